@@ -1,0 +1,115 @@
+"""The ``rackstress`` command line: run a scene, write its LAMMPS deck, list scenes."""
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+import click
+
+from .errors import DivergenceError, RackstressError
+
+#: Exit codes: bad input, diverged run.
+EXIT_INPUT, EXIT_DIVERGED = 2, 3
+
+
+def _load_scene(scene: str, steps, dt, sets):
+    from . import scenes
+
+    overrides = scenes.parse_overrides(sets)
+    sc = scenes.load(scene, overrides)
+    if dt is not None:
+        if not dt > 0:
+            raise RackstressError(f"--dt must be positive, got {dt}")
+        sc.dt = float(dt)
+        sc.params["dt"] = float(dt)
+        sc.validate()
+    if steps is not None:
+        sc = sc.with_steps(int(steps))
+    return sc
+
+
+def _fail(err: Exception, code: int):
+    click.echo(f"rackstress: error: {err}", err=True)
+    sys.exit(code)
+
+
+@click.group()
+@click.version_option(package_name="rackstress")
+def main():
+    """Particle-system stress visualization with rack particles, backed by LAMMPS."""
+
+
+@main.command()
+@click.argument("scene")
+@click.option("--engine", type=click.Choice(["lammps", "reference"]), default="lammps",
+              show_default=True, help="lammps (the backend) or reference (exact NumPy engine).")
+@click.option("--mode", type=click.Choice(["exact", "fast"]), default="exact", show_default=True,
+              help="LAMMPS realization: exact (matches the reference to round-off) or fast.")
+@click.option("--steps", type=click.IntRange(min=0), help="Iterations to run (default: the scene's).")
+@click.option("--dt", type=float, help="Time step t of Eq. 5 (default: the scene's).")
+@click.option("--set", "sets", multiple=True, metavar="KEY=VALUE",
+              help="Override a scene parameter; repeatable (see 'rackstress scenes').")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
+              help="Run directory (default: runs/SCENE-TIMESTAMP).")
+@click.option("--dump-every", type=click.IntRange(min=1), help="Steps between trajectory frames.")
+@click.option("--overwrite", is_flag=True, help="Replace a finished run in --out.")
+@click.option("--progress/--no-progress", default=True, show_default=True)
+def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progress):
+    """Run SCENE (a built-in name or a .toml file) and write a run directory."""
+    from . import run as run_mod
+    from .mpi import rank
+
+    try:
+        sc = _load_scene(scene, steps, dt, sets)
+        if out is None:
+            out = Path("runs") / f"{sc.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+        summary = run_mod.run(sc, out, engine=engine, mode=mode, dump_every=dump_every,
+                              progress=progress and rank() == 0, overwrite=overwrite)
+    except DivergenceError as err:
+        _fail(f"{err} (run directory: {out})", EXIT_DIVERGED)
+    except RackstressError as err:
+        _fail(err, EXIT_INPUT)
+    if rank() == 0:
+        click.echo(f"{summary['scene']}: {summary['steps']} steps on {summary['engine']} "
+                   f"({summary['mode']}) in {summary['wall_s']:.2f} s -> {out}")
+        for name, g in summary["groups"].items():
+            click.echo(f"  {name:12s} n={g['n']:6d}  max_deformation={g['max_deformation']:.4g}")
+
+
+@main.command()
+@click.argument("scene")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), required=True)
+@click.option("--mode", type=click.Choice(["exact", "fast"]), default="exact", show_default=True)
+@click.option("--steps", type=click.IntRange(min=0))
+@click.option("--dt", type=float)
+@click.option("--set", "sets", multiple=True, metavar="KEY=VALUE")
+@click.option("--dump-every", type=click.IntRange(min=1), default=None)
+def deck(scene, out, mode, steps, dt, sets, dump_every):
+    """Write the LAMMPS data file and input deck of SCENE into OUT, without running."""
+    from .deck import write_deck
+    from .run import default_dump_every
+
+    try:
+        sc = _load_scene(scene, steps, dt, sets)
+        d = write_deck(sc, out, mode, dump_every or default_dump_every(sc))
+    except RackstressError as err:
+        _fail(err, EXIT_INPUT)
+    click.echo(f"wrote {out / 'data.lmp'} and {out / 'in.lammps'} "
+               f"({sc.n_particles} atoms, {len(d.python_ops)} operator(s) in Python)")
+
+
+@main.command("scenes")
+def list_scenes():
+    """List the built-in scenes and their parameters."""
+    from . import scenes
+
+    for name in scenes.BUILDERS:
+        params = scenes.parameters(name)
+        click.echo(f"{name}")
+        click.echo("  " + json.dumps(params))
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

@@ -1,0 +1,49 @@
+"""Trajectory frames in LAMMPS ``dump custom`` text format (``id type mol x y z``).
+
+Both engines write this one format, so everything downstream (MDAnalysis, stress, pictures)
+reads every run the same way. Frames are appended whole and flushed, so a run stopped by the
+watchdog keeps every complete frame written before it.
+"""
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import numpy as np
+
+#: Columns every rackstress dump holds: what post-processing needs and nothing more.
+COLUMNS = ("id", "type", "mol", "x", "y", "z")
+#: Float format of positions in dumps (10 significant digits: far below any visible deformation).
+FLOAT_FORMAT = "%.10g"
+
+
+class DumpWriter:
+    """Append frames of a whole scene to a LAMMPS-style dump file."""
+
+    def __init__(self, path: Path, types: np.ndarray, mols: np.ndarray):
+        self.path = Path(path)
+        self.ids = np.arange(1, len(types) + 1)
+        self.types, self.mols = np.asarray(types), np.asarray(mols)
+        self._fh = open(self.path, "w")
+
+    def write(self, step: int, p: np.ndarray) -> None:
+        lo, hi = p.min(axis=0), p.max(axis=0)
+        buf = io.StringIO()
+        buf.write(f"ITEM: TIMESTEP\n{step}\nITEM: NUMBER OF ATOMS\n{len(p)}\n"
+                  "ITEM: BOX BOUNDS mm mm mm\n")
+        for k in range(3):
+            buf.write(f"{lo[k]:.10g} {hi[k]:.10g}\n")
+        buf.write("ITEM: ATOMS " + " ".join(COLUMNS) + "\n")
+        table = np.column_stack([self.ids, self.types, self.mols, p])
+        np.savetxt(buf, table, fmt=["%d", "%d", "%d"] + [FLOAT_FORMAT] * 3)
+        self._fh.write(buf.getvalue())
+        self._fh.flush()
+
+    def close(self) -> None:
+        self._fh.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()

@@ -1,0 +1,188 @@
+"""Running a scene: the run directory, the engine loop, the watchdog, and ``summary.json``.
+
+A run directory holds ``scene.json`` (how the scene was built), ``data.lmp`` (particles, types,
+molecules), ``trajectory.dump`` (frames every ``dump_every`` steps) and, once the run has ended
+either way, ``summary.json``. A run stopped by the watchdog keeps its frames and records
+``status: "diverged"`` with the step, particle and group.
+"""
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from . import rigid, topology
+from .errors import DivergenceError, RunDirError
+from .scene import Scene
+
+ENGINES = ("lammps", "reference")
+#: Runs shorter than this many seconds show no progress bar.
+PROGRESS_DELAY_S = 2.0
+
+
+def default_dump_every(scene: Scene) -> int:
+    """About 100 frames a run, never fewer than every step."""
+    return max(1, scene.total_steps // 100)
+
+
+def prepare_rundir(out: Path, overwrite: bool = False) -> Path:
+    """Create ``out``; refuse to reuse a directory holding a finished run unless ``overwrite``."""
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise RunDirError(f"run directory {out} exists and is not a directory")
+    if (out / "summary.json").exists() and not overwrite:
+        raise RunDirError(f"run directory {out} already holds a finished run (summary.json); "
+                          "choose another --out or pass --overwrite to replace it")
+    out.mkdir(parents=True, exist_ok=True)
+    for stale in ("summary.json", "trajectory.dump"):
+        if (out / stale).exists():
+            (out / stale).unlink()
+    return out
+
+
+def write_json(path: Path, data) -> None:
+    """Write JSON atomically: a reader sees the old file or the new one, never half of one."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp")
+    with open(tmp, "w") as fh:
+        json.dump(data, fh, indent=2, default=_jsonable)
+        fh.write("\n")
+    os.replace(tmp, path)
+
+
+def _jsonable(x):
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, (np.floating,)):
+        return float(x)
+    if isinstance(x, tuple):
+        return list(x)
+    raise TypeError(f"not JSON serializable: {type(x)}")
+
+
+def group_figures(scene: Scene, p_start: np.ndarray, p_end: np.ndarray) -> dict:
+    """Per group: n, centre of mass at start and end, and max_deformation (DESIGN.md §4)."""
+    out = {}
+    for name, g in scene.groups.items():
+        sl = scene.slice(name)
+        end = p_end[sl]
+        ok = bool(np.isfinite(end).all())
+        out[name] = {
+            "n": g.n,
+            "kind": g.kind,
+            "com_start": p_start[sl].mean(axis=0).tolist(),
+            "com_end": end.mean(axis=0).tolist() if ok else None,
+            "max_deformation": rigid.max_deformation(g.o, end) if ok else None,
+        }
+    return out
+
+
+def summarize(scene: Scene, engine: str, mode: str, p_end: np.ndarray, steps_done: int,
+              wall_s: float, status: str, error: DivergenceError | None = None,
+              extra: dict | None = None) -> dict:
+    s = {
+        "scene": scene.name,
+        "engine": engine,
+        "mode": mode,
+        "status": status,
+        "n_particles": scene.n_particles,
+        "steps": int(steps_done),
+        "steps_requested": scene.total_steps,
+        "dt": scene.dt,
+        "wall_s": wall_s,
+        "params": scene.params,
+        "groups": group_figures(scene, scene.original_positions(), p_end),
+    }
+    if error is not None:
+        s["error"] = {"message": str(error), "step": error.step, "group": error.group,
+                      "particle": error.local, "index": error.index}
+    if extra:
+        s.update(extra)
+    return s
+
+
+def progress_bar(total: int, enabled: bool, desc: str):
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, disable=not enabled, delay=PROGRESS_DELAY_S, unit="step",
+                desc=desc, dynamic_ncols=True, leave=False)
+
+
+def run_reference(scene: Scene, out: Path, dump_every: int, progress: bool):
+    """Step a scene with the reference engine, writing frames; returns (p_end, steps_done)."""
+    from .dumpio import DumpWriter
+    from .reference import Reference
+
+    ref = Reference(scene)
+    types = topology.per_particle(scene, topology.group_types(scene))
+    mols = topology.per_particle(scene, topology.group_mols(scene))
+    with DumpWriter(out / "trajectory.dump", types, mols) as dump, \
+            progress_bar(scene.total_steps, progress, scene.name) as bar:
+        dump.write(0, ref.p)
+        try:
+            for _, phase, _ in scene.schedule():
+                for _ in range(phase.steps):
+                    ref.step(phase.vars)
+                    if ref.step_count % dump_every == 0:
+                        dump.write(ref.step_count, ref.p)
+                    bar.update(1)
+        except DivergenceError as err:
+            err.p_end, err.steps_done = ref.p, ref.step_count
+            raise
+    return ref.p, ref.step_count
+
+
+def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
+        dump_every: int | None = None, progress: bool = True, overwrite: bool = False) -> dict:
+    """Run ``scene`` on ``engine`` into the run directory ``out``; return the summary.
+
+    Raises :class:`DivergenceError` after writing the summary when the watchdog stops the run.
+    """
+    if engine not in ENGINES:
+        raise RunDirError(f"unknown engine '{engine}'; choose one of {', '.join(ENGINES)}")
+    dump_every = dump_every or default_dump_every(scene)
+    if dump_every < 1:
+        raise RunDirError(f"--dump-every must be >= 1, got {dump_every}")
+    out = prepare_rundir(out, overwrite)
+    write_json(out / "scene.json", {"scene": scene.name, "params": scene.params,
+                                    "dt": scene.dt, "steps": scene.total_steps})
+    from .deck import write_data
+
+    write_data(scene, out / "data.lmp")
+    t0 = time.perf_counter()
+    extra = {"dump_every": dump_every}
+    try:
+        if engine == "reference":
+            mode = "exact"
+            p_end, steps = run_reference(scene, out, dump_every, progress)
+        else:
+            from .lammps_engine import run_lammps
+
+            p_end, steps, more = run_lammps(scene, out, mode, dump_every, progress)
+            extra.update(more)
+    except DivergenceError as err:
+        wall = time.perf_counter() - t0
+        p_end = getattr(err, "p_end", None)
+        if p_end is None:
+            p_end = np.full((scene.n_particles, 3), np.nan)
+        summary = summarize(scene, engine, mode, p_end, getattr(err, "steps_done", err.step),
+                            wall, "diverged", err, extra)
+        if _is_root():
+            write_json(out / "summary.json", summary)
+        raise
+    wall = time.perf_counter() - t0
+    summary = summarize(scene, engine, mode, p_end, steps, wall, "ok", extra=extra)
+    if _is_root():
+        write_json(out / "summary.json", summary)
+    return summary
+
+
+def _is_root() -> bool:
+    from .mpi import rank
+
+    return rank() == 0

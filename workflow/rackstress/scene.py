@@ -1,0 +1,168 @@
+"""A scene: named particle groups, the operator sequence acting on each, and a schedule of phases.
+
+This is the paper's model of motion (Eqs. 6, 26, 32–33) as data: for every group the list of
+operators composed left to right (Eqs. 2–3), then ``integrate(dt)`` over all particles at once.
+Engines (reference, LAMMPS) take a :class:`Scene` and nothing else.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Mapping
+
+import numpy as np
+
+from . import operators as ops_mod
+from .errors import SceneError
+from .particles import Group
+
+#: Relative distance below which two particles count as coincident (their col/bin is undefined).
+COINCIDENT_TOL = 1e-9
+
+
+@dataclass(frozen=True)
+class Phase:
+    """One phase of the schedule: ``steps`` iterations of motion with the phase variables ``vars``.
+
+    MagPod's gait phase (r, l) = (4, 6) is ``Phase('4-6', 1200, {'r': 4, 'l': 6})``.
+    """
+
+    name: str
+    steps: int
+    vars: Mapping = field(default_factory=dict)
+
+
+@dataclass
+class Scene:
+    """Groups + per-group operator sequences + schedule + time step ``dt`` (Eq. 5's t).
+
+    ``bound`` is the watchdog's limit on any particle's distance from its original position.
+    ``params`` records how the scene was built (for the summary and for rebuilding with --set).
+    """
+
+    name: str
+    groups: dict
+    operators: dict
+    phases: list
+    dt: float = 0.01
+    cycles: int = 1
+    bound: float = 1.0e4
+    params: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.validate()
+        starts = np.cumsum([0] + [g.n for g in self.groups.values()])
+        self._offset = {name: int(s) for name, s in zip(self.groups, starts[:-1])}
+
+    # ------------------------------------------------------------------ structure
+    @property
+    def n_particles(self) -> int:
+        return sum(g.n for g in self.groups.values())
+
+    def offset(self, group: str) -> int:
+        """Index of the group's first particle in the engines' global particle order."""
+        return self._offset[group]
+
+    def slice(self, group: str) -> slice:
+        start = self._offset[group]
+        return slice(start, start + self.groups[group].n)
+
+    def group_of(self, index: int) -> tuple[str, int]:
+        """(group name, index within the group) of a global particle index."""
+        for name, g in self.groups.items():
+            start = self._offset[name]
+            if start <= index < start + g.n:
+                return name, index - start
+        raise IndexError(index)
+
+    def original_positions(self) -> np.ndarray:
+        return np.concatenate([g.o for g in self.groups.values()])
+
+    def radii(self) -> np.ndarray:
+        return np.concatenate([g.r for g in self.groups.values()])
+
+    @property
+    def steps_per_cycle(self) -> int:
+        return sum(p.steps for p in self.phases)
+
+    @property
+    def total_steps(self) -> int:
+        return self.steps_per_cycle * self.cycles
+
+    def schedule(self):
+        """Yield (first_step, phase, cycle) for every phase of every cycle, in order."""
+        step = 0
+        for cycle in range(self.cycles):
+            for phase in self.phases:
+                yield step, phase, cycle
+                step += phase.steps
+
+    def with_steps(self, steps: int) -> "Scene":
+        """The same scene run for exactly ``steps`` iterations (schedule repeated or cut short)."""
+        if steps < 0:
+            raise SceneError(f"steps must be >= 0, got {steps}")
+        phases, left = [], steps
+        while left > 0:
+            for p in self.phases:
+                take = min(p.steps, left)
+                if take:
+                    phases.append(Phase(p.name, take, p.vars))
+                left -= take
+                if left <= 0:
+                    break
+        if not phases:
+            phases = [Phase(self.phases[0].name, 0, self.phases[0].vars)]
+        return Scene(self.name, self.groups, self.operators, phases, self.dt, 1, self.bound,
+                     {**self.params, "steps": steps})
+
+    # ------------------------------------------------------------------ validation
+    def validate(self) -> None:
+        if not self.groups:
+            raise SceneError(f"scene '{self.name}' has no groups")
+        for key, g in self.groups.items():
+            if key != g.name:
+                raise SceneError(f"scene '{self.name}': group stored as '{key}' is named '{g.name}'")
+            if g.host is not None and g.host not in self.groups:
+                raise SceneError(f"rack group '{g.name}' names unknown host '{g.host}'")
+        for target, seq in self.operators.items():
+            if target not in self.groups:
+                raise SceneError(f"scene '{self.name}': operators given for unknown group "
+                                 f"'{target}' (groups: {', '.join(self.groups)})")
+            for op in seq:
+                if not isinstance(op, tuple(ops_mod.OPERATOR_KINDS.values())):
+                    raise SceneError(f"scene '{self.name}': '{op!r}' on '{target}' is not an "
+                                     f"operator (known: {', '.join(ops_mod.OPERATOR_KINDS)})")
+                ops_mod.check_operator(op, target, self.groups)
+        if not (np.isfinite(self.dt) and self.dt > 0):
+            raise SceneError(f"scene '{self.name}': time step dt must be positive, got {self.dt!r}")
+        if not self.phases:
+            raise SceneError(f"scene '{self.name}' has no phases")
+        for p in self.phases:
+            if int(p.steps) != p.steps or p.steps < 0:
+                raise SceneError(f"phase '{p.name}': steps must be a non-negative integer, "
+                                 f"got {p.steps!r}")
+        if int(self.cycles) != self.cycles or self.cycles < 1:
+            raise SceneError(f"scene '{self.name}': cycles must be a positive integer")
+        if not self.bound > 0:
+            raise SceneError(f"scene '{self.name}': watchdog bound must be positive")
+        self._check_coincident()
+
+    def _check_coincident(self) -> None:
+        from scipy.spatial import cKDTree
+
+        o = np.concatenate([g.o for g in self.groups.values()])
+        scale = max(1.0, float(np.ptp(o, axis=0).max()) if len(o) > 1 else 1.0)
+        pairs = cKDTree(o).query_pairs(COINCIDENT_TOL * scale, output_type="ndarray")
+        if len(pairs):
+            a, b = (int(x) for x in pairs[0])
+            starts = np.cumsum([0] + [g.n for g in self.groups.values()])
+            names = list(self.groups)
+
+            def where(k):
+                gi = int(np.searchsorted(starts, k, side="right") - 1)
+                return f"'{names[gi]}' particle {k - starts[gi]}"
+
+            raise SceneError(
+                f"scene '{self.name}': {where(a)} and {where(b)} are coincident at {o[a]} "
+                f"({len(pairs)} coincident pair(s) in all). Collision and binding forces "
+                "(Eqs. 10, 12) divide by the squared distance, which is zero there: move or "
+                "remove one of them.")
