@@ -96,7 +96,7 @@ def deck(scene, out, mode, steps, dt, sets, dump_every):
         d = write_deck(sc, out, mode, dump_every or default_dump_every(sc))
     except RackstressError as err:
         _fail(err, EXIT_INPUT)
-    click.echo(f"wrote {out / 'data.lmp'} and {out / 'in.lammps'} "
+    click.echo(f"wrote {out / 'particles.data'} and {out / 'in.lammps'} "
                f"({sc.n_particles} atoms, {len(d.python_ops)} operator(s) in Python)")
 
 

@@ -90,7 +90,7 @@ class Deck:
         return data_text(self.scene, self.masses, self.bonds, len(self.bond_types))
 
     # ------------------------------------------------------------------ input deck
-    def setup_commands(self, data_file: str = "data.lmp", dump_file: str | None = "trajectory.dump",
+    def setup_commands(self, data_file: str = "particles.data", dump_file: str | None = "trajectory.dump",
                        dump_every: int = 100) -> list[str]:
         """Everything before the first run: styles, groups, static fixes, dump."""
         sc, types = self.scene, topology.group_types(self.scene)
@@ -452,10 +452,10 @@ def write_data(scene: Scene, path: Path, deck: Deck | None = None) -> None:
 
 
 def write_deck(scene: Scene, out: Path, mode: str = "exact", dump_every: int = 100) -> Deck:
-    """Write ``data.lmp`` and ``in.lammps`` into ``out``; return the compiled deck."""
+    """Write ``particles.data`` and ``in.lammps`` into ``out``; return the compiled deck."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     deck = compile_deck(scene, mode)
-    (out / "data.lmp").write_text(deck.data_text())
+    (out / "particles.data").write_text(deck.data_text())
     (out / "in.lammps").write_text(deck.input_text(dump_every))
     return deck

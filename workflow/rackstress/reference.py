@@ -172,30 +172,45 @@ class Reference:
         check(self.scene, self.p, self.v, self.o, self.step_count)
 
 
-def check(scene: Scene, p: np.ndarray, v: np.ndarray, o: np.ndarray, step: int,
-          index: np.ndarray | None = None) -> None:
-    """The watchdog: raise :class:`DivergenceError` if a particle is non-finite or out of bound.
+def find_divergence(scene: Scene, p: np.ndarray, v: np.ndarray, o: np.ndarray,
+                    index: np.ndarray | None = None) -> dict | None:
+    """The watchdog's test: the worst particle that is non-finite or beyond ``scene.bound``.
 
     ``index`` gives the global particle index of each row when p, v hold only some particles.
+    Returns None when all is well.
     """
     finite = np.isfinite(p).all(axis=1) & np.isfinite(v).all(axis=1)
     disp = np.full(len(p), np.inf)
     disp[finite] = np.sqrt(((p[finite] - o[finite]) ** 2).sum(axis=1))
     bad = disp > scene.bound
     if not bad.any():
-        return
+        return None
     rows = np.flatnonzero(bad)
-    row = int(rows[np.argmax(np.where(np.isfinite(disp[rows]), disp[rows], np.inf))])
-    k = int(index[row]) if index is not None else row
+    nonfinite = rows[~finite[rows]]
+    row = int(nonfinite[0]) if len(nonfinite) else int(rows[np.argmax(disp[rows])])
+    return {"index": int(index[row]) if index is not None else row, "finite": bool(finite[row]),
+            "disp": float(disp[row]), "p": p[row].tolist(), "v": v[row].tolist(),
+            "count": int(len(rows))}
+
+
+def divergence_error(scene: Scene, step: int, found: dict) -> DivergenceError:
+    """The one-paragraph error for a particle found by :func:`find_divergence`."""
+    k = found["index"]
     group, local = scene.group_of(k)
-    if not finite[row]:
-        what = f"its position {p[row]} / velocity {v[row]} is not finite"
+    if not found["finite"]:
+        what = f"its position {found['p']} / velocity {found['v']} is not finite"
     else:
-        what = (f"it is {disp[row]:.4g} units from its original position, beyond the "
+        what = (f"it is {found['disp']:.4g} units from its original position, beyond the "
                 f"watchdog bound {scene.bound:g}")
-    raise DivergenceError(
+    return DivergenceError(
         f"run diverged at step {step}: '{group}' particle {local} (global index {k}): {what}. "
-        f"{len(rows)} particle(s) out of bound. A smaller time step (dt = {scene.dt:g} now) or "
-        "weaker coefficients keep Eq. 5 stable (t < 2/ω_max); the output written up to here "
-        "is kept.", step=step, index=k, group=group, local=local,
-        value=float(disp[row]))
+        f"{found['count']} particle(s) out of bound. A smaller time step (dt = {scene.dt:g} now) "
+        "or weaker coefficients keep Eq. 5 stable (t < 2/ω_max); the output written up to here "
+        "is kept.", step=step, index=k, group=group, local=local, value=found["disp"])
+
+
+def check(scene: Scene, p: np.ndarray, v: np.ndarray, o: np.ndarray, step: int) -> None:
+    """The watchdog: raise :class:`DivergenceError` if a particle is non-finite or out of bound."""
+    found = find_divergence(scene, p, v, o)
+    if found is not None:
+        raise divergence_error(scene, step, found)

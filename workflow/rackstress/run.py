@@ -1,6 +1,6 @@
 """Running a scene: the run directory, the engine loop, the watchdog, and ``summary.json``.
 
-A run directory holds ``scene.json`` (how the scene was built), ``data.lmp`` (particles, types,
+A run directory holds ``scene.json`` (how the scene was built), ``particles.data`` (particles, types,
 molecules), ``trajectory.dump`` (frames every ``dump_every`` steps) and, once the run has ended
 either way, ``summary.json``. A run stopped by the watchdog keeps its frames and records
 ``status: "diverged"`` with the step, particle and group.
@@ -148,22 +148,32 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
     dump_every = dump_every or default_dump_every(scene)
     if dump_every < 1:
         raise RunDirError(f"--dump-every must be >= 1, got {dump_every}")
-    out = prepare_rundir(out, overwrite)
-    write_json(out / "scene.json", {"scene": scene.name, "params": scene.params,
-                                    "dt": scene.dt, "steps": scene.total_steps})
-    from .deck import write_data
+    from .deck import compile_deck
 
-    write_data(scene, out / "data.lmp")
+    deck = compile_deck(scene, mode if engine == "lammps" else "exact")
+
+    def start():
+        prepare_rundir(out, overwrite)
+        write_json(out / "scene.json", {"scene": scene.name, "params": scene.params,
+                                        "dt": scene.dt, "steps": scene.total_steps})
+        (out / "particles.data").write_text(deck.data_text())
+        if engine == "lammps":
+            (out / "in.lammps").write_text(deck.input_text(dump_every))
+
+    out = Path(out)
+    on_root(start)
     t0 = time.perf_counter()
     extra = {"dump_every": dump_every}
     try:
         if engine == "reference":
             mode = "exact"
+            if not _is_root():
+                raise RunDirError("the reference engine runs on one rank; run it without mpiexec")
             p_end, steps = run_reference(scene, out, dump_every, progress)
         else:
             from .lammps_engine import run_lammps
 
-            p_end, steps, more = run_lammps(scene, out, mode, dump_every, progress)
+            p_end, steps, more = run_lammps(scene, out, mode, dump_every, progress, deck)
             extra.update(more)
     except DivergenceError as err:
         wall = time.perf_counter() - t0
@@ -186,3 +196,20 @@ def _is_root() -> bool:
     from .mpi import rank
 
     return rank() == 0
+
+
+def on_root(fn):
+    """Run ``fn`` on rank 0 only; every rank then raises what it raised, or goes on together."""
+    from .mpi import world
+
+    comm = world()
+    err = None
+    if comm.Get_rank() == 0:
+        try:
+            fn()
+        except Exception as exc:  # noqa: BLE001 - re-raised on every rank below
+            err = exc
+    if comm.Get_size() > 1:
+        err = comm.bcast(err, root=0)
+    if err is not None:
+        raise err

@@ -6,7 +6,7 @@ Choices the paper leaves open, all parameters:
   the pull (0, 100, 0) on ⟨‖o‖² < 10⟩ (Eq. 15) lifts the corner nearest the origin;
 * ``spacing = 1``: with it, within(2) binds each particle to its 8 neighbours (Fig. 1b),
   within(10) to a disc of up to ~300 of the 400 (about half of the plane, Fig. 1c) and
-  within(100) to all (Fig. 1d); the pull then acts on the 10 particles with i² + k² < 10;
+  within(100) to all (Fig. 1d); the pull then acts on the 11 particles with i² + k² < 10;
 * ``radius = 0.5`` (touching spheres); it matters only for the rack placement (Eqs. 18–21).
 """
 from __future__ import annotations

@@ -1,0 +1,223 @@
+"""The LAMMPS backend against the reference engine: forces, trajectories, MPI, watchdog, decks.
+
+Expected values come from the independent path, the reference engine (the paper's equations in
+NumPy); the LAMMPS side runs real LAMMPS through the ``lammps`` module.
+"""
+from __future__ import annotations
+
+import ctypes
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rackstress import (Attract, Bind, Collide, Const, Contact, Dampen, DivergenceError, Force,
+                        Group, Matched, Phase, PhaseIn, Scene, Within, lattice, rack, scenes)
+from rackstress.deck import compile_deck
+from rackstress.lammps_engine import LammpsRun
+from rackstress.reference import Reference
+
+ROOT = Path(__file__).resolve().parent.parent
+MPIEXEC = Path(sys.executable).parent / "mpiexec"
+
+
+def every_operator_scene(steps: int = 40) -> Scene:
+    """A small scene holding every operator kind, directed coefficients and both condition kinds.
+
+    A (a 3×2×2 block with its rack) meets B (a 2×2×2 block) head on; C is a single particle
+    attracted by A's region. Realizations this exercises: fix addforce (masked, and phase-
+    conditioned), fix viscous (plain, phase-conditioned extra), contact-conditioned damping
+    (callback), reciprocal collide A↔B with c 30 vs 10 (lepton with masses 1 : 3), one-way
+    collide C←B (callback), bind to rack and within(d) (callback), attract with phase-filled
+    index-matched regions (callback).
+    """
+    A = Group("A", lattice((3, 2, 2), 1.0), 0.6, kind="body")
+    B = Group("B", lattice((2, 2, 2), 1.0, origin=(2.9, 0.2, 0.1)), 0.6, kind="leg")
+    C = Group("C", [[1.0, 3.2, 0.5]], 0.6, kind="leg")
+    A.meta["regions"] = {"ra1": np.array([0, 1, 2] + [0] * 9), "ra2": np.array([0] * 9 + [1, 2, 0])}
+    C.meta["regions"] = {"rc": np.array([2])}
+    Arack = rack(A, "Arack")
+    mask = tuple(bool(x) for x in (np.arange(12) % 3 == 0))
+    ops = {
+        "A": [Force((0.0, 2.0, 0.0), where=mask),
+              Collide("B", Const(30.0)),
+              Bind("Arack", Const(100.0)),
+              Bind("A", Within(1.5, 20.0)),
+              Attract("C", Matched("ra{r}", "rc", 7.0), when=(PhaseIn("r", (1,)),)),
+              Dampen(1.0, extra=2.0, when=(Contact("B"),))],
+        "B": [Collide("A", Const(10.0)),
+              Force((0.0, -5.0, 0.0), when=(PhaseIn("r", (2,)),)),
+              Dampen(2.0, extra=5.0, when=(PhaseIn("r", (1,)),))],
+        "C": [Collide("B", Const(4.0)), Attract("A", Const(2.0)), Dampen(1.5)],
+        "Arack": [Bind("A", Const(0.5)), Dampen(1.0)],
+    }
+    phases = [Phase("one", steps, {"r": 1}), Phase("two", steps, {"r": 2}),
+              Phase("one-again", steps, {"r": 1})]
+    return Scene("every-operator", {"A": A, "B": B, "C": C, "Arack": Arack}, ops, phases, dt=0.01)
+
+
+def _scatter(lmp, name, arr):
+    flat = np.ascontiguousarray(arr, dtype=np.float64).ravel()
+    lmp.scatter_atoms(name, 1, 3, (ctypes.c_double * len(flat))(*flat))
+
+
+def test_realization_uses_native_styles_where_exact():
+    deck = compile_deck(every_operator_scene(), "exact")
+    how = {(r.target, r.op.kind, getattr(r.op, "source", None)): r.how for r in deck.realized}
+    assert how[("A", "collide", "B")] == "lepton" and how[("B", "collide", "A")] == "lepton"
+    assert how[("C", "collide", "B")] == "python"        # one-way: no reciprocal partner
+    assert how[("A", "bind", "Arack")] == "python"       # per-pair L0: no exact native style
+    assert how[("A", "force", None)] == "addforce"
+    # masses make c_AB·m_A = c_BA·m_B: 30·m_A = 10·m_B
+    assert deck.masses["B"] / deck.masses["A"] == pytest.approx(3.0, rel=1e-15)
+    text = deck.input_text()
+    # no pair is computed for type pairs that never collide (A–A, A–C, C–C, racks ...)
+    assert "neigh_modify exclude type 1 1" in text and "neigh_modify exclude type 1 3" in text
+    assert "neigh_modify exclude type 1 2" not in text
+
+
+@pytest.mark.parametrize("phase", [{"r": 1}, {"r": 2}])
+def test_force_parity_every_operator_kind(phase):
+    """LAMMPS forces at step 0 = reference accelerations × mass, to 1e-10 relative."""
+    scene = every_operator_scene()
+    rng = np.random.default_rng(7)
+    p = scene.original_positions() + rng.normal(scale=0.08, size=(scene.n_particles, 3))
+    v = rng.normal(scale=0.5, size=p.shape)
+    ref = Reference(scene)
+    ref.p, ref.v = p.copy(), v.copy()
+    a_ref = ref.accelerations(phase)
+    deck = compile_deck(scene, "exact")
+    run = LammpsRun(deck, None)
+    try:
+        _scatter(run.lmp, "x", p)
+        _scatter(run.lmp, "v", v)
+        run.enter_phase(phase)
+        f = run.gather_forces()
+    finally:
+        run.close()
+    mass = np.concatenate([np.full(g.n, deck.masses[k]) for k, g in scene.groups.items()])
+    a_lmp = f / mass[:, None]
+    scale = np.abs(a_ref).max()
+    assert scale > 1.0  # the state is far from rest: every operator contributes
+    np.testing.assert_allclose(a_lmp, a_ref, rtol=1e-10, atol=1e-10 * scale)
+
+
+def _reference_final(scene, steps=None):
+    ref = Reference(scene)
+    for _, phase, _ in scene.schedule():
+        for _ in range(phase.steps):
+            ref.step(phase.vars)
+    return ref.p
+
+
+def _lammps_final(scene, mode="exact"):
+    run = LammpsRun(compile_deck(scene, mode), None)
+    try:
+        run.run_schedule()
+        return run.gather_positions()
+    finally:
+        run.close()
+
+
+def test_trajectory_parity_across_phase_switches():
+    """Three phases (coefficients, fixes and callbacks switch twice) stay at round-off."""
+    scene = every_operator_scene(steps=60)
+    diff = np.abs(_lammps_final(scene) - _reference_final(scene)).max()
+    assert diff <= 1e-8
+
+
+@pytest.mark.parametrize("name,params", [("plane-bound", {"d": 2.0}), ("plane-bound", {"d": 10.0}),
+                                         ("plane-rack", {})])
+def test_trajectory_parity_plane_scenes(name, params):
+    """Exact mode: 1200 steps, max position difference ≤ 1e-8 against the reference engine."""
+    scene = scenes.build(name, steps=1200, **params)
+    ref = _reference_final(scene)
+    lmp = _lammps_final(scene)
+    assert np.abs(ref - scene.original_positions()).max() > 1.0  # it really moved
+    assert np.abs(lmp - ref).max() <= 1e-8
+
+
+MPI_SCRIPT = """
+import sys, numpy as np
+from rackstress import scenes
+from rackstress.deck import compile_deck
+from rackstress.lammps_engine import LammpsRun
+from rackstress.mpi import world
+out = sys.argv[1]
+for key, name, params in [("d2", "plane-bound", {"d": 2.0}), ("d10", "plane-bound", {"d": 10.0}),
+                          ("rack", "plane-rack", {})]:
+    run = LammpsRun(compile_deck(scenes.build(name, steps=1200, **params), "exact"), None)
+    run.run_schedule()
+    p = run.gather_positions()
+    nlocal = run.lmp.extract_global("nlocal")
+    counts = world().allgather(nlocal)
+    run.close()
+    if world().Get_rank() == 0:
+        np.save(f"{out}/{key}.npy", p)
+        np.save(f"{out}/{key}-counts.npy", np.array(counts))
+"""
+
+
+def test_trajectory_parity_under_mpi(tmp_path):
+    """The same three runs under ``mpiexec -n 2``: one LAMMPS spanning both ranks."""
+    script = tmp_path / "mpi_parity.py"
+    script.write_text(MPI_SCRIPT)
+    proc = subprocess.run([str(MPIEXEC), "-n", "2", sys.executable, str(script), str(tmp_path)],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    for key, name, params in [("d2", "plane-bound", {"d": 2.0}), ("d10", "plane-bound", {"d": 10.0}),
+                              ("rack", "plane-rack", {})]:
+        counts = np.load(tmp_path / f"{key}-counts.npy")
+        assert len(counts) == 2 and counts.min() > 0  # atoms really are split over both ranks
+        ref = _reference_final(scenes.build(name, steps=1200, **params))
+        assert np.abs(np.load(tmp_path / f"{key}.npy") - ref).max() <= 1e-8
+
+
+def test_watchdog_catches_divergence_on_lammps(tmp_path):
+    """within(100) with magnitude 100 (Section 3.1) is stopped, named, and its frames kept."""
+    from rackstress.run import run
+
+    scene = scenes.build("plane-bound", d=100.0, magnitude=100.0, steps=300)
+    with pytest.raises(DivergenceError) as info:
+        run(scene, tmp_path / "run", engine="lammps", dump_every=5, progress=False)
+    err = info.value
+    assert err.step <= 150 and err.group == "plane"
+    assert f"step {err.step}" in str(err) and "'plane' particle" in str(err)
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert summary["status"] == "diverged" and summary["error"]["step"] == err.step
+    frames = (tmp_path / "run" / "trajectory.dump").read_text().count("ITEM: TIMESTEP")
+    assert frames >= err.step // 5 - 1  # the frames before the stop are there
+    assert "Loop time" in (tmp_path / "run" / "log.lammps").read_text()
+
+
+def test_committed_decks_regenerate_byte_identically(tmp_path):
+    proc = subprocess.run([sys.executable, str(ROOT / "scripts" / "make_decks.py"), str(tmp_path)],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    committed = sorted(p.relative_to(ROOT / "lammps_inputs")
+                       for p in (ROOT / "lammps_inputs").rglob("*") if p.is_file())
+    fresh = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*") if p.is_file())
+    assert committed == fresh and len(fresh) >= 10
+    for rel in fresh:
+        assert (tmp_path / rel).read_bytes() == (ROOT / "lammps_inputs" / rel).read_bytes(), rel
+
+
+def test_cli_run_under_mpiexec(tmp_path):
+    """``mpiexec -n 2 rackstress run plane-rack`` writes one run directory that matches serial."""
+    exe = Path(sys.executable).parent / "rackstress"
+    out = tmp_path / "mpi"
+    proc = subprocess.run([str(MPIEXEC), "-n", "2", str(exe), "run", "plane-rack", "--steps", "300",
+                           "--out", str(out), "--no-progress"],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["ranks"] == 2 and summary["engine"] == "lammps" and summary["steps"] == 300
+    ref = _reference_final(scenes.build("plane-rack", steps=300))
+    scene = scenes.build("plane-rack")
+    com = ref[scene.slice("plane")].mean(axis=0)
+    np.testing.assert_allclose(summary["groups"]["plane"]["com_end"], com, rtol=0, atol=1e-9)
+    for name in ("particles.data", "in.lammps", "log.lammps", "trajectory.dump"):
+        assert (out / name).stat().st_size > 0

@@ -1,0 +1,178 @@
+"""Operators LAMMPS has no exact style for, evaluated in NumPy inside one ``fix external``.
+
+Every term computes the paper's *directed* acceleration on the particles a rank owns, from
+partners that are local or ghost atoms there, so it needs no reverse communication and stays
+correct however the atoms are spread over ranks (the ghost cutoff covers every partner). The
+same functions as the reference engine (:mod:`rackstress.reference`) do the arithmetic.
+
+An exception inside a ctypes callback would be printed and ignored, so the callback catches it,
+stores it and zeroes its forces; the runner checks ``error`` after every chunk and stops.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .operators import (Attract, Bind, Collide, Contact, Dampen, Force, attract_pairs, bind_pairs,
+                        phase_active)
+from .reference import attraction, bin_, col
+
+
+class Frame:
+    """What one callback invocation sees: local and ghost atoms, and tag → row look-ups."""
+
+    def __init__(self, lmp, n_total: int, nlocal: int):
+        nghost = lmp.extract_global("nghost")
+        nall = nlocal + nghost
+        self.nlocal = nlocal
+        self.x = lmp.numpy.extract_atom("x")[:nall]
+        self.v = lmp.numpy.extract_atom("v")[:nlocal]
+        tag = lmp.numpy.extract_atom("id")[:nall].astype(np.int64)
+        self.index = tag - 1                          # global particle index of each row
+        self.row = np.full(n_total, -1, dtype=np.int64)
+        self.row[self.index[::-1]] = np.arange(nall)[::-1]   # first copy wins (owned before ghost)
+        self.local = np.zeros(n_total, dtype=bool)
+        self.local[self.index[:nlocal]] = True
+
+
+class PairTerm:
+    """Directed pair forces from a fixed (or per-phase) list of global pairs (bind, attract)."""
+
+    def __init__(self, name, I, J, c, L0sq=None):
+        self.name, self.I, self.J, self.c, self.L0sq = name, I, J, c, L0sq
+
+    def add(self, fr: Frame, acc: np.ndarray):
+        I, J, c, L0sq = self.I, self.J, self.c, self.L0sq
+        if not fr.local.all():
+            sel = fr.local[I]
+            I, J, c = I[sel], J[sel], c[sel]
+            L0sq = L0sq[sel] if L0sq is not None else None
+        ri, rj = fr.row[I], fr.row[J]
+        if len(rj) and rj.min() < 0:
+            k = int(np.flatnonzero(rj < 0)[0])
+            raise RuntimeError(f"{self.name}: partner particle {int(J[k])} of particle {int(I[k])} "
+                               "is not visible on this rank (raise the ghost cutoff)")
+        p, u = fr.x[ri], fr.x[rj]
+        contrib = bin_(p, u, L0sq, c) if L0sq is not None else attraction(p, u, c)
+        for k in range(3):
+            acc[:, k] += np.bincount(ri, weights=contrib[:, k], minlength=len(acc))
+
+
+class CollideTerm:
+    """One-way collide (Eq. 10): target atoms owned here against source atoms seen here."""
+
+    def __init__(self, name, target_slice, source_slice, c, radius):
+        self.name, self.t, self.s, self.c, self.radius = name, target_slice, source_slice, c, radius
+
+    def pairs(self, fr: Frame):
+        idx_t = np.flatnonzero((fr.index[:fr.nlocal] >= self.t.start) & (fr.index[:fr.nlocal] < self.t.stop))
+        idx_s = np.flatnonzero((fr.index >= self.s.start) & (fr.index < self.s.stop))
+        if not len(idx_t) or not len(idx_s):
+            return idx_t[:0], idx_s[:0]
+        rt, rs = self.radius[fr.index[idx_t]], self.radius[fr.index[idx_s]]
+        sm = cKDTree(fr.x[idx_t]).sparse_distance_matrix(cKDTree(fr.x[idx_s]), rt.max() + rs.max(),
+                                                         output_type="ndarray")
+        a, b = idx_t[sm["i"]], idx_s[sm["j"]]
+        keep = (fr.index[a] != fr.index[b]) & (sm["v"] < self.radius[fr.index[a]] + self.radius[fr.index[b]])
+        return a[keep], b[keep]
+
+    def add(self, fr: Frame, acc: np.ndarray):
+        a, b = self.pairs(fr)
+        contrib = col(fr.x[a], fr.x[b], self.radius[fr.index[a]], self.radius[fr.index[b]], self.c)
+        for k in range(3):
+            acc[:, k] += np.bincount(a, weights=contrib[:, k], minlength=len(acc))
+
+
+class PyForces:
+    """The ``fix external`` callback: the sum of all Python-realized operators active now."""
+
+    def __init__(self, lmp, deck, comm=None):
+        self.lmp, self.deck, self.scene, self.comm = lmp, deck, deck.scene, comm
+        self.n = self.scene.n_particles
+        self.radius = self.scene.radii()
+        self.mass = np.concatenate([np.full(g.n, deck.masses[name])
+                                    for name, g in self.scene.groups.items()])
+        self.error = None
+        self.terms = []    # (realized, term-or-None)
+        self._attract = {}
+        o = self.scene.original_positions()
+        for r in deck.python_ops:
+            op, target = r.op, r.target
+            sl = self.scene.slice(target)
+            if isinstance(op, Bind):
+                i, j, c = bind_pairs(op, self.scene.groups[target], self.scene.groups[op.source])
+                I, J = i + sl.start, j + self.scene.offset(op.source)
+                d = o[J] - o[I]
+                self.terms.append((r, PairTerm(f"bind on {target}", I, J, c,
+                                               np.einsum("ij,ij->i", d, d))))
+            elif isinstance(op, Collide):
+                self.terms.append((r, CollideTerm(f"collide on {target}", sl,
+                                                  self.scene.slice(op.source), float(op.coeff.c),
+                                                  self.radius)))
+            else:
+                self.terms.append((r, None))
+        self.phase = {}
+        self.active = []
+
+    # ------------------------------------------------------------------ phase
+    def set_phase(self, phase_vars) -> bool:
+        """Select the terms active in this phase; return whether any are."""
+        self.phase = dict(phase_vars)
+        self.active = [(r, t) for r, t in self.terms
+                       if isinstance(r.op, Dampen) or phase_active(r.op.when, self.phase)]
+        return bool(self.active)
+
+    def _attract_term(self, r):
+        key = (id(r.op), tuple(sorted(self.phase.items())))
+        if key not in self._attract:
+            sc = self.scene
+            i, j, c = attract_pairs(r.op, sc.groups[r.target], sc.groups[r.op.source], self.phase)
+            self._attract[key] = PairTerm(f"attract on {r.target}", i + sc.offset(r.target),
+                                          j + sc.offset(r.op.source), c)
+        return self._attract[key]
+
+    def _contact(self, fr: Frame, target: str, group: str) -> bool:
+        term = CollideTerm("contact", self.scene.slice(target), self.scene.slice(group), 0.0,
+                           self.radius)
+        here = len(term.pairs(fr)[0]) > 0
+        if self.comm is not None and self.comm.Get_size() > 1:
+            from mpi4py import MPI
+
+            here = self.comm.allreduce(here, op=MPI.LOR)
+        return here
+
+    def _holds(self, fr, r) -> bool:
+        if not phase_active(r.op.when, self.phase):
+            return False
+        return all(self._contact(fr, r.target, c.group) for c in r.op.when
+                   if isinstance(c, Contact))
+
+    # ------------------------------------------------------------------ callback
+    def __call__(self, caller, step, nlocal, tag, x, f):
+        try:
+            fr = Frame(self.lmp, self.n, nlocal)
+            acc = np.zeros((nlocal, 3))
+            for r, term in self.active:
+                op = r.op
+                if isinstance(op, Dampen):       # only the contact-conditioned extra is here
+                    if self._holds(fr, r):
+                        sel = (fr.index[:nlocal] >= self.scene.slice(r.target).start) & \
+                              (fr.index[:nlocal] < self.scene.slice(r.target).stop)
+                        acc[sel] -= op.extra * fr.v[sel]
+                elif isinstance(op, Force):
+                    if self._holds(fr, r):
+                        sl = self.scene.slice(r.target)
+                        mask = np.zeros(self.n, dtype=bool)
+                        mask[sl] = True if op.where is None else np.asarray(op.where, bool)
+                        acc[mask[fr.index[:nlocal]]] += np.asarray(op.accel, float)
+                elif not self._holds(fr, r):
+                    continue
+                elif isinstance(op, Attract):
+                    self._attract_term(r).add(fr, acc)
+                else:
+                    term.add(fr, acc)
+            f[:] = acc * self.mass[fr.index[:nlocal], None]
+        except Exception as exc:  # noqa: BLE001 - reported by the runner after the chunk
+            if self.error is None:
+                self.error = (step, exc)
+            f[:] = 0.0
