@@ -15,7 +15,8 @@ from scipy.spatial import cKDTree
 
 from .operators import (Attract, Bind, Collide, Contact, Dampen, Force, attract_pairs, bind_pairs,
                         phase_active)
-from .reference import attraction, bin_, col
+from .deck import reverse_of
+from .reference import col
 
 
 class Frame:
@@ -33,29 +34,59 @@ class Frame:
         self.row[self.index[::-1]] = np.arange(nall)[::-1]   # first copy wins (owned before ghost)
         self.local = np.zeros(n_total, dtype=bool)
         self.local[self.index[:nlocal]] = True
+        #: serial with unsorted atoms: row k holds particle k, so look-ups can be skipped
+        self.identity = (nlocal == n_total and nall == n_total
+                         and bool(np.array_equal(self.index, np.arange(n_total))))
+
+    def rows(self, name, I, J):
+        """Rows of the particles I and J here; raise if a partner is not visible on this rank."""
+        if self.identity:
+            return I, J
+        ri, rj = self.row[I], self.row[J]
+        if len(ri) and min(ri.min(), rj.min()) < 0:
+            k = int(np.flatnonzero((ri < 0) | (rj < 0))[0])
+            raise RuntimeError(f"{name}: particles {int(I[k])} and {int(J[k])} are not both "
+                               "visible on this rank (raise the ghost cutoff)")
+        return ri, rj
+
+
+def _add_rows(acc, rows, contrib, nlocal):
+    """acc[rows] += contrib for the rows owned here (ghost rows carry no force of ours)."""
+    if len(rows) and rows.max() >= nlocal:
+        own = rows < nlocal
+        rows, contrib = rows[own], contrib[own]
+    for k in range(3):
+        acc[:, k] += np.bincount(rows, weights=contrib[:, k], minlength=len(acc))
 
 
 class PairTerm:
-    """Directed pair forces from a fixed (or per-phase) list of global pairs (bind, attract)."""
+    """Pair forces from a fixed (or per-phase) list of global pairs (bind Eq. 12, attract Eq. 14).
 
-    def __init__(self, name, I, J, c, L0sq=None):
-        self.name, self.I, self.J, self.c, self.L0sq = name, I, J, c, L0sq
+    Each pair (I, J) pushes ``cI``·g on I and, where the reverse operator exists with the same
+    pairs (a bind and its partner: plane←rack 100 and rack←plane 0.5, or within(d) of a group
+    with itself), −``cJ``·g on J, so the geometry g is computed once per unordered pair.
+    """
+
+    def __init__(self, name, I, J, cI, cJ=None, L0sq=None):
+        self.name, self.I, self.J, self.cI, self.cJ, self.L0sq = name, I, J, cI, cJ, L0sq
 
     def add(self, fr: Frame, acc: np.ndarray):
-        I, J, c, L0sq = self.I, self.J, self.c, self.L0sq
-        if not fr.local.all():
-            sel = fr.local[I]
-            I, J, c = I[sel], J[sel], c[sel]
+        I, J, cI, cJ, L0sq = self.I, self.J, self.cI, self.cJ, self.L0sq
+        if not fr.identity:
+            sel = fr.local[I] if cJ is None else (fr.local[I] | fr.local[J])
+            I, J, cI = I[sel], J[sel], cI[sel]
+            cJ = cJ[sel] if cJ is not None else None
             L0sq = L0sq[sel] if L0sq is not None else None
-        ri, rj = fr.row[I], fr.row[J]
-        if len(rj) and rj.min() < 0:
-            k = int(np.flatnonzero(rj < 0)[0])
-            raise RuntimeError(f"{self.name}: partner particle {int(J[k])} of particle {int(I[k])} "
-                               "is not visible on this rank (raise the ghost cutoff)")
-        p, u = fr.x[ri], fr.x[rj]
-        contrib = bin_(p, u, L0sq, c) if L0sq is not None else attraction(p, u, c)
-        for k in range(3):
-            acc[:, k] += np.bincount(ri, weights=contrib[:, k], minlength=len(acc))
+        ri, rj = fr.rows(self.name, I, J)
+        diff = fr.x[rj] - fr.x[ri]
+        d2 = np.einsum("ij,ij->i", diff, diff)
+        if L0sq is not None:
+            g = (1.0 - L0sq / d2)[:, None] * diff        # Eq. 12 without its coefficient
+        else:
+            g = diff / np.sqrt(d2)[:, None]              # Eq. 14 without its coefficient
+        _add_rows(acc, ri, cI[:, None] * g, fr.nlocal)
+        if cJ is not None:
+            _add_rows(acc, rj, -cJ[:, None] * g, fr.nlocal)
 
 
 class CollideTerm:
@@ -96,14 +127,32 @@ class PyForces:
         self.terms = []    # (realized, term-or-None)
         self._attract = {}
         o = self.scene.original_positions()
+        folded = {}
+        for r in deck.python_ops:
+            if isinstance(r.op, Bind):
+                rev = reverse_of(r.op, r.target, self.scene)
+                if (rev is not None and rev is not r.op and id(r.op) not in folded
+                        and any(q.op is rev for q in deck.python_ops)):
+                    folded[id(rev)] = r.op   # rev is carried by r.op's term
         for r in deck.python_ops:
             op, target = r.op, r.target
             sl = self.scene.slice(target)
             if isinstance(op, Bind):
+                if id(op) in folded:          # carried by its reverse's term
+                    self.terms.append((r, None))
+                    continue
                 i, j, c = bind_pairs(op, self.scene.groups[target], self.scene.groups[op.source])
                 I, J = i + sl.start, j + self.scene.offset(op.source)
+                cJ = None
+                if op.source == target:       # within(d)/const of a group with itself: i<j once
+                    keep = I < J
+                    I, J, c = I[keep], J[keep], c[keep]
+                    cJ = c
+                elif any(v is op for v in folded.values()):
+                    rev = reverse_of(op, target, self.scene)
+                    cJ = np.full(len(I), float(rev.coeff.c))
                 d = o[J] - o[I]
-                self.terms.append((r, PairTerm(f"bind on {target}", I, J, c,
+                self.terms.append((r, PairTerm(f"bind on {target}", I, J, c, cJ,
                                                np.einsum("ij,ij->i", d, d))))
             elif isinstance(op, Collide):
                 self.terms.append((r, CollideTerm(f"collide on {target}", sl,
@@ -169,7 +218,7 @@ class PyForces:
                     continue
                 elif isinstance(op, Attract):
                     self._attract_term(r).add(fr, acc)
-                else:
+                elif term is not None:
                     term.add(fr, acc)
             f[:] = acc * self.mass[fr.index[:nlocal], None]
         except Exception as exc:  # noqa: BLE001 - reported by the runner after the chunk

@@ -259,7 +259,7 @@ def _when(op) -> str:
     return f" when {' and '.join(map(_cond, op.when))}" if op.when else ""
 
 
-def _reverse_of(op, target, scene: Scene):
+def reverse_of(op, target, scene: Scene):
     """The operator on ``op.source`` from ``target`` that forms one reciprocal pair with ``op``."""
     if op.source == target:
         return op  # a group bound/colliding with itself: (i, j) and (j, i) are both in ĉ
@@ -293,7 +293,7 @@ def solve_masses(scene: Scene, mode: str):
                 continue
             if isinstance(op, Bind) and mode != "fast":
                 continue
-            rev = _reverse_of(op, target, scene)
+            rev = reverse_of(op, target, scene)
             if rev is None or rev.coeff.c == 0:
                 continue
             ratio_edges.append((target, op.source, rev.coeff.c / op.coeff.c, op, rev))

@@ -194,6 +194,9 @@ def check_operator(op, target: str, groups: Mapping) -> None:
         raise SceneError(f"{where}: within(d) needs d > 0, got {coeff.d!r}")
     if isinstance(coeff, Matched) and not isinstance(op, Attract):
         raise SceneError(f"{where}: index-matched coefficients are for attract only")
+    if isinstance(op, Collide) and not isinstance(coeff, Const):
+        raise SceneError(f"{where}: collide takes a constant coefficient (its reach is the "
+                         f"sum of the radii, Eq. 10), not {type(coeff).__name__}")
     if isinstance(op, Attract) and not isinstance(coeff, (Matched, Const)):
         raise SceneError(f"{where}: attract takes a constant or index-matched coefficient")
 
@@ -261,6 +264,9 @@ def attract_pairs(op: Attract, target, source, phase: Mapping):
                 j_list.append(b.ravel())
         i = np.concatenate(i_list) if i_list else np.zeros(0, np.int64)
         j = np.concatenate(j_list) if j_list else np.zeros(0, np.int64)
+        if target is source:  # a particle never attracts itself (0/0 in Eq. 14)
+            keep = i != j
+            i, j = i[keep], j[keep]
         order = np.lexsort((j, i))
         i, j = i[order], j[order]
     return i, j, np.full(len(i), float(coeff.c))

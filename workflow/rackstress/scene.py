@@ -6,6 +6,7 @@ Engines (reference, LAMMPS) take a :class:`Scene` and nothing else.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Mapping
 
@@ -49,6 +50,10 @@ class Scene:
     params: dict = field(default_factory=dict)
 
     def __post_init__(self):
+        # One operator object per place in the sequences: engines key their pair lists by
+        # operator, and a user may well put the same Dampen(1) object on several groups.
+        self.operators = {t: [dataclasses.replace(op) if dataclasses.is_dataclass(op) else op
+                              for op in seq] for t, seq in self.operators.items()}
         self.validate()
         starts = np.cumsum([0] + [g.n for g in self.groups.values()])
         self._offset = {name: int(s) for name, s in zip(self.groups, starts[:-1])}
@@ -101,6 +106,8 @@ class Scene:
         if steps < 0:
             raise SceneError(f"steps must be >= 0, got {steps}")
         phases, left = [], steps
+        if self.steps_per_cycle == 0:
+            left = 0   # nothing to repeat: every phase has zero steps
         while left > 0:
             for p in self.phases:
                 take = min(p.steps, left)
