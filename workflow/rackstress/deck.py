@@ -78,13 +78,6 @@ class Deck:
     def python_ops(self) -> list:
         return [r for r in self.realized if "python" in r.how]
 
-    def needs_python(self, phase_vars) -> bool:
-        return any(phase_active(r.op.when, phase_vars) or isinstance(r.op, Dampen)
-                   for r in self.python_ops)
-
-    def type_of(self, group: str) -> int:
-        return topology.group_types(self.scene)[group]
-
     # ------------------------------------------------------------------ data file
     def data_text(self) -> str:
         return data_text(self.scene, self.masses, self.bonds, len(self.bond_types))
@@ -189,15 +182,15 @@ class Deck:
                     L.append(f"unfix rs_force{idx}")
         return L
 
-    def schedule_commands(self, chunk: int | None = None) -> list[str]:
+    def velocity_variables(self) -> list[str]:
+        """Atom variables for v + dt/2·f/m (into fix nve) and v − dt/2·f/m (back to Eq. 5's v)."""
+        h = _f(0.5 * self.scene.dt)
+        return [f"variable rs_vh{c} atom v{c}+{h}*f{c}/mass" for c in "xyz"] + \
+               [f"variable rs_vp{c} atom v{c}-{h}*f{c}/mass" for c in "xyz"]
+
+    def schedule_commands(self) -> list[str]:
         """The whole schedule as plain LAMMPS commands (what the runner does, in one text)."""
-        dt = self.scene.dt
-        L = [f"variable rs_vhx atom vx+{_f(0.5 * dt)}*fx/mass",
-             f"variable rs_vhy atom vy+{_f(0.5 * dt)}*fy/mass",
-             f"variable rs_vhz atom vz+{_f(0.5 * dt)}*fz/mass",
-             f"variable rs_vpx atom vx-{_f(0.5 * dt)}*fx/mass",
-             f"variable rs_vpy atom vy-{_f(0.5 * dt)}*fy/mass",
-             f"variable rs_vpz atom vz-{_f(0.5 * dt)}*fz/mass"]
+        L = self.velocity_variables()
         previous = None
         for first, phase, cycle in self.scene.schedule():
             L.append(f"# phase '{phase.name}' {dict(phase.vars)} (cycle {cycle + 1}), "
@@ -444,11 +437,6 @@ def data_text(scene: Scene, masses: dict, bonds=None, n_bond_types: int = 0) -> 
         text += "\nBonds\n\n" + "\n".join(
             f"{k} {t} {a} {b}" for k, (t, a, b) in enumerate(zip(btype, bi, bj), start=1)) + "\n"
     return text
-
-
-def write_data(scene: Scene, path: Path, deck: Deck | None = None) -> None:
-    deck = deck or compile_deck(scene, "exact")
-    Path(path).write_text(deck.data_text())
 
 
 def write_deck(scene: Scene, out: Path, mode: str = "exact", dump_every: int = 100) -> Deck:

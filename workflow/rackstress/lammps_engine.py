@@ -49,7 +49,8 @@ class LammpsRun:
         dump = str(out / "trajectory.dump") if out is not None else None
         for cmd in deck.setup_commands(str(data), dump, dump_every):
             self.command(cmd)
-        self.command("\n".join(deck.schedule_commands()[:6]))  # the velocity variables
+        for cmd in deck.velocity_variables():
+            self.command(cmd)
         if deck.python_ops:
             self.py = PyForces(self.lmp, deck, self.comm)
 
