@@ -65,6 +65,20 @@ def _jsonable(x):
     raise TypeError(f"not JSON serializable: {type(x)}")
 
 
+def scene_record(scene: Scene) -> dict:
+    """What post-processing needs to know of a scene: its groups as atom types and id ranges."""
+    types, mols = topology.group_types(scene), topology.group_mols(scene)
+    return {"scene": scene.name, "params": scene.params, "dt": scene.dt,
+            "steps": scene.total_steps,
+            "phases": [{"name": p.name, "steps": p.steps, "vars": dict(p.vars)}
+                       for p in scene.phases],
+            "cycles": scene.cycles,
+            "groups": [{"name": name, "kind": g.kind, "host": g.host, "n": g.n,
+                        "type": types[name], "mol": mols[name],
+                        "first_id": scene.offset(name) + 1}
+                       for name, g in scene.groups.items()]}
+
+
 def group_figures(scene: Scene, p_start: np.ndarray, p_end: np.ndarray) -> dict:
     """Per group: n, centre of mass at start and end, and max_deformation (DESIGN.md §4)."""
     out = {}
@@ -154,8 +168,7 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
 
     def start():
         prepare_rundir(out, overwrite)
-        write_json(out / "scene.json", {"scene": scene.name, "params": scene.params,
-                                        "dt": scene.dt, "steps": scene.total_steps})
+        write_json(out / "scene.json", scene_record(scene))
         (out / "particles.data").write_text(deck.data_text())
         if engine == "lammps":
             (out / "in.lammps").write_text(deck.input_text(dump_every))
