@@ -96,15 +96,28 @@ class CollideTerm:
         self.name, self.t, self.s, self.c, self.radius = name, target_slice, source_slice, c, radius
 
     def pairs(self, fr: Frame):
-        idx_t = np.flatnonzero((fr.index[:fr.nlocal] >= self.t.start) & (fr.index[:fr.nlocal] < self.t.stop))
-        idx_s = np.flatnonzero((fr.index >= self.s.start) & (fr.index < self.s.stop))
+        """Row pairs (a, b), a owned here in the target, b in the source, overlapping (d < R)."""
+        if fr.identity:
+            idx_t = np.arange(self.t.start, self.t.stop)
+            idx_s = np.arange(self.s.start, self.s.stop)
+        else:
+            own = fr.index[:fr.nlocal]
+            idx_t = np.flatnonzero((own >= self.t.start) & (own < self.t.stop))
+            idx_s = np.flatnonzero((fr.index >= self.s.start) & (fr.index < self.s.stop))
         if not len(idx_t) or not len(idx_s):
             return idx_t[:0], idx_s[:0]
-        rt, rs = self.radius[fr.index[idx_t]], self.radius[fr.index[idx_s]]
-        sm = cKDTree(fr.x[idx_t]).sparse_distance_matrix(cKDTree(fr.x[idx_s]), rt.max() + rs.max(),
-                                                         output_type="ndarray")
+        xt = fr.x[idx_t]
+        reach = self.radius[fr.index[idx_t]].max() + self.radius[fr.index[idx_s]].max()
+        # only source particles inside the target's bounding box (grown by the reach) can touch
+        xs = fr.x[idx_s]
+        near = ((xs >= xt.min(axis=0) - reach) & (xs <= xt.max(axis=0) + reach)).all(axis=1)
+        idx_s = idx_s[near]
+        if not len(idx_s):
+            return idx_t[:0], idx_s[:0]
+        sm = cKDTree(xt).sparse_distance_matrix(cKDTree(fr.x[idx_s]), reach, output_type="ndarray")
         a, b = idx_t[sm["i"]], idx_s[sm["j"]]
-        keep = (fr.index[a] != fr.index[b]) & (sm["v"] < self.radius[fr.index[a]] + self.radius[fr.index[b]])
+        keep = (fr.index[a] != fr.index[b]) & \
+               (sm["v"] < self.radius[fr.index[a]] + self.radius[fr.index[b]])
         return a[keep], b[keep]
 
     def add(self, fr: Frame, acc: np.ndarray):

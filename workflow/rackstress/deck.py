@@ -100,7 +100,13 @@ class Deck:
         L.append(f"read_data {data_file}")
         L.append(f"comm_modify cutoff {self.ghost_cutoff:.6g}")
         L.append(f"neighbor {SKIN:g} bin")
-        L.append("neigh_modify delay 0 every 1 check yes")
+        binsize = ""
+        if self.lepton:
+            # bins as wide as the cutoff: a flat sediment in a tall box otherwise makes millions
+            # of near-empty bins that every rebuild sweeps (measured: 3x faster rebuilds)
+            cut = max(R for _, R in self.lepton.values()) + SKIN
+            binsize = f" binsize {_f(cut)}"
+        L.append(f"neigh_modify delay 0 every 1 check yes{binsize}")
         L.append(f"timestep {_f(sc.dt)}")
         for name in sc.groups:
             L.append(f"group {name} type {types[name]}")
