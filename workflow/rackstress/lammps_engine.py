@@ -15,6 +15,7 @@ from .callbacks import PyForces
 from .deck import PY_FIX, Deck
 from .errors import DivergenceError, RackstressError
 from .reference import find_divergence, divergence_error
+from .scene import PhaseEnd
 
 #: Steps between watchdog checks (and progress updates) on LAMMPS.
 CHECK_EVERY = 10
@@ -141,8 +142,10 @@ class LammpsRun:
         self.lmp.close()
 
     # ------------------------------------------------------------------ the whole schedule
-    def run_schedule(self, progress=None, check_every: int = CHECK_EVERY) -> None:
-        for _, phase, _ in self.scene.schedule():
+    def run_schedule(self, progress=None, check_every: int = CHECK_EVERY,
+                     on_phase_end=None) -> None:
+        """Every phase of every cycle; ``on_phase_end(PhaseEnd)`` sees each phase's last state."""
+        for _, phase, cycle in self.scene.schedule():
             self.enter_phase(phase.vars)
             left = phase.steps
             while left > 0:
@@ -152,9 +155,13 @@ class LammpsRun:
                 left -= k
                 if progress is not None:
                     progress.update(k)
+            if on_phase_end is not None:
+                on_phase_end(PhaseEnd(self.step, phase.name, dict(phase.vars), cycle,
+                                      self.gather_positions()))
 
 
-def run_lammps(scene, out: Path, mode: str, dump_every: int, progress: bool, deck=None):
+def run_lammps(scene, out: Path, mode: str, dump_every: int, progress: bool, deck=None,
+               on_phase_end=None):
     """Run ``scene`` on LAMMPS into ``out``; return (final positions, steps done, extra summary)."""
     from .deck import compile_deck
     from .run import progress_bar
@@ -164,7 +171,7 @@ def run_lammps(scene, out: Path, mode: str, dump_every: int, progress: bool, dec
     try:
         with progress_bar(scene.total_steps, progress, f"{scene.name} (lammps)") as bar:
             try:
-                runner.run_schedule(bar)
+                runner.run_schedule(bar, on_phase_end=on_phase_end)
             except DivergenceError as err:
                 err.p_end = runner.gather_positions()
                 err.steps_done = runner.step

@@ -16,7 +16,7 @@ import numpy as np
 
 from . import rigid, topology
 from .errors import DivergenceError, RunDirError
-from .scene import Scene
+from .scene import PhaseEnd, Scene
 
 ENGINES = ("lammps", "reference")
 #: Runs shorter than this many seconds show no progress bar.
@@ -127,7 +127,7 @@ def progress_bar(total: int, enabled: bool, desc: str):
                 desc=desc, dynamic_ncols=True, leave=False)
 
 
-def run_reference(scene: Scene, out: Path, dump_every: int, progress: bool):
+def run_reference(scene: Scene, out: Path, dump_every: int, progress: bool, on_phase_end=None):
     """Step a scene with the reference engine, writing frames; returns (p_end, steps_done)."""
     from .dumpio import DumpWriter
     from .reference import Reference
@@ -139,12 +139,15 @@ def run_reference(scene: Scene, out: Path, dump_every: int, progress: bool):
             progress_bar(scene.total_steps, progress, scene.name) as bar:
         dump.write(0, ref.p)
         try:
-            for _, phase, _ in scene.schedule():
+            for _, phase, cycle in scene.schedule():
                 for _ in range(phase.steps):
                     ref.step(phase.vars)
                     if ref.step_count % dump_every == 0:
                         dump.write(ref.step_count, ref.p)
                     bar.update(1)
+                if on_phase_end is not None:
+                    on_phase_end(PhaseEnd(ref.step_count, phase.name, dict(phase.vars), cycle,
+                                          ref.p.copy()))
         except DivergenceError as err:
             err.p_end, err.steps_done = ref.p, ref.step_count
             raise
@@ -177,19 +180,27 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
     on_root(start)
     t0 = time.perf_counter()
     extra = {"dump_every": dump_every}
+    records = [PhaseEnd(0, None, {}, 0, scene.original_positions())]
+    on_phase_end = records.append if scene.report is not None else None
+
+    def report():
+        if scene.report is not None and _is_root():
+            extra["report"] = scene.report(scene, records)
     try:
         if engine == "reference":
             mode = "exact"
             if not _is_root():
                 raise RunDirError("the reference engine runs on one rank; run it without mpiexec")
-            p_end, steps = run_reference(scene, out, dump_every, progress)
+            p_end, steps = run_reference(scene, out, dump_every, progress, on_phase_end)
         else:
             from .lammps_engine import run_lammps
 
-            p_end, steps, more = run_lammps(scene, out, mode, dump_every, progress, deck)
+            p_end, steps, more = run_lammps(scene, out, mode, dump_every, progress, deck,
+                                            on_phase_end)
             extra.update(more)
     except DivergenceError as err:
         wall = time.perf_counter() - t0
+        report()
         p_end = getattr(err, "p_end", None)
         if p_end is None:
             p_end = np.full((scene.n_particles, 3), np.nan)
@@ -199,6 +210,7 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
             write_json(out / "summary.json", summary)
         raise
     wall = time.perf_counter() - t0
+    report()
     summary = summarize(scene, engine, mode, p_end, steps, wall, "ok", extra=extra)
     if _is_root():
         write_json(out / "summary.json", summary)

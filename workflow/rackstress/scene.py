@@ -32,6 +32,17 @@ class Phase:
     vars: Mapping = field(default_factory=dict)
 
 
+@dataclass(frozen=True)
+class PhaseEnd:
+    """The state when a phase of the schedule ends: what a scene's ``report`` looks at."""
+
+    step: int
+    phase: str | None
+    vars: Mapping
+    cycle: int
+    p: np.ndarray
+
+
 @dataclass
 class Scene:
     """Groups + per-group operator sequences + schedule + time step ``dt`` (Eq. 5's t).
@@ -48,6 +59,9 @@ class Scene:
     cycles: int = 1
     bound: float = 1.0e4
     params: dict = field(default_factory=dict)
+    #: Optional ``report(scene, records) -> dict`` over the states at phase ends (a list of
+    #: :class:`PhaseEnd`, the first being the initial state); its result goes into the summary.
+    report: object = None
 
     def __post_init__(self):
         # One operator object per place in the sequences: engines key their pair lists by
@@ -119,7 +133,7 @@ class Scene:
         if not phases:
             phases = [Phase(self.phases[0].name, 0, self.phases[0].vars)]
         return Scene(self.name, self.groups, self.operators, phases, self.dt, 1, self.bound,
-                     {**self.params, "steps": steps})
+                     {**self.params, "steps": steps}, self.report)
 
     # ------------------------------------------------------------------ validation
     def validate(self) -> None:
