@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .operators import (Attract, Bind, Collide, Contact, Dampen, Force, attract_pairs, bind_pairs,
+from .operators import (Attract, Bind, Collide, Const, Contact, Dampen, Force, attract_pairs, bind_pairs,
                         phase_active)
 from .deck import reverse_of
 from .reference import col
@@ -67,10 +67,26 @@ class PairTerm:
     with itself), −``cJ``·g on J, so the geometry g is computed once per unordered pair.
     """
 
-    def __init__(self, name, I, J, cI, cJ=None, L0sq=None):
+    def __init__(self, name, I, J, cI, cJ=None, L0sq=None, block=None):
         self.name, self.I, self.J, self.cI, self.cJ, self.L0sq = name, I, J, cI, cJ, L0sq
+        #: (target slice, source slice) when the pairs are every (i, j) of two groups in
+        #: row-major order (a Const bind such as host ↔ rack): then a serial frame is served by
+        #: broadcasting over the m×n block, with no gathers or scatters.
+        self.block = block
+
+    def _add_block(self, fr: Frame, acc: np.ndarray):
+        ts, ss = self.block
+        m, n = ts.stop - ts.start, ss.stop - ss.start
+        diff = fr.x[ss][None, :, :] - fr.x[ts][:, None, :]          # (m, n, 3): u − p
+        d2 = np.einsum("ijk,ijk->ij", diff, diff)
+        g = (1.0 - self.L0sq.reshape(m, n) / d2)[:, :, None] * diff  # Eq. 12 without c
+        acc[ts] += (self.cI.reshape(m, n)[:, :, None] * g).sum(axis=1)
+        if self.cJ is not None:
+            acc[ss] -= (self.cJ.reshape(m, n)[:, :, None] * g).sum(axis=0)
 
     def add(self, fr: Frame, acc: np.ndarray):
+        if self.block is not None and fr.identity:
+            return self._add_block(fr, acc)
         I, J, cI, cJ, L0sq = self.I, self.J, self.cI, self.cJ, self.L0sq
         if not fr.identity:
             sel = fr.local[I] if cJ is None else (fr.local[I] | fr.local[J])
@@ -165,8 +181,11 @@ class PyForces:
                     rev = reverse_of(op, target, self.scene)
                     cJ = np.full(len(I), float(rev.coeff.c))
                 d = o[J] - o[I]
+                block = None
+                if isinstance(op.coeff, Const) and op.source != target:
+                    block = (sl, self.scene.slice(op.source))
                 self.terms.append((r, PairTerm(f"bind on {target}", I, J, c, cJ,
-                                               np.einsum("ij,ij->i", d, d))))
+                                               np.einsum("ij,ij->i", d, d), block)))
             elif isinstance(op, Collide):
                 self.terms.append((r, CollideTerm(f"collide on {target}", sl,
                                                   self.scene.slice(op.source), float(op.coeff.c),
