@@ -5,12 +5,15 @@ import inspect
 from pathlib import Path
 
 from ..errors import SceneError
+from .magpod import magpod, magpod_small
 from .plane import plane_bound, plane_rack
 
 #: name → builder; each builder's keyword arguments are the scene's parameters (``--set``).
 BUILDERS = {
     "plane-bound": plane_bound,
     "plane-rack": plane_rack,
+    "magpod": magpod,
+    "magpod-small": magpod_small,
 }
 
 
