@@ -111,5 +111,48 @@ def list_scenes():
         click.echo("  " + json.dumps(params))
 
 
+@main.command()
+@click.argument("rundir", type=click.Path(file_okay=False, path_type=Path))
+@click.option("--frames", metavar="N,N,...",
+              help="Iterations to picture (nearest dumped frame is used); default: the paper's "
+                   "1320,2600,4720,17480 if the run reaches them, else 4 spread over the run.")
+@click.option("--measure", type=click.Choice(["paper", "accumulated", "strain", "d2min",
+                                              "virial"]),
+              default="paper", show_default=True,
+              help="paper: distance from desired position (Sec. 5.2); accumulated: its time "
+                   "integral; strain: von Mises shear strain; d2min: non-affine D2min; "
+                   "virial: LAMMPS per-atom stress (if the dump has it).")
+@click.option("--views", default="right,front,left", show_default=True,
+              help="Comma-separated: right, front, left, back, top, iso.")
+@click.option("--movie", is_flag=True, help="Also write figures/movie.mp4 (first view).")
+@click.option("--vmax", type=float, help="Top of the colour scale (default: 99th percentile).")
+@click.option("--allow-truncated", is_flag=True,
+              help="Render the complete frames of a dump that ends mid-frame.")
+def render(rundir, frames, measure, views, movie, vmax, allow_truncated):
+    """Render the stress pictures, sheet, plots (and movie) of RUNDIR into RUNDIR/figures/."""
+    from .render import render as render_run
+
+    t0 = time.perf_counter()
+    try:
+        its = None
+        if frames:
+            try:
+                its = [int(f) for f in frames.split(",") if f.strip()]
+            except ValueError:
+                raise RackstressError(f"--frames expects comma-separated integers, got '{frames}'")
+        rep = render_run(rundir, frames=its, measure=measure,
+                         views=[v.strip() for v in views.split(",") if v.strip()], movie=movie,
+                         vmax=vmax, allow_truncated=allow_truncated)
+    except RackstressError as err:
+        _fail(err, EXIT_INPUT)
+    for note in rep.notes:
+        click.echo(f"note: {note}")
+    click.echo("frames: " + ", ".join(f"{s}" for _, _, s in rep.frames)
+               + f"; colour scale 0..{rep.vmax:.4g}")
+    for name in rep.files:
+        click.echo(f"  wrote {rep.outdir / name}")
+    click.echo(f"rendered in {time.perf_counter() - t0:.1f} s")
+
+
 if __name__ == "__main__":  # pragma: no cover
     main()

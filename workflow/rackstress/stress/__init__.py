@@ -1,0 +1,23 @@
+"""Per-particle stress of a run: reading its dump through MDAnalysis, and the stress measures.
+
+* :mod:`.dump` — :class:`RackDumpReader` (an MDAnalysis reader: float64, streamed by frame) and
+  the errors for bad dumps and data files;
+* :mod:`.rundata` — :func:`load_run`: a run directory as a Universe with its parts;
+* :mod:`.fit` — best-fit rigid motion of a part (Kabsch), plain and robust;
+* :mod:`.measures` — one MDAnalysis ``AnalysisBase`` class per measure: the paper's distance
+  from the desired position and its time integral, von Mises shear strain, D²min, virial stress,
+  and the parts' motion (centre of mass, footprints).
+"""
+from .dump import (DataMismatchError, DumpColumnsError, DumpError, RackDumpReader,
+                   StressInputError, TruncatedDumpError, index_dump, read_data_file)
+from .fit import robust_fit, rigid_fit
+from .measures import (MEASURES, AccumulatedDistance, DesiredPositionDistance, NonAffineD2min,
+                       PartMotion, VirialStress, VonMisesStrain, von_mises_strain)
+from .rundata import Part, RunData, load_run
+
+__all__ = [
+    "AccumulatedDistance", "DataMismatchError", "DesiredPositionDistance", "DumpColumnsError",
+    "DumpError", "MEASURES", "NonAffineD2min", "Part", "PartMotion", "RackDumpReader",
+    "RunData", "StressInputError", "TruncatedDumpError", "VirialStress", "VonMisesStrain",
+    "index_dump", "load_run", "read_data_file", "rigid_fit", "robust_fit", "von_mises_strain",
+]

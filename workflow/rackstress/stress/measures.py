@@ -1,0 +1,393 @@
+"""Per-particle stress measures, one MDAnalysis ``AnalysisBase`` class each, over a run's frames.
+
+Every class takes a :class:`~rackstress.stress.rundata.RunData` (from :func:`load_run`), streams
+its trajectory frame by frame (only one frame's positions are ever held) and leaves in
+``self.results``: ``steps`` (iteration of every analysed frame), ``per_particle`` (n_frames × n_atoms,
+float64, the measure per particle; NaN where it is undefined or for parts not analysed) and
+``per_part`` (name → {"max", "mean"} over the frames). ``UNITS`` and ``LABEL`` say what it is.
+
+The measures and what they mean
+-------------------------------
+``paper`` — :class:`DesiredPositionDistance`
+    Section 5.2 / DESIGN.md §4: the distance of a particle from its desired position, its
+    original position carried by its part's best-fit rigid motion (:mod:`.fit`; robust Kabsch
+    by default). Zero for a rigid motion of the part; for a local deformation, the local
+    displacement itself. It sees any departure from the rest shape — including a part bending
+    as a whole, where every particle is far from where the rigid fit puts it although the
+    neighbourhood of each is only gently strained. Length units.
+``accumulated`` — :class:`AccumulatedDistance`
+    "the magnitude and the duration of local deformations" (Section 5.2): the time integral
+    ∫ d_i dt of the paper's distance (trapezoid rule over the dumped frames, t = step × dt), so a
+    deformation held long weighs as much as a larger one held briefly. Length × time units.
+``strain`` — :class:`VonMisesStrain`
+    The local von Mises shear strain as OVITO's atomic-strain modifier computes it: per
+    particle, the neighbours within a cutoff in the original configuration (1.5 × the part's
+    typical spacing by default), the best-fit affine deformation gradient
+    F = (Σ d d₀ᵀ)(Σ d₀ d₀ᵀ)⁻¹ (Falk & Langer 1998), E = ½(FᵀF − I) and
+    η = √(E_xy² + E_yz² + E_xz² + ((E_xx−E_yy)² + (E_yy−E_zz)² + (E_zz−E_xx)²)/6).
+    Dimensionless. It measures shape change of the neighbourhood only: it is zero for a rigid
+    motion *and* for a neighbourhood that is displaced but not distorted, e.g. a toe that is
+    bent rigidly about a hinge shows strain only at the hinge while the paper's measure paints
+    the whole toe. Conversely a uniform stretch of a whole part shows everywhere in η but, under
+    the paper's measure, grows from zero at the centre to its largest at the ends.
+    A planar neighbourhood (the plane scenes, the sediment, one-layer feet) has a singular
+    Σ d₀ d₀ᵀ: there F is fitted in the plane (pseudo-inverse) and completed by carrying the
+    plane's normal to the deformed plane's unit normal, so E is the in-plane (membrane) strain
+    with no thickness change. A particle with a collinear or empty neighbourhood gets NaN.
+``d2min`` — :class:`NonAffineD2min`
+    D²min = Σ_j ‖d_j − F d₀_j‖² of the same fit (Falk & Langer): the part of the neighbours'
+    motion no affine deformation explains — local rearrangement or sharp bending. Zero for any
+    uniform deformation, which the paper's measure does not ignore. Length² units.
+``virial`` — :class:`VirialStress`
+    LAMMPS' per-atom stress (``compute stress/atom``, columns ``c_NAME[1..6]`` = xx yy zz xy xz yz
+    in the dump), shown as its von Mises equivalent √(½Σ(σ_ii−σ_jj)² + 3Σσ_ij²). It is force ×
+    distance per particle (stress × volume, energy units), includes the forces that hold the
+    parts together however far they deform, and so differs from the paper's measure where a
+    large force holds a small deformation (stiff binds to a rack) or the reverse. Only if the
+    run recorded it; rackstress runs do not by default.
+
+:class:`PartMotion` is the companion for plots: each part's centre of mass and bounding box per
+frame, and for a sediment the vertical displacement of its particles (footprints).
+"""
+from __future__ import annotations
+
+import re
+
+import numpy as np
+from MDAnalysis.analysis.base import AnalysisBase
+from scipy.spatial import cKDTree
+
+from .dump import DumpColumnsError, StressInputError
+from .fit import FITS
+
+#: Cutoff of the strain neighbourhood in units of the part's typical (median nearest) spacing.
+CUTOFF_FACTOR = 1.5
+#: Relative eigenvalue below which Σ d₀ d₀ᵀ counts as singular (planar/collinear neighbourhood).
+RANK_TOL = 1e-9
+#: Vertical axis (MagPod and the planes: y is up).
+UP = 1
+
+
+def positions(ts) -> np.ndarray:
+    """Float64 positions of a frame (``RackDumpReader`` keeps them; else MDAnalysis' float32)."""
+    p = ts.data.get("positions64") if hasattr(ts, "data") else None
+    return np.asarray(p if p is not None else ts.positions, dtype=np.float64)
+
+
+class _RunAnalysis(AnalysisBase):
+    """Shared plumbing: parts, steps, per-particle values, per-part summaries."""
+
+    NAME = ""
+    LABEL = ""
+    UNITS = ""
+
+    def __init__(self, run, parts=None, **kwargs):
+        super().__init__(run.trajectory, **kwargs)
+        self.run_data = run
+        names = list(run.parts) if parts is None else list(parts)
+        unknown = [n for n in names if n not in run.parts]
+        if unknown:
+            raise StressInputError(f"no part(s) {', '.join(unknown)} in {run.rundir}; parts: "
+                                   f"{', '.join(run.parts)}")
+        self.parts = [run.parts[n] for n in names]
+
+    def _prepare(self):
+        self.results.steps = np.zeros(self.n_frames, dtype=np.int64)
+        self.results.per_particle = np.full((self.n_frames, self.run_data.n_atoms), np.nan)
+
+    def _single_frame(self):
+        k = self._frame_index
+        self.results.steps[k] = int(self._ts.data.get("step", self._ts.frame))
+        self.results.per_particle[k] = self._measure(positions(self._ts))
+
+    def _measure(self, p: np.ndarray) -> np.ndarray:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _conclude(self):
+        vals = self.results.per_particle
+        self.results.per_part = {}
+        for part in self.parts:
+            v = vals[:, part.index]
+            ok = np.isfinite(v).any(axis=1)
+            with np.errstate(all="ignore"):
+                vmax = np.where(ok, np.nanmax(np.where(np.isfinite(v), v, -np.inf), axis=1),
+                                np.nan)
+                vmean = np.where(ok, np.nansum(v, axis=1) / np.maximum(
+                    np.isfinite(v).sum(axis=1), 1), np.nan)
+            self.results.per_part[part.name] = {"max": vmax, "mean": vmean}
+        self.results.units = self.UNITS
+        self.results.label = self.LABEL
+
+
+class DesiredPositionDistance(_RunAnalysis):
+    """The paper's measure: distance from the desired position (see module docstring)."""
+
+    NAME = "paper"
+    LABEL = "distance from desired position"
+    UNITS = "length units"
+
+    def __init__(self, run, parts=None, fit: str = "robust", **kwargs):
+        super().__init__(run, parts, **kwargs)
+        if fit not in FITS:
+            raise StressInputError(f"unknown fit '{fit}'; choose one of {', '.join(FITS)}")
+        self.fit = fit
+        self._o = run.o
+
+    def _distance(self, p: np.ndarray) -> np.ndarray:
+        out = np.full(len(p), np.nan)
+        fit = FITS[self.fit]
+        for part in self.parts:
+            idx = part.index
+            out[idx] = fit(self._o[idx], p[idx])[2]
+        return out
+
+    def _measure(self, p):
+        return self._distance(p)
+
+
+class AccumulatedDistance(DesiredPositionDistance):
+    """∫ distance dt per particle: the paper's "magnitude and duration" (module docstring).
+
+    ``results.distance`` keeps the instantaneous distance of every frame as well. Analyse every
+    frame (the default): the integral uses the frames it is given.
+    """
+
+    NAME = "accumulated"
+    LABEL = "accumulated distance from desired position"
+    UNITS = "length × time units"
+
+    def _prepare(self):
+        super()._prepare()
+        self.results.distance = np.full_like(self.results.per_particle, np.nan)
+        self._acc = np.zeros(self.run_data.n_atoms)
+        self._prev = None
+
+    def _measure(self, p):
+        d = self._distance(p)
+        t = self.results.steps[self._frame_index] * self.run_data.dt
+        if self._prev is not None:
+            d_prev, t_prev = self._prev
+            self._acc += 0.5 * (np.nan_to_num(d) + np.nan_to_num(d_prev)) * (t - t_prev)
+        self._prev = (d, t)
+        self.results.distance[self._frame_index] = d
+        acc = self._acc.copy()
+        acc[~np.isfinite(d)] = np.nan
+        return acc
+
+
+# ----------------------------------------------------------------------------- local strain
+def von_mises_strain(E: np.ndarray) -> np.ndarray:
+    """η of Green–Lagrange strain tensors E (..., 3, 3), as OVITO defines it."""
+    xx, yy, zz = E[..., 0, 0], E[..., 1, 1], E[..., 2, 2]
+    return np.sqrt(E[..., 0, 1] ** 2 + E[..., 1, 2] ** 2 + E[..., 0, 2] ** 2
+                   + ((xx - yy) ** 2 + (yy - zz) ** 2 + (zz - xx) ** 2) / 6.0)
+
+
+def _bincount3(i: np.ndarray, a: np.ndarray, b: np.ndarray, n: int) -> np.ndarray:
+    """Σ over pairs with first index i of the outer products a bᵀ, per particle: (n, 3, 3)."""
+    out = np.empty((n, 3, 3))
+    for r in range(3):
+        for c in range(3):
+            out[:, r, c] = np.bincount(i, weights=a[:, r] * b[:, c], minlength=n)
+    return out
+
+
+class _AffineStrain(_RunAnalysis):
+    """Falk–Langer affine fit of each particle's neighbourhood; results: both η and D²min."""
+
+    def __init__(self, run, parts=None, cutoff: float | None = None,
+                 cutoff_factor: float = CUTOFF_FACTOR, **kwargs):
+        super().__init__(run, parts, **kwargs)
+        if cutoff is not None and not cutoff > 0:
+            raise StressInputError(f"strain cutoff must be positive, got {cutoff}")
+        self.cutoff, self.cutoff_factor = cutoff, float(cutoff_factor)
+
+    def _prepare(self):
+        super()._prepare()
+        o, n = self.run_data.o, self.run_data.n_atoms
+        I, J = [], []
+        self.results.cutoffs = {}
+        for part in self.parts:
+            if part.n < 2:
+                continue
+            po = o[part.index]
+            tree = cKDTree(po)
+            spacing = float(np.median(tree.query(po, k=2)[0][:, 1]))
+            rc = self.cutoff if self.cutoff is not None else self.cutoff_factor * spacing
+            self.results.cutoffs[part.name] = rc
+            pairs = tree.query_pairs(rc * (1 + 1e-9), output_type="ndarray")
+            if len(pairs):
+                gi, gj = part.index[pairs[:, 0]], part.index[pairs[:, 1]]
+                I += [gi, gj]
+                J += [gj, gi]
+        self._I = np.concatenate(I) if I else np.zeros(0, dtype=np.int64)
+        self._J = np.concatenate(J) if J else np.zeros(0, dtype=np.int64)
+        self._d0 = o[self._J] - o[self._I]
+        V = _bincount3(self._I, self._d0, self._d0, n)
+        lam, vec = np.linalg.eigh(V)                      # ascending eigenvalues
+        top = lam[:, 2:3]
+        nonzero = lam > RANK_TOL * np.maximum(top, np.finfo(float).tiny)
+        rank = nonzero.sum(axis=1)
+        inv = np.where(nonzero, 1.0 / np.where(nonzero, lam, 1.0), 0.0)
+        self._Vpinv = np.einsum("nik,nk,njk->nij", vec, inv, vec)
+        self._rank = rank
+        # planar neighbourhoods: in-plane basis t1, t2 and normal n0 = t1 × t2
+        t1, t2 = vec[:, :, 1], vec[:, :, 2]
+        self._t1, self._t2, self._n0 = t1, t2, np.cross(t1, t2)
+        self._valid = rank >= 2
+        in_parts = np.zeros(n, dtype=bool)
+        for part in self.parts:
+            in_parts[part.index] = True
+        self._valid &= in_parts
+        self._in_parts = in_parts
+        self.results.von_mises = np.full((self.n_frames, n), np.nan)
+        self.results.d2min = np.full((self.n_frames, n), np.nan)
+
+    def deformation_gradient(self, p: np.ndarray) -> np.ndarray:
+        """Best-fit F of every particle's neighbourhood at positions p (n, 3, 3)."""
+        n = len(p)
+        d = p[self._J] - p[self._I]
+        W = _bincount3(self._I, d, self._d0, n)
+        F = W @ self._Vpinv
+        planar = self._rank == 2
+        if planar.any():
+            a = np.einsum("nij,nj->ni", F[planar], self._t1[planar])
+            b = np.einsum("nij,nj->ni", F[planar], self._t2[planar])
+            nd = np.cross(a, b)
+            norm = np.linalg.norm(nd, axis=1, keepdims=True)
+            nd = nd / np.where(norm > 0, norm, 1.0)
+            F[planar] += nd[:, :, None] * self._n0[planar][:, None, :]
+        return F
+
+    def _measure(self, p):
+        n = len(p)
+        F = self.deformation_gradient(p)
+        E = 0.5 * (np.transpose(F, (0, 2, 1)) @ F - np.eye(3))
+        eta = von_mises_strain(E)
+        d = p[self._J] - p[self._I]
+        r = d - np.einsum("nij,nj->ni", F[self._I], self._d0)
+        d2 = np.bincount(self._I, weights=(r * r).sum(axis=1), minlength=n)
+        eta[~self._valid] = np.nan
+        d2[~self._valid] = np.nan
+        k = self._frame_index
+        self.results.von_mises[k], self.results.d2min[k] = eta, d2
+        return eta if self.NAME == "strain" else d2
+
+
+class VonMisesStrain(_AffineStrain):
+    """Local von Mises shear strain η (module docstring); ``results.d2min`` comes along."""
+
+    NAME = "strain"
+    LABEL = "von Mises shear strain"
+    UNITS = "dimensionless"
+
+
+class NonAffineD2min(_AffineStrain):
+    """Non-affine squared displacement D²min (module docstring); ``results.von_mises`` too."""
+
+    NAME = "d2min"
+    LABEL = "non-affine displacement D²min"
+    UNITS = "length² units"
+
+
+# ----------------------------------------------------------------------------- virial
+_STRESS_COL = re.compile(r"^c_(.+)\[([1-6])\]$")
+
+
+def stress_columns(columns) -> list | None:
+    """The six per-atom stress columns c_NAME[1]..c_NAME[6] of a dump, or None."""
+    found = {}
+    for c in columns:
+        m = _STRESS_COL.match(c)
+        if m:
+            found.setdefault(m.group(1), {})[int(m.group(2))] = c
+    for name, cols in found.items():
+        if len(cols) == 6:
+            return [cols[k] for k in range(1, 7)]
+    return None
+
+
+class VirialStress(_RunAnalysis):
+    """Von Mises equivalent of LAMMPS' per-atom stress; ``results.pressure`` = −tr σ / 3."""
+
+    NAME = "virial"
+    LABEL = "per-atom von Mises stress × volume"
+    UNITS = "energy units"
+
+    def __init__(self, run, parts=None, **kwargs):
+        super().__init__(run, parts, **kwargs)
+        cols = stress_columns(run.index.columns)
+        if cols is None:
+            raise DumpColumnsError(
+                f"{run.index.path}: the run did not record per-atom virial stress (its columns "
+                f"are '{' '.join(run.index.columns)}'); the 'virial' measure needs six columns "
+                "c_NAME[1]..c_NAME[6] from 'compute NAME all stress/atom NULL' in the dump. Use "
+                "--measure paper, accumulated, strain or d2min for this run.")
+        self.columns = cols
+
+    def _prepare(self):
+        super()._prepare()
+        self.results.pressure = np.full_like(self.results.per_particle, np.nan)
+
+    def _measure(self, p):
+        s = np.stack([self._ts.data[c] for c in self.columns], axis=1)
+        xx, yy, zz, xy, xz, yz = s.T
+        vm = np.sqrt(0.5 * ((xx - yy) ** 2 + (yy - zz) ** 2 + (zz - xx) ** 2)
+                     + 3.0 * (xy ** 2 + xz ** 2 + yz ** 2))
+        mask = np.zeros(len(p), dtype=bool)
+        for part in self.parts:
+            mask[part.index] = True
+        vm[~mask] = np.nan
+        pr = -(xx + yy + zz) / 3.0
+        pr[~mask] = np.nan
+        self.results.pressure[self._frame_index] = pr
+        return vm
+
+
+# ----------------------------------------------------------------------------- motion
+class PartMotion(AnalysisBase):
+    """Per part and frame: centre of mass and bounding box; per sediment: footprints.
+
+    ``results.com``, ``results.lo``, ``results.hi``: (n_frames, n_parts, 3) in ``results.names``
+    order; ``results.footprints[name]``: ``final_dy`` (vertical displacement p_y − o_y at the last
+    analysed frame) and ``min_dy`` (the deepest it reached) per sediment particle.
+    """
+
+    def __init__(self, run, **kwargs):
+        super().__init__(run.trajectory, **kwargs)
+        self.run_data = run
+
+    def _prepare(self):
+        run = self.run_data
+        self.results.names = list(run.parts)
+        shape = (self.n_frames, len(run.parts), 3)
+        self.results.com = np.zeros(shape)
+        self.results.lo, self.results.hi = np.zeros(shape), np.zeros(shape)
+        self.results.steps = np.zeros(self.n_frames, dtype=np.int64)
+        masses = run.data.masses
+        self._w = np.array([masses.get(int(t), 1.0) for t in run.data.types])
+        self._sed = [p for p in run.parts.values() if p.kind == "sediment"]
+        self.results.footprints = {p.name: {"final_dy": np.zeros(p.n), "min_dy": np.zeros(p.n)}
+                                   for p in self._sed}
+
+    def _single_frame(self):
+        k, p = self._frame_index, positions(self._ts)
+        self.results.steps[k] = int(self._ts.data.get("step", self._ts.frame))
+        for j, part in enumerate(self.run_data.parts.values()):
+            q, w = p[part.index], self._w[part.index]
+            self.results.com[k, j] = (q * w[:, None]).sum(axis=0) / w.sum()
+            self.results.lo[k, j], self.results.hi[k, j] = q.min(axis=0), q.max(axis=0)
+        o = self.run_data.o
+        for part in self._sed:
+            dy = p[part.index, UP] - o[part.index, UP]
+            fp = self.results.footprints[part.name]
+            fp["final_dy"] = dy
+            fp["min_dy"] = np.minimum(fp["min_dy"], dy)
+
+    def _conclude(self):
+        pass
+
+
+#: measure name → analysis class (what ``rackstress render --measure`` offers).
+MEASURES = {cls.NAME: cls for cls in (DesiredPositionDistance, AccumulatedDistance,
+                                      VonMisesStrain, NonAffineD2min, VirialStress)}

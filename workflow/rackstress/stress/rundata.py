@@ -1,0 +1,163 @@
+"""A run directory as an MDAnalysis Universe: topology, parts, original positions, frames.
+
+:func:`load_run` reads ``scene.json`` (groups → atom types and id ranges), ``particles.data``
+(the topology, through MDAnalysis' DATA parser with ``atom_style="id resid type x y z"``, and the
+original positions o at full precision) and indexes ``trajectory.dump`` (read frame by frame by
+:class:`~rackstress.stress.dump.RackDumpReader`). It checks that the three agree — atom count,
+ids, the type of every atom, the groups' id ranges — and raises a
+:class:`~rackstress.stress.dump.StressInputError` naming the file when they do not.
+
+Parts: every group of ``scene.json`` is a part of its own for stress purposes, a rack included
+(a rack rides on its host, but its own few particles are fitted separately). Pictures leave the
+racks out (:meth:`RunData.displayed`): they are the paper's invisible mechanism, not structure.
+A group of kind ``sediment`` is a loose material with no rest shape (no forces between its
+particles), so it is drawn as grey context and studied in the footprints plot instead.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .dump import (DataFile, DataMismatchError, FrameIndex, RackDumpReader, StressInputError,
+                   index_dump, read_data_file)
+
+SCENE, DATA, DUMP = "scene.json", "particles.data", "trajectory.dump"
+
+
+@dataclass
+class Part:
+    name: str
+    kind: str
+    host: str | None
+    type: int
+    mol: int
+    index: np.ndarray      # 0-based positions in the id-sorted atom order
+
+    @property
+    def n(self) -> int:
+        return len(self.index)
+
+
+@dataclass
+class RunData:
+    rundir: Path
+    scene: dict
+    data: DataFile
+    index: FrameIndex
+    parts: dict                      # name → Part, in scene order
+    universe: object = field(repr=False, default=None)
+
+    @property
+    def o(self) -> np.ndarray:
+        """Original positions (float64, id order)."""
+        return self.data.positions
+
+    @property
+    def n_atoms(self) -> int:
+        return len(self.data.ids)
+
+    @property
+    def steps(self) -> np.ndarray:
+        return self.index.steps
+
+    @property
+    def dt(self) -> float:
+        return float(self.scene.get("dt") or 1.0)
+
+    @property
+    def trajectory(self):
+        return self.universe.trajectory
+
+    @property
+    def truncation(self) -> str | None:
+        return self.index.truncation
+
+    def displayed(self) -> list:
+        """Parts drawn coloured by stress: every part but racks and sediments."""
+        return [p for p in self.parts.values() if p.kind not in ("rack", "sediment")]
+
+    def context(self) -> list:
+        """Parts drawn as plain grey context (sediments)."""
+        return [p for p in self.parts.values() if p.kind == "sediment"]
+
+    def nearest_frames(self, iterations) -> list:
+        """For each requested iteration: (requested, frame index, step of that frame)."""
+        out = []
+        for it in iterations:
+            k = int(np.argmin(np.abs(self.steps - int(it))))
+            out.append((int(it), k, int(self.steps[k])))
+        return out
+
+
+def load_run(rundir, allow_truncated: bool = False) -> RunData:
+    """Open a run directory for analysis; see the module docstring for what is checked."""
+    import MDAnalysis as mda
+
+    rundir = Path(rundir)
+    if not rundir.is_dir():
+        raise StressInputError(f"{rundir}: no such run directory")
+    for name in (SCENE, DATA, DUMP):
+        if not (rundir / name).is_file():
+            raise StressInputError(f"{rundir}: no {name}; is this a run directory "
+                                   "(made by 'rackstress run')?")
+    try:
+        scene = json.loads((rundir / SCENE).read_text())
+    except json.JSONDecodeError as exc:
+        raise StressInputError(f"{rundir / SCENE}: not valid JSON ({exc})") from None
+    data = read_data_file(rundir / DATA)
+    index = index_dump(rundir / DUMP, allow_truncated)
+    n = len(data.ids)
+    if index.n_atoms != n:
+        raise DataMismatchError(f"{rundir / DUMP} has {index.n_atoms} atoms per frame but "
+                                f"{rundir / DATA} has {n}: the dump and the data file are not of "
+                                "the same run")
+    parts = _parts(scene, data, rundir)
+    dt = float(scene.get("dt") or 1.0)
+    u = mda.Universe(str(rundir / DATA), str(rundir / DUMP), topology_format="DATA",
+                     atom_style="id resid type x y z", format=RackDumpReader, index=index, dt=dt)
+    if not np.array_equal(u.atoms.ids, data.ids):
+        raise DataMismatchError(f"{rundir / DATA}: MDAnalysis reads its atoms in another order "
+                                "than by id; rackstress data files list atoms by id")
+    ts = u.trajectory[0]
+    if not np.array_equal(ts.data["ids"], data.ids):
+        bad = np.flatnonzero(ts.data["ids"] != data.ids)[0]
+        raise DataMismatchError(f"{rundir / DUMP} (step {index.steps[0]}) has atom id "
+                                f"{ts.data['ids'][bad]} where {rundir / DATA} has "
+                                f"{data.ids[bad]}: the files are not of the same run")
+    if not np.array_equal(ts.data["types"], data.types):
+        bad = int(np.flatnonzero(ts.data["types"] != data.types)[0])
+        raise DataMismatchError(f"atom {data.ids[bad]} has type {ts.data['types'][bad]} in "
+                                f"{rundir / DUMP} but type {data.types[bad]} in {rundir / DATA}: "
+                                "the files are not of the same run")
+    return RunData(rundir, scene, data, index, parts, u)
+
+
+def _parts(scene: dict, data: DataFile, rundir: Path) -> dict:
+    groups = scene.get("groups")
+    if not groups:
+        raise StressInputError(f"{rundir / SCENE}: no 'groups' (made by an older rackstress?)")
+    parts, total = {}, 0
+    id_pos = {int(i): k for k, i in enumerate(data.ids)}
+    for g in groups:
+        first, n = int(g["first_id"]), int(g["n"])
+        try:
+            index = np.array([id_pos[i] for i in range(first, first + n)], dtype=np.int64)
+        except KeyError as exc:
+            raise DataMismatchError(f"{rundir / SCENE}: group '{g['name']}' claims ids {first}.."
+                                    f"{first + n - 1} but {rundir / DATA} has no atom "
+                                    f"{exc.args[0]}") from None
+        types = np.unique(data.types[index])
+        if types.tolist() != [int(g["type"])]:
+            raise DataMismatchError(f"{rundir / SCENE}: group '{g['name']}' has type {g['type']} "
+                                    f"but its atoms in {rundir / DATA} have type(s) "
+                                    f"{types.tolist()}")
+        parts[g["name"]] = Part(g["name"], g.get("kind", "part"), g.get("host"), int(g["type"]),
+                                int(g.get("mol", 0)), index)
+        total += n
+    if total != len(data.ids):
+        raise DataMismatchError(f"{rundir / SCENE}: the groups hold {total} particles but "
+                                f"{rundir / DATA} has {len(data.ids)}")
+    return parts
