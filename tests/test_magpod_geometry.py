@@ -47,7 +47,7 @@ def test_radii_and_schedule(full, small):
 
 
 def test_small_sediment(small):
-    assert small.groups["sediment"].n == 40 * 22
+    assert small.groups["sediment"].n == 40 * 30
     assert build("magpod-small", sediment_nx=30, sediment_nz=25).groups["sediment"].n == 750
     assert small.groups["body"].n == 2907 and small.groups["leftleg"].n == 382
 

@@ -10,8 +10,8 @@ import click
 
 from .errors import DivergenceError, RackstressError
 
-#: Exit codes: bad input, diverged run.
-EXIT_INPUT, EXIT_DIVERGED = 2, 3
+#: Exit codes: bad input, diverged run, pictures failed after a good run.
+EXIT_INPUT, EXIT_DIVERGED, EXIT_RENDER = 2, 3, 4
 
 
 def _load_scene(scene: str, steps, dt, sets):
@@ -56,8 +56,14 @@ def main():
 @click.option("--dump-every", type=click.IntRange(min=1), help="Steps between trajectory frames.")
 @click.option("--overwrite", is_flag=True, help="Replace a finished run in --out.")
 @click.option("--progress/--no-progress", default=True, show_default=True)
-def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progress):
-    """Run SCENE (a built-in name or a .toml file) and write a run directory."""
+@click.option("--render/--no-render", "do_render", default=True, show_default=True,
+              help="Render the default stress pictures and plots into OUT/figures/ at the end.")
+def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progress, do_render):
+    """Run SCENE (a built-in name or a .toml file) and write a run directory.
+
+    Exit status: 0 done, 2 bad input, 3 diverged (frames and summary kept), 4 the run is done
+    but its pictures could not be rendered.
+    """
     from . import run as run_mod
     from .mpi import rank
 
@@ -76,6 +82,18 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
                    f"({summary['mode']}) in {summary['wall_s']:.2f} s -> {out}")
         for name, g in summary["groups"].items():
             click.echo(f"  {name:12s} n={g['n']:6d}  max_deformation={g['max_deformation']:.4g}")
+        if do_render:
+            from .render import render_default
+
+            t0 = time.perf_counter()
+            try:
+                rep = render_default(out)
+            except Exception as err:  # noqa: BLE001 - the run itself is complete and kept
+                click.echo(f"rackstress: error: the run finished, but rendering its pictures "
+                           f"failed: {err} (retry with 'rackstress render {out}')", err=True)
+                sys.exit(EXIT_RENDER)
+            click.echo(f"  pictures: {rep.outdir} ({len(rep.files)} files, "
+                       f"{time.perf_counter() - t0:.1f} s)")
 
 
 @main.command()

@@ -22,14 +22,13 @@ choice is a keyword parameter of :func:`magpod`:
 * body: a simple-cubic block of 19 (x) × 9 (y) × 17 (z) = 2907 particles, radius 1, spacing 2
   (touching neighbours), centred on x = z = 0; it floats (no force but the legs holds it up);
 * leg (382 particles each, radius 1, spacing 2): a column of 4 (x) × 3 (z) × 12 (y) = 144
-  particles standing on a one-layer foot plate of 14 (x) × 16 (z) = 224, with the remaining 14
-  particles as a row of "toes" ahead of it. The column's inner face touches the body's side face
-  (centre distance 2 = sum of radii, zero force). The foot extends 5 columns behind the column
-  and 6 inward (under the body, which floats high enough for a lifted foot to pass under it).
-  The wide, flat foot is a measured choice: the sediment has no support but its damping (Eq. 31),
-  so a foot sinks at a rate ~ 382 / (50·(number of sediment particles under it) + 95·382·…);
-  a 28 × 32-unit sole sinks ~5 units a stance, the first design's 20 × 22 × 2-layer foot sank
-  ~10 and went through the one-particle-thick sediment;
+  particles standing on a two-layer foot of 7 (x) × 17 (z) × 2 = 238: a sole 14 units long
+  (along the walk) and 34 wide. The column's inner face touches the body's side face (centre
+  distance 2 = sum of radii, zero force). The foot extends 2 columns behind the column and 6
+  inward (under the body, which floats high enough for a lifted foot to pass under it). The
+  foot is short along the walk so that a step (one gait cycle) is longer than a foot: the prints
+  of one foot stay apart instead of merging into a trough; it is wide so that its weight spreads
+  over ~40 sediment particles (the sediment has no support but its damping, Eq. 31);
 * attraction regions: on each side face of the body, 4 × 4 patches (x × y), four layers deep;
   the leg's region "R" is the top four rows of its column, all 4 × 3 particles of each row.
   A particle's index is 1 + (its column in the patch) + 4·(its row in the patch), on the body
@@ -37,22 +36,23 @@ choice is a keyword parameter of :func:`magpod`:
   leg row to the same body row and each leg column to the same body column: it aligns the leg
   upright as well as attracting it (Section 4.1). Each matched index couples 4 × 3 particles,
   192 pairs a region: a lift pulls with 300·192 = 57,600 against the leg's push-down
-  50·382 = 19,100; a pull on the body is 200·192 = 38,400 (a body speed of up to ~1.3 units per
-  unit time against dampen(10)). Per particle that is 300·4 = 1200 on a leg's R particle and
-  200·3 = 600 on a body region particle, which the racks (bind 100 × 6) resist with ~0.5–1.5
-  units of local deformation: the "stress around region R" of Section 5.2;
+  50·382 = 19,100; a pull on the body is 200·192 = 38,400. Per particle that is 300·4 = 1200 on
+  a leg's R particle and 200·3 = 600 on a body region particle, which the racks (bind 100 × 6)
+  resist with ~0.5–1.5 units of local deformation: the "stress around region R" of Section 5.2;
 * region placement (Section 4.1's motion principle), right side (left side 5–8 likewise):
-  3 = rear, low (body rows 1–4, body columns 3–6); 2 = middle, low (columns 7–10);
-  1 = front (columns 11–14), raised by one row so that the swinging leg is carried clear of the
-  sediment and then dropped; 4 = the top four rows (5–8) above region 3: the lift is 8 units.
-  The low regions start at row 1, not 0: a pull further below the body's centre tilts the
-  body nose-up faster (measured), a pull higher leaves too little lift to clear the footprint.
+  3 = rear, low (body rows 2–5, body columns 2–5); 2 = middle, low (columns 7–10);
+  1 = front (columns 12–15), raised by one row so that the swinging leg is carried clear of the
+  sediment and then dropped; 4 = the top four rows (5–8) above region 3: the lift.
+  Regions one step of 5 columns (10 units) apart and pulling rows near the body's mid-height
+  (rows 2–5 of 0–8) are measured choices: a step of 4 columns gave ~14 units a cycle, less than a
+  foot length, and pulling rows lower down (1–4) tilted the body nose-up faster (31° against
+  23° after three cycles).
   Gait: (4,6) lift the right leg while the planted left leg pulls the body from region 5 to 6;
   (1,7) swing it to the front while the body is pulled on to region 7; (2,8) the right leg is
   dropped onto the sediment and pulls the body to region 2 while the left leg is lifted; (3,5)
   the body is pulled to region 3 and the left leg swings to the front. Every phase moves the
-  body one region step (4 columns = 8 units) relative to the planted leg; as a one-sided pull
-  also yaws the body (±25°), its centre advances about half of that, ~13–17 units a cycle;
+  body one region step (5 columns = 10 units) relative to the planted leg; as a one-sided pull
+  also yaws the body, its centre advances about half of that, ~18–21 units a cycle;
 * sediment: 300 (x) × 100 (z) particles of radius 2 at spacing 4 in the plane y = −2: neighbours
   touch exactly (the sediment has no sediment–sediment forces, so touching costs nothing and
   leaves no gaps a leg particle of radius 1 could fall through: the hole between four touching
@@ -62,16 +62,15 @@ choice is a keyword parameter of :func:`magpod`:
 * initial pose: the right leg at region 3's columns, the left leg at region 5's columns, as after
   a (3, 5) phase; the body at the height where both legs' R regions face the low rows.
 
-Measured with the reference engine (magpod-small, defaults, 2 cycles; the full scene gives the
-same figures, LAMMPS agrees to 1e-8): the body's centre advances 16.9 and 13.7 units in the two
-cycles, pitches nose-up (15.6° after one cycle, 23.3° after two: the paper's "tilts upright",
-Section 5.1), yaws ±26° and rolls ±11° within a cycle (the paper's swing and sway) and ends
-each cycle near yaw 0; the feet turn outward by ~20°; each stance presses the sediment down
-2–4 units (4.1 deepest after two cycles) while the sole sinks ~5 units, partly between the
-sediment particles. As steps (~16 units) are shorter than the 28-unit feet, the prints of one
-foot merge into a trough. The constant-magnitude attraction (57,600 on a leg, 38,400 on the
-body) exceeds what the collisions can hold at small overlap, so a leg's R region sinks ~7 units
-into the body's side (closest centres ~0.6 apart for a radius sum of 2).
+Measured (magpod-small, 4 cycles = 19,200 iterations, LAMMPS exact mode, which matches the
+reference engine to ~1e-8): the body's centre advances 21.5, 19.6, 18.8 and 18.2 units in the
+four cycles (a foot is 14 long), pitches nose-up (14.7°, 20.1°, 22.8°, 25.3° at the cycle
+ends: the paper's "tilts upright", Section 5.1), yaws and rolls within a cycle (the paper's
+swing and sway) and drifts ~5 units a cycle to its right; each stance presses the sediment down
+by up to ~3 units, and a planted sole sinks ~10 units, pushing the one-particle-thick sediment
+down and aside (it has no support but its damping). The constant-magnitude attraction exceeds
+what the collisions can hold at small overlap, so a leg's R region sinks a few units into the
+body's side while it is attracted.
 """
 from __future__ import annotations
 
@@ -290,7 +289,8 @@ def sole(scene: Scene, leg: str, p: np.ndarray) -> np.ndarray:
 
 def gait_report(scene: Scene, records) -> dict:
     """Per gait cycle: body centre of mass, advance along the walk, pitch, footprint depth;
-    per stance: where each foot stood (Section 5.1's "tilts upright" and "trail of footprints");
+    per stance (a phase end at which a sole touches the sediment): where that foot stood
+    (Section 5.1's "tilts upright" and "trail of footprints");
     per phase: the body's centre, pitch (nose-up rotation about the lateral z axis, degrees)
     and ``up_y``, the vertical component of its up axis (≤ 0 would be capsized).
 
@@ -298,6 +298,8 @@ def gait_report(scene: Scene, records) -> dict:
     the initial state. The footprint depth is the largest downward displacement of a sediment
     particle from its original height.
     """
+    from scipy.spatial import cKDTree
+
     from ..rigid import best_fit
 
     body, sed = scene.slice("body"), scene.slice("sediment")
@@ -313,12 +315,16 @@ def gait_report(scene: Scene, records) -> dict:
                        "pitch_deg": float(np.degrees(np.arctan2(R[1, 0], R[0, 0]))),
                        # y-component of the body's up axis: 1 upright, <= 0 capsized
                        "up_y": float(R[1, 1])})
+        sed_tree = cKDTree(rec.p[sed])
+        reach = float(scene.groups["sediment"].r.max() + scene.groups["rightleg"].r.max())
         for leg, (var, values) in STANCE.items():
-            if rec.vars.get(var) in values:
-                s = sole(scene, leg, rec.p)
+            s = sole(scene, leg, rec.p)
+            # a stance: the sole touches the sediment (pulling, or just landed from a swing)
+            if np.isfinite(sed_tree.query(s, distance_upper_bound=reach)[0]).any():
                 stances.append({"leg": leg, "cycle": rec.cycle, "phase": rec.phase,
-                                "step": rec.step, "x": float(s[:, 0].mean()),
-                                "z": float(s[:, 2].mean()), "sole_y": float(s[:, 1].min())})
+                                "step": rec.step, "pulling": rec.vars.get(var) in values,
+                                "x": float(s[:, 0].mean()), "z": float(s[:, 2].mean()),
+                                "sole_y": float(s[:, 1].min())})
         if rec.phase == last_phase:
             com = rec.p[body].mean(axis=0)
             depth = float(np.max(o[sed, 1] - rec.p[sed, 1]))
@@ -331,7 +337,7 @@ def gait_report(scene: Scene, records) -> dict:
             "cycles": cycles, "stances": stances, "phases": phases}
 
 
-def magpod_small(sediment_nx: int = 40, sediment_nz: int = 22, sediment_back: int = 10,
+def magpod_small(sediment_nx: int = 40, sediment_nz: int = 30, sediment_back: int = 10,
                  phase_steps: int = 1200, cycles: int = 1, body_nx: int = 19, body_ny: int = 9,
                  body_nz: int = 17, spacing: float = 2.0, radius: float = 1.0,
                  leg_particles: int = 382, leg_nx: int = 4, leg_nz: int = 3, leg_ny: int = 12,
