@@ -53,12 +53,14 @@ choice is a keyword parameter of :func:`magpod`:
   the body is pulled to region 3 and the left leg swings to the front. Every phase moves the
   body one region step (5 columns = 10 units) relative to the planted leg; as a one-sided pull
   also yaws the body, its centre advances about half of that, ~18–21 units a cycle;
-* sediment: 300 (x) × 100 (z) particles of radius 2 at spacing 4 in the plane y = −2: neighbours
-  touch exactly (the sediment has no sediment–sediment forces, so touching costs nothing and
-  leaves no gaps a leg particle of radius 1 could fall through: the hole between four touching
-  discs has radius 2√2 − 2 ≈ 0.83 < 1). It extends ``sediment_back`` columns behind the body's
-  centre, the rest ahead; it is centred in z. The feet start touching it (sole at y = 1, centre
-  distance 3 = 1 + 2 above a sediment particle, zero force);
+* sediment: 300 (x) × 100 (z) particles of radius 2 at spacing 3 in the plane y = −2 (its top at
+  y = 0): neighbours overlap, which costs nothing (there are no sediment–sediment forces) and
+  leaves no hole a leg particle could slip through (between four neighbours the hole has
+  radius 3/√2 − 2 ≈ 0.12). Measured: with touching sediment (spacing 4, holes of radius 0.83)
+  the soles pushed the sediment aside and sank through it to ~10 units below its top, and the
+  lifts could not pull them clear; at spacing 3 a planted sole stays in the sediment 2–5 units
+  deep and the lift raises it clear. It extends ``sediment_back`` columns behind the body's
+  centre, the rest ahead, centred in z. The soles start resting on it (sole centres at y = 1);
 * initial pose: the right leg at region 3's columns, the left leg at region 5's columns, as after
   a (3, 5) phase; the body at the height where both legs' R regions face the low rows.
 
@@ -143,7 +145,7 @@ def magpod(body_nx: int = 19, body_ny: int = 9, body_nz: int = 17, spacing: floa
            region_depth: int = 4, region_rear: int = 2, region_step: int = 5,
            region_low: int = 2, swing_raise: int = 1, lift_shift: int = 0,
            foot_gap: float = 0.0, sediment_nx: int = 300, sediment_nz: int = 100, sediment_radius: float = 2.0,
-           sediment_spacing: float = 4.0, sediment_back: int = 25, rack_offset: float = 5.0,
+           sediment_spacing: float = 3.0, sediment_back: int = 25, rack_offset: float = 5.0,
            phase_steps: int = 1200, cycles: int = 4, dt: float = 0.01,
            name: str = "magpod") -> Scene:
     """MagPod (Eqs. 27–33) with the geometry described in the module docstring.
@@ -337,7 +339,7 @@ def gait_report(scene: Scene, records) -> dict:
             "cycles": cycles, "stances": stances, "phases": phases}
 
 
-def magpod_small(sediment_nx: int = 40, sediment_nz: int = 30, sediment_back: int = 10,
+def magpod_small(sediment_nx: int = 56, sediment_nz: int = 36, sediment_back: int = 10,
                  phase_steps: int = 1200, cycles: int = 1, body_nx: int = 19, body_ny: int = 9,
                  body_nz: int = 17, spacing: float = 2.0, radius: float = 1.0,
                  leg_particles: int = 382, leg_nx: int = 4, leg_nz: int = 3, leg_ny: int = 12,
@@ -345,14 +347,15 @@ def magpod_small(sediment_nx: int = 40, sediment_nz: int = 30, sediment_back: in
                  foot_inset: int = 6, toe_width: int = 14, region_rows: int = 4,
                  region_depth: int = 4, region_rear: int = 2, region_step: int = 5,
                  region_low: int = 2, swing_raise: int = 1, lift_shift: int = 0,
-                 foot_gap: float = 0.0, sediment_radius: float = 2.0, sediment_spacing: float = 4.0,
+                 foot_gap: float = 0.0, sediment_radius: float = 2.0, sediment_spacing: float = 3.0,
                  rack_offset: float = 5.0, dt: float = 0.01) -> Scene:
     """The same MagPod on a sediment patch just large enough for a short walk.
 
-    Defaults: 32 × 22 sediment particles (128 × 88 units), 10 columns (40 units) behind the
-    body's centre: the feet span z ∈ [−36, 36] and x from −22 (right heel) to +22 (left toes)
-    at the start, and MagPod advances ~13–17 units a cycle (never more than the nominal 32), so
-    two cycles stay on the patch with a margin. ``phase_steps`` can be lowered for quick checks; the rest is as :func:`magpod`.
+    Defaults: 56 × 36 sediment particles (168 × 108 units at spacing 3), 10 columns (30 units)
+    behind the body's centre: the soles start within x ∈ [−19, 15], z ∈ [−39, 39]; MagPod
+    advances ~19–23 units a cycle and drifts a few units a cycle to its right, so four cycles
+    (19,200 iterations) stay on the patch. One cycle by default (the README's first command);
+    ``phase_steps`` can be lowered for quick checks; the rest is as :func:`magpod`.
     """
     kw = {k: v for k, v in locals().items()}
     scene = magpod(name="magpod-small", **kw)
