@@ -25,18 +25,45 @@ class Frame:
     def __init__(self, lmp, n_total: int, nlocal: int):
         nghost = lmp.extract_global("nghost")
         nall = nlocal + nghost
-        self.nlocal = nlocal
+        self.nlocal, self.n_total = nlocal, n_total
         self.x = lmp.numpy.extract_atom("x")[:nall]
         self.v = lmp.numpy.extract_atom("v")[:nlocal]
-        tag = lmp.numpy.extract_atom("id")[:nall].astype(np.int64)
-        self.index = tag - 1                          # global particle index of each row
-        self.row = np.full(n_total, -1, dtype=np.int64)
-        self.row[self.index[::-1]] = np.arange(nall)[::-1]   # first copy wins (owned before ghost)
-        self.local = np.zeros(n_total, dtype=bool)
-        self.local[self.index[:nlocal]] = True
+        tag = lmp.numpy.extract_atom("id")[:nall]
         #: serial with unsorted atoms: row k holds particle k, so look-ups can be skipped
         self.identity = (nlocal == n_total and nall == n_total
-                         and bool(np.array_equal(self.index, np.arange(n_total))))
+                         and bool(np.array_equal(tag, np.arange(1, n_total + 1))))
+        self.index = np.arange(n_total) if self.identity else tag.astype(np.int64) - 1
+        self._row = self._local = None
+
+    @property
+    def row(self) -> np.ndarray:
+        """Global particle index → row here (−1 if not here); the owned copy wins over ghosts."""
+        if self._row is None:
+            self._row = np.full(self.n_total, -1, dtype=np.int64)
+            nall = len(self.index)
+            self._row[self.index[::-1]] = np.arange(nall)[::-1]
+        return self._row
+
+    @property
+    def local(self) -> np.ndarray:
+        """Global particle index → owned by this rank."""
+        if self._local is None:
+            self._local = np.zeros(self.n_total, dtype=bool)
+            self._local[self.index[:self.nlocal]] = True
+        return self._local
+
+    def owned(self, sl: slice) -> np.ndarray:
+        """Rows of the owned particles of a group (its global index slice)."""
+        if self.identity:
+            return np.arange(sl.start, sl.stop)
+        own = self.index[:self.nlocal]
+        return np.flatnonzero((own >= sl.start) & (own < sl.stop))
+
+    def seen(self, sl: slice) -> np.ndarray:
+        """Rows of the owned and ghost particles of a group."""
+        if self.identity:
+            return np.arange(sl.start, sl.stop)
+        return np.flatnonzero((self.index >= sl.start) & (self.index < sl.stop))
 
     def rows(self, name, I, J):
         """Rows of the particles I and J here; raise if a partner is not visible on this rank."""
@@ -113,19 +140,13 @@ class CollideTerm:
 
     def pairs(self, fr: Frame):
         """Row pairs (a, b), a owned here in the target, b in the source, overlapping (d < R)."""
-        if fr.identity:
-            idx_t = np.arange(self.t.start, self.t.stop)
-            idx_s = np.arange(self.s.start, self.s.stop)
-        else:
-            own = fr.index[:fr.nlocal]
-            idx_t = np.flatnonzero((own >= self.t.start) & (own < self.t.stop))
-            idx_s = np.flatnonzero((fr.index >= self.s.start) & (fr.index < self.s.stop))
+        idx_t, idx_s = fr.owned(self.t), fr.seen(self.s)
         if not len(idx_t) or not len(idx_s):
             return idx_t[:0], idx_s[:0]
         xt = fr.x[idx_t]
         reach = self.radius[fr.index[idx_t]].max() + self.radius[fr.index[idx_s]].max()
         # only source particles inside the target's bounding box (grown by the reach) can touch
-        xs = fr.x[idx_s]
+        xs = fr.x[self.s] if fr.identity else fr.x[idx_s]   # a view when rows are particles
         near = ((xs >= xt.min(axis=0) - reach) & (xs <= xt.max(axis=0) + reach)).all(axis=1)
         idx_s = idx_s[near]
         if not len(idx_s):
@@ -237,8 +258,7 @@ class PyForces:
                 op = r.op
                 if isinstance(op, Dampen):       # only the contact-conditioned extra is here
                     if self._holds(fr, r):
-                        sel = (fr.index[:nlocal] >= self.scene.slice(r.target).start) & \
-                              (fr.index[:nlocal] < self.scene.slice(r.target).stop)
+                        sel = fr.owned(self.scene.slice(r.target))
                         acc[sel] -= op.extra * fr.v[sel]
                 elif isinstance(op, Force):
                     if self._holds(fr, r):
@@ -252,7 +272,7 @@ class PyForces:
                     self._attract_term(r).add(fr, acc)
                 elif term is not None:
                     term.add(fr, acc)
-            f[:] = acc * self.mass[fr.index[:nlocal], None]
+            f[:] = acc * (self.mass[:, None] if fr.identity else self.mass[fr.index[:nlocal], None])
         except Exception as exc:  # noqa: BLE001 - reported by the runner after the chunk
             if self.error is None:
                 self.error = (step, exc)
