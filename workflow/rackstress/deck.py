@@ -46,8 +46,9 @@ from .scene import Scene
 MODES = ("exact", "fast")
 #: The fix external that carries every Python-realized operator.
 PY_FIX = "rs_py"
-#: Neighbour skin (distance units): particles here move far less than this between rebuilds.
-SKIN = 1.0
+#: Neighbour skin (distance units). 2 rather than 1 halves the rebuilds of a MagPod run (measured:
+#: 52 against 99 in 300 iterations), each of which re-bins all the resting sediment.
+SKIN = 2.0
 #: Relative tolerance under which two original lengths count as one bond type (fast mode).
 L0_DIGITS = 10
 
