@@ -16,6 +16,7 @@ from scipy.spatial import cKDTree
 from .operators import (Attract, Bind, Collide, Const, Contact, Dampen, Force, attract_pairs, bind_pairs,
                         phase_active)
 from .deck import reverse_of
+from ._vec import bbox, inside, rowdot
 from .reference import col
 
 
@@ -34,6 +35,8 @@ class Frame:
                          and bool(np.array_equal(tag, np.arange(1, n_total + 1))))
         self.index = np.arange(n_total) if self.identity else tag.astype(np.int64) - 1
         self._row = self._local = None
+        #: per-step results shared between terms (collision pairs of a pair of groups)
+        self.cache = {}
 
     @property
     def row(self) -> np.ndarray:
@@ -105,11 +108,11 @@ class PairTerm:
         ts, ss = self.block
         m, n = ts.stop - ts.start, ss.stop - ss.start
         diff = fr.x[ss][None, :, :] - fr.x[ts][:, None, :]          # (m, n, 3): u − p
-        d2 = np.einsum("ijk,ijk->ij", diff, diff)
+        d2 = diff[:, :, 0] ** 2 + diff[:, :, 1] ** 2 + diff[:, :, 2] ** 2
         g = (1.0 - self.L0sq.reshape(m, n) / d2)[:, :, None] * diff  # Eq. 12 without c
-        acc[ts] += (self.cI.reshape(m, n)[:, :, None] * g).sum(axis=1)
+        acc[ts] += np.einsum("ij,ijk->ik", self.cI.reshape(m, n), g)
         if self.cJ is not None:
-            acc[ss] -= (self.cJ.reshape(m, n)[:, :, None] * g).sum(axis=0)
+            acc[ss] -= np.einsum("ij,ijk->jk", self.cJ.reshape(m, n), g)
 
     def add(self, fr: Frame, acc: np.ndarray):
         if self.block is not None and fr.identity:
@@ -122,7 +125,7 @@ class PairTerm:
             L0sq = L0sq[sel] if L0sq is not None else None
         ri, rj = fr.rows(self.name, I, J)
         diff = fr.x[rj] - fr.x[ri]
-        d2 = np.einsum("ij,ij->i", diff, diff)
+        d2 = rowdot(diff, diff)
         if L0sq is not None:
             g = (1.0 - L0sq / d2)[:, None] * diff        # Eq. 12 without its coefficient
         else:
@@ -137,25 +140,44 @@ class CollideTerm:
 
     def __init__(self, name, target_slice, source_slice, c, radius):
         self.name, self.t, self.s, self.c, self.radius = name, target_slice, source_slice, c, radius
+        self.reach = float(radius[target_slice].max() + radius[source_slice].max())
 
     def pairs(self, fr: Frame):
-        """Row pairs (a, b), a owned here in the target, b in the source, overlapping (d < R)."""
+        """Row pairs (a, b), a owned here in the target, b in the source, overlapping (d < R).
+
+        In a serial frame the pairs of (target, source) are the transpose of those of
+        (source, target), so the two directions of a one-way pair share one search a step.
+        """
+        if fr.identity:
+            hit = fr.cache.get((self.s.start, self.t.start))
+            if hit is not None:
+                return hit[1], hit[0]
         idx_t, idx_s = fr.owned(self.t), fr.seen(self.s)
         if not len(idx_t) or not len(idx_s):
             return idx_t[:0], idx_s[:0]
-        xt = fr.x[idx_t]
-        reach = self.radius[fr.index[idx_t]].max() + self.radius[fr.index[idx_s]].max()
-        # only source particles inside the target's bounding box (grown by the reach) can touch
-        xs = fr.x[self.s] if fr.identity else fr.x[idx_s]   # a view when rows are particles
-        near = ((xs >= xt.min(axis=0) - reach) & (xs <= xt.max(axis=0) + reach)).all(axis=1)
-        idx_s = idx_s[near]
+        reach = self.reach
+        # each side only where the other's bounding box (grown by the reach) is: a leg meets a
+        # few hundred of the body's or the sediment's particles, not all of them
+        xt = fr.x[self.t] if fr.identity else fr.x[idx_t]    # views when rows are particles
+        xs = fr.x[self.s] if fr.identity else fr.x[idx_s]
+        lo, hi = bbox(xs)
+        near_t = inside(xt, lo - reach, hi + reach)
+        idx_t, xt = idx_t[near_t], xt[near_t]
+        if not len(idx_t):
+            return idx_t, idx_s[:0]
+        lo, hi = bbox(xt)
+        near_s = inside(xs, lo - reach, hi + reach)
+        idx_s, xs = idx_s[near_s], xs[near_s]
         if not len(idx_s):
-            return idx_t[:0], idx_s[:0]
-        sm = cKDTree(xt).sparse_distance_matrix(cKDTree(fr.x[idx_s]), reach, output_type="ndarray")
+            return idx_t[:0], idx_s
+        sm = cKDTree(xt).sparse_distance_matrix(cKDTree(xs), reach, output_type="ndarray")
         a, b = idx_t[sm["i"]], idx_s[sm["j"]]
         keep = (fr.index[a] != fr.index[b]) & \
                (sm["v"] < self.radius[fr.index[a]] + self.radius[fr.index[b]])
-        return a[keep], b[keep]
+        out = a[keep], b[keep]
+        if fr.identity:
+            fr.cache[(self.t.start, self.s.start)] = out
+        return out
 
     def add(self, fr: Frame, acc: np.ndarray):
         a, b = self.pairs(fr)
@@ -206,7 +228,7 @@ class PyForces:
                 if isinstance(op.coeff, Const) and op.source != target:
                     block = (sl, self.scene.slice(op.source))
                 self.terms.append((r, PairTerm(f"bind on {target}", I, J, c, cJ,
-                                               np.einsum("ij,ij->i", d, d), block)))
+                                               rowdot(d, d), block)))
             elif isinstance(op, Collide):
                 self.terms.append((r, CollideTerm(f"collide on {target}", sl,
                                                   self.scene.slice(op.source), float(op.coeff.c),

@@ -12,6 +12,7 @@ from typing import Mapping
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ._vec import finite_rows, rowdot
 from .errors import DivergenceError
 from .operators import (Attract, Bind, Collide, Contact, Dampen, Force, attract_pairs,
                         bind_pairs, phase_active)
@@ -22,7 +23,7 @@ from .scene import Scene
 def col(p, u, r_p, r_u, c):
     """Eq. 10 (erratum: R = p_r + u_r) for arrays of pairs: c·(u−p)·min(0, 1 − R²/‖u−p‖²)."""
     diff = u - p
-    d2 = np.einsum("ij,ij->i", diff, diff)
+    d2 = rowdot(diff, diff)
     factor = np.minimum(0.0, 1.0 - (r_p + r_u) ** 2 / d2)
     return (c * factor)[:, None] * diff
 
@@ -30,14 +31,14 @@ def col(p, u, r_p, r_u, c):
 def bin_(p, u, L0sq, c):
     """Eq. 12 for arrays of pairs: c·(u−p)·(1 − L0²/‖u−p‖²), L0 the pair's original distance."""
     diff = u - p
-    d2 = np.einsum("ij,ij->i", diff, diff)
+    d2 = rowdot(diff, diff)
     return (c * (1.0 - L0sq / d2))[:, None] * diff
 
 
 def attraction(p, u, c):
     """Eq. 14 summand for arrays of pairs: c·(u−p)/‖u−p‖."""
     diff = u - p
-    d = np.sqrt(np.einsum("ij,ij->i", diff, diff))
+    d = np.sqrt(rowdot(diff, diff))
     return (c / d)[:, None] * diff
 
 
@@ -75,7 +76,7 @@ class Reference:
                     i, j, c = bind_pairs(op, g_t, g_s)
                     I, J = i + scene.offset(target), j + scene.offset(op.source)
                     diff = self.o[J] - self.o[I]
-                    self._bind[id(op)] = (I, J, c, np.einsum("ij,ij->i", diff, diff))
+                    self._bind[id(op)] = (I, J, c, rowdot(diff, diff))
 
     # ------------------------------------------------------------------ neighbour search
     def _trees(self):
@@ -99,7 +100,7 @@ class Reference:
             keep = I != J
             I, J = I[keep], J[keep]
         diff = self.p[J] - self.p[I]
-        d2 = np.einsum("ij,ij->i", diff, diff)
+        d2 = rowdot(diff, diff)
         keep = d2 < (self.radius[I] + self.radius[J]) ** 2
         I, J, d2 = I[keep], J[keep], d2[keep]
         if np.any(d2 == 0.0):
@@ -179,9 +180,10 @@ def find_divergence(scene: Scene, p: np.ndarray, v: np.ndarray, o: np.ndarray,
     ``index`` gives the global particle index of each row when p, v hold only some particles.
     Returns None when all is well.
     """
-    finite = np.isfinite(p).all(axis=1) & np.isfinite(v).all(axis=1)
+    finite = finite_rows(p) & finite_rows(v)
     disp = np.full(len(p), np.inf)
-    disp[finite] = np.sqrt(((p[finite] - o[finite]) ** 2).sum(axis=1))
+    dp = p[finite] - o[finite]
+    disp[finite] = np.sqrt(rowdot(dp, dp))
     bad = disp > scene.bound
     if not bad.any():
         return None
