@@ -463,6 +463,15 @@ def _plots(run, ana, motion, report, out: Path) -> None:
         com = motion.results.com[:, [names.index(p.name) for p in moving]]
         for j in range(com.shape[1]):
             ax.plot(com[:, j, 0], com[:, j, 2], lw=0.8, color="k", alpha=0.5)
+        # frame the walk, not the whole sediment: the displaced particles and the path, padded
+        moved = np.abs(dy) > 0.01 * lim
+        pts = np.concatenate([o[moved][:, [0, 2]], com[:, :, [0, 2]].reshape(-1, 2)])
+        pts = pts[np.isfinite(pts).all(axis=1)]
+        if len(pts):
+            lo, hi = pts.min(axis=0), pts.max(axis=0)
+            pad = 0.15 * float((hi - lo).max()) + 4.0
+            ax.set_xlim(lo[0] - pad, hi[0] + pad)
+            ax.set_ylim(lo[1] - pad, hi[1] + pad)
         ax.set_aspect("equal")
         ax.set(xlabel="x", ylabel="z",
                title=f"footprints in {part.name}: deepest vertical displacement "
