@@ -124,3 +124,41 @@ def test_footprints_at_stances_only(walk):
     assert not moved[~covered].any(), o[moved & ~covered][:5]   # and none elsewhere
     depth = max(c["footprint_depth"] for c in s["report"]["cycles"])
     assert depth > 0.1 * r_sed
+
+
+MPI_MAGPOD = """
+import sys, numpy as np
+from rackstress import scenes
+from rackstress.deck import compile_deck
+from rackstress.lammps_engine import LammpsRun
+from rackstress.mpi import world
+sc = scenes.build("magpod-small", phase_steps=100, cycles=1)
+run = LammpsRun(compile_deck(sc, "exact"), None)
+run.run_schedule()
+p = run.gather_positions()
+counts = world().allgather(run.lmp.extract_global("nlocal"))
+run.close()
+if world().Get_rank() == 0:
+    np.save(sys.argv[1] + "/p.npy", p)
+    np.save(sys.argv[1] + "/counts.npy", np.array(counts))
+"""
+
+
+def test_parity_magpod_small_under_mpi(tmp_path):
+    """400 iterations through all four phases on two ranks: callbacks see only their rank's
+    atoms (and ghosts), the contact test is reduced over ranks; positions stay at round-off."""
+    script = tmp_path / "mpi_magpod.py"
+    script.write_text(MPI_MAGPOD)
+    mpiexec = Path(sys.executable).parent / "mpiexec"
+    proc = subprocess.run([str(mpiexec), "-n", "2", sys.executable, str(script), str(tmp_path)],
+                          capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    counts = np.load(tmp_path / "counts.npy")
+    assert counts.min() > 0 and counts.sum() == scenes.build("magpod-small").n_particles
+    sc = scenes.build("magpod-small", phase_steps=100, cycles=1)
+    ref = Reference(sc)
+    for _, phase, _ in sc.schedule():
+        for _ in range(phase.steps):
+            ref.step(phase.vars)
+    assert np.abs(ref.p - sc.original_positions()).max() > 1.0
+    assert np.abs(np.load(tmp_path / "p.npy") - ref.p).max() <= 1e-6

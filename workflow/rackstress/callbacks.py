@@ -37,6 +37,21 @@ class Frame:
         self._row = self._local = None
         #: per-step results shared between terms (collision pairs of a pair of groups)
         self.cache = {}
+        self.span_rows = None
+
+    def use_span(self, span: int) -> int:
+        """Accumulate only for owned particles with global index < ``span`` (the groups the
+        Python operators act on); return how many rows the accumulator needs."""
+        if self.identity:
+            return span
+        self.span_rows = np.flatnonzero(self.index[:self.nlocal] < span)
+        self._compact = np.full(len(self.index), -1, dtype=np.int64)
+        self._compact[self.span_rows] = np.arange(len(self.span_rows))
+        return len(self.span_rows)
+
+    def compact(self, rows: np.ndarray) -> np.ndarray:
+        """Accumulator rows of frame rows (−1: a ghost or a particle outside the span)."""
+        return rows if self.identity else self._compact[rows]
 
     @property
     def row(self) -> np.ndarray:
@@ -80,11 +95,14 @@ class Frame:
         return ri, rj
 
 
-def _add_rows(acc, rows, contrib, nlocal):
+def _add_rows(fr, acc, rows, contrib):
     """acc[rows] += contrib for the rows owned here (ghost rows carry no force of ours)."""
-    if len(rows) and rows.max() >= nlocal:
-        own = rows < nlocal
+    rows = fr.compact(rows)
+    if not fr.identity:
+        own = rows >= 0
         rows, contrib = rows[own], contrib[own]
+    if not len(rows):
+        return
     for k in range(3):
         acc[:, k] += np.bincount(rows, weights=contrib[:, k], minlength=len(acc))
 
@@ -130,9 +148,9 @@ class PairTerm:
             g = (1.0 - L0sq / d2)[:, None] * diff        # Eq. 12 without its coefficient
         else:
             g = diff / np.sqrt(d2)[:, None]              # Eq. 14 without its coefficient
-        _add_rows(acc, ri, cI[:, None] * g, fr.nlocal)
+        _add_rows(fr, acc, ri, cI[:, None] * g)
         if cJ is not None:
-            _add_rows(acc, rj, -cJ[:, None] * g, fr.nlocal)
+            _add_rows(fr, acc, rj, -cJ[:, None] * g)
 
 
 class CollideTerm:
@@ -182,8 +200,7 @@ class CollideTerm:
     def add(self, fr: Frame, acc: np.ndarray):
         a, b = self.pairs(fr)
         contrib = col(fr.x[a], fr.x[b], self.radius[fr.index[a]], self.radius[fr.index[b]], self.c)
-        for k in range(3):
-            acc[:, k] += np.bincount(a, weights=contrib[:, k], minlength=len(acc))
+        _add_rows(fr, acc, a, contrib)
 
 
 class PyForces:
@@ -282,7 +299,7 @@ class PyForces:
             fr = Frame(self.lmp, self.n, nlocal)
             # serial: only the groups the Python operators act on get forces from here, the rest
             # (MagPod's 30,000 sediment particles) is never touched after one zeroing
-            rows = self.span if fr.identity else nlocal
+            rows = fr.use_span(self.span)
             if fr.identity and self._fresh:
                 f[:] = 0.0
                 self._fresh = False
@@ -292,13 +309,13 @@ class PyForces:
                 if isinstance(op, Dampen):       # only the contact-conditioned extra is here
                     if self._holds(fr, r):
                         sel = fr.owned(self.scene.slice(r.target))
-                        acc[sel] -= op.extra * fr.v[sel]
+                        acc[fr.compact(sel)] -= op.extra * fr.v[sel]
                 elif isinstance(op, Force):
                     if self._holds(fr, r):
                         sl = self.scene.slice(r.target)
                         mask = np.zeros(self.n, dtype=bool)
                         mask[sl] = True if op.where is None else np.asarray(op.where, bool)
-                        acc[mask[:rows] if fr.identity else mask[fr.index[:nlocal]]] += \
+                        acc[mask[:rows] if fr.identity else mask[fr.index[fr.span_rows]]] += \
                             np.asarray(op.accel, float)
                 elif not self._holds(fr, r):
                     continue
@@ -308,8 +325,9 @@ class PyForces:
                     term.add(fr, acc)
             if fr.identity:
                 f[:rows] = acc * self.mass[:rows, None]
-            else:
-                f[:] = acc * self.mass[fr.index[:nlocal], None]
+            else:               # atoms migrate between ranks: every row is written every step
+                f[:] = 0.0
+                f[fr.span_rows] = acc * self.mass[fr.index[fr.span_rows], None]
         except Exception as exc:  # noqa: BLE001 - reported by the runner after the chunk
             if self.error is None:
                 self.error = (step, exc)
