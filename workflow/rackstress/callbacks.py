@@ -178,16 +178,18 @@ class CollideTerm:
         # few hundred of the body's or the sediment's particles, not all of them
         xt = fr.x[self.t] if fr.identity else fr.x[idx_t]    # views when rows are particles
         xs = fr.x[self.s] if fr.identity else fr.x[idx_s]
-        lo, hi = bbox(xs)
-        near_t = inside(xt, lo - reach, hi + reach)
-        idx_t, xt = idx_t[near_t], xt[near_t]
-        if not len(idx_t):
-            return idx_t, idx_s[:0]
-        lo, hi = bbox(xt)
-        near_s = inside(xs, lo - reach, hi + reach)
-        idx_s, xs = idx_s[near_s], xs[near_s]
-        if not len(idx_s):
-            return idx_t[:0], idx_s
+        # the larger side is scanned once, against the smaller side's box
+        for _ in range(2):
+            if len(xs) >= len(xt):
+                lo, hi = bbox(xt)
+                near = inside(xs, lo - reach, hi + reach)
+                idx_s, xs = idx_s[near], xs[near]
+            else:
+                lo, hi = bbox(xs)
+                near = inside(xt, lo - reach, hi + reach)
+                idx_t, xt = idx_t[near], xt[near]
+            if not len(idx_s) or not len(idx_t):
+                return idx_t[:0], idx_s[:0]
         sm = cKDTree(xt).sparse_distance_matrix(cKDTree(xs), reach, output_type="ndarray")
         a, b = idx_t[sm["i"]], idx_s[sm["j"]]
         keep = (fr.index[a] != fr.index[b]) & \
