@@ -90,7 +90,7 @@ def test_divergence_exit_code_and_summary(tmp_path):
     out = tmp_path / "div"
     res = invoke("run", "plane-bound", "--engine", "reference", "--set", "d=100",
                  "--set", "magnitude=100", "--steps", 150, "--dump-every", 5, "--out", out,
-                 "--no-progress")
+                 "--no-progress", "--allow-unstable")
     assert res.exit_code == 3, res.output
     s = json.loads((out / "summary.json").read_text())
     assert s["status"] == "diverged"

@@ -182,7 +182,8 @@ def test_watchdog_catches_divergence_on_lammps(tmp_path):
 
     scene = scenes.build("plane-bound", d=100.0, magnitude=100.0, steps=300)
     with pytest.raises(DivergenceError) as info:
-        run(scene, tmp_path / "run", engine="lammps", dump_every=5, progress=False)
+        run(scene, tmp_path / "run", engine="lammps", dump_every=5, progress=False,
+            allow_unstable=True)
     err = info.value
     assert err.step <= 150 and err.group == "plane"
     assert f"step {err.step}" in str(err) and "'plane' particle" in str(err)

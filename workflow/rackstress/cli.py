@@ -42,7 +42,7 @@ def main():
 
 
 @main.command()
-@click.argument("scene")
+@click.argument("scene", required=False)
 @click.option("--engine", type=click.Choice(["lammps", "reference"]), default="lammps",
               show_default=True, help="lammps (the backend) or reference (exact NumPy engine).")
 @click.option("--mode", type=click.Choice(["exact", "fast"]), default="exact", show_default=True,
@@ -58,7 +58,16 @@ def main():
 @click.option("--progress/--no-progress", default=True, show_default=True)
 @click.option("--render/--no-render", "do_render", default=True, show_default=True,
               help="Render the default stress pictures and plots into OUT/figures/ at the end.")
-def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progress, do_render):
+@click.option("--restart-every", type=click.IntRange(min=0), default=None,
+              help="LAMMPS: write a checkpoint (restart file + exact state) every N steps "
+                   "(default: ~10 a run, >= 100 steps apart; 0: none).")
+@click.option("--resume", "resume_dir", type=click.Path(file_okay=False, path_type=Path),
+              help="Continue the interrupted run in this run directory from its last "
+                   "checkpoint (SCENE only needed for .toml scenes).")
+@click.option("--allow-unstable", is_flag=True,
+              help="Run even if --dt exceeds the predicted stability limit of Eq. 5.")
+def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progress, do_render,
+        restart_every=None, resume_dir=None, allow_unstable=False):
     """Run SCENE (a built-in name or a .toml file) and write a run directory.
 
     Exit status: 0 done, 2 bad input, 3 diverged (frames and summary kept), 4 the run is done
@@ -67,12 +76,27 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
     from . import run as run_mod
     from .mpi import rank
 
+    if resume_dir is not None:
+        out = resume_dir
+    elif scene is None:
+        raise click.UsageError("Missing argument 'SCENE' (or give --resume RUNDIR).")
     try:
-        sc = _load_scene(scene, steps, dt, sets)
-        if out is None:
-            out = Path("runs") / f"{sc.name}-{time.strftime('%Y%m%d-%H%M%S')}"
-        summary = run_mod.run(sc, out, engine=engine, mode=mode, dump_every=dump_every,
-                              progress=progress and rank() == 0, overwrite=overwrite)
+        if resume_dir is not None:
+            from .resume import resume_run
+
+            summary = resume_run(resume_dir, scene, progress=progress and rank() == 0)
+        else:
+            sc = _load_scene(scene, steps, dt, sets)
+            if out is None:
+                out = Path("runs") / f"{sc.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+            if restart_every is None and engine == "lammps":
+                from .resume import default_restart_every
+
+                restart_every = default_restart_every(sc.total_steps)
+            summary = run_mod.run(sc, out, engine=engine, mode=mode, dump_every=dump_every,
+                                  progress=progress and rank() == 0, overwrite=overwrite,
+                                  restart_every=restart_every or None,
+                                  allow_unstable=allow_unstable)
     except DivergenceError as err:
         _fail(f"{err} (run directory: {out})", EXIT_DIVERGED)
     except RackstressError as err:
@@ -170,6 +194,121 @@ def render(rundir, frames, measure, views, movie, vmax, allow_truncated):
     for name in rep.files:
         click.echo(f"  wrote {rep.outdir / name}")
     click.echo(f"rendered in {time.perf_counter() - t0:.1f} s")
+
+
+@main.command()
+@click.argument("sweep", required=False, type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
+              help="Batch directory (default: batches/SWEEP-STEM); rerun to finish it.")
+@click.option("--ranks-per-job", type=click.IntRange(min=1), default=1, show_default=True,
+              help="MPI ranks per job: mpiexec -n K runs K/J jobs at a time.")
+@click.option("--retry-failed", is_flag=True, help="Also rerun jobs recorded as failed.")
+@click.option("--manager", type=click.Choice(["thread", "rank"]), default="thread",
+              show_default=True, help="Job hand-out: a thread on rank 0 (which also runs jobs) "
+                                      "or rank 0 alone.")
+@click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=Path),
+              help="Instead of running: tabulate and plot a finished (or partial) batch.")
+@click.option("--figure", help="With --report: a summary figure as a dotted path "
+                               "(default: groups.FIRSTGROUP.max_deformation).")
+@click.option("--against", help="With --report: the swept parameter on the x axis "
+                                "(default: the first swept one).")
+def batch(sweep, out, ranks_per_job, retry_failed, manager, report_dir, figure, against):
+    """Run every job of a SWEEP file (TOML), over MPI ranks when under mpiexec.
+
+    Jobs that diverge or fail are recorded and the rest go on; a killed batch run again on the
+    same --out finishes only what was not finished. Exit status: 0 all jobs finished (whatever
+    their status), 2 bad input.
+    """
+    from . import batch as batch_mod
+    from .mpi import rank
+
+    try:
+        if report_dir is not None:
+            batch_mod.report(report_dir, figure, against, log=click.echo)
+            return
+        if sweep is None:
+            raise click.UsageError("give a SWEEP file, or --report BATCHDIR")
+        index = batch_mod.run_batch(sweep, out, ranks_per_job, retry_failed, manager,
+                                    log=lambda m: click.echo(m) if rank() == 0 else None)
+    except RackstressError as err:
+        _fail(err, EXIT_INPUT)
+    if rank() == 0:
+        p = index["passes"][-1]
+        click.echo(f"batch {'complete' if index['complete'] else 'incomplete'}: "
+                   + ", ".join(f"{v} {k}" for k, v in sorted(index["counts"].items()))
+                   + f"; this pass ran {p['jobs_run']} job(s) in {p['wall_s']:.2f} s")
+
+
+@main.group()
+def bench():
+    """Benchmarks of stability, work-precision and speed (outputs in docs/benchmarks/)."""
+
+
+def _bench_report(data, mod):
+    from .bench import md_table
+
+    click.echo(md_table(mod.HEADER, mod.table_rows(data)))
+    for f in data["files"]:
+        click.echo(f"wrote {f}")
+    click.echo(f"({data['wall_s']:.0f} s)")
+
+
+@bench.command("stability")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
+              help="Output directory (default: docs/benchmarks/ of the repository).")
+@click.option("--quick", is_flag=True, help="A few cases only.")
+@click.option("--magpod", is_flag=True, help="Also the 17,480-iteration MagPod run on LAMMPS.")
+@click.option("--magpod-steps", type=click.IntRange(min=1), default=17480, show_default=True)
+@click.option("--only", multiple=True, help="Only cases whose label contains this (repeatable).")
+def bench_stability(out, quick, magpod, magpod_steps, only):
+    """Largest stable t by bisection (reference engine) beside the predicted limit."""
+    from .bench import stability as mod
+
+    data = mod.run_bench(out, quick=quick, magpod=magpod, magpod_steps=magpod_steps,
+                         only=only or None, echo=click.echo)
+    _bench_report(data, mod)
+    if data.get("magpod"):
+        mp = data["magpod"]
+        click.echo(f"magpod: {mp['status']} over {mp['steps']} iterations at t = 0.01 "
+                   f"(predicted t_max {mp['t_pred']:.4g})")
+
+
+@bench.command("accuracy")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
+              help="Output directory (default: docs/benchmarks/ of the repository).")
+@click.option("--quick", is_flag=True, help="Shorter physical times (under 5 minutes).")
+@click.option("--scene", "scene_names", multiple=True,
+              type=click.Choice(["plane-bound", "plane-rack", "magpod-small"]),
+              help="Only these scenes (repeatable; default: all three).")
+def bench_accuracy(out, quick, scene_names):
+    """Work-precision: errors against a converged reference vs wall time."""
+    from .bench import accuracy as mod
+
+    data = mod.run_bench(out, quick=quick, scenes_=scene_names or None, echo=click.echo)
+    _bench_report(data, mod)
+
+
+@bench.command("perf")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
+              help="Output directory (default: docs/benchmarks/ of the repository).")
+@click.option("--steps", type=click.IntRange(min=1), default=1200, show_default=True)
+@click.option("--quick", is_flag=True, help="300 iterations.")
+@click.option("--profile-steps", type=click.IntRange(min=0), default=100, show_default=True,
+              help="Iterations of the extra chunk profiled by LAMMPS (0: none).")
+@click.option("--scene", "scene_name", default="magpod", show_default=True,
+              type=click.Choice(["magpod", "magpod-small"]))
+@click.option("--no-mpi", is_flag=True, help="Skip the mpiexec -n 2 configurations.")
+def bench_perf(out, steps, quick, profile_steps, scene_name, no_mpi):
+    """Wall time per 1200 MagPod iterations: reference, LAMMPS modes, serial and 2 ranks."""
+    from .bench import perf as mod
+
+    configs = [c for c in mod.CONFIGS if not (no_mpi and c[2] > 1)]
+    data = mod.run_bench(out, steps=steps, quick=quick, profile_steps=profile_steps,
+                         scene_name=scene_name, configs=configs, echo=click.echo)
+    _bench_report(data, mod)
+    from .bench import md_table
+
+    click.echo(md_table(*mod.breakdown_rows(data)))
 
 
 if __name__ == "__main__":  # pragma: no cover

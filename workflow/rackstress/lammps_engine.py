@@ -21,23 +21,54 @@ from .scene import PhaseEnd
 CHECK_EVERY = 10
 
 
+def balance_commands(scene, nranks: int) -> list[str]:
+    """Load balancing a scene asks for in ``params['balance']`` (issue 7: ``sediment-large``).
+
+    ``rcb``: ``comm_style tiled`` and one recursive-coordinate-bisection ``balance`` in which
+    every particle outside the passive ``sediment`` group weighs ``robot_weight`` (the robot's
+    particles carry the Python operators); ``shift``: ``balance shift xz`` on particle counts.
+    Nothing in serial, nor for scenes that ask for nothing (every scene but sediment-large).
+    """
+    how = (scene.params or {}).get("balance", "none")
+    if nranks < 2 or how in (None, "none"):
+        return []
+    if how == "shift":
+        return ["balance 1.05 shift xz 20 1.05"]
+    if how == "rcb":
+        w = float(scene.params.get("robot_weight", 20.0))
+        L = ["comm_style tiled"]
+        if "sediment" in scene.groups:
+            L += ["group rs_active subtract all sediment",
+                  f"balance 1.0 rcb weight group 1 rs_active {w!r}"]
+        else:
+            L += ["balance 1.0 rcb"]
+        return L
+    raise RackstressError(f"unknown balance '{how}' (rcb, shift or none)")
+
+
 class LammpsRun:
     """One LAMMPS instance running one deck (all ranks of ``comm`` take part)."""
 
     def __init__(self, deck: Deck, out: Path | None, comm=None, dump_every: int = 100,
-                 log: bool = True):
+                 log: bool = True, append: bool = False):
+        """``append``: continue an interrupted run in ``out`` (resume): the log and the
+        trajectory are appended to, not replaced."""
         from .mpi import lammps_module, world
 
         self.deck, self.scene = deck, deck.scene
         self.comm = comm or world()
         out = Path(out).resolve() if out is not None else None
-        args = ["-screen", "none", "-nocite", "-log",
-                str(out / "log.lammps") if (out is not None and log) else "none"]
+        self.out = out
+        logfile = str(out / "log.lammps") if (out is not None and log) else "none"
+        args = ["-screen", "none", "-nocite", "-log", "none" if append else logfile]
         self.lmp = lammps_module().lammps(cmdargs=args, comm=self.comm)
+        if append and logfile != "none":
+            self.lmp.command(f"log {logfile} append")
         self.step = 0
         self.py = None
         self._py_on = False
         self._phase = None
+        self._dump_id = None
         data = (out / "particles.data") if out is not None else None
         if data is None:
             import tempfile
@@ -50,7 +81,13 @@ class LammpsRun:
         dump = str(out / "trajectory.dump") if out is not None else None
         for cmd in deck.setup_commands(str(data), dump, dump_every):
             self.command(cmd)
+            if dump is not None and cmd.startswith("dump ") and " all custom " in cmd:
+                self._dump_id = cmd.split()[1]
+                if append:
+                    self.command(f"dump_modify {self._dump_id} append yes")
         for cmd in deck.velocity_variables():
+            self.command(cmd)
+        for cmd in balance_commands(self.scene, self.comm.Get_size()):
             self.command(cmd)
         if deck.python_ops:
             self.py = PyForces(self.lmp, deck, self.comm)
@@ -103,6 +140,9 @@ class LammpsRun:
         err = self.py.error if self.py is not None else None
         flag = self.comm.allreduce(err is not None)
         if flag:
+            # a callback that failed because particles flew apart (a partner out of ghost
+            # reach) is a divergence: let the watchdog name it first
+            self.check()
             msgs = self.comm.allgather(None if err is None else f"step {err[0]}: {err[1]}")
             msg = next(m for m in msgs if m)
             raise RackstressError(f"the Python operator callback failed at {msg}")
@@ -143,35 +183,126 @@ class LammpsRun:
 
     # ------------------------------------------------------------------ the whole schedule
     def run_schedule(self, progress=None, check_every: int = CHECK_EVERY,
-                     on_phase_end=None) -> None:
-        """Every phase of every cycle; ``on_phase_end(PhaseEnd)`` sees each phase's last state."""
-        for _, phase, cycle in self.scene.schedule():
-            self.enter_phase(phase.vars)
+                     on_phase_end=None, checkpoint=None, resume=None) -> None:
+        """Every phase of every cycle; ``on_phase_end(PhaseEnd)`` sees each phase's last state.
+
+        ``checkpoint``: a :class:`rackstress.resume.Checkpointer`, asked after every chunk
+        (and after each phase end) whether to write one. ``resume``: a loaded checkpoint
+        (:class:`rackstress.resume.Checkpoint`): phases before it are skipped and its phase is
+        re-entered exactly (:meth:`restore`).
+        """
+        for k, (_, phase, cycle) in enumerate(self.scene.schedule()):
             left = phase.steps
+            if resume is not None:
+                if k < resume.phase_index:
+                    continue
+                if k == resume.phase_index:
+                    self.restore(resume)
+                    left = phase.steps - resume.phase_done
+                    if left == 0:       # the checkpoint was at this phase's end
+                        continue
+                else:
+                    self.enter_phase(phase.vars)
+            else:
+                self.enter_phase(phase.vars)
             while left > 0:
-                k = min(check_every, left)
-                self.advance(k)
+                k_ = min(check_every, left)
+                self.advance(k_)
                 self.check()
-                left -= k
+                left -= k_
                 if progress is not None:
-                    progress.update(k)
+                    progress.update(k_)
+                if left > 0 and checkpoint is not None:
+                    checkpoint.maybe(self, k, phase.steps - left, cycle)
             if on_phase_end is not None:
                 on_phase_end(PhaseEnd(self.step, phase.name, dict(phase.vars), cycle,
                                       self.gather_positions()))
+            if checkpoint is not None:
+                checkpoint.maybe(self, k, phase.steps, cycle)
+        if checkpoint is not None:
+            checkpoint.final(self)
+
+    # ------------------------------------------------------------------ checkpoints
+    def gather_velocities(self) -> np.ndarray:
+        v = self.lmp.gather_atoms("v", 1, 3)
+        return np.ctypeslib.as_array(v).reshape(-1, 3).copy()
+
+    def scatter(self, name: str, values: np.ndarray) -> None:
+        """Set a per-atom 3-vector (x, v, f) of every atom from an array in global order."""
+        import ctypes
+
+        flat = np.ascontiguousarray(values, dtype=np.float64).reshape(-1)
+        self.lmp.scatter_atoms(name, 1, 3, flat.ctypes.data_as(ctypes.POINTER(ctypes.c_double)))
+
+    def realign(self, f: np.ndarray) -> None:
+        """Rebuild the neighbour lists here, as a resumed run does, keeping the state exact.
+
+        ``run 0`` recomputes forces with LAMMPS' full-step velocity, so the forces of the last
+        step (``f``, in global order) are put back; positions and velocities are untouched.
+        Done at every checkpoint, so that an interrupted and resumed run sums its pair forces in
+        the same order as an uninterrupted one (bitwise in serial)."""
+        self.command("run 0 post no")
+        self.scatter("f", f)
+        self._check_callback()
+
+    def restore(self, ck) -> None:
+        """Re-enter the checkpoint's phase exactly: the fixes as the uninterrupted run had them
+        (every phase switch replayed, so the fixes sum in the same order), the step, positions
+        and velocities, then ``run 0`` (neighbour lists, as :meth:`realign` did when the
+        checkpoint was written) and the last step's forces put back."""
+        previous = None
+        for k, (_, phase, _) in enumerate(self.scene.schedule()):
+            if k > ck.phase_index:
+                break
+            for cmd in self.deck.phase_commands(phase.vars, previous):
+                self.command(cmd)
+            if self.py is not None:
+                want = self.py.set_phase(phase.vars)
+                if want and not self._py_on:
+                    self.command(f"fix {PY_FIX} all external pf/callback 1 1")
+                    self.lmp.set_fix_external_callback(PY_FIX, self.py, self)
+                elif self._py_on and not want:
+                    self.command(f"unfix {PY_FIX}")
+                self._py_on = want
+            previous = dict(phase.vars)
+        self.command(f"reset_timestep {int(ck.step)}")
+        if self._dump_id is not None:
+            # the frame at the checkpoint's step is already in the file: write from the next one
+            self.command(f"dump_modify {self._dump_id} delay {int(ck.step) + 1}")
+        self.scatter("x", ck.x)
+        self.scatter("v", ck.v)
+        self.step = int(ck.step)
+        self.realign(ck.f)
+        self._phase = previous
 
 
 def run_lammps(scene, out: Path, mode: str, dump_every: int, progress: bool, deck=None,
-               on_phase_end=None):
-    """Run ``scene`` on LAMMPS into ``out``; return (final positions, steps done, extra summary)."""
+               on_phase_end=None, comm=None, restart_every: int | None = None, resume=None):
+    """Run ``scene`` on LAMMPS into ``out``; return (final positions, steps done, extra summary).
+
+    ``comm``: the ranks running it (default COMM_WORLD). ``restart_every``: checkpoint interval
+    in steps (None: no checkpoints). ``resume``: a :class:`rackstress.resume.Checkpoint` to
+    continue from (the run directory ``out`` already holds the first part).
+    """
     from .deck import compile_deck
     from .run import progress_bar
 
     deck = deck or compile_deck(scene, mode)
-    runner = LammpsRun(deck, out, dump_every=dump_every)
+    runner = LammpsRun(deck, out, comm=comm, dump_every=dump_every, append=resume is not None)
+    ckpt = None
+    if restart_every:
+        from .resume import Checkpointer
+
+        ckpt = Checkpointer(out, runner.comm, restart_every, mode=mode, dump_every=dump_every,
+                            resumed=resume)
+        on_phase_end = ckpt.wrap_phase_end(on_phase_end)
     try:
+        done = resume.step if resume is not None else 0
         with progress_bar(scene.total_steps, progress, f"{scene.name} (lammps)") as bar:
+            bar.update(done)
             try:
-                runner.run_schedule(bar, on_phase_end=on_phase_end)
+                runner.run_schedule(bar, on_phase_end=on_phase_end, checkpoint=ckpt,
+                                    resume=resume)
             except DivergenceError as err:
                 err.p_end = runner.gather_positions()
                 err.steps_done = runner.step

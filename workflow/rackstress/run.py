@@ -155,11 +155,20 @@ def run_reference(scene: Scene, out: Path, dump_every: int, progress: bool, on_p
 
 
 def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
-        dump_every: int | None = None, progress: bool = True, overwrite: bool = False) -> dict:
+        dump_every: int | None = None, progress: bool = True, overwrite: bool = False,
+        comm=None, restart_every: int | None = None, allow_unstable: bool = False) -> dict:
     """Run ``scene`` on ``engine`` into the run directory ``out``; return the summary.
 
     Raises :class:`DivergenceError` after writing the summary when the watchdog stops the run.
+    ``comm`` (batch runs): the mpi4py communicator whose ranks run this one job (default
+    COMM_WORLD). ``restart_every``: write a checkpoint (LAMMPS restart + exact state, see
+    :mod:`rackstress.resume`) every so many steps; None: none.
     """
+    # refuse a dt beyond the predicted stability limit of Eq. 5 (rackstress.stability) before
+    # anything is written, unless allow_unstable
+    from .stability import check_dt
+
+    check_dt(scene, allow=allow_unstable)
     if engine not in ENGINES:
         raise RunDirError(f"unknown engine '{engine}'; choose one of {', '.join(ENGINES)}")
     dump_every = dump_every or default_dump_every(scene)
@@ -177,26 +186,26 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
             (out / "in.lammps").write_text(deck.input_text(dump_every))
 
     out = Path(out)
-    on_root(start)
+    on_root(start, comm)
     t0 = time.perf_counter()
     extra = {"dump_every": dump_every}
     records = [PhaseEnd(0, None, {}, 0, scene.original_positions())]
     on_phase_end = records.append if scene.report is not None else None
 
     def report():
-        if scene.report is not None and _is_root():
+        if scene.report is not None and _is_root(comm):
             extra["report"] = scene.report(scene, records)
     try:
         if engine == "reference":
             mode = "exact"
-            if not _is_root():
+            if not _is_root(comm):
                 raise RunDirError("the reference engine runs on one rank; run it without mpiexec")
             p_end, steps = run_reference(scene, out, dump_every, progress, on_phase_end)
         else:
             from .lammps_engine import run_lammps
 
             p_end, steps, more = run_lammps(scene, out, mode, dump_every, progress, deck,
-                                            on_phase_end)
+                                            on_phase_end, comm=comm, restart_every=restart_every)
             extra.update(more)
     except DivergenceError as err:
         wall = time.perf_counter() - t0
@@ -206,28 +215,29 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
             p_end = np.full((scene.n_particles, 3), np.nan)
         summary = summarize(scene, engine, mode, p_end, getattr(err, "steps_done", err.step),
                             wall, "diverged", err, extra)
-        if _is_root():
+        if _is_root(comm):
             write_json(out / "summary.json", summary)
         raise
     wall = time.perf_counter() - t0
     report()
     summary = summarize(scene, engine, mode, p_end, steps, wall, "ok", extra=extra)
-    if _is_root():
+    if _is_root(comm):
         write_json(out / "summary.json", summary)
     return summary
 
 
-def _is_root() -> bool:
-    from .mpi import rank
-
-    return rank() == 0
-
-
-def on_root(fn):
-    """Run ``fn`` on rank 0 only; every rank then raises what it raised, or goes on together."""
+def _is_root(comm=None) -> bool:
     from .mpi import world
 
-    comm = world()
+    return (comm or world()).Get_rank() == 0
+
+
+def on_root(fn, comm=None):
+    """Run ``fn`` on rank 0 of ``comm`` (default: world) only; every rank then raises what it
+    raised, or goes on together."""
+    from .mpi import world
+
+    comm = comm or world()
     err = None
     if comm.Get_rank() == 0:
         try:

@@ -7,6 +7,7 @@ from pathlib import Path
 from ..errors import SceneError
 from .magpod import magpod, magpod_small
 from .plane import plane_bound, plane_rack
+from .large import sediment_large
 
 #: name → builder; each builder's keyword arguments are the scene's parameters (``--set``).
 BUILDERS = {
@@ -14,6 +15,7 @@ BUILDERS = {
     "plane-rack": plane_rack,
     "magpod": magpod,
     "magpod-small": magpod_small,
+    "sediment-large": sediment_large,
 }
 
 

@@ -1,0 +1,62 @@
+"""Smoke runs of ``rackstress bench stability | accuracy | perf`` at minimal sizes (real engines)."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from rackstress.bench import accuracy, perf, stability
+from rackstress.cli import main
+
+
+def test_bench_stability_smoke(tmp_path):
+    runner = CliRunner()
+    res = runner.invoke(main, ["bench", "stability", "--quick", "--out", str(tmp_path),
+                               "--only", "plane-rack", "--only", "damping"])
+    assert res.exit_code == 0, res.output
+    data = json.loads((tmp_path / "stability.json").read_text())
+    assert {c["family"] for c in data["cases"]} == {"rack bind", "damping"}
+    for c in data["cases"]:
+        assert c["converged"] and c["within_2x"], c
+        # the bracket: its lower end was stable, its upper end was not
+        lo, hi = c["bracket"]
+        assert hi / lo <= 1.0 + stability.REL_TOL + 1e-12
+    damp = next(c for c in data["cases"] if c["family"] == "damping")
+    # plane-bound d=2 with damping 50: t_max = 4/(γ + √(γ² + 4ω²)) with γ = 50
+    assert damp["limit"]["gamma"] == pytest.approx(50.0)
+    assert (tmp_path / "stability.md").read_text().count("|") > 10
+    assert (tmp_path / "stability.png").stat().st_size > 1000
+    assert "wrote" in res.output
+
+
+def test_bench_accuracy_smoke(tmp_path):
+    data = accuracy.run_bench(tmp_path, quick=True, scenes_=("plane-rack",), echo=lambda s: None)
+    rows = data["scenes"][0]["rows"]
+    assert len(rows) == 4 * 3 and all(r["status"] == "ok" for r in rows)
+    for r in rows:
+        assert abs(r["T"] - 3.0) < 1e-12          # the same physical time at every t
+        if (r["engine"], r["mode"]) == ("lammps", "exact"):
+            assert r["vs_reference_same_t"] < 1e-10   # exact mode: the reference to round-off
+    ref = [r["pos_max"] for r in rows if r["engine"] == "reference"]
+    assert all(a > b for a, b in zip(ref, ref[1:]))   # smaller t, smaller error
+    assert data["scenes"][0]["observed_order_reference"][-1] > 0.8
+    assert (tmp_path / "accuracy.png").stat().st_size > 1000
+    assert "lammps fast" in (tmp_path / "accuracy.md").read_text()
+
+
+def test_bench_perf_smoke(tmp_path):
+    data = perf.run_bench(tmp_path, steps=4, profile_steps=4, scene_name="magpod-small",
+                          configs=(("reference", "exact", 1), ("lammps", "exact", 1),
+                                   ("lammps", "fast", 2)), echo=lambda s: None)
+    rows = data["rows"]
+    assert [r["status"] for r in rows] == ["ok"] * 3, [r.get("error") for r in rows]
+    ex = rows[1]
+    assert ex["x_lammps_exact_1"] == 1.0 and ex["maxrss_mb"] > 10
+    assert ex["breakdown"]["_loop"]["steps"] == 4 and "Modify" in ex["breakdown"]
+    assert 0.0 < ex["callback_share"] < 1.0 and ex["callback_calls"] >= 4
+    assert rows[2]["ranks"] == 2 and len(rows[2]["callback_s_per_rank"]) == 2
+    assert np.isclose(data["paper"]["particle_steps_per_s"], 33689 * 1200 / 142)
+    md = (tmp_path / "perf.md").read_text()
+    assert "paper" in md and "MPI" not in md.split("\n")[0]

@@ -1,0 +1,73 @@
+"""Benchmarks of issue 6: ``rackstress bench stability | accuracy | perf``.
+
+Each writes JSON, a Markdown table (and a plot where it has one) under ``docs/benchmarks/``:
+
+* :mod:`.stability` — the largest stable time step of Eq. 5, measured by bisection on the
+  reference engine, beside the linear prediction of :mod:`rackstress.stability`;
+* :mod:`.accuracy` — work-precision: errors against a converged reference run at fixed physical
+  times, for every engine and mode and several time steps;
+* :mod:`.perf` — wall time per 1200 MagPod iterations, serial and under ``mpiexec -n 2``, with
+  LAMMPS' own timing breakdown and the Python callback's share.
+"""
+from __future__ import annotations
+
+import json
+import os
+import platform
+from pathlib import Path
+
+#: Where the benchmark outputs go (relative to the repository, else the working directory).
+DEFAULT_OUT = Path(__file__).resolve().parents[3] / "docs" / "benchmarks"
+
+
+def out_dir(out: Path | None) -> Path:
+    out = Path(out) if out is not None else DEFAULT_OUT
+    out.mkdir(parents=True, exist_ok=True)
+    return out
+
+
+def machine() -> dict:
+    """What the numbers were measured on (timings are comparable only as ratios in one run)."""
+    try:
+        load = os.getloadavg()
+    except OSError:  # pragma: no cover
+        load = None
+    cpu = None
+    try:
+        for line in open("/proc/cpuinfo"):
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:  # pragma: no cover
+        pass
+    return {"cores": os.cpu_count(), "cpu": cpu, "python": platform.python_version(),
+            "platform": platform.platform(), "load_avg_at_start": load,
+            "note": "2 cores shared with other work: compare timings within one run, as ratios"}
+
+
+def write_json(path: Path, data) -> None:
+    from ..run import write_json as _w
+
+    _w(path, data)
+
+
+def md_table(header: list, rows: list) -> str:
+    out = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    for r in rows:
+        out.append("| " + " | ".join(str(x) for x in r) + " |")
+    return "\n".join(out) + "\n"
+
+
+def fmt(x, digits: int = 3) -> str:
+    if x is None:
+        return "—"
+    if isinstance(x, str):
+        return x
+    if x != x:  # nan
+        return "nan"
+    if x in (float("inf"), float("-inf")):
+        return "∞"
+    return f"{x:.{digits}g}"
+
+
+__all__ = ["DEFAULT_OUT", "out_dir", "machine", "write_json", "md_table", "fmt", "json"]

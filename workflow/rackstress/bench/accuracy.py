@@ -1,0 +1,251 @@
+"""``rackstress bench accuracy [--quick]``: work-precision of every engine and mode.
+
+For each scene (plane-bound d = 10, plane-rack, magpod-small) and each time step t in
+``T_STEPS`` the scene is run to the same physical time T (steps = T/t; MagPod's phases keep
+their physical length, phase_steps = T_phase/t) on
+
+* the reference engine (NumPy, Eq. 5 exactly),
+* LAMMPS exact mode and LAMMPS fast mode (one rank),
+
+and compared with a **converged reference**: the reference engine at t/8 of the smallest t
+(``t_conv`` = 0.0025/8 = 0.0003125), at the same physical times (the end of the run, and for
+MagPod every phase end). Errors:
+
+* positions: RMS and max over all particles of ‖p − p_conv‖ (max over the compared times);
+* ``max_deformation`` of each part (the summary's figure): |value − converged value|, largest
+  over the parts;
+* the stress field of the paper's measure (distance from the desired position,
+  :func:`rackstress.rigid.deformation` per group): max over particles of the difference;
+* MagPod: the distance walked (the body's centre-of-mass advance along +x): |difference|.
+
+A t the stability prediction refuses (t > t_max, :mod:`rackstress.stability`) is skipped and
+reported; a run the watchdog stops is reported as diverged. Wall time is the stepping only
+(LAMMPS: ``run_schedule``; setup is reported apart). ``--quick``: T = 3 for the planes and
+20-iteration (at t = 0.01) phases for MagPod (one cycle, T = 0.8); full: T = 12 and 300-iteration
+phases (T = 12).
+"""
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .. import rigid, scenes
+from ..errors import DivergenceError, RackstressError
+from ..reference import Reference
+from ..stability import predict
+from . import fmt, machine, md_table, out_dir, write_json
+
+T_STEPS = (0.02, 0.01, 0.005, 0.0025)
+REFINE = 8
+ENGINES = (("reference", "exact"), ("lammps", "exact"), ("lammps", "fast"))
+
+
+def scene_at(name: str, t: float, quick: bool):
+    """The benchmark's scene ``name`` at time step t, run to its fixed physical time."""
+    if name == "magpod-small":
+        tp = 0.2 if quick else 3.0
+        return scenes.build("magpod-small", phase_steps=int(round(tp / t)), dt=t, cycles=1)
+    T = 3.0 if quick else 12.0
+    kw = {"d": 10.0} if name == "plane-bound" else {}
+    return scenes.build(name, dt=t, steps=int(round(T / t)), **kw)
+
+
+def run_engine(scene, engine: str, mode: str) -> dict:
+    """Run; return the states at every phase end, wall time of the stepping, setup time."""
+    ends = []
+    t0 = time.perf_counter()
+    if engine == "reference":
+        ref = Reference(scene)
+        setup = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        for _, phase, _ in scene.schedule():
+            for _ in range(phase.steps):
+                ref.step(phase.vars)
+            ends.append(ref.p.copy())
+        wall = time.perf_counter() - t0
+    else:
+        from ..deck import compile_deck
+        from ..lammps_engine import LammpsRun
+
+        runner = LammpsRun(compile_deck(scene, mode), None, log=False)
+        setup = time.perf_counter() - t0
+        try:
+            t0 = time.perf_counter()
+            runner.run_schedule(on_phase_end=lambda rec: ends.append(rec.p))
+            wall = time.perf_counter() - t0
+        finally:
+            runner.close()
+    return {"ends": ends, "wall_s": wall, "setup_s": setup}
+
+
+def walked(scene, p: np.ndarray) -> float:
+    body = scene.slice("body")
+    return float(p[body, 0].mean() - scene.original_positions()[body, 0].mean())
+
+
+def errors(scene, ends: list, conv: list) -> dict:
+    """The error measures of the module docstring, max over the compared phase ends."""
+    e = {"pos_rms": 0.0, "pos_max": 0.0, "maxdef": 0.0, "stress_max": 0.0, "stress_rms": 0.0}
+    if "body" in scene.groups:
+        e["walk"] = 0.0
+    for p, q in zip(ends, conv):
+        d = np.linalg.norm(p - q, axis=1)
+        e["pos_rms"] = max(e["pos_rms"], float(np.sqrt((d * d).mean())))
+        e["pos_max"] = max(e["pos_max"], float(d.max()))
+        sd = []
+        for name, g in scene.groups.items():
+            if g.kind in ("rack", "sediment"):
+                continue   # racks are 6 points; the sediment has no rest shape (README)
+            sl = scene.slice(name)
+            a, b = rigid.deformation(g.o, p[sl]), rigid.deformation(g.o, q[sl])
+            e["maxdef"] = max(e["maxdef"], abs(float(a.max()) - float(b.max())))
+            sd.append(np.abs(a - b))
+        sd = np.concatenate(sd)
+        e["stress_max"] = max(e["stress_max"], float(sd.max()))
+        e["stress_rms"] = max(e["stress_rms"], float(np.sqrt((sd * sd).mean())))
+        if "walk" in e:
+            e["walk"] = max(e["walk"], abs(walked(scene, p) - walked(scene, q)))
+    return e
+
+
+def bench_scene(name: str, quick: bool, echo=print) -> dict:
+    t_conv = min(T_STEPS) / REFINE
+    conv_scene = scene_at(name, t_conv, quick)
+    t0 = time.perf_counter()
+    conv = run_engine(conv_scene, "reference", "exact")
+    echo(f"  {name}: converged reference t = {t_conv:g}, {conv_scene.total_steps} steps, "
+         f"{time.perf_counter() - t0:.1f} s")
+    T = conv_scene.total_steps * t_conv
+    rows = []
+    for t in T_STEPS:
+        sc = scene_at(name, t, quick)
+        pred = predict(sc)
+        ref_ends = None
+        for engine, mode in ENGINES:
+            row = {"scene": name, "t": t, "engine": engine, "mode": mode, "steps": sc.total_steps,
+                   "T": sc.total_steps * t, "t_pred": pred["t_max"], "status": "ok"}
+            if t > pred["t_max"]:
+                row["status"] = "refused (t > predicted t_max)"
+                rows.append(row)
+                continue
+            try:
+                r = run_engine(sc, engine, mode)
+            except DivergenceError as err:
+                row["status"] = f"diverged at step {err.step}"
+                rows.append(row)
+                continue
+            except RackstressError as err:
+                row["status"] = f"failed: {err}"
+                rows.append(row)
+                continue
+            row.update(wall_s=r["wall_s"], setup_s=r["setup_s"],
+                       particle_steps_per_s=sc.n_particles * sc.total_steps / r["wall_s"],
+                       **errors(sc, r["ends"], conv["ends"]))
+            if engine == "reference":
+                ref_ends = r["ends"]
+            elif ref_ends is not None:
+                row["vs_reference_same_t"] = max(float(np.abs(a - b).max())
+                                                 for a, b in zip(r["ends"], ref_ends))
+            rows.append(row)
+            echo(f"    t={t:<7g} {engine:9s} {mode:5s} pos_max {fmt(row['pos_max'])}  "
+                 f"stress_max {fmt(row['stress_max'])}  wall {r['wall_s']:.2f} s")
+    # observed order of the reference engine (position max error between successive t)
+    refs = [r for r in rows if r["engine"] == "reference" and "pos_max" in r]
+    order = []
+    for a, b in zip(refs, refs[1:]):
+        if a["pos_max"] > 0 and b["pos_max"] > 0:
+            order.append(math.log(a["pos_max"] / b["pos_max"]) / math.log(a["t"] / b["t"]))
+    return {"scene": name, "T": T, "t_conv": t_conv, "conv_steps": conv_scene.total_steps,
+            "conv_wall_s": conv["wall_s"], "n_particles": conv_scene.n_particles,
+            "observed_order_reference": order, "rows": rows}
+
+
+def run_bench(out: Path | None = None, quick: bool = False, scenes_=None, echo=print) -> dict:
+    out = out_dir(out)
+    t0 = time.perf_counter()
+    names = scenes_ or ("plane-bound", "plane-rack", "magpod-small")
+    results = [bench_scene(n, quick, echo) for n in names]
+    data = {"benchmark": "accuracy", "quick": quick, "machine": machine(),
+            "converged_reference": f"reference engine at t = {min(T_STEPS)}/{REFINE}",
+            "t_values": list(T_STEPS), "scenes": results, "wall_s": time.perf_counter() - t0}
+    write_json(out / "accuracy.json", data)
+    (out / "accuracy.md").write_text(markdown(data))
+    plot(data, out / "accuracy.png")
+    data["files"] = [str(out / f) for f in ("accuracy.json", "accuracy.md", "accuracy.png")]
+    return data
+
+
+HEADER = ["scene", "t", "engine", "steps", "status", "pos RMS", "pos max", "max_deformation",
+          "stress field max", "walk", "vs reference (same t)", "wall s", "particle-steps/s"]
+
+
+def table_rows(data: dict) -> list:
+    out = []
+    for s in data["scenes"]:
+        for r in s["rows"]:
+            eng = r["engine"] if r["engine"] == "reference" else f"lammps {r['mode']}"
+            out.append([s["scene"], f"{r['t']:g}", eng, r["steps"], r["status"],
+                        fmt(r.get("pos_rms")), fmt(r.get("pos_max")), fmt(r.get("maxdef")),
+                        fmt(r.get("stress_max")), fmt(r.get("walk")) if "walk" in r else "",
+                        fmt(r.get("vs_reference_same_t")) if r["engine"] != "reference" else "",
+                        fmt(r.get("wall_s")), fmt(r.get("particle_steps_per_s"))])
+    return out
+
+
+def markdown(data: dict) -> str:
+    m = data["machine"]
+    lines = ["# Work-precision: error against a converged reference vs wall time", "",
+             f"Regenerate: `rackstress bench accuracy{' --quick' if data['quick'] else ''}`. "
+             f"Machine: {m['cores']} cores ({m['cpu']}), shared with other work: wall times "
+             "are comparable within this table, as ratios.", "",
+             f"Converged solution: the {data['converged_reference']}, compared at the same "
+             "physical time (end of the run; for MagPod every phase end, the largest error "
+             "taken). Errors in length units; 'stress field' is the largest per-particle "
+             "difference of the paper's measure (distance from the desired position); "
+             "'walk' is MagPod's body centre-of-mass advance; 'vs reference' is LAMMPS against "
+             "the reference engine at the same t (exact mode: round-off).", ""]
+    for s in data["scenes"]:
+        lines.append(f"- {s['scene']}: {s['n_particles']} particles, T = {s['T']:g}, converged "
+                     f"run {s['conv_steps']} steps ({s['conv_wall_s']:.1f} s); observed order "
+                     "of the reference engine (pos max): "
+                     + ", ".join(f"{o:.2f}" for o in s["observed_order_reference"]))
+    lines += ["", md_table(HEADER, table_rows(data))]
+    return "\n".join(lines) + "\n"
+
+
+def plot(data: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = len(data["scenes"])
+    fig, axes = plt.subplots(1, n, figsize=(5 * n, 4.5), squeeze=False)
+    styles = {("reference", "exact"): ("k", "o", "reference"),
+              ("lammps", "exact"): ("tab:blue", "s", "LAMMPS exact"),
+              ("lammps", "fast"): ("tab:red", "^", "LAMMPS fast")}
+    for ax, s in zip(axes[0], data["scenes"]):
+        for key, (col, mk, lab) in styles.items():
+            rs = [r for r in s["rows"] if (r["engine"], r["mode"]) == key and "pos_max" in r]
+            if not rs:
+                continue
+            x = [r["wall_s"] for r in rs]
+            y = [max(r["pos_max"], 1e-16) for r in rs]
+            ax.plot(x, y, marker=mk, color=col, label=lab,
+                    ls="-" if key != ("lammps", "exact") else "--")
+            for r, xi, yi in zip(rs, x, y):
+                ax.annotate(f"{r['t']:g}", (xi, yi), fontsize=7, xytext=(3, 3),
+                            textcoords="offset points")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("wall time of the run (s)")
+        ax.set_ylabel("max position error at T (vs converged)")
+        ax.set_title(f"{s['scene']} (T = {s['T']:g})")
+        ax.legend(fontsize=8)
+    fig.suptitle("Work-precision (labels: time step t)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

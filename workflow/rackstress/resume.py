@@ -1,0 +1,344 @@
+"""Checkpoints of long LAMMPS runs and ``rackstress run --resume RUNDIR`` (issue 7).
+
+A run started with ``restart_every = N`` writes, every N steps (at the first chunk boundary
+at or after each multiple of N) and at its end, into ``RUNDIR/restart/``:
+
+* ``state-<step>.restart`` — a LAMMPS restart file (``write_restart ... noinit``, so writing
+  it changes nothing in the run), for anyone who wants to go on with LAMMPS alone;
+* ``state-<step>.npz`` — the exact state rackstress resumes from: positions ``x``, LAMMPS
+  velocities ``v`` and the last step's forces ``f``, float64 in global particle order. LAMMPS'
+  ``fix nve`` holds v = v_n + dt/2·f/m between steps (the paper's v_n is v − dt/2·f/m), and a
+  restart file keeps no forces, so the forces are stored to go on bit for bit;
+* ``phase-end-<k>.npz`` — the state at each phase end so far (what a scene's ``report`` reads);
+
+and then, atomically, ``RUNDIR/progress.json``: the step, the phase (index in the schedule and
+steps done in it), the cycle, the files above, the engine settings and the wall time so far.
+``progress.json`` is the commit point: a run killed at any moment leaves it naming a complete
+checkpoint. Older checkpoints are deleted once a newer one is committed.
+
+Resuming rebuilds the scene from ``scene.json`` (or from the scene given again, which must match
+it), starts LAMMPS from ``particles.data`` as the first part did, replays every phase switch up
+to the checkpoint's phase (so the fixes sum their forces in the same order), sets the step, x
+and v, runs ``run 0`` (neighbour lists), puts the forces back and continues the schedule.
+Frames of ``trajectory.dump`` after the checkpoint's step are cut off and written again, and the
+log is appended to. Writing a checkpoint also runs that ``run 0`` (and puts the forces
+back), so the uninterrupted run builds its neighbour lists (and shrink-wraps its box) at the same
+steps as the resumed one: in serial the resumed run equals the uninterrupted one bit for bit,
+trajectory file included. (With a pair style, MagPod's collisions, a run with checkpoints
+therefore sums its pair forces in a different order than one without: equal to round-off.)
+Under MPI the atoms may be spread differently after resuming, and sums are then equal to
+round-off.
+"""
+from __future__ import annotations
+
+import json
+import mmap
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import DivergenceError, RunDirError
+from .scene import PhaseEnd
+
+PROGRESS = "progress.json"
+RESTART_DIR = "restart"
+
+
+def default_restart_every(total_steps: int) -> int:
+    """About ten checkpoints a run, at least 100 steps apart."""
+    return max(100, -(-int(total_steps) // 10))
+
+
+@dataclass
+class Checkpoint:
+    """A loaded checkpoint: where the schedule stood and the exact state (global order)."""
+
+    step: int
+    phase_index: int
+    phase_done: int
+    cycle: int
+    x: np.ndarray
+    v: np.ndarray
+    f: np.ndarray
+    meta: dict = field(default_factory=dict)
+
+
+def _save_npz(path: Path, **arrays) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    with open(tmp, "wb") as fh:
+        np.savez(fh, **arrays)
+    os.replace(tmp, path)
+
+
+class Checkpointer:
+    """Writes checkpoints of one :class:`~rackstress.lammps_engine.LammpsRun` (all ranks call)."""
+
+    def __init__(self, out: Path, comm, every: int, *, mode: str, dump_every: int,
+                 resumed: Checkpoint | None = None):
+        if int(every) < 1:
+            raise RunDirError(f"restart interval must be >= 1 step, got {every}")
+        self.out, self.comm, self.every = Path(out), comm, int(every)
+        self.root = comm.Get_rank() == 0
+        self.dir = self.out / RESTART_DIR
+        self.meta = {"engine": "lammps", "mode": mode, "dump_every": int(dump_every),
+                     "restart_every": self.every, "ranks": comm.Get_size()}
+        self.t0 = time.perf_counter()
+        self.wall_before = 0.0
+        self.phase_ends: list[str] = []
+        self.last = None          # the committed checkpoint's meta
+        if resumed is not None:
+            self.wall_before = float(resumed.meta.get("wall_s", 0.0))
+            self.phase_ends = list(resumed.meta.get("phase_ends", []))
+            self.last = resumed.meta
+        if self.root:
+            self.dir.mkdir(parents=True, exist_ok=True)
+        self.last_step = int(resumed.step) if resumed is not None else 0
+
+    # ------------------------------------------------------------------ phase ends
+    def wrap_phase_end(self, on_phase_end):
+        """Persist each phase end (for the scene's report after a resume), then pass it on."""
+        if on_phase_end is None:
+            return None
+
+        def record(pe: PhaseEnd):
+            if self.root:
+                name = f"phase-end-{len(self.phase_ends):05d}.npz"
+                _save_npz(self.dir / name, p=pe.p, step=pe.step, cycle=pe.cycle,
+                          meta=json.dumps({"phase": pe.phase, "vars": dict(pe.vars)}))
+                self.phase_ends.append(name)
+            on_phase_end(pe)
+        return record
+
+    # ------------------------------------------------------------------ writing
+    def maybe(self, runner, phase_index: int, phase_done: int, cycle: int) -> None:
+        if runner.step // self.every > self.last_step // self.every:
+            self.write(runner, phase_index, phase_done, cycle)
+
+    def final(self, runner) -> None:
+        """A checkpoint at the last step (if none there yet): resuming a run killed while it
+        wrote its summary then has nothing left to step."""
+        if self.last_step != runner.step or self.last is None:
+            sched = list(runner.scene.schedule())
+            k = len(sched) - 1
+            self.write(runner, k, sched[k][1].steps, sched[k][2])
+
+    def write(self, runner, phase_index: int, phase_done: int, cycle: int) -> None:
+        step = runner.step
+        x = runner.gather_positions()
+        v = runner.gather_velocities()
+        f = runner.gather_forces()
+        stem = f"state-{step:09d}"
+        restart = self.dir / f"{stem}.restart"
+        # noinit: no re-initialization or atom migration, so the run goes on untouched
+        runner.command(f"write_restart {restart} noinit")
+        runner.realign(f)
+        meta = dict(self.meta, step=int(step), phase_index=int(phase_index),
+                    phase_done=int(phase_done), cycle=int(cycle),
+                    total_steps=runner.scene.total_steps,
+                    state=f"{RESTART_DIR}/{stem}.npz", restart=f"{RESTART_DIR}/{stem}.restart",
+                    phase_ends=list(self.phase_ends),
+                    wall_s=self.wall_before + time.perf_counter() - self.t0,
+                    written=time.strftime("%Y-%m-%dT%H:%M:%S"))
+        if self.root:
+            from .run import write_json
+
+            _save_npz(self.out / meta["state"], x=x, v=v, f=f)
+            write_json(self.out / PROGRESS, meta)          # the commit point
+            keep = {Path(meta["state"]).name, Path(meta["restart"]).name}
+            for old in self.dir.glob("state-*"):
+                if old.name not in keep:
+                    old.unlink(missing_ok=True)
+        self.last, self.last_step = meta, step
+        self.comm.Barrier()
+
+
+# ---------------------------------------------------------------------------- reading
+def read_progress(rundir: Path) -> dict:
+    rundir = Path(rundir)
+    path = rundir / PROGRESS
+    if not path.exists():
+        raise RunDirError(f"{rundir} has no {PROGRESS}: the run wrote no checkpoint to resume "
+                          "from (runs write them with --restart-every; the first comes after "
+                          "that many steps)")
+    try:
+        return json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise RunDirError(f"{path} is not valid JSON: {exc}") from None
+
+
+def load_checkpoint(rundir: Path, meta: dict | None = None) -> Checkpoint:
+    rundir = Path(rundir)
+    meta = meta or read_progress(rundir)
+    with np.load(rundir / meta["state"]) as z:
+        x, v, f = z["x"], z["v"], z["f"]
+    return Checkpoint(int(meta["step"]), int(meta["phase_index"]), int(meta["phase_done"]),
+                      int(meta["cycle"]), x, v, f, meta)
+
+
+def load_phase_ends(rundir: Path, meta: dict) -> list[PhaseEnd]:
+    out = []
+    for name in meta.get("phase_ends", []):
+        with np.load(Path(rundir) / RESTART_DIR / name) as z:
+            m = json.loads(str(z["meta"]))
+            out.append(PhaseEnd(int(z["step"]), m["phase"], m["vars"], int(z["cycle"]),
+                                z["p"].copy()))
+    return out
+
+
+def truncate_dump(path: Path, step: int) -> int:
+    """Cut ``trajectory.dump`` before its first frame after ``step`` (or a torn frame); return
+    the number of frames kept. A frame at ``step`` itself was complete before the checkpoint was
+    committed, so it stays (the resumed run writes from the next frame on)."""
+    path = Path(path)
+    if not path.exists() or path.stat().st_size == 0:
+        return 0
+    marker = b"ITEM: TIMESTEP\n"
+    with open(path, "r+b") as fh:
+        mm = mmap.mmap(fh.fileno(), 0)
+        try:
+            pos, kept, cut = 0, 0, None
+            while True:
+                at = mm.find(marker, pos)
+                if at < 0:
+                    break
+                end = mm.find(b"\n", at + len(marker))
+                try:
+                    s = int(mm[at + len(marker):end]) if end > 0 else None
+                except ValueError:
+                    s = None
+                if s is None or s > step:
+                    cut = at
+                    break
+                kept += 1
+                pos = at + len(marker)
+        finally:
+            mm.close()
+        if cut is not None:
+            fh.truncate(cut)
+    return kept
+
+
+def rebuild_scene(rundir: Path, spec: str | None = None):
+    """The scene of a run directory: from ``spec`` (a name or .toml, checked against
+    ``scene.json``) or from the name and parameters recorded in ``scene.json``."""
+    from . import scenes
+    from .run import scene_record
+
+    rundir = Path(rundir)
+    try:
+        rec = json.loads((rundir / "scene.json").read_text())
+    except FileNotFoundError:
+        raise RunDirError(f"{rundir} is not a run directory (no scene.json)") from None
+    params = dict(rec.get("params") or {})
+    steps = params.pop("steps", None)
+    name = spec or rec["scene"]
+    if spec is None and name not in scenes.BUILDERS:
+        raise RunDirError(f"scene '{name}' of {rundir} is not a built-in scene: give its scene "
+                          f"file again, e.g. 'rackstress run SCENE.toml --resume {rundir}'")
+    if spec is None:
+        known = scenes.parameters(name)
+        sc = scenes.build(name, **{k: v for k, v in params.items() if k in known})
+    else:
+        sc = scenes.load(spec, {})
+        dt = params.get("dt")
+        if dt is not None and dt != sc.dt:
+            sc.dt = float(dt)
+            sc.params["dt"] = float(dt)
+    if sc.dt != rec["dt"]:
+        sc.dt = float(rec["dt"])
+        sc.params["dt"] = float(rec["dt"])
+    if steps is not None or sc.total_steps != rec["steps"]:
+        sc = sc.with_steps(int(rec["steps"]))
+    mine = json.loads(json.dumps(scene_record(sc), default=_plain))
+    for key in ("scene", "dt", "steps", "phases", "groups"):
+        if mine.get(key) != rec.get(key):
+            raise RunDirError(f"the scene rebuilt for {rundir} differs from its scene.json in "
+                              f"'{key}': cannot resume it")
+    return sc
+
+
+def _plain(x):
+    from .run import _jsonable
+
+    return _jsonable(x)
+
+
+def resume_run(rundir: Path, spec: str | None = None, progress: bool = True, comm=None) -> dict:
+    """Continue the interrupted LAMMPS run in ``rundir``; return its summary (as :func:`run.run`).
+
+    Raises :class:`DivergenceError` after writing the summary, like a run that was never cut.
+    """
+    from .deck import compile_deck
+    from .lammps_engine import run_lammps
+    from .mpi import world
+    from .run import summarize, write_json
+
+    comm = comm or world()
+    rundir = Path(rundir)
+    root = comm.Get_rank() == 0
+
+    def prepare():
+        if (rundir / "summary.json").exists():
+            raise RunDirError(f"{rundir} already holds a finished run (summary.json): "
+                              "nothing to resume")
+        meta = read_progress(rundir)
+        if meta.get("engine") != "lammps":
+            raise RunDirError(f"{rundir}: only LAMMPS runs can be resumed")
+        return meta
+
+    err, meta = None, None
+    if root:
+        try:
+            meta = prepare()
+        except Exception as exc:  # noqa: BLE001 - raised on every rank below
+            err = exc
+    err, meta = comm.bcast((err, meta), root=0)
+    if err is not None:
+        raise err
+    scene = rebuild_scene(rundir, spec)
+    ck = load_checkpoint(rundir, meta)
+    if ck.x.shape != (scene.n_particles, 3):
+        raise RunDirError(f"{rundir}: checkpoint holds {len(ck.x)} particles, the scene "
+                          f"{scene.n_particles}")
+    mode, dump_every = meta["mode"], int(meta["dump_every"])
+    deck = compile_deck(scene, mode)
+    if root:
+        truncate_dump(rundir / "trajectory.dump", ck.step)
+    comm.Barrier()
+    records = None
+    if scene.report is not None:
+        records = [PhaseEnd(0, None, {}, 0, scene.original_positions())]
+        records += load_phase_ends(rundir, meta)
+    on_phase_end = records.append if records is not None else None
+    t0 = time.perf_counter()
+    extra = {"dump_every": dump_every, "resumed_from_step": ck.step}
+
+    def report():
+        if scene.report is not None and root:
+            extra["report"] = scene.report(scene, records)
+
+    try:
+        p_end, steps, more = run_lammps(scene, rundir, mode, dump_every, progress, deck,
+                                        on_phase_end, comm=comm,
+                                        restart_every=int(meta["restart_every"]), resume=ck)
+        extra.update(more)
+    except DivergenceError as e:
+        wall = float(meta.get("wall_s", 0.0)) + time.perf_counter() - t0
+        report()
+        p_end = getattr(e, "p_end", None)
+        if p_end is None:
+            p_end = np.full((scene.n_particles, 3), np.nan)
+        summary = summarize(scene, "lammps", mode, p_end, getattr(e, "steps_done", e.step),
+                            wall, "diverged", e, extra)
+        if root:
+            write_json(rundir / "summary.json", summary)
+        raise
+    wall = float(meta.get("wall_s", 0.0)) + time.perf_counter() - t0
+    report()
+    summary = summarize(scene, "lammps", mode, p_end, steps, wall, "ok", extra=extra)
+    if root:
+        write_json(rundir / "summary.json", summary)
+    return summary
