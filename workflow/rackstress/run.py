@@ -123,8 +123,9 @@ def summarize(scene: Scene, engine: str, mode: str, p_end: np.ndarray, steps_don
 def progress_bar(total: int, enabled: bool, desc: str):
     from tqdm.auto import tqdm
 
-    return tqdm(total=total, disable=not enabled, delay=PROGRESS_DELAY_S, unit="step",
-                desc=desc, dynamic_ncols=True, leave=False)
+    # disable=None: tqdm stays quiet when stderr is not a terminal (batch jobs, CI logs)
+    return tqdm(total=total, disable=True if not enabled else None, delay=PROGRESS_DELAY_S,
+                unit="step", desc=desc, dynamic_ncols=True, leave=False)
 
 
 def run_reference(scene: Scene, out: Path, dump_every: int, progress: bool, on_phase_end=None):
