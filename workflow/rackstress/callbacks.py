@@ -13,10 +13,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .operators import (Attract, Bind, Collide, Const, Contact, Dampen, Force, attract_pairs, bind_pairs,
-                        phase_active)
-from .deck import reverse_of
 from ._vec import bbox, inside, rowdot
+from .deck import reverse_of
+from .operators import (Attract, Bind, Collide, Const, Contact, Dampen, Force, attract_pairs,
+                        bind_pairs, phase_active)
 from .reference import col
 
 
