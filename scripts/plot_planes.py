@@ -17,7 +17,6 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
 
 from rackstress import rigid, scenes  # noqa: E402
 from rackstress.reference import Reference  # noqa: E402

@@ -136,7 +136,7 @@ class Deck:
     def _pair_commands(self) -> list[str]:
         if not self.lepton:
             return []
-        sc, types = self.scene, topology.group_types(self.scene)
+        sc = self.scene
         rmax = max(R for _, R in self.lepton.values())
         L = [f"pair_style lepton {_f(rmax)}"]
         ntypes = len(sc.groups)
@@ -241,7 +241,7 @@ def describe(op) -> str:
         return f"dampen({op.c:g}{extra})"
     coeff = op.coeff
     if isinstance(coeff, Within):
-        c = f"within({coeff.d:g}) x {coeff.c:g}"
+        c = f"within({coeff.d:g}) magnitude {coeff.c:g}"
     elif isinstance(coeff, Const):
         c = f"{coeff.c:g}"
     else:

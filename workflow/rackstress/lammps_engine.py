@@ -118,18 +118,23 @@ class LammpsRun:
         run0 = cmds.index("run 0 post no")
         for cmd in cmds[:run0]:
             self.command(cmd)
-        if self.py is not None:
-            want = self.py.set_phase(phase_vars)
-            if want and not self._py_on:
-                self.command(f"fix {PY_FIX} all external pf/callback 1 1")
-                self.lmp.set_fix_external_callback(PY_FIX, self.py, self)
-            elif self._py_on and not want:
-                self.command(f"unfix {PY_FIX}")
-            self._py_on = want
+        self._toggle_callback(phase_vars)
         for cmd in cmds[run0:]:
             self.command(cmd)
         self._check_callback()
         self._phase = dict(phase_vars)
+
+    def _toggle_callback(self, phase_vars) -> None:
+        """The fix external exists only in phases where a Python operator is active."""
+        if self.py is None:
+            return
+        want = self.py.set_phase(phase_vars)
+        if want and not self._py_on:
+            self.command(f"fix {PY_FIX} all external pf/callback 1 1")
+            self.lmp.set_fix_external_callback(PY_FIX, self.py, self)
+        elif self._py_on and not want:
+            self.command(f"unfix {PY_FIX}")
+        self._py_on = want
 
     def advance(self, n: int) -> None:
         self.command(f"run {n} pre no post no")
@@ -256,14 +261,7 @@ class LammpsRun:
                 break
             for cmd in self.deck.phase_commands(phase.vars, previous):
                 self.command(cmd)
-            if self.py is not None:
-                want = self.py.set_phase(phase.vars)
-                if want and not self._py_on:
-                    self.command(f"fix {PY_FIX} all external pf/callback 1 1")
-                    self.lmp.set_fix_external_callback(PY_FIX, self.py, self)
-                elif self._py_on and not want:
-                    self.command(f"unfix {PY_FIX}")
-                self._py_on = want
+            self._toggle_callback(phase.vars)
             previous = dict(phase.vars)
         self.command(f"reset_timestep {int(ck.step)}")
         if self._dump_id is not None:

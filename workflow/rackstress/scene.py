@@ -14,7 +14,6 @@ import numpy as np
 
 from . import operators as ops_mod
 from .errors import SceneError
-from .particles import Group
 
 #: Relative distance below which two particles count as coincident (their col/bin is undefined).
 COINCIDENT_TOL = 1e-9

@@ -50,7 +50,7 @@ from typing import Mapping
 import numpy as np
 
 from .errors import SceneError
-from .operators import (Attract, Bind, Collide, Dampen, PhaseIn, attract_pairs,
+from .operators import (Attract, Bind, Collide, Dampen, attract_pairs,
                         bind_pairs, phase_active)
 from .scene import Scene
 
@@ -119,19 +119,9 @@ def _phases(scene: Scene) -> list[dict]:
 
 def _label(target: str, op) -> str:
     """'plane' bind(plane, within(100) magnitude 100): how an operator is named in messages."""
-    from .operators import Const, Within
+    from .deck import describe
 
-    coeff = op.coeff
-    if isinstance(coeff, Within):
-        c = f"within({coeff.d:g}) magnitude {coeff.c:g}"
-    elif isinstance(coeff, Const):
-        c = f"{coeff.c:g}"
-    else:
-        c = f"{coeff.c:g}<{coeff.target} = {coeff.source}>"
-    when = [f"{w.var} in {set(w.values)}" if isinstance(w, PhaseIn) else f"contact {w.group}"
-            for w in op.when]
-    return (f"'{target}' {op.kind}({op.source}, {c})"
-            + (f" when {' and '.join(when)}" if when else ""))
+    return f"'{target}' {describe(op)}"
 
 
 def _collide_pairs(scene: Scene, p: np.ndarray, target: str, op) -> tuple:
