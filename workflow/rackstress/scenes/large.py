@@ -11,7 +11,7 @@ passive: the active region (body, legs, racks, and the sediment under the feet) 
 hundred units across.
 
 ``balance`` names the load balancing the LAMMPS engine applies under MPI
-(:func:`rackstress.lammps_engine.apply_balance`): ``"rcb"`` (default) — ``comm_style tiled`` and
+(:func:`rackstress.lammps_engine.balance_commands`): ``"rcb"`` (default) — ``comm_style tiled`` and
 a recursive-bisection ``balance`` that weighs each robot particle ``robot_weight`` times a
 sediment particle (the robot's per-particle work is the Python operators: binds to the racks,
 attraction, one-way collisions), so the robot and an equal share of the work sit on one rank and
