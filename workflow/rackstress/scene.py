@@ -93,10 +93,18 @@ class Scene:
         raise IndexError(index)
 
     def original_positions(self) -> np.ndarray:
-        return np.concatenate([g.o for g in self.groups.values()])
+        """o of every particle in global order (built once; read-only, copy to change it)."""
+        if getattr(self, "_o", None) is None:
+            self._o = np.concatenate([g.o for g in self.groups.values()])
+            self._o.flags.writeable = False
+        return self._o
 
     def radii(self) -> np.ndarray:
-        return np.concatenate([g.r for g in self.groups.values()])
+        """r of every particle in global order (built once; read-only)."""
+        if getattr(self, "_r", None) is None:
+            self._r = np.concatenate([g.r for g in self.groups.values()])
+            self._r.flags.writeable = False
+        return self._r
 
     @property
     def steps_per_cycle(self) -> int:
