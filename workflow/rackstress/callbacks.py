@@ -14,40 +14,56 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ._vec import bbox, inside, rowdot
-from .deck import reverse_of
+from .deck import SKIN, reverse_of
 from .operators import (Attract, Bind, Collide, Const, Contact, Dampen, Force, attract_pairs,
                         bind_pairs, phase_active)
 from .reference import col
 
 
 class Frame:
-    """What one callback invocation sees: local and ghost atoms, and tag → row look-ups."""
+    """What the callback sees: local and ghost atoms, tag → row look-ups, and per-layout memos.
 
-    def __init__(self, lmp, n_total: int, nlocal: int):
+    LAMMPS exchanges atoms between ranks, rebuilds ghosts and (with ``sort 0``) reorders nothing
+    except when it reneighbours, so everything that depends only on which atom sits in which row
+    (look-ups, owned rows of a group, each term's selected pairs, collision candidates) is kept
+    from one reneighbouring to the next in ``memo``; positions and velocities are re-read every
+    step (:meth:`refresh`).
+    """
+
+    def __init__(self, lmp, n_total: int, nlocal: int, span: int, dense_span: int):
         nghost = lmp.extract_global("nghost")
         nall = nlocal + nghost
-        self.nlocal, self.n_total = nlocal, n_total
-        self.x = lmp.numpy.extract_atom("x")[:nall]
-        self.v = lmp.numpy.extract_atom("v")[:nlocal]
+        self.nlocal, self.nghost, self.n_total = nlocal, nghost, n_total
         tag = lmp.numpy.extract_atom("id")[:nall]
         #: serial with unsorted atoms: row k holds particle k, so look-ups can be skipped
         self.identity = (nlocal == n_total and nall == n_total
                          and bool(np.array_equal(tag, np.arange(1, n_total + 1))))
         self.index = np.arange(n_total) if self.identity else tag.astype(np.int64) - 1
         self._row = self._local = None
-        #: per-step results shared between terms (collision pairs of a pair of groups)
-        self.cache = {}
-        self.span_rows = None
-
-    def use_span(self, span: int) -> int:
-        """Accumulate only for owned particles with global index < ``span`` (the groups the
-        Python operators act on); return how many rows the accumulator needs."""
+        #: per-layout results of the terms (selected pairs, candidates, owned rows)
+        self.memo = {}
+        # accumulator rows: serially the first ``dense_span`` particles (the groups the bind,
+        # attract, dampen and force terms act on), further rows (a collide's target such as
+        # MagPod's sediment) go to a sparse list; under MPI the owned particles below ``span``
         if self.identity:
-            return span
-        self.span_rows = np.flatnonzero(self.index[:self.nlocal] < span)
-        self._compact = np.full(len(self.index), -1, dtype=np.int64)
-        self._compact[self.span_rows] = np.arange(len(self.span_rows))
-        return len(self.span_rows)
+            self.span_rows = None
+            self.acc_rows = dense_span
+        else:
+            self.span_rows = np.flatnonzero(self.index[:nlocal] < span)
+            self._compact = np.full(nall, -1, dtype=np.int64)
+            self._compact[self.span_rows] = np.arange(len(self.span_rows))
+            self.acc_rows = len(self.span_rows)
+        self.refresh(lmp)
+
+    def refresh(self, lmp) -> None:
+        """Re-read positions and velocities (every step) and clear the per-step cache."""
+        nall = self.nlocal + self.nghost
+        self.x = lmp.numpy.extract_atom("x")[:nall]
+        self.v = lmp.numpy.extract_atom("v")[:self.nlocal]
+        #: per-step results shared between terms (overlapping pairs of a pair of groups)
+        self.cache = {}
+        #: serial contributions to rows beyond the dense accumulator: (rows, contributions)
+        self.sparse = []
 
     def compact(self, rows: np.ndarray) -> np.ndarray:
         """Accumulator rows of frame rows (−1: a ghost or a particle outside the span)."""
@@ -72,16 +88,25 @@ class Frame:
 
     def owned(self, sl: slice) -> np.ndarray:
         """Rows of the owned particles of a group (its global index slice)."""
-        if self.identity:
-            return np.arange(sl.start, sl.stop)
-        own = self.index[:self.nlocal]
-        return np.flatnonzero((own >= sl.start) & (own < sl.stop))
+        key = ("owned", sl.start, sl.stop)
+        if key not in self.memo:
+            if self.identity:
+                self.memo[key] = np.arange(sl.start, sl.stop)
+            else:
+                own = self.index[:self.nlocal]
+                self.memo[key] = np.flatnonzero((own >= sl.start) & (own < sl.stop))
+        return self.memo[key]
 
     def seen(self, sl: slice) -> np.ndarray:
         """Rows of the owned and ghost particles of a group."""
-        if self.identity:
-            return np.arange(sl.start, sl.stop)
-        return np.flatnonzero((self.index >= sl.start) & (self.index < sl.stop))
+        key = ("seen", sl.start, sl.stop)
+        if key not in self.memo:
+            if self.identity:
+                self.memo[key] = np.arange(sl.start, sl.stop)
+            else:
+                self.memo[key] = np.flatnonzero((self.index >= sl.start)
+                                                & (self.index < sl.stop))
+        return self.memo[key]
 
     def rows(self, name, I, J):
         """Rows of the particles I and J here; raise if a partner is not visible on this rank."""
@@ -97,8 +122,13 @@ class Frame:
 
 def _add_rows(fr, acc, rows, contrib):
     """acc[rows] += contrib for the rows owned here (ghost rows carry no force of ours)."""
-    rows = fr.compact(rows)
-    if not fr.identity:
+    if fr.identity:
+        beyond = rows >= len(acc)
+        if beyond.any():     # a collide's sparse target rows (MagPod's sediment under a sole)
+            fr.sparse.append((rows[beyond], contrib[beyond]))
+            rows, contrib = rows[~beyond], contrib[~beyond]
+    else:
+        rows = fr.compact(rows)
         own = rows >= 0
         rows, contrib = rows[own], contrib[own]
     if not len(rows):
@@ -119,88 +149,163 @@ class PairTerm:
         self.name, self.I, self.J, self.cI, self.cJ, self.L0sq = name, I, J, cI, cJ, L0sq
         #: (target slice, source slice) when the pairs are every (i, j) of two groups in
         #: row-major order (a Const bind such as host ↔ rack): then a serial frame is served by
-        #: broadcasting over the m×n block, with no gathers or scatters.
+        #: broadcasting over the block, with no gathers or scatters.
         self.block = block
+        if block is not None:
+            ts, ss = block
+            m, n = ts.stop - ts.start, ss.stop - ss.start
+            # source-major (n, m): the sums over a host's few racks run over rows (fast), the
+            # sums over a rack's many hosts along contiguous rows (fast); see _vec.py
+            self._L0sqT = np.ascontiguousarray(L0sq.reshape(m, n).T)
+            self._cIT = _scalar_or(np.ascontiguousarray(cI.reshape(m, n).T))
+            self._cJT = None if cJ is None else _scalar_or(
+                np.ascontiguousarray(cJ.reshape(m, n).T))
 
     def _add_block(self, fr: Frame, acc: np.ndarray):
         ts, ss = self.block
-        m, n = ts.stop - ts.start, ss.stop - ss.start
-        diff = fr.x[ss][None, :, :] - fr.x[ts][:, None, :]          # (m, n, 3): u − p
-        d2 = diff[:, :, 0] ** 2 + diff[:, :, 1] ** 2 + diff[:, :, 2] ** 2
-        g = (1.0 - self.L0sq.reshape(m, n) / d2)[:, :, None] * diff  # Eq. 12 without c
-        acc[ts] += np.einsum("ij,ijk->ik", self.cI.reshape(m, n), g)
-        if self.cJ is not None:
-            acc[ss] -= np.einsum("ij,ijk->jk", self.cJ.reshape(m, n), g)
+        xt, xs = fr.x[ts], fr.x[ss]
+        d = [xs[:, k][:, None] - xt[:, k][None, :] for k in range(3)]   # (n, m): u − p
+        w = 1.0 - self._L0sqT / (d[0] * d[0] + d[1] * d[1] + d[2] * d[2])  # Eq. 12 without c
+        for k in range(3):
+            g = w * d[k]
+            acc[ts, k] += (self._cIT * g).sum(axis=0)
+            if self._cJT is not None:
+                acc[ss, k] -= (self._cJT * g).sum(axis=1)
+
+    def _selected(self, fr: Frame):
+        """The pairs with a particle owned here, as rows (memoized until the next reneighbouring)."""
+        key = ("pairs", id(self))
+        hit = fr.memo.get(key)
+        if hit is None:
+            I, J, cI, cJ, L0sq = self.I, self.J, self.cI, self.cJ, self.L0sq
+            if not fr.identity:
+                sel = fr.local[I] if cJ is None else (fr.local[I] | fr.local[J])
+                I, J, cI = I[sel], J[sel], cI[sel]
+                cJ = cJ[sel] if cJ is not None else None
+                L0sq = L0sq[sel] if L0sq is not None else None
+            ri, rj = fr.rows(self.name, I, J)
+            hit = fr.memo[key] = (ri, rj, cI[:, None], None if cJ is None else -cJ[:, None],
+                                  L0sq)
+        return hit
 
     def add(self, fr: Frame, acc: np.ndarray):
         if self.block is not None and fr.identity:
             return self._add_block(fr, acc)
-        I, J, cI, cJ, L0sq = self.I, self.J, self.cI, self.cJ, self.L0sq
-        if not fr.identity:
-            sel = fr.local[I] if cJ is None else (fr.local[I] | fr.local[J])
-            I, J, cI = I[sel], J[sel], cI[sel]
-            cJ = cJ[sel] if cJ is not None else None
-            L0sq = L0sq[sel] if L0sq is not None else None
-        ri, rj = fr.rows(self.name, I, J)
+        ri, rj, cI, mcJ, L0sq = self._selected(fr)
         diff = fr.x[rj] - fr.x[ri]
         d2 = rowdot(diff, diff)
         if L0sq is not None:
             g = (1.0 - L0sq / d2)[:, None] * diff        # Eq. 12 without its coefficient
         else:
             g = diff / np.sqrt(d2)[:, None]              # Eq. 14 without its coefficient
-        _add_rows(fr, acc, ri, cI[:, None] * g)
-        if cJ is not None:
-            _add_rows(fr, acc, rj, -cJ[:, None] * g)
+        _add_rows(fr, acc, ri, cI * g)
+        if mcJ is not None:
+            _add_rows(fr, acc, rj, mcJ * g)
+
+
+def _scalar_or(a: np.ndarray):
+    """A constant array as its one value (one multiply per block instead of one per pair)."""
+    return float(a.flat[0]) if a.size and np.all(a == a.flat[0]) else a
+
+
+class Overlaps:
+    """Overlapping pairs (d < r_i + r_j, Eq. 10's support) of two groups, every step.
+
+    A Verlet list: candidates within reach + skin are found (cKDTree) only when LAMMPS
+    reneighbours, which it does as soon as any atom has moved more than half the skin since
+    the last time (``neigh_modify every 1 delay 0 check yes``, skin :data:`SKIN`). A pair that
+    was farther apart than reach + skin then cannot have come within reach, so each step only
+    measures the candidates. Shared by the collide terms of both directions and by the contact
+    conditions (Eq. 28's damping) of the same two groups.
+    """
+
+    def __init__(self, radius: np.ndarray, skin: float):
+        self.radius, self.skin = radius, skin
+        self._rmax = {}
+
+    def _reach(self, sl: slice) -> float:
+        key = (sl.start, sl.stop)
+        if key not in self._rmax:
+            self._rmax[key] = float(self.radius[sl].max()) if sl.stop > sl.start else 0.0
+        return self._rmax[key]
+
+    def _candidates(self, fr: Frame, A: slice, B: slice):
+        """Rows (a in A, b in B, both owned or ghost) within reach + skin, with R² per pair."""
+        key = ("cand", A.start, B.start)
+        hit = fr.memo.get(key)
+        if hit is not None:
+            return hit
+        cut = self._reach(A) + self._reach(B) + self.skin
+        ia, ib = fr.seen(A), fr.seen(B)
+        xa, xb = fr.x[ia], fr.x[ib]
+        if A == B:
+            if len(ia) > 1:
+                p = cKDTree(xa).query_pairs(cut, output_type="ndarray")
+                a, b = ia[p[:, 0]], ia[p[:, 1]]
+                a, b = np.concatenate([a, b]), np.concatenate([b, a])
+            else:
+                a = b = ia[:0]
+        else:
+            # each side only where the other's bounding box (grown by the cut) is: a leg meets
+            # a few hundred of the body's or the sediment's particles, not all of them
+            for _ in range(2):
+                if not len(ia) or not len(ib):
+                    break
+                if len(ib) >= len(xa):
+                    lo, hi = bbox(xa)
+                    near = inside(xb, lo - cut, hi + cut)
+                    ib, xb = ib[near], xb[near]
+                else:
+                    lo, hi = bbox(xb)
+                    near = inside(xa, lo - cut, hi + cut)
+                    ia, xa = ia[near], xa[near]
+            if len(ia) and len(ib):
+                sm = cKDTree(xa).sparse_distance_matrix(cKDTree(xb), cut, output_type="ndarray")
+                a, b = ia[sm["i"]], ib[sm["j"]]
+            else:
+                a, b = ia[:0], ib[:0]
+        R2 = (self.radius[fr.index[a]] + self.radius[fr.index[b]]) ** 2
+        hit = fr.memo[key] = (a, b, R2)
+        return hit
+
+    def pairs(self, fr: Frame, t: slice, s: slice, name: str = "collide"):
+        """Row pairs (a, b) overlapping now, a owned here in ``t``, b seen here in ``s``."""
+        key = (t.start, s.start)
+        hit = fr.cache.get(key)
+        if hit is not None:
+            return hit
+        A, B = (s, t) if t.start > s.start else (t, s)
+        a, b, R2 = self._candidates(fr, A, B)
+        diff = fr.x[b] - fr.x[a]
+        d2 = rowdot(diff, diff)
+        on = d2 < R2
+        a, b, d2 = a[on], b[on], d2[on]
+        if len(d2) and not d2.all():
+            k = int(np.flatnonzero(d2 == 0.0)[0])
+            raise RuntimeError(f"{name}: particles {int(fr.index[a[k]])} and "
+                               f"{int(fr.index[b[k]])} coincide (Eq. 10 is undefined at d = 0)")
+        both = {(A.start, B.start): (a, b)}
+        if A != B:              # the other direction of the same pairs
+            both[(B.start, A.start)] = (b, a)
+        for k2, (u, w) in both.items():
+            if not fr.identity:
+                own = u < fr.nlocal
+                u, w = u[own], w[own]
+            fr.cache[k2] = (u, w)
+        return fr.cache[key]
 
 
 class CollideTerm:
     """One-way collide (Eq. 10): target atoms owned here against source atoms seen here."""
 
-    def __init__(self, name, target_slice, source_slice, c, radius):
+    def __init__(self, name, target_slice, source_slice, c, radius, overlaps: Overlaps):
         self.name, self.t, self.s, self.c, self.radius = name, target_slice, source_slice, c, radius
-        self.reach = float(radius[target_slice].max() + radius[source_slice].max())
-
-    def pairs(self, fr: Frame):
-        """Row pairs (a, b), a owned here in the target, b in the source, overlapping (d < R).
-
-        In a serial frame the pairs of (target, source) are the transpose of those of
-        (source, target), so the two directions of a one-way pair share one search a step.
-        """
-        if fr.identity:
-            hit = fr.cache.get((self.s.start, self.t.start))
-            if hit is not None:
-                return hit[1], hit[0]
-        idx_t, idx_s = fr.owned(self.t), fr.seen(self.s)
-        if not len(idx_t) or not len(idx_s):
-            return idx_t[:0], idx_s[:0]
-        reach = self.reach
-        # each side only where the other's bounding box (grown by the reach) is: a leg meets a
-        # few hundred of the body's or the sediment's particles, not all of them
-        xt = fr.x[self.t] if fr.identity else fr.x[idx_t]    # views when rows are particles
-        xs = fr.x[self.s] if fr.identity else fr.x[idx_s]
-        # the larger side is scanned once, against the smaller side's box
-        for _ in range(2):
-            if len(xs) >= len(xt):
-                lo, hi = bbox(xt)
-                near = inside(xs, lo - reach, hi + reach)
-                idx_s, xs = idx_s[near], xs[near]
-            else:
-                lo, hi = bbox(xs)
-                near = inside(xt, lo - reach, hi + reach)
-                idx_t, xt = idx_t[near], xt[near]
-            if not len(idx_s) or not len(idx_t):
-                return idx_t[:0], idx_s[:0]
-        sm = cKDTree(xt).sparse_distance_matrix(cKDTree(xs), reach, output_type="ndarray")
-        a, b = idx_t[sm["i"]], idx_s[sm["j"]]
-        keep = (fr.index[a] != fr.index[b]) & \
-               (sm["v"] < self.radius[fr.index[a]] + self.radius[fr.index[b]])
-        out = a[keep], b[keep]
-        if fr.identity:
-            fr.cache[(self.t.start, self.s.start)] = out
-        return out
+        self.overlaps = overlaps
 
     def add(self, fr: Frame, acc: np.ndarray):
-        a, b = self.pairs(fr)
+        a, b = self.overlaps.pairs(fr, self.t, self.s, self.name)
+        if not len(a):
+            return
         contrib = col(fr.x[a], fr.x[b], self.radius[fr.index[a]], self.radius[fr.index[b]], self.c)
         _add_rows(fr, acc, a, contrib)
 
@@ -217,6 +322,7 @@ class PyForces:
         self.error = None
         self.terms = []    # (realized, term-or-None)
         self._attract = {}
+        self.overlaps = Overlaps(self.radius, SKIN)
         o = self.scene.original_positions()
         folded = {}
         for r in deck.python_ops:
@@ -225,9 +331,12 @@ class PyForces:
                 if (rev is not None and rev is not r.op and id(r.op) not in folded
                         and any(q.op is rev for q in deck.python_ops)):
                     folded[id(rev)] = r.op   # rev is carried by r.op's term
+        dense = [0]     # rows written by other than a collide (see Frame)
         for r in deck.python_ops:
             op, target = r.op, r.target
             sl = self.scene.slice(target)
+            if not isinstance(op, Collide):
+                dense.append(sl.stop)
             if isinstance(op, Bind):
                 if id(op) in folded:          # carried by its reverse's term
                     self.terms.append((r, None))
@@ -242,6 +351,7 @@ class PyForces:
                 elif any(v is op for v in folded.values()):
                     rev = reverse_of(op, target, self.scene)
                     cJ = np.full(len(I), float(rev.coeff.c))
+                    dense.append(self.scene.slice(op.source).stop)
                 d = o[J] - o[I]
                 block = None
                 if isinstance(op.coeff, Const) and op.source != target:
@@ -251,7 +361,7 @@ class PyForces:
             elif isinstance(op, Collide):
                 self.terms.append((r, CollideTerm(f"collide on {target}", sl,
                                                   self.scene.slice(op.source), float(op.coeff.c),
-                                                  self.radius)))
+                                                  self.radius, self.overlaps)))
             else:
                 self.terms.append((r, None))
         self.phase = {}
@@ -259,7 +369,15 @@ class PyForces:
         # rows a Python operator can write: the target groups (a folded bind writes its
         # reverse's target, which is a Python operator's target too)
         self.span = max((self.scene.slice(r.target).stop for r in deck.python_ops), default=0)
+        self.dense_span = max(dense)
         self._fresh = True
+        self.frame = None
+        self._sparse_rows = np.zeros(0, dtype=np.int64)   # f rows written sparsely last step
+        # LAMMPS' own displacement check keeps the per-layout memos valid (Overlaps); with any
+        # other neighbour settings every step starts from scratch
+        self.verlet = (lmp.extract_setting("neigh_every") == 1
+                       and lmp.extract_setting("neigh_delay") == 0
+                       and lmp.extract_setting("neigh_dist_check") == 1)
 
     # ------------------------------------------------------------------ phase
     def set_phase(self, phase_vars) -> bool:
@@ -280,9 +398,8 @@ class PyForces:
         return self._attract[key]
 
     def _contact(self, fr: Frame, target: str, group: str) -> bool:
-        term = CollideTerm("contact", self.scene.slice(target), self.scene.slice(group), 0.0,
-                           self.radius)
-        here = len(term.pairs(fr)[0]) > 0
+        here = len(self.overlaps.pairs(fr, self.scene.slice(target), self.scene.slice(group),
+                                       "contact")[0]) > 0
         if self.comm is not None and self.comm.Get_size() > 1:
             from mpi4py import MPI
 
@@ -295,17 +412,30 @@ class PyForces:
         return all(self._contact(fr, r.target, c.group) for c in r.op.when
                    if isinstance(c, Contact))
 
+    def _frame(self, nlocal: int) -> Frame:
+        """This step's frame: the last one refreshed, or a new layout after a reneighbouring."""
+        lmp, fr = self.lmp, self.frame
+        if (fr is None or self._fresh or not self.verlet or fr.nlocal != nlocal
+                or lmp.extract_setting("neigh_ago") == 0
+                or lmp.extract_global("nghost") != fr.nghost):
+            fr = self.frame = Frame(lmp, self.n, nlocal, self.span, self.dense_span)
+        else:
+            fr.refresh(lmp)
+        return fr
+
     # ------------------------------------------------------------------ callback
     def __call__(self, caller, step, nlocal, tag, x, f):
         try:
-            fr = Frame(self.lmp, self.n, nlocal)
+            fresh = self._fresh
+            fr = self._frame(nlocal)
+            self._fresh = False
             # serial: only the groups the Python operators act on get forces from here, the rest
-            # (MagPod's 30,000 sediment particles) is never touched after one zeroing
-            rows = fr.use_span(self.span)
-            if fr.identity and self._fresh:
+            # (MagPod's 30,000 sediment particles) is never touched after one zeroing, except
+            # the few rows a collide reaches (written sparsely, and zeroed the step after)
+            if fr.identity and fresh:
                 f[:] = 0.0
-                self._fresh = False
-            acc = np.zeros((rows, 3))
+                self._sparse_rows = self._sparse_rows[:0]
+            acc = np.zeros((fr.acc_rows, 3))
             for r, term in self.active:
                 op = r.op
                 if isinstance(op, Dampen):       # only the contact-conditioned extra is here
@@ -314,11 +444,7 @@ class PyForces:
                         acc[fr.compact(sel)] -= op.extra * fr.v[sel]
                 elif isinstance(op, Force):
                     if self._holds(fr, r):
-                        sl = self.scene.slice(r.target)
-                        mask = np.zeros(self.n, dtype=bool)
-                        mask[sl] = True if op.where is None else np.asarray(op.where, bool)
-                        acc[mask[:rows] if fr.identity else mask[fr.index[fr.span_rows]]] += \
-                            np.asarray(op.accel, float)
+                        acc[self._force_rows(fr, r)] += np.asarray(op.accel, float)
                 elif not self._holds(fr, r):
                     continue
                 elif isinstance(op, Attract):
@@ -326,7 +452,9 @@ class PyForces:
                 elif term is not None:
                     term.add(fr, acc)
             if fr.identity:
-                f[:rows] = acc * self.mass[:rows, None]
+                n = fr.acc_rows
+                f[:n] = acc * self.mass[:n, None]
+                self._write_sparse(fr, f)
             else:               # atoms migrate between ranks: every row is written every step
                 f[:] = 0.0
                 f[fr.span_rows] = acc * self.mass[fr.index[fr.span_rows], None]
@@ -334,3 +462,29 @@ class PyForces:
             if self.error is None:
                 self.error = (step, exc)
             f[:] = 0.0
+
+    def _force_rows(self, fr: Frame, r) -> np.ndarray:
+        """Accumulator rows of a contact-conditioned force's selected particles (memoized)."""
+        key = ("force", id(r.op))
+        if key not in fr.memo:
+            sl, op = self.scene.slice(r.target), r.op
+            mask = np.zeros(self.n, dtype=bool)
+            mask[sl] = True if op.where is None else np.asarray(op.where, bool)
+            fr.memo[key] = (np.flatnonzero(mask[:fr.acc_rows]) if fr.identity
+                            else np.flatnonzero(mask[fr.index[fr.span_rows]]))
+        return fr.memo[key]
+
+    def _write_sparse(self, fr: Frame, f) -> None:
+        """Serial: f rows beyond the dense accumulator, from this step's sparse contributions."""
+        if len(self._sparse_rows):
+            f[self._sparse_rows] = 0.0
+        if not fr.sparse:
+            self._sparse_rows = self._sparse_rows[:0]
+            return
+        rows = np.concatenate([rw for rw, _ in fr.sparse])
+        contrib = np.concatenate([c for _, c in fr.sparse])
+        u, inv = np.unique(rows, return_inverse=True)
+        m = self.mass[u]
+        for k in range(3):
+            f[u, k] = np.bincount(inv, weights=contrib[:, k], minlength=len(u)) * m
+        self._sparse_rows = u
