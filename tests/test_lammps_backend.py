@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parent.parent
 MPIEXEC = Path(sys.executable).parent / "mpiexec"
 
 
-def every_operator_scene(steps: int = 40) -> Scene:
+def every_operator_scene(steps: int = 40, contact: str = "B") -> Scene:
     """A small scene holding every operator kind, directed coefficients and both condition kinds.
 
     A (a 3×2×2 block with its rack) meets B (a 2×2×2 block) head on; C is a single particle
@@ -32,7 +32,9 @@ def every_operator_scene(steps: int = 40) -> Scene:
     conditioned), fix viscous (plain, phase-conditioned extra), contact-conditioned damping
     (callback), reciprocal collide A↔B with c 30 vs 10 (lepton with masses 1 : 3), one-way
     collide C←B (callback), bind to rack and within(d) (callback), attract with phase-filled
-    index-matched regions (callback).
+    index-matched regions (callback). A's damping extra holds while A touches ``contact``: with
+    "B" that search already finds the A–B pairs, so the A↔B collide joins the callback instead
+    of the lepton pair; with "C" it stays a lepton pair.
     """
     A = Group("A", lattice((3, 2, 2), 1.0), 0.6, kind="body")
     B = Group("B", lattice((2, 2, 2), 1.0, origin=(2.9, 0.2, 0.1)), 0.6, kind="leg")
@@ -47,7 +49,7 @@ def every_operator_scene(steps: int = 40) -> Scene:
               Bind("Arack", Const(100.0)),
               Bind("A", Within(1.5, 20.0)),
               Attract("C", Matched("ra{r}", "rc", 7.0), when=(PhaseIn("r", (1,)),)),
-              Dampen(1.0, extra=2.0, when=(Contact("B"),))],
+              Dampen(1.0, extra=2.0, when=(Contact(contact),))],
         "B": [Collide("A", Const(10.0)),
               Force((0.0, -5.0, 0.0), when=(PhaseIn("r", (2,)),)),
               Dampen(2.0, extra=5.0, when=(PhaseIn("r", (1,)),))],
@@ -65,7 +67,7 @@ def _scatter(lmp, name, arr):
 
 
 def test_realization_uses_native_styles_where_exact():
-    deck = compile_deck(every_operator_scene(), "exact")
+    deck = compile_deck(every_operator_scene(contact="C"), "exact")
     how = {(r.target, r.op.kind, getattr(r.op, "source", None)): r.how for r in deck.realized}
     assert how[("A", "collide", "B")] == "lepton" and how[("B", "collide", "A")] == "lepton"
     assert how[("C", "collide", "B")] == "python"        # one-way: no reciprocal partner
@@ -79,10 +81,21 @@ def test_realization_uses_native_styles_where_exact():
     assert "neigh_modify exclude type 1 2" not in text
 
 
+def test_collide_shares_the_contact_search():
+    """A contact condition on A and B: the A↔B collide is carried by the callback's search,
+    so no pair style (and no neighbour list) is set up, and the masses stay 1."""
+    deck = compile_deck(every_operator_scene(contact="B"), "exact")
+    how = {(r.target, r.op.kind, getattr(r.op, "source", None)): r.how for r in deck.realized}
+    assert how[("A", "collide", "B")] == "python" and how[("B", "collide", "A")] == "python"
+    assert "pair_style" not in deck.input_text()
+    assert deck.masses["A"] == deck.masses["B"] == 1.0
+
+
+@pytest.mark.parametrize("contact", ["B", "C"])
 @pytest.mark.parametrize("phase", [{"r": 1}, {"r": 2}])
-def test_force_parity_every_operator_kind(phase):
+def test_force_parity_every_operator_kind(phase, contact):
     """LAMMPS forces at step 0 = reference accelerations × mass, to 1e-10 relative."""
-    scene = every_operator_scene()
+    scene = every_operator_scene(contact=contact)
     rng = np.random.default_rng(7)
     p = scene.original_positions() + rng.normal(scale=0.08, size=(scene.n_particles, 3))
     v = rng.normal(scale=0.5, size=p.shape)
@@ -122,9 +135,10 @@ def _lammps_final(scene, mode="exact"):
         run.close()
 
 
-def test_trajectory_parity_across_phase_switches():
+@pytest.mark.parametrize("contact", ["B", "C"])
+def test_trajectory_parity_across_phase_switches(contact):
     """Three phases (coefficients, fixes and callbacks switch twice) stay at round-off."""
-    scene = every_operator_scene(steps=60)
+    scene = every_operator_scene(steps=60, contact=contact)
     diff = np.abs(_lammps_final(scene) - _reference_final(scene)).max()
     assert diff <= 1e-8
 
