@@ -62,8 +62,34 @@ class Frame:
         self.v = lmp.numpy.extract_atom("v")[:self.nlocal]
         #: per-step results shared between terms (overlapping pairs of a pair of groups)
         self.cache = {}
-        #: serial contributions to rows beyond the dense accumulator: (rows, contributions)
-        self.sparse = []
+        #: pair contributions (rows, values), summed into the accumulator once (:meth:`flush`)
+        self.pending = []
+        #: serial contributions to rows beyond the dense accumulator: (rows, values)
+        self.sparse = None
+
+    def add(self, rows: np.ndarray, contrib: np.ndarray) -> None:
+        """acc[rows] += contrib, deferred to :meth:`flush` (one scatter a step, not one a term)."""
+        self.pending.append((rows, contrib))
+
+    def flush(self, acc: np.ndarray) -> None:
+        """Sum the pending contributions of the rows owned here (ghost rows carry no force of
+        ours); serially, rows beyond ``acc`` (a collide's sparse target) go to ``sparse``."""
+        if not self.pending:
+            return
+        rows = np.concatenate([r for r, _ in self.pending])
+        contrib = np.concatenate([c for _, c in self.pending])
+        self.pending = []
+        if self.identity:
+            beyond = rows >= len(acc)
+            if beyond.any():     # MagPod's sediment under a sole
+                self.sparse = (rows[beyond], contrib[beyond])
+                rows, contrib = rows[~beyond], contrib[~beyond]
+        else:
+            rows = self.compact(rows)
+            own = rows >= 0
+            rows, contrib = rows[own], contrib[own]
+        for k in range(3):
+            acc[:, k] += np.bincount(rows, weights=contrib[:, k], minlength=len(acc))
 
     def compact(self, rows: np.ndarray) -> np.ndarray:
         """Accumulator rows of frame rows (−1: a ghost or a particle outside the span)."""
@@ -118,23 +144,6 @@ class Frame:
             raise RuntimeError(f"{name}: particles {int(I[k])} and {int(J[k])} are not both "
                                "visible on this rank (raise the ghost cutoff)")
         return ri, rj
-
-
-def _add_rows(fr, acc, rows, contrib):
-    """acc[rows] += contrib for the rows owned here (ghost rows carry no force of ours)."""
-    if fr.identity:
-        beyond = rows >= len(acc)
-        if beyond.any():     # a collide's sparse target rows (MagPod's sediment under a sole)
-            fr.sparse.append((rows[beyond], contrib[beyond]))
-            rows, contrib = rows[~beyond], contrib[~beyond]
-    else:
-        rows = fr.compact(rows)
-        own = rows >= 0
-        rows, contrib = rows[own], contrib[own]
-    if not len(rows):
-        return
-    for k in range(3):
-        acc[:, k] += np.bincount(rows, weights=contrib[:, k], minlength=len(acc))
 
 
 class PairTerm:
@@ -198,9 +207,9 @@ class PairTerm:
             g = (1.0 - L0sq / d2)[:, None] * diff        # Eq. 12 without its coefficient
         else:
             g = diff / np.sqrt(d2)[:, None]              # Eq. 14 without its coefficient
-        _add_rows(fr, acc, ri, cI * g)
+        fr.add(ri, cI * g)
         if mcJ is not None:
-            _add_rows(fr, acc, rj, mcJ * g)
+            fr.add(rj, mcJ * g)
 
 
 def _scalar_or(a: np.ndarray):
@@ -307,7 +316,7 @@ class CollideTerm:
         if not len(a):
             return
         contrib = col(fr.x[a], fr.x[b], self.radius[fr.index[a]], self.radius[fr.index[b]], self.c)
-        _add_rows(fr, acc, a, contrib)
+        fr.add(a, contrib)
 
 
 class PyForces:
@@ -451,6 +460,7 @@ class PyForces:
                     self._attract_term(r).add(fr, acc)
                 elif term is not None:
                     term.add(fr, acc)
+            fr.flush(acc)
             if fr.identity:
                 n = fr.acc_rows
                 f[:n] = acc * self.mass[:n, None]
@@ -478,11 +488,10 @@ class PyForces:
         """Serial: f rows beyond the dense accumulator, from this step's sparse contributions."""
         if len(self._sparse_rows):
             f[self._sparse_rows] = 0.0
-        if not fr.sparse:
+        if fr.sparse is None:
             self._sparse_rows = self._sparse_rows[:0]
             return
-        rows = np.concatenate([rw for rw, _ in fr.sparse])
-        contrib = np.concatenate([c for _, c in fr.sparse])
+        rows, contrib = fr.sparse
         u, inv = np.unique(rows, return_inverse=True)
         m = self.mass[u]
         for k in range(3):

@@ -6,7 +6,8 @@ How each operator is realized (``mode='exact'`` unless said otherwise):
 operator                    LAMMPS realization
 ==========================  ================================================================
 force (phase-conditioned)   ``fix addforce`` on the selected atoms, F = m·â (Eq. 8)
-dampen (phase-conditioned)  ``fix viscous`` with γ = c·m (Eq. 9)
+dampen                      one ``fix viscous`` for all groups, γ = c·m per type (Eq. 9)
+dampen (phase-conditioned)  ``fix viscous`` on the group, γ = c·m, redefined at phase switches
 dampen + contact extra      base as above; the extra term in the Python callback
 collide, reciprocal         ``pair_style lepton`` E = K((r²−R²)/2 − R² ln(r/R)), cut R (Eq. 10)
 collide, one-way            Python callback (a Verlet list over local + ghost atoms)
@@ -124,11 +125,17 @@ class Deck:
         L.append("# operators (paper order) and their realization:")
         for r in self.realized:
             L.append(f"#   {r.target} <- {describe(r.op)}: {r.how}")
+        gamma = dict.fromkeys(range(1, len(sc.groups) + 1), 0.0)   # static damping per type
         for idx, r in enumerate(self.realized):
             if r.how == "addforce" and not r.op.when:
                 L += self._addforce(idx, r)
             if r.how == "viscous+python" or (r.how == "viscous" and not r.op.when):
-                L.append(self._viscous(idx, r, 0.0))
+                gamma[types[r.target]] += r.op.c * self.masses[r.target]
+        if any(gamma.values()):
+            # one fix for every group's constant damping: one pass over the atoms, not one per
+            # group (gamma 1 times scale γ_type is γ_type exactly; an unnamed type would get 1)
+            scale = " ".join(f"scale {t} {_f(g)}" for t, g in gamma.items())
+            L.append(f"fix rs_damp all viscous 1.0 {scale}")
         L.append("fix rs_nve all nve")
         L.append("thermo_style custom step")
         L.append(f"thermo {max(1, dump_every)}")
