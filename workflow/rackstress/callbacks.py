@@ -30,7 +30,7 @@ class Frame:
     step (:meth:`refresh`).
     """
 
-    def __init__(self, lmp, n_total: int, nlocal: int, span: int, dense_span: int):
+    def __init__(self, lmp, n_total: int, nlocal: int, dense_span: int, mass: np.ndarray):
         nghost = lmp.extract_global("nghost")
         nall = nlocal + nghost
         self.nlocal, self.nghost, self.n_total = nlocal, nghost, n_total
@@ -42,17 +42,19 @@ class Frame:
         self._row = self._local = None
         #: per-layout results of the terms (selected pairs, candidates, owned rows)
         self.memo = {}
-        # accumulator rows: serially the first ``dense_span`` particles (the groups the bind,
-        # attract, dampen and force terms act on), further rows (a collide's target such as
-        # MagPod's sediment) go to a sparse list; under MPI the owned particles below ``span``
+        # the dense accumulator: the owned particles below ``dense_span`` (the groups the bind,
+        # attract, dampen and force terms act on); contributions to other owned rows (a
+        # collide's target such as MagPod's sediment under a sole) are written sparsely
         if self.identity:
-            self.span_rows = None
+            self.dense_rows = slice(0, dense_span)
             self.acc_rows = dense_span
+            self.dense_mass = mass[:dense_span, None]
         else:
-            self.span_rows = np.flatnonzero(self.index[:nlocal] < span)
+            self.dense_rows = np.flatnonzero(self.index[:nlocal] < dense_span)
             self._compact = np.full(nall, -1, dtype=np.int64)
-            self._compact[self.span_rows] = np.arange(len(self.span_rows))
-            self.acc_rows = len(self.span_rows)
+            self._compact[self.dense_rows] = np.arange(len(self.dense_rows))
+            self.acc_rows = len(self.dense_rows)
+            self.dense_mass = mass[self.index[self.dense_rows], None]
         self.refresh(lmp)
 
     def refresh(self, lmp) -> None:
@@ -76,23 +78,25 @@ class Frame:
         ours); serially, rows beyond ``acc`` (a collide's sparse target) go to ``sparse``."""
         if not self.pending:
             return
-        rows = np.concatenate([r for r, _ in self.pending])
+        rows = fr_rows = np.concatenate([r for r, _ in self.pending])
         contrib = np.concatenate([c for _, c in self.pending])
         self.pending = []
         if self.identity:
             beyond = rows >= len(acc)
-            if beyond.any():     # MagPod's sediment under a sole
-                self.sparse = (rows[beyond], contrib[beyond])
-                rows, contrib = rows[~beyond], contrib[~beyond]
         else:
+            owned = rows < self.nlocal
             rows = self.compact(rows)
-            own = rows >= 0
-            rows, contrib = rows[own], contrib[own]
+            beyond = owned & (rows < 0)
+        if beyond.any():     # owned rows outside the dense accumulator (frame rows kept)
+            self.sparse = (fr_rows[beyond], contrib[beyond])
+        if not self.identity or beyond.any():
+            keep = rows >= 0 if not self.identity else ~beyond
+            rows, contrib = rows[keep], contrib[keep]
         for k in range(3):
             acc[:, k] += np.bincount(rows, weights=contrib[:, k], minlength=len(acc))
 
     def compact(self, rows: np.ndarray) -> np.ndarray:
-        """Accumulator rows of frame rows (−1: a ghost or a particle outside the span)."""
+        """Accumulator rows of frame rows (−1: a ghost or a particle outside the dense rows)."""
         return rows if self.identity else self._compact[rows]
 
     @property
@@ -172,14 +176,51 @@ class PairTerm:
 
     def _add_block(self, fr: Frame, acc: np.ndarray):
         ts, ss = self.block
-        xt, xs = fr.x[ts], fr.x[ss]
+        if fr.identity:
+            xt, xs = fr.x[ts], fr.x[ss]
+        else:
+            # under MPI every rank that owns a particle of either group evaluates the whole
+            # block (both groups are in its ghost reach) and keeps its owned rows' sums
+            place = self._placement(fr)
+            if place is None:
+                return
+            rt, rs, ti, ct, si, cs = place
+            xt, xs = fr.x[rt], fr.x[rs]
         d = [xs[:, k][:, None] - xt[:, k][None, :] for k in range(3)]   # (n, m): u − p
         w = 1.0 - self._L0sqT / (d[0] * d[0] + d[1] * d[1] + d[2] * d[2])  # Eq. 12 without c
         for k in range(3):
             g = w * d[k]
-            acc[ts, k] += (self._cIT * g).sum(axis=0)
-            if self._cJT is not None:
-                acc[ss, k] -= (self._cJT * g).sum(axis=1)
+            if fr.identity:
+                acc[ts, k] += (self._cIT * g).sum(axis=0)
+                if self._cJT is not None:
+                    acc[ss, k] -= (self._cJT * g).sum(axis=1)
+                continue
+            if len(ti):
+                acc[ct, k] += (self._cIT * g).sum(axis=0)[ti]
+            if self._cJT is not None and len(si):
+                acc[cs, k] -= (self._cJT * g).sum(axis=1)[si]
+
+    def _placement(self, fr: Frame):
+        """Rows of every particle of the block's groups here, and which of them are owned."""
+        key = ("block", id(self))
+        if key not in fr.memo:
+            ts, ss = self.block
+            rt, rs = fr.row[ts], fr.row[ss]
+            t_own = (rt >= 0) & (rt < fr.nlocal)
+            s_own = ((rs >= 0) & (rs < fr.nlocal) if self._cJT is not None
+                     else np.zeros(len(rs), dtype=bool))
+            if not (t_own.any() or s_own.any()):
+                fr.memo[key] = None
+            else:
+                missing = np.flatnonzero(np.concatenate([rt, rs]) < 0)
+                if len(missing):
+                    k = int(missing[0])
+                    k = ts.start + k if k < len(rt) else ss.start + k - len(rt)
+                    raise RuntimeError(f"{self.name}: particle {k} is not visible on a rank that "
+                                       "owns part of its block (raise the ghost cutoff)")
+                ti, si = np.flatnonzero(t_own), np.flatnonzero(s_own)
+                fr.memo[key] = (rt, rs, ti, fr.compact(rt[ti]), si, fr.compact(rs[si]))
+        return fr.memo[key]
 
     def _selected(self, fr: Frame):
         """The pairs with a particle owned here, as rows (memoized until the next reneighbouring)."""
@@ -198,7 +239,7 @@ class PairTerm:
         return hit
 
     def add(self, fr: Frame, acc: np.ndarray):
-        if self.block is not None and fr.identity:
+        if self.block is not None:
             return self._add_block(fr, acc)
         ri, rj, cI, mcJ, L0sq = self._selected(fr)
         diff = fr.x[rj] - fr.x[ri]
@@ -375,9 +416,6 @@ class PyForces:
                 self.terms.append((r, None))
         self.phase = {}
         self.active = []
-        # rows a Python operator can write: the target groups (a folded bind writes its
-        # reverse's target, which is a Python operator's target too)
-        self.span = max((self.scene.slice(r.target).stop for r in deck.python_ops), default=0)
         self.dense_span = max(dense)
         self._fresh = True
         self.frame = None
@@ -427,7 +465,7 @@ class PyForces:
         if (fr is None or self._fresh or not self.verlet or fr.nlocal != nlocal
                 or lmp.extract_setting("neigh_ago") == 0
                 or lmp.extract_global("nghost") != fr.nghost):
-            fr = self.frame = Frame(lmp, self.n, nlocal, self.span, self.dense_span)
+            fr = self.frame = Frame(lmp, self.n, nlocal, self.dense_span, self.mass)
         else:
             fr.refresh(lmp)
         return fr
@@ -435,13 +473,13 @@ class PyForces:
     # ------------------------------------------------------------------ callback
     def __call__(self, caller, step, nlocal, tag, x, f):
         try:
-            fresh = self._fresh
+            old = self.frame
             fr = self._frame(nlocal)
             self._fresh = False
-            # serial: only the groups the Python operators act on get forces from here, the rest
-            # (MagPod's 30,000 sediment particles) is never touched after one zeroing, except
-            # the few rows a collide reaches (written sparsely, and zeroed the step after)
-            if fr.identity and fresh:
+            # only the groups the Python operators act on get forces from here; the rest
+            # (MagPod's 30,000 sediment particles) is zeroed once per layout, except the few
+            # rows a collide reaches (written sparsely, and zeroed the step after)
+            if fr is not old:
                 f[:] = 0.0
                 self._sparse_rows = self._sparse_rows[:0]
             acc = np.zeros((fr.acc_rows, 3))
@@ -461,13 +499,8 @@ class PyForces:
                 elif term is not None:
                     term.add(fr, acc)
             fr.flush(acc)
-            if fr.identity:
-                n = fr.acc_rows
-                f[:n] = acc * self.mass[:n, None]
-                self._write_sparse(fr, f)
-            else:               # atoms migrate between ranks: every row is written every step
-                f[:] = 0.0
-                f[fr.span_rows] = acc * self.mass[fr.index[fr.span_rows], None]
+            f[fr.dense_rows] = acc * fr.dense_mass
+            self._write_sparse(fr, f)
         except Exception as exc:  # noqa: BLE001 - reported by the runner after the chunk
             if self.error is None:
                 self.error = (step, exc)
@@ -481,11 +514,11 @@ class PyForces:
             mask = np.zeros(self.n, dtype=bool)
             mask[sl] = True if op.where is None else np.asarray(op.where, bool)
             fr.memo[key] = (np.flatnonzero(mask[:fr.acc_rows]) if fr.identity
-                            else np.flatnonzero(mask[fr.index[fr.span_rows]]))
+                            else np.flatnonzero(mask[fr.index[fr.dense_rows]]))
         return fr.memo[key]
 
     def _write_sparse(self, fr: Frame, f) -> None:
-        """Serial: f rows beyond the dense accumulator, from this step's sparse contributions."""
+        """f rows outside the dense accumulator, from this step's sparse contributions."""
         if len(self._sparse_rows):
             f[self._sparse_rows] = 0.0
         if fr.sparse is None:
@@ -493,7 +526,7 @@ class PyForces:
             return
         rows, contrib = fr.sparse
         u, inv = np.unique(rows, return_inverse=True)
-        m = self.mass[u]
+        m = self.mass[fr.index[u]]
         for k in range(3):
             f[u, k] = np.bincount(inv, weights=contrib[:, k], minlength=len(u)) * m
         self._sparse_rows = u
