@@ -236,3 +236,21 @@ def test_cli_run_under_mpiexec(tmp_path):
     np.testing.assert_allclose(summary["groups"]["plane"]["com_end"], com, rtol=0, atol=1e-9)
     for name in ("particles.data", "in.lammps", "log.lammps", "trajectory.dump"):
         assert (out / name).stat().st_size > 0
+
+
+def test_fast_mode_refused_where_the_callback_stays(tmp_path):
+    """MagPod keeps attraction, one-way collisions and contact damping in the callback, so fast
+    mode would only swap bind for harmonic bonds: refused with exit 2, nothing written. The
+    planes lose their callback entirely in fast mode, which is where it is offered."""
+    from click.testing import CliRunner
+
+    from rackstress.cli import main
+
+    out = tmp_path / "run"
+    res = CliRunner().invoke(main, ["run", "magpod-small", "--mode", "fast", "--out", str(out),
+                                    "--no-render"])
+    assert res.exit_code == 2
+    assert "mode 'fast' is not offered for scene 'magpod-small'" in res.output
+    assert "use --mode exact" in res.output
+    assert not out.exists()
+    assert compile_deck(scenes.build("plane-rack"), "fast").python_ops == []

@@ -352,7 +352,16 @@ def solve_masses(scene: Scene, mode: str):
     return mass, pairs
 
 
-def compile_deck(scene: Scene, mode: str = "exact") -> Deck:
+def compile_deck(scene: Scene, mode: str = "exact", measure_fast: bool = False) -> Deck:
+    """Realize every operator of ``scene`` (module doc).
+
+    Fast mode is offered only where it takes every operator out of the Python callback (the
+    plane scenes): there it is on the work-precision front, 7-13x faster than exact mode at
+    its error floor. Where the callback stays (MagPod's attraction, one-way collisions and
+    contact damping), fast mode was measured no faster than exact mode (0.9x) at 4x its error
+    (``rackstress bench accuracy``/``perf``), so it is refused; ``measure_fast`` lets the
+    benchmarks keep measuring it.
+    """
     if mode not in MODES:
         raise SceneError(f"unknown mode '{mode}'; modes: {', '.join(MODES)}")
     masses, pairs = solve_masses(scene, mode)
@@ -400,7 +409,16 @@ def compile_deck(scene: Scene, mode: str = "exact") -> Deck:
         first[inv[::-1]] = np.arange(len(inv))[::-1]
         bond_types = [(float(K[f]), float(r0[f])) for f in first]
         bonds = (inv.reshape(-1) + 1, i, j)
-    return Deck(scene, mode, masses, realized, ghost_cutoff(scene), bonds, bond_types, lepton)
+    deck = Deck(scene, mode, masses, realized, ghost_cutoff(scene), bonds, bond_types, lepton)
+    if mode == "fast" and deck.python_ops and not measure_fast:
+        kept = sorted({f"{r.target} <- {r.op.kind}" for r in deck.python_ops})
+        raise SceneError(
+            f"mode 'fast' is not offered for scene '{scene.name}': it only replaces bind by "
+            f"harmonic bonds, and {len(deck.python_ops)} operators ({', '.join(kept[:4])}"
+            f"{', ...' if len(kept) > 4 else ''}) stay in the Python callback either way. For "
+            "such a scene fast mode was measured no faster than exact mode and about 4x less "
+            "accurate (README 'Accuracy and speed'); use --mode exact.")
+    return deck
 
 
 def _native_how(op) -> str:

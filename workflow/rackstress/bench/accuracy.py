@@ -70,7 +70,7 @@ def run_engine(scene, engine: str, mode: str) -> dict:
         from ..deck import compile_deck
         from ..lammps_engine import LammpsRun
 
-        runner = LammpsRun(compile_deck(scene, mode), None, log=False)
+        runner = LammpsRun(compile_deck(scene, mode, measure_fast=True), None, log=False)
         setup = time.perf_counter() - t0
         try:
             t0 = time.perf_counter()

@@ -98,7 +98,7 @@ def worker(engine: str, mode: str, steps: int, profile_steps: int, scene_name: s
     from ..deck import compile_deck
     from ..lammps_engine import LammpsRun
 
-    deck = compile_deck(sc, mode)
+    deck = compile_deck(sc, mode, measure_fast=True)
     runner = LammpsRun(deck, None, log=False)
     comm = runner.comm
     if runner.py is not None:
