@@ -44,6 +44,9 @@ def test_bench_accuracy_smoke(tmp_path):
     assert data["scenes"][0]["observed_order_reference"][-1] > 0.8
     assert (tmp_path / "accuracy.png").stat().st_size > 1000
     assert "lammps fast" in (tmp_path / "accuracy.md").read_text()
+    ff = data["scenes"][0]["fast_front"]
+    assert [p["t"] for p in ff["points"]] == [0.02, 0.01, 0.005, 0.0025]
+    assert "the front" in (tmp_path / "accuracy.md").read_text()
 
 
 def test_bench_perf_smoke(tmp_path):

@@ -125,3 +125,17 @@ def test_cli_refuses_with_exit_2_and_flag_overrides(tmp_path):
     assert "time step 0.02 exceeds the predicted stability limit 0.01575" in res.output
     res = runner.invoke(main, args + ["--out", str(tmp_path / "b"), "--allow-unstable"])
     assert res.exit_code == 0, res.output
+
+
+def test_magpod_gait_breaks_just_beyond_the_predicted_limit():
+    """MagPod's predicted limit (a sole's rack bind under contact damping γ = 95) is where the
+    gait really stops working: one cycle at 0.93× the prediction walks as at t = 0.01, at
+    1.1× it does not (stopped or off by more than the benchmark's 5 %)."""
+    from rackstress.bench.stability import GAIT_TOL, gait_cycle
+
+    t_max = predict(scenes.build("magpod-small"))["t_max"]
+    base, below, above = gait_cycle(0.01), gait_cycle(0.93 * t_max), gait_cycle(1.1 * t_max)
+    assert base["stopped"] is None and base["advance"] > 10.0
+    assert below["stopped"] is None
+    assert abs(below["advance"] - base["advance"]) <= GAIT_TOL * base["advance"]
+    assert above["stopped"] or abs(above["advance"] - base["advance"]) > GAIT_TOL * base["advance"]

@@ -5,6 +5,10 @@ partners that are local or ghost atoms there, so it needs no reverse communicati
 correct however the atoms are spread over ranks (the ghost cutoff covers every partner). The
 same functions as the reference engine (:mod:`rackstress.reference`) do the arithmetic.
 
+What depends only on which atom sits in which row (look-ups, each term's pairs, collision
+candidates) is kept from one LAMMPS reneighbouring to the next (:class:`Frame`,
+:class:`Overlaps`); each step then costs the arithmetic on the pairs and one scatter.
+
 An exception inside a ctypes callback would be printed and ignored, so the callback catches it,
 stores it and zeroes its forces; the runner checks ``error`` after every chunk and stops.
 """
@@ -66,7 +70,7 @@ class Frame:
         self.cache = {}
         #: pair contributions (rows, values), summed into the accumulator once (:meth:`flush`)
         self.pending = []
-        #: serial contributions to rows beyond the dense accumulator: (rows, values)
+        #: contributions to owned rows outside the dense accumulator: (frame rows, values)
         self.sparse = None
 
     def add(self, rows: np.ndarray, contrib: np.ndarray) -> None:
@@ -74,26 +78,27 @@ class Frame:
         self.pending.append((rows, contrib))
 
     def flush(self, acc: np.ndarray) -> None:
-        """Sum the pending contributions of the rows owned here (ghost rows carry no force of
-        ours); serially, rows beyond ``acc`` (a collide's sparse target) go to ``sparse``."""
+        """Sum the pending contributions into ``acc``; contributions to owned rows outside it
+        (a collide's sparse target) go to ``sparse``, those to ghost rows are dropped (the
+        owning rank computes its own)."""
         if not self.pending:
             return
-        rows = fr_rows = np.concatenate([r for r, _ in self.pending])
+        rows = np.concatenate([r for r, _ in self.pending])
         contrib = np.concatenate([c for _, c in self.pending])
         self.pending = []
+        ar = self.compact(rows)
         if self.identity:
-            beyond = rows >= len(acc)
+            keep = ar < len(acc)
+            beyond = ~keep
         else:
-            owned = rows < self.nlocal
-            rows = self.compact(rows)
-            beyond = owned & (rows < 0)
-        if beyond.any():     # owned rows outside the dense accumulator (frame rows kept)
-            self.sparse = (fr_rows[beyond], contrib[beyond])
-        if not self.identity or beyond.any():
-            keep = rows >= 0 if not self.identity else ~beyond
-            rows, contrib = rows[keep], contrib[keep]
+            keep = ar >= 0
+            beyond = ~keep & (rows < self.nlocal)
+        if beyond.any():
+            self.sparse = (rows[beyond], contrib[beyond])
+        if self.sparse is not None or not self.identity:
+            ar, contrib = ar[keep], contrib[keep]
         for k in range(3):
-            acc[:, k] += np.bincount(rows, weights=contrib[:, k], minlength=len(acc))
+            acc[:, k] += np.bincount(ar, weights=contrib[:, k], minlength=len(acc))
 
     def compact(self, rows: np.ndarray) -> np.ndarray:
         """Accumulator rows of frame rows (−1: a ghost or a particle outside the dense rows)."""
@@ -161,8 +166,8 @@ class PairTerm:
     def __init__(self, name, I, J, cI, cJ=None, L0sq=None, block=None):
         self.name, self.I, self.J, self.cI, self.cJ, self.L0sq = name, I, J, cI, cJ, L0sq
         #: (target slice, source slice) when the pairs are every (i, j) of two groups in
-        #: row-major order (a Const bind such as host ↔ rack): then a serial frame is served by
-        #: broadcasting over the block, with no gathers or scatters.
+        #: row-major order (a Const bind such as host ↔ rack): then it is evaluated by
+        #: broadcasting over the block, with no per-pair gathers or scatters.
         self.block = block
         if block is not None:
             ts, ss = block

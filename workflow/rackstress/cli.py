@@ -46,7 +46,8 @@ def main():
 @click.option("--engine", type=click.Choice(["lammps", "reference"]), default="lammps",
               show_default=True, help="lammps (the backend) or reference (exact NumPy engine).")
 @click.option("--mode", type=click.Choice(["exact", "fast"]), default="exact", show_default=True,
-              help="LAMMPS realization: exact (matches the reference to round-off) or fast.")
+              help="LAMMPS realization: exact (matches the reference to round-off) or fast "
+                   "(bind as harmonic bonds; only for scenes it takes out of the callback).")
 @click.option("--steps", type=click.IntRange(min=0), help="Iterations to run (default: the scene's).")
 @click.option("--dt", type=float, help="Time step t of Eq. 5 (default: the scene's).")
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE",

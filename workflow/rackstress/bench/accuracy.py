@@ -39,6 +39,9 @@ from ..stability import predict
 from . import fmt, machine, md_table, out_dir, write_json
 
 T_STEPS = (0.02, 0.01, 0.005, 0.0025)
+#: A fast-mode run counts as on the work-precision front when it is at least this much faster
+#: than the cheapest exact-mode run that is at least as accurate (timings here drift ±20 %).
+FRONT_MARGIN = 1.2
 REFINE = 8
 ENGINES = (("reference", "exact"), ("lammps", "exact"), ("lammps", "fast"))
 
@@ -160,7 +163,24 @@ def bench_scene(name: str, quick: bool, echo=print) -> dict:
             order.append(math.log(a["pos_max"] / b["pos_max"]) / math.log(a["t"] / b["t"]))
     return {"scene": name, "T": T, "t_conv": t_conv, "conv_steps": conv_scene.total_steps,
             "conv_wall_s": conv["wall_s"], "n_particles": conv_scene.n_particles,
-            "observed_order_reference": order, "rows": rows}
+            "observed_order_reference": order, "rows": rows, "fast_front": fast_front(rows)}
+
+
+def fast_front(rows: list) -> dict:
+    """Is fast mode on the work-precision front? For each fast run: the speed-up over the
+    cheapest exact run with a position error no larger (None: no exact run is that accurate,
+    so the fast run is on the front by default)."""
+    ok = [r for r in rows if "pos_max" in r and r["engine"] == "lammps"]
+    exact = [r for r in ok if r["mode"] == "exact"]
+    points = []
+    for f in (r for r in ok if r["mode"] == "fast"):
+        better = [e["wall_s"] for e in exact if e["pos_max"] <= f["pos_max"]]
+        points.append({"t": f["t"], "pos_max": f["pos_max"],
+                       "speedup": min(better) / f["wall_s"] if better else None})
+    on = [p for p in points if p["speedup"] is None or p["speedup"] >= FRONT_MARGIN]
+    best = max((p["speedup"] for p in points if p["speedup"] is not None), default=None)
+    return {"points": points, "on_front": bool(on), "best_speedup": best,
+            "margin": FRONT_MARGIN}
 
 
 def run_bench(out: Path | None = None, quick: bool = False, scenes_=None, echo=print) -> dict:
@@ -212,7 +232,18 @@ def markdown(data: dict) -> str:
                      f"run {s['conv_steps']} steps ({s['conv_wall_s']:.1f} s); observed order "
                      "of the reference engine (pos max): "
                      + ", ".join(f"{o:.2f}" for o in s["observed_order_reference"]))
-    lines += ["", md_table(HEADER, table_rows(data))]
+    lines += ["", md_table(HEADER, table_rows(data)), "",
+              "Fast mode against the work-precision front (speed-up over the cheapest exact run "
+              f"at least as accurate; on the front from {FRONT_MARGIN:g}×, the noise margin "
+              "here):", ""]
+    for s in data["scenes"]:
+        ff = s.get("fast_front") or {}
+        if not ff.get("points"):
+            continue
+        pts = ", ".join(f"t={p['t']:g}: {fmt(p['speedup'], 3) if p['speedup'] else 'none as accurate'}"
+                        for p in ff["points"])
+        lines.append(f"- {s['scene']}: **{'on' if ff['on_front'] else 'off'} the front** "
+                     f"({pts})")
     return "\n".join(lines) + "\n"
 
 
