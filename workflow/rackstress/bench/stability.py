@@ -84,12 +84,23 @@ def trial(scene: Scene, dt: float, steps: int = STEPS, p0: np.ndarray | None = N
 def measure_t_max(scene: Scene, t_guess: float, steps: int = STEPS, p0=None,
                   rel_tol: float = REL_TOL, max_trials: int = 40) -> dict:
     """Largest stable t by expansion from ``t_guess`` and bisection (module docstring)."""
+    def verdict(t):
+        r = trial(scene, t, steps, p0)
+        return r["stable"], r["reason"]
+
+    return bisect_limit(verdict, t_guess, rel_tol, max_trials)
+
+
+def bisect_limit(verdict, t_guess: float, rel_tol: float = REL_TOL,
+                 max_trials: int = 40) -> dict:
+    """Largest t with ``verdict(t)`` = (True, _): from ``t_guess`` step by ×1.5 up (or down)
+    until the verdict flips, then halve the bracket (geometrically) to ``rel_tol``."""
     trials = []
 
     def stable(t):
-        r = trial(scene, t, steps, p0)
-        trials.append((t, r["stable"], r["reason"]))
-        return r["stable"]
+        ok, why = verdict(t)
+        trials.append((t, ok, why))
+        return ok
 
     t = float(t_guess)
     lo = hi = None
@@ -272,7 +283,6 @@ def magpod_gait_case() -> dict:
     pred = predict(sc)
     t0 = time.perf_counter()
     base = gait_cycle(0.01)
-    trials = []
 
     def usable(t):
         g = gait_cycle(t)
@@ -284,39 +294,23 @@ def magpod_gait_case() -> dict:
             why = f"pitch {g['pitch_deg']:.3g} vs {base['pitch_deg']:.3g} deg"
         else:
             why = ""
-        trials.append((t, not why, why))
-        return not why
+        return not why, why
 
-    lo = hi = None
-    t = pred["t_max"]
-    for _ in range(8):       # bracket by factors 1.5 from the prediction
-        if usable(t):
-            lo, t = t, t * 1.5
-        else:
-            hi, t = t, t / 1.5
-        if lo is not None and hi is not None:
-            break
-    while lo is not None and hi is not None and hi / lo > 1.0 + REL_TOL:
-        mid = math.sqrt(lo * hi)
-        if usable(mid):
-            lo = mid
-        else:
-            hi = mid
+    meas = bisect_limit(usable, pred["t_max"], max_trials=16)
     wall = time.perf_counter() - t0
     growth = measure_t_max(sc, pred["t_max"])
-    tm = lo
+    tm = meas["t_measured"]
     return {"family": "magpod", "case": "magpod-small gait cycle usable (LAMMPS exact)",
             "n_particles": sc.n_particles, "steps": None, "jitter": 0.0,
             "t_pred": pred["t_max"], "t_pred_gershgorin": pred["t_max_gershgorin"],
             "limit": {k: pred[k] for k in ("group", "particle", "operator", "omega2", "gamma",
                                            "how", "phase")},
             "virtual_contacts": pred["virtual_contacts"],
-            "t_measured": tm, "bracket": [lo, hi],
-            "converged": lo is not None and hi is not None,
+            "t_measured": tm, "bracket": meas["bracket"], "converged": meas["converged"],
             "ratio": tm / pred["t_max"] if tm else None,
             "within_2x": bool(tm and 0.5 <= tm / pred["t_max"] <= 2.0),
             "stable_at_0.01": True, "predicted_stable_at_0.01": bool(pred["t_max"] >= 0.01),
-            "trials": [{"t": t, "stable": s, "why": r} for t, s, r in trials],
+            "trials": [{"t": t, "stable": s, "why": r} for t, s, r in meas["trials"]],
             "baseline": base, "gait_tol": GAIT_TOL, "gait_pitch_deg": GAIT_PITCH_DEG,
             "growth_test_300": {"t_measured": growth["t_measured"],
                                 "ratio": (growth["t_measured"] / pred["t_max"]
