@@ -65,6 +65,7 @@ class LammpsRun:
         if append and logfile != "none":
             self.lmp.command(f"log {logfile} append")
         self.step = 0
+        self._ids = np.arange(1, self.scene.n_particles + 1)
         self.py = None
         self._py_on = False
         self._phase = None
@@ -166,8 +167,11 @@ class LammpsRun:
     def check(self) -> None:
         """The watchdog on every rank's atoms; all ranks raise the same DivergenceError."""
         x, v, tag = self.positions_local()
-        o = self.scene.original_positions()[tag - 1]
-        found = find_divergence(self.scene, x, v, o, tag - 1)
+        o = self.scene.original_positions()
+        if len(tag) == len(o) and tag[0] == 1 and np.array_equal(tag, self._ids):
+            found = find_divergence(self.scene, x, v, o)    # row k holds particle k
+        else:
+            found = find_divergence(self.scene, x, v, o[tag - 1], tag - 1)
         everything = [f for f in self.comm.allgather(found) if f is not None]
         if everything:
             worst = max(everything, key=lambda f: (not f["finite"], f["disp"]))

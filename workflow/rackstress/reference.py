@@ -7,6 +7,7 @@ neighbours come from ``scipy.spatial.cKDTree`` (the same pairs as an all-pairs s
 """
 from __future__ import annotations
 
+import math
 from typing import Mapping
 
 import numpy as np
@@ -180,6 +181,13 @@ def find_divergence(scene: Scene, p: np.ndarray, v: np.ndarray, o: np.ndarray,
     ``index`` gives the global particle index of each row when p, v hold only some particles.
     Returns None when all is well.
     """
+    if not len(p):
+        return None
+    # the common case in one pass: every displacement within the bound (so every position
+    # finite) and the velocities' sum finite (a NaN or an infinity would make it non-finite)
+    dp = p - o
+    if rowdot(dp, dp).max() <= scene.bound ** 2 and math.isfinite(float(v.sum())):
+        return None
     finite = finite_rows(p) & finite_rows(v)
     disp = np.full(len(p), np.inf)
     dp = p[finite] - o[finite]
