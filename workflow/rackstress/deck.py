@@ -356,11 +356,11 @@ def compile_deck(scene: Scene, mode: str = "exact", measure_fast: bool = False) 
     """Realize every operator of ``scene`` (module doc).
 
     Fast mode is offered only where it takes every operator out of the Python callback (the
-    plane scenes): there it is on the work-precision front, 7-13x faster than exact mode at
-    its error floor. Where the callback stays (MagPod's attraction, one-way collisions and
-    contact damping), fast mode was measured no faster than exact mode (0.9x) at 4x its error
-    (``rackstress bench accuracy``/``perf``), so it is refused; ``measure_fast`` lets the
-    benchmarks keep measuring it.
+    plane scenes): there it is on the work-precision front, 1.6-9x faster than the cheapest
+    exact run at least as accurate. Where the callback stays (MagPod's attraction, one-way
+    collisions and contact damping), it was measured at best 1.06x faster at 4-6x exact mode's
+    error (``rackstress bench accuracy``), off the front, so it is refused; ``measure_fast``
+    lets the benchmarks keep measuring it.
     """
     if mode not in MODES:
         raise SceneError(f"unknown mode '{mode}'; modes: {', '.join(MODES)}")
