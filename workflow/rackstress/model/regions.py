@@ -215,7 +215,7 @@ class Ids(Region):
         out = np.zeros(n, dtype=bool)
         for i in self.ids:
             if not 0 <= i < n:
-                raise SceneError(f"particle index {i} is not in the group (0..{n - 1})")
+                raise SceneError(f"ids: particle index {i} is not in the group (0..{n - 1})")
             out[i] = True
         return out
 

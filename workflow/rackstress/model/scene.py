@@ -174,6 +174,11 @@ class Scene:
         dt = float(dt)
         if not (np.isfinite(dt) and dt > 0):
             raise SceneError(f"scene '{self.name}': time step dt must be positive, got {dt!r}")
+        if self.duration is None and all(p.duration is None for p in self.phases):
+            self.dt = dt                      # given in steps: only the step changes
+            self.params["dt"] = dt
+            self.validate()
+            return self
         phases = [Phase(p.name, steps_for(p.duration, dt, f"phase '{p.name}'"), p.vars,
                         p.duration) if p.duration is not None else p for p in self.phases]
         sc = Scene(self.name, self.groups, self.operators, phases, dt, self.cycles, self.bound,
