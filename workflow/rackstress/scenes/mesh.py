@@ -6,9 +6,9 @@ particles of another group (``where``, supports, attraction regions).
 
 Reading is pyvista's (``pyvista.read``: every surface format VTK reads — ``.stl``, ``.obj``,
 ``.ply``, ``.vtk`` and ``.vtp``); the checks are trimesh's (watertight, consistent
-winding) and VTK's (``vtkCollisionDetectionFilter`` of the mesh against itself: two triangles
-that share no vertex yet touch are a self-intersection). Nothing here tests points against
-triangles by hand.
+winding; along rays through the part its winding number must stay 0 or 1, which two overlapping
+shells or a surface folded through itself break). Nothing here tests points against triangles
+by hand: inside tests are VTK's, ray–triangle hits trimesh's.
 
 Placement, in this order: ``scale`` (one factor or one per axis), ``rotate`` (degrees about the
 x, then the y, then the z axis, fixed axes, about the origin), ``translate``. Lengths are the
@@ -151,12 +151,11 @@ def _checked(file: str, mtime_ns: int):
     if not tm.is_winding_consistent:
         raise SceneError(f"mesh file {file}: the triangles are not consistently oriented "
                          "(some normals point inwards); re-export the solid from the CAD tool")
-    pairs = self_intersections(tm.vertices, tm.faces)
-    if len(pairs):
-        c = tm.triangles_center[pairs[0][0]].tolist()
+    where = self_intersections(tm)
+    if len(where):
         raise SceneError(
-            f"mesh file {file}: the surface intersects itself ({len(pairs)} pair(s) of "
-            f"triangles cross, e.g. near {np.round(c, 6).tolist()}); its inside is not "
+            f"mesh file {file}: the surface overlaps or intersects itself (e.g. at "
+            f"{np.round(where[0], 6).tolist()} a ray is inside it twice); its inside is not "
             "defined. Union the bodies in the CAD tool before exporting, or give each body as "
             "its own part (a group's parts are united)")
     volume = float(tm.volume)
@@ -165,31 +164,47 @@ def _checked(file: str, mtime_ns: int):
     return tm.vertices.copy(), tm.faces.copy(), volume
 
 
-def self_intersections(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Pairs of triangles that touch without sharing a vertex (VTK collision detection).
+def self_intersections(tm, rays_per_axis: int = 24, seed: int = 0) -> np.ndarray:
+    """Points on rays where the surface ``tm`` (a trimesh) overlaps or crosses itself.
 
-    The mesh is collided with itself (``vtkCollisionDetectionFilter``, all contacts, OBB trees);
-    triangles sharing a vertex always touch and are dropped, what is left crosses.
+    The winding number of a closed, consistently oriented surface that does not intersect
+    itself is 1 inside and 0 outside. Along a ray, each crossing of the surface changes it by
+    ±1 (entering or leaving, from the triangle's normal): the running sum must stay 0 or 1. Two
+    overlapping shells, or a surface folded through itself, make it 2 or −1 along every ray
+    through the overlap. ``rays_per_axis``² rays along each axis at seeded random places in the
+    bounding box test it (trimesh's ray–triangle queries); touching triangles of a valid mesh
+    (T-junctions, slivers) change nothing. Returns the points where the sum left {0, 1}.
     """
-    import pyvista as pv
-    from vtkmodules.util.numpy_support import vtk_to_numpy
-    from vtkmodules.vtkCommonTransforms import vtkTransform
-    from vtkmodules.vtkFiltersModeling import vtkCollisionDetectionFilter
-
-    poly = pv.PolyData.from_regular_faces(np.asarray(vertices, dtype=float),
-                                          np.asarray(faces, dtype=np.int64))
-    f = vtkCollisionDetectionFilter()
-    f.SetInputData(0, poly)
-    f.SetInputData(1, poly)
-    f.SetTransform(0, vtkTransform())
-    f.SetTransform(1, vtkTransform())
-    f.SetCollisionModeToAllContacts()
-    f.SetBoxTolerance(0.0)
-    f.SetCellTolerance(0.0)
-    f.Update()
-    c0 = vtk_to_numpy(f.GetContactCells(0)).astype(np.int64)
-    c1 = vtk_to_numpy(f.GetContactCells(1)).astype(np.int64)
-    F = np.asarray(faces)
-    share = (F[c0][:, :, None] == F[c1][:, None, :]).any(axis=(1, 2))
-    pairs = np.sort(np.column_stack([c0[~share], c1[~share]]), axis=1)
-    return np.unique(pairs, axis=0) if len(pairs) else pairs.reshape(0, 2)
+    rng = np.random.default_rng(seed)
+    lo, hi = tm.bounds
+    ext = hi - lo
+    sign = 1.0 if tm.volume > 0 else -1.0       # normals outwards (+) or all inwards (−)
+    normals = tm.face_normals
+    bad = []
+    for axis in range(3):
+        d = np.zeros(3)
+        d[axis] = 1.0
+        m = rays_per_axis ** 2
+        origins = lo + rng.uniform(0.0, 1.0, (m, 3)) * ext
+        origins[:, axis] = lo[axis] - 0.01 * ext[axis] - 1e-9
+        dirs = np.tile(d, (m, 1))
+        loc, iray, itri = tm.ray.intersects_location(origins, dirs, multiple_hits=True)
+        if not len(iray):
+            continue
+        t = (loc - origins[iray]) @ d
+        step = -sign * np.sign(normals[itri] @ d)        # +1 entering, −1 leaving
+        order = np.lexsort((t, iray))
+        iray, t, step, loc = iray[order], t[order], step[order], loc[order]
+        # one crossing hit on a shared edge or vertex is reported once per triangle: merge
+        keep = np.ones(len(t), dtype=bool)
+        same = (iray[1:] == iray[:-1]) & (np.abs(t[1:] - t[:-1]) <= 1e-9 * max(ext.max(), 1.0)) \
+            & (step[1:] == step[:-1])
+        keep[1:] = ~same
+        iray, step, loc = iray[keep], step[keep], loc[keep]
+        starts = np.flatnonzero(np.r_[True, iray[1:] != iray[:-1]])
+        run = np.cumsum(step)
+        base = np.repeat(np.r_[0.0, run[starts[1:] - 1]], np.diff(np.r_[starts, len(step)]))
+        wind = run - base
+        out = (wind > 1.5) | (wind < -0.5)
+        bad.append(loc[out])
+    return np.concatenate(bad) if bad else np.zeros((0, 3))
