@@ -113,8 +113,12 @@ def _checked(file: str, mtime_ns: int):
     import pyvista as pv
     import trimesh
 
+    import warnings
+
     try:
-        data = pv.read(file)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")      # the reader's failure is reported below
+            data = pv.read(file)
     except Exception as exc:  # noqa: BLE001 - any reader failure is the file's fault
         raise SceneError(f"mesh file {file}: cannot be read as a surface ({exc})") from None
     if isinstance(data, pv.MultiBlock):
