@@ -193,8 +193,9 @@ class Norm2Below(Region):
     value: float
 
     def mask(self, o):
-        o = _as_points(o)
-        return np.einsum("ij,ij->i", o, o) < self.value
+        from rackstress.model.operators import norm2_below   # Eq. 15, one home
+
+        return np.asarray(norm2_below(_as_points(o), self.value), dtype=bool)
 
 
 @dataclass(frozen=True, eq=False)
