@@ -216,3 +216,15 @@ def test_lattice_points_hcp_layers():
     pts, shape = lattice_points([0, 0, 0], [4, 4, 4], 1.0, "hcp")
     y = np.unique(np.round(pts[:, 1], 12))
     assert np.allclose(np.diff(y), math.sqrt(2 / 3))     # close-packed layers √(2/3) apart
+
+
+def test_scan_conversion_agrees_with_the_point_test(meshes):
+    """Filling uses VTK's scan conversion of whole grids; selecting uses the enclosed-points
+    test point by point: on the same grid (off the faces) both give the same points."""
+    from rackstress.model.regions import Cylinder, grid_points
+    surf = read_surface(meshes["plate4"])
+    region = surf - Cylinder([5, -1, 5], [5, 5, 5], 2.0)
+    origin, spacing, dims = (0.3, 0.2, 0.1), (0.7, 0.45, 0.6), (44, 10, 34)
+    pts = grid_points(origin, spacing, dims)
+    np.testing.assert_array_equal(region.grid_mask(origin, spacing, dims), region.mask(pts))
+    assert 0 < region.mask(pts).sum() < len(pts)

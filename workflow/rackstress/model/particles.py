@@ -240,18 +240,37 @@ def fill(region, spacing: float, packing: str = "cubic", origin=None, name: str 
             "(e.g. 0.001 for millimetres to metres) or a larger spacing")
     _, shape = lattice_points(lo, hi, s, packing, origin, z_slice=slice(0, 0))
     nx, ny, nz = shape
-    per_slab = max(1, int(2_000_000 // max(1, nx * ny)))
+    per_slab = 2 * max(1, int(1_000_000 // max(1, nx * ny)))   # even: hcp parities line up
     out = []
     for k0 in range(0, nz, per_slab):
-        pts, _ = lattice_points(lo, hi, s, packing, origin, z_slice=slice(k0, k0 + per_slab))
-        near = np.all((pts >= lo - 1e-9 * ext.max()) & (pts <= hi + 1e-9 * ext.max()), axis=1)
-        pts = pts[near]
-        out.append(pts[region.mask(pts)])
+        k1 = min(nz, k0 + per_slab)
+        pts, _ = lattice_points(lo, hi, s, packing, origin, z_slice=slice(k0, k1))
+        out.append(pts[_slab_mask(region, pts, (nx, ny, k1 - k0), k0, s, packing)])
     o = np.concatenate(out) if out else np.zeros((0, 3))
     if not len(o):
         raise SceneError(f"{name}: no lattice point at spacing {s:g} falls inside the part; "
                          "use a smaller spacing")
     return o
+
+
+def _slab_mask(region, pts, dims, k0: int, s: float, packing: str) -> np.ndarray:
+    """Which of a slab's lattice points (z indices k0 …) lie in ``region``, asked as regular
+    grids (:meth:`Region.grid_mask`): the cubic slab is one; an hcp slab is four, one per
+    parity of layer (j) and row (k), each a rectangular grid of pitch (s, 2·hy, 2·hz)."""
+    nx, ny, nk = dims
+    if packing == "cubic":
+        return region.grid_mask(pts[0], (s, s, s), dims)
+    grid = pts.reshape(nk, ny, nx, 3)
+    hy, hz = s * math.sqrt(2.0 / 3.0), s * math.sqrt(3.0) / 2.0
+    mask = np.zeros((nk, ny, nx), dtype=bool)
+    for pj in (0, 1):
+        for pk in (0, 1):
+            sub = grid[pk::2, pj::2, :]
+            if not sub.size:
+                continue
+            m = region.grid_mask(sub[0, 0, 0], (s, 2 * hy, 2 * hz), (nx, sub.shape[1], sub.shape[0]))
+            mask[pk::2, pj::2, :] = m.reshape(sub.shape[0], sub.shape[1], nx)
+    return mask.ravel()
 
 
 def union_positions(*blocks, tol: float = 1e-9) -> np.ndarray:
