@@ -486,8 +486,21 @@ def _groups(ctx: _Ctx, value, base: Path) -> dict:
     return {name: built[name] for name in names}
 
 
+#: Group kinds (docs/scenes.md "kind"): ``rack`` and ``sediment`` change what the pictures, the
+#: stress measures and the guard rails do with a group; the others are parts, named as the
+#: built-in scenes name theirs.
+KINDS = ("part", "rack", "sediment", "body", "leg", "plane")
+
+
 def _kind(c: _Ctx, t: dict, default: str) -> str:
-    return _string(c, t["kind"], "kind") if "kind" in t else default
+    if "kind" not in t:
+        return default
+    kind = _string(c, t["kind"], "kind")
+    if kind not in KINDS:
+        raise c.error(f"unknown kind '{kind}'; kinds: {', '.join(KINDS)} (rack: not drawn, "
+                      "no stress; sediment: drawn grey, footprints; the others: a part "
+                      "coloured by its stress)", "kind")
+    return kind
 
 
 def _radii(c: _Ctx, value, n: int) -> np.ndarray:
