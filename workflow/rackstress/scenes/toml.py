@@ -64,7 +64,7 @@ Every problem is a :class:`SceneError` whose message names the file and the tabl
 Example
 -------
 >>> from rackstress.scenes.toml import load_toml                  # doctest: +SKIP
->>> scene = load_toml("examples/bracket/scene.toml", {"drop": 12})   # doctest: +SKIP
+>>> scene = load_toml("examples/bracket/scene.toml", {"speed": 8.0})   # doctest: +SKIP
 """
 from __future__ import annotations
 
