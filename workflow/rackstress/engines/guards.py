@@ -30,7 +30,7 @@ import numpy as np
 from rackstress.model.operators import Collide, Force
 
 #: Frames of a trajectory the pass-through check reads at most (evenly spread, last included).
-MAX_FRAMES = 60
+MAX_FRAMES = 30
 
 
 def is_rack(group) -> bool:
@@ -123,31 +123,26 @@ def dump_frames(path, n_atoms: int, max_frames: int = MAX_FRAMES):
     (``id type mol x y z``), evenly spread, the first and the last always; a frame cut short
     at the end of the file (a killed run) is skipped."""
     path = Path(path)
-    steps = []
+    per_frame = 9 + n_atoms
+    lines = 0
     with open(path, "rb") as fh:
-        while True:
-            head = list(islice(fh, 9))
-            if len(head) < 9:
-                break
-            steps.append(int(head[1]))
-            if sum(1 for _ in islice(fh, n_atoms)) < n_atoms:
-                steps.pop()
-                break
-    if not steps:
+        for chunk in iter(lambda: fh.read(1 << 22), b""):
+            lines += chunk.count(b"\n")
+    k = lines // per_frame                      # complete frames (a cut-short last one is not)
+    if not k:
         return
-    k = len(steps)
     want = set(np.unique(np.linspace(0, k - 1, min(k, max_frames)).round().astype(int)).tolist())
     with open(path, "rb") as fh:
         for idx in range(k):
-            head = list(islice(fh, 9))
             if idx not in want:
-                for _ in islice(fh, n_atoms):
+                for _ in islice(fh, per_frame):
                     pass
                 continue
-            rows = np.array(b" ".join(islice(fh, n_atoms)).split(), dtype=float)
-            rows = rows.reshape(n_atoms, -1)
+            head = list(islice(fh, 9))
+            rows = np.loadtxt(list(islice(fh, n_atoms)), dtype=float, usecols=(0, 3, 4, 5),
+                              ndmin=2)
             order = np.argsort(rows[:, 0], kind="stable")
-            yield int(head[1]), rows[order, 3:6]
+            yield int(head[1]), rows[order, 1:4]
 
 
 def check_run(scene, out, echo: bool = True) -> list[dict]:
