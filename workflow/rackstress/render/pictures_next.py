@@ -1,0 +1,852 @@
+"""The paper's false-colour stress pictures, a sheet like Fig. 12, a movie, and plots of a run.
+
+``render(rundir, ...)`` (``rackstress render RUNDIR``) writes into ``RUNDIR/figures/`` (the paper
+measure) or ``RUNDIR/figures/MEASURE/`` (any other measure), or ``out`` if given. It adds files
+and replaces only files of the same name: renders never delete each other's pictures.
+
+* ``{view}_{step:06d}.png`` — one picture per chosen frame and view, pyvista off-screen: every
+  particle of the coloured parts as a sphere, grey (0.6, 0.6, 0.6) and translucent (α = 0.15) at
+  zero stress, redder and more opaque as the stress grows, red and opaque (α = 1) at the top of the
+  colour scale (Section 5.2; ``cmap`` swaps grey→red for a matplotlib colour map, keeping the
+  opacity ramp). Above the model, never over it: the title, the colour bar with the measure and
+  its units, the legend of parts (coloured, context, hidden) and the run's peak; in the picture
+  the iteration (as in Fig. 12), each part's name beside it, and in the peak frame a ring round
+  the peak particle.
+* ``sheet.png`` — the chosen frames side by side, one row per view (Fig. 12), the peak frame
+  marked;
+* ``movie.mp4`` (``movie=True``) — every frame of the run (at most ``movie_max_frames``, evenly
+  strided) in ``movie_view`` (default: the first view), H.264 through imageio-ffmpeg;
+* ``stress_over_time.png`` — max and mean of the measure per coloured part against the
+  iteration, the peak marked;
+* ``com_path.png`` — each part's centre-of-mass path, top view (x–z) and side view (x–y);
+* ``footprints.png`` — for a group of kind ``sediment``, its particles' deepest vertical
+  displacement as a top-view map (skipped with a note when the scene has no sediment);
+* ``render.json`` — what was rendered: measure, scale, peak, frames asked and used, parts,
+  views, notes, timings.
+
+**Frames.** By default four frames spread over the run (the paper's Fig. 12 iterations 1320,
+2600, 4720, 17480 when the run reaches them) *and the peak frame* — the iteration at which the
+measure is largest over the coloured parts. **Scale.** By default the colour scale runs from 0 to
+that peak value, so the peak is never clipped; ``vmax`` sets it. The measures come from
+:func:`rackstress.stress.post.compute_fields` (cached in ``RUNDIR/measures.npz``), the same
+numbers as ``summary.json``'s peaks, the report and the VTK files; the paper measure uses the
+robust fit everywhere.
+
+**Views**, as Fig. 3, relative to the walking direction (MagPod walks towards +x, y is up, its
+right side is +z): ``right`` looks from +z, ``left`` from −z, ``front`` from +x (at its face),
+``back`` from −x, ``top`` from +y, ``iso`` from (+x, +y, +z). The camera is orthographic, follows
+the coloured parts' centre, and keeps one scale for the whole render, fitted to the parts' own
+extent (1st–99th percentile of their particles): a part that flew far from the others, or a few
+particles that flew from their part, are left out of the framing with a note, so the rest does
+not shrink to dots.
+
+**Parts** (``groups``): by default the parts of kind other than ``rack`` and ``sediment`` are
+coloured by stress, a sediment is light-sand context (it has no rest shape; see
+``footprints.png``) and racks are hidden (the paper's invisible mechanism). ``groups=["body",
+"leftleg"]`` shows only those (coloured, whatever their kind); ``groups=["-sediment"]`` hides one
+from the default set.
+
+**Speed.** One off-screen plotter serves every view and frame (points and colours are updated in
+place, no multisampling: spheres are drawn as point sprites), pictures are read straight from the
+render window and saved with light PNG compression, and the sheet is tiled with NumPy.
+
+Frames asked for that the dump does not hold are replaced by the nearest dumped frame, and
+``render`` says so. Everything is written into a temporary directory first and moved in only
+when complete; on any error nothing of the render remains.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from rackstress.lib.jsonio import write_json
+from rackstress.stress import PartMotion, StressInputError, load_run
+from rackstress.stress.post import LABELS, compute_fields
+
+#: The iterations of the paper's Fig. 12.
+PAPER_FRAMES = (1320, 2600, 4720, 17480)
+DEFAULT_VIEWS = ("right", "front", "left")
+#: view → (direction from the focal point to the camera, view-up).
+VIEWS = {
+    "right": ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0)),
+    "left": ((0.0, 0.0, -1.0), (0.0, 1.0, 0.0)),
+    "front": ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0)),
+    "back": ((-1.0, 0.0, 0.0), (0.0, 1.0, 0.0)),
+    "top": ((0.0, 1.0, 0.0), (0.0, 0.0, -1.0)),
+    "iso": ((1.0, 0.8, 1.0), (0.0, 1.0, 0.0)),
+}
+GREY = np.array([0.6, 0.6, 0.6])
+RED = np.array([1.0, 0.0, 0.0])
+ALPHA0 = 0.15
+CONTEXT_RGB, CONTEXT_ALPHA = (0.78, 0.74, 0.66), 0.12
+WINDOW = (1024, 768)
+FIGURES = "figures"
+#: Height of the strip above the model (title, colour bar, legend, peak): a multiple of 16.
+HEADER_H = 112
+#: A part whose centre is further than this many times the coloured parts' first-frame size
+#: from the others' box has flown away; particles this many part sizes outside their part's
+#: 1–99 % box likewise.
+FLOWN = 2.0
+PNG_COMPRESS = 1
+
+
+@dataclass
+class RenderReport:
+    outdir: Path
+    files: list = field(default_factory=list)
+    notes: list = field(default_factory=list)
+    timings: dict = field(default_factory=dict)
+    vmax: float = 0.0
+    frames: list = field(default_factory=list)   # (requested, frame index, step)
+    peak: dict | None = None
+    parts: dict = field(default_factory=dict)
+
+
+# ----------------------------------------------------------------------------- colours
+def colour_table(cmap: str = "paper") -> np.ndarray:
+    """(256, 3) RGB in [0, 1] from zero to the top of the scale."""
+    s = np.linspace(0.0, 1.0, 256)
+    if cmap in (None, "paper"):
+        return GREY[None, :] * (1 - s[:, None]) + RED[None, :] * s[:, None]
+    import matplotlib
+
+    try:
+        cm = matplotlib.colormaps[cmap]
+    except KeyError:
+        raise StressInputError(f"unknown colour map '{cmap}'; use 'paper' (grey→red, Section "
+                               "5.2) or a matplotlib colour map name such as viridis, inferno, "
+                               "coolwarm") from None
+    return np.asarray(cm(s))[:, :3]
+
+
+def stress_rgba(values: np.ndarray, vmax: float, cmap: str = "paper") -> np.ndarray:
+    """Section 5.2's colouring: grey translucent at 0 → red opaque at vmax (uint8 RGBA)."""
+    s = np.clip(np.nan_to_num(np.asarray(values, float), nan=0.0) / vmax, 0.0, 1.0)
+    if cmap in (None, "paper"):
+        rgb = GREY[None, :] * (1.0 - s[:, None]) + RED[None, :] * s[:, None]
+    else:
+        rgb = colour_table(cmap)[np.round(s * 255).astype(int)]
+    alpha = ALPHA0 + (1.0 - ALPHA0) * s
+    return np.round(np.column_stack([rgb, alpha]) * 255).astype(np.uint8)
+
+
+def _pyvista():
+    if not os.environ.get("DISPLAY"):
+        # no X server: render through EGL, without VTK first trying (and warning about) X
+        os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+    import pyvista as pv
+
+    pv.OFF_SCREEN = True
+    return pv
+
+
+def _radius(o: np.ndarray) -> float:
+    """Half the typical nearest-neighbour distance (the particles of a part touch)."""
+    if len(o) < 2:
+        return 0.5
+    from scipy.spatial import cKDTree
+
+    d = cKDTree(o).query(o, k=2)[0][:, 1]
+    return 0.5 * float(np.median(d)) or 0.5
+
+
+def _font(size: int):
+    import matplotlib
+    from PIL import ImageFont
+
+    path = Path(matplotlib.get_data_path()) / "fonts" / "ttf" / "DejaVuSans.ttf"
+    return ImageFont.truetype(str(path), size)
+
+
+# ----------------------------------------------------------------------------- parts
+def select_parts(run, groups=None) -> tuple[list, list, list]:
+    """(coloured parts, context parts, hidden names) for ``groups`` (module docstring)."""
+    names = list(run.parts)
+    if not groups:
+        coloured = run.displayed()
+        context = run.context()
+    else:
+        tokens = [g.strip() for g in groups if g and g.strip()]
+        unknown = [t.lstrip("-") for t in tokens if t.lstrip("-") not in run.parts]
+        if unknown:
+            raise StressInputError(f"--groups: no part(s) {', '.join(unknown)} in {run.rundir}; "
+                                   f"parts: {', '.join(names)}")
+        shown = [t for t in tokens if not t.startswith("-")]
+        hidden = {t[1:] for t in tokens if t.startswith("-")}
+        if shown:
+            coloured = [run.parts[n] for n in names if n in shown and n not in hidden]
+            context = []
+        else:
+            coloured = [p for p in run.displayed() if p.name not in hidden]
+            context = [p for p in run.context() if p.name not in hidden]
+    if not coloured:
+        raise StressInputError(f"{run.rundir}: no part to colour (parts: {', '.join(names)}; "
+                               "every group is a rack or sediment, or --groups hid them all)")
+    shown = {p.name for p in coloured + context}
+    return coloured, context, [n for n in names if n not in shown]
+
+
+# ----------------------------------------------------------------------------- framing
+def _screen_axes(view: str):
+    direction, up = VIEWS[view]
+    d = np.asarray(direction, float) / np.linalg.norm(direction)
+    u = np.asarray(up, float) - np.dot(up, d) * d
+    u /= np.linalg.norm(u)
+    return np.cross(u, d), u, d     # screen right, screen up, towards the camera
+
+
+def _robust_box(q: np.ndarray):
+    if len(q) >= 20:
+        return np.quantile(q, 0.01, axis=0), np.quantile(q, 0.99, axis=0)
+    return q.min(axis=0), q.max(axis=0)
+
+
+def frame_boxes(run, positions: dict, parts, notes: list) -> dict:
+    """Per frame index: (lo, hi) of the box to frame — the parts' own extent, without a part
+    that flew away from the others or particles that flew away from their part (noted)."""
+    first = positions[min(positions)]
+    allq = np.concatenate([first[p.index] for p in parts])
+    size0 = float(np.max(allq.max(axis=0) - allq.min(axis=0))) or 1.0
+    flown_parts, flown_particles = {}, {}
+    out = {}
+    for k in sorted(positions):
+        p = positions[k]
+        boxes = {}
+        for part in parts:
+            q = p[part.index]
+            lo, hi = _robust_box(q)
+            ext = float(np.max(hi - lo)) or size0
+            far = np.any((q < lo - FLOWN * ext) | (q > hi + FLOWN * ext), axis=1)
+            if far.any() and part.name not in flown_particles:
+                j = int(np.flatnonzero(far)[0])
+                flown_particles[part.name] = (int(far.sum()), int(run.data.ids[part.index[j]]),
+                                              int(run.steps[k]))
+            boxes[part.name] = (lo, hi)
+        keep = list(boxes)
+        if len(boxes) > 1:
+            for name, (lo, hi) in boxes.items():
+                others = [boxes[n] for n in boxes if n != name]
+                olo = np.min([b[0] for b in others], axis=0)
+                ohi = np.max([b[1] for b in others], axis=0)
+                c = 0.5 * (lo + hi)
+                gap = float(np.linalg.norm(np.maximum(0, np.maximum(olo - c, c - ohi))))
+                if gap > FLOWN * size0:
+                    keep.remove(name)
+                    flown_parts.setdefault(name, (gap, int(run.steps[k])))
+            if not keep:
+                keep = list(boxes)
+        lo = np.min([boxes[n][0] for n in keep], axis=0)
+        hi = np.max([boxes[n][1] for n in keep], axis=0)
+        out[k] = (lo, hi)
+    for name, (gap, step) in flown_parts.items():
+        notes.append(f"warning: part {name} flew away ({gap:.3g} units from the other parts at "
+                     f"iteration {step}); the pictures frame the other parts")
+    for name, (count, pid, step) in flown_particles.items():
+        notes.append(f"warning: {count} particle(s) of {name} flew away from their part (e.g. "
+                     f"particle {pid} at iteration {step}); the pictures frame the part without "
+                     "them")
+    return out
+
+
+def framing(run, positions: dict, parts, view: str, aspect: float, notes: list):
+    """({frame: centre}, one half-height) fitting the parts' own extent in every frame."""
+    boxes = frame_boxes(run, positions, parts, notes)
+    right, up, _ = _screen_axes(view)
+    centre, h = {}, 0.0
+    for k, (lo, hi) in boxes.items():
+        centre[k] = 0.5 * (lo + hi)
+        half = 0.5 * (hi - lo)
+        h = max(h, float(np.abs(half) @ np.abs(up)), float(np.abs(half) @ np.abs(right)) / aspect)
+    radius = max(_radius(run.o[p.index]) for p in parts)
+    return centre, 1.1 * max(h + 2 * radius, 1e-6)
+
+
+# ----------------------------------------------------------------------------- the painter
+class Painter:
+    """One off-screen pyvista plotter for every view and frame; ``paint`` → RGB uint8 image."""
+
+    def __init__(self, run, coloured, context, vmax: float, cmap: str = "paper",
+                 window_size=WINDOW):
+        pv = _pyvista()
+        self.run, self.vmax, self.cmap = run, vmax, cmap
+        self.size = (int(window_size[0]), int(window_size[1]))
+        self.pl = pv.Plotter(off_screen=True, window_size=list(self.size))
+        self.pl.ren_win.SetMultiSamples(0)
+        self.pl.set_background("white")
+        # No depth peeling: with EGL/Mesa it drops sphere-imposter points altogether. Points are
+        # drawn back to front instead (``paint`` sorts them), which blends translucency right.
+        o = run.o
+        self.meshes, self.context = [], []
+        for part in coloured:
+            mesh = pv.PolyData(o[part.index].copy())
+            mesh.point_data["rgba"] = np.zeros((part.n, 4), dtype=np.uint8)
+            actor = self.pl.add_mesh(mesh, scalars="rgba", rgba=True, point_size=4,
+                                     render_points_as_spheres=True, show_scalar_bar=False)
+            self.meshes.append((part, actor.mapper.dataset, actor, _radius(o[part.index])))
+        for part in context:
+            mesh = pv.PolyData(o[part.index].copy())
+            actor = self.pl.add_mesh(mesh, color=CONTEXT_RGB, opacity=CONTEXT_ALPHA,
+                                     point_size=4, render_points_as_spheres=True)
+            self.context.append((part, actor.mapper.dataset, actor, _radius(o[part.index])))
+        self.pl.camera.parallel_projection = True
+
+    def project(self, q: np.ndarray, view: str, centre, half: float) -> np.ndarray:
+        """Pixel (x, y from the top) of points q in a picture of ``view`` (orthographic)."""
+        right, up, _ = _screen_axes(view)
+        w, h = self.size
+        s = 0.5 * h / half
+        d = np.atleast_2d(q) - centre
+        return np.column_stack([0.5 * w + (d @ right) * s, 0.5 * h - (d @ up) * s])
+
+    def paint(self, p: np.ndarray, values: np.ndarray, view: str, centre, half: float):
+        from vtk import vtkUnsignedCharArray
+        from vtk.util.numpy_support import vtk_to_numpy
+
+        right, up, direction = _screen_axes(view)
+        px_per_unit = self.size[1] / (2.0 * half)
+        for part, mesh, actor, r in self.meshes:
+            q = p[part.index]
+            order = np.argsort(q @ direction, kind="stable")   # farthest first
+            mesh.points = q[order]
+            mesh.point_data["rgba"] = stress_rgba(values[part.index][order], self.vmax, self.cmap)
+            actor.prop.point_size = max(2.0, 2.0 * r * px_per_unit)
+        for part, mesh, actor, r in self.context:
+            q = p[part.index]
+            mesh.points = q[np.argsort(q @ direction, kind="stable")]
+            actor.prop.point_size = max(2.0, 2.0 * r * px_per_unit)
+        cam = self.pl.camera
+        cam.focal_point = tuple(centre)
+        cam.position = tuple(np.asarray(centre) + direction * 10.0 * half)
+        cam.up = tuple(up)
+        cam.parallel_scale = half
+        self.pl.renderer.ResetCameraClippingRange()
+        rw = self.pl.ren_win
+        rw.Render()
+        buf = vtkUnsignedCharArray()
+        w, h = self.size
+        rw.GetPixelData(0, 0, w - 1, h - 1, 0, buf, 0)
+        return vtk_to_numpy(buf).reshape(h, w, 3)[::-1].copy()
+
+    def close(self):
+        self.pl.close()
+
+
+# ----------------------------------------------------------------------------- annotations
+def header_strip(width: int, title: str, label: str, vmax: float, cmap: str, legend: list,
+                 peak_line: str, height: int = HEADER_H) -> np.ndarray:
+    """The strip above a picture: title, legend and peak on the left, colour bar on the right."""
+    from PIL import Image, ImageDraw
+
+    img = Image.new("RGB", (width, height), "white")
+    dr = ImageDraw.Draw(img)
+    big, small = _font(17), _font(13)
+    left = int(0.5 * width) - 10
+    dr.text((10, 6), title, fill="black", font=big)
+    y = 32
+    for text, colour in legend:
+        dr.rectangle([10, y + 3, 22, y + 15], fill=colour, outline="black")
+        dr.text((28, y), text, fill="black", font=small)
+        y += 18
+    if peak_line:
+        dr.text((10, y), peak_line, fill=(150, 0, 0), font=small)
+    x0, x1 = int(0.55 * width), int(0.96 * width)
+    dr.text((x0, 6), label, fill="black", font=small)
+    table = (colour_table(cmap) * 255).round().astype(np.uint8)
+    cols = table[np.linspace(0, 255, x1 - x0).round().astype(int)]
+    bar = np.repeat(cols[None, :, :], 22, axis=0)
+    arr = np.asarray(img).copy()
+    arr[28:50, x0:x1] = bar
+    img = Image.fromarray(arr)
+    dr = ImageDraw.Draw(img)
+    dr.rectangle([x0, 28, x1 - 1, 49], outline="black")
+    for t in np.linspace(0.0, 1.0, 5):
+        x = x0 + t * (x1 - 1 - x0)
+        dr.line([x, 50, x, 55], fill="black")
+        s = f"{t * vmax:.3g}"
+        tw = dr.textlength(s, font=small)
+        dr.text((min(max(x - tw / 2, x0 - 10), x1 - tw), 57), s, fill="black", font=small)
+    del left
+    return np.asarray(img)
+
+
+def annotate(img: np.ndarray, step: int, view: str, labels: list, ring=None,
+             ring_text: str = "") -> np.ndarray:
+    """The iteration at the bottom (Fig. 12), the view, part names, a ring round the peak."""
+    from PIL import Image, ImageDraw
+
+    im = Image.fromarray(img)
+    dr = ImageDraw.Draw(im)
+    w, h = im.size
+    f16, f13 = _font(18), _font(13)
+    text = f"{step} iterations"
+    dr.text(((w - dr.textlength(text, font=f16)) / 2, h - 30), text, fill="black", font=f16)
+    dr.text((8, h - 24), f"{view} view", fill=(80, 80, 80), font=f13)
+    for name, (x, y) in labels:
+        if 0 <= x < w and 0 <= y < h:
+            dr.text((x + 4, max(0, y - 18)), name, fill=(40, 40, 160), font=f13)
+    if ring is not None:
+        x, y, r = ring
+        if -r <= x < w + r and -r <= y < h + r:
+            dr.ellipse([x - r, y - r, x + r, y + r], outline=(0, 0, 0), width=3)
+            dr.ellipse([x - r - 3, y - r - 3, x + r + 3, y + r + 3], outline=(255, 255, 255),
+                       width=2)
+            dr.text((x + r + 6, y - 8), ring_text, fill="black", font=f13)
+    return np.asarray(im)
+
+
+def _save_png(path: Path, img: np.ndarray) -> None:
+    from PIL import Image
+
+    Image.fromarray(img).save(path, compress_level=PNG_COMPRESS)
+
+
+# ----------------------------------------------------------------------------- choices
+def default_iterations(run, peak_iteration: int | None = None) -> list:
+    """The paper's Fig. 12 iterations if the run reaches them, else 4 spread over the run;
+    and the peak iteration."""
+    last = int(run.steps[-1])
+    if last >= PAPER_FRAMES[-1]:
+        its = set(PAPER_FRAMES)
+    else:
+        its = {int(round(last * q)) for q in (0.25, 0.5, 0.75, 1.0)}
+    if peak_iteration is not None:
+        its.add(int(peak_iteration))
+    return sorted(its)
+
+
+def find_peak(run, values: np.ndarray, parts) -> dict | None:
+    """Largest value over the whole run among ``parts``: value, frame, iteration, particle."""
+    best = None
+    for part in parts:
+        sub = values[:, part.index]
+        fin = np.isfinite(sub)
+        if not fin.any():
+            continue
+        flat = int(np.argmax(np.where(fin, sub, -np.inf)))
+        k, j = divmod(flat, sub.shape[1])
+        if best is None or sub[k, j] > best["value"]:
+            best = {"value": float(sub[k, j]), "frame": int(k), "iteration": int(run.steps[k]),
+                    "group": part.name, "row": int(part.index[j]), "index": int(j),
+                    "particle": int(run.data.ids[part.index[j]])}
+    return best
+
+
+def output_dir(rundir: Path, measure: str, out=None) -> Path:
+    """``out``, else ``RUNDIR/figures`` (paper measure) or ``RUNDIR/figures/MEASURE``."""
+    if out is not None:
+        return Path(out)
+    return rundir / FIGURES if measure == "paper" else rundir / FIGURES / measure
+
+
+# ----------------------------------------------------------------------------- render
+def render(rundir, frames=None, measure: str = "paper", views=DEFAULT_VIEWS, movie: bool = False,
+           vmax: float | None = None, allow_truncated: bool = False, window_size=WINDOW,
+           movie_max_frames: int = 400, fps: int = 10, plots: bool = True, groups=None,
+           out=None, cmap: str = "paper", movie_view: str | None = None,
+           progress: bool = False) -> RenderReport:
+    """Render the pictures, sheet, optional movie and plots of a run (module docstring).
+
+    Parameters
+    ----------
+    rundir : path
+        A run directory.
+    frames : list of int, optional
+        Iterations to picture (nearest dumped frame); default: spread over the run + the peak.
+    measure : str
+        ``paper``, ``accumulated``, ``strain``, ``d2min`` or ``virial``.
+    views : list of str
+        Any of ``right, left, front, back, top, iso``.
+    movie, movie_view : bool, str
+        Also write ``movie.mp4`` of ``movie_view`` (default: the first view).
+    vmax : float, optional
+        Top of the colour scale; default: the peak over the coloured parts.
+    groups : list of str, optional
+        Parts to show (``body``) or hide (``-sediment``).
+    out : path, optional
+        Output folder (default ``RUNDIR/figures`` or ``RUNDIR/figures/MEASURE``).
+    cmap : str
+        ``paper`` (grey→red) or a matplotlib colour map name.
+    progress : bool
+        A progress bar on a terminal.
+
+    Returns
+    -------
+    RenderReport
+
+    Example
+    -------
+    >>> rep = render("runs/plane-rack", views=["right", "top"], movie=True)   # doctest: +SKIP
+    >>> rep.peak["iteration"], rep.vmax                                       # doctest: +SKIP
+    """
+    from rackstress.lib.progress import progress_bar
+
+    t0 = time.perf_counter()
+    rundir = Path(rundir)
+    if measure not in LABELS:
+        raise StressInputError(f"unknown measure '{measure}'; measures: {', '.join(LABELS)}")
+    views = list(views)
+    if not views:
+        raise StressInputError("no view given; views: " + ", ".join(VIEWS))
+    movie_view = movie_view or views[0]
+    for v in [*views, movie_view]:
+        if v not in VIEWS:
+            raise StressInputError(f"unknown view '{v}'; views: {', '.join(VIEWS)}")
+    if vmax is not None and not vmax > 0:
+        raise StressInputError(f"--vmax must be positive, got {vmax}")
+    colour_table(cmap)                                         # fail early on a bad name
+    run = load_run(rundir, allow_truncated=allow_truncated)
+    outdir = output_dir(rundir, measure, out)
+    report = RenderReport(outdir)
+    if run.truncation:
+        report.notes.append(f"{run.truncation}; rendering the complete frames only")
+    coloured, context, hidden = select_parts(run, groups)
+    report.parts = {"coloured": [p.name for p in coloured], "context": [p.name for p in context],
+                    "hidden": hidden}
+    fields = compute_fields(run, cache=True)
+    if measure not in fields.values:
+        from rackstress.stress.measures import VirialStress
+
+        VirialStress(run)                 # raises the clear error: the dump has no virial
+    values = fields.values[measure]
+    label = fields.label(measure)
+    report.timings["load+measures_s"] = time.perf_counter() - t0
+    peak = find_peak(run, values, coloured)
+    report.peak = peak
+    if frames:
+        asked = list(frames)
+    else:
+        asked = default_iterations(run, peak["iteration"] if peak else None)
+    report.frames = run.nearest_frames(asked)
+    for req, k, step in report.frames:
+        if req != step:
+            report.notes.append(f"iteration {req} is not in the dump; using the nearest frame, "
+                                f"iteration {step}")
+    if vmax is not None:
+        report.vmax = float(vmax)
+        if peak and peak["value"] > vmax:
+            report.notes.append(f"the peak {peak['value']:.4g} is above --vmax {vmax:.4g}: "
+                                "it shows clipped at full red")
+    elif peak and peak["value"] > 0:
+        report.vmax = peak["value"]
+    else:
+        report.vmax = 1.0
+        report.notes.append("the measure is zero on every coloured particle; colour scale "
+                            "set to 0..1")
+
+    tmp = rundir / f".render.tmp{os.getpid()}"
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir()
+    try:
+        n_pics = len({k for _, k, _ in report.frames}) * len(views)
+        movie_ks = _movie_frames(run, movie_max_frames) if movie else []
+        with progress_bar(n_pics + len(movie_ks), progress, "pictures") as bar:
+            bar.unit = "picture"
+            t = time.perf_counter()
+            painter = Painter(run, coloured, context, report.vmax, cmap, window_size)
+            try:
+                pictures = _pictures(run, painter, values, report, views, label, cmap, coloured,
+                                     context, hidden, tmp, bar)
+                report.timings["pictures_s"] = time.perf_counter() - t
+                t = time.perf_counter()
+                _sheet(pictures, run, report, views, label, cmap, coloured, context, hidden,
+                       tmp / "sheet.png")
+                report.files.append("sheet.png")
+                report.timings["sheet_s"] = time.perf_counter() - t
+                if movie:
+                    t = time.perf_counter()
+                    _movie(run, painter, values, report, movie_view, label, cmap, coloured,
+                           context, hidden, movie_ks, fps, tmp / "movie.mp4", bar)
+                    report.files.append("movie.mp4")
+                    report.timings["movie_s"] = time.perf_counter() - t
+                    report.timings["movie_frames"] = len(movie_ks)
+            finally:
+                painter.close()
+        if plots:
+            t = time.perf_counter()
+            _plots(run, values, label, coloured, context, report, tmp)
+            report.timings["plots_s"] = time.perf_counter() - t
+        report.timings["total_s"] = time.perf_counter() - t0
+        manifest = {"rundir": str(rundir), "measure": measure, "label": label,
+                    "fit": fields.fit, "vmax": report.vmax, "cmap": cmap, "views": views,
+                    "movie_view": movie_view if movie else None,
+                    "peak": report.peak, "parts": report.parts,
+                    "frames": [{"requested": r, "frame": k, "iteration": s,
+                                "peak": bool(peak and k == peak["frame"])}
+                               for r, k, s in report.frames],
+                    "files": report.files, "notes": report.notes, "timings": report.timings}
+        write_json(tmp / "render.json", manifest)
+        report.files.append("render.json")
+        _move_in(tmp, outdir)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return report
+
+
+def render_default(rundir, progress: bool = False) -> RenderReport:
+    """What ``rackstress run`` renders at the end: the paper measure, default frames and views,
+    sheet and plots (no movie); the render's wall time goes into ``summary.json``."""
+    t0 = time.perf_counter()
+    rep = render(rundir, progress=progress)
+    record_render(Path(rundir), rep, time.perf_counter() - t0)
+    return rep
+
+
+def record_render(rundir: Path, rep: RenderReport, wall_s: float) -> None:
+    """``summary.json``'s ``render``: wall time, pictures, where (atomically)."""
+    path = rundir / "summary.json"
+    try:
+        summary = json.loads(path.read_text())
+    except (FileNotFoundError, json.JSONDecodeError):
+        return
+    summary["render"] = {"wall_s": wall_s, "outdir": str(rep.outdir.relative_to(rundir))
+                         if rep.outdir.is_relative_to(rundir) else str(rep.outdir),
+                         "files": len(rep.files),
+                         "pictures": sum(f.endswith(".png") for f in rep.files),
+                         "timings": rep.timings}
+    write_json(path, summary)
+
+
+def _move_in(tmp: Path, outdir: Path) -> None:
+    """Move every file of ``tmp`` into ``outdir`` (replacing same names only), then drop tmp."""
+    outdir.mkdir(parents=True, exist_ok=True)
+    for f in sorted(tmp.iterdir()):
+        if f.name != "render.json":
+            os.replace(f, outdir / f.name)
+    os.replace(tmp / "render.json", outdir / "render.json")   # the manifest last
+    shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _legend(run, coloured, context, hidden, cmap):
+    hot = tuple(int(round(255 * c)) for c in colour_table(cmap)[-1])
+    rows = [(f"coloured: {', '.join(p.name for p in coloured)}", hot)]
+    if context:
+        rows.append((f"context: {', '.join(p.name for p in context)}",
+                     tuple(int(255 * c) for c in CONTEXT_RGB)))
+    if hidden:
+        rows.append((f"hidden: {', '.join(hidden)}", (255, 255, 255)))
+    return rows
+
+
+def _peak_line(peak) -> str:
+    if not peak:
+        return ""
+    return (f"peak {peak['value']:.4g} at iteration {peak['iteration']}, "
+            f"particle {peak['particle']} ({peak['group']})")
+
+
+def _header(run, report, label, cmap, coloured, context, hidden, width) -> np.ndarray:
+    title = f"{run.scene.get('scene', run.rundir.name)}"
+    return header_strip(width, title, label, report.vmax, cmap,
+                        _legend(run, coloured, context, hidden, cmap), _peak_line(report.peak))
+
+
+def _one(run, painter, values, k, step, view, centre, half, coloured, header, report):
+    p = run.trajectory[k].data["positions64"]
+    img = painter.paint(p, values[k], view, centre, half)
+    labels = []
+    for part in coloured:
+        q = p[part.index]
+        top = q[np.argmax(q @ _screen_axes(view)[1])]
+        labels.append((part.name, tuple(painter.project(top, view, centre, half)[0])))
+    ring, ring_text = None, ""
+    pk = report.peak
+    if pk and k == pk["frame"]:
+        x, y = painter.project(p[pk["row"]], view, centre, half)[0]
+        r = max(10.0, 2.5 * _radius(run.o[run.parts[pk["group"]].index]) * painter.size[1]
+                / (2 * half))
+        ring, ring_text = (x, y, r), f"peak {pk['value']:.3g}"
+    img = annotate(img, step, view, labels, ring, ring_text)
+    return np.concatenate([header, img], axis=0)
+
+
+def _positions(run, ks) -> dict:
+    return {k: run.trajectory[k].data["positions64"].copy() for k in ks}
+
+
+def _pictures(run, painter, values, report, views, label, cmap, coloured, context, hidden,
+              out: Path, bar) -> dict:
+    """{(view, frame index): image} and the PNGs."""
+    images = {}
+    ks = sorted({k for _, k, _ in report.frames})
+    pos = _positions(run, ks)
+    aspect = painter.size[0] / painter.size[1]
+    header = _header(run, report, label, cmap, coloured, context, hidden, painter.size[0])
+    for view in views:
+        centre, half = framing(run, pos, coloured, view, aspect,
+                               report.notes if view == views[0] else [])
+        for k in ks:
+            step = int(run.steps[k])
+            img = _one(run, painter, values, k, step, view, centre[k], half, coloured, header,
+                       report)
+            images[(view, k)] = img
+            name = f"{view}_{step:06d}.png"
+            _save_png(out / name, img)
+            report.files.append(name)
+            bar.update(1)
+    return images
+
+
+def _sheet(images, run, report, views, label, cmap, coloured, context, hidden,
+           path: Path) -> None:
+    """Fig. 12-like sheet: rows = views, columns = frames (half size), one header on top."""
+    from PIL import Image, ImageDraw
+
+    ks = sorted({k for _, k, _ in report.frames})
+    hh = HEADER_H
+    first = images[(views[0], ks[0])]
+    h, w = first.shape[0] - hh, first.shape[1]
+    cw, ch = w // 2, h // 2
+    lab_w, top = 28, 24
+    W = lab_w + cw * len(ks)
+    cells = np.full((top + ch * len(views), W, 3), 255, np.uint8)
+    for r, view in enumerate(views):
+        for c, k in enumerate(ks):
+            img = images[(view, k)][hh:]
+            small = np.asarray(Image.fromarray(img).reduce(2))
+            y, x = top + r * ch, lab_w + c * cw
+            cells[y:y + small.shape[0], x:x + small.shape[1]] = small
+    im = Image.fromarray(cells)
+    dr = ImageDraw.Draw(im)
+    f = _font(14)
+    for c, k in enumerate(ks):
+        peak = report.peak is not None and k == report.peak["frame"]
+        text = f"iteration {int(run.steps[k])}" + ("  (peak)" if peak else "")
+        x = lab_w + c * cw + (cw - dr.textlength(text, font=f)) / 2
+        dr.text((x, 4), text, fill=(170, 0, 0) if peak else "black", font=f)
+        if peak:
+            dr.rectangle([lab_w + c * cw + 1, top, lab_w + (c + 1) * cw - 2,
+                          top + ch * len(views) - 2], outline=(170, 0, 0), width=2)
+    for r, view in enumerate(views):
+        txt = Image.new("RGB", (ch, lab_w), "white")
+        ImageDraw.Draw(txt).text((ch / 2 - 20, 6), view, fill="black", font=f)
+        cells_rot = np.asarray(txt.rotate(90, expand=True))
+        im.paste(Image.fromarray(cells_rot), (0, top + r * ch))
+    header = _header(run, report, label, cmap, coloured, context, hidden, W)
+    sheet = np.concatenate([header, np.asarray(im)], axis=0)
+    _save_png(path, sheet)
+
+
+def _movie_frames(run, max_frames: int) -> list:
+    n = run.index.n_frames
+    stride = max(1, int(np.ceil(n / max_frames)))
+    ks = list(range(0, n, stride))
+    if ks[-1] != n - 1:
+        ks.append(n - 1)
+    return ks
+
+
+def _movie(run, painter, values, report, view, label, cmap, coloured, context, hidden, ks,
+           fps, path: Path, bar) -> int:
+    import imageio_ffmpeg
+
+    aspect = painter.size[0] / painter.size[1]
+    pos = _positions(run, ks)
+    centre, half = framing(run, pos, coloured, view, aspect, [])
+    header = _header(run, report, label, cmap, coloured, context, hidden, painter.size[0])
+    w, h = painter.size[0] // 16 * 16, (painter.size[1] + HEADER_H) // 16 * 16
+    writer = imageio_ffmpeg.write_frames(str(path), (w, h), fps=fps, codec="libx264",
+                                         pix_fmt_in="rgb24", pix_fmt_out="yuv420p",
+                                         macro_block_size=16, quality=7,
+                                         ffmpeg_log_level="error")
+    writer.send(None)
+    try:
+        for k in ks:
+            img = _one(run, painter, values, k, int(run.steps[k]), view, centre[k], half,
+                       coloured, header, report)
+            writer.send(np.ascontiguousarray(img[:h, :w, :3]).tobytes())
+            bar.update(1)
+    finally:
+        writer.close()
+    return len(ks)
+
+
+def _plots(run, values, label, coloured, context, report, out: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    steps = run.steps
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for k, part in enumerate(coloured):
+        v = values[:, part.index]
+        colour = f"C{k % 10}"
+        with np.errstate(all="ignore"):
+            fin = np.isfinite(v)
+            vmax = np.where(fin.any(axis=1), np.max(np.where(fin, v, -np.inf), axis=1), np.nan)
+            vmean = np.where(fin.any(axis=1), np.nansum(v, axis=1) / np.maximum(fin.sum(axis=1),
+                                                                                 1), np.nan)
+        ax.plot(steps, vmax, color=colour, label=f"{part.name} max")
+        ax.plot(steps, vmean, color=colour, ls="--", label=f"{part.name} mean")
+    pk = report.peak
+    if pk:
+        ax.plot([pk["iteration"]], [pk["value"]], "k*", ms=12,
+                label=f"peak {pk['value']:.3g} ({pk['group']}, it. {pk['iteration']})")
+    ax.set_xlabel("iteration")
+    ax.set_ylabel(label.replace(" [", "\n["))
+    ax.set_title(f"{run.scene.get('scene', '')}: stress per part over time")
+    ax.legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    fig.savefig(out / "stress_over_time.png", dpi=110)
+    plt.close(fig)
+    report.files.append("stress_over_time.png")
+
+    motion = PartMotion(run).run()
+    names = motion.results.names
+    fig, (top, side) = plt.subplots(1, 2, figsize=(10, 4))
+    for k, part in enumerate(coloured):
+        c = motion.results.com[:, names.index(part.name)]
+        for ax, (a, b) in ((top, (0, 2)), (side, (0, 1))):
+            ax.plot(c[:, a], c[:, b], color=f"C{k % 10}", label=part.name)
+            ax.plot(c[0, a], c[0, b], "o", color=f"C{k % 10}", ms=4)
+            ax.plot(c[-1, a], c[-1, b], "s", color=f"C{k % 10}", ms=4)
+    top.set(xlabel="x", ylabel="z", title="centre of mass, top view (○ start, □ end)")
+    side.set(xlabel="x", ylabel="y", title="centre of mass, side view")
+    for ax in (top, side):
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.grid(alpha=0.3)
+    top.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "com_path.png", dpi=110)
+    plt.close(fig)
+    report.files.append("com_path.png")
+
+    if not context:
+        report.notes.append("no sediment group shown: footprints plot skipped")
+        return
+    fig, axes = plt.subplots(1, len(context), figsize=(8 * len(context), 4), squeeze=False)
+    for ax, part in zip(axes[0], context):
+        dy = motion.results.footprints[part.name]["min_dy"]
+        o = run.o[part.index]
+        lim = float(np.abs(dy).max()) or 1.0
+        sc = ax.scatter(o[:, 0], o[:, 2], c=dy, cmap="RdBu", vmin=-lim, vmax=lim, s=6,
+                        marker="s")
+        com = motion.results.com[:, [names.index(p.name) for p in coloured]]
+        for j in range(com.shape[1]):
+            ax.plot(com[:, j, 0], com[:, j, 2], lw=0.8, color="k", alpha=0.5)
+        # frame the walk, not the whole sediment: the displaced particles and the path, padded
+        moved = np.abs(dy) > 0.01 * lim
+        pts = np.concatenate([o[moved][:, [0, 2]], com[:, :, [0, 2]].reshape(-1, 2)])
+        pts = pts[np.isfinite(pts).all(axis=1)]
+        if len(pts):
+            lo, hi = pts.min(axis=0), pts.max(axis=0)
+            pad = 0.15 * float((hi - lo).max()) + 4.0
+            ax.set_xlim(lo[0] - pad, hi[0] + pad)
+            ax.set_ylim(lo[1] - pad, hi[1] + pad)
+        ax.set_aspect("equal")
+        ax.set(xlabel="x", ylabel="z",
+               title=f"footprints in {part.name}: deepest vertical displacement "
+                     f"(iterations {steps[0]}–{steps[-1]})")
+        fig.colorbar(sc, ax=ax, label="vertical displacement [length units]")
+    fig.tight_layout()
+    fig.savefig(out / "footprints.png", dpi=110)
+    plt.close(fig)
+    report.files.append("footprints.png")
