@@ -120,8 +120,10 @@ def write_vtk(run, fields, outdir, progress: bool = False) -> Path:
     >>> r = pv.get_reader("runs/plane-rack/vtk/run.pvd"); r.set_active_time_value(36)
     >>> r.read()[0].point_data["paper"].max()                             # doctest: +SKIP
     """
-    import vtk
-    from vtk.util.numpy_support import numpy_to_vtk
+    from vtkmodules.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray
+    from vtkmodules.vtkCommonCore import vtkPoints, vtkStringArray
+    from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData
+    from vtkmodules.vtkIOXML import vtkXMLPolyDataWriter
 
     from rackstress.lib.progress import progress_bar
 
@@ -141,12 +143,10 @@ def write_vtk(run, fields, outdir, progress: bool = False) -> Path:
         v.SetName(name)
         return v
 
-    poly = vtk.vtkPolyData()
+    poly = vtkPolyData()
     n = run.n_atoms
-    verts = vtk.vtkCellArray()
+    verts = vtkCellArray()
     conn = np.column_stack([np.ones(n, dtype=np.int64), np.arange(n, dtype=np.int64)]).ravel()
-    from vtk.util.numpy_support import numpy_to_vtkIdTypeArray
-
     verts.SetCells(n, numpy_to_vtkIdTypeArray(conn, deep=True))
     poly.SetVerts(verts)
     pd = poly.GetPointData()
@@ -155,19 +155,19 @@ def write_vtk(run, fields, outdir, progress: bool = False) -> Path:
               arr(run.data.mols.astype(np.int32), "mol"), arr(r, "radius"),
               arr(o, "original")):
         pd.AddArray(a)
-    sname = vtk.vtkStringArray()
+    sname = vtkStringArray()
     sname.SetName("group_name")
     sname.SetNumberOfValues(n)
     for k, s in enumerate(name_of):
         sname.SetValue(k, s)
     pd.AddArray(sname)
     fd = poly.GetFieldData()
-    gnames = vtk.vtkStringArray()
+    gnames = vtkStringArray()
     gnames.SetName("group_names")
     for s in names:
         gnames.InsertNextValue(s)
     fd.AddArray(gnames)
-    writer = vtk.vtkXMLPolyDataWriter()
+    writer = vtkXMLPolyDataWriter()
     writer.SetDataModeToBinary()
     writer.SetCompressorTypeToZLib()
     entries = []
@@ -176,7 +176,7 @@ def write_vtk(run, fields, outdir, progress: bool = False) -> Path:
             for k, step in enumerate(fields.steps):
                 ts = run.trajectory[k]
                 p = positions(ts)
-                pts = vtk.vtkPoints()
+                pts = vtkPoints()
                 pts.SetData(arr(p, "points"))
                 poly.SetPoints(pts)
                 disp = p - o

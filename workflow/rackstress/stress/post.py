@@ -205,7 +205,7 @@ def overall_peak(run, group_peaks: dict, measure: str = "paper") -> dict | None:
 
 # ----------------------------------------------------------------------------- the step
 def postprocess(rundir, vtk: bool = True, dump: bool = False, progress: bool = False,
-                run=None, out=None, log=None) -> dict:
+                run=None, out=None, log=None, allow_truncated: bool = False) -> dict:
     """Compute the measures once, write the peaks into ``summary.json`` and the files.
 
     Parameters
@@ -235,7 +235,7 @@ def postprocess(rundir, vtk: bool = True, dump: bool = False, progress: bool = F
 
     t0 = time.perf_counter()
     if run is None:
-        run = load_run(rundir)
+        run = load_run(rundir, allow_truncated=allow_truncated)
     out = Path(out) if out is not None else Path(run.rundir)
     out.mkdir(parents=True, exist_ok=True)
     fields = compute_fields(run, progress=progress)
