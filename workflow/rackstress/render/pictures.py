@@ -369,8 +369,8 @@ def _points_poly(q: np.ndarray):
     pts = vtkPoints()
     pts.SetData(numpy_to_vtk(np.ascontiguousarray(q, dtype=np.float64), deep=True))
     verts = vtkCellArray()
-    conn = np.column_stack([np.ones(n, np.int64), np.arange(n, dtype=np.int64)]).ravel()
-    verts.SetCells(n, numpy_to_vtkIdTypeArray(conn, deep=True))
+    verts.SetData(numpy_to_vtkIdTypeArray(np.arange(n + 1, dtype=np.int64), deep=True),
+                  numpy_to_vtkIdTypeArray(np.arange(n, dtype=np.int64), deep=True))
     poly = vtkPolyData()
     poly.SetPoints(pts)
     poly.SetVerts(verts)

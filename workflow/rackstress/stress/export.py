@@ -146,8 +146,8 @@ def write_vtk(run, fields, outdir, progress: bool = False) -> Path:
     poly = vtkPolyData()
     n = run.n_atoms
     verts = vtkCellArray()
-    conn = np.column_stack([np.ones(n, dtype=np.int64), np.arange(n, dtype=np.int64)]).ravel()
-    verts.SetCells(n, numpy_to_vtkIdTypeArray(conn, deep=True))
+    verts.SetData(numpy_to_vtkIdTypeArray(np.arange(n + 1, dtype=np.int64), deep=True),
+                  numpy_to_vtkIdTypeArray(np.arange(n, dtype=np.int64), deep=True))
     poly.SetVerts(verts)
     pd = poly.GetPointData()
     for a in (arr(run.data.ids.astype(np.int64), "id"), arr(gid, "group_id"),
