@@ -333,3 +333,25 @@ def test_run_reports_one_peak_everywhere(plane_run):
     # the stability margin of Eq. 5 (plane-rack is predicted stable at t = 0.01)
     html = (rundir / "report.html").read_text()
     assert "× margin" in html and "within the limit" in html
+
+
+@pytest.mark.lammps
+def test_batch_jobs_get_peaks_and_report_shows_them(tmp_path):
+    sw = tmp_path / "s.toml"
+    sw.write_text('scene = "plane-rack"\nsteps = 60\ndump_every = 3\n'
+                  '[grid]\nplane_bind = [50.0, 100.0]\n')
+    res = CliRunner().invoke(main, ["batch", str(sw), "--out", str(tmp_path / "b")])
+    assert res.exit_code == 0, res.output
+    index = json.loads((tmp_path / "b" / "batch.json").read_text())
+    res = CliRunner().invoke(main, ["batch", "--report", str(tmp_path / "b"), "--figure",
+                                    "groups.plane.peak.paper", "--against", "plane_bind"])
+    assert res.exit_code == 0, res.output
+    lines = res.output.splitlines()
+    assert lines[0].split() == ["name", "plane_bind", "status", "groups.plane.peak.paper.value",
+                                "iteration", "particle", "wall_s"]
+    for j in index["jobs"]:
+        s = json.loads((tmp_path / "b" / j["dir"] / "summary.json").read_text())
+        pk = s["groups"]["plane"]["peak"]["paper"]
+        assert j["figures"]["groups.plane.peak.paper.value"] == pk["value"]
+        row = next(ln.split() for ln in lines[1:] if ln.startswith(j["name"]))
+        assert row[3:6] == [f"{pk['value']:.6g}", str(pk["iteration"]), str(pk["particle"])]

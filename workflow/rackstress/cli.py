@@ -169,6 +169,14 @@ def _post_run(out, progress):
         click.echo(line)
 
 
+def _post_job(rundir):
+    """A batch job's post-processing: the stress peaks into its summary.json (no VTK: run
+    'rackstress stress BATCHDIR/JOB' for the files)."""
+    from rackstress.stress.post import postprocess
+
+    postprocess(rundir, vtk=False, dump=False)
+
+
 def _csv(text):
     return [t.strip() for t in text.split(",") if t.strip()] if text else None
 
@@ -339,7 +347,8 @@ def batch(sweep, out, ranks_per_job, retry_failed, manager, report_dir, figure, 
         if sweep is None:
             raise click.UsageError("give a SWEEP file, or --report BATCHDIR")
         index = batch_mod.run_batch(sweep, out, ranks_per_job, retry_failed, manager,
-                                    log=lambda m: click.echo(m) if rank() == 0 else None)
+                                    log=lambda m: click.echo(m) if rank() == 0 else None,
+                                    post=_post_job)
     except RackstressError as err:
         _fail(err, EXIT_INPUT)
     if rank() == 0:
