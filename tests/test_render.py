@@ -225,3 +225,58 @@ def test_magpod_pictures_and_stress_where_section_5_2_says(magpod_run):
     print(f"top decile in the zone: {frac:.2f}, random: {base:.2f}")
     assert frac >= 0.7 and frac >= 2.5 * base, (frac, base)
     assert rep.vmax > 0
+
+
+# ----------------------------------------------------------------------------- steering
+def test_groups_legend_out_movie_view_cmap_and_no_overlap(plane_run, tmp_path):
+    rundir = tmp_path / "r"
+    shutil.copytree(plane_run, rundir, ignore=shutil.ignore_patterns("figures"))
+    render(rundir, views=["right"], frames=[200], plots=False)
+    before = sorted(p.name for p in (rundir / "figures").iterdir())
+    # another view into the same folder adds, deletes nothing
+    render(rundir, views=["top"], frames=[200], plots=False)
+    after = sorted(p.name for p in (rundir / "figures").iterdir())
+    assert set(before) <= set(after) and "top_000200.png" in after
+    # --out, --groups (a rack shown, coloured), --cmap, a movie of the second view
+    out = tmp_path / "mine"
+    res = CliRunner().invoke(main, ["render", str(rundir), "--out", str(out), "--groups",
+                                    "plane,planerack", "--views", "right,top", "--frames", "200",
+                                    "--cmap", "viridis", "--movie", "--movie-view", "top"])
+    assert res.exit_code == 0, res.output
+    manifest = json.loads((out / "render.json").read_text())
+    assert manifest["parts"] == {"coloured": ["plane", "planerack"], "context": [],
+                                 "hidden": []}
+    assert manifest["movie_view"] == "top" and manifest["cmap"] == "viridis"
+    assert (out / "movie.mp4").stat().st_size > 1000
+    assert sorted(p.name for p in (rundir / "figures").iterdir()) == after   # untouched
+    img = np.asarray(mpimg.imread(out / "right_000200.png"))[..., :3]
+    # viridis: the top of the scale is yellow, the bottom purple; no grey→red in the bar
+    bar = img[35:45, int(0.56 * img.shape[1]):int(0.95 * img.shape[1])]
+    assert bar[:, -1].mean(axis=0)[2] < 0.3 and bar[:, 0].mean(axis=0)[2] > 0.25
+    # the strip above the model holds title, legend and colour bar; the model stays below it:
+    # the same strip on every picture, and nothing of the model in it
+    other = np.asarray(mpimg.imread(out / "top_000200.png"))[..., :3]
+    np.testing.assert_array_equal(img[:HEADER_H], other[:HEADER_H])
+    # hiding: the default set minus the plane leaves nothing to colour -> a clear error
+    res = CliRunner().invoke(main, ["render", str(rundir), "--groups", "-plane"])
+    assert res.exit_code == 2 and "no part to colour" in res.output
+    res = CliRunner().invoke(main, ["render", str(rundir), "--groups", "wing"])
+    assert res.exit_code == 2 and "no part(s) wing" in res.output and "plane" in res.output
+    res = CliRunner().invoke(main, ["render", str(rundir), "--cmap", "nope"])
+    assert res.exit_code == 2 and "unknown colour map 'nope'" in res.output
+
+
+def test_a_part_that_flew_away_is_framed_out_with_a_warning(tmp_path):
+    from test_stress import BLOCK, write_run
+
+    d = tmp_path / "run"
+    far = BLOCK + [40.0, 0.0, 0.0]
+    frames = [(0, np.concatenate([BLOCK, far])),
+              (10, np.concatenate([BLOCK, far + [5000.0, 0.0, 0.0]]))]
+    write_run(d, [("stay", "part", BLOCK), ("gone", "part", far)], frames)
+    rep = render(d, views=["right"], frames=[10], plots=False)
+    assert any("part gone flew away" in n for n in rep.notes), rep.notes
+    img = np.asarray(mpimg.imread(d / "figures" / "right_000010.png"))[HEADER_H:-40, :, :3]
+    drawn = np.argwhere(img.min(axis=2) < 0.9)          # (the iteration line is below)
+    # the remaining block fills the picture instead of shrinking to a dot
+    assert np.ptp(drawn[:, 1]) > 0.3 * img.shape[1]

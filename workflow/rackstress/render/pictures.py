@@ -211,8 +211,7 @@ def _robust_box(q: np.ndarray):
 def frame_boxes(run, positions: dict, parts, notes: list) -> dict:
     """Per frame index: (lo, hi) of the box to frame — the parts' own extent, without a part
     that flew away from the others or particles that flew away from their part (noted)."""
-    first = positions[min(positions)]
-    allq = np.concatenate([first[p.index] for p in parts])
+    allq = np.concatenate([run.o[p.index] for p in parts])      # the rest shape's size
     size0 = float(np.max(allq.max(axis=0) - allq.min(axis=0))) or 1.0
     flown_parts, flown_particles = {}, {}
     out = {}

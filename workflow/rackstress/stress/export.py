@@ -173,6 +173,7 @@ def write_vtk(run, fields, outdir, progress: bool = False) -> Path:
     entries = []
     try:
         with progress_bar(len(fields.steps), progress, "VTK frames") as bar:
+            bar.unit = "frame"
             for k, step in enumerate(fields.steps):
                 ts = run.trajectory[k]
                 p = positions(ts)
@@ -241,6 +242,7 @@ def write_stress_dump(run, fields, path, progress: bool = False) -> Path:
     del nfloat
     try:
         with open(tmp, "w") as fh, progress_bar(len(fields.steps), progress, "stress dump") as bar:
+            bar.unit = "frame"
             for k, step in enumerate(fields.steps):
                 ts = run.trajectory[k]
                 p = positions(ts)
