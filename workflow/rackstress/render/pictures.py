@@ -144,6 +144,14 @@ def _offscreen():
         os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 
 
+def _part_radius(run, part) -> float:
+    """The drawn radius of a part's particles, computed once per run."""
+    cache = run.__dict__.setdefault("_drawn_radius", {})
+    if part.name not in cache:
+        cache[part.name] = _radius(run.o[part.index])
+    return cache[part.name]
+
+
 def _radius(o: np.ndarray) -> float:
     """Half the typical nearest-neighbour distance (the particles of a part touch)."""
     if len(o) < 2:
@@ -263,7 +271,7 @@ def framing(run, positions: dict, parts, view: str, aspect: float, notes: list):
         centre[k] = 0.5 * (lo + hi)
         half = 0.5 * (hi - lo)
         h = max(h, float(np.abs(half) @ np.abs(up)), float(np.abs(half) @ np.abs(right)) / aspect)
-    radius = max(_radius(run.o[p.index]) for p in parts)
+    radius = max(_part_radius(run, p) for p in parts)
     return centre, 1.1 * max(h + 2 * radius, 1e-6)
 
 
@@ -314,7 +322,7 @@ class Painter:
                     prop.SetColor(*CONTEXT_RGB)
                     prop.SetOpacity(CONTEXT_ALPHA)
                 self.ren.AddActor(actor)
-                group.append((part, poly, actor, _radius(o[part.index])))
+                group.append((part, poly, actor, _part_radius(run, part)))
         self.ren.GetActiveCamera().ParallelProjectionOn()
 
     def project(self, q: np.ndarray, view: str, centre, half: float) -> np.ndarray:
@@ -720,8 +728,11 @@ def render_default(rundir, progress: bool = False) -> RenderReport:
 
     t0 = time.perf_counter()
     rep = render(rundir, progress=progress)
-    record_render(Path(rundir), rep, time.perf_counter() - t0)
+    wall = time.perf_counter() - t0
+    t = time.perf_counter()
     rep.report = write_report(rundir)
+    rep.timings["report_s"] = time.perf_counter() - t
+    record_render(Path(rundir), rep, wall)
     return rep
 
 
@@ -786,7 +797,7 @@ def _one(run, painter, values, k, step, view, centre, half, coloured, header, re
     pk = report.peak
     if pk and k == pk["frame"]:
         x, y = painter.project(p[pk["row"]], view, centre, half)[0]
-        r = max(10.0, 2.5 * _radius(run.o[run.parts[pk["group"]].index]) * painter.size[1]
+        r = max(10.0, 2.5 * _part_radius(run, run.parts[pk["group"]]) * painter.size[1]
                 / (2 * half))
         ring, ring_text = (x, y, r), f"peak {pk['value']:.3g}"
     img = annotate(img, step, view, labels, ring, ring_text)

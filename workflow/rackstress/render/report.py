@@ -22,6 +22,7 @@ import time
 from pathlib import Path
 
 REPORT = "report.html"
+STABILITY = "stability.json"
 FIGURES = "figures"
 PLOTS = (("stress_over_time.png", "The measure per part over time (max solid, mean dashed; "
                                   "★ the peak)"),
@@ -67,6 +68,14 @@ def stability_margin(rundir: Path, scene: dict, summary: dict) -> dict | None:
     rec = summary.get("stability")
     if isinstance(rec, dict) and rec.get("t_max"):
         return rec
+    cache = rundir / STABILITY
+    try:
+        rec = json.loads(cache.read_text())
+        if rec.get("scene") == scene.get("scene") and rec.get("params") == scene.get("params") \
+                and rec.get("dt") == scene.get("dt"):
+            return rec
+    except (OSError, json.JSONDecodeError, AttributeError):
+        pass
     try:
         from rackstress import scenes
         from rackstress.model.stability import describe_limit, predict
@@ -79,10 +88,17 @@ def stability_margin(rundir: Path, scene: dict, summary: dict) -> dict | None:
         if scene.get("dt"):
             sc.dt = float(scene["dt"])
         pred = predict(sc)
-        return {"t_max": pred["t_max"], "dt": sc.dt, "ratio": pred["ratio"],
-                "set_by": describe_limit(pred)}
+        rec = {"t_max": pred["t_max"], "dt": sc.dt, "ratio": pred["ratio"],
+               "set_by": describe_limit(pred), "scene": name, "params": params}
     except Exception:  # noqa: BLE001 - the report still shows everything else
         return None
+    try:
+        from rackstress.lib.jsonio import write_json
+
+        write_json(cache, rec)              # computed once per run directory
+    except OSError:
+        pass
+    return rec
 
 
 def write_report(rundir, stability: bool = True) -> Path:
