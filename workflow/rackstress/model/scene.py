@@ -6,7 +6,6 @@ Engines (reference, LAMMPS) take a :class:`Scene` and nothing else.
 """
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 from typing import Mapping
 
@@ -63,10 +62,9 @@ class Scene:
     report: object = None
 
     def __post_init__(self):
-        # One operator object per place in the sequences: engines key their pair lists by
-        # operator, and a user may well put the same Dampen(1) object on several groups.
-        self.operators = {t: [dataclasses.replace(op) if dataclasses.is_dataclass(op) else op
-                              for op in seq] for t, seq in self.operators.items()}
+        # engines key what they prepare by an operator's place (group, index in its sequence),
+        # so the same Dampen(1) object may well sit on several groups
+        self.operators = {t: list(seq) for t, seq in self.operators.items()}
         self.validate()
         starts = np.cumsum([0] + [g.n for g in self.groups.values()])
         self._offset = {name: int(s) for name, s in zip(self.groups, starts[:-1])}

@@ -64,7 +64,7 @@ import numpy as np
 from rackstress.model import operators as ops_mod
 from rackstress.lib.toml import tomllib
 from rackstress.errors import SceneError
-from rackstress.model.operators import (Attract, Bind, Collide, Const, Contact, Dampen, Force, Matched, PhaseIn,
+from rackstress.model.operators import (norm2_below, Attract, Bind, Collide, Const, Contact, Dampen, Force, Matched, PhaseIn,
                         Within)
 from rackstress.model.particles import RACK_OFFSET, RACK_RADIUS, Group, lattice, rack
 from rackstress.model.scene import Phase, Scene
@@ -530,7 +530,7 @@ def _operator(c: _Ctx, kind: str, t: dict, on: str, groups: dict, when: tuple, p
                 raise c.error("needs exactly one of norm2_lt = value or ids = [...]", "where")
             if "norm2_lt" in w:
                 lim = _number(wc, w["norm2_lt"], "norm2_lt")
-                mask = (groups[on].o ** 2).sum(axis=1) < lim
+                mask = norm2_below(groups[on].o, lim)
             else:
                 ids = w["ids"]
                 if not isinstance(ids, list):
