@@ -243,6 +243,9 @@ def test_groups_legend_out_movie_view_cmap_and_no_overlap(plane_run, tmp_path):
                                     "plane,planerack", "--views", "right,top", "--frames", "200",
                                     "--cmap", "viridis", "--movie", "--movie-view", "top"])
     assert res.exit_code == 0, res.output
+    # not a terminal: no progress bar, one line of record
+    assert "%|" not in res.output and "\r" not in res.output
+    assert sum(ln.startswith("rendered in ") for ln in res.output.splitlines()) == 1
     manifest = json.loads((out / "render.json").read_text())
     assert manifest["parts"] == {"coloured": ["plane", "planerack"], "context": [],
                                  "hidden": []}
