@@ -554,7 +554,7 @@ def render(rundir, frames=None, measure: str = "paper", views=DEFAULT_VIEWS, mov
     """
     from rackstress.lib.progress import progress_bar
 
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     rundir = Path(rundir)
     if measure not in LABELS:
         raise StressInputError(f"unknown measure '{measure}'; measures: {', '.join(LABELS)}")
@@ -625,6 +625,7 @@ def render(rundir, frames=None, measure: str = "paper", views=DEFAULT_VIEWS, mov
                 pictures = _pictures(run, painter, values, report, views, label, cmap, coloured,
                                      context, hidden, tmp, bar)
                 report.timings["pictures_s"] = time.perf_counter() - t
+                report.timings["pictures_cpu_s"] = time.process_time() - c0
                 t = time.perf_counter()
                 _sheet(pictures, run, report, views, label, cmap, coloured, context, hidden,
                        tmp / "sheet.png")
@@ -647,6 +648,7 @@ def render(rundir, frames=None, measure: str = "paper", views=DEFAULT_VIEWS, mov
             report.timings["plots_s"] = wall
             report.timings["plots_wait_s"] = time.perf_counter() - t
         report.timings["total_s"] = time.perf_counter() - t0
+        report.timings["cpu_s"] = time.process_time() - c0
         manifest = {"rundir": str(rundir), "measure": measure, "label": label,
                     "fit": fields.fit, "vmax": report.vmax, "cmap": cmap, "views": views,
                     "movie_view": movie_view if movie else None,
