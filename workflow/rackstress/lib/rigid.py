@@ -48,6 +48,20 @@ def best_fit(o: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return R, cp - co @ R.T
 
 
+def kabsch(o: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(R, t) of :func:`best_fit` by the SVD of the 3 × 3 covariance directly (Kabsch 1976,
+    reflection excluded): the same minimizer without scipy's per-call overhead, for the robust
+    fit's repeated fits over every part and frame of a run."""
+    co, cp = o.mean(axis=0), p.mean(axis=0)
+    if len(o) < 2:
+        return np.eye(3), cp - co
+    H = (o - co).T @ (p - cp)
+    U, _, Vt = np.linalg.svd(H)
+    d = np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0
+    R = Vt.T @ np.diag([1.0, 1.0, d]) @ U.T
+    return R, cp - co @ R.T
+
+
 def rigid_fit(o: np.ndarray, p: np.ndarray):
     """(R, t, distances) of the plain Kabsch fit."""
     R, t = best_fit(o, p)
@@ -74,7 +88,7 @@ def robust_fit(o: np.ndarray, p: np.ndarray, c: float = ROBUST_C, floor: float =
     size = float(np.sqrt(((o - o.mean(axis=0)) ** 2).sum(axis=1).mean())) or 1.0
     tol = floor * size
     for _ in range(max_iter):
-        R, t = best_fit(o[inl], p[inl])
+        R, t = kabsch(o[inl], p[inl])
         d = np.linalg.norm(p - (o @ R.T + t), axis=1)
         new = d <= max(c * float(np.median(d)), tol)
         if np.array_equal(new, inl) or new.sum() < 3:

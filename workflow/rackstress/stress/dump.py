@@ -33,6 +33,8 @@ from rackstress.errors import RackstressError
 
 #: Coordinate columns accepted, in order of preference (runs use ``boundary m m m``: x = xu).
 COORD_COLUMNS = (("x", "y", "z"), ("xu", "yu", "zu"))
+#: A dump whose parsed frames take at most this many bytes is kept in memory once read.
+CACHE_BYTES = 256 * 2 ** 20
 #: Columns every dump must hold besides coordinates.
 REQUIRED = ("id", "type")
 
@@ -268,13 +270,23 @@ class RackDumpReader(base.ReaderBase):
             raise EOFError
         return self._read_frame(nxt)
 
+    def _table(self, frame) -> np.ndarray:
+        """The frame's atom lines, sorted by id; kept in memory when the whole dump fits
+        :data:`CACHE_BYTES` (the post-processing reads every frame several times)."""
+        cache = self.__dict__.setdefault("_tables", {})
+        if frame in cache:
+            return cache[frame]
+        table = read_table(self.index, frame)
+        order = np.argsort(table[:, self._col["id"]], kind="stable")
+        table = table[order]
+        if table.nbytes * self.index.n_frames <= CACHE_BYTES:
+            cache[frame] = table
+        return table
+
     def _read_frame(self, frame):
         ts = self.ts
         idx = self.index
-        table = read_table(idx, frame)
-        ids = table[:, self._col["id"]]
-        order = np.argsort(ids, kind="stable")
-        table = table[order]
+        table = self._table(frame)
         pos = np.ascontiguousarray(table[:, [self._col[c] for c in self._coords]])
         ts.frame = frame
         ts.data["positions64"] = pos

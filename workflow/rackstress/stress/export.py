@@ -9,7 +9,7 @@
     ``displacement`` (p − o) and its magnitude ``displacement_magnitude``, ``velocity`` where the
     dump holds vx vy vz, and every measure by its name (``paper``, ``accumulated``, ``strain``,
     ``d2min``, ``virial`` if recorded) as float64 — the very numbers of ``summary.json``'s peaks.
-    Field data: ``iteration``, ``time`` and ``group_names``. Binary, zlib-compressed (a resting
+    Field data: ``iteration``, ``time`` and ``group_names``. Binary, LZ4-compressed (fast; a resting
     sediment compresses to almost nothing).
 ``RUNDIR/stress.dump``
     A LAMMPS ``dump custom`` text file, OVITO's native input: ``id type mol x y z radius
@@ -169,7 +169,7 @@ def write_vtk(run, fields, outdir, progress: bool = False) -> Path:
     fd.AddArray(gnames)
     writer = vtkXMLPolyDataWriter()
     writer.SetDataModeToBinary()
-    writer.SetCompressorTypeToZLib()
+    writer.SetCompressorTypeToLZ4()       # fast; ParaView, pyvista and VTK ≥ 8.1 read it
     entries = []
     try:
         with progress_bar(len(fields.steps), progress, "VTK frames") as bar:
