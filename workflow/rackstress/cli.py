@@ -157,10 +157,13 @@ def list_scenes():
 
 def _post_run(out, progress):
     """After a run: the stress measures once, their peaks into summary.json, the VTK series."""
-    from rackstress.stress.post import describe, postprocess
+    from rackstress.stress.post import TooLargeError, describe, postprocess
 
     try:
         info = postprocess(out, vtk=True, dump=False, progress=progress)
+    except TooLargeError as err:
+        click.echo(f"  note: no stress peaks or VTK files: {err}")
+        return
     except Exception as err:  # noqa: BLE001 - the run itself is complete and kept
         click.echo(f"rackstress: error: the run finished, but post-processing its stress "
                    f"failed: {err} (retry with 'rackstress stress {out}')", err=True)

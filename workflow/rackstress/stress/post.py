@@ -43,6 +43,15 @@ LABELS = {
     "d2min": ("non-affine displacement D²min", "length² units"),
     "virial": ("per-atom von Mises stress × volume", "energy units"),
 }
+#: Largest n_atoms × n_frames post-processed (each measure keeps n_frames × n_atoms float64,
+#: five such arrays while computing): about 1 GB at this size.
+MAX_VALUES = 25_000_000
+
+
+class TooLargeError(StressInputError):
+    """The run has too many particles × frames to hold its measures in memory."""
+
+
 #: The fit of the desired position (one for summary, pictures, report and files).
 FIT = "robust"
 CACHE = "measures.npz"
@@ -137,6 +146,13 @@ def compute_fields(run, cache: bool = True, progress: bool = False) -> Fields:
     import sys
 
     t0 = time.perf_counter()
+    size = run.n_atoms * run.index.n_frames
+    if size > MAX_VALUES:
+        raise TooLargeError(
+            f"{run.index.path}: {run.n_atoms} particles × {run.index.n_frames} frames = "
+            f"{size:.3g} values per measure, more than the {MAX_VALUES:.3g} the stress "
+            "post-processing holds in memory; dump fewer frames (--dump-every) or analyse "
+            "a part of the run")
     virial = stress_columns(run.index.columns) is not None
     analyses = [AccumulatedDistance(run, fit=FIT), VonMisesStrain(run)]
     if virial:
