@@ -355,3 +355,15 @@ def test_batch_jobs_get_peaks_and_report_shows_them(tmp_path):
         assert j["figures"]["groups.plane.peak.paper.value"] == pk["value"]
         row = next(ln.split() for ln in lines[1:] if ln.startswith(j["name"]))
         assert row[3:6] == [f"{pk['value']:.6g}", str(pk["iteration"]), str(pk["particle"])]
+
+
+def test_too_large_for_memory_is_a_clear_error(synthetic, monkeypatch):
+    from rackstress.stress import post
+
+    d, _ = synthetic
+    monkeypatch.setattr(post, "MAX_VALUES", 100)      # the synthetic run: 162 atoms × 4 frames
+    with pytest.raises(post.TooLargeError) as ei:
+        post.postprocess(d)
+    msg = str(ei.value)
+    assert "trajectory.dump" in msg and "162 particles × 4 frames" in msg and "--dump-every" in msg
+    assert not (d / "stress.json").exists()
