@@ -276,7 +276,7 @@ def postprocess(rundir, vtk: bool = True, dump: bool = False, progress: bool = F
         info["timings"]["dump_s"] = time.perf_counter() - t
     info["timings"]["total_s"] = time.perf_counter() - t0
     write_json(out / STRESS_JSON, info)
-    summary_path = out / "summary.json"
+    summary_path = Path(run.rundir) / "summary.json"      # the run's own record
     if summary_path.is_file():
         add_to_summary(summary_path, info)
     if log is not None:
