@@ -146,8 +146,28 @@ def dump_frames(path, n_atoms: int, max_frames: int = MAX_FRAMES):
 
 
 def check_run(scene, out, echo: bool = True) -> list[dict]:
-    """Every guard-rail warning of the finished run in directory ``out`` (printed to stderr
-    when ``echo``): what ``summary.json`` records under ``warnings``."""
+    """Every guard-rail warning of the finished run in directory ``out``.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene that ran.
+    out : path
+        Its run directory (``trajectory.dump`` is read for the pass-through check).
+    echo : bool
+        Print each warning to stderr.
+
+    Returns
+    -------
+    list of dict
+        What ``summary.json`` records under ``warnings``: ``kind`` (``pass_through`` or
+        ``force_on_rack``), ``message`` and the groups (and step) concerned.
+
+    Example
+    -------
+    >>> check_run(scene, "runs/bracket")       # doctest: +SKIP
+    []
+    """
     found = force_on_racks(scene)
     dump = Path(out) / "trajectory.dump"
     if colliding_pairs(scene) and dump.exists():
