@@ -167,3 +167,33 @@ def test_through_the_arm_of_an_l_shape_is_found_below_the_arm():
     found = pass_through(sc, frames_moving_block(sc, below))
     assert [f["step"] for f in found] == [20]
     assert found[0]["message"].startswith("'block' passed through 'ell'")
+
+
+def test_run_records_force_on_rack_in_summary(tmp_path):
+    path = tmp_path / "rackforce.toml"
+    path.write_text(textwrap.dedent("""
+        name = "rackforce"
+        steps = 20
+        [[group]]
+        name = "block"
+        lattice = { shape = [2, 2, 2] }
+        [[group]]
+        name = "blockrack"
+        rack = "block"
+        [[operator]]
+        on = "block"
+        op = "bind"
+        from = "blockrack"
+        c = 100
+        [[operator]]
+        on = "blockrack"
+        op = "force"
+        accel = [0, -10, 0]
+    """))
+    out = tmp_path / "run"
+    proc = subprocess.run([str(RACKSTRESS), "run", str(path), "--engine", "reference", "--out",
+                           str(out), "--no-render"], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    s = json.loads((out / "summary.json").read_text())
+    assert [w["kind"] for w in s["warnings"]] == ["force_on_rack"]
+    assert s["warnings"][0]["group"] == "blockrack" and "blockrack" in proc.stderr
