@@ -8,10 +8,8 @@ from pathlib import Path
 
 import click
 
-from rackstress.errors import DivergenceError, RackstressError
-
-#: Exit codes: bad input, diverged run, pictures failed after a good run.
-EXIT_INPUT, EXIT_DIVERGED, EXIT_RENDER = 2, 3, 4
+from rackstress.errors import (EXIT_BUG, EXIT_DIVERGED, EXIT_INPUT, EXIT_RENDER,  # noqa: F401
+                               EXIT_STORAGE, DivergenceError, RackstressError, os_error_message)
 
 
 def _load_scene(scene: str, steps, dt, sets):
@@ -33,6 +31,45 @@ def _load_scene(scene: str, steps, dt, sets):
 def _fail(err: Exception, code: int):
     click.echo(f"rackstress: error: {err}", err=True)
     sys.exit(code)
+
+
+def _fail_any(err: BaseException, out=None):
+    """Exit with the documented status of ``err`` (errors.py) after one paragraph.
+
+    Errors rackstress raises reach every rank alike; anything else may have reached one rank
+    only while the others wait for it, so under MPI it ends all of them (MPI_Abort)."""
+    from rackstress.lib.mpi import world
+
+    if isinstance(err, DivergenceError):
+        msg, code = f"{err} (run directory: {out})", EXIT_DIVERGED
+    elif isinstance(err, RackstressError):
+        msg, code = str(err), err.exit_code
+    elif isinstance(err, OSError):
+        msg, code = os_error_message(err, "write"), EXIT_STORAGE
+    elif isinstance(err, MemoryError):
+        msg, code = ("the machine ran out of memory; make the scene smaller or run it on a "
+                     "larger machine"), EXIT_INPUT
+    else:
+        comm = world()
+        if comm.Get_size() > 1:       # a bug on one rank: the others must not wait forever
+            import traceback
+
+            traceback.print_exception(err)
+            sys.stderr.write(f"rackstress: error on rank {comm.Get_rank()}: ending all ranks\n")
+            sys.stderr.flush()
+            comm.Abort(EXIT_BUG)
+        raise err
+    click.echo(f"rackstress: error: {msg}", err=True)
+    comm = world()
+    if comm.Get_size() > 1 and not isinstance(err, RackstressError):
+        sys.stderr.flush()
+        comm.Abort(code)
+    sys.exit(code)
+
+
+#: Options of ``run`` that ``--resume`` cannot honour: the run goes on as it was started.
+RESUME_FIXED = ("engine", "mode", "steps", "dt", "sets", "dump_every", "overwrite",
+                "restart_every", "allow_unstable")
 
 
 @click.group()
@@ -71,54 +108,82 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
         restart_every=None, resume_dir=None, allow_unstable=False):
     """Run SCENE (a built-in name or a .toml file) and write a run directory.
 
-    Exit status: 0 done, 2 bad input, 3 diverged (frames and summary kept), 4 the run is done
-    but its pictures could not be rendered.
+    Exit status (errors.py): 0 done, 2 bad input or a run directory in use or holding another
+    run, 3 diverged (frames and summary kept), 4 the run is done but its pictures could not be
+    rendered, 5 the disk refused a write (full, read-only, no permission).
     """
-    from rackstress.runs import run as run_mod
     from rackstress.lib.mpi import rank
+    from rackstress.runs import run as run_mod
+    from rackstress.runs.rundir import check_out, locked
 
-    if resume_dir is not None:
-        out = resume_dir
-    elif scene is None:
-        raise click.UsageError("Missing argument 'SCENE' (or give --resume RUNDIR).")
+    ctx = click.get_current_context()
     try:
+        if resume_dir is not None:
+            given = [n for n in RESUME_FIXED
+                     if ctx.get_parameter_source(n) != click.core.ParameterSource.DEFAULT]
+            if out is not None and Path(out).resolve() != Path(resume_dir).resolve():
+                given.append("out")
+            if given:
+                opts = ", ".join("--" + ("set" if n == "sets" else n.replace("_", "-"))
+                                 for n in given)
+                raise RackstressError(
+                    f"--resume continues the run in {resume_dir} exactly as it was started, "
+                    f"so {opts} cannot be given with it (the checkpoint fixes them); to change "
+                    "them start a new run, e.g. with --overwrite")
+            out = check_out(resume_dir)
+        elif scene is None:
+            raise click.UsageError("Missing argument 'SCENE' (or give --resume RUNDIR).")
+        elif out is not None:
+            check_out(out)
         if resume_dir is not None:
             from rackstress.runs.resume import resume_run
 
-            summary = resume_run(resume_dir, scene, progress=progress and rank() == 0)
-        else:
-            sc = _load_scene(scene, steps, dt, sets)
-            if out is None:
-                out = Path("runs") / f"{sc.name}-{time.strftime('%Y%m%d-%H%M%S')}"
-            if restart_every is None and engine == "lammps":
-                from rackstress.runs.resume import default_restart_every
+            with locked(out, create=False) as held:
+                summary = resume_run(resume_dir, scene, progress=progress and rank() == 0)
+                _finish(summary, out, do_render)
+            return
+        sc = _load_scene(scene, steps, dt, sets)
+        if out is None:
+            out = Path("runs") / f"{sc.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+        if restart_every is None and engine == "lammps":
+            from rackstress.runs.checkpoint import default_restart_every
 
-                restart_every = default_restart_every(sc.total_steps)
+            restart_every = default_restart_every(sc.total_steps)
+        # the lock is held from before anything is written until the pictures are done
+        with locked(out) as held:   # noqa: F841
             summary = run_mod.run(sc, out, engine=engine, mode=mode, dump_every=dump_every,
                                   progress=progress and rank() == 0, overwrite=overwrite,
                                   restart_every=restart_every or None,
                                   allow_unstable=allow_unstable)
-    except DivergenceError as err:
-        _fail(f"{err} (run directory: {out})", EXIT_DIVERGED)
-    except RackstressError as err:
-        _fail(err, EXIT_INPUT)
-    if rank() == 0:
-        click.echo(f"{summary['scene']}: {summary['steps']} steps on {summary['engine']} "
-                   f"({summary['mode']}) in {summary['wall_s']:.2f} s -> {out}")
-        for name, g in summary["groups"].items():
-            click.echo(f"  {name:12s} n={g['n']:6d}  max_deformation={g['max_deformation']:.4g}")
-        if do_render:
-            from rackstress.render.pictures import render_default
+            _finish(summary, out, do_render)
+    except Exception as err:  # noqa: BLE001 - each kind has its exit status (_fail_any)
+        _fail_any(err, out)
 
-            t0 = time.perf_counter()
-            try:
-                rep = render_default(out)
-            except Exception as err:  # noqa: BLE001 - the run itself is complete and kept
-                click.echo(f"rackstress: error: the run finished, but rendering its pictures "
-                           f"failed: {err} (retry with 'rackstress render {out}')", err=True)
-                sys.exit(EXIT_RENDER)
-            click.echo(f"  pictures: {rep.outdir} ({len(rep.files)} files, "
-                       f"{time.perf_counter() - t0:.1f} s)")
+
+def _finish(summary: dict, out: Path, do_render: bool) -> None:
+    """Report a finished run and render its pictures (rank 0, the run directory still held)."""
+    from rackstress.lib.mpi import rank
+
+    if rank() != 0:
+        return
+    click.echo(f"{summary['scene']}: {summary['steps']} steps on {summary['engine']} "
+               f"({summary['mode']}) in {summary['wall_s']:.2f} s -> {out}")
+    for name, g in summary["groups"].items():
+        md = g["max_deformation"]
+        click.echo(f"  {name:12s} n={g['n']:6d}  max_deformation="
+                   + (f"{md:.4g}" if md is not None else "-"))
+    if do_render:
+        from rackstress.render.pictures import render_default
+
+        t0 = time.perf_counter()
+        try:
+            rep = render_default(out)
+        except Exception as err:  # noqa: BLE001 - the run itself is complete and kept
+            click.echo(f"rackstress: error: the run finished, but rendering its pictures "
+                       f"failed: {err} (retry with 'rackstress render {out}')", err=True)
+            sys.exit(EXIT_RENDER)
+        click.echo(f"  pictures: {rep.outdir} ({len(rep.files)} files, "
+                   f"{time.perf_counter() - t0:.1f} s)")
 
 
 @main.command()
@@ -174,6 +239,7 @@ def list_scenes():
 def render(rundir, frames, measure, views, movie, vmax, allow_truncated):
     """Render the stress pictures, sheet, plots (and movie) of RUNDIR into RUNDIR/figures/."""
     from rackstress.render.pictures import render as render_run
+    from rackstress.runs.rundir import locked
 
     t0 = time.perf_counter()
     try:
@@ -183,11 +249,15 @@ def render(rundir, frames, measure, views, movie, vmax, allow_truncated):
                 its = [int(f) for f in frames.split(",") if f.strip()]
             except ValueError:
                 raise RackstressError(f"--frames expects comma-separated integers, got '{frames}'")
-        rep = render_run(rundir, frames=its, measure=measure,
-                         views=[v.strip() for v in views.split(",") if v.strip()], movie=movie,
-                         vmax=vmax, allow_truncated=allow_truncated)
-    except RackstressError as err:
-        _fail(err, EXIT_INPUT)
+        if not Path(rundir).is_dir():
+            raise RackstressError(f"{rundir} is not a run directory (it does not exist)")
+        # one writer per run directory: not while a run (or another render) holds it
+        with locked(rundir, create=False):
+            rep = render_run(rundir, frames=its, measure=measure,
+                             views=[v.strip() for v in views.split(",") if v.strip()],
+                             movie=movie, vmax=vmax, allow_truncated=allow_truncated)
+    except (RackstressError, OSError, MemoryError) as err:
+        _fail_any(err)
     for note in rep.notes:
         click.echo(f"note: {note}")
     click.echo("frames: " + ", ".join(f"{s}" for _, _, s in rep.frames)

@@ -26,7 +26,7 @@ class Engine(Protocol):
     ----------
     scene : Scene
         The scene being stepped.
-    step : int
+    step_count : int
         Steps done so far (the iteration counter of Eq. 5).
     check_every : int
         Steps between watchdog checks: 1 on the reference engine, 10 on LAMMPS.
@@ -35,7 +35,7 @@ class Engine(Protocol):
     """
 
     scene: Scene
-    step: int
+    step_count: int
     check_every: int
     root: bool
 

@@ -92,11 +92,11 @@ def drive(engine, *, progress=None, on_phase_end=None, checkpoint=None, resume=N
                     checkpoint.maybe(engine, k, phase.steps - left, cycle)
             last = (k, phase.steps, cycle)
             if on_phase_end is not None:
-                on_phase_end(PhaseEnd(engine.step, phase.name, dict(phase.vars), cycle,
+                on_phase_end(PhaseEnd(engine.step_count, phase.name, dict(phase.vars), cycle,
                                       engine.positions()))
             if checkpoint is not None:
                 checkpoint.maybe(engine, k, phase.steps, cycle)
-        resumed_at_end = resume is not None and last is not None and engine.step == resume.step
+        resumed_at_end = resume is not None and last is not None and engine.step_count == resume.step
         if final_frame and not resumed_at_end:
             engine.write_frame()
         if checkpoint is not None and last is not None:
@@ -104,6 +104,6 @@ def drive(engine, *, progress=None, on_phase_end=None, checkpoint=None, resume=N
     except DivergenceError as err:
         if getattr(err, "p_end", None) is None:
             err.p_end = engine.positions()
-        err.steps_done = engine.step
+        err.steps_done = engine.step_count
         raise
-    return Outcome(engine.step, engine.positions())
+    return Outcome(engine.step_count, engine.positions())

@@ -61,6 +61,9 @@ class Scene:
     #: Optional ``report(scene, records) -> dict`` over the states at phase ends (a list of
     #: :class:`PhaseEnd`, the first being the initial state); its result goes into the summary.
     report: object = None
+    #: Run exactly this many steps (the cycle of phases repeated or cut short, generated
+    #: lazily by :meth:`schedule`); None: ``cycles`` whole cycles. Set by :meth:`with_steps`.
+    limit: int | None = None
 
     def __post_init__(self):
         # One operator object per place in the sequences: engines key their pair lists by
@@ -112,35 +115,47 @@ class Scene:
 
     @property
     def total_steps(self) -> int:
+        if self.limit is not None:
+            return int(self.limit)
         return self.steps_per_cycle * self.cycles
 
     def schedule(self):
-        """Yield (first_step, phase, cycle) for every phase of every cycle, in order."""
+        """Yield (first_step, phase, cycle) for every phase of every cycle, in order.
+
+        Generated as it is walked: a run of 10¹² steps holds one phase at a time."""
         step = 0
-        for cycle in range(self.cycles):
+        if self.limit is None:
+            for cycle in range(self.cycles):
+                for phase in self.phases:
+                    yield step, phase, cycle
+                    step += phase.steps
+            return
+        end = int(self.limit)
+        if end == 0 or self.steps_per_cycle == 0:
+            first = self.phases[0]
+            yield 0, Phase(first.name, 0, first.vars), 0
+            return
+        cycle = 0
+        while step < end:
             for phase in self.phases:
-                yield step, phase, cycle
-                step += phase.steps
+                take = min(phase.steps, end - step)
+                if take > 0:
+                    yield step, (phase if take == phase.steps
+                                 else Phase(phase.name, take, phase.vars)), cycle
+                    step += take
+                if step >= end:
+                    break
+            cycle += 1
 
     def with_steps(self, steps: int) -> "Scene":
-        """The same scene run for exactly ``steps`` iterations (schedule repeated or cut short)."""
-        if steps < 0:
-            raise SceneError(f"steps must be >= 0, got {steps}")
-        phases, left = [], steps
-        if self.steps_per_cycle == 0:
-            left = 0   # nothing to repeat: every phase has zero steps
-        while left > 0:
-            for p in self.phases:
-                take = min(p.steps, left)
-                if take:
-                    phases.append(Phase(p.name, take, p.vars))
-                left -= take
-                if left <= 0:
-                    break
-        if not phases:
-            phases = [Phase(self.phases[0].name, 0, self.phases[0].vars)]
-        return Scene(self.name, self.groups, self.operators, phases, self.dt, 1, self.bound,
-                     {**self.params, "steps": steps}, self.report)
+        """The same scene run for exactly ``steps`` iterations (its cycle of phases repeated or
+        cut short; nothing is built per phase, so any number of steps costs nothing up front)."""
+        if int(steps) != steps or steps < 0:
+            raise SceneError(f"steps must be a non-negative integer, got {steps!r}")
+        spc = self.steps_per_cycle
+        cycles = max(1, -(-int(steps) // spc)) if spc else 1
+        return Scene(self.name, self.groups, self.operators, self.phases, self.dt, cycles,
+                     self.bound, {**self.params, "steps": int(steps)}, self.report, int(steps))
 
     # ------------------------------------------------------------------ validation
     def validate(self) -> None:

@@ -29,7 +29,7 @@ import sys
 import time
 from pathlib import Path
 
-from rackstress.errors import RunDirError, os_error_message
+from rackstress.errors import RunDirError, storage_error
 
 LOCK = ".lock"
 #: Files whose presence makes a directory a run directory (written by ``rackstress run``).
@@ -121,11 +121,11 @@ def locked(rundir, command: str | None = None, comm=None, create: bool = True, n
             try:
                 rundir.mkdir(parents=True, exist_ok=True)
             except OSError as exc:
-                raise RunDirError(os_error_message(exc, "create the run directory")) from None
+                raise storage_error(exc, "create the run directory") from None
         try:
             fd = os.open(rundir / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
         except OSError as exc:
-            raise RunDirError(os_error_message(exc, "create the lock file of")) from None
+            raise storage_error(exc, "create the lock file") from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError as exc:
@@ -134,7 +134,7 @@ def locked(rundir, command: str | None = None, comm=None, create: bool = True, n
                 raise RunDirError(f"run directory {rundir} is in use by "
                                   f"{describe_holder(holder(rundir))}; wait for it to finish, "
                                   "or choose another --out") from None
-            raise RunDirError(os_error_message(exc, "lock")) from None
+            raise storage_error(exc, "lock") from None
         old = holder(rundir)
         note = stale_note(old)
         if note and notes is not None:
@@ -244,7 +244,7 @@ def _start_clean(rundir: Path) -> None:
         os.replace(rundir, trash)
         rundir.mkdir()
     except OSError as exc:
-        raise RunDirError(os_error_message(exc, "replace the earlier run in")) from None
+        raise storage_error(exc, "move aside the earlier run") from None
     ent = _held.get(key)
     if ent is not None:
         fd = os.open(rundir / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
