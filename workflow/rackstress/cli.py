@@ -33,6 +33,15 @@ def _fail(err: Exception, code: int):
     sys.exit(code)
 
 
+def _out_path(ctx, param, value):
+    """``--out`` as a Path, refusing an empty one (it would write into the working directory)."""
+    if value is None:
+        return None
+    if not str(value).strip():
+        raise click.BadParameter("is empty: give a run directory (e.g. --out runs/mine)")
+    return Path(value)
+
+
 def _fail_any(err: BaseException, out=None):
     """Exit with the documented status of ``err`` (errors.py) after one paragraph.
 
@@ -89,7 +98,7 @@ def main():
 @click.option("--dt", type=float, help="Time step t of Eq. 5 (default: the scene's).")
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE",
               help="Override a scene parameter; repeatable (see 'rackstress scenes').")
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
+@click.option("--out", type=click.Path(file_okay=False), callback=_out_path,
               help="Run directory (default: runs/SCENE-TIMESTAMP).")
 @click.option("--dump-every", type=click.IntRange(min=1), help="Steps between trajectory frames.")
 @click.option("--overwrite", is_flag=True, help="Replace a finished run in --out.")
@@ -188,7 +197,7 @@ def _finish(summary: dict, out: Path, do_render: bool) -> None:
 
 @main.command()
 @click.argument("scene")
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path), required=True)
+@click.option("--out", type=click.Path(file_okay=False), callback=_out_path, required=True)
 @click.option("--mode", type=click.Choice(["exact", "fast"]), default="exact", show_default=True)
 @click.option("--steps", type=click.IntRange(min=0))
 @click.option("--dt", type=float)
@@ -202,8 +211,8 @@ def deck(scene, out, mode, steps, dt, sets, dump_every):
     try:
         sc = _load_scene(scene, steps, dt, sets)
         d = write_deck(sc, out, mode, dump_every or default_dump_every(sc))
-    except RackstressError as err:
-        _fail(err, EXIT_INPUT)
+    except Exception as err:  # noqa: BLE001 - each kind has its exit status (_fail_any)
+        _fail_any(err, out)
     click.echo(f"wrote {out / 'particles.data'} and {out / 'in.lammps'} "
                f"({sc.n_particles} atoms, {len(d.python_ops)} operator(s) in Python)")
 
@@ -269,7 +278,7 @@ def render(rundir, frames, measure, views, movie, vmax, allow_truncated):
 
 @main.command()
 @click.argument("sweep", required=False, type=click.Path(dir_okay=False, path_type=Path))
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
+@click.option("--out", type=click.Path(file_okay=False), callback=_out_path,
               help="Batch directory (default: batches/SWEEP-STEM); rerun to finish it.")
 @click.option("--ranks-per-job", type=click.IntRange(min=1), default=1, show_default=True,
               help="MPI ranks per job: mpiexec -n K runs K/J jobs at a time.")
@@ -288,7 +297,7 @@ def batch(sweep, out, ranks_per_job, retry_failed, manager, report_dir, figure, 
 
     Jobs that diverge or fail are recorded and the rest go on; a killed batch run again on the
     same --out finishes only what was not finished. Exit status: 0 all jobs finished (whatever
-    their status), 2 bad input.
+    their status), 2 bad input (also a --figure no summary has), 5 the disk refused a write.
     """
     from rackstress.runs import batch as batch_mod
     from rackstress.lib.mpi import rank
@@ -299,10 +308,16 @@ def batch(sweep, out, ranks_per_job, retry_failed, manager, report_dir, figure, 
             return
         if sweep is None:
             raise click.UsageError("give a SWEEP file, or --report BATCHDIR")
+        if out is not None:
+            from rackstress.runs.rundir import check_out
+
+            check_out(out)
         index = batch_mod.run_batch(sweep, out, ranks_per_job, retry_failed, manager,
                                     log=lambda m: click.echo(m) if rank() == 0 else None)
-    except RackstressError as err:
-        _fail(err, EXIT_INPUT)
+    except click.UsageError:
+        raise
+    except Exception as err:  # noqa: BLE001 - each kind has its exit status (_fail_any)
+        _fail_any(err, out)
     if rank() == 0:
         p = index["passes"][-1]
         click.echo(f"batch {'complete' if index['complete'] else 'incomplete'}: "

@@ -79,10 +79,20 @@ class StorageError(RackstressError, OSError):
 
     exit_code = EXIT_STORAGE
 
+    def __init__(self, message: str):
+        super().__init__(message)
+        self.message = message
 
-def os_error_message(exc: OSError, doing: str) -> str:
+    def __str__(self):
+        return self.message
+
+    def __reduce__(self):       # travels between MPI ranks whole
+        return (StorageError, (self.message,))
+
+
+def os_error_message(exc: OSError, doing: str, path=None) -> str:
     """One paragraph for an OS error: what was being done, the path, the reason, what to do."""
-    path = exc.filename or "?"
+    path = path or exc.filename or "?"
     reason = exc.strerror or str(exc)
     hint = {_errno.ENOSPC: "free space on that file system or choose another --out",
             _errno.EDQUOT: "free space within your quota or choose another --out",
@@ -94,8 +104,8 @@ def os_error_message(exc: OSError, doing: str) -> str:
     return f"could not {doing} {path}: {reason}" + (f"; {hint}" if hint else "")
 
 
-def storage_error(exc: OSError, doing: str) -> StorageError:
+def storage_error(exc: OSError, doing: str, path=None) -> StorageError:
     """A :class:`StorageError` for ``exc`` (its errno and path kept)."""
-    err = StorageError(os_error_message(exc, doing))
+    err = StorageError(os_error_message(exc, doing, path))
     err.errno, err.filename = exc.errno, exc.filename
     return err

@@ -59,7 +59,7 @@ class DumpWriter:
             except OSError:
                 pass
             self._fh = _reopen_at(self.path, start)
-            raise storage_error(exc, f"write frame {step} to") from None
+            raise storage_error(exc, f"write frame {step} to", self.path) from None
 
     def close(self) -> None:
         try:

@@ -25,7 +25,7 @@ def write_json(path: Path, data) -> None:
             tmp.unlink()
         except OSError:
             pass
-        raise storage_error(exc, "write") from None
+        raise storage_error(exc, "write", path) from None
 
 
 def jsonable(x):

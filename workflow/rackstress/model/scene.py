@@ -15,7 +15,9 @@ import numpy as np
 from rackstress.model import operators as ops_mod
 from rackstress.errors import SceneError
 
-#: Relative distance below which two particles count as coincident (their col/bin is undefined).
+#: Distance below which two particles count as coincident (their col/bin is undefined): this
+#: many units, or a few rounding steps of the coordinates' magnitude if that is larger. Not
+#: relative to the scene's size: two particles 1 unit apart stay apart however far a third is.
 COINCIDENT_TOL = 1e-9
 
 
@@ -187,14 +189,35 @@ class Scene:
             raise SceneError(f"scene '{self.name}': cycles must be a positive integer")
         if not self.bound > 0:
             raise SceneError(f"scene '{self.name}': watchdog bound must be positive")
+        for name, g in self.groups.items():
+            if not np.isfinite(g.o).all():
+                k = int(np.flatnonzero(~np.isfinite(g.o).all(axis=1))[0])
+                raise SceneError(f"scene '{self.name}': '{name}' particle {k} has a non-finite "
+                                 f"position {g.o[k].tolist()}")
+            r = np.asarray(g.r, dtype=float)
+            bad = ~(np.isfinite(r) & (r > 0) & (r <= self.bound))
+            if bad.any():
+                k = int(np.flatnonzero(bad)[0])
+                raise SceneError(f"scene '{self.name}': '{name}' particle {k} has radius "
+                                 f"{r[k]!r}; a radius must be positive, finite and at most the "
+                                 f"watchdog bound {self.bound:g} (the collision test squares "
+                                 "the sum of two radii)")
+        for target, seq in self.operators.items():
+            for op in seq:
+                where = getattr(op, "where", None)
+                if isinstance(op, ops_mod.Force) and where is not None \
+                        and not np.asarray(where, dtype=bool).any():
+                    raise SceneError(f"scene '{self.name}': the force {tuple(op.accel)} on "
+                                     f"'{target}' selects no particle (its 'where' is false "
+                                     "everywhere): remove it or widen 'where'")
         self._check_coincident()
 
     def _check_coincident(self) -> None:
         from scipy.spatial import cKDTree
 
         o = np.concatenate([g.o for g in self.groups.values()])
-        scale = max(1.0, float(np.ptp(o, axis=0).max()) if len(o) > 1 else 1.0)
-        pairs = cKDTree(o).query_pairs(COINCIDENT_TOL * scale, output_type="ndarray")
+        ulp = 8 * np.finfo(float).eps * float(np.abs(o).max()) if len(o) else 0.0
+        pairs = cKDTree(o).query_pairs(max(COINCIDENT_TOL, ulp), output_type="ndarray")
         if len(pairs):
             a, b = (int(x) for x in pairs[0])
             starts = np.cumsum([0] + [g.n for g in self.groups.values()])

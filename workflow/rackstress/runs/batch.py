@@ -447,6 +447,12 @@ def report(batchdir, figure: str | None = None, against: str | None = None, log=
         rows.append({"name": j["name"], **eff,
                      "status": j["status"], figure: val, "wall_s": j.get("wall_s"),
                      "attempts": j.get("attempts")})
+    oks = [summaries[j["name"]] for j in jobs if j["status"] == "ok" and summaries[j["name"]]]
+    if oks and all(lookup(x, figure) is None for x in oks):
+        known = sorted(_figure_paths(oks[0]), key=lambda k: not k.startswith("groups."))
+        raise RackstressError(f"--figure {figure!r}: no finished job's summary.json has it; "
+                              f"figures there are e.g. {', '.join(known[:8])}"
+                              f"{', ...' if len(known) > 8 else ''}")
     cols = ["name", *swept, "status", figure, "wall_s"]
 
     def cell(v):
@@ -468,6 +474,18 @@ def report(batchdir, figure: str | None = None, against: str | None = None, log=
     plot = _plot(batchdir, rows, figure, against, [k for k in swept if k != against])
     log(f"plot: {plot}")
     return {"rows": rows, "figure": figure, "against": against, "plot": plot}
+
+
+def _figure_paths(summary: dict, prefix: str = "") -> list[str]:
+    """Dotted paths of the numeric figures in a summary (what --figure can name)."""
+    out = []
+    for k, v in summary.items():
+        path = f"{prefix}{k}"
+        if isinstance(v, dict):
+            out += _figure_paths(v, path + ".")
+        elif isinstance(v, (int, float)) and not isinstance(v, bool):
+            out.append(path)
+    return out
 
 
 def _plot(batchdir: Path, rows, figure: str, against: str, others) -> Path:

@@ -48,7 +48,7 @@ def _save_npz(path: Path, **arrays) -> None:
         os.replace(tmp, path)
     except OSError as exc:
         tmp.unlink(missing_ok=True)
-        raise storage_error(exc, "write the checkpoint file") from None
+        raise storage_error(exc, "write the checkpoint file", path) from None
 
 
 def _on_root(fn, comm):

@@ -11,7 +11,6 @@ with the step, particle and group. One process writes a run directory at a time
 """
 from __future__ import annotations
 
-import os
 import time
 from pathlib import Path
 
@@ -19,10 +18,11 @@ import numpy as np
 
 from rackstress.lib import rigid
 from rackstress.model import topology
-from rackstress.errors import DivergenceError, RunDirError, SceneError
+from rackstress.errors import DivergenceError, RunDirError
 from rackstress.lib.jsonio import write_json
 from rackstress.lib.mpi import on_root, world
 from rackstress.lib.progress import progress_bar
+from rackstress.lib.resources import require_memory
 from rackstress.model.scene import PhaseEnd, Scene
 
 ENGINES = ("lammps", "reference")
@@ -40,38 +40,30 @@ BYTES_PER_PARTICLE = {"lammps": 700, "reference": 900}
 BYTES_PER_PAIR = 64
 
 
-def available_memory() -> int:
-    """Bytes the machine can still give (``MemAvailable``; physical memory if unknown)."""
-    try:
-        for line in open("/proc/meminfo"):
-            if line.startswith("MemAvailable:"):
-                return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-
-
 def check_memory(scene: Scene, engine: str, ranks: int = 1) -> int:
     """Refuse a run whose estimated memory exceeds what the machine has; return the estimate.
 
     The estimate: particles × :data:`BYTES_PER_PARTICLE` plus bind pairs × :data:`BYTES_PER_PAIR`
-    (counted from the operators' pair structures without building them), on every rank.
+    (counted without building them: within(d) pairs by a tree count), on every rank.
     """
-    from rackstress.model.operators import Bind
+    from scipy.spatial import cKDTree
+
+    from rackstress.model.operators import Bind, Within
 
     pairs = 0
     for target, seq in scene.operators.items():
         for op in seq:
-            if isinstance(op, Bind):
-                pairs += scene.groups[target].n * scene.groups[op.source].n
+            if not isinstance(op, Bind):
+                continue
+            t, u = scene.groups[target], scene.groups[op.source]
+            if isinstance(op.coeff, Within):      # only pairs closer than d (Eq. 16): count them
+                pairs += int(cKDTree(t.o).count_neighbors(cKDTree(u.o), float(op.coeff.d)))
+            else:
+                pairs += t.n * u.n
     need = (scene.n_particles * BYTES_PER_PARTICLE.get(engine, 900) + pairs * BYTES_PER_PAIR) \
         * max(1, ranks)
-    have = available_memory()
-    if need > have:
-        raise SceneError(f"scene '{scene.name}' needs about {need / 2**30:.1f} GiB "
-                         f"({scene.n_particles:,} particles, up to {pairs:,} bind pairs, "
-                         f"{ranks} rank(s)) and this machine has {have / 2**30:.1f} GiB "
-                         "available: make it smaller or run it on a larger machine")
+    require_memory(need, f"scene '{scene.name}' ({scene.n_particles:,} particles, up to "
+                         f"{pairs:,} bind pairs, {ranks} rank(s), {engine} engine)")
     return need
 
 

@@ -137,8 +137,11 @@ def locked(rundir, command: str | None = None, comm=None, create: bool = True, n
             raise storage_error(exc, "lock") from None
         old = holder(rundir)
         note = stale_note(old)
-        if note and notes is not None:
-            notes.append(note)
+        if note:
+            if notes is not None:
+                notes.append(note)
+            else:
+                sys.stderr.write(f"rackstress: note: {note}\n")
         rec = {"pid": os.getpid(), "host": socket.gethostname(),
                "command": command or _command_line(),
                "started": time.strftime("%Y-%m-%dT%H:%M:%S")}

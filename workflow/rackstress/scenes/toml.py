@@ -371,7 +371,7 @@ def _plain_group(c: _Ctx, t: dict) -> Group:
         shape = [_integer(lc, s, "shape", 1) for s in shape]
         spacing = _number(lc, lat.get("spacing", 1.0), "spacing", positive=True)
         origin = _vec3(lc, lat.get("origin", [0.0, 0.0, 0.0]), "origin")
-        o = lattice(shape, spacing, origin)
+        o = _wrap(lc, lambda: lattice(shape, spacing, origin))
     r = _radii(c, _require(c, t, "radius"), len(o))
     g = _wrap(c, lambda: Group(t["name"], o, r, kind=_kind(c, t, "part")))
     _regions(c, t, g)

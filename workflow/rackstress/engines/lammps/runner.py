@@ -38,7 +38,7 @@ DIVERGED_MARKERS = ("Lost atoms", "Too many neighbor bins", "Out of range atoms"
                     "Neighbor list overflow", "Too many local+ghost atoms")
 #: LAMMPS errors of the file system.
 STORAGE_MARKERS = ("Cannot open", "No space", "Error writing", "Cannot write", "Disk quota",
-                   "Read-only", "Could not write", "Cannot close")
+                   "Read-only", "Could not write", "Cannot close", "I/O error")
 
 
 def balance_commands(scene, nranks: int) -> list[str]:
@@ -155,14 +155,26 @@ class LammpsRun:
         if any(m in msg for m in STORAGE_MARKERS):
             if lone:
                 abort_all(self.comm, f"LAMMPS could not write at step {self.step}: {msg}", 5)
-            raise StorageError(f"LAMMPS could not write at step {self.step} ('{cmd}'): {msg}; "
-                               "free space on that file system or choose another --out")
+            raise StorageError(f"LAMMPS could not write at step {self.step} ('{cmd}'): {msg}"
+                               f"{self._free_space()}; free space on that file system or "
+                               "choose another --out")
         if lone:
             abort_all(self.comm, f"LAMMPS failed on '{cmd}' at step {self.step}: {msg}", 2)
         found = self._finder()
         if found is not None:
             raise divergence_error(self.scene, self.step, found)
         raise RackstressError(f"LAMMPS failed on '{cmd}' at step {self.step}: {msg}")
+
+    def _free_space(self) -> str:
+        import shutil
+
+        try:
+            free = shutil.disk_usage(self.out).free if self.out is not None else None
+        except OSError:
+            return ""
+        if free is None:
+            return ""
+        return " (No space left on device)" if free == 0 else f" ({free} bytes free there)"
 
     def _sync_step(self) -> None:
         try:
