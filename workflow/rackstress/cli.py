@@ -158,12 +158,14 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
             from rackstress.runs.checkpoint import default_restart_every
 
             restart_every = default_restart_every(sc.total_steps)
+        # bad input is refused before the run directory is touched
+        planned = run_mod.plan(sc, engine, mode, dump_every, allow_unstable=allow_unstable)
         # the lock is held from before anything is written until the pictures are done
         with locked(out) as held:   # noqa: F841
             summary = run_mod.run(sc, out, engine=engine, mode=mode, dump_every=dump_every,
                                   progress=progress and rank() == 0, overwrite=overwrite,
                                   restart_every=restart_every or None,
-                                  allow_unstable=allow_unstable)
+                                  allow_unstable=allow_unstable, planned=planned)
             _finish(summary, out, do_render)
     except Exception as err:  # noqa: BLE001 - each kind has its exit status (_fail_any)
         _fail_any(err, out)

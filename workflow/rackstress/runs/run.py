@@ -216,9 +216,38 @@ def execute(scene: Scene, out: Path, engine: str, mode: str, dump_every: int, *,
     return summary
 
 
+def plan(scene: Scene, engine: str = "lammps", mode: str = "exact",
+         dump_every: int | None = None, comm=None, allow_unstable: bool = False) -> dict:
+    """Check everything about a run that can be checked before its directory is touched: the
+    engine, the dump interval, the predicted stability limit of Eq. 5
+    (:mod:`rackstress.model.stability`, unless ``allow_unstable``), the memory it needs, and
+    the deck; return what :func:`run` needs (``engine``, ``mode``, ``dump_every``, ``deck``,
+    ``fingerprint``)."""
+    from rackstress.engines.lammps.deck import compile_deck
+    from rackstress.model.stability import check_dt
+    from rackstress.runs.fingerprint import fingerprint
+
+    check_dt(scene, allow=allow_unstable)
+    if engine not in ENGINES:
+        raise RunDirError(f"unknown engine '{engine}'; choose one of {', '.join(ENGINES)}")
+    dump_every = dump_every or default_dump_every(scene)
+    if dump_every < 1:
+        raise RunDirError(f"--dump-every must be >= 1, got {dump_every}")
+    comm = comm or world()
+    if engine == "reference":
+        mode = "exact"
+        if comm.Get_size() > 1:
+            raise RunDirError("the reference engine runs on one rank; run it without mpiexec")
+    check_memory(scene, engine, comm.Get_size())
+    return {"engine": engine, "mode": mode, "dump_every": int(dump_every),
+            "deck": compile_deck(scene, mode),
+            "fingerprint": fingerprint(scene, engine=engine, mode=mode, dump_every=dump_every)}
+
+
 def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
         dump_every: int | None = None, progress: bool = True, overwrite: bool = False,
-        comm=None, restart_every: int | None = None, allow_unstable: bool = False) -> dict:
+        comm=None, restart_every: int | None = None, allow_unstable: bool = False,
+        planned: dict | None = None) -> dict:
     """Run ``scene`` on ``engine`` into the run directory ``out``; return the summary.
 
     Parameters
@@ -238,6 +267,8 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
     restart_every : int, optional
         Write a checkpoint (LAMMPS restart + exact state, :mod:`rackstress.runs.resume`) every so
         many steps; None: none.
+    planned : dict, optional
+        The result of :func:`plan` for these arguments (checked already).
 
     Returns
     -------
@@ -259,27 +290,13 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
     >>> run(sc, tempfile.mkdtemp() + "/pr", engine="reference", progress=False)["status"]
     'ok'
     """
-    # refuse a dt beyond the predicted stability limit of Eq. 5 (rackstress.model.stability)
-    # before anything is written, unless allow_unstable
-    from rackstress.model.stability import check_dt
-    from rackstress.runs.fingerprint import fingerprint
     from rackstress.runs.rundir import check_out, claim, locked
 
     check_out(out)
-    check_dt(scene, allow=allow_unstable)
-    if engine not in ENGINES:
-        raise RunDirError(f"unknown engine '{engine}'; choose one of {', '.join(ENGINES)}")
-    dump_every = dump_every or default_dump_every(scene)
-    if dump_every < 1:
-        raise RunDirError(f"--dump-every must be >= 1, got {dump_every}")
     comm = comm or world()
-    if engine == "reference":
-        mode = "exact"
-    check_memory(scene, engine, comm.Get_size())
-    from rackstress.engines.lammps.deck import compile_deck
-
-    deck = compile_deck(scene, mode if engine == "lammps" else "exact")
-    fp = fingerprint(scene, engine=engine, mode=mode, dump_every=dump_every)
+    p = planned or plan(scene, engine, mode, dump_every, comm, allow_unstable)
+    engine, mode, dump_every, deck, fp = (p["engine"], p["mode"], p["dump_every"], p["deck"],
+                                          p["fingerprint"])
     out = Path(out)
 
     def start():

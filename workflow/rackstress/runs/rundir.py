@@ -5,8 +5,8 @@ else is written and holds it until the command is done (``rackstress run`` holds
 post-processing and render; ``render`` and ``--resume`` take it too). The lock file records the
 holder — pid, host, command line, start time — so a second command on the same directory exits
 with status 2 naming it. The kernel releases an ``flock`` when its process dies, so a killed run
-never blocks the next one; the holder record it leaves behind (a clean release empties the file)
-is recognized as stale — its process no longer exists — and reported.
+never blocks the next one; the lock file it leaves behind (a clean release removes it) is
+recognized as stale — its process no longer exists — and reported.
 
 **Reuse.** :func:`claim` decides what a new run may do with an existing directory: an empty or
 new directory is used; a finished run (``summary.json``) or a run that did not finish (killed:
@@ -122,19 +122,7 @@ def locked(rundir, command: str | None = None, comm=None, create: bool = True, n
                 rundir.mkdir(parents=True, exist_ok=True)
             except OSError as exc:
                 raise storage_error(exc, "create the run directory") from None
-        try:
-            fd = os.open(rundir / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
-        except OSError as exc:
-            raise storage_error(exc, "create the lock file") from None
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError as exc:
-            os.close(fd)
-            if exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
-                raise RunDirError(f"run directory {rundir} is in use by "
-                                  f"{describe_holder(holder(rundir))}; wait for it to finish, "
-                                  "or choose another --out") from None
-            raise storage_error(exc, "lock") from None
+        fd = _take(rundir)
         old = holder(rundir)
         note = stale_note(old)
         if note:
@@ -159,8 +147,10 @@ def locked(rundir, command: str | None = None, comm=None, create: bool = True, n
         ent[1] -= 1
         if ent[1] == 0:
             del _held[key]
+            # a clean release leaves no lock file (a killed holder leaves its record behind);
+            # unlinked while still held, so a waiter never locks a file that is gone (_take)
             with contextlib.suppress(OSError):
-                os.ftruncate(ent[0], 0)      # a clean release leaves no holder record
+                os.unlink(rundir / LOCK)
             os.close(ent[0])
 
     on_root(acquire, comm)
@@ -169,6 +159,34 @@ def locked(rundir, command: str | None = None, comm=None, create: bool = True, n
     finally:
         if comm is None or comm.Get_rank() == 0:
             release()
+
+
+def _take(rundir: Path) -> int:
+    """Open and ``flock`` ``RUNDIR/.lock``; retry if the file was replaced meanwhile (a holder
+    that released it unlinks it: a lock on the unlinked file would exclude nobody)."""
+    path = rundir / LOCK
+    for _ in range(100):
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as exc:
+            raise storage_error(exc, "create the lock file", path) from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as exc:
+            os.close(fd)
+            if exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                raise RunDirError(f"run directory {rundir} is in use by "
+                                  f"{describe_holder(holder(rundir))}; wait for it to finish, "
+                                  "or choose another --out") from None
+            raise storage_error(exc, "lock", path) from None
+        try:
+            same = os.fstat(fd).st_ino == os.stat(path).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            return fd
+        os.close(fd)
+    raise RunDirError(f"could not lock {path}: it keeps being replaced")
 
 
 def check_out(out) -> Path:
@@ -250,14 +268,7 @@ def _start_clean(rundir: Path) -> None:
         raise storage_error(exc, "move aside the earlier run") from None
     ent = _held.get(key)
     if ent is not None:
-        fd = os.open(rundir / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            os.close(fd)
-            raise RunDirError(f"run directory {rundir} was taken by "
-                              f"{describe_holder(holder(rundir))} while its earlier run was "
-                              "being removed") from None
+        fd = _take(rundir)
         old_fd = ent[0]
         with contextlib.suppress(OSError):
             os.pwrite(fd, os.pread(old_fd, 4096, 0), 0)
