@@ -26,7 +26,8 @@ class Outcome:
 
 
 def drive(engine, *, progress=None, on_phase_end=None, checkpoint=None, resume=None,
-          check_every: int | None = None, final_frame: bool = True) -> Outcome:
+          check_every: int | None = None, final_frame: bool = True,
+          on_chunk=None) -> Outcome:
     """Step ``engine`` through its scene's whole schedule.
 
     Parameters
@@ -46,6 +47,9 @@ def drive(engine, *, progress=None, on_phase_end=None, checkpoint=None, resume=N
         Steps between watchdog checks (default: the engine's own).
     final_frame : bool
         Write a frame of the last step if the engine's dump interval did not fall on it.
+    on_chunk : callable, optional
+        Called with the engine after every chunk (after its watchdog check): what a benchmark
+        observes step by step (``check_every=1``).
 
     Returns
     -------
@@ -86,6 +90,8 @@ def drive(engine, *, progress=None, on_phase_end=None, checkpoint=None, resume=N
                 engine.advance(n)
                 engine.check()
                 left -= n
+                if on_chunk is not None:
+                    on_chunk(engine)
                 if progress is not None:
                     progress.update(n)
                 if left > 0 and checkpoint is not None:

@@ -201,12 +201,17 @@ class Reference:
         """``n`` steps of :meth:`step` in the current phase, writing frames as they fall due."""
         for _ in range(int(n)):
             self.step(self._phase)
+            self._checked_at = self.step_count
             if self._dump is not None and self.step_count % self._dump_every == 0:
                 self._dump.write(self.step_count, self.p)
 
+    _checked_at = -1
+
     def check(self) -> None:
-        """The watchdog (already run by every :meth:`step`; repeated here for the interface)."""
-        check(self.scene, self.p, self.v, self.o, self.step_count)
+        """The watchdog (every :meth:`step` runs it already: not again for the same step)."""
+        if self._checked_at != self.step_count:
+            check(self.scene, self.p, self.v, self.o, self.step_count)
+            self._checked_at = self.step_count
 
     def positions(self) -> np.ndarray:
         return self.p.copy()
