@@ -447,3 +447,19 @@ def test_input_edges_give_clear_errors(tmp_path):
     sweep.write_bytes(b'scene = "plane-bound"\n# caf\xe9\n')
     r = rs("batch", sweep, "--out", tmp_path / "b")
     assert r.returncode == 2 and "UTF-8" in r.stderr and str(sweep) in r.stderr
+
+
+def test_render_of_a_run_with_non_finite_frames_is_refused_clearly(tmp_path):
+    out = tmp_path / "r"
+    assert rs("run", "plane-rack", "--engine", "reference", "--steps", "20", "--dump-every",
+              "10", "--out", out, *QUIET).returncode == 0
+    dump = out / "trajectory.dump"
+    text = dump.read_text()
+    last = text.rindex("ITEM: ATOMS")
+    head, body = text[:last], text[last:].split("\n")
+    body[5] = " ".join(body[5].split()[:3] + ["nan", "nan", "nan"])   # one particle of frame 20
+    dump.write_text(head + "\n".join(body))
+    r = rs("render", out)
+    assert r.returncode == 2, r.stderr
+    assert "iteration 20" in r.stderr and "non-finite" in r.stderr and "Traceback" not in r.stderr
+    assert not (out / "figures").exists()

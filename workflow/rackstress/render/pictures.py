@@ -234,6 +234,14 @@ def _choose_vmax(values, run, frames, vmax, notes) -> float:
     return v
 
 
+def _first_nonfinite(run) -> int | None:
+    """The iteration of the first dumped frame with a non-finite position (None: all finite)."""
+    for k, ts in enumerate(run.trajectory):
+        if not np.isfinite(ts.positions).all():
+            return int(run.steps[k])
+    return None
+
+
 def render(rundir, frames=None, measure: str = "paper", views=DEFAULT_VIEWS, movie: bool = False,
            vmax: float | None = None, allow_truncated: bool = False, window_size=WINDOW,
            movie_max_frames: int = 400, fps: int = 10, plots: bool = True) -> RenderReport:
@@ -255,8 +263,17 @@ def render(rundir, frames=None, measure: str = "paper", views=DEFAULT_VIEWS, mov
     if not run.displayed():
         raise StressInputError(f"{rundir}: no part to draw (every group is a rack or sediment)")
     t = time.perf_counter()
-    ana = MEASURES[measure](run).run()
-    motion = PartMotion(run).run()
+    try:
+        ana = MEASURES[measure](run).run()
+        motion = PartMotion(run).run()
+    except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+        bad = _first_nonfinite(run)
+        if bad is None:
+            raise
+        raise StressInputError(
+            f"{rundir}: the frame of iteration {bad} in trajectory.dump holds non-finite "
+            "positions (the run diverged there: see its summary.json), so no stress can be "
+            "measured over the run; nothing was rendered") from None
     report.timings["load+analyse_s"] = time.perf_counter() - t0
     values = ana.results.per_particle
     label = f"{ana.LABEL} [{ana.UNITS}]"
