@@ -68,8 +68,10 @@ def _fail_any(err: BaseException, out=None):
             sys.stderr.flush()
             comm.Abort(EXIT_BUG)
         raise err
-    click.echo(f"rackstress: error: {msg}", err=True)
     comm = world()
+    # errors rackstress raises reach every rank alike: one message, from rank 0
+    if comm.Get_rank() == 0 or not isinstance(err, RackstressError):
+        click.echo(f"rackstress: error: {msg}", err=True)
     if comm.Get_size() > 1 and not isinstance(err, RackstressError):
         sys.stderr.flush()
         comm.Abort(code)

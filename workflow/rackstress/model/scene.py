@@ -199,7 +199,7 @@ class Scene:
             if bad.any():
                 k = int(np.flatnonzero(bad)[0])
                 raise SceneError(f"scene '{self.name}': '{name}' particle {k} has radius "
-                                 f"{r[k]!r}; a radius must be positive, finite and at most the "
+                                 f"{float(r[k])!r}; a radius must be positive, finite and at most the "
                                  f"watchdog bound {self.bound:g} (the collision test squares "
                                  "the sum of two radii)")
         for target, seq in self.operators.items():

@@ -96,6 +96,8 @@ class LammpsRun:
         # the deck's cutoff is 1.5 reach + 2 r_max + skin + 1 (deck.ghost_cutoff)
         self._extra = 2 * float(self.scene.radii().max()) + SKIN + 1.0
         self._reach0 = (self.cutoff - self._extra) / 1.5
+        self._span = max((self.scene.slice(g).stop for pair in self._reach for g in pair),
+                         default=0)
         self._ids = np.arange(1, self.scene.n_particles + 1)
         self.py = None
         self._py_on = False
@@ -156,7 +158,7 @@ class LammpsRun:
             if lone:
                 abort_all(self.comm, f"LAMMPS could not write at step {self.step}: {msg}", 5)
             raise StorageError(f"LAMMPS could not write at step {self.step} ('{cmd}'): {msg}"
-                               f"{self._free_space()}; free space on that file system or "
+                               f"{self._free_space(msg)}; free space on that file system or "
                                "choose another --out")
         if lone:
             abort_all(self.comm, f"LAMMPS failed on '{cmd}' at step {self.step}: {msg}", 2)
@@ -165,7 +167,7 @@ class LammpsRun:
             raise divergence_error(self.scene, self.step, found)
         raise RackstressError(f"LAMMPS failed on '{cmd}' at step {self.step}: {msg}")
 
-    def _free_space(self) -> str:
+    def _free_space(self, msg: str = "") -> str:
         import shutil
 
         try:
@@ -174,7 +176,8 @@ class LammpsRun:
             return ""
         if free is None:
             return ""
-        return " (No space left on device)" if free == 0 else f" ({free} bytes free there)"
+        return "" if free == 0 and "No space" in msg else (
+            " (No space left on device)" if free == 0 else f" ({free} bytes free there)")
 
     def _sync_step(self) -> None:
         try:
@@ -335,8 +338,12 @@ class LammpsRun:
         starts = np.array([sc.offset(n) for n in names])
         lo = np.full((len(names), 3), np.inf)
         hi = np.full((len(names), 3), -np.inf)
-        if len(tag):
-            gid = np.searchsorted(starts, tag - 1, side="right") - 1
+        idx = tag - 1
+        if self._span < sc.n_particles:      # only the groups binds and attractions join
+            keep = idx < self._span           # (MagPod's robot, not its sediment)
+            idx, x = idx[keep], x[keep]
+        if len(idx):
+            gid = np.searchsorted(starts, idx, side="right") - 1
             for g in np.unique(gid):
                 rows = x[gid == g]
                 lo[g], hi[g] = rows.min(0), rows.max(0)
