@@ -72,7 +72,8 @@ def fingerprint(scene, *, engine: str, mode: str, dump_every: int) -> dict:
                              + [scene.cycles, scene.total_steps])
     fp["dt"] = float(scene.dt).hex()
     fp["bound"] = float(scene.bound).hex()
-    fp["params"] = _digest({k: v for k, v in (scene.params or {}).items()})
+    # where a scene file lies is no part of the physics (its content is hashed above)
+    fp["params"] = _digest({k: v for k, v in (scene.params or {}).items() if k != "file"})
     fp["engine"], fp["mode"], fp["dump_every"] = str(engine), str(mode), int(dump_every)
     return fp
 
