@@ -150,7 +150,8 @@ def replace_ops(scene: Scene, fn) -> Scene:
     """The scene with every operator ``op`` on ``target`` replaced by ``fn(target, op)``."""
     ops = {t: [fn(t, op) for op in seq] for t, seq in scene.operators.items()}
     return Scene(scene.name, scene.groups, ops, scene.phases, scene.dt, scene.cycles,
-                 scene.bound, dict(scene.params), scene.report, scene.limit)
+                 scene.bound, dict(scene.params), scene.report,
+                 duration=scene.duration, limit=scene.limit)
 
 
 def two_blobs(collide: float = 100.0, ratio: float = 0.2) -> Scene:

@@ -209,6 +209,10 @@ def execute(scene: Scene, out: Path, engine: str, mode: str, dump_every: int, *,
     wall = wall_before + time.perf_counter() - t0
     if scene.report is not None and root:
         extra["report"] = scene.report(scene, records)
+    if root:   # guard rails: pass-through, force on racks (engines/guards.py)
+        from rackstress.engines.guards import check_run
+
+        extra["warnings"] = check_run(scene, out)
     summary = summarize(scene, engine, mode, p_end, steps, wall, status, error, extra)
     on_root(lambda: write_json(Path(out) / "summary.json", summary), comm)
     if error is not None:
