@@ -66,7 +66,9 @@ def fingerprint(scene, *, engine: str, mode: str, dump_every: int) -> dict:
     >>> sorted(k for k in a if a[k] != b[k])
     ['operators:plane', 'params']
     """
-    fp = {f"group:{name}": _digest([g.kind, g.host, g.o, g.r]) for name, g in scene.groups.items()}
+    fp = {f"group:{name}": _digest([g.kind, g.host, g.o, g.r, getattr(g, "held", None),
+                                    getattr(g, "v0", None)])
+          for name, g in scene.groups.items()}
     fp.update({f"operators:{t}": _digest(list(seq)) for t, seq in scene.operators.items()})
     fp["schedule"] = _digest([[p.name, p.steps, dict(p.vars)] for p in scene.phases]
                              + [scene.cycles, scene.total_steps])
@@ -96,7 +98,7 @@ def compare(recorded: dict, now: dict, where: str) -> None:
 def _name(key: str) -> str:
     kind, _, rest = key.partition(":")
     if kind == "group":
-        return f"group '{rest}' (positions or radii)"
+        return f"group '{rest}' (positions, radii, supports or initial velocity)"
     if kind == "operators":
         return f"the operators on '{rest}'"
     return {"dt": "the time step dt", "params": "the scene parameters",

@@ -583,8 +583,10 @@ class PyForces:
             self._fresh = False
         except Exception as exc:  # noqa: BLE001 - agreed on below
             self._fail_here = exc
-        failed = (self._agree(fr, self._fail_here is not None) if mpi
-                  else self._fail_here is not None)
+        # MPI: the contact conditions are agreed on first (one reduction, if there are any);
+        # a failure is agreed on at the end in any case (one more)
+        failed = (self._agree(fr, self._fail_here is not None)
+                  if mpi and self._contact_keys() else self._fail_here is not None)
         if not failed:
             self._evaluate(fr, old, f)
         if mpi:
