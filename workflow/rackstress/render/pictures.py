@@ -513,6 +513,14 @@ def output_dir(rundir: Path, measure: str, out=None) -> Path:
 
 
 # ----------------------------------------------------------------------------- render
+def _first_nonfinite(run) -> int | None:
+    """The iteration of the first dumped frame with a non-finite position (None: all finite)."""
+    for k, ts in enumerate(run.trajectory):
+        if not np.isfinite(ts.positions).all():
+            return int(run.steps[k])
+    return None
+
+
 def render(rundir, frames=None, measure: str = "paper", views=DEFAULT_VIEWS, movie: bool = False,
            vmax: float | None = None, allow_truncated: bool = False, window_size=WINDOW,
            movie_max_frames: int = 400, fps: int = 10, plots: bool = True, groups=None,
@@ -576,7 +584,16 @@ def render(rundir, frames=None, measure: str = "paper", views=DEFAULT_VIEWS, mov
     coloured, context, hidden = select_parts(run, groups)
     report.parts = {"coloured": [p.name for p in coloured], "context": [p.name for p in context],
                     "hidden": hidden}
-    fields = compute_fields(run, cache=True)
+    try:
+        fields = compute_fields(run, cache=True)
+    except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+        bad = _first_nonfinite(run)
+        if bad is None:
+            raise
+        raise StressInputError(
+            f"{rundir}: the frame of iteration {bad} in trajectory.dump holds non-finite "
+            "positions (the run diverged there: see its summary.json), so no stress can be "
+            "measured over the run; nothing was rendered") from None
     if measure not in fields.values:
         from rackstress.stress.measures import VirialStress
 
