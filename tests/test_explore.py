@@ -11,7 +11,6 @@ from __future__ import annotations
 import json
 import math
 from html.parser import HTMLParser
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,7 +18,6 @@ from click.testing import CliRunner
 
 from rackstress.cli import main
 from rackstress.lib import rigid
-from rackstress.stress import load_run
 from rackstress.stress.post import postprocess
 from test_stress import BLOCK, SHEET, lattice, rigid as rigid_motion, write_run
 

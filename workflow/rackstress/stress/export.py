@@ -229,10 +229,9 @@ def write_stress_dump(run, fields, path, progress: bool = False) -> Path:
     ids, types, mols = run.data.ids, run.data.types, run.data.mols
     with_v = _velocity(run.trajectory[0]) is not None
     cols = stress_dump_columns(run, fields, with_v)
-    nfloat = len(cols) - 3 - 1  # id type mol ... group (ints)
+    # id type mol: integers; x y z radius [vx vy vz]; group: integer; dx dy dz and the measures
     fmt = " ".join(["%d", "%d", "%d"] + [FLOAT] * (4 + 3 * with_v) + ["%d"]
                    + [FLOAT] * (3 + len(fields.values)))
-    del nfloat
     try:
         with open(tmp, "w") as fh, progress_bar(len(fields.steps), progress, "stress dump") as bar:
             bar.unit = "frame"
