@@ -22,9 +22,7 @@ def _load_scene(scene: str, steps, dt, sets):
     if dt is not None:
         if not dt > 0:
             raise RackstressError(f"--dt must be positive, got {dt}")
-        sc.dt = float(dt)
-        sc.params["dt"] = float(dt)
-        sc.validate()
+        sc = sc.with_dt(float(dt))   # a scene given by duration keeps its physical time
     if steps is not None:
         sc = sc.with_steps(int(steps))
     return sc
