@@ -22,9 +22,10 @@
 
 Both are written into a temporary name and renamed when complete: a reader never sees half.
 
-Radii: a rackstress run's scene is rebuilt from ``scene.json`` to take its radii; if that is not
-possible (a TOML scene, a plain LAMMPS run) the data file's diameter column is used, else half the
-part's median nearest-neighbour distance (touching spheres).
+Radii: the groups' ``radius`` in ``scene.json`` if recorded, else a built-in scene is rebuilt from
+``scene.json`` to take its radii; if neither is possible (a TOML scene, a plain LAMMPS run) the data
+file's diameter column is used, else half the part's median nearest-neighbour distance (touching
+spheres).
 """
 from __future__ import annotations
 
@@ -57,6 +58,15 @@ def radii(run) -> np.ndarray:
 
 def _scene_radii(run):
     scene = run.scene or {}
+    groups = scene.get("groups") or []
+    if groups and all("radius" in g for g in groups):          # recorded in scene.json
+        out = np.empty(run.n_atoms)
+        for g in groups:
+            part = run.parts.get(g["name"])
+            if part is None:
+                return None
+            out[part.index] = np.broadcast_to(np.asarray(g["radius"], float), (part.n,))
+        return out
     name, params = scene.get("scene"), scene.get("params") or {}
     try:
         from rackstress import scenes
