@@ -222,10 +222,21 @@ def deck(scene, out, mode, steps, dt, sets, dump_every):
 
 
 @main.command("scenes")
-def list_scenes():
-    """List the built-in scenes and their parameters."""
+@click.argument("files", nargs=-1)
+def list_scenes(files):
+    """List the built-in scenes and their parameters (or those of the given .toml scenes)."""
     from rackstress import scenes
+    from rackstress.errors import SceneError
 
+    if files:
+        from rackstress.scenes.toml import scene_parameters
+
+        for f in files:
+            try:
+                click.echo(f"{f}\n  " + json.dumps(scene_parameters(f)))
+            except SceneError as err:
+                _fail(err, EXIT_INPUT)
+        return
     for name in scenes.BUILDERS:
         params = scenes.parameters(name)
         click.echo(f"{name}")
