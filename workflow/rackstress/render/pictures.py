@@ -393,7 +393,6 @@ def header_strip(width: int, title: str, label: str, vmax: float, cmap: str, leg
     img = Image.new("RGB", (width, height), "white")
     dr = ImageDraw.Draw(img)
     big, small = _font(17), _font(13)
-    left = int(0.5 * width) - 10
     dr.text((10, 6), title, fill="black", font=big)
     y = 32
     for text, colour in legend:
@@ -418,7 +417,6 @@ def header_strip(width: int, title: str, label: str, vmax: float, cmap: str, leg
         s = f"{t * vmax:.3g}"
         tw = dr.textlength(s, font=small)
         dr.text((min(max(x - tw / 2, x0 - 10), x1 - tw), 57), s, fill="black", font=small)
-    del left
     return np.asarray(img)
 
 
