@@ -323,6 +323,9 @@ def render(rundir, frames, measure, views, groups, out, movie, movie_view, vmax,
             raise RackstressError(f"{rundir} is not a run directory (it does not exist)")
         # one writer per run directory: not while a run (or another render) holds it
         with locked(rundir, create=False):
+            from rackstress.runs.rundir import remove_temporaries
+
+            remove_temporaries(rundir)       # of a render or run killed midway
             rep = render_run(rundir, frames=its, measure=measure, views=_csv(views) or [],
                              movie=movie, movie_view=movie_view, vmax=vmax, cmap=cmap,
                              groups=_csv(groups), out=out, allow_truncated=allow_truncated,
