@@ -1,4 +1,4 @@
-"""Time per iteration and peak memory of a scene on LAMMPS (issue 7: sediment-large).
+"""Time per iteration and peak memory of a scene on LAMMPS (sediment-large).
 
     python scripts/bench_large.py [SCENE] [--steps 200] [--set key=value ...]
     mpiexec -n 2 python scripts/bench_large.py sediment-large --steps 200
@@ -42,8 +42,8 @@ def main():
     a = ap.parse_args()
     comm = MPI.COMM_WORLD
     from rackstress import scenes
-    from rackstress.deck import compile_deck
-    from rackstress.lammps_engine import LammpsRun
+    from rackstress.engines.lammps.deck import compile_deck
+    from rackstress.engines.lammps.runner import LammpsRun
 
     t0 = time.perf_counter()
     sc = scenes.load(a.scene, scenes.parse_overrides(a.sets))

@@ -12,8 +12,8 @@ import sys
 from pathlib import Path
 
 from rackstress import scenes
-from rackstress.deck import write_deck
-from rackstress.run import default_dump_every
+from rackstress.engines.lammps.deck import write_deck
+from rackstress.runs.run import default_dump_every
 
 #: deck directory → (scene, parameters, mode)
 DECKS = {

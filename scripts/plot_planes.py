@@ -18,8 +18,9 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from rackstress import rigid, scenes  # noqa: E402
-from rackstress.reference import Reference  # noqa: E402
+from rackstress.lib import rigid
+from rackstress import scenes  # noqa: E402
+from rackstress.engines.reference import Reference  # noqa: E402
 
 
 def states(scene, at):

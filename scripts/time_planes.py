@@ -25,7 +25,7 @@ CASES = {"plane-bound-d2": ("plane-bound", {"d": 2.0}), "plane-bound-d10": ("pla
 
 def time_reference(name, params, steps):
     from rackstress import scenes
-    from rackstress.reference import Reference
+    from rackstress.engines.reference import Reference
 
     sc = scenes.build(name, steps=steps, **params)
     ref = Reference(sc)
@@ -37,9 +37,9 @@ def time_reference(name, params, steps):
 
 def time_lammps(name, params, steps, mode="exact"):
     from rackstress import scenes
-    from rackstress.deck import compile_deck
-    from rackstress.lammps_engine import LammpsRun
-    from rackstress.mpi import world
+    from rackstress.engines.lammps.deck import compile_deck
+    from rackstress.engines.lammps.runner import LammpsRun
+    from rackstress.lib.mpi import world
 
     sc = scenes.build(name, steps=steps, **params)
     run = LammpsRun(compile_deck(sc, mode), None)
@@ -60,7 +60,7 @@ def main():
     ap.add_argument("--mpi-child", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.mpi_child:
-        from rackstress.mpi import world
+        from rackstress.lib.mpi import world
         name, params = CASES[args.mpi_child]
         best = min(time_lammps(name, params, args.steps) for _ in range(args.repeat))
         if world().Get_rank() == 0:

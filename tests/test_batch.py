@@ -1,4 +1,4 @@
-"""``rackstress batch`` (issue 7): sweeps over real MPI ranks (the venv's mpiexec), a job that
+"""``rackstress batch``: sweeps over real MPI ranks (the venv's mpiexec), a job that
 diverges, a batch killed mid-way and restarted, ranks per job, the report, bad sweep files."""
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from rackstress.sweep import SweepError, load_sweep
+from rackstress.runs.sweep import SweepError, load_sweep
 
 BIN = Path(sys.executable).parent
 RACKSTRESS, MPIEXEC = str(BIN / "rackstress"), str(BIN / "mpiexec")
@@ -89,6 +89,9 @@ def reference(tmp_path_factory):
     return {n: j["figures"] for n, j in by.items()}, sw
 
 
+@pytest.mark.slow
+@pytest.mark.lammps
+@pytest.mark.mpi
 def test_sweep_under_mpiexec_two_groups(reference, tmp_path):
     figs, sw = reference
     r = batch([str(sw), "--out", str(tmp_path / "b")], mpi=2)
@@ -105,6 +108,9 @@ def test_sweep_under_mpiexec_two_groups(reference, tmp_path):
     assert p["ranks"] == 2 and p["groups"] == 2 and p["jobs_run"] == 6
 
 
+@pytest.mark.slow
+@pytest.mark.lammps
+@pytest.mark.mpi
 def test_killed_batch_restarts_and_runs_each_job_once(reference, tmp_path):
     figs, sw = reference
     d = tmp_path / "b"
@@ -153,6 +159,7 @@ def test_killed_batch_restarts_and_runs_each_job_once(reference, tmp_path):
     assert r.returncode == 0 and index(d)["passes"][-1]["jobs_run"] == 0
 
 
+@pytest.mark.slow
 def test_two_ranks_per_job(reference, tmp_path):
     figs, _ = reference
     sw = tmp_path / "two.toml"

@@ -31,6 +31,8 @@ def test_bench_stability_smoke(tmp_path):
     assert "wrote" in res.output
 
 
+@pytest.mark.slow
+@pytest.mark.lammps
 def test_bench_accuracy_smoke(tmp_path):
     data = accuracy.run_bench(tmp_path, quick=True, scenes_=("plane-rack",), echo=lambda s: None)
     rows = data["scenes"][0]["rows"]
@@ -49,6 +51,7 @@ def test_bench_accuracy_smoke(tmp_path):
     assert "the front" in (tmp_path / "accuracy.md").read_text()
 
 
+@pytest.mark.lammps
 def test_bench_perf_smoke(tmp_path):
     data = perf.run_bench(tmp_path, steps=4, profile_steps=4, scene_name="magpod-small",
                           configs=(("reference", "exact", 1), ("lammps", "exact", 1),

@@ -10,7 +10,7 @@ from click.testing import CliRunner
 
 from rackstress import scenes
 from rackstress.cli import main
-from rackstress.reference import Reference
+from rackstress.engines.reference import Reference
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -39,6 +39,7 @@ def read_frames(path: Path):
     return frames
 
 
+@pytest.mark.slow
 def test_run_plane_rack_writes_summary(tmp_path):
     out = tmp_path / "run"
     res = invoke("run", "plane-rack", "--engine", "reference", "--steps", 50, "--out", out,

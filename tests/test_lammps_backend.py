@@ -16,9 +16,9 @@ import pytest
 
 from rackstress import (Attract, Bind, Collide, Const, Contact, Dampen, DivergenceError, Force,
                         Group, Matched, Phase, PhaseIn, Scene, Within, lattice, rack, scenes)
-from rackstress.deck import compile_deck
-from rackstress.lammps_engine import LammpsRun
-from rackstress.reference import Reference
+from rackstress.engines.lammps.deck import compile_deck
+from rackstress.engines.lammps.runner import LammpsRun
+from rackstress.engines.reference import Reference
 
 ROOT = Path(__file__).resolve().parent.parent
 MPIEXEC = Path(sys.executable).parent / "mpiexec"
@@ -66,6 +66,7 @@ def _scatter(lmp, name, arr):
     lmp.scatter_atoms(name, 1, 3, (ctypes.c_double * len(flat))(*flat))
 
 
+@pytest.mark.lammps
 def test_realization_uses_native_styles_where_exact():
     deck = compile_deck(every_operator_scene(contact="C"), "exact")
     how = {(r.target, r.op.kind, getattr(r.op, "source", None)): r.how for r in deck.realized}
@@ -81,6 +82,7 @@ def test_realization_uses_native_styles_where_exact():
     assert "neigh_modify exclude type 1 2" not in text
 
 
+@pytest.mark.lammps
 def test_collide_shares_the_contact_search():
     """A contact condition on A and B: the A↔B collide is carried by the callback's search,
     so no pair style (and no neighbour list) is set up, and the masses stay 1."""
@@ -91,6 +93,7 @@ def test_collide_shares_the_contact_search():
     assert deck.masses["A"] == deck.masses["B"] == 1.0
 
 
+@pytest.mark.lammps
 @pytest.mark.parametrize("contact", ["B", "C"])
 @pytest.mark.parametrize("phase", [{"r": 1}, {"r": 2}])
 def test_force_parity_every_operator_kind(phase, contact):
@@ -135,6 +138,7 @@ def _lammps_final(scene, mode="exact"):
         run.close()
 
 
+@pytest.mark.lammps
 @pytest.mark.parametrize("contact", ["B", "C"])
 def test_trajectory_parity_across_phase_switches(contact):
     """Three phases (coefficients, fixes and callbacks switch twice) stay at round-off."""
@@ -143,8 +147,10 @@ def test_trajectory_parity_across_phase_switches(contact):
     assert diff <= 1e-8
 
 
+@pytest.mark.lammps
 @pytest.mark.parametrize("name,params", [("plane-bound", {"d": 2.0}), ("plane-bound", {"d": 10.0}),
                                          ("plane-rack", {})])
+@pytest.mark.slow
 def test_trajectory_parity_plane_scenes(name, params):
     """Exact mode: 1200 steps, max position difference ≤ 1e-8 against the reference engine."""
     scene = scenes.build(name, steps=1200, **params)
@@ -157,9 +163,9 @@ def test_trajectory_parity_plane_scenes(name, params):
 MPI_SCRIPT = """
 import sys, numpy as np
 from rackstress import scenes
-from rackstress.deck import compile_deck
-from rackstress.lammps_engine import LammpsRun
-from rackstress.mpi import world
+from rackstress.engines.lammps.deck import compile_deck
+from rackstress.engines.lammps.runner import LammpsRun
+from rackstress.lib.mpi import world
 out = sys.argv[1]
 for key, name, params in [("d2", "plane-bound", {"d": 2.0}), ("d10", "plane-bound", {"d": 10.0}),
                           ("rack", "plane-rack", {})]:
@@ -175,6 +181,9 @@ for key, name, params in [("d2", "plane-bound", {"d": 2.0}), ("d10", "plane-boun
 """
 
 
+@pytest.mark.slow
+@pytest.mark.lammps
+@pytest.mark.mpi
 def test_trajectory_parity_under_mpi(tmp_path):
     """The same three runs under ``mpiexec -n 2``: one LAMMPS spanning both ranks."""
     script = tmp_path / "mpi_parity.py"
@@ -190,9 +199,10 @@ def test_trajectory_parity_under_mpi(tmp_path):
         assert np.abs(np.load(tmp_path / f"{key}.npy") - ref).max() <= 1e-8
 
 
+@pytest.mark.lammps
 def test_watchdog_catches_divergence_on_lammps(tmp_path):
     """within(100) with magnitude 100 (Section 3.1) is stopped, named, and its frames kept."""
-    from rackstress.run import run
+    from rackstress.runs.run import run
 
     scene = scenes.build("plane-bound", d=100.0, magnitude=100.0, steps=300)
     with pytest.raises(DivergenceError) as info:
@@ -208,6 +218,7 @@ def test_watchdog_catches_divergence_on_lammps(tmp_path):
     assert "Loop time" in (tmp_path / "run" / "log.lammps").read_text()
 
 
+@pytest.mark.lammps
 def test_committed_decks_regenerate_byte_identically(tmp_path):
     proc = subprocess.run([sys.executable, str(ROOT / "scripts" / "make_decks.py"), str(tmp_path)],
                           capture_output=True, text=True, timeout=300)
@@ -220,6 +231,9 @@ def test_committed_decks_regenerate_byte_identically(tmp_path):
         assert (tmp_path / rel).read_bytes() == (ROOT / "lammps_inputs" / rel).read_bytes(), rel
 
 
+@pytest.mark.slow
+@pytest.mark.lammps
+@pytest.mark.mpi
 def test_cli_run_under_mpiexec(tmp_path):
     """``mpiexec -n 2 rackstress run plane-rack`` writes one run directory that matches serial."""
     exe = Path(sys.executable).parent / "rackstress"
@@ -238,6 +252,7 @@ def test_cli_run_under_mpiexec(tmp_path):
         assert (out / name).stat().st_size > 0
 
 
+@pytest.mark.lammps
 def test_fast_mode_refused_where_the_callback_stays(tmp_path):
     """MagPod keeps attraction, one-way collisions and contact damping in the callback, so fast
     mode would only swap bind for harmonic bonds: refused with exit 2, nothing written. The
@@ -256,6 +271,7 @@ def test_fast_mode_refused_where_the_callback_stays(tmp_path):
     assert compile_deck(scenes.build("plane-rack"), "fast").python_ops == []
 
 
+@pytest.mark.lammps
 def test_phase_conditioned_self_collision_parity():
     """Two clusters of one group pushed into each other from 6 units apart, colliding with
     themselves only in phase r = 1 (so in the callback, both directions from one Verlet list of

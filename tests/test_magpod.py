@@ -15,13 +15,15 @@ import numpy as np
 import pytest
 
 from rackstress import scenes
-from rackstress.deck import compile_deck
-from rackstress.lammps_engine import LammpsRun
-from rackstress.reference import Reference
+from rackstress.engines.lammps.deck import compile_deck
+from rackstress.engines.lammps.runner import LammpsRun
+from rackstress.engines.reference import Reference
 
 EXE = Path(sys.executable).parent / "rackstress"
 
 
+@pytest.mark.slow
+@pytest.mark.lammps
 def test_parity_magpod_small_600_iterations():
     """Exact mode vs the reference engine over 600 iterations, all four gait phases."""
     sc = scenes.build("magpod-small", phase_steps=150, cycles=1)
@@ -59,6 +61,7 @@ def _foot_length(sc) -> float:
     return float(sole[:, 0].max() - sole[:, 0].min() + 2 * sc.groups["rightleg"].r[0])
 
 
+@pytest.mark.slow
 def test_walk_runs_without_divergence(walk):
     _, s = walk
     assert s["status"] == "ok" and s["steps"] == 19200 >= 17480
@@ -129,9 +132,9 @@ def test_footprints_at_stances_only(walk):
 MPI_MAGPOD = """
 import sys, numpy as np
 from rackstress import scenes
-from rackstress.deck import compile_deck
-from rackstress.lammps_engine import LammpsRun
-from rackstress.mpi import world
+from rackstress.engines.lammps.deck import compile_deck
+from rackstress.engines.lammps.runner import LammpsRun
+from rackstress.lib.mpi import world
 sc = scenes.build("magpod-small", phase_steps=100, cycles=1)
 run = LammpsRun(compile_deck(sc, "exact"), None)
 run.run_schedule()
@@ -144,6 +147,8 @@ if world().Get_rank() == 0:
 """
 
 
+@pytest.mark.lammps
+@pytest.mark.mpi
 def test_parity_magpod_small_under_mpi(tmp_path):
     """400 iterations through all four phases on two ranks: callbacks see only their rank's
     atoms (and ghosts), the contact test is reduced over ranks; positions stay at round-off."""

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from rackstress.operators import Attract, Collide, Dampen, Force, Matched, PhaseIn
+from rackstress.model.operators import Attract, Collide, Dampen, Force, Matched, PhaseIn
 from rackstress.scenes import BUILDERS, build
 
 ORDER = ["body", "rightleg", "leftleg", "bodyrack", "rightrack", "leftrack", "sediment"]

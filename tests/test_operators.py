@@ -1,7 +1,7 @@
 """Each primitive operator of Section 2.3 against hand-computed accelerations.
 
 Tiny scenes are built by hand and evaluated with ``Reference(scene).accelerations(phase)``;
-every expected value below is worked out from the paper's equations (with the DESIGN.md errata),
+every expected value below is worked out from the paper's equations (with the errata of docs/model.md),
 written as plain arithmetic in the test.
 """
 from __future__ import annotations
@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 
 from rackstress.errors import SceneError
-from rackstress.operators import (Attract, Bind, Collide, Const, Contact, Dampen, Force, Matched,
+from rackstress.model.operators import (Attract, Bind, Collide, Const, Contact, Dampen, Force, Matched,
                                   PhaseIn, Within)
-from rackstress.particles import Group
-from rackstress.reference import Reference
-from rackstress.scene import Phase, Scene
+from rackstress.model.particles import Group
+from rackstress.engines.reference import Reference
+from rackstress.model.scene import Phase, Scene
 
 
 def make(groups: dict, ops: dict, phases=None, dt=0.01) -> Scene:

@@ -4,7 +4,7 @@
   violently after only a few computation rounds" (t = 0.01).
 * 3.3 / Fig. 2: with rack particles the deformation under the corner pull stays local and the
   plane tilts as a whole, unlike the all-bound plane of Fig. 1 (d).
-* DESIGN.md §4: a rigidly moving part shows no deformation.
+* docs/model.md, "Desired position": a rigidly moving part shows no deformation.
 """
 from __future__ import annotations
 
@@ -13,9 +13,10 @@ import math
 import numpy as np
 import pytest
 
-from rackstress import rigid, scenes
+from rackstress.lib import rigid
+from rackstress import scenes
 from rackstress.errors import DivergenceError
-from rackstress.reference import Reference
+from rackstress.engines.reference import Reference
 
 
 def run_steps(scene, n):

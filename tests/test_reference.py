@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from rackstress.errors import DivergenceError
-from rackstress.operators import Bind, Collide, Const, Dampen, Force
-from rackstress.particles import Group
-from rackstress.reference import Reference, integrate
-from rackstress.scene import Phase, Scene
+from rackstress.model.operators import Bind, Collide, Const, Dampen, Force
+from rackstress.model.particles import Group
+from rackstress.engines.reference import Reference, integrate
+from rackstress.model.scene import Phase, Scene
 
 
 def test_integrate_is_eq5():

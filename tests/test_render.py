@@ -12,8 +12,8 @@ from matplotlib import image as mpimg
 
 from rackstress import scenes
 from rackstress.cli import main
-from rackstress.render import VIEWS, render, stress_rgba
-from rackstress.run import run as run_scene
+from rackstress.render.pictures import VIEWS, render, stress_rgba
+from rackstress.runs.run import run as run_scene
 from rackstress.stress import DesiredPositionDistance, TruncatedDumpError, load_run
 
 STEPS, EVERY = 200, 10
@@ -54,6 +54,7 @@ def test_colouring_is_the_papers():
     assert tuple(rgba[4]) == tuple(rgba[0])                # undefined → as zero
 
 
+@pytest.mark.slow
 def test_pictures_exist_and_show_the_pulled_corner_red(rendered):
     rundir, rep = rendered
     fig = rundir / "figures"

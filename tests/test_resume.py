@@ -1,4 +1,4 @@
-"""Checkpoints and ``rackstress run --resume`` (issue 7): a run killed half-way and resumed
+"""Checkpoints and ``rackstress run --resume``: a run killed half-way and resumed
 equals the uninterrupted run bit for bit in serial (real LAMMPS, a real SIGKILL)."""
 from __future__ import annotations
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from rackstress import Dampen, Force, Group, Phase, PhaseIn, Scene
-from rackstress.run import run
+from rackstress.runs.run import run
 
 
 def com_report(scene, records):

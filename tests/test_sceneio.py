@@ -1,4 +1,4 @@
-"""Scenes from TOML files (``rackstress.sceneio``): both forms, overrides, and bad input."""
+"""Scenes from TOML files (``rackstress.scenes.toml``): both forms, overrides, and bad input."""
 from __future__ import annotations
 
 import textwrap
@@ -9,10 +9,10 @@ import pytest
 
 from rackstress import scenes
 from rackstress.errors import SceneError
-from rackstress.operators import (Attract, Bind, Collide, Const, Contact, Dampen, Force, Matched,
+from rackstress.model.operators import (Attract, Bind, Collide, Const, Contact, Dampen, Force, Matched,
                                   PhaseIn, Within)
-from rackstress.reference import Reference
-from rackstress.sceneio import load_toml
+from rackstress.engines.reference import Reference
+from rackstress.scenes.toml import load_toml
 
 REPO = Path(__file__).resolve().parents[1]
 

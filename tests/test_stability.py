@@ -1,4 +1,4 @@
-"""The linear stability limit of Eq. 5 (DESIGN.md §3) and the run-time refusal built on it.
+"""The linear stability limit of Eq. 5 (docs/model.md, "Stability") and the run-time refusal built on it.
 
 Hand values: Eq. 5 on x'' = −ω²x − γx' has the amplification matrix
 [[1 − ω²t², t(1 − γt)], [−ω²t, 1 − γt]]; Jury's test gives ω²t² < 4 − 2γt, i.e.
@@ -18,7 +18,7 @@ from rackstress import Bind, Const, Dampen, Group, Phase, Scene, scenes
 from rackstress.bench.stability import measure_t_max, trial
 from rackstress.cli import main
 from rackstress.errors import SceneError
-from rackstress.stability import check_dt, predict, t_limit
+from rackstress.model.stability import check_dt, predict, t_limit
 
 
 def pair(c: float, damping: float = 0.0, one_way: bool = False) -> Scene:
@@ -81,7 +81,7 @@ def test_damped_pair_and_damped_particle():
 
 
 def test_within100_magnitude20_stable_and_100_unstable_at_001():
-    """Section 3.1 / DESIGN.md §3: magnitude 20 usable at t = 0.01, magnitude 100 diverges."""
+    """Section 3.1 / docs/model.md, "Stability": magnitude 20 usable at t = 0.01, magnitude 100 diverges."""
     p20 = predict(scenes.build("plane-bound", d=100.0, magnitude=20.0))
     p100 = predict(scenes.build("plane-bound", d=100.0, magnitude=100.0))
     assert p20["t_max"] > 0.01 > p100["t_max"]
@@ -101,7 +101,7 @@ def test_builtin_scenes_predicted_stable_at_their_defaults(name, kw):
 
 
 def test_refusal_names_dt_the_limit_and_the_operator(tmp_path):
-    from rackstress.run import run
+    from rackstress.runs.run import run
 
     sc = scenes.build("plane-bound", d=100.0, magnitude=100.0, steps=10)
     with pytest.raises(SceneError) as info:
@@ -127,6 +127,7 @@ def test_cli_refuses_with_exit_2_and_flag_overrides(tmp_path):
     assert res.exit_code == 0, res.output
 
 
+@pytest.mark.slow
 def test_magpod_gait_breaks_just_beyond_the_predicted_limit():
     """MagPod's predicted limit (a sole's rack bind under contact damping γ = 95) is where the
     gait really stops working: one cycle at 0.93× the prediction walks as at t = 0.01, at

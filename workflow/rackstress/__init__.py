@@ -2,11 +2,11 @@
 
 The data flows one way: scene → deck → run → dump → stress → pictures.
 """
-from .errors import DivergenceError, RackstressError, SceneError
-from .operators import (Attract, Bind, Collide, Const, Contact, Dampen, Force, Matched, PhaseIn,
+from rackstress.errors import DivergenceError, RackstressError, SceneError
+from rackstress.model.operators import (Attract, Bind, Collide, Const, Contact, Dampen, Force, Matched, PhaseIn,
                         Within)
-from .particles import Group, lattice, rack
-from .scene import Phase, Scene
+from rackstress.model.particles import Group, lattice, rack
+from rackstress.model.scene import Phase, Scene
 
 __version__ = "0.1.0"
 __all__ = ["Attract", "Bind", "Collide", "Const", "Contact", "Dampen", "DivergenceError",

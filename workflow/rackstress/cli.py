@@ -8,14 +8,14 @@ from pathlib import Path
 
 import click
 
-from .errors import DivergenceError, RackstressError
+from rackstress.errors import DivergenceError, RackstressError
 
 #: Exit codes: bad input, diverged run, pictures failed after a good run.
 EXIT_INPUT, EXIT_DIVERGED, EXIT_RENDER = 2, 3, 4
 
 
 def _load_scene(scene: str, steps, dt, sets):
-    from . import scenes
+    from rackstress import scenes
 
     overrides = scenes.parse_overrides(sets)
     sc = scenes.load(scene, overrides)
@@ -74,8 +74,8 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
     Exit status: 0 done, 2 bad input, 3 diverged (frames and summary kept), 4 the run is done
     but its pictures could not be rendered.
     """
-    from . import run as run_mod
-    from .mpi import rank
+    from rackstress.runs import run as run_mod
+    from rackstress.lib.mpi import rank
 
     if resume_dir is not None:
         out = resume_dir
@@ -83,7 +83,7 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
         raise click.UsageError("Missing argument 'SCENE' (or give --resume RUNDIR).")
     try:
         if resume_dir is not None:
-            from .resume import resume_run
+            from rackstress.runs.resume import resume_run
 
             summary = resume_run(resume_dir, scene, progress=progress and rank() == 0)
         else:
@@ -91,7 +91,7 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
             if out is None:
                 out = Path("runs") / f"{sc.name}-{time.strftime('%Y%m%d-%H%M%S')}"
             if restart_every is None and engine == "lammps":
-                from .resume import default_restart_every
+                from rackstress.runs.resume import default_restart_every
 
                 restart_every = default_restart_every(sc.total_steps)
             summary = run_mod.run(sc, out, engine=engine, mode=mode, dump_every=dump_every,
@@ -108,7 +108,7 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
         for name, g in summary["groups"].items():
             click.echo(f"  {name:12s} n={g['n']:6d}  max_deformation={g['max_deformation']:.4g}")
         if do_render:
-            from .render import render_default
+            from rackstress.render.pictures import render_default
 
             t0 = time.perf_counter()
             try:
@@ -131,8 +131,8 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
 @click.option("--dump-every", type=click.IntRange(min=1), default=None)
 def deck(scene, out, mode, steps, dt, sets, dump_every):
     """Write the LAMMPS data file and input deck of SCENE into OUT, without running."""
-    from .deck import write_deck
-    from .run import default_dump_every
+    from rackstress.engines.lammps.deck import write_deck
+    from rackstress.runs.run import default_dump_every
 
     try:
         sc = _load_scene(scene, steps, dt, sets)
@@ -146,7 +146,7 @@ def deck(scene, out, mode, steps, dt, sets, dump_every):
 @main.command("scenes")
 def list_scenes():
     """List the built-in scenes and their parameters."""
-    from . import scenes
+    from rackstress import scenes
 
     for name in scenes.BUILDERS:
         params = scenes.parameters(name)
@@ -173,7 +173,7 @@ def list_scenes():
               help="Render the complete frames of a dump that ends mid-frame.")
 def render(rundir, frames, measure, views, movie, vmax, allow_truncated):
     """Render the stress pictures, sheet, plots (and movie) of RUNDIR into RUNDIR/figures/."""
-    from .render import render as render_run
+    from rackstress.render.pictures import render as render_run
 
     t0 = time.perf_counter()
     try:
@@ -220,8 +220,8 @@ def batch(sweep, out, ranks_per_job, retry_failed, manager, report_dir, figure, 
     same --out finishes only what was not finished. Exit status: 0 all jobs finished (whatever
     their status), 2 bad input.
     """
-    from . import batch as batch_mod
-    from .mpi import rank
+    from rackstress.runs import batch as batch_mod
+    from rackstress.lib.mpi import rank
 
     try:
         if report_dir is not None:
@@ -246,7 +246,7 @@ def bench():
 
 
 def _bench_report(data, mod):
-    from .bench import md_table
+    from rackstress.bench import md_table
 
     click.echo(md_table(mod.HEADER, mod.table_rows(data)))
     for f in data["files"]:
@@ -263,7 +263,7 @@ def _bench_report(data, mod):
 @click.option("--only", multiple=True, help="Only cases whose label contains this (repeatable).")
 def bench_stability(out, quick, magpod, magpod_steps, only):
     """Largest stable t by bisection (reference engine) beside the predicted limit."""
-    from .bench import stability as mod
+    from rackstress.bench import stability as mod
 
     data = mod.run_bench(out, quick=quick, magpod=magpod, magpod_steps=magpod_steps,
                          only=only or None, echo=click.echo)
@@ -283,7 +283,7 @@ def bench_stability(out, quick, magpod, magpod_steps, only):
               help="Only these scenes (repeatable; default: all three).")
 def bench_accuracy(out, quick, scene_names):
     """Work-precision: errors against a converged reference vs wall time."""
-    from .bench import accuracy as mod
+    from rackstress.bench import accuracy as mod
 
     data = mod.run_bench(out, quick=quick, scenes_=scene_names or None, echo=click.echo)
     _bench_report(data, mod)
@@ -301,13 +301,13 @@ def bench_accuracy(out, quick, scene_names):
 @click.option("--no-mpi", is_flag=True, help="Skip the mpiexec -n 2 configurations.")
 def bench_perf(out, steps, quick, profile_steps, scene_name, no_mpi):
     """Wall time per 1200 MagPod iterations: reference, LAMMPS modes, serial and 2 ranks."""
-    from .bench import perf as mod
+    from rackstress.bench import perf as mod
 
     configs = [c for c in mod.CONFIGS if not (no_mpi and c[2] > 1)]
     data = mod.run_bench(out, steps=steps, quick=quick, profile_steps=profile_steps,
                          scene_name=scene_name, configs=configs, echo=click.echo)
     _bench_report(data, mod)
-    from .bench import md_table
+    from rackstress.bench import md_table
 
     click.echo(md_table(*mod.breakdown_rows(data)))
 

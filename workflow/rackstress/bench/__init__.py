@@ -1,9 +1,9 @@
-"""Benchmarks of issue 6: ``rackstress bench stability | accuracy | perf``.
+"""Benchmarks: ``rackstress bench stability | accuracy | perf``.
 
 Each writes JSON, a Markdown table (and a plot where it has one) under ``docs/benchmarks/``:
 
 * :mod:`.stability` — the largest stable time step of Eq. 5, measured by bisection on the
-  reference engine, beside the linear prediction of :mod:`rackstress.stability`;
+  reference engine, beside the linear prediction of :mod:`rackstress.model.stability`;
 * :mod:`.accuracy` — work-precision: errors against a converged reference run at fixed physical
   times, for every engine and mode and several time steps;
 * :mod:`.perf` — wall time per 1200 MagPod iterations, serial and under ``mpiexec -n 2``, with
@@ -46,7 +46,7 @@ def machine() -> dict:
 
 
 def write_json(path: Path, data) -> None:
-    from ..run import write_json as _w
+    from rackstress.lib.jsonio import write_json as _w
 
     _w(path, data)
 

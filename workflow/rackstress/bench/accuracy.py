@@ -15,10 +15,10 @@ MagPod every phase end). Errors:
 * ``max_deformation`` of each part (the summary's figure): |value − converged value|, largest
   over the parts;
 * the stress field of the paper's measure (distance from the desired position,
-  :func:`rackstress.rigid.deformation` per group): max over particles of the difference;
+  :func:`rackstress.lib.rigid.deformation` per group): max over particles of the difference;
 * MagPod: the distance walked (the body's centre-of-mass advance along +x): |difference|.
 
-A t the stability prediction refuses (t > t_max, :mod:`rackstress.stability`) is skipped and
+A t the stability prediction refuses (t > t_max, :mod:`rackstress.model.stability`) is skipped and
 reported; a run the watchdog stops is reported as diverged. Wall time is the stepping only
 (LAMMPS: ``run_schedule``; setup is reported apart). ``--quick``: T = 3 for the planes and
 20-iteration (at t = 0.01) phases for MagPod (one cycle, T = 0.8); full: T = 12 and 300-iteration
@@ -32,11 +32,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import rigid, scenes
-from ..errors import DivergenceError, RackstressError
-from ..reference import Reference
-from ..stability import predict
-from . import fmt, machine, md_table, out_dir, write_json
+from rackstress.lib import rigid
+from rackstress import scenes
+from rackstress.errors import DivergenceError, RackstressError
+from rackstress.engines.reference import Reference
+from rackstress.model.stability import predict
+from rackstress.bench import fmt, machine, md_table, out_dir, write_json
 
 T_STEPS = (0.02, 0.01, 0.005, 0.0025)
 #: A fast-mode run counts as on the work-precision front when it is at least this much faster
@@ -70,8 +71,8 @@ def run_engine(scene, engine: str, mode: str) -> dict:
             ends.append(ref.p.copy())
         wall = time.perf_counter() - t0
     else:
-        from ..deck import compile_deck
-        from ..lammps_engine import LammpsRun
+        from rackstress.engines.lammps.deck import compile_deck
+        from rackstress.engines.lammps.runner import LammpsRun
 
         runner = LammpsRun(compile_deck(scene, mode, measure_fast=True), None, log=False)
         setup = time.perf_counter() - t0

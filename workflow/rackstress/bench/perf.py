@@ -26,7 +26,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from . import fmt, machine, md_table, out_dir, write_json
+from rackstress.bench import fmt, machine, md_table, out_dir, write_json
 
 PAPER = {"config": "paper (Rönkkö et al.): one thread, 1.83 GHz", "s_per_1200": 142.0,
          "n_particles": 33689}
@@ -76,13 +76,13 @@ def parse_breakdown(log: str) -> dict:
 # ---------------------------------------------------------------------------- the worker
 def worker(engine: str, mode: str, steps: int, profile_steps: int, scene_name: str) -> dict:
     """One configuration, in this process (all ranks of COMM_WORLD); rank 0 returns the result."""
-    from .. import scenes
+    from rackstress import scenes
 
     sc = scenes.build(scene_name).with_steps(steps)
     t0 = time.perf_counter()
     res = {"engine": engine, "mode": mode, "steps": steps, "n_particles": sc.n_particles}
     if engine == "reference":
-        from ..reference import Reference
+        from rackstress.engines.reference import Reference
 
         ref = Reference(sc)
         res["setup_s"] = time.perf_counter() - t0
@@ -95,8 +95,8 @@ def worker(engine: str, mode: str, steps: int, profile_steps: int, scene_name: s
         res["maxrss_mb"] = res["maxrss_sum_mb"] = \
             resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
         return res
-    from ..deck import compile_deck
-    from ..lammps_engine import LammpsRun
+    from rackstress.engines.lammps.deck import compile_deck
+    from rackstress.engines.lammps.runner import LammpsRun
 
     deck = compile_deck(sc, mode, measure_fast=True)
     runner = LammpsRun(deck, None, log=False)

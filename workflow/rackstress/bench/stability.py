@@ -18,7 +18,7 @@ time step t, from its original positions or from jittered ones, and called **sta
 
 The largest stable t is found by bisection: from the predicted limit, step by ×1.5 up (or
 down) until the result flips, then halve the bracket until it is within ``REL_TOL`` (1 %). The
-table sets it beside :func:`rackstress.stability.predict` and reports measured / predicted (the
+table sets it beside :func:`rackstress.model.stability.predict` and reports measured / predicted (the
 target: within a factor 2 either way).
 """
 from __future__ import annotations
@@ -30,12 +30,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import DivergenceError
-from ..operators import Collide, Const
-from ..reference import Reference
-from ..scene import Scene
-from ..stability import predict
-from . import fmt, machine, md_table, out_dir, write_json
+from rackstress.errors import DivergenceError
+from rackstress.model.operators import Collide, Const
+from rackstress.engines.reference import Reference
+from rackstress.model.scene import Scene
+from rackstress.model.stability import predict
+from rackstress.bench import fmt, machine, md_table, out_dir, write_json
 
 STEPS = 300
 GROWTH = 1.0e3
@@ -152,7 +152,7 @@ def replace_ops(scene: Scene, fn) -> Scene:
 
 def two_blobs(collide: float = 100.0, ratio: float = 0.2) -> Scene:
     """scenes/two-blobs.toml with blob a's collide coefficient ``collide``, b's ``ratio``·that."""
-    from .. import scenes
+    from rackstress import scenes
 
     sc = scenes.load(str(TWO_BLOBS))
 
@@ -168,7 +168,7 @@ def two_blobs(collide: float = 100.0, ratio: float = 0.2) -> Scene:
 
 def cases(quick: bool = False) -> list[dict]:
     """The benchmark's cases: dicts with a label, a family, a scene builder and optional jitter."""
-    from .. import scenes
+    from rackstress import scenes
 
     out = []
 
@@ -248,10 +248,10 @@ GAIT_PITCH_DEG = 2.0
 def gait_cycle(t: float) -> dict:
     """One gait cycle of ``magpod-small`` at time step t (phases keep their physical length,
     12 time units), LAMMPS exact mode: the gait report's advance and pitch, or the stop."""
-    from .. import scenes
-    from ..deck import compile_deck
-    from ..lammps_engine import LammpsRun
-    from ..scene import PhaseEnd
+    from rackstress import scenes
+    from rackstress.engines.lammps.deck import compile_deck
+    from rackstress.engines.lammps.runner import LammpsRun
+    from rackstress.model.scene import PhaseEnd
 
     sc = scenes.build("magpod-small", dt=t, phase_steps=max(1, round(12.0 / t)), cycles=1)
     records = [PhaseEnd(0, None, {}, 0, sc.original_positions())]
@@ -277,7 +277,7 @@ def magpod_gait_case() -> dict:
     t = 0.01; bisection as in :func:`measure_t_max`. The growth test over the first 300
     iterations is reported beside it.
     """
-    from .. import scenes
+    from rackstress import scenes
 
     sc = scenes.build("magpod-small")
     pred = predict(sc)
@@ -320,9 +320,9 @@ def magpod_gait_case() -> dict:
 
 def magpod_case(steps: int = 17480) -> dict:
     """The full MagPod run (LAMMPS, exact mode) for ``steps`` iterations at its dt = 0.01."""
-    from .. import scenes
-    from ..deck import compile_deck
-    from ..lammps_engine import LammpsRun
+    from rackstress import scenes
+    from rackstress.engines.lammps.deck import compile_deck
+    from rackstress.engines.lammps.runner import LammpsRun
 
     sc = scenes.build("magpod").with_steps(steps)
     pred = predict(sc)
@@ -394,7 +394,7 @@ def markdown(data: dict) -> str:
              "MagPod run on LAMMPS). "
              f"Machine: {m['cores']} cores ({m['cpu']}), shared; Python {m['python']}.",
              "",
-             "Prediction: `rackstress.stability.predict` (linearization at the original positions; "
+             "Prediction: `rackstress.model.stability.predict` (linearization at the original positions; "
              "largest eigenvalues of the pair-operator Jacobian with their damping, "
              "t_max = 4/(γ + √(γ² + 4ω²))). Gershgorin: the row-sum bound on the same "
              "linearization. Measured: reference engine, "

@@ -1,4 +1,4 @@
-"""``sediment-large``: MagPod on a sediment of a million particles (issue 7; the paper's future
+"""``sediment-large``: MagPod on a sediment of a million particles (the paper's future
 work, "millions of particles").
 
 The robot is :func:`~rackstress.scenes.magpod.magpod`'s, unchanged; the sediment is
@@ -11,7 +11,7 @@ passive: the active region (body, legs, racks, and the sediment under the feet) 
 hundred units across.
 
 ``balance`` names the load balancing the LAMMPS engine applies under MPI
-(:func:`rackstress.lammps_engine.balance_commands`): ``"rcb"`` (default) — ``comm_style tiled`` and
+(:func:`rackstress.engines.lammps.runner.balance_commands`): ``"rcb"`` (default) — ``comm_style tiled`` and
 a recursive-bisection ``balance`` that weighs each robot particle ``robot_weight`` times a
 sediment particle (the robot's per-particle work is the Python operators: binds to the racks,
 attraction, one-way collisions), so the robot and an equal share of the work sit on one rank and
@@ -23,8 +23,8 @@ Run it with a sparse trajectory: a frame of a million particles is ~40 MB of tex
 """
 from __future__ import annotations
 
-from ..scene import Scene
-from .magpod import magpod
+from rackstress.model.scene import Scene
+from rackstress.scenes.magpod import magpod
 
 
 def sediment_large(sediment_nx: int = 1100, sediment_nz: int = 910, sediment_back: int = 25,
@@ -34,7 +34,7 @@ def sediment_large(sediment_nx: int = 1100, sediment_nz: int = 910, sediment_bac
     """MagPod on a ``sediment_nx × sediment_nz`` sediment (default 1,001,000 particles), one cycle."""
     kw = {k: v for k, v in locals().items()}
     if balance not in ("rcb", "shift", "none"):
-        from ..errors import SceneError
+        from rackstress.errors import SceneError
 
         raise SceneError(f"sediment-large: balance must be rcb, shift or none, got {balance!r}")
     scene = magpod(sediment_nx=sediment_nx, sediment_nz=sediment_nz, sediment_back=sediment_back,

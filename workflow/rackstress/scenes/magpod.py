@@ -1,6 +1,6 @@
 """MagPod, the bipedal robot of Section 4 (Eqs. 27–33), walking on a soft sediment.
 
-The operators are the paper's, coefficient for coefficient (directed, DESIGN.md §1):
+The operators are the paper's, coefficient for coefficient (directed: docs/model.md, "Directed coefficients"):
 
 * body (Eq. 27): attract(rightleg, 200⟨r∈{2,3} ∧ breg_r,i = rreg_j ≠ 0⟩)
   • attract(leftleg, 200⟨l∈{6,7} ∧ breg_l,i = lreg_j ≠ 0⟩) • collide(rightleg, 100⟨r∈{2,3}⟩)
@@ -78,10 +78,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import SceneError
-from ..operators import Attract, Bind, Collide, Const, Contact, Dampen, Force, Matched, PhaseIn
-from ..particles import Group, rack
-from ..scene import Phase, Scene
+from rackstress.errors import SceneError
+from rackstress.model.operators import Attract, Bind, Collide, Const, Contact, Dampen, Force, Matched, PhaseIn
+from rackstress.model.particles import Group, rack
+from rackstress.model.scene import Phase, Scene
 
 #: The gait (Section 4.1): (r, l) pairs, each run ``phase_steps`` iterations.
 GAIT = ((4, 6), (1, 7), (2, 8), (3, 5))
@@ -296,13 +296,13 @@ def gait_report(scene: Scene, records) -> dict:
     per phase: the body's centre, pitch (nose-up rotation about the lateral z axis, degrees)
     and ``up_y``, the vertical component of its up axis (≤ 0 would be capsized).
 
-    ``records`` are the states at phase ends (:class:`rackstress.scene.PhaseEnd`), the first
+    ``records`` are the states at phase ends (:class:`rackstress.model.scene.PhaseEnd`), the first
     the initial state. The footprint depth is the largest downward displacement of a sediment
     particle from its original height.
     """
     from scipy.spatial import cKDTree
 
-    from ..rigid import best_fit
+    from rackstress.lib.rigid import best_fit
 
     body, sed = scene.slice("body"), scene.slice("sediment")
     o = scene.original_positions()

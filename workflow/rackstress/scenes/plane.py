@@ -13,9 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..operators import Bind, Const, Dampen, Force, Within
-from ..particles import Group, lattice, rack
-from ..scene import Phase, Scene
+from rackstress.model.operators import Bind, Const, Dampen, Force, Within
+from rackstress.model.particles import Group, lattice, rack
+from rackstress.model.scene import Phase, Scene
 
 
 def plane_group(n: int = 20, spacing: float = 1.0, radius: float = 0.5) -> Group:

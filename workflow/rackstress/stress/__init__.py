@@ -8,12 +8,12 @@
   from the desired position and its time integral, von Mises shear strain, D²min, virial stress,
   and the parts' motion (centre of mass, footprints).
 """
-from .dump import (DataMismatchError, DumpColumnsError, DumpError, RackDumpReader,
+from rackstress.stress.dump import (DataMismatchError, DumpColumnsError, DumpError, RackDumpReader,
                    StressInputError, TruncatedDumpError, index_dump, read_data_file)
-from .fit import robust_fit, rigid_fit
-from .measures import (MEASURES, AccumulatedDistance, DesiredPositionDistance, NonAffineD2min,
+from rackstress.stress.fit import robust_fit, rigid_fit
+from rackstress.stress.measures import (MEASURES, AccumulatedDistance, DesiredPositionDistance, NonAffineD2min,
                        PartMotion, VirialStress, VonMisesStrain, von_mises_strain)
-from .rundata import Part, RunData, load_run
+from rackstress.stress.rundata import Part, RunData, load_run
 
 __all__ = [
     "AccumulatedDistance", "DataMismatchError", "DesiredPositionDistance", "DumpColumnsError",

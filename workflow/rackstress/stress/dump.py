@@ -30,7 +30,7 @@ import numpy as np
 from MDAnalysis.coordinates import base
 from MDAnalysis.lib.util import store_init_arguments
 
-from ..errors import RackstressError
+from rackstress.errors import RackstressError
 
 #: Coordinate columns accepted, in order of preference (runs use ``boundary m m m``: x = xu).
 COORD_COLUMNS = (("x", "y", "z"), ("xu", "yu", "zu"))

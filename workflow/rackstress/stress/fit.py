@@ -1,8 +1,8 @@
 """Best-fit rigid motion of a part: plain Kabsch and a robust (outlier-excluding) Kabsch.
 
 The paper's "desired position" of a particle is its original position o carried by its part's
-current rigid motion (DESIGN.md §4). Which rigid motion? Two answers, both built on
-:func:`rackstress.rigid.best_fit` (Kabsch via ``scipy.spatial.transform.Rotation.align_vectors``):
+current rigid motion (docs/model.md, "Desired position"). Which rigid motion? Two answers, both built on
+:func:`rackstress.lib.rigid.best_fit` (Kabsch via ``scipy.spatial.transform.Rotation.align_vectors``):
 
 ``kabsch``
     R, t minimizing Σ‖p_i − (R o_i + t)‖² over all particles of the part: what ``summary.json``'s
@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..rigid import best_fit
+from rackstress.lib.rigid import best_fit
 
 #: Distances above ``ROBUST_C`` × median leave a particle out of the next robust fit.
 ROBUST_C = 3.0

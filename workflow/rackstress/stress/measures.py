@@ -9,7 +9,7 @@ float64, the measure per particle; NaN where it is undefined or for parts not an
 The measures and what they mean
 -------------------------------
 ``paper`` — :class:`DesiredPositionDistance`
-    Section 5.2 / DESIGN.md §4: the distance of a particle from its desired position, its
+    Section 5.2 / docs/model.md, "Desired position": the distance of a particle from its desired position, its
     original position carried by its part's best-fit rigid motion (:mod:`.fit`; robust Kabsch
     by default). Zero for a rigid motion of the part; for a local deformation, the local
     displacement itself. It sees any departure from the rest shape — including a part bending
@@ -57,8 +57,8 @@ import numpy as np
 from MDAnalysis.analysis.base import AnalysisBase
 from scipy.spatial import cKDTree
 
-from .dump import DumpColumnsError, StressInputError
-from .fit import FITS
+from rackstress.stress.dump import DumpColumnsError, StressInputError
+from rackstress.stress.fit import FITS
 
 #: Cutoff of the strain neighbourhood in units of the part's typical (median nearest) spacing.
 CUTOFF_FACTOR = 1.5

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .dump import (DataFile, DataMismatchError, FrameIndex, RackDumpReader, StressInputError,
+from rackstress.stress.dump import (DataFile, DataMismatchError, FrameIndex, RackDumpReader, StressInputError,
                    index_dump, read_data_file)
 
 SCENE, DATA, DUMP = "scene.json", "particles.data", "trajectory.dump"

@@ -1,4 +1,4 @@
-"""The deck compiler: a scene becomes a LAMMPS data file and an input deck (DESIGN.md §2).
+"""The deck compiler: a scene becomes a LAMMPS data file and an input deck (docs/model.md, "On LAMMPS").
 
 How each operator is realized (``mode='exact'`` unless said otherwise):
 
@@ -42,11 +42,12 @@ from pathlib import Path
 
 import numpy as np
 
-from . import topology
-from .errors import SceneError
-from .operators import (Attract, Bind, Collide, Const, Contact, Dampen, Force, PhaseIn, Within,
+from rackstress.model import topology
+from rackstress.errors import SceneError
+from rackstress.model.operators import (Attract, Bind, Collide, Const, Contact, Dampen, Force, Within,
                         bind_pairs, phase_active)
-from .scene import Scene
+from rackstress.model.operators import describe
+from rackstress.model.scene import Scene
 
 MODES = ("exact", "fast")
 #: The fix external that carries every Python-realized operator.
@@ -241,33 +242,6 @@ class Deck:
 def _f(x) -> str:
     """A number as LAMMPS reads it back exactly (shortest round-trip repr of the float)."""
     return repr(float(x))
-
-
-def describe(op) -> str:
-    if isinstance(op, Force):
-        sel = "all" if op.where is None else f"{int(np.sum(op.where))} selected"
-        return f"force({tuple(op.accel)}, {sel})" + _when(op)
-    if isinstance(op, Dampen):
-        extra = f" + {op.extra:g}<{', '.join(map(_cond, op.when))}>" if op.extra else ""
-        return f"dampen({op.c:g}{extra})"
-    coeff = op.coeff
-    if isinstance(coeff, Within):
-        c = f"within({coeff.d:g}) magnitude {coeff.c:g}"
-    elif isinstance(coeff, Const):
-        c = f"{coeff.c:g}"
-    else:
-        c = f"{coeff.c:g}<{coeff.target} = {coeff.source} != 0>"
-    return f"{op.kind}({op.source}, {c})" + _when(op)
-
-
-def _cond(c) -> str:
-    if isinstance(c, PhaseIn):
-        return f"{c.var} in {set(c.values)}"
-    return f"contact {c.group}"
-
-
-def _when(op) -> str:
-    return f" when {' and '.join(map(_cond, op.when))}" if op.when else ""
 
 
 def reverse_of(op, target, scene: Scene):

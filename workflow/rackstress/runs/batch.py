@@ -1,4 +1,4 @@
-"""Batch runs of a sweep over MPI ranks (issue 7): ``rackstress batch SWEEP.toml``.
+"""Batch runs of a sweep over MPI ranks: ``rackstress batch SWEEP.toml``.
 
 ``mpiexec -n K rackstress batch SWEEP.toml --ranks-per-job J`` splits COMM_WORLD into K/J groups
 of J ranks (``Split(color = rank // J)``); each group runs one job at a time, one LAMMPS instance
@@ -42,8 +42,8 @@ import threading
 import time
 from pathlib import Path
 
-from .errors import DivergenceError, RackstressError, RunDirError
-from .sweep import Sweep, SweepError, load_sweep
+from rackstress.errors import DivergenceError, RackstressError, RunDirError
+from rackstress.runs.sweep import Sweep, SweepError, load_sweep
 
 INDEX = "batch.json"
 EVENTS = "events.log"
@@ -55,7 +55,7 @@ FINISHED = ("ok", "diverged", "failed")
 
 # ---------------------------------------------------------------------------- small helpers
 def _write_json(path: Path, data) -> None:
-    from .run import write_json
+    from rackstress.lib.jsonio import write_json
 
     write_json(path, data)
 
@@ -139,7 +139,7 @@ def run_job(job, sweep: Sweep, batchdir: Path, comm, group: int) -> dict | None:
     Every outcome leaves a complete ``BATCHDIR/NAME`` (summary.json with the status); only a
     killed process leaves a ``.tmp-`` directory behind.
     """
-    from . import run as run_mod
+    from rackstress.runs import run as run_mod
 
     root = comm.Get_rank() == 0
     tmp = batchdir / f".tmp-{job.name}-{os.getpid()}"

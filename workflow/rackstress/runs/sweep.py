@@ -35,7 +35,7 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .errors import SceneError
+from rackstress.errors import SceneError
 
 #: Keys that set the run rather than the scene.
 RUN_KEYS = ("dt", "mode", "steps", "engine", "dump_every", "allow_unstable")
@@ -66,7 +66,7 @@ class Job:
 
     def build(self, spec: str):
         """The job's scene (as ``rackstress run SPEC --set ... --steps --dt`` builds it)."""
-        from . import scenes
+        from rackstress import scenes
 
         sc = scenes.load(spec, dict(self.scene_sets))
         if self.dt is not None:
@@ -141,7 +141,7 @@ def _fmt(v) -> str:
 
 def load_sweep(path) -> Sweep:
     """Parse and check a sweep file (its scenes are built by :meth:`Sweep.validate`)."""
-    from ._toml import tomllib
+    from rackstress.lib.toml import tomllib
 
     path = Path(path)
     try:
@@ -164,7 +164,7 @@ def load_sweep(path) -> Sweep:
         if not Path(spec).is_file():
             raise _err(path, "scene", f"scene file {spec} does not exist")
     else:
-        from . import scenes
+        from rackstress import scenes
 
         if scene not in scenes.BUILDERS:
             raise _err(path, "scene", f"unknown scene '{scene}'; built-in scenes: "

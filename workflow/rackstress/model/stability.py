@@ -49,10 +49,11 @@ from typing import Mapping
 
 import numpy as np
 
-from .errors import SceneError
-from .operators import (Attract, Bind, Collide, Dampen, attract_pairs,
+from rackstress.errors import SceneError
+from rackstress.model.operators import (Attract, Bind, Collide, Dampen, attract_pairs,
                         bind_pairs, phase_active)
-from .scene import Scene
+from rackstress.model.operators import describe
+from rackstress.model.scene import Scene
 
 #: Pairs this close to touching (relative to the contact distance R) count as contacts.
 CONTACT_MARGIN = 1.05
@@ -119,7 +120,6 @@ def _phases(scene: Scene) -> list[dict]:
 
 def _label(target: str, op) -> str:
     """'plane' bind(plane, within(100) magnitude 100): how an operator is named in messages."""
-    from .deck import describe
 
     return f"'{target}' {describe(op)}"
 

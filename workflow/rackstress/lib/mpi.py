@@ -2,7 +2,7 @@
 
 ``liblammps.so`` links ``libmpi.so.12``, which the ``mpich`` wheel installs in the virtual
 environment's ``lib/`` where the loader does not look; importing ``mpi4py.MPI`` first loads it
-(DESIGN.md §2).
+(docs/model.md, "On LAMMPS").
 """
 from __future__ import annotations
 

@@ -12,8 +12,8 @@ from typing import Mapping
 
 import numpy as np
 
-from . import operators as ops_mod
-from .errors import SceneError
+from rackstress.model import operators as ops_mod
+from rackstress.errors import SceneError
 
 #: Relative distance below which two particles count as coincident (their col/bin is undefined).
 COINCIDENT_TOL = 1e-9

@@ -61,13 +61,13 @@ import string
 
 import numpy as np
 
-from . import operators as ops_mod
-from ._toml import tomllib
-from .errors import SceneError
-from .operators import (Attract, Bind, Collide, Const, Contact, Dampen, Force, Matched, PhaseIn,
+from rackstress.model import operators as ops_mod
+from rackstress.lib.toml import tomllib
+from rackstress.errors import SceneError
+from rackstress.model.operators import (Attract, Bind, Collide, Const, Contact, Dampen, Force, Matched, PhaseIn,
                         Within)
-from .particles import RACK_OFFSET, RACK_RADIUS, Group, lattice, rack
-from .scene import Phase, Scene
+from rackstress.model.particles import RACK_OFFSET, RACK_RADIUS, Group, lattice, rack
+from rackstress.model.scene import Phase, Scene
 
 #: Defaults of an explicit scene's top-level settings.
 DEFAULTS = {"dt": 0.01, "cycles": 1, "bound": 1.0e4, "steps": 1200}
@@ -216,7 +216,7 @@ def _decode_message(file: str, exc) -> str:
 
 # --------------------------------------------------------------------------- form (a)
 def _load_builtin(ctx: _Ctx, data: dict, overrides: dict) -> Scene:
-    from . import scenes
+    from rackstress.scenes import builtins as scenes
 
     _check_keys(ctx.at("top level"), data, _BUILTIN_KEYS,
                 "key (a file naming a built-in scene takes only 'scene' and [params])")

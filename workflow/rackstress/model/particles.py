@@ -10,11 +10,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import SceneError
+from rackstress.errors import SceneError
 
 #: The paper's rack offset: "the distance from a rack particle to the corresponding face of the
-#: bounding box is five units" (Section 3.2). The printed Eq. 21 puts them on the faces; DESIGN.md
-#: (errata) follows the prose. A parameter of :func:`rack`.
+#: bounding box is five units" (Section 3.2). The printed Eq. 21 puts them on the faces; the errata
+#: of docs/model.md follow the prose. A parameter of :func:`rack`.
 RACK_OFFSET = 5.0
 #: Radius of a rack particle, Eq. 22.
 RACK_RADIUS = 1.0

@@ -1,4 +1,4 @@
-"""Best-fit rigid motion of a part and the paper's "desired position" (Section 5.2, DESIGN.md §4).
+"""Best-fit rigid motion of a part and the paper's "desired position" (Section 5.2, docs/model.md, "Desired position").
 
 The desired position of a particle is its original position carried by its part's current rigid
 motion — the rotation R and translation t minimizing Σ‖p_i − (R o_i + t)‖² (Kabsch), taken from

@@ -3,7 +3,7 @@
 Every term computes the paper's *directed* acceleration on the particles a rank owns, from
 partners that are local or ghost atoms there, so it needs no reverse communication and stays
 correct however the atoms are spread over ranks (the ghost cutoff covers every partner). The
-same functions as the reference engine (:mod:`rackstress.reference`) do the arithmetic.
+same functions as the reference engine (:mod:`rackstress.engines.reference`) do the arithmetic.
 
 What depends only on which atom sits in which row (look-ups, each term's pairs, collision
 candidates) is kept from one LAMMPS reneighbouring to the next (:class:`Frame`,
@@ -17,11 +17,11 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ._vec import bbox, inside, rowdot
-from .deck import SKIN, reverse_of
-from .operators import (Attract, Bind, Collide, Const, Contact, Dampen, Force, attract_pairs,
+from rackstress.lib.vec import bbox, inside, rowdot
+from rackstress.engines.lammps.deck import SKIN, reverse_of
+from rackstress.model.operators import (Attract, Bind, Collide, Const, Contact, Dampen, Force, attract_pairs,
                         bind_pairs, phase_active)
-from .reference import col
+from rackstress.engines.reference import col
 
 
 class Frame:

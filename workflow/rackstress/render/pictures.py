@@ -44,7 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .stress import MEASURES, PartMotion, StressInputError, load_run
+from rackstress.stress import MEASURES, PartMotion, StressInputError, load_run
 
 #: The iterations of the paper's Fig. 12.
 PAPER_FRAMES = (1320, 2600, 4720, 17480)

@@ -31,7 +31,7 @@ from typing import Mapping, Union
 
 import numpy as np
 
-from .errors import SceneError
+from rackstress.errors import SceneError
 
 
 # --------------------------------------------------------------------------- conditions
@@ -271,3 +271,31 @@ def attract_pairs(op: Attract, target, source, phase: Mapping):
         i, j = i[order], j[order]
     return i, j, np.full(len(i), float(coeff.c))
 
+
+# --------------------------------------------------------------------------- labels
+def describe(op) -> str:
+    """The operator as a reader holding the paper writes it (decks, stability messages)."""
+    if isinstance(op, Force):
+        sel = "all" if op.where is None else f"{int(np.sum(op.where))} selected"
+        return f"force({tuple(op.accel)}, {sel})" + _when(op)
+    if isinstance(op, Dampen):
+        extra = f" + {op.extra:g}<{', '.join(map(_cond, op.when))}>" if op.extra else ""
+        return f"dampen({op.c:g}{extra})"
+    coeff = op.coeff
+    if isinstance(coeff, Within):
+        c = f"within({coeff.d:g}) magnitude {coeff.c:g}"
+    elif isinstance(coeff, Const):
+        c = f"{coeff.c:g}"
+    else:
+        c = f"{coeff.c:g}<{coeff.target} = {coeff.source} != 0>"
+    return f"{op.kind}({op.source}, {c})" + _when(op)
+
+
+def _cond(c) -> str:
+    if isinstance(c, PhaseIn):
+        return f"{c.var} in {set(c.values)}"
+    return f"contact {c.group}"
+
+
+def _when(op) -> str:
+    return f" when {' and '.join(map(_cond, op.when))}" if op.when else ""

@@ -7,20 +7,19 @@ either way, ``summary.json``. A run stopped by the watchdog keeps its frames and
 """
 from __future__ import annotations
 
-import json
-import os
 import time
 from pathlib import Path
 
 import numpy as np
 
-from . import rigid, topology
-from .errors import DivergenceError, RunDirError
-from .scene import PhaseEnd, Scene
+from rackstress.lib import rigid
+from rackstress.model import topology
+from rackstress.errors import DivergenceError, RunDirError
+from rackstress.lib.jsonio import write_json
+from rackstress.lib.progress import progress_bar
+from rackstress.model.scene import PhaseEnd, Scene
 
 ENGINES = ("lammps", "reference")
-#: Runs shorter than this many seconds show no progress bar.
-PROGRESS_DELAY_S = 2.0
 
 
 def default_dump_every(scene: Scene) -> int:
@@ -43,28 +42,6 @@ def prepare_rundir(out: Path, overwrite: bool = False) -> Path:
     return out
 
 
-def write_json(path: Path, data) -> None:
-    """Write JSON atomically: a reader sees the old file or the new one, never half of one."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "w") as fh:
-        json.dump(data, fh, indent=2, default=_jsonable)
-        fh.write("\n")
-    os.replace(tmp, path)
-
-
-def _jsonable(x):
-    if isinstance(x, np.ndarray):
-        return x.tolist()
-    if isinstance(x, (np.integer,)):
-        return int(x)
-    if isinstance(x, (np.floating,)):
-        return float(x)
-    if isinstance(x, tuple):
-        return list(x)
-    raise TypeError(f"not JSON serializable: {type(x)}")
-
-
 def scene_record(scene: Scene) -> dict:
     """What post-processing needs to know of a scene: its groups as atom types and id ranges."""
     types, mols = topology.group_types(scene), topology.group_mols(scene)
@@ -80,7 +57,7 @@ def scene_record(scene: Scene) -> dict:
 
 
 def group_figures(scene: Scene, p_start: np.ndarray, p_end: np.ndarray) -> dict:
-    """Per group: n, centre of mass at start and end, and max_deformation (DESIGN.md §4)."""
+    """Per group: n, centre of mass at start and end, and max_deformation (docs/model.md, "Desired position")."""
     out = {}
     for name, g in scene.groups.items():
         sl = scene.slice(name)
@@ -120,18 +97,10 @@ def summarize(scene: Scene, engine: str, mode: str, p_end: np.ndarray, steps_don
     return s
 
 
-def progress_bar(total: int, enabled: bool, desc: str):
-    from tqdm.auto import tqdm
-
-    # disable=None: tqdm stays quiet when stderr is not a terminal (batch jobs, CI logs)
-    return tqdm(total=total, disable=True if not enabled else None, delay=PROGRESS_DELAY_S,
-                unit="step", desc=desc, dynamic_ncols=True, leave=False)
-
-
 def run_reference(scene: Scene, out: Path, dump_every: int, progress: bool, on_phase_end=None):
     """Step a scene with the reference engine, writing frames; returns (p_end, steps_done)."""
-    from .dumpio import DumpWriter
-    from .reference import Reference
+    from rackstress.engines.dumpio import DumpWriter
+    from rackstress.engines.reference import Reference
 
     ref = Reference(scene)
     types = topology.per_particle(scene, topology.group_types(scene))
@@ -163,11 +132,11 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
     Raises :class:`DivergenceError` after writing the summary when the watchdog stops the run.
     ``comm`` (batch runs): the mpi4py communicator whose ranks run this one job (default
     COMM_WORLD). ``restart_every``: write a checkpoint (LAMMPS restart + exact state, see
-    :mod:`rackstress.resume`) every so many steps; None: none.
+    :mod:`rackstress.runs.resume`) every so many steps; None: none.
     """
-    # refuse a dt beyond the predicted stability limit of Eq. 5 (rackstress.stability) before
+    # refuse a dt beyond the predicted stability limit of Eq. 5 (rackstress.model.stability) before
     # anything is written, unless allow_unstable
-    from .stability import check_dt
+    from rackstress.model.stability import check_dt
 
     check_dt(scene, allow=allow_unstable)
     if engine not in ENGINES:
@@ -175,7 +144,7 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
     dump_every = dump_every or default_dump_every(scene)
     if dump_every < 1:
         raise RunDirError(f"--dump-every must be >= 1, got {dump_every}")
-    from .deck import compile_deck
+    from rackstress.engines.lammps.deck import compile_deck
 
     deck = compile_deck(scene, mode if engine == "lammps" else "exact")
 
@@ -203,8 +172,6 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
                 raise RunDirError("the reference engine runs on one rank; run it without mpiexec")
             p_end, steps = run_reference(scene, out, dump_every, progress, on_phase_end)
         else:
-            from .lammps_engine import run_lammps
-
             p_end, steps, more = run_lammps(scene, out, mode, dump_every, progress, deck,
                                             on_phase_end, comm=comm, restart_every=restart_every)
             extra.update(more)
@@ -228,7 +195,7 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
 
 
 def _is_root(comm=None) -> bool:
-    from .mpi import world
+    from rackstress.lib.mpi import world
 
     return (comm or world()).Get_rank() == 0
 
@@ -236,7 +203,7 @@ def _is_root(comm=None) -> bool:
 def on_root(fn, comm=None):
     """Run ``fn`` on rank 0 of ``comm`` (default: world) only; every rank then raises what it
     raised, or goes on together."""
-    from .mpi import world
+    from rackstress.lib.mpi import world
 
     comm = comm or world()
     err = None
@@ -249,3 +216,42 @@ def on_root(fn, comm=None):
         err = comm.bcast(err, root=0)
     if err is not None:
         raise err
+
+def run_lammps(scene, out: Path, mode: str, dump_every: int, progress: bool, deck=None,
+               on_phase_end=None, comm=None, restart_every: int | None = None, resume=None):
+    """Run ``scene`` on LAMMPS into ``out``; return (final positions, steps done, extra summary).
+
+    ``comm``: the ranks running it (default COMM_WORLD). ``restart_every``: checkpoint interval
+    in steps (None: no checkpoints). ``resume``: a :class:`rackstress.runs.resume.Checkpoint` to
+    continue from (the run directory ``out`` already holds the first part).
+    """
+    from rackstress.engines.lammps.deck import compile_deck
+    from rackstress.engines.lammps.runner import LammpsRun
+
+    deck = deck or compile_deck(scene, mode)
+    runner = LammpsRun(deck, out, comm=comm, dump_every=dump_every, append=resume is not None)
+    ckpt = None
+    if restart_every:
+        from rackstress.runs.checkpoint import Checkpointer
+
+        ckpt = Checkpointer(out, runner.comm, restart_every, mode=mode, dump_every=dump_every,
+                            resumed=resume)
+        on_phase_end = ckpt.wrap_phase_end(on_phase_end)
+    try:
+        done = resume.step if resume is not None else 0
+        with progress_bar(scene.total_steps, progress, f"{scene.name} (lammps)") as bar:
+            bar.update(done)
+            try:
+                runner.run_schedule(bar, on_phase_end=on_phase_end, checkpoint=ckpt,
+                                    resume=resume)
+            except DivergenceError as err:
+                err.p_end = runner.gather_positions()
+                err.steps_done = runner.step
+                raise
+        p = runner.gather_positions()
+        extra = {"ranks": runner.comm.Get_size(), "lammps_version": runner.lmp.version(),
+                 "python_operators": [f"{r.target} <- {r.op.kind}" for r in deck.python_ops],
+                 "masses": deck.masses}
+        return p, runner.step, extra
+    finally:
+        runner.close()

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .scene import Scene
+from rackstress.model.scene import Scene
 
 
 def group_types(scene: Scene) -> dict:

@@ -3,7 +3,7 @@
 The runner executes the deck's setup commands, attaches the Python callback, and drives the
 schedule itself: the same commands as the deck's schedule, but each phase's ``run N`` split into
 chunks so that the watchdog and the progress bar see the state between chunks. ``run k pre no
-post no`` continues a run without recomputing forces, so chunking changes nothing (DESIGN.md §2).
+post no`` continues a run without recomputing forces, so chunking changes nothing (docs/model.md, "On LAMMPS").
 """
 from __future__ import annotations
 
@@ -11,18 +11,18 @@ from pathlib import Path
 
 import numpy as np
 
-from .callbacks import PyForces
-from .deck import PY_FIX, Deck
-from .errors import DivergenceError, RackstressError
-from .reference import find_divergence, divergence_error
-from .scene import PhaseEnd
+from rackstress.engines.lammps.callback import PyForces
+from rackstress.engines.lammps.deck import PY_FIX, Deck
+from rackstress.errors import RackstressError
+from rackstress.engines.watchdog import divergence_error, find_divergence
+from rackstress.model.scene import PhaseEnd
 
 #: Steps between watchdog checks (and progress updates) on LAMMPS.
 CHECK_EVERY = 10
 
 
 def balance_commands(scene, nranks: int) -> list[str]:
-    """Load balancing a scene asks for in ``params['balance']`` (issue 7: ``sediment-large``).
+    """Load balancing a scene asks for in ``params['balance']`` (``sediment-large``).
 
     ``rcb``: ``comm_style tiled`` and one recursive-coordinate-bisection ``balance`` in which
     every particle outside the passive ``sediment`` group weighs ``robot_weight`` (the robot's
@@ -53,7 +53,7 @@ class LammpsRun:
                  log: bool = True, append: bool = False):
         """``append``: continue an interrupted run in ``out`` (resume): the log and the
         trajectory are appended to, not replaced."""
-        from .mpi import lammps_module, world
+        from rackstress.lib.mpi import lammps_module, world
 
         self.deck, self.scene = deck, deck.scene
         self.comm = comm or world()
@@ -195,9 +195,9 @@ class LammpsRun:
                      on_phase_end=None, checkpoint=None, resume=None) -> None:
         """Every phase of every cycle; ``on_phase_end(PhaseEnd)`` sees each phase's last state.
 
-        ``checkpoint``: a :class:`rackstress.resume.Checkpointer`, asked after every chunk
+        ``checkpoint``: a :class:`rackstress.runs.resume.Checkpointer`, asked after every chunk
         (and after each phase end) whether to write one. ``resume``: a loaded checkpoint
-        (:class:`rackstress.resume.Checkpoint`): phases before it are skipped and its phase is
+        (:class:`rackstress.runs.resume.Checkpoint`): phases before it are skipped and its phase is
         re-entered exactly (:meth:`restore`).
         """
         for k, (_, phase, cycle) in enumerate(self.scene.schedule()):
@@ -276,43 +276,3 @@ class LammpsRun:
         self.step = int(ck.step)
         self.realign(ck.f)
         self._phase = previous
-
-
-def run_lammps(scene, out: Path, mode: str, dump_every: int, progress: bool, deck=None,
-               on_phase_end=None, comm=None, restart_every: int | None = None, resume=None):
-    """Run ``scene`` on LAMMPS into ``out``; return (final positions, steps done, extra summary).
-
-    ``comm``: the ranks running it (default COMM_WORLD). ``restart_every``: checkpoint interval
-    in steps (None: no checkpoints). ``resume``: a :class:`rackstress.resume.Checkpoint` to
-    continue from (the run directory ``out`` already holds the first part).
-    """
-    from .deck import compile_deck
-    from .run import progress_bar
-
-    deck = deck or compile_deck(scene, mode)
-    runner = LammpsRun(deck, out, comm=comm, dump_every=dump_every, append=resume is not None)
-    ckpt = None
-    if restart_every:
-        from .resume import Checkpointer
-
-        ckpt = Checkpointer(out, runner.comm, restart_every, mode=mode, dump_every=dump_every,
-                            resumed=resume)
-        on_phase_end = ckpt.wrap_phase_end(on_phase_end)
-    try:
-        done = resume.step if resume is not None else 0
-        with progress_bar(scene.total_steps, progress, f"{scene.name} (lammps)") as bar:
-            bar.update(done)
-            try:
-                runner.run_schedule(bar, on_phase_end=on_phase_end, checkpoint=ckpt,
-                                    resume=resume)
-            except DivergenceError as err:
-                err.p_end = runner.gather_positions()
-                err.steps_done = runner.step
-                raise
-        p = runner.gather_positions()
-        extra = {"ranks": runner.comm.Get_size(), "lammps_version": runner.lmp.version(),
-                 "python_operators": [f"{r.target} <- {r.op.kind}" for r in deck.python_ops],
-                 "masses": deck.masses}
-        return p, runner.step, extra
-    finally:
-        runner.close()

@@ -1,0 +1,1 @@
+"""Shared helpers with no knowledge of scenes or engines: vectors, rigid fits, JSON, MPI, progress."""

@@ -1,0 +1,1 @@
+"""Run directories: a run, checkpoints and --resume, sweeps and batches over MPI ranks."""
