@@ -312,5 +312,17 @@ def bench_perf(out, steps, quick, profile_steps, scene_name, no_mpi):
     click.echo(md_table(*mod.breakdown_rows(data)))
 
 
+@bench.command("validity")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
+              help="Output directory (default: docs/benchmarks/ of the repository).")
+@click.option("--quick", is_flag=True, help="Small bodies and coarse meshes (seconds).")
+def bench_validity(out, quick):
+    """Stress measures of three body models against linear-elastic FEA (three cases)."""
+    from rackstress.bench import validity as mod
+
+    data = mod.run_bench(out, quick=quick, echo=click.echo)
+    _bench_report(data, mod)
+
+
 if __name__ == "__main__":  # pragma: no cover
     main()

@@ -26,9 +26,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..scenes import validation as cases
-from ..stability import predict
-from . import fmt, machine, md_table, out_dir, write_json
+from rackstress.scenes import validation as cases
+from rackstress.model.stability import predict
+from rackstress.bench import fmt, machine, md_table, out_dir, write_json
 
 MEASURES = ("paper", "strain", "d2min", "virial")
 #: Damping of the body: near critical for the slowest bending mode of the bind network.
@@ -40,6 +40,10 @@ QUICK = {"cantilever": dict(nx=14, ny=4), "plate-hole": dict(n=6, a=2.5),
          "l-bracket": dict(w=4, H=12, lx=10)}
 
 
+HEADER = ["case", "body", "measure", "Spearman ρ", "top-5 % overlap", "max distance (spacings)",
+          "strain meets target"]
+
+
 def meets(row: dict) -> bool:
     return (row["spearman"] >= TARGET["spearman"] and row["top5_overlap"] >= TARGET["top5_overlap"]
             and row["max_distance"] <= TARGET["max_distance"])
@@ -47,7 +51,7 @@ def meets(row: dict) -> bool:
 
 def run_case(case: str, body: str, quick: bool = False, fea_ref=None, echo=print) -> dict:
     """One case × body model: equilibrium, measures, agreement with the FEA reference."""
-    from ..validity import compare
+    from rackstress.validity import compare
 
     kw = dict(QUICK[case]) if quick else {}
     scene = cases.BUILDERS[case](body=body, damping=DAMPING, **kw)
@@ -79,7 +83,7 @@ def run_case(case: str, body: str, quick: bool = False, fea_ref=None, echo=print
 
 def fea_reference(solver, skw, points, quick: bool) -> dict:
     """The FEA field at ``points`` from a refinement study (densities 4, 8, 16; quick: 2, 4)."""
-    from ..validity import fea
+    from rackstress.validity import fea
 
     dens = (2, 4) if quick else DENSITIES
     t0 = time.perf_counter()
@@ -113,6 +117,7 @@ def run_bench(out: Path | None = None, quick: bool = False, echo=print) -> dict:
     data = {"quick": quick, "machine": machine(), "target": TARGET, "fea": fea_studies,
             "results": results, "strain_meets_target_on_all_cases": best,
             "wall_s": time.perf_counter() - t0}
+    data["files"] = [str(out / f"validity.{x}") for x in ("json", "md", "png")]
     write_json(out / "validity.json", data)
     (out / "validity.md").write_text(report(data))
     try:
@@ -140,8 +145,7 @@ def report(data) -> str:
              + "`. Reference: FEA von Mises strain η (plane stress, ν = 0.3) at the particles' "
              "original positions. Target for the strain measure: ρ ≥ 0.8, top-5 % overlap ≥ 0.5, "
              "maximum within 2 spacings.", ""]
-    lines.append(md_table(["case", "body", "measure", "Spearman ρ", "top-5 % overlap",
-                           "max distance (spacings)", "strain meets target"], table_rows(data)))
+    lines.append(md_table(HEADER, table_rows(data)))
     lines += ["", "Body models whose strain meets the target on every case: "
               + ", ".join(f"`{b}`: {'yes' if ok else 'no'}"
                           for b, ok in data["strain_meets_target_on_all_cases"].items()), ""]

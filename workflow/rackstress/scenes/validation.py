@@ -40,10 +40,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import SceneError
-from ..operators import Bind, Const, Dampen, Force, Within
-from ..particles import Group, rack
-from ..scene import Phase, Scene
+from rackstress.errors import SceneError
+from rackstress.model.operators import Bind, Const, Dampen, Force, Within
+from rackstress.model.particles import Group, rack
+from rackstress.model.scene import Phase, Scene
 
 BODIES = ("rack", "rack+bind", "bind")
 RADIUS = 0.5

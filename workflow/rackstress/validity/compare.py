@@ -25,11 +25,11 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.stats import spearmanr
 
-from ..operators import Bind
-from ..reference import Reference, bin_
-from ..scenes.validation import body_index
-from ..stress.fit import robust_fit
-from ..stress.measures import CUTOFF_FACTOR, RANK_TOL, _bincount3, von_mises_strain
+from rackstress.model.operators import Bind, bind_pairs
+from rackstress.engines.reference import Reference, bin_
+from rackstress.scenes.validation import body_index
+from rackstress.stress.fit import robust_fit
+from rackstress.stress.measures import CUTOFF_FACTOR, RANK_TOL, _bincount3, von_mises_strain
 
 #: Top fraction of particles that make the hot-spot set.
 TOP = 0.05
@@ -113,8 +113,6 @@ def bind_virial(scene, p: np.ndarray) -> np.ndarray:
         for op in seq:
             if not isinstance(op, Bind):
                 continue
-            from ..operators import bind_pairs
-
             i, j, c = bind_pairs(op, scene.groups[target], scene.groups[op.source])
             I, J = i + scene.offset(target), j + scene.offset(op.source)
             L0sq = ((o[J] - o[I]) ** 2).sum(axis=1)
@@ -175,7 +173,7 @@ def fea_case(scene):
     cells (module docstring of :mod:`rackstress.scenes.validation`), loaded by the same total
     force.
     """
-    from . import fea
+    from rackstress.validity import fea
 
     g = scene.groups["body"].meta["validation"]
     if g["case"] == "cantilever":
