@@ -17,6 +17,7 @@ from rackstress.errors import DivergenceError
 from rackstress.model.operators import (Attract, Bind, Collide, Contact, Dampen, Force, attract_pairs,
                         bind_pairs, phase_active)
 from rackstress.model.scene import Scene
+from rackstress.model.verlet import integrate_verlet
 from rackstress.engines.watchdog import check
 
 
@@ -166,8 +167,37 @@ class Reference:
         return self._attract[key]
 
     # ------------------------------------------------------------------ motion
+    def damping(self, phase: Mapping) -> np.ndarray:
+        """γ per particle: the dampen coefficients (Eq. 9) acting now, extras whose conditions hold."""
+        g = np.zeros(len(self.p))
+        tree = self._trees()
+        for target, seq in self.scene.operators.items():
+            sl = self.scene.slice(target)
+            for op in seq:
+                if isinstance(op, Dampen):
+                    extra = op.extra if op.extra and self.holds(op.when, target, phase, tree) else 0.0
+                    g[sl] += op.c + extra
+        return g
+
     def step(self, phase: Mapping) -> None:
-        """motion = netForce • integrate(t) (Eqs. 6–7), then the watchdog."""
+        """motion = netForce • integrate(t) (Eqs. 6–7), then the watchdog.
+
+        With ``scene.integrator == "verlet"`` the step is :func:`integrate_verlet` instead
+        (v holds v_{n+½}); the first step is velocity Verlet's half kick,
+        v_½ = v₀ + (t/2)·a(p₀, v₀)/(1 + γt/2), as LAMMPS' fix nve starts it.
+        """
+        if self.scene.integrator == "verlet":
+            t = self.scene.dt
+            g = self.damping(phase)
+            a = self.accelerations(phase)
+            if self.step_count == 0:
+                self.v = self.v + (0.5 * t) * a / (1.0 + 0.5 * t * g)[:, None]
+                self.p = self.p + t * self.v
+            else:
+                self.p, self.v = integrate_verlet(self.p, self.v, a + g[:, None] * self.v, g, t)
+            self.step_count += 1
+            check(self.scene, self.p, self.v, self.o, self.step_count)
+            return
         a = self.accelerations(phase)
         self.p, self.v = integrate(self.p, self.v, a, self.scene.dt)
         self.step_count += 1

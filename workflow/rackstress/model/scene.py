@@ -61,6 +61,9 @@ class Scene:
     #: Optional ``report(scene, records) -> dict`` over the states at phase ends (a list of
     #: :class:`PhaseEnd`, the first being the initial state); its result goes into the summary.
     report: object = None
+    #: ``"euler"``: Eq. 5, the paper's (default); ``"verlet"``: the second-order mode of
+    #: :mod:`rackstress.model.verlet` (leapfrog with trapezoidal damping).
+    integrator: str = "euler"
 
     def __post_init__(self):
         # One operator object per place in the sequences: engines key their pair lists by
@@ -140,7 +143,7 @@ class Scene:
         if not phases:
             phases = [Phase(self.phases[0].name, 0, self.phases[0].vars)]
         return Scene(self.name, self.groups, self.operators, phases, self.dt, 1, self.bound,
-                     {**self.params, "steps": steps}, self.report)
+                     {**self.params, "steps": steps}, self.report, self.integrator)
 
     # ------------------------------------------------------------------ validation
     def validate(self) -> None:
@@ -160,6 +163,9 @@ class Scene:
                     raise SceneError(f"scene '{self.name}': '{op!r}' on '{target}' is not an "
                                      f"operator (known: {', '.join(ops_mod.OPERATOR_KINDS)})")
                 ops_mod.check_operator(op, target, self.groups)
+        if self.integrator not in ("euler", "verlet"):
+            raise SceneError(f"scene '{self.name}': integrator must be 'euler' (Eq. 5) or "
+                             f"'verlet', got {self.integrator!r}")
         if not (np.isfinite(self.dt) and self.dt > 0):
             raise SceneError(f"scene '{self.name}': time step dt must be positive, got {self.dt!r}")
         if not self.phases:
