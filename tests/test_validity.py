@@ -41,7 +41,7 @@ def test_l_bracket_fea_converges_at_the_particle_positions():
     sc = cases.l_bracket(body="bind", w=4, H=12, lx=10)
     solver, kw, to_fea = compare.fea_case(sc)
     pts = to_fea(sc.groups["body"].o)
-    study = fea.refinement_study(solver, pts, (4, 8, 16), **kw)
+    study = fea.refinement_study(solver, pts, (2, 4, 8), **kw)
     assert study["change"] <= fea.CONVERGED
     # the peak is at the re-entrant corner's nearest particle (0.71 spacings from it)
     vm = study["result"].at(pts)["von_mises_stress"]

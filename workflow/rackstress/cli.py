@@ -14,11 +14,14 @@ from rackstress.errors import DivergenceError, RackstressError
 EXIT_INPUT, EXIT_DIVERGED, EXIT_RENDER = 2, 3, 4
 
 
-def _load_scene(scene: str, steps, dt, sets):
+def _load_scene(scene: str, steps, dt, sets, integrator: str | None = None):
     from rackstress import scenes
 
     overrides = scenes.parse_overrides(sets)
     sc = scenes.load(scene, overrides)
+    if integrator is not None:
+        sc.integrator = integrator
+        sc.params["integrator"] = integrator
     if dt is not None:
         if not dt > 0:
             raise RackstressError(f"--dt must be positive, got {dt}")
@@ -67,8 +70,11 @@ def main():
                    "checkpoint (SCENE only needed for .toml scenes).")
 @click.option("--allow-unstable", is_flag=True,
               help="Run even if --dt exceeds the predicted stability limit of Eq. 5.")
+@click.option("--integrator", type=click.Choice(["euler", "verlet"]), default="euler",
+              show_default=True, help="euler: Eq. 5, the paper's; verlet: the second-order mode "
+              "(leapfrog with trapezoidal damping; not resumable).")
 def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progress, do_render,
-        restart_every=None, resume_dir=None, allow_unstable=False):
+        restart_every=None, resume_dir=None, allow_unstable=False, integrator="euler"):
     """Run SCENE (a built-in name or a .toml file) and write a run directory.
 
     Exit status: 0 done, 2 bad input, 3 diverged (frames and summary kept), 4 the run is done
@@ -81,13 +87,16 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
         out = resume_dir
     elif scene is None:
         raise click.UsageError("Missing argument 'SCENE' (or give --resume RUNDIR).")
+    if integrator == "verlet" and resume_dir is not None:
+        raise click.UsageError("--resume continues Eq. 5 runs only; the verlet mode has no "
+                               "resumable checkpoints.")
     try:
         if resume_dir is not None:
             from rackstress.runs.resume import resume_run
 
             summary = resume_run(resume_dir, scene, progress=progress and rank() == 0)
         else:
-            sc = _load_scene(scene, steps, dt, sets)
+            sc = _load_scene(scene, steps, dt, sets, integrator)
             if out is None:
                 out = Path("runs") / f"{sc.name}-{time.strftime('%Y%m%d-%H%M%S')}"
             if restart_every is None and engine == "lammps":

@@ -150,12 +150,24 @@ def rectangle_mesh(x0, x1, y0, y1, density: int):
     return MeshTri.init_tensor(np.linspace(x0, x1, nx + 1), np.linspace(y0, y1, ny + 1))
 
 
-def l_mesh(w, H, Lx, density: int):
-    """Triangles of the L [0, w]×[0, H] ∪ [0, Lx]×[H−w, H] (grid lines through the corner)."""
+def l_mesh(w, H, Lx, density: int, corner_levels: int = 4, corner_radius: float = 2.0):
+    """Triangles of the L [0, w]×[0, H] ∪ [0, Lx]×[H−w, H] (grid lines through the corner).
+
+    The elements within ``corner_radius`` of the re-entrant corner (w, H−w) are refined
+    ``corner_levels`` more times, the radius halving each time (the singularity needs it).
+    """
     m = rectangle_mesh(0.0, Lx, 0.0, H, density)
     c = m.p[:, m.t].mean(axis=1)
     out = (c[0] > w) & (c[1] < H - w)
-    return m.remove_elements(np.flatnonzero(out))
+    m = m.remove_elements(np.flatnonzero(out))
+    r = corner_radius
+    for _ in range(corner_levels):
+        c = m.p[:, m.t].mean(axis=1)
+        near = np.flatnonzero(np.hypot(c[0] - w, c[1] - (H - w)) < r)
+        if len(near):
+            m = m.refined(near)
+        r *= 0.5
+    return m
 
 
 def hole_quarter_mesh(a, W, density: int, grading: float = 3.0):
