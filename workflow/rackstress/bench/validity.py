@@ -137,13 +137,13 @@ def run_bench(out: Path | None = None, quick: bool = False, echo=print) -> dict:
     data = {"quick": quick, "machine": machine(), "target": TARGET, "fea": fea_studies,
             "results": results, "strain_meets_target_on_all_cases": best,
             "wall_s": time.perf_counter() - t0}
-    data["files"] = [str(out / f"validity.{x}") for x in ("json", "md", "png")]
     write_json(out / "validity.json", data)
     (out / "validity.md").write_text(report(data))
     try:
         plot(data, out / "validity.png")
     except Exception as exc:  # pragma: no cover - a plot failure keeps the figures
         echo(f"plot failed: {exc}")
+    data["files"] = [str(out / f"validity.{x}") for x in ("json", "md", "png")]
     return data
 
 
