@@ -18,6 +18,7 @@ from rackstress import (Attract, Bind, Collide, Const, Contact, Dampen, Divergen
                         Group, Matched, Phase, PhaseIn, Scene, Within, lattice, rack, scenes)
 from rackstress.engines.lammps.deck import compile_deck
 from rackstress.engines.lammps.runner import LammpsRun
+from rackstress.engines.driver import drive
 from rackstress.engines.reference import Reference
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -122,18 +123,13 @@ def test_force_parity_every_operator_kind(phase, contact):
 
 
 def _reference_final(scene, steps=None):
-    ref = Reference(scene)
-    for _, phase, _ in scene.schedule():
-        for _ in range(phase.steps):
-            ref.step(phase.vars)
-    return ref.p
+    return drive(Reference(scene)).positions
 
 
 def _lammps_final(scene, mode="exact"):
     run = LammpsRun(compile_deck(scene, mode), None)
     try:
-        run.run_schedule()
-        return run.gather_positions()
+        return drive(run).positions
     finally:
         run.close()
 
@@ -166,11 +162,12 @@ from rackstress import scenes
 from rackstress.engines.lammps.deck import compile_deck
 from rackstress.engines.lammps.runner import LammpsRun
 from rackstress.lib.mpi import world
+from rackstress.engines.driver import drive
 out = sys.argv[1]
 for key, name, params in [("d2", "plane-bound", {"d": 2.0}), ("d10", "plane-bound", {"d": 10.0}),
                           ("rack", "plane-rack", {})]:
     run = LammpsRun(compile_deck(scenes.build(name, steps=1200, **params), "exact"), None)
-    run.run_schedule()
+    drive(run)
     p = run.gather_positions()
     nlocal = run.lmp.extract_global("nlocal")
     counts = world().allgather(nlocal)
@@ -295,3 +292,47 @@ def test_phase_conditioned_self_collision_parity():
     gap = ref[8:, 0].min() - ref[:8, 0].max()
     assert gap < 1.2      # the clusters met: pairs 6 units apart at the start now overlap
     assert np.abs(_lammps_final(scene) - ref).max() <= 1e-8
+
+
+def _frames(path: Path) -> list:
+    """(timestep, atom lines) of every frame of a dump (box bounds left out: LAMMPS updates a
+    shrink-wrapped box only when it reneighbours)."""
+    lines, out, k = path.read_text().splitlines(), [], 0
+    while k < len(lines):
+        if lines[k] == "ITEM: TIMESTEP":
+            n = int(lines[k + 3])
+            out.append((lines[k + 1], lines[k + 9:k + 9 + n]))
+            k += 9 + n
+        else:
+            k += 1
+    return out
+
+
+@pytest.mark.lammps
+def test_what_runs_standalone_with_plain_lmp(tmp_path):
+    """The decks' own comments say it: the fast plane-rack deck (no Python operator) runs with
+    the wheel's ``lmp`` and writes rackstress' positions in every frame; a deck with Python
+    operators stops at its first ``run 0``."""
+    import shutil
+
+    lmp = Path(sys.executable).parent / "lmp"
+    for name in ("plane-rack-fast", "plane-rack"):
+        shutil.copytree(ROOT / "lammps_inputs" / name, tmp_path / name)
+    fast = subprocess.run([str(lmp), "-in", "in.lammps"], cwd=tmp_path / "plane-rack-fast",
+                          capture_output=True, text=True, timeout=300)
+    assert fast.returncode == 0, fast.stdout[-2000:]
+    assert "runs this deck standalone" in (tmp_path / "plane-rack-fast" / "in.lammps").read_text()
+    exact = subprocess.run([str(lmp), "-in", "in.lammps"], cwd=tmp_path / "plane-rack",
+                           capture_output=True, text=True, timeout=300)
+    assert exact.returncode != 0
+    assert "Fix external callback function not set" in exact.stdout + exact.stderr
+    assert "stops at the first 'run 0'" in (tmp_path / "plane-rack" / "in.lammps").read_text()
+    exe = Path(sys.executable).parent / "rackstress"
+    out = tmp_path / "rs"
+    proc = subprocess.run([str(exe), "run", "plane-rack", "--mode", "fast", "--out", str(out),
+                           "--no-render", "--no-progress"], capture_output=True, text=True,
+                          timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    ours = _frames(out / "trajectory.dump")
+    theirs = _frames(tmp_path / "plane-rack-fast" / "trajectory.dump")
+    assert len(ours) == len(theirs) == 101 and ours == theirs

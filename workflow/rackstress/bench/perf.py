@@ -27,6 +27,7 @@ import time
 from pathlib import Path
 
 from rackstress.bench import fmt, machine, md_table, out_dir, write_json
+from rackstress.engines.driver import drive
 
 PAPER = {"config": "paper (Rönkkö et al.): one thread, 1.83 GHz", "s_per_1200": 142.0,
          "n_particles": 33689}
@@ -87,9 +88,7 @@ def worker(engine: str, mode: str, steps: int, profile_steps: int, scene_name: s
         ref = Reference(sc)
         res["setup_s"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        for _, phase, _ in sc.schedule():
-            for _ in range(phase.steps):
-                ref.step(phase.vars)
+        drive(ref)
         res["wall_s"] = time.perf_counter() - t0
         res["ranks"] = 1
         res["maxrss_mb"] = res["maxrss_sum_mb"] = \
@@ -106,7 +105,7 @@ def worker(engine: str, mode: str, steps: int, profile_steps: int, scene_name: s
     res["setup_s"] = time.perf_counter() - t0
     comm.Barrier()
     t0 = time.perf_counter()
-    runner.run_schedule()
+    drive(runner)
     comm.Barrier()
     res["wall_s"] = time.perf_counter() - t0
     cb = runner.py.seconds if runner.py is not None else 0.0

@@ -1,53 +1,28 @@
 """The reference engine: evaluates a scene exactly by the paper's equations, float64, unit masses.
 
 It is the ground truth the LAMMPS backend is measured against, so it stays simple: every
-operator is one short function of the current state, the operators of all groups are evaluated
-on the same state (the composite of Eqs. 26 and 32), and ``integrate`` is Eq. 5. Collision
-neighbours come from ``scipy.spatial.cKDTree`` (the same pairs as an all-pairs search).
+operator's acceleration is its own kernel (:mod:`rackstress.model.operators`), the operators of
+all groups are evaluated on the same state (the composite of Eqs. 26 and 32), and ``integrate``
+is Eq. 5 (:func:`rackstress.model.operators.integrate`). Collision neighbours come from the one
+contact search, :func:`rackstress.model.operators.contact_candidates` (the same pairs as an
+all-pairs search). Which kernel evaluates an operator is looked up in :data:`KERNELS` by the
+operator's class.
 """
 from __future__ import annotations
 
 from typing import Mapping
 
 import numpy as np
-from scipy.spatial import cKDTree
 
-from rackstress.lib.vec import rowdot
 from rackstress.errors import DivergenceError
-from rackstress.model.operators import (Attract, Bind, Collide, Contact, Dampen, Force, attract_pairs,
-                        bind_pairs, phase_active)
+from rackstress.lib.vec import rowdot
+from rackstress.model.operators import (Attract, Bind, Collide, Dampen, Force, contact_candidates,
+                                        contact_groups, integrate, phase_active)
 from rackstress.model.scene import Scene
 from rackstress.model.verlet import integrate_verlet
 from rackstress.engines.watchdog import check
 
-
-# ----------------------------------------------------------------------- the paper's functions
-def col(p, u, r_p, r_u, c):
-    """Eq. 10 (erratum: R = p_r + u_r) for arrays of pairs: c·(u−p)·min(0, 1 − R²/‖u−p‖²)."""
-    diff = u - p
-    d2 = rowdot(diff, diff)
-    factor = np.minimum(0.0, 1.0 - (r_p + r_u) ** 2 / d2)
-    return (c * factor)[:, None] * diff
-
-
-def bin_(p, u, L0sq, c):
-    """Eq. 12 for arrays of pairs: c·(u−p)·(1 − L0²/‖u−p‖²), L0 the pair's original distance."""
-    diff = u - p
-    d2 = rowdot(diff, diff)
-    return (c * (1.0 - L0sq / d2))[:, None] * diff
-
-
-def attraction(p, u, c):
-    """Eq. 14 summand for arrays of pairs: c·(u−p)/‖u−p‖."""
-    diff = u - p
-    d = np.sqrt(rowdot(diff, diff))
-    return (c / d)[:, None] * diff
-
-
-def integrate(p, v, a, t):
-    """Eq. 5 (forward-corrected Euler): v += t·a; p += t·v. Returns the new (p, v)."""
-    v = v + t * a
-    return p + t * v, v
+__all__ = ["Reference", "integrate", "KERNELS"]
 
 
 def _accumulate(a, idx, contrib):
@@ -67,48 +42,40 @@ class Reference:
         self.o = scene.original_positions()
         self.radius = scene.radii()
         self.p = self.o.copy()
-        self.v = np.zeros_like(self.p)
+        self.v = scene.initial_velocities()   # v at step 0: zero unless a group sets v0
+        # supports: held particles get zero acceleration (and start at rest), so Eq. 5 keeps
+        # them at o exactly, like LAMMPS' fix setforce 0 0 0 with zero velocity
+        held = scene.held()
+        self._held = held if held.any() else None
         self.step_count = 0
-        self._bind = {}      # id(op) → (I, J, c, L0²) in global indices
-        self._attract = {}   # (id(op), phase key) → (I, J, c)
-        for target, seq in scene.operators.items():
-            for op in seq:
-                if isinstance(op, Bind):
-                    g_t, g_s = scene.groups[target], scene.groups[op.source]
-                    i, j, c = bind_pairs(op, g_t, g_s)
-                    I, J = i + scene.offset(target), j + scene.offset(op.source)
-                    diff = self.o[J] - self.o[I]
-                    self._bind[id(op)] = (I, J, c, rowdot(diff, diff))
+        #: (group, index in its sequence) [+ phase] → the operator's PairList in global indices
+        self._pairs = {}
 
-    # ------------------------------------------------------------------ neighbour search
-    def _trees(self):
-        cache = {}
-
-        def tree(group):
-            if group not in cache:
-                cache[group] = cKDTree(self.p[self.scene.slice(group)])
-            return cache[group]
-        return tree
-
-    def contacts(self, target: str, source: str, tree) -> tuple[np.ndarray, np.ndarray]:
-        """Global index pairs (I, J) with ‖p_I − p_J‖ < r_I + r_J, I in target, J in source."""
+    # ------------------------------------------------------------------ contact search
+    def contacts(self, target: str, source: str, cache: dict | None = None):
+        """Global index pairs (I, J) with ‖p_I − p_J‖ < r_I + r_J, I in target, J in source,
+        and their R² = (r_I + r_J)² (Eq. 10's support). ``cache`` shares one search per
+        evaluation between both directions and the contact conditions."""
+        if cache is not None and (target, source) in cache:
+            return cache[(target, source)]
         sc = self.scene
-        rt, rs = sc.groups[target].r, sc.groups[source].r
-        sm = tree(target).sparse_distance_matrix(tree(source), rt.max() + rs.max(),
-                                                 output_type="ndarray")
-        i, j = sm["i"].astype(np.int64), sm["j"].astype(np.int64)
-        I, J = i + sc.offset(target), j + sc.offset(source)
-        if target == source:
-            keep = I != J
-            I, J = I[keep], J[keep]
+        st, ss = sc.slice(target), sc.slice(source)
+        cut = sc.groups[target].r.max() + sc.groups[source].r.max()
+        a, b = contact_candidates(self.p[st], self.p[ss], cut, same=target == source)
+        I, J = a + st.start, b + ss.start
         diff = self.p[J] - self.p[I]
         d2 = rowdot(diff, diff)
-        keep = d2 < (self.radius[I] + self.radius[J]) ** 2
-        I, J, d2 = I[keep], J[keep], d2[keep]
+        R2 = (self.radius[I] + self.radius[J]) ** 2
+        keep = Collide.touching(d2, R2)
+        I, J, d2, R2 = I[keep], J[keep], d2[keep], R2[keep]
         if np.any(d2 == 0.0):
             k = int(np.flatnonzero(d2 == 0.0)[0])
             self._coincide(int(I[k]), int(J[k]))
-        return I, J
+        if cache is not None:
+            cache[(target, source)] = (I, J, R2)
+            if source != target:
+                cache[(source, target)] = (J, I, R2)
+        return I, J, R2
 
     def _coincide(self, a: int, b: int):
         ga, la = self.scene.group_of(a)
@@ -121,62 +88,69 @@ class Reference:
     # ------------------------------------------------------------------ netForce
     def accelerations(self, phase: Mapping) -> np.ndarray:
         """netForce of the scene on the current state: the accelerations of all particles."""
-        sc, p, v = self.scene, self.p, self.v
-        a = np.zeros_like(p)
-        tree = self._trees()
-        for target, seq in sc.operators.items():
-            sl = sc.slice(target)
-            for op in seq:
-                if isinstance(op, Dampen):  # conditions gate only the extra term (Eq. 28)
-                    extra = op.extra if op.extra and self.holds(op.when, target, phase, tree) else 0.0
-                    a[sl] -= (op.c + extra) * v[sl]
-                    continue
-                if not self.holds(op.when, target, phase, tree):
-                    continue
-                if isinstance(op, Force):
-                    acc = np.asarray(op.accel, dtype=float)
-                    if op.where is None:
-                        a[sl] += acc
-                    else:
-                        a[sl][np.asarray(op.where, dtype=bool)] += acc
-                elif isinstance(op, Collide):
-                    I, J = self.contacts(target, op.source, tree)
-                    c = np.full(len(I), float(op.coeff.c))
-                    _accumulate(a, I, col(p[I], p[J], self.radius[I], self.radius[J], c))
-                elif isinstance(op, Bind):
-                    I, J, c, L0sq = self._bind[id(op)]
-                    _accumulate(a, I, bin_(p[I], p[J], L0sq, c))
-                elif isinstance(op, Attract):
-                    I, J, c = self._attract_pairs(op, target, phase)
-                    _accumulate(a, I, attraction(p[I], p[J], c))
+        a = np.zeros_like(self.p)
+        cache = {}
+        for target, seq in self.scene.operators.items():
+            for k, op in enumerate(seq):
+                KERNELS[type(op)](self, a, (target, k), op, phase, cache)
         return a
 
-    def holds(self, conditions, target: str, phase: Mapping, tree) -> bool:
+    def holds(self, conditions, target: str, phase: Mapping, cache: dict | None = None) -> bool:
         """⟨P⟩ of Eq. 4 for an operator's conditions: phase ones first, contact ones if needed."""
         if not phase_active(conditions, phase):
             return False
-        return all(len(self.contacts(target, c.group, tree)[0]) > 0
-                   for c in conditions if isinstance(c, Contact))
+        return all(len(self.contacts(target, g, cache)[0]) > 0 for g in contact_groups(conditions))
 
-    def _attract_pairs(self, op, target, phase):
-        key = (id(op), tuple(sorted(phase.items())))
-        if key not in self._attract:
-            sc = self.scene
-            i, j, c = attract_pairs(op, sc.groups[target], sc.groups[op.source], phase)
-            self._attract[key] = (i + sc.offset(target), j + sc.offset(op.source), c)
-        return self._attract[key]
+    def _pair_list(self, site, op, phase=None):
+        """The operator's pairs in global indices, prepared once (per phase for attract)."""
+        key = site if phase is None else (site, tuple(sorted(phase.items())))
+        if key not in self._pairs:
+            sc, target = self.scene, site[0]
+            pl = op.pairs(sc.groups[target], sc.groups[op.source], phase)
+            self._pairs[key] = pl.shifted(sc.offset(target), sc.offset(op.source))
+        return self._pairs[key]
+
+    def _force(self, a, site, op, phase, cache):
+        if self.holds(op.when, site[0], phase, cache):
+            sl = self.scene.slice(site[0])
+            if op.where is None:
+                a[sl] += op.vector()
+            else:
+                a[sl][np.asarray(op.where, dtype=bool)] += op.vector()
+
+    def _dampen(self, a, site, op, phase, cache):
+        # conditions gate only the extra term (Eq. 28)
+        holds = bool(op.extra) and self.holds(op.when, site[0], phase, cache)
+        sl = self.scene.slice(site[0])
+        a[sl] += Dampen.accel(self.v[sl], op.coefficient(holds))
+
+    def _collide(self, a, site, op, phase, cache):
+        if self.holds(op.when, site[0], phase, cache):
+            I, J, R2 = self.contacts(site[0], op.source, cache)
+            c = np.full(len(I), float(op.coeff.c))
+            _accumulate(a, I, Collide.accel(self.p[I], self.p[J], c, R2))
+
+    def _bind(self, a, site, op, phase, cache):
+        if self.holds(op.when, site[0], phase, cache):
+            pl = self._pair_list(site, op)
+            _accumulate(a, pl.i, Bind.accel(self.p[pl.i], self.p[pl.j], pl.c, pl.q))
+
+    def _attract(self, a, site, op, phase, cache):
+        if self.holds(op.when, site[0], phase, cache):
+            pl = self._pair_list(site, op, phase)
+            _accumulate(a, pl.i, Attract.accel(self.p[pl.i], self.p[pl.j], pl.c))
 
     # ------------------------------------------------------------------ motion
     def damping(self, phase: Mapping) -> np.ndarray:
         """γ per particle: the dampen coefficients (Eq. 9) acting now, extras whose conditions hold."""
         g = np.zeros(len(self.p))
-        tree = self._trees()
+        cache = {}
         for target, seq in self.scene.operators.items():
             sl = self.scene.slice(target)
             for op in seq:
                 if isinstance(op, Dampen):
-                    extra = op.extra if op.extra and self.holds(op.when, target, phase, tree) else 0.0
-                    g[sl] += op.c + extra
+                    holds = bool(op.extra) and self.holds(op.when, target, phase, cache)
+                    g[sl] += op.coefficient(holds)
         return g
 
     def step(self, phase: Mapping) -> None:
@@ -190,6 +164,8 @@ class Reference:
             t = self.scene.dt
             g = self.damping(phase)
             a = self.accelerations(phase)
+            if self._held is not None:
+                a[self._held] = 0.0
             if self.step_count == 0:
                 self.v = self.v + (0.5 * t) * a / (1.0 + 0.5 * t * g)[:, None]
                 self.p = self.p + t * self.v
@@ -199,7 +175,75 @@ class Reference:
             check(self.scene, self.p, self.v, self.o, self.step_count)
             return
         a = self.accelerations(phase)
+        if self._held is not None:
+            a[self._held] = 0.0
         self.p, self.v = integrate(self.p, self.v, a, self.scene.dt)
         self.step_count += 1
         check(self.scene, self.p, self.v, self.o, self.step_count)
 
+    # ------------------------------------------------------------------ the engine interface
+    #: Steps between the driver's watchdog checks: every step (:meth:`step` checks itself).
+    check_every = 1
+    #: The reference engine runs on one process, which writes everything.
+    root = True
+    _dump = None
+    _dump_every = 1
+    _phase: Mapping = {}
+
+    def open_dump(self, path, dump_every: int) -> None:
+        """Write frames of the trajectory to ``path`` every ``dump_every`` steps, starting now."""
+        from rackstress.engines.dumpio import DumpWriter
+        from rackstress.model import topology
+
+        sc = self.scene
+        self._dump = DumpWriter(path, topology.per_particle(sc, topology.group_types(sc)),
+                                topology.per_particle(sc, topology.group_mols(sc)))
+        self._dump_every = int(dump_every)
+        self._dump.write(self.step_count, self.p)
+
+    def enter_phase(self, phase_vars: Mapping) -> None:
+        """The phase variables the operators' conditions read (⟨P⟩ of Eq. 4) from now on."""
+        self._phase = dict(phase_vars)
+
+    def advance(self, n: int) -> None:
+        """``n`` steps of :meth:`step` in the current phase, writing frames as they fall due."""
+        for _ in range(int(n)):
+            self.step(self._phase)
+            self._checked_at = self.step_count
+            if self._dump is not None and self.step_count % self._dump_every == 0:
+                self._dump.write(self.step_count, self.p)
+
+    _checked_at = -1
+
+    def check(self) -> None:
+        """The watchdog (every :meth:`step` runs it already: not again for the same step)."""
+        if self._checked_at != self.step_count:
+            check(self.scene, self.p, self.v, self.o, self.step_count)
+            self._checked_at = self.step_count
+
+    def positions(self) -> np.ndarray:
+        return self.p.copy()
+
+    def state(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.p.copy(), self.v.copy()
+
+    def write_frame(self) -> None:
+        """A frame of the current step, unless the dump interval already wrote it."""
+        if self._dump is not None and self.step_count % self._dump_every != 0:
+            self._dump.write(self.step_count, self.p)
+
+    def close(self) -> None:
+        if self._dump is not None:
+            self._dump.close()
+            self._dump = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+#: The reference kernel evaluating each operator class (adding an operator adds one entry).
+KERNELS = {Force: Reference._force, Dampen: Reference._dampen, Collide: Reference._collide,
+           Bind: Reference._bind, Attract: Reference._attract}

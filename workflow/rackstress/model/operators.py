@@ -1,37 +1,74 @@
-"""The paper's primitive operators (Section 2.3) as plain data, and their coefficient structures.
+"""The paper's primitive operators (Section 2.3), each with its physics in one place.
 
-An operator acts on a target group and adds an acceleration to it (every particle has unit mass):
+Every particle has unit mass and every operator adds an acceleration. One class per operator
+holds everything about it that any engine needs:
 
-=========  ============================  ======================================================
-operator   equation                      acceleration on particle p (from particle u)
-=========  ============================  ======================================================
-force      Eq. 8                         â_i
-dampen     Eq. 9                         −c·v
-collide    Eqs. 10–11 (erratum: radii)   c·(u−p)·min(0, 1 − (u_r+p_r)²/‖u−p‖²)
-bind       Eqs. 12–13                    c·(u−p)·(1 − ‖u_o−p_o‖²/‖u−p‖²)
-attract    Eq. 14                        c·(u−p)/‖u−p‖
-=========  ============================  ======================================================
+=========  ==========================  =====================================================
+operator   equation                    acceleration on particle p from particle u
+=========  ==========================  =====================================================
+force      Eq. 8 (Eq. 15 selection)    â_p
+dampen     Eq. 9 (Eq. 28 extra)        −c·v_p
+collide    Eqs. 10–11 (radii erratum)  c·(u−p)·min(0, 1 − R²/‖u−p‖²),   R = r_p + r_u
+bind       Eqs. 12–13                  c·(u−p)·(1 − L0²/‖u−p‖²),       L0 = ‖u_o − p_o‖
+attract    Eq. 14                      c·(u−p)/‖u−p‖                  (constant magnitude c)
+integrate  Eq. 5                       v += t·a;  p += t·v            (:func:`integrate`)
+=========  ==========================  =====================================================
+
+A pair operator's formula is written once, as ``c·factor(d², q)·(u − p)`` with the per-pair
+parameter q (R² for collide, L0² for bind, none for attract): :meth:`PairOperator.factor` is the
+equation, :meth:`PairOperator.accel` the acceleration kernel on i from j (the reference engine
+and the LAMMPS callback both call them), :meth:`PairOperator.jacobian` its linearization (the
+stability prediction), :meth:`PairOperator.pairs` the coefficient matrix's pairs with their
+per-pair parameter (L0² is computed here and nowhere else), :meth:`Operator.label` its name in
+messages and decks. Collisions have no fixed pairs: :func:`contact_candidates` and
+:meth:`Collide.touching` are the one contact search every engine uses.
 
 Coefficient "matrices" ĉ (m×n) are never stored densely: :class:`Const` (every pair),
 :class:`Within` (pairs whose original distance is below d, Eq. 16) and :class:`Matched` (index-
 matched attraction regions, Eqs. 27–28). Coefficients are *directed*: the operator on i from j
-carries its own c; the reverse interaction, if any, is a separate operator on j.
+carries its own c; the reverse interaction, if any, is a separate operator on j
+(:func:`reverse_of` finds it).
 
 Conditions make an operator conditional (the paper's ⟨P⟩, Eq. 4): :class:`PhaseIn` (the gait
 phase) and :class:`Contact` (some particle of the target overlaps some particle of a group,
 Eq. 28's damping). An operator applies only when all its conditions hold; :class:`Dampen` may
 instead add ``extra`` to its base coefficient when its conditions hold (10 + 85⟨…⟩).
 
-``integrate`` (Eq. 5) is not an operator of this list: it closes every step of every engine.
+Adding an operator is one new class here (its formula, parameters, label, pairs and Jacobian)
+plus its realization in each engine's registry (``REALIZE`` in the deck compiler, ``TERMS`` in
+the LAMMPS callback, ``KERNELS`` in the reference engine).
+
+Examples
+--------
+>>> import numpy as np
+>>> Collide.accel(np.zeros((1, 3)), np.array([[1.5, 0.0, 0.0]]), 100.0, np.array([4.0]))
+array([[-116.66666667,   -0.        ,   -0.        ]])
+>>> Bind("rack", Const(100.0)).label()
+'bind(rack, 100)'
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Mapping, Union
+from typing import ClassVar, Mapping, Union
 
 import numpy as np
 
 from rackstress.errors import SceneError
+from rackstress.lib.vec import bbox, inside, rowdot
+
+
+# --------------------------------------------------------------------------- Eq. 5
+def integrate(p: np.ndarray, v: np.ndarray, a: np.ndarray, t: float):
+    """Eq. 5 (forward-corrected Euler): v += t·a; p += t·v. Returns the new (p, v).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> integrate(np.zeros((1, 3)), np.zeros((1, 3)), np.array([[0.0, 2.0, 0.0]]), 0.5)[0]
+    array([[0. , 0.5, 0. ]])
+    """
+    v = v + t * a
+    return p + t * v, v
 
 
 # --------------------------------------------------------------------------- conditions
@@ -51,12 +88,18 @@ class PhaseIn:
                              f"{dict(phase)} does not set")
         return phase[self.var] in self.values
 
+    def label(self) -> str:
+        return f"{self.var} in {set(self.values)}"
+
 
 @dataclass(frozen=True)
 class Contact:
     """⟨∃ i, j : ‖col(p_i, 1, group_j)‖ > 0⟩: some target particle overlaps a ``group`` particle."""
 
     group: str
+
+    def label(self) -> str:
+        return f"contact {self.group}"
 
 
 Condition = Union[PhaseIn, Contact]
@@ -67,12 +110,20 @@ def phase_active(conditions, phase: Mapping) -> bool:
     return all(c.holds(phase) for c in conditions if isinstance(c, PhaseIn))
 
 
+def contact_groups(conditions) -> tuple:
+    """The groups an operator's contact conditions name (Eq. 28's ⟨leg touches sediment⟩)."""
+    return tuple(c.group for c in conditions if isinstance(c, Contact))
+
+
 # --------------------------------------------------------------------------- coefficients
 @dataclass(frozen=True)
 class Const:
     """ĉ = [c] for every pair (i, j), i ≠ j when target and source are the same group."""
 
     c: float
+
+    def label(self) -> str:
+        return f"{self.c:g}"
 
 
 @dataclass(frozen=True)
@@ -81,6 +132,9 @@ class Within:
 
     d: float
     c: float
+
+    def label(self) -> str:
+        return f"within({self.d:g}) magnitude {self.c:g}"
 
 
 @dataclass(frozen=True)
@@ -96,137 +150,47 @@ class Matched:
     source: str
     c: float
 
+    def label(self) -> str:
+        return f"{self.c:g}<{self.target} = {self.source} != 0>"
+
 
 Coefficient = Union[Const, Within, Matched]
 
 
-# --------------------------------------------------------------------------- operators
 @dataclass(frozen=True)
-class Force:
-    """force(â), Eq. 8: a constant acceleration ``accel`` on the particles selected by ``where``.
+class PairList:
+    """The pairs (i on the target, j on the source) of a coefficient matrix, with c per pair and
+    the operator's per-pair parameter ``q`` (L0² for bind, None otherwise)."""
 
-    ``where`` is None (all) or a boolean mask over the target group, e.g. Eq. 15's
-    ⟨‖o‖² < 10⟩.
-    """
+    i: np.ndarray
+    j: np.ndarray
+    c: np.ndarray
+    q: np.ndarray | None = None
 
-    accel: tuple
-    where: tuple | None = None
-    when: tuple = ()
+    def __len__(self) -> int:
+        return len(self.i)
 
-    kind = "force"
+    def shifted(self, ti: int, sj: int) -> "PairList":
+        """The same pairs in global particle indices (group offsets ``ti``, ``sj``)."""
+        return PairList(self.i + ti, self.j + sj, self.c, self.q)
 
-
-@dataclass(frozen=True)
-class Dampen:
-    """dampen(c), Eq. 9: −c·v; ``c + extra`` while every condition in ``when`` holds (Eq. 28)."""
-
-    c: float
-    extra: float = 0.0
-    when: tuple = ()
-
-    kind = "dampen"
+    def select(self, keep) -> "PairList":
+        return PairList(self.i[keep], self.j[keep], self.c[keep],
+                        None if self.q is None else self.q[keep])
 
 
-@dataclass(frozen=True)
-class Collide:
-    """collide(u, ĉ), Eqs. 10–11: repulsion c(u−p)·min(0, 1 − R²/d²), R = p_r + u_r."""
-
-    source: str
-    coeff: Coefficient
-    when: tuple = ()
-
-    kind = "collide"
-
-
-@dataclass(frozen=True)
-class Bind:
-    """bind(u, ĉ), Eqs. 12–13: c(u−p)(1 − L0²/d²) with L0 = ‖u_o − p_o‖ per pair."""
-
-    source: str
-    coeff: Coefficient
-    when: tuple = ()
-
-    kind = "bind"
-
-
-@dataclass(frozen=True)
-class Attract:
-    """attract(u, ĉ), Eq. 14: c(u−p)/‖u−p‖ — constant magnitude c per pair, one-way."""
-
-    source: str
-    coeff: Coefficient
-    when: tuple = ()
-
-    kind = "attract"
-
-
-Operator = Union[Force, Dampen, Collide, Bind, Attract]
-PAIR_OPERATORS = (Collide, Bind, Attract)
-OPERATOR_KINDS = {cls.kind: cls for cls in (Force, Dampen, Collide, Bind, Attract)}
-
-
-def check_operator(op, target: str, groups: Mapping) -> None:
-    """Validate one operator against the scene's groups; raise :class:`SceneError` if wrong."""
-    where = f"operator {op.kind} on '{target}'"
-    for cond in op.when:
-        if isinstance(cond, Contact) and cond.group not in groups:
-            raise SceneError(f"{where}: contact condition names unknown group '{cond.group}'")
-    if isinstance(op, Force):
-        if len(op.accel) != 3 or not np.all(np.isfinite(op.accel)):
-            raise SceneError(f"{where}: accel must be three finite numbers, got {op.accel!r}")
-        if op.where is not None and len(op.where) != groups[target].n:
-            raise SceneError(f"{where}: mask has {len(op.where)} entries for "
-                             f"{groups[target].n} particles")
-        return
-    if isinstance(op, Dampen):
-        if not (np.isfinite(op.c) and np.isfinite(op.extra)):
-            raise SceneError(f"{where}: damping coefficients must be finite")
-        return
-    if op.source not in groups:
-        raise SceneError(f"{where}: source group '{op.source}' does not exist "
-                         f"(groups: {', '.join(groups)})")
-    coeff = op.coeff
-    if not isinstance(coeff, (Const, Within, Matched)):
-        raise SceneError(f"{where}: unknown coefficient {coeff!r}")
-    if not np.isfinite(coeff.c):
-        raise SceneError(f"{where}: coefficient c must be finite, got {coeff.c!r}")
-    if isinstance(coeff, Within) and not coeff.d > 0:
-        raise SceneError(f"{where}: within(d) needs d > 0, got {coeff.d!r}")
-    if isinstance(coeff, Matched) and not isinstance(op, Attract):
-        raise SceneError(f"{where}: index-matched coefficients are for attract only")
-    if isinstance(op, Collide) and not isinstance(coeff, Const):
-        raise SceneError(f"{where}: collide takes a constant coefficient (its reach is the "
-                         f"sum of the radii, Eq. 10), not {type(coeff).__name__}")
-    if isinstance(op, Attract) and not isinstance(coeff, (Matched, Const)):
-        raise SceneError(f"{where}: attract takes a constant or index-matched coefficient")
-
-
-# --------------------------------------------------------------------------- pair lists
-def bind_pairs(op: Bind, target, source) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The (i, j, c) triples of a bind's coefficient matrix, from original positions only.
-
-    i indexes the target, j the source; a group bound to itself never pairs i with i.
-    """
-    same = target is source
-    coeff = op.coeff
-    if isinstance(coeff, Const):
-        i, j = np.meshgrid(np.arange(target.n), np.arange(source.n), indexing="ij")
-        i, j = i.ravel(), j.ravel()
-    elif isinstance(coeff, Within):
-        from scipy.spatial import cKDTree
-        # within(d) is a strict '<' (Eq. 16): query to d, then filter exactly.
-        sm = cKDTree(target.o).sparse_distance_matrix(cKDTree(source.o), coeff.d,
-                                                      output_type="ndarray")
-        keep = sm["v"] < coeff.d
-        i, j = sm["i"][keep].astype(np.int64), sm["j"][keep].astype(np.int64)
-    else:  # pragma: no cover - check_operator rejects it
-        raise SceneError(f"bind takes const or within coefficients, not {coeff!r}")
-    if same:
+def _all_pairs(target, source) -> tuple[np.ndarray, np.ndarray]:
+    i, j = np.meshgrid(np.arange(target.n), np.arange(source.n), indexing="ij")
+    i, j = i.ravel(), j.ravel()
+    if target is source:
         keep = i != j
         i, j = i[keep], j[keep]
+    return i, j
+
+
+def _sorted(i, j):
     order = np.lexsort((j, i))
-    i, j = i[order], j[order]
-    return i, j, np.full(len(i), float(coeff.c))
+    return i[order], j[order]
 
 
 def region_index(group, name: str, phase: Mapping) -> np.ndarray:
@@ -242,60 +206,423 @@ def region_index(group, name: str, phase: Mapping) -> np.ndarray:
     return np.asarray(regions[key])
 
 
-def attract_pairs(op: Attract, target, source, phase: Mapping):
-    """(i, j, c) of an attract's coefficient matrix in the given phase."""
-    coeff = op.coeff
-    if isinstance(coeff, Const):
-        i, j = np.meshgrid(np.arange(target.n), np.arange(source.n), indexing="ij")
-        i, j = i.ravel(), j.ravel()
-        if target is source:
-            keep = i != j
-            i, j = i[keep], j[keep]
-    else:
-        ti = region_index(target, coeff.target, phase)
-        sj = region_index(source, coeff.source, phase)
-        i_list, j_list = [], []
-        for value in np.unique(ti[ti != 0]):
-            ii = np.flatnonzero(ti == value)
-            jj = np.flatnonzero(sj == value)
-            if len(jj):
-                a, b = np.meshgrid(ii, jj, indexing="ij")
-                i_list.append(a.ravel())
-                j_list.append(b.ravel())
-        i = np.concatenate(i_list) if i_list else np.zeros(0, np.int64)
-        j = np.concatenate(j_list) if j_list else np.zeros(0, np.int64)
-        if target is source:  # a particle never attracts itself (0/0 in Eq. 14)
-            keep = i != j
-            i, j = i[keep], j[keep]
-        order = np.lexsort((j, i))
-        i, j = i[order], j[order]
-    return i, j, np.full(len(i), float(coeff.c))
+# --------------------------------------------------------------------------- operators
+class Operator:
+    """What every operator has: a ``kind`` (the paper's name), conditions ``when``, a label."""
+
+    kind: ClassVar[str] = ""
+    #: True for operators acting between pairs of particles (collide, bind, attract)
+    pair: ClassVar[bool] = False
+    fixed_pairs: ClassVar[bool] = False
+    when: tuple = ()
+
+    def label(self) -> str:
+        """How the operator is named in messages and deck comments, e.g. ``dampen(1)``."""
+        raise NotImplementedError
+
+    def _when(self) -> str:
+        return f" when {' and '.join(c.label() for c in self.when)}" if self.when else ""
+
+    def check(self, target: str, groups: Mapping) -> None:
+        """Validate against the scene's groups; raise :class:`SceneError` naming what is wrong."""
+        for cond in self.when:
+            if isinstance(cond, Contact) and cond.group not in groups:
+                raise SceneError(f"operator {self.kind} on '{target}': contact condition names "
+                                 f"unknown group '{cond.group}'")
 
 
-# --------------------------------------------------------------------------- labels
+@dataclass(frozen=True)
+class Force(Operator):
+    """force(â), Eq. 8: a constant acceleration ``accel`` on the particles selected by ``where``.
+
+    ``where`` is None (all) or a boolean mask over the target group, e.g. Eq. 15's
+    ⟨‖o‖² < 10⟩ (:func:`norm2_below`).
+
+    Examples
+    --------
+    >>> Force((0.0, 100.0, 0.0), where=(True, False)).label()
+    'force((0.0, 100.0, 0.0), 1 selected)'
+    """
+
+    accel: tuple
+    where: tuple | None = None
+    when: tuple = ()
+
+    kind: ClassVar[str] = "force"
+
+    def label(self) -> str:
+        sel = "all" if self.where is None else f"{int(np.sum(self.where))} selected"
+        return f"force({tuple(self.accel)}, {sel})" + self._when()
+
+    def check(self, target, groups) -> None:
+        super().check(target, groups)
+        where = f"operator force on '{target}'"
+        if len(self.accel) != 3 or not np.all(np.isfinite(self.accel)):
+            raise SceneError(f"{where}: accel must be three finite numbers, got {self.accel!r}")
+        if self.where is not None and len(self.where) != groups[target].n:
+            raise SceneError(f"{where}: mask has {len(self.where)} entries for "
+                             f"{groups[target].n} particles")
+
+    def mask(self, n: int) -> np.ndarray:
+        """The selected particles of a target group of n (all when ``where`` is None)."""
+        return np.ones(n, bool) if self.where is None else np.asarray(self.where, dtype=bool)
+
+    def vector(self) -> np.ndarray:
+        """â (Eq. 8) as a float array."""
+        return np.asarray(self.accel, dtype=float)
+
+
+def norm2_below(o: np.ndarray, limit: float) -> tuple:
+    """Eq. 15's selection ⟨‖o‖² < limit⟩ over original positions, as a ``Force.where`` mask."""
+    o = np.asarray(o, dtype=float)
+    return tuple(bool(m) for m in (o ** 2).sum(axis=1) < limit)
+
+
+@dataclass(frozen=True)
+class Dampen(Operator):
+    """dampen(c), Eq. 9: −c·v; ``c + extra`` while every condition in ``when`` holds (Eq. 28).
+
+    Examples
+    --------
+    >>> Dampen(10.0, 85.0, when=(PhaseIn("r", (2, 3)),)).coefficient(True)
+    95.0
+    """
+
+    c: float
+    extra: float = 0.0
+    when: tuple = ()
+
+    kind: ClassVar[str] = "dampen"
+
+    def label(self) -> str:
+        extra = (f" + {self.extra:g}<{', '.join(c.label() for c in self.when)}>"
+                 if self.extra else "")
+        return f"dampen({self.c:g}{extra})"
+
+    def check(self, target, groups) -> None:
+        super().check(target, groups)
+        if not (np.isfinite(self.c) and np.isfinite(self.extra)):
+            raise SceneError(f"operator dampen on '{target}': damping coefficients must be finite")
+
+    def coefficient(self, holds: bool) -> float:
+        """The damping coefficient now: c, plus ``extra`` when the conditions hold (Eq. 28)."""
+        return self.c + (self.extra if (self.extra and holds) else 0.0)
+
+    @staticmethod
+    def accel(v: np.ndarray, c: float) -> np.ndarray:
+        """Eq. 9: −c·v."""
+        return -c * v
+
+
+class PairOperator(Operator):
+    """An operator on a target group from a ``source`` group with a coefficient matrix ``coeff``.
+
+    Its acceleration on i from j is ``c·factor(d², q)·(u − p)`` (u − p = the vector from i to
+    j, d² its square length, q the per-pair parameter of the operator).
+    """
+
+    pair: ClassVar[bool] = True
+    #: True when the pairs are fixed by the coefficient matrix (bind, attract: :meth:`pairs`),
+    #: False when they are found by the contact search as the particles move (collide)
+    fixed_pairs: ClassVar[bool] = True
+    #: the coefficient structures the operator accepts
+    coefficients: ClassVar[tuple] = (Const, Within, Matched)
+    source: str
+    coeff: Coefficient
+
+    def label(self) -> str:
+        return f"{self.kind}({self.source}, {self.coeff.label()})" + self._when()
+
+    def check(self, target, groups) -> None:
+        super().check(target, groups)
+        where = f"operator {self.kind} on '{target}'"
+        if self.source not in groups:
+            raise SceneError(f"{where}: source group '{self.source}' does not exist "
+                             f"(groups: {', '.join(groups)})")
+        coeff = self.coeff
+        if not isinstance(coeff, (Const, Within, Matched)):
+            raise SceneError(f"{where}: unknown coefficient {coeff!r}")
+        if not np.isfinite(coeff.c):
+            raise SceneError(f"{where}: coefficient c must be finite, got {coeff.c!r}")
+        if isinstance(coeff, Within) and not coeff.d > 0:
+            raise SceneError(f"{where}: within(d) needs d > 0, got {coeff.d!r}")
+        if isinstance(coeff, Matched) and Matched not in self.coefficients:
+            raise SceneError(f"{where}: index-matched coefficients are for attract only")
+        if not isinstance(coeff, self.coefficients):
+            raise SceneError(f"{where}: {self.coefficient_rule(coeff)}")
+
+    @classmethod
+    def coefficient_rule(cls, coeff) -> str:
+        """Why ``coeff`` is not a coefficient this operator takes."""
+        return f"{cls.kind} takes {', '.join(c.__name__ for c in cls.coefficients)} coefficients"
+
+    # the physics: subclasses define factor; accel and jacobian follow from it
+    @staticmethod
+    def factor(d2, q):
+        """The scalar s of the acceleration c·s·(u − p) for squared distances d2."""
+        raise NotImplementedError
+
+    @classmethod
+    def accel(cls, p: np.ndarray, u: np.ndarray, c, q=None) -> np.ndarray:
+        """The acceleration kernel on i from j for arrays of pairs: c·factor(d², q)·(u − p)."""
+        diff = u - p
+        return (c * cls.factor(rowdot(diff, diff), q))[:, None] * diff
+
+    def pairs(self, target, source, phase: Mapping | None = None) -> PairList:
+        """The (i, j, c, q) of the coefficient matrix (group-local indices, sorted by i, j)."""
+        raise NotImplementedError
+
+    @staticmethod
+    def _radial(diff: np.ndarray, c: np.ndarray, q: np.ndarray):
+        """Jacobian blocks −∂a_p/∂p (n×3×3) of c·(u−p)·(1 − q/d²) and their 2-norms.
+
+        With n = (u − p)/d: B = c·[(1 − q/d²)·(I − nnᵀ) + (1 + q/d²)·nnᵀ].
+        """
+        d2 = rowdot(diff, diff)
+        n = diff / np.sqrt(d2)[:, None]
+        nn = n[:, :, None] * n[:, None, :]
+        ratio = q / d2
+        alpha, beta = 1.0 - ratio, 1.0 + ratio
+        B = c[:, None, None] * (alpha[:, None, None] * np.eye(3)[None]
+                                + (beta - alpha)[:, None, None] * nn)
+        return B, np.abs(c) * beta
+
+
+@dataclass(frozen=True)
+class Collide(PairOperator):
+    """collide(u, ĉ), Eqs. 10–11: repulsion c(u−p)·min(0, 1 − R²/d²), R = p_r + u_r.
+
+    The printed Eq. 10 squares the sum of two x coordinates; the prose (particles collide when
+    "their distance is [not] greater than the sum of their radii") fixes it to the radii.
+    ``q`` is R² per pair.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> float(Collide.factor(np.array([2.25]), np.array([4.0]))[0])   # d 1.5, R 2
+    -0.7777777777777777
+    """
+
+    source: str
+    coeff: Coefficient
+    when: tuple = ()
+
+    kind: ClassVar[str] = "collide"
+    fixed_pairs: ClassVar[bool] = False
+    coefficients: ClassVar[tuple] = (Const,)
+
+    @classmethod
+    def coefficient_rule(cls, coeff) -> str:
+        return ("collide takes a constant coefficient (its reach is the sum of the radii, "
+                f"Eq. 10), not {type(coeff).__name__}")
+
+    @staticmethod
+    def factor(d2, q):
+        """Eq. 10: min(0, 1 − R²/d²) (q = R², R the sum of the radii)."""
+        return np.minimum(0.0, 1.0 - q / d2)
+
+    @staticmethod
+    def touching(d2, R2):
+        """Eq. 10's support: the pair overlaps (d < R), so its col term is non-zero."""
+        return d2 < R2
+
+    @staticmethod
+    def jacobian(diff: np.ndarray, c: np.ndarray, R2: np.ndarray):
+        """Linearized Eq. 10 for overlapping pairs: Eq. 12's block with L0² → R²."""
+        return PairOperator._radial(diff, c, R2)
+
+
+@dataclass(frozen=True)
+class Bind(PairOperator):
+    """bind(u, ĉ), Eqs. 12–13: c(u−p)(1 − L0²/d²) with L0 = ‖u_o − p_o‖ per pair (q = L0²).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> Bind.accel(np.zeros((1, 3)), np.array([[4.0, 0, 0]]), 2.0, np.array([9.0]))
+    array([[3.5, 0. , 0. ]])
+    """
+
+    source: str
+    coeff: Coefficient
+    when: tuple = ()
+
+    kind: ClassVar[str] = "bind"
+    coefficients: ClassVar[tuple] = (Const, Within)
+
+    @staticmethod
+    def factor(d2, q):
+        """Eq. 12: 1 − L0²/d² (q = L0², the pair's original squared distance)."""
+        return 1.0 - q / d2
+
+    @staticmethod
+    def jacobian(diff: np.ndarray, c: np.ndarray, L0sq: np.ndarray):
+        """Linearized Eq. 12: c·[(1 − L0²/d²)(I − nnᵀ) + (1 + L0²/d²)nnᵀ] (2c·nnᵀ at rest)."""
+        return PairOperator._radial(diff, c, L0sq)
+
+    def pairs(self, target, source, phase: Mapping | None = None) -> PairList:
+        """The bound pairs, from original positions only, with L0² per pair (Eqs. 12, 16).
+
+        i indexes the target, j the source; a group bound to itself never pairs i with i.
+        """
+        coeff = self.coeff
+        if isinstance(coeff, Const):
+            i, j = _all_pairs(target, source)
+        else:
+            from scipy.spatial import cKDTree
+            # within(d) is a strict '<' (Eq. 16): query to d, then filter exactly.
+            sm = cKDTree(target.o).sparse_distance_matrix(cKDTree(source.o), coeff.d,
+                                                          output_type="ndarray")
+            keep = sm["v"] < coeff.d
+            i, j = sm["i"][keep].astype(np.int64), sm["j"][keep].astype(np.int64)
+            if target is source:
+                keep = i != j
+                i, j = i[keep], j[keep]
+        i, j = _sorted(i, j)
+        diff = source.o[j] - target.o[i]
+        return PairList(i, j, np.full(len(i), float(coeff.c)), rowdot(diff, diff))
+
+
+@dataclass(frozen=True)
+class Attract(PairOperator):
+    """attract(u, ĉ), Eq. 14: c(u−p)/‖u−p‖ — constant magnitude c per pair, one-way.
+
+    The prose calls the attraction linear in the distance; the formula (constant magnitude) is
+    what is implemented.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> Attract.accel(np.zeros((1, 3)), np.array([[3.0, 4.0, 0]]), 5.0)
+    array([[3., 4., 0.]])
+    """
+
+    source: str
+    coeff: Coefficient
+    when: tuple = ()
+
+    kind: ClassVar[str] = "attract"
+    coefficients: ClassVar[tuple] = (Const, Matched)
+
+    @classmethod
+    def coefficient_rule(cls, coeff) -> str:
+        return "attract takes a constant or index-matched coefficient"
+
+    @staticmethod
+    def factor(d2, q=None):
+        """Eq. 14: 1/d."""
+        return 1.0 / np.sqrt(d2)
+
+    @staticmethod
+    def jacobian(diff: np.ndarray, c: np.ndarray, q=None):
+        """Linearized Eq. 14: (c/d)·(I − nnᵀ)."""
+        d = np.sqrt(rowdot(diff, diff))
+        n = diff / d[:, None]
+        s = c / d
+        return s[:, None, None] * (np.eye(3)[None] - n[:, :, None] * n[:, None, :]), np.abs(s)
+
+    def pairs(self, target, source, phase: Mapping | None = None) -> PairList:
+        """The attracting pairs in ``phase`` (Eqs. 14, 27–28: region names follow the phase)."""
+        coeff = self.coeff
+        if isinstance(coeff, Const):
+            i, j = _all_pairs(target, source)
+        else:
+            ti = region_index(target, coeff.target, phase or {})
+            sj = region_index(source, coeff.source, phase or {})
+            i_list, j_list = [], []
+            for value in np.unique(ti[ti != 0]):
+                ii = np.flatnonzero(ti == value)
+                jj = np.flatnonzero(sj == value)
+                if len(jj):
+                    a, b = np.meshgrid(ii, jj, indexing="ij")
+                    i_list.append(a.ravel())
+                    j_list.append(b.ravel())
+            i = np.concatenate(i_list) if i_list else np.zeros(0, np.int64)
+            j = np.concatenate(j_list) if j_list else np.zeros(0, np.int64)
+            if target is source:  # a particle never attracts itself (0/0 in Eq. 14)
+                keep = i != j
+                i, j = i[keep], j[keep]
+            i, j = _sorted(i, j)
+        return PairList(i, j, np.full(len(i), float(coeff.c)))
+
+
+OPERATORS = (Force, Dampen, Collide, Bind, Attract)
+PAIR_OPERATORS = (Collide, Bind, Attract)
+OPERATOR_KINDS = {cls.kind: cls for cls in OPERATORS}
+
+
 def describe(op) -> str:
     """The operator as a reader holding the paper writes it (decks, stability messages)."""
-    if isinstance(op, Force):
-        sel = "all" if op.where is None else f"{int(np.sum(op.where))} selected"
-        return f"force({tuple(op.accel)}, {sel})" + _when(op)
-    if isinstance(op, Dampen):
-        extra = f" + {op.extra:g}<{', '.join(map(_cond, op.when))}>" if op.extra else ""
-        return f"dampen({op.c:g}{extra})"
-    coeff = op.coeff
-    if isinstance(coeff, Within):
-        c = f"within({coeff.d:g}) magnitude {coeff.c:g}"
-    elif isinstance(coeff, Const):
-        c = f"{coeff.c:g}"
-    else:
-        c = f"{coeff.c:g}<{coeff.target} = {coeff.source} != 0>"
-    return f"{op.kind}({op.source}, {c})" + _when(op)
+    return op.label()
 
 
-def _cond(c) -> str:
-    if isinstance(c, PhaseIn):
-        return f"{c.var} in {set(c.values)}"
-    return f"contact {c.group}"
+def check_operator(op, target: str, groups: Mapping) -> None:
+    """Validate one operator against the scene's groups; raise :class:`SceneError` if wrong."""
+    op.check(target, groups)
 
 
-def _when(op) -> str:
-    return f" when {' and '.join(map(_cond, op.when))}" if op.when else ""
+def rack_forces(host: str, bind: float = 0.5, damping: float = 1.0) -> list:
+    """rackForces(host) of Eq. 23: a rack group bound back to its host, and damped.
+
+    Examples
+    --------
+    >>> [op.label() for op in rack_forces("plane")]
+    ['bind(plane, 0.5)', 'dampen(1)']
+    """
+    return [Bind(host, Const(float(bind))), Dampen(float(damping))]
+
+
+def reverse_of(operators: Mapping, target: str, k: int):
+    """The place ``(group, index)`` of the operator forming one reciprocal pair with
+    ``operators[target][k]``: the same kind, from ``target`` on its source, with the same
+    conditions and coefficient structure. None when there is none (a one-way operator).
+
+    A group acting on itself is its own reverse (ĉ holds both (i, j) and (j, i)).
+    """
+    op = operators[target][k]
+    if op.source == target:
+        return (target, k)
+    for m, other in enumerate(operators.get(op.source, [])):
+        if (type(other) is type(op) and other.source == target and other.when == op.when
+                and type(other.coeff) is type(op.coeff)
+                and (not isinstance(op.coeff, Within) or other.coeff.d == op.coeff.d)):
+            return (op.source, m)
+    return None
+
+
+# --------------------------------------------------------------------------- contact search
+def contact_candidates(xa: np.ndarray, xb: np.ndarray, cut: float, same: bool = False):
+    """Row pairs (a, b) of two point sets closer than ``cut`` (all of them; cKDTree).
+
+    The one contact search of every engine: candidates within reach (the sum of the largest
+    radii, plus a skin for a Verlet list) are then measured by :meth:`Collide.touching`. Each
+    side is first cut to the other's bounding box grown by ``cut`` (a leg meets a few hundred
+    of the sediment's particles, not all). ``same``: xa and xb are one group; both orders of
+    every pair are returned, never a particle with itself.
+    """
+    from scipy.spatial import cKDTree
+
+    empty = np.zeros(0, np.int64)
+    if same:
+        if len(xa) < 2:
+            return empty, empty
+        p = cKDTree(xa).query_pairs(cut, output_type="ndarray")
+        a, b = p[:, 0].astype(np.int64), p[:, 1].astype(np.int64)
+        return np.concatenate([a, b]), np.concatenate([b, a])
+    ia, ib = np.arange(len(xa)), np.arange(len(xb))
+    for _ in range(2):
+        if not len(ia) or not len(ib):
+            break
+        if len(ib) >= len(ia):
+            lo, hi = bbox(xa)
+            near = inside(xb, lo - cut, hi + cut)
+            ib, xb = ib[near], xb[near]
+        else:
+            lo, hi = bbox(xb)
+            near = inside(xa, lo - cut, hi + cut)
+            ia, xa = ia[near], xa[near]
+    if not len(ia) or not len(ib):
+        return empty, empty
+    sm = cKDTree(xa).sparse_distance_matrix(cKDTree(xb), cut, output_type="ndarray")
+    return ia[sm["i"]].astype(np.int64), ib[sm["j"]].astype(np.int64)
+

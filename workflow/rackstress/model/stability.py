@@ -53,9 +53,7 @@ from typing import Mapping
 import numpy as np
 
 from rackstress.errors import SceneError
-from rackstress.model.operators import (Attract, Bind, Collide, Dampen, attract_pairs,
-                        bind_pairs, phase_active)
-from rackstress.model.operators import describe
+from rackstress.model.operators import Collide, Dampen, contact_candidates, phase_active
 from rackstress.model.scene import Scene
 from rackstress.model.verlet import t_limit_verlet
 
@@ -96,22 +94,6 @@ def t_limit(lam, gamma: float = 0.0) -> float:
 
 
 # ---------------------------------------------------------------------------- linearization
-def _blocks(diff: np.ndarray, c: np.ndarray, kind: str, Lsq: np.ndarray | None = None):
-    """Jacobian blocks B (n×3×3) and their norms for pairs with u − p = diff."""
-    d2 = np.einsum("ij,ij->i", diff, diff)
-    d = np.sqrt(d2)
-    n = diff / d[:, None]
-    nn = n[:, :, None] * n[:, None, :]
-    eye = np.eye(3)[None]
-    if kind == "attract":
-        s = c / d
-        return s[:, None, None] * (eye - nn), np.abs(s)
-    q = Lsq / d2
-    alpha, beta = 1.0 - q, 1.0 + q
-    B = c[:, None, None] * (alpha[:, None, None] * eye + (beta - alpha)[:, None, None] * nn)
-    return B, np.abs(c) * beta
-
-
 def _phases(scene: Scene) -> list[dict]:
     seen, out = set(), []
     for ph in scene.phases:
@@ -124,8 +106,7 @@ def _phases(scene: Scene) -> list[dict]:
 
 def _label(target: str, op) -> str:
     """'plane' bind(plane, within(100) magnitude 100): how an operator is named in messages."""
-
-    return f"'{target}' {describe(op)}"
+    return f"'{target}' {op.label()}"
 
 
 def _collide_pairs(scene: Scene, p: np.ndarray, target: str, op) -> tuple:
@@ -135,13 +116,8 @@ def _collide_pairs(scene: Scene, p: np.ndarray, target: str, op) -> tuple:
     sl_t, sl_s = scene.slice(target), scene.slice(op.source)
     rt, rs = scene.groups[target].r, scene.groups[op.source].r
     reach = (rt.max() + rs.max()) * CONTACT_MARGIN
-    tt, ts = cKDTree(p[sl_t]), cKDTree(p[sl_s])
-    sm = tt.sparse_distance_matrix(ts, reach, output_type="ndarray")
-    i, j = sm["i"].astype(np.int64), sm["j"].astype(np.int64)
+    i, j = contact_candidates(p[sl_t], p[sl_s], reach, same=target == op.source)
     I, J = i + sl_t.start, j + sl_s.start
-    if target == op.source:
-        keep = I != J
-        I, J = I[keep], J[keep]
     R = scene.radii()[I] + scene.radii()[J]
     d = np.linalg.norm(p[J] - p[I], axis=1)
     keep = d < R * CONTACT_MARGIN
@@ -155,7 +131,7 @@ def _collide_pairs(scene: Scene, p: np.ndarray, target: str, op) -> tuple:
     # its nearest source particle's distance (one for aligned lattices, a few for staggered).
     src = p[sl_s]
     k = min(8, len(src))
-    dd, jj = ts.query(p[sl_t], k=k)
+    dd, jj = cKDTree(src).query(p[sl_t], k=k)
     dd, jj = np.asarray(dd).reshape(len(p[sl_t]), k), np.asarray(jj).reshape(len(p[sl_t]), k)
     R = rt[:, None] + rs.max()
     tie = dd <= dd[:, :1] + (CONTACT_MARGIN - 1.0) * R
@@ -182,33 +158,21 @@ def linearize(scene: Scene, phase: Mapping, p: np.ndarray | None = None) -> dict
         g_t = scene.groups[target]
         for op in seq:
             if isinstance(op, Dampen):
-                extra = op.extra if (op.extra and phase_active(op.when, phase)) else 0.0
-                gamma[sl] += op.c + extra
+                gamma[sl] += op.coefficient(phase_active(op.when, phase))
                 continue
-            if not phase_active(op.when, phase):
+            if not op.pair or not phase_active(op.when, phase):
                 continue
-            if isinstance(op, Bind):
-                g_s = scene.groups[op.source]
-                i, j, c = bind_pairs(op, g_t, g_s)
-                I, J = i + sl.start, j + scene.offset(op.source)
-                dO = o[J] - o[I]
-                Lsq = np.einsum("ij,ij->i", dO, dO)
-                B, nrm = _blocks(p[J] - p[I], c, "bind", Lsq)
-            elif isinstance(op, Collide):
-                I, J, Lsq, virt = _collide_pairs(scene, p, target, op)
+            if op.fixed_pairs:     # bind, attract: the coefficient matrix's pairs
+                pl = op.pairs(g_t, scene.groups[op.source], phase)
+                I, J, c, q = pl.i + sl.start, pl.j + scene.offset(op.source), pl.c, pl.q
+            else:                  # collide: contacts (or virtual ones) at p
+                I, J, q, virt = _collide_pairs(scene, p, target, op)
                 if virt:
                     virtual.append(_label(target, op))
                 c = np.full(len(I), float(op.coeff.c))
-                B, nrm = _blocks(p[J] - p[I], c, "collide", Lsq) if len(I) else (
-                    np.zeros((0, 3, 3)), np.zeros(0))
-            elif isinstance(op, Attract):
-                g_s = scene.groups[op.source]
-                i, j, c = attract_pairs(op, g_t, g_s, phase)
-                I, J = i + sl.start, j + scene.offset(op.source)
-                B, nrm = _blocks(p[J] - p[I], c, "attract") if len(I) else (
-                    np.zeros((0, 3, 3)), np.zeros(0))
-            else:
+            if not len(I):
                 continue
+            B, nrm = op.jacobian(p[J] - p[I], c, q)
             if not len(I):
                 continue
             labels.append(_label(target, op))

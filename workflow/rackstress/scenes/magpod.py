@@ -79,7 +79,8 @@ from __future__ import annotations
 import numpy as np
 
 from rackstress.errors import SceneError
-from rackstress.model.operators import Attract, Bind, Collide, Const, Contact, Dampen, Force, Matched, PhaseIn
+from rackstress.model.operators import (Attract, Bind, Collide, Const, Contact, Dampen, Force,
+                                        Matched, PhaseIn, rack_forces)
 from rackstress.model.particles import Group, rack
 from rackstress.model.scene import Phase, Scene
 
@@ -250,9 +251,6 @@ def magpod(body_nx: int = 19, body_ny: int = 9, body_nz: int = 17, spacing: floa
             Dampen(10.0, 85.0, when=(Contact("sediment"),) + pulling),
         ]
 
-    def rack_forces(host: str) -> list:                                # Eq. 23
-        return [Bind(host, Const(0.5)), Dampen(1.0)]
-
     r_pull, l_pull = (PhaseIn("r", (2, 3)),), (PhaseIn("l", (6, 7)),)
     operators = {
         "body": [                                                      # Eq. 27
@@ -265,7 +263,7 @@ def magpod(body_nx: int = 19, body_ny: int = 9, body_nz: int = 17, spacing: floa
         ],
         "rightleg": leg_forces("r", "rreg", "rightrack"),             # Eq. 29
         "leftleg": leg_forces("l", "lreg", "leftrack"),               # Eq. 30
-        "bodyrack": rack_forces("body"),
+        "bodyrack": rack_forces("body"),                              # Eq. 23
         "rightrack": rack_forces("rightleg"),
         "leftrack": rack_forces("leftleg"),
         "sediment": [Collide("rightleg", Const(1.0)), Collide("leftleg", Const(1.0)),

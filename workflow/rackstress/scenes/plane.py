@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rackstress.model.operators import Bind, Const, Dampen, Force, Within
+from rackstress.model.operators import Bind, Const, Dampen, Force, Within, norm2_below, rack_forces
 from rackstress.model.particles import Group, lattice, rack
 from rackstress.model.scene import Phase, Scene
 
@@ -24,8 +24,7 @@ def plane_group(n: int = 20, spacing: float = 1.0, radius: float = 0.5) -> Group
 
 def pull(plane: Group, accel: float = 100.0, radius2: float = 10.0) -> Force:
     """force(pull), Eq. 15: (0, accel, 0) on particles with ‖o‖² < radius2."""
-    mask = (plane.o ** 2).sum(axis=1) < radius2
-    return Force((0.0, float(accel), 0.0), where=tuple(bool(m) for m in mask))
+    return Force((0.0, float(accel), 0.0), where=norm2_below(plane.o, radius2))
 
 
 def plane_bound(d: float = 10.0, magnitude: float = 20.0, n: int = 20, spacing: float = 1.0,
@@ -58,7 +57,7 @@ def plane_rack(n: int = 20, spacing: float = 1.0, radius: float = 0.5, plane_bin
         "plane": [pull(plane, pull_accel, pull_radius2),
                   Bind("planerack", Const(plane_bind)),
                   Dampen(damping)],
-        "planerack": [Bind("plane", Const(rack_bind)), Dampen(rack_damping)],
+        "planerack": rack_forces("plane", rack_bind, rack_damping),
     }
     params = dict(n=n, spacing=spacing, radius=radius, plane_bind=plane_bind,
                   rack_bind=rack_bind, rack_offset=rack_offset, pull_accel=pull_accel,

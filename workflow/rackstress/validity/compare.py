@@ -25,8 +25,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.stats import spearmanr
 
-from rackstress.model.operators import Bind, bind_pairs
-from rackstress.engines.reference import Reference, bin_
+from rackstress.model.operators import Bind
+from rackstress.engines.reference import Reference
 from rackstress.scenes.validation import body_index
 from rackstress.stress.fit import robust_fit
 from rackstress.stress.measures import CUTOFF_FACTOR, RANK_TOL, _bincount3, von_mises_strain
@@ -106,18 +106,16 @@ def affine_fit(o: np.ndarray, p: np.ndarray, cutoff: float | None = None):
 
 def bind_virial(scene, p: np.ndarray) -> np.ndarray:
     """Von Mises equivalent of ½ Σ_j r_ij ⊗ f_ij over every bind on each particle (n_total)."""
-    o = scene.original_positions()
-    n = len(o)
+    n = scene.n_particles
     W = np.zeros((n, 3, 3))
     for target, seq in scene.operators.items():
         for op in seq:
             if not isinstance(op, Bind):
                 continue
-            i, j, c = bind_pairs(op, scene.groups[target], scene.groups[op.source])
-            I, J = i + scene.offset(target), j + scene.offset(op.source)
-            L0sq = ((o[J] - o[I]) ** 2).sum(axis=1)
-            f = bin_(p[I], p[J], L0sq, c)
-            W += 0.5 * _bincount3(I, p[J] - p[I], f, n)
+            pl = op.pairs(scene.groups[target], scene.groups[op.source]).shifted(
+                scene.offset(target), scene.offset(op.source))
+            f = Bind.accel(p[pl.i], p[pl.j], pl.c, pl.q)
+            W += 0.5 * _bincount3(pl.i, p[pl.j] - p[pl.i], f, n)
     xx, yy, zz = W[:, 0, 0], W[:, 1, 1], W[:, 2, 2]
     xy, xz, yz = W[:, 0, 1], W[:, 0, 2], W[:, 1, 2]
     return np.sqrt(0.5 * ((xx - yy) ** 2 + (yy - zz) ** 2 + (zz - xx) ** 2)

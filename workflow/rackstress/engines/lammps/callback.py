@@ -3,25 +3,45 @@
 Every term computes the paper's *directed* acceleration on the particles a rank owns, from
 partners that are local or ghost atoms there, so it needs no reverse communication and stays
 correct however the atoms are spread over ranks (the ghost cutoff covers every partner). The
-same functions as the reference engine (:mod:`rackstress.engines.reference`) do the arithmetic.
+arithmetic is each operator's own (:mod:`rackstress.model.operators`: ``factor``/``accel`` for
+the formulas, ``pairs`` for the pair lists and L0², :func:`contact_candidates` and
+``Collide.touching`` for the contact search), the same the reference engine uses.
+
+Which term carries an operator is looked up in :data:`TERMS` by the operator's class; adding an
+operator is one entry there (and one in the deck compiler's ``REALIZE``).
 
 What depends only on which atom sits in which row (look-ups, each term's pairs, collision
 candidates) is kept from one LAMMPS reneighbouring to the next (:class:`Frame`,
 :class:`Overlaps`); each step then costs the arithmetic on the pairs and one scatter.
 
 An exception inside a ctypes callback would be printed and ignored, so the callback catches it,
-stores it and zeroes its forces; the runner checks ``error`` after every chunk and stops.
+stores it, zeroes its forces and forces LAMMPS' timeout, which stops the run before the next
+step; the runner then reports it. Under MPI the ranks agree on failure inside the callback at
+fixed points (one reduction of the contact conditions and the failures so far, one of the
+failures at the end), so every rank stops after the same step and none waits in a collective
+another has left. A bind partner out of ghost reach raises :class:`PartnerLost`, naming the
+particle: the runner reports it as a divergence.
 """
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
 
-from rackstress.lib.vec import bbox, inside, rowdot
-from rackstress.engines.lammps.deck import SKIN, reverse_of
-from rackstress.model.operators import (Attract, Bind, Collide, Const, Contact, Dampen, Force, attract_pairs,
-                        bind_pairs, phase_active)
-from rackstress.engines.reference import col
+from rackstress.lib.vec import rowdot
+from rackstress.model.operators import (Attract, Bind, Collide, Const, Dampen, Force,
+                                        contact_candidates, contact_groups, phase_active,
+                                        reverse_of)
+
+
+class PartnerLost(RuntimeError):
+    """A term's partner is not visible on this rank: the particles flew apart (``index``: the
+    global index of a particle of the pair)."""
+
+    def __init__(self, message: str, index: int):
+        super().__init__(message, index)
+        self.message, self.index = message, int(index)
+
+    def __str__(self):
+        return self.message
 
 
 class Frame:
@@ -150,21 +170,24 @@ class Frame:
         ri, rj = self.row[I], self.row[J]
         if len(ri) and min(ri.min(), rj.min()) < 0:
             k = int(np.flatnonzero((ri < 0) | (rj < 0))[0])
-            raise RuntimeError(f"{name}: particles {int(I[k])} and {int(J[k])} are not both "
-                               "visible on this rank (raise the ghost cutoff)")
+            raise PartnerLost(f"{name}: particles {int(I[k])} and {int(J[k])} are not both "
+                              "visible on this rank", int(I[k]))
         return ri, rj
 
 
 class PairTerm:
     """Pair forces from a fixed (or per-phase) list of global pairs (bind Eq. 12, attract Eq. 14).
 
-    Each pair (I, J) pushes ``cI``·g on I and, where the reverse operator exists with the same
-    pairs (a bind and its partner: plane←rack 100 and rack←plane 0.5, or within(d) of a group
-    with itself), −``cJ``·g on J, so the geometry g is computed once per unordered pair.
+    ``factor`` is the operator's formula (``Bind.factor``, ``Attract.factor``). Each pair
+    (I, J) pushes ``cI``·g on I and, where the reverse operator exists with the same pairs (a
+    bind and its partner: plane←rack 100 and rack←plane 0.5, or within(d) of a group with
+    itself), −``cJ``·g on J, so the geometry g = factor(d², q)·(u − p) is computed once per
+    unordered pair.
     """
 
-    def __init__(self, name, I, J, cI, cJ=None, L0sq=None, block=None):
-        self.name, self.I, self.J, self.cI, self.cJ, self.L0sq = name, I, J, cI, cJ, L0sq
+    def __init__(self, name, factor, I, J, cI, cJ=None, q=None, block=None):
+        self.name, self.factor = name, factor
+        self.I, self.J, self.cI, self.cJ, self.q = I, J, cI, cJ, q
         #: (target slice, source slice) when the pairs are every (i, j) of two groups in
         #: row-major order (a Const bind such as host ↔ rack): then it is evaluated by
         #: broadcasting over the block, with no per-pair gathers or scatters.
@@ -173,8 +196,8 @@ class PairTerm:
             ts, ss = block
             m, n = ts.stop - ts.start, ss.stop - ss.start
             # source-major (n, m): the sums over a host's few racks run over rows (fast), the
-            # sums over a rack's many hosts along contiguous rows (fast); see _vec.py
-            self._L0sqT = np.ascontiguousarray(L0sq.reshape(m, n).T)
+            # sums over a rack's many hosts along contiguous rows (fast); see lib/vec.py
+            self._qT = np.ascontiguousarray(q.reshape(m, n).T)
             self._cIT = _scalar_or(np.ascontiguousarray(cI.reshape(m, n).T))
             self._cJT = None if cJ is None else _scalar_or(
                 np.ascontiguousarray(cJ.reshape(m, n).T))
@@ -192,7 +215,7 @@ class PairTerm:
             rt, rs, ti, ct, si, cs = place
             xt, xs = fr.x[rt], fr.x[rs]
         d = [xs[:, k][:, None] - xt[:, k][None, :] for k in range(3)]   # (n, m): u − p
-        w = 1.0 - self._L0sqT / (d[0] * d[0] + d[1] * d[1] + d[2] * d[2])  # Eq. 12 without c
+        w = self.factor(d[0] * d[0] + d[1] * d[1] + d[2] * d[2], self._qT)  # without c
         for k in range(3):
             g = w * d[k]
             if fr.identity:
@@ -221,8 +244,8 @@ class PairTerm:
                 if len(missing):
                     k = int(missing[0])
                     k = ts.start + k if k < len(rt) else ss.start + k - len(rt)
-                    raise RuntimeError(f"{self.name}: particle {k} is not visible on a rank that "
-                                       "owns part of its block (raise the ghost cutoff)")
+                    raise PartnerLost(f"{self.name}: particle {k} is not visible on a rank that "
+                                      "owns part of its block", k)
                 ti, si = np.flatnonzero(t_own), np.flatnonzero(s_own)
                 fr.memo[key] = (rt, rs, ti, fr.compact(rt[ti]), si, fr.compact(rs[si]))
         return fr.memo[key]
@@ -232,27 +255,22 @@ class PairTerm:
         key = ("pairs", id(self))
         hit = fr.memo.get(key)
         if hit is None:
-            I, J, cI, cJ, L0sq = self.I, self.J, self.cI, self.cJ, self.L0sq
+            I, J, cI, cJ, q = self.I, self.J, self.cI, self.cJ, self.q
             if not fr.identity:
                 sel = fr.local[I] if cJ is None else (fr.local[I] | fr.local[J])
                 I, J, cI = I[sel], J[sel], cI[sel]
                 cJ = cJ[sel] if cJ is not None else None
-                L0sq = L0sq[sel] if L0sq is not None else None
+                q = q[sel] if q is not None else None
             ri, rj = fr.rows(self.name, I, J)
-            hit = fr.memo[key] = (ri, rj, cI[:, None], None if cJ is None else -cJ[:, None],
-                                  L0sq)
+            hit = fr.memo[key] = (ri, rj, cI[:, None], None if cJ is None else -cJ[:, None], q)
         return hit
 
     def add(self, fr: Frame, acc: np.ndarray):
         if self.block is not None:
             return self._add_block(fr, acc)
-        ri, rj, cI, mcJ, L0sq = self._selected(fr)
+        ri, rj, cI, mcJ, q = self._selected(fr)
         diff = fr.x[rj] - fr.x[ri]
-        d2 = rowdot(diff, diff)
-        if L0sq is not None:
-            g = (1.0 - L0sq / d2)[:, None] * diff        # Eq. 12 without its coefficient
-        else:
-            g = diff / np.sqrt(d2)[:, None]              # Eq. 14 without its coefficient
+        g = self.factor(rowdot(diff, diff), q)[:, None] * diff   # the formula without its c
         fr.add(ri, cI * g)
         if mcJ is not None:
             fr.add(rj, mcJ * g)
@@ -266,12 +284,12 @@ def _scalar_or(a: np.ndarray):
 class Overlaps:
     """Overlapping pairs (d < r_i + r_j, Eq. 10's support) of two groups, every step.
 
-    A Verlet list: candidates within reach + skin are found (cKDTree) only when LAMMPS
-    reneighbours, which it does as soon as any atom has moved more than half the skin since
-    the last time (``neigh_modify every 1 delay 0 check yes``, skin :data:`SKIN`). A pair that
-    was farther apart than reach + skin then cannot have come within reach, so each step only
-    measures the candidates. Shared by the collide terms of both directions and by the contact
-    conditions (Eq. 28's damping) of the same two groups.
+    A Verlet list: candidates within reach + skin are found (:func:`contact_candidates`) only
+    when LAMMPS reneighbours, which it does as soon as any atom has moved more than half the
+    skin since the last time (``neigh_modify every 1 delay 0 check yes``, the deck's skin). A
+    pair that was farther apart than reach + skin then cannot have come within reach, so each
+    step only measures the candidates (``Collide.touching``). Shared by the collide terms of
+    both directions and by the contact conditions (Eq. 28's damping) of the same two groups.
     """
 
     def __init__(self, radius: np.ndarray, skin: float):
@@ -292,39 +310,15 @@ class Overlaps:
             return hit
         cut = self._reach(A) + self._reach(B) + self.skin
         ia, ib = fr.seen(A), fr.seen(B)
-        xa, xb = fr.x[ia], fr.x[ib]
-        if A == B:
-            if len(ia) > 1:
-                p = cKDTree(xa).query_pairs(cut, output_type="ndarray")
-                a, b = ia[p[:, 0]], ia[p[:, 1]]
-                a, b = np.concatenate([a, b]), np.concatenate([b, a])
-            else:
-                a = b = ia[:0]
-        else:
-            # each side only where the other's bounding box (grown by the cut) is: a leg meets
-            # a few hundred of the body's or the sediment's particles, not all of them
-            for _ in range(2):
-                if not len(ia) or not len(ib):
-                    break
-                if len(ib) >= len(xa):
-                    lo, hi = bbox(xa)
-                    near = inside(xb, lo - cut, hi + cut)
-                    ib, xb = ib[near], xb[near]
-                else:
-                    lo, hi = bbox(xb)
-                    near = inside(xa, lo - cut, hi + cut)
-                    ia, xa = ia[near], xa[near]
-            if len(ia) and len(ib):
-                sm = cKDTree(xa).sparse_distance_matrix(cKDTree(xb), cut, output_type="ndarray")
-                a, b = ia[sm["i"]], ib[sm["j"]]
-            else:
-                a, b = ia[:0], ib[:0]
+        a, b = contact_candidates(fr.x[ia], fr.x[ib], cut, same=A == B)
+        a, b = ia[a], ib[b]
         R2 = (self.radius[fr.index[a]] + self.radius[fr.index[b]]) ** 2
         hit = fr.memo[key] = (a, b, R2)
         return hit
 
     def pairs(self, fr: Frame, t: slice, s: slice, name: str = "collide"):
-        """Row pairs (a, b) overlapping now, a owned here in ``t``, b seen here in ``s``."""
+        """Row pairs (a, b) overlapping now, a owned here in ``t``, b seen here in ``s``, with
+        their R²."""
         key = (t.start, s.start)
         hit = fr.cache.get(key)
         if hit is not None:
@@ -333,36 +327,145 @@ class Overlaps:
         a, b, R2 = self._candidates(fr, A, B)
         diff = fr.x[b] - fr.x[a]
         d2 = rowdot(diff, diff)
-        on = d2 < R2
-        a, b, d2 = a[on], b[on], d2[on]
+        on = Collide.touching(d2, R2)
+        a, b, d2, R2 = a[on], b[on], d2[on], R2[on]
         if len(d2) and not d2.all():
             k = int(np.flatnonzero(d2 == 0.0)[0])
-            raise RuntimeError(f"{name}: particles {int(fr.index[a[k]])} and "
-                               f"{int(fr.index[b[k]])} coincide (Eq. 10 is undefined at d = 0)")
-        both = {(A.start, B.start): (a, b)}
+            raise PartnerLost(f"{name}: particles {int(fr.index[a[k]])} and "
+                              f"{int(fr.index[b[k]])} coincide (Eq. 10 is undefined at d = 0)",
+                              int(fr.index[a[k]]))
+        both = {(A.start, B.start): (a, b, R2)}
         if A != B:              # the other direction of the same pairs
-            both[(B.start, A.start)] = (b, a)
-        for k2, (u, w) in both.items():
+            both[(B.start, A.start)] = (b, a, R2)
+        for k2, (u, w, r2) in both.items():
             if not fr.identity:
                 own = u < fr.nlocal
-                u, w = u[own], w[own]
-            fr.cache[k2] = (u, w)
+                u, w, r2 = u[own], w[own], r2[own]
+            fr.cache[k2] = (u, w, r2)
         return fr.cache[key]
 
 
-class CollideTerm:
+# ----------------------------------------------------------------------------- terms
+class Term:
+    """One Python-realized operator: ``add(fr, acc)`` adds its accelerations when it holds.
+
+    ``gated``: the operator is evaluated only in phases where its phase conditions hold (all
+    but the contact-conditioned damping extra, whose conditions gate only the extra).
+    """
+
+    gated = True
+
+    def __init__(self, forces: "PyForces", r):
+        self.forces, self.r, self.op, self.target = forces, r, r.op, r.target
+        self.sl = forces.scene.slice(r.target)
+        #: the last row written by other than a collide (see Frame's dense accumulator)
+        self.dense_stop = self.sl.stop
+
+    def add(self, fr: Frame, acc: np.ndarray) -> None:
+        raise NotImplementedError
+
+
+class ForceTerm(Term):
+    """A force (Eq. 8) conditioned on a contact: fix addforce cannot test the contact."""
+
+    def add(self, fr, acc):
+        if self.forces.holds(fr, self.r):
+            acc[self._rows(fr)] += self.op.vector()
+
+    def _rows(self, fr: Frame) -> np.ndarray:
+        """Accumulator rows of the selected particles (memoized per layout)."""
+        key = ("force", id(self))
+        if key not in fr.memo:
+            mask = np.zeros(self.forces.n, dtype=bool)
+            mask[self.sl] = self.op.mask(self.sl.stop - self.sl.start)
+            fr.memo[key] = (np.flatnonzero(mask[:fr.acc_rows]) if fr.identity
+                            else np.flatnonzero(mask[fr.index[fr.dense_rows]]))
+        return fr.memo[key]
+
+
+class DampenTerm(Term):
+    """The contact-conditioned extra of a dampen (Eq. 28); its base c is a fix viscous."""
+
+    gated = False
+
+    def add(self, fr, acc):
+        if self.forces.holds(fr, self.r):
+            sel = fr.owned(self.sl)
+            acc[fr.compact(sel)] += Dampen.accel(fr.v[sel], self.op.extra)
+
+
+class CollideTerm(Term):
     """One-way collide (Eq. 10): target atoms owned here against source atoms seen here."""
 
-    def __init__(self, name, target_slice, source_slice, c, radius, overlaps: Overlaps):
-        self.name, self.t, self.s, self.c, self.radius = name, target_slice, source_slice, c, radius
-        self.overlaps = overlaps
+    def __init__(self, forces, r):
+        super().__init__(forces, r)
+        self.s = forces.scene.slice(r.op.source)
+        self.c = float(r.op.coeff.c)
+        self.dense_stop = 0     # writes its (few) target rows sparsely
 
-    def add(self, fr: Frame, acc: np.ndarray):
-        a, b = self.overlaps.pairs(fr, self.t, self.s, self.name)
-        if not len(a):
+    def add(self, fr, acc):
+        if not self.forces.holds(fr, self.r):
             return
-        contrib = col(fr.x[a], fr.x[b], self.radius[fr.index[a]], self.radius[fr.index[b]], self.c)
-        fr.add(a, contrib)
+        a, b, R2 = self.forces.overlaps.pairs(fr, self.sl, self.s, f"collide on {self.target}")
+        if len(a):
+            fr.add(a, Collide.accel(fr.x[a], fr.x[b], self.c, R2))
+
+
+class BindTerm(Term):
+    """bind (Eq. 12) with each pair's L0², the reverse bind folded in when both are here."""
+
+    def __init__(self, forces, r):
+        super().__init__(forces, r)
+        sc, op = forces.scene, r.op
+        self.pair_term = None
+        if r.site in forces.folded:        # carried by its reverse's term
+            return
+        pl = op.pairs(sc.groups[r.target], sc.groups[op.source]).shifted(
+            self.sl.start, sc.offset(op.source))
+        I, J, c, q = pl.i, pl.j, pl.c, pl.q
+        cJ = None
+        if op.source == r.target:           # within(d)/const of a group with itself: i<j once
+            keep = I < J
+            I, J, c, q = I[keep], J[keep], c[keep], q[keep]
+            cJ = c
+        elif r.site in forces.folded.values():
+            rev = forces.op_at(forces.reverse[r.site])
+            cJ = np.full(len(I), float(rev.coeff.c))
+            self.dense_stop = max(self.dense_stop, sc.slice(op.source).stop)
+        block = None
+        if isinstance(op.coeff, Const) and op.source != r.target:
+            block = (self.sl, sc.slice(op.source))
+        self.pair_term = PairTerm(f"bind on {r.target}", Bind.factor, I, J, c, cJ, q, block)
+
+    def add(self, fr, acc):
+        if self.pair_term is not None and self.forces.holds(fr, self.r):
+            self.pair_term.add(fr, acc)
+
+
+class AttractTerm(Term):
+    """attract (Eq. 14), its pairs following the phase (index-matched regions)."""
+
+    def __init__(self, forces, r):
+        super().__init__(forces, r)
+        self._by_phase = {}
+
+    def add(self, fr, acc):
+        if not self.forces.holds(fr, self.r):
+            return
+        phase = self.forces.phase
+        key = tuple(sorted(phase.items()))
+        if key not in self._by_phase:
+            sc, op = self.forces.scene, self.op
+            pl = op.pairs(sc.groups[self.target], sc.groups[op.source], phase).shifted(
+                self.sl.start, sc.offset(op.source))
+            self._by_phase[key] = PairTerm(f"attract on {self.target}", Attract.factor,
+                                           pl.i, pl.j, pl.c)
+        self._by_phase[key].add(fr, acc)
+
+
+#: The term realizing each operator class in the callback.
+TERMS = {Force: ForceTerm, Dampen: DampenTerm, Collide: CollideTerm, Bind: BindTerm,
+         Attract: AttractTerm}
 
 
 class PyForces:
@@ -375,53 +478,25 @@ class PyForces:
         self.mass = np.concatenate([np.full(g.n, deck.masses[name])
                                     for name, g in self.scene.groups.items()])
         self.error = None
-        self.terms = []    # (realized, term-or-None)
-        self._attract = {}
-        self.overlaps = Overlaps(self.radius, SKIN)
-        o = self.scene.original_positions()
-        folded = {}
-        for r in deck.python_ops:
+        self._keys = None        # contact conditions of the active terms (per phase)
+        self._agreed = None      # MPI: this step's agreed contact conditions
+        self._fail_here = None
+        self.overlaps = Overlaps(self.radius, deck.skin)
+        python = deck.python_ops
+        here = {r.site for r in python}
+        #: reverse place of every bind here whose reverse is here too; folded[rev] = carrier
+        self.reverse, self.folded = {}, {}
+        for r in python:
             if isinstance(r.op, Bind):
-                rev = reverse_of(r.op, r.target, self.scene)
-                if (rev is not None and rev is not r.op and id(r.op) not in folded
-                        and any(q.op is rev for q in deck.python_ops)):
-                    folded[id(rev)] = r.op   # rev is carried by r.op's term
-        dense = [0]     # rows written by other than a collide (see Frame)
-        for r in deck.python_ops:
-            op, target = r.op, r.target
-            sl = self.scene.slice(target)
-            if not isinstance(op, Collide):
-                dense.append(sl.stop)
-            if isinstance(op, Bind):
-                if id(op) in folded:          # carried by its reverse's term
-                    self.terms.append((r, None))
-                    continue
-                i, j, c = bind_pairs(op, self.scene.groups[target], self.scene.groups[op.source])
-                I, J = i + sl.start, j + self.scene.offset(op.source)
-                cJ = None
-                if op.source == target:       # within(d)/const of a group with itself: i<j once
-                    keep = I < J
-                    I, J, c = I[keep], J[keep], c[keep]
-                    cJ = c
-                elif any(v is op for v in folded.values()):
-                    rev = reverse_of(op, target, self.scene)
-                    cJ = np.full(len(I), float(rev.coeff.c))
-                    dense.append(self.scene.slice(op.source).stop)
-                d = o[J] - o[I]
-                block = None
-                if isinstance(op.coeff, Const) and op.source != target:
-                    block = (sl, self.scene.slice(op.source))
-                self.terms.append((r, PairTerm(f"bind on {target}", I, J, c, cJ,
-                                               rowdot(d, d), block)))
-            elif isinstance(op, Collide):
-                self.terms.append((r, CollideTerm(f"collide on {target}", sl,
-                                                  self.scene.slice(op.source), float(op.coeff.c),
-                                                  self.radius, self.overlaps)))
-            else:
-                self.terms.append((r, None))
+                rev = reverse_of(self.scene.operators, *r.site)
+                if (rev is not None and rev != r.site and r.site not in self.folded
+                        and rev in here):
+                    self.reverse[r.site] = rev
+                    self.folded[rev] = r.site   # rev is carried by r's term
+        self.terms = [TERMS[type(r.op)](self, r) for r in python]
         self.phase = {}
         self.active = []
-        self.dense_span = max(dense)
+        self.dense_span = max([0] + [t.dense_stop for t in self.terms])
         self._fresh = True
         self.frame = None
         self._sparse_rows = np.zeros(0, dtype=np.int64)   # f rows written sparsely last step
@@ -431,38 +506,61 @@ class PyForces:
                        and lmp.extract_setting("neigh_delay") == 0
                        and lmp.extract_setting("neigh_dist_check") == 1)
 
+    def op_at(self, site):
+        return self.scene.operators[site[0]][site[1]]
+
     # ------------------------------------------------------------------ phase
     def set_phase(self, phase_vars) -> bool:
         """Select the terms active in this phase; return whether any are."""
         self.phase = dict(phase_vars)
+        self._keys = None
         self._fresh = True     # the fix (and its force array) may be new
-        self.active = [(r, t) for r, t in self.terms
-                       if isinstance(r.op, Dampen) or phase_active(r.op.when, self.phase)]
+        self.active = [t for t in self.terms
+                       if not t.gated or phase_active(t.op.when, self.phase)]
         return bool(self.active)
 
-    def _attract_term(self, r):
-        key = (id(r.op), tuple(sorted(self.phase.items())))
-        if key not in self._attract:
-            sc = self.scene
-            i, j, c = attract_pairs(r.op, sc.groups[r.target], sc.groups[r.op.source], self.phase)
-            self._attract[key] = PairTerm(f"attract on {r.target}", i + sc.offset(r.target),
-                                          j + sc.offset(r.op.source), c)
-        return self._attract[key]
-
     def _contact(self, fr: Frame, target: str, group: str) -> bool:
-        here = len(self.overlaps.pairs(fr, self.scene.slice(target), self.scene.slice(group),
+        if self._agreed is not None:            # MPI: agreed on by all ranks this step
+            return self._agreed[(target, group)]
+        return self._contact_here(fr, target, group)
+
+    def _contact_here(self, fr: Frame, target: str, group: str) -> bool:
+        return len(self.overlaps.pairs(fr, self.scene.slice(target), self.scene.slice(group),
                                        "contact")[0]) > 0
-        if self.comm is not None and self.comm.Get_size() > 1:
-            from mpi4py import MPI
 
-            here = self.comm.allreduce(here, op=MPI.LOR)
-        return here
+    def _contact_keys(self) -> list:
+        """(target, group) of every contact condition of the terms active in this phase."""
+        if self._keys is None:
+            keys = []
+            for t in self.active:
+                if phase_active(t.op.when, self.phase):
+                    keys += [(t.target, g) for g in contact_groups(t.op.when)]
+            self._keys = list(dict.fromkeys(keys))
+        return self._keys
 
-    def _holds(self, fr, r) -> bool:
+    def _agree(self, fr, failed: bool) -> bool:
+        """MPI: one reduction of this rank's failure and contact conditions; every rank learns
+        whether any failed and each condition (a contact anywhere holds everywhere)."""
+        from mpi4py import MPI
+
+        keys = self._contact_keys()
+        vec = np.zeros(1 + len(keys), dtype=np.int8)
+        vec[0] = failed
+        if not failed:
+            try:
+                vec[1:] = [self._contact_here(fr, t, g) for t, g in keys]
+            except Exception as exc:  # noqa: BLE001 - agreed on below
+                self._fail_here = exc
+                vec[0] = 1
+        self.comm.Allreduce(MPI.IN_PLACE, vec, op=MPI.MAX)
+        self._agreed = {k: bool(b) for k, b in zip(keys, vec[1:])}
+        return bool(vec[0])
+
+    def holds(self, fr, r) -> bool:
+        """⟨P⟩ (Eq. 4) of a realized operator's conditions now: phase, then contacts."""
         if not phase_active(r.op.when, self.phase):
             return False
-        return all(self._contact(fr, r.target, c.group) for c in r.op.when
-                   if isinstance(c, Contact))
+        return all(self._contact(fr, r.target, g) for g in contact_groups(r.op.when))
 
     def _frame(self, nlocal: int) -> Frame:
         """This step's frame: the last one refreshed, or a new layout after a reneighbouring."""
@@ -477,10 +575,37 @@ class PyForces:
 
     # ------------------------------------------------------------------ callback
     def __call__(self, caller, step, nlocal, tag, x, f):
+        mpi = self.comm is not None and self.comm.Get_size() > 1
+        self._fail_here, self._agreed, fr = None, None, None
         try:
             old = self.frame
             fr = self._frame(nlocal)
             self._fresh = False
+        except Exception as exc:  # noqa: BLE001 - agreed on below
+            self._fail_here = exc
+        # MPI: the contact conditions are agreed on first (one reduction, if there are any);
+        # a failure is agreed on at the end in any case (one more)
+        failed = (self._agree(fr, self._fail_here is not None)
+                  if mpi and self._contact_keys() else self._fail_here is not None)
+        if not failed:
+            self._evaluate(fr, old, f)
+        if mpi:
+            from mpi4py import MPI
+
+            failed = self.comm.allreduce(self._fail_here is not None, op=MPI.LOR)
+        else:
+            failed = self._fail_here is not None
+        if failed:
+            if self._fail_here is not None and self.error is None:
+                self.error = (step, self._fail_here)
+            f[:] = 0.0
+            # stop LAMMPS before the next step (it checks its timer there; all ranks do this
+            # in the same step), so no step runs on without these forces
+            self.lmp.force_timeout()
+
+    def _evaluate(self, fr, old, f) -> None:
+        """This step's forces of the active terms into ``f`` (a failure kept in _fail_here)."""
+        try:
             # only the groups the Python operators act on get forces from here; the rest
             # (MagPod's 30,000 sediment particles) is zeroed once per layout, except the few
             # rows a collide reaches (written sparsely, and zeroed the step after)
@@ -488,39 +613,13 @@ class PyForces:
                 f[:] = 0.0
                 self._sparse_rows = self._sparse_rows[:0]
             acc = np.zeros((fr.acc_rows, 3))
-            for r, term in self.active:
-                op = r.op
-                if isinstance(op, Dampen):       # only the contact-conditioned extra is here
-                    if self._holds(fr, r):
-                        sel = fr.owned(self.scene.slice(r.target))
-                        acc[fr.compact(sel)] -= op.extra * fr.v[sel]
-                elif isinstance(op, Force):
-                    if self._holds(fr, r):
-                        acc[self._force_rows(fr, r)] += np.asarray(op.accel, float)
-                elif not self._holds(fr, r):
-                    continue
-                elif isinstance(op, Attract):
-                    self._attract_term(r).add(fr, acc)
-                elif term is not None:
-                    term.add(fr, acc)
+            for term in self.active:
+                term.add(fr, acc)
             fr.flush(acc)
             f[fr.dense_rows] = acc * fr.dense_mass
             self._write_sparse(fr, f)
         except Exception as exc:  # noqa: BLE001 - reported by the runner after the chunk
-            if self.error is None:
-                self.error = (step, exc)
-            f[:] = 0.0
-
-    def _force_rows(self, fr: Frame, r) -> np.ndarray:
-        """Accumulator rows of a contact-conditioned force's selected particles (memoized)."""
-        key = ("force", id(r.op))
-        if key not in fr.memo:
-            sl, op = self.scene.slice(r.target), r.op
-            mask = np.zeros(self.n, dtype=bool)
-            mask[sl] = True if op.where is None else np.asarray(op.where, bool)
-            fr.memo[key] = (np.flatnonzero(mask[:fr.acc_rows]) if fr.identity
-                            else np.flatnonzero(mask[fr.index[fr.dense_rows]]))
-        return fr.memo[key]
+            self._fail_here = exc
 
     def _write_sparse(self, fr: Frame, f) -> None:
         """f rows outside the dense accumulator, from this step's sparse contributions."""
