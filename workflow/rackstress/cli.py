@@ -19,7 +19,8 @@ def _load_scene(scene: str, steps, dt, sets, integrator: str | None = None):
     sc = scenes.load(scene, overrides)
     if integrator is not None:
         sc.integrator = integrator
-        sc.params["integrator"] = integrator
+        if integrator != "euler":       # recorded where it changes the scene (Eq. 5 is the default)
+            sc.params["integrator"] = integrator
     if dt is not None:
         if not dt > 0:
             raise RackstressError(f"--dt must be positive, got {dt}")
