@@ -463,3 +463,19 @@ def test_render_of_a_run_with_non_finite_frames_is_refused_clearly(tmp_path):
     assert r.returncode == 2, r.stderr
     assert "iteration 20" in r.stderr and "non-finite" in r.stderr and "Traceback" not in r.stderr
     assert not (out / "figures").exists()
+
+
+def test_a_render_killed_midway_leaves_nothing_the_next_render_keeps(tmp_path):
+    out = tmp_path / "r"
+    assert rs("run", "plane-rack", "--engine", "reference", "--steps", "20", "--out", out,
+              *QUIET).returncode == 0
+    p = subprocess.Popen([RS, "render", str(out), "--no-progress"], stdout=subprocess.DEVNULL,
+                         stderr=subprocess.DEVNULL)
+    seen = wait_for(lambda: any(out.glob(".*.tmp*")), 60, p)
+    p.send_signal(signal.SIGKILL)
+    p.wait()
+    assert seen and p.returncode == -signal.SIGKILL      # killed while writing
+    r = rs("render", out, "--no-progress", timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert [x.name for x in out.glob(".*tmp*")] == []
+    assert not (out / ".lock").exists()

@@ -231,10 +231,21 @@ def deck(scene, out, mode, steps, dt, sets, dump_every):
 
 
 @main.command("scenes")
-def list_scenes():
-    """List the built-in scenes and their parameters."""
+@click.argument("files", nargs=-1)
+def list_scenes(files):
+    """List the built-in scenes and their parameters (or those of the given .toml scenes)."""
     from rackstress import scenes
+    from rackstress.errors import SceneError
 
+    if files:
+        from rackstress.scenes.toml import scene_parameters
+
+        for f in files:
+            try:
+                click.echo(f"{f}\n  " + json.dumps(scene_parameters(f)))
+            except SceneError as err:
+                _fail(err, EXIT_INPUT)
+        return
     for name in scenes.BUILDERS:
         params = scenes.parameters(name)
         click.echo(f"{name}")
@@ -321,6 +332,9 @@ def render(rundir, frames, measure, views, groups, out, movie, movie_view, vmax,
             raise RackstressError(f"{rundir} is not a run directory (it does not exist)")
         # one writer per run directory: not while a run (or another render) holds it
         with locked(rundir, create=False):
+            from rackstress.runs.rundir import remove_temporaries
+
+            remove_temporaries(rundir)       # of a render or run killed midway
             rep = render_run(rundir, frames=its, measure=measure, views=_csv(views) or [],
                              movie=movie, movie_view=movie_view, vmax=vmax, cmap=cmap,
                              groups=_csv(groups), out=out, allow_truncated=allow_truncated,

@@ -43,7 +43,8 @@ import threading
 import time
 from pathlib import Path
 
-from rackstress.errors import DivergenceError, RackstressError, RunDirError
+from rackstress.errors import DivergenceError, RackstressError, RunDirError, storage_error
+from rackstress.lib.mpi import on_root
 from rackstress.runs.sweep import Sweep, SweepError, load_sweep
 
 INDEX = "batch.json"
@@ -355,29 +356,29 @@ def run_batch(sweep_path, out=None, ranks_per_job: int = 1, retry_failed: bool =
     sweep = load_sweep(sweep_path)
     batchdir = Path(out) if out is not None else Path("batches") / Path(sweep_path).stem
 
-    # rank 0: check every job, prepare the directory, lock it; all ranks learn the outcome
-    err, lockfd, mgr = None, None, None
-    if rank == 0:
+    state = {}
+
+    def prepare():
+        sweep.validate(J)
         try:
-            sweep.validate(J)
             batchdir.mkdir(parents=True, exist_ok=True)
-            lockfd = os.open(batchdir / ".lock", os.O_RDWR | os.O_CREAT, 0o644)
-            try:
-                fcntl.flock(lockfd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except BlockingIOError:
-                raise RunDirError(f"{batchdir} is in use by another running batch") from None
-            prepare_dir(sweep, batchdir)
-            mgr = Manager(sweep, batchdir, groups, world, log=log, retry_failed=retry_failed,
-                          ranks_per_job=J, mode=manager)
-            log(f"batch {sweep.name}: {len(sweep.jobs)} jobs, {len(mgr.queue)} to run, "
-                f"{size} rank(s), {groups} group(s) of {J}, manager: "
-                f"{'rank 0 (thread)' if manager == 'thread' else 'rank 0 only'} -> {batchdir}")
-        except Exception as exc:  # noqa: BLE001 - raised on every rank below
-            err = exc
-    if size > 1:
-        err = world.bcast(err, root=0)
-    if err is not None:
-        raise err
+        except OSError as exc:
+            raise storage_error(exc, "create the batch directory", batchdir) from None
+        state["lockfd"] = fd = os.open(batchdir / ".lock", os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise RunDirError(f"{batchdir} is in use by another running batch") from None
+        prepare_dir(sweep, batchdir)
+        state["mgr"] = m = Manager(sweep, batchdir, groups, world, log=log,
+                                   retry_failed=retry_failed, ranks_per_job=J, mode=manager)
+        log(f"batch {sweep.name}: {len(sweep.jobs)} jobs, {len(m.queue)} to run, "
+            f"{size} rank(s), {groups} group(s) of {J}, manager: "
+            f"{'rank 0 (thread)' if manager == 'thread' else 'rank 0 only'} -> {batchdir}")
+
+    # rank 0 checks every job, prepares the directory and locks it; all ranks learn the outcome
+    on_root(prepare, world)
+    lockfd, mgr = state.get("lockfd"), state.get("mgr")
 
     if manager == "thread":
         color = rank // J

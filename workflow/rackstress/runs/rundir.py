@@ -289,10 +289,20 @@ def _remove_leftovers(rundir: Path) -> None:
             continue
         if pid == os.getpid() or not _pid_alive(pid):
             shutil.rmtree(old, ignore_errors=True)
-    # temporary files of writers killed midway (atomic writes, renders)
+    remove_temporaries(rundir)
+
+
+def remove_temporaries(rundir: Path) -> list[str]:
+    """Remove the temporary files and folders of writers killed midway (atomic writes, renders,
+    post-processing: hidden names with ``.tmp``); the caller holds :func:`locked`, so no live
+    writer owns them. Returns their names."""
+    rundir = Path(rundir)
+    gone = []
     if rundir.is_dir():
-        for tmp in list(rundir.glob(".*.tmp")) + list(rundir.glob(".figures.tmp*")):
+        for tmp in rundir.glob(".*.tmp*"):
             if tmp.is_dir():
                 shutil.rmtree(tmp, ignore_errors=True)
             else:
                 tmp.unlink(missing_ok=True)
+            gone.append(tmp.name)
+    return gone
