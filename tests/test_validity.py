@@ -105,3 +105,23 @@ def test_validity_pipeline_on_tiny_bodies(tmp_path):
     rack_row, _ = bench.run_case("cantilever", "rack", quick=True, fea_ref=ref,
                                  echo=lambda *a: None)
     assert rack_row["agreement"]["paper"]["n"] == a["n"]
+
+
+@pytest.mark.slow
+def test_bench_validity_cli_quick(tmp_path):
+    import json
+
+    from click.testing import CliRunner
+
+    from rackstress.cli import main
+
+    res = CliRunner().invoke(main, ["bench", "validity", "--quick", "--out", str(tmp_path)],
+                             catch_exceptions=False)
+    assert res.exit_code == 0, res.output
+    data = json.loads((tmp_path / "validity.json").read_text())
+    assert {(r["case"], r["body"]) for r in data["results"]} == {
+        (c, b) for c in ("cantilever", "plate-hole", "l-bracket")
+        for b in ("rack", "rack+bind", "rack(1)+bind", "bind")}
+    assert all(s["converged"] for s in data["fea"].values())
+    assert (tmp_path / "validity.png").stat().st_size > 10000
+    assert "Spearman" in (tmp_path / "validity.md").read_text()
