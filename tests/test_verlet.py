@@ -115,3 +115,22 @@ def test_lammps_verlet_equals_the_reference_verlet():
         assert np.abs(a - b).max() < 1e-10
         euler = run_engine(scenes.build(name, steps=200, **kw), "reference", "exact")["ends"][-1]
         assert np.abs(a - euler).max() > 1e-4        # a different scheme, not Eq. 5 again
+
+
+def test_cli_integrator_option(tmp_path):
+    from click.testing import CliRunner
+
+    from rackstress.cli import main
+
+    res = CliRunner().invoke(main, ["run", "cantilever", "--set", "nx=6", "--set", "ny=2",
+                                    "--engine", "reference", "--steps", "20", "--integrator",
+                                    "verlet", "--out", str(tmp_path / "v"), "--no-render",
+                                    "--no-progress"], catch_exceptions=False)
+    assert res.exit_code == 0, res.output
+    import json
+
+    summary = json.loads((tmp_path / "v" / "summary.json").read_text())
+    assert summary["params"]["integrator"] == "verlet"
+    res = CliRunner().invoke(main, ["run", "--resume", str(tmp_path / "v"), "--integrator",
+                                    "verlet"])
+    assert res.exit_code == 2 and "verlet" in res.output

@@ -71,26 +71,26 @@ def run_case(case: str, model: str, quick: bool = False, fea_ref=None, echo=prin
     p, info = compare.equilibrate(scene, tol=1e-5)
     m = compare.measures(scene, p)
     idx = cases.body_index(scene)
-    n_body = scene.groups["body"].n
-    o = scene.original_positions()[idx][:n_body]
+    free = cases.free_mask(scene)           # held particles lie outside the FEA body
+    o_all = scene.original_positions()[idx]
+    o = o_all[free]
     solver, skw, to_fea = compare.fea_case(scene)
     if fea_ref is None:
         fea_ref = fea_reference(solver, skw, to_fea(o), quick)
         # FEA seen through the particle measure: its displacement at the part's particles
         # (held ones: zero), then the same affine fit (resolution matched)
-        part_o = scene.original_positions()[idx]
-        u = np.zeros_like(part_o)
-        u[:n_body, :2] = np.stack([fea_ref["fields"]["ux"], fea_ref["fields"]["uy"]], axis=1)
+        u = np.zeros_like(o_all)
+        u[free, :2] = np.stack([fea_ref["fields"]["ux"], fea_ref["fields"]["uy"]], axis=1)
         scale = 1e-3 / max(float(np.abs(u).max()), 1e-300)    # small strain: linear regime
-        eta, _ = compare.affine_fit(part_o, part_o + scale * u)
-        fea_ref["fields"]["fit_strain"] = eta[:n_body]
+        eta, _ = compare.affine_fit(o_all, o_all + scale * u)
+        fea_ref["fields"]["fit_strain"] = eta[free]
     ref = fea_ref["fields"]["von_mises_strain"]
-    rows = {name: compare.agreement(m[name][:n_body], ref, o) for name in MEASURES}
-    fit_rows = {name: compare.agreement(m[name][:n_body], fea_ref["fields"]["fit_strain"], o)
+    rows = {name: compare.agreement(m[name][free], ref, o) for name in MEASURES}
+    fit_rows = {name: compare.agreement(m[name][free], fea_ref["fields"]["fit_strain"], o)
                 for name in ("strain", "d2min")}
     out = {"case": case, "body": model, "n_particles": int(len(idx)), "dt": dt, "t_max": t_max,
            "equilibrium": info, "agreement": rows, "agreement_fit": fit_rows,
-           "fields": {k: v[:n_body].tolist() for k, v in m.items()}, "o": o[:, :2].tolist()}
+           "fields": {k: v[free].tolist() for k, v in m.items()}, "o": o[:, :2].tolist()}
     if case == "cantilever":
         out["E_eff"] = compare.effective_modulus(scene, p)
         out["bind_c"] = scene.params["bind_c"]

@@ -53,6 +53,11 @@ def t_limit_verlet(lam, gamma: float = 0.0) -> float:
 
     Complex λ (directed couplings): the boundary of max|μ| < 1 of
     μ² − (1 + q − λt²/(1 + γt/2))μ + q = 0 by bisection.
+
+    Example
+    -------
+    >>> t_limit_verlet(400.0, 10.0)     # 2/ω; Eq. 5 would allow 4/(10 + √1700) ≈ 0.078
+    0.1
     """
     lam = complex(lam)
     gamma = max(0.0, float(gamma))
@@ -99,7 +104,8 @@ def _scale(op, s: float):
 
 
 def scaled_scene(scene):
-    """The scene whose Eq. 5 run (from v₀ + its own half-step shift left out) is the verlet mode.
+    """The scene whose Eq. 5 recursion, started by fix nve from v₀ (no half-step shift), is the
+    verlet mode.
 
     Every operator on a group with damping γ is multiplied by 1/(1 + γ·dt/2); the result has
     ``integrator = "euler"`` and is what the LAMMPS deck compiles (module docstring).

@@ -14,10 +14,9 @@ elastic is the scene option ``body``:
     bind(body, within(d)) alone: a lattice spring network, the body model closest to a
     continuum (Section 3.1's plane with within(2)).
 
-A clamped end is a group ``clamp`` of particles with **no operators**: nothing accelerates them,
-so they stay at their original positions for ever (held supports, exact on every engine). The
-body's particles are bound to them as to each other, and the rack binds to them as to any host
-particle (the clamp is part of the part: :func:`body_index` gives body ∪ clamp).
+A clamped end is a set of **held** particles of the body (``Group.held``: held at their original
+positions on every engine). The body's particles are bound to them as to each other, and the
+rack binds to them as to any host particle; :func:`free_mask` tells them apart.
 
 Loads are ``force`` with ``where`` (Eq. 8) on edge particles, so that their sum equals the
 continuum case's traction times the edge length (unit thickness, unit spacing):
@@ -53,34 +52,23 @@ def _grid(ii, jj) -> np.ndarray:
     return np.stack([np.asarray(ii, float), np.asarray(jj, float), np.zeros(len(ii))], axis=1)
 
 
-def _assemble(name: str, body_o: np.ndarray, clamp_o: np.ndarray | None, loads: list,
+def _assemble(name: str, body_o: np.ndarray, held: np.ndarray | None, loads: list,
               body: str, bind_c: float, bind_d: float, rack_c: float,
               rack_back_c: float, damping: float, rack_damping: float, dt: float, steps: int,
               params: dict, geometry: dict) -> Scene:
     if body not in BODIES:
         raise SceneError(f"scene '{name}': body must be one of {', '.join(BODIES)}, got {body!r}")
-    groups = {"body": Group("body", body_o, RADIUS, kind="body",
+    groups = {"body": Group("body", body_o, RADIUS, kind="body", held=held,
                             meta={"validation": geometry})}
-    if clamp_o is not None and len(clamp_o):
-        groups["clamp"] = Group("clamp", clamp_o, RADIUS, kind="body")
-    held = "clamp" in groups
     body_ops = [Force(tuple(float(a) for a in accel), where=tuple(bool(m) for m in mask))
                 for mask, accel in loads]
     if body in ("rack+bind", "bind"):
         body_ops.append(Bind("body", Within(bind_d, bind_c)))
-        if held:
-            body_ops.append(Bind("clamp", Within(bind_d, bind_c)))
     ops = {"body": body_ops}
     if body in ("rack", "rack+bind"):
-        whole = Group("part", np.concatenate([g.o for g in groups.values()]), RADIUS)
-        r = rack(whole, "bodyrack")
-        groups["bodyrack"] = Group("bodyrack", r.o, r.r, kind="rack", host="body",
-                                   meta=r.meta)
+        groups["bodyrack"] = rack(groups["body"], "bodyrack")
         body_ops.append(Bind("bodyrack", Const(rack_c)))
-        ops["bodyrack"] = [Bind("body", Const(rack_back_c))]
-        if held:
-            ops["bodyrack"].append(Bind("clamp", Const(rack_back_c)))
-        ops["bodyrack"].append(Dampen(rack_damping))
+        ops["bodyrack"] = [Bind("body", Const(rack_back_c)), Dampen(rack_damping)]
     body_ops.append(Dampen(damping))
     return Scene(name, groups, ops, [Phase("load", int(steps))], dt=dt, params=params)
 
@@ -94,22 +82,21 @@ def cantilever(body: str = "rack+bind", nx: int = 40, ny: int = 6, n_clamp: int 
     Example
     -------
     >>> s = cantilever(nx=10, ny=3)
-    >>> s.groups["body"].n, s.groups["clamp"].n
-    (24, 6)
+    >>> s.groups["body"].n, int(s.groups["body"].held.sum())
+    (30, 6)
     """
     if nx - n_clamp < 2 or ny < 2 or n_clamp < 1:
         raise SceneError("cantilever needs ny ≥ 2, n_clamp ≥ 1 and at least 2 free columns")
     i, j = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
     i, j = i.ravel(), j.ravel()
-    free = i >= n_clamp
-    body_o, clamp_o = _grid(i[free], j[free]), _grid(i[~free], j[~free])
-    tip = i[free] == nx - 1
+    body_o, held = _grid(i, j), i < n_clamp
+    tip = i == nx - 1
     geometry = {"case": "cantilever", "L": float(nx - n_clamp), "h": float(ny), "P": float(load),
                 "x0": n_clamp - 0.5, "y0": -0.5}
     params = dict(body=body, nx=nx, ny=ny, n_clamp=n_clamp, load=load, bind_c=bind_c,
                   bind_d=bind_d, rack_c=rack_c, rack_back_c=rack_back_c, damping=damping,
                   rack_damping=rack_damping, dt=dt, steps=steps)
-    return _assemble("cantilever", body_o, clamp_o, [(tip, (0.0, -load / ny, 0.0))], body, bind_c,
+    return _assemble("cantilever", body_o, held, [(tip, (0.0, -load / ny, 0.0))], body, bind_c,
                      bind_d, rack_c, rack_back_c, damping, rack_damping, dt, steps, params,
                      geometry)
 
@@ -150,27 +137,28 @@ def l_bracket(body: str = "rack+bind", w: int = 6, H: int = 26, lx: int = 24, n_
     i, j = i.ravel(), j.ravel()
     inside = (i < w) | (j >= H - w)
     i, j = i[inside], j[inside]
-    free = j >= n_clamp
-    body_o, clamp_o = _grid(i[free], j[free]), _grid(i[~free], j[~free])
-    tip = i[free] == lx - 1
+    body_o, held = _grid(i, j), j < n_clamp
+    tip = i == lx - 1
     geometry = {"case": "l-bracket", "w": float(w), "H": float(H - n_clamp), "Lx": float(lx),
                 "P": float(load), "shift": (-0.5, n_clamp - 0.5),
                 "corner": (w - 0.5, H - w - 0.5)}
     params = dict(body=body, w=w, H=H, lx=lx, n_clamp=n_clamp, load=load, bind_c=bind_c,
                   bind_d=bind_d, rack_c=rack_c, rack_back_c=rack_back_c, damping=damping,
                   rack_damping=rack_damping, dt=dt, steps=steps)
-    return _assemble("l-bracket", body_o, clamp_o, [(tip, (0.0, -load / w, 0.0))], body, bind_c,
+    return _assemble("l-bracket", body_o, held, [(tip, (0.0, -load / w, 0.0))], body, bind_c,
                      bind_d, rack_c, rack_back_c, damping, rack_damping, dt, steps, params,
                      geometry)
 
 
 def body_index(scene: Scene) -> np.ndarray:
-    """Global indices of the part's particles: body, then clamp (if any), in engine order."""
-    idx = [np.arange(scene.slice("body").start, scene.slice("body").stop)]
-    if "clamp" in scene.groups:
-        sl = scene.slice("clamp")
-        idx.append(np.arange(sl.start, sl.stop))
-    return np.concatenate(idx)
+    """Global indices of the part's particles (the body group, held ones included)."""
+    sl = scene.slice("body")
+    return np.arange(sl.start, sl.stop)
+
+
+def free_mask(scene: Scene) -> np.ndarray:
+    """Which of the body's particles are free (not held): the ones compared with FEA."""
+    return ~np.asarray(scene.groups["body"].held, dtype=bool)
 
 
 BUILDERS = {"cantilever": cantilever, "plate-hole": plate_hole, "l-bracket": l_bracket}

@@ -123,9 +123,8 @@ def bind_virial(scene, p: np.ndarray) -> np.ndarray:
 
 
 def measures(scene, p: np.ndarray) -> dict:
-    """Every measure on the part (body ∪ clamp) at positions ``p``; arrays over the part's particles.
-
-    Order: the body's particles, then the clamp's (:func:`body_index`).
+    """Every measure on the part (the body group, held particles included) at positions ``p``;
+    arrays over the body's particles in group order.
     """
     idx = body_index(scene)
     o = scene.original_positions()[idx]
