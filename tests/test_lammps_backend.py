@@ -339,3 +339,29 @@ def test_what_runs_standalone_with_plain_lmp(tmp_path):
     ours = _frames(out / "trajectory.dump")
     theirs = _frames(tmp_path / "plane-rack-fast" / "trajectory.dump")
     assert len(ours) == len(theirs) == 101 and ours == theirs
+
+
+def _final_with_kernels(scene, kernels, monkeypatch):
+    monkeypatch.setenv("RACKSTRESS_KERNELS", kernels)
+    run = LammpsRun(compile_deck(scene, "exact"), None)
+    try:
+        assert run.py.kernels == kernels
+        run.run_schedule()
+        return run.gather_positions()
+    finally:
+        run.close()
+
+
+@pytest.mark.lammps
+@pytest.mark.parametrize("name", ["every-operator", "magpod-small"])
+def test_compiled_kernels_equal_the_numpy_path(name, monkeypatch):
+    """The callback's compiled (numba) kernels and its NumPy path (the reference
+    implementation) give the same trajectory: every operator kind through two phase switches,
+    and 300 MagPod iterations with the legs on the sediment (the only difference is the order
+    of sums, so they agree to round-off)."""
+    scene = (every_operator_scene(steps=60) if name == "every-operator"
+             else scenes.build("magpod-small").with_steps(300))
+    a = _final_with_kernels(scene, "numpy", monkeypatch)
+    b = _final_with_kernels(scene, "numba", monkeypatch)
+    assert np.abs(a - scene.original_positions()).max() > 0.1      # it moved
+    assert np.abs(a - b).max() <= 1e-10

@@ -44,7 +44,7 @@ import numpy as np
 
 from rackstress.model import topology
 from rackstress.errors import SceneError
-from rackstress.model.operators import (Attract, Bind, Collide, Const, Dampen, Force,
+from rackstress.model.operators import (Attract, Bind, Collide, Dampen, Force,
                                         contact_groups, phase_active, reverse_of)
 from rackstress.model.scene import Scene
 
