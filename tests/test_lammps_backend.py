@@ -365,3 +365,82 @@ def test_compiled_kernels_equal_the_numpy_path(name, monkeypatch):
     b = _final_with_kernels(scene, "numba", monkeypatch)
     assert np.abs(a - scene.original_positions()).max() > 0.1      # it moved
     assert np.abs(a - b).max() <= 1e-10
+
+
+# ------------------------------------------------------------------ active particles only
+def _gait_cycle():
+    """A whole gait cycle of magpod-small (all four phases, 300 iterations each): the soles
+    land on the sediment, which starts at rest and is integrated only once touched."""
+    return scenes.build("magpod-small", phase_steps=300, cycles=1)
+
+
+@pytest.fixture(scope="module")
+def gait_reference():
+    return _reference_final(_gait_cycle())
+
+
+def _lammps_run(scene, **compile_kw):
+    run = LammpsRun(compile_deck(scene, "exact", **compile_kw), None)
+    try:
+        run.run_schedule()
+        p, v = run.gather_positions(), run.gather_velocities()
+        bit = run.py.move_bit
+        mask = run.lmp.numpy.extract_atom("mask")[:scene.n_particles].copy()
+        return p, v, (None if bit is None else (mask & bit) != 0)
+    finally:
+        run.close()
+
+
+@pytest.mark.slow
+@pytest.mark.lammps
+def test_active_only_is_exact_over_a_gait_cycle(gait_reference):
+    """Integrating only the particles that can move changes nothing: bit for bit against
+    integrating every particle, and the reference engine to 1e-10, over a whole gait cycle."""
+    sc = _gait_cycle()
+    deck = compile_deck(sc, "exact")
+    assert deck.passive == ("sediment",) and "fix rs_nve rs_move nve" in deck.input_text()
+    assert compile_deck(scenes.build("plane-rack"), "exact").passive == ()   # nothing rests
+    p, v, active = _lammps_run(sc)
+    p_all, v_all, none = _lammps_run(sc, active_only=False)
+    assert none is None
+    np.testing.assert_array_equal(p, p_all)
+    np.testing.assert_array_equal(v, v_all)
+    sed = sc.slice("sediment")
+    moved = np.abs(p[sed] - sc.original_positions()[sed]).max(axis=1) > 0
+    assert moved.any() and active[sed].sum() < sc.groups["sediment"].n   # some, not all
+    assert np.all(active[sed][moved])           # every sediment particle that moved was active
+    assert np.all(active[:sed.start])           # the robot always is
+    assert np.abs(p - gait_reference).max() <= 1e-10
+
+
+ACTIVE_MPI = """
+import sys, numpy as np
+from rackstress import scenes
+from rackstress.engines.lammps.deck import compile_deck
+from rackstress.engines.lammps.runner import LammpsRun
+from rackstress.lib.mpi import world
+sc = scenes.build("magpod-small", phase_steps=300, cycles=1)
+run = LammpsRun(compile_deck(sc, "exact"), None)
+run.run_schedule()
+p = run.gather_positions()
+counts = world().allgather(run.lmp.extract_global("nlocal"))
+run.close()
+if world().Get_rank() == 0:
+    np.save(sys.argv[1] + "/p.npy", p)
+    np.save(sys.argv[1] + "/counts.npy", np.array(counts))
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.mpi
+@pytest.mark.lammps
+def test_active_only_is_exact_under_mpi(tmp_path, gait_reference):
+    """The same gait cycle under ``mpiexec -n 2`` (each rank activates the particles it owns)."""
+    script = tmp_path / "active_mpi.py"
+    script.write_text(ACTIVE_MPI)
+    proc = subprocess.run([str(MPIEXEC), "-n", "2", sys.executable, str(script), str(tmp_path)],
+                          capture_output=True, text=True, timeout=1200)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    counts = np.load(tmp_path / "counts.npy")
+    assert len(counts) == 2 and counts.min() > 0
+    assert np.abs(np.load(tmp_path / "p.npy") - gait_reference).max() <= 1e-10

@@ -300,8 +300,11 @@ class Overlaps:
     both directions and by the contact conditions (Eq. 28's damping) of the same two groups.
     """
 
-    def __init__(self, radius: np.ndarray, skin: float, compiled=None):
+    def __init__(self, radius: np.ndarray, skin: float, compiled=None, activate=None):
         self.radius, self.skin, self.k = radius, skin, compiled
+        #: called with the candidate rows of every new list (a resting particle that may be
+        #: touched before the next reneighbouring must be integrated from now on)
+        self.activate = activate
         self._rmax = {}
 
     def _reach(self, sl: slice) -> float:
@@ -321,6 +324,9 @@ class Overlaps:
         a, b = contact_candidates(fr.x[ia], fr.x[ib], cut, same=A == B)
         a, b = ia[a], ib[b]
         R2 = (self.radius[fr.index[a]] + self.radius[fr.index[b]]) ** 2
+        if self.activate is not None:
+            self.activate(fr, a)
+            self.activate(fr, b)
         hit = fr.memo[key] = (a, b, R2)
         return hit
 
@@ -501,7 +507,14 @@ class PyForces:
         self.mass = np.concatenate([np.full(g.n, deck.masses[name])
                                     for name, g in self.scene.groups.items()])
         self.error = None
-        self.overlaps = Overlaps(self.radius, deck.skin, self.compiled)
+        #: passive particles (deck.passive) join LAMMPS' moving group when first reachable
+        self.passive = np.zeros(self.n, dtype=bool)
+        for name in getattr(deck, "passive", ()):
+            self.passive[self.scene.slice(name)] = True
+        self.move_bit = self._move_bit(lmp, deck) if self.passive.any() else None
+        self._scan_moving = self.move_bit is not None   # once: a resumed run's moving ones
+        self.overlaps = Overlaps(self.radius, deck.skin, self.compiled,
+                                 self._activate if self.move_bit is not None else None)
         python = deck.python_ops
         here = {r.site for r in python}
         #: reverse place of every bind here whose reverse is here too; folded[rev] = carrier
@@ -525,6 +538,30 @@ class PyForces:
         self.verlet = (lmp.extract_setting("neigh_every") == 1
                        and lmp.extract_setting("neigh_delay") == 0
                        and lmp.extract_setting("neigh_dist_check") == 1)
+
+    @staticmethod
+    def _move_bit(lmp, deck) -> int:
+        """LAMMPS' mask bit of the deck's moving group (group index k has bit 1 << k)."""
+        names = list(lmp.available_ids("group"))
+        return 1 << names.index(deck.moving)
+
+    def _activate(self, fr: Frame, rows: np.ndarray) -> None:
+        """Add the owned passive particles among ``rows`` to the moving group (exact: they are
+        at rest with no force until now; fix nve reads the mask every step)."""
+        own = rows[rows < fr.nlocal]
+        own = own[self.passive[fr.index[own]]]
+        if len(own):
+            mask = self.lmp.numpy.extract_atom("mask")
+            mask[own] |= self.move_bit
+
+    def _activate_moving(self, fr: Frame) -> None:
+        """Once, at the first call: passive particles already moving (a resumed run) join."""
+        self._scan_moving = False
+        own = np.arange(fr.nlocal)
+        own = own[self.passive[fr.index[own]]]
+        v = fr.v[own]
+        moving = own[(v[:, 0] != 0.0) | (v[:, 1] != 0.0) | (v[:, 2] != 0.0)]
+        self._activate(fr, moving)
 
     def op_at(self, site):
         return self.scene.operators[site[0]][site[1]]
@@ -581,6 +618,8 @@ class PyForces:
             if fr is not old:
                 f[:] = 0.0
                 self._sparse_rows = self._sparse_rows[:0]
+                if self._scan_moving:
+                    self._activate_moving(fr)
             acc = np.zeros((fr.acc_rows, 3))
             for term in self.active:
                 term.add(fr, acc)

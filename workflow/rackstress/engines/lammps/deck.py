@@ -32,6 +32,15 @@ Python. Every other operator on a group is scaled by its mass, so accelerations 
 Skipped because it is exact to skip: no pair style when nothing is realized as a pair style;
 ``neigh_modify exclude`` for every type pair that does not collide; no bonds in exact mode; no
 ``fix external`` in a phase where no Python-realized operator is active.
+
+Active particles: a *passive* group (:func:`passive_groups`: at rest, moved only by collisions
+the callback evaluates, and damped — MagPod's sediment) is left out of the group ``rs_move``
+that ``fix nve`` and ``fix viscous`` act on. A particle of it has zero velocity and zero force
+until a collision partner comes within reach, and Eq. 5 does not move such a particle, so
+skipping it is exact. The callback adds it to ``rs_move`` (its group bit in LAMMPS' per-atom
+mask) as soon as its Verlet list holds a candidate pair with it — found when LAMMPS reneighbours,
+before any force can act on it — and for good (a touched particle keeps moving); a run resumed
+from a checkpoint re-adds every passive particle that is moving.
 """
 from __future__ import annotations
 
@@ -51,6 +60,9 @@ from rackstress.model.scene import Scene
 MODES = ("exact", "fast")
 #: The fix external that carries every Python-realized operator.
 PY_FIX = "rs_py"
+#: The group LAMMPS integrates and damps: every particle but the resting ones of passive groups
+#: (module doc, "Active particles"); the callback adds a passive particle the moment it can move.
+MOVE_GROUP = "rs_move"
 #: Neighbour skin (distance units). 2 rather than 1 halves the rebuilds of a MagPod run (measured:
 #: 52 against 99 in 300 iterations), each of which re-bins all the resting sediment.
 SKIN = 2.0
@@ -94,6 +106,14 @@ class Deck:
     lepton: dict = field(default_factory=dict)       # (type_i, type_j) → (K, R)
     #: neighbour skin: LAMMPS' (``neighbor``) and the callback's Verlet list of contacts
     skin: float = SKIN
+    #: groups whose particles rest until touched (only python-realized collides and dampen act
+    #: on them): LAMMPS integrates them only once the callback has activated them
+    passive: tuple = ()
+
+    @property
+    def moving(self) -> str:
+        """The group ``fix nve`` and ``fix viscous`` act on."""
+        return MOVE_GROUP if self.passive else "all"
 
     # ------------------------------------------------------------------ pieces
     @property
@@ -139,6 +159,10 @@ class Deck:
         L.append(f"timestep {_f(sc.dt)}")
         for name in sc.groups:
             L.append(f"group {name} type {types[name]}")
+        if self.passive:
+            L.append(f"# {', '.join(self.passive)}: at rest until touched; integrated and damped "
+                     f"only once the callback adds a particle to {MOVE_GROUP}")
+            L.append(f"group {MOVE_GROUP} subtract all {' '.join(self.passive)}")
         L += self._pair_commands()
         if self.bonds is not None:
             L.append("bond_style harmonic")
@@ -158,8 +182,8 @@ class Deck:
             # one fix for every group's constant damping: one pass over the atoms, not one per
             # group (gamma 1 times scale γ_type is γ_type exactly; an unnamed type would get 1)
             scale = " ".join(f"scale {t} {_f(g)}" for t, g in gamma.items())
-            L.append(f"fix rs_damp all viscous 1.0 {scale}")
-        L.append("fix rs_nve all nve")
+            L.append(f"fix rs_damp {self.moving} viscous 1.0 {scale}")
+        L.append(f"fix rs_nve {self.moving} nve")
         L.append("thermo_style custom step")
         L.append(f"thermo {max(1, dump_every)}")
         if dump_file:
@@ -399,8 +423,28 @@ REALIZE = {Force: _realize_force, Dampen: _realize_dampen, Collide: _realize_pai
            Bind: _realize_pair, Attract: _realize_pair}
 
 
+def passive_groups(scene: Scene, realized: list) -> tuple:
+    """Groups whose particles start at rest and are moved only by collisions the callback
+    evaluates (and damped): a particle of one that no collision partner can reach has zero
+    velocity and zero force, so Eq. 5 leaves it where it is, and LAMMPS need not pass over it
+    until the callback finds a partner within reach + skin (module doc, "Active particles")."""
+    if not any(r.python for r in realized):
+        return ()
+    out = []
+    for name, g in scene.groups.items():
+        rs = [r for r in realized if r.target == name]
+        v0 = getattr(g, "v0", None)
+        contact_only = all(
+            (r.op.pair and not r.op.fixed_pairs and r.python and not r.native)   # collide
+            or (r.native == "viscous" and not r.python and not r.op.when)        # dampen(c)
+            for r in rs)
+        if rs and contact_only and any(r.op.pair for r in rs) and (v0 is None or not np.any(v0)):
+            out.append(name)
+    return tuple(out)
+
+
 def compile_deck(scene: Scene, mode: str = "exact", measure_fast: bool = False,
-                 native: bool = True) -> Deck:
+                 native: bool = True, active_only: bool = True) -> Deck:
     """Realize every operator of ``scene`` (module doc).
 
     Fast mode is offered only where it takes every operator out of the Python callback (the
@@ -410,7 +454,7 @@ def compile_deck(scene: Scene, mode: str = "exact", measure_fast: bool = False,
     error (``rackstress bench accuracy``), off the front, so it is refused; ``measure_fast``
     lets the benchmarks keep measuring it. ``native=False`` keeps every pair operator in the
     callback (no pair style, no bonds, unit masses): the tests check both paths against the
-    same accelerations.
+    same accelerations. ``active_only=False`` integrates every particle, resting or not.
 
     Examples
     --------
@@ -443,7 +487,8 @@ def compile_deck(scene: Scene, mode: str = "exact", measure_fast: bool = False,
         first[inv[::-1]] = np.arange(len(inv))[::-1]
         bond_types = [(float(K[f]), float(r0[f])) for f in first]
         bonds = (inv.reshape(-1) + 1, i, j)
-    deck = Deck(scene, mode, masses, realized, ghost_cutoff(scene), bonds, bond_types, lepton)
+    deck = Deck(scene, mode, masses, realized, ghost_cutoff(scene), bonds, bond_types, lepton,
+                passive=passive_groups(scene, realized) if active_only else ())
     if mode == "fast" and deck.python_ops and not measure_fast:
         kept = sorted({f"{r.target} <- {r.op.kind}" for r in deck.python_ops})
         raise SceneError(
