@@ -20,7 +20,8 @@ bind, ``mode='fast'``       ``bond_style harmonic`` K = c·m, r0 = L0 (one bond 
                             distinct L0): equal to Eq. 12 to first order in the strain
 attract                     Python callback (Eq. 14), only in phases where it is active
 integrate                   ``fix nve``, started with v = v0 + dt/2·a0 after ``run 0`` so its
-                            positions are Eq. 5's exactly; the same restart at every phase switch
+                            positions are Eq. 5's exactly; the same restart at every phase switch;
+                            only on the particles that can move (Active particles, below)
 ==========================  ================================================================
 
 Directed coefficients: a reciprocal LAMMPS interaction of strength K gives accelerations K/m_i
