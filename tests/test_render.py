@@ -12,7 +12,7 @@ from matplotlib import image as mpimg
 
 from rackstress import scenes
 from rackstress.cli import main
-from rackstress.render.pictures import VIEWS, render, stress_rgba
+from rackstress.render.pictures import HEADER_H, VIEWS, render, stress_rgba
 from rackstress.runs.run import run as run_scene
 from rackstress.stress import DesiredPositionDistance, TruncatedDumpError, load_run
 
@@ -33,15 +33,16 @@ def rendered(plane_run):
     return plane_run, rep
 
 
-def _red(img, skip_bar=True):
-    """Reddish pixels (shaded red spheres included), not counting the colour bar at the top."""
+def _red(img, skip_bar=True, margin=60):
+    """Reddish pixels (shaded red spheres included), not counting the strip above the model
+    (title, colour bar, legend); ``margin`` 25 counts the pink of a value well below the top."""
     img = np.asarray(img)[..., :3]
     if img.dtype != np.uint8:
         img = np.round(img * 255).astype(np.uint8)
     r, g, b = (img[..., k].astype(int) for k in range(3))
-    red = (r - g > 60) & (r - b > 60)
+    red = (r - g > margin) & (r - b > margin)
     if skip_bar:
-        red[: int(0.16 * len(red))] = False
+        red[:HEADER_H] = False
     return red
 
 
@@ -67,10 +68,11 @@ def test_pictures_exist_and_show_the_pulled_corner_red(rendered):
     corner_hot = paper[k, :400][run.o[:400, 0] + run.o[:400, 2] < 3].mean()
     assert corner_hot > 3 * np.nanmean(paper[k, :400])     # the measure itself: corner stressed
     halves = {}
+    # the colour scale tops at the run's peak (iteration ~40), so at 200 the corner is pink
     for view in ("right", "left"):
         img = mpimg.imread(fig / f"{view}_000200.png")
         assert img.std() > 0.05                            # not a uniform image
-        red = _red(img)
+        red = _red(img, margin=25)
         assert red.sum() > 50, view
         cols = np.nonzero(red)[1]
         halves[view] = cols.mean() / img.shape[1]
@@ -78,7 +80,7 @@ def test_pictures_exist_and_show_the_pulled_corner_red(rendered):
     # seen from −z (left) on the right
     assert halves["right"] < 0.5 < halves["left"]
     top = mpimg.imread(fig / "top_000200.png")
-    assert _red(top).sum() > 50
+    assert _red(top, margin=25).sum() > 50
     assert rep.vmax > 0 and rep.timings["pictures_s"] > 0
 
 
@@ -121,9 +123,10 @@ def test_nearest_frame_is_used_and_said(plane_run, tmp_path):
     assert res.exit_code == 0, res.output
     assert "iteration 33 is not in the dump; using the nearest frame, iteration 30" in res.output
     assert "iteration 5000" in res.output and "wrote" in res.output and "rendered in" in res.output
-    assert (rundir / "figures" / "front_000030.png").is_file()
-    assert (rundir / "figures" / "front_000200.png").is_file()
-    manifest = json.loads((rundir / "figures" / "render.json").read_text())
+    # another measure goes into its own folder: the paper measure's figures stay
+    assert (rundir / "figures" / "strain" / "front_000030.png").is_file()
+    assert (rundir / "figures" / "strain" / "front_000200.png").is_file()
+    manifest = json.loads((rundir / "figures" / "strain" / "render.json").read_text())
     assert manifest["label"] == "von Mises shear strain [dimensionless]"
 
 
@@ -142,11 +145,11 @@ def test_failed_render_leaves_nothing_and_keeps_old_figures(plane_run, tmp_path)
     assert sorted(p.name for p in rundir.iterdir() if p.name.startswith(".")) == []
     with pytest.raises(TruncatedDumpError):
         render(rundir)
-    # on request, the complete frames render (and replace the old figures)
+    # on request, the complete frames render (beside the old figures: renders add, never delete)
     rep = render(rundir, allow_truncated=True, views=["right"], frames=[190], plots=False)
     assert any("mid-frame" in n for n in rep.notes)
     assert (rundir / "figures" / "right_000190.png").is_file()
-    assert not (rundir / "figures" / "old.png").exists()
+    assert (rundir / "figures" / "old.png").read_bytes() == b"old"
     res = CliRunner().invoke(main, ["render", str(rundir), "--allow-truncated", "--measure",
                                     "virial"])
     assert res.exit_code == 2 and "did not record per-atom virial stress" in res.output
@@ -208,7 +211,9 @@ def test_magpod_pictures_and_stress_where_section_5_2_says(magpod_run):
                  "com_path.png", "footprints.png"):
         assert (fig / name).is_file(), name
     img = mpimg.imread(fig / "right_000600.png")
-    assert img.std() > 0.05 and _red(img).sum() > 200
+    # the scale tops at the run's peak (the right leg at iteration 50): at 600 the active
+    # regions are pink to red
+    assert img.std() > 0.05 and _red(img, margin=25).sum() > 200
     run = load_run(rundir)
     assert [p.name for p in run.displayed()] == ["body", "rightleg", "leftleg"]
     paper = DesiredPositionDistance(run).run().results.per_particle[-1]
@@ -220,3 +225,61 @@ def test_magpod_pictures_and_stress_where_section_5_2_says(magpod_run):
     print(f"top decile in the zone: {frac:.2f}, random: {base:.2f}")
     assert frac >= 0.7 and frac >= 2.5 * base, (frac, base)
     assert rep.vmax > 0
+
+
+# ----------------------------------------------------------------------------- steering
+def test_groups_legend_out_movie_view_cmap_and_no_overlap(plane_run, tmp_path):
+    rundir = tmp_path / "r"
+    shutil.copytree(plane_run, rundir, ignore=shutil.ignore_patterns("figures"))
+    render(rundir, views=["right"], frames=[200], plots=False)
+    before = sorted(p.name for p in (rundir / "figures").iterdir())
+    # another view into the same folder adds, deletes nothing
+    render(rundir, views=["top"], frames=[200], plots=False)
+    after = sorted(p.name for p in (rundir / "figures").iterdir())
+    assert set(before) <= set(after) and "top_000200.png" in after
+    # --out, --groups (a rack shown, coloured), --cmap, a movie of the second view
+    out = tmp_path / "mine"
+    res = CliRunner().invoke(main, ["render", str(rundir), "--out", str(out), "--groups",
+                                    "plane,planerack", "--views", "right,top", "--frames", "200",
+                                    "--cmap", "viridis", "--movie", "--movie-view", "top"])
+    assert res.exit_code == 0, res.output
+    # not a terminal: no progress bar, one line of record
+    assert "%|" not in res.output and "\r" not in res.output
+    assert sum(ln.startswith("rendered in ") for ln in res.output.splitlines()) == 1
+    manifest = json.loads((out / "render.json").read_text())
+    assert manifest["parts"] == {"coloured": ["plane", "planerack"], "context": [],
+                                 "hidden": []}
+    assert manifest["movie_view"] == "top" and manifest["cmap"] == "viridis"
+    assert (out / "movie.mp4").stat().st_size > 1000
+    assert sorted(p.name for p in (rundir / "figures").iterdir()) == after   # untouched
+    img = np.asarray(mpimg.imread(out / "right_000200.png"))[..., :3]
+    # viridis: the top of the scale is yellow, the bottom purple; no grey→red in the bar
+    bar = img[35:45, int(0.56 * img.shape[1]):int(0.95 * img.shape[1])]
+    assert bar[:, -1].mean(axis=0)[2] < 0.3 and bar[:, 0].mean(axis=0)[2] > 0.25
+    # the strip above the model holds title, legend and colour bar; the model stays below it:
+    # the same strip on every picture, and nothing of the model in it
+    other = np.asarray(mpimg.imread(out / "top_000200.png"))[..., :3]
+    np.testing.assert_array_equal(img[:HEADER_H], other[:HEADER_H])
+    # hiding: the default set minus the plane leaves nothing to colour -> a clear error
+    res = CliRunner().invoke(main, ["render", str(rundir), "--groups", "-plane"])
+    assert res.exit_code == 2 and "no part to colour" in res.output
+    res = CliRunner().invoke(main, ["render", str(rundir), "--groups", "wing"])
+    assert res.exit_code == 2 and "no part(s) wing" in res.output and "plane" in res.output
+    res = CliRunner().invoke(main, ["render", str(rundir), "--cmap", "nope"])
+    assert res.exit_code == 2 and "unknown colour map 'nope'" in res.output
+
+
+def test_a_part_that_flew_away_is_framed_out_with_a_warning(tmp_path):
+    from test_stress import BLOCK, write_run
+
+    d = tmp_path / "run"
+    far = BLOCK + [40.0, 0.0, 0.0]
+    frames = [(0, np.concatenate([BLOCK, far])),
+              (10, np.concatenate([BLOCK, far + [5000.0, 0.0, 0.0]]))]
+    write_run(d, [("stay", "part", BLOCK), ("gone", "part", far)], frames)
+    rep = render(d, views=["right"], frames=[10], plots=False)
+    assert any("part gone flew away" in n for n in rep.notes), rep.notes
+    img = np.asarray(mpimg.imread(d / "figures" / "right_000010.png"))[HEADER_H:-40, :, :3]
+    drawn = np.argwhere(img.min(axis=2) < 0.9)          # (the iteration line is below)
+    # the remaining block fills the picture instead of shrinking to a dot
+    assert np.ptp(drawn[:, 1]) > 0.3 * img.shape[1]

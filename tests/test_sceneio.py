@@ -316,7 +316,7 @@ def test_coincident_particles(tmp_path):
 
 def test_unknown_set_key_for_explicit_scene(tmp_path):
     path = write(tmp_path, TWO)
-    expect_error(path, ["--set", "'radius'", "dt, steps, cycles, bound"], {"radius": 2.0})
+    expect_error(path, ["--set", "'radius'", "dt, steps, duration, cycles, bound", "[params]"], {"radius": 2.0})
     expect_error(path, ["--set dt", "positive"], {"dt": -0.1})
     expect_error(path, ["--set steps", "integer"], {"steps": 2.5})
 

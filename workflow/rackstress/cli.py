@@ -22,9 +22,7 @@ def _load_scene(scene: str, steps, dt, sets):
     if dt is not None:
         if not dt > 0:
             raise RackstressError(f"--dt must be positive, got {dt}")
-        sc.dt = float(dt)
-        sc.params["dt"] = float(dt)
-        sc.validate()
+        sc = sc.with_dt(float(dt))   # a scene given by duration keeps its physical time
     if steps is not None:
         sc = sc.with_steps(int(steps))
     return sc
@@ -107,12 +105,13 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
                    f"({summary['mode']}) in {summary['wall_s']:.2f} s -> {out}")
         for name, g in summary["groups"].items():
             click.echo(f"  {name:12s} n={g['n']:6d}  max_deformation={g['max_deformation']:.4g}")
+        _post_run(out, progress)
         if do_render:
             from rackstress.render.pictures import render_default
 
             t0 = time.perf_counter()
             try:
-                rep = render_default(out)
+                rep = render_default(out, progress=progress)
             except Exception as err:  # noqa: BLE001 - the run itself is complete and kept
                 click.echo(f"rackstress: error: the run finished, but rendering its pictures "
                            f"failed: {err} (retry with 'rackstress render {out}')", err=True)
@@ -154,11 +153,41 @@ def list_scenes():
         click.echo("  " + json.dumps(params))
 
 
+def _post_run(out, progress):
+    """After a run: the stress measures once, their peaks into summary.json, the VTK series."""
+    from rackstress.stress.post import TooLargeError, describe, postprocess
+
+    try:
+        info = postprocess(out, vtk=True, dump=False, progress=progress)
+    except TooLargeError as err:
+        click.echo(f"  note: no stress peaks or VTK files: {err}")
+        return
+    except Exception as err:  # noqa: BLE001 - the run itself is complete and kept
+        click.echo(f"rackstress: error: the run finished, but post-processing its stress "
+                   f"failed: {err} (retry with 'rackstress stress {out}')", err=True)
+        sys.exit(EXIT_RENDER)
+    for line in describe(info):
+        click.echo(line)
+
+
+def _post_job(rundir):
+    """A batch job's post-processing: the stress peaks into its summary.json (no VTK: run
+    'rackstress stress BATCHDIR/JOB' for the files)."""
+    from rackstress.stress.post import postprocess
+
+    postprocess(rundir, vtk=False, dump=False)
+
+
+def _csv(text):
+    return [t.strip() for t in text.split(",") if t.strip()] if text else None
+
+
 @main.command()
 @click.argument("rundir", type=click.Path(file_okay=False, path_type=Path))
 @click.option("--frames", metavar="N,N,...",
               help="Iterations to picture (nearest dumped frame is used); default: the paper's "
-                   "1320,2600,4720,17480 if the run reaches them, else 4 spread over the run.")
+                   "1320,2600,4720,17480 if the run reaches them, else 4 spread over the run, "
+                   "and the iteration of the peak.")
 @click.option("--measure", type=click.Choice(["paper", "accumulated", "strain", "d2min",
                                               "virial"]),
               default="paper", show_default=True,
@@ -167,12 +196,28 @@ def list_scenes():
                    "virial: LAMMPS per-atom stress (if the dump has it).")
 @click.option("--views", default="right,front,left", show_default=True,
               help="Comma-separated: right, front, left, back, top, iso.")
-@click.option("--movie", is_flag=True, help="Also write figures/movie.mp4 (first view).")
-@click.option("--vmax", type=float, help="Top of the colour scale (default: 99th percentile).")
+@click.option("--groups", metavar="PART,...",
+              help="Parts to show, e.g. body,leftleg (coloured whatever their kind); or parts to "
+                   "hide from the default set with a leading '-', e.g. -sediment.")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
+              help="Output folder (default: RUNDIR/figures for the paper measure, "
+                   "RUNDIR/figures/MEASURE otherwise). Files of other names there are kept.")
+@click.option("--movie", is_flag=True, help="Also write movie.mp4 of every frame.")
+@click.option("--movie-view", help="The view of the movie (default: the first of --views).")
+@click.option("--vmax", type=float,
+              help="Top of the colour scale (default: the peak, so it is never clipped).")
+@click.option("--cmap", default="paper", show_default=True,
+              help="paper (grey to red, Section 5.2) or a matplotlib colour map (viridis, ...).")
 @click.option("--allow-truncated", is_flag=True,
               help="Render the complete frames of a dump that ends mid-frame.")
-def render(rundir, frames, measure, views, movie, vmax, allow_truncated):
-    """Render the stress pictures, sheet, plots (and movie) of RUNDIR into RUNDIR/figures/."""
+@click.option("--progress/--no-progress", default=True, show_default=True,
+              help="A progress bar on a terminal.")
+def render(rundir, frames, measure, views, groups, out, movie, movie_view, vmax, cmap,
+           allow_truncated, progress):
+    """Render the stress pictures, sheet, plots (and movie) of RUNDIR; refresh RUNDIR/report.html.
+
+    Exit status: 0 done, 2 bad input.
+    """
     from rackstress.render.pictures import render as render_run
 
     t0 = time.perf_counter()
@@ -183,18 +228,91 @@ def render(rundir, frames, measure, views, movie, vmax, allow_truncated):
                 its = [int(f) for f in frames.split(",") if f.strip()]
             except ValueError:
                 raise RackstressError(f"--frames expects comma-separated integers, got '{frames}'")
-        rep = render_run(rundir, frames=its, measure=measure,
-                         views=[v.strip() for v in views.split(",") if v.strip()], movie=movie,
-                         vmax=vmax, allow_truncated=allow_truncated)
+        rep = render_run(rundir, frames=its, measure=measure, views=_csv(views) or [],
+                         movie=movie, movie_view=movie_view, vmax=vmax, cmap=cmap,
+                         groups=_csv(groups), out=out, allow_truncated=allow_truncated,
+                         progress=progress)
+        report = _write_report(rundir)
     except RackstressError as err:
         _fail(err, EXIT_INPUT)
     for note in rep.notes:
         click.echo(f"note: {note}")
+    pk = rep.peak
     click.echo("frames: " + ", ".join(f"{s}" for _, _, s in rep.frames)
-               + f"; colour scale 0..{rep.vmax:.4g}")
+               + f"; colour scale 0..{rep.vmax:.4g}"
+               + (f"; peak {pk['value']:.4g} at iteration {pk['iteration']}, particle "
+                  f"{pk['particle']} ({pk['group']})" if pk else ""))
     for name in rep.files:
         click.echo(f"  wrote {rep.outdir / name}")
+    if report is not None:
+        click.echo(f"  wrote {report}")
     click.echo(f"rendered in {time.perf_counter() - t0:.1f} s")
+
+
+def _write_report(rundir):
+    """RUNDIR/report.html when RUNDIR is a run directory with a summary; else None."""
+    from rackstress.render.report import write_report
+
+    if not (Path(rundir) / "summary.json").is_file():
+        return None
+    return write_report(rundir)
+
+
+@main.command()
+@click.argument("inputs", nargs=-1, required=True,
+                type=click.Path(exists=True, path_type=Path))
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
+              help="Output folder (default: the run directory; for DATA DUMP the dump's folder).")
+@click.option("--vtk/--no-vtk", default=True, show_default=True,
+              help="Write vtk/run.pvd and one .vtp per frame (ParaView, OVITO, pyvista).")
+@click.option("--dump/--no-dump", "write_dump", default=True, show_default=True,
+              help="Write stress.dump: a LAMMPS dump with the measures as named columns.")
+@click.option("--parts", type=click.Choice(["mol", "type"]),
+              help="DATA DUMP: parts by molecule or by atom type (default: mol when the data "
+                   "file has several molecules).")
+@click.option("--atom-style", help="DATA DUMP: atom style of the data file's Atoms section, if "
+                                   "it does not say (atomic, bond, molecular, full, sphere, ...).")
+@click.option("--dt", type=float, default=1.0, show_default=True,
+              help="DATA DUMP: time per iteration (for the accumulated measure).")
+@click.option("--allow-truncated", is_flag=True,
+              help="Use the complete frames of a dump that ends mid-frame.")
+@click.option("--progress/--no-progress", default=True, show_default=True)
+def stress(inputs, out, vtk, write_dump, parts, atom_style, dt, allow_truncated, progress):
+    """Compute every stress measure of a run once and write them for ParaView and OVITO.
+
+    INPUTS is a run directory (RUNDIR), or a plain LAMMPS data file and dump (DATA DUMP) that
+    rackstress did not write. Writes the peaks (into RUNDIR/summary.json and stress.json), the
+    VTK time series vtk/run.pvd and the LAMMPS dump stress.dump.
+
+    Exit status: 0 done, 2 bad input.
+    """
+    from rackstress.stress.post import describe, postprocess
+
+    t0 = time.perf_counter()
+    try:
+        if len(inputs) == 1:
+            if not inputs[0].is_dir():
+                raise RackstressError(f"{inputs[0]}: give a run directory, or a data file and a "
+                                      "dump (rackstress stress DATA DUMP --out DIR)")
+            info = postprocess(inputs[0], vtk=vtk, dump=write_dump, progress=progress, out=out)
+            where = out or inputs[0]
+        elif len(inputs) == 2:
+            from rackstress.stress.foreign import load_plain
+
+            if not dt > 0:
+                raise RackstressError(f"--dt must be positive, got {dt}")
+            where = out or inputs[1].resolve().parent
+            run = load_plain(inputs[0], inputs[1], parts=parts, atom_style=atom_style, dt=dt,
+                             outdir=where, allow_truncated=allow_truncated)
+            info = postprocess(None, run=run, vtk=vtk, dump=write_dump, progress=progress,
+                               out=where)
+        else:
+            raise RackstressError("give one run directory, or a data file and a dump")
+    except RackstressError as err:
+        _fail(err, EXIT_INPUT)
+    for line in describe(info):
+        click.echo(line)
+    click.echo(f"wrote {Path(where) / 'stress.json'} ({time.perf_counter() - t0:.1f} s)")
 
 
 @main.command()
@@ -230,7 +348,8 @@ def batch(sweep, out, ranks_per_job, retry_failed, manager, report_dir, figure, 
         if sweep is None:
             raise click.UsageError("give a SWEEP file, or --report BATCHDIR")
         index = batch_mod.run_batch(sweep, out, ranks_per_job, retry_failed, manager,
-                                    log=lambda m: click.echo(m) if rank() == 0 else None)
+                                    log=lambda m: click.echo(m) if rank() == 0 else None,
+                                    post=_post_job)
     except RackstressError as err:
         _fail(err, EXIT_INPUT)
     if rank() == 0:

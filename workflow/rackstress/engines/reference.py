@@ -41,7 +41,11 @@ class Reference:
         self.o = scene.original_positions()
         self.radius = scene.radii()
         self.p = self.o.copy()
-        self.v = np.zeros_like(self.p)
+        self.v = scene.initial_velocities()   # v at step 0: zero unless a group sets v0
+        # supports: held particles get zero acceleration (and start at rest), so Eq. 5 keeps
+        # them at o exactly, like LAMMPS' fix setforce 0 0 0 with zero velocity
+        held = scene.held()
+        self._held = held if held.any() else None
         self.step_count = 0
         #: (group, index in its sequence) [+ phase] → the operator's PairList in global indices
         self._pairs = {}
@@ -139,6 +143,8 @@ class Reference:
     def step(self, phase: Mapping) -> None:
         """motion = netForce • integrate(t) (Eqs. 6–7), then the watchdog."""
         a = self.accelerations(phase)
+        if self._held is not None:
+            a[self._held] = 0.0
         self.p, self.v = integrate(self.p, self.v, a, self.scene.dt)
         self.step_count += 1
         check(self.scene, self.p, self.v, self.o, self.step_count)

@@ -28,6 +28,9 @@ class Phase:
     name: str
     steps: int
     vars: Mapping = field(default_factory=dict)
+    #: physical time of the phase when it was given as a duration (``steps`` = round(duration
+    #: / dt)); :meth:`Scene.with_dt` recomputes ``steps`` from it.
+    duration: float | None = None
 
 
 @dataclass(frozen=True)
@@ -60,6 +63,10 @@ class Scene:
     #: Optional ``report(scene, records) -> dict`` over the states at phase ends (a list of
     #: :class:`PhaseEnd`, the first being the initial state); its result goes into the summary.
     report: object = None
+    #: physical time of the whole run when the scene gave ``duration`` instead of ``steps``
+    #: (total steps = round(duration / dt)); :meth:`with_dt` keeps it, so a dt sweep compares
+    #: the same time.
+    duration: float | None = None
 
     def __post_init__(self):
         # engines key what they prepare by an operator's place (group, index in its sequence),
@@ -96,6 +103,17 @@ class Scene:
             self._o = np.concatenate([g.o for g in self.groups.values()])
             self._o.flags.writeable = False
         return self._o
+
+    def held(self) -> np.ndarray:
+        """Which particles are held at their original positions (supports), in global order."""
+        if getattr(self, "_held", None) is None:
+            self._held = np.concatenate([g.held for g in self.groups.values()])
+            self._held.flags.writeable = False
+        return self._held
+
+    def initial_velocities(self) -> np.ndarray:
+        """v at step 0 of every particle in global order (zero unless a group sets ``v0``)."""
+        return np.concatenate([g.v0 for g in self.groups.values()])
 
     def radii(self) -> np.ndarray:
         """r of every particle in global order (built once; read-only)."""
@@ -139,6 +157,35 @@ class Scene:
             phases = [Phase(self.phases[0].name, 0, self.phases[0].vars)]
         return Scene(self.name, self.groups, self.operators, phases, self.dt, 1, self.bound,
                      {**self.params, "steps": steps}, self.report)
+
+    def with_dt(self, dt: float) -> "Scene":
+        """The same scene with time step ``dt``; what was given as a physical time stays one.
+
+        A phase given by ``duration`` gets round(duration / dt) steps, and a scene given by a
+        total ``duration`` is run for round(duration / dt) iterations, so a dt sweep compares
+        the same physical time; a scene given in steps keeps its steps.
+
+        Example
+        -------
+        >>> sc.with_dt(0.005).total_steps     # doctest: +SKIP  (duration = 3: 600 steps)
+        """
+        dt = float(dt)
+        if not (np.isfinite(dt) and dt > 0):
+            raise SceneError(f"scene '{self.name}': time step dt must be positive, got {dt!r}")
+        if self.duration is None and all(p.duration is None for p in self.phases):
+            self.dt = dt                      # given in steps: only the step changes
+            self.params["dt"] = dt
+            self.validate()
+            return self
+        phases = [Phase(p.name, steps_for(p.duration, dt, f"phase '{p.name}'"), p.vars,
+                        p.duration) if p.duration is not None else p for p in self.phases]
+        sc = Scene(self.name, self.groups, self.operators, phases, dt, self.cycles, self.bound,
+                   {**self.params, "dt": dt}, self.report, self.duration)
+        if self.duration is not None:
+            sc = sc.with_steps(steps_for(self.duration, dt, "duration"))
+            sc.duration = self.duration
+            sc.params["duration"] = self.duration
+        return sc
 
     # ------------------------------------------------------------------ validation
     def validate(self) -> None:
@@ -192,3 +239,13 @@ class Scene:
                 f"({len(pairs)} coincident pair(s) in all). Collision and binding forces "
                 "(Eqs. 10, 12) divide by the squared distance, which is zero there: move or "
                 "remove one of them.")
+
+
+def steps_for(duration: float, dt: float, what: str = "duration") -> int:
+    """Iterations covering the physical time ``duration`` at time step ``dt``: round(T / dt).
+
+    The time reached, steps·dt, is within dt/2 of ``duration``.
+    """
+    if not (np.isfinite(duration) and duration >= 0):
+        raise SceneError(f"{what} must be a non-negative physical time, got {duration!r}")
+    return int(round(duration / dt))

@@ -1,40 +1,62 @@
 """The paper's false-colour stress pictures, a sheet like Fig. 12, a movie, and plots of a run.
 
-``render(rundir, ...)`` (``rackstress render RUNDIR``) writes into ``RUNDIR/figures/``:
+``render(rundir, ...)`` (``rackstress render RUNDIR``) writes into ``RUNDIR/figures/`` (the paper
+measure) or ``RUNDIR/figures/MEASURE/`` (any other measure), or ``out`` if given. It adds files
+and replaces only files of the same name: renders never delete each other's pictures.
 
 * ``{view}_{step:06d}.png`` — one picture per chosen frame and view, pyvista off-screen: every
-  particle of the displayed parts as a sphere, grey (0.6, 0.6, 0.6) and translucent (α = 0.15)
-  at zero stress, redder and more opaque as the stress grows, red and opaque (α = 1) at the top
-  of the colour scale (Section 5.2); a colour bar with the measure and its units; the iteration
-  at the bottom (as in Fig. 12). The scale's top is ``vmax`` if given, else the 99th percentile
-  of the measure over the displayed particles in the chosen frames (one scale for all pictures
-  and the movie, so they compare).
-* ``sheet.png`` — the chosen frames side by side, one row per view (Fig. 12);
+  particle of the coloured parts as a sphere, grey (0.6, 0.6, 0.6) and translucent (α = 0.15) at
+  zero stress, redder and more opaque as the stress grows, red and opaque (α = 1) at the top of the
+  colour scale (Section 5.2; ``cmap`` swaps grey→red for a matplotlib colour map, keeping the
+  opacity ramp). Above the model, never over it: the title, the colour bar with the measure and
+  its units, the legend of parts (coloured, context, hidden) and the run's peak; in the picture
+  the iteration (as in Fig. 12), each part's name beside it, and in the peak frame a ring round
+  the peak particle.
+* ``sheet.png`` — the chosen frames side by side, one row per view (Fig. 12), the peak frame
+  marked;
 * ``movie.mp4`` (``movie=True``) — every frame of the run (at most ``movie_max_frames``, evenly
-  strided) in the first view, H.264 through imageio-ffmpeg;
-* ``stress_over_time.png`` — max and mean of the measure per displayed part against the
-  iteration;
+  strided) in ``movie_view`` (default: the first view), H.264 through imageio-ffmpeg;
+* ``stress_over_time.png`` — max and mean of the measure per coloured part against the
+  iteration, the peak marked;
 * ``com_path.png`` — each part's centre-of-mass path, top view (x–z) and side view (x–y);
 * ``footprints.png`` — for a group of kind ``sediment``, its particles' deepest vertical
   displacement as a top-view map (skipped with a note when the scene has no sediment);
-* ``render.json`` — what was rendered: measure, scale, frames asked and used, views, notes,
-  timings.
+* ``render.json`` — what was rendered: measure, scale, peak, frames asked and used, parts,
+  views, notes, timings.
 
-Views, as Fig. 3, relative to the walking direction (MagPod walks towards +x, y is up, its right
-side is +z): ``right`` looks from +z, ``left`` from −z, ``front`` from +x (at its face),
+**Frames.** By default four frames spread over the run (the paper's Fig. 12 iterations 1320,
+2600, 4720, 17480 when the run reaches them) *and the peak frame* — the iteration at which the
+measure is largest over the coloured parts. **Scale.** By default the colour scale runs from 0 to
+that peak value, so the peak is never clipped; ``vmax`` sets it. The measures come from
+:func:`rackstress.stress.post.compute_fields` (cached in ``RUNDIR/measures.npz``), the same
+numbers as ``summary.json``'s peaks, the report and the VTK files; the paper measure uses the
+robust fit everywhere.
+
+**Views**, as Fig. 3, relative to the walking direction (MagPod walks towards +x, y is up, its
+right side is +z): ``right`` looks from +z, ``left`` from −z, ``front`` from +x (at its face),
 ``back`` from −x, ``top`` from +y, ``iso`` from (+x, +y, +z). The camera is orthographic, follows
-the displayed parts' centre, and keeps one scale for the whole render.
+the coloured parts' centre, and keeps one scale for the whole render, fitted to the parts' own
+extent (1st–99th percentile of their particles): a part that flew far from the others, or a few
+particles that flew from their part, are left out of the framing with a note, so the rest does
+not shrink to dots.
 
-Which particles: the parts of kind other than ``rack`` and ``sediment`` are drawn coloured by
-stress; racks are not drawn (the paper's invisible mechanism); a sediment is drawn as light grey
-context (it has no rest shape; see ``footprints.png``). Frames asked for that the dump does not
-hold are replaced by the nearest dumped frame, and ``render`` says so.
+**Parts** (``groups``): by default the parts of kind other than ``rack`` and ``sediment`` are
+coloured by stress, a sediment is light-sand context (it has no rest shape; see
+``footprints.png``) and racks are hidden (the paper's invisible mechanism). ``groups=["body",
+"leftleg"]`` shows only those (coloured, whatever their kind); ``groups=["-sediment"]`` hides one
+from the default set.
 
-Files appear all at once: everything is written into a temporary directory that replaces
-``figures/`` only when complete; on any error nothing of the render remains.
+**Speed.** One off-screen plotter serves every view and frame (points and colours are updated in
+place, no multisampling: spheres are drawn as point sprites), pictures are read straight from the
+render window and saved with light PNG compression, and the sheet is tiled with NumPy.
+
+Frames asked for that the dump does not hold are replaced by the nearest dumped frame, and
+``render`` says so. Everything is written into a temporary directory first and moved in only
+when complete; on any error nothing of the render remains.
 """
 from __future__ import annotations
 
+import functools
 import json
 import os
 import shutil
@@ -44,7 +66,9 @@ from pathlib import Path
 
 import numpy as np
 
-from rackstress.stress import MEASURES, PartMotion, StressInputError, load_run
+from rackstress.lib.jsonio import write_json
+from rackstress.stress import PartMotion, StressInputError, load_run
+from rackstress.stress.post import LABELS, compute_fields
 
 #: The iterations of the paper's Fig. 12.
 PAPER_FRAMES = (1320, 2600, 4720, 17480)
@@ -64,6 +88,13 @@ ALPHA0 = 0.15
 CONTEXT_RGB, CONTEXT_ALPHA = (0.78, 0.74, 0.66), 0.12
 WINDOW = (1024, 768)
 FIGURES = "figures"
+#: Height of the strip above the model (title, colour bar, legend, peak): a multiple of 16.
+HEADER_H = 112
+#: A part whose centre is further than this many times the coloured parts' first-frame size
+#: from the others' box has flown away; particles this many part sizes outside their part's
+#: 1–99 % box likewise.
+FLOWN = 2.0
+PNG_COMPRESS = 1
 
 
 @dataclass
@@ -74,32 +105,51 @@ class RenderReport:
     timings: dict = field(default_factory=dict)
     vmax: float = 0.0
     frames: list = field(default_factory=list)   # (requested, frame index, step)
+    peak: dict | None = None
+    parts: dict = field(default_factory=dict)
+    report: Path | None = None
 
 
 # ----------------------------------------------------------------------------- colours
-def stress_rgba(values: np.ndarray, vmax: float) -> np.ndarray:
+def colour_table(cmap: str = "paper") -> np.ndarray:
+    """(256, 3) RGB in [0, 1] from zero to the top of the scale."""
+    s = np.linspace(0.0, 1.0, 256)
+    if cmap in (None, "paper"):
+        return GREY[None, :] * (1 - s[:, None]) + RED[None, :] * s[:, None]
+    import matplotlib
+
+    try:
+        cm = matplotlib.colormaps[cmap]
+    except KeyError:
+        raise StressInputError(f"unknown colour map '{cmap}'; use 'paper' (grey→red, Section "
+                               "5.2) or a matplotlib colour map name such as viridis, inferno, "
+                               "coolwarm") from None
+    return np.asarray(cm(s))[:, :3]
+
+
+def stress_rgba(values: np.ndarray, vmax: float, cmap: str = "paper") -> np.ndarray:
     """Section 5.2's colouring: grey translucent at 0 → red opaque at vmax (uint8 RGBA)."""
     s = np.clip(np.nan_to_num(np.asarray(values, float), nan=0.0) / vmax, 0.0, 1.0)
-    rgb = GREY[None, :] * (1.0 - s[:, None]) + RED[None, :] * s[:, None]
+    if cmap in (None, "paper"):
+        rgb = GREY[None, :] * (1.0 - s[:, None]) + RED[None, :] * s[:, None]
+    else:
+        rgb = colour_table(cmap)[np.round(s * 255).astype(int)]
     alpha = ALPHA0 + (1.0 - ALPHA0) * s
     return np.round(np.column_stack([rgb, alpha]) * 255).astype(np.uint8)
 
 
-def _bar_cmap():
-    from matplotlib.colors import ListedColormap
-
-    s = np.linspace(0.0, 1.0, 256)
-    return ListedColormap(GREY[None, :] * (1 - s[:, None]) + RED[None, :] * s[:, None])
-
-
-def _pyvista():
+def _offscreen():
     if not os.environ.get("DISPLAY"):
         # no X server: render through EGL, without VTK first trying (and warning about) X
         os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
-    import pyvista as pv
 
-    pv.OFF_SCREEN = True
-    return pv
+
+def _part_radius(run, part) -> float:
+    """The drawn radius of a part's particles, computed once per run."""
+    cache = run.__dict__.setdefault("_drawn_radius", {})
+    if part.name not in cache:
+        cache[part.name] = _radius(run.o[part.index])
+    return cache[part.name]
 
 
 def _radius(o: np.ndarray) -> float:
@@ -109,286 +159,740 @@ def _radius(o: np.ndarray) -> float:
     from scipy.spatial import cKDTree
 
     d = cKDTree(o).query(o, k=2)[0][:, 1]
-    return 0.5 * float(np.median(d))
+    return 0.5 * float(np.median(d)) or 0.5
 
 
-# ----------------------------------------------------------------------------- the painter
-class Painter:
-    """One off-screen pyvista plotter for one view; ``paint`` a frame → RGB image array."""
+@functools.lru_cache(maxsize=None)
+def _font(size: int):
+    import importlib.util
 
-    def __init__(self, run, view: str, vmax: float, label: str, half_height: float,
-                 window_size=WINDOW, title: str = ""):
-        pv = _pyvista()
-        if view not in VIEWS:
-            raise StressInputError(f"unknown view '{view}'; views: {', '.join(VIEWS)}")
-        self.run, self.view, self.vmax = run, view, vmax
-        self.pl = pv.Plotter(off_screen=True, window_size=list(window_size))
-        self.pl.set_background("white")
-        # No depth peeling: with EGL/Mesa it drops sphere-imposter points altogether. Points are
-        # drawn back to front instead (``paint`` sorts them), which blends translucency right.
-        px_per_unit = window_size[1] / (2.0 * half_height)
-        self.meshes = []
-        o = run.o
-        for part in run.displayed():
-            mesh = pv.PolyData(o[part.index].copy())
-            mesh.point_data["rgba"] = np.zeros((part.n, 4), dtype=np.uint8)
-            size = max(2.0, 2.0 * _radius(o[part.index]) * px_per_unit)
-            actor = self.pl.add_mesh(mesh, scalars="rgba", rgba=True, point_size=size,
-                                     render_points_as_spheres=True, show_scalar_bar=False)
-            self.meshes.append((part, actor.mapper.dataset))
-        self.context = []
-        for part in run.context():
-            mesh = pv.PolyData(o[part.index].copy())
-            size = max(2.0, 2.0 * _radius(o[part.index]) * px_per_unit)
-            actor = self.pl.add_mesh(mesh, color=CONTEXT_RGB, opacity=CONTEXT_ALPHA,
-                                     point_size=size, render_points_as_spheres=True)
-            self.context.append((part, actor.mapper.dataset))
-        bar = pv.PolyData(np.zeros((2, 3)))
-        self.pl.add_mesh(bar, scalars=np.array([0.0, vmax]), cmap=_bar_cmap(), clim=(0.0, vmax),
-                         opacity=0.0, show_scalar_bar=True,
-                         scalar_bar_args=dict(title=label, color="black", vertical=False,
-                                              position_x=0.5, position_y=0.86, width=0.46,
-                                              height=0.08, title_font_size=16,
-                                              label_font_size=14, fmt="%.3g", n_labels=5))
-        self.pl.add_text(title, position="upper_left", font_size=10, color="black")
-        self.step_text = self.pl.add_text(" ", position="lower_edge", font_size=16,
-                                          color="black")
-        direction, up = VIEWS[view]
-        cam = self.pl.camera
-        cam.parallel_projection = True
-        self.direction = np.asarray(direction) / np.linalg.norm(direction)
-        cam.up = up
-        cam.parallel_scale = half_height
-        self.half_height = half_height
+    from PIL import ImageFont
 
-    def paint(self, p: np.ndarray, values: np.ndarray, step: int, centre: np.ndarray):
-        for part, mesh in self.meshes:
-            q = p[part.index]
-            order = np.argsort(q @ self.direction, kind="stable")   # farthest first
-            mesh.points = q[order]
-            mesh.point_data["rgba"] = stress_rgba(values[part.index][order], self.vmax)
-            mesh.Modified()
-        for part, mesh in self.context:
-            q = p[part.index]
-            mesh.points = q[np.argsort(q @ self.direction, kind="stable")]
-            mesh.Modified()
-        cam = self.pl.camera
-        cam.focal_point = tuple(centre)
-        cam.position = tuple(centre + self.direction * 10.0 * self.half_height)
-        cam.parallel_scale = self.half_height
-        self.pl.renderer.ResetCameraClippingRange()
-        self.step_text.set_text("lower_edge", f"{step} iterations")
-        self.pl.render()
-        return self.pl.screenshot(return_img=True)
-
-    def close(self):
-        self.pl.close()
+    # matplotlib's own copy of DejaVu Sans (found without importing matplotlib, which is slow)
+    base = Path(importlib.util.find_spec("matplotlib").origin).parent
+    return ImageFont.truetype(str(base / "mpl-data" / "fonts" / "ttf" / "DejaVuSans.ttf"), size)
 
 
+# ----------------------------------------------------------------------------- parts
+def select_parts(run, groups=None) -> tuple[list, list, list]:
+    """(coloured parts, context parts, hidden names) for ``groups`` (module docstring)."""
+    names = list(run.parts)
+    if not groups:
+        coloured = run.displayed()
+        context = run.context()
+    else:
+        tokens = [g.strip() for g in groups if g and g.strip()]
+        unknown = [t.lstrip("-") for t in tokens if t.lstrip("-") not in run.parts]
+        if unknown:
+            raise StressInputError(f"--groups: no part(s) {', '.join(unknown)} in {run.rundir}; "
+                                   f"parts: {', '.join(names)}")
+        shown = [t for t in tokens if not t.startswith("-")]
+        hidden = {t[1:] for t in tokens if t.startswith("-")}
+        if shown:
+            coloured = [run.parts[n] for n in names if n in shown and n not in hidden]
+            context = []
+        else:
+            coloured = [p for p in run.displayed() if p.name not in hidden]
+            context = [p for p in run.context() if p.name not in hidden]
+    if not coloured:
+        raise StressInputError(f"{run.rundir}: no part to colour (parts: {', '.join(names)}; "
+                               "every group is a rack or sediment, or --groups hid them all)")
+    shown = {p.name for p in coloured + context}
+    return coloured, context, [n for n in names if n not in shown]
+
+
+# ----------------------------------------------------------------------------- framing
 def _screen_axes(view: str):
     direction, up = VIEWS[view]
     d = np.asarray(direction, float) / np.linalg.norm(direction)
     u = np.asarray(up, float) - np.dot(up, d) * d
     u /= np.linalg.norm(u)
-    return np.cross(u, d), u     # screen right, screen up
+    return np.cross(u, d), u, d     # screen right, screen up, towards the camera
 
 
-def _framing(motion, run, frames, view: str, aspect: float):
-    """Centre per frame and one half-height that fits the displayed parts in all ``frames``."""
-    names = motion.results.names
-    cols = [names.index(p.name) for p in run.displayed()] or list(range(len(names)))
-    lo = motion.results.lo[:, cols].min(axis=1)
-    hi = motion.results.hi[:, cols].max(axis=1)
-    centre = 0.5 * (lo + hi)
-    right, up = _screen_axes(view)
-    half = 0.5 * (hi - lo)[frames]                                   # (k, 3)
-    ext_up = np.abs(half) @ np.abs(up)
-    ext_right = np.abs(half) @ np.abs(right)
-    radius = max([_radius(run.o[p.index]) for p in run.displayed()] or [0.5])
-    h = float(max(ext_up.max(), ext_right.max() / aspect)) + 2 * radius
-    return centre, 1.12 * max(h, 1e-6)
+def _robust_box(q: np.ndarray):
+    if len(q) >= 20:
+        return np.quantile(q, 0.01, axis=0), np.quantile(q, 0.99, axis=0)
+    return q.min(axis=0), q.max(axis=0)
+
+
+def frame_boxes(run, positions: dict, parts, notes: list) -> dict:
+    """Per frame index: (lo, hi) of the box to frame — the parts' own extent, without a part
+    that flew away from the others or particles that flew away from their part (noted)."""
+    allq = np.concatenate([run.o[p.index] for p in parts])      # the rest shape's size
+    size0 = float(np.max(allq.max(axis=0) - allq.min(axis=0))) or 1.0
+    flown_parts, flown_particles = {}, {}
+    out = {}
+    for k in sorted(positions):
+        p = positions[k]
+        boxes = {}
+        for part in parts:
+            q = p[part.index]
+            lo, hi = _robust_box(q)
+            ext = float(np.max(hi - lo)) or size0
+            far = np.any((q < lo - FLOWN * ext) | (q > hi + FLOWN * ext), axis=1)
+            if far.any() and part.name not in flown_particles:
+                j = int(np.flatnonzero(far)[0])
+                flown_particles[part.name] = (int(far.sum()), int(run.data.ids[part.index[j]]),
+                                              int(run.steps[k]))
+            boxes[part.name] = (lo, hi)
+        keep = list(boxes)
+        if len(boxes) > 1:
+            for name, (lo, hi) in boxes.items():
+                others = [boxes[n] for n in boxes if n != name]
+                olo = np.min([b[0] for b in others], axis=0)
+                ohi = np.max([b[1] for b in others], axis=0)
+                c = 0.5 * (lo + hi)
+                gap = float(np.linalg.norm(np.maximum(0, np.maximum(olo - c, c - ohi))))
+                if gap > FLOWN * size0:
+                    keep.remove(name)
+                    flown_parts.setdefault(name, (gap, int(run.steps[k])))
+            if not keep:
+                keep = list(boxes)
+        lo = np.min([boxes[n][0] for n in keep], axis=0)
+        hi = np.max([boxes[n][1] for n in keep], axis=0)
+        out[k] = (lo, hi)
+    for name, (gap, step) in flown_parts.items():
+        notes.append(f"warning: part {name} flew away ({gap:.3g} units from the other parts at "
+                     f"iteration {step}); the pictures frame the other parts")
+    for name, (count, pid, step) in flown_particles.items():
+        notes.append(f"warning: {count} particle(s) of {name} flew away from their part (e.g. "
+                     f"particle {pid} at iteration {step}); the pictures frame the part without "
+                     "them")
+    return out
+
+
+def framing(run, positions: dict, parts, view: str, aspect: float, notes: list):
+    """({frame: centre}, one half-height) fitting the parts' own extent in every frame."""
+    boxes = frame_boxes(run, positions, parts, notes)
+    right, up, _ = _screen_axes(view)
+    centre, h = {}, 0.0
+    for k, (lo, hi) in boxes.items():
+        centre[k] = 0.5 * (lo + hi)
+        half = 0.5 * (hi - lo)
+        h = max(h, float(np.abs(half) @ np.abs(up)), float(np.abs(half) @ np.abs(right)) / aspect)
+    radius = max(_part_radius(run, p) for p in parts)
+    return centre, 1.1 * max(h + 2 * radius, 1e-6)
+
+
+# ----------------------------------------------------------------------------- the painter
+class Painter:
+    """One off-screen VTK render window for every view and frame; ``paint`` → RGB uint8 image.
+
+    Plain VTK (no pyvista plotter: importing its plotting layer costs more than painting a run's
+    default pictures): one actor per part, spheres drawn as point sprites
+    (``RenderPointsAsSpheres``), colours as direct RGBA scalars, no multisampling.
+    """
+
+    def __init__(self, run, coloured, context, vmax: float, cmap: str = "paper",
+                 window_size=WINDOW):
+        _offscreen()
+        import vtkmodules.vtkRenderingOpenGL2  # noqa: F401 - registers the OpenGL classes
+        from vtkmodules.vtkRenderingCore import (vtkActor, vtkPolyDataMapper, vtkRenderer,
+                                                 vtkRenderWindow)
+
+        self.run, self.vmax, self.cmap = run, vmax, cmap
+        self.size = (int(window_size[0]), int(window_size[1]))
+        self.ren = vtkRenderer()
+        self.ren.SetBackground(1.0, 1.0, 1.0)
+        self.rw = vtkRenderWindow()
+        self.rw.SetOffScreenRendering(1)
+        self.rw.SetMultiSamples(0)
+        self.rw.AddRenderer(self.ren)
+        self.rw.SetSize(*self.size)
+        # No depth peeling: with EGL/Mesa it drops sphere-imposter points altogether. Points are
+        # drawn back to front instead (``paint`` sorts them), which blends translucency right.
+        o = run.o
+        self.meshes, self.context = [], []
+        for parts, group, rgba in ((coloured, self.meshes, True), (context, self.context, False)):
+            for part in parts:
+                poly = _points_poly(o[part.index])
+                mapper = vtkPolyDataMapper()
+                mapper.SetInputData(poly)
+                actor = vtkActor()
+                actor.SetMapper(mapper)
+                prop = actor.GetProperty()
+                prop.SetRenderPointsAsSpheres(True)
+                if rgba:
+                    mapper.ScalarVisibilityOn()
+                    mapper.SetColorModeToDirectScalars()
+                    mapper.SetScalarModeToUsePointData()
+                else:
+                    mapper.ScalarVisibilityOff()
+                    prop.SetColor(*CONTEXT_RGB)
+                    prop.SetOpacity(CONTEXT_ALPHA)
+                self.ren.AddActor(actor)
+                group.append((part, poly, actor, _part_radius(run, part)))
+        self.ren.GetActiveCamera().ParallelProjectionOn()
+
+    def project(self, q: np.ndarray, view: str, centre, half: float) -> np.ndarray:
+        """Pixel (x, y from the top) of points q in a picture of ``view`` (orthographic)."""
+        right, up, _ = _screen_axes(view)
+        w, h = self.size
+        s = 0.5 * h / half
+        d = np.atleast_2d(q) - centre
+        return np.column_stack([0.5 * w + (d @ right) * s, 0.5 * h - (d @ up) * s])
+
+    def paint(self, p: np.ndarray, values: np.ndarray, view: str, centre, half: float):
+        from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy
+        from vtkmodules.vtkCommonCore import vtkUnsignedCharArray
+
+        right, up, direction = _screen_axes(view)
+        px_per_unit = self.size[1] / (2.0 * half)
+        for group, coloured in ((self.meshes, True), (self.context, False)):
+            for part, poly, actor, r in group:
+                q = p[part.index]
+                order = np.argsort(q @ direction, kind="stable")   # farthest first
+                poly.GetPoints().SetData(numpy_to_vtk(np.ascontiguousarray(q[order]), deep=True))
+                if coloured:
+                    rgba = stress_rgba(values[part.index][order], self.vmax, self.cmap)
+                    arr = numpy_to_vtk(rgba, deep=True)
+                    arr.SetName("rgba")
+                    poly.GetPointData().SetScalars(arr)
+                poly.Modified()
+                actor.GetProperty().SetPointSize(max(2.0, 2.0 * r * px_per_unit))
+        cam = self.ren.GetActiveCamera()
+        cam.SetFocalPoint(*map(float, centre))
+        cam.SetPosition(*map(float, np.asarray(centre) + direction * 10.0 * half))
+        cam.SetViewUp(*map(float, up))
+        cam.SetParallelScale(half)
+        self.ren.ResetCameraClippingRange()
+        self.rw.Render()
+        buf = vtkUnsignedCharArray()
+        w, h = self.size
+        self.rw.GetPixelData(0, 0, w - 1, h - 1, 0, buf, 0)
+        return vtk_to_numpy(buf).reshape(h, w, 3)[::-1].copy()
+
+    def close(self):
+        self.rw.Finalize()
+
+
+def _points_poly(q: np.ndarray):
+    from vtkmodules.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray
+    from vtkmodules.vtkCommonCore import vtkPoints
+    from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData
+
+    n = len(q)
+    pts = vtkPoints()
+    pts.SetData(numpy_to_vtk(np.ascontiguousarray(q, dtype=np.float64), deep=True))
+    verts = vtkCellArray()
+    verts.SetData(numpy_to_vtkIdTypeArray(np.arange(n + 1, dtype=np.int64), deep=True),
+                  numpy_to_vtkIdTypeArray(np.arange(n, dtype=np.int64), deep=True))
+    poly = vtkPolyData()
+    poly.SetPoints(pts)
+    poly.SetVerts(verts)
+    return poly
+
+
+# ----------------------------------------------------------------------------- annotations
+def header_strip(width: int, title: str, label: str, vmax: float, cmap: str, legend: list,
+                 peak_line: str, height: int = HEADER_H) -> np.ndarray:
+    """The strip above a picture: title, legend and peak on the left, colour bar on the right."""
+    from PIL import Image, ImageDraw
+
+    img = Image.new("RGB", (width, height), "white")
+    dr = ImageDraw.Draw(img)
+    big, small = _font(17), _font(13)
+    left = int(0.5 * width) - 10
+    dr.text((10, 6), title, fill="black", font=big)
+    y = 32
+    for text, colour in legend:
+        dr.rectangle([10, y + 3, 22, y + 15], fill=colour, outline="black")
+        dr.text((28, y), text, fill="black", font=small)
+        y += 18
+    if peak_line:
+        dr.text((10, y), peak_line, fill=(150, 0, 0), font=small)
+    x0, x1 = int(0.55 * width), int(0.96 * width)
+    dr.text((x0, 6), label, fill="black", font=small)
+    table = (colour_table(cmap) * 255).round().astype(np.uint8)
+    cols = table[np.linspace(0, 255, x1 - x0).round().astype(int)]
+    bar = np.repeat(cols[None, :, :], 22, axis=0)
+    arr = np.asarray(img).copy()
+    arr[28:50, x0:x1] = bar
+    img = Image.fromarray(arr)
+    dr = ImageDraw.Draw(img)
+    dr.rectangle([x0, 28, x1 - 1, 49], outline="black")
+    for t in np.linspace(0.0, 1.0, 5):
+        x = x0 + t * (x1 - 1 - x0)
+        dr.line([x, 50, x, 55], fill="black")
+        s = f"{t * vmax:.3g}"
+        tw = dr.textlength(s, font=small)
+        dr.text((min(max(x - tw / 2, x0 - 10), x1 - tw), 57), s, fill="black", font=small)
+    del left
+    return np.asarray(img)
+
+
+def annotate(img: np.ndarray, step: int, view: str, labels: list, ring=None,
+             ring_text: str = "") -> np.ndarray:
+    """The iteration at the bottom (Fig. 12), the view, part names, a ring round the peak."""
+    from PIL import Image, ImageDraw
+
+    im = Image.fromarray(img)
+    dr = ImageDraw.Draw(im)
+    w, h = im.size
+    f16, f13 = _font(18), _font(13)
+    text = f"{step} iterations"
+    dr.text(((w - dr.textlength(text, font=f16)) / 2, h - 30), text, fill="black", font=f16)
+    dr.text((8, h - 24), f"{view} view", fill=(80, 80, 80), font=f13)
+    for name, (x, y) in labels:
+        if 0 <= x < w and 0 <= y < h:
+            dr.text((x - dr.textlength(name, font=f13) / 2, min(h - 48, y + 14)), name,
+                    fill=(40, 40, 160), font=f13)
+    if ring is not None:
+        x, y, r = ring
+        if -r <= x < w + r and -r <= y < h + r:
+            dr.ellipse([x - r, y - r, x + r, y + r], outline=(0, 0, 0), width=3)
+            dr.ellipse([x - r - 3, y - r - 3, x + r + 3, y + r + 3], outline=(255, 255, 255),
+                       width=2)
+            dr.text((x + r + 6, y - 8), ring_text, fill="black", font=f13)
+    return np.asarray(im)
+
+
+def _save_png(path: Path, img: np.ndarray) -> None:
+    from PIL import Image
+
+    Image.fromarray(img).save(path, compress_level=PNG_COMPRESS)
+
+
+class _Saver:
+    """PNG files written by a thread while the next picture renders (zlib releases the GIL)."""
+
+    def __init__(self):
+        from concurrent.futures import ThreadPoolExecutor
+
+        self.pool = ThreadPoolExecutor(max_workers=1)
+        self.futures = []
+
+    def save(self, path: Path, img: np.ndarray) -> None:
+        self.futures.append(self.pool.submit(_save_png, path, img))
+
+    def wait(self) -> None:
+        try:
+            for f in self.futures:
+                f.result()
+        finally:
+            self.pool.shutdown(wait=True)
+
+
+# ----------------------------------------------------------------------------- choices
+def default_iterations(run, peak_iteration: int | None = None) -> list:
+    """The paper's Fig. 12 iterations if the run reaches them, else 4 spread over the run;
+    and the peak iteration."""
+    last = int(run.steps[-1])
+    if last >= PAPER_FRAMES[-1]:
+        its = set(PAPER_FRAMES)
+    else:
+        its = {int(round(last * q)) for q in (0.25, 0.5, 0.75, 1.0)}
+    if peak_iteration is not None:
+        its.add(int(peak_iteration))
+    return sorted(its)
+
+
+def find_peak(run, values: np.ndarray, parts) -> dict | None:
+    """Largest value over the whole run among ``parts``: value, frame, iteration, particle."""
+    best = None
+    for part in parts:
+        sub = values[:, part.index]
+        fin = np.isfinite(sub)
+        if not fin.any():
+            continue
+        flat = int(np.argmax(np.where(fin, sub, -np.inf)))
+        k, j = divmod(flat, sub.shape[1])
+        if best is None or sub[k, j] > best["value"]:
+            best = {"value": float(sub[k, j]), "frame": int(k), "iteration": int(run.steps[k]),
+                    "group": part.name, "row": int(part.index[j]), "index": int(j),
+                    "particle": int(run.data.ids[part.index[j]])}
+    return best
+
+
+def output_dir(rundir: Path, measure: str, out=None) -> Path:
+    """``out``, else ``RUNDIR/figures`` (paper measure) or ``RUNDIR/figures/MEASURE``."""
+    if out is not None:
+        return Path(out)
+    return rundir / FIGURES if measure == "paper" else rundir / FIGURES / measure
 
 
 # ----------------------------------------------------------------------------- render
-def default_iterations(run) -> list:
-    """The paper's Fig. 12 iterations if the run reaches them; else 4 spread over the run."""
-    last = int(run.steps[-1])
-    if last >= PAPER_FRAMES[-1]:
-        return list(PAPER_FRAMES)
-    return sorted({int(round(last * q)) for q in (0.25, 0.5, 0.75, 1.0)})
-
-
-def _choose_vmax(values, run, frames, vmax, notes) -> float:
-    if vmax is not None:
-        if not vmax > 0:
-            raise StressInputError(f"--vmax must be positive, got {vmax}")
-        return float(vmax)
-    idx = np.concatenate([p.index for p in run.displayed()] or [np.arange(run.n_atoms)])
-    sel = values[np.ix_(frames, idx)]
-    sel = sel[np.isfinite(sel)]
-    v = float(np.percentile(sel, 99)) if sel.size else 0.0
-    if not v > 0:
-        notes.append("the measure is zero on every displayed particle of the chosen frames; "
-                     "colour scale set to 0..1")
-        return 1.0
-    return v
-
-
 def render(rundir, frames=None, measure: str = "paper", views=DEFAULT_VIEWS, movie: bool = False,
            vmax: float | None = None, allow_truncated: bool = False, window_size=WINDOW,
-           movie_max_frames: int = 400, fps: int = 10, plots: bool = True) -> RenderReport:
-    """Render the pictures, sheet, optional movie and plots of a run into RUNDIR/figures/."""
-    t0 = time.perf_counter()
+           movie_max_frames: int = 400, fps: int = 10, plots: bool = True, groups=None,
+           out=None, cmap: str = "paper", movie_view: str | None = None,
+           progress: bool = False) -> RenderReport:
+    """Render the pictures, sheet, optional movie and plots of a run (module docstring).
+
+    Parameters
+    ----------
+    rundir : path
+        A run directory.
+    frames : list of int, optional
+        Iterations to picture (nearest dumped frame); default: spread over the run + the peak.
+    measure : str
+        ``paper``, ``accumulated``, ``strain``, ``d2min`` or ``virial``.
+    views : list of str
+        Any of ``right, left, front, back, top, iso``.
+    movie, movie_view : bool, str
+        Also write ``movie.mp4`` of ``movie_view`` (default: the first view).
+    vmax : float, optional
+        Top of the colour scale; default: the peak over the coloured parts.
+    groups : list of str, optional
+        Parts to show (``body``) or hide (``-sediment``).
+    out : path, optional
+        Output folder (default ``RUNDIR/figures`` or ``RUNDIR/figures/MEASURE``).
+    cmap : str
+        ``paper`` (grey→red) or a matplotlib colour map name.
+    progress : bool
+        A progress bar on a terminal.
+
+    Returns
+    -------
+    RenderReport
+
+    Example
+    -------
+    >>> rep = render("runs/plane-rack", views=["right", "top"], movie=True)   # doctest: +SKIP
+    >>> rep.peak["iteration"], rep.vmax                                       # doctest: +SKIP
+    """
+    from rackstress.lib.progress import progress_bar
+
+    t0, c0 = time.perf_counter(), time.process_time()
     rundir = Path(rundir)
-    if measure not in MEASURES:
-        raise StressInputError(f"unknown measure '{measure}'; measures: {', '.join(MEASURES)}")
+    if measure not in LABELS:
+        raise StressInputError(f"unknown measure '{measure}'; measures: {', '.join(LABELS)}")
     views = list(views)
     if not views:
         raise StressInputError("no view given; views: " + ", ".join(VIEWS))
-    for v in views:
+    movie_view = movie_view or views[0]
+    for v in [*views, movie_view]:
         if v not in VIEWS:
             raise StressInputError(f"unknown view '{v}'; views: {', '.join(VIEWS)}")
+    if vmax is not None and not vmax > 0:
+        raise StressInputError(f"--vmax must be positive, got {vmax}")
+    colour_table(cmap)                                         # fail early on a bad name
     run = load_run(rundir, allow_truncated=allow_truncated)
-    report = RenderReport(rundir / FIGURES)
+    outdir = output_dir(rundir, measure, out)
+    report = RenderReport(outdir)
     if run.truncation:
         report.notes.append(f"{run.truncation}; rendering the complete frames only")
-    if not run.displayed():
-        raise StressInputError(f"{rundir}: no part to draw (every group is a rack or sediment)")
-    t = time.perf_counter()
-    ana = MEASURES[measure](run).run()
-    motion = PartMotion(run).run()
-    report.timings["load+analyse_s"] = time.perf_counter() - t0
-    values = ana.results.per_particle
-    label = f"{ana.LABEL} [{ana.UNITS}]"
-    asked = list(frames) if frames else default_iterations(run)
+    coloured, context, hidden = select_parts(run, groups)
+    report.parts = {"coloured": [p.name for p in coloured], "context": [p.name for p in context],
+                    "hidden": hidden}
+    fields = compute_fields(run, cache=True)
+    if measure not in fields.values:
+        from rackstress.stress.measures import VirialStress
+
+        VirialStress(run)                 # raises the clear error: the dump has no virial
+    values = fields.values[measure]
+    label = fields.label(measure)
+    report.timings["load+measures_s"] = time.perf_counter() - t0
+    peak = find_peak(run, values, coloured)
+    report.peak = peak
+    if frames:
+        asked = list(frames)
+    else:
+        asked = default_iterations(run, peak["iteration"] if peak else None)
     report.frames = run.nearest_frames(asked)
     for req, k, step in report.frames:
         if req != step:
             report.notes.append(f"iteration {req} is not in the dump; using the nearest frame, "
                                 f"iteration {step}")
-    fidx = [k for _, k, _ in report.frames]
-    report.vmax = _choose_vmax(values, run, fidx, vmax, report.notes)
+    if vmax is not None:
+        report.vmax = float(vmax)
+        if peak and peak["value"] > vmax:
+            report.notes.append(f"the peak {peak['value']:.4g} is above --vmax {vmax:.4g}: "
+                                "it shows clipped at full red")
+    elif peak and peak["value"] > 0:
+        report.vmax = peak["value"]
+    else:
+        report.vmax = 1.0
+        report.notes.append("the measure is zero on every coloured particle; colour scale "
+                            "set to 0..1")
 
-    tmp = rundir / f".{FIGURES}.tmp{os.getpid()}"
+    tmp = rundir / f".render.tmp{os.getpid()}"
     if tmp.exists():
         shutil.rmtree(tmp)
     tmp.mkdir()
     try:
-        t = time.perf_counter()
-        pictures = _pictures(run, motion, values, report, views, label, window_size, tmp)
-        report.timings["pictures_s"] = time.perf_counter() - t
-        t = time.perf_counter()
-        _sheet(pictures, report, views, tmp / "sheet.png")
-        report.files.append("sheet.png")
-        report.timings["sheet_s"] = time.perf_counter() - t
-        if movie:
+        n_pics = len({k for _, k, _ in report.frames}) * len(views)
+        movie_ks = _movie_frames(run, movie_max_frames) if movie else []
+        # the plots (matplotlib) are drawn by a forked process while this one paints
+        plotter = _Background(_plots, run, values, label, coloured, context, report, tmp) \
+            if plots else None
+        with progress_bar(n_pics + len(movie_ks), progress, "pictures") as bar:
+            bar.unit = "picture"
             t = time.perf_counter()
-            n = _movie(run, motion, values, report, views[0], label, window_size,
-                       movie_max_frames, fps, tmp / "movie.mp4")
-            report.files.append("movie.mp4")
-            report.timings["movie_s"] = time.perf_counter() - t
-            report.timings["movie_frames"] = n
-        if plots:
+            painter = Painter(run, coloured, context, report.vmax, cmap, window_size)
+            try:
+                pictures = _pictures(run, painter, values, report, views, label, cmap, coloured,
+                                     context, hidden, tmp, bar)
+                report.timings["pictures_s"] = time.perf_counter() - t
+                report.timings["pictures_cpu_s"] = time.process_time() - c0
+                t = time.perf_counter()
+                _sheet(pictures, run, report, views, label, cmap, coloured, context, hidden,
+                       tmp / "sheet.png")
+                report.files.append("sheet.png")
+                report.timings["sheet_s"] = time.perf_counter() - t
+                if movie:
+                    t = time.perf_counter()
+                    _movie(run, painter, values, report, movie_view, label, cmap, coloured,
+                           context, hidden, movie_ks, fps, tmp / "movie.mp4", bar)
+                    report.files.append("movie.mp4")
+                    report.timings["movie_s"] = time.perf_counter() - t
+                    report.timings["movie_frames"] = len(movie_ks)
+            finally:
+                painter.close()
+        if plotter is not None:
             t = time.perf_counter()
-            _plots(run, ana, motion, report, tmp)
-            report.timings["plots_s"] = time.perf_counter() - t
+            files, notes, wall = plotter.join()
+            report.files += files
+            report.notes += notes
+            report.timings["plots_s"] = wall
+            report.timings["plots_wait_s"] = time.perf_counter() - t
         report.timings["total_s"] = time.perf_counter() - t0
+        report.timings["cpu_s"] = time.process_time() - c0
         manifest = {"rundir": str(rundir), "measure": measure, "label": label,
-                    "vmax": report.vmax, "views": views,
-                    "frames": [{"requested": r, "frame": k, "iteration": s}
+                    "fit": fields.fit, "vmax": report.vmax, "cmap": cmap, "views": views,
+                    "movie_view": movie_view if movie else None,
+                    "peak": report.peak, "parts": report.parts,
+                    "frames": [{"requested": r, "frame": k, "iteration": s,
+                                "peak": bool(peak and k == peak["frame"])}
                                for r, k, s in report.frames],
                     "files": report.files, "notes": report.notes, "timings": report.timings}
-        (tmp / "render.json").write_text(json.dumps(manifest, indent=2) + "\n")
+        write_json(tmp / "render.json", manifest)
         report.files.append("render.json")
-        _swap_in(tmp, rundir / FIGURES)
+        _move_in(tmp, outdir)
     except BaseException:
+        if plots and "plotter" in locals() and plotter is not None:
+            plotter.kill()
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     return report
 
 
-def render_default(rundir) -> RenderReport:
-    """What ``rackstress run`` renders at the end: the paper measure, default frames and views,
-    sheet and plots (no movie)."""
-    return render(rundir)
+class _Background:
+    """``fn(run, values, label, coloured, context, report, out)`` in a forked child process,
+    concurrently with the pictures (this machine's second core); ``join`` → (files, notes,
+    wall time) it added to the report, or re-raises its error. Where fork is not available it
+    runs in this process at ``join``."""
 
+    def __init__(self, fn, run, values, label, coloured, context, report, out: Path):
+        import multiprocessing as mp
 
-def _swap_in(tmp: Path, final: Path) -> None:
-    old = final.with_name(f".{final.name}.old{os.getpid()}")
-    if final.exists():
-        os.replace(final, old)
-    os.replace(tmp, final)
-    if old.exists():
-        shutil.rmtree(old, ignore_errors=True)
+        self.args = (fn, run, values, label, coloured, context, report, out)
+        self.result = out / ".plots.json"
+        self.proc = None
+        if "fork" in mp.get_all_start_methods():
+            self.proc = mp.get_context("fork").Process(target=self._child, daemon=True)
+            self.proc.start()
 
-
-def _pictures(run, motion, values, report, views, label, window_size, out: Path) -> dict:
-    """{(view, frame index): image} and the PNGs."""
-    from matplotlib import image as mpimg
-
-    images = {}
-    fidx = [k for _, k, _ in report.frames]
-    aspect = window_size[0] / window_size[1]
-    title = f"{run.scene.get('scene', run.rundir.name)} — "
-    for view in views:
-        centre, half = _framing(motion, run, fidx, view, aspect)
-        painter = Painter(run, view, report.vmax, label, half, window_size,
-                          title=title + f"{view} view")
+    def _child(self):
+        fn, run, values, label, coloured, context, report, out = self.args
+        t = time.perf_counter()
+        report.files, report.notes = [], []
         try:
-            for _, k, step in report.frames:
-                if (view, k) in images:
-                    continue
-                ts = run.trajectory[k]
-                p = np.asarray(ts.data["positions64"])
-                img = painter.paint(p, values[k], step, centre[k])
-                images[(view, k)] = img
-                name = f"{view}_{step:06d}.png"
-                mpimg.imsave(out / name, img)
-                report.files.append(name)
-        finally:
-            painter.close()
+            fn(run, values, label, coloured, context, report, out)
+            rec = {"files": report.files, "notes": report.notes,
+                   "wall_s": time.perf_counter() - t}
+        except BaseException as exc:  # noqa: BLE001 - handed to the parent
+            rec = {"error": f"{type(exc).__name__}: {exc}"}
+        self.result.write_text(json.dumps(rec))
+        os._exit(0)
+
+    def join(self):
+        if self.proc is None:
+            fn, run, values, label, coloured, context, report, out = self.args
+            t = time.perf_counter()
+            n_files, n_notes = len(report.files), len(report.notes)
+            fn(run, values, label, coloured, context, report, out)
+            files, notes = report.files[n_files:], report.notes[n_notes:]
+            del report.files[n_files:], report.notes[n_notes:]
+            return files, notes, time.perf_counter() - t
+        self.proc.join()
+        try:
+            rec = json.loads(self.result.read_text())
+        except (OSError, json.JSONDecodeError):
+            raise RuntimeError(f"drawing the plots failed (exit code {self.proc.exitcode})")
+        self.result.unlink()
+        if "error" in rec:
+            raise RuntimeError(f"drawing the plots failed: {rec['error']}")
+        return rec["files"], rec["notes"], rec["wall_s"]
+
+    def kill(self):
+        if self.proc is not None and self.proc.is_alive():
+            self.proc.kill()
+            self.proc.join()
+
+
+def render_default(rundir, progress: bool = False) -> RenderReport:
+    """What ``rackstress run`` renders at the end: the paper measure, default frames and views,
+    sheet and plots (no movie); the render's wall time goes into ``summary.json``, and
+    ``RUNDIR/report.html`` is written."""
+    from rackstress.render.report import write_report
+
+    t0 = time.perf_counter()
+    rep = render(rundir, progress=progress)
+    wall = time.perf_counter() - t0
+    t = time.perf_counter()
+    rep.report = write_report(rundir)
+    rep.timings["report_s"] = time.perf_counter() - t
+    record_render(Path(rundir), rep, wall)
+    return rep
+
+
+def record_render(rundir: Path, rep: RenderReport, wall_s: float) -> None:
+    """``summary.json``'s ``render``: wall time, pictures, where (atomically)."""
+    path = rundir / "summary.json"
+    try:
+        summary = json.loads(path.read_text())
+    except (FileNotFoundError, json.JSONDecodeError):
+        return
+    summary["render"] = {"wall_s": wall_s, "outdir": str(rep.outdir.relative_to(rundir))
+                         if rep.outdir.is_relative_to(rundir) else str(rep.outdir),
+                         "files": len(rep.files),
+                         "pictures": sum(f.endswith(".png") for f in rep.files),
+                         "timings": rep.timings}
+    write_json(path, summary)
+
+
+def _move_in(tmp: Path, outdir: Path) -> None:
+    """Move every file of ``tmp`` into ``outdir`` (replacing same names only), then drop tmp."""
+    outdir.mkdir(parents=True, exist_ok=True)
+    for f in sorted(tmp.iterdir()):
+        if f.name != "render.json":
+            os.replace(f, outdir / f.name)
+    os.replace(tmp / "render.json", outdir / "render.json")   # the manifest last
+    shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _legend(run, coloured, context, hidden, cmap):
+    hot = tuple(int(round(255 * c)) for c in colour_table(cmap)[-1])
+    rows = [(f"coloured: {', '.join(p.name for p in coloured)}", hot)]
+    if context:
+        rows.append((f"context: {', '.join(p.name for p in context)}",
+                     tuple(int(255 * c) for c in CONTEXT_RGB)))
+    if hidden:
+        rows.append((f"hidden: {', '.join(hidden)}", (255, 255, 255)))
+    return rows
+
+
+def _peak_line(peak) -> str:
+    if not peak:
+        return ""
+    return (f"peak {peak['value']:.4g} at iteration {peak['iteration']}, "
+            f"particle {peak['particle']} ({peak['group']})")
+
+
+def _header(run, report, label, cmap, coloured, context, hidden, width) -> np.ndarray:
+    title = f"{run.scene.get('scene', run.rundir.name)}"
+    return header_strip(width, title, label, report.vmax, cmap,
+                        _legend(run, coloured, context, hidden, cmap), _peak_line(report.peak))
+
+
+def _one(run, painter, values, k, step, view, centre, half, coloured, header, report):
+    p = run.trajectory[k].data["positions64"]
+    img = painter.paint(p, values[k], view, centre, half)
+    labels = []
+    for part in coloured:
+        q = p[part.index]
+        low = q[np.argmin(q @ _screen_axes(view)[1])]          # name under the part
+        labels.append((part.name, tuple(painter.project(low, view, centre, half)[0])))
+    ring, ring_text = None, ""
+    pk = report.peak
+    if pk and k == pk["frame"]:
+        x, y = painter.project(p[pk["row"]], view, centre, half)[0]
+        r = max(10.0, 2.5 * _part_radius(run, run.parts[pk["group"]]) * painter.size[1]
+                / (2 * half))
+        ring, ring_text = (x, y, r), f"peak {pk['value']:.3g}"
+    img = annotate(img, step, view, labels, ring, ring_text)
+    return np.concatenate([header, img], axis=0)
+
+
+def _positions(run, ks) -> dict:
+    return {k: run.trajectory[k].data["positions64"].copy() for k in ks}
+
+
+def _pictures(run, painter, values, report, views, label, cmap, coloured, context, hidden,
+              out: Path, bar) -> dict:
+    """{(view, frame index): image} and the PNGs."""
+    images = {}
+    saver = _Saver()
+    ks = sorted({k for _, k, _ in report.frames})
+    pos = _positions(run, ks)
+    aspect = painter.size[0] / painter.size[1]
+    header = _header(run, report, label, cmap, coloured, context, hidden, painter.size[0])
+    for view in views:
+        centre, half = framing(run, pos, coloured, view, aspect,
+                               report.notes if view == views[0] else [])
+        for k in ks:
+            step = int(run.steps[k])
+            img = _one(run, painter, values, k, step, view, centre[k], half, coloured, header,
+                       report)
+            images[(view, k)] = img
+            name = f"{view}_{step:06d}.png"
+            saver.save(out / name, img)
+            report.files.append(name)
+            bar.update(1)
+    saver.wait()
     return images
 
 
-def _sheet(images, report, views, path: Path) -> None:
-    import matplotlib
+def _sheet(images, run, report, views, label, cmap, coloured, context, hidden,
+           path: Path) -> None:
+    """Fig. 12-like sheet: rows = views, columns = frames (half size), one header on top."""
+    from PIL import Image, ImageDraw
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    cols = []
-    for _, k, step in report.frames:
-        if (k, step) not in cols:
-            cols.append((k, step))
-    h, w = next(iter(images.values())).shape[:2]
-    fig, axes = plt.subplots(len(views), len(cols), squeeze=False,
-                             figsize=(3.2 * len(cols), 3.2 * len(views) * h / w + 0.3))
+    ks = sorted({k for _, k, _ in report.frames})
+    hh = HEADER_H
+    first = images[(views[0], ks[0])]
+    h, w = first.shape[0] - hh, first.shape[1]
+    cw, ch = w // 2, h // 2
+    lab_w, top = 28, 24
+    W = lab_w + cw * len(ks)
+    cells = np.full((top + ch * len(views), W, 3), 255, np.uint8)
     for r, view in enumerate(views):
-        for c, (k, step) in enumerate(cols):
-            ax = axes[r][c]
-            ax.imshow(images[(view, k)])
-            ax.set_axis_off()
-        axes[r][0].text(-0.02, 0.5, view, transform=axes[r][0].transAxes, rotation=90,
-                        ha="right", va="center", fontsize=9)
-    fig.tight_layout(pad=0.3)
-    fig.savefig(path, dpi=200)
-    plt.close(fig)
+        for c, k in enumerate(ks):
+            img = images[(view, k)][hh:]
+            small = np.asarray(Image.fromarray(img).reduce(2))
+            y, x = top + r * ch, lab_w + c * cw
+            cells[y:y + small.shape[0], x:x + small.shape[1]] = small
+    im = Image.fromarray(cells)
+    dr = ImageDraw.Draw(im)
+    f = _font(14)
+    for c, k in enumerate(ks):
+        peak = report.peak is not None and k == report.peak["frame"]
+        text = f"iteration {int(run.steps[k])}" + ("  (peak)" if peak else "")
+        x = lab_w + c * cw + (cw - dr.textlength(text, font=f)) / 2
+        dr.text((x, 4), text, fill=(170, 0, 0) if peak else "black", font=f)
+        if peak:
+            dr.rectangle([lab_w + c * cw + 1, top, lab_w + (c + 1) * cw - 2,
+                          top + ch * len(views) - 2], outline=(170, 0, 0), width=2)
+    for r, view in enumerate(views):
+        txt = Image.new("RGB", (ch, lab_w), "white")
+        ImageDraw.Draw(txt).text((ch / 2 - 20, 6), view, fill="black", font=f)
+        cells_rot = np.asarray(txt.rotate(90, expand=True))
+        im.paste(Image.fromarray(cells_rot), (0, top + r * ch))
+    header = _header(run, report, label, cmap, coloured, context, hidden, W)
+    sheet = np.concatenate([header, np.asarray(im)], axis=0)
+    _save_png(path, sheet)
 
 
-def _movie(run, motion, values, report, view, label, window_size, max_frames, fps,
-           path: Path) -> int:
-    import imageio_ffmpeg
-
+def _movie_frames(run, max_frames: int) -> list:
     n = run.index.n_frames
     stride = max(1, int(np.ceil(n / max_frames)))
     ks = list(range(0, n, stride))
     if ks[-1] != n - 1:
         ks.append(n - 1)
-    aspect = window_size[0] / window_size[1]
-    centre, half = _framing(motion, run, ks, view, aspect)
-    w, h = (int(window_size[0]) // 16 * 16, int(window_size[1]) // 16 * 16)
-    painter = Painter(run, view, report.vmax, label, half, (w, h),
-                      title=f"{run.scene.get('scene', run.rundir.name)} — {view} view")
+    return ks
+
+
+def _movie(run, painter, values, report, view, label, cmap, coloured, context, hidden, ks,
+           fps, path: Path, bar) -> int:
+    import imageio_ffmpeg
+
+    aspect = painter.size[0] / painter.size[1]
+    pos = _positions(run, ks)
+    centre, half = framing(run, pos, coloured, view, aspect, [])
+    header = _header(run, report, label, cmap, coloured, context, hidden, painter.size[0])
+    w, h = painter.size[0] // 16 * 16, (painter.size[1] + HEADER_H) // 16 * 16
     writer = imageio_ffmpeg.write_frames(str(path), (w, h), fps=fps, codec="libx264",
                                          pix_fmt_in="rgb24", pix_fmt_out="yuv420p",
                                          macro_block_size=16, quality=7,
@@ -396,43 +900,48 @@ def _movie(run, motion, values, report, view, label, window_size, max_frames, fp
     writer.send(None)
     try:
         for k in ks:
-            ts = run.trajectory[k]
-            img = painter.paint(np.asarray(ts.data["positions64"]), values[k],
-                                int(run.steps[k]), centre[k])
+            img = _one(run, painter, values, k, int(run.steps[k]), view, centre[k], half,
+                       coloured, header, report)
             writer.send(np.ascontiguousarray(img[:h, :w, :3]).tobytes())
+            bar.update(1)
     finally:
         writer.close()
-        painter.close()
     return len(ks)
 
 
-def _plots(run, ana, motion, report, out: Path) -> None:
-    import matplotlib
+def _plots(run, values, label, coloured, context, report, out: Path) -> None:
+    from matplotlib.figure import Figure     # no pyplot: no GUI backend, faster to import
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    steps = ana.results.steps
-    parts = run.displayed()
-    fig, ax = plt.subplots(figsize=(7, 4))
-    for k, part in enumerate(parts):
-        pp = ana.results.per_part[part.name]
+    steps = run.steps
+    fig = Figure(figsize=(7, 4))
+    ax = fig.subplots()
+    for k, part in enumerate(coloured):
+        v = values[:, part.index]
         colour = f"C{k % 10}"
-        ax.plot(steps, pp["max"], color=colour, label=f"{part.name} max")
-        ax.plot(steps, pp["mean"], color=colour, ls="--", label=f"{part.name} mean")
+        with np.errstate(all="ignore"):
+            fin = np.isfinite(v)
+            vmax = np.where(fin.any(axis=1), np.max(np.where(fin, v, -np.inf), axis=1), np.nan)
+            vmean = np.where(fin.any(axis=1), np.nansum(v, axis=1) / np.maximum(fin.sum(axis=1),
+                                                                                 1), np.nan)
+        ax.plot(steps, vmax, color=colour, label=f"{part.name} max")
+        ax.plot(steps, vmean, color=colour, ls="--", label=f"{part.name} mean")
+    pk = report.peak
+    if pk:
+        ax.plot([pk["iteration"]], [pk["value"]], "k*", ms=12,
+                label=f"peak {pk['value']:.3g} ({pk['group']}, it. {pk['iteration']})")
     ax.set_xlabel("iteration")
-    ax.set_ylabel(f"{ana.LABEL}\n[{ana.UNITS}]")
+    ax.set_ylabel(label.replace(" [", "\n["))
     ax.set_title(f"{run.scene.get('scene', '')}: stress per part over time")
     ax.legend(fontsize=7, ncol=2)
-    fig.tight_layout()
-    fig.savefig(out / "stress_over_time.png", dpi=130)
-    plt.close(fig)
+    fig.subplots_adjust(left=0.14, right=0.98, bottom=0.12, top=0.92)
+    fig.savefig(out / "stress_over_time.png", dpi=110)
     report.files.append("stress_over_time.png")
 
+    motion = PartMotion(run).run()
     names = motion.results.names
-    moving = parts
-    fig, (top, side) = plt.subplots(1, 2, figsize=(10, 4))
-    for k, part in enumerate(moving):
+    fig = Figure(figsize=(10, 4))
+    top, side = fig.subplots(1, 2)
+    for k, part in enumerate(coloured):
         c = motion.results.com[:, names.index(part.name)]
         for ax, (a, b) in ((top, (0, 2)), (side, (0, 1))):
             ax.plot(c[:, a], c[:, b], color=f"C{k % 10}", label=part.name)
@@ -444,23 +953,22 @@ def _plots(run, ana, motion, report, out: Path) -> None:
         ax.set_aspect("equal", adjustable="datalim")
         ax.grid(alpha=0.3)
     top.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(out / "com_path.png", dpi=130)
-    plt.close(fig)
+    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.13, top=0.92, wspace=0.25)
+    fig.savefig(out / "com_path.png", dpi=110)
     report.files.append("com_path.png")
 
-    sediments = run.context()
-    if not sediments:
-        report.notes.append("no sediment group: footprints plot skipped")
+    if not context:
+        report.notes.append("no sediment group shown: footprints plot skipped")
         return
-    fig, axes = plt.subplots(1, len(sediments), figsize=(8 * len(sediments), 4), squeeze=False)
-    for ax, part in zip(axes[0], sediments):
+    fig = Figure(figsize=(8 * len(context), 4))
+    axes = fig.subplots(1, len(context), squeeze=False)
+    for ax, part in zip(axes[0], context):
         dy = motion.results.footprints[part.name]["min_dy"]
         o = run.o[part.index]
         lim = float(np.abs(dy).max()) or 1.0
         sc = ax.scatter(o[:, 0], o[:, 2], c=dy, cmap="RdBu", vmin=-lim, vmax=lim, s=6,
                         marker="s")
-        com = motion.results.com[:, [names.index(p.name) for p in moving]]
+        com = motion.results.com[:, [names.index(p.name) for p in coloured]]
         for j in range(com.shape[1]):
             ax.plot(com[:, j, 0], com[:, j, 2], lw=0.8, color="k", alpha=0.5)
         # frame the walk, not the whole sediment: the displaced particles and the path, padded
@@ -478,6 +986,5 @@ def _plots(run, ana, motion, report, out: Path) -> None:
                      f"(iterations {steps[0]}–{steps[-1]})")
         fig.colorbar(sc, ax=ax, label="vertical displacement [length units]")
     fig.tight_layout()
-    fig.savefig(out / "footprints.png", dpi=130)
-    plt.close(fig)
+    fig.savefig(out / "footprints.png", dpi=110)
     report.files.append("footprints.png")

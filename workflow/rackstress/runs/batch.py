@@ -36,6 +36,7 @@ from __future__ import annotations
 import fcntl
 import inspect
 import json
+import re
 import os
 import shutil
 import threading
@@ -106,6 +107,9 @@ def figures(summary: dict) -> dict:
     out = {"steps": summary.get("steps"), "n_particles": summary.get("n_particles")}
     for g, rec in (summary.get("groups") or {}).items():
         out[f"groups.{g}.max_deformation"] = rec.get("max_deformation")
+        for m, pk in (rec.get("peak") or {}).items():
+            if pk is not None:
+                out[f"groups.{g}.peak.{m}.value"] = pk.get("value")
     cycles = (summary.get("report") or {}).get("cycles") or []
     if cycles:
         for k, v in cycles[-1].items():
@@ -133,8 +137,12 @@ def lookup(summary: dict, dotted: str):
 
 
 # ---------------------------------------------------------------------------- one job
-def run_job(job, sweep: Sweep, batchdir: Path, comm, group: int) -> dict | None:
+def run_job(job, sweep: Sweep, batchdir: Path, comm, group: int, post=None) -> dict | None:
     """Run one job on the ranks of ``comm`` into its own directory; the root returns its record.
+
+    ``post(rundir)``: post-processing of a finished job on its root (the CLI passes the stress
+    peaks of :mod:`rackstress.stress.post`, which this layer may not import); a failure there is
+    recorded in the job's ``post_error`` and the job stays ``ok``.
 
     Every outcome leaves a complete ``BATCHDIR/NAME`` (summary.json with the status); only a
     killed process leaves a ``.tmp-`` directory behind.
@@ -165,6 +173,13 @@ def run_job(job, sweep: Sweep, batchdir: Path, comm, group: int) -> dict | None:
         return None
     final = batchdir / job.name
     tmp.mkdir(parents=True, exist_ok=True)
+    post_error = None
+    if post is not None and status == "ok" and summary is not None:
+        try:
+            post(tmp)
+            summary = json.loads((tmp / "summary.json").read_text())
+        except Exception as exc:  # noqa: BLE001 - the run is complete; its figures stay
+            post_error = f"{type(exc).__name__}: {exc}"
     if status != "ok" or summary is None:
         try:
             summary = json.loads((tmp / "summary.json").read_text())
@@ -175,6 +190,8 @@ def run_job(job, sweep: Sweep, batchdir: Path, comm, group: int) -> dict | None:
     rec = {"name": job.name, "index": job.index, "params": job.params, "status": status,
            "error": error, "wall_s": wall, "group": group, "ranks": comm.Get_size(),
            "started": started, "ended": _now(), "figures": figures(summary)}
+    if post_error is not None:
+        rec["post_error"] = post_error
     _write_json(tmp / "job.json", {**job.record(), **rec})
     if final.exists():          # only possible if someone else made it: never half a job
         shutil.rmtree(final)
@@ -315,8 +332,10 @@ def prepare_dir(sweep: Sweep, batchdir: Path) -> None:
 
 
 def run_batch(sweep_path, out=None, ranks_per_job: int = 1, retry_failed: bool = False,
-              manager: str = "thread", log=print, comm=None) -> dict | None:
-    """Run (or finish) a sweep; world rank 0 returns the index, other ranks None."""
+              manager: str = "thread", log=print, comm=None, post=None) -> dict | None:
+    """Run (or finish) a sweep; world rank 0 returns the index, other ranks None.
+
+    ``post(rundir)`` post-processes each finished job (see :func:`run_job`)."""
     from mpi4py import MPI
 
     world = comm or MPI.COMM_WORLD
@@ -375,7 +394,7 @@ def run_batch(sweep_path, out=None, ranks_per_job: int = 1, retry_failed: bool =
             else:
                 mgr.serve()
         if sub != MPI.COMM_NULL:
-            _work(sweep, batchdir, world, sub, color, mgr)
+            _work(sweep, batchdir, world, sub, color, mgr, post)
         if thread is not None:
             thread.join()
     finally:
@@ -390,7 +409,7 @@ def run_batch(sweep_path, out=None, ranks_per_job: int = 1, retry_failed: bool =
     return None
 
 
-def _work(sweep: Sweep, batchdir: Path, world, sub, group: int, mgr) -> None:
+def _work(sweep: Sweep, batchdir: Path, world, sub, group: int, mgr, post=None) -> None:
     """A group's loop: the root asks for jobs, the members follow; all run each job."""
     root = sub.Get_rank() == 0
     result = None
@@ -407,7 +426,7 @@ def _work(sweep: Sweep, batchdir: Path, world, sub, group: int, mgr) -> None:
         if idx is None:
             return
         job = next(j for j in sweep.jobs if j.index == idx)
-        result = run_job(job, sweep, batchdir, sub, group)
+        result = run_job(job, sweep, batchdir, sub, group, post)
 
 
 # ---------------------------------------------------------------------------- report
@@ -431,6 +450,11 @@ def report(batchdir, figure: str | None = None, against: str | None = None, log=
         first = next((s for s in summaries.values() if s.get("groups")), {})
         g = next(iter(first.get("groups", {"?": 0})))
         figure = f"groups.{g}.max_deformation"
+    # a peak (groups.G.peak.M, summary.json after the stress post-processing): its value, and
+    # where and when it was, as extra columns
+    peak = re.fullmatch(r"(groups\.[^.]+\.peak\.[^.]+)(\.value)?", figure)
+    if peak:
+        figure = peak.group(1) + ".value"
     if against is None:
         if not swept:
             raise RackstressError(f"{batchdir}: the sweep varies nothing to plot against")
@@ -447,7 +471,12 @@ def report(batchdir, figure: str | None = None, against: str | None = None, log=
         rows.append({"name": j["name"], **eff,
                      "status": j["status"], figure: val, "wall_s": j.get("wall_s"),
                      "attempts": j.get("attempts")})
-    cols = ["name", *swept, "status", figure, "wall_s"]
+        if peak:
+            rec = lookup(s, peak.group(1)) if j["status"] == "ok" else None
+            rows[-1]["iteration"] = (rec or {}).get("iteration")
+            rows[-1]["particle"] = (rec or {}).get("particle")
+    cols = ["name", *swept, "status", figure, *(("iteration", "particle") if peak else ()),
+            "wall_s"]
 
     def cell(v):
         if v is None:

@@ -165,6 +165,10 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
     def report():
         if scene.report is not None and _is_root(comm):
             extra["report"] = scene.report(scene, records)
+        if _is_root(comm):   # guard rails: pass-through, force on racks (engines/guards.py)
+            from rackstress.engines.guards import check_run
+
+            extra["warnings"] = check_run(scene, out)
     try:
         if engine == "reference":
             mode = "exact"

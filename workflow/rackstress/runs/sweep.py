@@ -70,9 +70,7 @@ class Job:
 
         sc = scenes.load(spec, dict(self.scene_sets))
         if self.dt is not None:
-            sc.dt = float(self.dt)
-            sc.params["dt"] = float(self.dt)
-            sc.validate()
+            sc = sc.with_dt(float(self.dt))   # a scene given by duration keeps its time
         if self.steps is not None:
             sc = sc.with_steps(int(self.steps))
         return sc

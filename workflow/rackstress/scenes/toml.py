@@ -48,37 +48,64 @@ Two forms (``rackstress run FILE.toml``; ``--set KEY=VALUE`` overrides win over 
         steps = 1200
         vars = { r = 4, l = 6 }
 
-    ``--set`` may give ``dt``, ``steps``, ``cycles`` and ``bound``. With ``[[phase]]`` tables,
-    ``steps`` is the total number of iterations (the schedule repeated or cut short).
+    ``--set`` may give ``dt``, ``steps``, ``duration``, ``cycles``, ``bound`` and every name of
+    the scene's own ``[params]``. With ``[[phase]]`` tables, ``steps`` is the total number of
+    iterations (the schedule repeated or cut short).
+
+    Beyond the paper's model: parts filled from meshes and shapes (``mesh``, ``fill``, ``parts``,
+    ``spacing``, ``packing``), regions by shape wherever particles are selected (``where``,
+    ``held``, ``regions``), supports (``held``), initial velocities (``velocity``), the scene's
+    own ``[params]`` referred to as ``"$name"`` or ``"$(expression)"`` from any numeric field,
+    and ``duration`` (physical time) instead of ``steps``. docs/scenes.md is the reference: every
+    key, its type, default and meaning.
 
 Every problem is a :class:`SceneError` whose message names the file and the table and field.
+
+Example
+-------
+>>> from rackstress.scenes.toml import load_toml                  # doctest: +SKIP
+>>> scene = load_toml("examples/bracket/scene.toml", {"drop": 12})   # doctest: +SKIP
 """
 from __future__ import annotations
 
+import ast
 import math
+import operator as _op
 import re
 import string
+from pathlib import Path
 
 import numpy as np
 
 from rackstress.model import operators as ops_mod
 from rackstress.lib.toml import tomllib
 from rackstress.errors import SceneError
-from rackstress.model.operators import (norm2_below, Attract, Bind, Collide, Const, Contact, Dampen, Force, Matched, PhaseIn,
+from rackstress.model.operators import (Attract, Bind, Collide, Const, Contact, Dampen, Force, Matched, PhaseIn,
                         Within)
-from rackstress.model.particles import RACK_OFFSET, RACK_RADIUS, Group, lattice, rack
-from rackstress.model.scene import Phase, Scene
+from rackstress.model import regions as rg
+from rackstress.model.particles import (PACKINGS, RACK_OFFSET, RACK_RADIUS, Group, fill,
+                                        lattice, rack, union_positions)
+from rackstress.model.scene import Phase, Scene, steps_for
 
 #: Defaults of an explicit scene's top-level settings.
 DEFAULTS = {"dt": 0.01, "cycles": 1, "bound": 1.0e4, "steps": 1200}
-#: Keys ``--set`` may override in an explicit scene.
-OVERRIDABLE = ("dt", "steps", "cycles", "bound")
+#: Keys ``--set`` may override in an explicit scene (besides the names of its ``[params]``).
+OVERRIDABLE = ("dt", "steps", "duration", "cycles", "bound")
 
-_TOP_KEYS = ("name", "dt", "cycles", "bound", "steps", "group", "operator", "phase")
+_TOP_KEYS = ("name", "dt", "cycles", "bound", "steps", "duration", "params", "group",
+             "operator", "phase")
 _BUILTIN_KEYS = ("scene", "params")
-_GROUP_KEYS = ("name", "kind", "positions", "lattice", "rack", "radius", "offset", "regions")
+#: How a plain group's particles are made: exactly one of these (or ``rack``).
+_SOURCES = ("positions", "lattice", "mesh", "fill", "parts")
+_GROUP_KEYS = ("name", "kind", "rack", "offset") + _SOURCES + (
+    "spacing", "packing", "origin", "translate", "rotate", "scale", "radius", "regions", "held",
+    "velocity")
 _LATTICE_KEYS = ("shape", "spacing", "origin")
-_PHASE_KEYS = ("name", "steps", "vars")
+_PHASE_KEYS = ("name", "steps", "duration", "vars")
+#: Region shapes (docs/scenes.md "Regions"): the one key a region table names.
+REGION_KEYS = ("box", "sphere", "cylinder", "plane", "mesh", "ids", "norm2_lt", "union",
+               "intersection", "difference")
+_MESH_PLACEMENT = ("translate", "rotate", "scale")
 _COMMON_OP_KEYS = ("on", "op", "when", "contact")
 _OP_KEYS = {
     "force": ("accel", "where"),
@@ -240,49 +267,186 @@ def _load_builtin(ctx: _Ctx, data: dict, overrides: dict) -> Scene:
         raise SceneError(f"{ctx.file}: {exc}") from None
 
 
+# --------------------------------------------------------------------------- [params]
+#: Names a scene's [params] may not take: they are the scene's top-level settings.
+_RESERVED = OVERRIDABLE
+_PARAM_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+_BINOPS = {ast.Add: _op.add, ast.Sub: _op.sub, ast.Mult: _op.mul, ast.Div: _op.truediv,
+           ast.Pow: _op.pow, ast.Mod: _op.mod}
+_UNOPS = {ast.USub: _op.neg, ast.UAdd: _op.pos}
+_FUNCS = {"sqrt": math.sqrt, "sin": math.sin, "cos": math.cos, "tan": math.tan,
+          "radians": math.radians, "abs": abs, "min": min, "max": max}
+
+
+def _scene_params(ctx: _Ctx, data: dict, overrides: dict) -> tuple[dict, dict]:
+    """(params, settings overrides): the file's [params] with --set applied, and the --set
+    keys that are top-level settings."""
+    table = dict(_table(ctx, data.get("params", {}), "[params]"))
+    for key, value in table.items():
+        if key in _RESERVED:
+            raise ctx.error(f"'{key}' is a top-level setting of the scene, not a parameter: "
+                            f"set {key} = ... at the top level (--set {key}=... works on it "
+                            "as well)", f"[params] {key}")
+        if not _PARAM_NAME.match(key):
+            raise ctx.error("a parameter name must be letters, digits and _ (not starting "
+                            "with a digit)", f"[params] {key}")
+        if not isinstance(value, (int, float, str, bool)) or (
+                _is_number(value) and not math.isfinite(value)):
+            raise ctx.error(f"a parameter must be a finite number, a string or a boolean, got "
+                            f"{_describe(value)}", f"[params] {key}")
+    settings = {}
+    for key, value in overrides.items():
+        if key in OVERRIDABLE:
+            settings[key] = value
+            continue
+        if key not in table:
+            listing = ", ".join(f"{k}={v!r}" for k, v in table.items()) or "none"
+            raise ctx.error(f"the scene has no parameter '{key}'; --set takes "
+                            f"{', '.join(OVERRIDABLE)} and the scene's [params]: {listing}",
+                            "--set")
+        default = table[key]
+        if _is_number(default) and not _is_number(value):
+            raise ctx.error(f"parameter {key} must be a number (its default is {default!r}), "
+                            f"got {_describe(value)}", f"--set {key}")
+        if isinstance(default, bool) and not isinstance(value, bool):
+            raise ctx.error(f"parameter {key} must be true or false, got {_describe(value)}",
+                            f"--set {key}")
+        table[key] = value
+    return table, settings
+
+
+def _evaluate(text: str, params: dict, where: str, ctx: _Ctx):
+    """The value of a parameter reference: ``$name`` or ``$(expression)`` over [params]."""
+    body = text[1:].strip()
+    if body.startswith("(") and body.endswith(")"):
+        body = body[1:-1]
+    elif not _PARAM_NAME.match(body):
+        raise ctx.error(f"'{text}' is not a parameter reference; write \"$name\" or "
+                        "\"$(expression)\", e.g. \"$(2 * height + 1)\"", where)
+    try:
+        tree = ast.parse(body, mode="eval")
+    except SyntaxError:
+        raise ctx.error(f"'{text}': the expression is not valid (use numbers, [params] names, "
+                        "+ - * / ** %, parentheses and sqrt sin cos tan radians abs min max)",
+                        where) from None
+
+    def ev(node):
+        if isinstance(node, ast.Expression):
+            return ev(node.body)
+        if isinstance(node, ast.Constant) and _is_number(node.value):
+            return node.value
+        if isinstance(node, ast.Name):
+            if node.id in params:
+                return params[node.id]
+            if node.id == "pi":
+                return math.pi
+            listing = ", ".join(params) or "none"
+            raise ctx.error(f"'{text}' refers to '{node.id}', which is not in [params] "
+                            f"(defined: {listing})", where)
+        if isinstance(node, ast.BinOp) and type(node.op) in _BINOPS:
+            return _BINOPS[type(node.op)](ev(node.left), ev(node.right))
+        if isinstance(node, ast.UnaryOp) and type(node.op) in _UNOPS:
+            return _UNOPS[type(node.op)](ev(node.operand))
+        if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
+                and node.func.id in _FUNCS and not node.keywords):
+            return _FUNCS[node.func.id](*(ev(a) for a in node.args))
+        raise ctx.error(f"'{text}': {ast.unparse(node)!r} is not allowed in a parameter "
+                        "expression (numbers, [params] names, + - * / ** %, parentheses, "
+                        "sqrt sin cos tan radians abs min max)", where)
+
+    try:
+        value = ev(tree)
+    except (ArithmeticError, TypeError, ValueError) as exc:
+        raise ctx.error(f"'{text}' cannot be evaluated: {exc}", where) from None
+    if isinstance(value, float) and not math.isfinite(value):
+        raise ctx.error(f"'{text}' evaluates to {value!r}", where)
+    return value
+
+
+def _substitute(ctx: _Ctx, data, params: dict, path: str = ""):
+    """``data`` with every string starting with ``$`` replaced by its parameter's value."""
+    if isinstance(data, dict):
+        return {k: _substitute(ctx, v, params, _join(path, k)) for k, v in data.items()}
+    if isinstance(data, list):
+        return [_substitute(ctx, v, params, f"{path}[{i}]") for i, v in enumerate(data)]
+    if isinstance(data, str) and data.startswith("$"):
+        return _evaluate(data, params, path or "value", ctx)
+    return data
+
+
+def _join(path: str, key: str) -> str:
+    return f"{path}.{key}" if path else key
+
+
 # --------------------------------------------------------------------------- form (b)
 def _load_explicit(ctx: _Ctx, data: dict, overrides: dict) -> Scene:
     _check_keys(ctx.at("top level"), data, _TOP_KEYS)
     if "group" not in data:
         raise ctx.error("an explicit scene needs at least one [[group]] table (or name a "
                         "built-in scene with scene = \"...\")")
-    name = _string(ctx, _require(ctx.at("top level"), data, "name"), "name")
+    user, set_settings = _scene_params(ctx, data, overrides)
+    body = {k: v for k, v in data.items() if k != "params"}
+    body = _substitute(ctx, body, user)
+    set_settings = _substitute(ctx, set_settings, user, "--set")
+    return _build_explicit(ctx, body, set_settings, user)
 
-    bad = [k for k in overrides if k not in OVERRIDABLE]
-    if bad:
-        raise ctx.error(f"cannot override {', '.join(map(repr, bad))} of an explicit scene; "
-                        f"--set takes only {', '.join(OVERRIDABLE)} (edit the file for the rest)",
-                        "--set")
+
+def _build_explicit(ctx: _Ctx, data: dict, overrides: dict, user: dict) -> Scene:
+    name = _string(ctx, _require(ctx.at("top level"), data, "name"), "name")
     settings = {}
-    for key in ("dt", "cycles", "bound", "steps"):
+    for key in ("dt", "cycles", "bound", "steps", "duration"):
         if key in overrides:
             where, value = f"--set {key}", overrides[key]
         elif key in data:
             where, value = key, data[key]
         else:
-            settings[key] = DEFAULTS[key]
+            if key in DEFAULTS:
+                settings[key] = DEFAULTS[key]
             continue
         if key in ("cycles", "steps"):
             settings[key] = _integer(ctx, value, where, 1 if key == "cycles" else 0)
+        elif key == "duration":
+            settings[key] = _number(ctx, value, where)
+            if settings[key] < 0:
+                raise ctx.error(f"must be >= 0, got {value!r}", where)
         else:
             settings[key] = _number(ctx, value, where, positive=True)
+    if "steps" in data and "duration" in data:
+        raise ctx.error("give steps (iterations) or duration (physical time), not both",
+                        "duration")
+    # the run's length: --set wins over the file; duration (time) or steps (iterations)
+    if "duration" in overrides or ("duration" in data and "steps" not in overrides):
+        length = ("duration", settings["duration"])
+    elif "steps" in overrides or "steps" in data:
+        length = ("steps", settings["steps"])
+    else:
+        length = None
+    dt = settings["dt"]
 
-    groups = _groups(ctx, data["group"])
-    phases = _phases(ctx, data, settings)
-    operators = _operators(ctx, data.get("operator", []), groups, phases)
+    base = Path(ctx.file).resolve().parent
+    groups = _groups(ctx, data["group"], base)
+    phases = _phases(ctx, data, settings, length)
+    operators = _operators(ctx, data.get("operator", []), groups, phases, base)
 
-    params = {"file": ctx.file, "dt": settings["dt"], "cycles": settings["cycles"],
-              "bound": settings["bound"]}
+    params = {"file": ctx.file, "dt": dt, "cycles": settings["cycles"],
+              "bound": settings["bound"], **user}
     try:
-        scene = Scene(name, groups, operators, phases, dt=settings["dt"],
-                      cycles=settings["cycles"], bound=settings["bound"], params=params)
+        scene = Scene(name, groups, operators, phases, dt=dt, cycles=settings["cycles"],
+                      bound=settings["bound"], params=params)
         if "phase" not in data:
-            scene.params["steps"] = settings["steps"]
-        elif "steps" in overrides:
-            if scene.steps_per_cycle == 0 and settings["steps"] > 0:
-                raise ctx.error(f"cannot run {settings['steps']} steps: every [[phase]] has "
-                                "steps = 0", "--set steps")
-            scene = scene.with_steps(settings["steps"])
+            if length and length[0] == "duration":
+                scene.params["duration"] = length[1]
+            scene.params["steps"] = phases[0].steps
+        elif length is not None and (length[0] == "duration" or "steps" in overrides):
+            total = length[1] if length[0] == "steps" else steps_for(length[1], dt)
+            if scene.steps_per_cycle == 0 and total > 0:
+                raise ctx.error(f"cannot run {total} steps: every [[phase]] has "
+                                "steps = 0", f"--set {length[0]}" if length[0] in overrides
+                                else length[0])
+            scene = scene.with_steps(total)
+            if length[0] == "duration":
+                scene.duration = length[1]
+                scene.params["duration"] = length[1]
     except SceneError as exc:
         raise SceneError(f"{ctx.file}: {exc}") from None
     return scene
@@ -295,7 +459,7 @@ def _array_of_tables(ctx: _Ctx, value, table: str) -> list:
     return value
 
 
-def _groups(ctx: _Ctx, value) -> dict:
+def _groups(ctx: _Ctx, value, base: Path) -> dict:
     tables = _array_of_tables(ctx, value, "group")
     if not tables:
         raise ctx.error("an explicit scene needs at least one [[group]] table")
@@ -315,15 +479,28 @@ def _groups(ctx: _Ctx, value) -> dict:
     # order of the scene is the file order.
     for t, c in zip(tables, gctx):
         if "rack" not in t:
-            built[t["name"]] = _plain_group(c, t)
+            built[t["name"]] = _plain_group(c, t, base)
     for t, c in zip(tables, gctx):
         if "rack" in t:
-            built[t["name"]] = _rack_group(c, t, built, names)
+            built[t["name"]] = _rack_group(c, t, built, names, base)
     return {name: built[name] for name in names}
 
 
+#: Group kinds (docs/scenes.md "kind"): ``rack`` and ``sediment`` change what the pictures, the
+#: stress measures and the guard rails do with a group; the others are parts, named as the
+#: built-in scenes name theirs.
+KINDS = ("part", "rack", "sediment", "body", "leg", "plane")
+
+
 def _kind(c: _Ctx, t: dict, default: str) -> str:
-    return _string(c, t["kind"], "kind") if "kind" in t else default
+    if "kind" not in t:
+        return default
+    kind = _string(c, t["kind"], "kind")
+    if kind not in KINDS:
+        raise c.error(f"unknown kind '{kind}'; kinds: {', '.join(KINDS)} (rack: not drawn, "
+                      "no stress; sediment: drawn grey, footprints; the others: a part "
+                      "coloured by its stress)", "kind")
+    return kind
 
 
 def _radii(c: _Ctx, value, n: int) -> np.ndarray:
@@ -348,38 +525,125 @@ def _radii(c: _Ctx, value, n: int) -> np.ndarray:
     return r
 
 
-def _plain_group(c: _Ctx, t: dict) -> Group:
-    has = [k for k in ("positions", "lattice") if k in t]
+def _plain_group(c: _Ctx, t: dict, base: Path) -> Group:
+    has = [k for k in _SOURCES if k in t]
     if len(has) != 1:
-        raise c.error("needs exactly one of 'positions', 'lattice' or 'rack'"
+        raise c.error(f"needs exactly one of {', '.join(map(repr, _SOURCES))} or 'rack'"
                       + (f" (got {' and '.join(has)})" if has else ""))
     if "offset" in t:
         raise c.error("'offset' is for rack groups (rack = \"<host>\") only", "offset")
-    if "positions" in t:
+    source = has[0]
+    filled = source in ("mesh", "fill", "parts")
+    for key in ("spacing", "packing", "origin"):
+        if key in t and not filled:
+            raise c.error(f"'{key}' is for parts filled from a mesh or shape (mesh, fill, "
+                          f"parts); a {source} sets its own particles", key)
+    for key in _MESH_PLACEMENT:
+        if key in t and source != "mesh":
+            raise c.error(f"'{key}' places a group's mesh (mesh = \"file\"); inside fill or "
+                          "parts give it next to each mesh", key)
+    spacing = None
+    if source == "positions":
         pos = t["positions"]
         if not isinstance(pos, list) or not pos:
             raise c.error(f"must be a non-empty array of [x, y, z], got {_describe(pos)}",
                           "positions")
         o = np.array([_vec3(c, p, f"positions[{i}]") for i, p in enumerate(pos)], dtype=float)
+    elif source == "lattice":
+        o, spacing = _lattice(c, t["lattice"], "lattice")
     else:
-        lat = _table(c, t["lattice"], "lattice")
-        lc = c.at(f"{c.where}: lattice")
-        _check_keys(lc, lat, _LATTICE_KEYS)
-        shape = _require(lc, lat, "shape")
-        if not isinstance(shape, list) or len(shape) != 3:
-            raise lc.error(f"must be [nx, ny, nz], got {shape!r}", "shape")
-        shape = [_integer(lc, s, "shape", 1) for s in shape]
-        spacing = _number(lc, lat.get("spacing", 1.0), "spacing", positive=True)
-        origin = _vec3(lc, lat.get("origin", [0.0, 0.0, 0.0]), "origin")
-        o = lattice(shape, spacing, origin)
-    r = _radii(c, _require(c, t, "radius"), len(o))
-    g = _wrap(c, lambda: Group(t["name"], o, r, kind=_kind(c, t, "part")))
-    _regions(c, t, g)
+        spacing = _number(c, _require(c, t, "spacing"), "spacing", positive=True)
+        packing = t.get("packing", "cubic")
+        if packing not in PACKINGS:
+            raise c.error(f"must be one of {', '.join(PACKINGS)}, got {_describe(packing)}",
+                          "packing")
+        origin = _vec3(c, t["origin"], "origin") if "origin" in t else None
+        solids, blocks = [], []
+        if source == "mesh":
+            solids.append(_region(c, {k: t[k] for k in ("mesh",) + _MESH_PLACEMENT if k in t},
+                                  "mesh", base))
+        elif source == "fill":
+            solids.append(_region(c, t["fill"], "fill", base))
+        else:
+            parts = t["parts"]
+            if not isinstance(parts, list) or not parts:
+                raise c.error("must be a non-empty array of parts ({ mesh = ... }, { box = ... "
+                              "}, { lattice = { ... } }, { positions = [...] }, ...)", "parts")
+            for i, part in enumerate(parts):
+                field = f"parts[{i}]"
+                part = _table(c, part, field)
+                if "lattice" in part:
+                    _check_keys(c.at(f"{c.where}: {field}"), part, ("lattice",))
+                    blocks.append(_lattice(c, part["lattice"], f"{field}.lattice")[0])
+                elif "positions" in part:
+                    _check_keys(c.at(f"{c.where}: {field}"), part, ("positions",))
+                    pos = part["positions"]
+                    if not isinstance(pos, list) or not pos:
+                        raise c.error("must be a non-empty array of [x, y, z]",
+                                      f"{field}.positions")
+                    blocks.append(np.array([_vec3(c, p, f"{field}.positions[{j}]")
+                                            for j, p in enumerate(pos)], dtype=float))
+                else:
+                    solids.append(_region(c, part, field, base))
+        what = f"{c.file}: {c.where}"
+        filled_o = []
+        if solids:
+            region = solids[0] if len(solids) == 1 else rg.Union(solids)
+            names = [getattr(s, "name", None) for s in solids if isinstance(s, rg.Surface)]
+            if names:
+                what += f" (mesh {', '.join(names)})"
+            try:
+                filled_o = [fill(region, spacing, packing, origin, name=what)]
+            except SceneError as exc:
+                raise SceneError(str(exc)) from None
+        o = union_positions(*filled_o, *blocks)
+    if "radius" in t:
+        r = _radii(c, t["radius"], len(o))
+    elif spacing is not None:
+        r = np.full(len(o), spacing / 2.0)
+    else:
+        raise c.error("missing required field 'radius' (positions have no spacing to take "
+                      "spacing/2 from)")
+    held = _held(c, t, o, base)
+    v0 = _vec3(c, t["velocity"], "velocity") if "velocity" in t else None
+    g = _wrap(c, lambda: Group(t["name"], o, r, kind=_kind(c, t, "part"), held=held, v0=v0))
+    _regions(c, t, g, base)
     return g
 
 
-def _rack_group(c: _Ctx, t: dict, built: dict, names: list) -> Group:
-    for other in ("positions", "lattice"):
+def _lattice(c: _Ctx, value, field: str):
+    lat = _table(c, value, field)
+    lc = c.at(f"{c.where}: {field}")
+    _check_keys(lc, lat, _LATTICE_KEYS)
+    shape = _require(lc, lat, "shape")
+    if not isinstance(shape, list) or len(shape) != 3:
+        raise lc.error(f"must be [nx, ny, nz], got {shape!r}", "shape")
+    shape = [_integer(lc, s, "shape", 1) for s in shape]
+    spacing = _number(lc, lat.get("spacing", 1.0), "spacing", positive=True)
+    origin = _vec3(lc, lat.get("origin", [0.0, 0.0, 0.0]), "origin")
+    return lattice(shape, spacing, origin), spacing
+
+
+def _held(c: _Ctx, t: dict, o: np.ndarray, base: Path):
+    if "held" not in t:
+        return None
+    region = _region(c, t["held"], "held", base)
+    mask = _mask(c, region, o, "held")
+    if not mask.any():
+        raise c.error("selects no particle of the group: a support must hold at least one "
+                      "(check the region against the group's positions)", "held")
+    return mask
+
+
+def _mask(c: _Ctx, region, o: np.ndarray, field: str) -> np.ndarray:
+    try:
+        return region.mask(o)
+    except SceneError as exc:
+        raise c.error(str(exc), field) from None
+
+
+def _rack_group(c: _Ctx, t: dict, built: dict, names: list, base: Path) -> Group:
+    for other in _SOURCES + ("spacing", "packing", "origin", "held") + _MESH_PLACEMENT:
         if other in t:
             raise c.error(f"a rack group takes no '{other}': its particles are placed by "
                           "rack(host), Eqs. 18-22")
@@ -388,7 +652,7 @@ def _rack_group(c: _Ctx, t: dict, built: dict, names: list) -> Group:
         raise c.error(f"host group '{host}' does not exist (groups: {', '.join(names)})", "rack")
     if host not in built:
         raise c.error(f"host group '{host}' is itself a rack group; a rack's host must be a "
-                      "group with positions or a lattice", "rack")
+                      "group with its own particles", "rack")
     offset = _number(c, t.get("offset", RACK_OFFSET), "offset")
     if offset < 0:
         raise c.error(f"must be >= 0, got {offset!r}", "offset")
@@ -400,25 +664,118 @@ def _rack_group(c: _Ctx, t: dict, built: dict, names: list) -> Group:
         radius = float(_radii(c, t["radius"], 6)[0])
     g = _wrap(c, lambda: rack(built[host], t["name"], offset=offset, radius=radius))
     g.kind = _kind(c, t, "rack")
-    _regions(c, t, g)
+    # a rack moves with its part: it starts with the host's velocity when that is one vector
+    hv = built[host].v0[~built[host].held]
+    v0 = _vec3(c, t["velocity"], "velocity") if "velocity" in t else (
+        hv[0] if len(hv) and np.all(hv == hv[0]) else None)
+    if v0 is not None:
+        g = _wrap(c, lambda: Group(g.name, g.o, g.r, g.kind, g.host, g.meta, None, v0))
+    _regions(c, t, g, base)
     return g
 
 
-def _regions(c: _Ctx, t: dict, g: Group) -> None:
+def _regions(c: _Ctx, t: dict, g: Group, base: Path) -> None:
     if "regions" not in t:
         return
     regions = _table(c, t["regions"], "regions")
     out = {}
     for key, idx in regions.items():
         field = f"regions.{key}"
+        if isinstance(idx, dict):                 # one shape: index 1 inside, 0 outside
+            out[key] = _mask(c, _region(c, idx, field, base), g.o, field).astype(np.int64)
+            continue
+        if isinstance(idx, list) and idx and all(isinstance(x, dict) for x in idx):
+            shapes = [_region(c, x, f"{field}[{i}]", base) for i, x in enumerate(idx)]
+            try:
+                out[key] = rg.index_vector(shapes, g.o)
+            except SceneError as exc:
+                raise c.error(str(exc), field) from None
+            continue
         if (not isinstance(idx, list)
                 or not all(isinstance(x, int) and not isinstance(x, bool) for x in idx)):
-            raise c.error(f"must be an array of integers (0 = not in the region), got "
-                          f"{_describe(idx)}", field)
+            raise c.error(f"must be an array of integers (0 = not in the region), a region "
+                          f"table or an array of region tables, got {_describe(idx)}", field)
         if len(idx) != g.n:
             raise c.error(f"has {len(idx)} entries for the group's {g.n} particles", field)
         out[key] = np.asarray(idx, dtype=np.int64)
     g.meta["regions"] = out
+
+
+# --------------------------------------------------------------------------- regions
+def _region(c: _Ctx, value, field: str, base: Path):
+    """A region (docs/scenes.md "Regions") from its table: exactly one shape key."""
+    t = _table(c, value, field)
+    shape = [k for k in REGION_KEYS if k in t]
+    if len(shape) != 1:
+        raise c.error(f"a region needs exactly one of {', '.join(REGION_KEYS)}"
+                      + (f" (got {' and '.join(shape)})" if shape else
+                         f" (got {', '.join(map(repr, t)) or 'an empty table'})"), field)
+    kind = shape[0]
+    allowed = (kind,) + (_MESH_PLACEMENT if kind == "mesh" else ())
+    _check_keys(c.at(f"{c.where}: {field}"), t, allowed, f"key for a {kind} region")
+    v = t[kind]
+    f = field if field == kind else f"{field}.{kind}"
+    try:
+        if kind == "box":
+            b = _table(c, v, f)
+            _check_keys(c.at(f"{c.where}: {f}"), b, ("min", "max"))
+            return rg.Box(_vec3(c, _require(c.at(f"{c.where}: {f}"), b, "min"), f"{f}.min"),
+                          _vec3(c, _require(c.at(f"{c.where}: {f}"), b, "max"), f"{f}.max"))
+        if kind == "sphere":
+            b = _table(c, v, f)
+            _check_keys(c.at(f"{c.where}: {f}"), b, ("centre", "center", "radius"))
+            centre = b.get("centre", b.get("center"))
+            if centre is None:
+                raise c.error("missing required field 'centre'", f)
+            return rg.Sphere(_vec3(c, centre, f"{f}.centre"),
+                             _number(c, _require(c.at(f"{c.where}: {f}"), b, "radius"),
+                                     f"{f}.radius", positive=True))
+        if kind == "cylinder":
+            b = _table(c, v, f)
+            _check_keys(c.at(f"{c.where}: {f}"), b, ("start", "end", "radius"))
+            req = c.at(f"{c.where}: {f}")
+            return rg.Cylinder(_vec3(c, _require(req, b, "start"), f"{f}.start"),
+                               _vec3(c, _require(req, b, "end"), f"{f}.end"),
+                               _number(c, _require(req, b, "radius"), f"{f}.radius",
+                                       positive=True))
+        if kind == "plane":
+            b = _table(c, v, f)
+            _check_keys(c.at(f"{c.where}: {f}"), b, ("point", "normal"))
+            req = c.at(f"{c.where}: {f}")
+            return rg.HalfSpace(_vec3(c, _require(req, b, "point"), f"{f}.point"),
+                                _vec3(c, _require(req, b, "normal"), f"{f}.normal"))
+        if kind == "norm2_lt":
+            return rg.Norm2Below(_number(c, v, f))
+        if kind == "ids":
+            if not isinstance(v, list):
+                raise c.error(f"must be an array of particle indices, got {_describe(v)}", f)
+            for i in v:
+                if isinstance(i, bool) or not isinstance(i, int):
+                    raise c.error(f"index {i!r} is not an integer", f)
+            return rg.Ids(v)
+        if kind == "mesh":
+            from rackstress.scenes.mesh import read_surface
+
+            file = _string(c, v, f)
+            scale = t.get("scale")
+            if scale is not None and not (_is_number(scale) or isinstance(scale, list)):
+                raise c.error(f"must be a number or [sx, sy, sz], got {_describe(scale)}",
+                              f"{field}.scale")
+            rot = _vec3(c, t["rotate"], f"{field}.rotate") if "rotate" in t else None
+            tr = _vec3(c, t["translate"], f"{field}.translate") if "translate" in t else None
+            return read_surface(file, scale=scale, rotate=rot, translate=tr, base=base)
+        # union / intersection / difference
+        if not isinstance(v, list) or not v:
+            raise c.error(f"must be a non-empty array of region tables, got {_describe(v)}", f)
+        parts = [_region(c, x, f"{f}[{i}]", base) for i, x in enumerate(v)]
+        if kind == "difference" and len(parts) < 2:
+            raise c.error("needs at least two regions: the first minus the others", f)
+        return {"union": rg.Union, "intersection": rg.Intersection,
+                "difference": rg.Difference}[kind](parts)
+    except SceneError as exc:
+        if str(exc).startswith(c.file):
+            raise
+        raise c.error(str(exc), f) from None
 
 
 def _wrap(c: _Ctx, make):
@@ -428,8 +785,11 @@ def _wrap(c: _Ctx, make):
         raise c.error(str(exc)) from None
 
 
-def _phases(ctx: _Ctx, data: dict, settings: dict) -> list:
+def _phases(ctx: _Ctx, data: dict, settings: dict, length) -> list:
+    dt = settings["dt"]
     if "phase" not in data:
+        if length is not None and length[0] == "duration":
+            return [Phase("run", steps_for(length[1], dt), {}, length[1])]
         return [Phase("run", settings["steps"], {})]
     if "steps" in data:
         raise ctx.error("top-level 'steps' cannot be combined with [[phase]] tables: each "
@@ -447,17 +807,26 @@ def _phases(ctx: _Ctx, data: dict, settings: dict) -> list:
         if name in names:
             raise c.error(f"phase name '{name}' is used twice", "name")
         names.append(name)
-        steps = _integer(c, _require(c, t, "steps"), "steps", 0)
+        if ("steps" in t) == ("duration" in t):
+            raise c.error("needs exactly one of 'steps' (iterations) or 'duration' (physical time)")
+        duration = None
+        if "steps" in t:
+            steps = _integer(c, t["steps"], "steps", 0)
+        else:
+            duration = _number(c, t["duration"], "duration")
+            if duration < 0:
+                raise c.error(f"must be >= 0, got {duration!r}", "duration")
+            steps = steps_for(duration, dt)
         pvars = dict(_table(c, t.get("vars", {}), "vars"))
         for key, val in pvars.items():
             if not (isinstance(val, (int, float, str, bool))):
                 raise c.error(f"must be a number, string or boolean, got {_describe(val)}",
                               f"vars.{key}")
-        phases.append(Phase(name, steps, pvars))
+        phases.append(Phase(name, steps, pvars, duration))
     return phases
 
 
-def _operators(ctx: _Ctx, value, groups: dict, phases: list) -> dict:
+def _operators(ctx: _Ctx, value, groups: dict, phases: list, base: Path) -> dict:
     tables = _array_of_tables(ctx, value, "operator")
     out: dict = {}
     kinds = ", ".join(_OP_KEYS)
@@ -472,7 +841,7 @@ def _operators(ctx: _Ctx, value, groups: dict, phases: list) -> dict:
             raise c.error(f"unknown operator '{kind}'; known operators: {kinds}")
         _check_keys(c, t, _COMMON_OP_KEYS + _OP_KEYS[kind], f"key for {kind}")
         when = _conditions(c, t, groups, phases)
-        op = _operator(c, kind, t, on, groups, when, phases)
+        op = _operator(c, kind, t, on, groups, when, phases, base)
         try:
             ops_mod.check_operator(op, on, groups)
         except SceneError as exc:
@@ -517,31 +886,14 @@ def _source(c: _Ctx, t: dict, groups: dict) -> str:
     return src
 
 
-def _operator(c: _Ctx, kind: str, t: dict, on: str, groups: dict, when: tuple, phases: list):
+def _operator(c: _Ctx, kind: str, t: dict, on: str, groups: dict, when: tuple, phases: list,
+              base: Path):
     n = groups[on].n
     if kind == "force":
         accel = _vec3(c, _require(c, t, "accel"), "accel")
         where = None
         if "where" in t:
-            w = _table(c, t["where"], "where")
-            wc = c.at(f"{c.where}: where")
-            _check_keys(wc, w, ("norm2_lt", "ids"))
-            if len(w) != 1:
-                raise c.error("needs exactly one of norm2_lt = value or ids = [...]", "where")
-            if "norm2_lt" in w:
-                lim = _number(wc, w["norm2_lt"], "norm2_lt")
-                mask = norm2_below(groups[on].o, lim)
-            else:
-                ids = w["ids"]
-                if not isinstance(ids, list):
-                    raise wc.error(f"must be an array of particle indices, got {_describe(ids)}",
-                                   "ids")
-                mask = np.zeros(n, dtype=bool)
-                for i in ids:
-                    if isinstance(i, bool) or not isinstance(i, int) or not 0 <= i < n:
-                        raise wc.error(f"index {i!r} is not a particle of '{on}' (0..{n - 1})",
-                                       "ids")
-                    mask[i] = True
+            mask = _mask(c, _region(c, t["where"], "where", base), groups[on].o, "where")
             where = tuple(bool(m) for m in mask)
         return Force(accel, where=where, when=when)
     if kind == "dampen":

@@ -6,7 +6,12 @@
 * :mod:`.fit` — best-fit rigid motion of a part (Kabsch), plain and robust;
 * :mod:`.measures` — one MDAnalysis ``AnalysisBase`` class per measure: the paper's distance
   from the desired position and its time integral, von Mises shear strain, D²min, virial stress,
-  and the parts' motion (centre of mass, footprints).
+  and the parts' motion (centre of mass, footprints);
+* :mod:`.post` — every measure computed once per run (cached), the peaks of every group and
+  measure into ``summary.json``, ``rackstress stress``;
+* :mod:`.export` — the VTK time series (``vtk/run.pvd``) and the LAMMPS dump with the measures
+  as named columns (``stress.dump``) for ParaView, OVITO and pyvista;
+* :mod:`.foreign` — a plain LAMMPS data file and dump (not written by rackstress) as a run.
 """
 from rackstress.stress.dump import (DataMismatchError, DumpColumnsError, DumpError, RackDumpReader,
                    StressInputError, TruncatedDumpError, index_dump, read_data_file)

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
-from itertools import islice
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +33,8 @@ from rackstress.errors import RackstressError
 
 #: Coordinate columns accepted, in order of preference (runs use ``boundary m m m``: x = xu).
 COORD_COLUMNS = (("x", "y", "z"), ("xu", "yu", "zu"))
+#: A dump whose parsed frames take at most this many bytes is kept in memory once read.
+CACHE_BYTES = 256 * 2 ** 20
 #: Columns every dump must hold besides coordinates.
 REQUIRED = ("id", "type")
 
@@ -112,6 +113,7 @@ def index_dump(path, allow_truncated: bool = False) -> FrameIndex:
     steps, starts, ends, boxes = [], [], [], []
     n_atoms, columns = None, None
     pos, lineno = 0, 0
+    line_len = 64.0
     trunc = None
     with open(path, "rb") as fh:
         while True:
@@ -155,15 +157,13 @@ def index_dump(path, allow_truncated: bool = False) -> FrameIndex:
             pos += sum(len(h) for h in header)
             lineno += 9
             start = pos
-            got, last = 0, b"\n"
-            for line in islice(fh, n):
-                pos += len(line)
-                got += 1
-                last = line
+            nbytes, got = _skip_lines(fh, n, int(1.02 * n * line_len) + 4096)
+            if got:
+                line_len = nbytes / got     # the next frame's lines are alike
+            pos += nbytes
             lineno += got
-            if got < n or not last.endswith(b"\n"):
-                complete = got - (0 if last.endswith(b"\n") else 1)
-                trunc = (step, frame, complete)
+            if got < n:
+                trunc = (step, frame, got)
                 break
             steps.append(step)
             starts.append(start)
@@ -188,6 +188,26 @@ def index_dump(path, allow_truncated: bool = False) -> FrameIndex:
             raise TruncatedDumpError(msg + hint, path=path, step=step, frame=frame,
                                      atoms_read=got, n_atoms=n_atoms)
     return index
+
+
+def _skip_lines(fh, n: int, chunk: int) -> tuple[int, int]:
+    """Advance ``fh`` past ``n`` complete lines, reading blocks and counting newlines with NumPy
+    (a Python loop over the lines of a long dump is what indexing it used to cost); return
+    (bytes passed, complete lines passed) — fewer lines than ``n`` at the end of the file."""
+    passed, got = 0, 0
+    while got < n:
+        block = fh.read(chunk)
+        if not block:
+            break
+        c = block.count(b"\n")
+        if got + c >= n:
+            nl = np.flatnonzero(np.frombuffer(block, dtype=np.uint8) == 10)
+            cut = int(nl[n - got - 1]) + 1
+            fh.seek(cut - len(block), 1)
+            return passed + cut, n
+        got += c
+        passed += len(block)
+    return passed, got        # (a last line without its newline is not a complete line)
 
 
 def _header_step(header) -> int | None:
@@ -250,13 +270,23 @@ class RackDumpReader(base.ReaderBase):
             raise EOFError
         return self._read_frame(nxt)
 
+    def _table(self, frame) -> np.ndarray:
+        """The frame's atom lines, sorted by id; kept in memory when the whole dump fits
+        :data:`CACHE_BYTES` (the post-processing reads every frame several times)."""
+        cache = self.__dict__.setdefault("_tables", {})
+        if frame in cache:
+            return cache[frame]
+        table = read_table(self.index, frame)
+        order = np.argsort(table[:, self._col["id"]], kind="stable")
+        table = table[order]
+        if table.nbytes * self.index.n_frames <= CACHE_BYTES:
+            cache[frame] = table
+        return table
+
     def _read_frame(self, frame):
         ts = self.ts
         idx = self.index
-        table = read_table(idx, frame)
-        ids = table[:, self._col["id"]]
-        order = np.argsort(ids, kind="stable")
-        table = table[order]
+        table = self._table(frame)
         pos = np.ascontiguousarray(table[:, [self._col[c] for c in self._coords]])
         ts.frame = frame
         ts.data["positions64"] = pos

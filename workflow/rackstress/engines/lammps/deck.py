@@ -184,7 +184,10 @@ class Deck:
             # group (gamma 1 times scale γ_type is γ_type exactly; an unnamed type would get 1)
             scale = " ".join(f"scale {t} {_f(g)}" for t, g in gamma.items())
             L.append(f"fix rs_damp {self.moving} viscous 1.0 {scale}")
-        L.append(f"fix rs_nve {self.moving} nve")
+        held_cmds, nve_group = support_commands(sc)   # supports and v0 (scene-level)
+        L += held_cmds
+        # a scene with supports has no passive group (passive_groups), so the two never meet
+        L.append(f"fix rs_nve {self.moving if self.passive else nve_group} nve")
         L.append("thermo_style custom step")
         L.append(f"thermo {max(1, dump_every)}")
         if dump_file:
@@ -251,6 +254,10 @@ class Deck:
     def velocity_variables(self) -> list[str]:
         """Atom variables for v + dt/2·f/m (into fix nve) and v − dt/2·f/m (back to Eq. 5's v)."""
         h = _f(0.5 * self.scene.dt)
+        if self.scene.held().any():
+            # held atoms keep v = 0 whatever force the callback leaves on them (× 1 is exact)
+            return [f"variable rs_vh{c} atom (v{c}+{h}*f{c}/mass)*gmask({FREE})" for c in "xyz"] + \
+                   [f"variable rs_vp{c} atom (v{c}-{h}*f{c}/mass)*gmask({FREE})" for c in "xyz"]
         return [f"variable rs_vh{c} atom v{c}+{h}*f{c}/mass" for c in "xyz"] + \
                [f"variable rs_vp{c} atom v{c}-{h}*f{c}/mass" for c in "xyz"]
 
@@ -283,6 +290,49 @@ class Deck:
             L.append(f"fix {PY_FIX} all external pf/callback 1 1")
         L += self.schedule_commands()
         return "\n".join(L) + "\n"
+
+
+# ---------------------------------------------------------------------------- supports, v0
+#: LAMMPS groups of the held atoms (supports) and of the rest, which ``fix nve`` integrates.
+HELD, FREE = "rs_held", "rs_free"
+
+
+def id_ranges(ids) -> str:
+    """1-based atom ids as LAMMPS ``group id`` ranges: ``1:4 7 9:10``."""
+    ids = np.asarray(ids, dtype=np.int64)
+    if not len(ids):
+        return ""
+    breaks = np.flatnonzero(np.diff(ids) != 1)
+    starts = np.concatenate([[ids[0]], ids[breaks + 1]])
+    ends = np.concatenate([ids[breaks], [ids[-1]]])
+    return " ".join(f"{a}" if a == b else f"{a}:{b}" for a, b in zip(starts, ends))
+
+
+def support_commands(scene: Scene) -> tuple[list[str], str]:
+    """Commands for the scene's supports and initial velocities, and the group ``fix nve`` takes.
+
+    Held atoms (``Group.held``) are left out of ``fix nve`` and get ``fix setforce 0 0 0``: they
+    never move and keep v = 0 (the velocity variables mask them, :meth:`Deck.velocity_variables`),
+    as on the reference engine. ``Group.v0`` is set with ``velocity … set`` before the first
+    ``run 0``, so the paper's v at step 0 is v0 on both engines. Nothing for a scene with
+    neither (the committed decks are unchanged).
+    """
+    L = []
+    held = scene.held()
+    if held.any():
+        L.append(f"group {HELD} id {id_ranges(np.flatnonzero(held) + 1)}")
+        L.append(f"group {FREE} subtract all {HELD}")
+        L.append(f"fix rs_hold {HELD} setforce 0.0 0.0 0.0")
+    v0 = scene.initial_velocities()
+    moving = np.flatnonzero(np.any(v0 != 0.0, axis=1))
+    if len(moving):
+        rows, inv = np.unique(v0[moving], axis=0, return_inverse=True)
+        for k, row in enumerate(rows):
+            ids = moving[inv.reshape(-1) == k] + 1
+            L.append(f"group rs_v0 id {id_ranges(ids)}")
+            L.append(f"velocity rs_v0 set {_f(row[0])} {_f(row[1])} {_f(row[2])} units box")
+            L.append("group rs_v0 delete")
+    return L, (FREE if held.any() else "all")
 
 
 # ---------------------------------------------------------------------------- compile
@@ -429,8 +479,8 @@ def passive_groups(scene: Scene, realized: list) -> tuple:
     evaluates (and damped): a particle of one that no collision partner can reach has zero
     velocity and zero force, so Eq. 5 leaves it where it is, and LAMMPS need not pass over it
     until the callback finds a partner within reach + skin (module doc, "Active particles")."""
-    if not any(r.python for r in realized):
-        return ()
+    if not any(r.python for r in realized) or scene.held().any():
+        return ()     # nothing to activate, or supports (their own fix nve group)
     out = []
     for name, g in scene.groups.items():
         rs = [r for r in realized if r.target == name]

@@ -1,0 +1,152 @@
+"""Guard rails (``rackstress.engines.guards``): pass-through and forces on rack particles.
+
+The pass-through check is fed hand-made motions (a block moved straight through a slab, around
+it, or stopped on it), then real runs on the reference engine; the summary records the findings.
+"""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rackstress.engines.dumpio import DumpWriter
+from rackstress.engines.guards import check_run, dump_frames, force_on_racks, pass_through
+from rackstress.model.operators import Bind, Collide, Const, Force
+from rackstress.model.particles import Group, lattice, rack
+from rackstress.model.scene import Phase, Scene
+
+RACKSTRESS = Path(sys.executable).with_name("rackstress")
+
+
+def slab_and_block():
+    slab = Group("slab", lattice((8, 1, 8), 1.0), 0.5)                 # y = 0, x, z ∈ 0..7
+    block = Group("block", lattice((2, 2, 2), 1.0, (3.0, 3.0, 3.0)), 0.5)
+    ops = {"slab": [Collide("block", Const(10.0))], "block": [Collide("slab", Const(10.0))]}
+    return Scene("g", {"slab": slab, "block": block}, ops, [Phase("run", 10)])
+
+
+def frames_moving_block(sc, path):
+    """Frames with the block moved by each offset in ``path`` (the slab stays)."""
+    o = sc.original_positions()
+    out = []
+    for k, offset in enumerate(path):
+        p = o.copy()
+        p[sc.slice("block")] += offset
+        out.append((10 * k, p))
+    return out
+
+
+def test_straight_through_is_found_at_the_first_frame_past():
+    sc = slab_and_block()
+    # the block's centre starts at y = 3.5; it is past the slab (y = 0) once below 0
+    path = [(0, 0, 0), (0, -2, 0), (0, -3.4, 0), (0, -3.6, 0), (0, -8, 0)]
+    found = pass_through(sc, frames_moving_block(sc, path))
+    assert len(found) == 1
+    assert found[0]["groups"] == ["slab", "block"] and found[0]["step"] == 30
+    assert "passed through" in found[0]["message"]
+
+
+def test_around_or_stopped_is_not_pass_through():
+    sc = slab_and_block()
+    # around: first sideways beyond the slab's edge (x > 7.5 + 0.5), then down below it
+    around = [(0, 0, 0), (6, 0, 0), (6, -8, 0)]
+    assert pass_through(sc, frames_moving_block(sc, around)) == []
+    # stopped on it: down to resting on the slab
+    stopped = [(0, 0, 0), (0, -2, 0), (0, -2.5, 0)]
+    assert pass_through(sc, frames_moving_block(sc, stopped)) == []
+
+
+def test_groups_not_apart_at_start_are_not_judged():
+    sc = slab_and_block()
+    sc.groups["block"].o[:] += (0.5, -3.0, 0.5)       # block sunk into the slab at step 0
+    sc = Scene("g", sc.groups, sc.operators, sc.phases)
+    path = [(0, 0, 0), (0, -8, 0)]
+    assert pass_through(sc, frames_moving_block(sc, path)) == []
+
+
+def test_force_on_rack_is_reported_once_per_operator():
+    host = Group("part", lattice((2, 2, 2)), 0.5)
+    r = rack(host)
+    ops = {"part": [Force((0, -9.81, 0)), Bind("partrack", Const(100.0))],
+           "partrack": [Force((0, -9.81, 0)), Bind("part", Const(0.5))]}
+    sc = Scene("r", {"part": host, "partrack": r}, ops, [Phase("run", 1)])
+    found = force_on_racks(sc)
+    assert len(found) == 1 and found[0]["group"] == "partrack"
+    assert "rack particle" in found[0]["message"] and "'part'" in found[0]["message"]
+
+
+def test_dump_frames_reads_back_what_was_written(tmp_path):
+    rng = np.random.default_rng(1)
+    n = 7
+    written = []
+    with DumpWriter(tmp_path / "t.dump", np.ones(n, int), np.ones(n, int)) as w:
+        for step in range(0, 50, 10):
+            p = rng.normal(size=(n, 3))
+            w.write(step, p)
+            written.append((step, p))
+    got = list(dump_frames(tmp_path / "t.dump", n, max_frames=3))
+    assert [s for s, _ in got] == [0, 20, 40]          # first, middle, last
+    for s, p in got:
+        np.testing.assert_allclose(p, dict(written)[s], rtol=1e-9)
+    # a frame cut short (a killed run) is skipped
+    text = (tmp_path / "t.dump").read_text().splitlines()
+    (tmp_path / "cut.dump").write_text("\n".join(text[:-3]) + "\n")
+    assert [s for s, _ in dump_frames(tmp_path / "cut.dump", n)] == [0, 10, 20, 30]
+
+
+SCENE = """
+    name = "through"
+    dt = 0.01
+    duration = 1.0
+    [params]
+    speed = 40.0
+    c = 5.0
+    [[group]]
+    name = "slab"
+    lattice = { shape = [6, 2, 6], spacing = 1.0 }
+    held = { box = { min = [0, 0, 0], max = [0, 1, 5] } }
+    [[group]]
+    name = "block"
+    lattice = { shape = [2, 2, 2], spacing = 1.0, origin = [2, 3.0, 2] }
+    velocity = [0, "$(-speed)", 0]
+    [[operator]]
+    on = "slab"
+    op = "bind"
+    from = "slab"
+    c = 100
+    within = 1.5
+    [[operator]]
+    on = "slab"
+    op = "collide"
+    from = "block"
+    c = "$c"
+    [[operator]]
+    on = "block"
+    op = "collide"
+    from = "slab"
+    c = "$c"
+"""
+
+
+@pytest.mark.parametrize("speed, c, passes", [(40.0, 5.0, True), (1.0, 100.0, False)])
+def test_run_records_pass_through_in_summary(tmp_path, speed, c, passes):
+    path = tmp_path / "scene.toml"
+    path.write_text(textwrap.dedent(SCENE))
+    out = tmp_path / "run"
+    proc = subprocess.run([str(RACKSTRESS), "run", str(path), "--engine", "reference", "--out",
+                           str(out), "--no-render", "--set", f"speed={speed}", "--set", f"c={c}"],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    s = json.loads((out / "summary.json").read_text())
+    kinds = [w["kind"] for w in s["warnings"]]
+    com = s["groups"]["block"]["com_end"][1]
+    if passes:
+        assert kinds == ["pass_through"] and com < 0           # really below the slab
+        assert "warning" in proc.stderr and "passed through" in proc.stderr
+    else:
+        assert kinds == [] and com > 0.5

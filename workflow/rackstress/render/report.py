@@ -1,0 +1,267 @@
+"""``RUNDIR/report.html``: one page to explore a run in a browser.
+
+The page holds, from ``summary.json``, ``scene.json``, ``stress.json`` and ``figures/``: the run's
+facts (scene, engine, mode, status, iterations, t, particles, wall times of the run, the
+post-processing and the pictures), the peak — where and when the design was most stressed —
+and the table of peaks of every group and measure (the very numbers of ``summary.json``), the
+Fig. 12-like sheet and the plots, the sheets of other measures rendered into ``figures/MEASURE``,
+the scene's parameters and groups, the stability margin of Eq. 5 (the predicted largest stable
+t against the t used), and links to the files to open elsewhere (``vtk/run.pvd`` for ParaView and
+OVITO, ``stress.dump``, the trajectory, the movie).
+
+It is self-contained as a folder: the images are the PNG files beside it (relative links into
+``figures/``), no script, no network, so it opens from the file system in any browser. Written
+atomically.
+"""
+from __future__ import annotations
+
+import html
+import json
+import os
+import time
+from pathlib import Path
+
+REPORT = "report.html"
+STABILITY = "stability.json"
+FIGURES = "figures"
+PLOTS = (("stress_over_time.png", "The measure per part over time (max solid, mean dashed; "
+                                  "★ the peak)"),
+         ("com_path.png", "Centre-of-mass paths"),
+         ("footprints.png", "Footprints in the sediment"))
+CSS = """
+body{font-family:DejaVu Sans,Helvetica,Arial,sans-serif;margin:1.5em auto;max-width:1200px;
+color:#222;padding:0 1em}
+h1{font-size:1.6em;margin-bottom:.2em}h2{font-size:1.25em;border-bottom:1px solid #ccc;
+padding-bottom:.2em;margin-top:1.6em}
+table{border-collapse:collapse;margin:.5em 0;font-size:.92em}
+td,th{border:1px solid #ccc;padding:.25em .6em;text-align:left;vertical-align:top}
+th{background:#f0f0f0}td.num{text-align:right;font-variant-numeric:tabular-nums}
+img{max-width:100%;height:auto;border:1px solid #ddd;margin:.3em 0}
+.headline{font-size:1.15em;background:#fff3f0;border-left:4px solid #c00;padding:.6em 1em}
+.note{color:#666;font-size:.9em}figure{margin:1em 0}figcaption{color:#555;font-size:.9em}
+.ok{color:#060}.bad{color:#b00}
+"""
+
+
+def _e(x) -> str:
+    return html.escape(str(x), quote=True)
+
+
+def _num(v, digits: int = 4) -> str:
+    if v is None:
+        return "–"
+    if isinstance(v, float):
+        return f"{v:.{digits}g}"
+    return str(v)
+
+
+def _load(path: Path) -> dict:
+    try:
+        return json.loads(path.read_text())
+    except (FileNotFoundError, json.JSONDecodeError):
+        return {}
+
+
+def stability_margin(rundir: Path, scene: dict, summary: dict) -> dict | None:
+    """Predicted stability limit of Eq. 5 for the run's scene (rebuilt from ``scene.json``), or
+    the one ``summary.json`` already records; None when the scene cannot be rebuilt."""
+    rec = summary.get("stability")
+    if isinstance(rec, dict) and rec.get("t_max"):
+        return rec
+    cache = rundir / STABILITY
+    try:
+        rec = json.loads(cache.read_text())
+        if rec.get("scene") == scene.get("scene") and rec.get("params") == scene.get("params") \
+                and rec.get("dt") == scene.get("dt"):
+            return rec
+    except (OSError, json.JSONDecodeError, AttributeError):
+        pass
+    try:
+        from rackstress import scenes
+        from rackstress.model.stability import describe_limit, predict
+
+        name, params = scene.get("scene"), scene.get("params") or {}
+        if name not in scenes.BUILDERS:
+            return None
+        known = scenes.parameters(name)
+        sc = scenes.build(name, **{k: v for k, v in params.items() if k in known})
+        if scene.get("dt"):
+            sc.dt = float(scene["dt"])
+        pred = predict(sc)
+        rec = {"t_max": pred["t_max"], "dt": sc.dt, "ratio": pred["ratio"],
+               "set_by": describe_limit(pred), "scene": name, "params": params}
+    except Exception:  # noqa: BLE001 - the report still shows everything else
+        return None
+    try:
+        from rackstress.lib.jsonio import write_json
+
+        write_json(cache, rec)              # computed once per run directory
+    except OSError:
+        pass
+    return rec
+
+
+def write_report(rundir, stability: bool = True) -> Path:
+    """Write ``RUNDIR/report.html`` from what the run directory holds; return its path.
+
+    Example
+    -------
+    >>> write_report("runs/plane-rack")          # doctest: +SKIP
+    PosixPath('runs/plane-rack/report.html')
+    """
+    rundir = Path(rundir)
+    summary = _load(rundir / "summary.json")
+    scene = _load(rundir / "scene.json")
+    post = _load(rundir / "stress.json")
+    render = _load(rundir / FIGURES / "render.json")
+    name = summary.get("scene") or scene.get("scene") or rundir.name
+    out = []
+    w = out.append
+    w("<!DOCTYPE html>")
+    w('<html lang="en"><head><meta charset="utf-8">')
+    w(f"<title>rackstress report: {_e(name)}</title><style>{CSS}</style></head><body>")
+    w(f"<h1>{_e(name)}: run report</h1>")
+    w(f'<p class="note">{_e(rundir.resolve())} — written {_e(time.strftime("%Y-%m-%d %H:%M:%S"))}'
+      "</p>")
+
+    # ---- the peak, in one sentence
+    peak = (summary.get("stress") or {}).get("peak") or post.get("peak")
+    w('<h2 id="peak">Where and when it was most stressed</h2>')
+    if peak:
+        pos = ", ".join(f"{x:.4g}" for x in peak.get("position", []))
+        w(f'<p class="headline" id="headline">The largest distance from the desired position '
+          f"(the paper's measure, robust fit) is <b>{_num(peak['value'])}</b> {_e(peak['units'])}"
+          f" in <b>{_e(peak['group'])}</b> at <b>iteration {peak['iteration']}</b>, particle "
+          f"{peak['particle']} (atom id) at ({_e(pos)}).</p>")
+    else:
+        w('<p class="headline">No peaks yet: run <code>rackstress stress '
+          f"{_e(rundir)}</code>.</p>")
+    groups = summary.get("groups") or {}
+    rows = [(g, m, rec) for g, grec in groups.items()
+            for m, rec in ((grec or {}).get("peak") or {}).items()]
+    if rows:
+        w('<table id="peaks"><thead><tr><th>group</th><th>measure</th><th>peak</th>'
+          "<th>units</th><th>iteration</th><th>particle</th><th>position (x, y, z)</th>"
+          "</tr></thead><tbody>")
+        for g, m, rec in rows:
+            if rec is None:
+                w(f'<tr data-group="{_e(g)}" data-measure="{_e(m)}"><td>{_e(g)}</td>'
+                  f"<td>{_e(m)}</td><td colspan=5>undefined</td></tr>")
+                continue
+            pos = ", ".join(f"{x:.4g}" for x in rec.get("position", []))
+            w(f'<tr data-group="{_e(g)}" data-measure="{_e(m)}" data-value="{rec["value"]!r}" '
+              f'data-iteration="{rec["iteration"]}" data-particle="{rec["particle"]}">'
+              f"<td>{_e(g)}</td><td>{_e(m)}</td><td class=num>{_num(rec['value'], 6)}</td>"
+              f"<td>{_e(rec.get('units', ''))}</td><td class=num>{rec['iteration']}</td>"
+              f"<td class=num>{rec['particle']}</td><td>{_e(pos)}</td></tr>")
+        w("</tbody></table>")
+        w('<p class="note">The same numbers as <code>summary.json</code> '
+          "(<code>groups.NAME.peak.MEASURE</code>), the pictures' colour scale and the VTK files' "
+          "point data. paper: distance from the desired position; accumulated: its time "
+          "integral; strain: von Mises shear strain; d2min: non-affine D²min.</p>")
+
+    # ---- pictures
+    w('<h2 id="pictures">Pictures</h2>')
+    fig = rundir / FIGURES
+    if (fig / "sheet.png").is_file():
+        frames = ", ".join(str(f["iteration"]) + (" (peak)" if f.get("peak") else "")
+                           for f in render.get("frames", []))
+        w(f'<figure><img src="{FIGURES}/sheet.png" alt="stress pictures, one row per view">'
+          f"<figcaption>{_e(render.get('label', ''))}; iterations {_e(frames)}; colour scale "
+          f"0..{_num(render.get('vmax'))}</figcaption></figure>")
+        for note in render.get("notes", []):
+            w(f'<p class="note">{_e(note)}</p>')
+    else:
+        w(f'<p class="note">No pictures: run <code>rackstress render {_e(rundir)}</code>.</p>')
+    for fname, caption in PLOTS:
+        if (fig / fname).is_file():
+            w(f'<figure><img src="{FIGURES}/{fname}" alt="{_e(caption)}">'
+              f"<figcaption>{_e(caption)}</figcaption></figure>")
+    others = sorted(p for p in fig.glob("*/sheet.png")) if fig.is_dir() else []
+    for p in others:
+        rel = p.relative_to(rundir).as_posix()
+        w(f'<figure><img src="{_e(rel)}" alt="sheet of {_e(p.parent.name)}">'
+          f"<figcaption>measure {_e(p.parent.name)}</figcaption></figure>")
+    if (fig / "movie.mp4").is_file():
+        w(f'<p><a href="{FIGURES}/movie.mp4">movie.mp4</a> (every frame, '
+          f"{_e(render.get('movie_view') or '')} view)</p>")
+
+    # ---- run facts
+    w('<h2 id="facts">The run</h2><table id="run-facts"><tbody>')
+    timings = post.get("timings") or {}
+    rtime = (summary.get("render") or {}).get("wall_s")
+    facts = [("scene", name), ("status", summary.get("status")),
+             ("engine", summary.get("engine")), ("mode", summary.get("mode")),
+             ("iterations", summary.get("steps")), ("time step t", summary.get("dt")),
+             ("particles", summary.get("n_particles")),
+             ("frames dumped", post.get("frames")),
+             ("run wall time [s]", _num(summary.get("wall_s"), 3)),
+             ("stress post-processing [s]", _num(timings.get("total_s"), 3)),
+             ("pictures [s]", _num(rtime, 3))]
+    if summary.get("error"):
+        facts.append(("error", summary["error"].get("message")))
+    for k, v in facts:
+        if v is not None:
+            w(f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>")
+    w("</tbody></table>")
+    cycles = (summary.get("report") or {}).get("cycles")
+    if cycles:
+        keys = [k for k in cycles[0] if isinstance(cycles[0][k], (int, float, str))]
+        w('<table id="cycles"><thead><tr>' + "".join(f"<th>{_e(k)}</th>" for k in keys)
+          + "</tr></thead><tbody>")
+        for c in cycles:
+            w("<tr>" + "".join(f"<td class=num>{_e(_num(c.get(k)))}</td>" for k in keys) + "</tr>")
+        w("</tbody></table>")
+
+    # ---- scene
+    w('<h2 id="scene">Scene and parameters</h2><table id="params"><tbody>')
+    for k, v in (summary.get("params") or scene.get("params") or {}).items():
+        w(f"<tr><th>{_e(k)}</th><td>{_e(json.dumps(v))}</td></tr>")
+    w("</tbody></table>")
+    if scene.get("groups"):
+        w('<table id="groups"><thead><tr><th>group</th><th>kind</th><th>host</th><th>n</th>'
+          "<th>type</th><th>molecule</th><th>max. deformation at the end</th></tr></thead><tbody>")
+        for g in scene["groups"]:
+            md = (groups.get(g["name"]) or {}).get("max_deformation")
+            w(f"<tr><td>{_e(g['name'])}</td><td>{_e(g.get('kind'))}</td>"
+              f"<td>{_e(g.get('host') or '')}</td><td class=num>{g.get('n')}</td>"
+              f"<td class=num>{g.get('type')}</td><td class=num>{g.get('mol')}</td>"
+              f"<td class=num>{_num(md)}</td></tr>")
+        w("</tbody></table>")
+    if scene.get("phases"):
+        w("<p>Phases: " + "; ".join(f"{_e(p['name'])} ({p['steps']} iterations)"
+                                    for p in scene["phases"]) + "</p>")
+
+    # ---- stability
+    w('<h2 id="stability">Stability margin (Eq. 5)</h2>')
+    st = stability_margin(rundir, scene, summary) if stability else None
+    if st:
+        ok = st["ratio"] <= 1.0
+        w(f'<p id="stability-margin">Predicted largest stable time step t<sub>max</sub> = '
+          f"{_num(st['t_max'])}; this run used t = {_num(st['dt'])}: "
+          f'<span class="{"ok" if ok else "bad"}">{_num(1.0 / st["ratio"] if st["ratio"] else None, 3)}'
+          f"× margin</span> ({'within' if ok else 'beyond'} the limit). "
+          f"{_e(st.get('set_by', ''))}</p>")
+    else:
+        w('<p class="note">Not available for this scene.</p>')
+
+    # ---- files
+    w('<h2 id="files">Files to open elsewhere</h2><ul>')
+    links = [("vtk/run.pvd", "VTK time series: open in ParaView, OVITO or pyvista (point data: "
+                             "group, type, radius, displacement, every measure)"),
+             ("stress.dump", "LAMMPS dump with the measures as named columns (OVITO)"),
+             ("summary.json", "the run's summary, peaks included"),
+             ("stress.json", "the post-processing record"),
+             ("trajectory.dump", "the trajectory (dump custom id type mol x y z)"),
+             ("particles.data", "LAMMPS data file (original positions)"),
+             ("in.lammps", "the LAMMPS input deck"),
+             (f"{FIGURES}/render.json", "what the pictures show")]
+    for rel, what in links:
+        if (rundir / rel).is_file():
+            w(f'<li><a href="{_e(rel)}">{_e(rel)}</a> — {_e(what)}</li>')
+    w("</ul></body></html>")
+    path = rundir / REPORT
+    tmp = rundir / f".{REPORT}.tmp{os.getpid()}"
+    tmp.write_text("\n".join(out) + "\n", encoding="utf-8")
+    os.replace(tmp, path)
+    return path

@@ -1,0 +1,268 @@
+"""The stress field of a run as files other programs open: a VTK time series and a LAMMPS dump.
+
+``RUNDIR/vtk/run.pvd``
+    A ParaView collection (PVD) of one VTK XML PolyData file a dumped frame
+    (``vtk/frame_ITERATION.vtp``, each particle a vertex), with the iteration as the time value,
+    so ParaView's time slider, pyvista (``pv.get_reader``) and OVITO step through the run. Point
+    data, per particle: ``id`` (LAMMPS atom id), ``group_id`` (0-based, the order of
+    ``scene.json``), ``group_name``, ``type``, ``mol``, ``radius``, ``original`` (o),
+    ``displacement`` (p − o) and its magnitude ``displacement_magnitude``, ``velocity`` where the
+    dump holds vx vy vz, and every measure by its name (``paper``, ``accumulated``, ``strain``,
+    ``d2min``, ``virial`` if recorded) as float64 — the very numbers of ``summary.json``'s peaks.
+    Field data: ``iteration``, ``time`` and ``group_names``. Binary, LZ4-compressed (fast; a resting
+    sediment compresses to almost nothing).
+``RUNDIR/stress.dump``
+    A LAMMPS ``dump custom`` text file, OVITO's native input: ``id type mol x y z radius
+    [vx vy vz] group dx dy dz paper accumulated strain d2min [virial]``; OVITO maps ``radius`` to
+    the particle radius and keeps the others as named properties. An undefined value (e.g. the
+    strain of a particle with no neighbours) is written ``nan``.
+
+Both are written into a temporary name and renamed when complete: a reader never sees half.
+
+Radii: a rackstress run's scene is rebuilt from ``scene.json`` to take its radii; if that is not
+possible (a TOML scene, a plain LAMMPS run) the data file's diameter column is used, else half the
+part's median nearest-neighbour distance (touching spheres).
+"""
+from __future__ import annotations
+
+import io
+import os
+import shutil
+from pathlib import Path
+from xml.sax.saxutils import quoteattr
+
+import numpy as np
+
+from rackstress.stress.measures import positions
+
+FLOAT = "%.10g"
+
+
+def radii(run) -> np.ndarray:
+    """Radius of every particle (id order); see the module docstring for where it comes from."""
+    r = getattr(run, "radii", None)
+    if r is not None:
+        return np.asarray(r, dtype=np.float64)
+    r = _scene_radii(run)
+    if r is None:
+        r = np.empty(run.n_atoms)
+        for part in run.parts.values():
+            r[part.index] = _touching_radius(run.o[part.index])
+    run.radii = r
+    return r
+
+
+def _scene_radii(run):
+    scene = run.scene or {}
+    name, params = scene.get("scene"), scene.get("params") or {}
+    try:
+        from rackstress import scenes
+
+        if name not in scenes.BUILDERS:
+            return None
+        known = scenes.parameters(name)
+        sc = scenes.build(name, **{k: v for k, v in params.items() if k in known})
+        out = np.empty(run.n_atoms)
+        for gname, part in run.parts.items():
+            g = sc.groups.get(gname)
+            if g is None or g.n != part.n:
+                return None
+            out[part.index] = g.r
+        return out
+    except Exception:  # noqa: BLE001 - a scene that cannot be rebuilt: estimate instead
+        return None
+
+
+def _touching_radius(o: np.ndarray) -> float:
+    if len(o) < 2:
+        return 0.5
+    from scipy.spatial import cKDTree
+
+    d = cKDTree(o).query(o, k=2)[0][:, 1]
+    return 0.5 * float(np.median(d)) or 0.5
+
+
+def group_ids(run) -> tuple[np.ndarray, list]:
+    """(0-based group id of every particle, group names in order)."""
+    gid = np.zeros(run.n_atoms, dtype=np.int32)
+    names = list(run.parts)
+    for k, part in enumerate(run.parts.values()):
+        gid[part.index] = k
+    return gid, names
+
+
+def _velocity(ts):
+    if all(c in ts.data for c in ("vx", "vy", "vz")):
+        return np.column_stack([ts.data["vx"], ts.data["vy"], ts.data["vz"]])
+    return None
+
+
+def _swap_in(tmp: Path, final: Path) -> None:
+    old = final.with_name(f".{final.name}.old{os.getpid()}")
+    if final.exists():
+        os.replace(final, old)
+    os.replace(tmp, final)
+    if old.exists():
+        shutil.rmtree(old, ignore_errors=True) if old.is_dir() else old.unlink()
+
+
+# ----------------------------------------------------------------------------- VTK
+def frame_name(step: int) -> str:
+    return f"frame_{int(step):07d}.vtp"
+
+
+def write_vtk(run, fields, outdir, progress: bool = False) -> Path:
+    """Write ``outdir/run.pvd`` and one ``.vtp`` per frame; return the ``.pvd`` path.
+
+    Example
+    -------
+    >>> import pyvista as pv                                              # doctest: +SKIP
+    >>> r = pv.get_reader("runs/plane-rack/vtk/run.pvd"); r.set_active_time_value(36)
+    >>> r.read()[0].point_data["paper"].max()                             # doctest: +SKIP
+    """
+    from vtkmodules.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray
+    from vtkmodules.vtkCommonCore import vtkPoints, vtkStringArray
+    from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData
+    from vtkmodules.vtkIOXML import vtkXMLPolyDataWriter
+
+    from rackstress.lib.progress import progress_bar
+
+    outdir = Path(outdir)
+    tmp = outdir.with_name(f".{outdir.name}.tmp{os.getpid()}")
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir(parents=True)
+    gid, names = group_ids(run)
+    name_of = np.asarray(names, dtype=object)[gid]
+    o = run.o
+    r = radii(run)
+
+    def arr(a, name, deep=True):
+        a = np.ascontiguousarray(a)
+        v = numpy_to_vtk(a, deep=deep)
+        v.SetName(name)
+        return v
+
+    poly = vtkPolyData()
+    n = run.n_atoms
+    verts = vtkCellArray()
+    verts.SetData(numpy_to_vtkIdTypeArray(np.arange(n + 1, dtype=np.int64), deep=True),
+                  numpy_to_vtkIdTypeArray(np.arange(n, dtype=np.int64), deep=True))
+    poly.SetVerts(verts)
+    pd = poly.GetPointData()
+    for a in (arr(run.data.ids.astype(np.int64), "id"), arr(gid, "group_id"),
+              arr(run.data.types.astype(np.int32), "type"),
+              arr(run.data.mols.astype(np.int32), "mol"), arr(r, "radius"),
+              arr(o, "original")):
+        pd.AddArray(a)
+    sname = vtkStringArray()
+    sname.SetName("group_name")
+    sname.SetNumberOfValues(n)
+    for k, s in enumerate(name_of):
+        sname.SetValue(k, s)
+    pd.AddArray(sname)
+    fd = poly.GetFieldData()
+    gnames = vtkStringArray()
+    gnames.SetName("group_names")
+    for s in names:
+        gnames.InsertNextValue(s)
+    fd.AddArray(gnames)
+    writer = vtkXMLPolyDataWriter()
+    writer.SetDataModeToBinary()
+    writer.SetCompressorTypeToLZ4()       # fast; ParaView, pyvista and VTK ≥ 8.1 read it
+    entries = []
+    try:
+        with progress_bar(len(fields.steps), progress, "VTK frames") as bar:
+            bar.unit = "frame"
+            for k, step in enumerate(fields.steps):
+                ts = run.trajectory[k]
+                p = positions(ts)
+                pts = vtkPoints()
+                pts.SetData(arr(p, "points"))
+                poly.SetPoints(pts)
+                disp = p - o
+                pd.AddArray(arr(disp, "displacement"))
+                pd.AddArray(arr(np.linalg.norm(disp, axis=1), "displacement_magnitude"))
+                v = _velocity(ts)
+                if v is not None:
+                    pd.AddArray(arr(v, "velocity"))
+                for m, vals in fields.values.items():
+                    pd.AddArray(arr(vals[k], m))
+                fd.AddArray(arr(np.array([int(step)], dtype=np.int64), "iteration"))
+                fd.AddArray(arr(np.array([float(step) * run.dt]), "time"))
+                name = frame_name(step)
+                writer.SetFileName(str(tmp / name))
+                writer.SetInputData(poly)
+                if not writer.Write():
+                    raise OSError(f"{tmp / name}: VTK could not write the frame")
+                entries.append((int(step), name))
+                bar.update(1)
+        lines = ['<?xml version="1.0"?>',
+                 '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">',
+                 "  <Collection>"]
+        lines += [f'    <DataSet timestep="{s}" group="" part="0" file={quoteattr(f)}/>'
+                  for s, f in entries]
+        lines += ["  </Collection>", "</VTKFile>", ""]
+        (tmp / "run.pvd").write_text("\n".join(lines))
+        _swap_in(tmp, outdir)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return outdir / "run.pvd"
+
+
+# ----------------------------------------------------------------------------- LAMMPS dump
+def stress_dump_columns(run, fields, with_velocity: bool) -> list:
+    cols = ["id", "type", "mol", "x", "y", "z", "radius"]
+    if with_velocity:
+        cols += ["vx", "vy", "vz"]
+    return cols + ["group", "dx", "dy", "dz", *fields.values]
+
+
+def write_stress_dump(run, fields, path, progress: bool = False) -> Path:
+    """Write the measures as named columns of a LAMMPS ``dump custom`` file (module docstring).
+
+    Example
+    -------
+    >>> write_stress_dump(run, compute_fields(run), "runs/plane-rack/stress.dump")  # doctest: +SKIP
+    """
+    from rackstress.lib.progress import progress_bar
+
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    gid, _ = group_ids(run)
+    r = radii(run)
+    o = run.o
+    ids, types, mols = run.data.ids, run.data.types, run.data.mols
+    with_v = _velocity(run.trajectory[0]) is not None
+    cols = stress_dump_columns(run, fields, with_v)
+    nfloat = len(cols) - 3 - 1  # id type mol ... group (ints)
+    fmt = " ".join(["%d", "%d", "%d"] + [FLOAT] * (4 + 3 * with_v) + ["%d"]
+                   + [FLOAT] * (3 + len(fields.values)))
+    del nfloat
+    try:
+        with open(tmp, "w") as fh, progress_bar(len(fields.steps), progress, "stress dump") as bar:
+            bar.unit = "frame"
+            for k, step in enumerate(fields.steps):
+                ts = run.trajectory[k]
+                p = positions(ts)
+                blocks = [ids, types, mols, p, r]
+                if with_v:
+                    blocks.append(_velocity(ts))
+                blocks += [gid, p - o] + [vals[k] for vals in fields.values.values()]
+                table = np.column_stack(blocks)
+                lo, hi = p.min(axis=0), p.max(axis=0)
+                buf = io.StringIO()
+                buf.write(f"ITEM: TIMESTEP\n{int(step)}\nITEM: NUMBER OF ATOMS\n{len(p)}\n"
+                          "ITEM: BOX BOUNDS mm mm mm\n")
+                for a in range(3):
+                    buf.write(f"{lo[a]:.10g} {hi[a]:.10g}\n")
+                buf.write("ITEM: ATOMS " + " ".join(cols) + "\n")
+                np.savetxt(buf, table, fmt=fmt)
+                fh.write(buf.getvalue())
+                bar.update(1)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path

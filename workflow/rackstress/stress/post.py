@@ -1,0 +1,319 @@
+"""Post-processing of a run: every stress measure computed once, the peaks, files to explore.
+
+:func:`compute_fields` runs the measures of :mod:`rackstress.stress.measures` over every dumped
+frame once — the paper's distance from the desired position (robust fit, Section 5.2), its time
+integral, von Mises shear strain and D²min (Falk & Langer), and the virial stress if the dump
+holds it — and keeps them as a :class:`Fields` (n_frames × n_atoms per measure, float64), cached
+in ``RUNDIR/measures.npz`` so that pictures, report and files reuse them instead of recomputing.
+
+:func:`peaks` finds, for every group and measure, the largest value over the whole run: value,
+iteration, frame, particle (LAMMPS atom id and index in its group) and its position at that
+iteration. :func:`postprocess` writes them into ``summary.json`` (``groups.<name>.peak.<measure>``,
+atomically) and writes the VTK time series (``RUNDIR/vtk/run.pvd``) and, on request, a LAMMPS dump
+with the measures as named columns (``RUNDIR/stress.dump``; see :mod:`rackstress.stress.export`).
+
+Example
+-------
+>>> from rackstress.stress.post import postprocess          # doctest: +SKIP
+>>> info = postprocess("runs/plane-rack")                   # doctest: +SKIP
+>>> info["peak"]["value"], info["peak"]["iteration"]         # doctest: +SKIP
+(2.81..., 36)
+"""
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from rackstress.lib.jsonio import write_json
+from rackstress.stress.dump import StressInputError
+from rackstress.stress.measures import (AccumulatedDistance, VirialStress, VonMisesStrain,
+                                        positions, stress_columns)
+
+#: The measures every run gets, in this order (``virial`` too when the dump recorded it).
+MEASURES = ("paper", "accumulated", "strain", "d2min")
+LABELS = {
+    "paper": ("distance from desired position", "length units"),
+    "accumulated": ("accumulated distance from desired position", "length × time units"),
+    "strain": ("von Mises shear strain", "dimensionless"),
+    "d2min": ("non-affine displacement D²min", "length² units"),
+    "virial": ("per-atom von Mises stress × volume", "energy units"),
+}
+#: Largest n_atoms × n_frames post-processed (each measure keeps n_frames × n_atoms float64,
+#: five such arrays while computing): about 1 GB at this size.
+MAX_VALUES = 25_000_000
+
+
+class TooLargeError(StressInputError):
+    """The run has too many particles × frames to hold its measures in memory."""
+
+
+#: The fit of the desired position (one for summary, pictures, report and files).
+FIT = "robust"
+CACHE = "measures.npz"
+CACHE_VERSION = 1
+VTK_DIR, PVD = "vtk", "run.pvd"
+STRESS_DUMP = "stress.dump"
+STRESS_JSON = "stress.json"
+
+
+@dataclass
+class Fields:
+    """Every measure per frame and particle (id order), with the frames' iterations."""
+
+    steps: np.ndarray                       # (n_frames,) iteration of every dumped frame
+    values: dict                            # measure → (n_frames, n_atoms) float64
+    fit: str = FIT
+    timings: dict = field(default_factory=dict)
+
+    @property
+    def measures(self) -> list:
+        return list(self.values)
+
+    def label(self, measure: str) -> str:
+        name, units = LABELS[measure]
+        return f"{name} [{units}]"
+
+
+# ----------------------------------------------------------------------------- computing
+def _stamp(run) -> dict:
+    """What the cache depends on: the dump's and data file's size and modification time."""
+    out = {"version": CACHE_VERSION, "fit": FIT, "n_frames": int(run.index.n_frames)}
+    for key, path in (("dump", run.index.path), ("data", run.data.path)):
+        st = os.stat(path)
+        out[key] = [int(st.st_size), int(st.st_mtime_ns)]
+    return out
+
+
+def _load_cache(run, path: Path) -> Fields | None:
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            if json.loads(str(z["stamp"])) != _stamp(run):
+                return None
+            values = {m: z[m] for m in json.loads(str(z["measures"]))}
+            steps = z["steps"]
+    except (OSError, KeyError, ValueError):
+        return None
+    if not np.array_equal(steps, run.steps):
+        return None
+    return Fields(steps, values)
+
+
+def _save_cache(run, fields: Fields, path: Path) -> None:
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}.npz")
+    try:
+        np.savez(tmp, stamp=json.dumps(_stamp(run)), measures=json.dumps(fields.measures),
+                 steps=fields.steps, **fields.values)
+        os.replace(tmp, path)
+    except OSError:
+        tmp.unlink(missing_ok=True)       # a cache that cannot be written is only a cache
+
+
+def compute_fields(run, cache: bool = True, progress: bool = False) -> Fields:
+    """Every measure of every frame of ``run`` (a :class:`RunData`), computed once.
+
+    Parameters
+    ----------
+    run : RunData
+        From :func:`rackstress.stress.load_run` (or :func:`rackstress.stress.foreign.load_plain`).
+    cache : bool
+        Reuse ``RUNDIR/measures.npz`` when it was made from the same dump and data file, and
+        write it after computing (only where the run directory is writable).
+    progress : bool
+        Show a progress bar on a terminal.
+
+    Returns
+    -------
+    Fields
+        ``values[m]`` is (n_frames, n_atoms): NaN where a measure is undefined.
+
+    Example
+    -------
+    >>> fields = compute_fields(load_run("runs/plane-rack"))          # doctest: +SKIP
+    >>> fields.values["paper"].shape                                  # doctest: +SKIP
+    (31, 406)
+    """
+    path = Path(run.rundir) / CACHE
+    if cache and not run.truncation:
+        got = _load_cache(run, path)
+        if got is not None:
+            got.timings["cached"] = True
+            return got
+    import sys
+
+    t0 = time.perf_counter()
+    size = run.n_atoms * run.index.n_frames
+    if size > MAX_VALUES:
+        raise TooLargeError(
+            f"{run.index.path}: {run.n_atoms} particles × {run.index.n_frames} frames = "
+            f"{size:.3g} values per measure, more than the {MAX_VALUES:.3g} the stress "
+            "post-processing holds in memory; dump fewer frames (--dump-every) or analyse "
+            "a part of the run")
+    virial = stress_columns(run.index.columns) is not None
+    analyses = [AccumulatedDistance(run, fit=FIT), VonMisesStrain(run)]
+    if virial:
+        analyses.append(VirialStress(run))
+    tty = bool(progress) and sys.stderr.isatty()
+    for a in analyses:
+        a.run(verbose=tty, progressbar_kwargs={"desc": f"measure {a.NAME}", "leave": False}
+              if tty else None)
+    acc, strain = analyses[0].results, analyses[1].results
+    values = {"paper": acc.distance, "accumulated": acc.per_particle,
+              "strain": strain.von_mises, "d2min": strain.d2min}
+    if virial:
+        values["virial"] = analyses[2].results.per_particle
+    fields = Fields(np.asarray(acc.steps, dtype=np.int64), values)
+    fields.timings["compute_s"] = time.perf_counter() - t0
+    fields.timings["cached"] = False
+    if cache and not run.truncation:
+        _save_cache(run, fields, path)
+    return fields
+
+
+# ----------------------------------------------------------------------------- peaks
+def peaks(run, fields: Fields) -> dict:
+    """For every group and measure, the largest value over the whole run and where it was.
+
+    Returns ``{group: {measure: record}}`` with record ``{"value", "iteration", "frame",
+    "time", "particle" (LAMMPS atom id), "index" (0-based in the group), "position" (x, y, z at
+    that iteration), "original" (its original position o), "units"}``, or None for a measure
+    undefined on every particle of the group. Ties go to the earliest frame, then the lowest id.
+    """
+    out, need = {}, {}
+    ids = run.data.ids
+    for name, part in run.parts.items():
+        out[name] = {}
+        for m, v in fields.values.items():
+            sub = v[:, part.index]
+            finite = np.isfinite(sub)
+            if not finite.any():
+                out[name][m] = None
+                continue
+            flat = int(np.argmax(np.where(finite, sub, -np.inf)))
+            k, j = divmod(flat, sub.shape[1])
+            row = int(part.index[j])
+            out[name][m] = {"value": float(sub[k, j]), "iteration": int(fields.steps[k]),
+                            "frame": int(k), "time": float(fields.steps[k] * run.dt),
+                            "particle": int(ids[row]), "index": int(j),
+                            "original": [float(x) for x in run.o[row]],
+                            "units": LABELS[m][1]}
+            need.setdefault(k, []).append((name, m, row))
+    for k, todo in sorted(need.items()):
+        p = positions(run.trajectory[k])
+        for name, m, row in todo:
+            out[name][m]["position"] = [float(x) for x in p[row]]
+    return out
+
+
+def overall_peak(run, group_peaks: dict, measure: str = "paper") -> dict | None:
+    """The largest ``measure`` over the parts pictures colour (not racks, not sediments)."""
+    best = None
+    for part in run.displayed() or list(run.parts.values()):
+        rec = group_peaks.get(part.name, {}).get(measure)
+        if rec is not None and (best is None or rec["value"] > best["value"]):
+            best = {"group": part.name, "measure": measure, **rec}
+    return best
+
+
+# ----------------------------------------------------------------------------- the step
+def postprocess(rundir, vtk: bool = True, dump: bool = False, progress: bool = False,
+                run=None, out=None, log=None, allow_truncated: bool = False) -> dict:
+    """Compute the measures once, write the peaks into ``summary.json`` and the files.
+
+    Parameters
+    ----------
+    rundir : path
+        A run directory (``rackstress run``); ignored when ``run`` is given.
+    vtk, dump : bool
+        Write ``vtk/run.pvd`` (one ``.vtp`` a frame) and ``stress.dump``.
+    progress : bool
+        Progress bars on a terminal.
+    run : RunData, optional
+        An already opened run (e.g. a plain LAMMPS data file and dump, :mod:`.foreign`).
+    out : path, optional
+        Where to write (default: the run directory).
+
+    Returns
+    -------
+    dict
+        What ``stress.json`` holds: the peaks per group, the overall peak of the paper measure,
+        the files written and the timings.
+
+    Example
+    -------
+    >>> postprocess("runs/magpod-small")["peak"]["iteration"]   # doctest: +SKIP
+    """
+    from rackstress.stress.rundata import load_run
+
+    t0 = time.perf_counter()
+    if run is None:
+        run = load_run(rundir, allow_truncated=allow_truncated)
+    out = Path(out) if out is not None else Path(run.rundir)
+    out.mkdir(parents=True, exist_ok=True)
+    fields = compute_fields(run, progress=progress)
+    group_peaks = peaks(run, fields)
+    info = {"fit": FIT, "measures": {m: {"label": LABELS[m][0], "units": LABELS[m][1]}
+                                     for m in fields.measures},
+            "frames": len(fields.steps), "first_iteration": int(fields.steps[0]),
+            "last_iteration": int(fields.steps[-1]),
+            "peak": overall_peak(run, group_peaks), "groups": group_peaks, "files": {},
+            "timings": {"measures_s": fields.timings.get("compute_s", 0.0)}}
+    from rackstress.stress import export
+
+    if vtk:
+        t = time.perf_counter()
+        pvd = export.write_vtk(run, fields, out / VTK_DIR, progress=progress)
+        info["files"]["vtk"] = str(pvd.relative_to(out))
+        info["timings"]["vtk_s"] = time.perf_counter() - t
+    if dump:
+        t = time.perf_counter()
+        path = export.write_stress_dump(run, fields, out / STRESS_DUMP, progress=progress)
+        info["files"]["dump"] = str(path.relative_to(out))
+        info["timings"]["dump_s"] = time.perf_counter() - t
+    info["timings"]["total_s"] = time.perf_counter() - t0
+    write_json(out / STRESS_JSON, info)
+    summary_path = Path(run.rundir) / "summary.json"      # the run's own record
+    if summary_path.is_file():
+        add_to_summary(summary_path, info)
+    if log is not None:
+        for line in describe(info):
+            log(line)
+    return info
+
+
+def add_to_summary(summary_path: Path, info: dict) -> dict:
+    """Put the peaks into ``summary.json`` (atomically): ``groups.<name>.peak.<measure>`` and a
+    top-level ``stress`` record (fit, overall peak, files)."""
+    try:
+        summary = json.loads(Path(summary_path).read_text())
+    except json.JSONDecodeError as exc:
+        raise StressInputError(f"{summary_path}: not valid JSON ({exc})") from None
+    groups = summary.setdefault("groups", {})
+    for name, rec in info["groups"].items():
+        groups.setdefault(name, {})["peak"] = rec
+    summary["stress"] = {"fit": info["fit"], "peak": info["peak"], "files": info["files"],
+                         "measures": info["measures"]}
+    write_json(summary_path, summary)
+    return summary
+
+
+def describe(info: dict) -> list:
+    """Lines for the terminal: the overall peak and the peak of the paper measure per group."""
+    lines = []
+    pk = info.get("peak")
+    if pk:
+        lines.append(f"  peak {pk['measure']} = {pk['value']:.4g} {pk['units']} in {pk['group']} "
+                     f"at iteration {pk['iteration']}, particle {pk['particle']} at "
+                     f"({', '.join(f'{x:.3g}' for x in pk['position'])})")
+    for name, rec in info["groups"].items():
+        p = rec.get("paper")
+        if p is not None:
+            lines.append(f"  {name:12s} peak paper={p['value']:.4g} (iteration {p['iteration']}, "
+                         f"particle {p['particle']})")
+    for key, path in info["files"].items():
+        lines.append(f"  {key}: {path}")
+    return lines
