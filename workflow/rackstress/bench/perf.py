@@ -111,11 +111,12 @@ def worker(engine: str, mode: str, steps: int, profile_steps: int, scene_name: s
 
         ref = Reference(sc)
         res["setup_s"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         for _, phase, _ in sc.schedule():
             for _ in range(phase.steps):
                 ref.step(phase.vars)
         res["wall_s"] = time.perf_counter() - t0
+        res["cpu_s"] = time.process_time() - c0
         res["ranks"] = 1
         res["maxrss_mb"] = res["maxrss_sum_mb"] = \
             resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
