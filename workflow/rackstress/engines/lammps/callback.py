@@ -67,11 +67,15 @@ class Frame:
             self.dense_mass = mass[self.index[self.dense_rows], None]
         self.refresh(lmp)
 
-    def refresh(self, lmp) -> None:
-        """Re-read positions and velocities (every step) and clear the per-step cache."""
-        nall = self.nlocal + self.nghost
-        self.x = lmp.numpy.extract_atom("x")[:nall]
-        self.v = lmp.numpy.extract_atom("v")[:self.nlocal]
+    def refresh(self, lmp=None) -> None:
+        """Clear the per-step cache; with ``lmp``, (re)take LAMMPS' position and velocity
+        arrays. Between two reneighbourings LAMMPS neither reallocates nor reorders them (atoms
+        are exchanged, and arrays grown, only when it reneighbours), so the views taken when
+        the frame was built see every step's values in place."""
+        if lmp is not None:
+            nall = self.nlocal + self.nghost
+            self.x = lmp.numpy.extract_atom("x")[:nall]
+            self.v = lmp.numpy.extract_atom("v")[:self.nlocal]
         #: per-step results shared between terms (overlapping pairs of a pair of groups)
         self.cache = {}
         #: pair contributions (rows, values), summed into the accumulator once (:meth:`flush`)
@@ -603,7 +607,7 @@ class PyForces:
                 or lmp.extract_global("nghost") != fr.nghost):
             fr = self.frame = Frame(lmp, self.n, nlocal, self.dense_span, self.mass)
         else:
-            fr.refresh(lmp)
+            fr.refresh()
         return fr
 
     # ------------------------------------------------------------------ callback
