@@ -20,6 +20,7 @@ vectorize); a coincident pair is caught before it gets here.
 from __future__ import annotations
 
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -69,8 +70,6 @@ def compiled():
     if nb is None:
         raise ValueError("kernels 'numba' asked for, but numba is not installed")
     cache_dir().mkdir(parents=True, exist_ok=True)
-    import sys
-
     return sys.modules[__name__]
 
 
@@ -79,6 +78,10 @@ def warm() -> dict:
     and the cache directory."""
     t0 = time.perf_counter()
     k = compiled()
+    first = not any(cache_dir().rglob("kernels.*.nbi"))
+    if first and os.environ.get("PMI_RANK", "0") == "0":
+        print(f"rackstress: compiling the callback's kernels (first run only; cached in "
+              f"{cache_dir()}) ...", file=sys.stderr, flush=True)
     x = np.array([[0.0, 0.0, 0.0], [1.5, 0.0, 0.0], [0.0, 1.0, 0.0]])
     acc = np.zeros((3, 3))
     r = np.array([0, 1], np.int64)
@@ -90,7 +93,10 @@ def warm() -> dict:
     k.touching(x, r, s, np.full(2, 4.0))
     k.collide(x, r, s, np.full(2, 4.0), 3.0)
     k.dampen(np.ones((3, 3)), r, r, 2.0, acc)
-    return {"seconds": time.perf_counter() - t0, "cache_dir": str(cache_dir())}
+    seconds = time.perf_counter() - t0
+    if first and os.environ.get("PMI_RANK", "0") == "0":
+        print(f"rackstress: kernels compiled in {seconds:.1f} s", file=sys.stderr, flush=True)
+    return {"seconds": seconds, "cache_dir": str(cache_dir()), "first_compile": first}
 
 
 if nb is not None:
