@@ -20,15 +20,16 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 from rackstress.lib import rigid
 from rackstress import scenes  # noqa: E402
+from rackstress.engines.driver import drive  # noqa: E402
 from rackstress.engines.reference import Reference  # noqa: E402
 
 
 def states(scene, at):
-    ref, out = Reference(scene), {}
-    for step in range(max(at) + 1):
-        if step in at:
-            out[step] = ref.p.copy()
-        ref.step({})
+    """Positions at the steps ``at`` (the one driver, stepping the reference engine)."""
+    ref = Reference(scene.with_steps(max(at)))
+    out = {0: ref.p.copy()} if 0 in at else {}
+    drive(ref, on_chunk=lambda e: out.__setitem__(e.step_count, e.p.copy())
+          if e.step_count in at else None)
     return out
 
 

@@ -25,19 +25,20 @@ CASES = {"plane-bound-d2": ("plane-bound", {"d": 2.0}), "plane-bound-d10": ("pla
 
 def time_reference(name, params, steps):
     from rackstress import scenes
+    from rackstress.engines.driver import drive
     from rackstress.engines.reference import Reference
 
     sc = scenes.build(name, steps=steps, **params)
     ref = Reference(sc)
     t = time.perf_counter()
-    for _ in range(steps):
-        ref.step({})
+    drive(ref)
     return time.perf_counter() - t
 
 
 def time_lammps(name, params, steps, mode="exact"):
     from rackstress import scenes
     from rackstress.engines.lammps.deck import compile_deck
+    from rackstress.engines.driver import drive
     from rackstress.engines.lammps.runner import LammpsRun
     from rackstress.lib.mpi import world
 
@@ -45,7 +46,7 @@ def time_lammps(name, params, steps, mode="exact"):
     run = LammpsRun(compile_deck(sc, mode), None)
     world().Barrier()
     t = time.perf_counter()
-    run.run_schedule()
+    drive(run)
     world().Barrier()
     wall = time.perf_counter() - t
     run.close()

@@ -18,6 +18,7 @@ from rackstress import (Attract, Bind, Collide, Const, Contact, Dampen, Divergen
                         Group, Matched, Phase, PhaseIn, Scene, Within, lattice, rack, scenes)
 from rackstress.engines.lammps.deck import compile_deck
 from rackstress.engines.lammps.runner import LammpsRun
+from rackstress.engines.driver import drive
 from rackstress.engines.reference import Reference
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -122,18 +123,13 @@ def test_force_parity_every_operator_kind(phase, contact):
 
 
 def _reference_final(scene, steps=None):
-    ref = Reference(scene)
-    for _, phase, _ in scene.schedule():
-        for _ in range(phase.steps):
-            ref.step(phase.vars)
-    return ref.p
+    return drive(Reference(scene)).positions
 
 
 def _lammps_final(scene, mode="exact"):
     run = LammpsRun(compile_deck(scene, mode), None)
     try:
-        run.run_schedule()
-        return run.gather_positions()
+        return drive(run).positions
     finally:
         run.close()
 
@@ -166,11 +162,12 @@ from rackstress import scenes
 from rackstress.engines.lammps.deck import compile_deck
 from rackstress.engines.lammps.runner import LammpsRun
 from rackstress.lib.mpi import world
+from rackstress.engines.driver import drive
 out = sys.argv[1]
 for key, name, params in [("d2", "plane-bound", {"d": 2.0}), ("d10", "plane-bound", {"d": 10.0}),
                           ("rack", "plane-rack", {})]:
     run = LammpsRun(compile_deck(scenes.build(name, steps=1200, **params), "exact"), None)
-    run.run_schedule()
+    drive(run)
     p = run.gather_positions()
     nlocal = run.lmp.extract_global("nlocal")
     counts = world().allgather(nlocal)

@@ -17,6 +17,7 @@ import pytest
 from rackstress import scenes
 from rackstress.engines.lammps.deck import compile_deck
 from rackstress.engines.lammps.runner import LammpsRun
+from rackstress.engines.driver import drive
 from rackstress.engines.reference import Reference
 
 EXE = Path(sys.executable).parent / "rackstress"
@@ -29,13 +30,10 @@ def test_parity_magpod_small_600_iterations():
     sc = scenes.build("magpod-small", phase_steps=150, cycles=1)
     assert sc.total_steps == 600
     ref = Reference(sc)
-    for _, phase, _ in sc.schedule():
-        for _ in range(phase.steps):
-            ref.step(phase.vars)
+    drive(ref)
     run = LammpsRun(compile_deck(sc, "exact"), None)
     try:
-        run.run_schedule()
-        p = run.gather_positions()
+        p = drive(run).positions
     finally:
         run.close()
     moved = np.abs(ref.p - sc.original_positions()).max()
@@ -135,9 +133,10 @@ from rackstress import scenes
 from rackstress.engines.lammps.deck import compile_deck
 from rackstress.engines.lammps.runner import LammpsRun
 from rackstress.lib.mpi import world
+from rackstress.engines.driver import drive
 sc = scenes.build("magpod-small", phase_steps=100, cycles=1)
 run = LammpsRun(compile_deck(sc, "exact"), None)
-run.run_schedule()
+drive(run)
 p = run.gather_positions()
 counts = world().allgather(run.lmp.extract_global("nlocal"))
 run.close()
@@ -162,8 +161,6 @@ def test_parity_magpod_small_under_mpi(tmp_path):
     assert counts.min() > 0 and counts.sum() == scenes.build("magpod-small").n_particles
     sc = scenes.build("magpod-small", phase_steps=100, cycles=1)
     ref = Reference(sc)
-    for _, phase, _ in sc.schedule():
-        for _ in range(phase.steps):
-            ref.step(phase.vars)
+    drive(ref)
     assert np.abs(ref.p - sc.original_positions()).max() > 1.0
     assert np.abs(np.load(tmp_path / "p.npy") - ref.p).max() <= 1e-6

@@ -113,6 +113,10 @@ def test_schedule_and_with_steps():
     assert sc.total_steps == 10
     assert [(s, p.name, c) for s, p, c in sc.schedule()] == [
         (0, "a", 0), (3, "b", 0), (5, "a", 1), (8, "b", 1)]
-    cut = sc.with_steps(7)  # a3 b2 a2
-    assert [(p.name, p.steps) for p in cut.phases] == [("a", 3), ("b", 2), ("a", 2)]
+    cut = sc.with_steps(7)  # a3 b2 a2, generated lazily (the cycle's phases are kept as they are)
+    assert [(s, p.name, p.steps, c) for s, p, c in cut.schedule()] == [
+        (0, "a", 3, 0), (3, "b", 2, 0), (5, "a", 2, 1)]
+    assert [(p.name, p.steps) for p in cut.phases] == [("a", 3), ("b", 2)]
     assert cut.total_steps == 7
+    huge = sc.with_steps(10**12)       # nothing is built per phase
+    assert huge.total_steps == 10**12 and len(huge.phases) == 2

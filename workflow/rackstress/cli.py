@@ -8,10 +8,8 @@ from pathlib import Path
 
 import click
 
-from rackstress.errors import DivergenceError, RackstressError
-
-#: Exit codes: bad input, diverged run, pictures failed after a good run.
-EXIT_INPUT, EXIT_DIVERGED, EXIT_RENDER = 2, 3, 4
+from rackstress.errors import (EXIT_BUG, EXIT_DIVERGED, EXIT_INPUT, EXIT_RENDER,  # noqa: F401
+                               EXIT_STORAGE, DivergenceError, RackstressError, os_error_message)
 
 
 def _load_scene(scene: str, steps, dt, sets):
@@ -33,6 +31,56 @@ def _fail(err: Exception, code: int):
     sys.exit(code)
 
 
+def _out_path(ctx, param, value):
+    """``--out`` as a Path, refusing an empty one (it would write into the working directory)."""
+    if value is None:
+        return None
+    if not str(value).strip():
+        raise click.BadParameter("is empty: give a run directory (e.g. --out runs/mine)")
+    return Path(value)
+
+
+def _fail_any(err: BaseException, out=None):
+    """Exit with the documented status of ``err`` (errors.py) after one paragraph.
+
+    Errors rackstress raises reach every rank alike; anything else may have reached one rank
+    only while the others wait for it, so under MPI it ends all of them (MPI_Abort)."""
+    from rackstress.lib.mpi import world
+
+    if isinstance(err, DivergenceError):
+        msg, code = f"{err} (run directory: {out})", EXIT_DIVERGED
+    elif isinstance(err, RackstressError):
+        msg, code = str(err), err.exit_code
+    elif isinstance(err, OSError):
+        msg, code = os_error_message(err, "write"), EXIT_STORAGE
+    elif isinstance(err, MemoryError):
+        msg, code = ("the machine ran out of memory; make the scene smaller or run it on a "
+                     "larger machine"), EXIT_INPUT
+    else:
+        comm = world()
+        if comm.Get_size() > 1:       # a bug on one rank: the others must not wait forever
+            import traceback
+
+            traceback.print_exception(err)
+            sys.stderr.write(f"rackstress: error on rank {comm.Get_rank()}: ending all ranks\n")
+            sys.stderr.flush()
+            comm.Abort(EXIT_BUG)
+        raise err
+    comm = world()
+    # errors rackstress raises reach every rank alike: one message, from rank 0
+    if comm.Get_rank() == 0 or not isinstance(err, RackstressError):
+        click.echo(f"rackstress: error: {msg}", err=True)
+    if comm.Get_size() > 1 and not isinstance(err, RackstressError):
+        sys.stderr.flush()
+        comm.Abort(code)
+    sys.exit(code)
+
+
+#: Options of ``run`` that ``--resume`` cannot honour: the run goes on as it was started.
+RESUME_FIXED = ("engine", "mode", "steps", "dt", "sets", "dump_every", "overwrite",
+                "restart_every", "allow_unstable")
+
+
 @click.group()
 @click.version_option(package_name="rackstress")
 def main():
@@ -50,7 +98,7 @@ def main():
 @click.option("--dt", type=float, help="Time step t of Eq. 5 (default: the scene's).")
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE",
               help="Override a scene parameter; repeatable (see 'rackstress scenes').")
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
+@click.option("--out", type=click.Path(file_okay=False), callback=_out_path,
               help="Run directory (default: runs/SCENE-TIMESTAMP).")
 @click.option("--dump-every", type=click.IntRange(min=1), help="Steps between trajectory frames.")
 @click.option("--overwrite", is_flag=True, help="Replace a finished run in --out.")
@@ -69,60 +117,91 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
         restart_every=None, resume_dir=None, allow_unstable=False):
     """Run SCENE (a built-in name or a .toml file) and write a run directory.
 
-    Exit status: 0 done, 2 bad input, 3 diverged (frames and summary kept), 4 the run is done
-    but its pictures could not be rendered.
+    Exit status (errors.py): 0 done, 2 bad input or a run directory in use or holding another
+    run, 3 diverged (frames and summary kept), 4 the run is done but its pictures could not be
+    rendered, 5 the disk refused a write (full, read-only, no permission).
     """
-    from rackstress.runs import run as run_mod
     from rackstress.lib.mpi import rank
+    from rackstress.runs import run as run_mod
+    from rackstress.runs.rundir import check_out, locked
 
-    if resume_dir is not None:
-        out = resume_dir
-    elif scene is None:
-        raise click.UsageError("Missing argument 'SCENE' (or give --resume RUNDIR).")
+    ctx = click.get_current_context()
     try:
+        if resume_dir is not None:
+            given = [n for n in RESUME_FIXED
+                     if ctx.get_parameter_source(n) != click.core.ParameterSource.DEFAULT]
+            if out is not None and Path(out).resolve() != Path(resume_dir).resolve():
+                given.append("out")
+            if given:
+                opts = ", ".join("--" + ("set" if n == "sets" else n.replace("_", "-"))
+                                 for n in given)
+                raise RackstressError(
+                    f"--resume continues the run in {resume_dir} exactly as it was started, "
+                    f"so {opts} cannot be given with it (the checkpoint fixes them); to change "
+                    "them start a new run, e.g. with --overwrite")
+            out = check_out(resume_dir)
+        elif scene is None:
+            raise click.UsageError("Missing argument 'SCENE' (or give --resume RUNDIR).")
+        elif out is not None:
+            check_out(out)
         if resume_dir is not None:
             from rackstress.runs.resume import resume_run
 
-            summary = resume_run(resume_dir, scene, progress=progress and rank() == 0)
-        else:
-            sc = _load_scene(scene, steps, dt, sets)
-            if out is None:
-                out = Path("runs") / f"{sc.name}-{time.strftime('%Y%m%d-%H%M%S')}"
-            if restart_every is None and engine == "lammps":
-                from rackstress.runs.resume import default_restart_every
+            with locked(out, create=False) as held:
+                summary = resume_run(resume_dir, scene, progress=progress and rank() == 0)
+                _finish(summary, out, do_render, progress)
+            return
+        sc = _load_scene(scene, steps, dt, sets)
+        if out is None:
+            out = Path("runs") / f"{sc.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+        if restart_every is None and engine == "lammps":
+            from rackstress.runs.checkpoint import default_restart_every
 
-                restart_every = default_restart_every(sc.total_steps)
+            restart_every = default_restart_every(sc.total_steps)
+        # bad input is refused before the run directory is touched
+        planned = run_mod.plan(sc, engine, mode, dump_every, allow_unstable=allow_unstable)
+        # the lock is held from before anything is written until the pictures are done
+        with locked(out) as held:   # noqa: F841
             summary = run_mod.run(sc, out, engine=engine, mode=mode, dump_every=dump_every,
                                   progress=progress and rank() == 0, overwrite=overwrite,
                                   restart_every=restart_every or None,
-                                  allow_unstable=allow_unstable)
-    except DivergenceError as err:
-        _fail(f"{err} (run directory: {out})", EXIT_DIVERGED)
-    except RackstressError as err:
-        _fail(err, EXIT_INPUT)
-    if rank() == 0:
-        click.echo(f"{summary['scene']}: {summary['steps']} steps on {summary['engine']} "
-                   f"({summary['mode']}) in {summary['wall_s']:.2f} s -> {out}")
-        for name, g in summary["groups"].items():
-            click.echo(f"  {name:12s} n={g['n']:6d}  max_deformation={g['max_deformation']:.4g}")
-        _post_run(out, progress)
-        if do_render:
-            from rackstress.render.pictures import render_default
+                                  allow_unstable=allow_unstable, planned=planned)
+            _finish(summary, out, do_render, progress)
+    except Exception as err:  # noqa: BLE001 - each kind has its exit status (_fail_any)
+        _fail_any(err, out)
 
-            t0 = time.perf_counter()
-            try:
-                rep = render_default(out, progress=progress)
-            except Exception as err:  # noqa: BLE001 - the run itself is complete and kept
-                click.echo(f"rackstress: error: the run finished, but rendering its pictures "
-                           f"failed: {err} (retry with 'rackstress render {out}')", err=True)
-                sys.exit(EXIT_RENDER)
-            click.echo(f"  pictures: {rep.outdir} ({len(rep.files)} files, "
-                       f"{time.perf_counter() - t0:.1f} s)")
+
+def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True) -> None:
+    """Report a finished run, post-process it and render its pictures (rank 0, the run
+    directory still held)."""
+    from rackstress.lib.mpi import rank
+
+    if rank() != 0:
+        return
+    click.echo(f"{summary['scene']}: {summary['steps']} steps on {summary['engine']} "
+               f"({summary['mode']}) in {summary['wall_s']:.2f} s -> {out}")
+    for name, g in summary["groups"].items():
+        md = g["max_deformation"]
+        click.echo(f"  {name:12s} n={g['n']:6d}  max_deformation="
+                   + (f"{md:.4g}" if md is not None else "-"))
+    _post_run(out, progress)
+    if do_render:
+        from rackstress.render.pictures import render_default
+
+        t0 = time.perf_counter()
+        try:
+            rep = render_default(out, progress=progress)
+        except Exception as err:  # noqa: BLE001 - the run itself is complete and kept
+            click.echo(f"rackstress: error: the run finished, but rendering its pictures "
+                       f"failed: {err} (retry with 'rackstress render {out}')", err=True)
+            sys.exit(EXIT_RENDER)
+        click.echo(f"  pictures: {rep.outdir} ({len(rep.files)} files, "
+                   f"{time.perf_counter() - t0:.1f} s)")
 
 
 @main.command()
 @click.argument("scene")
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path), required=True)
+@click.option("--out", type=click.Path(file_okay=False), callback=_out_path, required=True)
 @click.option("--mode", type=click.Choice(["exact", "fast"]), default="exact", show_default=True)
 @click.option("--steps", type=click.IntRange(min=0))
 @click.option("--dt", type=float)
@@ -136,8 +215,8 @@ def deck(scene, out, mode, steps, dt, sets, dump_every):
     try:
         sc = _load_scene(scene, steps, dt, sets)
         d = write_deck(sc, out, mode, dump_every or default_dump_every(sc))
-    except RackstressError as err:
-        _fail(err, EXIT_INPUT)
+    except Exception as err:  # noqa: BLE001 - each kind has its exit status (_fail_any)
+        _fail_any(err, out)
     click.echo(f"wrote {out / 'particles.data'} and {out / 'in.lammps'} "
                f"({sc.n_particles} atoms, {len(d.python_ops)} operator(s) in Python)")
 
@@ -219,6 +298,7 @@ def render(rundir, frames, measure, views, groups, out, movie, movie_view, vmax,
     Exit status: 0 done, 2 bad input.
     """
     from rackstress.render.pictures import render as render_run
+    from rackstress.runs.rundir import locked
 
     t0 = time.perf_counter()
     try:
@@ -228,13 +308,17 @@ def render(rundir, frames, measure, views, groups, out, movie, movie_view, vmax,
                 its = [int(f) for f in frames.split(",") if f.strip()]
             except ValueError:
                 raise RackstressError(f"--frames expects comma-separated integers, got '{frames}'")
-        rep = render_run(rundir, frames=its, measure=measure, views=_csv(views) or [],
-                         movie=movie, movie_view=movie_view, vmax=vmax, cmap=cmap,
-                         groups=_csv(groups), out=out, allow_truncated=allow_truncated,
-                         progress=progress)
-        report = _write_report(rundir)
-    except RackstressError as err:
-        _fail(err, EXIT_INPUT)
+        if not Path(rundir).is_dir():
+            raise RackstressError(f"{rundir} is not a run directory (it does not exist)")
+        # one writer per run directory: not while a run (or another render) holds it
+        with locked(rundir, create=False):
+            rep = render_run(rundir, frames=its, measure=measure, views=_csv(views) or [],
+                             movie=movie, movie_view=movie_view, vmax=vmax, cmap=cmap,
+                             groups=_csv(groups), out=out, allow_truncated=allow_truncated,
+                             progress=progress)
+            report = _write_report(rundir)
+    except Exception as err:  # noqa: BLE001 - each kind has its exit status (_fail_any)
+        _fail_any(err)
     for note in rep.notes:
         click.echo(f"note: {note}")
     pk = rep.peak
@@ -294,7 +378,11 @@ def stress(inputs, out, vtk, write_dump, parts, atom_style, dt, allow_truncated,
             if not inputs[0].is_dir():
                 raise RackstressError(f"{inputs[0]}: give a run directory, or a data file and a "
                                       "dump (rackstress stress DATA DUMP --out DIR)")
-            info = postprocess(inputs[0], vtk=vtk, dump=write_dump, progress=progress, out=out)
+            from rackstress.runs.rundir import locked
+
+            with locked(inputs[0], create=False):      # not while a run or render holds it
+                info = postprocess(inputs[0], vtk=vtk, dump=write_dump, progress=progress,
+                                   out=out)
             where = out or inputs[0]
         elif len(inputs) == 2:
             from rackstress.stress.foreign import load_plain
@@ -317,7 +405,7 @@ def stress(inputs, out, vtk, write_dump, parts, atom_style, dt, allow_truncated,
 
 @main.command()
 @click.argument("sweep", required=False, type=click.Path(dir_okay=False, path_type=Path))
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
+@click.option("--out", type=click.Path(file_okay=False), callback=_out_path,
               help="Batch directory (default: batches/SWEEP-STEM); rerun to finish it.")
 @click.option("--ranks-per-job", type=click.IntRange(min=1), default=1, show_default=True,
               help="MPI ranks per job: mpiexec -n K runs K/J jobs at a time.")
@@ -336,7 +424,7 @@ def batch(sweep, out, ranks_per_job, retry_failed, manager, report_dir, figure, 
 
     Jobs that diverge or fail are recorded and the rest go on; a killed batch run again on the
     same --out finishes only what was not finished. Exit status: 0 all jobs finished (whatever
-    their status), 2 bad input.
+    their status), 2 bad input (also a --figure no summary has), 5 the disk refused a write.
     """
     from rackstress.runs import batch as batch_mod
     from rackstress.lib.mpi import rank
@@ -347,11 +435,17 @@ def batch(sweep, out, ranks_per_job, retry_failed, manager, report_dir, figure, 
             return
         if sweep is None:
             raise click.UsageError("give a SWEEP file, or --report BATCHDIR")
+        if out is not None:
+            from rackstress.runs.rundir import check_out
+
+            check_out(out)
         index = batch_mod.run_batch(sweep, out, ranks_per_job, retry_failed, manager,
                                     log=lambda m: click.echo(m) if rank() == 0 else None,
                                     post=_post_job)
-    except RackstressError as err:
-        _fail(err, EXIT_INPUT)
+    except click.UsageError:
+        raise
+    except Exception as err:  # noqa: BLE001 - each kind has its exit status (_fail_any)
+        _fail_any(err, out)
     if rank() == 0:
         p = index["passes"][-1]
         click.echo(f"batch {'complete' if index['complete'] else 'incomplete'}: "

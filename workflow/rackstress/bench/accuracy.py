@@ -20,7 +20,7 @@ MagPod every phase end). Errors:
 
 A t the stability prediction refuses (t > t_max, :mod:`rackstress.model.stability`) is skipped and
 reported; a run the watchdog stops is reported as diverged. Wall time is the stepping only
-(LAMMPS: ``run_schedule``; setup is reported apart). ``--quick``: T = 3 for the planes and
+(:func:`rackstress.engines.driver.drive`; setup is reported apart). ``--quick``: T = 3 for the planes and
 20-iteration (at t = 0.01) phases for MagPod (one cycle, T = 0.8); full: T = 12 and 300-iteration
 phases (T = 12).
 """
@@ -35,6 +35,7 @@ import numpy as np
 from rackstress.lib import rigid
 from rackstress import scenes
 from rackstress.errors import DivergenceError, RackstressError
+from rackstress.engines.driver import drive
 from rackstress.engines.reference import Reference
 from rackstress.model.stability import predict
 from rackstress.bench import fmt, machine, md_table, out_dir, write_json
@@ -65,10 +66,7 @@ def run_engine(scene, engine: str, mode: str) -> dict:
         ref = Reference(scene)
         setup = time.perf_counter() - t0
         t0 = time.perf_counter()
-        for _, phase, _ in scene.schedule():
-            for _ in range(phase.steps):
-                ref.step(phase.vars)
-            ends.append(ref.p.copy())
+        drive(ref, on_phase_end=lambda rec: ends.append(rec.p))
         wall = time.perf_counter() - t0
     else:
         from rackstress.engines.lammps.deck import compile_deck
@@ -78,7 +76,7 @@ def run_engine(scene, engine: str, mode: str) -> dict:
         setup = time.perf_counter() - t0
         try:
             t0 = time.perf_counter()
-            runner.run_schedule(on_phase_end=lambda rec: ends.append(rec.p))
+            drive(runner, on_phase_end=lambda rec: ends.append(rec.p))
             wall = time.perf_counter() - t0
         finally:
             runner.close()

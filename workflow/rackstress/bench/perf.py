@@ -35,6 +35,7 @@ import time
 from pathlib import Path
 
 from rackstress.bench import fmt, machine, md_table, out_dir, write_json
+from rackstress.engines.driver import drive
 
 PAPER = {"config": "paper (Rönkkö et al.): one thread, 1.83 GHz", "s_per_1200": 142.0,
          "n_particles": 33689}
@@ -112,9 +113,7 @@ def worker(engine: str, mode: str, steps: int, profile_steps: int, scene_name: s
         ref = Reference(sc)
         res["setup_s"] = time.perf_counter() - t0
         t0, c0 = time.perf_counter(), time.process_time()
-        for _, phase, _ in sc.schedule():
-            for _ in range(phase.steps):
-                ref.step(phase.vars)
+        drive(ref)
         res["wall_s"] = time.perf_counter() - t0
         res["cpu_s"] = time.process_time() - c0
         res["ranks"] = 1
@@ -135,7 +134,7 @@ def worker(engine: str, mode: str, steps: int, profile_steps: int, scene_name: s
     res["setup_s"] = time.perf_counter() - t0
     comm.Barrier()
     t0, c0 = time.perf_counter(), time.process_time()
-    runner.run_schedule()
+    drive(runner)
     cpu = time.process_time() - c0
     comm.Barrier()
     res["wall_s"] = time.perf_counter() - t0

@@ -32,6 +32,7 @@ import numpy as np
 
 from rackstress.errors import DivergenceError
 from rackstress.model.operators import Collide, Const
+from rackstress.engines.driver import drive
 from rackstress.engines.reference import Reference
 from rackstress.model.scene import Scene
 from rackstress.model.stability import predict
@@ -55,18 +56,20 @@ def trial(scene: Scene, dt: float, steps: int = STEPS, p0: np.ndarray | None = N
     a0 = ref.accelerations(first)
     q0 = float(dt * dt * np.sqrt((a0 * a0).sum(axis=1)).max())
     q = np.zeros(steps)
-    prev2, prev1 = None, ref.p.copy()
-    n = 0
+    prev = [None, ref.p.copy()]
+
+    def observe(eng):      # the second difference of the positions, step by step
+        k = eng.step_count - 1
+        if prev[0] is not None:
+            dd = eng.p - 2.0 * prev[1] + prev[0]
+            q[k] = float(np.sqrt((dd * dd).sum(axis=1)).max())
+        prev[0], prev[1] = prev[1], eng.p.copy()
+
     try:
-        for _, phase, _ in sc.schedule():
-            for _ in range(phase.steps):
-                ref.step(phase.vars)
-                if prev2 is not None:
-                    dd = ref.p - 2.0 * prev1 + prev2
-                    q[n] = float(np.sqrt((dd * dd).sum(axis=1)).max())
-                prev2, prev1 = prev1, ref.p.copy()
-                n += 1
+        drive(ref, on_chunk=observe, check_every=1)
+        n = ref.step_count
     except (DivergenceError, FloatingPointError) as err:
+        n = ref.step_count
         return {"stable": False, "reason": "watchdog", "step": getattr(err, "step", n)}
     if not np.isfinite(ref.p).all():
         return {"stable": False, "reason": "non-finite", "step": n}
@@ -147,7 +150,8 @@ def replace_ops(scene: Scene, fn) -> Scene:
     """The scene with every operator ``op`` on ``target`` replaced by ``fn(target, op)``."""
     ops = {t: [fn(t, op) for op in seq] for t, seq in scene.operators.items()}
     return Scene(scene.name, scene.groups, ops, scene.phases, scene.dt, scene.cycles,
-                 scene.bound, dict(scene.params), scene.report)
+                 scene.bound, dict(scene.params), scene.report,
+                 duration=scene.duration, limit=scene.limit)
 
 
 def two_blobs(collide: float = 100.0, ratio: float = 0.2) -> Scene:
@@ -257,7 +261,7 @@ def gait_cycle(t: float) -> dict:
     records = [PhaseEnd(0, None, {}, 0, sc.original_positions())]
     runner = LammpsRun(compile_deck(sc, "exact"), None, log=False)
     try:
-        runner.run_schedule(on_phase_end=records.append)
+        drive(runner, on_phase_end=records.append)
     except DivergenceError as err:
         return {"stopped": f"watchdog at step {err.step}"}
     finally:
@@ -330,7 +334,7 @@ def magpod_case(steps: int = 17480) -> dict:
     runner = LammpsRun(compile_deck(sc, "exact"), None, log=False)
     status, why = "stable", ""
     try:
-        runner.run_schedule()
+        drive(runner)
         p = runner.gather_positions()
         o = sc.original_positions()
         disp = float(np.linalg.norm(p - o, axis=1).max())

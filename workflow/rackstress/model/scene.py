@@ -14,7 +14,9 @@ import numpy as np
 from rackstress.model import operators as ops_mod
 from rackstress.errors import SceneError
 
-#: Relative distance below which two particles count as coincident (their col/bin is undefined).
+#: Distance below which two particles count as coincident (their col/bin is undefined): this
+#: many units, or a few rounding steps of the coordinates' magnitude if that is larger. Not
+#: relative to the scene's size: two particles 1 unit apart stay apart however far a third is.
 COINCIDENT_TOL = 1e-9
 
 
@@ -67,6 +69,9 @@ class Scene:
     #: (total steps = round(duration / dt)); :meth:`with_dt` keeps it, so a dt sweep compares
     #: the same time.
     duration: float | None = None
+    #: Run exactly this many steps (the cycle of phases repeated or cut short, generated
+    #: lazily by :meth:`schedule`); None: ``cycles`` whole cycles. Set by :meth:`with_steps`.
+    limit: int | None = None
 
     def __post_init__(self):
         # engines key what they prepare by an operator's place (group, index in its sequence),
@@ -128,35 +133,48 @@ class Scene:
 
     @property
     def total_steps(self) -> int:
+        if self.limit is not None:
+            return int(self.limit)
         return self.steps_per_cycle * self.cycles
 
     def schedule(self):
-        """Yield (first_step, phase, cycle) for every phase of every cycle, in order."""
+        """Yield (first_step, phase, cycle) for every phase of every cycle, in order.
+
+        Generated as it is walked: a run of 10¹² steps holds one phase at a time."""
         step = 0
-        for cycle in range(self.cycles):
+        if self.limit is None:
+            for cycle in range(self.cycles):
+                for phase in self.phases:
+                    yield step, phase, cycle
+                    step += phase.steps
+            return
+        end = int(self.limit)
+        if end == 0 or self.steps_per_cycle == 0:
+            first = self.phases[0]
+            yield 0, Phase(first.name, 0, first.vars), 0
+            return
+        cycle = 0
+        while step < end:
             for phase in self.phases:
-                yield step, phase, cycle
-                step += phase.steps
+                take = min(phase.steps, end - step)
+                if take > 0:
+                    yield step, (phase if take == phase.steps
+                                 else Phase(phase.name, take, phase.vars)), cycle
+                    step += take
+                if step >= end:
+                    break
+            cycle += 1
 
     def with_steps(self, steps: int) -> "Scene":
-        """The same scene run for exactly ``steps`` iterations (schedule repeated or cut short)."""
-        if steps < 0:
-            raise SceneError(f"steps must be >= 0, got {steps}")
-        phases, left = [], steps
-        if self.steps_per_cycle == 0:
-            left = 0   # nothing to repeat: every phase has zero steps
-        while left > 0:
-            for p in self.phases:
-                take = min(p.steps, left)
-                if take:
-                    phases.append(Phase(p.name, take, p.vars))
-                left -= take
-                if left <= 0:
-                    break
-        if not phases:
-            phases = [Phase(self.phases[0].name, 0, self.phases[0].vars)]
-        return Scene(self.name, self.groups, self.operators, phases, self.dt, 1, self.bound,
-                     {**self.params, "steps": steps}, self.report)
+        """The same scene run for exactly ``steps`` iterations (its cycle of phases repeated or
+        cut short; nothing is built per phase, so any number of steps costs nothing up front)."""
+        if int(steps) != steps or steps < 0:
+            raise SceneError(f"steps must be a non-negative integer, got {steps!r}")
+        spc = self.steps_per_cycle
+        cycles = max(1, -(-int(steps) // spc)) if spc else 1
+        return Scene(self.name, self.groups, self.operators, self.phases, self.dt, cycles,
+                     self.bound, {**self.params, "steps": int(steps)}, self.report,
+                     duration=self.duration, limit=int(steps))
 
     def with_dt(self, dt: float) -> "Scene":
         """The same scene with time step ``dt``; what was given as a physical time stays one.
@@ -180,7 +198,7 @@ class Scene:
         phases = [Phase(p.name, steps_for(p.duration, dt, f"phase '{p.name}'"), p.vars,
                         p.duration) if p.duration is not None else p for p in self.phases]
         sc = Scene(self.name, self.groups, self.operators, phases, dt, self.cycles, self.bound,
-                   {**self.params, "dt": dt}, self.report, self.duration)
+                   {**self.params, "dt": dt}, self.report, self.duration, self.limit)
         if self.duration is not None:
             sc = sc.with_steps(steps_for(self.duration, dt, "duration"))
             sc.duration = self.duration
@@ -217,14 +235,35 @@ class Scene:
             raise SceneError(f"scene '{self.name}': cycles must be a positive integer")
         if not self.bound > 0:
             raise SceneError(f"scene '{self.name}': watchdog bound must be positive")
+        for name, g in self.groups.items():
+            if not np.isfinite(g.o).all():
+                k = int(np.flatnonzero(~np.isfinite(g.o).all(axis=1))[0])
+                raise SceneError(f"scene '{self.name}': '{name}' particle {k} has a non-finite "
+                                 f"position {g.o[k].tolist()}")
+            r = np.asarray(g.r, dtype=float)
+            bad = ~(np.isfinite(r) & (r > 0) & (r <= self.bound))
+            if bad.any():
+                k = int(np.flatnonzero(bad)[0])
+                raise SceneError(f"scene '{self.name}': '{name}' particle {k} has radius "
+                                 f"{float(r[k])!r}; a radius must be positive, finite and at most the "
+                                 f"watchdog bound {self.bound:g} (the collision test squares "
+                                 "the sum of two radii)")
+        for target, seq in self.operators.items():
+            for op in seq:
+                where = getattr(op, "where", None)
+                if isinstance(op, ops_mod.Force) and where is not None \
+                        and not np.asarray(where, dtype=bool).any():
+                    raise SceneError(f"scene '{self.name}': the force {tuple(op.accel)} on "
+                                     f"'{target}' selects no particle (its 'where' is false "
+                                     "everywhere): remove it or widen 'where'")
         self._check_coincident()
 
     def _check_coincident(self) -> None:
         from scipy.spatial import cKDTree
 
         o = np.concatenate([g.o for g in self.groups.values()])
-        scale = max(1.0, float(np.ptp(o, axis=0).max()) if len(o) > 1 else 1.0)
-        pairs = cKDTree(o).query_pairs(COINCIDENT_TOL * scale, output_type="ndarray")
+        ulp = 8 * np.finfo(float).eps * float(np.abs(o).max()) if len(o) else 0.0
+        pairs = cKDTree(o).query_pairs(max(COINCIDENT_TOL, ulp), output_type="ndarray")
         if len(pairs):
             a, b = (int(x) for x in pairs[0])
             starts = np.cumsum([0] + [g.n for g in self.groups.values()])

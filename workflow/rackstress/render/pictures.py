@@ -393,7 +393,6 @@ def header_strip(width: int, title: str, label: str, vmax: float, cmap: str, leg
     img = Image.new("RGB", (width, height), "white")
     dr = ImageDraw.Draw(img)
     big, small = _font(17), _font(13)
-    left = int(0.5 * width) - 10
     dr.text((10, 6), title, fill="black", font=big)
     y = 32
     for text, colour in legend:
@@ -418,7 +417,6 @@ def header_strip(width: int, title: str, label: str, vmax: float, cmap: str, leg
         s = f"{t * vmax:.3g}"
         tw = dr.textlength(s, font=small)
         dr.text((min(max(x - tw / 2, x0 - 10), x1 - tw), 57), s, fill="black", font=small)
-    del left
     return np.asarray(img)
 
 
@@ -513,6 +511,14 @@ def output_dir(rundir: Path, measure: str, out=None) -> Path:
 
 
 # ----------------------------------------------------------------------------- render
+def _first_nonfinite(run) -> int | None:
+    """The iteration of the first dumped frame with a non-finite position (None: all finite)."""
+    for k, ts in enumerate(run.trajectory):
+        if not np.isfinite(ts.positions).all():
+            return int(run.steps[k])
+    return None
+
+
 def render(rundir, frames=None, measure: str = "paper", views=DEFAULT_VIEWS, movie: bool = False,
            vmax: float | None = None, allow_truncated: bool = False, window_size=WINDOW,
            movie_max_frames: int = 400, fps: int = 10, plots: bool = True, groups=None,
@@ -576,7 +582,16 @@ def render(rundir, frames=None, measure: str = "paper", views=DEFAULT_VIEWS, mov
     coloured, context, hidden = select_parts(run, groups)
     report.parts = {"coloured": [p.name for p in coloured], "context": [p.name for p in context],
                     "hidden": hidden}
-    fields = compute_fields(run, cache=True)
+    try:
+        fields = compute_fields(run, cache=True)
+    except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+        bad = _first_nonfinite(run)
+        if bad is None:
+            raise
+        raise StressInputError(
+            f"{rundir}: the frame of iteration {bad} in trajectory.dump holds non-finite "
+            "positions (the run diverged there: see its summary.json), so no stress can be "
+            "measured over the run; nothing was rendered") from None
     if measure not in fields.values:
         from rackstress.stress.measures import VirialStress
 

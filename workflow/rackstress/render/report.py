@@ -248,7 +248,8 @@ def write_report(rundir, stability: bool = True) -> Path:
     # ---- files
     w('<h2 id="files">Files to open elsewhere</h2><ul>')
     links = [("vtk/run.pvd", "VTK time series: open in ParaView, OVITO or pyvista (point data: "
-                             "group, type, radius, displacement, every measure)"),
+                             "group_id and group_NAME, type, radius, displacement, every "
+                             "measure; time = iteration)"),
              ("stress.dump", "LAMMPS dump with the measures as named columns (OVITO)"),
              ("summary.json", "the run's summary, peaks included"),
              ("stress.json", "the post-processing record"),

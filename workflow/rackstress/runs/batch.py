@@ -475,6 +475,12 @@ def report(batchdir, figure: str | None = None, against: str | None = None, log=
             rec = lookup(s, peak.group(1)) if j["status"] == "ok" else None
             rows[-1]["iteration"] = (rec or {}).get("iteration")
             rows[-1]["particle"] = (rec or {}).get("particle")
+    oks = [summaries[j["name"]] for j in jobs if j["status"] == "ok" and summaries[j["name"]]]
+    if oks and all(lookup(x, figure) is None for x in oks):
+        known = sorted(_figure_paths(oks[0]), key=lambda k: not k.startswith("groups."))
+        raise RackstressError(f"--figure {figure!r}: no finished job's summary.json has it; "
+                              f"figures there are e.g. {', '.join(known[:8])}"
+                              f"{', ...' if len(known) > 8 else ''}")
     cols = ["name", *swept, "status", figure, *(("iteration", "particle") if peak else ()),
             "wall_s"]
 
@@ -497,6 +503,18 @@ def report(batchdir, figure: str | None = None, against: str | None = None, log=
     plot = _plot(batchdir, rows, figure, against, [k for k in swept if k != against])
     log(f"plot: {plot}")
     return {"rows": rows, "figure": figure, "against": against, "plot": plot}
+
+
+def _figure_paths(summary: dict, prefix: str = "") -> list[str]:
+    """Dotted paths of the numeric figures in a summary (what --figure can name)."""
+    out = []
+    for k, v in summary.items():
+        path = f"{prefix}{k}"
+        if isinstance(v, dict):
+            out += _figure_paths(v, path + ".")
+        elif isinstance(v, (int, float)) and not isinstance(v, bool):
+            out.append(path)
+    return out
 
 
 def _plot(batchdir: Path, rows, figure: str, against: str, others) -> Path:

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rackstress.errors import RunDirError
+from rackstress.errors import RunDirError, StorageError, storage_error
 from rackstress.lib.jsonio import write_json
 from rackstress.model.scene import PhaseEnd
 
@@ -40,24 +40,37 @@ class Checkpoint:
 
 
 def _save_npz(path: Path, **arrays) -> None:
+    """Write arrays atomically; on an OS error (full disk) no temporary file is left."""
     tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "wb") as fh:
-        np.savez(fh, **arrays)
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "wb") as fh:
+            np.savez(fh, **arrays)
+        os.replace(tmp, path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise storage_error(exc, "write the checkpoint file", path) from None
+
+
+def _on_root(fn, comm):
+    """``fn`` on rank 0; every rank raises what it raised (no rank waits for a failed one)."""
+    from rackstress.lib.mpi import on_root
+
+    return on_root(fn, comm)
 
 
 class Checkpointer:
     """Writes checkpoints of one :class:`~rackstress.engines.lammps.runner.LammpsRun` (all ranks call)."""
 
     def __init__(self, out: Path, comm, every: int, *, mode: str, dump_every: int,
-                 resumed: Checkpoint | None = None):
+                 resumed: Checkpoint | None = None, fingerprint: dict | None = None):
         if int(every) < 1:
             raise RunDirError(f"restart interval must be >= 1 step, got {every}")
         self.out, self.comm, self.every = Path(out), comm, int(every)
         self.root = comm.Get_rank() == 0
         self.dir = self.out / RESTART_DIR
         self.meta = {"engine": "lammps", "mode": mode, "dump_every": int(dump_every),
-                     "restart_every": self.every, "ranks": comm.Get_size()}
+                     "restart_every": self.every, "ranks": comm.Get_size(),
+                     "fingerprint": dict(fingerprint or {})}
         self.t0 = time.perf_counter()
         self.wall_before = 0.0
         self.phase_ends: list[str] = []
@@ -66,8 +79,14 @@ class Checkpointer:
             self.wall_before = float(resumed.meta.get("wall_s", 0.0))
             self.phase_ends = list(resumed.meta.get("phase_ends", []))
             self.last = resumed.meta
-        if self.root:
-            self.dir.mkdir(parents=True, exist_ok=True)
+        def prepare():
+            try:
+                self.dir.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise storage_error(exc, "create the checkpoint directory") from None
+            for tmp in self.dir.glob(".*.tmp"):        # a writer killed midway
+                tmp.unlink(missing_ok=True)
+        _on_root(prepare, comm)
         self.last_step = int(resumed.step) if resumed is not None else 0
 
     # ------------------------------------------------------------------ phase ends
@@ -77,11 +96,11 @@ class Checkpointer:
             return None
 
         def record(pe: PhaseEnd):
-            if self.root:
-                name = f"phase-end-{len(self.phase_ends):05d}.npz"
-                _save_npz(self.dir / name, p=pe.p, step=pe.step, cycle=pe.cycle,
-                          meta=json.dumps({"phase": pe.phase, "vars": dict(pe.vars)}))
-                self.phase_ends.append(name)
+            name = f"phase-end-{len(self.phase_ends):05d}.npz"
+            _on_root(lambda: _save_npz(self.dir / name, p=pe.p, step=pe.step, cycle=pe.cycle,
+                                       meta=json.dumps({"phase": pe.phase,
+                                                        "vars": dict(pe.vars)})), self.comm)
+            self.phase_ends.append(name)
             on_phase_end(pe)
         return record
 
@@ -90,13 +109,11 @@ class Checkpointer:
         if runner.step // self.every > self.last_step // self.every:
             self.write(runner, phase_index, phase_done, cycle)
 
-    def final(self, runner) -> None:
+    def final(self, runner, phase_index: int, phase_done: int, cycle: int) -> None:
         """A checkpoint at the last step (if none there yet): resuming a run killed while it
         wrote its summary then has nothing left to step."""
         if self.last_step != runner.step or self.last is None:
-            sched = list(runner.scene.schedule())
-            k = len(sched) - 1
-            self.write(runner, k, sched[k][1].steps, sched[k][2])
+            self.write(runner, phase_index, phase_done, cycle)
 
     def write(self, runner, phase_index: int, phase_done: int, cycle: int) -> None:
         step = runner.step
@@ -105,8 +122,15 @@ class Checkpointer:
         f = runner.gather_forces()
         stem = f"state-{step:09d}"
         restart = self.dir / f"{stem}.restart"
-        # noinit: no re-initialization or atom migration, so the run goes on untouched
-        runner.command(f"write_restart {restart} noinit")
+        part = self.dir / f".{stem}.restart.tmp"
+        # noinit: no re-initialization or atom migration, so the run goes on untouched; written
+        # under a temporary name, so a full disk leaves no partial restart file under its name
+        try:
+            runner.command(f"write_restart {part} noinit")
+        except Exception:
+            _on_root(lambda: part.unlink(missing_ok=True), self.comm)
+            raise
+        _on_root(lambda: os.replace(part, restart), self.comm)
         runner.realign(f)
         meta = dict(self.meta, step=int(step), phase_index=int(phase_index),
                     phase_done=int(phase_done), cycle=int(cycle),
@@ -115,12 +139,21 @@ class Checkpointer:
                     phase_ends=list(self.phase_ends),
                     wall_s=self.wall_before + time.perf_counter() - self.t0,
                     written=time.strftime("%Y-%m-%dT%H:%M:%S"))
-        if self.root:
-            _save_npz(self.out / meta["state"], x=x, v=v, f=f)
-            write_json(self.out / PROGRESS, meta)          # the commit point
+        def commit():
+            try:
+                _save_npz(self.out / meta["state"], x=x, v=v, f=f)
+                write_json(self.out / PROGRESS, meta)          # the commit point
+            except OSError as exc:
+                # not committed: this checkpoint's files go, the previous one stays whole
+                for name in (meta["state"], meta["restart"]):
+                    (self.out / name).unlink(missing_ok=True)
+                (self.out / f".{PROGRESS}.tmp").unlink(missing_ok=True)
+                if isinstance(exc, StorageError):
+                    raise
+                raise storage_error(exc, "write the checkpoint") from None
             keep = {Path(meta["state"]).name, Path(meta["restart"]).name}
             for old in self.dir.glob("state-*"):
                 if old.name not in keep:
                     old.unlink(missing_ok=True)
+        _on_root(commit, self.comm)
         self.last, self.last_step = meta, step
-        self.comm.Barrier()

@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rackstress.errors import DivergenceError, RunDirError
+from rackstress.errors import ResumeError, RunDirError
 from rackstress.lib.jsonio import jsonable, write_json
 from rackstress.model.scene import PhaseEnd
 
@@ -125,10 +125,14 @@ def rebuild_scene(rundir: Path, spec: str | None = None):
         raise RunDirError(f"{rundir} is not a run directory (no scene.json)") from None
     params = dict(rec.get("params") or {})
     steps = params.pop("steps", None)
+    if spec is None and rec["scene"] not in scenes.BUILDERS:
+        src = rec.get("source")
+        if not src or not Path(src).is_file():
+            raise ResumeError(f"scene '{rec['scene']}' of {rundir} is not a built-in scene and its "
+                              f"file {src or '(unknown)'} is gone: give its scene file again, "
+                              f"e.g. 'rackstress run SCENE.toml --resume {rundir}'")
+        spec = src
     name = spec or rec["scene"]
-    if spec is None and name not in scenes.BUILDERS:
-        raise RunDirError(f"scene '{name}' of {rundir} is not a built-in scene: give its scene "
-                          f"file again, e.g. 'rackstress run SCENE.toml --resume {rundir}'")
     if spec is None:
         known = scenes.parameters(name)
         sc = scenes.build(name, **{k: v for k, v in params.items() if k in known})
@@ -146,7 +150,7 @@ def rebuild_scene(rundir: Path, spec: str | None = None):
     mine = json.loads(json.dumps(scene_record(sc), default=_plain))
     for key in ("scene", "dt", "steps", "phases", "groups"):
         if mine.get(key) != rec.get(key):
-            raise RunDirError(f"the scene rebuilt for {rundir} differs from its scene.json in "
+            raise ResumeError(f"the scene rebuilt for {rundir} differs from its scene.json in "
                               f"'{key}': cannot resume it")
     return sc
 
@@ -156,17 +160,32 @@ def _plain(x):
 
 
 def resume_run(rundir: Path, spec: str | None = None, progress: bool = True, comm=None) -> dict:
-    """Continue the interrupted LAMMPS run in ``rundir``; return its summary (as :func:`run.run`).
+    """Continue the interrupted LAMMPS run in ``rundir``; return its summary (as
+    :func:`rackstress.runs.run.run`).
 
-    Raises :class:`DivergenceError` after writing the summary, like a run that was never cut.
+    The scene is rebuilt (from ``spec``, or from ``scene.json``: a built-in scene by name and
+    parameters, a TOML scene from the file it was read from) and its fingerprint
+    (:mod:`rackstress.runs.fingerprint`) must equal the checkpoint's: an edited scene file, other
+    parameters or another dt are refused, naming what changed. The run directory is held
+    locked while it runs.
+
+    Raises
+    ------
+    ResumeError
+        The checkpoint belongs to another run, or there is none.
+    DivergenceError
+        After writing the summary, like a run that was never cut.
     """
     from rackstress.engines.lammps.deck import compile_deck
-    from rackstress.lib.mpi import world
-    from rackstress.runs.run import run_lammps, summarize
+    from rackstress.lib.mpi import on_root, world
+    from rackstress.runs.fingerprint import compare, fingerprint
+    from rackstress.runs.run import check_memory, execute
+    from rackstress.runs.rundir import check_out, locked
 
     comm = comm or world()
-    rundir = Path(rundir)
-    root = comm.Get_rank() == 0
+    rundir = check_out(rundir)
+    if not rundir.is_dir():
+        raise RunDirError(f"{rundir} is not a run directory (it does not exist)")
 
     def prepare():
         if (rundir / "summary.json").exists():
@@ -175,58 +194,30 @@ def resume_run(rundir: Path, spec: str | None = None, progress: bool = True, com
         meta = read_progress(rundir)
         if meta.get("engine") != "lammps":
             raise RunDirError(f"{rundir}: only LAMMPS runs can be resumed")
+        for tmp in (rundir / RESTART_DIR).glob(".*.tmp"):     # a checkpoint cut short
+            tmp.unlink(missing_ok=True)
         return meta
 
-    err, meta = None, None
-    if root:
-        try:
-            meta = prepare()
-        except Exception as exc:  # noqa: BLE001 - raised on every rank below
-            err = exc
-    err, meta = comm.bcast((err, meta), root=0)
-    if err is not None:
-        raise err
-    scene = rebuild_scene(rundir, spec)
-    ck = load_checkpoint(rundir, meta)
-    if ck.x.shape != (scene.n_particles, 3):
-        raise RunDirError(f"{rundir}: checkpoint holds {len(ck.x)} particles, the scene "
-                          f"{scene.n_particles}")
-    mode, dump_every = meta["mode"], int(meta["dump_every"])
-    deck = compile_deck(scene, mode)
-    if root:
-        truncate_dump(rundir / "trajectory.dump", ck.step)
-    comm.Barrier()
-    records = None
-    if scene.report is not None:
-        records = [PhaseEnd(0, None, {}, 0, scene.original_positions())]
-        records += load_phase_ends(rundir, meta)
-    on_phase_end = records.append if records is not None else None
-    t0 = time.perf_counter()
-    extra = {"dump_every": dump_every, "resumed_from_step": ck.step}
-
-    def report():
-        if scene.report is not None and root:
-            extra["report"] = scene.report(scene, records)
-
-    try:
-        p_end, steps, more = run_lammps(scene, rundir, mode, dump_every, progress, deck,
-                                        on_phase_end, comm=comm,
-                                        restart_every=int(meta["restart_every"]), resume=ck)
-        extra.update(more)
-    except DivergenceError as e:
-        wall = float(meta.get("wall_s", 0.0)) + time.perf_counter() - t0
-        report()
-        p_end = getattr(e, "p_end", None)
-        if p_end is None:
-            p_end = np.full((scene.n_particles, 3), np.nan)
-        summary = summarize(scene, "lammps", mode, p_end, getattr(e, "steps_done", e.step),
-                            wall, "diverged", e, extra)
-        if root:
-            write_json(rundir / "summary.json", summary)
-        raise
-    wall = float(meta.get("wall_s", 0.0)) + time.perf_counter() - t0
-    report()
-    summary = summarize(scene, "lammps", mode, p_end, steps, wall, "ok", extra=extra)
-    if root:
-        write_json(rundir / "summary.json", summary)
-    return summary
+    with locked(rundir, comm=comm, create=False):
+        meta = on_root(prepare, comm)
+        scene = rebuild_scene(rundir, spec)
+        mode, dump_every = meta["mode"], int(meta["dump_every"])
+        compare(meta.get("fingerprint"),
+                fingerprint(scene, engine="lammps", mode=mode, dump_every=dump_every),
+                f"the checkpoint in {rundir} (step {meta.get('step')})")
+        check_memory(scene, "lammps", comm.Get_size())
+        ck = load_checkpoint(rundir, meta)
+        if ck.x.shape != (scene.n_particles, 3):
+            raise ResumeError(f"{rundir}: checkpoint holds {len(ck.x)} particles, the scene "
+                              f"{scene.n_particles}")
+        deck = compile_deck(scene, mode)
+        on_root(lambda: truncate_dump(rundir / "trajectory.dump", ck.step), comm)
+        records = None
+        if scene.report is not None:
+            records = [PhaseEnd(0, None, {}, 0, scene.original_positions())]
+            records += load_phase_ends(rundir, meta)
+        return execute(scene, rundir, "lammps", mode, dump_every, progress=progress, comm=comm,
+                       restart_every=int(meta["restart_every"]), deck=deck, resume=ck,
+                       records=records, wall_before=float(meta.get("wall_s", 0.0)),
+                       extra={"resumed_from_step": ck.step},
+                       fingerprint=meta.get("fingerprint"))

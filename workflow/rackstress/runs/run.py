@@ -1,9 +1,13 @@
-"""Running a scene: the run directory, the engine loop, the watchdog, and ``summary.json``.
+"""Running a scene: the run directory, the engine, the driver, and ``summary.json``.
 
-A run directory holds ``scene.json`` (how the scene was built), ``particles.data`` (particles, types,
-molecules), ``trajectory.dump`` (frames every ``dump_every`` steps) and, once the run has ended
-either way, ``summary.json``. A run stopped by the watchdog keeps its frames and records
-``status: "diverged"`` with the step, particle and group.
+A run directory holds ``scene.json`` (how the scene was built, and the fingerprint of what
+determines its trajectory), ``particles.data`` (particles, types, molecules), ``trajectory.dump``
+(frames every ``dump_every`` steps and the last step) and, once the run has ended either way,
+``summary.json``. A run that diverged — stopped by the watchdog, by LAMMPS losing atoms, or by
+the operator callback losing a partner — keeps its frames and records ``status: "diverged"``
+with the step, particle and group. One process writes a run directory at a time
+(:func:`rackstress.runs.rundir.locked`); a run and its resumption share one ending
+(:func:`execute`).
 """
 from __future__ import annotations
 
@@ -16,7 +20,9 @@ from rackstress.lib import rigid
 from rackstress.model import topology
 from rackstress.errors import DivergenceError, RunDirError
 from rackstress.lib.jsonio import write_json
+from rackstress.lib.mpi import on_root, world
 from rackstress.lib.progress import progress_bar
+from rackstress.lib.resources import require_memory
 from rackstress.model.scene import PhaseEnd, Scene
 
 ENGINES = ("lammps", "reference")
@@ -27,25 +33,45 @@ def default_dump_every(scene: Scene) -> int:
     return max(1, scene.total_steps // 100)
 
 
-def prepare_rundir(out: Path, overwrite: bool = False) -> Path:
-    """Create ``out``; refuse to reuse a directory holding a finished run unless ``overwrite``."""
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise RunDirError(f"run directory {out} exists and is not a directory")
-    if (out / "summary.json").exists() and not overwrite:
-        raise RunDirError(f"run directory {out} already holds a finished run (summary.json); "
-                          "choose another --out or pass --overwrite to replace it")
-    out.mkdir(parents=True, exist_ok=True)
-    for stale in ("summary.json", "trajectory.dump"):
-        if (out / stale).exists():
-            (out / stale).unlink()
-    return out
+#: Bytes a particle costs, measured (peak RSS over particles, ``scripts/bench_large.py``:
+#: 536 MB for 1,004,689 particles on LAMMPS, one rank), with room for the dump buffers.
+BYTES_PER_PARTICLE = {"lammps": 700, "reference": 900}
+#: Bytes a bind pair costs (index pairs, coefficients, L0²: 4 float64/int64 arrays, twice).
+BYTES_PER_PAIR = 64
+
+
+def check_memory(scene: Scene, engine: str, ranks: int = 1) -> int:
+    """Refuse a run whose estimated memory exceeds what the machine has; return the estimate.
+
+    The estimate: particles × :data:`BYTES_PER_PARTICLE` plus bind pairs × :data:`BYTES_PER_PAIR`
+    (counted without building them: within(d) pairs by a tree count), on every rank.
+    """
+    from scipy.spatial import cKDTree
+
+    from rackstress.model.operators import Bind, Within
+
+    pairs = 0
+    for target, seq in scene.operators.items():
+        for op in seq:
+            if not isinstance(op, Bind):
+                continue
+            t, u = scene.groups[target], scene.groups[op.source]
+            if isinstance(op.coeff, Within):      # only pairs closer than d (Eq. 16): count them
+                pairs += int(cKDTree(t.o).count_neighbors(cKDTree(u.o), float(op.coeff.d)))
+            else:
+                pairs += t.n * u.n
+    need = (scene.n_particles * BYTES_PER_PARTICLE.get(engine, 900) + pairs * BYTES_PER_PAIR) \
+        * max(1, ranks)
+    require_memory(need, f"scene '{scene.name}' ({scene.n_particles:,} particles, up to "
+                         f"{pairs:,} bind pairs, {ranks} rank(s), {engine} engine)")
+    return need
 
 
 def scene_record(scene: Scene) -> dict:
     """What post-processing needs to know of a scene: its groups as atom types and id ranges."""
     types, mols = topology.group_types(scene), topology.group_mols(scene)
     return {"scene": scene.name, "params": scene.params, "dt": scene.dt,
+            "source": scene_source(scene),
             "steps": scene.total_steps,
             "phases": [{"name": p.name, "steps": p.steps, "vars": dict(p.vars)}
                        for p in scene.phases],
@@ -54,6 +80,12 @@ def scene_record(scene: Scene) -> dict:
                         "type": types[name], "mol": mols[name],
                         "first_id": scene.offset(name) + 1}
                        for name, g in scene.groups.items()]}
+
+
+def scene_source(scene: Scene) -> str | None:
+    """The scene file a TOML scene was read from (absolute), for --resume to find it again."""
+    src = (scene.params or {}).get("file") or getattr(scene, "source", None)
+    return str(Path(src).resolve()) if src else None
 
 
 def group_figures(scene: Scene, p_start: np.ndarray, p_end: np.ndarray) -> dict:
@@ -97,46 +129,107 @@ def summarize(scene: Scene, engine: str, mode: str, p_end: np.ndarray, steps_don
     return s
 
 
-def run_reference(scene: Scene, out: Path, dump_every: int, progress: bool, on_phase_end=None):
-    """Step a scene with the reference engine, writing frames; returns (p_end, steps_done)."""
-    from rackstress.engines.dumpio import DumpWriter
-    from rackstress.engines.reference import Reference
+def open_engine(scene: Scene, out: Path | None, engine: str, mode: str, dump_every: int,
+                comm=None, deck=None, append: bool = False):
+    """The engine for a run: the reference engine (one rank) or a LAMMPS runner on ``comm``."""
+    if engine == "reference":
+        from rackstress.engines.reference import Reference
 
-    ref = Reference(scene)
-    types = topology.per_particle(scene, topology.group_types(scene))
-    mols = topology.per_particle(scene, topology.group_mols(scene))
-    with DumpWriter(out / "trajectory.dump", types, mols) as dump, \
-            progress_bar(scene.total_steps, progress, scene.name) as bar:
-        dump.write(0, ref.p)
-        try:
-            for _, phase, cycle in scene.schedule():
-                for _ in range(phase.steps):
-                    ref.step(phase.vars)
-                    if ref.step_count % dump_every == 0:
-                        dump.write(ref.step_count, ref.p)
-                    bar.update(1)
-                if on_phase_end is not None:
-                    on_phase_end(PhaseEnd(ref.step_count, phase.name, dict(phase.vars), cycle,
-                                          ref.p.copy()))
-        except DivergenceError as err:
-            err.p_end, err.steps_done = ref.p, ref.step_count
-            raise
-    return ref.p, ref.step_count
+        if (comm or world()).Get_size() > 1:
+            raise RunDirError("the reference engine runs on one rank; run it without mpiexec")
+        ref = Reference(scene)
+        if out is not None:
+            ref.open_dump(Path(out) / "trajectory.dump", dump_every)
+        return ref
+    from rackstress.engines.lammps.deck import compile_deck
+    from rackstress.engines.lammps.runner import LammpsRun
+
+    deck = deck or compile_deck(scene, mode)
+    return LammpsRun(deck, out, comm=comm, dump_every=dump_every, append=append)
 
 
-def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
-        dump_every: int | None = None, progress: bool = True, overwrite: bool = False,
-        comm=None, restart_every: int | None = None, allow_unstable: bool = False) -> dict:
-    """Run ``scene`` on ``engine`` into the run directory ``out``; return the summary.
+def execute(scene: Scene, out: Path, engine: str, mode: str, dump_every: int, *,
+            progress: bool = True, comm=None, restart_every: int | None = None, deck=None,
+            resume=None, records=None, wall_before: float = 0.0, extra: dict | None = None,
+            fingerprint: dict | None = None) -> dict:
+    """Drive ``scene`` on ``engine`` into the prepared run directory ``out``, then write
+    ``summary.json`` — the one ending of a run and of its resumption.
 
-    Raises :class:`DivergenceError` after writing the summary when the watchdog stops the run.
-    ``comm`` (batch runs): the mpi4py communicator whose ranks run this one job (default
-    COMM_WORLD). ``restart_every``: write a checkpoint (LAMMPS restart + exact state, see
-    :mod:`rackstress.runs.resume`) every so many steps; None: none.
+    Parameters
+    ----------
+    resume : rackstress.runs.checkpoint.Checkpoint, optional
+        Continue from this checkpoint (LAMMPS); ``records`` are the phase ends before it.
+    wall_before : float
+        Wall time of the earlier part(s) of a resumed run.
+
+    Returns
+    -------
+    dict
+        The summary. Raises :class:`DivergenceError` after writing it when the run diverged.
     """
-    # refuse a dt beyond the predicted stability limit of Eq. 5 (rackstress.model.stability) before
-    # anything is written, unless allow_unstable
+    from rackstress.engines.driver import drive
+
+    comm = comm or world()
+    root = comm.Get_rank() == 0
+    extra = dict(extra or {}, dump_every=dump_every)
+    if records is None:
+        records = [PhaseEnd(0, None, {}, 0, scene.original_positions())]
+    on_phase_end = records.append if scene.report is not None else None
+    t0 = time.perf_counter()
+    eng = open_engine(scene, out, engine, mode, dump_every, comm, deck, append=resume is not None)
+    try:
+        ckpt = None
+        if restart_every and engine == "lammps":
+            from rackstress.runs.checkpoint import Checkpointer
+
+            ckpt = Checkpointer(out, eng.comm, restart_every, mode=mode, dump_every=dump_every,
+                                resumed=resume, fingerprint=fingerprint)
+            on_phase_end = ckpt.wrap_phase_end(on_phase_end)
+        status, error = "ok", None
+        try:
+            with progress_bar(scene.total_steps, progress,
+                              f"{scene.name} ({engine})") as bar:
+                bar.update(resume.step if resume is not None else 0)
+                outcome = drive(eng, progress=bar, on_phase_end=on_phase_end,
+                                checkpoint=ckpt, resume=resume)
+            p_end, steps = outcome.positions, outcome.steps
+        except DivergenceError as err:
+            status, error = "diverged", err
+            p_end = getattr(err, "p_end", None)
+            if p_end is None:
+                p_end = np.full((scene.n_particles, 3), np.nan)
+            steps = getattr(err, "steps_done", err.step)
+        if engine == "lammps":
+            extra.update({"ranks": eng.comm.Get_size(), "lammps_version": eng.lmp.version(),
+                          "python_operators": [f"{r.target} <- {r.op.kind}"
+                                               for r in eng.deck.python_ops],
+                          "masses": eng.deck.masses})
+    finally:
+        eng.close()
+    wall = wall_before + time.perf_counter() - t0
+    if scene.report is not None and root:
+        extra["report"] = scene.report(scene, records)
+    if root:   # guard rails: pass-through, force on racks (engines/guards.py)
+        from rackstress.engines.guards import check_run
+
+        extra["warnings"] = check_run(scene, out)
+    summary = summarize(scene, engine, mode, p_end, steps, wall, status, error, extra)
+    on_root(lambda: write_json(Path(out) / "summary.json", summary), comm)
+    if error is not None:
+        raise error
+    return summary
+
+
+def plan(scene: Scene, engine: str = "lammps", mode: str = "exact",
+         dump_every: int | None = None, comm=None, allow_unstable: bool = False) -> dict:
+    """Check everything about a run that can be checked before its directory is touched: the
+    engine, the dump interval, the predicted stability limit of Eq. 5
+    (:mod:`rackstress.model.stability`, unless ``allow_unstable``), the memory it needs, and
+    the deck; return what :func:`run` needs (``engine``, ``mode``, ``dump_every``, ``deck``,
+    ``fingerprint``)."""
+    from rackstress.engines.lammps.deck import compile_deck
     from rackstress.model.stability import check_dt
+    from rackstress.runs.fingerprint import fingerprint
 
     check_dt(scene, allow=allow_unstable)
     if engine not in ENGINES:
@@ -144,118 +237,87 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
     dump_every = dump_every or default_dump_every(scene)
     if dump_every < 1:
         raise RunDirError(f"--dump-every must be >= 1, got {dump_every}")
-    from rackstress.engines.lammps.deck import compile_deck
+    comm = comm or world()
+    if engine == "reference":
+        mode = "exact"
+        if comm.Get_size() > 1:
+            raise RunDirError("the reference engine runs on one rank; run it without mpiexec")
+    check_memory(scene, engine, comm.Get_size())
+    return {"engine": engine, "mode": mode, "dump_every": int(dump_every),
+            "deck": compile_deck(scene, mode),
+            "fingerprint": fingerprint(scene, engine=engine, mode=mode, dump_every=dump_every)}
 
-    deck = compile_deck(scene, mode if engine == "lammps" else "exact")
+
+def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
+        dump_every: int | None = None, progress: bool = True, overwrite: bool = False,
+        comm=None, restart_every: int | None = None, allow_unstable: bool = False,
+        planned: dict | None = None) -> dict:
+    """Run ``scene`` on ``engine`` into the run directory ``out``; return the summary.
+
+    Parameters
+    ----------
+    scene : Scene
+        Built in (:func:`rackstress.scenes.build`) or from TOML (:func:`rackstress.scenes.load`).
+    out : path
+        The run directory: new or empty, or (with ``overwrite``) holding an earlier run, which
+        is removed first. Held locked (:func:`rackstress.runs.rundir.locked`) while running.
+    engine, mode : str
+        ``lammps`` (``exact`` or ``fast``) or ``reference``.
+    dump_every : int, optional
+        Steps between trajectory frames (default: about 100 frames); the last step is always
+        written.
+    comm : mpi4py communicator, optional
+        The ranks running this one job (default COMM_WORLD).
+    restart_every : int, optional
+        Write a checkpoint (LAMMPS restart + exact state, :mod:`rackstress.runs.resume`) every so
+        many steps; None: none.
+    planned : dict, optional
+        The result of :func:`plan` for these arguments (checked already).
+
+    Returns
+    -------
+    dict
+        The summary (also in ``out/summary.json``).
+
+    Raises
+    ------
+    DivergenceError
+        After writing the summary, when the run diverged.
+    RunDirError, SceneError, StorageError
+        Before anything of an earlier run is touched, where possible.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from rackstress import scenes
+    >>> sc = scenes.build("plane-rack").with_steps(20)
+    >>> run(sc, tempfile.mkdtemp() + "/pr", engine="reference", progress=False)["status"]
+    'ok'
+    """
+    from rackstress.runs.rundir import check_out, claim, locked
+
+    check_out(out)
+    comm = comm or world()
+    p = planned or plan(scene, engine, mode, dump_every, comm, allow_unstable)
+    engine, mode, dump_every, deck, fp = (p["engine"], p["mode"], p["dump_every"], p["deck"],
+                                          p["fingerprint"])
+    out = Path(out)
 
     def start():
-        prepare_rundir(out, overwrite)
-        write_json(out / "scene.json", scene_record(scene))
-        (out / "particles.data").write_text(deck.data_text())
-        if engine == "lammps":
-            (out / "in.lammps").write_text(deck.input_text(dump_every))
+        from rackstress.errors import storage_error
 
-    out = Path(out)
-    on_root(start, comm)
-    t0 = time.perf_counter()
-    extra = {"dump_every": dump_every}
-    records = [PhaseEnd(0, None, {}, 0, scene.original_positions())]
-    on_phase_end = records.append if scene.report is not None else None
-
-    def report():
-        if scene.report is not None and _is_root(comm):
-            extra["report"] = scene.report(scene, records)
-        if _is_root(comm):   # guard rails: pass-through, force on racks (engines/guards.py)
-            from rackstress.engines.guards import check_run
-
-            extra["warnings"] = check_run(scene, out)
-    try:
-        if engine == "reference":
-            mode = "exact"
-            if not _is_root(comm):
-                raise RunDirError("the reference engine runs on one rank; run it without mpiexec")
-            p_end, steps = run_reference(scene, out, dump_every, progress, on_phase_end)
-        else:
-            p_end, steps, more = run_lammps(scene, out, mode, dump_every, progress, deck,
-                                            on_phase_end, comm=comm, restart_every=restart_every)
-            extra.update(more)
-    except DivergenceError as err:
-        wall = time.perf_counter() - t0
-        report()
-        p_end = getattr(err, "p_end", None)
-        if p_end is None:
-            p_end = np.full((scene.n_particles, 3), np.nan)
-        summary = summarize(scene, engine, mode, p_end, getattr(err, "steps_done", err.step),
-                            wall, "diverged", err, extra)
-        if _is_root(comm):
-            write_json(out / "summary.json", summary)
-        raise
-    wall = time.perf_counter() - t0
-    report()
-    summary = summarize(scene, engine, mode, p_end, steps, wall, "ok", extra=extra)
-    if _is_root(comm):
-        write_json(out / "summary.json", summary)
-    return summary
-
-
-def _is_root(comm=None) -> bool:
-    from rackstress.lib.mpi import world
-
-    return (comm or world()).Get_rank() == 0
-
-
-def on_root(fn, comm=None):
-    """Run ``fn`` on rank 0 of ``comm`` (default: world) only; every rank then raises what it
-    raised, or goes on together."""
-    from rackstress.lib.mpi import world
-
-    comm = comm or world()
-    err = None
-    if comm.Get_rank() == 0:
+        claim(out, overwrite)
+        write_json(out / "scene.json", {**scene_record(scene), "engine": engine, "mode": mode,
+                                        "dump_every": dump_every, "fingerprint": fp})
         try:
-            fn()
-        except Exception as exc:  # noqa: BLE001 - re-raised on every rank below
-            err = exc
-    if comm.Get_size() > 1:
-        err = comm.bcast(err, root=0)
-    if err is not None:
-        raise err
+            (out / "particles.data").write_text(deck.data_text())
+            if engine == "lammps":
+                (out / "in.lammps").write_text(deck.input_text(dump_every))
+        except OSError as exc:
+            raise storage_error(exc, "write") from None
 
-def run_lammps(scene, out: Path, mode: str, dump_every: int, progress: bool, deck=None,
-               on_phase_end=None, comm=None, restart_every: int | None = None, resume=None):
-    """Run ``scene`` on LAMMPS into ``out``; return (final positions, steps done, extra summary).
-
-    ``comm``: the ranks running it (default COMM_WORLD). ``restart_every``: checkpoint interval
-    in steps (None: no checkpoints). ``resume``: a :class:`rackstress.runs.resume.Checkpoint` to
-    continue from (the run directory ``out`` already holds the first part).
-    """
-    from rackstress.engines.lammps.deck import compile_deck
-    from rackstress.engines.lammps.runner import LammpsRun
-
-    deck = deck or compile_deck(scene, mode)
-    runner = LammpsRun(deck, out, comm=comm, dump_every=dump_every, append=resume is not None)
-    ckpt = None
-    if restart_every:
-        from rackstress.runs.checkpoint import Checkpointer
-
-        ckpt = Checkpointer(out, runner.comm, restart_every, mode=mode, dump_every=dump_every,
-                            resumed=resume)
-        on_phase_end = ckpt.wrap_phase_end(on_phase_end)
-    try:
-        done = resume.step if resume is not None else 0
-        with progress_bar(scene.total_steps, progress, f"{scene.name} (lammps)") as bar:
-            bar.update(done)
-            try:
-                runner.run_schedule(bar, on_phase_end=on_phase_end, checkpoint=ckpt,
-                                    resume=resume)
-            except DivergenceError as err:
-                err.p_end = runner.gather_positions()
-                err.steps_done = runner.step
-                raise
-        p = runner.gather_positions()
-        extra = {"ranks": runner.comm.Get_size(), "lammps_version": runner.lmp.version(),
-                 "python_operators": [f"{r.target} <- {r.op.kind}" for r in deck.python_ops],
-                 "masses": deck.masses}
-        return p, runner.step, extra
-    finally:
-        runner.close()
+    with locked(out, comm=comm):
+        on_root(start, comm)
+        return execute(scene, out, engine, mode, dump_every, progress=progress, comm=comm,
+                       restart_every=restart_every,
+                       deck=deck if engine == "lammps" else None, fingerprint=fp)

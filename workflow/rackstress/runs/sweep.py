@@ -143,9 +143,16 @@ def load_sweep(path) -> Sweep:
 
     path = Path(path)
     try:
-        data = tomllib.loads(path.read_text())
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise SweepError(f"sweep file {path} does not exist") from None
+    except IsADirectoryError:
+        raise SweepError(f"{path}: is a directory, not a sweep file") from None
+    except UnicodeDecodeError as exc:
+        raise SweepError(f"{path}: is not UTF-8 text ({exc.reason} at byte {exc.start}); a TOML "
+                         "file must be UTF-8") from None
+    except OSError as exc:
+        raise SweepError(f"{path}: cannot read the sweep file: {exc.strerror or exc}") from None
     except tomllib.TOMLDecodeError as exc:
         raise SweepError(f"{path}: not valid TOML: {exc}") from None
     unknown = sorted(set(data) - set(TOP_KEYS))

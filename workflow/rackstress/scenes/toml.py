@@ -621,7 +621,7 @@ def _lattice(c: _Ctx, value, field: str):
     shape = [_integer(lc, s, "shape", 1) for s in shape]
     spacing = _number(lc, lat.get("spacing", 1.0), "spacing", positive=True)
     origin = _vec3(lc, lat.get("origin", [0.0, 0.0, 0.0]), "origin")
-    return lattice(shape, spacing, origin), spacing
+    return _wrap(lc, lambda: lattice(shape, spacing, origin)), spacing
 
 
 def _held(c: _Ctx, t: dict, o: np.ndarray, base: Path):

@@ -5,12 +5,15 @@
     (``vtk/frame_ITERATION.vtp``, each particle a vertex), with the iteration as the time value,
     so ParaView's time slider, pyvista (``pv.get_reader``) and OVITO step through the run. Point
     data, per particle: ``id`` (LAMMPS atom id), ``group_id`` (0-based, the order of
-    ``scene.json``), ``group_name``, ``type``, ``mol``, ``radius``, ``original`` (o),
+    ``scene.json``), ``group_NAME`` (1 on the particles of group NAME, 0 elsewhere: the names as
+    OVITO can read them, which takes no string arrays), ``type``, ``mol``, ``radius``,
+    ``original`` (o),
     ``displacement`` (p − o) and its magnitude ``displacement_magnitude``, ``velocity`` where the
-    dump holds vx vy vz, and every measure by its name (``paper``, ``accumulated``, ``strain``,
-    ``d2min``, ``virial`` if recorded) as float64 — the very numbers of ``summary.json``'s peaks.
-    Field data: ``iteration``, ``time`` and ``group_names``. Binary, LZ4-compressed (fast; a resting
-    sediment compresses to almost nothing).
+    dump holds vx vy vz (geometry in float32), and every measure by its name (``paper``,
+    ``accumulated``, ``strain``, ``d2min``, ``virial`` if recorded) in float64 — the very numbers
+    of ``summary.json``'s peaks. No field data (OVITO does not read it): the iteration is the
+    PVD's time value. Inline binary, uncompressed: OVITO reads neither VTK's appended data nor
+    compressed arrays.
 ``RUNDIR/stress.dump``
     A LAMMPS ``dump custom`` text file, OVITO's native input: ``id type mol x y z radius
     [vx vy vz] group dx dy dz paper accumulated strain d2min [virial]``; OVITO maps ``radius`` to
@@ -19,9 +22,10 @@
 
 Both are written into a temporary name and renamed when complete: a reader never sees half.
 
-Radii: a rackstress run's scene is rebuilt from ``scene.json`` to take its radii; if that is not
-possible (a TOML scene, a plain LAMMPS run) the data file's diameter column is used, else half the
-part's median nearest-neighbour distance (touching spheres).
+Radii: the groups' ``radius`` in ``scene.json`` if recorded, else a built-in scene is rebuilt from
+``scene.json`` to take its radii; if neither is possible (a TOML scene, a plain LAMMPS run) the data
+file's diameter column is used, else half the part's median nearest-neighbour distance (touching
+spheres).
 """
 from __future__ import annotations
 
@@ -54,6 +58,15 @@ def radii(run) -> np.ndarray:
 
 def _scene_radii(run):
     scene = run.scene or {}
+    groups = scene.get("groups") or []
+    if groups and all("radius" in g for g in groups):          # recorded in scene.json
+        out = np.empty(run.n_atoms)
+        for g in groups:
+            part = run.parts.get(g["name"])
+            if part is None:
+                return None
+            out[part.index] = np.broadcast_to(np.asarray(g["radius"], float), (part.n,))
+        return out
     name, params = scene.get("scene"), scene.get("params") or {}
     try:
         from rackstress import scenes
@@ -121,7 +134,7 @@ def write_vtk(run, fields, outdir, progress: bool = False) -> Path:
     >>> r.read()[0].point_data["paper"].max()                             # doctest: +SKIP
     """
     from vtkmodules.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray
-    from vtkmodules.vtkCommonCore import vtkPoints, vtkStringArray
+    from vtkmodules.vtkCommonCore import vtkPoints
     from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData
     from vtkmodules.vtkIOXML import vtkXMLPolyDataWriter
 
@@ -133,7 +146,6 @@ def write_vtk(run, fields, outdir, progress: bool = False) -> Path:
         shutil.rmtree(tmp)
     tmp.mkdir(parents=True)
     gid, names = group_ids(run)
-    name_of = np.asarray(names, dtype=object)[gid]
     o = run.o
     r = radii(run)
 
@@ -150,26 +162,18 @@ def write_vtk(run, fields, outdir, progress: bool = False) -> Path:
                   numpy_to_vtkIdTypeArray(np.arange(n, dtype=np.int64), deep=True))
     poly.SetVerts(verts)
     pd = poly.GetPointData()
-    for a in (arr(run.data.ids.astype(np.int64), "id"), arr(gid, "group_id"),
+    f32 = np.float32
+    for a in (arr(run.data.ids.astype(np.int32), "id"), arr(gid, "group_id"),
               arr(run.data.types.astype(np.int32), "type"),
-              arr(run.data.mols.astype(np.int32), "mol"), arr(r, "radius"),
-              arr(o, "original")):
+              arr(run.data.mols.astype(np.int32), "mol"), arr(r.astype(f32), "radius"),
+              arr(o.astype(f32), "original")):
         pd.AddArray(a)
-    sname = vtkStringArray()
-    sname.SetName("group_name")
-    sname.SetNumberOfValues(n)
-    for k, s in enumerate(name_of):
-        sname.SetValue(k, s)
-    pd.AddArray(sname)
-    fd = poly.GetFieldData()
-    gnames = vtkStringArray()
-    gnames.SetName("group_names")
-    for s in names:
-        gnames.InsertNextValue(s)
-    fd.AddArray(gnames)
+    for k, name in enumerate(names):                 # the names, as OVITO can read them
+        pd.AddArray(arr((gid == k).astype(np.int32), f"group_{name}"))
     writer = vtkXMLPolyDataWriter()
-    writer.SetDataModeToBinary()
-    writer.SetCompressorTypeToLZ4()       # fast; ParaView, pyvista and VTK ≥ 8.1 read it
+    writer.SetDataModeToBinary()          # inline base64: OVITO reads neither appended data
+    writer.SetCompressorTypeToNone()      # nor compressed arrays, only Int32/64 and Float32/64
+    #                                       arrays, no field data (checked with OVITO 3.17)
     entries = []
     try:
         with progress_bar(len(fields.steps), progress, "VTK frames") as bar:
@@ -178,18 +182,17 @@ def write_vtk(run, fields, outdir, progress: bool = False) -> Path:
                 ts = run.trajectory[k]
                 p = positions(ts)
                 pts = vtkPoints()
-                pts.SetData(arr(p, "points"))
+                pts.SetData(arr(p.astype(f32), "points"))
                 poly.SetPoints(pts)
                 disp = p - o
-                pd.AddArray(arr(disp, "displacement"))
-                pd.AddArray(arr(np.linalg.norm(disp, axis=1), "displacement_magnitude"))
+                pd.AddArray(arr(disp.astype(f32), "displacement"))
+                pd.AddArray(arr(np.linalg.norm(disp, axis=1).astype(f32),
+                                "displacement_magnitude"))
                 v = _velocity(ts)
                 if v is not None:
-                    pd.AddArray(arr(v, "velocity"))
+                    pd.AddArray(arr(v.astype(f32), "velocity"))
                 for m, vals in fields.values.items():
                     pd.AddArray(arr(vals[k], m))
-                fd.AddArray(arr(np.array([int(step)], dtype=np.int64), "iteration"))
-                fd.AddArray(arr(np.array([float(step) * run.dt]), "time"))
                 name = frame_name(step)
                 writer.SetFileName(str(tmp / name))
                 writer.SetInputData(poly)
@@ -236,10 +239,9 @@ def write_stress_dump(run, fields, path, progress: bool = False) -> Path:
     ids, types, mols = run.data.ids, run.data.types, run.data.mols
     with_v = _velocity(run.trajectory[0]) is not None
     cols = stress_dump_columns(run, fields, with_v)
-    nfloat = len(cols) - 3 - 1  # id type mol ... group (ints)
+    # id type mol: integers; x y z radius [vx vy vz]; group: integer; dx dy dz and the measures
     fmt = " ".join(["%d", "%d", "%d"] + [FLOAT] * (4 + 3 * with_v) + ["%d"]
                    + [FLOAT] * (3 + len(fields.values)))
-    del nfloat
     try:
         with open(tmp, "w") as fh, progress_bar(len(fields.steps), progress, "stress dump") as bar:
             bar.unit = "frame"

