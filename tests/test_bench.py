@@ -61,9 +61,12 @@ def test_bench_accuracy_smoke(tmp_path):
 def test_bench_perf_smoke(tmp_path):
     data = perf.run_bench(tmp_path, steps=4, profile_steps=4, scene_name="magpod-small",
                           configs=(("reference", "exact", 1), ("lammps", "exact", 1),
-                                   ("lammps", "fast", 2)), echo=lambda s: None)
+                                   ("lammps", "fast", 2), ("lammps", "exact", 1, "numpy")),
+                          echo=lambda s: None, kernel_times=False)
     rows = data["rows"]
-    assert [r["status"] for r in rows] == ["ok"] * 3, [r.get("error") for r in rows]
+    assert [r["status"] for r in rows] == ["ok"] * 4, [r.get("error") for r in rows]
+    assert [r["kernels"] for r in rows] == ["—", "numba", "numba", "numpy"]
+    assert rows[3]["cpu_ms_per_it"] > 0 and data["kernel_compile"] is None
     ex = rows[1]
     assert ex["x_lammps_exact_1"] == 1.0 and ex["maxrss_mb"] > 10
     assert ex["breakdown"]["_loop"]["steps"] == 4 and "Modify" in ex["breakdown"]

@@ -8,7 +8,8 @@ text; it is its derivation. Every path that evaluates operators is checked again
 * LAMMPS in exact mode as compiled (fix addforce, fix viscous, ``pair_style lepton`` for the
   reciprocal collisions, the Python callback for bind, attract, one-way collisions and contact
   conditions);
-* LAMMPS with every pair operator in the Python callback (``native=False``);
+* LAMMPS with every pair operator in the Python callback (``native=False``), with the callback's
+  NumPy path and with its compiled (numba) kernels;
 * LAMMPS fast mode (harmonic bonds): equal to Eq. 12 only to first order in the strain, so it
   must lie within the golden file's ``harmonic_bound`` (Σ c·(d − L0)²/d per particle, the exact
   difference of the two forces per pair).
@@ -117,9 +118,11 @@ def test_reference_engine(name):
 
 
 @pytest.mark.lammps
+@pytest.mark.parametrize("kernels", ["numpy", "numba"])
 @pytest.mark.parametrize("native", [True, False], ids=["as-compiled", "all-pairs-in-callback"])
 @pytest.mark.parametrize("name", sorted(CASES))
-def test_lammps_exact(name, native):
+def test_lammps_exact(name, native, kernels, monkeypatch):
+    monkeypatch.setenv("RACKSTRESS_KERNELS", kernels)
     case = CASES[name]
     scene, p, v, golden = build(case)
     a, deck = lammps_accel(scene, p, v, case["phase"], mode="exact", native=native)

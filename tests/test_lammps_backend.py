@@ -336,3 +336,145 @@ def test_what_runs_standalone_with_plain_lmp(tmp_path):
     ours = _frames(out / "trajectory.dump")
     theirs = _frames(tmp_path / "plane-rack-fast" / "trajectory.dump")
     assert len(ours) == len(theirs) == 101 and ours == theirs
+
+
+def _final_with_kernels(scene, kernels, monkeypatch):
+    monkeypatch.setenv("RACKSTRESS_KERNELS", kernels)
+    run = LammpsRun(compile_deck(scene, "exact"), None)
+    try:
+        assert run.py.kernels == kernels
+        run.run_schedule()
+        return run.gather_positions()
+    finally:
+        run.close()
+
+
+@pytest.mark.lammps
+@pytest.mark.parametrize("name", ["every-operator", "magpod-small"])
+def test_compiled_kernels_equal_the_numpy_path(name, monkeypatch):
+    """The callback's compiled (numba) kernels and its NumPy path (the reference
+    implementation) give the same trajectory: every operator kind through two phase switches,
+    and 300 MagPod iterations with the legs on the sediment (the only difference is the order
+    of sums, so they agree to round-off)."""
+    scene = (every_operator_scene(steps=60) if name == "every-operator"
+             else scenes.build("magpod-small").with_steps(300))
+    a = _final_with_kernels(scene, "numpy", monkeypatch)
+    b = _final_with_kernels(scene, "numba", monkeypatch)
+    assert np.abs(a - scene.original_positions()).max() > 0.1      # it moved
+    assert np.abs(a - b).max() <= 1e-10
+
+
+# ------------------------------------------------------------------ active particles only
+def _gait_cycle():
+    """A whole gait cycle of magpod-small (all four phases, 300 iterations each): the soles
+    land on the sediment, which starts at rest and is integrated only once touched."""
+    return scenes.build("magpod-small", phase_steps=300, cycles=1)
+
+
+@pytest.fixture(scope="module")
+def gait_reference():
+    return _reference_final(_gait_cycle())
+
+
+def _lammps_run(scene, **compile_kw):
+    run = LammpsRun(compile_deck(scene, "exact", **compile_kw), None)
+    try:
+        run.run_schedule()
+        p, v = run.gather_positions(), run.gather_velocities()
+        bit = run.py.move_bit
+        mask = run.lmp.numpy.extract_atom("mask")[:scene.n_particles].copy()
+        return p, v, (None if bit is None else (mask & bit) != 0)
+    finally:
+        run.close()
+
+
+@pytest.mark.slow
+@pytest.mark.lammps
+def test_active_only_is_exact_over_a_gait_cycle(gait_reference):
+    """Integrating only the particles that can move changes nothing: bit for bit against
+    integrating every particle, and the reference engine to 1e-10, over a whole gait cycle."""
+    sc = _gait_cycle()
+    deck = compile_deck(sc, "exact")
+    assert deck.passive == ("sediment",) and "fix rs_nve rs_move nve" in deck.input_text()
+    assert compile_deck(scenes.build("plane-rack"), "exact").passive == ()   # nothing rests
+    p, v, active = _lammps_run(sc)
+    p_all, v_all, none = _lammps_run(sc, active_only=False)
+    assert none is None
+    np.testing.assert_array_equal(p, p_all)
+    np.testing.assert_array_equal(v, v_all)
+    sed = sc.slice("sediment")
+    moved = np.abs(p[sed] - sc.original_positions()[sed]).max(axis=1) > 0
+    assert moved.any() and active[sed].sum() < sc.groups["sediment"].n   # some, not all
+    assert np.all(active[sed][moved])           # every sediment particle that moved was active
+    assert np.all(active[:sed.start])           # the robot always is
+    assert np.abs(p - gait_reference).max() <= 1e-10
+
+
+ACTIVE_MPI = """
+import sys, numpy as np
+from rackstress import scenes
+from rackstress.engines.lammps.deck import compile_deck
+from rackstress.engines.lammps.runner import LammpsRun
+from rackstress.lib.mpi import world
+sc = scenes.build("magpod-small", phase_steps=300, cycles=1)
+run = LammpsRun(compile_deck(sc, "exact"), None)
+run.run_schedule()
+p = run.gather_positions()
+counts = world().allgather(run.lmp.extract_global("nlocal"))
+run.close()
+if world().Get_rank() == 0:
+    np.save(sys.argv[1] + "/p.npy", p)
+    np.save(sys.argv[1] + "/counts.npy", np.array(counts))
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.mpi
+@pytest.mark.lammps
+def test_active_only_is_exact_under_mpi(tmp_path, gait_reference):
+    """The same gait cycle under ``mpiexec -n 2`` (each rank activates the particles it owns)."""
+    script = tmp_path / "active_mpi.py"
+    script.write_text(ACTIVE_MPI)
+    proc = subprocess.run([str(MPIEXEC), "-n", "2", sys.executable, str(script), str(tmp_path)],
+                          capture_output=True, text=True, timeout=1200)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    counts = np.load(tmp_path / "counts.npy")
+    assert len(counts) == 2 and counts.min() > 0
+    assert np.abs(np.load(tmp_path / "p.npy") - gait_reference).max() <= 1e-10
+
+
+@pytest.mark.slow
+@pytest.mark.lammps
+def test_active_only_run_killed_and_resumed_equals_uninterrupted(tmp_path):
+    """A magpod-small run (sediment integrated only once touched) killed with SIGKILL after a
+    checkpoint at step >= 300 and resumed writes the same trajectory, byte for byte: the
+    resumed run re-adds every moving sediment particle, and an untouched one is at rest."""
+    import os
+    import signal
+    import time
+
+    exe = str(Path(sys.executable).parent / "rackstress")
+    args = ["run", "magpod-small", "--steps", "600", "--restart-every", "100", "--dump-every",
+            "20", "--no-render", "--no-progress"]
+    full, cut = tmp_path / "full", tmp_path / "cut"
+    r = subprocess.run([exe, *args, "--out", str(full)], capture_output=True, text=True,
+                       timeout=900)
+    assert r.returncode == 0, r.stderr[-2000:]
+    p = subprocess.Popen([exe, *args, "--out", str(cut)], start_new_session=True,
+                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline, step = time.monotonic() + 900, None
+    while time.monotonic() < deadline and p.poll() is None:
+        try:
+            step = json.loads((cut / "progress.json").read_text())["step"]
+            if step >= 300:
+                break
+        except (FileNotFoundError, json.JSONDecodeError, KeyError):
+            pass
+        time.sleep(0.001)
+    os.killpg(p.pid, signal.SIGKILL)
+    p.wait()
+    assert not (cut / "summary.json").exists() and step is not None and step < 600
+    r = subprocess.run([exe, "run", "--resume", str(cut), "--no-render", "--no-progress"],
+                       capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert (cut / "trajectory.dump").read_bytes() == (full / "trajectory.dump").read_bytes()

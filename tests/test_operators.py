@@ -288,3 +288,80 @@ def test_operator_order_within_a_group_does_not_change_the_sum():
     expected = [[-100 * (4 / 1.5 - 1.5) - 2.0, 3.0 - 2.0, 0.0]]
     np.testing.assert_allclose(fwd, expected, rtol=1e-12)
     np.testing.assert_allclose(rev, expected, rtol=1e-12)
+
+
+# ----------------------------------------------------------------------------- one home each
+def test_every_operator_has_a_kernel_a_realization_and_a_callback_term():
+    """Adding an operator is one class plus one entry per engine registry: none is missing."""
+    from rackstress.engines.lammps.callback import TERMS
+    from rackstress.engines.lammps.deck import REALIZE
+    from rackstress.engines.reference import KERNELS
+    from rackstress.model.operators import OPERATORS
+
+    for registry in (KERNELS, REALIZE, TERMS):
+        assert set(registry) == set(OPERATORS)
+
+
+@pytest.mark.parametrize("cls,q", [(Bind, 2.0), (Collide, 9.0), (Attract, None)])
+def test_jacobian_block_is_minus_the_derivative_of_the_kernel(cls, q):
+    """The stability prediction's block B = −∂a_p/∂p of each pair kernel, by central differences
+    of the kernel (in a state where collide overlaps and bind is stretched)."""
+    p = np.array([[0.1, -0.2, 0.3]])
+    u = np.array([[1.3, 0.4, -0.5]])
+    c = 7.0
+    qa = None if q is None else np.array([q])
+    B, norm = cls.jacobian(u - p, np.array([c]), qa)
+    h = 1e-6
+    num = np.zeros((3, 3))
+    for k in range(3):
+        e = np.zeros((1, 3))
+        e[0, k] = h
+        num[:, k] = -(cls.accel(p + e, u, c, qa) - cls.accel(p - e, u, c, qa))[0] / (2 * h)
+    np.testing.assert_allclose(B[0], num, rtol=1e-6, atol=1e-6)
+    assert norm[0] == pytest.approx(np.linalg.norm(B[0], 2), rel=1e-12)
+
+
+def test_bind_pairs_carry_each_pair_original_length():
+    from rackstress.model.operators import Within as W
+
+    g = Group("g", [[0, 0, 0], [1, 0, 0], [0, 2, 0]], 0.25)
+    pl = Bind("g", W(2.5, 3.0)).pairs(g, g)
+    # pairs (0,1) L0² 1, (0,2) 4, (1,0) 1, (1,2) 5, (2,0) 4, (2,1) 5; never (i, i)
+    assert list(zip(pl.i.tolist(), pl.j.tolist())) == [(0, 1), (0, 2), (1, 0), (1, 2), (2, 0),
+                                                       (2, 1)]
+    np.testing.assert_array_equal(pl.q, [1, 4, 1, 5, 4, 5])
+    np.testing.assert_array_equal(pl.c, [3.0] * 6)
+
+
+def test_rack_forces_and_pull_selection():
+    from rackstress.model.operators import norm2_below, rack_forces
+
+    assert rack_forces("body") == [Bind("body", Const(0.5)), Dampen(1.0)]          # Eq. 23
+    assert rack_forces("plane", 2.0, 3.0) == [Bind("plane", Const(2.0)), Dampen(3.0)]
+    # Eq. 15: ‖o‖² = 0, 9, 9.61, 10, 100 < 10
+    o = [[0, 0, 0], [3, 0, 0], [0, 0, 3.1], [1, 3, 0], [10, 0, 0]]
+    assert norm2_below(o, 10.0) == (True, True, True, False, False)
+
+
+def test_reverse_of_finds_the_directed_partner():
+    from rackstress.model.operators import reverse_of
+
+    ops = {"A": [Dampen(1.0), Bind("B", Const(100.0)), Collide("B", Const(3.0))],
+           "B": [Collide("A", Const(1.0)), Bind("A", Const(0.5)), Bind("B", Within(2.0, 1.0))],
+           "C": [Attract("A", Const(1.0))]}
+    assert reverse_of(ops, "A", 1) == ("B", 1)          # bind A<-B 100 and B<-A 0.5
+    assert reverse_of(ops, "B", 0) == ("A", 2)          # collide, other coefficient
+    assert reverse_of(ops, "B", 2) == ("B", 2)          # a group with itself is its own reverse
+    assert reverse_of(ops, "C", 0) is None              # one-way attraction
+
+
+def test_the_same_operator_object_on_two_groups():
+    """Engines key what they prepare by an operator's place, so one Bind object may sit on two
+    groups: each acts with its own pairs (S0, S1 bound to T with 2; T bound to each)."""
+    shared = Bind("T", Const(2.0))
+    sc = make({"T": ([[0, 0, 0]], 0.5), "S": ([[3, 0, 0]], 0.5), "U": ([[0, 4, 0]], 0.5)},
+              {"S": [shared], "U": [shared]})
+    a = acc(sc, p=[[0, 0, 0], [4, 0, 0], [0, 2, 0]])
+    # S at 4 (L0 3): 2·(−4,0,0)·(1 − 9/16); U at 2 (L0 4): 2·(0,−2,0)·(1 − 16/4)
+    np.testing.assert_allclose(a["S"], [[-3.5, 0, 0]], rtol=1e-12)
+    np.testing.assert_allclose(a["U"], [[0, 12.0, 0]], rtol=1e-12)

@@ -223,6 +223,10 @@ class Operator:
     def _when(self) -> str:
         return f" when {' and '.join(c.label() for c in self.when)}" if self.when else ""
 
+    def damping(self, holds: bool) -> float:
+        """The velocity coefficient γ this operator adds (a ≈ −γ·v; only dampen has one)."""
+        return 0.0
+
     def check(self, target: str, groups: Mapping) -> None:
         """Validate against the scene's groups; raise :class:`SceneError` naming what is wrong."""
         for cond in self.when:
@@ -307,6 +311,9 @@ class Dampen(Operator):
     def coefficient(self, holds: bool) -> float:
         """The damping coefficient now: c, plus ``extra`` when the conditions hold (Eq. 28)."""
         return self.c + (self.extra if (self.extra and holds) else 0.0)
+
+    def damping(self, holds: bool) -> float:
+        return self.coefficient(holds)
 
     @staticmethod
     def accel(v: np.ndarray, c: float) -> np.ndarray:

@@ -53,7 +53,7 @@ from typing import Mapping
 import numpy as np
 
 from rackstress.errors import SceneError
-from rackstress.model.operators import Collide, Dampen, contact_candidates, phase_active
+from rackstress.model.operators import contact_candidates, phase_active
 from rackstress.model.scene import Scene
 from rackstress.model.verlet import t_limit_verlet
 
@@ -157,10 +157,10 @@ def linearize(scene: Scene, phase: Mapping, p: np.ndarray | None = None) -> dict
         sl = scene.slice(target)
         g_t = scene.groups[target]
         for op in seq:
-            if isinstance(op, Dampen):
-                gamma[sl] += op.coefficient(phase_active(op.when, phase))
+            if not op.pair:        # dampen: Γ (contact assumed); force: a constant
+                gamma[sl] += op.damping(phase_active(op.when, phase))
                 continue
-            if not op.pair or not phase_active(op.when, phase):
+            if not phase_active(op.when, phase):
                 continue
             if op.fixed_pairs:     # bind, attract: the coefficient matrix's pairs
                 pl = op.pairs(g_t, scene.groups[op.source], phase)

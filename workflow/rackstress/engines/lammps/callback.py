@@ -27,6 +27,9 @@ from __future__ import annotations
 import numpy as np
 
 from rackstress.lib.vec import rowdot
+from rackstress.model.kernels import choice as kernel_choice
+from rackstress.model.kernels import compiled as compiled_kernels
+from rackstress.model.kernels import warm as warm_kernels
 from rackstress.model.operators import (Attract, Bind, Collide, Const, Dampen, Force,
                                         contact_candidates, contact_groups, phase_active,
                                         reverse_of)
@@ -81,11 +84,15 @@ class Frame:
             self.dense_mass = mass[self.index[self.dense_rows], None]
         self.refresh(lmp)
 
-    def refresh(self, lmp) -> None:
-        """Re-read positions and velocities (every step) and clear the per-step cache."""
-        nall = self.nlocal + self.nghost
-        self.x = lmp.numpy.extract_atom("x")[:nall]
-        self.v = lmp.numpy.extract_atom("v")[:self.nlocal]
+    def refresh(self, lmp=None) -> None:
+        """Clear the per-step cache; with ``lmp``, (re)take LAMMPS' position and velocity
+        arrays. Between two reneighbourings LAMMPS neither reallocates nor reorders them (atoms
+        are exchanged, and arrays grown, only when it reneighbours), so the views taken when
+        the frame was built see every step's values in place."""
+        if lmp is not None:
+            nall = self.nlocal + self.nghost
+            self.x = lmp.numpy.extract_atom("x")[:nall]
+            self.v = lmp.numpy.extract_atom("v")[:self.nlocal]
         #: per-step results shared between terms (overlapping pairs of a pair of groups)
         self.cache = {}
         #: pair contributions (rows, values), summed into the accumulator once (:meth:`flush`)
@@ -185,9 +192,11 @@ class PairTerm:
     unordered pair.
     """
 
-    def __init__(self, name, factor, I, J, cI, cJ=None, q=None, block=None):
+    def __init__(self, name, factor, I, J, cI, cJ=None, q=None, block=None, compiled=None):
         self.name, self.factor = name, factor
         self.I, self.J, self.cI, self.cJ, self.q = I, J, cI, cJ, q
+        #: the compiled kernels (:mod:`rackstress.model.kernels`), or None for NumPy
+        self.k = compiled
         #: (target slice, source slice) when the pairs are every (i, j) of two groups in
         #: row-major order (a Const bind such as host ↔ rack): then it is evaluated by
         #: broadcasting over the block, with no per-pair gathers or scatters.
@@ -201,9 +210,17 @@ class PairTerm:
             self._cIT = _scalar_or(np.ascontiguousarray(cI.reshape(m, n).T))
             self._cJT = None if cJ is None else _scalar_or(
                 np.ascontiguousarray(cJ.reshape(m, n).T))
+            if compiled is not None:
+                self._full = (np.ascontiguousarray(cI.reshape(m, n).T),
+                              np.ascontiguousarray((cI if cJ is None else cJ).reshape(m, n).T))
 
     def _add_block(self, fr: Frame, acc: np.ndarray):
         ts, ss = self.block
+        if fr.identity and self.k is not None:     # rows are particles: one compiled pass
+            cIT, cJT = self._full
+            self.k.bind_block(fr.x, ts.start, ts.stop - ts.start, ss.start, ss.stop - ss.start,
+                              self._qT, cIT, cJT, self._cJT is not None, acc)
+            return
         if fr.identity:
             xt, xs = fr.x[ts], fr.x[ss]
         else:
@@ -262,12 +279,24 @@ class PairTerm:
                 cJ = cJ[sel] if cJ is not None else None
                 q = q[sel] if q is not None else None
             ri, rj = fr.rows(self.name, I, J)
-            hit = fr.memo[key] = (ri, rj, cI[:, None], None if cJ is None else -cJ[:, None], q)
+            if self.k is not None:   # the compiled loop adds into accumulator rows directly
+                hit = (ri, rj, fr.compact(ri), fr.compact(rj), cI,
+                       cI if cJ is None else cJ, q)
+            else:
+                hit = (ri, rj, cI[:, None], None if cJ is None else -cJ[:, None], q)
+            fr.memo[key] = hit
         return hit
 
     def add(self, fr: Frame, acc: np.ndarray):
         if self.block is not None:
             return self._add_block(fr, acc)
+        if self.k is not None:
+            ri, rj, ai, aj, cI, cJ, q = self._selected(fr)
+            if q is None:
+                self.k.attract_pairs(fr.x, ri, rj, ai, cI, acc)
+            else:
+                self.k.bind_pairs(fr.x, ri, rj, ai, aj, cI, cJ, q, self.cJ is not None, acc)
+            return
         ri, rj, cI, mcJ, q = self._selected(fr)
         diff = fr.x[rj] - fr.x[ri]
         g = self.factor(rowdot(diff, diff), q)[:, None] * diff   # the formula without its c
@@ -292,8 +321,11 @@ class Overlaps:
     both directions and by the contact conditions (Eq. 28's damping) of the same two groups.
     """
 
-    def __init__(self, radius: np.ndarray, skin: float):
-        self.radius, self.skin = radius, skin
+    def __init__(self, radius: np.ndarray, skin: float, compiled=None, activate=None):
+        self.radius, self.skin, self.k = radius, skin, compiled
+        #: called with the candidate rows of every new list (a resting particle that may be
+        #: touched before the next reneighbouring must be integrated from now on)
+        self.activate = activate
         self._rmax = {}
 
     def _reach(self, sl: slice) -> float:
@@ -313,6 +345,9 @@ class Overlaps:
         a, b = contact_candidates(fr.x[ia], fr.x[ib], cut, same=A == B)
         a, b = ia[a], ib[b]
         R2 = (self.radius[fr.index[a]] + self.radius[fr.index[b]]) ** 2
+        if self.activate is not None:
+            self.activate(fr, a)
+            self.activate(fr, b)
         hit = fr.memo[key] = (a, b, R2)
         return hit
 
@@ -325,9 +360,12 @@ class Overlaps:
             return hit
         A, B = (s, t) if t.start > s.start else (t, s)
         a, b, R2 = self._candidates(fr, A, B)
-        diff = fr.x[b] - fr.x[a]
-        d2 = rowdot(diff, diff)
-        on = Collide.touching(d2, R2)
+        if self.k is not None:
+            on, d2 = self.k.touching(fr.x, a, b, R2)
+        else:
+            diff = fr.x[b] - fr.x[a]
+            d2 = rowdot(diff, diff)
+            on = Collide.touching(d2, R2)
         a, b, d2, R2 = a[on], b[on], d2[on], R2[on]
         if len(d2) and not d2.all():
             k = int(np.flatnonzero(d2 == 0.0)[0])
@@ -358,6 +396,9 @@ class Term:
     def __init__(self, forces: "PyForces", r):
         self.forces, self.r, self.op, self.target = forces, r, r.op, r.target
         self.sl = forces.scene.slice(r.target)
+        #: the groups its contact conditions name, and whether its phase conditions hold now
+        self.contacts = contact_groups(r.op.when)
+        self.phase_ok = False
         #: the last row written by other than a collide (see Frame's dense accumulator)
         self.dense_stop = self.sl.stop
 
@@ -369,7 +410,7 @@ class ForceTerm(Term):
     """A force (Eq. 8) conditioned on a contact: fix addforce cannot test the contact."""
 
     def add(self, fr, acc):
-        if self.forces.holds(fr, self.r):
+        if self.forces.holds(fr, self):
             acc[self._rows(fr)] += self.op.vector()
 
     def _rows(self, fr: Frame) -> np.ndarray:
@@ -389,7 +430,7 @@ class DampenTerm(Term):
     gated = False
 
     def add(self, fr, acc):
-        if self.forces.holds(fr, self.r):
+        if self.forces.holds(fr, self):
             sel = fr.owned(self.sl)
             acc[fr.compact(sel)] += Dampen.accel(fr.v[sel], self.op.extra)
 
@@ -404,11 +445,13 @@ class CollideTerm(Term):
         self.dense_stop = 0     # writes its (few) target rows sparsely
 
     def add(self, fr, acc):
-        if not self.forces.holds(fr, self.r):
+        if not self.forces.holds(fr, self):
             return
         a, b, R2 = self.forces.overlaps.pairs(fr, self.sl, self.s, f"collide on {self.target}")
         if len(a):
-            fr.add(a, Collide.accel(fr.x[a], fr.x[b], self.c, R2))
+            k = self.forces.compiled
+            fr.add(a, k.collide(fr.x, a, b, R2, self.c) if k is not None
+                   else Collide.accel(fr.x[a], fr.x[b], self.c, R2))
 
 
 class BindTerm(Term):
@@ -435,10 +478,11 @@ class BindTerm(Term):
         block = None
         if isinstance(op.coeff, Const) and op.source != r.target:
             block = (self.sl, sc.slice(op.source))
-        self.pair_term = PairTerm(f"bind on {r.target}", Bind.factor, I, J, c, cJ, q, block)
+        self.pair_term = PairTerm(f"bind on {r.target}", Bind.factor, I, J, c, cJ, q, block,
+                                  forces.compiled)
 
     def add(self, fr, acc):
-        if self.pair_term is not None and self.forces.holds(fr, self.r):
+        if self.pair_term is not None and self.forces.holds(fr, self):
             self.pair_term.add(fr, acc)
 
 
@@ -450,7 +494,7 @@ class AttractTerm(Term):
         self._by_phase = {}
 
     def add(self, fr, acc):
-        if not self.forces.holds(fr, self.r):
+        if not self.forces.holds(fr, self):
             return
         phase = self.forces.phase
         key = tuple(sorted(phase.items()))
@@ -459,7 +503,7 @@ class AttractTerm(Term):
             pl = op.pairs(sc.groups[self.target], sc.groups[op.source], phase).shifted(
                 self.sl.start, sc.offset(op.source))
             self._by_phase[key] = PairTerm(f"attract on {self.target}", Attract.factor,
-                                           pl.i, pl.j, pl.c)
+                                           pl.i, pl.j, pl.c, compiled=self.forces.compiled)
         self._by_phase[key].add(fr, acc)
 
 
@@ -471,8 +515,15 @@ TERMS = {Force: ForceTerm, Dampen: DampenTerm, Collide: CollideTerm, Bind: BindT
 class PyForces:
     """The ``fix external`` callback: the sum of all Python-realized operators active now."""
 
-    def __init__(self, lmp, deck, comm=None):
+    def __init__(self, lmp, deck, comm=None, kernels: str | None = None):
+        """``kernels``: 'numba' (compiled loops, :mod:`rackstress.model.kernels`) or 'numpy'
+        (the reference implementation); default ``RACKSTRESS_KERNELS``, else numba if present."""
         self.lmp, self.deck, self.scene, self.comm = lmp, deck, deck.scene, comm
+        self.kernels = kernel_choice(kernels)
+        self.compiled, self.warm = None, None
+        if self.kernels == "numba":
+            self.warm = warm_kernels()     # compile once (cached on disk), load afterwards
+            self.compiled = compiled_kernels()
         self.n = self.scene.n_particles
         self.radius = self.scene.radii()
         self.mass = np.concatenate([np.full(g.n, deck.masses[name])
@@ -481,7 +532,14 @@ class PyForces:
         self._keys = None        # contact conditions of the active terms (per phase)
         self._agreed = None      # MPI: this step's agreed contact conditions
         self._fail_here = None
-        self.overlaps = Overlaps(self.radius, deck.skin)
+        #: passive particles (deck.passive) join LAMMPS' moving group when first reachable
+        self.passive = np.zeros(self.n, dtype=bool)
+        for name in getattr(deck, "passive", ()):
+            self.passive[self.scene.slice(name)] = True
+        self.move_bit = self._move_bit(lmp, deck) if self.passive.any() else None
+        self._scan_moving = self.move_bit is not None   # once: a resumed run's moving ones
+        self.overlaps = Overlaps(self.radius, deck.skin, self.compiled,
+                                 self._activate if self.move_bit is not None else None)
         python = deck.python_ops
         here = {r.site for r in python}
         #: reverse place of every bind here whose reverse is here too; folded[rev] = carrier
@@ -506,6 +564,30 @@ class PyForces:
                        and lmp.extract_setting("neigh_delay") == 0
                        and lmp.extract_setting("neigh_dist_check") == 1)
 
+    @staticmethod
+    def _move_bit(lmp, deck) -> int:
+        """LAMMPS' mask bit of the deck's moving group (group index k has bit 1 << k)."""
+        names = list(lmp.available_ids("group"))
+        return 1 << names.index(deck.moving)
+
+    def _activate(self, fr: Frame, rows: np.ndarray) -> None:
+        """Add the owned passive particles among ``rows`` to the moving group (exact: they are
+        at rest with no force until now; fix nve reads the mask every step)."""
+        own = rows[rows < fr.nlocal]
+        own = own[self.passive[fr.index[own]]]
+        if len(own):
+            mask = self.lmp.numpy.extract_atom("mask")
+            mask[own] |= self.move_bit
+
+    def _activate_moving(self, fr: Frame) -> None:
+        """Once, at the first call: passive particles already moving (a resumed run) join."""
+        self._scan_moving = False
+        own = np.arange(fr.nlocal)
+        own = own[self.passive[fr.index[own]]]
+        v = fr.v[own]
+        moving = own[(v[:, 0] != 0.0) | (v[:, 1] != 0.0) | (v[:, 2] != 0.0)]
+        self._activate(fr, moving)
+
     def op_at(self, site):
         return self.scene.operators[site[0]][site[1]]
 
@@ -515,8 +597,9 @@ class PyForces:
         self.phase = dict(phase_vars)
         self._keys = None
         self._fresh = True     # the fix (and its force array) may be new
-        self.active = [t for t in self.terms
-                       if not t.gated or phase_active(t.op.when, self.phase)]
+        for t in self.terms:
+            t.phase_ok = phase_active(t.op.when, self.phase)
+        self.active = [t for t in self.terms if not t.gated or t.phase_ok]
         return bool(self.active)
 
     def _contact(self, fr: Frame, target: str, group: str) -> bool:
@@ -556,11 +639,15 @@ class PyForces:
         self._agreed = {k: bool(b) for k, b in zip(keys, vec[1:])}
         return bool(vec[0])
 
-    def holds(self, fr, r) -> bool:
-        """⟨P⟩ (Eq. 4) of a realized operator's conditions now: phase, then contacts."""
-        if not phase_active(r.op.when, self.phase):
+    def holds(self, fr, term) -> bool:
+        """⟨P⟩ (Eq. 4) of a term's conditions now: phase (decided at the phase switch), then
+        contacts."""
+        if not term.phase_ok:
             return False
-        return all(self._contact(fr, r.target, g) for g in contact_groups(r.op.when))
+        for g in term.contacts:
+            if not self._contact(fr, term.target, g):
+                return False
+        return True
 
     def _frame(self, nlocal: int) -> Frame:
         """This step's frame: the last one refreshed, or a new layout after a reneighbouring."""
@@ -570,7 +657,7 @@ class PyForces:
                 or lmp.extract_global("nghost") != fr.nghost):
             fr = self.frame = Frame(lmp, self.n, nlocal, self.dense_span, self.mass)
         else:
-            fr.refresh(lmp)
+            fr.refresh()
         return fr
 
     # ------------------------------------------------------------------ callback
@@ -612,6 +699,8 @@ class PyForces:
             if fr is not old:
                 f[:] = 0.0
                 self._sparse_rows = self._sparse_rows[:0]
+                if self._scan_moving:
+                    self._activate_moving(fr)
             acc = np.zeros((fr.acc_rows, 3))
             for term in self.active:
                 term.add(fr, acc)

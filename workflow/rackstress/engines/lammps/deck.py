@@ -20,7 +20,8 @@ bind, ``mode='fast'``       ``bond_style harmonic`` K = c·m, r0 = L0 (one bond 
                             distinct L0): equal to Eq. 12 to first order in the strain
 attract                     Python callback (Eq. 14), only in phases where it is active
 integrate                   ``fix nve``, started with v = v0 + dt/2·a0 after ``run 0`` so its
-                            positions are Eq. 5's exactly; the same restart at every phase switch
+                            positions are Eq. 5's exactly; the same restart at every phase switch;
+                            only on the particles that can move (Active particles, below)
 ==========================  ================================================================
 
 Directed coefficients: a reciprocal LAMMPS interaction of strength K gives accelerations K/m_i
@@ -32,6 +33,15 @@ Python. Every other operator on a group is scaled by its mass, so accelerations 
 Skipped because it is exact to skip: no pair style when nothing is realized as a pair style;
 ``neigh_modify exclude`` for every type pair that does not collide; no bonds in exact mode; no
 ``fix external`` in a phase where no Python-realized operator is active.
+
+Active particles: a *passive* group (:func:`passive_groups`: at rest, moved only by collisions
+the callback evaluates, and damped — MagPod's sediment) is left out of the group ``rs_move``
+that ``fix nve`` and ``fix viscous`` act on. A particle of it has zero velocity and zero force
+until a collision partner comes within reach, and Eq. 5 does not move such a particle, so
+skipping it is exact. The callback adds it to ``rs_move`` (its group bit in LAMMPS' per-atom
+mask) as soon as its Verlet list holds a candidate pair with it — found when LAMMPS reneighbours,
+before any force can act on it — and for good (a touched particle keeps moving); a run resumed
+from a checkpoint re-adds every passive particle that is moving.
 """
 from __future__ import annotations
 
@@ -44,7 +54,7 @@ import numpy as np
 
 from rackstress.model import topology
 from rackstress.errors import SceneError
-from rackstress.model.operators import (Attract, Bind, Collide, Const, Dampen, Force,
+from rackstress.model.operators import (Attract, Bind, Collide, Dampen, Force,
                                         contact_groups, phase_active, reverse_of)
 from rackstress.model.scene import Scene
 from rackstress.model.verlet import scaled_scene
@@ -52,6 +62,9 @@ from rackstress.model.verlet import scaled_scene
 MODES = ("exact", "fast")
 #: The fix external that carries every Python-realized operator.
 PY_FIX = "rs_py"
+#: The group LAMMPS integrates and damps: every particle but the resting ones of passive groups
+#: (module doc, "Active particles"); the callback adds a passive particle the moment it can move.
+MOVE_GROUP = "rs_move"
 #: Neighbour skin (distance units). 2 rather than 1 halves the rebuilds of a MagPod run (measured:
 #: 52 against 99 in 300 iterations), each of which re-bins all the resting sediment.
 SKIN = 2.0
@@ -99,6 +112,14 @@ class Deck:
     #: :func:`rackstress.model.verlet.scaled_scene` and fix nve starts from v without Eq. 5's
     #: half-step shift (plain velocity Verlet, fix viscous at v_{n+1/2}).
     integrator: str = "euler"
+    #: groups whose particles rest until touched (only python-realized collides and dampen act
+    #: on them): LAMMPS integrates them only once the callback has activated them
+    passive: tuple = ()
+
+    @property
+    def moving(self) -> str:
+        """The group ``fix nve`` and ``fix viscous`` act on."""
+        return MOVE_GROUP if self.passive else "all"
 
     # ------------------------------------------------------------------ pieces
     @property
@@ -144,6 +165,10 @@ class Deck:
         L.append(f"timestep {_f(sc.dt)}")
         for name in sc.groups:
             L.append(f"group {name} type {types[name]}")
+        if self.passive:
+            L.append(f"# {', '.join(self.passive)}: at rest until touched; integrated and damped "
+                     f"only once the callback adds a particle to {MOVE_GROUP}")
+            L.append(f"group {MOVE_GROUP} subtract all {' '.join(self.passive)}")
         L += self._pair_commands()
         if self.bonds is not None:
             L.append("bond_style harmonic")
@@ -163,10 +188,11 @@ class Deck:
             # one fix for every group's constant damping: one pass over the atoms, not one per
             # group (gamma 1 times scale γ_type is γ_type exactly; an unnamed type would get 1)
             scale = " ".join(f"scale {t} {_f(g)}" for t, g in gamma.items())
-            L.append(f"fix rs_damp all viscous 1.0 {scale}")
+            L.append(f"fix rs_damp {self.moving} viscous 1.0 {scale}")
         held_cmds, nve_group = support_commands(sc)   # supports and v0 (scene-level)
         L += held_cmds
-        L.append(f"fix rs_nve {nve_group} nve")
+        # a scene with supports has no passive group (passive_groups), so the two never meet
+        L.append(f"fix rs_nve {self.moving if self.passive else nve_group} nve")
         L.append("thermo_style custom step")
         L.append(f"thermo {max(1, dump_every)}")
         if dump_file:
@@ -458,8 +484,28 @@ REALIZE = {Force: _realize_force, Dampen: _realize_dampen, Collide: _realize_pai
            Bind: _realize_pair, Attract: _realize_pair}
 
 
+def passive_groups(scene: Scene, realized: list) -> tuple:
+    """Groups whose particles start at rest and are moved only by collisions the callback
+    evaluates (and damped): a particle of one that no collision partner can reach has zero
+    velocity and zero force, so Eq. 5 leaves it where it is, and LAMMPS need not pass over it
+    until the callback finds a partner within reach + skin (module doc, "Active particles")."""
+    if not any(r.python for r in realized) or scene.held().any():
+        return ()     # nothing to activate, or supports (their own fix nve group)
+    out = []
+    for name, g in scene.groups.items():
+        rs = [r for r in realized if r.target == name]
+        v0 = getattr(g, "v0", None)
+        contact_only = all(
+            (r.op.pair and not r.op.fixed_pairs and r.python and not r.native)   # collide
+            or (r.native == "viscous" and not r.python and not r.op.when)        # dampen(c)
+            for r in rs)
+        if rs and contact_only and any(r.op.pair for r in rs) and (v0 is None or not np.any(v0)):
+            out.append(name)
+    return tuple(out)
+
+
 def compile_deck(scene: Scene, mode: str = "exact", measure_fast: bool = False,
-                 native: bool = True) -> Deck:
+                 native: bool = True, active_only: bool = True) -> Deck:
     """Realize every operator of ``scene`` (module doc).
 
     Fast mode is offered only where it takes every operator out of the Python callback (the
@@ -469,7 +515,7 @@ def compile_deck(scene: Scene, mode: str = "exact", measure_fast: bool = False,
     error (``rackstress bench accuracy``), off the front, so it is refused; ``measure_fast``
     lets the benchmarks keep measuring it. ``native=False`` keeps every pair operator in the
     callback (no pair style, no bonds, unit masses): the tests check both paths against the
-    same accelerations.
+    same accelerations. ``active_only=False`` integrates every particle, resting or not.
 
     Examples
     --------
@@ -506,7 +552,8 @@ def compile_deck(scene: Scene, mode: str = "exact", measure_fast: bool = False,
         bond_types = [(float(K[f]), float(r0[f])) for f in first]
         bonds = (inv.reshape(-1) + 1, i, j)
     deck = Deck(scene, mode, masses, realized, ghost_cutoff(scene), bonds, bond_types, lepton,
-                integrator=integrator)
+                integrator=integrator,
+                passive=passive_groups(scene, realized) if active_only else ())
     if mode == "fast" and deck.python_ops and not measure_fast:
         kept = sorted({f"{r.target} <- {r.op.kind}" for r in deck.python_ops})
         raise SceneError(
