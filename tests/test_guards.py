@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from rackstress.engines.dumpio import DumpWriter
-from rackstress.engines.guards import check_run, dump_frames, force_on_racks, pass_through
+from rackstress.engines.guards import dump_frames, force_on_racks, pass_through
 from rackstress.model.operators import Bind, Collide, Const, Force
 from rackstress.model.particles import Group, lattice, rack
 from rackstress.model.scene import Phase, Scene

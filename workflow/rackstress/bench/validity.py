@@ -21,7 +21,6 @@ Outputs ``validity.json``, ``validity.md`` (the correlation table, FEA convergen
 """
 from __future__ import annotations
 
-import math
 import time
 from pathlib import Path
 

@@ -33,13 +33,12 @@ from __future__ import annotations
 
 import json
 import mmap
-import time
 from pathlib import Path
 
 import numpy as np
 
 from rackstress.errors import ResumeError, RunDirError
-from rackstress.lib.jsonio import jsonable, write_json
+from rackstress.lib.jsonio import jsonable
 from rackstress.model.scene import PhaseEnd
 
 from rackstress.runs.checkpoint import (PROGRESS, RESTART_DIR, Checkpoint, Checkpointer,  # noqa: F401

@@ -914,7 +914,6 @@ def _source(c: _Ctx, t: dict, groups: dict) -> str:
 
 def _operator(c: _Ctx, kind: str, t: dict, on: str, groups: dict, when: tuple, phases: list,
               base: Path):
-    n = groups[on].n
     if kind == "force":
         accel = _vec3(c, _require(c, t, "accel"), "accel")
         where = None
