@@ -36,14 +36,20 @@ def test_bench_stability_smoke(tmp_path):
 def test_bench_accuracy_smoke(tmp_path):
     data = accuracy.run_bench(tmp_path, quick=True, scenes_=("plane-rack",), echo=lambda s: None)
     rows = data["scenes"][0]["rows"]
-    assert len(rows) == 4 * 3 and all(r["status"] == "ok" for r in rows)
+    assert len(rows) == 4 * 5 and all(r["status"] == "ok" for r in rows)
     for r in rows:
         assert abs(r["T"] - 3.0) < 1e-12          # the same physical time at every t
         if (r["engine"], r["mode"]) == ("lammps", "exact"):
             assert r["vs_reference_same_t"] < 1e-10   # exact mode: the reference to round-off
-    ref = [r["pos_max"] for r in rows if r["engine"] == "reference"]
+    ref = [r["pos_max"] for r in rows if r["engine"] == "reference" and r["integrator"] == "euler"]
     assert all(a > b for a, b in zip(ref, ref[1:]))   # smaller t, smaller error
     assert data["scenes"][0]["observed_order_reference"][-1] > 0.8
+    assert min(data["scenes"][0]["observed_order_verlet"]) >= 1.9   # the second-order mode
+    # a verlet step costs an Eq. 5 step: at equal t (equal work) its error is >= 10x smaller
+    err = {(r["integrator"], r["t"]): r["pos_max"] for r in rows
+           if (r["engine"], r["mode"]) == ("lammps", "exact")}
+    assert all(err[("euler", t)] >= 10 * err[("verlet", t)] for t in (0.01, 0.005, 0.0025))
+    assert data["scenes"][0]["verlet_front"]["lammps"]["points"]
     assert (tmp_path / "accuracy.png").stat().st_size > 1000
     assert "lammps fast" in (tmp_path / "accuracy.md").read_text()
     ff = data["scenes"][0]["fast_front"]

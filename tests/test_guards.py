@@ -150,3 +150,50 @@ def test_run_records_pass_through_in_summary(tmp_path, speed, c, passes):
         assert "warning" in proc.stderr and "passed through" in proc.stderr
     else:
         assert kinds == [] and com > 0.5
+
+
+def test_through_the_arm_of_an_l_shape_is_found_below_the_arm():
+    """A block over the tip of an L's arm, moved down through the arm: caught once its centre
+    is below the arm (y < 18), though it is still far above the L's bottom and centre."""
+    leg = lattice((2, 20, 2), 1.0)                                  # x 0..1, y 0..19
+    arm = lattice((18, 2, 2), 1.0, (2.0, 18.0, 0.0))                # x 2..19, y 18..19
+    ell = Group("ell", np.concatenate([leg, arm]), 0.5)
+    block = Group("block", lattice((2, 2, 2), 1.0, (15.0, 21.0, 0.0)), 0.5)   # centre y 21.5
+    ops = {"ell": [Collide("block", Const(10.0))], "block": [Collide("ell", Const(10.0))]}
+    sc = Scene("l", {"ell": ell, "block": block}, ops, [Phase("run", 10)])
+    inside = [(0, 0, 0), (0, -3.0, 0)]                              # centre 18.5: in the arm
+    assert pass_through(sc, frames_moving_block(sc, inside)) == []
+    below = [(0, 0, 0), (0, -3.0, 0), (0, -4.6, 0)]                  # centre 16.9: below it
+    found = pass_through(sc, frames_moving_block(sc, below))
+    assert [f["step"] for f in found] == [20]
+    assert found[0]["message"].startswith("'block' passed through 'ell'")
+
+
+def test_run_records_force_on_rack_in_summary(tmp_path):
+    path = tmp_path / "rackforce.toml"
+    path.write_text(textwrap.dedent("""
+        name = "rackforce"
+        steps = 20
+        [[group]]
+        name = "block"
+        lattice = { shape = [2, 2, 2] }
+        [[group]]
+        name = "blockrack"
+        rack = "block"
+        [[operator]]
+        on = "block"
+        op = "bind"
+        from = "blockrack"
+        c = 100
+        [[operator]]
+        on = "blockrack"
+        op = "force"
+        accel = [0, -10, 0]
+    """))
+    out = tmp_path / "run"
+    proc = subprocess.run([str(RACKSTRESS), "run", str(path), "--engine", "reference", "--out",
+                           str(out), "--no-render"], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    s = json.loads((out / "summary.json").read_text())
+    assert [w["kind"] for w in s["warnings"]] == ["force_on_rack"]
+    assert s["warnings"][0]["group"] == "blockrack" and "blockrack" in proc.stderr

@@ -372,3 +372,11 @@ def test_example_runs_and_sweeps_from_the_command_line(tmp_path):
     jobs = batch["jobs"]
     assert [j["status"] for j in jobs] == ["ok"] * 3
     assert sorted(j["params"]["speed"] for j in jobs) == [2.0, 4.0, 8.0]
+
+
+def test_rackstress_scenes_lists_a_files_own_parameters():
+    proc = subprocess.run([str(RACKSTRESS), "scenes", str(EXAMPLE / "scene.toml")],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    listed = json.loads(proc.stdout.splitlines()[1])
+    assert listed["speed"] == 4.0 and listed["duration"] == 3.0 and "steps" not in listed

@@ -12,11 +12,14 @@ from rackstress.errors import (EXIT_BUG, EXIT_DIVERGED, EXIT_INPUT, EXIT_RENDER,
                                EXIT_STORAGE, DivergenceError, RackstressError, os_error_message)
 
 
-def _load_scene(scene: str, steps, dt, sets):
+def _load_scene(scene: str, steps, dt, sets, integrator: str | None = None):
     from rackstress import scenes
 
     overrides = scenes.parse_overrides(sets)
     sc = scenes.load(scene, overrides)
+    if integrator is not None:
+        sc.integrator = integrator
+        sc.params["integrator"] = integrator
     if dt is not None:
         if not dt > 0:
             raise RackstressError(f"--dt must be positive, got {dt}")
@@ -113,8 +116,11 @@ def main():
                    "checkpoint (SCENE only needed for .toml scenes).")
 @click.option("--allow-unstable", is_flag=True,
               help="Run even if --dt exceeds the predicted stability limit of Eq. 5.")
+@click.option("--integrator", type=click.Choice(["euler", "verlet"]), default="euler",
+              show_default=True, help="euler: Eq. 5, the paper's; verlet: the second-order mode "
+              "(leapfrog with trapezoidal damping; not resumable).")
 def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progress, do_render,
-        restart_every=None, resume_dir=None, allow_unstable=False):
+        restart_every=None, resume_dir=None, allow_unstable=False, integrator="euler"):
     """Run SCENE (a built-in name or a .toml file) and write a run directory.
 
     Exit status (errors.py): 0 done, 2 bad input or a run directory in use or holding another
@@ -126,6 +132,9 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
     from rackstress.runs.rundir import check_out, locked
 
     ctx = click.get_current_context()
+    if integrator == "verlet" and resume_dir is not None:
+        raise click.UsageError("--resume continues Eq. 5 runs only; the verlet mode has no "
+                               "resumable checkpoints.")
     try:
         if resume_dir is not None:
             given = [n for n in RESUME_FIXED
@@ -151,7 +160,7 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
                 summary = resume_run(resume_dir, scene, progress=progress and rank() == 0)
                 _finish(summary, out, do_render, progress)
             return
-        sc = _load_scene(scene, steps, dt, sets)
+        sc = _load_scene(scene, steps, dt, sets, integrator)
         if out is None:
             out = Path("runs") / f"{sc.name}-{time.strftime('%Y%m%d-%H%M%S')}"
         if restart_every is None and engine == "lammps":
@@ -222,10 +231,21 @@ def deck(scene, out, mode, steps, dt, sets, dump_every):
 
 
 @main.command("scenes")
-def list_scenes():
-    """List the built-in scenes and their parameters."""
+@click.argument("files", nargs=-1)
+def list_scenes(files):
+    """List the built-in scenes and their parameters (or those of the given .toml scenes)."""
     from rackstress import scenes
+    from rackstress.errors import SceneError
 
+    if files:
+        from rackstress.scenes.toml import scene_parameters
+
+        for f in files:
+            try:
+                click.echo(f"{f}\n  " + json.dumps(scene_parameters(f)))
+            except SceneError as err:
+                _fail(err, EXIT_INPUT)
+        return
     for name in scenes.BUILDERS:
         params = scenes.parameters(name)
         click.echo(f"{name}")
@@ -526,6 +546,18 @@ def bench_perf(out, steps, quick, profile_steps, scene_name, no_mpi):
     from rackstress.bench import md_table
 
     click.echo(md_table(*mod.breakdown_rows(data)))
+
+
+@bench.command("validity")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
+              help="Output directory (default: docs/benchmarks/ of the repository).")
+@click.option("--quick", is_flag=True, help="Small bodies and coarse meshes (seconds).")
+def bench_validity(out, quick):
+    """Stress measures of three body models against linear-elastic FEA (three cases)."""
+    from rackstress.bench import validity as mod
+
+    data = mod.run_bench(out, quick=quick, echo=click.echo)
+    _bench_report(data, mod)
 
 
 if __name__ == "__main__":  # pragma: no cover

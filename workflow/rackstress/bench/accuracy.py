@@ -6,9 +6,12 @@ their physical length, phase_steps = T_phase/t) on
 
 * the reference engine (NumPy, Eq. 5 exactly),
 * LAMMPS exact mode and LAMMPS fast mode (one rank),
+* the second-order ``verlet`` mode (:mod:`rackstress.model.verlet`) on the reference engine and
+  on LAMMPS exact mode,
 
-and compared with a **converged reference**: the reference engine at t/8 of the smallest t
-(``t_conv`` = 0.0025/8 = 0.0003125), at the same physical times (the end of the run, and for
+and compared with a **converged reference**: the reference engine in the verlet mode at t/8 of
+the smallest t (``t_conv`` = 0.0025/8 = 0.0003125; Eq. 5 there is itself ~1e-3 off on the
+planes, the verlet mode ~1e-6), at the same physical times (the end of the run, and for
 MagPod every phase end). Errors:
 
 * positions: RMS and max over all particles of ‖p − p_conv‖ (max over the compared times);
@@ -45,17 +48,27 @@ T_STEPS = (0.02, 0.01, 0.005, 0.0025)
 #: than the cheapest exact-mode run that is at least as accurate (timings here drift ±20 %).
 FRONT_MARGIN = 1.2
 REFINE = 8
-ENGINES = (("reference", "exact"), ("lammps", "exact"), ("lammps", "fast"))
+#: (engine, deck mode, integrator): Eq. 5 on every engine and mode, and the second-order
+#: "verlet" mode (:mod:`rackstress.model.verlet`) on the reference engine and LAMMPS.
+ENGINES = (("reference", "exact", "euler"), ("lammps", "exact", "euler"),
+           ("lammps", "fast", "euler"), ("reference", "exact", "verlet"),
+           ("lammps", "exact", "verlet"))
+#: The integrator of the converged solution: the second-order mode at t_conv (its own error
+#: there is ~1e-6 on the planes, Eq. 5's ~1e-3).
+CONV_INTEGRATOR = "verlet"
 
 
-def scene_at(name: str, t: float, quick: bool):
+def scene_at(name: str, t: float, quick: bool, integrator: str = "euler"):
     """The benchmark's scene ``name`` at time step t, run to its fixed physical time."""
     if name == "magpod-small":
         tp = 0.2 if quick else 3.0
-        return scenes.build("magpod-small", phase_steps=int(round(tp / t)), dt=t, cycles=1)
-    T = 3.0 if quick else 12.0
-    kw = {"d": 10.0} if name == "plane-bound" else {}
-    return scenes.build(name, dt=t, steps=int(round(T / t)), **kw)
+        sc = scenes.build("magpod-small", phase_steps=int(round(tp / t)), dt=t, cycles=1)
+    else:
+        T = 3.0 if quick else 12.0
+        kw = {"d": 10.0} if name == "plane-bound" else {}
+        sc = scenes.build(name, dt=t, steps=int(round(T / t)), **kw)
+    sc.integrator = integrator
+    return sc
 
 
 def run_engine(scene, engine: str, mode: str) -> dict:
@@ -115,7 +128,7 @@ def errors(scene, ends: list, conv: list) -> dict:
 
 def bench_scene(name: str, quick: bool, echo=print) -> dict:
     t_conv = min(T_STEPS) / REFINE
-    conv_scene = scene_at(name, t_conv, quick)
+    conv_scene = scene_at(name, t_conv, quick, CONV_INTEGRATOR)
     t0 = time.perf_counter()
     conv = run_engine(conv_scene, "reference", "exact")
     echo(f"  {name}: converged reference t = {t_conv:g}, {conv_scene.total_steps} steps, "
@@ -123,11 +136,12 @@ def bench_scene(name: str, quick: bool, echo=print) -> dict:
     T = conv_scene.total_steps * t_conv
     rows = []
     for t in T_STEPS:
-        sc = scene_at(name, t, quick)
-        pred = predict(sc)
-        ref_ends = None
-        for engine, mode in ENGINES:
-            row = {"scene": name, "t": t, "engine": engine, "mode": mode, "steps": sc.total_steps,
+        ref_ends = {}
+        for engine, mode, integ in ENGINES:
+            sc = scene_at(name, t, quick, integ)
+            pred = predict(sc)
+            row = {"scene": name, "t": t, "engine": engine, "mode": mode, "integrator": integ,
+                   "steps": sc.total_steps,
                    "T": sc.total_steps * t, "t_pred": pred["t_max"], "status": "ok"}
             if t > pred["t_max"]:
                 row["status"] = "refused (t > predicted t_max)"
@@ -147,29 +161,65 @@ def bench_scene(name: str, quick: bool, echo=print) -> dict:
                        particle_steps_per_s=sc.n_particles * sc.total_steps / r["wall_s"],
                        **errors(sc, r["ends"], conv["ends"]))
             if engine == "reference":
-                ref_ends = r["ends"]
-            elif ref_ends is not None:
+                ref_ends[integ] = r["ends"]
+            elif ref_ends.get(integ) is not None:
                 row["vs_reference_same_t"] = max(float(np.abs(a - b).max())
-                                                 for a, b in zip(r["ends"], ref_ends))
+                                                 for a, b in zip(r["ends"], ref_ends[integ]))
             rows.append(row)
-            echo(f"    t={t:<7g} {engine:9s} {mode:5s} pos_max {fmt(row['pos_max'])}  "
+            echo(f"    t={t:<7g} {engine:9s} {mode:5s} {integ:6s} pos_max {fmt(row['pos_max'])}  "
                  f"stress_max {fmt(row['stress_max'])}  wall {r['wall_s']:.2f} s")
     # observed order of the reference engine (position max error between successive t)
-    refs = [r for r in rows if r["engine"] == "reference" and "pos_max" in r]
-    order = []
-    for a, b in zip(refs, refs[1:]):
-        if a["pos_max"] > 0 and b["pos_max"] > 0:
-            order.append(math.log(a["pos_max"] / b["pos_max"]) / math.log(a["t"] / b["t"]))
+    def orders(integ):
+        refs = [r for r in rows if r["engine"] == "reference" and "pos_max" in r
+                and r["integrator"] == integ]
+        out = []
+        for a, b in zip(refs, refs[1:]):
+            if a["pos_max"] > 0 and b["pos_max"] > 0:
+                out.append(math.log(a["pos_max"] / b["pos_max"]) / math.log(a["t"] / b["t"]))
+        return out
+
     return {"scene": name, "T": T, "t_conv": t_conv, "conv_steps": conv_scene.total_steps,
+            "conv_integrator": CONV_INTEGRATOR,
             "conv_wall_s": conv["wall_s"], "n_particles": conv_scene.n_particles,
-            "observed_order_reference": order, "rows": rows, "fast_front": fast_front(rows)}
+            "observed_order_reference": orders("euler"),
+            "observed_order_verlet": orders("verlet"), "rows": rows,
+            "fast_front": fast_front(rows), "verlet_front": verlet_front(rows)}
+
+
+def verlet_front(rows: list) -> dict:
+    """The second-order mode against Eq. 5 at equal wall time, per engine: for each verlet run,
+    Eq. 5's error at the same wall time (log-log interpolation of the same engine's Eq. 5 runs,
+    exact mode; extrapolated from the nearest two beyond their range) over the verlet error."""
+    out = {}
+    for engine in ("reference", "lammps"):
+        eu = sorted(((r["wall_s"], r["pos_max"]) for r in rows if r["engine"] == engine
+                     and r["mode"] == "exact" and r.get("integrator") == "euler"
+                     and r.get("pos_max", 0) > 0))
+        pts = []
+        for r in rows:
+            if r["engine"] != engine or r.get("integrator") != "verlet" or "pos_max" not in r:
+                continue
+            if len(eu) < 2 or r["pos_max"] <= 0:
+                continue
+            lw = np.log([w for w, _ in eu])
+            le = np.log([e for _, e in eu])
+            x = math.log(r["wall_s"])
+            k = int(np.clip(np.searchsorted(lw, x) - 1, 0, len(lw) - 2))
+            slope = (le[k + 1] - le[k]) / (lw[k + 1] - lw[k]) if lw[k + 1] != lw[k] else 0.0
+            e_euler = math.exp(le[k] + slope * (x - lw[k]))
+            pts.append({"t": r["t"], "wall_s": r["wall_s"], "pos_max": r["pos_max"],
+                        "euler_pos_max_same_wall": e_euler, "ratio": e_euler / r["pos_max"]})
+        out[engine] = {"points": pts,
+                       "min_ratio": min((p["ratio"] for p in pts), default=None)}
+    return out
 
 
 def fast_front(rows: list) -> dict:
     """Is fast mode on the work-precision front? For each fast run: the speed-up over the
     cheapest exact run with a position error no larger (None: no exact run is that accurate,
     so the fast run is on the front by default)."""
-    ok = [r for r in rows if "pos_max" in r and r["engine"] == "lammps"]
+    ok = [r for r in rows if "pos_max" in r and r["engine"] == "lammps"
+          and r.get("integrator", "euler") == "euler"]
     exact = [r for r in ok if r["mode"] == "exact"]
     points = []
     for f in (r for r in ok if r["mode"] == "fast"):
@@ -188,7 +238,8 @@ def run_bench(out: Path | None = None, quick: bool = False, scenes_=None, echo=p
     names = scenes_ or ("plane-bound", "plane-rack", "magpod-small")
     results = [bench_scene(n, quick, echo) for n in names]
     data = {"benchmark": "accuracy", "quick": quick, "machine": machine(),
-            "converged_reference": f"reference engine at t = {min(T_STEPS)}/{REFINE}",
+            "converged_reference": f"reference engine, {CONV_INTEGRATOR} mode, at t = "
+                                   f"{min(T_STEPS)}/{REFINE}",
             "t_values": list(T_STEPS), "scenes": results, "wall_s": time.perf_counter() - t0}
     write_json(out / "accuracy.json", data)
     (out / "accuracy.md").write_text(markdown(data))
@@ -197,7 +248,7 @@ def run_bench(out: Path | None = None, quick: bool = False, scenes_=None, echo=p
     return data
 
 
-HEADER = ["scene", "t", "engine", "steps", "status", "pos RMS", "pos max", "max_deformation",
+HEADER = ["scene", "t", "engine", "integrator", "steps", "status", "pos RMS", "pos max", "max_deformation",
           "stress field max", "walk", "vs reference (same t)", "wall s", "particle-steps/s"]
 
 
@@ -206,7 +257,8 @@ def table_rows(data: dict) -> list:
     for s in data["scenes"]:
         for r in s["rows"]:
             eng = r["engine"] if r["engine"] == "reference" else f"lammps {r['mode']}"
-            out.append([s["scene"], f"{r['t']:g}", eng, r["steps"], r["status"],
+            out.append([s["scene"], f"{r['t']:g}", eng, r.get("integrator", "euler"), r["steps"],
+                        r["status"],
                         fmt(r.get("pos_rms")), fmt(r.get("pos_max")), fmt(r.get("maxdef")),
                         fmt(r.get("stress_max")), fmt(r.get("walk")) if "walk" in r else "",
                         fmt(r.get("vs_reference_same_t")) if r["engine"] != "reference" else "",
@@ -229,8 +281,10 @@ def markdown(data: dict) -> str:
     for s in data["scenes"]:
         lines.append(f"- {s['scene']}: {s['n_particles']} particles, T = {s['T']:g}, converged "
                      f"run {s['conv_steps']} steps ({s['conv_wall_s']:.1f} s); observed order "
-                     "of the reference engine (pos max): "
-                     + ", ".join(f"{o:.2f}" for o in s["observed_order_reference"]))
+                     "of the reference engine (pos max), Eq. 5: "
+                     + ", ".join(f"{o:.2f}" for o in s["observed_order_reference"])
+                     + "; verlet mode: "
+                     + ", ".join(f"{o:.2f}" for o in s.get("observed_order_verlet", [])))
     lines += ["", md_table(HEADER, table_rows(data)), "",
               "Fast mode against the work-precision front (speed-up over the cheapest exact run "
               f"at least as accurate; on the front from {FRONT_MARGIN:g}×, the noise margin "
@@ -243,6 +297,17 @@ def markdown(data: dict) -> str:
                         for p in ff["points"])
         lines.append(f"- {s['scene']}: **{'on' if ff['on_front'] else 'off'} the front** "
                      f"({pts})")
+    lines += ["", "The second-order (verlet) mode against Eq. 5 at equal wall time (Eq. 5's error "
+              "interpolated at the verlet run's wall time, same engine, over the verlet error):",
+              ""]
+    for s in data["scenes"]:
+        vf = s.get("verlet_front") or {}
+        for engine, v in vf.items():
+            if not v["points"]:
+                continue
+            pts = ", ".join(f"t={p['t']:g}: {p['ratio']:.3g}×" for p in v["points"])
+            lines.append(f"- {s['scene']}, {engine}: smallest ratio "
+                         f"{fmt(v['min_ratio'], 3)}× ({pts})")
     return "\n".join(lines) + "\n"
 
 
@@ -254,18 +319,21 @@ def plot(data: dict, path: Path) -> None:
 
     n = len(data["scenes"])
     fig, axes = plt.subplots(1, n, figsize=(5 * n, 4.5), squeeze=False)
-    styles = {("reference", "exact"): ("k", "o", "reference"),
-              ("lammps", "exact"): ("tab:blue", "s", "LAMMPS exact"),
-              ("lammps", "fast"): ("tab:red", "^", "LAMMPS fast")}
+    styles = {("reference", "exact", "euler"): ("k", "o", "reference"),
+              ("lammps", "exact", "euler"): ("tab:blue", "s", "LAMMPS exact"),
+              ("lammps", "fast", "euler"): ("tab:red", "^", "LAMMPS fast"),
+              ("reference", "exact", "verlet"): ("tab:green", "D", "reference verlet"),
+              ("lammps", "exact", "verlet"): ("tab:olive", "v", "LAMMPS verlet")}
     for ax, s in zip(axes[0], data["scenes"]):
         for key, (col, mk, lab) in styles.items():
-            rs = [r for r in s["rows"] if (r["engine"], r["mode"]) == key and "pos_max" in r]
+            rs = [r for r in s["rows"] if (r["engine"], r["mode"], r.get("integrator", "euler"))
+                  == key and "pos_max" in r]
             if not rs:
                 continue
             x = [r["wall_s"] for r in rs]
             y = [max(r["pos_max"], 1e-16) for r in rs]
             ax.plot(x, y, marker=mk, color=col, label=lab,
-                    ls="-" if key != ("lammps", "exact") else "--")
+                    ls="--" if key[0] == "lammps" and key[1] == "exact" else "-")
             for r, xi, yi in zip(rs, x, y):
                 ax.annotate(f"{r['t']:g}", (xi, yi), fontsize=7, xytext=(3, 3),
                             textcoords="offset points")

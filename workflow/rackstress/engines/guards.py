@@ -10,14 +10,17 @@ Both are warnings, not errors: the run is kept, each finding is printed and reco
     (collisions act on the host, never on the rack). Put loads such as gravity on the host.
 
 ``pass_through``
-    Particles of two colliding groups passed through each other: a group's centre of mass
-    crossed the other's along the line that joined them at step 0, while the two groups still
-    overlapped seen along that line (their extents across it intersect) — so it went through,
-    not around. The collision (Eq. 10) is too weak for the speed, or the time step too large,
-    to stop it: raise the collision coefficient c, lower dt or the speed. Checked on the
-    frames of ``trajectory.dump`` (at most :data:`MAX_FRAMES`, evenly spread, the last always),
-    for every pair of groups with a ``collide`` between them, neither a rack, that were apart
-    along that line at step 0.
+    Particles of two colliding groups passed through each other. At step 0 the two groups are
+    apart along some direction n (the one with the widest gap of: the axes, the line joining
+    their centres, the line joining their closest particles). A group went through the other
+    when its centre lies beyond the far side (along n) of the part of the other that is in its
+    way — the other's particles within its extent across n; if none is, it went around. So a
+    block that falls through a bracket's arm is caught as soon as its centre is below the arm,
+    however far the rest of the bracket reaches. The collision (Eq. 10) was too weak for the
+    speed, or the time step too large: raise the collision coefficient c, lower dt or the
+    speed. Checked on the frames of ``trajectory.dump`` (at most :data:`MAX_FRAMES`, evenly
+    spread, the last always), for every pair of groups with a ``collide`` between them,
+    neither a rack, that were apart at step 0.
 """
 from __future__ import annotations
 
@@ -30,7 +33,7 @@ import numpy as np
 from rackstress.model.operators import Collide, Force
 
 #: Frames of a trajectory the pass-through check reads at most (evenly spread, last included).
-MAX_FRAMES = 60
+MAX_FRAMES = 30
 
 
 def is_rack(group) -> bool:
@@ -72,6 +75,41 @@ def colliding_pairs(scene) -> list[tuple[str, str]]:
     return pairs
 
 
+def _separation(pa, pb):
+    """The direction n (from group a to group b) that separates them best at step 0 — the
+    coordinate axes, the line joining their centres, and the line joining their closest
+    particles are tried — as (n, gap), gap = min(pb·n) − max(pa·n); None if none separates."""
+    from scipy.spatial import cKDTree
+
+    d, j = cKDTree(pb).query(pa)
+    i = int(np.argmin(d))
+    cands = list(np.eye(3)) + list(-np.eye(3)) + [pb.mean(axis=0) - pa.mean(axis=0),
+                                                   pb[j[i]] - pa[i]]
+    best = None
+    for n in cands:
+        norm = np.linalg.norm(n)
+        if not norm > 0:
+            continue
+        n = n / norm
+        gap = (pb @ n).min() - (pa @ n).max()
+        if gap > 0 and (best is None or gap > best[1]):
+            best = (n, gap)
+    return best
+
+
+def _went_through(p_moving, p_obstacle, r_moving, n, across) -> bool:
+    """Whether the moving group, on the +n side of the obstacle at step 0, has its centre
+    beyond the obstacle's far side (along −n) of the part in its way: the obstacle particles
+    inside the moving group's extent across n (radii included); none there means it went
+    around, not through."""
+    qm, qo = p_moving @ across, p_obstacle @ across
+    lo, hi = qm.min(axis=0) - r_moving, qm.max(axis=0) + r_moving
+    in_way = np.all((qo >= lo) & (qo <= hi), axis=1)
+    if not in_way.any():
+        return False
+    return float(p_moving.mean(axis=0) @ n) < float((p_obstacle[in_way] @ n).min())
+
+
 def pass_through(scene, frames) -> list[dict]:
     """Pairs of colliding groups that passed through each other (module doc), from
     ``frames``: an iterable of (step, positions in global order), the first at step 0."""
@@ -85,13 +123,10 @@ def pass_through(scene, frames) -> list[dict]:
         return []
     setup = {}
     for a, b in pairs:
-        pa, pb = p0[scene.slice(a)], p0[scene.slice(b)]
-        d = pb.mean(axis=0) - pa.mean(axis=0)
-        if not np.linalg.norm(d) > 0:
+        sep = _separation(p0[scene.slice(a)], p0[scene.slice(b)])
+        if sep is None:                       # not apart at step 0: cannot judge
             continue
-        n = d / np.linalg.norm(d)
-        if not (pa @ n).max() < (pb @ n).min():     # not apart along the line: cannot judge
-            continue
+        n = sep[0]
         u = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
         u /= np.linalg.norm(u)
         setup[(a, b)] = (n, np.column_stack([u, np.cross(n, u)]))
@@ -103,18 +138,21 @@ def pass_through(scene, frames) -> list[dict]:
             pa, pb = p[scene.slice(a)], p[scene.slice(b)]
             if not (np.isfinite(pa).all() and np.isfinite(pb).all()):
                 continue
-            if (pb.mean(axis=0) - pa.mean(axis=0)) @ n >= 0:
+            ra, rb = scene.groups[a].r.max(), scene.groups[b].r.max()
+            # b (on a's +n side) through a, or a (on b's −n side) through b
+            if _went_through(pb, pa, rb, n, across):
+                mover, obstacle = b, a
+            elif _went_through(pa, pb, ra, -n, across):
+                mover, obstacle = a, b
+            else:
                 continue
-            qa, qb = pa @ across, pb @ across
-            if np.all(qa.max(axis=0) >= qb.min(axis=0)) and np.all(qb.max(axis=0) >= qa.min(axis=0)):
-                found[(a, b)] = {
-                    "kind": "pass_through", "groups": [a, b], "step": int(step),
-                    "message": (
-                        f"'{a}' and '{b}' collide, yet they passed through each other by step "
-                        f"{int(step)}: the centre of '{a}' crossed the centre of '{b}' along "
-                        f"the line joining them at step 0 while they still overlapped across "
-                        "it. The collision (Eq. 10) did not stop them: raise its coefficient "
-                        f"c, or lower dt (now {scene.dt:g}) or the speed.")}
+            found[(a, b)] = {
+                "kind": "pass_through", "groups": [a, b], "step": int(step),
+                "message": (
+                    f"'{mover}' passed through '{obstacle}' by step {int(step)}, though they "
+                    f"collide: the centre of '{mover}' is beyond the far side of the part of "
+                    f"'{obstacle}' in its way. The collision (Eq. 10) did not stop it: raise "
+                    f"its coefficient c, or lower dt (now {scene.dt:g}) or the speed.")}
     return list(found.values())
 
 
@@ -123,36 +161,51 @@ def dump_frames(path, n_atoms: int, max_frames: int = MAX_FRAMES):
     (``id type mol x y z``), evenly spread, the first and the last always; a frame cut short
     at the end of the file (a killed run) is skipped."""
     path = Path(path)
-    steps = []
+    per_frame = 9 + n_atoms
+    lines = 0
     with open(path, "rb") as fh:
-        while True:
-            head = list(islice(fh, 9))
-            if len(head) < 9:
-                break
-            steps.append(int(head[1]))
-            if sum(1 for _ in islice(fh, n_atoms)) < n_atoms:
-                steps.pop()
-                break
-    if not steps:
+        for chunk in iter(lambda: fh.read(1 << 22), b""):
+            lines += chunk.count(b"\n")
+    k = lines // per_frame                      # complete frames (a cut-short last one is not)
+    if not k:
         return
-    k = len(steps)
     want = set(np.unique(np.linspace(0, k - 1, min(k, max_frames)).round().astype(int)).tolist())
     with open(path, "rb") as fh:
         for idx in range(k):
-            head = list(islice(fh, 9))
             if idx not in want:
-                for _ in islice(fh, n_atoms):
+                for _ in islice(fh, per_frame):
                     pass
                 continue
-            rows = np.array(b" ".join(islice(fh, n_atoms)).split(), dtype=float)
-            rows = rows.reshape(n_atoms, -1)
+            head = list(islice(fh, 9))
+            rows = np.loadtxt(list(islice(fh, n_atoms)), dtype=float, usecols=(0, 3, 4, 5),
+                              ndmin=2)
             order = np.argsort(rows[:, 0], kind="stable")
-            yield int(head[1]), rows[order, 3:6]
+            yield int(head[1]), rows[order, 1:4]
 
 
 def check_run(scene, out, echo: bool = True) -> list[dict]:
-    """Every guard-rail warning of the finished run in directory ``out`` (printed to stderr
-    when ``echo``): what ``summary.json`` records under ``warnings``."""
+    """Every guard-rail warning of the finished run in directory ``out``.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene that ran.
+    out : path
+        Its run directory (``trajectory.dump`` is read for the pass-through check).
+    echo : bool
+        Print each warning to stderr.
+
+    Returns
+    -------
+    list of dict
+        What ``summary.json`` records under ``warnings``: ``kind`` (``pass_through`` or
+        ``force_on_rack``), ``message`` and the groups (and step) concerned.
+
+    Example
+    -------
+    >>> check_run(scene, "runs/bracket")       # doctest: +SKIP
+    []
+    """
     found = force_on_racks(scene)
     dump = Path(out) / "trajectory.dump"
     if colliding_pairs(scene) and dump.exists():

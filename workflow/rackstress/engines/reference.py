@@ -19,6 +19,7 @@ from rackstress.lib.vec import rowdot
 from rackstress.model.operators import (Attract, Bind, Collide, Dampen, Force, contact_candidates,
                                         contact_groups, integrate, phase_active)
 from rackstress.model.scene import Scene
+from rackstress.model.verlet import integrate_verlet
 from rackstress.engines.watchdog import check
 
 __all__ = ["Reference", "integrate", "KERNELS"]
@@ -140,8 +141,39 @@ class Reference:
             _accumulate(a, pl.i, Attract.accel(self.p[pl.i], self.p[pl.j], pl.c))
 
     # ------------------------------------------------------------------ motion
+    def damping(self, phase: Mapping) -> np.ndarray:
+        """γ per particle: the dampen coefficients (Eq. 9) acting now, extras whose conditions hold."""
+        g = np.zeros(len(self.p))
+        cache = {}
+        for target, seq in self.scene.operators.items():
+            sl = self.scene.slice(target)
+            for op in seq:
+                if isinstance(op, Dampen):
+                    holds = bool(op.extra) and self.holds(op.when, target, phase, cache)
+                    g[sl] += op.coefficient(holds)
+        return g
+
     def step(self, phase: Mapping) -> None:
-        """motion = netForce • integrate(t) (Eqs. 6–7), then the watchdog."""
+        """motion = netForce • integrate(t) (Eqs. 6–7), then the watchdog.
+
+        With ``scene.integrator == "verlet"`` the step is :func:`integrate_verlet` instead
+        (v holds v_{n+½}); the first step is velocity Verlet's half kick,
+        v_½ = v₀ + (t/2)·a(p₀, v₀)/(1 + γt/2), as LAMMPS' fix nve starts it.
+        """
+        if self.scene.integrator == "verlet":
+            t = self.scene.dt
+            g = self.damping(phase)
+            a = self.accelerations(phase)
+            if self._held is not None:
+                a[self._held] = 0.0
+            if self.step_count == 0:
+                self.v = self.v + (0.5 * t) * a / (1.0 + 0.5 * t * g)[:, None]
+                self.p = self.p + t * self.v
+            else:
+                self.p, self.v = integrate_verlet(self.p, self.v, a + g[:, None] * self.v, g, t)
+            self.step_count += 1
+            check(self.scene, self.p, self.v, self.o, self.step_count)
+            return
         a = self.accelerations(phase)
         if self._held is not None:
             a[self._held] = 0.0

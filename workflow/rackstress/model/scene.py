@@ -72,6 +72,9 @@ class Scene:
     #: Run exactly this many steps (the cycle of phases repeated or cut short, generated
     #: lazily by :meth:`schedule`); None: ``cycles`` whole cycles. Set by :meth:`with_steps`.
     limit: int | None = None
+    #: ``"euler"``: Eq. 5, the paper's (default); ``"verlet"``: the second-order mode of
+    #: :mod:`rackstress.model.verlet` (leapfrog with trapezoidal damping).
+    integrator: str = "euler"
 
     def __post_init__(self):
         # engines key what they prepare by an operator's place (group, index in its sequence),
@@ -174,7 +177,7 @@ class Scene:
         cycles = max(1, -(-int(steps) // spc)) if spc else 1
         return Scene(self.name, self.groups, self.operators, self.phases, self.dt, cycles,
                      self.bound, {**self.params, "steps": int(steps)}, self.report,
-                     duration=self.duration, limit=int(steps))
+                     duration=self.duration, limit=int(steps), integrator=self.integrator)
 
     def with_dt(self, dt: float) -> "Scene":
         """The same scene with time step ``dt``; what was given as a physical time stays one.
@@ -198,7 +201,8 @@ class Scene:
         phases = [Phase(p.name, steps_for(p.duration, dt, f"phase '{p.name}'"), p.vars,
                         p.duration) if p.duration is not None else p for p in self.phases]
         sc = Scene(self.name, self.groups, self.operators, phases, dt, self.cycles, self.bound,
-                   {**self.params, "dt": dt}, self.report, self.duration, self.limit)
+                   {**self.params, "dt": dt}, self.report, self.duration, self.limit,
+                   self.integrator)
         if self.duration is not None:
             sc = sc.with_steps(steps_for(self.duration, dt, "duration"))
             sc.duration = self.duration
@@ -223,6 +227,9 @@ class Scene:
                     raise SceneError(f"scene '{self.name}': '{op!r}' on '{target}' is not an "
                                      f"operator (known: {', '.join(ops_mod.OPERATOR_KINDS)})")
                 ops_mod.check_operator(op, target, self.groups)
+        if self.integrator not in ("euler", "verlet"):
+            raise SceneError(f"scene '{self.name}': integrator must be 'euler' (Eq. 5) or "
+                             f"'verlet', got {self.integrator!r}")
         if not (np.isfinite(self.dt) and self.dt > 0):
             raise SceneError(f"scene '{self.name}': time step dt must be positive, got {self.dt!r}")
         if not self.phases:

@@ -38,6 +38,9 @@ Two estimates of ω² = λ_max come out:
   damping its eigenvector sees (Rayleigh quotient of Γ), and of each group's own principal block
   with the group's damping (so a strongly damped group is judged with its own γ).
 
+For a scene with ``integrator = "verlet"`` (:mod:`rackstress.model.verlet`) the same spectrum
+is judged by that mode's limit, t < 2/ω whatever the damping (``t_limit_verlet``).
+
 It is a *linear* prediction at the start: a scene whose bindings are compressed or whose
 contacts deepen as it runs becomes stiffer (the factor 1 + L0²/d² grows); ``rackstress bench
 stability`` measures how far the prediction holds.
@@ -52,6 +55,7 @@ import numpy as np
 from rackstress.errors import SceneError
 from rackstress.model.operators import Collide, Dampen, contact_candidates, phase_active
 from rackstress.model.scene import Scene
+from rackstress.model.verlet import t_limit_verlet
 
 #: Pairs this close to touching (relative to the contact distance R) count as contacts.
 CONTACT_MARGIN = 1.05
@@ -254,6 +258,8 @@ def predict(scene: Scene, p: np.ndarray | None = None) -> dict:
     ``gershgorin`` record likewise.
     """
     N = scene.n_particles
+    verlet = scene.integrator == "verlet"
+    limit = t_limit_verlet if verlet else t_limit
     best = {"t_max": math.inf, "omega2": 0.0, "gamma": 0.0, "group": None, "particle": None,
             "operator": None, "phase": None, "how": None}
     gbest = {"t_max": math.inf, "omega2": 0.0, "gamma": 0.0, "group": None, "particle": None,
@@ -266,8 +272,12 @@ def predict(scene: Scene, p: np.ndarray | None = None) -> dict:
         I, norm, lab = lin["I"], lin["norm"], lin["label"]
         # --- Gershgorin, per particle
         row = 2.0 * np.bincount(I, weights=norm, minlength=N)
-        t_row = np.array([t_limit(r, g) for r, g in zip(row, gamma)]) if N < 5000 else \
-            4.0 / (gamma + np.sqrt(gamma ** 2 + 4.0 * row))
+        if verlet:    # t < 2/ω whatever the damping (rackstress.model.verlet)
+            with np.errstate(divide="ignore"):
+                t_row = 2.0 / np.sqrt(row)
+        else:
+            t_row = np.array([t_limit(r, g) for r, g in zip(row, gamma)]) if N < 5000 else \
+                4.0 / (gamma + np.sqrt(gamma ** 2 + 4.0 * row))
         t_row = np.where((row == 0) & (gamma <= 0), np.inf, t_row)
         k = int(np.argmin(t_row))
 
@@ -314,7 +324,7 @@ def predict(scene: Scene, p: np.ndarray | None = None) -> dict:
             e[3 * kg] = 1.0
             candidates.append((0.0, float(gamma[kg]), e, None, "damping"))
         for lam, g, vec, _, how in candidates:
-            t = t_limit(lam, g)
+            t = limit(lam, g)
             if t < best["t_max"]:
                 amp = (np.abs(vec.reshape(-1, 3)) ** 2).sum(axis=1)
                 kk = int(np.argmax(amp))

@@ -7,6 +7,7 @@ from rackstress.errors import SceneError
 from rackstress.scenes.magpod import magpod, magpod_small
 from rackstress.scenes.plane import plane_bound, plane_rack
 from rackstress.scenes.large import sediment_large
+from rackstress.scenes.validation import cantilever, l_bracket, plate_hole
 
 #: name → builder; each builder's keyword arguments are the scene's parameters (``--set``).
 BUILDERS = {
@@ -15,6 +16,10 @@ BUILDERS = {
     "magpod": magpod,
     "magpod-small": magpod_small,
     "sediment-large": sediment_large,
+    # validation cases against linear elasticity (rackstress bench validity)
+    "cantilever": cantilever,
+    "plate-hole": plate_hole,
+    "l-bracket": l_bracket,
 }
 
 

@@ -64,7 +64,7 @@ Every problem is a :class:`SceneError` whose message names the file and the tabl
 Example
 -------
 >>> from rackstress.scenes.toml import load_toml                  # doctest: +SKIP
->>> scene = load_toml("examples/bracket/scene.toml", {"drop": 12})   # doctest: +SKIP
+>>> scene = load_toml("examples/bracket/scene.toml", {"speed": 8.0})   # doctest: +SKIP
 """
 from __future__ import annotations
 
@@ -220,6 +220,32 @@ def load_toml(path, overrides: dict | None = None) -> Scene:
     if "scene" in data:
         return _load_builtin(ctx, data, overrides)
     return _load_explicit(ctx, data, overrides)
+
+
+def scene_parameters(path) -> dict:
+    """The parameters ``--set`` takes for the scene file ``path``, with their defaults: a
+    built-in scene's (its file's [params] applied), or an explicit scene's top-level settings
+    and own [params] (``rackstress scenes FILE.toml``)."""
+    from rackstress.scenes import builtins
+
+    file = str(path)
+    try:
+        with open(path, "rb") as fh:
+            data = tomllib.load(fh)
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SceneError(f"{file}: cannot read the scene file: {exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(_decode_message(file, exc)) from None
+    params = dict(data.get("params", {})) if isinstance(data.get("params", {}), dict) else {}
+    if "scene" in data:
+        name = data["scene"]
+        if name not in builtins.BUILDERS:
+            raise SceneError(f"{file}: scene: unknown built-in scene {name!r}")
+        return {**builtins.parameters(name), **params}
+    settings = {k: data.get(k, DEFAULTS.get(k)) for k in OVERRIDABLE}
+    if "duration" in data and "steps" not in data:
+        settings.pop("steps")          # the run's length is its duration
+    return {**{k: v for k, v in settings.items() if v is not None}, **params}
 
 
 def _decode_message(file: str, exc) -> str:

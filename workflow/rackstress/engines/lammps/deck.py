@@ -47,6 +47,7 @@ from rackstress.errors import SceneError
 from rackstress.model.operators import (Attract, Bind, Collide, Const, Dampen, Force,
                                         contact_groups, phase_active, reverse_of)
 from rackstress.model.scene import Scene
+from rackstress.model.verlet import scaled_scene
 
 MODES = ("exact", "fast")
 #: The fix external that carries every Python-realized operator.
@@ -94,6 +95,10 @@ class Deck:
     lepton: dict = field(default_factory=dict)       # (type_i, type_j) → (K, R)
     #: neighbour skin: LAMMPS' (``neighbor``) and the callback's Verlet list of contacts
     skin: float = SKIN
+    #: "euler" (Eq. 5) or "verlet": then ``scene`` is the scaled scene of
+    #: :func:`rackstress.model.verlet.scaled_scene` and fix nve starts from v without Eq. 5's
+    #: half-step shift (plain velocity Verlet, fix viscous at v_{n+1/2}).
+    integrator: str = "euler"
 
     # ------------------------------------------------------------------ pieces
     @property
@@ -248,7 +253,12 @@ class Deck:
         return L
 
     def switch_commands(self, phase_vars, previous) -> list[str]:
-        """Enter a phase exactly: back to the paper's v_n, new coefficients, forces, v + dt/2·a."""
+        """Enter a phase exactly: back to the paper's v_n, new coefficients, forces, v + dt/2·a.
+
+        In the verlet mode LAMMPS' own full-step velocity is the scheme's: new coefficients and
+        forces only."""
+        if self.integrator == "verlet":
+            return self.phase_commands(phase_vars, previous) + ["run 0 post no"]
         L = []
         if previous is not None:
             L.append("velocity all set v_rs_vpx v_rs_vpy v_rs_vpz units box")
@@ -470,6 +480,9 @@ def compile_deck(scene: Scene, mode: str = "exact", measure_fast: bool = False,
     """
     if mode not in MODES:
         raise SceneError(f"unknown mode '{mode}'; modes: {', '.join(MODES)}")
+    integrator = scene.integrator
+    if integrator == "verlet":
+        scene = scaled_scene(scene)
     if native:
         masses, pairs = solve_masses(scene, mode)
     else:
@@ -492,7 +505,8 @@ def compile_deck(scene: Scene, mode: str = "exact", measure_fast: bool = False,
         first[inv[::-1]] = np.arange(len(inv))[::-1]
         bond_types = [(float(K[f]), float(r0[f])) for f in first]
         bonds = (inv.reshape(-1) + 1, i, j)
-    deck = Deck(scene, mode, masses, realized, ghost_cutoff(scene), bonds, bond_types, lepton)
+    deck = Deck(scene, mode, masses, realized, ghost_cutoff(scene), bonds, bond_types, lepton,
+                integrator=integrator)
     if mode == "fast" and deck.python_ops and not measure_fast:
         kept = sorted({f"{r.target} <- {r.op.kind}" for r in deck.python_ops})
         raise SceneError(

@@ -1,0 +1,117 @@
+"""The second-order integration mode (Scene.integrator = "verlet") beside Eq. 5."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from rackstress import scenes
+from rackstress.engines.reference import Reference
+from rackstress.errors import DivergenceError
+from rackstress.model.operators import Bind, Const, Dampen, Force
+from rackstress.model.particles import Group
+from rackstress.model.scene import Phase, Scene
+from rackstress.model.stability import predict
+from rackstress.model.verlet import t_limit_verlet
+
+
+def _run(scene) -> np.ndarray:
+    eng = Reference(scene)
+    for _ in range(scene.total_steps):
+        eng.step({})
+    return eng.p
+
+
+def _pushed(dt, integrator, T=2.0, a=3.0, gamma=1.5):
+    g = Group("p", np.zeros((1, 3)), 0.5)
+    ops = {"p": [Force((a, 0.0, 0.0)), Dampen(gamma)]}
+    return Scene("pushed", {"p": g}, ops, [Phase("go", int(round(T / dt)))], dt=dt,
+                 integrator=integrator)
+
+
+def _orders(errors):
+    e = np.asarray(errors)
+    return np.log2(e[:-1] / e[1:])
+
+
+def test_damped_push_against_its_analytical_solution():
+    """x'' = a − γx' from rest: x(T) = (a/γ)(T − (1 − e^{−γT})/γ)."""
+    a, gamma, T = 3.0, 1.5, 2.0
+    exact = a / gamma * (T - (1 - math.exp(-gamma * T)) / gamma)
+    dts = (0.04, 0.02, 0.01, 0.005)
+    err = {k: [abs(_run(_pushed(dt, k))[0, 0] - exact) for dt in dts] for k in ("euler", "verlet")}
+    assert _orders(err["verlet"]).min() >= 1.9
+    assert np.all(np.abs(_orders(err["euler"]) - 1.0) < 0.1)     # Eq. 5: first order
+    assert err["verlet"][-1] < err["euler"][-1] / 100
+
+
+def test_bound_pair_order_two_against_a_converged_run():
+    """A damped pair bound by Eq. 12, one end pulled: smooth, nonlinear; reference at dt/16."""
+    o = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+
+    def pair(dt, integ, T=3.0):
+        g = Group("pair", o, 0.5)
+        ops = {"pair": [Force((0.0, 20.0, 0.0), where=(False, True)),
+                        Bind("pair", Const(50.0)), Dampen(0.7)]}
+        return Scene("pair", {"pair": g}, ops, [Phase("go", int(round(T / dt)))], dt=dt,
+                     integrator=integ)
+
+    conv = _run(pair(0.01 / 16, "verlet"))
+    errs = [np.abs(_run(pair(dt, "verlet")) - conv).max() for dt in (0.04, 0.02, 0.01)]
+    assert _orders(errs).min() >= 1.9
+
+
+def test_verlet_limit_is_two_over_omega_whatever_the_damping():
+    for gamma in (0.0, 1.0, 50.0):
+        assert t_limit_verlet(400.0, gamma) == pytest.approx(0.1)
+    # complex λ (directed couplings) by bisection: reduces to the real case as Im λ → 0
+    assert t_limit_verlet(400.0 + 1e-6j, 1.0) == pytest.approx(0.1, rel=1e-4)
+
+
+def test_predicted_limits_hold_on_a_strongly_damped_bound_pair():
+    """A pair bound by Eq. 12 (c = 100 both ways: λ = 4c = 400 for the stretch) damped by 10:
+    Eq. 5's limit is 4/(γ + √(γ² + 4λ)) = 0.0781, the verlet mode's 2/√λ = 0.1. At t = 0.09 the
+    first grows without bound (until Eq. 12's nonlinearity stops it) and the second settles; at
+    0.105 both grow."""
+    o = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+
+    def pair(dt, integ):
+        g = Group("pair", o, 0.5)
+        ops = {"pair": [Force((0.01, 0.0, 0.0), where=(False, True)),
+                        Bind("pair", Const(100.0)), Dampen(10.0)]}
+        return Scene("pair", {"pair": g}, ops, [Phase("go", 400)], dt=dt, integrator=integ)
+
+    assert predict(pair(0.05, "euler"))["t_max"] == pytest.approx(4 / (10 + math.sqrt(1700)),
+                                                                   rel=1e-6)
+    assert predict(pair(0.05, "verlet"))["t_max"] == pytest.approx(0.1, rel=1e-6)
+    def stretch(sc):
+        """Largest |d − 1| over the run (an unstable step size makes it grow until Eq. 12's
+        nonlinearity bounds it, far above the pull's stretch of 2.5e-5)."""
+        eng, worst = Reference(sc), 0.0
+        for _ in range(sc.total_steps):
+            try:
+                eng.step({})
+            except DivergenceError:        # past the watchdog's bound: grown without limit
+                return math.inf
+            worst = max(worst, abs(float(np.linalg.norm(eng.p[1] - eng.p[0])) - 1.0))
+        return worst
+
+    assert stretch(pair(0.09, "verlet")) < 1e-4
+    assert stretch(pair(0.07, "euler")) < 1e-4
+    for integ, t in (("euler", 0.09), ("verlet", 0.105), ("euler", 0.105)):
+        assert stretch(pair(t, integ)) > 0.1
+
+
+@pytest.mark.lammps
+def test_lammps_verlet_equals_the_reference_verlet():
+    for name, kw in (("plane-rack", {}), ("plane-bound", {"d": 2.0})):
+        sc = scenes.build(name, steps=200, **kw)
+        sc.integrator = "verlet"
+        from rackstress.bench.accuracy import run_engine
+
+        a = run_engine(sc, "reference", "exact")["ends"][-1]
+        b = run_engine(sc, "lammps", "exact")["ends"][-1]
+        assert np.abs(a - b).max() < 1e-10
+        euler = run_engine(scenes.build(name, steps=200, **kw), "reference", "exact")["ends"][-1]
+        assert np.abs(a - euler).max() > 1e-4        # a different scheme, not Eq. 5 again

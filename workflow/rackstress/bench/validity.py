@@ -1,0 +1,247 @@
+"""``rackstress bench validity [--quick]``: how honest is the picture?
+
+For each validation case (:mod:`rackstress.scenes.validation`: cantilever, plate with a hole,
+L-bracket) and each body model of :data:`MODELS` (``rack``, the paper's; ``rack+bind``;
+``rack(1)+bind``; ``bind``):
+
+1. the scene is run on the reference engine to damped equilibrium (time step half the predicted
+   stability limit of :mod:`rackstress.stability`, damping ``DAMPING`` near the slowest mode's
+   critical value, at rest when no particle moves more than 1e-5 of the largest displacement in
+   500 steps);
+2. every measure (the paper's distance from the desired position, von Mises strain η, D²min,
+   the bind virial) is computed on the part (:func:`rackstress.validity.compare.measures`);
+3. each is compared with the finite-element von Mises strain at the particles' original
+   positions (plane stress, ν = 0.3; :mod:`rackstress.validity.fea`, converged by mesh
+   refinement): Spearman ρ, top-5 % overlap, distance of the maxima (spacings); for the
+   cantilever the effective Young's modulus from the tip deflection.
+
+Outputs ``validity.json``, ``validity.md`` (the correlation table, FEA convergence, moduli) and
+``validity.png`` (per case: FEA's η and each model's strain and paper measure side by side).
+``--quick`` uses smaller bodies and coarser meshes (a test runs it).
+"""
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from rackstress.scenes import validation as cases
+from rackstress.model.stability import predict
+from rackstress.bench import fmt, machine, md_table, out_dir, write_json
+
+MEASURES = ("paper", "strain", "d2min", "virial")
+#: The body models compared: label → (scene option ``body``, other scene overrides). ``rack`` is
+#: the paper's; ``rack(1)+bind`` weakens the host→rack bindings from 100 to 1 (the lattice
+#: bindings, 20, then dominate) to see whether any rack coupling keeps FEA's hot spots.
+MODELS = {"rack": ("rack", {}), "rack+bind": ("rack+bind", {}),
+          "rack(1)+bind": ("rack+bind", {"rack_c": 1.0}), "bind": ("bind", {})}
+#: Damping of the body: near critical for the slowest bending mode of the bind network.
+DAMPING = 0.06
+#: Target figures (issue): a body model whose strain matches FEA's hot spots on every case.
+TARGET = {"spearman": 0.8, "top5_overlap": 0.5, "max_distance": 2.0}
+DENSITIES = (2, 4, 8)
+QUICK = {"cantilever": dict(nx=14, ny=4), "plate-hole": dict(n=6, a=2.5),
+         "l-bracket": dict(w=4, H=12, lx=10)}
+
+
+HEADER = ["case", "body", "measure", "Spearman ρ", "top-5 % overlap", "max distance (spacings)",
+          "strain meets target"]
+
+
+def meets(row: dict) -> bool:
+    return (row["spearman"] >= TARGET["spearman"] and row["top5_overlap"] >= TARGET["top5_overlap"]
+            and row["max_distance"] <= TARGET["max_distance"])
+
+
+def run_case(case: str, model: str, quick: bool = False, fea_ref=None, echo=print) -> dict:
+    """One case × body model (a key of :data:`MODELS`): equilibrium, measures, agreement with
+    the FEA reference."""
+    from rackstress.validity import compare
+
+    body, extra = MODELS[model]
+    kw = dict(QUICK[case]) if quick else {}
+    kw.update(extra)
+    scene = cases.BUILDERS[case](body=body, damping=DAMPING, **kw)
+    t_max = predict(scene)["t_max"]
+    dt = 0.5 * t_max
+    scene = cases.BUILDERS[case](body=body, damping=DAMPING, dt=dt,
+                                 steps=int(4000 if quick else 60000), **kw)
+    p, info = compare.equilibrate(scene, tol=1e-5)
+    m = compare.measures(scene, p)
+    idx = cases.body_index(scene)
+    n_body = scene.groups["body"].n
+    o = scene.original_positions()[idx][:n_body]
+    solver, skw, to_fea = compare.fea_case(scene)
+    if fea_ref is None:
+        fea_ref = fea_reference(solver, skw, to_fea(o), quick)
+        # FEA seen through the particle measure: its displacement at the part's particles
+        # (held ones: zero), then the same affine fit (resolution matched)
+        part_o = scene.original_positions()[idx]
+        u = np.zeros_like(part_o)
+        u[:n_body, :2] = np.stack([fea_ref["fields"]["ux"], fea_ref["fields"]["uy"]], axis=1)
+        scale = 1e-3 / max(float(np.abs(u).max()), 1e-300)    # small strain: linear regime
+        eta, _ = compare.affine_fit(part_o, part_o + scale * u)
+        fea_ref["fields"]["fit_strain"] = eta[:n_body]
+    ref = fea_ref["fields"]["von_mises_strain"]
+    rows = {name: compare.agreement(m[name][:n_body], ref, o) for name in MEASURES}
+    fit_rows = {name: compare.agreement(m[name][:n_body], fea_ref["fields"]["fit_strain"], o)
+                for name in ("strain", "d2min")}
+    out = {"case": case, "body": model, "n_particles": int(len(idx)), "dt": dt, "t_max": t_max,
+           "equilibrium": info, "agreement": rows, "agreement_fit": fit_rows,
+           "fields": {k: v[:n_body].tolist() for k, v in m.items()}, "o": o[:, :2].tolist()}
+    if case == "cantilever":
+        out["E_eff"] = compare.effective_modulus(scene, p)
+        out["bind_c"] = scene.params["bind_c"]
+    echo(f"  {case:10s} {model:12s} n={len(idx)} steps={info['steps']} at_rest={info['at_rest']} "
+         + " ".join(f"{k}: ρ={r['spearman']:.2f} top5={r['top5_overlap']:.2f} "
+                    f"d={r['max_distance']:.1f}" for k, r in rows.items()))
+    return out, fea_ref
+
+
+def fea_reference(solver, skw, points, quick: bool) -> dict:
+    """The FEA field at ``points`` from a refinement study (densities 2, 4, 8; quick: 1, 2)."""
+    from rackstress.validity import fea
+
+    dens = (1, 2) if quick else DENSITIES
+    t0 = time.perf_counter()
+    study = fea.refinement_study(solver, points, dens, **skw)
+    res = study.pop("result")
+    fields = res.at(points)
+    study["wall_s"] = time.perf_counter() - t0
+    study["fields"] = {k: np.asarray(fields[k])
+                       for k in ("von_mises_strain", "von_mises_stress", "ux", "uy")}
+    if solver is fea.cantilever:
+        # the FEA body's own modulus from its tip deflection: Euler–Bernoulli + shear
+        tip = res.at(np.array([[skw["x0"] + skw["L"], skw["y0"] + skw["h"] / 2]]))
+        delta = -float(tip["uy"][0])
+        study["E_eff_over_E"] = skw["P"] * skw["L"] ** 3 / (3 * skw["h"] ** 3 / 12 * delta) / res.E
+    return study
+
+
+def run_bench(out: Path | None = None, quick: bool = False, echo=print) -> dict:
+    out = out_dir(out)
+    t0 = time.perf_counter()
+    results, fea_studies = [], {}
+    for case in cases.BUILDERS:
+        ref = None
+        for model in MODELS:
+            row, ref = run_case(case, model, quick=quick, fea_ref=ref, echo=echo)
+            results.append(row)
+        fea_studies[case] = {k: v for k, v in ref.items() if k != "fields"}
+        fea_studies[case]["fields"] = {k: v.tolist() for k, v in ref["fields"].items()}
+    best = {}
+    for body in MODELS:
+        best[body] = all(meets(r["agreement"]["strain"]) for r in results if r["body"] == body)
+    data = {"quick": quick, "machine": machine(), "target": TARGET, "fea": fea_studies,
+            "results": results, "strain_meets_target_on_all_cases": best,
+            "wall_s": time.perf_counter() - t0}
+    write_json(out / "validity.json", data)
+    (out / "validity.md").write_text(report(data))
+    try:
+        plot(data, out / "validity.png")
+    except Exception as exc:  # pragma: no cover - a plot failure keeps the figures
+        echo(f"plot failed: {exc}")
+    data["files"] = [str(out / f"validity.{x}") for x in ("json", "md", "png")]
+    return data
+
+
+def table_rows(data) -> list:
+    rows = []
+    for r in data["results"]:
+        for name in MEASURES:
+            a = r["agreement"][name]
+            rows.append([r["case"], r["body"], name, fmt(a["spearman"], 2),
+                         fmt(a["top5_overlap"], 2), fmt(a["max_distance"], 2),
+                         "yes" if name == "strain" and meets(a) else ("no" if name == "strain"
+                                                                       else "")])
+    return rows
+
+
+def report(data) -> str:
+    lines = ["# Validity: particle measures against linear-elastic FEA", "",
+             "Generated by `rackstress bench validity" + (" --quick" if data["quick"] else "")
+             + "`. Reference: FEA von Mises strain η (plane stress, ν = 0.3) at the particles' "
+             "original positions. Target for the strain measure: ρ ≥ 0.8, top-5 % overlap ≥ 0.5, "
+             "maximum within 2 spacings.", ""]
+    lines.append(md_table(HEADER, table_rows(data)))
+    lines += ["", "Body models whose strain meets the target on every case: "
+              + ", ".join(f"`{b}`: {'yes' if ok else 'no'}"
+                          for b, ok in data["strain_meets_target_on_all_cases"].items()), ""]
+    lines.append("## Against FEA seen through the same measure\n")
+    lines.append("The FEA displacement at the particles' positions (held particles: zero), put "
+                 "through the particle strain measure itself (the same 1.5-spacing affine fit): "
+                 "a reference at the measure's resolution. It separates what the body model "
+                 "does from what the neighbourhood fit can resolve (a singular corner is "
+                 "averaged over ~3 spacings).\n")
+    fr2 = []
+    for r in data["results"]:
+        for name, a in r.get("agreement_fit", {}).items():
+            fr2.append([r["case"], r["body"], name, fmt(a["spearman"], 2),
+                        fmt(a["top5_overlap"], 2), fmt(a["max_distance"], 2),
+                        ("yes" if meets(a) else "no") if name == "strain" else ""])
+    lines.append(md_table(HEADER, fr2))
+    lines.append("## FEA convergence (peak von Mises stress at the particle positions)\n")
+    fr = []
+    for case, s in data["fea"].items():
+        fr.append([case, " → ".join(str(d) for d in s["densities"]),
+                   " → ".join(fmt(x, 5) for x in s["peak_von_mises"]),
+                   f"{100 * s['change']:.2f} %", "yes" if s["converged"] else "no"])
+    lines.append(md_table(["case", "mesh density (per spacing)", "peak σ_vm", "last change",
+                           "≤ 2 %"], fr))
+    lines.append("\nThe L-bracket's re-entrant corner is singular: its peak over the mesh grows "
+                 "without bound, so the peak is taken over the particle positions (the nearest "
+                 "lies 0.71 spacings from the corner).\n")
+    lines.append("## Equilibrium and effective modulus\n")
+    er = []
+    for r in data["results"]:
+        e = r["equilibrium"]
+        er.append([r["case"], r["body"], r["n_particles"], fmt(r["dt"], 3), e["steps"],
+                   "yes" if e["at_rest"] else "no", fmt(e["max_displacement"], 3),
+                   fmt(r.get("E_eff"), 4) if "E_eff" in r else ""])
+    lines.append(md_table(["case", "body", "particles", "dt", "steps", "at rest",
+                           "max displacement", "E_eff (tip deflection)"], er))
+    c = data["fea"].get("cantilever", {})
+    if "E_eff_over_E" in c:
+        lines.append(f"\nThe FEA cantilever's own E_eff / E from its tip deflection "
+                     f"(Euler–Bernoulli, no shear term): {c['E_eff_over_E']:.4f}. A square "
+                     "lattice bound to its 8 neighbours with Eq. 12's c has, to first order, "
+                     "E = 3c along the lattice axes (bond stiffness 2c).\n")
+    return "\n".join(lines)
+
+
+def plot(data, path: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    case_names = list(data["fea"])
+    cols = [("FEA", "von_mises_strain")] + [(b, "strain") for b in MODELS] \
+        + [("rack", "paper")]
+    fig, axes = plt.subplots(len(case_names), len(cols), figsize=(3.2 * len(cols),
+                                                                    2.6 * len(case_names)))
+    axes = np.atleast_2d(axes)
+    for r, case in enumerate(case_names):
+        runs = {x["body"]: x for x in data["results"] if x["case"] == case}
+        o = np.asarray(runs["rack"]["o"])
+        for c, (who, field) in enumerate(cols):
+            ax = axes[r, c]
+            if who == "FEA":
+                v = np.asarray(data["fea"][case]["fields"][field])
+                title = "FEA von Mises strain"
+            else:
+                v = np.asarray(runs[who]["fields"][field], dtype=float)
+                a = runs[who]["agreement"][field]
+                title = f"{who}: {field}\nρ={a['spearman']:.2f} top5={a['top5_overlap']:.2f}"
+            vmax = np.nanpercentile(v, 99) or 1.0
+            ax.scatter(o[:, 0], o[:, 1], c=v, s=6, cmap="Reds", vmin=0, vmax=vmax)
+            ax.set_aspect("equal")
+            ax.set_xticks([])
+            ax.set_yticks([])
+            ax.set_title(title, fontsize=8)
+            if c == 0:
+                ax.set_ylabel(case)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -1,0 +1,115 @@
+"""A second-order integration mode beside Eq. 5: leapfrog with trapezoidal damping ("verlet").
+
+Eq. 5 (``v += t·a; p += t·v``) is the paper's and stays the default (``Scene.integrator =
+"euler"``). Its positions obey p_{n+1} − 2p_n + p_{n−1} = t²·a_n — Störmer–Verlet — but it is
+first order all the same, for two reasons: it starts from v₀ where a leapfrog needs v_{−½}, and
+its damping −γv uses the velocity half a step old. ``integrator = "verlet"`` fixes both:
+
+    v_{n+½} = [(1 − γt/2)·v_{n−½} + t·a_c(p_n)] / (1 + γt/2),     p_{n+1} = p_n + t·v_{n+½},
+    v_½     = v₀ + (t/2)·a(p₀, v₀)/(1 + γt/2)        (the first step: velocity Verlet's half kick),
+
+where a = a_c − γv splits every operator's acceleration into the velocity-free part a_c (force,
+collide, bind, attract) and the damping (Eq. 9; per particle, conditions evaluated at p_n).
+The damping is the trapezoidal average of v_{n−½} and v_{n+½}, so the scheme is second order
+for damped scenes too and reduces to velocity Verlet without damping.
+
+**Stability** (x'' = −λx − γx'): the amplification matrix has determinant
+q = (1 − γt/2)/(1 + γt/2) ∈ (−1, 1) and trace 1 + q − λt²/(1 + γt/2); Jury's test gives
+λt² < 4 whatever γ ≥ 0, i.e. **t < 2/ω**: damping never limits it (Eq. 5's limit is
+4/(γ + √(γ² + 4λ)), below 2/ω whenever γ > 0). :func:`t_limit_verlet`.
+
+**On LAMMPS** the same recursion is Eq. 5 on a *scaled* scene: every operator on a group whose
+damping is γ multiplied by s = 1/(1 + γt/2) (then γ' = sγ and a_c' = s·a_c give exactly the
+update above), run by ``fix nve`` started from v₀ without Eq. 5's half-step shift — LAMMPS'
+velocity Verlet evaluates ``fix viscous`` with the half-step velocity v_{n+½}, which is what the
+scaled recursion needs (:func:`scaled_scene`). A damping ``extra`` that switches on a contact
+condition (MagPod's legs, Eq. 28) cannot be folded into a fixed s: there the base damping is
+folded and the extra stays lagged (first order in that term alone); the reference engine
+evaluates it exactly.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from rackstress.errors import SceneError
+from rackstress.model.operators import Attract, Bind, Collide, Dampen, Force
+
+INTEGRATORS = ("euler", "verlet")
+
+
+def integrate_verlet(p: np.ndarray, v_half: np.ndarray, a_c: np.ndarray, gamma: np.ndarray,
+                     t: float) -> tuple[np.ndarray, np.ndarray]:
+    """One step of the module's recursion: returns (p_{n+1}, v_{n+½}) from v_{n−½}, a_c(p_n), γ."""
+    g = np.asarray(gamma, dtype=float)[:, None] * (0.5 * t)
+    v = ((1.0 - g) * v_half + t * a_c) / (1.0 + g)
+    return p + t * v, v
+
+
+def t_limit_verlet(lam, gamma: float = 0.0) -> float:
+    """Largest stable t of the verlet mode for x'' = −λx − γx' (module docstring): 2/√λ.
+
+    Complex λ (directed couplings): the boundary of max|μ| < 1 of
+    μ² − (1 + q − λt²/(1 + γt/2))μ + q = 0 by bisection.
+    """
+    lam = complex(lam)
+    gamma = max(0.0, float(gamma))
+    if lam.real < 0 or abs(lam) == 0:
+        return math.inf
+    if abs(lam.imag) <= 1e-12 * abs(lam):
+        return 2.0 / math.sqrt(lam.real)
+
+    def stable(t):
+        s = 1.0 / (1.0 + 0.5 * gamma * t)
+        q = (1.0 - 0.5 * gamma * t) * s
+        roots = np.roots([1.0, -(1.0 + q - s * lam * t * t), q])
+        return np.abs(roots).max() < 1.0
+
+    lo, hi = 0.0, 8.0 / math.sqrt(abs(lam))
+    if stable(hi):
+        return hi
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if stable(mid) else (lo, mid)
+    return lo
+
+
+def group_damping(scene) -> dict:
+    """Unconditional damping γ of each group (sum of its dampen coefficients, Eq. 9)."""
+    out = {}
+    for name in scene.groups:
+        out[name] = float(sum(op.c for op in scene.operators.get(name, [])
+                              if isinstance(op, Dampen) and not op.when))
+        for op in scene.operators.get(name, []):
+            if isinstance(op, Dampen) and op.when:
+                out[name] += float(op.c)   # the base of a conditional dampen always acts
+    return out
+
+
+def _scale(op, s: float):
+    if isinstance(op, Force):
+        return dataclasses.replace(op, accel=tuple(s * float(a) for a in op.accel))
+    if isinstance(op, Dampen):
+        return dataclasses.replace(op, c=s * op.c, extra=s * op.extra)
+    if isinstance(op, (Collide, Bind, Attract)):
+        return dataclasses.replace(op, coeff=dataclasses.replace(op.coeff, c=s * op.coeff.c))
+    raise SceneError(f"verlet mode cannot scale operator {op!r}")  # pragma: no cover
+
+
+def scaled_scene(scene):
+    """The scene whose Eq. 5 run (from v₀ + its own half-step shift left out) is the verlet mode.
+
+    Every operator on a group with damping γ is multiplied by 1/(1 + γ·dt/2); the result has
+    ``integrator = "euler"`` and is what the LAMMPS deck compiles (module docstring).
+    """
+    gam = group_damping(scene)
+    ops = {}
+    for target, seq in scene.operators.items():
+        s = 1.0 / (1.0 + 0.5 * gam.get(target, 0.0) * scene.dt)
+        ops[target] = [_scale(op, s) if s != 1.0 else op for op in seq]
+    return dataclasses.replace(scene, operators=ops, integrator="euler")
+
+
+__all__ = ["INTEGRATORS", "integrate_verlet", "t_limit_verlet", "group_damping", "scaled_scene"]
