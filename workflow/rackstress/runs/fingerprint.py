@@ -73,6 +73,7 @@ def fingerprint(scene, *, engine: str, mode: str, dump_every: int) -> dict:
     fp["schedule"] = _digest([[p.name, p.steps, dict(p.vars)] for p in scene.phases]
                              + [scene.cycles, scene.total_steps])
     fp["dt"] = float(scene.dt).hex()
+    fp["integrator"] = str(getattr(scene, "integrator", "euler"))
     fp["bound"] = float(scene.bound).hex()
     # where a scene file lies is no part of the physics (its content is hashed above)
     fp["params"] = _digest({k: v for k, v in (scene.params or {}).items() if k != "file"})
@@ -102,7 +103,7 @@ def _name(key: str) -> str:
     if kind == "operators":
         return f"the operators on '{rest}'"
     return {"dt": "the time step dt", "params": "the scene parameters",
-            "schedule": "the schedule (phases or steps)", "bound": "the watchdog bound",
+            "schedule": "the schedule (phases or steps)", "integrator": "the integrator", "bound": "the watchdog bound",
             "dump_every": "the dump interval"}.get(key, key)
 
 
