@@ -479,3 +479,18 @@ def test_a_render_killed_midway_leaves_nothing_the_next_render_keeps(tmp_path):
     assert r.returncode == 0, r.stderr
     assert [x.name for x in out.glob(".*tmp*")] == []
     assert not (out / ".lock").exists()
+
+
+@pytest.mark.lammps
+@pytest.mark.mpi
+def test_full_disk_on_the_dump_under_mpi_ends_all_ranks(tmpfs):
+    """LAMMPS writes the dump on rank 0 alone, so only rank 0 sees the full disk while rank 1
+    waits in a collective: all ranks end (MPI_Abort with the storage status), no hang."""
+    disk = tmpfs("1m")
+    t0 = time.monotonic()
+    r = mpi_rs("run", "plane-rack", "--steps", "3000", "--dump-every", "1", "--restart-every",
+               "0", "--out", disk / "run", *QUIET, timeout=120)
+    assert r.returncode == 5, r.stderr
+    assert "No space left" in r.stderr and "Traceback" not in r.stderr
+    assert time.monotonic() - t0 < 100
+    assert leftovers(disk / "run") == []

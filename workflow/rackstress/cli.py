@@ -82,7 +82,7 @@ def _fail_any(err: BaseException, out=None):
 
 #: Options of ``run`` that ``--resume`` cannot honour: the run goes on as it was started.
 RESUME_FIXED = ("engine", "mode", "steps", "dt", "sets", "dump_every", "overwrite",
-                "restart_every", "allow_unstable")
+                "restart_every", "allow_unstable", "integrator")
 
 
 @click.group()

@@ -141,6 +141,10 @@ def rebuild_scene(rundir: Path, spec: str | None = None):
         if dt is not None and dt != sc.dt:
             sc.dt = float(dt)
             sc.params["dt"] = float(dt)
+    integrator = params.get("integrator")
+    if integrator is not None:         # how the run integrated (an option, not a scene key)
+        sc.integrator = integrator
+        sc.params["integrator"] = integrator
     if sc.dt != rec["dt"]:
         sc.dt = float(rec["dt"])
         sc.params["dt"] = float(rec["dt"])
