@@ -20,6 +20,19 @@ COLUMNS = ("id", "type", "mol", "x", "y", "z")
 FLOAT_FORMAT = "%.10g"
 
 
+def frame_text(step: int, p: np.ndarray, columns, table: np.ndarray, fmt) -> str:
+    """One ``dump custom`` frame: header (box = the particles' bounds, boundary ``mm``) and rows."""
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    buf = io.StringIO()
+    buf.write(f"ITEM: TIMESTEP\n{int(step)}\nITEM: NUMBER OF ATOMS\n{len(p)}\n"
+              "ITEM: BOX BOUNDS mm mm mm\n")
+    for k in range(3):
+        buf.write(f"{lo[k]:.10g} {hi[k]:.10g}\n")
+    buf.write("ITEM: ATOMS " + " ".join(columns) + "\n")
+    np.savetxt(buf, table, fmt=fmt)
+    return buf.getvalue()
+
+
 def _reopen_at(path: Path, size: int):
     """Reopen ``path`` for appending after truncating it to ``size`` bytes (best effort)."""
     try:
@@ -39,18 +52,11 @@ class DumpWriter:
         self._fh = open(self.path, "w")
 
     def write(self, step: int, p: np.ndarray) -> None:
-        lo, hi = p.min(axis=0), p.max(axis=0)
-        buf = io.StringIO()
-        buf.write(f"ITEM: TIMESTEP\n{step}\nITEM: NUMBER OF ATOMS\n{len(p)}\n"
-                  "ITEM: BOX BOUNDS mm mm mm\n")
-        for k in range(3):
-            buf.write(f"{lo[k]:.10g} {hi[k]:.10g}\n")
-        buf.write("ITEM: ATOMS " + " ".join(COLUMNS) + "\n")
-        table = np.column_stack([self.ids, self.types, self.mols, p])
-        np.savetxt(buf, table, fmt=["%d", "%d", "%d"] + [FLOAT_FORMAT] * 3)
+        text = frame_text(step, p, COLUMNS, np.column_stack([self.ids, self.types, self.mols, p]),
+                          ["%d", "%d", "%d"] + [FLOAT_FORMAT] * 3)
         start = self._fh.tell()
         try:
-            self._fh.write(buf.getvalue())
+            self._fh.write(text)
             self._fh.flush()
         except OSError as exc:
             # a full disk: cut the torn frame off, so the file keeps only whole frames

@@ -53,6 +53,7 @@ from typing import Mapping
 import numpy as np
 
 from rackstress.errors import SceneError
+from rackstress.lib.roots import inside_unit_circle, largest_stable
 from rackstress.model.operators import contact_candidates, phase_active
 from rackstress.model.scene import Scene
 from rackstress.model.verlet import t_limit_verlet
@@ -80,17 +81,9 @@ def t_limit(lam, gamma: float = 0.0) -> float:
         return 4.0 / (gamma + math.sqrt(gamma * gamma + 4.0 * lr))
 
     def stable(t):
-        roots = np.roots([1.0, -(2.0 - gamma * t - lam * t * t), 1.0 - gamma * t])
-        return np.abs(roots).max() < 1.0
+        return inside_unit_circle([1.0, -(2.0 - gamma * t - lam * t * t), 1.0 - gamma * t])
 
-    hi = 4.0 / (gamma + math.sqrt(gamma * gamma + 4.0 * abs(lam))) * 4.0
-    lo = 0.0
-    if stable(hi):
-        return hi
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if stable(mid) else (lo, mid)
-    return lo
+    return largest_stable(stable, 4.0 / (gamma + math.sqrt(gamma * gamma + 4.0 * abs(lam))) * 4.0)
 
 
 # ---------------------------------------------------------------------------- linearization

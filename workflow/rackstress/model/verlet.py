@@ -35,6 +35,7 @@ import math
 import numpy as np
 
 from rackstress.errors import SceneError
+from rackstress.lib.roots import inside_unit_circle, largest_stable
 from rackstress.model.operators import Attract, Bind, Collide, Dampen, Force
 
 INTEGRATORS = ("euler", "verlet")
@@ -69,16 +70,9 @@ def t_limit_verlet(lam, gamma: float = 0.0) -> float:
     def stable(t):
         s = 1.0 / (1.0 + 0.5 * gamma * t)
         q = (1.0 - 0.5 * gamma * t) * s
-        roots = np.roots([1.0, -(1.0 + q - s * lam * t * t), q])
-        return np.abs(roots).max() < 1.0
+        return inside_unit_circle([1.0, -(1.0 + q - s * lam * t * t), q])
 
-    lo, hi = 0.0, 8.0 / math.sqrt(abs(lam))
-    if stable(hi):
-        return hi
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if stable(mid) else (lo, mid)
-    return lo
+    return largest_stable(stable, 8.0 / math.sqrt(abs(lam)))
 
 
 def group_damping(scene) -> dict:

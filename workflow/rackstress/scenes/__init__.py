@@ -15,7 +15,25 @@ __all__ = ["BUILDERS", "build", "load", "load_toml", "parameters", "parse_overri
 
 
 def load(spec: str, overrides: dict | None = None):
-    """A scene from a built-in name or a ``.toml`` file path, with ``--set`` overrides applied."""
+    """A scene from a built-in name or a ``.toml`` file path, with ``--set`` overrides applied.
+
+    Parameters
+    ----------
+    spec : str
+        A built-in scene's name (:func:`build`) or the path of a TOML scene file (format:
+        ``docs/scenes.md``; :func:`rackstress.scenes.toml.load_toml`).
+    overrides : dict, optional
+        Parameter values by name: a built-in scene's parameters or a file's ``[params]``.
+
+    Returns
+    -------
+    rackstress.model.scene.Scene
+
+    Examples
+    --------
+    >>> load("plane-rack", {"plane_bind": 50.0}).params["plane_bind"]
+    50.0
+    """
     overrides = dict(overrides or {})
     if spec.endswith(".toml") or Path(spec).is_file():
         return load_toml(spec, overrides)

@@ -50,7 +50,26 @@ def parse_overrides(pairs) -> dict:
 
 
 def build(name: str, **overrides):
-    """Build a built-in scene by name with parameter overrides, checking every key."""
+    """Build a built-in scene by name with parameter overrides, checking every key.
+
+    Parameters
+    ----------
+    name : str
+        A key of :data:`BUILDERS` (``rackstress scenes`` lists them with their parameters).
+    **overrides
+        Scene parameters (``--set key=value``); an unknown key or a value of the wrong type is
+        a :class:`~rackstress.errors.SceneError` naming the scene and the parameter.
+
+    Returns
+    -------
+    rackstress.model.scene.Scene
+
+    Examples
+    --------
+    >>> sc = build("plane-bound", d=2)
+    >>> sc.n_particles, sc.params["d"]
+    (400, 2)
+    """
     if name not in BUILDERS:
         raise SceneError(f"unknown scene '{name}'; built-in scenes: {', '.join(BUILDERS)} "
                          "(or give the path of a .toml scene file)")

@@ -29,7 +29,6 @@ spheres).
 """
 from __future__ import annotations
 
-import io
 import os
 import shutil
 from pathlib import Path
@@ -37,6 +36,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
+from rackstress.engines.dumpio import frame_text
 from rackstress.stress.measures import positions
 
 FLOAT = "%.10g"
@@ -252,16 +252,7 @@ def write_stress_dump(run, fields, path, progress: bool = False) -> Path:
                 if with_v:
                     blocks.append(_velocity(ts))
                 blocks += [gid, p - o] + [vals[k] for vals in fields.values.values()]
-                table = np.column_stack(blocks)
-                lo, hi = p.min(axis=0), p.max(axis=0)
-                buf = io.StringIO()
-                buf.write(f"ITEM: TIMESTEP\n{int(step)}\nITEM: NUMBER OF ATOMS\n{len(p)}\n"
-                          "ITEM: BOX BOUNDS mm mm mm\n")
-                for a in range(3):
-                    buf.write(f"{lo[a]:.10g} {hi[a]:.10g}\n")
-                buf.write("ITEM: ATOMS " + " ".join(cols) + "\n")
-                np.savetxt(buf, table, fmt=fmt)
-                fh.write(buf.getvalue())
+                fh.write(frame_text(step, p, cols, np.column_stack(blocks), fmt))
                 bar.update(1)
         os.replace(tmp, path)
     except BaseException:

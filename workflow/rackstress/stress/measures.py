@@ -120,7 +120,22 @@ class _RunAnalysis(AnalysisBase):
 
 
 class DesiredPositionDistance(_RunAnalysis):
-    """The paper's measure: distance from the desired position (see module docstring)."""
+    """The paper's measure: distance from the desired position (see module docstring).
+
+    Parameters
+    ----------
+    run : rackstress.stress.rundata.RunData
+        A run opened by :func:`rackstress.stress.load_run`.
+    parts : list of str, optional
+        The parts to analyse (default: every part with a rest shape; racks and sediment not).
+    fit : {"robust", "plain"}
+        The best-fit rigid motion that carries the original positions (``lib/rigid.py``).
+
+    Examples
+    --------
+    ``docs/api.md`` runs a plane-rack scene and reads ``DesiredPositionDistance(run).run()``:
+    ``results.per_particle`` is frames × particles, ``results.per_part[name]["max"]`` per frame.
+    """
 
     NAME = "paper"
     LABEL = "distance from desired position"

@@ -93,7 +93,27 @@ class RunData:
 
 
 def load_run(rundir, allow_truncated: bool = False) -> RunData:
-    """Open a run directory for analysis; see the module docstring for what is checked."""
+    """Open a run directory for analysis; see the module docstring for what is checked.
+
+    Parameters
+    ----------
+    rundir : path
+        A directory written by ``rackstress run`` (``scene.json``, ``particles.data``,
+        ``trajectory.dump``).
+    allow_truncated : bool
+        Read the whole frames of a dump whose last frame was cut (a full disk, a kill).
+
+    Returns
+    -------
+    RunData
+        The MDAnalysis Universe (float64 positions, streamed by frame), its parts by name, the
+        original positions ``o`` and the run's ``dt``.
+
+    Examples
+    --------
+    ``docs/api.md`` (run as a test) opens a plane-rack run: ``sorted(load_run(out).parts)`` is
+    ``['plane', 'planerack']``.
+    """
     import MDAnalysis as mda
 
     rundir = Path(rundir)
