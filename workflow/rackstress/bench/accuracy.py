@@ -15,10 +15,12 @@ planes, the verlet mode ~1e-6), at the same physical times (the end of the run, 
 MagPod every phase end). Errors:
 
 * positions: RMS and max over all particles of ‖p − p_conv‖ (max over the compared times);
-* ``max_deformation`` of each part (the summary's figure): |value − converged value|, largest
-  over the parts;
+* ``max_deformation`` of each part: |value − converged value|, largest over the parts;
 * the stress field of the paper's measure (distance from the desired position,
-  :func:`rackstress.lib.rigid.deformation` per group): max over particles of the difference;
+  :func:`rackstress.lib.rigid.deformation` per group): max over particles of the difference.
+  Both use the plain Kabsch fit, which is smooth in the positions (a convergence study needs
+  that); ``summary.json`` and the pictures use the robust fit, whose outlier cut can switch
+  between two nearby runs;
 * MagPod: the distance walked (the body's centre-of-mass advance along +x): |difference|.
 
 A t the stability prediction refuses (t > t_max, :mod:`rackstress.model.stability`) is skipped and
