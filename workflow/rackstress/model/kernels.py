@@ -69,7 +69,15 @@ def compiled():
     """This module's compiled kernels (raise if numba is missing)."""
     if nb is None:
         raise ValueError("kernels 'numba' asked for, but numba is not installed")
-    cache_dir().mkdir(parents=True, exist_ok=True)
+    try:
+        cache_dir().mkdir(parents=True, exist_ok=True)
+    except OSError:     # an unwritable home (a batch node): compile into the temporary directory
+        import tempfile
+
+        os.environ["NUMBA_CACHE_DIR"] = str(Path(tempfile.gettempdir())
+                                            / f"rackstress-numba-{os.getuid()}")
+        nb.config.CACHE_DIR = os.environ["NUMBA_CACHE_DIR"]
+        cache_dir().mkdir(parents=True, exist_ok=True)
     return sys.modules[__name__]
 
 
