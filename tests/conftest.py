@@ -39,3 +39,45 @@ def reference_final(scene) -> np.ndarray:
 @pytest.fixture(name="reference_final")
 def _reference_final_fixture():
     return reference_final
+
+
+#: A script run by ``mpiexec -n 2``: each scene that ``SETUP`` puts in ``scenes_`` (key → scene)
+#: runs as one LAMMPS instance over both ranks; rank 0 saves the final positions and the atoms
+#: each rank held (``KEY.npy``, ``KEY-counts.npy``).
+_MPI_SCRIPT = """
+import sys, numpy as np
+sys.path.insert(0, sys.argv[2])
+from rackstress.engines.driver import drive
+from rackstress.engines.lammps.deck import compile_deck
+from rackstress.engines.lammps.runner import LammpsRun
+from rackstress.lib.mpi import world
+{setup}
+for key, scene in scenes_.items():
+    run = LammpsRun(compile_deck(scene, "exact"), None)
+    drive(run)
+    p = run.gather_positions()
+    counts = world().allgather(run.lmp.extract_global("nlocal"))
+    run.close()
+    if world().Get_rank() == 0:
+        np.save(f"{{sys.argv[1]}}/{{key}}.npy", p)
+        np.save(f"{{sys.argv[1]}}/{{key}}-counts.npy", np.array(counts))
+"""
+
+
+def lammps_under_mpi(tmp_path, setup: str, timeout: int = 900) -> dict:
+    """Run the scenes ``setup`` (Python source) defines in ``scenes_`` on two ranks, exact mode.
+
+    Returns key → (final positions, atoms per rank). The tests folder is importable in
+    ``setup`` (e.g. ``from test_supports import impact_scene``).
+    """
+    import subprocess
+
+    script = tmp_path / "mpi_run.py"
+    script.write_text(_MPI_SCRIPT.format(setup=setup))
+    proc = subprocess.run([MPIEXEC, "-n", "2", sys.executable, str(script), str(tmp_path),
+                           str(Path(__file__).parent)], capture_output=True, text=True,
+                          timeout=timeout)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    keys = [p.name[:-len("-counts.npy")] for p in tmp_path.glob("*-counts.npy")]
+    return {k: (np.load(tmp_path / f"{k}.npy"), np.load(tmp_path / f"{k}-counts.npy"))
+            for k in keys}

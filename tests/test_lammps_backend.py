@@ -158,44 +158,25 @@ def test_trajectory_parity_plane_scenes(name, params):
     assert np.abs(lmp - ref).max() <= 1e-8
 
 
-MPI_SCRIPT = """
-import sys, numpy as np
-from rackstress import scenes
-from rackstress.engines.lammps.deck import compile_deck
-from rackstress.engines.lammps.runner import LammpsRun
-from rackstress.lib.mpi import world
-from rackstress.engines.driver import drive
-out = sys.argv[1]
-for key, name, params in [("d2", "plane-bound", {"d": 2.0}), ("d10", "plane-bound", {"d": 10.0}),
-                          ("rack", "plane-rack", {})]:
-    run = LammpsRun(compile_deck(scenes.build(name, steps=1200, **params), "exact"), None)
-    drive(run)
-    p = run.gather_positions()
-    nlocal = run.lmp.extract_global("nlocal")
-    counts = world().allgather(nlocal)
-    run.close()
-    if world().Get_rank() == 0:
-        np.save(f"{out}/{key}.npy", p)
-        np.save(f"{out}/{key}-counts.npy", np.array(counts))
-"""
-
-
 @pytest.mark.slow
 @pytest.mark.lammps
 @pytest.mark.mpi
 def test_trajectory_parity_under_mpi(tmp_path):
     """The same three runs under ``mpiexec -n 2``: one LAMMPS spanning both ranks."""
-    script = tmp_path / "mpi_parity.py"
-    script.write_text(MPI_SCRIPT)
-    proc = subprocess.run([str(MPIEXEC), "-n", "2", sys.executable, str(script), str(tmp_path)],
-                          capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stderr[-3000:]
+    from conftest import lammps_under_mpi
+
+    runs = lammps_under_mpi(tmp_path, """
+from rackstress import scenes
+scenes_ = {key: scenes.build(name, steps=1200, **params) for key, name, params in
+           [("d2", "plane-bound", {"d": 2.0}), ("d10", "plane-bound", {"d": 10.0}),
+            ("rack", "plane-rack", {})]}
+""", timeout=600)
     for key, name, params in [("d2", "plane-bound", {"d": 2.0}), ("d10", "plane-bound", {"d": 10.0}),
                               ("rack", "plane-rack", {})]:
-        counts = np.load(tmp_path / f"{key}-counts.npy")
+        p, counts = runs[key]
         assert len(counts) == 2 and counts.min() > 0  # atoms really are split over both ranks
         ref = _reference_final(scenes.build(name, steps=1200, **params))
-        assert np.abs(np.load(tmp_path / f"{key}.npy") - ref).max() <= 1e-8
+        assert np.abs(p - ref).max() <= 1e-8
 
 
 @pytest.mark.lammps
@@ -412,37 +393,19 @@ def test_active_only_is_exact_over_a_gait_cycle(gait_reference):
     assert np.abs(p - gait_reference).max() <= 1e-10
 
 
-ACTIVE_MPI = """
-import sys, numpy as np
-from rackstress import scenes
-from rackstress.engines.lammps.deck import compile_deck
-from rackstress.engines.lammps.runner import LammpsRun
-from rackstress.lib.mpi import world
-sc = scenes.build("magpod-small", phase_steps=300, cycles=1)
-run = LammpsRun(compile_deck(sc, "exact"), None)
-run.run_schedule()
-p = run.gather_positions()
-counts = world().allgather(run.lmp.extract_global("nlocal"))
-run.close()
-if world().Get_rank() == 0:
-    np.save(sys.argv[1] + "/p.npy", p)
-    np.save(sys.argv[1] + "/counts.npy", np.array(counts))
-"""
-
-
 @pytest.mark.slow
 @pytest.mark.mpi
 @pytest.mark.lammps
 def test_active_only_is_exact_under_mpi(tmp_path, gait_reference):
     """The same gait cycle under ``mpiexec -n 2`` (each rank activates the particles it owns)."""
-    script = tmp_path / "active_mpi.py"
-    script.write_text(ACTIVE_MPI)
-    proc = subprocess.run([str(MPIEXEC), "-n", "2", sys.executable, str(script), str(tmp_path)],
-                          capture_output=True, text=True, timeout=1200)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    counts = np.load(tmp_path / "counts.npy")
+    from conftest import lammps_under_mpi
+
+    p, counts = lammps_under_mpi(tmp_path, """
+from rackstress import scenes
+scenes_ = {"gait": scenes.build("magpod-small", phase_steps=300, cycles=1)}
+""", timeout=1200)["gait"]
     assert len(counts) == 2 and counts.min() > 0
-    assert np.abs(np.load(tmp_path / "p.npy") - gait_reference).max() <= 1e-10
+    assert np.abs(p - gait_reference).max() <= 1e-10
 
 
 @pytest.mark.slow

@@ -18,7 +18,6 @@ from rackstress import scenes
 from rackstress.engines.lammps.deck import compile_deck
 from rackstress.engines.lammps.runner import LammpsRun
 from rackstress.engines.driver import drive
-from rackstress.engines.reference import Reference
 
 EXE = Path(sys.executable).parent / "rackstress"
 
@@ -126,40 +125,19 @@ def test_footprints_at_stances_only(walk):
     assert depth > 0.1 * r_sed
 
 
-MPI_MAGPOD = """
-import sys, numpy as np
-from rackstress import scenes
-from rackstress.engines.lammps.deck import compile_deck
-from rackstress.engines.lammps.runner import LammpsRun
-from rackstress.lib.mpi import world
-from rackstress.engines.driver import drive
-sc = scenes.build("magpod-small", phase_steps=100, cycles=1)
-run = LammpsRun(compile_deck(sc, "exact"), None)
-drive(run)
-p = run.gather_positions()
-counts = world().allgather(run.lmp.extract_global("nlocal"))
-run.close()
-if world().Get_rank() == 0:
-    np.save(sys.argv[1] + "/p.npy", p)
-    np.save(sys.argv[1] + "/counts.npy", np.array(counts))
-"""
-
-
 @pytest.mark.lammps
 @pytest.mark.mpi
-def test_parity_magpod_small_under_mpi(tmp_path):
+def test_parity_magpod_small_under_mpi(tmp_path, reference_final):
     """400 iterations through all four phases on two ranks: callbacks see only their rank's
     atoms (and ghosts), the contact test is reduced over ranks; positions stay at round-off."""
-    script = tmp_path / "mpi_magpod.py"
-    script.write_text(MPI_MAGPOD)
-    mpiexec = Path(sys.executable).parent / "mpiexec"
-    proc = subprocess.run([str(mpiexec), "-n", "2", sys.executable, str(script), str(tmp_path)],
-                          capture_output=True, text=True, timeout=900)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    counts = np.load(tmp_path / "counts.npy")
+    from conftest import lammps_under_mpi
+
+    p, counts = lammps_under_mpi(tmp_path, """
+from rackstress import scenes
+scenes_ = {"m": scenes.build("magpod-small", phase_steps=100, cycles=1)}
+""")["m"]
     assert counts.min() > 0 and counts.sum() == scenes.build("magpod-small").n_particles
     sc = scenes.build("magpod-small", phase_steps=100, cycles=1)
-    ref = Reference(sc)
-    drive(ref)
-    assert np.abs(ref.p - sc.original_positions()).max() > 1.0
-    assert np.abs(np.load(tmp_path / "p.npy") - ref.p).max() <= 1e-10
+    ref_p = reference_final(sc)
+    assert np.abs(ref_p - sc.original_positions()).max() > 1.0
+    assert np.abs(p - ref_p).max() <= 1e-10

@@ -6,7 +6,6 @@ v = 0 whatever acts on it. Parity: LAMMPS exact mode against the reference engin
 """
 from __future__ import annotations
 
-import subprocess
 import sys
 from pathlib import Path
 
@@ -139,37 +138,17 @@ def test_deck_support_commands():
     assert support_commands(plain) == ([], "all")
 
 
-MPI_SCRIPT = """
-import sys, numpy as np
-sys.path.insert(0, sys.argv[2])
-from test_supports import impact_scene
-from rackstress.engines.lammps.deck import compile_deck
-from rackstress.engines.lammps.runner import LammpsRun
-from rackstress.lib.mpi import world
-run = LammpsRun(compile_deck(impact_scene(phases=3)), None)
-run.run_schedule()
-p = run.gather_positions()
-counts = world().allgather(run.lmp.extract_global("nlocal"))
-run.close()
-if world().Get_rank() == 0:
-    np.save(sys.argv[1] + "/p.npy", p)
-    np.save(sys.argv[1] + "/counts.npy", np.array(counts))
-"""
-
-
 @pytest.mark.lammps
 @pytest.mark.mpi
 def test_impact_parity_under_mpi(tmp_path):
-    script = tmp_path / "mpi_supports.py"
-    script.write_text(MPI_SCRIPT)
-    proc = subprocess.run([str(MPIEXEC), "-n", "2", sys.executable, str(script), str(tmp_path),
-                           str(Path(__file__).parent)], capture_output=True, text=True,
-                          timeout=600)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    counts = np.load(tmp_path / "counts.npy")
+    from conftest import lammps_under_mpi
+
+    p, counts = lammps_under_mpi(tmp_path, """
+from test_supports import impact_scene
+scenes_ = {"impact": impact_scene(phases=3)}
+""", timeout=600)["impact"]
     assert counts.min() > 0                               # both ranks hold atoms
     sc = impact_scene(phases=3)
     ref = run_reference(sc)
-    p = np.load(tmp_path / "p.npy")
     assert (p[sc.held()] == sc.original_positions()[sc.held()]).all()
     assert np.abs(p - ref.p).max() <= 1e-8
