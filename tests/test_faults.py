@@ -208,6 +208,29 @@ def _kill_after_checkpoint(cmd, out: Path, at: int = 100):
     return progress_step(out)
 
 
+
+PARAMS_TOML = TOML.replace("steps = {steps}", "duration = {duration}\n\n[params]\nc = 0.05") \
+                  .replace("c = {c}", 'c = "$c"')
+
+
+@pytest.mark.lammps
+@pytest.mark.parametrize("args", [["--set", "c=0.07"], ["--dt", "0.005"]])
+def test_resume_of_a_toml_run_started_with_set_or_dt(tmp_path, args):
+    """A scene file's own parameter set with --set, or a duration-given scene run at another
+    dt, resumes: the rebuilt scene is the one the run started with (the file read with the
+    recorded parameters, its phases' steps from the duration at the run's dt)."""
+    scene = tmp_path / "blobs.toml"
+    scene.write_text(PARAMS_TOML.format(duration=30.0))
+    out = tmp_path / "run"
+    step = _kill_after_checkpoint([RS, "run", str(scene), *args, "--restart-every", "100",
+                                   "--dump-every", "50", "--out", str(out), *QUIET], out)
+    total = 6000 if "--dt" in args else 3000
+    assert step is not None and step < total and not (out / "summary.json").exists()
+    r = rs("run", "--resume", out, *QUIET, timeout=300)
+    assert r.returncode == 0, r.stderr
+    s = json.loads((out / "summary.json").read_text())
+    assert s["status"] == "ok" and s["steps"] == total and s["resumed_from_step"] == step
+
 @pytest.mark.lammps
 def test_resume_refuses_an_edited_scene_file_and_options_it_cannot_honour(tmp_path):
     scene = tmp_path / "blobs.toml"

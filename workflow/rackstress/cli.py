@@ -133,9 +133,6 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
     from rackstress.runs.rundir import check_out, locked
 
     ctx = click.get_current_context()
-    if integrator == "verlet" and resume_dir is not None:
-        raise click.UsageError("--resume continues Eq. 5 runs only; the verlet mode has no "
-                               "resumable checkpoints.")
     try:
         if resume_dir is not None:
             given = [n for n in RESUME_FIXED

@@ -207,6 +207,8 @@ class Scene:
             sc = sc.with_steps(steps_for(self.duration, dt, "duration"))
             sc.duration = self.duration
             sc.params["duration"] = self.duration
+        if "steps" in sc.params:      # the record says what runs (phase durations at this dt)
+            sc.params["steps"] = sc.total_steps
         return sc
 
     # ------------------------------------------------------------------ validation

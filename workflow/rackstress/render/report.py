@@ -87,6 +87,7 @@ def stability_margin(rundir: Path, scene: dict, summary: dict) -> dict | None:
         sc = scenes.build(name, **{k: v for k, v in params.items() if k in known})
         if scene.get("dt"):
             sc.dt = float(scene["dt"])
+        sc.integrator = params.get("integrator", "euler")   # each integrator has its own limit
         pred = predict(sc)
         rec = {"t_max": pred["t_max"], "dt": sc.dt, "ratio": pred["ratio"],
                "set_by": describe_limit(pred), "scene": name, "params": params}

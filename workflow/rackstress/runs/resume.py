@@ -136,18 +136,21 @@ def rebuild_scene(rundir: Path, spec: str | None = None):
         known = scenes.parameters(name)
         sc = scenes.build(name, **{k: v for k, v in params.items() if k in known})
     else:
-        sc = scenes.load(spec, {})
+        # the file's own [params] as the run had them (its --set overrides included); a
+        # duration-given scene gets its steps from the duration, not from a recorded count
+        given = {k: v for k, v in params.items()
+                 if k not in ("file", "integrator", "dt")
+                 and not (k == "steps" and "duration" in params)}
+        sc = scenes.load(spec, given)
         dt = params.get("dt")
         if dt is not None and dt != sc.dt:
-            sc.dt = float(dt)
-            sc.params["dt"] = float(dt)
+            sc = sc.with_dt(float(dt))
     integrator = params.get("integrator")
     if integrator is not None:         # how the run integrated (an option, not a scene key)
         sc.integrator = integrator
         sc.params["integrator"] = integrator
     if sc.dt != rec["dt"]:
-        sc.dt = float(rec["dt"])
-        sc.params["dt"] = float(rec["dt"])
+        sc = sc.with_dt(float(rec["dt"]))
     if steps is not None or sc.total_steps != rec["steps"]:
         sc = sc.with_steps(int(rec["steps"]))
     mine = json.loads(json.dumps(scene_record(sc), default=_plain))

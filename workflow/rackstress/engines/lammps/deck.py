@@ -281,9 +281,10 @@ class Deck:
     def switch_commands(self, phase_vars, previous) -> list[str]:
         """Enter a phase exactly: back to the paper's v_n, new coefficients, forces, v + dt/2·a.
 
-        In the verlet mode LAMMPS' own full-step velocity is the scheme's: new coefficients and
-        forces only."""
-        if self.integrator == "verlet":
+        In the verlet mode the run starts from LAMMPS' own velocity (no half-step shift); a later
+        switch, like Eq. 5's, recomputes the forces with v − dt/2·a (``fix viscous`` must see
+        v_{n−½}, the velocity the scheme damps with, not the full-step one) and then restores v."""
+        if self.integrator == "verlet" and previous is None:
             return self.phase_commands(phase_vars, previous) + ["run 0 post no"]
         L = []
         if previous is not None:
