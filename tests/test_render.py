@@ -283,3 +283,17 @@ def test_a_part_that_flew_away_is_framed_out_with_a_warning(tmp_path):
     drawn = np.argwhere(img.min(axis=2) < 0.9)          # (the iteration line is below)
     # the remaining block fills the picture instead of shrinking to a dot
     assert np.ptp(drawn[:, 1]) > 0.3 * img.shape[1]
+
+
+def test_default_frames_are_the_papers_for_magpod_only():
+    """Fig. 12's iterations (1320, 2600, 4720, 17480) for a MagPod run that reaches them; any
+    other run of that length gets four spread over it, its last iteration included."""
+    from types import SimpleNamespace
+
+    from rackstress.render.pictures import default_iterations
+
+    other = SimpleNamespace(steps=np.array([0, 10000, 20000]), scene={"scene": "plane-rack"})
+    assert default_iterations(other) == [5000, 10000, 15000, 20000]
+    assert default_iterations(other, 37) == [37, 5000, 10000, 15000, 20000]
+    magpod = SimpleNamespace(steps=np.array([0, 19200]), scene={"scene": "magpod"})
+    assert default_iterations(magpod) == [1320, 2600, 4720, 17480]

@@ -65,8 +65,14 @@ def test_killed_and_resumed_equals_uninterrupted(tmp_path):
         raise AssertionError("could not kill the run between step 600 and its end")
     assert 600 <= step < 1200
     assert not (cut / "summary.json").exists()
+    # post-processing the killed part writes a stress dump of its frames only ...
+    r = _run(["stress", str(cut)])
+    assert r.returncode == 0, r.stderr
+    assert (cut / "stress.dump").exists()
     r = _run(["run", "--resume", str(cut), "--no-render", "--no-progress"])
     assert r.returncode == 0, r.stderr
+    # ... which the continued run removes (it would hold fewer frames than the trajectory)
+    assert not (cut / "stress.dump").exists()
     a, b = json.loads((full / "summary.json").read_text()), json.loads((cut / "summary.json").read_text())
     assert b["status"] == "ok" and b["steps"] == 1200 and b["resumed_from_step"] == step
     assert a["groups"] == b["groups"]

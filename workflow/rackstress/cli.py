@@ -9,7 +9,8 @@ from pathlib import Path
 import click
 
 from rackstress.errors import (EXIT_BUG, EXIT_DIVERGED, EXIT_INPUT, EXIT_RENDER,  # noqa: F401
-                               EXIT_STORAGE, DivergenceError, RackstressError, os_error_message)
+                               EXIT_STORAGE, DivergenceError, RackstressError, RunDirError,
+                               os_error_message)
 
 
 def _load_scene(scene: str, steps, dt, sets, integrator: str | None = None):
@@ -119,7 +120,7 @@ def main():
               help="Run even if --dt exceeds the predicted stability limit of Eq. 5.")
 @click.option("--integrator", type=click.Choice(["euler", "verlet"]), default="euler",
               show_default=True, help="euler: Eq. 5, the paper's; verlet: the second-order mode "
-              "(leapfrog with trapezoidal damping; not resumable).")
+              "(leapfrog with trapezoidal damping).")
 def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progress, do_render,
         restart_every=None, resume_dir=None, allow_unstable=False, integrator="euler"):
     """Run SCENE (a built-in name or a .toml file) and write a run directory.
@@ -154,6 +155,9 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
         if resume_dir is not None:
             from rackstress.runs.resume import resume_run
 
+            if not Path(out).is_dir():
+                raise RunDirError(f"{out} is not a run directory (it does not exist): nothing "
+                                  "to resume")
             with locked(out, create=False) as held:
                 summary = resume_run(resume_dir, scene, progress=progress and rank() == 0)
                 _finish(summary, out, do_render, progress)

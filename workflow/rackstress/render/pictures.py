@@ -474,10 +474,10 @@ class _Saver:
 
 # ----------------------------------------------------------------------------- choices
 def default_iterations(run, peak_iteration: int | None = None) -> list:
-    """The paper's Fig. 12 iterations if the run reaches them, else 4 spread over the run;
-    and the peak iteration."""
+    """For MagPod, the paper's Fig. 12 iterations if the run reaches them; else 4 spread over
+    the run, the last included; and the peak iteration."""
     last = int(run.steps[-1])
-    if last >= PAPER_FRAMES[-1]:
+    if str(run.scene.get("scene", "")).startswith("magpod") and last >= PAPER_FRAMES[-1]:
         its = set(PAPER_FRAMES)
     else:
         its = {int(round(last * q)) for q in (0.25, 0.5, 0.75, 1.0)}

@@ -111,6 +111,23 @@ def truncate_dump(path: Path, step: int) -> int:
     return kept
 
 
+#: What post-processing derived from the trajectory of the interrupted part (``rackstress
+#: stress`` run on a killed run): stale once the run goes on, written again at its end.
+DERIVED = ("stress.dump", "stress.json", "measures.npz", "report.html", "vtk")
+
+
+def remove_derived(rundir: Path) -> None:
+    """Remove files derived from the trajectory before it continues (they would mix two lengths)."""
+    import shutil
+
+    for name in DERIVED:
+        path = Path(rundir) / name
+        if path.is_dir():
+            shutil.rmtree(path, ignore_errors=True)
+        elif path.exists():
+            path.unlink()
+
+
 def rebuild_scene(rundir: Path, spec: str | None = None):
     """The scene of a run directory: from ``spec`` (a name or .toml, checked against
     ``scene.json``) or from the name and parameters recorded in ``scene.json``."""
@@ -217,7 +234,8 @@ def resume_run(rundir: Path, spec: str | None = None, progress: bool = True, com
             raise ResumeError(f"{rundir}: checkpoint holds {len(ck.x)} particles, the scene "
                               f"{scene.n_particles}")
         deck = compile_deck(scene, mode)
-        on_root(lambda: truncate_dump(rundir / "trajectory.dump", ck.step), comm)
+        on_root(lambda: (truncate_dump(rundir / "trajectory.dump", ck.step),
+                         remove_derived(rundir)), comm)
         records = None
         if scene.report is not None:
             records = [PhaseEnd(0, None, {}, 0, scene.original_positions())]
