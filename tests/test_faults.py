@@ -517,3 +517,14 @@ def test_full_disk_on_the_dump_under_mpi_ends_all_ranks(tmpfs):
     assert "No space left" in r.stderr and "Traceback" not in r.stderr
     assert time.monotonic() - t0 < 100
     assert leftovers(disk / "run") == []
+
+
+def test_commands_on_a_missing_run_directory_are_bad_input(tmp_path):
+    """--resume and render of a directory that does not exist: exit 2 naming it (not a disk
+    error, exit 5, from trying to lock it), and nothing is created."""
+    missing = tmp_path / "nope"
+    for args in (["run", "--resume", missing], ["render", missing]):
+        r = rs(*args, timeout=120)
+        assert r.returncode == 2, r.stderr
+        assert f"{missing} is not a run directory (it does not exist)" in r.stderr
+    assert not missing.exists()

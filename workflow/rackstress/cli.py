@@ -9,8 +9,7 @@ from pathlib import Path
 import click
 
 from rackstress.errors import (EXIT_BUG, EXIT_DIVERGED, EXIT_INPUT, EXIT_RENDER,  # noqa: F401
-                               EXIT_STORAGE, DivergenceError, RackstressError, RunDirError,
-                               os_error_message)
+                               EXIT_STORAGE, DivergenceError, RackstressError, os_error_message)
 
 
 def _load_scene(scene: str, steps, dt, sets, integrator: str | None = None):
@@ -155,9 +154,6 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
         if resume_dir is not None:
             from rackstress.runs.resume import resume_run
 
-            if not Path(out).is_dir():
-                raise RunDirError(f"{out} is not a run directory (it does not exist): nothing "
-                                  "to resume")
             with locked(out, create=False) as held:
                 summary = resume_run(resume_dir, scene, progress=progress and rank() == 0)
                 _finish(summary, out, do_render, progress)
@@ -330,8 +326,6 @@ def render(rundir, frames, measure, views, groups, out, movie, movie_view, vmax,
                 its = [int(f) for f in frames.split(",") if f.strip()]
             except ValueError:
                 raise RackstressError(f"--frames expects comma-separated integers, got '{frames}'")
-        if not Path(rundir).is_dir():
-            raise RackstressError(f"{rundir} is not a run directory (it does not exist)")
         # one writer per run directory: not while a run (or another render) holds it
         with locked(rundir, create=False):
             from rackstress.runs.rundir import remove_temporaries

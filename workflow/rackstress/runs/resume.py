@@ -206,9 +206,7 @@ def resume_run(rundir: Path, spec: str | None = None, progress: bool = True, com
     from rackstress.runs.rundir import check_out, locked
 
     comm = comm or world()
-    rundir = check_out(rundir)
-    if not rundir.is_dir():
-        raise RunDirError(f"{rundir} is not a run directory (it does not exist)")
+    rundir = check_out(rundir)     # a missing directory: refused by locked() below
 
     def prepare():
         if (rundir / "summary.json").exists():

@@ -122,6 +122,8 @@ def locked(rundir, command: str | None = None, comm=None, create: bool = True, n
                 rundir.mkdir(parents=True, exist_ok=True)
             except OSError as exc:
                 raise storage_error(exc, "create the run directory") from None
+        elif not rundir.is_dir():     # a command on an existing run: bad input, not the disk
+            raise RunDirError(f"{rundir} is not a run directory (it does not exist)")
         fd = _take(rundir)
         old = holder(rundir)
         note = stale_note(old)
