@@ -150,24 +150,21 @@ class Frame:
 
     def owned(self, sl: slice) -> np.ndarray:
         """Rows of the owned particles of a group (its global index slice)."""
-        key = ("owned", sl.start, sl.stop)
-        if key not in self.memo:
-            if self.identity:
-                self.memo[key] = np.arange(sl.start, sl.stop)
-            else:
-                own = self.index[:self.nlocal]
-                self.memo[key] = np.flatnonzero((own >= sl.start) & (own < sl.stop))
-        return self.memo[key]
+        return self._rows("owned", sl, self.nlocal)
 
     def seen(self, sl: slice) -> np.ndarray:
         """Rows of the owned and ghost particles of a group."""
-        key = ("seen", sl.start, sl.stop)
+        return self._rows("seen", sl, None)
+
+    def _rows(self, kind: str, sl: slice, upto) -> np.ndarray:
+        """Rows among the first ``upto`` (all: None) whose particle lies in ``sl`` (memoized)."""
+        key = (kind, sl.start, sl.stop)
         if key not in self.memo:
             if self.identity:
                 self.memo[key] = np.arange(sl.start, sl.stop)
             else:
-                self.memo[key] = np.flatnonzero((self.index >= sl.start)
-                                                & (self.index < sl.stop))
+                idx = self.index[:upto]
+                self.memo[key] = np.flatnonzero((idx >= sl.start) & (idx < sl.stop))
         return self.memo[key]
 
     def rows(self, name, I, J):
