@@ -24,8 +24,9 @@ messages and decks. Collisions have no fixed pairs: :func:`contact_candidates` a
 :meth:`Collide.touching` are the one contact search every engine uses.
 
 Coefficient "matrices" ĉ (m×n) are never stored densely: :class:`Const` (every pair),
-:class:`Within` (pairs whose original distance is below d, Eq. 16) and :class:`Matched` (index-
-matched attraction regions, Eqs. 27–28). Coefficients are *directed*: the operator on i from j
+:class:`Within` (pairs whose original distance is below d, Eq. 16; :class:`WithinInside` keeps only
+those whose segment stays inside the part's shape) and :class:`Matched` (index-matched attraction
+regions, Eqs. 27–28). Coefficients are *directed*: the operator on i from j
 carries its own c; the reverse interaction, if any, is a separate operator on j
 (:func:`reverse_of` finds it).
 
@@ -152,6 +153,53 @@ class Matched:
 
     def label(self) -> str:
         return f"{self.c:g}<{self.target} = {self.source} != 0>"
+
+
+@dataclass(frozen=True)
+class WithinInside(Within):
+    """within(d) of Eq. 16 restricted to pairs whose binding segment lies inside ``region``.
+
+    ``region`` (a :class:`rackstress.model.regions.Region`) is the part's shape, the continuum
+    its particles fill. A binding that crosses free space — a notch, a hole, the gap at a
+    re-entrant corner — is no material: a square lattice's diagonal binding at an L's inner
+    corner passes through the corner point itself and would fill the notch, so the part would
+    lose the corner's stress concentration (measured: docs/benchmarks/validity.md). A segment is
+    inside when every one of its points at 1/32, 2/32, …, 31/32 of its length is an *interior*
+    point of the region (its 8 neighbours at ±ε along the diagonals, ε = 10⁻⁶·d, are all in it);
+    a segment touching the boundary only at its ends is inside, one through a corner is not.
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> from rackstress.model.regions import Box
+    >>> L = Box((-.5, -.5, -.5), (.5, 1.5, .5)) | Box((-.5, .5, -.5), (1.5, 1.5, .5))
+    >>> c = WithinInside(1.5, 20.0, L)      # an L of three unit cells around (0,0), (0,1), (1,1)
+    >>> c.inside(np.array([[0., 0, 0], [0, 0, 0]]), np.array([[0., 1, 0], [1, 1, 0]])).tolist()
+    [True, False]
+    """
+
+    region: object = None
+    SAMPLES: ClassVar[int] = 32
+    CHUNK: ClassVar[int] = 4096
+
+    def label(self) -> str:
+        return f"within({self.d:g}) inside the part magnitude {self.c:g}"
+
+    def inside(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """Whether each segment a[k]–b[k] lies inside the region (class docstring)."""
+        a, b = np.asarray(a, float).reshape(-1, 3), np.asarray(b, float).reshape(-1, 3)
+        t = np.arange(1, self.SAMPLES) / self.SAMPLES
+        eps = 1e-6 * float(self.d)
+        offs = eps * np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)],
+                              dtype=float)
+        out = np.ones(len(a), dtype=bool)
+        for s in range(0, len(a), self.CHUNK):
+            aa, bb = a[s:s + self.CHUNK], b[s:s + self.CHUNK]
+            pts = aa[:, None, None, :] + t[None, :, None, None] * (bb - aa)[:, None, None, :] \
+                + offs[None, None, :, :]
+            ok = self.region.mask(pts.reshape(-1, 3)).reshape(len(aa), -1)
+            out[s:s + self.CHUNK] = ok.all(axis=1)
+        return out
 
 
 Coefficient = Union[Const, Within, Matched]
@@ -484,6 +532,9 @@ class Bind(PairOperator):
             i, j = sm["i"][keep].astype(np.int64), sm["j"][keep].astype(np.int64)
             if target is source:
                 keep = i != j
+                i, j = i[keep], j[keep]
+            if isinstance(coeff, WithinInside):     # no binding across free space
+                keep = coeff.inside(target.o[i], source.o[j])
                 i, j = i[keep], j[keep]
         i, j = _sorted(i, j)
         diff = source.o[j] - target.o[i]

@@ -13,6 +13,12 @@ elastic is the scene option ``body``:
 ``bind``
     bind(body, within(d)) alone: a lattice spring network, the body model closest to a
     continuum (Section 3.1's plane with within(2)).
+``bind-inside``
+    bind(body, within(d) inside the part) (:class:`~rackstress.model.operators.WithinInside`):
+    the same network without the bindings that cross free space. On a square lattice the
+    diagonal binding at a re-entrant corner runs through the corner point and fills the notch;
+    this body has none (the L-bracket loses 2 of its 1818 bindings, the others none), so it
+    keeps the corner's stress concentration.
 
 A clamped end is a set of **held** particles of the body (``Group.held``: held at their original
 positions on every engine). The body's particles are bound to them as to each other, and the
@@ -40,11 +46,12 @@ from __future__ import annotations
 import numpy as np
 
 from rackstress.errors import SceneError
-from rackstress.model.operators import Bind, Const, Dampen, Force, Within
+from rackstress.model.operators import Bind, Const, Dampen, Force, Within, WithinInside
 from rackstress.model.particles import Group, rack
+from rackstress.model.regions import Box, Cylinder
 from rackstress.model.scene import Phase, Scene
 
-BODIES = ("rack", "rack+bind", "bind")
+BODIES = ("rack", "rack+bind", "bind", "bind-inside")
 RADIUS = 0.5
 
 
@@ -55,7 +62,7 @@ def _grid(ii, jj) -> np.ndarray:
 def _assemble(name: str, body_o: np.ndarray, held: np.ndarray | None, loads: list,
               body: str, bind_c: float, bind_d: float, rack_c: float,
               rack_back_c: float, damping: float, rack_damping: float, dt: float, steps: int,
-              params: dict, geometry: dict) -> Scene:
+              params: dict, geometry: dict, shape=None) -> Scene:
     if body not in BODIES:
         raise SceneError(f"scene '{name}': body must be one of {', '.join(BODIES)}, got {body!r}")
     groups = {"body": Group("body", body_o, RADIUS, kind="body", held=held,
@@ -64,6 +71,8 @@ def _assemble(name: str, body_o: np.ndarray, held: np.ndarray | None, loads: lis
                 for mask, accel in loads]
     if body in ("rack+bind", "bind"):
         body_ops.append(Bind("body", Within(bind_d, bind_c)))
+    if body == "bind-inside":
+        body_ops.append(Bind("body", WithinInside(bind_d, bind_c, shape)))
     ops = {"body": body_ops}
     if body in ("rack", "rack+bind"):
         groups["bodyrack"] = rack(groups["body"], "bodyrack")
@@ -96,9 +105,10 @@ def cantilever(body: str = "rack+bind", nx: int = 40, ny: int = 6, n_clamp: int 
     params = dict(body=body, nx=nx, ny=ny, n_clamp=n_clamp, load=load, bind_c=bind_c,
                   bind_d=bind_d, rack_c=rack_c, rack_back_c=rack_back_c, damping=damping,
                   rack_damping=rack_damping, dt=dt, steps=steps)
+    shape = Box((-0.5, -0.5, -0.5), (nx - 0.5, ny - 0.5, 0.5))     # the lattice cells' union
     return _assemble("cantilever", body_o, held, [(tip, (0.0, -load / ny, 0.0))], body, bind_c,
                      bind_d, rack_c, rack_back_c, damping, rack_damping, dt, steps, params,
-                     geometry)
+                     geometry, shape)
 
 
 def plate_hole(body: str = "rack+bind", n: int = 12, a: float = 4.0, sigma: float = 0.01,
@@ -122,8 +132,10 @@ def plate_hole(body: str = "rack+bind", n: int = 12, a: float = 4.0, sigma: floa
                   rack_c=rack_c, rack_back_c=rack_back_c, damping=damping,
                   rack_damping=rack_damping, dt=dt, steps=steps)
     loads = [(i == n, (sigma, 0.0, 0.0)), (i == -n, (-sigma, 0.0, 0.0))]
+    shape = (Box((-n - 0.5, -n - 0.5, -0.5), (n + 0.5, n + 0.5, 0.5))
+             - Cylinder((0.0, 0.0, -1.0), (0.0, 0.0, 1.0), a))      # the FEA's plate
     return _assemble("plate-hole", body_o, None, loads, body, bind_c, bind_d, rack_c,
-                     rack_back_c, damping, rack_damping, dt, steps, params, geometry)
+                     rack_back_c, damping, rack_damping, dt, steps, params, geometry, shape)
 
 
 def l_bracket(body: str = "rack+bind", w: int = 6, H: int = 26, lx: int = 24, n_clamp: int = 2,
@@ -145,9 +157,11 @@ def l_bracket(body: str = "rack+bind", w: int = 6, H: int = 26, lx: int = 24, n_
     params = dict(body=body, w=w, H=H, lx=lx, n_clamp=n_clamp, load=load, bind_c=bind_c,
                   bind_d=bind_d, rack_c=rack_c, rack_back_c=rack_back_c, damping=damping,
                   rack_damping=rack_damping, dt=dt, steps=steps)
+    shape = (Box((-0.5, -0.5, -0.5), (w - 0.5, H - 0.5, 0.5))          # leg
+             | Box((-0.5, H - w - 0.5, -0.5), (lx - 0.5, H - 0.5, 0.5)))  # arm
     return _assemble("l-bracket", body_o, held, [(tip, (0.0, -load / w, 0.0))], body, bind_c,
                      bind_d, rack_c, rack_back_c, damping, rack_damping, dt, steps, params,
-                     geometry)
+                     geometry, shape)
 
 
 def body_index(scene: Scene) -> np.ndarray:

@@ -1,6 +1,7 @@
 """Particle measures at damped equilibrium against a finite-element reference.
 
-:func:`equilibrate` runs a scene on the reference engine (Eq. 5) until it is at rest;
+:func:`equilibrate` runs a scene on an engine (the reference engine or LAMMPS, exact or fast
+mode) until it is at rest, LAMMPS optionally recording its own per-atom virial;
 :func:`measures` computes, on the body's original and final positions, every stress measure the
 project offers — the paper's distance from the desired position (robust Kabsch, as
 :mod:`rackstress.stress.fit`), the von Mises shear strain η and D²min of the Falk–Langer affine
@@ -37,32 +38,88 @@ TOP = 0.05
 PEAK_TOL = 0.01
 
 
+def _engine(scene, engine: str, mode: str):
+    if engine == "reference":
+        if mode != "exact":
+            raise ValueError("the reference engine has one mode, exact (Eq. 5)")
+        return Reference(scene)
+    if engine == "lammps":
+        from rackstress.engines.lammps.deck import compile_deck
+        from rackstress.engines.lammps.runner import LammpsRun
+
+        return LammpsRun(compile_deck(scene, mode), None, log=False)
+    raise ValueError(f"unknown engine {engine!r} (reference or lammps)")
+
+
 def equilibrate(scene, tol: float = 1e-7, check_every: int = 500, max_steps: int | None = None,
-                engine_cls=Reference):
-    """Run ``scene`` until at rest; return ``(p, info)``.
+                engine: str = "reference", mode: str = "exact", steps: int | None = None,
+                virial: bool = False):
+    """Run ``scene`` on ``engine`` (``reference`` or ``lammps``, ``mode`` exact or fast) until
+    at rest; return ``(p, info)``.
 
     At rest: between two checks (``check_every`` steps apart) no particle moved more than
-    ``tol`` × the largest displacement from the original positions (and the velocities are
-    below that per unit time). ``max_steps`` defaults to ``scene.total_steps``; ``info`` says
-    whether rest was reached, the steps taken and the wall time.
+    ``tol`` × the largest displacement from the original positions. ``max_steps`` defaults to
+    ``scene.total_steps``. ``steps``: run exactly that many steps instead (another engine
+    repeating a run that came to rest). ``info`` says whether rest was reached, the steps taken
+    and the wall time; with ``virial`` (LAMMPS only) also ``info["virial"]``, LAMMPS' own
+    per-atom virial (``compute stress/atom NULL virial``, n × 6: xx yy zz xy xz yz) at the end.
+
+    Example
+    -------
+    >>> from rackstress.scenes import validation as cases
+    >>> p, info = equilibrate(cases.cantilever(body="bind", nx=6, ny=2), max_steps=20,
+    ...                       check_every=10)
+    >>> info["steps"], p.shape
+    (20, (12, 3))
     """
-    eng = engine_cls(scene)
-    phase = dict(scene.phases[0].vars)
-    max_steps = scene.total_steps if max_steps is None else int(max_steps)
-    t0, prev, rest = time.perf_counter(), eng.p.copy(), False
-    while eng.step_count < max_steps:
-        for _ in range(min(check_every, max_steps - eng.step_count)):
-            eng.step(phase)
-        disp = float(np.abs(eng.p - eng.o).max())
-        moved = float(np.abs(eng.p - prev).max())
-        prev = eng.p.copy()
-        if disp > 0 and moved <= tol * disp:
-            rest = True
-            break
-    return eng.p.copy(), {"at_rest": rest, "steps": int(eng.step_count),
-                          "time": eng.step_count * scene.dt,
-                          "wall_s": time.perf_counter() - t0,
-                          "max_displacement": float(np.linalg.norm(eng.p - eng.o, axis=1).max())}
+    eng = _engine(scene, engine, mode)
+    try:
+        eng.enter_phase(dict(scene.phases[0].vars))
+        o = scene.original_positions()
+        max_steps = scene.total_steps if max_steps is None else int(max_steps)
+        if steps is not None:
+            max_steps = int(steps)
+        t0, prev, rest = time.perf_counter(), eng.positions(), False
+        while eng.step_count < max_steps:
+            eng.advance(min(check_every, max_steps - eng.step_count))
+            p = eng.positions()
+            disp = float(np.abs(p - o).max())
+            moved = float(np.abs(p - prev).max())
+            prev = p
+            if disp > 0 and moved <= tol * disp:
+                rest = True
+                if steps is None:
+                    break
+        wall = time.perf_counter() - t0
+        info = {"at_rest": rest, "steps": int(eng.step_count), "time": eng.step_count * scene.dt,
+                "wall_s": wall, "engine": engine, "mode": mode,
+                "max_displacement": float(np.linalg.norm(prev - o, axis=1).max())}
+        if virial:
+            info["virial"] = _lammps_virial(eng)
+        return prev.copy(), info
+    finally:
+        eng.close()
+
+
+def _lammps_virial(run) -> np.ndarray:
+    """LAMMPS' per-atom virial stress (``compute stress/atom NULL virial``), global order."""
+    run.command("compute rs_virial all stress/atom NULL virial")
+    run.command("run 0 post no")
+    lmp = run.lmp
+    nlocal = int(lmp.extract_global("nlocal"))
+    ids = np.array(lmp.numpy.extract_atom("id")[:nlocal], dtype=np.int64)
+    s = np.array(lmp.numpy.extract_compute("rs_virial", 1, 2)[:nlocal], dtype=float)
+    out = np.full((run.scene.n_particles, 6), np.nan)
+    for i, v in run.comm.allgather((ids, s)):
+        out[i - 1] = v
+    return out
+
+
+def von_mises_6(s: np.ndarray) -> np.ndarray:
+    """Von Mises equivalent of symmetric tensors given as n × 6 (xx yy zz xy xz yz)."""
+    xx, yy, zz, xy, xz, yz = np.asarray(s, dtype=float).T
+    return np.sqrt(0.5 * ((xx - yy) ** 2 + (yy - zz) ** 2 + (zz - xx) ** 2)
+                   + 3.0 * (xy ** 2 + xz ** 2 + yz ** 2))
 
 
 def affine_fit(o: np.ndarray, p: np.ndarray, cutoff: float | None = None):
@@ -139,6 +196,9 @@ def agreement(values: np.ndarray, reference: np.ndarray, points: np.ndarray,
     """Spearman ρ, top-5 % overlap and distance of the maxima (module docstring)."""
     ok = np.isfinite(values) & np.isfinite(reference)
     v, r, x = values[ok], reference[ok], points[ok]
+    if len(v) == 0:                     # the measure was not recorded
+        return {"spearman": float("nan"), "top5_overlap": float("nan"),
+                "max_distance": float("nan"), "n": 0, "k": 0}
     rho = float(spearmanr(v, r).statistic) if np.ptp(v) > 0 and np.ptp(r) > 0 else float("nan")
     k = max(1, math.ceil(top * len(v)))
     a = set(np.argsort(-v, kind="stable")[:k].tolist())

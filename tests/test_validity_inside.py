@@ -1,0 +1,107 @@
+"""The bind-inside body model (within(d) without bindings across free space), the validity
+comparison on LAMMPS, and LAMMPS' own per-atom virial — expected values from geometry, the
+re-entrant corner's singularity and hand calculation."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from rackstress.model.operators import Bind, Dampen, Force, Within, WithinInside
+from rackstress.model.particles import Group
+from rackstress.model.regions import Box
+from rackstress.model.scene import Phase, Scene
+from rackstress.scenes import validation as cases
+from rackstress.validity import compare
+
+
+def _bind_pairs(scene):
+    op = next(o for o in scene.operators["body"] if isinstance(o, Bind))
+    g = scene.groups["body"]
+    pl = op.pairs(g, g)
+    return {(int(i), int(j)) for i, j in zip(pl.i, pl.j)}, g.o
+
+
+def test_inside_drops_only_the_binding_through_the_re_entrant_corner():
+    w, H, lx = 4, 12, 10
+    plain, o = _bind_pairs(cases.l_bracket(body="bind", w=w, H=H, lx=lx))
+    inside, _ = _bind_pairs(cases.l_bracket(body="bind-inside", w=w, H=H, lx=lx))
+    assert inside < plain
+    gone = {tuple(sorted(p)) for p in plain - inside}
+    # the one diagonal whose midpoint is the corner (w − ½, H − w − ½) of the cells' union:
+    # from the leg's particle (w−1, H−w−1) to the arm's (w, H−w), both ways
+    assert len(gone) == 1 and len(plain - inside) == 2
+    (a, b), = gone
+    mid = (o[a] + o[b]) / 2
+    assert np.allclose(mid[:2], (w - 0.5, H - w - 0.5))
+    assert np.linalg.norm(o[a] - o[b]) == pytest.approx(math.sqrt(2))
+
+
+def test_inside_keeps_every_binding_of_a_convex_part():
+    # a segment between two points of a convex set lies in it: nothing to drop
+    plain, _ = _bind_pairs(cases.cantilever(body="bind", nx=9, ny=4))
+    inside, _ = _bind_pairs(cases.cantilever(body="bind-inside", nx=9, ny=4))
+    assert plain == inside and len(plain) == 2 * (8 * 4 + 9 * 3 + 2 * 8 * 3)  # 4 bonds a cell
+
+
+def test_inside_segment_test_by_hand():
+    box = Box((0, 0, -1), (2, 2, 1)) - Box((1, 1, -1), (2, 2, 1))   # an L of three unit squares
+    c = WithinInside(3.0, 1.0, box)
+    a = np.array([[0.5, 0.5, 0], [0.5, 1.5, 0], [0.2, 0.2, 0], [0.5, 0.5, 0]])
+    b = np.array([[1.5, 0.5, 0], [1.5, 0.5, 0], [0.8, 0.8, 0], [1.5, 1.5, 0]])
+    # in the bottom row; across the notch's corner (1, 1); short, inside; ends in the notch
+    assert c.inside(a, b).tolist() == [True, False, True, False]
+
+
+def test_bind_inside_l_bracket_peaks_at_the_re_entrant_corner():
+    """Linear elasticity puts the L's largest strain at the re-entrant corner (σ ~ r^−0.456,
+    unbounded); the particle nearest it lies 0.71 spacings away. bind-inside's strain measure
+    has its maximum within two spacings of that corner."""
+    from rackstress.model.stability import predict
+
+    kw = dict(body="bind-inside", damping=0.06)
+    sc = cases.l_bracket(**kw)
+    sc = cases.l_bracket(dt=0.5 * predict(sc)["t_max"], steps=20000, **kw)
+    p, info = compare.equilibrate(sc, tol=1e-5)
+    assert info["at_rest"]
+    m = compare.measures(sc, p)
+    free = cases.free_mask(sc)
+    o = sc.groups["body"].o[free]
+    top = o[np.nanargmax(m["strain"][free])]
+    g = sc.params
+    corner = np.array([g["w"] - 0.5, g["H"] - g["w"] - 0.5])
+    assert np.linalg.norm(top[:2] - corner) <= 2.0
+
+
+@pytest.mark.lammps
+def test_lammps_repeats_the_reference_equilibrium():
+    sc = cases.l_bracket(body="bind-inside", w=4, H=12, lx=10, damping=0.06, dt=0.05)
+    p_ref, info = compare.equilibrate(sc, max_steps=600, check_every=100)
+    p, info_l = compare.equilibrate(sc, engine="lammps", steps=info["steps"], check_every=100)
+    assert info_l["steps"] == info["steps"] == 600
+    assert np.abs(p - p_ref).max() <= 1e-10 * max(1.0, np.abs(p_ref).max())
+    assert np.abs(p - sc.original_positions()).max() > 1e-4       # it moved
+
+
+@pytest.mark.lammps
+def test_lammps_virial_of_a_pulled_pair_by_hand():
+    """Two particles bound with c, pulled apart by f each: fast mode's harmonic bond (stiffness
+    2c) rests at d = 1 + f/2c, and each particle's virial is ½·d·f along x, whose von Mises
+    equivalent is |½·d·f|; the binds' ½ Σ r ⊗ f at the same positions is the same number."""
+    c, f = 20.0, 0.5
+    o = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    ops = {"body": [Force((-f, 0.0, 0.0), where=(True, False)),
+                    Force((f, 0.0, 0.0), where=(False, True)),
+                    Bind("body", Within(1.5, c)), Dampen(2.0)]}
+    sc = Scene("pair", {"body": Group("body", o, 0.5)}, ops, [Phase("pull", 4000)], dt=0.02)
+    p, info = compare.equilibrate(sc, engine="lammps", mode="fast", virial=True, tol=1e-9,
+                                  check_every=200)
+    assert info["at_rest"]
+    d = 1 + f / (2 * c)
+    assert np.linalg.norm(p[1] - p[0]) == pytest.approx(d, rel=1e-6)
+    vm = compare.von_mises_6(info["virial"])
+    assert vm == pytest.approx([0.5 * d * f] * 2, rel=1e-6)
+    # Eq. 12's force at the harmonic rest differs from f by its linearization: c(d²−1)/d vs 2c(d−1)
+    eq12 = c * (d * d - 1) / d
+    assert compare.bind_virial(sc, p) == pytest.approx([0.5 * d * eq12] * 2, rel=1e-9)
