@@ -17,7 +17,10 @@ def test_bench_stability_smoke(tmp_path):
                                "--only", "plane-rack", "--only", "damping"])
     assert res.exit_code == 0, res.output
     data = json.loads((tmp_path / "stability.json").read_text())
-    assert {c["family"] for c in data["cases"]} == {"rack bind", "damping"}
+    assert {c["family"] for c in data["cases"]} == {"rack bind", "damping", "verlet mode"}
+    v = next(c for c in data["cases"] if c["family"] == "verlet mode")
+    # the second-order mode's limit is 2/ω whatever the damping (leapfrog)
+    assert v["t_pred"] == pytest.approx(2.0 / np.sqrt(v["limit"]["omega2"]), rel=1e-9)
     for c in data["cases"]:
         assert c["converged"] and c["within_2x"], c
         # the bracket: its lower end was stable, its upper end was not
@@ -55,6 +58,25 @@ def test_bench_accuracy_smoke(tmp_path):
     ff = data["scenes"][0]["fast_front"]
     assert [p["t"] for p in ff["points"]] == [0.02, 0.01, 0.005, 0.0025]
     assert "the front" in (tmp_path / "accuracy.md").read_text()
+    c = data["scenes"][0]["error_constants"]["lammps"]
+    # e1 = A t and e2 = B t^2, so the ratio at equal t, A/(B t), is 10 at t* = A/(10 B)
+    for t in (0.01, 0.005, 0.0025):
+        assert err[("euler", t)] / err[("verlet", t)] == pytest.approx(c["A"] / (c["B"] * t),
+                                                                       rel=0.15)
+    assert c["t_star"] >= 0.01
+
+
+def test_error_constants_of_first_and_second_order_errors_by_hand():
+    A, B = 4.0, 100.0
+    rows = [{"engine": "reference", "mode": "exact", "integrator": integ, "t": t, "t_pred": 0.05,
+             "pos_max": A * t if integ == "euler" else B * t * t}
+            for t in (0.02, 0.01, 0.005) for integ in ("euler", "verlet")]
+    c = accuracy.error_constants(rows, [2.0, 2.0])["reference"]
+    assert c["A"] == pytest.approx(A) and c["B"] == pytest.approx(B)
+    assert c["t_star"] == pytest.approx(0.004)            # A / (10 B): where A/(B t) = 10
+    assert c["t_star_over_t_max"] == pytest.approx(0.08)
+    assert c["steps_saved_at"]["0.001"] == pytest.approx(A / np.sqrt(1e-3 * B))   # t1/t2 at ε
+    assert accuracy.error_constants(rows, [2.0, 1.1])["reference"] is None   # not second order
 
 
 @pytest.mark.lammps

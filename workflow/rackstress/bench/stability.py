@@ -212,9 +212,34 @@ def cases(quick: bool = False) -> list[dict]:
         # 10^4 units within 300 large steps, which is physics, not instability)
         add("extreme", "plane-bound d=2 magnitude=0.01 pull 1 (soft)",
             lambda: scenes.build("plane-bound", d=2.0, magnitude=0.01, pull_accel=1.0))
+    # the second-order mode (model/verlet.py): predicted t < 2/ω whatever the damping
+    verlet_cases = [("plane-rack", lambda: scenes.build("plane-rack"))]
+    if not quick:
+        verlet_cases += [
+            ("plane-bound d=100 magnitude=20",
+             lambda: scenes.build("plane-bound", d=100.0, magnitude=20.0)),
+            ("plane-bound d=10 magnitude=20", lambda: scenes.build("plane-bound", d=10.0)),
+            ("plane-bound d=2 damping=1", lambda: scenes.build("plane-bound", d=2.0, damping=1.0)),
+            ("plane-bound d=2 damping=50",
+             lambda: scenes.build("plane-bound", d=2.0, damping=50.0)),
+            ("plane-bound d=2 damping=150",
+             lambda: scenes.build("plane-bound", d=2.0, damping=150.0)),
+            ("plane-bound d=2 damping=1000",
+             lambda: scenes.build("plane-bound", d=2.0, damping=1000.0)),
+            ("two-blobs collide=100 (b: 20)", lambda: two_blobs(100.0)),
+            ("two-blobs collide=10000 (b: 2000)", lambda: two_blobs(1e4))]
+    for label, make in verlet_cases:
+        add("verlet mode", f"{label}, verlet", lambda make=make: _verlet(make()))
+    if not quick:
         add("magpod", "magpod-small gait cycle", None)
         out[-1]["gait"] = True      # its own criterion: magpod_gait_case
     return out
+
+
+def _verlet(scene: Scene) -> Scene:
+    """The scene run by the second-order mode (:mod:`rackstress.model.verlet`)."""
+    scene.integrator = "verlet"
+    return scene
 
 
 def run_case(case: dict) -> dict:
@@ -400,8 +425,9 @@ def markdown(data: dict) -> str:
              "",
              "Prediction: `rackstress.model.stability.predict` (linearization at the original positions; "
              "largest eigenvalues of the pair-operator Jacobian with their damping, "
-             "t_max = 4/(γ + √(γ² + 4ω²))). Gershgorin: the row-sum bound on the same "
-             "linearization. Measured: reference engine, "
+             "t_max = 4/(γ + √(γ² + 4ω²)); rows 'verlet mode': the second-order mode, whose "
+             "limit is t_max = 2/ω whatever the damping). Gershgorin: the row-sum bound on the "
+             "same linearization. Measured: reference engine (the run's own integrator), "
              f"{data['steps_per_trial']} steps a trial, bisection to {data['rel_tol']:.0%}; "
              "stable = no watchdog stop and no exponential growth of the step-to-step "
              f"acceleration (last value ≤ {data['growth']:g}× the second half's minimum).",
