@@ -251,6 +251,40 @@ def error_constants(rows: list, orders_verlet: list) -> dict:
     return out
 
 
+#: The gain sweep: plane-rack variants (scene overrides) whose error constants show what sets
+#: the verlet mode's gain — damping (none, the default 1, 10) and binding stiffness.
+GAIN_SWEEP = (("default (damping 1, plane_bind 100)", {}),
+              ("no damping", {"damping": 0.0, "rack_damping": 0.0}),
+              ("damping 10", {"damping": 10.0}),
+              ("plane_bind 20", {"plane_bind": 20.0}),
+              ("plane_bind 500", {"plane_bind": 500.0}))
+
+
+def gain_sweep(echo=print, T: float = 3.0, ts=(0.01, 0.005)) -> list:
+    """A and B (:func:`error_constants`) of plane-rack variants on the reference engine (T = 3,
+    converged: the verlet mode at 0.0025/8): what makes t* = A/(10B) small or large."""
+    out = []
+    for label, kw in GAIN_SWEEP:
+        def make(t, integ):
+            sc = scenes.build("plane-rack", dt=t, steps=int(round(T / t)), **kw)
+            sc.integrator = integ
+            return sc
+        conv = run_engine(make(min(T_STEPS) / REFINE, CONV_INTEGRATOR), "reference",
+                          "exact")["ends"][-1]
+        A, B = [], []
+        for t in ts:
+            for integ, store, power in (("euler", A, 1), ("verlet", B, 2)):
+                p = run_engine(make(t, integ), "reference", "exact")["ends"][-1]
+                store.append(float(np.linalg.norm(p - conv, axis=1).max()) / t ** power)
+        a, b = float(np.median(A)), float(np.median(B))
+        t_max = predict(make(ts[0], "euler"))["t_max"]
+        out.append({"label": label, "overrides": kw, "A": A, "B": B, "t_star": a / (VERLET_GAIN * b),
+                    "t_max": t_max, "t_star_over_t_max": a / (VERLET_GAIN * b) / t_max,
+                    "t": list(ts)})
+        echo(f"  gain sweep, plane-rack {label}: A {a:.3g} B {b:.3g} t* {a / (10 * b):.3g}")
+    return out
+
+
 def fast_front(rows: list) -> dict:
     """Is fast mode on the work-precision front? For each fast run: the speed-up over the
     cheapest exact run with a position error no larger (None: no exact run is that accurate,
@@ -274,10 +308,12 @@ def run_bench(out: Path | None = None, quick: bool = False, scenes_=None, echo=p
     t0 = time.perf_counter()
     names = scenes_ or ("plane-bound", "plane-rack", "magpod-small")
     results = [bench_scene(n, quick, echo) for n in names]
+    sweep = gain_sweep(echo) if scenes_ is None else []
     data = {"benchmark": "accuracy", "quick": quick, "machine": machine(),
             "converged_reference": f"reference engine, {CONV_INTEGRATOR} mode, at t = "
                                    f"{min(T_STEPS)}/{REFINE}",
-            "t_values": list(T_STEPS), "scenes": results, "wall_s": time.perf_counter() - t0}
+            "t_values": list(T_STEPS), "scenes": results, "gain_sweep": sweep,
+            "wall_s": time.perf_counter() - t0}
     write_json(out / "accuracy.json", data)
     (out / "accuracy.md").write_text(markdown(data))
     plot(data, out / "accuracy.png")
@@ -360,6 +396,15 @@ def markdown(data: dict) -> str:
                          f"t* = {c['t_star']:.2g} ({c['t_star_over_t_max']:.2f} of Eq. 5's "
                          f"predicted limit {c['t_max']:.3g}); fewer steps at equal accuracy: "
                          f"{sv}")
+    if data.get("gain_sweep"):
+        lines += ["", "What sets the gain (plane-rack variants, reference engine, T = 3; A and "
+                  "B at t = 0.01 and 0.005; t* = A/(10·B)):", "",
+                  md_table(["plane-rack", "A (Eq. 5: e₁/t)", "B (verlet: e₂/t²)", "t*",
+                            "Eq. 5's predicted limit", "t* / limit"],
+                           [[g["label"], ", ".join(f"{x:.3g}" for x in g["A"]),
+                             ", ".join(f"{x:.3g}" for x in g["B"]), f"{g['t_star']:.2g}",
+                             f"{g['t_max']:.3g}", f"{g['t_star_over_t_max']:.2g}"]
+                            for g in data["gain_sweep"]])]
     return "\n".join(lines) + "\n"
 
 

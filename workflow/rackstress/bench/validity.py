@@ -20,7 +20,8 @@ L-bracket) and each body model of :data:`MODELS` (``rack``, the paper's; ``rack+
    cantilever the effective Young's modulus from the tip deflection.
 
 Outputs ``validity.json``, ``validity.md`` (the correlation table, FEA convergence, moduli) and
-``validity.png`` (per case: FEA's η and each model's strain and paper measure side by side).
+``validity.png`` (per case: FEA's η and each model's strain and paper measure side by side, a
+blue cross on each panel's largest particle).
 ``--quick`` uses smaller bodies and coarser meshes (a test runs it).
 """
 from __future__ import annotations
@@ -95,6 +96,11 @@ def run_case(case: str, model: str, quick: bool = False, fea_ref=None, echo=prin
                                          virial=True)
         m["lammps_virial"] = compare.von_mises_6(info_f.pop("virial"))[idx]
         info_f["vs_exact"] = float(np.abs(pf - p).max())
+        # LAMMPS' virial against the binds' ½ Σ r ⊗ f (Eq. 12) at the same positions
+        vb = compare.bind_virial(scene, pf)[idx][cases.free_mask(scene)]
+        vl = m["lammps_virial"][cases.free_mask(scene)]
+        info_f["virial_vs_binds"] = float(np.nanmax(np.abs(vl - vb)) / np.nanmax(vb)) \
+            if np.nanmax(vb) > 0 else None
     except Exception as exc:   # fast mode not offered for this scene: say so, keep the rest
         info_f = {"error": str(exc)}
         m["lammps_virial"] = np.full(len(idx), np.nan)
@@ -120,6 +126,9 @@ def run_case(case: str, model: str, quick: bool = False, fea_ref=None, echo=prin
     out = {"case": case, "body": model, "n_particles": int(len(idx)), "dt": dt, "t_max": t_max,
            "equilibrium": info, "agreement": rows, "agreement_fit": fit_rows,
            "fields": {k: v[free].tolist() for k, v in m.items()}, "o": o[:, :2].tolist()}
+    if case == "l-bracket":
+        out["corner_over_band"] = {"strain": corner_over_band(scene, o, m["strain"][free]),
+                                   "fea": corner_over_band(scene, o, ref)}
     if case == "cantilever":
         out["E_eff"] = compare.effective_modulus(scene, p)
         out["bind_c"] = scene.params["bind_c"]
@@ -128,6 +137,20 @@ def run_case(case: str, model: str, quick: bool = False, fea_ref=None, echo=prin
          + " ".join(f"{k}: ρ={r['spearman']:.2f} top5={r['top5_overlap']:.2f} "
                     f"d={r['max_distance']:.1f}" for k, r in rows.items()))
     return out, fea_ref
+
+
+def corner_over_band(scene, o: np.ndarray, values: np.ndarray) -> float:
+    """L-bracket: the value at the re-entrant corner (largest over the particles nearest it,
+    0.71 spacings away) over the bending band's (median over the held leg's inner fibre,
+    i = w − 1, in the middle half of its free height): how strongly the corner concentrates."""
+    g = scene.params
+    corner = np.array([g["w"] - 0.5, g["H"] - g["w"] - 0.5])
+    r = np.linalg.norm(o[:, :2] - corner, axis=1)
+    at_corner = np.nanmax(values[r <= r.min() + 1e-9])
+    y0, y1 = g["n_clamp"], g["H"] - g["w"]
+    band = (np.abs(o[:, 0] - (g["w"] - 1)) < 1e-9) & (o[:, 1] > y0 + (y1 - y0) / 4) \
+        & (o[:, 1] < y0 + 3 * (y1 - y0) / 4)
+    return float(at_corner / np.nanmedian(values[band]))
 
 
 def fea_reference(solver, skw, points, quick: bool, densities=None) -> dict:
@@ -247,6 +270,17 @@ def report(data) -> str:
                                  f"{r['equilibrium']['steps']}, "
                                  f"{100 * r['fea_converged']['change']:.2f} %"
                                  for r in data["fine"]) + ".\n")
+    cb = [r for r in data["results"] + data.get("fine", []) if "corner_over_band" in r]
+    if cb:
+        lines.append("## The L-bracket's corner\n")
+        lines.append("Strain at the re-entrant corner (largest over the particles nearest it) "
+                     "over the bending band's (median over the held leg's inner fibre, middle "
+                     "half of its free height); FEA's von Mises strain the same way.\n")
+        lines.append(md_table(["spacing", "body", "body's corner / band", "FEA's corner / band"],
+                              [["½" if r in data.get("fine", []) else "1", r["body"],
+                                fmt(r["corner_over_band"]["strain"], 3),
+                                fmt(r["corner_over_band"]["fea"], 3)] for r in cb]))
+        lines.append("")
     lines.append("## FEA convergence (peak von Mises stress at the particle positions)\n")
     fr = []
     for case, s in data["fea"].items():
@@ -267,10 +301,13 @@ def report(data) -> str:
                    "yes" if e["at_rest"] else "no", fmt(e["max_displacement"], 3),
                    fmt(e.get("vs_reference"), 2),
                    fmt(fast.get("vs_exact"), 2) if "vs_exact" in fast else "not offered",
+                   fmt(fast.get("virial_vs_binds"), 2),
                    fmt(r.get("E_eff"), 4) if "E_eff" in r else ""])
     lines.append(md_table(["case", "body", "particles", "dt", "steps", "at rest",
                            "max displacement", "LAMMPS exact − reference (largest Δp)",
-                           "LAMMPS fast − exact (largest Δp)", "E_eff (tip deflection)"], er))
+                           "LAMMPS fast − exact (largest Δp)",
+                           "LAMMPS virial vs binds' (largest difference / largest)",
+                           "E_eff (tip deflection)"], er))
     lines.append("\nMeasured positions: LAMMPS exact mode, the same steps as the reference "
                  "engine's run to rest (their difference is round-off). The `lammps_virial` "
                  "rows: LAMMPS' own `compute stress/atom NULL virial` at the rest of a fast-mode "
@@ -309,6 +346,9 @@ def plot(data, path: Path) -> None:
                 title = f"{who}: {field}\nρ={a['spearman']:.2f} top5={a['top5_overlap']:.2f}"
             vmax = np.nanpercentile(v, 99) or 1.0
             ax.scatter(o[:, 0], o[:, 1], c=v, s=6, cmap="Reds", vmin=0, vmax=vmax)
+            if np.isfinite(v).any():          # the largest particle: where the maximum is
+                k = int(np.nanargmax(v))
+                ax.plot(o[k, 0], o[k, 1], "x", color="tab:blue", ms=7, mew=2)
             ax.set_aspect("equal")
             ax.set_xticks([])
             ax.set_yticks([])
