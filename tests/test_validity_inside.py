@@ -105,3 +105,36 @@ def test_lammps_virial_of_a_pulled_pair_by_hand():
     # Eq. 12's force at the harmonic rest differs from f by its linearization: c(d²−1)/d vs 2c(d−1)
     eq12 = c * (d * d - 1) / d
     assert compare.bind_virial(sc, p) == pytest.approx([0.5 * d * eq12] * 2, rel=1e-9)
+
+
+def test_toml_bind_inside_region(tmp_path):
+    """A TOML scene's bind with ``inside``: an L of 8 unit cells (3×3 minus the corner (2, 0))
+    has 17 neighbour pairs within 1.5; the diagonal (1, 0)–(2, 1) runs through the notch's
+    corner (1.5, 0.5), so 16 remain."""
+    from rackstress.errors import SceneError
+    from rackstress.scenes.toml import load_toml
+
+    pts = [[i, j, 0] for j in range(3) for i in range(3) if (i, j) != (2, 0)]
+    shape = ('{ difference = [{ box = { min = [-0.5, -0.5, -0.5], max = [2.5, 2.5, 0.5] } }, '
+             '{ box = { min = [1.5, -0.5, -0.5], max = [2.5, 0.5, 0.5] } }] }')
+
+    def scene(extra):
+        f = tmp_path / "l.toml"
+        f.write_text(f'name = "l"\ndt = 0.05\nsteps = 10\n[[group]]\nname = "l"\npositions = {pts}\n'
+                     'radius = 0.5\n[[operator]]\non = "l"\nop = "bind"\nfrom = "l"\nc = 20\n'
+                     + extra)
+        return load_toml(str(f))
+
+    def unordered(sc):
+        op = sc.operators["l"][0]
+        g = sc.groups["l"]
+        pl = op.pairs(g, g)
+        return {tuple(sorted((int(i), int(j)))) for i, j in zip(pl.i, pl.j)}, g.o
+
+    plain, o = unordered(scene("within = 1.5\n"))
+    inside, _ = unordered(scene(f"within = 1.5\ninside = {shape}\n"))
+    assert len(plain) == 17 and len(inside) == 16
+    (a, b), = plain - inside
+    assert sorted(map(tuple, o[[a, b], :2].tolist())) == [(1.0, 0.0), (2.0, 1.0)]
+    with pytest.raises(SceneError, match="inside"):
+        scene(f"inside = {shape}\n")                 # inside without within

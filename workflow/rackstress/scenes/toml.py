@@ -40,7 +40,8 @@ Two forms (``rackstress run FILE.toml``; ``--set KEY=VALUE`` overrides win over 
         contact = "sediment"           # optional: Contact condition
 
         # dampen: c, extra (c + extra while the conditions hold, Eq. 28)
-        # collide / bind / attract: from, c; bind: within = d (Eq. 16);
+        # collide / bind / attract: from, c; bind: within = d (Eq. 16), inside = { region }
+        #   (only pairs whose segment stays in the region: no binding across a notch);
         # attract: match = ["aregion", "breg{r}"] (index-matched regions, Eqs. 27-28)
 
         [[phase]]          # optional; default one phase "run" of ``steps`` iterations
@@ -111,7 +112,7 @@ _OP_KEYS = {
     "force": ("accel", "where"),
     "dampen": ("c", "extra"),
     "collide": ("from", "c"),
-    "bind": ("from", "c", "within"),
+    "bind": ("from", "c", "within", "inside"),
     "attract": ("from", "c", "match"),
 }
 
@@ -935,8 +936,14 @@ def _operator(c: _Ctx, kind: str, t: dict, on: str, groups: dict, when: tuple, p
         return Collide(src, Const(cc), when=when)
     if kind == "bind":
         if "within" in t:
-            return Bind(src, Within(_number(c, t["within"], "within", positive=True), cc),
-                        when=when)
+            d = _number(c, t["within"], "within", positive=True)
+            if "inside" in t:       # no binding across free space (WithinInside)
+                return Bind(src, ops_mod.WithinInside(d, cc, _region(c, t["inside"], "inside",
+                                                                     base)), when=when)
+            return Bind(src, Within(d, cc), when=when)
+        if "inside" in t:
+            raise c.error("'inside' restricts within(d)'s pairs to those whose segment stays "
+                          "in the part; give 'within' too", "inside")
         return Bind(src, Const(cc), when=when)
     # attract
     if "match" not in t:
