@@ -138,3 +138,22 @@ def test_toml_bind_inside_region(tmp_path):
     assert sorted(map(tuple, o[[a, b], :2].tolist())) == [(1.0, 0.0), (2.0, 1.0)]
     with pytest.raises(SceneError, match="inside"):
         scene(f"inside = {shape}\n")                 # inside without within
+
+
+def test_fea_square_material_reduces_to_isotropic_and_matches_beam_theory():
+    from rackstress.validity import fea
+
+    L, h, P, E, nu = 20.0, 1.0, 1e-3, 1.0, 0.3
+    iso = fea.cantilever(L, h, P, density=4, E=E, nu=nu)
+    C = (E / (1 - nu ** 2), nu * E / (1 - nu ** 2), E / (2 * (1 + nu)))   # plane stress
+    same = fea.cantilever(L, h, P, density=4, stiffness=C)
+    tip = np.array([[L, h / 2]])
+    assert same.at(tip)["uy"][0] == pytest.approx(iso.at(tip)["uy"][0], rel=1e-9)
+    # the square lattice's material (k = 2c = 40): E along x = C11 − C12²/C11 = 1.5k, G = C44 = k
+    k = 40.0
+    C11, C12, C44 = fea.square_lattice_stiffness(k)
+    assert (C11, C12, C44) == (2 * k, k, k)
+    lat = fea.cantilever(L, h, P, density=4, stiffness=(C11, C12, C44))
+    Ex, I = 1.5 * k, h ** 3 / 12
+    expected = P * L ** 3 / (3 * Ex * I) + P * L / (5 / 6 * C44 * h)       # Timoshenko
+    assert -lat.at(tip)["uy"][0] == pytest.approx(expected, rel=0.01)

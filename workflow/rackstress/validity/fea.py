@@ -14,6 +14,12 @@ Three planar bodies of unit thickness, quadratic triangles (P2), a direct sparse
   not converge, so every figure here is taken at given points (the particles' positions, at
   least half a lattice spacing from the corner), where it does.
 
+Material: isotropic (E, ν; plane stress) by default, or ``stiffness = (C11, C12, C44)``, a 2D
+material with square (cubic) symmetry along x and y — σxx = C11 εxx + C12 εyy, σyy = C12 εxx +
+C11 εyy, σxy = 2 C44 εxy — which is what a square lattice with nearest and diagonal bindings of
+equal stiffness k represents to first order (:func:`square_lattice_stiffness`: C11 = 2k,
+C12 = C44 = k per unit area), so the FEA can solve the lattice's own material.
+
 Every solver returns an :class:`FEAResult`; :meth:`FEAResult.at` interpolates displacement,
 small strain ε, plane-stress σ, the von Mises stress σ_vm = √(σxx² − σxxσyy + σyy² + 3σxy²) and
 the von Mises shear strain η of the particle measure (OVITO's definition, with ε_zz = 0 as the
@@ -59,6 +65,7 @@ class FEAResult:
     density: int
     mirror: bool = False
     info: dict = field(default_factory=dict)
+    stiffness: tuple | None = None
 
     def __post_init__(self):
         sb = self.basis.with_element(ElementTriP2())
@@ -128,9 +135,13 @@ class FEAResult:
         ux, uy = uv[: len(x)], uv[len(x):]
         if self.mirror:
             ux, uy, exy = ux * sx, uy * sy, exy * sx * sy
-        k = self.E / (1.0 - self.nu ** 2)
-        sxx, syy = k * (exx + self.nu * eyy), k * (eyy + self.nu * exx)
-        sxy = self.E / (1.0 + self.nu) * exy
+        if self.stiffness is not None:
+            C11, C12, C44 = self.stiffness
+            sxx, syy, sxy = C11 * exx + C12 * eyy, C12 * exx + C11 * eyy, 2 * C44 * exy
+        else:
+            k = self.E / (1.0 - self.nu ** 2)
+            sxx, syy = k * (exx + self.nu * eyy), k * (eyy + self.nu * exx)
+            sxy = self.E / (1.0 + self.nu) * exy
         return {"ux": ux, "uy": uy, "exx": exx, "eyy": eyy, "exy": exy,
                 "sxx": sxx, "syy": syy, "sxy": sxy,
                 "von_mises_stress": np.sqrt(sxx ** 2 - sxx * syy + syy ** 2 + 3 * sxy ** 2),
@@ -215,13 +226,49 @@ def _boundary(mesh, test):
     return mesh.facets_satisfying(test, boundaries_only=True)
 
 
-def _solve(mesh, E, nu, fixed, traction):
-    """Plane-stress linear elasticity; ``fixed`` = [(facets, components)], traction [(facets, t)]."""
+def square_lattice_stiffness(k: float) -> tuple:
+    """(C11, C12, C44) per unit area of a square lattice of spacing 1 whose nearest and diagonal
+    neighbours are joined by springs of stiffness k (first order; bind's k = 2c, Eq. 12).
+
+    Energy per particle ½ k Σ (n·ε·n)² L² over one axial bond each way and both diagonals
+    (L² = 2, n_x⁴ = n_x² n_y² = ¼): C11 = k + k, C12 = C44 = k. Along the axes E = C11 −
+    C12²/C11 = 1.5k and ν = C12/C11 = ½; the shear modulus C44 is twice an isotropic sheet's.
+
+    Example
+    -------
+    >>> square_lattice_stiffness(40.0)
+    (80.0, 40.0, 40.0)
+    """
+    return (2.0 * k, float(k), float(k))
+
+
+def _anisotropic(stiffness):
+    from skfem import BilinearForm
+    from skfem.helpers import sym_grad
+
+    C11, C12, C44 = (float(x) for x in stiffness)
+
+    @BilinearForm
+    def form(u, v, w):
+        eu, ev = sym_grad(u), sym_grad(v)
+        sxx = C11 * eu[0, 0] + C12 * eu[1, 1]
+        syy = C12 * eu[0, 0] + C11 * eu[1, 1]
+        sxy = 2.0 * C44 * eu[0, 1]
+        return sxx * ev[0, 0] + syy * ev[1, 1] + 2.0 * sxy * ev[0, 1]
+    return form
+
+
+def _solve(mesh, E, nu, fixed, traction, stiffness=None):
+    """Plane-stress linear elasticity; ``fixed`` = [(facets, components)], traction [(facets, t)].
+    ``stiffness``: (C11, C12, C44) of a square-symmetric 2D material instead of (E, ν)."""
     e = ElementVector(ElementTriP2())
     basis = Basis(mesh, e, intorder=4)
-    lam, mu = lame_parameters(E, nu)
-    lam = 2 * lam * mu / (lam + 2 * mu)    # plane stress
-    K = asm(linear_elasticity(lam, mu), basis)
+    if stiffness is not None:
+        K = asm(_anisotropic(stiffness), basis)
+    else:
+        lam, mu = lame_parameters(E, nu)
+        lam = 2 * lam * mu / (lam + 2 * mu)    # plane stress
+        K = asm(linear_elasticity(lam, mu), basis)
     f = np.zeros(basis.N)
     for facets, t in traction:
         fb = FacetBasis(mesh, e, facets=facets, intorder=4)
@@ -236,7 +283,8 @@ def _solve(mesh, E, nu, fixed, traction):
     return basis, solve(*condense(K, f, D=D))
 
 
-def cantilever(L, h, P, x0=0.0, y0=0.0, density=8, E=E_DEFAULT, nu=NU_DEFAULT) -> FEAResult:
+def cantilever(L, h, P, x0=0.0, y0=0.0, density=8, E=E_DEFAULT, nu=NU_DEFAULT,
+               stiffness=None) -> FEAResult:
     """Beam clamped at x = x0, total downward end load P on x = x0 + L (module docstring).
 
     Example
@@ -249,32 +297,36 @@ def cantilever(L, h, P, x0=0.0, y0=0.0, density=8, E=E_DEFAULT, nu=NU_DEFAULT) -
     tol = 1e-9 * max(L, h)
     clamp = _boundary(m, lambda x: np.abs(x[0] - x0) < tol)
     end = _boundary(m, lambda x: np.abs(x[0] - x0 - L) < tol)
-    basis, u = _solve(m, E, nu, [(clamp, (0, 1))], [(end, (0.0, -P / h))])
+    basis, u = _solve(m, E, nu, [(clamp, (0, 1))], [(end, (0.0, -P / h))], stiffness)
     return FEAResult("cantilever", m, basis, u, E, nu, density,
-                     info={"L": L, "h": h, "P": P, "x0": x0, "y0": y0})
+                     info={"L": L, "h": h, "P": P, "x0": x0, "y0": y0}, stiffness=stiffness)
 
 
-def plate_with_hole(a, W, sigma, density=8, E=E_DEFAULT, nu=NU_DEFAULT) -> FEAResult:
+def plate_with_hole(a, W, sigma, density=8, E=E_DEFAULT, nu=NU_DEFAULT,
+                    stiffness=None) -> FEAResult:
     """Plate [−W, W]² with a hole of radius a, tension σ along x (quarter model, mirrored)."""
     m = hole_quarter_mesh(a, W, density)
     tol = 1e-9 * W
     left = _boundary(m, lambda x: np.abs(x[0]) < tol)
     bottom = _boundary(m, lambda x: np.abs(x[1]) < tol)
     right = _boundary(m, lambda x: np.abs(x[0] - W) < tol)
-    basis, u = _solve(m, E, nu, [(left, (0,)), (bottom, (1,))], [(right, (sigma, 0.0))])
+    basis, u = _solve(m, E, nu, [(left, (0,)), (bottom, (1,))], [(right, (sigma, 0.0))],
+                      stiffness)
     return FEAResult("plate-hole", m, basis, u, E, nu, density, mirror=True,
-                     info={"a": a, "W": W, "sigma": sigma})
+                     info={"a": a, "W": W, "sigma": sigma}, stiffness=stiffness)
 
 
-def l_bracket(w, H, Lx, P, density=8, E=E_DEFAULT, nu=NU_DEFAULT) -> FEAResult:
+def l_bracket(w, H, Lx, P, density=8, E=E_DEFAULT, nu=NU_DEFAULT,
+              stiffness=None) -> FEAResult:
     """The L of the module docstring: fixed along y = 0, downward end load P on x = Lx."""
     m = l_mesh(w, H, Lx, density)
     tol = 1e-9 * max(H, Lx)
     base = _boundary(m, lambda x: np.abs(x[1]) < tol)
     end = _boundary(m, lambda x: np.abs(x[0] - Lx) < tol)
-    basis, u = _solve(m, E, nu, [(base, (0, 1))], [(end, (0.0, -P / w))])
+    basis, u = _solve(m, E, nu, [(base, (0, 1))], [(end, (0.0, -P / w))], stiffness)
     return FEAResult("l-bracket", m, basis, u, E, nu, density,
-                     info={"w": w, "H": H, "Lx": Lx, "P": P, "corner": (w, H - w)})
+                     info={"w": w, "H": H, "Lx": Lx, "P": P, "corner": (w, H - w)},
+                     stiffness=stiffness)
 
 
 def refinement_study(solver, points, densities=(4, 8, 16), **kw) -> dict:
@@ -294,5 +346,6 @@ def refinement_study(solver, points, densities=(4, 8, 16), **kw) -> dict:
 
 
 __all__ = ["FEAResult", "cantilever", "plate_with_hole", "l_bracket", "refinement_study",
+           "square_lattice_stiffness",
            "von_mises_strain_2d", "rectangle_mesh", "l_mesh", "hole_quarter_mesh", "skfem",
            "CONVERGED", "E_DEFAULT", "NU_DEFAULT"]
