@@ -174,7 +174,10 @@ def own_material(results: list, quick: bool, echo=print) -> list:
                                             ref["fields"]["von_mises_strain"], o)
                     for name in ("strain", "virial", "lammps_virial")}
             out.append({"case": case, "body": r["body"], "stiffness": C, "agreement": rows,
-                        "fea_change": ref["change"], "densities": ref["densities"]})
+                        "fea_change": ref["change"], "densities": ref["densities"],
+                        # the lattice material's cantilever modulus from its tip deflection
+                        # (FEA, E = 1 there, so the ratio is the modulus itself)
+                        "E_eff_fea": ref.get("E_eff_over_E"), "E_eff_lattice": r.get("E_eff")})
             echo(f"  own material {case:10s} {r['body']:12s} strain: "
                  f"ρ={rows['strain']['spearman']:.2f} top5={rows['strain']['top5_overlap']:.2f} "
                  f"d={rows['strain']['max_distance']:.1f}")
@@ -298,6 +301,13 @@ def report(data) -> str:
                             fmt(a["top5_overlap"], 2), fmt(a["max_distance"], 2),
                             ("**yes**" if name == "strain" else "yes") if meets(a) else "no"])
         lines.append(md_table(HEADER, fr4))
+        ce = next((r for r in data["lattice_material"] if r.get("E_eff_fea")), None)
+        if ce:
+            lines.append(f"\nCantilever modulus from the tip deflection (E = PL³/3Iδ): the "
+                         f"lattice {fmt(ce['E_eff_lattice'], 4)}, FEA of its first-order "
+                         f"material {fmt(ce['E_eff_fea'], 4)} (E = 1.5k = "
+                         f"{fmt(1.5 * ce['stiffness'][1], 4)} along x, plus the shear and "
+                         "clamp terms).")
         lines.append("")
     if data.get("fine"):
         lines.append("## The same bodies at half the spacing\n")
