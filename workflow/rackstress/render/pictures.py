@@ -746,6 +746,7 @@ def render_default(rundir, progress: bool = False) -> RenderReport:
     t0 = time.perf_counter()
     rep = render(rundir, progress=progress)
     wall = time.perf_counter() - t0
+    record_render(Path(rundir), rep, wall)          # first, so that the report shows it
     t = time.perf_counter()
     rep.report = write_report(rundir)
     rep.timings["report_s"] = time.perf_counter() - t
