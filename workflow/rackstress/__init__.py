@@ -4,11 +4,11 @@ The data flows one way: scene → deck → run → dump → stress → pictures.
 """
 from rackstress.errors import DivergenceError, RackstressError, SceneError
 from rackstress.model.operators import (Attract, Bind, Collide, Const, Contact, Dampen, Force, Matched, PhaseIn,
-                        Within)
+                        Within, WithinInside)
 from rackstress.model.particles import Group, lattice, rack
 from rackstress.model.scene import Phase, Scene
 
 __version__ = "0.1.0"
 __all__ = ["Attract", "Bind", "Collide", "Const", "Contact", "Dampen", "DivergenceError",
            "Force", "Group", "Matched", "Phase", "PhaseIn", "RackstressError", "Scene",
-           "SceneError", "Within", "lattice", "rack"]
+           "SceneError", "Within", "WithinInside", "lattice", "rack"]
