@@ -157,3 +157,24 @@ def test_fea_square_material_reduces_to_isotropic_and_matches_beam_theory():
     Ex, I = 1.5 * k, h ** 3 / 12
     expected = P * L ** 3 / (3 * Ex * I) + P * L / (5 / 6 * C44 * h)       # Timoshenko
     assert -lat.at(tip)["uy"][0] == pytest.approx(expected, rel=0.01)
+
+
+def test_fingerprint_sees_the_shape_a_bind_stays_inside():
+    """--resume must refuse a scene whose bind-inside region changed: the region (a union of
+    boxes, hashed by its description) is part of the operators' fingerprint."""
+    from rackstress.model.operators import Bind
+    from rackstress.runs.fingerprint import fingerprint
+
+    a = cases.l_bracket(body="bind-inside", w=4, H=12, lx=10)
+    b = cases.l_bracket(body="bind-inside", w=4, H=12, lx=10)
+    k = next(i for i, op in enumerate(b.operators["body"]) if isinstance(op, Bind))
+    op = b.operators["body"][k]
+    shape = op.coeff.region
+    wider = type(shape)((shape.parts[0], Box((-0.5, 7.0, -0.5), (9.5, 11.5, 0.5))))
+    b.operators["body"][k] = Bind(op.source, WithinInside(op.coeff.d, op.coeff.c, wider))
+    fa = fingerprint(a, engine="lammps", mode="exact", dump_every=10)
+    fb = fingerprint(b, engine="lammps", mode="exact", dump_every=10)
+    assert sorted(key for key in fa if fa[key] != fb[key]) == ["operators:body"]
+    same = fingerprint(cases.l_bracket(body="bind-inside", w=4, H=12, lx=10), engine="lammps",
+                       mode="exact", dump_every=10)
+    assert same == fa
