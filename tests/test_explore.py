@@ -287,6 +287,10 @@ def test_run_reports_one_peak_everywhere(plane_run):
     summary = json.loads((rundir / "summary.json").read_text())
     pk = summary["groups"]["plane"]["peak"]["paper"]
     assert f"peak paper = {pk['value']:.4g}" in output
+    st = summary["groups"]["plane"]["peak"]["strain"]
+    assert (f"plane        peak paper={pk['value']:.4g} (iteration {pk['iteration']}, particle "
+            f"{pk['particle']}); strain={st['value']:.4g} (iteration {st['iteration']}, "
+            f"particle {st['particle']})") in output
     # the pulled corner, early in the run (plane-rack peaks while the corner is pulled up)
     assert pk["iteration"] < 75 and np.linalg.norm(pk["original"]) < math.sqrt(10)
     # pictures: the peak frame is among the default frames and the scale covers it

@@ -302,7 +302,9 @@ def add_to_summary(summary_path: Path, info: dict) -> dict:
 
 
 def describe(info: dict) -> list:
-    """Lines for the terminal: the overall peak and the peak of the paper measure per group."""
+    """Lines for the terminal: the overall peak, and per group the peaks of the paper measure
+    and of the strain (the hot-spot measure of an elastic body, README "What the picture
+    means")."""
     lines = []
     pk = info.get("peak")
     if pk:
@@ -310,10 +312,10 @@ def describe(info: dict) -> list:
                      f"at iteration {pk['iteration']}, particle {pk['particle']} at "
                      f"({', '.join(f'{x:.3g}' for x in pk['position'])})")
     for name, rec in info["groups"].items():
-        p = rec.get("paper")
-        if p is not None:
-            lines.append(f"  {name:12s} peak paper={p['value']:.4g} (iteration {p['iteration']}, "
-                         f"particle {p['particle']})")
+        shown = [f"{m}={p['value']:.4g} (iteration {p['iteration']}, particle {p['particle']})"
+                 for m in ("paper", "strain") if (p := rec.get(m)) is not None]
+        if shown:
+            lines.append(f"  {name:12s} peak " + "; ".join(shown))
     for key, path in info["files"].items():
         lines.append(f"  {key}: {path}")
     return lines
