@@ -156,3 +156,22 @@ def test_lammps_verlet_equals_the_reference_verlet_across_phase_switches():
     assert moved > 0.1
     for r, m in zip(ref, lmp):
         assert np.abs(r - m).max() <= 1e-10
+
+
+def test_verlet_on_lammps_warns_of_the_lagged_contact_damping():
+    """Eq. 28's contact damping acts on MagPod's two legs only (Section 4): the verlet mode on
+    LAMMPS reports exactly those; Eq. 5, the reference engine and scenes without a conditional
+    damping get no warning."""
+    import dataclasses
+
+    from rackstress import scenes
+    from rackstress.engines.guards import verlet_lag
+
+    mp = scenes.build("magpod-small")
+    verlet = dataclasses.replace(mp, integrator="verlet")
+    (w,) = verlet_lag(verlet, "lammps")
+    assert w["kind"] == "verlet_lagged_damping" and w["groups"] == ["leftleg", "rightleg"]
+    assert "--engine reference" in w["message"]
+    assert verlet_lag(verlet, "reference") == [] and verlet_lag(mp, "lammps") == []
+    plane = dataclasses.replace(scenes.build("plane-rack"), integrator="verlet")
+    assert verlet_lag(plane, "lammps") == []

@@ -213,7 +213,7 @@ def execute(scene: Scene, out: Path, engine: str, mode: str, dump_every: int, *,
     if root:   # guard rails: pass-through, force on racks (engines/guards.py)
         from rackstress.engines.guards import check_run
 
-        extra["warnings"] = check_run(scene, out)
+        extra["warnings"] = check_run(scene, out, engine=engine)
     summary = summarize(scene, engine, mode, p_end, steps, wall, status, error, extra)
     on_root(lambda: write_json(Path(out) / "summary.json", summary), comm)
     if error is not None:
