@@ -339,8 +339,11 @@ class Overlaps:
             return hit
         cut = self._reach(A) + self._reach(B) + self.skin
         ia, ib = fr.seen(A), fr.seen(B)
-        a, b = contact_candidates(fr.x[ia], fr.x[ib], cut, same=A == B)
-        a, b = ia[a], ib[b]
+        if self.k is not None:      # a compiled cell list, pairs in one order (by row)
+            a, b = self.k.candidates(fr.x, ia, ib, cut, A == B)
+        else:
+            a, b = contact_candidates(fr.x[ia], fr.x[ib], cut, same=A == B)
+            a, b = ia[a], ib[b]
         R2 = (self.radius[fr.index[a]] + self.radius[fr.index[b]]) ** 2
         if self.activate is not None:
             self.activate(fr, a)
@@ -358,14 +361,14 @@ class Overlaps:
         A, B = (s, t) if t.start > s.start else (t, s)
         a, b, R2 = self._candidates(fr, A, B)
         if self.k is not None:
-            on, d2 = self.k.touching(fr.x, a, b, R2)
+            a, b, R2, k = self.k.overlapping(fr.x, a, b, R2)
         else:
             diff = fr.x[b] - fr.x[a]
             d2 = rowdot(diff, diff)
             on = Collide.touching(d2, R2)
-        a, b, d2, R2 = a[on], b[on], d2[on], R2[on]
-        if len(d2) and not d2.all():
-            k = int(np.flatnonzero(d2 == 0.0)[0])
+            a, b, d2, R2 = a[on], b[on], d2[on], R2[on]
+            k = int(np.flatnonzero(d2 == 0.0)[0]) if len(d2) and not d2.all() else -1
+        if k >= 0:
             raise PartnerLost(f"{name}: particles {int(fr.index[a[k]])} and "
                               f"{int(fr.index[b[k]])} coincide (Eq. 10 is undefined at d = 0)",
                               int(fr.index[a[k]]))
@@ -445,10 +448,15 @@ class CollideTerm(Term):
         if not self.forces.holds(fr, self):
             return
         a, b, R2 = self.forces.overlaps.pairs(fr, self.sl, self.s, f"collide on {self.target}")
-        if len(a):
-            k = self.forces.compiled
-            fr.add(a, k.collide(fr.x, a, b, R2, self.c) if k is not None
-                   else Collide.accel(fr.x[a], fr.x[b], self.c, R2))
+        if not len(a):
+            return
+        F, k = self.forces, self.forces.compiled
+        if k is not None and fr.identity:   # straight into the accumulators
+            k.collide_add(fr.x, a, b, R2, self.c, acc, fr.acc_rows, F.sacc, F.sflag,
+                          F.stouched, F.snt)
+            return
+        fr.add(a, k.collide(fr.x, a, b, R2, self.c) if k is not None
+               else Collide.accel(fr.x[a], fr.x[b], self.c, R2))
 
 
 class BindTerm(Term):
@@ -555,6 +563,15 @@ class PyForces:
         self._fresh = True
         self.frame = None
         self._sparse_rows = np.zeros(0, dtype=np.int64)   # f rows written sparsely last step
+        if self.compiled is not None:
+            # compiled serial path: the sparse (collide-only) rows' accelerations, which of
+            # them this step touched, and the f rows written last step
+            self.sacc = np.zeros((self.n, 3))
+            self.sflag = np.zeros(self.n, dtype=np.bool_)
+            self.stouched = np.zeros(self.n, dtype=np.int64)
+            self.snt = np.zeros(1, dtype=np.int64)
+            self._last = np.zeros(self.n, dtype=np.int64)
+        self._nlast = 0
         # LAMMPS' own displacement check keeps the per-layout memos valid (Overlaps); with any
         # other neighbour settings every step starts from scratch
         self.verlet = (lmp.extract_setting("neigh_every") == 1
@@ -696,6 +713,7 @@ class PyForces:
             if fr is not old:
                 f[:] = 0.0
                 self._sparse_rows = self._sparse_rows[:0]
+                self._nlast = 0
                 if self._scan_moving:
                     self._activate_moving(fr)
             acc = np.zeros((fr.acc_rows, 3))
@@ -703,7 +721,12 @@ class PyForces:
                 term.add(fr, acc)
             fr.flush(acc)
             f[fr.dense_rows] = acc * fr.dense_mass
-            self._write_sparse(fr, f)
+            if self.compiled is not None and fr.identity:
+                self._nlast = self.compiled.write_sparse(f, self._last, self._nlast, self.sacc,
+                                                         self.sflag, self.stouched, self.snt,
+                                                         self.mass)
+            else:
+                self._write_sparse(fr, f)
         except Exception as exc:  # noqa: BLE001 - reported by the runner after the chunk
             self._fail_here = exc
 
