@@ -101,13 +101,14 @@ def warm() -> dict:
     k.touching(x, r, s, np.full(2, 4.0))
     k.collide(x, r, s, np.full(2, 4.0), 3.0)
     k.dampen(np.ones((3, 3)), r, r, 2.0, acc)
-    k.candidates(x, r, s, 2.0, False)
+    k.candidates(x, r, s, 2.0, False, np.arange(3))
     k.overlapping(x, r, s, np.full(2, 4.0))
     flag, nt = np.zeros(3, np.bool_), np.zeros(1, np.int64)
     k.collide_add(x, r, s, np.full(2, 4.0), 3.0, acc, 1, np.zeros((3, 3)), flag,
                   np.zeros(3, np.int64), nt)
     k.write_sparse(np.zeros((3, 3)), np.zeros(3, np.int64), 0, np.zeros((3, 3)), flag,
-                   np.zeros(3, np.int64), nt, np.ones(3))
+                   np.zeros(3, np.int64), nt, np.ones(3),
+                   np.arange(3))
     seconds = time.perf_counter() - t0
     if first and os.environ.get("PMI_RANK", "0") == "0":
         print(f"rackstress: kernels compiled in {seconds:.1f} s", file=sys.stderr, flush=True)
@@ -220,9 +221,10 @@ if nb is not None:
 
 
     @nb.njit(**_OPTS)
-    def candidates(x, ia, ib, cut, same):
+    def candidates(x, ia, ib, cut, same, index):
         """Rows (a in ia, b in ib) closer than ``cut`` (d² ≤ cut², as
-        :func:`~rackstress.model.operators.contact_candidates`), sorted by (a, b): a cell list
+        :func:`~rackstress.model.operators.contact_candidates`), sorted by the particles
+        (``index`` of a row) of (a, b), whatever the rows' layout: a cell list
         over the part of ``ib`` inside the bounding box of ``ia`` grown by ``cut``. ``same``:
         one group, both orders of every pair, never a row with itself."""
         empty = np.zeros(0, np.int64)
@@ -317,14 +319,14 @@ if nb is not None:
                                 ob[n] = b
                                 n += 1
         oa, ob = oa[:n], ob[:n]
-        # one order whatever the rows' layout: by (a, b)
+        # one order whatever the rows' layout: by the particles of (a, b)
         key = np.empty(n, np.int64)
         span = 0
         for k in range(n):
-            if ob[k] >= span:
-                span = ob[k] + 1
+            if index[ob[k]] >= span:
+                span = index[ob[k]] + 1
         for k in range(n):
-            key[k] = oa[k] * span + ob[k]
+            key[k] = index[oa[k]] * span + index[ob[k]]
         s = np.argsort(key)
         return oa[s], ob[s]
 
@@ -374,9 +376,10 @@ if nb is not None:
                 sacc[i, 2] += w * d2_
 
     @nb.njit(**_OPTS)
-    def write_sparse(f, last, nlast, sacc, flag, touched, nt, mass):
+    def write_sparse(f, last, nlast, sacc, flag, touched, nt, mass, index):
         """f rows outside the dense accumulator: last step's zeroed, this step's = sacc·m
-        (then sacc cleared); returns how many rows were written (they become ``last``)."""
+        (``mass`` of particle ``index[row]``; then sacc cleared); returns how many rows were
+        written (they become ``last``)."""
         for k in range(nlast):
             r = last[k]
             f[r, 0] = 0.0
@@ -385,7 +388,7 @@ if nb is not None:
         n = 0
         for k in range(nt[0]):
             r = touched[k]
-            m = mass[r]
+            m = mass[index[r]]
             f[r, 0] = sacc[r, 0] * m
             f[r, 1] = sacc[r, 1] * m
             f[r, 2] = sacc[r, 2] * m

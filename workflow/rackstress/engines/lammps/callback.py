@@ -57,15 +57,22 @@ class Frame:
     step (:meth:`refresh`).
     """
 
-    def __init__(self, lmp, n_total: int, nlocal: int, dense_span: int, mass: np.ndarray):
+    def __init__(self, lmp, n_total: int, nlocal: int, dense_span: int, mass: np.ndarray,
+                 span: int | None = None):
         nghost = lmp.extract_global("nghost")
         nall = nlocal + nghost
         self.nlocal, self.nghost, self.n_total = nlocal, nghost, n_total
         tag = lmp.numpy.extract_atom("id")[:nall]
-        #: serial with unsorted atoms: row k holds particle k, so look-ups can be skipped
-        self.identity = (nlocal == n_total and nall == n_total
-                         and bool(np.array_equal(tag, np.arange(1, n_total + 1))))
-        self.index = np.arange(n_total) if self.identity else tag.astype(np.int64) - 1
+        #: serial, and row k holds particle k for every k below ``span`` (all particles, or
+        #: those before the passive groups, whose rows LAMMPS reorders as they become active:
+        #: ``atom_modify first``), so look-ups can be skipped there
+        span = n_total if span is None else span
+        self.identity = (nlocal == n_total and nall == n_total and dense_span <= span
+                         and bool(np.array_equal(tag[:span], np.arange(1, span + 1))))
+        self.span = span if self.identity else 0
+        full = self.identity and (span == n_total or bool(np.array_equal(
+            tag[span:], np.arange(span + 1, n_total + 1))))
+        self.index = np.arange(n_total) if full else tag.astype(np.int64) - 1
         self._row = self._local = None
         #: per-layout results of the terms (selected pairs, candidates, owned rows)
         self.memo = {}
@@ -160,16 +167,20 @@ class Frame:
         """Rows among the first ``upto`` (all: None) whose particle lies in ``sl`` (memoized)."""
         key = (kind, sl.start, sl.stop)
         if key not in self.memo:
-            if self.identity:
+            if self.ident(sl):
                 self.memo[key] = np.arange(sl.start, sl.stop)
             else:
                 idx = self.index[:upto]
                 self.memo[key] = np.flatnonzero((idx >= sl.start) & (idx < sl.stop))
         return self.memo[key]
 
+    def ident(self, sl: slice) -> bool:
+        """Whether the rows of the particles in ``sl`` are their indices."""
+        return sl.stop <= self.span
+
     def rows(self, name, I, J):
         """Rows of the particles I and J here; raise if a partner is not visible on this rank."""
-        if self.identity:
+        if self.identity and (not len(I) or max(I.max(), J.max()) < self.span):
             return I, J
         ri, rj = self.row[I], self.row[J]
         if len(ri) and min(ri.min(), rj.min()) < 0:
@@ -213,12 +224,13 @@ class PairTerm:
 
     def _add_block(self, fr: Frame, acc: np.ndarray):
         ts, ss = self.block
-        if fr.identity and self.k is not None:     # rows are particles: one compiled pass
+        here = fr.ident(ts) and fr.ident(ss)
+        if here and self.k is not None:     # rows are particles: one compiled pass
             cIT, cJT = self._full
             self.k.bind_block(fr.x, ts.start, ts.stop - ts.start, ss.start, ss.stop - ss.start,
                               self._qT, cIT, cJT, self._cJT is not None, acc)
             return
-        if fr.identity:
+        if here:
             xt, xs = fr.x[ts], fr.x[ss]
         else:
             # under MPI every rank that owns a particle of either group evaluates the whole
@@ -232,7 +244,7 @@ class PairTerm:
         w = self.factor(d[0] * d[0] + d[1] * d[1] + d[2] * d[2], self._qT)  # without c
         for k in range(3):
             g = w * d[k]
-            if fr.identity:
+            if here:
                 acc[ts, k] += (self._cIT * g).sum(axis=0)
                 if self._cJT is not None:
                     acc[ss, k] -= (self._cJT * g).sum(axis=1)
@@ -318,8 +330,11 @@ class Overlaps:
     both directions and by the contact conditions (Eq. 28's damping) of the same two groups.
     """
 
-    def __init__(self, radius: np.ndarray, skin: float, compiled=None, activate=None):
+    def __init__(self, radius: np.ndarray, skin: float, compiled=None, activate=None,
+                 passive=None):
         self.radius, self.skin, self.k = radius, skin, compiled
+        #: which particles belong to passive groups (activated when first within reach)
+        self.passive = np.zeros(len(radius), dtype=bool) if passive is None else passive
         #: called with the candidate rows of every new list (a resting particle that may be
         #: touched before the next reneighbouring must be integrated from now on)
         self.activate = activate
@@ -338,18 +353,37 @@ class Overlaps:
         if hit is not None:
             return hit
         cut = self._reach(A) + self._reach(B) + self.skin
-        ia, ib = fr.seen(A), fr.seen(B)
-        if self.k is not None:      # a compiled cell list, pairs in one order (by row)
-            a, b = self.k.candidates(fr.x, ia, ib, cut, A == B)
-        else:
-            a, b = contact_candidates(fr.x[ia], fr.x[ib], cut, same=A == B)
-            a, b = ia[a], ib[b]
-        R2 = (self.radius[fr.index[a]] + self.radius[fr.index[b]]) ** 2
-        if self.activate is not None:
+        wide = self.activate is not None and self._passive(A, B)
+        a, b = self._search(fr, A, B, cut + self.skin if wide else cut)
+        if wide:
+            # resting particles join the moving group one reneighbouring early (within reach
+            # + 2 skins), so LAMMPS has put them among the integrated rows (atom_modify first)
+            # before anything can touch them; the contact candidates are those within cut
             self.activate(fr, a)
             self.activate(fr, b)
+            diff = fr.x[b] - fr.x[a]
+            near = rowdot(diff, diff) <= cut * cut
+            a, b = a[near], b[near]
+        R2 = (self.radius[fr.index[a]] + self.radius[fr.index[b]]) ** 2
         hit = fr.memo[key] = (a, b, R2)
         return hit
+
+    def _passive(self, A: slice, B: slice) -> bool:
+        key = ("passive", A.start, B.start)
+        if key not in self._rmax:
+            self._rmax[key] = bool(self.passive[A].any() or self.passive[B].any())
+        return self._rmax[key]
+
+    def _search(self, fr: Frame, A: slice, B: slice, cut: float):
+        """Rows (a in A, b in B, owned or ghost) within ``cut``, ordered by their particles
+        (the same sums whatever the rows' layout)."""
+        ia, ib = fr.seen(A), fr.seen(B)
+        if self.k is not None:      # a compiled cell list
+            return self.k.candidates(fr.x, ia, ib, cut, A == B, fr.index)
+        a, b = contact_candidates(fr.x[ia], fr.x[ib], cut, same=A == B)
+        a, b = ia[a], ib[b]
+        order = np.lexsort((fr.index[b], fr.index[a]))
+        return a[order], b[order]
 
     def pairs(self, fr: Frame, t: slice, s: slice, name: str = "collide"):
         """Row pairs (a, b) overlapping now, a owned here in ``t``, b seen here in ``s``, with
@@ -544,7 +578,19 @@ class PyForces:
         self.move_bit = self._move_bit(lmp, deck) if self.passive.any() else None
         self._scan_moving = self.move_bit is not None   # once: a resumed run's moving ones
         self.overlaps = Overlaps(self.radius, deck.skin, self.compiled,
-                                 self._activate if self.move_bit is not None else None)
+                                 self._activate if self.move_bit is not None else None,
+                                 self.passive)
+        #: rows below this are particles (serial): every group before the passive ones, which
+        #: LAMMPS keeps first (they are never reordered) when the passive groups come last
+        first_passive = min((self.scene.offset(g) for g in getattr(deck, "passive", ())),
+                            default=self.n)
+        self.span = first_passive if not self.passive[:first_passive].any() and \
+            self.passive[first_passive:].all() else 0
+        #: LAMMPS integrates only its first ``nfirst`` rows (atom_modify first); a force on a
+        #: later row (a passive particle activated too late) would be lost: (step, particle)
+        self.nfirst = self.n
+        self.late = None
+        self.activated_late = False
         python = deck.python_ops
         here = {r.site for r in python}
         #: reverse place of every bind here whose reverse is here too; folded[rev] = carrier
@@ -591,6 +637,9 @@ class PyForces:
         own = own[self.passive[fr.index[own]]]
         if len(own):
             mask = self.lmp.numpy.extract_atom("mask")
+            new = own[(mask[own] & self.move_bit) == 0]
+            if len(new) and new.max() >= self.nfirst:
+                self.activated_late = True   # integrated from LAMMPS' next reordering on
             mask[own] |= self.move_bit
 
     def _activate_moving(self, fr: Frame) -> None:
@@ -666,10 +715,15 @@ class PyForces:
     def _frame(self, nlocal: int) -> Frame:
         """This step's frame: the last one refreshed, or a new layout after a reneighbouring."""
         lmp, fr = self.lmp, self.frame
-        if (fr is None or self._fresh or not self.verlet or fr.nlocal != nlocal
-                or lmp.extract_setting("neigh_ago") == 0
+        ago = lmp.extract_setting("neigh_ago")
+        if (fr is None or self._fresh or not self.verlet or fr.nlocal != nlocal or ago == 0
                 or lmp.extract_global("nghost") != fr.nghost):
-            fr = self.frame = Frame(lmp, self.n, nlocal, self.dense_span, self.mass)
+            if self.move_bit is not None and (ago == 0 or self._fresh):
+                # LAMMPS has just reordered (atom_modify first): the moving group's rows
+                # come first, and only they are integrated until it reorders again
+                off = (lmp.numpy.extract_atom("mask")[:nlocal] & self.move_bit) == 0
+                self.nfirst = int(off.argmax()) if off.any() else nlocal
+            fr = self.frame = Frame(lmp, self.n, nlocal, self.dense_span, self.mass, self.span)
         else:
             fr.refresh()
         return fr
@@ -724,9 +778,15 @@ class PyForces:
             if self.compiled is not None and fr.identity:
                 self._nlast = self.compiled.write_sparse(f, self._last, self._nlast, self.sacc,
                                                          self.sflag, self.stouched, self.snt,
-                                                         self.mass)
+                                                         self.mass, fr.index)
+                written = self._last[:self._nlast]
             else:
                 self._write_sparse(fr, f)
+                written = self._sparse_rows
+            if self.move_bit is not None and len(written) and written.max() >= self.nfirst:
+                # a force on a row LAMMPS does not integrate yet: exactness would be lost
+                r = int(written[written >= self.nfirst][0])
+                self.late = (int(self.lmp.extract_global("ntimestep")), int(fr.index[r]))
         except Exception as exc:  # noqa: BLE001 - reported by the runner after the chunk
             self._fail_here = exc
 

@@ -38,10 +38,16 @@ Active particles: a *passive* group (:func:`passive_groups`: at rest, moved only
 the callback evaluates, and damped — MagPod's sediment) is left out of the group ``rs_move``
 that ``fix nve`` and ``fix viscous`` act on. A particle of it has zero velocity and zero force
 until a collision partner comes within reach, and Eq. 5 does not move such a particle, so
-skipping it is exact. The callback adds it to ``rs_move`` (its group bit in LAMMPS' per-atom
-mask) as soon as its Verlet list holds a candidate pair with it — found when LAMMPS reneighbours,
-before any force can act on it — and for good (a touched particle keeps moving); a run resumed
-from a checkpoint re-adds every passive particle that is moving.
+skipping it is exact. ``atom_modify first rs_move`` makes LAMMPS keep the group's atoms first in
+its arrays (it reorders them when it reneighbours) and ``fix nve`` loop over those rows only, so
+the resting ones cost nothing there. The callback adds a passive particle to ``rs_move`` (its
+group bit in LAMMPS' per-atom mask), for good, as soon as a partner comes within reach + 2 skins
+when LAMMPS reneighbours: one reneighbouring before anything can touch it, so LAMMPS has reordered
+it among the integrated rows by then. A particle touched at the start is reordered by a second
+``run 0``; a force on a row LAMMPS does not integrate yet (a particle that moved more than a skin
+between two reneighbourings) stops the run with an error rather than lose exactness. A run
+resumed from a checkpoint re-adds every passive particle that is moving. Atom ids stay the
+particles' ids (dumps, checkpoints and gathers go by id).
 """
 from __future__ import annotations
 
@@ -148,7 +154,10 @@ class Deck:
                   "# and writes the same atom positions in every frame as 'rackstress run'."]
         L += ["units lj", "dimension 3", "boundary m m m"]
         L.append("atom_style bond")
-        L.append("atom_modify map array sort 0 0.0")
+        # passive groups: LAMMPS keeps the moving group's atoms first in its arrays and
+        # fix nve integrates only those rows (module doc, "Active particles")
+        first = f" first {MOVE_GROUP}" if self.passive else ""
+        L.append(f"atom_modify map array sort 0 0.0{first}")
         if self.bonds is not None:
             # A rack bonded to thousands of hosts: keep LAMMPS from building 1-3/1-4 lists.
             L.append("special_bonds lj/coul 1.0 1.0 1.0")

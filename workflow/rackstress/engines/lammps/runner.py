@@ -250,9 +250,42 @@ class LammpsRun:
             self.command(cmd)
         self._toggle_callback(phase_vars)
         for cmd in cmds[run0:]:
-            self.command(cmd)
+            if cmd == "run 0 post no":
+                self._run0()
+            else:
+                self.command(cmd)
         self._check_callback()
         self._phase = dict(phase_vars)
+
+    def _run0(self) -> None:
+        """``run 0 post no`` (forces at the current state). If the callback activated resting
+        particles there (Deck.passive) that LAMMPS has not yet put among its integrated first
+        rows (``atom_modify first``), once more: LAMMPS reorders them, and the forces, from the
+        same positions and velocities, are the same."""
+        py = self.py
+        if py is not None:
+            py.activated_late, py.late = False, None
+        self.command("run 0 post no")
+        if py is None or not self.comm.allreduce(py.activated_late or py.late is not None):
+            return
+        py.activated_late, py.late = False, None
+        self.command("run 0 post no")
+        self._check_late()
+
+    def _check_late(self) -> None:
+        """Stop if a force reached a resting particle LAMMPS did not yet integrate (Deck.passive):
+        it would have moved. Activation one reneighbouring early (within reach + 2 skins) rules
+        this out unless a particle moves more than a skin between two reneighbourings."""
+        late = self.py.late if self.py is not None else None
+        if not self.comm.allreduce(late is not None):
+            return
+        step, k = next(x for x in self.comm.allgather(late) if x is not None)
+        group, local = self.scene.group_of(k)
+        raise RackstressError(
+            f"step {step}: resting '{group}' particle {local} (global index {k}) was touched "
+            "before LAMMPS integrated it: a particle moved more than the neighbour skin "
+            f"({self.deck.skin:g}) between two reneighbourings. A smaller time step keeps the "
+            "active-particles scheme exact.")
 
     def _toggle_callback(self, phase_vars) -> None:
         """The fix external exists only in phases where a Python operator is active."""
@@ -271,6 +304,7 @@ class LammpsRun:
         self.command(f"run {n} pre no post no")
         self.step += n
         self._check_callback()
+        self._check_late()
 
     def _check_callback(self):
         err = self.py.error if self.py is not None else None
@@ -314,8 +348,15 @@ class LammpsRun:
         MPI it also keeps the ghost cutoff ahead of the scene's reach (:meth:`_grow_cutoff`)."""
         x, v, tag = self.positions_local()
         o = self.scene.original_positions()
+        if self._py_on and self.py.move_bit is not None:
+            # only LAMMPS' first rows move (atom_modify first, Deck.passive): a resting particle
+            # after them is where the data file put it, with v = 0
+            x, v, tag = x[:self.py.nfirst], v[:self.py.nfirst], tag[:self.py.nfirst]
         if len(tag) == len(o) and tag[0] == 1 and np.array_equal(tag, self._ids):
             found = find_divergence(self.scene, x, v, o)    # row k holds particle k
+        elif len(tag) and tag[0] == 1 and tag[-1] == len(tag) and np.array_equal(
+                tag, self._ids[:len(tag)]):
+            found = find_divergence(self.scene, x, v, o[:len(tag)])
         else:
             found = find_divergence(self.scene, x, v, o[tag - 1], tag - 1)
         everything = [f for f in self.comm.allgather(found) if f is not None]
@@ -428,7 +469,7 @@ class LammpsRun:
         step (``f``, in global order) are put back; positions and velocities are untouched.
         Done at every checkpoint, so that an interrupted and resumed run sums its pair forces in
         the same order as an uninterrupted one (bitwise in serial)."""
-        self.command("run 0 post no")
+        self._run0()
         self.scatter("f", f)
         self._check_callback()
 
