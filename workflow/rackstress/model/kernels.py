@@ -101,7 +101,7 @@ def warm() -> dict:
     k.touching(x, r, s, np.full(2, 4.0))
     k.collide(x, r, s, np.full(2, 4.0), 3.0)
     k.dampen(np.ones((3, 3)), r, r, 2.0, acc)
-    k.candidates(x, r, s, 2.0, False, np.arange(3))
+    k.candidates(x, r, s, 2.0, False, np.arange(3), 3.0)
     k.overlapping(x, r, s, np.full(2, 4.0))
     flag, nt = np.zeros(3, np.bool_), np.zeros(1, np.int64)
     k.collide_add(x, r, s, np.full(2, 4.0), 3.0, acc, 1, np.zeros((3, 3)), flag,
@@ -221,15 +221,35 @@ if nb is not None:
 
 
     @nb.njit(**_OPTS)
-    def candidates(x, ia, ib, cut, same, index):
+    def candidates(x, ia, ib, cut, same, index, wide):
         """Rows (a in ia, b in ib) closer than ``cut`` (d² ≤ cut², as
         :func:`~rackstress.model.operators.contact_candidates`), sorted by the particles
-        (``index`` of a row) of (a, b), whatever the rows' layout: a cell list
-        over the part of ``ib`` inside the bounding box of ``ia`` grown by ``cut``. ``same``:
-        one group, both orders of every pair, never a row with itself."""
+        (``index`` of a row) of (a, b), whatever the rows' layout; and the rows of ia and of ib
+        with a partner closer than ``wide`` (≥ cut). The cell list holds the larger side."""
+        if len(ia) > len(ib):
+            ob, oa, near_b, near_a = _cells(x, ib, ia, cut, same, wide)
+        else:
+            oa, ob, near_a, near_b = _cells(x, ia, ib, cut, same, wide)
+        # one order whatever the rows' layout: by the particles of (a, b)
+        n = len(oa)
+        key = np.empty(n, np.int64)
+        span = 0
+        for k in range(n):
+            if index[ob[k]] >= span:
+                span = index[ob[k]] + 1
+        for k in range(n):
+            key[k] = index[oa[k]] * span + index[ob[k]]
+        s = np.argsort(key)
+        return oa[s], ob[s], near_a, near_b
+
+    @nb.njit(**_OPTS)
+    def _cells(x, ia, ib, cut, same, wide):
+        """:func:`candidates`, unsorted: a cell list over the part of ``ib`` inside the bounding
+        box of ``ia`` grown by ``wide``, each row of ``ia`` looking in the 27 cells around it.
+        ``same``: one group, both orders of every pair, never a row with itself."""
         empty = np.zeros(0, np.int64)
         if len(ia) == 0 or len(ib) == 0:
-            return empty, empty
+            return empty, empty, empty, empty
         lo = np.empty(3)
         hi = np.empty(3)
         for m in range(3):
@@ -243,23 +263,23 @@ if nb is not None:
                 if v > hi[m]:
                     hi[m] = v
         for m in range(3):
-            lo[m] -= cut
-            hi[m] += cut
-        keep = np.empty(len(ib), np.int64)
+            lo[m] -= wide
+            hi[m] += wide
+        keep = np.empty(len(ib), np.int64)      # positions in ib
         nb_ = 0
         for k in range(len(ib)):
             r = ib[k]
             if (x[r, 0] >= lo[0] and x[r, 0] <= hi[0] and x[r, 1] >= lo[1]
                     and x[r, 1] <= hi[1] and x[r, 2] >= lo[2] and x[r, 2] <= hi[2]):
-                keep[nb_] = r
+                keep[nb_] = k
                 nb_ += 1
         if nb_ == 0:
-            return empty, empty
-        # cells no smaller than cut (a pair within cut is in neighbouring cells), at most a
+            return empty, empty, empty, empty
+        # cells no smaller than wide (a pair within it is in neighbouring cells), at most a
         # few per kept row
-        size = cut if cut > 0.0 else 1.0
+        size = wide if wide > 0.0 else 1.0
+        nc = np.empty(3, np.int64)
         while True:
-            nc = np.empty(3, np.int64)
             for m in range(3):
                 nc[m] = int((hi[m] - lo[m]) / size) + 1
             if nc[0] * nc[1] * nc[2] <= 4 * nb_ + 64:
@@ -269,7 +289,7 @@ if nb is not None:
         cell = np.empty(nb_, np.int64)
         count = np.zeros(ncell + 1, np.int64)
         for k in range(nb_):
-            r = keep[k]
+            r = ib[keep[k]]
             c0 = min(int((x[r, 0] - lo[0]) / size), nc[0] - 1)
             c1 = min(int((x[r, 1] - lo[1]) / size), nc[1] - 1)
             c2 = min(int((x[r, 2] - lo[2]) / size), nc[2] - 1)
@@ -283,6 +303,9 @@ if nb is not None:
             order[fill[cell[k]]] = keep[k]
             fill[cell[k]] += 1
         cut2 = cut * cut
+        wide2 = wide * wide
+        near_a = np.zeros(len(ia), np.bool_)
+        near_b = np.zeros(len(ib), np.bool_)
         cap = 16 * len(ia) + 16
         oa = np.empty(cap, np.int64)
         ob = np.empty(cap, np.int64)
@@ -290,8 +313,8 @@ if nb is not None:
         for k in range(len(ia)):
             a = ia[k]
             xa0, xa1, xa2 = x[a, 0], x[a, 1], x[a, 2]
-            if (xa0 < lo[0] - cut or xa0 > hi[0] + cut or xa1 < lo[1] - cut
-                    or xa1 > hi[1] + cut or xa2 < lo[2] - cut or xa2 > hi[2] + cut):
+            if (xa0 < lo[0] - wide or xa0 > hi[0] + wide or xa1 < lo[1] - wide
+                    or xa1 > hi[1] + wide or xa2 < lo[2] - wide or xa2 > hi[2] + wide):
                 continue
             c0 = int((xa0 - lo[0]) / size)
             c1 = int((xa1 - lo[1]) / size)
@@ -301,13 +324,18 @@ if nb is not None:
                     for d2 in range(max(c2 - 1, 0), min(c2 + 2, nc[2])):
                         c = (d0 * nc[1] + d1) * nc[2] + d2
                         for p in range(count[c], count[c + 1]):
-                            b = order[p]
+                            pb = order[p]
+                            b = ib[pb]
                             if same and b == a:
                                 continue
                             e0 = x[b, 0] - xa0
                             e1 = x[b, 1] - xa1
                             e2 = x[b, 2] - xa2
-                            if e0 * e0 + e1 * e1 + e2 * e2 <= cut2:
+                            e = e0 * e0 + e1 * e1 + e2 * e2
+                            if e <= wide2:
+                                near_a[k] = True
+                                near_b[pb] = True
+                            if e <= cut2:
                                 if n == cap:
                                     cap *= 2
                                     oa2 = np.empty(cap, np.int64)
@@ -318,17 +346,7 @@ if nb is not None:
                                 oa[n] = a
                                 ob[n] = b
                                 n += 1
-        oa, ob = oa[:n], ob[:n]
-        # one order whatever the rows' layout: by the particles of (a, b)
-        key = np.empty(n, np.int64)
-        span = 0
-        for k in range(n):
-            if index[ob[k]] >= span:
-                span = index[ob[k]] + 1
-        for k in range(n):
-            key[k] = index[oa[k]] * span + index[ob[k]]
-        s = np.argsort(key)
-        return oa[s], ob[s]
+        return oa[:n], ob[:n], ia[near_a], ib[near_b]
 
     @nb.njit(**_OPTS)
     def overlapping(x, a, b, R2):

@@ -353,17 +353,26 @@ class Overlaps:
         if hit is not None:
             return hit
         cut = self._reach(A) + self._reach(B) + self.skin
-        wide = self.activate is not None and self._passive(A, B)
-        a, b = self._search(fr, A, B, cut + self.skin if wide else cut)
-        if wide:
-            # resting particles join the moving group one reneighbouring early (within reach
-            # + 2 skins), so LAMMPS has put them among the integrated rows (atom_modify first)
-            # before anything can touch them; the contact candidates are those within cut
-            self.activate(fr, a)
-            self.activate(fr, b)
-            diff = fr.x[b] - fr.x[a]
-            near = rowdot(diff, diff) <= cut * cut
-            a, b = a[near], b[near]
+        # resting particles join the moving group one reneighbouring early (a partner within
+        # reach + 2 skins), so LAMMPS has put them among the integrated rows (atom_modify
+        # first) before anything can touch them; the contact candidates are those within cut
+        wide = cut + self.skin if self.activate is not None and self._passive(A, B) else cut
+        ia, ib = fr.seen(A), fr.seen(B)
+        if self.k is not None:      # a compiled cell list
+            a, b, near_a, near_b = self.k.candidates(fr.x, ia, ib, cut, A == B, fr.index, wide)
+        else:
+            a, b = contact_candidates(fr.x[ia], fr.x[ib], wide, same=A == B)
+            a, b = ia[a], ib[b]
+            order = np.lexsort((fr.index[b], fr.index[a]))
+            a, b = a[order], b[order]
+            near_a, near_b = a, b
+            if wide > cut:
+                diff = fr.x[b] - fr.x[a]
+                near = rowdot(diff, diff) <= cut * cut
+                a, b = a[near], b[near]
+        if wide > cut:
+            self.activate(fr, near_a)
+            self.activate(fr, near_b)
         R2 = (self.radius[fr.index[a]] + self.radius[fr.index[b]]) ** 2
         hit = fr.memo[key] = (a, b, R2)
         return hit
@@ -373,17 +382,6 @@ class Overlaps:
         if key not in self._rmax:
             self._rmax[key] = bool(self.passive[A].any() or self.passive[B].any())
         return self._rmax[key]
-
-    def _search(self, fr: Frame, A: slice, B: slice, cut: float):
-        """Rows (a in A, b in B, owned or ghost) within ``cut``, ordered by their particles
-        (the same sums whatever the rows' layout)."""
-        ia, ib = fr.seen(A), fr.seen(B)
-        if self.k is not None:      # a compiled cell list
-            return self.k.candidates(fr.x, ia, ib, cut, A == B, fr.index)
-        a, b = contact_candidates(fr.x[ia], fr.x[ib], cut, same=A == B)
-        a, b = ia[a], ib[b]
-        order = np.lexsort((fr.index[b], fr.index[a]))
-        return a[order], b[order]
 
     def pairs(self, fr: Frame, t: slice, s: slice, name: str = "collide"):
         """Row pairs (a, b) overlapping now, a owned here in ``t``, b seen here in ``s``, with
