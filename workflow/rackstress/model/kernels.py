@@ -101,14 +101,14 @@ def warm() -> dict:
     k.touching(x, r, s, np.full(2, 4.0))
     k.collide(x, r, s, np.full(2, 4.0), 3.0)
     k.dampen(np.ones((3, 3)), r, r, 2.0, acc)
-    k.candidates(x, r, s, 2.0, False, np.arange(3), 3.0)
+    tag = np.arange(1, 4, dtype=np.int32)    # LAMMPS' atom ids (tagint: int32)
+    k.candidates(x, r, s, 2.0, False, tag, 3.0)
     k.overlapping(x, r, s, np.full(2, 4.0))
     flag, nt = np.zeros(3, np.bool_), np.zeros(1, np.int64)
     k.collide_add(x, r, s, np.full(2, 4.0), 3.0, acc, 1, np.zeros((3, 3)), flag,
                   np.zeros(3, np.int64), nt)
     k.write_sparse(np.zeros((3, 3)), np.zeros(3, np.int64), 0, np.zeros((3, 3)), flag,
-                   np.zeros(3, np.int64), nt, np.ones(3),
-                   np.arange(3))
+                   np.zeros(3, np.int64), nt, np.ones(3), tag)
     seconds = time.perf_counter() - t0
     if first and os.environ.get("PMI_RANK", "0") == "0":
         print(f"rackstress: kernels compiled in {seconds:.1f} s", file=sys.stderr, flush=True)
@@ -221,11 +221,12 @@ if nb is not None:
 
 
     @nb.njit(**_OPTS)
-    def candidates(x, ia, ib, cut, same, index, wide):
+    def candidates(x, ia, ib, cut, same, tag, wide):
         """Rows (a in ia, b in ib) closer than ``cut`` (d² ≤ cut², as
         :func:`~rackstress.model.operators.contact_candidates`), sorted by the particles
-        (``index`` of a row) of (a, b), whatever the rows' layout; and the rows of ia and of ib
-        with a partner closer than ``wide`` (≥ cut). The cell list holds the larger side."""
+        (``tag``: the atom id of a row) of (a, b), whatever the rows' layout; and the rows of ia
+        and of ib with a partner closer than ``wide`` (≥ cut). The cell list holds the larger
+        side."""
         if len(ia) > len(ib):
             ob, oa, near_b, near_a = _cells(x, ib, ia, cut, same, wide)
         else:
@@ -235,10 +236,10 @@ if nb is not None:
         key = np.empty(n, np.int64)
         span = 0
         for k in range(n):
-            if index[ob[k]] >= span:
-                span = index[ob[k]] + 1
+            if tag[ob[k]] >= span:
+                span = np.int64(tag[ob[k]]) + 1
         for k in range(n):
-            key[k] = index[oa[k]] * span + index[ob[k]]
+            key[k] = np.int64(tag[oa[k]]) * span + tag[ob[k]]
         s = np.argsort(key)
         return oa[s], ob[s], near_a, near_b
 
@@ -394,10 +395,10 @@ if nb is not None:
                 sacc[i, 2] += w * d2_
 
     @nb.njit(**_OPTS)
-    def write_sparse(f, last, nlast, sacc, flag, touched, nt, mass, index):
+    def write_sparse(f, last, nlast, sacc, flag, touched, nt, mass, tag):
         """f rows outside the dense accumulator: last step's zeroed, this step's = sacc·m
-        (``mass`` of particle ``index[row]``; then sacc cleared); returns how many rows were
-        written (they become ``last``)."""
+        (``mass`` of the particle with atom id ``tag[row]``; then sacc cleared); returns how
+        many rows were written (they become ``last``)."""
         for k in range(nlast):
             r = last[k]
             f[r, 0] = 0.0
@@ -406,7 +407,7 @@ if nb is not None:
         n = 0
         for k in range(nt[0]):
             r = touched[k]
-            m = mass[index[r]]
+            m = mass[tag[r] - 1]
             f[r, 0] = sacc[r, 0] * m
             f[r, 1] = sacc[r, 1] * m
             f[r, 2] = sacc[r, 2] * m

@@ -70,9 +70,9 @@ class Frame:
         self.identity = (nlocal == n_total and nall == n_total and dense_span <= span
                          and bool(np.array_equal(tag[:span], np.arange(1, span + 1))))
         self.span = span if self.identity else 0
-        full = self.identity and (span == n_total or bool(np.array_equal(
-            tag[span:], np.arange(span + 1, n_total + 1))))
-        self.index = np.arange(n_total) if full else tag.astype(np.int64) - 1
+        #: LAMMPS' atom ids of the rows (the particle of row r is tag[r] − 1)
+        self.tag = tag
+        self._index = np.arange(n_total) if self.identity and span == n_total else None
         self._row = self._local = None
         #: per-layout results of the terms (selected pairs, candidates, owned rows)
         self.memo = {}
@@ -134,6 +134,20 @@ class Frame:
         for k in range(3):
             acc[:, k] += np.bincount(ar, weights=contrib[:, k], minlength=len(acc))
 
+    @property
+    def index(self) -> np.ndarray:
+        """The particle (global index) of every row here (made when first needed: the serial
+        path needs it only for a few rows, :meth:`particles`)."""
+        if self._index is None:
+            self._index = self.tag.astype(np.int64) - 1
+        return self._index
+
+    def particles(self, rows: np.ndarray) -> np.ndarray:
+        """The particles (global indices) of some rows."""
+        if self._index is not None:
+            return self._index[rows]
+        return self.tag[rows].astype(np.int64) - 1
+
     def compact(self, rows: np.ndarray) -> np.ndarray:
         """Accumulator rows of frame rows (−1: a ghost or a particle outside the dense rows)."""
         return rows if self.identity else self._compact[rows]
@@ -167,7 +181,9 @@ class Frame:
         """Rows among the first ``upto`` (all: None) whose particle lies in ``sl`` (memoized)."""
         key = (kind, sl.start, sl.stop)
         if key not in self.memo:
-            if self.ident(sl):
+            if self.ident(sl) or (self.identity and sl.start == self.span
+                                  and sl.stop == self.n_total):
+                # the rows after span hold the particles after span (a permutation of them)
                 self.memo[key] = np.arange(sl.start, sl.stop)
             else:
                 idx = self.index[:upto]
@@ -359,7 +375,7 @@ class Overlaps:
         wide = cut + self.skin if self.activate is not None and self._passive(A, B) else cut
         ia, ib = fr.seen(A), fr.seen(B)
         if self.k is not None:      # a compiled cell list
-            a, b, near_a, near_b = self.k.candidates(fr.x, ia, ib, cut, A == B, fr.index, wide)
+            a, b, near_a, near_b = self.k.candidates(fr.x, ia, ib, cut, A == B, fr.tag, wide)
         else:
             a, b = contact_candidates(fr.x[ia], fr.x[ib], wide, same=A == B)
             a, b = ia[a], ib[b]
@@ -373,7 +389,7 @@ class Overlaps:
         if wide > cut:
             self.activate(fr, near_a)
             self.activate(fr, near_b)
-        R2 = (self.radius[fr.index[a]] + self.radius[fr.index[b]]) ** 2
+        R2 = (self.radius[fr.particles(a)] + self.radius[fr.particles(b)]) ** 2
         hit = fr.memo[key] = (a, b, R2)
         return hit
 
@@ -632,7 +648,7 @@ class PyForces:
         """Add the owned passive particles among ``rows`` to the moving group (exact: they are
         at rest with no force until now; fix nve reads the mask every step)."""
         own = rows[rows < fr.nlocal]
-        own = own[self.passive[fr.index[own]]]
+        own = own[self.passive[fr.particles(own)]]
         if len(own):
             mask = self.lmp.numpy.extract_atom("mask")
             new = own[(mask[own] & self.move_bit) == 0]
@@ -731,7 +747,7 @@ class PyForces:
         mpi = self.comm is not None and self.comm.Get_size() > 1
         self._fail_here, self._agreed, fr = None, None, None
         try:
-            old = self.frame
+            old, fresh = self.frame, self._fresh
             fr = self._frame(nlocal)
             self._fresh = False
         except Exception as exc:  # noqa: BLE001 - agreed on below
@@ -741,7 +757,7 @@ class PyForces:
         failed = (self._agree(fr, self._fail_here is not None)
                   if mpi and self._contact_keys() else self._fail_here is not None)
         if not failed:
-            self._evaluate(fr, old, f)
+            self._evaluate(fr, old, f, fresh)
         if mpi:
             from mpi4py import MPI
 
@@ -756,14 +772,20 @@ class PyForces:
             # in the same step), so no step runs on without these forces
             self.lmp.force_timeout()
 
-    def _evaluate(self, fr, old, f) -> None:
+    def _evaluate(self, fr, old, f, fresh=False) -> None:
         """This step's forces of the active terms into ``f`` (a failure kept in _fail_here)."""
         try:
             # only the groups the Python operators act on get forces from here; the rest
             # (MagPod's 30,000 sediment particles) is zeroed once per layout, except the few
             # rows a collide reaches (written sparsely, and zeroed the step after)
             if fr is not old:
-                f[:] = 0.0
+                if fresh or self.move_bit is None or not fr.identity:
+                    f[:] = 0.0
+                else:
+                    # serial, LAMMPS just reordered: every row written since (the dense rows,
+                    # touched passive particles) lies below nfirst (a later row is never
+                    # written: _check_late), so the resting rows need no clearing
+                    f[:self.nfirst] = 0.0
                 self._sparse_rows = self._sparse_rows[:0]
                 self._nlast = 0
                 if self._scan_moving:
@@ -776,7 +798,7 @@ class PyForces:
             if self.compiled is not None and fr.identity:
                 self._nlast = self.compiled.write_sparse(f, self._last, self._nlast, self.sacc,
                                                          self.sflag, self.stouched, self.snt,
-                                                         self.mass, fr.index)
+                                                         self.mass, fr.tag)
                 written = self._last[:self._nlast]
             else:
                 self._write_sparse(fr, f)
@@ -784,7 +806,7 @@ class PyForces:
             if self.move_bit is not None and len(written) and written.max() >= self.nfirst:
                 # a force on a row LAMMPS does not integrate yet: exactness would be lost
                 r = int(written[written >= self.nfirst][0])
-                self.late = (int(self.lmp.extract_global("ntimestep")), int(fr.index[r]))
+                self.late = (int(self.lmp.extract_global("ntimestep")), int(fr.tag[r]) - 1)
         except Exception as exc:  # noqa: BLE001 - reported by the runner after the chunk
             self._fail_here = exc
 

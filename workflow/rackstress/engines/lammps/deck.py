@@ -40,7 +40,9 @@ that ``fix nve`` and ``fix viscous`` act on. A particle of it has zero velocity 
 until a collision partner comes within reach, and Eq. 5 does not move such a particle, so
 skipping it is exact. ``atom_modify first rs_move`` makes LAMMPS keep the group's atoms first in
 its arrays (it reorders them when it reneighbours) and ``fix nve`` loop over those rows only, so
-the resting ones cost nothing there. The callback adds a passive particle to ``rs_move`` (its
+the resting ones cost nothing there; in serial runs the runner adds ``neigh_modify include
+rs_move`` (forces cleared, displacements checked and atoms binned over those rows only; a resting
+row's force is zeroed once and nothing writes it). The callback adds a passive particle to ``rs_move`` (its
 group bit in LAMMPS' per-atom mask), for good, as soon as a partner comes within reach + 2 skins
 when LAMMPS reneighbours: one reneighbouring before anything can touch it, so LAMMPS has reordered
 it among the integrated rows by then. A particle touched at the start is reordered by a second

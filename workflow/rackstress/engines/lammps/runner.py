@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from rackstress.engines.lammps.callback import PyForces
-from rackstress.engines.lammps.deck import PY_FIX, SKIN, Deck
+from rackstress.engines.lammps.deck import MOVE_GROUP, PY_FIX, SKIN, Deck
 from rackstress.errors import DivergenceError, RackstressError, StorageError
 from rackstress.engines.watchdog import divergence_error, find_divergence
 
@@ -122,6 +122,13 @@ class LammpsRun:
                     self.command(f"dump_modify {self._dump_id} append yes")
         for cmd in deck.velocity_variables():
             self.command(cmd)
+        if deck.passive and self.comm.Get_size() == 1:
+            # serial: LAMMPS clears forces, checks displacements and bins only its first rows
+            # (the moving group, atom_modify first). A resting row's force then stays what it
+            # is, so it is zeroed once here; nothing writes it later (fix external's rows there
+            # are zero, fix viscous multiplies v = 0), so v + dt/2·f/m keeps it at rest.
+            self.command(f"neigh_modify include {MOVE_GROUP}")
+            self.scatter("f", np.zeros((self.scene.n_particles, 3)))
         for cmd in balance_commands(self.scene, self.comm.Get_size()):
             self.command(cmd)
         if deck.python_ops:
@@ -270,6 +277,9 @@ class LammpsRun:
         if py is None or not self.comm.allreduce(py.activated_late or py.late is not None):
             return
         py.activated_late, py.late = False, None
+        # forces the first setup left on rows LAMMPS is about to hand to other atoms would stay
+        # there (serially it clears only its first rows: neigh_modify include)
+        self.lmp.numpy.extract_atom("f")[:self.lmp.extract_global("nlocal")] = 0.0
         self.command("run 0 post no")
         self._check_late()
 
