@@ -480,7 +480,10 @@ class DampenTerm(Term):
     def add(self, fr, acc):
         if self.forces.holds(fr, self):
             sel = fr.owned(self.sl)
-            acc[fr.compact(sel)] += Dampen.accel(fr.v[sel], self.op.extra)
+            if self.forces.compiled is not None:
+                self.forces.compiled.dampen(fr.v, sel, fr.compact(sel), self.op.extra, acc)
+            else:
+                acc[fr.compact(sel)] += Dampen.accel(fr.v[sel], self.op.extra)
 
 
 class CollideTerm(Term):
@@ -558,6 +561,19 @@ class AttractTerm(Term):
             self._by_phase[key] = PairTerm(f"attract on {self.target}", Attract.factor,
                                            pl.i, pl.j, pl.c, compiled=self.forces.compiled)
         self._by_phase[key].add(fr, acc)
+
+
+def _leading(mask: np.ndarray, bit: int, n: int) -> int:
+    """How many leading rows have ``bit`` set, when every row with it comes before every row
+    without it (LAMMPS' ``atom_modify first`` order just after it reordered): a bisection."""
+    lo, hi = 0, n
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if mask[mid] & bit:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
 
 
 #: The term realizing each operator class in the callback.
@@ -735,8 +751,7 @@ class PyForces:
             if self.move_bit is not None and (ago == 0 or self._fresh):
                 # LAMMPS has just reordered (atom_modify first): the moving group's rows
                 # come first, and only they are integrated until it reorders again
-                off = (lmp.numpy.extract_atom("mask")[:nlocal] & self.move_bit) == 0
-                self.nfirst = int(off.argmax()) if off.any() else nlocal
+                self.nfirst = _leading(lmp.numpy.extract_atom("mask"), self.move_bit, nlocal)
             fr = self.frame = Frame(lmp, self.n, nlocal, self.dense_span, self.mass, self.span)
         else:
             fr.refresh()
