@@ -42,7 +42,8 @@ skipping it is exact. ``atom_modify first rs_move`` makes LAMMPS keep the group'
 its arrays (it reorders them when it reneighbours) and ``fix nve`` loop over those rows only, so
 the resting ones cost nothing there; in serial runs the runner adds ``neigh_modify include
 rs_move`` (forces cleared, displacements checked and atoms binned over those rows only; a resting
-row's force is zeroed once and nothing writes it). The callback adds a passive particle to ``rs_move`` (its
+row's force is zeroed once and nothing writes it), and ``fix external`` acts on ``rs_move`` too
+(its add pass skips resting rows, whose external force is zero). The callback adds a passive particle to ``rs_move`` (its
 group bit in LAMMPS' per-atom mask), for good, as soon as a partner comes within reach + 2 skins
 when LAMMPS reneighbours: one reneighbouring before anything can touch it, so LAMMPS has reordered
 it among the integrated rows by then. A particle touched at the start is reordered by a second
@@ -309,7 +310,7 @@ class Deck:
         py = self.python_ops
         L = self.setup_commands(dump_every=dump_every)
         if py:
-            L.append(f"fix {PY_FIX} all external pf/callback 1 1")
+            L.append(f"fix {PY_FIX} {self.moving} external pf/callback 1 1")
         L += self.schedule_commands()
         return "\n".join(L) + "\n"
 

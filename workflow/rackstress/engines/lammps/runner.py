@@ -304,7 +304,7 @@ class LammpsRun:
             return
         want = self.py.set_phase(phase_vars)
         if want and not self._py_on:
-            self.command(f"fix {PY_FIX} all external pf/callback 1 1")
+            self.command(f"fix {PY_FIX} {self.deck.moving} external pf/callback 1 1")
             self.lmp.set_fix_external_callback(PY_FIX, self.py, self)
         elif self._py_on and not want:
             self.command(f"unfix {PY_FIX}")
