@@ -191,11 +191,26 @@ class Deck:
         for r in self.realized:
             L.append(f"#   {r.target} <- {r.op.label()}: {r.how}")
         gamma = dict.fromkeys(range(1, len(sc.groups) + 1), 0.0)   # static damping per type
+        # constant forces: one fix addforce per distinct force vector (MagPod's two legs share
+        # one: one pass over the atoms, not one per group; each atom gets the same F = m·â)
+        same = defaultdict(list)
         for idx, r in enumerate(self.realized):
             if r.native == "addforce" and not r.op.when:
-                L += self._addforce(idx, r)
+                cmds = self._addforce(idx, r)
+                same[cmds[-1].split(" addforce ")[1]].append((idx, cmds))
             if r.native == "viscous" and (r.python or not r.op.when):
                 gamma[types[r.target]] += r.op.c * self.masses[r.target]
+        for F, fixes in same.items():
+            if len(fixes) == 1:
+                L += fixes[0][1]
+                continue
+            sel = []
+            for _, cmds in fixes:
+                L += cmds[:-1]                   # id groups of masked forces
+                sel.append(cmds[-1].split()[2])
+            idx = fixes[0][0]
+            L.append(f"group rs_fu{idx} union {' '.join(sel)}")
+            L.append(f"fix rs_force{idx} rs_fu{idx} addforce {F}")
         if any(gamma.values()):
             # one fix for every group's constant damping: one pass over the atoms, not one per
             # group (gamma 1 times scale γ_type is γ_type exactly; an unnamed type would get 1)
