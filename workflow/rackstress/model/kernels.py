@@ -104,6 +104,7 @@ def warm() -> dict:
     tag = np.arange(1, 4, dtype=np.int32)    # LAMMPS' atom ids (tagint: int32)
     k.candidates(x, r, s, 2.0, False, tag, 3.0)
     k.overlapping(x, r, s, np.full(2, 4.0))
+    k.moved_below(x, 0, 1, 1, 2, x.copy(), 1.0)
     flag, nt = np.zeros(3, np.bool_), np.zeros(1, np.int64)
     k.collide_add(x, r, s, np.full(2, 4.0), 3.0, acc, 1, np.zeros((3, 3)), flag,
                   np.zeros(3, np.int64), nt)
@@ -348,6 +349,19 @@ if nb is not None:
                                 ob[n] = b
                                 n += 1
         return oa[:n], ob[:n], ia[near_a], ib[near_b]
+
+    @nb.njit(**_OPTS)
+    def moved_below(x, a0, na, b0, nb_, ref, lim2):
+        """Whether every row of the ranges a0..a0+na and b0..b0+nb_ (``ref``: their positions,
+        one range after the other) is within √lim2 of where ``ref`` has it."""
+        for k in range(na + nb_):
+            r = a0 + k if k < na else b0 + k - na
+            d0 = x[r, 0] - ref[k, 0]
+            d1 = x[r, 1] - ref[k, 1]
+            d2 = x[r, 2] - ref[k, 2]
+            if d0 * d0 + d1 * d1 + d2 * d2 > lim2:
+                return False
+        return True
 
     @nb.njit(**_OPTS)
     def overlapping(x, a, b, R2):

@@ -355,6 +355,9 @@ class Overlaps:
         #: touched before the next reneighbouring must be integrated from now on)
         self.activate = activate
         self._rmax = {}
+        #: serial lists between groups whose rows are their particles, with the positions they
+        #: were searched at: kept while no atom of the two groups has moved half a skin
+        self._kept = {}
 
     def _reach(self, sl: slice) -> float:
         key = (sl.start, sl.stop)
@@ -373,6 +376,17 @@ class Overlaps:
         # reach + 2 skins), so LAMMPS has put them among the integrated rows (atom_modify
         # first) before anything can touch them; the contact candidates are those within cut
         wide = cut + self.skin if self.activate is not None and self._passive(A, B) else cut
+        stable = self.k is not None and wide == cut and fr.ident(A) and fr.ident(B)
+        if stable:
+            # LAMMPS reneighbours when any atom has moved half a skin; the list of two groups
+            # stays valid (no pair outside it can come within reach) as long as none of
+            # *their* atoms has, and their rows are their particles, so it is kept
+            kept = self._kept.get((A.start, B.start))
+            if kept is not None and self.k.moved_below(
+                    fr.x, A.start, A.stop - A.start, B.start, B.stop - B.start, kept[0],
+                    0.25 * self.skin * self.skin):
+                hit = fr.memo[key] = kept[1]
+                return hit
         ia, ib = fr.seen(A), fr.seen(B)
         if self.k is not None:      # a compiled cell list
             a, b, near_a, near_b = self.k.candidates(fr.x, ia, ib, cut, A == B, fr.tag, wide)
@@ -391,6 +405,8 @@ class Overlaps:
             self.activate(fr, near_b)
         R2 = (self.radius[fr.particles(a)] + self.radius[fr.particles(b)]) ** 2
         hit = fr.memo[key] = (a, b, R2)
+        if stable:
+            self._kept[(A.start, B.start)] = (np.concatenate([fr.x[A], fr.x[B]]), hit)
         return hit
 
     def _passive(self, A: slice, B: slice) -> bool:
