@@ -267,6 +267,10 @@ def test_divergence_inside_lammps_is_a_divergence(tmp_path):
     e = s["error"]
     assert e["group"] == "plane" and 0 <= e["particle"] < s["n_particles"]
     assert 0 < e["step"] < 300 and f"step {e['step']}" in r.stderr
+    # named as peaks, VTK and dumps name particles: by LAMMPS atom id (plane-bound: the plane
+    # is the only group, so the in-group index is the global one and the id is one more)
+    assert e["atom_id"] == e["particle"] + 1
+    assert f"'plane' particle {e['particle']} (atom id {e['particle'] + 1})" in r.stderr
     assert frames(out / "trajectory.dump")[-1] <= e["step"]
 
 

@@ -297,3 +297,24 @@ def test_default_frames_are_the_papers_for_magpod_only():
     assert default_iterations(other, 37) == [37, 5000, 10000, 15000, 20000]
     magpod = SimpleNamespace(steps=np.array([0, 19200]), scene={"scene": "magpod"})
     assert default_iterations(magpod) == [1320, 2600, 4720, 17480]
+
+
+@pytest.mark.parametrize("x, y", [(390, 150), (10, 150), (200, 2), (390, 296)])
+def test_the_peak_label_stays_inside_the_panel(x, y):
+    """The ring's label is drawn right of the ring, or left of it at the right edge, and never
+    cut at an edge of the 400 × 300 panel (black text pixels 2+ px from every edge)."""
+    from rackstress.render.pictures import annotate
+
+    img = np.full((300, 400, 3), 255, np.uint8)
+    out = annotate(img, 100, "right", [], ring=(x, y, 12), ring_text="peak 2.81 (particle 1)")
+    # the label's black pixels (the ring is black too: mask the ring's box out)
+    black = (out < 60).all(axis=2)
+    black[max(y - 16, 0):y + 16, max(x - 16, 0):x + 16] = False
+    black[-32:, :] = False                     # the iteration line at the bottom
+    rows, cols = np.nonzero(black)
+    assert cols.size > 50                      # the label is there
+    assert cols.min() >= 2 and cols.max() <= 397 and rows.min() >= 2
+    if x > 200:
+        assert cols.max() < x                  # moved to the ring's left
+    else:
+        assert cols.min() > x                  # right of the ring

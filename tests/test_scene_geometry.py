@@ -107,7 +107,15 @@ def test_params_set_errors(tmp_path, overrides, needles):
     ('"$pull", 0', '"$(1 / (n - 3))", 0', ["accel[0]", "cannot be evaluated"]),
 ])
 def test_param_reference_errors_name_the_field(tmp_path, old, new, needles):
-    expect_error(write(tmp_path, PARAMS.replace(old, new, 1)), needles)
+    path = write(tmp_path, PARAMS.replace(old, new, 1))
+    msg = expect_error(path, needles)
+    assert msg.count(str(path)) == 1, msg           # one paragraph, the file named once
+
+
+def test_an_unknown_name_inside_an_expression_is_named_once(tmp_path):
+    path = write(tmp_path, PARAMS.replace('"$pull", 0', '"$(pull + nope)", 0', 1))
+    msg = expect_error(path, ["accel[0]", "'nope'", "not in [params]"])
+    assert msg.count(str(path)) == 1 and "cannot be evaluated" not in msg, msg
 
 
 def test_builtin_sweep_style_set_on_own_params_via_batch_job(tmp_path):

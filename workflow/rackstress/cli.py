@@ -315,6 +315,7 @@ def render(rundir, frames, measure, views, groups, out, movie, movie_view, vmax,
 
     Exit status: 0 done, 2 bad input.
     """
+    from rackstress.render.pictures import record_render
     from rackstress.render.pictures import render as render_run
     from rackstress.runs.rundir import locked
 
@@ -335,6 +336,7 @@ def render(rundir, frames, measure, views, groups, out, movie, movie_view, vmax,
                              movie=movie, movie_view=movie_view, vmax=vmax, cmap=cmap,
                              groups=_csv(groups), out=out, allow_truncated=allow_truncated,
                              progress=progress)
+            record_render(rundir, rep, time.perf_counter() - t0)
             report = _write_report(rundir)
     except Exception as err:  # noqa: BLE001 - each kind has its exit status (_fail_any)
         _fail_any(err)

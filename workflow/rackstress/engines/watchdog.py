@@ -50,7 +50,7 @@ def divergence_error(scene: Scene, step: int, found: dict) -> DivergenceError:
         what = (f"it is {found['disp']:.4g} units from its original position, beyond the "
                 f"watchdog bound {scene.bound:g}")
     return DivergenceError(
-        f"run diverged at step {step}: '{group}' particle {local} (global index {k}): {what}. "
+        f"run diverged at step {step}: '{group}' particle {local} (atom id {k + 1}): {what}. "
         f"{found['count']} particle(s) out of bound. A smaller time step (dt = {scene.dt:g} now) "
         "or weaker coefficients keep Eq. 5 stable (t < 2/ω_max); the output written up to here "
         "is kept.", step=step, index=k, group=group, local=local, value=found["disp"])

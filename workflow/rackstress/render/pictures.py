@@ -434,16 +434,25 @@ def annotate(img: np.ndarray, step: int, view: str, labels: list, ring=None,
     dr.text((8, h - 24), f"{view} view", fill=(80, 80, 80), font=f13)
     for name, (x, y) in labels:
         if 0 <= x < w and 0 <= y < h:
-            dr.text((x - dr.textlength(name, font=f13) / 2, min(h - 48, y + 14)), name,
-                    fill=(40, 40, 160), font=f13)
+            dr.text((_inside(x - dr.textlength(name, font=f13) / 2, dr.textlength(name, font=f13),
+                             w), min(h - 48, y + 14)), name, fill=(40, 40, 160), font=f13)
     if ring is not None:
         x, y, r = ring
         if -r <= x < w + r and -r <= y < h + r:
             dr.ellipse([x - r, y - r, x + r, y + r], outline=(0, 0, 0), width=3)
             dr.ellipse([x - r - 3, y - r - 3, x + r + 3, y + r + 3], outline=(255, 255, 255),
                        width=2)
-            dr.text((x + r + 6, y - 8), ring_text, fill="black", font=f13)
+            tw = dr.textlength(ring_text, font=f13)
+            # right of the ring, or left of it where the panel ends: never cut at an edge
+            tx = x + r + 6 if x + r + 6 + tw <= w - 2 else x - r - 6 - tw
+            dr.text((_inside(tx, tw, w), min(max(y - 8, 2), h - 48)), ring_text, fill="black",
+                    font=f13)
     return np.asarray(im)
+
+
+def _inside(x: float, width: float, w: int, margin: float = 2.0) -> float:
+    """The left edge of a text ``width`` wide moved so the text lies inside ``[0, w)``."""
+    return max(margin, min(x, w - width - margin))
 
 
 def _save_png(path: Path, img: np.ndarray) -> None:
@@ -746,6 +755,7 @@ def render_default(rundir, progress: bool = False) -> RenderReport:
     t0 = time.perf_counter()
     rep = render(rundir, progress=progress)
     wall = time.perf_counter() - t0
+    record_render(Path(rundir), rep, wall)          # first, so that the report shows it
     t = time.perf_counter()
     rep.report = write_report(rundir)
     rep.timings["report_s"] = time.perf_counter() - t

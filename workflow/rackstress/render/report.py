@@ -21,7 +21,8 @@ import os
 import time
 from pathlib import Path
 
-REPORT = "report.html"
+from rackstress.lib.runfiles import REPORT, STRESS_JSON
+
 STABILITY = "stability.json"
 FIGURES = "figures"
 PLOTS = (("stress_over_time.png", "The measure per part over time (max solid, mean dashed; "
@@ -102,6 +103,24 @@ def stability_margin(rundir: Path, scene: dict, summary: dict) -> dict | None:
     return rec
 
 
+def _phase_runs(phases, steps) -> list:
+    """Each phase with its length, and how much of it ran when ``--steps`` cut the run short."""
+    out, start, total = [], 0, sum(int(p["steps"]) for p in phases)
+    for p in phases:
+        n, label = int(p["steps"]), _e(p["name"])
+        ran = n if steps is None or steps >= total else min(max(int(steps) - start, 0), n)
+        if ran == n:
+            out.append(f"{label} ({n} iterations)")
+        elif ran == 0:
+            out.append(f"{label} ({n} iterations, not reached: the run stopped at iteration "
+                       f"{steps})")
+        else:
+            out.append(f"{label} ({ran} of its {n} iterations run: the run stopped at "
+                       f"iteration {steps})")
+        start += n
+    return out
+
+
 def write_report(rundir, stability: bool = True) -> Path:
     """Write ``RUNDIR/report.html`` from what the run directory holds; return its path.
 
@@ -113,7 +132,7 @@ def write_report(rundir, stability: bool = True) -> Path:
     rundir = Path(rundir)
     summary = _load(rundir / "summary.json")
     scene = _load(rundir / "scene.json")
-    post = _load(rundir / "stress.json")
+    post = _load(rundir / STRESS_JSON)
     render = _load(rundir / FIGURES / "render.json")
     name = summary.get("scene") or scene.get("scene") or rundir.name
     out = []
@@ -230,8 +249,8 @@ def write_report(rundir, stability: bool = True) -> Path:
               f"<td class=num>{_num(md)}</td></tr>")
         w("</tbody></table>")
     if scene.get("phases"):
-        w("<p>Phases: " + "; ".join(f"{_e(p['name'])} ({p['steps']} iterations)"
-                                    for p in scene["phases"]) + "</p>")
+        w("<p>Phases: " + "; ".join(_phase_runs(scene["phases"], summary.get("steps")))
+          + "</p>")
 
     # ---- stability
     w('<h2 id="stability">Stability margin (Eq. 5)</h2>')

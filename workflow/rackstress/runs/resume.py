@@ -39,6 +39,7 @@ import numpy as np
 
 from rackstress.errors import ResumeError, RunDirError
 from rackstress.lib.jsonio import jsonable
+from rackstress.lib.runfiles import DERIVED
 from rackstress.model.scene import PhaseEnd
 
 from rackstress.runs.checkpoint import (PROGRESS, RESTART_DIR, Checkpoint, Checkpointer,  # noqa: F401
@@ -111,13 +112,9 @@ def truncate_dump(path: Path, step: int) -> int:
     return kept
 
 
-#: What post-processing derived from the trajectory of the interrupted part (``rackstress
-#: stress`` run on a killed run): stale once the run goes on, written again at its end.
-DERIVED = ("stress.dump", "stress.json", "measures.npz", "report.html", "vtk")
-
-
 def remove_derived(rundir: Path) -> None:
-    """Remove files derived from the trajectory before it continues (they would mix two lengths)."""
+    """Remove files derived from the trajectory before it continues (they would mix two lengths;
+    ``rackstress stress`` may have been run on the killed run)."""
     import shutil
 
     for name in DERIVED:

@@ -123,7 +123,8 @@ def summarize(scene: Scene, engine: str, mode: str, p_end: np.ndarray, steps_don
     }
     if error is not None:
         s["error"] = {"message": str(error), "step": error.step, "group": error.group,
-                      "particle": error.local, "index": error.index}
+                      "particle": error.local, "index": error.index,
+                      "atom_id": None if error.index is None else error.index + 1}
     if extra:
         s.update(extra)
     return s

@@ -382,6 +382,8 @@ def _evaluate(text: str, params: dict, where: str, ctx: _Ctx):
 
     try:
         value = ev(tree)
+    except SceneError:
+        raise                           # already names the file, field and reference
     except (ArithmeticError, TypeError, ValueError) as exc:
         raise ctx.error(f"'{text}' cannot be evaluated: {exc}", where) from None
     if isinstance(value, float) and not math.isfinite(value):

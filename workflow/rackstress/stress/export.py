@@ -36,6 +36,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
+from rackstress.lib.runfiles import PVD
 from rackstress.engines.dumpio import frame_text
 from rackstress.stress.measures import positions
 
@@ -206,12 +207,12 @@ def write_vtk(run, fields, outdir, progress: bool = False) -> Path:
         lines += [f'    <DataSet timestep="{s}" group="" part="0" file={quoteattr(f)}/>'
                   for s, f in entries]
         lines += ["  </Collection>", "</VTKFile>", ""]
-        (tmp / "run.pvd").write_text("\n".join(lines))
+        (tmp / PVD).write_text("\n".join(lines))
         _swap_in(tmp, outdir)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
-    return outdir / "run.pvd"
+    return outdir / PVD
 
 
 # ----------------------------------------------------------------------------- LAMMPS dump

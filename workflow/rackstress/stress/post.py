@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from rackstress.lib.jsonio import write_json
+from rackstress.lib.runfiles import CACHE, STRESS_DUMP, STRESS_JSON, VTK_DIR
 from rackstress.stress.dump import StressInputError
 from rackstress.stress.measures import (AccumulatedDistance, VirialStress, VonMisesStrain,
                                         positions, stress_columns)
@@ -54,11 +55,7 @@ class TooLargeError(StressInputError):
 
 #: The fit of the desired position (one for summary, pictures, report and files).
 FIT = "robust"
-CACHE = "measures.npz"
 CACHE_VERSION = 1
-VTK_DIR, PVD = "vtk", "run.pvd"
-STRESS_DUMP = "stress.dump"
-STRESS_JSON = "stress.json"
 
 
 @dataclass
@@ -176,16 +173,19 @@ def compute_fields(run, cache: bool = True, progress: bool = False) -> Fields:
 
 # ----------------------------------------------------------------------------- peaks
 def peaks(run, fields: Fields) -> dict:
-    """For every group and measure, the largest value over the whole run and where it was.
+    """For every coloured part and measure, the largest value over the whole run and where it was.
 
-    Returns ``{group: {measure: record}}`` with record ``{"value", "iteration", "frame",
+    Racks and sediments get none: a rack is the paper's invisible mechanism and a sediment has no
+    rest shape, so a distance from a desired position means nothing there (when a run has only
+    such groups, as a foreign dump may, every group gets its peaks). Returns ``{group: {measure: record}}`` with record ``{"value", "iteration", "frame",
     "time", "particle" (LAMMPS atom id), "index" (0-based in the group), "position" (x, y, z at
     that iteration), "original" (its original position o), "units"}``, or None for a measure
     undefined on every particle of the group. Ties go to the earliest frame, then the lowest id.
     """
     out, need = {}, {}
     ids = run.data.ids
-    for name, part in run.parts.items():
+    for part in run.displayed() or list(run.parts.values()):
+        name = part.name
         out[name] = {}
         for m, v in fields.values.items():
             sub = v[:, part.index]

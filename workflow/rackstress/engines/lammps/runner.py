@@ -201,9 +201,9 @@ class LammpsRun:
         group, local = self.scene.group_of(k)
         if found and found.get("lost"):
             what = (f"{found['count']} atom(s) left LAMMPS' domain between two reneighbourings, "
-                    f"the first '{group}' particle {local} (global index {k})")
+                    f"the first '{group}' particle {local} (atom id {k + 1})")
         elif found:
-            what = (f"'{group}' particle {local} (global index {k}) is "
+            what = (f"'{group}' particle {local} (atom id {k + 1}) is "
                     + ("not finite" if not found["finite"] else
                        f"{found['disp']:.4g} units from its original position"))
         else:

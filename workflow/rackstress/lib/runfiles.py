@@ -1,0 +1,20 @@
+"""Names of the files post-processing and rendering derive from a run's trajectory.
+
+They live here, below every layer, because three layers need the same names: ``stress`` writes
+them, ``render`` links them from the report, and ``runs`` removes them when a killed run is
+resumed (they would otherwise describe the shorter, interrupted trajectory).
+"""
+
+#: per-frame measures cached for pictures, report and files (:mod:`rackstress.stress.post`)
+CACHE = "measures.npz"
+#: the post-processing record: peaks, files written, timings
+STRESS_JSON = "stress.json"
+#: the trajectory with the measures as named columns
+STRESS_DUMP = "stress.dump"
+#: one ``.vtp`` a frame and the ParaView collection that lists them
+VTK_DIR, PVD = "vtk", "run.pvd"
+#: the one-page HTML report (:mod:`rackstress.render.report`)
+REPORT = "report.html"
+
+#: what ``--resume`` removes before the trajectory grows (written again at the run's end)
+DERIVED = (STRESS_DUMP, STRESS_JSON, CACHE, REPORT, VTK_DIR)
