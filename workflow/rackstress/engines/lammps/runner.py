@@ -292,11 +292,13 @@ class LammpsRun:
             return
         step, k = next(x for x in self.comm.allgather(late) if x is not None)
         group, local = self.scene.group_of(k)
-        raise RackstressError(
-            f"step {step}: resting '{group}' particle {local} (global index {k}) was touched "
-            "before LAMMPS integrated it: a particle moved more than the neighbour skin "
-            f"({self.deck.skin:g}) between two reneighbourings. A smaller time step keeps the "
-            "active-particles scheme exact.")
+        raise DivergenceError(
+            f"run diverged at step {step}: resting '{group}' particle {local} (atom id {k + 1}) "
+            "was touched before LAMMPS integrated it: a particle moved more than the neighbour "
+            f"skin ({self.deck.skin:g}) between two reneighbourings, so the run could not stay "
+            f"exact. A smaller time step (dt = {self.scene.dt:g} now) or weaker coefficients "
+            "keep Eq. 5 stable; the output written up to here is kept.",
+            step=int(step), index=int(k), group=group, local=int(local))
 
     def _toggle_callback(self, phase_vars) -> None:
         """The fix external exists only in phases where a Python operator is active."""
