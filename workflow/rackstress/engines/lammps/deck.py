@@ -5,7 +5,8 @@ How each operator is realized (``mode='exact'`` unless said otherwise):
 ==========================  ================================================================
 operator                    LAMMPS realization
 ==========================  ================================================================
-force (phase-conditioned)   ``fix addforce`` on the selected atoms, F = m·â (Eq. 8)
+force (phase-conditioned)   ``fix addforce`` on the selected atoms, F = m·â (Eq. 8); constant
+                            forces with the same F share one fix (one pass over the atoms)
 dampen                      one ``fix viscous`` for all groups, γ = c·m per type (Eq. 9)
 dampen (phase-conditioned)  ``fix viscous`` on the group, γ = c·m, redefined at phase switches
 dampen + contact extra      base as above; the extra term in the Python callback
