@@ -365,7 +365,9 @@ def _lammps_run(scene, **compile_kw):
         run.run_schedule()
         p, v = run.gather_positions(), run.gather_velocities()
         bit = run.py.move_bit
-        mask = run.lmp.numpy.extract_atom("mask")[:scene.n_particles].copy()
+        n = scene.n_particles
+        mask = np.zeros(n, dtype=np.int64)    # by particle: LAMMPS keeps moving rows first
+        mask[run.lmp.numpy.extract_atom("id")[:n] - 1] = run.lmp.numpy.extract_atom("mask")[:n]
         return p, v, (None if bit is None else (mask & bit) != 0)
     finally:
         run.close()
@@ -379,6 +381,8 @@ def test_active_only_is_exact_over_a_gait_cycle(gait_reference):
     sc = _gait_cycle()
     deck = compile_deck(sc, "exact")
     assert deck.passive == ("sediment",) and "fix rs_nve rs_move nve" in deck.input_text()
+    # LAMMPS keeps the moving rows first and fix nve integrates only those
+    assert "atom_modify map array sort 0 0.0 first rs_move" in deck.input_text()
     assert compile_deck(scenes.build("plane-rack"), "exact").passive == ()   # nothing rests
     p, v, active = _lammps_run(sc)
     p_all, v_all, none = _lammps_run(sc, active_only=False)
@@ -391,6 +395,68 @@ def test_active_only_is_exact_over_a_gait_cycle(gait_reference):
     assert np.all(active[sed][moved])           # every sediment particle that moved was active
     assert np.all(active[:sed.start])           # the robot always is
     assert np.abs(p - gait_reference).max() <= 1e-10
+
+
+def _bed_scene() -> Scene:
+    """A block pushed sideways and down across a resting bed (a passive group, last): its
+    bottom layer already overlaps the bed at step 0, and it reaches bed particles far from its
+    start during the run."""
+    block = Group("block", lattice((2, 2, 2), 1.0, origin=(1.0, 0.8, 1.0)), 0.5, kind="body")
+    bed = Group("bed", lattice((40, 1, 6), 1.0), 0.5, kind="leg")
+    ops = {"block": [Force((40.0, -10.0, 0.0)), Collide("bed", Const(50.0)),
+                     Dampen(1.0, extra=2.0, when=(Contact("bed"),))],
+           "bed": [Collide("block", Const(20.0)), Dampen(5.0)]}
+    return Scene("bed", {"block": block, "bed": bed}, ops, [Phase("push", 150, {})], dt=0.01)
+
+
+@pytest.mark.lammps
+def test_active_only_is_exact_when_touched_at_the_start():
+    """Resting particles touched at step 0 are put among LAMMPS' integrated rows before the
+    first step (a second ``run 0``), and those reached later one reneighbouring early: the
+    trajectory equals integrating every particle bit for bit and the reference engine."""
+    sc = _bed_scene()
+    deck = compile_deck(sc, "exact")
+    assert deck.passive == ("bed",)
+    p, v, active = _lammps_run(sc)
+    p_all, v_all, _ = _lammps_run(sc, active_only=False)
+    np.testing.assert_array_equal(p, p_all)
+    np.testing.assert_array_equal(v, v_all)
+    o, bed = sc.original_positions(), sc.slice("bed")
+    moved = np.abs(p[bed] - o[bed]).max(axis=1) > 0
+    d0 = np.linalg.norm(o[bed][:, None] - o[sc.slice("block")][None], axis=2).min(axis=1)
+    touched0 = d0 < 1.0                         # overlapping at step 0 (R = 0.5 + 0.5)
+    assert touched0.sum() == 4 and moved[touched0].all()
+    assert moved.sum() > 3 * touched0.sum() and not active[bed].all()   # more later, not all
+    ref = Reference(sc)
+    drive(ref)
+    assert np.abs(p - ref.p).max() <= 1e-10
+
+
+@pytest.mark.lammps
+def test_active_only_refuses_a_touch_it_cannot_integrate():
+    """A block thrown at the bed 7 units a step (the skin is 2) overlaps resting bed particles
+    one step after being farther than reach + 2 skins: LAMMPS has not put them among its
+    integrated rows yet, so the run stops with a divergence naming the step and a bed particle,
+    rather than go on inexactly; integrating every particle runs it."""
+    block = Group("block", lattice((2, 2, 2), 1.0, origin=(10.0, 7.5, 2.0)), 0.5, kind="body")
+    block.v0 = np.tile([0.0, -700.0, 0.0], (8, 1))
+    bed = Group("bed", lattice((24, 1, 6), 1.0), 0.5, kind="leg")
+    ops = {"block": [Collide("bed", Const(50.0)), Dampen(0.0, extra=2.0, when=(Contact("bed"),))],
+           "bed": [Collide("block", Const(20.0)), Dampen(5.0)]}
+    sc = Scene("thrown", {"block": block, "bed": bed}, ops, [Phase("fall", 20, {})], dt=0.01)
+    o = sc.original_positions()
+    # the block's bottom layer is 7.5 above the bed at step 0 and 0.5 (overlapping) at step 1
+    assert np.isclose(o[:8, 1].min() - 700.0 * 0.01, 0.5)
+    run = LammpsRun(compile_deck(sc, "exact"), None)
+    try:
+        with pytest.raises(DivergenceError) as err:
+            drive(run)
+    finally:
+        run.close()
+    assert err.value.step == 1 and err.value.group == "bed"
+    assert "touched before LAMMPS integrated it" in str(err.value)
+    p, _, _ = _lammps_run(sc, active_only=False)
+    assert np.isfinite(p).all()
 
 
 @pytest.mark.slow

@@ -9,9 +9,11 @@ another, and are reported as ratios to LAMMPS exact serial and to the reference 
 machine is shared: absolute seconds drift, ratios within one run hold better). The paper's own
 figure (142 s per 1200 iterations, one thread, 1.83 GHz) is a row.
 
-Rows are (engine, mode, ranks[, kernels[, scene[, steps]]]): ``kernels`` is the callback's
-compiled (numba) path or its NumPy path (the reference implementation); ``scene`` lets one
-invocation cover ``magpod-small``, ``magpod`` and ``sediment-large`` (one million particles).
+Rows are (engine, mode, ranks[, kernels[, scene[, steps[, particles]]]]): ``kernels`` is the
+callback's compiled (numba) path or its NumPy path (the reference implementation); ``scene`` lets
+one invocation cover ``magpod-small`` (a whole gait cycle, 4800 iterations: its target is the
+cycle's time), ``magpod`` and ``sediment-large`` (one million particles, 200 iterations); a row's
+own steps hold unless ``--quick``.
 Each row reports wall time and CPU time per iteration (the machine is shared: CPU time drifts
 less). Compiling the kernels is never counted in a figure: it happens in setup, and the
 "kernels" section measures it apart — the first compile (a fresh cache directory) and the warm
@@ -42,8 +44,8 @@ PAPER = {"config": "paper (Rönkkö et al.): one thread, 1.83 GHz", "s_per_1200"
 CONFIGS = (("reference", "exact", 1), ("lammps", "exact", 1, "numpy"),
            ("lammps", "exact", 1, "numba"), ("lammps", "fast", 1, "numba"),
            ("lammps", "exact", 2, "numba"), ("lammps", "fast", 2, "numba"),
-           ("lammps", "exact", 1, "numba", "magpod-small"),
-           ("lammps", "exact", 1, "numpy", "magpod-small"),
+           ("lammps", "exact", 1, "numba", "magpod-small", 4800),
+           ("lammps", "exact", 1, "numpy", "magpod-small", 4800),
            ("lammps", "exact", 1, "numba", "magpod", None, "all"),
            ("lammps", "exact", 1, "numba", "sediment-large", 200),
            ("lammps", "exact", 1, "numba", "sediment-large", 200, "all"),
@@ -56,7 +58,7 @@ def normalize(config, scene_name: str, steps: int) -> dict:
     return {"engine": engine, "mode": mode, "ranks": int(ranks),
             "kernels": rest[0] if rest else "numba",
             "scene": rest[1] if len(rest) > 1 else scene_name,
-            "steps": min(int(rest[2]), steps) if len(rest) > 2 and rest[2] else steps,
+            "steps": int(rest[2]) if len(rest) > 2 and rest[2] else steps,
             "particles": rest[3] if len(rest) > 3 else "active"}
 
 
@@ -234,6 +236,8 @@ def run_bench(out: Path | None = None, steps: int = 1200, quick: bool = False,
     rows = []
     for config in configs:
         c = normalize(config, scene_name, steps)
+        if quick:
+            c["steps"] = min(c["steps"], steps)
         engine, mode, ranks, n = c["engine"], c["mode"], c["ranks"], c["steps"]
         kern = c["kernels"] if engine == "lammps" else "—"
         r = spawn(engine, mode, ranks, n, profile_steps if engine == "lammps" else 0,
@@ -372,7 +376,10 @@ def verdict(data: dict) -> list[str]:
     small = _row(data, "magpod-small")
     if small is not None:
         cyc = min(small["ms_per_it"], small.get("cpu_ms_per_it") or small["ms_per_it"]) * 4.8
-        out.append(f"- A gait cycle of magpod-small (4800 iterations, CPU time): {cyc:.2f} s "
+        how = ("measured over the whole cycle" if small["steps"] >= 4800
+               else f"from {small['steps']} iterations")
+        out.append(f"- A gait cycle of magpod-small (4800 iterations, {how}; the better of "
+                   f"wall and CPU time): {cyc:.2f} s "
                    f"(target ≤ {t['magpod_small_cycle_s_max']:g} s: "
                    f"{'**met**' if cyc <= t['magpod_small_cycle_s_max'] else '**not met**'}).")
     for scene in (data["scene"], "sediment-large"):

@@ -57,15 +57,22 @@ class Frame:
     step (:meth:`refresh`).
     """
 
-    def __init__(self, lmp, n_total: int, nlocal: int, dense_span: int, mass: np.ndarray):
+    def __init__(self, lmp, n_total: int, nlocal: int, dense_span: int, mass: np.ndarray,
+                 span: int | None = None):
         nghost = lmp.extract_global("nghost")
         nall = nlocal + nghost
         self.nlocal, self.nghost, self.n_total = nlocal, nghost, n_total
         tag = lmp.numpy.extract_atom("id")[:nall]
-        #: serial with unsorted atoms: row k holds particle k, so look-ups can be skipped
-        self.identity = (nlocal == n_total and nall == n_total
-                         and bool(np.array_equal(tag, np.arange(1, n_total + 1))))
-        self.index = np.arange(n_total) if self.identity else tag.astype(np.int64) - 1
+        #: serial, and row k holds particle k for every k below ``span`` (all particles, or
+        #: those before the passive groups, whose rows LAMMPS reorders as they become active:
+        #: ``atom_modify first``), so look-ups can be skipped there
+        span = n_total if span is None else span
+        self.identity = (nlocal == n_total and nall == n_total and dense_span <= span
+                         and bool(np.array_equal(tag[:span], np.arange(1, span + 1))))
+        self.span = span if self.identity else 0
+        #: LAMMPS' atom ids of the rows (the particle of row r is tag[r] − 1)
+        self.tag = tag
+        self._index = np.arange(n_total) if self.identity and span == n_total else None
         self._row = self._local = None
         #: per-layout results of the terms (selected pairs, candidates, owned rows)
         self.memo = {}
@@ -127,6 +134,20 @@ class Frame:
         for k in range(3):
             acc[:, k] += np.bincount(ar, weights=contrib[:, k], minlength=len(acc))
 
+    @property
+    def index(self) -> np.ndarray:
+        """The particle (global index) of every row here (made when first needed: the serial
+        path needs it only for a few rows, :meth:`particles`)."""
+        if self._index is None:
+            self._index = self.tag.astype(np.int64) - 1
+        return self._index
+
+    def particles(self, rows: np.ndarray) -> np.ndarray:
+        """The particles (global indices) of some rows."""
+        if self._index is not None:
+            return self._index[rows]
+        return self.tag[rows].astype(np.int64) - 1
+
     def compact(self, rows: np.ndarray) -> np.ndarray:
         """Accumulator rows of frame rows (−1: a ghost or a particle outside the dense rows)."""
         return rows if self.identity else self._compact[rows]
@@ -160,16 +181,22 @@ class Frame:
         """Rows among the first ``upto`` (all: None) whose particle lies in ``sl`` (memoized)."""
         key = (kind, sl.start, sl.stop)
         if key not in self.memo:
-            if self.identity:
+            if self.ident(sl) or (self.identity and sl.start == self.span
+                                  and sl.stop == self.n_total):
+                # the rows after span hold the particles after span (a permutation of them)
                 self.memo[key] = np.arange(sl.start, sl.stop)
             else:
                 idx = self.index[:upto]
                 self.memo[key] = np.flatnonzero((idx >= sl.start) & (idx < sl.stop))
         return self.memo[key]
 
+    def ident(self, sl: slice) -> bool:
+        """Whether the rows of the particles in ``sl`` are their indices."""
+        return sl.stop <= self.span
+
     def rows(self, name, I, J):
         """Rows of the particles I and J here; raise if a partner is not visible on this rank."""
-        if self.identity:
+        if self.identity and (not len(I) or max(I.max(), J.max()) < self.span):
             return I, J
         ri, rj = self.row[I], self.row[J]
         if len(ri) and min(ri.min(), rj.min()) < 0:
@@ -213,12 +240,13 @@ class PairTerm:
 
     def _add_block(self, fr: Frame, acc: np.ndarray):
         ts, ss = self.block
-        if fr.identity and self.k is not None:     # rows are particles: one compiled pass
+        here = fr.ident(ts) and fr.ident(ss)
+        if here and self.k is not None:     # rows are particles: one compiled pass
             cIT, cJT = self._full
             self.k.bind_block(fr.x, ts.start, ts.stop - ts.start, ss.start, ss.stop - ss.start,
                               self._qT, cIT, cJT, self._cJT is not None, acc)
             return
-        if fr.identity:
+        if here:
             xt, xs = fr.x[ts], fr.x[ss]
         else:
             # under MPI every rank that owns a particle of either group evaluates the whole
@@ -232,7 +260,7 @@ class PairTerm:
         w = self.factor(d[0] * d[0] + d[1] * d[1] + d[2] * d[2], self._qT)  # without c
         for k in range(3):
             g = w * d[k]
-            if fr.identity:
+            if here:
                 acc[ts, k] += (self._cIT * g).sum(axis=0)
                 if self._cJT is not None:
                     acc[ss, k] -= (self._cJT * g).sum(axis=1)
@@ -318,12 +346,18 @@ class Overlaps:
     both directions and by the contact conditions (Eq. 28's damping) of the same two groups.
     """
 
-    def __init__(self, radius: np.ndarray, skin: float, compiled=None, activate=None):
+    def __init__(self, radius: np.ndarray, skin: float, compiled=None, activate=None,
+                 passive=None):
         self.radius, self.skin, self.k = radius, skin, compiled
+        #: which particles belong to passive groups (activated when first within reach)
+        self.passive = np.zeros(len(radius), dtype=bool) if passive is None else passive
         #: called with the candidate rows of every new list (a resting particle that may be
         #: touched before the next reneighbouring must be integrated from now on)
         self.activate = activate
         self._rmax = {}
+        #: serial lists between groups whose rows are their particles, with the positions they
+        #: were searched at: kept while no atom of the two groups has moved half a skin
+        self._kept = {}
 
     def _reach(self, sl: slice) -> float:
         key = (sl.start, sl.stop)
@@ -338,15 +372,48 @@ class Overlaps:
         if hit is not None:
             return hit
         cut = self._reach(A) + self._reach(B) + self.skin
+        # resting particles join the moving group one reneighbouring early (a partner within
+        # reach + 2 skins), so LAMMPS has put them among the integrated rows (atom_modify
+        # first) before anything can touch them; the contact candidates are those within cut
+        wide = cut + self.skin if self.activate is not None and self._passive(A, B) else cut
+        stable = self.k is not None and wide == cut and fr.ident(A) and fr.ident(B)
+        if stable:
+            # LAMMPS reneighbours when any atom has moved half a skin; the list of two groups
+            # stays valid (no pair outside it can come within reach) as long as none of
+            # *their* atoms has, and their rows are their particles, so it is kept
+            kept = self._kept.get((A.start, B.start))
+            if kept is not None and self.k.moved_below(
+                    fr.x, A.start, A.stop - A.start, B.start, B.stop - B.start, kept[0],
+                    0.25 * self.skin * self.skin):
+                hit = fr.memo[key] = kept[1]
+                return hit
         ia, ib = fr.seen(A), fr.seen(B)
-        a, b = contact_candidates(fr.x[ia], fr.x[ib], cut, same=A == B)
-        a, b = ia[a], ib[b]
-        R2 = (self.radius[fr.index[a]] + self.radius[fr.index[b]]) ** 2
-        if self.activate is not None:
-            self.activate(fr, a)
-            self.activate(fr, b)
+        if self.k is not None:      # a compiled cell list
+            a, b, near_a, near_b = self.k.candidates(fr.x, ia, ib, cut, A == B, fr.tag, wide)
+        else:
+            a, b = contact_candidates(fr.x[ia], fr.x[ib], wide, same=A == B)
+            a, b = ia[a], ib[b]
+            order = np.lexsort((fr.index[b], fr.index[a]))
+            a, b = a[order], b[order]
+            near_a, near_b = a, b
+            if wide > cut:
+                diff = fr.x[b] - fr.x[a]
+                near = rowdot(diff, diff) <= cut * cut
+                a, b = a[near], b[near]
+        if wide > cut:
+            self.activate(fr, near_a)
+            self.activate(fr, near_b)
+        R2 = (self.radius[fr.particles(a)] + self.radius[fr.particles(b)]) ** 2
         hit = fr.memo[key] = (a, b, R2)
+        if stable:
+            self._kept[(A.start, B.start)] = (np.concatenate([fr.x[A], fr.x[B]]), hit)
         return hit
+
+    def _passive(self, A: slice, B: slice) -> bool:
+        key = ("passive", A.start, B.start)
+        if key not in self._rmax:
+            self._rmax[key] = bool(self.passive[A].any() or self.passive[B].any())
+        return self._rmax[key]
 
     def pairs(self, fr: Frame, t: slice, s: slice, name: str = "collide"):
         """Row pairs (a, b) overlapping now, a owned here in ``t``, b seen here in ``s``, with
@@ -358,14 +425,14 @@ class Overlaps:
         A, B = (s, t) if t.start > s.start else (t, s)
         a, b, R2 = self._candidates(fr, A, B)
         if self.k is not None:
-            on, d2 = self.k.touching(fr.x, a, b, R2)
+            a, b, R2, k = self.k.overlapping(fr.x, a, b, R2)
         else:
             diff = fr.x[b] - fr.x[a]
             d2 = rowdot(diff, diff)
             on = Collide.touching(d2, R2)
-        a, b, d2, R2 = a[on], b[on], d2[on], R2[on]
-        if len(d2) and not d2.all():
-            k = int(np.flatnonzero(d2 == 0.0)[0])
+            a, b, d2, R2 = a[on], b[on], d2[on], R2[on]
+            k = int(np.flatnonzero(d2 == 0.0)[0]) if len(d2) and not d2.all() else -1
+        if k >= 0:
             raise PartnerLost(f"{name}: particles {int(fr.index[a[k]])} and "
                               f"{int(fr.index[b[k]])} coincide (Eq. 10 is undefined at d = 0)",
                               int(fr.index[a[k]]))
@@ -429,7 +496,10 @@ class DampenTerm(Term):
     def add(self, fr, acc):
         if self.forces.holds(fr, self):
             sel = fr.owned(self.sl)
-            acc[fr.compact(sel)] += Dampen.accel(fr.v[sel], self.op.extra)
+            if self.forces.compiled is not None:
+                self.forces.compiled.dampen(fr.v, sel, fr.compact(sel), self.op.extra, acc)
+            else:
+                acc[fr.compact(sel)] += Dampen.accel(fr.v[sel], self.op.extra)
 
 
 class CollideTerm(Term):
@@ -445,10 +515,15 @@ class CollideTerm(Term):
         if not self.forces.holds(fr, self):
             return
         a, b, R2 = self.forces.overlaps.pairs(fr, self.sl, self.s, f"collide on {self.target}")
-        if len(a):
-            k = self.forces.compiled
-            fr.add(a, k.collide(fr.x, a, b, R2, self.c) if k is not None
-                   else Collide.accel(fr.x[a], fr.x[b], self.c, R2))
+        if not len(a):
+            return
+        F, k = self.forces, self.forces.compiled
+        if k is not None and fr.identity:   # straight into the accumulators
+            k.collide_add(fr.x, a, b, R2, self.c, acc, fr.acc_rows, F.sacc, F.sflag,
+                          F.stouched, F.snt)
+            return
+        fr.add(a, k.collide(fr.x, a, b, R2, self.c) if k is not None
+               else Collide.accel(fr.x[a], fr.x[b], self.c, R2))
 
 
 class BindTerm(Term):
@@ -504,6 +579,19 @@ class AttractTerm(Term):
         self._by_phase[key].add(fr, acc)
 
 
+def _leading(mask: np.ndarray, bit: int, n: int) -> int:
+    """How many leading rows have ``bit`` set, when every row with it comes before every row
+    without it (LAMMPS' ``atom_modify first`` order just after it reordered): a bisection."""
+    lo, hi = 0, n
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if mask[mid] & bit:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
 #: The term realizing each operator class in the callback.
 TERMS = {Force: ForceTerm, Dampen: DampenTerm, Collide: CollideTerm, Bind: BindTerm,
          Attract: AttractTerm}
@@ -536,7 +624,19 @@ class PyForces:
         self.move_bit = self._move_bit(lmp, deck) if self.passive.any() else None
         self._scan_moving = self.move_bit is not None   # once: a resumed run's moving ones
         self.overlaps = Overlaps(self.radius, deck.skin, self.compiled,
-                                 self._activate if self.move_bit is not None else None)
+                                 self._activate if self.move_bit is not None else None,
+                                 self.passive)
+        #: rows below this are particles (serial): every group before the passive ones, which
+        #: LAMMPS keeps first (they are never reordered) when the passive groups come last
+        first_passive = min((self.scene.offset(g) for g in getattr(deck, "passive", ())),
+                            default=self.n)
+        self.span = first_passive if not self.passive[:first_passive].any() and \
+            self.passive[first_passive:].all() else 0
+        #: LAMMPS integrates only its first ``nfirst`` rows (atom_modify first); a force on a
+        #: later row (a passive particle activated too late) would be lost: (step, particle)
+        self.nfirst = self.n
+        self.late = None
+        self.activated_late = False
         python = deck.python_ops
         here = {r.site for r in python}
         #: reverse place of every bind here whose reverse is here too; folded[rev] = carrier
@@ -555,6 +655,15 @@ class PyForces:
         self._fresh = True
         self.frame = None
         self._sparse_rows = np.zeros(0, dtype=np.int64)   # f rows written sparsely last step
+        if self.compiled is not None:
+            # compiled serial path: the sparse (collide-only) rows' accelerations, which of
+            # them this step touched, and the f rows written last step
+            self.sacc = np.zeros((self.n, 3))
+            self.sflag = np.zeros(self.n, dtype=np.bool_)
+            self.stouched = np.zeros(self.n, dtype=np.int64)
+            self.snt = np.zeros(1, dtype=np.int64)
+            self._last = np.zeros(self.n, dtype=np.int64)
+        self._nlast = 0
         # LAMMPS' own displacement check keeps the per-layout memos valid (Overlaps); with any
         # other neighbour settings every step starts from scratch
         self.verlet = (lmp.extract_setting("neigh_every") == 1
@@ -571,9 +680,12 @@ class PyForces:
         """Add the owned passive particles among ``rows`` to the moving group (exact: they are
         at rest with no force until now; fix nve reads the mask every step)."""
         own = rows[rows < fr.nlocal]
-        own = own[self.passive[fr.index[own]]]
+        own = own[self.passive[fr.particles(own)]]
         if len(own):
             mask = self.lmp.numpy.extract_atom("mask")
+            new = own[(mask[own] & self.move_bit) == 0]
+            if len(new) and new.max() >= self.nfirst:
+                self.activated_late = True   # integrated from LAMMPS' next reordering on
             mask[own] |= self.move_bit
 
     def _activate_moving(self, fr: Frame) -> None:
@@ -649,10 +761,14 @@ class PyForces:
     def _frame(self, nlocal: int) -> Frame:
         """This step's frame: the last one refreshed, or a new layout after a reneighbouring."""
         lmp, fr = self.lmp, self.frame
-        if (fr is None or self._fresh or not self.verlet or fr.nlocal != nlocal
-                or lmp.extract_setting("neigh_ago") == 0
+        ago = lmp.extract_setting("neigh_ago")
+        if (fr is None or self._fresh or not self.verlet or fr.nlocal != nlocal or ago == 0
                 or lmp.extract_global("nghost") != fr.nghost):
-            fr = self.frame = Frame(lmp, self.n, nlocal, self.dense_span, self.mass)
+            if self.move_bit is not None and (ago == 0 or self._fresh):
+                # LAMMPS has just reordered (atom_modify first): the moving group's rows
+                # come first, and only they are integrated until it reorders again
+                self.nfirst = _leading(lmp.numpy.extract_atom("mask"), self.move_bit, nlocal)
+            fr = self.frame = Frame(lmp, self.n, nlocal, self.dense_span, self.mass, self.span)
         else:
             fr.refresh()
         return fr
@@ -662,7 +778,7 @@ class PyForces:
         mpi = self.comm is not None and self.comm.Get_size() > 1
         self._fail_here, self._agreed, fr = None, None, None
         try:
-            old = self.frame
+            old, fresh = self.frame, self._fresh
             fr = self._frame(nlocal)
             self._fresh = False
         except Exception as exc:  # noqa: BLE001 - agreed on below
@@ -672,7 +788,7 @@ class PyForces:
         failed = (self._agree(fr, self._fail_here is not None)
                   if mpi and self._contact_keys() else self._fail_here is not None)
         if not failed:
-            self._evaluate(fr, old, f)
+            self._evaluate(fr, old, f, fresh)
         if mpi:
             from mpi4py import MPI
 
@@ -687,23 +803,44 @@ class PyForces:
             # in the same step), so no step runs on without these forces
             self.lmp.force_timeout()
 
-    def _evaluate(self, fr, old, f) -> None:
+    def _evaluate(self, fr, old, f, fresh=False) -> None:
         """This step's forces of the active terms into ``f`` (a failure kept in _fail_here)."""
         try:
             # only the groups the Python operators act on get forces from here; the rest
             # (MagPod's 30,000 sediment particles) is zeroed once per layout, except the few
             # rows a collide reaches (written sparsely, and zeroed the step after)
             if fr is not old:
-                f[:] = 0.0
+                if fresh or self.move_bit is None or not fr.identity:
+                    f[:] = 0.0
+                else:
+                    # serial, LAMMPS just reordered: every row written since (the dense rows,
+                    # touched passive particles) lies below nfirst (a later row is never
+                    # written: _check_late), so the resting rows need no clearing
+                    f[:self.nfirst] = 0.0
                 self._sparse_rows = self._sparse_rows[:0]
+                self._nlast = 0
                 if self._scan_moving:
                     self._activate_moving(fr)
             acc = np.zeros((fr.acc_rows, 3))
             for term in self.active:
                 term.add(fr, acc)
             fr.flush(acc)
-            f[fr.dense_rows] = acc * fr.dense_mass
-            self._write_sparse(fr, f)
+            if fr.identity:
+                np.multiply(acc, fr.dense_mass, out=f[:fr.acc_rows])
+            else:
+                f[fr.dense_rows] = acc * fr.dense_mass
+            if self.compiled is not None and fr.identity:
+                self._nlast = self.compiled.write_sparse(f, self._last, self._nlast, self.sacc,
+                                                         self.sflag, self.stouched, self.snt,
+                                                         self.mass, fr.tag)
+                written = self._last[:self._nlast]
+            else:
+                self._write_sparse(fr, f)
+                written = self._sparse_rows
+            if self.move_bit is not None and len(written) and written.max() >= self.nfirst:
+                # a force on a row LAMMPS does not integrate yet: exactness would be lost
+                r = int(written[written >= self.nfirst][0])
+                self.late = (int(self.lmp.extract_global("ntimestep")), int(fr.tag[r]) - 1)
         except Exception as exc:  # noqa: BLE001 - reported by the runner after the chunk
             self._fail_here = exc
 

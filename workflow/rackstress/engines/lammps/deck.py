@@ -5,7 +5,8 @@ How each operator is realized (``mode='exact'`` unless said otherwise):
 ==========================  ================================================================
 operator                    LAMMPS realization
 ==========================  ================================================================
-force (phase-conditioned)   ``fix addforce`` on the selected atoms, F = m·â (Eq. 8)
+force (phase-conditioned)   ``fix addforce`` on the selected atoms, F = m·â (Eq. 8); constant
+                            forces with the same F share one fix (one pass over the atoms)
 dampen                      one ``fix viscous`` for all groups, γ = c·m per type (Eq. 9)
 dampen (phase-conditioned)  ``fix viscous`` on the group, γ = c·m, redefined at phase switches
 dampen + contact extra      base as above; the extra term in the Python callback
@@ -38,10 +39,19 @@ Active particles: a *passive* group (:func:`passive_groups`: at rest, moved only
 the callback evaluates, and damped — MagPod's sediment) is left out of the group ``rs_move``
 that ``fix nve`` and ``fix viscous`` act on. A particle of it has zero velocity and zero force
 until a collision partner comes within reach, and Eq. 5 does not move such a particle, so
-skipping it is exact. The callback adds it to ``rs_move`` (its group bit in LAMMPS' per-atom
-mask) as soon as its Verlet list holds a candidate pair with it — found when LAMMPS reneighbours,
-before any force can act on it — and for good (a touched particle keeps moving); a run resumed
-from a checkpoint re-adds every passive particle that is moving.
+skipping it is exact. ``atom_modify first rs_move`` makes LAMMPS keep the group's atoms first in
+its arrays (it reorders them when it reneighbours) and ``fix nve`` loop over those rows only, so
+the resting ones cost nothing there; in serial runs the runner adds ``neigh_modify include
+rs_move`` (forces cleared, displacements checked and atoms binned over those rows only; a resting
+row's force is zeroed once and nothing writes it), and ``fix external`` acts on ``rs_move`` too
+(its add pass skips resting rows, whose external force is zero). The callback adds a passive particle to ``rs_move`` (its
+group bit in LAMMPS' per-atom mask), for good, as soon as a partner comes within reach + 2 skins
+when LAMMPS reneighbours: one reneighbouring before anything can touch it, so LAMMPS has reordered
+it among the integrated rows by then. A particle touched at the start is reordered by a second
+``run 0``; a force on a row LAMMPS does not integrate yet (a particle that moved more than a skin
+between two reneighbourings) stops the run with an error rather than lose exactness. A run
+resumed from a checkpoint re-adds every passive particle that is moving. Atom ids stay the
+particles' ids (dumps, checkpoints and gathers go by id).
 """
 from __future__ import annotations
 
@@ -148,7 +158,10 @@ class Deck:
                   "# and writes the same atom positions in every frame as 'rackstress run'."]
         L += ["units lj", "dimension 3", "boundary m m m"]
         L.append("atom_style bond")
-        L.append("atom_modify map array sort 0 0.0")
+        # passive groups: LAMMPS keeps the moving group's atoms first in its arrays and
+        # fix nve integrates only those rows (module doc, "Active particles")
+        first = f" first {MOVE_GROUP}" if self.passive else ""
+        L.append(f"atom_modify map array sort 0 0.0{first}")
         if self.bonds is not None:
             # A rack bonded to thousands of hosts: keep LAMMPS from building 1-3/1-4 lists.
             L.append("special_bonds lj/coul 1.0 1.0 1.0")
@@ -179,11 +192,26 @@ class Deck:
         for r in self.realized:
             L.append(f"#   {r.target} <- {r.op.label()}: {r.how}")
         gamma = dict.fromkeys(range(1, len(sc.groups) + 1), 0.0)   # static damping per type
+        # constant forces: one fix addforce per distinct force vector (MagPod's two legs share
+        # one: one pass over the atoms, not one per group; each atom gets the same F = m·â)
+        same = defaultdict(list)
         for idx, r in enumerate(self.realized):
             if r.native == "addforce" and not r.op.when:
-                L += self._addforce(idx, r)
+                cmds = self._addforce(idx, r)
+                same[cmds[-1].split(" addforce ")[1]].append((idx, cmds))
             if r.native == "viscous" and (r.python or not r.op.when):
                 gamma[types[r.target]] += r.op.c * self.masses[r.target]
+        for F, fixes in same.items():
+            if len(fixes) == 1:
+                L += fixes[0][1]
+                continue
+            sel = []
+            for _, cmds in fixes:
+                L += cmds[:-1]                   # id groups of masked forces
+                sel.append(cmds[-1].split()[2])
+            idx = fixes[0][0]
+            L.append(f"group rs_fu{idx} union {' '.join(sel)}")
+            L.append(f"fix rs_force{idx} rs_fu{idx} addforce {F}")
         if any(gamma.values()):
             # one fix for every group's constant damping: one pass over the atoms, not one per
             # group (gamma 1 times scale γ_type is γ_type exactly; an unnamed type would get 1)
@@ -298,7 +326,7 @@ class Deck:
         py = self.python_ops
         L = self.setup_commands(dump_every=dump_every)
         if py:
-            L.append(f"fix {PY_FIX} all external pf/callback 1 1")
+            L.append(f"fix {PY_FIX} {self.moving} external pf/callback 1 1")
         L += self.schedule_commands()
         return "\n".join(L) + "\n"
 

@@ -21,12 +21,13 @@ ranks with one message (:func:`abort_all`).
 """
 from __future__ import annotations
 
+import gc
 from pathlib import Path
 
 import numpy as np
 
 from rackstress.engines.lammps.callback import PyForces
-from rackstress.engines.lammps.deck import PY_FIX, SKIN, Deck
+from rackstress.engines.lammps.deck import MOVE_GROUP, PY_FIX, SKIN, Deck
 from rackstress.errors import DivergenceError, RackstressError, StorageError
 from rackstress.engines.watchdog import divergence_error, find_divergence
 
@@ -121,6 +122,13 @@ class LammpsRun:
                     self.command(f"dump_modify {self._dump_id} append yes")
         for cmd in deck.velocity_variables():
             self.command(cmd)
+        if deck.passive and self.comm.Get_size() == 1:
+            # serial: LAMMPS clears forces, checks displacements and bins only its first rows
+            # (the moving group, atom_modify first). A resting row's force then stays what it
+            # is, so it is zeroed once here; nothing writes it later (fix external's rows there
+            # are zero, fix viscous multiplies v = 0), so v + dt/2·f/m keeps it at rest.
+            self.command(f"neigh_modify include {MOVE_GROUP}")
+            self.scatter("f", np.zeros((self.scene.n_particles, 3)))
         for cmd in balance_commands(self.scene, self.comm.Get_size()):
             self.command(cmd)
         if deck.python_ops:
@@ -250,9 +258,47 @@ class LammpsRun:
             self.command(cmd)
         self._toggle_callback(phase_vars)
         for cmd in cmds[run0:]:
-            self.command(cmd)
+            if cmd == "run 0 post no":
+                self._run0()
+            else:
+                self.command(cmd)
         self._check_callback()
         self._phase = dict(phase_vars)
+
+    def _run0(self) -> None:
+        """``run 0 post no`` (forces at the current state). If the callback activated resting
+        particles there (Deck.passive) that LAMMPS has not yet put among its integrated first
+        rows (``atom_modify first``), once more: LAMMPS reorders them, and the forces, from the
+        same positions and velocities, are the same."""
+        py = self.py
+        if py is not None:
+            py.activated_late, py.late = False, None
+        self.command("run 0 post no")
+        if py is None or not self.comm.allreduce(py.activated_late or py.late is not None):
+            return
+        py.activated_late, py.late = False, None
+        # forces the first setup left on rows LAMMPS is about to hand to other atoms would stay
+        # there (serially it clears only its first rows: neigh_modify include)
+        self.lmp.numpy.extract_atom("f")[:self.lmp.extract_global("nlocal")] = 0.0
+        self.command("run 0 post no")
+        self._check_late()
+
+    def _check_late(self) -> None:
+        """Stop if a force reached a resting particle LAMMPS did not yet integrate (Deck.passive):
+        it would have moved. Activation one reneighbouring early (within reach + 2 skins) rules
+        this out unless a particle moves more than a skin between two reneighbourings."""
+        late = self.py.late if self.py is not None else None
+        if not self.comm.allreduce(late is not None):
+            return
+        step, k = next(x for x in self.comm.allgather(late) if x is not None)
+        group, local = self.scene.group_of(k)
+        raise DivergenceError(
+            f"run diverged at step {step}: resting '{group}' particle {local} (atom id {k + 1}) "
+            "was touched before LAMMPS integrated it: a particle moved more than the neighbour "
+            f"skin ({self.deck.skin:g}) between two reneighbourings, so the run could not stay "
+            f"exact. A smaller time step (dt = {self.scene.dt:g} now) or weaker coefficients "
+            "keep Eq. 5 stable; the output written up to here is kept.",
+            step=int(step), index=int(k), group=group, local=int(local))
 
     def _toggle_callback(self, phase_vars) -> None:
         """The fix external exists only in phases where a Python operator is active."""
@@ -260,17 +306,27 @@ class LammpsRun:
             return
         want = self.py.set_phase(phase_vars)
         if want and not self._py_on:
-            self.command(f"fix {PY_FIX} all external pf/callback 1 1")
-            self.lmp.set_fix_external_callback(PY_FIX, self.py, self)
+            self.command(f"fix {PY_FIX} {self.deck.moving} external pf/callback 1 1")
+            attach_callback(self.lmp, PY_FIX, self.py, self)
         elif self._py_on and not want:
             self.command(f"unfix {PY_FIX}")
         self._py_on = want
 
     def advance(self, n: int) -> None:
         """``n`` steps (fewer if the callback failed: it stops LAMMPS after its step)."""
-        self.command(f"run {n} pre no post no")
+        # no cyclic garbage collection inside the run: the callback makes no reference cycles,
+        # and a collection pass over every live object (numba, scipy, LAMMPS' wrappers) every
+        # few hundred allocations was a measurable share of each step
+        gc_was = gc.isenabled()
+        gc.disable()
+        try:
+            self.command(f"run {n} pre no post no")
+        finally:
+            if gc_was:
+                gc.enable()
         self.step += n
         self._check_callback()
+        self._check_late()
 
     def _check_callback(self):
         err = self.py.error if self.py is not None else None
@@ -314,8 +370,15 @@ class LammpsRun:
         MPI it also keeps the ghost cutoff ahead of the scene's reach (:meth:`_grow_cutoff`)."""
         x, v, tag = self.positions_local()
         o = self.scene.original_positions()
+        if self._py_on and self.py.move_bit is not None:
+            # only LAMMPS' first rows move (atom_modify first, Deck.passive): a resting particle
+            # after them is where the data file put it, with v = 0
+            x, v, tag = x[:self.py.nfirst], v[:self.py.nfirst], tag[:self.py.nfirst]
         if len(tag) == len(o) and tag[0] == 1 and np.array_equal(tag, self._ids):
             found = find_divergence(self.scene, x, v, o)    # row k holds particle k
+        elif len(tag) and tag[0] == 1 and tag[-1] == len(tag) and np.array_equal(
+                tag, self._ids[:len(tag)]):
+            found = find_divergence(self.scene, x, v, o[:len(tag)])
         else:
             found = find_divergence(self.scene, x, v, o[tag - 1], tag - 1)
         everything = [f for f in self.comm.allgather(found) if f is not None]
@@ -428,7 +491,7 @@ class LammpsRun:
         step (``f``, in global order) are put back; positions and velocities are untouched.
         Done at every checkpoint, so that an interrupted and resumed run sums its pair forces in
         the same order as an uninterrupted one (bitwise in serial)."""
-        self.command("run 0 post no")
+        self._run0()
         self.scatter("f", f)
         self._check_callback()
 
@@ -454,6 +517,28 @@ class LammpsRun:
         self.step = int(ck.step)
         self.realign(ck.f)
         self._phase = previous
+
+
+def attach_callback(lmp, fix_id: str, fn, caller) -> None:
+    """``lmp.set_fix_external_callback`` without its per-step cost: the ``lammps`` module
+    wraps each call's three pointers into new NumPy arrays (~30 µs a step); the callback here
+    only needs fix external's force array, whose view is kept until its address or the number
+    of owned atoms changes (LAMMPS grows or exchanges arrays only when it reneighbours)."""
+    import ctypes
+
+    view = {}
+
+    def wrapper(caller_, step, nlocal, tag_ptr, x_ptr, fext_ptr):
+        key = (nlocal, ctypes.cast(fext_ptr[0], ctypes.c_void_p).value)
+        f = view.get(key)
+        if f is None:
+            view.clear()
+            f = view[key] = lmp.numpy.darray(fext_ptr, nlocal, 3)
+        fn(caller_, step, nlocal, None, None, f)
+
+    cfunc = lmp.FIX_EXTERNAL_CALLBACK_FUNC(wrapper)
+    lmp.callback[fix_id] = {"function": cfunc, "caller": caller}   # kept alive with lmp
+    lmp.lib.lammps_set_fix_external_callback(lmp.lmp, fix_id.encode(), cfunc, caller)
 
 
 def _reach_pairs(scene) -> list[tuple[str, str]]:
