@@ -201,8 +201,8 @@ class Frame:
         ri, rj = self.row[I], self.row[J]
         if len(ri) and min(ri.min(), rj.min()) < 0:
             k = int(np.flatnonzero((ri < 0) | (rj < 0))[0])
-            raise PartnerLost(f"{name}: particles {int(I[k])} and {int(J[k])} are not both "
-                              "visible on this rank", int(I[k]))
+            raise PartnerLost(f"{name}: atom ids {int(I[k]) + 1} and {int(J[k]) + 1} are not "
+                              "both visible on this rank", int(I[k]))
         return ri, rj
 
 
@@ -286,8 +286,8 @@ class PairTerm:
                 if len(missing):
                     k = int(missing[0])
                     k = ts.start + k if k < len(rt) else ss.start + k - len(rt)
-                    raise PartnerLost(f"{self.name}: particle {k} is not visible on a rank that "
-                                      "owns part of its block", k)
+                    raise PartnerLost(f"{self.name}: atom id {k + 1} is not visible on a rank "
+                                      "that owns part of its block", k)
                 ti, si = np.flatnonzero(t_own), np.flatnonzero(s_own)
                 fr.memo[key] = (rt, rs, ti, fr.compact(rt[ti]), si, fr.compact(rs[si]))
         return fr.memo[key]
@@ -433,8 +433,8 @@ class Overlaps:
             a, b, d2, R2 = a[on], b[on], d2[on], R2[on]
             k = int(np.flatnonzero(d2 == 0.0)[0]) if len(d2) and not d2.all() else -1
         if k >= 0:
-            raise PartnerLost(f"{name}: particles {int(fr.index[a[k]])} and "
-                              f"{int(fr.index[b[k]])} coincide (Eq. 10 is undefined at d = 0)",
+            raise PartnerLost(f"{name}: atom ids {int(fr.index[a[k]]) + 1} and "
+                              f"{int(fr.index[b[k]]) + 1} coincide (Eq. 10 is undefined at d = 0)",
                               int(fr.index[a[k]]))
         both = {(A.start, B.start): (a, b, R2)}
         if A != B:              # the other direction of the same pairs
