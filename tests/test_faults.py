@@ -498,10 +498,35 @@ def test_a_render_killed_midway_leaves_nothing_the_next_render_keeps(tmp_path):
               *QUIET).returncode == 0
     p = subprocess.Popen([RS, "render", str(out), "--no-progress"], stdout=subprocess.DEVNULL,
                          stderr=subprocess.DEVNULL)
-    seen = wait_for(lambda: any(out.glob(".*.tmp*")), 60, p)
+
+    def children():
+        try:
+            return Path(f"/proc/{p.pid}/task/{p.pid}/children").read_text().split()
+        except OSError:
+            return []
+
+    # killed while writing, with its plot process (a fork) drawing beside it
+    seen = wait_for(lambda: any(out.glob(".*.tmp*")) and children(), 60, p)
+    kids = children()
     p.send_signal(signal.SIGKILL)
     p.wait()
-    assert seen and p.returncode == -signal.SIGKILL      # killed while writing
+    assert seen and kids and p.returncode == -signal.SIGKILL
+    # the lock ended with the process that took it: the plot process holds no copy of it
+    import fcntl
+
+    fd = os.open(out / ".lock", os.O_RDWR)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)     # raises while a copy holds it
+    finally:
+        os.close(fd)
+    # the plot process dies with it and holds no copy of the lock
+    def alive(k):
+        try:        # a zombie ('Z') waits only for its reaper
+            return Path(f"/proc/{k}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+        except OSError:
+            return False
+
+    assert wait_for(lambda: not any(alive(k) for k in kids), 20)
     r = rs("render", out, "--no-progress", timeout=300)
     assert r.returncode == 0, r.stderr
     assert [x.name for x in out.glob(".*tmp*")] == []

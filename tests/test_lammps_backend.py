@@ -364,7 +364,7 @@ def _lammps_run(scene, **compile_kw):
     try:
         run.run_schedule()
         p, v = run.gather_positions(), run.gather_velocities()
-        bit = run.py.move_bit
+        bit = None if run.py is None else run.py.move_bit     # no callback: nothing passive
         n = scene.n_particles
         mask = np.zeros(n, dtype=np.int64)    # by particle: LAMMPS keeps moving rows first
         mask[run.lmp.numpy.extract_atom("id")[:n] - 1] = run.lmp.numpy.extract_atom("mask")[:n]
@@ -509,3 +509,53 @@ def test_active_only_run_killed_and_resumed_equals_uninterrupted(tmp_path):
                        capture_output=True, text=True, timeout=900)
     assert r.returncode == 0, r.stderr[-2000:]
     assert (cut / "trajectory.dump").read_bytes() == (full / "trajectory.dump").read_bytes()
+
+
+@pytest.mark.lammps
+def test_a_contact_list_kept_across_reneighbourings_misses_no_contact():
+    """Two particles close in on each other at 4 units/time while a third, far away, flies at
+    10 and makes LAMMPS reneighbour every ~10 steps (skin 2: at half a skin). Each of the two
+    moves less than half a skin between reneighbourings, so their contact list (searched at
+    d = 3.05, just beyond reach + skin = 3) is kept twice; by then they can have closed by two
+    skins, and they touch (d < R = 1) at step 27, before the next search. LAMMPS must see that
+    contact when it happens: equal to the reference engine to 1e-10 (a list kept with one skin
+    of margin missed it for six steps)."""
+    a = Group("a", np.array([[0.0, 0.0, 0.0]]), 0.5, kind="body")
+    b = Group("b", np.array([[3.05, 0.0, 0.0]]), 0.5, kind="body")
+    fast = Group("fast", np.array([[200.0, 0.0, 0.0]]), 0.5, kind="body")
+    a.v0, b.v0, fast.v0 = np.array([[4.0, 0, 0]]), np.array([[-4.0, 0, 0]]), np.array([[10.0, 0, 0]])
+    # a contact condition on the pair puts their collisions in the Python callback's search
+    ops = {"a": [Collide("b", Const(50.0)), Dampen(0.0, extra=1.0, when=(Contact("b"),))],
+           "b": [Collide("a", Const(20.0))]}
+    sc = Scene("kept", {"a": a, "b": b, "fast": fast}, ops, [Phase("go", 60, {})], dt=0.01)
+    p, _, _ = _lammps_run(sc)
+    ref = Reference(sc)
+    drive(ref)
+    # they did touch and bounce: the gap at the end is wider than at the closest approach
+    assert ref.p[1, 0] - ref.p[0, 0] > 1.0 and np.abs(ref.p[0, 0] - 0.6 * 4.0) > 0.1
+    assert np.abs(p - ref.p).max() <= 1e-10
+
+
+@pytest.mark.lammps
+def test_equal_constant_forces_add_up_on_lammps():
+    """Eq. 8's forces add: a group with the same force twice moves as under twice the force, a
+    masked force on top of a whole-group one adds on the selected particles, and two groups
+    with one equal force each (which share one fix addforce) each get it once. From rest under
+    a constant acceleration â, Eq. 5 gives p_n = o + t²·n(n+1)/2·â; LAMMPS matches that and the
+    reference engine."""
+    n, t = 10, 0.01
+    a = Group("a", lattice((2, 1, 1), 1.0), 0.5, kind="body")
+    b = Group("b", lattice((2, 1, 1), 1.0, origin=(10.0, 0.0, 0.0)), 0.5, kind="body")
+    c = Group("c", lattice((2, 1, 1), 1.0, origin=(20.0, 0.0, 0.0)), 0.5, kind="body")
+    e = (1.0, 0.0, 0.0)
+    ops = {"a": [Force(e), Force(e)],
+           "b": [Force(e), Force(e, where=(True, False))],
+           "c": [Force(e)]}
+    sc = Scene("forces", {"a": a, "b": b, "c": c}, ops, [Phase("go", n, {})], dt=t)
+    p, _, _ = _lammps_run(sc)
+    moved = p[:, 0] - sc.original_positions()[:, 0]
+    unit = t * t * n * (n + 1) / 2
+    np.testing.assert_allclose(moved, unit * np.array([2, 2, 2, 1, 1, 1]), rtol=1e-12)
+    ref = Reference(sc)
+    drive(ref)
+    assert np.abs(p - ref.p).max() <= 1e-12

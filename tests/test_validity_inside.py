@@ -138,6 +138,11 @@ def test_toml_bind_inside_region(tmp_path):
     assert sorted(map(tuple, o[[a, b], :2].tolist())) == [(1.0, 0.0), (2.0, 1.0)]
     with pytest.raises(SceneError, match="inside"):
         scene(f"inside = {shape}\n")                 # inside without within
+    # an ids region selects particles, not space: refused (it used to drop every binding)
+    for ids in ("{ ids = [0, 1, 2] }", "{ union = [{ ids = [0] }, { box = { min = [0, 0, 0], "
+                "max = [1, 1, 1] } }] }"):
+        with pytest.raises(SceneError, match="'inside'.*an 'ids' region selects particles"):
+            scene(f"within = 1.5\ninside = {ids}\n")
 
 
 def test_fea_square_material_reduces_to_isotropic_and_matches_beam_theory():
@@ -178,3 +183,19 @@ def test_fingerprint_sees_the_shape_a_bind_stays_inside():
     same = fingerprint(cases.l_bracket(body="bind-inside", w=4, H=12, lx=10), engine="lammps",
                        mode="exact", dump_every=10)
     assert same == fa
+
+
+def test_binds_inside_different_shapes_are_not_each_others_reverse():
+    """Eq. 16's reciprocal pair set is shared only by binds with the same coefficient: two
+    WithinInside binds with the same d but different shapes keep their own pairs."""
+    from rackstress.model.operators import Bind, WithinInside, reverse_of
+    from rackstress.model.regions import Box
+
+    big = Box([-10, -10, -10], [10, 10, 10])
+    small = Box([-1, -1, -1], [1, 1, 1])
+    same = {"a": [Bind("b", WithinInside(1.5, 20.0, big))],           # read twice from a file
+            "b": [Bind("a", WithinInside(1.5, 20.0, Box([-10, -10, -10], [10, 10, 10])))]}
+    assert reverse_of(same, "a", 0) == ("b", 0)
+    other = {"a": [Bind("b", WithinInside(1.5, 20.0, big))],
+             "b": [Bind("a", WithinInside(1.5, 20.0, small))]}
+    assert reverse_of(other, "a", 0) is None

@@ -643,7 +643,9 @@ def reverse_of(operators: Mapping, target: str, k: int):
     for m, other in enumerate(operators.get(op.source, [])):
         if (type(other) is type(op) and other.source == target and other.when == op.when
                 and type(other.coeff) is type(op.coeff)
-                and (not isinstance(op.coeff, Within) or other.coeff.d == op.coeff.d)):
+                and (not isinstance(op.coeff, Within) or other.coeff.d == op.coeff.d)
+                and (not isinstance(op.coeff, WithinInside)    # the same shape (by value)
+                     or repr(other.coeff.region) == repr(op.coeff.region))):
             return (op.source, m)
     return None
 

@@ -703,12 +703,15 @@ class _Background:
 
         self.args = (fn, run, values, label, coloured, context, report, out)
         self.result = out / ".plots.json"
-        self.proc = None
+        self.proc, self.parent = None, os.getpid()
         if "fork" in mp.get_all_start_methods():
             self.proc = mp.get_context("fork").Process(target=self._child, daemon=True)
             self.proc.start()
 
     def _child(self):
+        from rackstress.runs.rundir import in_forked_child
+
+        in_forked_child(self.parent)     # the run directory's lock stays the parent's alone
         fn, run, values, label, coloured, context, report, out = self.args
         t = time.perf_counter()
         report.files, report.notes = [], []

@@ -79,6 +79,28 @@ def stale_note(rec: dict | None) -> str | None:
     return None
 
 
+def in_forked_child(parent: int) -> None:
+    """Call first in a process forked while a lock is held (the pictures' plot process): close
+    its copies of the lock files, so the lock ends with the process that took it — a copy would
+    keep the ``flock`` alive after that process is killed — and die with the parent (Linux:
+    ``PR_SET_PDEATHSIG``), so nothing goes on writing into a run directory nobody holds."""
+    for fd, _ in list(_held.values()):
+        try:
+            os.close(fd)            # never LOCK_UN: that would release the parent's lock too
+        except OSError:
+            pass
+    _held.clear()
+    try:
+        import ctypes
+        import signal
+
+        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+    if os.getppid() != parent:     # the parent (pid ``parent``) died before prctl took effect
+        os._exit(1)
+
+
 @contextlib.contextmanager
 def locked(rundir, command: str | None = None, comm=None, create: bool = True, notes=None):
     """Hold the exclusive lock of a run directory for the duration of a ``with`` block.

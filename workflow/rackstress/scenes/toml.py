@@ -342,6 +342,14 @@ def _scene_params(ctx: _Ctx, data: dict, overrides: dict) -> tuple[dict, dict]:
     return table, settings
 
 
+def _names_particles(region) -> bool:
+    """Whether a region (or a part of a combination) selects particles by index (``ids``)."""
+    from rackstress.model.regions import Ids
+
+    return isinstance(region, Ids) or any(_names_particles(p)
+                                          for p in getattr(region, "parts", ()))
+
+
 def _evaluate(text: str, params: dict, where: str, ctx: _Ctx):
     """The value of a parameter reference: ``$name`` or ``$(expression)`` over [params]."""
     body = text[1:].strip()
@@ -940,8 +948,13 @@ def _operator(c: _Ctx, kind: str, t: dict, on: str, groups: dict, when: tuple, p
         if "within" in t:
             d = _number(c, t["within"], "within", positive=True)
             if "inside" in t:       # no binding across free space (WithinInside)
-                return Bind(src, ops_mod.WithinInside(d, cc, _region(c, t["inside"], "inside",
-                                                                     base)), when=when)
+                shape = _region(c, t["inside"], "inside", base)
+                if _names_particles(shape):
+                    raise c.error("'inside' is the part's shape, tested at points along each "
+                                  "binding's segment; an 'ids' region selects particles, not "
+                                  "space: give a box, sphere, cylinder, half-space, mesh or a "
+                                  "combination of them", "inside")
+                return Bind(src, ops_mod.WithinInside(d, cc, shape), when=when)
             return Bind(src, Within(d, cc), when=when)
         if "inside" in t:
             raise c.error("'inside' restricts within(d)'s pairs to those whose segment stays "

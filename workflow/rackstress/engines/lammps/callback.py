@@ -378,15 +378,19 @@ class Overlaps:
         wide = cut + self.skin if self.activate is not None and self._passive(A, B) else cut
         stable = self.k is not None and wide == cut and fr.ident(A) and fr.ident(B)
         if stable:
-            # LAMMPS reneighbours when any atom has moved half a skin; the list of two groups
-            # stays valid (no pair outside it can come within reach) as long as none of
-            # *their* atoms has, and their rows are their particles, so it is kept
+            # a list of two groups whose rows are their particles is searched with two skins
+            # of margin (reach + 2 skins) and kept at a later reneighbouring while none of
+            # *their* atoms has moved half a skin since the search: until the next
+            # reneighbouring each atom then stays within one skin of where it was searched
+            # (LAMMPS reneighbours once any atom has moved half a skin), so a pair can have
+            # closed by less than two skins and none outside the list can be within reach
             kept = self._kept.get((A.start, B.start))
             if kept is not None and self.k.moved_below(
                     fr.x, A.start, A.stop - A.start, B.start, B.stop - B.start, kept[0],
                     0.25 * self.skin * self.skin):
                 hit = fr.memo[key] = kept[1]
                 return hit
+            cut = wide = cut + self.skin
         ia, ib = fr.seen(A), fr.seen(B)
         if self.k is not None:      # a compiled cell list
             a, b, near_a, near_b = self.k.candidates(fr.x, ia, ib, cut, A == B, fr.tag, wide)

