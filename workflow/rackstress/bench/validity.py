@@ -249,27 +249,22 @@ def run_bench(out: Path | None = None, quick: bool = False, echo=print) -> dict:
 
 
 def table_rows(data) -> list:
-    rows = []
-    for r in data["results"]:
-        for name in MEASURES:
-            a = r["agreement"][name]
-            rows.append([r["case"], r["body"], name, fmt(a["spearman"], 2),
-                         fmt(a["top5_overlap"], 2), fmt(a["max_distance"], 2),
-                         ("**yes**" if name == "strain" else "yes") if meets(a) else "no"])
-    return rows
+    """The main table's rows: every case, body model and measure (what ``cli`` prints too)."""
+    return agreement_rows(data["results"], MEASURES)
 
 
-
-def _lattice_rows(records) -> list:
-    """Table rows (strain, virial, LAMMPS' virial) of the lattice models' comparisons."""
+def agreement_rows(records, measures=("strain", "virial", "lammps_virial")) -> list:
+    """Table rows (case, body, measure, ρ, top-5 %, max distance, meets) of ``records``; the
+    lattice-material and half-spacing tables show the stress-like measures only."""
     rows = []
     for r in records:
-        for name in ("strain", "virial", "lammps_virial"):
+        for name in measures:
             a = r["agreement"][name]
             rows.append([r["case"], r["body"], name, fmt(a["spearman"], 2),
                          fmt(a["top5_overlap"], 2), fmt(a["max_distance"], 2),
                          ("**yes**" if name == "strain" else "yes") if meets(a) else "no"])
     return rows
+
 
 def report(data) -> str:
     lines = ["# Validity: particle measures against linear-elastic FEA", "",
@@ -316,7 +311,7 @@ def report(data) -> str:
                      "(mesh densities 4 → 8; change in the peak "
                      + ", ".join(sorted({f"{100 * r['fea_change']:.2f} %"
                                          for r in data["lattice_material"]})) + "):\n")
-        lines.append(md_table(HEADER, _lattice_rows(data["lattice_material"])))
+        lines.append(md_table(HEADER, agreement_rows(data["lattice_material"])))
         ce = next((r for r in data["lattice_material"] if r.get("E_eff_fea")), None)
         if ce:
             lines.append(f"\nCantilever modulus from the tip deflection (E = PL³/3Iδ): the "
@@ -331,7 +326,7 @@ def report(data) -> str:
             f"{c}: " + ", ".join(f"{k} = {v:g}" for k, v in FINE[c].items()) for c in FINE)
             + "), the lattice models only; FEA at mesh densities "
             + " → ".join(map(str, FINE_DENSITIES)) + " per spacing.\n")
-        lines.append(md_table(HEADER, _lattice_rows(data["fine"])))
+        lines.append(md_table(HEADER, agreement_rows(data["fine"])))
         lines.append("\nParticles, steps to rest and FEA change between the two meshes: "
                      + "; ".join(f"{r['case']} {r['body']}: {r['n_particles']}, "
                                  f"{r['equilibrium']['steps']}, "

@@ -374,11 +374,9 @@ class LammpsRun:
             # only LAMMPS' first rows move (atom_modify first, Deck.passive): a resting particle
             # after them is where the data file put it, with v = 0
             x, v, tag = x[:self.py.nfirst], v[:self.py.nfirst], tag[:self.py.nfirst]
-        if len(tag) == len(o) and tag[0] == 1 and np.array_equal(tag, self._ids):
-            found = find_divergence(self.scene, x, v, o)    # row k holds particle k
-        elif len(tag) and tag[0] == 1 and tag[-1] == len(tag) and np.array_equal(
+        if len(tag) and tag[0] == 1 and tag[-1] == len(tag) and np.array_equal(
                 tag, self._ids[:len(tag)]):
-            found = find_divergence(self.scene, x, v, o[:len(tag)])
+            found = find_divergence(self.scene, x, v, o[:len(tag)])   # row k holds particle k
         else:
             found = find_divergence(self.scene, x, v, o[tag - 1], tag - 1)
         everything = [f for f in self.comm.allgather(found) if f is not None]
