@@ -108,8 +108,8 @@ def warm() -> dict:
     flag, nt = np.zeros(3, np.bool_), np.zeros(1, np.int64)
     k.collide_add(x, r, s, np.full(2, 4.0), 3.0, acc, 1, np.zeros((3, 3)), flag,
                   np.zeros(3, np.int64), nt)
-    k.write_sparse(np.zeros((3, 3)), np.zeros(3, np.int64), 0, np.zeros((3, 3)), flag,
-                   np.zeros(3, np.int64), nt, np.ones(3), tag)
+    k.add_sparse(np.zeros((3, 3)), np.zeros((3, 3)), flag, np.zeros(3, np.int64), nt,
+                 np.ones(3), tag, 3)
     seconds = time.perf_counter() - t0
     if first and os.environ.get("PMI_RANK", "0") == "0":
         print(f"rackstress: kernels compiled in {seconds:.1f} s", file=sys.stderr, flush=True)
@@ -409,27 +409,22 @@ if nb is not None:
                 sacc[i, 2] += w * d2_
 
     @nb.njit(**_OPTS)
-    def write_sparse(f, last, nlast, sacc, flag, touched, nt, mass, tag):
-        """f rows outside the dense accumulator: last step's zeroed, this step's = sacc·m
-        (``mass`` of the particle with atom id ``tag[row]``; then sacc cleared); returns how
-        many rows were written (they become ``last``)."""
-        for k in range(nlast):
-            r = last[k]
-            f[r, 0] = 0.0
-            f[r, 1] = 0.0
-            f[r, 2] = 0.0
-        n = 0
+    def add_sparse(f, sacc, flag, touched, nt, mass, tag, nfirst):
+        """f rows outside the dense accumulator += sacc·m (``mass`` of the particle with atom
+        id ``tag[row]``; then sacc cleared), for the rows this step touched; returns the first
+        of them at or after ``nfirst`` (a row LAMMPS does not integrate yet), or −1."""
+        late = -1
         for k in range(nt[0]):
             r = touched[k]
             m = mass[tag[r] - 1]
-            f[r, 0] = sacc[r, 0] * m
-            f[r, 1] = sacc[r, 1] * m
-            f[r, 2] = sacc[r, 2] * m
+            f[r, 0] += sacc[r, 0] * m
+            f[r, 1] += sacc[r, 1] * m
+            f[r, 2] += sacc[r, 2] * m
             sacc[r, 0] = 0.0
             sacc[r, 1] = 0.0
             sacc[r, 2] = 0.0
             flag[r] = False
-            last[n] = r
-            n += 1
+            if r >= nfirst and late < 0:
+                late = r
         nt[0] = 0
-        return n
+        return late

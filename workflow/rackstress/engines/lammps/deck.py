@@ -72,6 +72,10 @@ from rackstress.model.verlet import scaled_scene
 MODES = ("exact", "fast")
 #: The fix external that carries every Python-realized operator.
 PY_FIX = "rs_py"
+#: fix external's Napply: how often its own pass adds its force array to every owned atom of
+#: its group. Never after step 0 (LAMMPS' largest int): the callback adds its forces into
+#: LAMMPS' force array itself, on the rows it computed; at step 0 the pass adds zeros.
+PY_NAPPLY = 2**31 - 1
 #: The group LAMMPS integrates and damps: every particle but the resting ones of passive groups
 #: (module doc, "Active particles"); the callback adds a passive particle the moment it can move.
 MOVE_GROUP = "rs_move"
@@ -331,7 +335,7 @@ class Deck:
         py = self.python_ops
         L = self.setup_commands(dump_every=dump_every)
         if py:
-            L.append(f"fix {PY_FIX} {self.moving} external pf/callback 1 1")
+            L.append(f"fix {PY_FIX} {self.moving} external pf/callback 1 {PY_NAPPLY}")
         L += self.schedule_commands()
         return "\n".join(L) + "\n"
 
