@@ -108,6 +108,7 @@ def warm() -> dict:
     flag, nt = np.zeros(3, np.bool_), np.zeros(1, np.int64)
     k.collide_add(x, r, s, np.full(2, 4.0), 3.0, acc, 1, np.zeros((3, 3)), flag,
                   np.zeros(3, np.int64), nt)
+    k.add_natives(np.zeros((3, 3)), np.ones((3, 3)), tag, 3, 1, np.ones((3, 3)), np.ones(3))
     k.add_sparse(np.zeros((3, 3)), np.zeros((3, 3)), flag, np.zeros(3, np.int64), nt,
                  np.ones(3), tag, 3)
     seconds = time.perf_counter() - t0
@@ -407,6 +408,16 @@ if nb is not None:
                 sacc[i, 0] += w * d0
                 sacc[i, 1] += w * d1
                 sacc[i, 2] += w * d2_
+
+    @nb.njit(**_OPTS)
+    def add_natives(f, v, tag, n, ident, F, g):
+        """Eqs. 8 and 9 as LAMMPS' fix addforce and fix viscous compute them, on rows below
+        ``n``: f = (f + F) − γ·v with F, γ of the row's particle (the row itself below
+        ``ident``, else atom id ``tag[row]`` − 1)."""
+        for r in range(n):
+            p = r if r < ident else tag[r] - 1
+            for k in range(3):
+                f[r, k] = (f[r, k] + F[p, k]) - g[p] * v[r, k]
 
     @nb.njit(**_OPTS)
     def add_sparse(f, sacc, flag, touched, nt, mass, tag, nfirst):

@@ -661,6 +661,9 @@ class PyForces:
         self.dense_span = max([0] + [t.dense_stop for t in self.terms])
         self._fresh = True
         self.frame = None
+        #: the static constant forces and damping the callback adds itself (Deck.callback_natives):
+        #: F and γ per particle, over the rows fix nve integrates
+        self.natives = deck.natives_per_particle() if deck.callback_natives else None
         if self.compiled is not None:
             # compiled serial path: the sparse (collide-only) rows' accelerations and which of
             # them this step touched
@@ -706,14 +709,15 @@ class PyForces:
 
     # ------------------------------------------------------------------ phase
     def set_phase(self, phase_vars) -> bool:
-        """Select the terms active in this phase; return whether any are."""
+        """Select the terms active in this phase; return whether the callback has anything to
+        do (a term is active, or it adds the deck's constant forces and damping)."""
         self.phase = dict(phase_vars)
         self._keys = None
         self._fresh = True     # the fix (and its force array) may be new
         for t in self.terms:
             t.phase_ok = phase_active(t.op.when, self.phase)
         self.active = [t for t in self.terms if not t.gated or t.phase_ok]
-        return bool(self.active)
+        return bool(self.active) or self.natives is not None
 
     def _contact(self, fr: Frame, target: str, group: str) -> bool:
         if self._agreed is not None:            # MPI: agreed on by all ranks this step
@@ -821,6 +825,8 @@ class PyForces:
                 term.add(fr, acc)
             fr.flush(acc)
             out = fr.f
+            if self.natives is not None:
+                self._add_natives(fr, out)
             if fr.identity:
                 out[:fr.acc_rows] += acc * fr.dense_mass
             else:
@@ -835,6 +841,19 @@ class PyForces:
                 self.late = (int(self.lmp.extract_global("ntimestep")), int(fr.tag[r]) - 1)
         except Exception as exc:  # noqa: BLE001 - reported by the runner after the chunk
             self._fail_here = exc
+
+    def _add_natives(self, fr: Frame, f) -> None:
+        """f = (f + F) − γ·v on the rows LAMMPS integrates (its first ``nfirst``; every other
+        row rests: v = 0, and no constant force acts on a passive group): the fixes addforce
+        and viscous would do the same arithmetic over every atom (Deck.callback_natives)."""
+        F, g = self.natives
+        n = min(self.nfirst, fr.nlocal)
+        ident = fr.span if fr.identity else 0
+        if self.compiled is not None:
+            self.compiled.add_natives(f, fr.v, fr.tag, n, ident, F, g)
+            return
+        p = fr.tag[:n].astype(np.int64) - 1
+        f[:n] = (f[:n] + F[p]) - g[p, None] * fr.v[:n]
 
     def _add_sparse(self, fr: Frame, f) -> int:
         """f rows outside the dense accumulator += this step's sparse contributions; the first

@@ -301,7 +301,8 @@ class LammpsRun:
             step=int(step), index=int(k), group=group, local=int(local))
 
     def _toggle_callback(self, phase_vars) -> None:
-        """The fix external exists only in phases where a Python operator is active."""
+        """The fix external exists only in phases where the callback has work: a Python operator
+        is active, or it adds the constant forces and damping (Deck.callback_natives)."""
         if self.py is None:
             return
         want = self.py.set_phase(phase_vars)
