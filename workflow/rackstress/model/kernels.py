@@ -108,8 +108,9 @@ def warm() -> dict:
     flag, nt = np.zeros(3, np.bool_), np.zeros(1, np.int64)
     k.collide_add(x, r, s, np.full(2, 4.0), 3.0, acc, 1, np.zeros((3, 3)), flag,
                   np.zeros(3, np.int64), nt)
-    k.write_sparse(np.zeros((3, 3)), np.zeros(3, np.int64), 0, np.zeros((3, 3)), flag,
-                   np.zeros(3, np.int64), nt, np.ones(3), tag)
+    k.add_natives(np.zeros((3, 3)), np.ones((3, 3)), tag, 3, 1, np.ones((3, 3)), np.ones(3))
+    k.add_sparse(np.zeros((3, 3)), np.zeros((3, 3)), flag, np.zeros(3, np.int64), nt,
+                 np.ones(3), tag, 3)
     k.members(r, s, np.zeros(3, np.bool_))
     # one instruction of every kind through the fused step (the types LAMMPS' arrays have)
     ops = np.array([[OP_BLOCK, 0, 1, 1, 2, 0, 0, 0], [OP_BIND, 0, 2, 0, 0, 0, 0, 0],
@@ -121,8 +122,7 @@ def warm() -> dict:
            np.array([0, 2], np.int64), np.zeros(2, np.int64), np.zeros(1, np.int64),
            np.zeros(2, np.int64), np.zeros(1, np.int64), np.zeros(1, np.int64),
            np.array([0, 1, 2], np.int64), np.array([0, 3], np.int64), np.zeros((3, 3)), 0.5,
-           np.zeros((3, 3)), flag, np.zeros(3, np.int64), nt, np.zeros(3, np.int64), 0,
-           np.ones(3), tag)
+           np.zeros((3, 3)), flag, np.zeros(3, np.int64), nt, np.ones(3), tag, 3)
     seconds = time.perf_counter() - t0
     if first and os.environ.get("PMI_RANK", "0") == "0":
         print(f"rackstress: kernels compiled in {seconds:.1f} s", file=sys.stderr, flush=True)
@@ -457,30 +457,35 @@ if nb is not None:
                 sacc[i, 2] += w * d2_
 
     @nb.njit(**_OPTS)
-    def write_sparse(f, last, nlast, sacc, flag, touched, nt, mass, tag):
-        """f rows outside the dense accumulator: last step's zeroed, this step's = sacc·m
-        (``mass`` of the particle with atom id ``tag[row]``; then sacc cleared); returns how
-        many rows were written (they become ``last``)."""
-        for k in range(nlast):
-            r = last[k]
-            f[r, 0] = 0.0
-            f[r, 1] = 0.0
-            f[r, 2] = 0.0
-        n = 0
+    def add_natives(f, v, tag, n, ident, F, g):
+        """Eqs. 8 and 9 as LAMMPS' fix addforce and fix viscous compute them, on rows below
+        ``n``: f = (f + F) − γ·v with F, γ of the row's particle (the row itself below
+        ``ident``, else atom id ``tag[row]`` − 1)."""
+        for r in range(n):
+            p = r if r < ident else tag[r] - 1
+            for k in range(3):
+                f[r, k] = (f[r, k] + F[p, k]) - g[p] * v[r, k]
+
+    @nb.njit(**_OPTS)
+    def add_sparse(f, sacc, flag, touched, nt, mass, tag, nfirst):
+        """f rows outside the dense accumulator += sacc·m (``mass`` of the particle with atom
+        id ``tag[row]``; then sacc cleared), for the rows this step touched; returns the first
+        of them at or after ``nfirst`` (a row LAMMPS does not integrate yet), or −1."""
+        late = -1
         for k in range(nt[0]):
             r = touched[k]
             m = mass[tag[r] - 1]
-            f[r, 0] = sacc[r, 0] * m
-            f[r, 1] = sacc[r, 1] * m
-            f[r, 2] = sacc[r, 2] * m
+            f[r, 0] += sacc[r, 0] * m
+            f[r, 1] += sacc[r, 1] * m
+            f[r, 2] += sacc[r, 2] * m
             sacc[r, 0] = 0.0
             sacc[r, 1] = 0.0
             sacc[r, 2] = 0.0
             flag[r] = False
-            last[n] = r
-            n += 1
+            if r >= nfirst and late < 0:
+                late = r
         nt[0] = 0
-        return n
+        return late
 
 
 if nb is not None:
@@ -508,7 +513,7 @@ if nb is not None:
     @nb.njit(**_OPTS)
     def step(x, v, f, acc, dmass, ops, fpar, conds, bq, bcI, bcJ, pi, pj, pcI, pcJ, pq, frows,
              ca, cb, cR2, loff, ov, ovn, near, nnear, valid, urow, uoff, uref, h,
-             sacc, sflag, stouched, snt, last, nlast, mass, tag):
+             sacc, sflag, stouched, snt, mass, tag, nfirst):
         """One callback step of the serial path (rows of the dense groups = particles): every
         active term of the phase, in the terms' order, then the forces into LAMMPS' ``f``.
 
@@ -528,11 +533,12 @@ if nb is not None:
         Each term adds exactly what
         its own kernel adds (:func:`bind_block`, :func:`bind_pairs`, :func:`attract_pairs`,
         :func:`collide_add`, :func:`dampen`, a force's vector), in the same order, so the sums
-        are those of the term-by-term path. Then f = acc·m on the dense rows and the sparse
-        rows as :func:`write_sparse`.
+        are those of the term-by-term path. Then f += acc·m on the dense rows and the sparse
+        rows as :func:`add_sparse`.
 
-        Returns (rows written sparsely, L, k): L ≥ 0 names a list whose candidate k coincides
-        (d = 0, Eq. 10 undefined); then nothing is written.
+        Returns (:func:`add_sparse`'s first row at or after ``nfirst``, or −1; L; k): L ≥ 0
+        names a list whose candidate k coincides (d = 0, Eq. 10 undefined); then nothing is
+        added.
         """
         nl = len(loff) - 1
         # each particle may move h/2 less a margin far above rounding (1e-6 relative)
@@ -578,7 +584,7 @@ if nb is not None:
                 if d2 < cR2[k]:
                     if d2 == 0.0:
                         valid[L] = 0
-                        return 0, L, k
+                        return -1, L, k
                     ov[base + cnt] = k
                     cnt += 1
             ovn[L] = cnt
@@ -647,7 +653,7 @@ if nb is not None:
                     acc[r, 1] = acc[r, 1] + fpar[o, 1]
                     acc[r, 2] = acc[r, 2] + fpar[o, 2]
         for r in range(nacc):
-            f[r, 0] = acc[r, 0] * dmass[r]
-            f[r, 1] = acc[r, 1] * dmass[r]
-            f[r, 2] = acc[r, 2] * dmass[r]
-        return write_sparse(f, last, nlast, sacc, sflag, stouched, snt, mass, tag), -1, -1
+            f[r, 0] += acc[r, 0] * dmass[r]
+            f[r, 1] += acc[r, 1] * dmass[r]
+            f[r, 2] += acc[r, 2] * dmass[r]
+        return add_sparse(f, sacc, sflag, stouched, snt, mass, tag, nfirst), -1, -1

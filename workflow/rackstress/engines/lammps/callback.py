@@ -101,6 +101,9 @@ class Frame:
             nall = self.nlocal + self.nghost
             self.x = lmp.numpy.extract_atom("x")[:nall]
             self.v = lmp.numpy.extract_atom("v")[:self.nlocal]
+            #: LAMMPS' force array: the callback adds its forces here itself (fix external's
+            #: own add pass over every owned atom never runs: runner.PY_NAPPLY)
+            self.f = lmp.numpy.extract_atom("f")[:self.nlocal]
         #: per-step results shared between terms (overlapping pairs of a pair of groups)
         self.cache = {}
         #: pair contributions (rows, values), summed into the accumulator once (:meth:`flush`)
@@ -716,7 +719,8 @@ class Fused:
         return True
 
     def run(self, forces: "PyForces", fr: Frame, f: np.ndarray) -> int:
-        """One step into ``f``; return how many rows were written sparsely (``forces._last``)."""
+        """One step added into ``f``; return the first row written at or after
+        ``forces.nfirst`` (one LAMMPS does not integrate yet), or −1."""
         ov = forces.overlaps
         hits = [ov._candidates(fr, A, B) for A, B in self.lists]
         if self._hits is None or any(h is not o for h, o in zip(hits, self._hits)):
@@ -745,7 +749,7 @@ class Fused:
             self.bcJ, self.pi, self.pj, self.pcI, self.pcJ, self.pq, self.frows, self.ca,
             self.cb, self.cR2, self.loff, self.ov, self.ovn, self.near, self.nnear, self.valid,
             self.urow, self.uoff, self.uref, self.margin, F.sacc, F.sflag, F.stouched,
-            F.snt, F._last, F._nlast, F.mass, fr.tag)
+            F.snt, F.mass, fr.tag, F.nfirst)
         if L >= 0:
             a, b = fr.particles(self.ca[k:k + 1])[0], fr.particles(self.cb[k:k + 1])[0]
             raise PartnerLost(f"{self.names[L]}: atom ids {int(a) + 1} and {int(b) + 1} "
@@ -815,16 +819,16 @@ class PyForces:
         self.dense_span = max([0] + [t.dense_stop for t in self.terms])
         self._fresh = True
         self.frame = None
-        self._sparse_rows = np.zeros(0, dtype=np.int64)   # f rows written sparsely last step
+        #: the static constant forces and damping the callback adds itself (Deck.callback_natives):
+        #: F and γ per particle, over the rows fix nve integrates
+        self.natives = deck.natives_per_particle() if deck.callback_natives else None
         if self.compiled is not None:
-            # compiled serial path: the sparse (collide-only) rows' accelerations, which of
-            # them this step touched, and the f rows written last step
+            # compiled serial path: the sparse (collide-only) rows' accelerations and which of
+            # them this step touched
             self.sacc = np.zeros((self.n, 3))
             self.sflag = np.zeros(self.n, dtype=np.bool_)
             self.stouched = np.zeros(self.n, dtype=np.int64)
             self.snt = np.zeros(1, dtype=np.int64)
-            self._last = np.zeros(self.n, dtype=np.int64)
-        self._nlast = 0
         #: serial with compiled kernels: each phase's terms as one compiled pass (Fused),
         #: made once a phase (None where a term cannot be expressed so); False: term by term
         self.fuse = self.compiled is not None and (comm is None or comm.Get_size() == 1)
@@ -871,7 +875,8 @@ class PyForces:
 
     # ------------------------------------------------------------------ phase
     def set_phase(self, phase_vars) -> bool:
-        """Select the terms active in this phase; return whether any are."""
+        """Select the terms active in this phase; return whether the callback has anything to
+        do (a term is active, or it adds the deck's constant forces and damping)."""
         self.phase = dict(phase_vars)
         self._keys = None
         self._fresh = True     # the fix (and its force array) may be new
@@ -879,7 +884,7 @@ class PyForces:
             t.phase_ok = phase_active(t.op.when, self.phase)
         self.active = [t for t in self.terms if not t.gated or t.phase_ok]
         self._plan = None
-        return bool(self.active)
+        return bool(self.active) or self.natives is not None
 
     def flag_rows(self, fr: Frame) -> np.ndarray:
         """A False flag per row of the frame (scratch of :func:`kernels.members`)."""
@@ -992,66 +997,67 @@ class PyForces:
             self.lmp.force_timeout()
 
     def _evaluate(self, fr, old, f, fresh=False) -> None:
-        """This step's forces of the active terms into ``f`` (a failure kept in _fail_here)."""
+        """This step's forces of the active terms, added into LAMMPS' force array ``fr.f``
+        (LAMMPS cleared it at the start of the step; a failure is kept in _fail_here).
+
+        The sums are LAMMPS' own: each row gets f + a·m, as fix external's add pass would have
+        done with a·m in its array, so the trajectory is the same bit for bit."""
         try:
-            # only the groups the Python operators act on get forces from here; the rest
-            # (MagPod's 30,000 sediment particles) is zeroed once per layout, except the few
-            # rows a collide reaches (written sparsely, and zeroed the step after)
-            if fr is not old:
-                if fresh or self.move_bit is None or not fr.identity:
-                    f[:] = 0.0
-                else:
-                    # serial, LAMMPS just reordered: every row written since (the dense rows,
-                    # touched passive particles) lies below nfirst (a later row is never
-                    # written: _check_late), so the resting rows need no clearing
-                    f[:self.nfirst] = 0.0
-                self._sparse_rows = self._sparse_rows[:0]
-                self._nlast = 0
-                if self._scan_moving:
-                    self._activate_moving(fr)
+            if fr is not old and self._scan_moving:
+                self._activate_moving(fr)
             plan = self._fused(fr)
-            if plan is not None:        # every term in one compiled pass, f written there
-                self._nlast = plan.run(self, fr, f)
-                written = self._last[:self._nlast]
-                self._check_late(fr, written)
+            if plan is not None:        # every term in one compiled pass, added to fr.f there
+                if self.natives is not None:
+                    self._add_natives(fr, fr.f)
+                r = plan.run(self, fr, fr.f)
+                if self.move_bit is not None and r >= 0:
+                    # a force on a row LAMMPS does not integrate yet: exactness would be lost
+                    self.late = (int(self.lmp.extract_global("ntimestep")), int(fr.tag[r]) - 1)
                 return
             acc = np.zeros((fr.acc_rows, 3))
             for term in self.active:
                 term.add(fr, acc)
             fr.flush(acc)
+            out = fr.f
+            if self.natives is not None:
+                self._add_natives(fr, out)
             if fr.identity:
-                np.multiply(acc, fr.dense_mass, out=f[:fr.acc_rows])
+                out[:fr.acc_rows] += acc * fr.dense_mass
             else:
-                f[fr.dense_rows] = acc * fr.dense_mass
+                out[fr.dense_rows] += acc * fr.dense_mass
             if self.compiled is not None and fr.identity:
-                self._nlast = self.compiled.write_sparse(f, self._last, self._nlast, self.sacc,
-                                                         self.sflag, self.stouched, self.snt,
-                                                         self.mass, fr.tag)
-                written = self._last[:self._nlast]
+                r = self.compiled.add_sparse(out, self.sacc, self.sflag, self.stouched, self.snt,
+                                             self.mass, fr.tag, self.nfirst)
             else:
-                self._write_sparse(fr, f)
-                written = self._sparse_rows
-            self._check_late(fr, written)
+                r = self._add_sparse(fr, out)
+            if self.move_bit is not None and r >= 0:
+                # a force on a row LAMMPS does not integrate yet: exactness would be lost
+                self.late = (int(self.lmp.extract_global("ntimestep")), int(fr.tag[r]) - 1)
         except Exception as exc:  # noqa: BLE001 - reported by the runner after the chunk
             self._fail_here = exc
 
-    def _check_late(self, fr: Frame, written: np.ndarray) -> None:
-        """A force on a row LAMMPS does not integrate yet: exactness would be lost (the step
-        and the particle are kept in ``late``)."""
-        if self.move_bit is not None and len(written) and written.max() >= self.nfirst:
-            r = int(written[written >= self.nfirst][0])
-            self.late = (int(self.lmp.extract_global("ntimestep")), int(fr.tag[r]) - 1)
-
-    def _write_sparse(self, fr: Frame, f) -> None:
-        """f rows outside the dense accumulator, from this step's sparse contributions."""
-        if len(self._sparse_rows):
-            f[self._sparse_rows] = 0.0
-        if fr.sparse is None:
-            self._sparse_rows = self._sparse_rows[:0]
+    def _add_natives(self, fr: Frame, f) -> None:
+        """f = (f + F) − γ·v on the rows LAMMPS integrates (its first ``nfirst``; every other
+        row rests: v = 0, and no constant force acts on a passive group): the fixes addforce
+        and viscous would do the same arithmetic over every atom (Deck.callback_natives)."""
+        F, g = self.natives
+        n = min(self.nfirst, fr.nlocal)
+        ident = fr.span if fr.identity else 0
+        if self.compiled is not None:
+            self.compiled.add_natives(f, fr.v, fr.tag, n, ident, F, g)
             return
+        p = fr.tag[:n].astype(np.int64) - 1
+        f[:n] = (f[:n] + F[p]) - g[p, None] * fr.v[:n]
+
+    def _add_sparse(self, fr: Frame, f) -> int:
+        """f rows outside the dense accumulator += this step's sparse contributions; the first
+        such row LAMMPS does not integrate yet (at or after ``nfirst``), or −1."""
+        if fr.sparse is None:
+            return -1
         rows, contrib = fr.sparse
         u, inv = np.unique(rows, return_inverse=True)
         m = self.mass[fr.index[u]]
         for k in range(3):
-            f[u, k] = np.bincount(inv, weights=contrib[:, k], minlength=len(u)) * m
-        self._sparse_rows = u
+            f[u, k] += np.bincount(inv, weights=contrib[:, k], minlength=len(u)) * m
+        late = u[u >= self.nfirst]
+        return int(late[0]) if len(late) else -1

@@ -72,6 +72,10 @@ from rackstress.model.verlet import scaled_scene
 MODES = ("exact", "fast")
 #: The fix external that carries every Python-realized operator.
 PY_FIX = "rs_py"
+#: fix external's Napply: how often its own pass adds its force array to every owned atom of
+#: its group. Never after step 0 (LAMMPS' largest int): the callback adds its forces into
+#: LAMMPS' force array itself, on the rows it computed; at step 0 the pass adds zeros.
+PY_NAPPLY = 2**31 - 1
 #: The group LAMMPS integrates and damps: every particle but the resting ones of passive groups
 #: (module doc, "Active particles"); the callback adds a passive particle the moment it can move.
 MOVE_GROUP = "rs_move"
@@ -191,6 +195,48 @@ class Deck:
         L.append("# operators (paper order) and their realization:")
         for r in self.realized:
             L.append(f"#   {r.target} <- {r.op.label()}: {r.how}")
+        forces, gamma = self.static_natives()
+        if self.callback_natives:
+            L.append(f"# the constant forces and damping of the moving particles are added by the "
+                     f"callback (fix external {PY_FIX}),")
+            L.append(f"# f = F - gamma*v over the rows fix nve integrates (these fixes, which would "
+                     "pass over every atom):")
+            L += ["# " + c for cmds, _, _ in forces for c in cmds]
+            if any(gamma.values()):
+                L.append("# " + self._damp_command(gamma))
+        else:
+            L += [c for cmds, _, _ in forces for c in cmds]
+            if any(gamma.values()):
+                L.append(self._damp_command(gamma))
+        held_cmds, nve_group = support_commands(sc)   # supports and v0 (scene-level)
+        L += held_cmds
+        # a scene with supports has no passive group (passive_groups), so the two never meet
+        L.append(f"fix rs_nve {self.moving if self.passive else nve_group} nve")
+        L.append("thermo_style custom step")
+        L.append(f"thermo {max(1, dump_every)}")
+        if dump_file:
+            L.append(f"dump rs_dump all custom {dump_every} {dump_file} id type mol x y z")
+            L.append("dump_modify rs_dump sort id format float %.10g")
+        return L
+
+    @property
+    def callback_natives(self) -> bool:
+        """Whether the static ``fix addforce`` and ``fix viscous`` are evaluated by the callback
+        instead (module doc, "Active particles"): a deck with passive groups, where those fixes
+        would pass over every atom each step, resting or not, while the callback passes over
+        the rows ``fix nve`` integrates. Only where nothing else adds to those forces before
+        the callback (no pair style, no bonds, no phase-conditioned native fix), so each atom's
+        force is summed in LAMMPS' own order and the trajectory is the same bit for bit."""
+        return (bool(self.passive) and not self.lepton and self.bonds is None
+                and not any(r.op.when and not r.python and r.native in ("addforce", "viscous")
+                            for r in self.realized))
+
+    def static_natives(self) -> tuple[list, dict]:
+        """The static constant forces and damping: ``([(commands, particles, F)], {type: γ})``,
+        the ``fix addforce`` in LAMMPS' fix order (F = m·â on the particles, global indices)
+        and γ = Σ c·m per atom type of the one ``fix viscous``."""
+        sc, types = self.scene, topology.group_types(self.scene)
+        out = []
         gamma = dict.fromkeys(range(1, len(sc.groups) + 1), 0.0)   # static damping per type
         # constant forces: groups whose one constant force is the same vector share one fix
         # addforce (MagPod's two legs: one pass over the atoms, not one per group; each atom
@@ -202,36 +248,46 @@ class Deck:
         same = defaultdict(list)
         for idx, r in static:
             cmds = self._addforce(idx, r)
+            sl = sc.slice(r.target)
+            parts = (np.arange(sl.start, sl.stop) if r.op.where is None
+                     else np.flatnonzero(np.asarray(r.op.where, bool)) + sl.start)
+            F = tuple(self.masses[r.target] * float(a) for a in r.op.accel)
             if r.op.where is None and per_group[r.target] == 1:
-                same[cmds[-1].split(" addforce ")[1]].append((idx, cmds))
+                same[cmds[-1].split(" addforce ")[1]].append((idx, cmds, parts, F))
             else:
-                L += cmds
+                out.append((cmds, parts, F))
         for idx, r in enumerate(self.realized):
             if r.native == "viscous" and (r.python or not r.op.when):
                 gamma[types[r.target]] += r.op.c * self.masses[r.target]
-        for F, fixes in same.items():
+        for Fs, fixes in same.items():
             if len(fixes) == 1:
-                L += fixes[0][1]
+                out.append(fixes[0][1:])
                 continue
-            sel = [cmds[-1].split()[2] for _, cmds in fixes]
+            sel = [cmds[-1].split()[2] for _, cmds, _, _ in fixes]
             idx = fixes[0][0]
-            L.append(f"group rs_fu{idx} union {' '.join(sel)}")
-            L.append(f"fix rs_force{idx} rs_fu{idx} addforce {F}")
-        if any(gamma.values()):
-            # one fix for every group's constant damping: one pass over the atoms, not one per
-            # group (gamma 1 times scale γ_type is γ_type exactly; an unnamed type would get 1)
-            scale = " ".join(f"scale {t} {_f(g)}" for t, g in gamma.items())
-            L.append(f"fix rs_damp {self.moving} viscous 1.0 {scale}")
-        held_cmds, nve_group = support_commands(sc)   # supports and v0 (scene-level)
-        L += held_cmds
-        # a scene with supports has no passive group (passive_groups), so the two never meet
-        L.append(f"fix rs_nve {self.moving if self.passive else nve_group} nve")
-        L.append("thermo_style custom step")
-        L.append(f"thermo {max(1, dump_every)}")
-        if dump_file:
-            L.append(f"dump rs_dump all custom {dump_every} {dump_file} id type mol x y z")
-            L.append("dump_modify rs_dump sort id format float %.10g")
-        return L
+            out.append(([f"group rs_fu{idx} union {' '.join(sel)}",
+                         f"fix rs_force{idx} rs_fu{idx} addforce {Fs}"],
+                        np.sort(np.concatenate([p for _, _, p, _ in fixes])), fixes[0][3]))
+        return out, gamma
+
+    def _damp_command(self, gamma: dict) -> str:
+        # one fix for every group's constant damping: one pass over the atoms, not one per
+        # group (gamma 1 times scale γ_type is γ_type exactly; an unnamed type would get 1)
+        scale = " ".join(f"scale {t} {_f(g)}" for t, g in gamma.items())
+        return f"fix rs_damp {self.moving} viscous 1.0 {scale}"
+
+    def natives_per_particle(self) -> tuple[np.ndarray, np.ndarray]:
+        """(F, γ) per particle of :meth:`static_natives`: F summed in fix order from 0, as
+        LAMMPS adds the fixes to a cleared force, and γ of the particle's type."""
+        sc, types = self.scene, topology.group_types(self.scene)
+        forces, gamma = self.static_natives()
+        F = np.zeros((sc.n_particles, 3))
+        for _, parts, vec in forces:
+            F[parts] += np.array(vec)
+        g = np.zeros(sc.n_particles)
+        for name in sc.groups:
+            g[sc.slice(name)] = gamma[types[name]]
+        return F, g
 
     def _pair_commands(self) -> list[str]:
         if not self.lepton:
@@ -331,7 +387,7 @@ class Deck:
         py = self.python_ops
         L = self.setup_commands(dump_every=dump_every)
         if py:
-            L.append(f"fix {PY_FIX} {self.moving} external pf/callback 1 1")
+            L.append(f"fix {PY_FIX} {self.moving} external pf/callback 1 {PY_NAPPLY}")
         L += self.schedule_commands()
         return "\n".join(L) + "\n"
 

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from rackstress.engines.lammps.callback import PyForces
-from rackstress.engines.lammps.deck import MOVE_GROUP, PY_FIX, SKIN, Deck
+from rackstress.engines.lammps.deck import MOVE_GROUP, PY_FIX, PY_NAPPLY, SKIN, Deck
 from rackstress.errors import DivergenceError, RackstressError, StorageError
 from rackstress.engines.watchdog import divergence_error, find_divergence
 
@@ -301,12 +301,13 @@ class LammpsRun:
             step=int(step), index=int(k), group=group, local=int(local))
 
     def _toggle_callback(self, phase_vars) -> None:
-        """The fix external exists only in phases where a Python operator is active."""
+        """The fix external exists only in phases where the callback has work: a Python operator
+        is active, or it adds the constant forces and damping (Deck.callback_natives)."""
         if self.py is None:
             return
         want = self.py.set_phase(phase_vars)
         if want and not self._py_on:
-            self.command(f"fix {PY_FIX} {self.deck.moving} external pf/callback 1 1")
+            self.command(f"fix {PY_FIX} {self.deck.moving} external pf/callback 1 {PY_NAPPLY}")
             attach_callback(self.lmp, PY_FIX, self.py, self)
         elif self._py_on and not want:
             self.command(f"unfix {PY_FIX}")
@@ -521,7 +522,11 @@ def attach_callback(lmp, fix_id: str, fn, caller) -> None:
     """``lmp.set_fix_external_callback`` without its per-step cost: the ``lammps`` module
     wraps each call's three pointers into new NumPy arrays (~30 µs a step); the callback here
     only needs fix external's force array, whose view is kept until its address or the number
-    of owned atoms changes (LAMMPS grows or exchanges arrays only when it reneighbours)."""
+    of owned atoms changes (LAMMPS grows or exchanges arrays only when it reneighbours).
+
+    The callback adds its forces into LAMMPS' force array itself; fix external's own pass,
+    which would add its array to every owned atom of its group, runs only at steps that are
+    multiples of ``PY_NAPPLY`` (step 0): its array is zeroed before those."""
     import ctypes
 
     view = {}
@@ -532,6 +537,8 @@ def attach_callback(lmp, fix_id: str, fn, caller) -> None:
         if f is None:
             view.clear()
             f = view[key] = lmp.numpy.darray(fext_ptr, nlocal, 3)
+        if step % PY_NAPPLY == 0:
+            f[:] = 0.0       # fix external's add pass runs this step: let it add nothing
         fn(caller_, step, nlocal, None, None, f)
 
     cfunc = lmp.FIX_EXTERNAL_CALLBACK_FUNC(wrapper)
