@@ -634,7 +634,7 @@ class Fused:
         self.nblock = self.npairs = self.nrows = 0
         #: the contact lists: (A, B) slices (A first in the scene), and a name for errors
         self.lists, self.names = [], []
-        self._hits = self._hits_rows = None
+        self._hits = self._hits_rows = self._frame = None
 
     @classmethod
     def make(cls, forces: "PyForces") -> "Fused | None":
@@ -739,8 +739,12 @@ class Fused:
     def run(self, forces: "PyForces", fr: Frame, f: np.ndarray) -> int:
         """One step added into ``f``; return the first row written at or after
         ``forces.nfirst`` (one LAMMPS does not integrate yet), or −1."""
-        ov = forces.overlaps
-        hits = [ov._candidates(fr, A, B) for A, B in self.lists]
+        # the lists change only when LAMMPS reneighbours (a new frame), and not always then
+        if fr is not self._frame:
+            self._frame = fr
+            hits = [forces.overlaps._candidates(fr, A, B) for A, B in self.lists]
+        else:
+            hits = self._hits
         if self._hits is None or any(h is not o for h, o in zip(hits, self._hits)):
             self._hits = hits
             i64 = np.int64

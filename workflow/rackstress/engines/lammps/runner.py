@@ -369,24 +369,30 @@ class LammpsRun:
     def check(self) -> None:
         """The watchdog on every rank's atoms; all ranks raise the same DivergenceError. Under
         MPI it also keeps the ghost cutoff ahead of the scene's reach (:meth:`_grow_cutoff`)."""
-        x, v, tag = self.positions_local()
-        o = self.scene.original_positions()
+        lmp = self.lmp
+        n = lmp.extract_global("nlocal")
         if self._py_on and self.py.move_bit is not None:
             # only LAMMPS' first rows move (atom_modify first, Deck.passive): a resting particle
             # after them is where the data file put it, with v = 0
-            x, v, tag = x[:self.py.nfirst], v[:self.py.nfirst], tag[:self.py.nfirst]
-        if len(tag) and tag[0] == 1 and tag[-1] == len(tag) and np.array_equal(
-                tag, self._ids[:len(tag)]):
-            found = find_divergence(self.scene, x, v, o[:len(tag)])   # row k holds particle k
+            n = min(n, self.py.nfirst)
+        # views of the rows checked only (LAMMPS' own arrays; the ids as LAMMPS keeps them)
+        x = lmp.numpy.extract_atom("x")[:n]
+        v = lmp.numpy.extract_atom("v")[:n]
+        tag = lmp.numpy.extract_atom("id")[:n]
+        o = self.scene.original_positions()
+        if n and tag[0] == 1 and tag[-1] == n and np.array_equal(tag, self._ids[:n]):
+            found = find_divergence(self.scene, x, v, o[:n])   # row k holds particle k
         else:
-            found = find_divergence(self.scene, x, v, o[tag - 1], tag - 1)
-        everything = [f for f in self.comm.allgather(found) if f is not None]
+            idx = tag.astype(np.int64) - 1
+            found = find_divergence(self.scene, x, v, o[idx], idx)
+        everything = ([found] if self.comm.Get_size() == 1 else self.comm.allgather(found))
+        everything = [f for f in everything if f is not None]
         if everything:
             worst = max(everything, key=lambda f: (not f["finite"], f["disp"]))
             worst["count"] = sum(f["count"] for f in everything)
             raise divergence_error(self.scene, self.step, worst)
         if self.comm.Get_size() > 1 and self._reach:
-            self._grow_cutoff(x, tag)
+            self._grow_cutoff(x, tag.astype(np.int64))
 
     def _grow_cutoff(self, x, tag) -> None:
         """Raise the ghost cutoff once a bind's or attraction's reach (the diagonal of its two
