@@ -111,6 +111,18 @@ def warm() -> dict:
     k.add_natives(np.zeros((3, 3)), np.ones((3, 3)), tag, 3, 1, np.ones((3, 3)), np.ones(3))
     k.add_sparse(np.zeros((3, 3)), np.zeros((3, 3)), flag, np.zeros(3, np.int64), nt,
                  np.ones(3), tag, 3)
+    k.members(r, s, np.zeros(3, np.bool_))
+    # one instruction of every kind through the fused step (the types LAMMPS' arrays have)
+    ops = np.array([[OP_BLOCK, 0, 1, 1, 2, 0, 0, 0], [OP_BIND, 0, 2, 0, 0, 0, 0, 0],
+                    [OP_ATTRACT, 0, 2, 0, 0, 0, 0, 0], [OP_COLLIDE, 0, 1, 0, 0, 0, 0, 1],
+                    [OP_DAMPEN, 0, 3, 0, 0, 0, 0, 1], [OP_FORCE, 0, 1, 0, 0, 0, 0, 0]], np.int64)
+    k.step(x, np.ones((3, 3)), np.zeros((3, 3)), np.zeros((3, 3)), np.ones(3), ops,
+           np.ones((len(ops), 3)), np.zeros(1, np.int64), np.ones(2), np.ones(2), np.ones(2),
+           r, s, one, one, one, np.zeros(1, np.int64), r, s, np.full(2, 4.0),
+           np.array([0, 2], np.int64), np.zeros(2, np.int64), np.zeros(1, np.int64),
+           np.zeros(2, np.int64), np.zeros(1, np.int64), np.zeros(1, np.int64),
+           np.array([0, 1, 2], np.int64), np.array([0, 3], np.int64), np.zeros((3, 3)), 0.5,
+           np.zeros((3, 3)), flag, np.zeros(3, np.int64), nt, 3, np.ones(3), tag)
     seconds = time.perf_counter() - t0
     if first and os.environ.get("PMI_RANK", "0") == "0":
         print(f"rackstress: kernels compiled in {seconds:.1f} s", file=sys.stderr, flush=True)
@@ -126,30 +138,65 @@ if nb is not None:
     @nb.njit(**_OPTS)
     def bind_block(x, t0, m, s0, n, qT, cIT, cJT, fold, acc):
         """Every (target t, source s) pair of two groups (serial rows = particles): Eq. 12 on
-        t with cIT, and its reverse bind on s with cJT when ``fold``."""
+        t with cIT, and its reverse bind on s with cJT when ``fold``.
+
+        The order of the sums is fixed: a target's acceleration gains its sources' terms in
+        source order (s = 0, 1, ...), a source's in target order (t = 0, 1, ...), each
+        source's sum added to its accumulator row once, after the block. The targets' rows
+        and positions are copied into contiguous columns first, so that the pass over the
+        targets of one source (a division each) vectorizes; the copies change no arithmetic.
+        """
+        X0 = np.empty(m)
+        X1 = np.empty(m)
+        X2 = np.empty(m)
+        A0 = np.empty(m)
+        A1 = np.empty(m)
+        A2 = np.empty(m)
+        for t in range(m):
+            X0[t] = x[t0 + t, 0]
+            X1[t] = x[t0 + t, 1]
+            X2[t] = x[t0 + t, 2]
+            A0[t] = acc[t0 + t, 0]
+            A1[t] = acc[t0 + t, 1]
+            A2[t] = acc[t0 + t, 2]
+        D0 = np.empty(m)
+        D1 = np.empty(m)
+        D2 = np.empty(m)
+        W = np.empty(m)
         for s in range(n):
             xs0, xs1, xs2 = x[s0 + s, 0], x[s0 + s, 1], x[s0 + s, 2]
-            a0 = 0.0
-            a1 = 0.0
-            a2 = 0.0
+            q = qT[s]
+            c = cIT[s]
             for t in range(m):
-                d0 = xs0 - x[t0 + t, 0]
-                d1 = xs1 - x[t0 + t, 1]
-                d2_ = xs2 - x[t0 + t, 2]
-                w = bind_f(d0 * d0 + d1 * d1 + d2_ * d2_, qT[s, t])
-                c = cIT[s, t] * w
-                acc[t0 + t, 0] += c * d0
-                acc[t0 + t, 1] += c * d1
-                acc[t0 + t, 2] += c * d2_
-                if fold:
-                    cj = cJT[s, t] * w
-                    a0 -= cj * d0
-                    a1 -= cj * d1
-                    a2 -= cj * d2_
+                d0 = xs0 - X0[t]
+                d1 = xs1 - X1[t]
+                d2_ = xs2 - X2[t]
+                w = bind_f(d0 * d0 + d1 * d1 + d2_ * d2_, q[t])
+                D0[t] = d0
+                D1[t] = d1
+                D2[t] = d2_
+                W[t] = w
+                ct = c[t] * w
+                A0[t] += ct * d0
+                A1[t] += ct * d1
+                A2[t] += ct * d2_
             if fold:
+                cj = cJT[s]
+                a0 = 0.0
+                a1 = 0.0
+                a2 = 0.0
+                for t in range(m):
+                    e = cj[t] * W[t]
+                    a0 -= e * D0[t]
+                    a1 -= e * D1[t]
+                    a2 -= e * D2[t]
                 acc[s0 + s, 0] += a0
                 acc[s0 + s, 1] += a1
                 acc[s0 + s, 2] += a2
+        for t in range(m):
+            acc[t0 + t, 0] = A0[t]
+            acc[t0 + t, 1] = A1[t]
+            acc[t0 + t, 2] = A2[t]
 
     @nb.njit(**_OPTS)
     def bind_pairs(x, ri, rj, ai, aj, cI, cJ, q, fold, acc):
@@ -439,3 +486,173 @@ if nb is not None:
                 late = r
         nt[0] = 0
         return late
+
+
+if nb is not None:
+    @nb.njit(**_OPTS)
+    def members(a, b, flag):
+        """The distinct rows of ``a`` and ``b`` (``flag``: False over every row; left so)."""
+        out = np.empty(len(a) + len(b), np.int64)
+        n = 0
+        for arr in (a, b):
+            for k in range(len(arr)):
+                r = arr[k]
+                if not flag[r]:
+                    flag[r] = True
+                    out[n] = r
+                    n += 1
+        for k in range(n):
+            flag[out[k]] = False
+        return out[:n]
+
+
+#: Instruction kinds of :func:`step` (column 0 of its ``ops`` table).
+OP_BLOCK, OP_BIND, OP_ATTRACT, OP_COLLIDE, OP_DAMPEN, OP_FORCE = range(6)
+
+if nb is not None:
+    @nb.njit(**_OPTS)
+    def step(x, v, f, acc, dmass, ops, fpar, conds, bq, bcI, bcJ, pi, pj, pcI, pcJ, pq, frows,
+             ca, cb, cR2, loff, ov, ovn, near, nnear, valid, urow, uoff, uref, h,
+             sacc, sflag, stouched, snt, nfirst, mass, tag):
+        """One callback step of the serial path (rows of the dense groups = particles): every
+        active term of the phase, in the terms' order, then the forces into LAMMPS' ``f``.
+
+        ``ops`` (one row a term, in the order of the callback's terms): kind (``OP_*``), five
+        integer arguments, and the range ``conds[cs:ce]`` of contact lists that must overlap
+        (⟨contact⟩ of Eq. 4) for the term to act; ``fpar``: its floats (c, or a force's
+        vector). The contact lists are candidate pairs ``ca, cb, cR2`` (list L is
+        ``loff[L]:loff[L+1]``, sorted by particles); their overlapping pairs (Eq. 10's
+        support, d² < R²) are found once here, into ``ov``/``ovn``, and serve every collide
+        (both directions) and every contact condition of the step. Only a list's *near*
+        candidates are measured (``near[loff[L]:loff[L] + nnear[L]]``, in list order: those
+        closer than R + ``h`` when the list's particles, ``urow[uoff[L]:uoff[L+1]]``, were at
+        ``uref``); while none of them has moved h/2 since, no other candidate can overlap
+        (its gap, ≥ h then, has closed by less than h), and once one has — or the list is new
+        (``valid[L] = 0``) — every candidate is measured and the near ones chosen again. The
+        overlapping pairs, and their order, are those of a pass over every candidate.
+        Each term adds exactly what
+        its own kernel adds (:func:`bind_block`, :func:`bind_pairs`, :func:`attract_pairs`,
+        :func:`collide_add`, :func:`dampen`, a force's vector), in the same order, so the sums
+        are those of the term-by-term path. Then f += acc·m on the dense rows and the sparse
+        rows as :func:`add_sparse`.
+
+        Returns (:func:`add_sparse`'s late row or −1, L, k): L ≥ 0 names a list whose
+        candidate k coincides (d = 0, Eq. 10 undefined); then nothing is added.
+        """
+        nl = len(loff) - 1
+        # each particle may move h/2 less a margin far above rounding (1e-6 relative)
+        lim2 = (0.5 * h * (1.0 - 1e-6)) ** 2
+        for L in range(nl):
+            base = loff[L]
+            ok = valid[L] != 0
+            if ok:
+                for u in range(uoff[L], uoff[L + 1]):
+                    r = urow[u]
+                    e0 = x[r, 0] - uref[u, 0]
+                    e1 = x[r, 1] - uref[u, 1]
+                    e2 = x[r, 2] - uref[u, 2]
+                    if e0 * e0 + e1 * e1 + e2 * e2 > lim2:
+                        ok = False
+                        break
+            if not ok:      # measure every candidate, keep the near ones and where they are
+                nn = 0
+                for k in range(loff[L], loff[L + 1]):
+                    a, b = ca[k], cb[k]
+                    d0 = x[b, 0] - x[a, 0]
+                    d1 = x[b, 1] - x[a, 1]
+                    d2_ = x[b, 2] - x[a, 2]
+                    reach = np.sqrt(cR2[k]) + h
+                    if d0 * d0 + d1 * d1 + d2_ * d2_ < reach * reach:
+                        near[base + nn] = k
+                        nn += 1
+                nnear[L] = nn
+                for u in range(uoff[L], uoff[L + 1]):
+                    r = urow[u]
+                    uref[u, 0] = x[r, 0]
+                    uref[u, 1] = x[r, 1]
+                    uref[u, 2] = x[r, 2]
+                valid[L] = 1
+            cnt = 0
+            for j in range(nnear[L]):
+                k = near[base + j]
+                a, b = ca[k], cb[k]
+                d0 = x[b, 0] - x[a, 0]
+                d1 = x[b, 1] - x[a, 1]
+                d2_ = x[b, 2] - x[a, 2]
+                d2 = d0 * d0 + d1 * d1 + d2_ * d2_
+                if d2 < cR2[k]:
+                    if d2 == 0.0:
+                        valid[L] = 0
+                        return 0, L, k
+                    ov[base + cnt] = k
+                    cnt += 1
+            ovn[L] = cnt
+        nacc = acc.shape[0]
+        for r in range(nacc):
+            acc[r, 0] = 0.0
+            acc[r, 1] = 0.0
+            acc[r, 2] = 0.0
+        for o in range(ops.shape[0]):
+            held = True
+            for c in range(ops[o, 6], ops[o, 7]):
+                if ovn[conds[c]] == 0:
+                    held = False
+                    break
+            if not held:
+                continue
+            kind = ops[o, 0]
+            if kind == OP_BLOCK:
+                t0, m, s0, n, off = ops[o, 1], ops[o, 2], ops[o, 3], ops[o, 4], ops[o, 5]
+                e = off + n * m
+                bind_block(x, t0, m, s0, n, bq[off:e].reshape((n, m)),
+                           bcI[off:e].reshape((n, m)), bcJ[off:e].reshape((n, m)),
+                           fpar[o, 0] != 0.0, acc)
+            elif kind == OP_BIND:
+                k0, k1 = ops[o, 1], ops[o, 2]
+                bind_pairs(x, pi[k0:k1], pj[k0:k1], pi[k0:k1], pj[k0:k1], pcI[k0:k1],
+                           pcJ[k0:k1], pq[k0:k1], fpar[o, 0] != 0.0, acc)
+            elif kind == OP_ATTRACT:
+                k0, k1 = ops[o, 1], ops[o, 2]
+                attract_pairs(x, pi[k0:k1], pj[k0:k1], pi[k0:k1], pcI[k0:k1], acc)
+            elif kind == OP_COLLIDE:
+                L, rev = ops[o, 1], ops[o, 2]
+                c = fpar[o, 0]
+                base = loff[L]
+                for j in range(ovn[L]):
+                    k = ov[base + j]
+                    if rev == 0:
+                        i, s = ca[k], cb[k]
+                    else:
+                        i, s = cb[k], ca[k]
+                    d0 = x[s, 0] - x[i, 0]
+                    d1 = x[s, 1] - x[i, 1]
+                    d2_ = x[s, 2] - x[i, 2]
+                    w = c * col_f(d0 * d0 + d1 * d1 + d2_ * d2_, cR2[k])
+                    if i < nacc:
+                        acc[i, 0] += w * d0
+                        acc[i, 1] += w * d1
+                        acc[i, 2] += w * d2_
+                    else:
+                        if not sflag[i]:
+                            sflag[i] = True
+                            stouched[snt[0]] = i
+                            snt[0] += 1
+                        sacc[i, 0] += w * d0
+                        sacc[i, 1] += w * d1
+                        sacc[i, 2] += w * d2_
+            elif kind == OP_DAMPEN:
+                c = fpar[o, 0]
+                for r in range(ops[o, 1], ops[o, 2]):
+                    for m3 in range(3):
+                        acc[r, m3] += -c * v[r, m3]
+            elif kind == OP_FORCE:
+                for k in range(ops[o, 1], ops[o, 2]):
+                    r = frows[k]
+                    acc[r, 0] = acc[r, 0] + fpar[o, 0]
+                    acc[r, 1] = acc[r, 1] + fpar[o, 1]
+                    acc[r, 2] = acc[r, 2] + fpar[o, 2]
+        for r in range(nacc):
+            f[r, 0] += acc[r, 0] * dmass[r]
+            f[r, 1] += acc[r, 1] * dmass[r]
+            f[r, 2] += acc[r, 2] * dmass[r]
+        return add_sparse(f, sacc, sflag, stouched, snt, mass, tag, nfirst), -1, -1

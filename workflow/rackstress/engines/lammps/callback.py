@@ -27,6 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from rackstress.lib.vec import rowdot
+from rackstress.model import kernels
 from rackstress.model.kernels import choice as kernel_choice
 from rackstress.model.kernels import compiled as compiled_kernels
 from rackstress.model.kernels import warm as warm_kernels
@@ -575,6 +576,11 @@ class AttractTerm(Term):
     def add(self, fr, acc):
         if not self.forces.holds(fr, self):
             return
+        self.pair_term.add(fr, acc)
+
+    @property
+    def pair_term(self) -> PairTerm:
+        """The attracting pairs of the current phase (made once a phase)."""
         phase = self.forces.phase
         key = tuple(sorted(phase.items()))
         if key not in self._by_phase:
@@ -583,7 +589,7 @@ class AttractTerm(Term):
                 self.sl.start, sc.offset(op.source))
             self._by_phase[key] = PairTerm(f"attract on {self.target}", Attract.factor,
                                            pl.i, pl.j, pl.c, compiled=self.forces.compiled)
-        self._by_phase[key].add(fr, acc)
+        return self._by_phase[key]
 
 
 def _leading(mask: np.ndarray, bit: int, n: int) -> int:
@@ -597,6 +603,158 @@ def _leading(mask: np.ndarray, bit: int, n: int) -> int:
         else:
             hi = mid
     return lo
+
+
+class Fused:
+    """The terms active in one phase as one compiled pass a step (:func:`kernels.step`).
+
+    Serial, with compiled kernels, when the rows of the groups the terms act on are their
+    particles (:attr:`Frame.identity`): the terms become rows of an instruction table, in the
+    callback's order of terms, and their pair data is concatenated once a phase (bind blocks,
+    bind and attraction pairs, selected force rows). Each step then costs one look-up of the
+    contact candidate lists (:class:`Overlaps`, kept between reneighbourings), re-joined only
+    when one of them is new, and one compiled call that finds the overlapping pairs of every
+    list once (shared by the collides of both directions and by the contact conditions),
+    evaluates every term exactly as its own kernel does, in the same order, and writes LAMMPS'
+    force array. The sums are therefore those of the term-by-term path, bit for bit, whatever
+    the order of LAMMPS' rows (:meth:`make` returns None where a term cannot be expressed so:
+    that phase runs term by term).
+    """
+
+    #: the near candidates' margin (kernels.step's h), in length units
+    margin = 0.5
+
+    def __init__(self):
+        self.ops, self.fpar, self.conds = [], [], []
+        self.block, self.pairs, self.frows = ([], [], []), ([], [], [], [], []), []
+        self.nblock = self.npairs = self.nrows = 0
+        #: the contact lists: (A, B) slices (A first in the scene), and a name for errors
+        self.lists, self.names = [], []
+        self._hits = self._hits_rows = None
+
+    @classmethod
+    def make(cls, forces: "PyForces") -> "Fused | None":
+        """The plan of ``forces``' active terms in its current phase, or None."""
+        span, acc_rows, scene = forces.span, forces.dense_span, forces.scene
+        self = cls()
+        for t in forces.active:
+            if not t.phase_ok:
+                continue            # holds() is false the whole phase
+            conds = [self._list(t.sl, scene.slice(g), "contact")[0] for g in t.contacts]
+            if isinstance(t, (BindTerm, AttractTerm)):
+                pt = t.pair_term
+                if pt is None:
+                    continue        # carried by its reverse's term
+                if not self._pair_term(pt, span, conds):
+                    return None
+            elif isinstance(t, CollideTerm):
+                L, rev = self._list(t.sl, t.s, f"collide on {t.target}")
+                self._op(kernels.OP_COLLIDE, (L, rev), (t.c,), conds)
+            elif isinstance(t, DampenTerm):
+                if t.sl.stop > min(span, acc_rows):
+                    return None
+                self._op(kernels.OP_DAMPEN, (t.sl.start, t.sl.stop), (t.op.extra,), conds)
+            elif isinstance(t, ForceTerm):
+                mask = np.zeros(forces.n, dtype=bool)
+                mask[t.sl] = t.op.mask(t.sl.stop - t.sl.start)
+                rows = np.flatnonzero(mask[:acc_rows])
+                if mask[acc_rows:].any():
+                    return None
+                self.frows.append(rows)
+                self._op(kernels.OP_FORCE, (self.nrows, self.nrows + len(rows)),
+                         tuple(float(c) for c in t.op.vector()), conds)
+                self.nrows += len(rows)
+            else:
+                return None
+        i64, f64 = np.int64, np.float64
+        self.ops = np.array(self.ops, i64).reshape(-1, 8)
+        self.fpar = np.array(self.fpar, f64).reshape(-1, 3)
+        self.conds = np.array(self.conds + [0], i64)
+        join = (lambda parts, dt: np.ascontiguousarray(np.concatenate(parts), dt) if parts
+                else np.zeros(0, dt))
+        self.bq, self.bcI, self.bcJ = (join(p, f64) for p in self.block)
+        self.pi, self.pj = (join(p, i64) for p in self.pairs[:2])
+        self.pcI, self.pcJ, self.pq = (join(p, f64) for p in self.pairs[2:])
+        self.frows = join(self.frows, i64)
+        return self
+
+    def _list(self, t: slice, s: slice, name: str):
+        """The contact list of groups t and s (index), and whether t is its second group."""
+        A, B = (s, t) if t.start > s.start else (t, s)
+        key = (A, B)
+        if key not in self.lists:
+            self.lists.append(key)
+            self.names.append(name)
+        return self.lists.index(key), int(t.start > s.start)
+
+    def _op(self, kind, ints, floats, conds):
+        row = list(ints) + [0] * (5 - len(ints))
+        self.ops.append([kind, *row, len(self.conds), len(self.conds) + len(conds)])
+        self.conds += conds
+        self.fpar.append(list(floats) + [0.0] * (3 - len(floats)))
+
+    def _pair_term(self, pt: PairTerm, span: int, conds) -> bool:
+        if pt.block is not None:
+            ts, ss = pt.block
+            if max(ts.stop, ss.stop) > span:
+                return False
+            m, n = ts.stop - ts.start, ss.stop - ss.start
+            cIT, cJT = pt._full
+            for part, a in zip(self.block, (pt._qT, cIT, cJT)):
+                part.append(a.ravel())
+            self._op(kernels.OP_BLOCK, (ts.start, m, ss.start, n, self.nblock),
+                     (float(pt._cJT is not None),), conds)
+            self.nblock += m * n
+            return True
+        I, J = pt.I, pt.J
+        if len(I) and max(I.max(), J.max()) >= span:
+            return False
+        attract = pt.q is None
+        cJ = pt.cI if pt.cJ is None else pt.cJ
+        for part, a in zip(self.pairs, (I, J, pt.cI, cJ, np.zeros(len(I)) if attract else pt.q)):
+            part.append(a)
+        kind = kernels.OP_ATTRACT if attract else kernels.OP_BIND
+        self._op(kind, (self.npairs, self.npairs + len(I)), (float(pt.cJ is not None),), conds)
+        self.npairs += len(I)
+        return True
+
+    def run(self, forces: "PyForces", fr: Frame, f: np.ndarray) -> int:
+        """One step added into ``f``; return the first row written sparsely that LAMMPS does
+        not integrate yet (at or after ``forces.nfirst``), or −1."""
+        ov = forces.overlaps
+        hits = [ov._candidates(fr, A, B) for A, B in self.lists]
+        if self._hits is None or any(h is not o for h, o in zip(hits, self._hits)):
+            self._hits = hits
+            i64 = np.int64
+            self.ca = np.ascontiguousarray(np.concatenate([h[0] for h in hits] + [[]]), i64)
+            self.cb = np.ascontiguousarray(np.concatenate([h[1] for h in hits] + [[]]), i64)
+            self.cR2 = np.ascontiguousarray(np.concatenate([h[2] for h in hits] + [[]]),
+                                            np.float64)
+            self.loff = np.cumsum([0] + [len(h[0]) for h in hits]).astype(i64)
+            self.ov = np.empty(len(self.ca), i64)
+            self.ovn = np.zeros(len(hits), i64)
+            self.near = np.empty(len(self.ca), i64)
+            self.nnear = np.zeros(len(hits), i64)
+            self.valid = np.zeros(len(hits), i64)       # measure every candidate first
+            old = {} if self._hits_rows is None else self._hits_rows
+            rows = [old[id(h)][1] if id(h) in old and old[id(h)][0] is h else
+                    forces.compiled.members(h[0], h[1], forces.flag_rows(fr)) for h in hits]
+            self._hits_rows = {id(h): (h, r) for h, r in zip(hits, rows)}
+            self.urow = np.ascontiguousarray(np.concatenate(rows + [[]]), i64)
+            self.uoff = np.cumsum([0] + [len(r) for r in rows]).astype(i64)
+            self.uref = np.zeros((len(self.urow), 3))
+        F = forces
+        n, L, k = F.compiled.step(
+            fr.x, fr.v, f, F.facc, F.fmass, self.ops, self.fpar, self.conds, self.bq, self.bcI,
+            self.bcJ, self.pi, self.pj, self.pcI, self.pcJ, self.pq, self.frows, self.ca,
+            self.cb, self.cR2, self.loff, self.ov, self.ovn, self.near, self.nnear, self.valid,
+            self.urow, self.uoff, self.uref, self.margin, F.sacc, F.sflag, F.stouched,
+            F.snt, F.nfirst, F.mass, fr.tag)
+        if L >= 0:
+            a, b = fr.particles(self.ca[k:k + 1])[0], fr.particles(self.cb[k:k + 1])[0]
+            raise PartnerLost(f"{self.names[L]}: atom ids {int(a) + 1} and {int(b) + 1} "
+                              "coincide (Eq. 10 is undefined at d = 0)", int(a))
+        return n
 
 
 #: The term realizing each operator class in the callback.
@@ -671,6 +829,14 @@ class PyForces:
             self.sflag = np.zeros(self.n, dtype=np.bool_)
             self.stouched = np.zeros(self.n, dtype=np.int64)
             self.snt = np.zeros(1, dtype=np.int64)
+        #: serial with compiled kernels: each phase's terms as one compiled pass (Fused),
+        #: made once a phase (None where a term cannot be expressed so); False: term by term
+        self.fuse = self.compiled is not None and (comm is None or comm.Get_size() == 1)
+        self._plans, self._plan = {}, None
+        self._flags = np.zeros(0, dtype=np.bool_)
+        if self.fuse:
+            self.facc = np.zeros((self.dense_span, 3))
+            self.fmass = np.ascontiguousarray(self.mass[:self.dense_span])
         # LAMMPS' own displacement check keeps the per-layout memos valid (Overlaps); with any
         # other neighbour settings every step starts from scratch
         self.verlet = (lmp.extract_setting("neigh_every") == 1
@@ -717,7 +883,26 @@ class PyForces:
         for t in self.terms:
             t.phase_ok = phase_active(t.op.when, self.phase)
         self.active = [t for t in self.terms if not t.gated or t.phase_ok]
+        self._plan = None
         return bool(self.active) or self.natives is not None
+
+    def flag_rows(self, fr: Frame) -> np.ndarray:
+        """A False flag per row of the frame (scratch of :func:`kernels.members`)."""
+        nall = fr.nlocal + fr.nghost
+        if len(self._flags) < nall:
+            self._flags = np.zeros(nall, dtype=np.bool_)
+        return self._flags
+
+    def _fused(self, fr: Frame) -> "Fused | None":
+        """This phase's compiled pass, if this step can take it (serial, rows = particles)."""
+        if not (self.fuse and fr.identity):
+            return None
+        if self._plan is None:
+            key = tuple(sorted(self.phase.items()))
+            if key not in self._plans:
+                self._plans[key] = Fused.make(self)
+            self._plan = self._plans[key] or False
+        return self._plan or None
 
     def _contact(self, fr: Frame, target: str, group: str) -> bool:
         if self._agreed is not None:            # MPI: agreed on by all ranks this step
@@ -820,13 +1005,17 @@ class PyForces:
         try:
             if fr is not old and self._scan_moving:
                 self._activate_moving(fr)
+            out = fr.f
+            if self.natives is not None:
+                self._add_natives(fr, out)
+            plan = self._fused(fr)
+            if plan is not None:        # every term in one compiled pass, added to f there
+                self._mark_late(fr, plan.run(self, fr, out))
+                return
             acc = np.zeros((fr.acc_rows, 3))
             for term in self.active:
                 term.add(fr, acc)
             fr.flush(acc)
-            out = fr.f
-            if self.natives is not None:
-                self._add_natives(fr, out)
             if fr.identity:
                 out[:fr.acc_rows] += acc * fr.dense_mass
             else:
@@ -836,11 +1025,15 @@ class PyForces:
                                              self.mass, fr.tag, self.nfirst)
             else:
                 r = self._add_sparse(fr, out)
-            if self.move_bit is not None and r >= 0:
-                # a force on a row LAMMPS does not integrate yet: exactness would be lost
-                self.late = (int(self.lmp.extract_global("ntimestep")), int(fr.tag[r]) - 1)
+            self._mark_late(fr, r)
         except Exception as exc:  # noqa: BLE001 - reported by the runner after the chunk
             self._fail_here = exc
+
+    def _mark_late(self, fr: Frame, r: int) -> None:
+        """Row ``r`` ≥ 0 got a force though LAMMPS does not integrate it yet: exactness would
+        be lost (the step and the particle are kept in ``late``)."""
+        if self.move_bit is not None and r >= 0:
+            self.late = (int(self.lmp.extract_global("ntimestep")), int(fr.tag[r]) - 1)
 
     def _add_natives(self, fr: Frame, f) -> None:
         """f = (f + F) − γ·v on the rows LAMMPS integrates (its first ``nfirst``; every other
