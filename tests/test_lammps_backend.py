@@ -434,20 +434,23 @@ def test_active_only_is_exact_when_touched_at_the_start():
 
 @pytest.mark.lammps
 def test_active_only_refuses_a_touch_it_cannot_integrate():
-    """A block thrown at the bed 7 units a step (the skin is 2) overlaps resting bed particles
-    one step after being farther than reach + 2 skins: LAMMPS has not put them among its
-    integrated rows yet, so the run stops with a divergence naming the step and a bed particle,
-    rather than go on inexactly; integrating every particle runs it."""
-    block = Group("block", lattice((2, 2, 2), 1.0, origin=(10.0, 7.5, 2.0)), 0.5, kind="body")
-    block.v0 = np.tile([0.0, -700.0, 0.0], (8, 1))
+    """A block thrown at the bed 25 units a step (LAMMPS' skin with a resting group is 8)
+    overlaps resting bed particles one step after being farther than reach + 2 skins
+    (1 + 16): LAMMPS has not put them among its integrated rows yet, so the run stops with a
+    divergence naming the step and a bed particle, rather than go on inexactly; integrating
+    every particle runs it."""
+    block = Group("block", lattice((2, 2, 2), 1.0, origin=(10.0, 25.5, 2.0)), 0.5, kind="body")
+    block.v0 = np.tile([0.0, -2500.0, 0.0], (8, 1))
     bed = Group("bed", lattice((24, 1, 6), 1.0), 0.5, kind="leg")
     ops = {"block": [Collide("bed", Const(50.0)), Dampen(0.0, extra=2.0, when=(Contact("bed"),))],
            "bed": [Collide("block", Const(20.0)), Dampen(5.0)]}
     sc = Scene("thrown", {"block": block, "bed": bed}, ops, [Phase("fall", 20, {})], dt=0.01)
     o = sc.original_positions()
-    # the block's bottom layer is 7.5 above the bed at step 0 and 0.5 (overlapping) at step 1
-    assert np.isclose(o[:8, 1].min() - 700.0 * 0.01, 0.5)
-    run = LammpsRun(compile_deck(sc, "exact"), None)
+    # the block's bottom layer is 25.5 above the bed at step 0 and 0.5 (overlapping) at step 1
+    assert np.isclose(o[:8, 1].min() - 2500.0 * 0.01, 0.5)
+    deck = compile_deck(sc, "exact")
+    assert deck.passive == ("bed",) and 25.5 > 1.0 + 2 * deck.lammps_skin
+    run = LammpsRun(deck, None)
     try:
         with pytest.raises(DivergenceError) as err:
             drive(run)

@@ -351,8 +351,11 @@ class Overlaps:
     """
 
     def __init__(self, radius: np.ndarray, skin: float, compiled=None, activate=None,
-                 passive=None, bed=None):
+                 passive=None, bed=None, own=None):
         self.radius, self.skin, self.k = radius, skin, compiled
+        #: serial, when LAMMPS' skin (``skin``) is wider: the callback's own skin, its lists
+        #: searched again whenever an atom has moved half of it (PyForces' own check)
+        self.own = own
         #: the resting particles of the passive groups in cell grids made once (serial,
         #: compiled): a search against a passive group looks only near the searching group
         self.bed = bed
@@ -378,11 +381,21 @@ class Overlaps:
         hit = fr.memo.get(key)
         if hit is not None:
             return hit
-        cut = self._reach(A) + self._reach(B) + self.skin
-        # resting particles join the moving group one reneighbouring early (a partner within
-        # reach + 2 skins), so LAMMPS has put them among the integrated rows (atom_modify
-        # first) before anything can touch them; the contact candidates are those within cut
-        wide = cut + self.skin if self.activate is not None and self._passive(A, B) else cut
+        # the lists' skin: LAMMPS' (its reneighbouring renews them), or in serial the
+        # callback's own where LAMMPS' is wider (its own displacement check renews them)
+        h = self.own if self.own is not None and fr.identity else self.skin
+        reach = self._reach(A) + self._reach(B)
+        cut = reach + h
+        # resting particles join the moving group one LAMMPS reneighbouring early (a partner
+        # within reach + 2 of LAMMPS' skins), so LAMMPS has put them among the integrated rows
+        # (atom_modify first) before anything can touch them; the contact candidates are
+        # those within cut
+        # (once a layout: a search the callback's own check asks for in between need not)
+        passive = self.activate is not None and self._passive(A, B)
+        wide = cut
+        if passive and ("act", A.start, B.start) not in fr.memo:
+            wide = reach + 2 * self.skin
+            fr.memo[("act", A.start, B.start)] = True
         stable = self.k is not None and wide == cut and fr.ident(A) and fr.ident(B)
         if stable:
             # a list of two groups whose rows are their particles is searched with two skins
@@ -394,11 +407,11 @@ class Overlaps:
             kept = self._kept.get((A.start, B.start))
             if kept is not None and self.k.moved_below(
                     fr.x, A.start, A.stop - A.start, B.start, B.stop - B.start, kept[0],
-                    0.25 * self.skin * self.skin):
+                    0.25 * h * h):
                 hit = fr.memo[key] = kept[1]
                 return hit
-            cut = wide = cut + self.skin
-        if (self.bed is not None and wide > cut and fr.identity and fr.ident(A)
+            cut = wide = cut + h
+        if (self.bed is not None and passive and fr.identity and fr.ident(A)
                 and B.start >= fr.span):
             # a group whose rows are its particles against a passive group: the resting
             # particles from the bed's grid, the activated ones from a cell list of their own
@@ -418,7 +431,7 @@ class Overlaps:
                 diff = fr.x[b] - fr.x[a]
                 near = rowdot(diff, diff) <= cut * cut
                 a, b = a[near], b[near]
-        if wide > cut:
+        if passive:
             self.activate(fr, near_a)
             self.activate(fr, near_b)
         R2 = (self.radius[fr.particles(a)] + self.radius[fr.particles(b)]) ** 2
@@ -899,9 +912,14 @@ class PyForces:
         self.bed = (RestingBed(self.n, self.span, self.compiled)
                     if self.move_bit is not None and self.span and self.compiled is not None
                     and serial else None)
-        self.overlaps = Overlaps(self.radius, deck.skin, self.compiled,
+        own = getattr(deck, "skin", None)
+        lammps_skin = getattr(deck, "lammps_skin", own)
+        #: serial, LAMMPS' skin wider than the lists': the lists' own displacement check
+        self.own = own if own != lammps_skin else None
+        self._xref = None
+        self.overlaps = Overlaps(self.radius, lammps_skin, self.compiled,
                                  self._activate if self.move_bit is not None else None,
-                                 self.passive, self.bed)
+                                 self.passive, self.bed, self.own)
         #: LAMMPS integrates only its first ``nfirst`` rows (atom_modify first); a force on a
         #: later row (a passive particle activated too late) would be lost: (step, particle)
         self.nfirst = self.n
@@ -1075,9 +1093,34 @@ class PyForces:
             fr = self.frame = Frame(lmp, self.n, nlocal, self.dense_span, self.mass, self.span)
             if self.bed is not None:
                 self.bed.relayout(fr, self.nfirst)
+            if self.own is not None:
+                self._own_check(fr, True)
         else:
             fr.refresh()
+            if self.own is not None:
+                self._own_check(fr, False)
         return fr
+
+    def _own_check(self, fr: Frame, new: bool) -> None:
+        """Serial, LAMMPS' skin wider than the contact lists' (Deck.neighbor_skin): the lists
+        are searched again once any atom has moved half the lists' skin since they were, as
+        LAMMPS' own check would with that skin. Only LAMMPS' first ``nfirst`` rows move (the
+        later ones rest until LAMMPS reorders them, which makes a new layout)."""
+        if not fr.identity:
+            return
+        n = min(self.nfirst, fr.nlocal)
+        if not new and self._xref is not None and len(self._xref) == n:
+            lim2 = 0.25 * self.own * self.own
+            if self.compiled is not None:
+                kept = self.compiled.moved_below(fr.x, 0, n, 0, 0, self._xref, lim2)
+            else:
+                d = fr.x[:n] - self._xref
+                kept = not len(d) or rowdot(d, d).max() <= lim2
+            if kept:
+                return
+            for key in [k for k in fr.memo if k[0] == "cand"]:
+                del fr.memo[key]
+        self._xref = np.array(fr.x[:n])
 
     # ------------------------------------------------------------------ callback
     def __call__(self, caller, step, nlocal, tag, x, f):

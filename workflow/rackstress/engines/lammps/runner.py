@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from rackstress.engines.lammps.callback import PyForces
-from rackstress.engines.lammps.deck import MOVE_GROUP, PY_FIX, PY_NAPPLY, SKIN, Deck
+from rackstress.engines.lammps.deck import MOVE_GROUP, PY_FIX, PY_NAPPLY, Deck
 from rackstress.errors import DivergenceError, RackstressError, StorageError
 from rackstress.engines.watchdog import divergence_error, find_divergence
 
@@ -94,8 +94,8 @@ class LammpsRun:
         self._dump_file = str(out / "trajectory.dump") if out is not None else None
         self.cutoff = float(deck.ghost_cutoff)
         self._reach = _reach_pairs(self.scene)
-        # the deck's cutoff is 1.5 reach + 2 r_max + skin + 1 (deck.ghost_cutoff)
-        self._extra = 2 * float(self.scene.radii().max()) + SKIN + 1.0
+        # the deck's cutoff is 1.5 reach + 2 r_max + LAMMPS' skin + 1 (deck.ghost_cutoff)
+        self._extra = 2 * float(self.scene.radii().max()) + deck.lammps_skin + 1.0
         self._reach0 = (self.cutoff - self._extra) / 1.5
         self._span = max((self.scene.slice(g).stop for pair in self._reach for g in pair),
                          default=0)
@@ -356,12 +356,14 @@ class LammpsRun:
                               f"{kind}: {text}")
 
     # ------------------------------------------------------------------ state
-    def positions_local(self):
+    def positions_local(self, rows: int | None = None):
+        """Positions, velocities and atom ids of the owned atoms (the first ``rows`` of them)."""
         try:
             nlocal = self.lmp.extract_global("nlocal")
-            x = self.lmp.numpy.extract_atom("x")[:nlocal]
-            v = self.lmp.numpy.extract_atom("v")[:nlocal]
-            tag = self.lmp.numpy.extract_atom("id")[:nlocal].astype(np.int64)
+            n = nlocal if rows is None else min(rows, nlocal)
+            x = self.lmp.numpy.extract_atom("x")[:n]
+            v = self.lmp.numpy.extract_atom("v")[:n]
+            tag = self.lmp.numpy.extract_atom("id")[:n].astype(np.int64)
             return x, v, tag
         except Exception:  # noqa: BLE001
             return None
@@ -369,12 +371,11 @@ class LammpsRun:
     def check(self) -> None:
         """The watchdog on every rank's atoms; all ranks raise the same DivergenceError. Under
         MPI it also keeps the ghost cutoff ahead of the scene's reach (:meth:`_grow_cutoff`)."""
-        x, v, tag = self.positions_local()
+        # only LAMMPS' first rows move (atom_modify first, Deck.passive): a resting particle
+        # after them is where the data file put it, with v = 0
+        moving = self._py_on and self.py.move_bit is not None
+        x, v, tag = self.positions_local(self.py.nfirst if moving else None)
         o = self.scene.original_positions()
-        if self._py_on and self.py.move_bit is not None:
-            # only LAMMPS' first rows move (atom_modify first, Deck.passive): a resting particle
-            # after them is where the data file put it, with v = 0
-            x, v, tag = x[:self.py.nfirst], v[:self.py.nfirst], tag[:self.py.nfirst]
         if len(tag) and tag[0] == 1 and tag[-1] == len(tag) and np.array_equal(
                 tag, self._ids[:len(tag)]):
             found = find_divergence(self.scene, x, v, o[:len(tag)])   # row k holds particle k
