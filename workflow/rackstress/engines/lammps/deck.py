@@ -43,15 +43,20 @@ skipping it is exact. ``atom_modify first rs_move`` makes LAMMPS keep the group'
 its arrays (it reorders them when it reneighbours) and ``fix nve`` loop over those rows only, so
 the resting ones cost nothing there; in serial runs the runner adds ``neigh_modify include
 rs_move`` (forces cleared, displacements checked and atoms binned over those rows only; a resting
-row's force is zeroed once and nothing writes it), and ``fix external`` acts on ``rs_move`` too
-(its add pass skips resting rows, whose external force is zero). The callback adds a passive particle to ``rs_move`` (its
+row's force is zeroed once and nothing writes it); the callback adds forces only on the rows it
+computed (never a resting one). The callback adds a passive particle to ``rs_move`` (its
 group bit in LAMMPS' per-atom mask), for good, as soon as a partner comes within reach + 2 skins
 when LAMMPS reneighbours: one reneighbouring before anything can touch it, so LAMMPS has reordered
 it among the integrated rows by then. A particle touched at the start is reordered by a second
 ``run 0``; a force on a row LAMMPS does not integrate yet (a particle that moved more than a skin
 between two reneighbourings) stops the run with an error rather than lose exactness. A run
 resumed from a checkpoint re-adds every passive particle that is moving. Atom ids stay the
-particles' ids (dumps, checkpoints and gathers go by id).
+particles' ids (dumps, checkpoints and gathers go by id). In such a deck LAMMPS would still pass
+over every atom each step in ``fix addforce``, ``fix viscous`` and fix external's add pass, so
+the callback adds its forces into LAMMPS' force array itself (fix external's Napply is never
+reached) and the static constant forces and damping too, on the moving rows, in the fixes' own
+arithmetic and order (:attr:`Deck.callback_natives`); and LAMMPS' skin is ``PASSIVE_SKIN``, the
+callback's contact lists keeping ``SKIN`` with a displacement check of their own.
 """
 from __future__ import annotations
 
