@@ -119,14 +119,15 @@ def warm() -> dict:
     # one instruction of every kind through the fused step (the types LAMMPS' arrays have)
     ops = np.array([[OP_BLOCK, 0, 1, 1, 2, 0, 0, 0], [OP_BIND, 0, 2, 0, 0, 0, 0, 0],
                     [OP_ATTRACT, 0, 2, 0, 0, 0, 0, 0], [OP_COLLIDE, 0, 1, 0, 0, 0, 0, 1],
-                    [OP_DAMPEN, 0, 3, 0, 0, 0, 0, 1], [OP_FORCE, 0, 1, 0, 0, 0, 0, 0]], np.int64)
+                    [OP_DAMPEN, 0, 3, 0, 0, 0, 0, 1], [OP_FORCE, 0, 1, 0, 0, 0, 0, 0],
+                    [OP_BLOCKC, 0, 1, 1, 1, 0, 0, 0]], np.int64)
     k.step(x, np.ones((3, 3)), np.zeros((3, 3)), np.zeros((3, 3)), np.ones(3), ops,
            np.ones((len(ops), 3)), np.zeros(1, np.int64), np.ones(2), np.ones(2), np.ones(2),
            r, s, one, one, one, np.zeros(1, np.int64), r, s, np.full(2, 4.0),
            np.array([0, 2], np.int64), np.zeros(2, np.int64), np.zeros(1, np.int64),
            np.zeros(2, np.int64), np.zeros(1, np.int64), np.zeros(1, np.int64),
            np.array([0, 1, 2], np.int64), np.array([0, 3], np.int64), np.zeros((3, 3)), 0.5,
-           np.zeros((3, 3)), flag, np.zeros(3, np.int64), nt, 3, np.ones(3), tag)
+           np.zeros((3, 3)), flag, np.zeros(3, np.int64), nt, np.ones(3), tag, 3)
     seconds = time.perf_counter() - t0
     if first and os.environ.get("PMI_RANK", "0") == "0":
         print(f"rackstress: kernels compiled in {seconds:.1f} s", file=sys.stderr, flush=True)
@@ -191,6 +192,70 @@ if nb is not None:
                 a2 = 0.0
                 for t in range(m):
                     e = cj[t] * W[t]
+                    a0 -= e * D0[t]
+                    a1 -= e * D1[t]
+                    a2 -= e * D2[t]
+                acc[s0 + s, 0] += a0
+                acc[s0 + s, 1] += a1
+                acc[s0 + s, 2] += a2
+        for t in range(m):
+            acc[t0 + t, 0] = A0[t]
+            acc[t0 + t, 1] = A1[t]
+            acc[t0 + t, 2] = A2[t]
+
+    @nb.njit(**_OPTS)
+    def bind_block_const(x, t0, m, s0, n, o, cI, cJ, fold, acc):
+        """:func:`bind_block` with one coefficient each way (``cI``, ``cJ``: Const binds such
+        as host ↔ rack) and each pair's L0² computed from the original positions ``o`` (the
+        targets' x, y, z columns, then the sources' rows: 3m + 3n values) as
+        :meth:`Bind.pairs` computes it, (u_o − p_o)·(u_o − p_o) in the order x, y, z — the same
+        numbers, read from 3(m + n) values instead of 3mn. Sums in :func:`bind_block`'s
+        order."""
+        X0 = np.empty(m)
+        X1 = np.empty(m)
+        X2 = np.empty(m)
+        A0 = np.empty(m)
+        A1 = np.empty(m)
+        A2 = np.empty(m)
+        for t in range(m):
+            X0[t] = x[t0 + t, 0]
+            X1[t] = x[t0 + t, 1]
+            X2[t] = x[t0 + t, 2]
+            A0[t] = acc[t0 + t, 0]
+            A1[t] = acc[t0 + t, 1]
+            A2[t] = acc[t0 + t, 2]
+        O0 = o[0:m]
+        O1 = o[m:2 * m]
+        O2 = o[2 * m:3 * m]
+        D0 = np.empty(m)
+        D1 = np.empty(m)
+        D2 = np.empty(m)
+        W = np.empty(m)
+        for s in range(n):
+            xs0, xs1, xs2 = x[s0 + s, 0], x[s0 + s, 1], x[s0 + s, 2]
+            os0, os1, os2 = o[3 * m + 3 * s], o[3 * m + 3 * s + 1], o[3 * m + 3 * s + 2]
+            for t in range(m):
+                e0 = os0 - O0[t]
+                e1 = os1 - O1[t]
+                e2 = os2 - O2[t]
+                d0 = xs0 - X0[t]
+                d1 = xs1 - X1[t]
+                d2_ = xs2 - X2[t]
+                w = bind_f(d0 * d0 + d1 * d1 + d2_ * d2_, e0 * e0 + e1 * e1 + e2 * e2)
+                D0[t] = d0
+                D1[t] = d1
+                D2[t] = d2_
+                W[t] = w
+                ct = cI * w
+                A0[t] += ct * d0
+                A1[t] += ct * d1
+                A2[t] += ct * d2_
+            if fold:
+                a0 = 0.0
+                a1 = 0.0
+                a2 = 0.0
+                for t in range(m):
+                    e = cJ * W[t]
                     a0 -= e * D0[t]
                     a1 -= e * D1[t]
                     a2 -= e * D2[t]
@@ -603,17 +668,18 @@ if nb is not None:
 
 
 #: Instruction kinds of :func:`step` (column 0 of its ``ops`` table).
-OP_BLOCK, OP_BIND, OP_ATTRACT, OP_COLLIDE, OP_DAMPEN, OP_FORCE = range(6)
+OP_BLOCK, OP_BIND, OP_ATTRACT, OP_COLLIDE, OP_DAMPEN, OP_FORCE, OP_BLOCKC = range(7)
 
 if nb is not None:
     @nb.njit(**_OPTS)
     def step(x, v, f, acc, dmass, ops, fpar, conds, bq, bcI, bcJ, pi, pj, pcI, pcJ, pq, frows,
              ca, cb, cR2, loff, ov, ovn, near, nnear, valid, urow, uoff, uref, h,
-             sacc, sflag, stouched, snt, nfirst, mass, tag):
+             sacc, sflag, stouched, snt, mass, tag, nfirst):
         """One callback step of the serial path (rows of the dense groups = particles): every
         active term of the phase, in the terms' order, then the forces into LAMMPS' ``f``.
 
-        ``ops`` (one row a term, in the order of the callback's terms): kind (``OP_*``), five
+        ``ops`` (one row a term, in the order of the callback's terms): kind (``OP_*``; a
+        Const bind block is ``OP_BLOCKC``: its L0² from the original positions in ``bq``), five
         integer arguments, and the range ``conds[cs:ce]`` of contact lists that must overlap
         (⟨contact⟩ of Eq. 4) for the term to act; ``fpar``: its floats (c, or a force's
         vector). The contact lists are candidate pairs ``ca, cb, cR2`` (list L is
@@ -632,8 +698,9 @@ if nb is not None:
         are those of the term-by-term path. Then f += acc·m on the dense rows and the sparse
         rows as :func:`add_sparse`.
 
-        Returns (:func:`add_sparse`'s late row or −1, L, k): L ≥ 0 names a list whose
-        candidate k coincides (d = 0, Eq. 10 undefined); then nothing is added.
+        Returns (:func:`add_sparse`'s first row at or after ``nfirst``, or −1; L; k): L ≥ 0
+        names a list whose candidate k coincides (d = 0, Eq. 10 undefined); then nothing is
+        added.
         """
         nl = len(loff) - 1
         # each particle may move h/2 less a margin far above rounding (1e-6 relative)
@@ -679,7 +746,7 @@ if nb is not None:
                 if d2 < cR2[k]:
                     if d2 == 0.0:
                         valid[L] = 0
-                        return 0, L, k
+                        return -1, L, k
                     ov[base + cnt] = k
                     cnt += 1
             ovn[L] = cnt
@@ -703,6 +770,10 @@ if nb is not None:
                 bind_block(x, t0, m, s0, n, bq[off:e].reshape((n, m)),
                            bcI[off:e].reshape((n, m)), bcJ[off:e].reshape((n, m)),
                            fpar[o, 0] != 0.0, acc)
+            elif kind == OP_BLOCKC:
+                t0, m, s0, n, off = ops[o, 1], ops[o, 2], ops[o, 3], ops[o, 4], ops[o, 5]
+                bind_block_const(x, t0, m, s0, n, bq[off:off + 3 * (m + n)], fpar[o, 1],
+                                 fpar[o, 2], fpar[o, 0] != 0.0, acc)
             elif kind == OP_BIND:
                 k0, k1 = ops[o, 1], ops[o, 2]
                 bind_pairs(x, pi[k0:k1], pj[k0:k1], pi[k0:k1], pj[k0:k1], pcI[k0:k1],

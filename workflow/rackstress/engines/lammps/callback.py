@@ -225,6 +225,8 @@ class PairTerm:
         self.I, self.J, self.cI, self.cJ, self.q = I, J, cI, cJ, q
         #: the compiled kernels (:mod:`rackstress.model.kernels`), or None for NumPy
         self.k = compiled
+        #: a block's original positions (target rows, source rows), where L0² comes from
+        self.orig = None
         #: (target slice, source slice) when the pairs are every (i, j) of two groups in
         #: row-major order (a Const bind such as host ↔ rack): then it is evaluated by
         #: broadcasting over the block, with no per-pair gathers or scatters.
@@ -674,6 +676,8 @@ class BindTerm(Term):
             block = (self.sl, sc.slice(op.source))
         self.pair_term = PairTerm(f"bind on {r.target}", Bind.factor, I, J, c, cJ, q, block,
                                   forces.compiled)
+        if block is not None:
+            self.pair_term.orig = (sc.groups[r.target].o, sc.groups[op.source].o)
 
     def add(self, fr, acc):
         if self.pair_term is not None and self.forces.holds(fr, self):
@@ -813,11 +817,25 @@ class Fused:
             if max(ts.stop, ss.stop) > span:
                 return False
             m, n = ts.stop - ts.start, ss.stop - ss.start
+            fold = float(pt._cJT is not None)
+            cI, cJ = pt._cIT, pt._cJT if pt._cJT is not None else 0.0
+            if isinstance(cI, float) and isinstance(cJ, float) and pt.orig is not None:
+                # one coefficient each way: L0² from the original positions, if that gives
+                # the pairs' own L0² bit for bit (it is how Bind.pairs computes them)
+                ot, os_ = pt.orig
+                e = [os_[:, k][:, None] - ot[:, k][None, :] for k in range(3)]
+                if np.array_equal(e[0] * e[0] + e[1] * e[1] + e[2] * e[2], pt._qT):
+                    o = np.concatenate([ot.T.ravel(), os_.ravel()])
+                    for part, a in zip(self.block, (o, np.zeros(len(o)), np.zeros(len(o)))):
+                        part.append(a)       # (the coefficient arrays keep the offsets)
+                    self._op(kernels.OP_BLOCKC, (ts.start, m, ss.start, n, self.nblock),
+                             (fold, cI, cJ), conds)
+                    self.nblock += len(o)
+                    return True
             cIT, cJT = pt._full
             for part, a in zip(self.block, (pt._qT, cIT, cJT)):
                 part.append(a.ravel())
-            self._op(kernels.OP_BLOCK, (ts.start, m, ss.start, n, self.nblock),
-                     (float(pt._cJT is not None),), conds)
+            self._op(kernels.OP_BLOCK, (ts.start, m, ss.start, n, self.nblock), (fold,), conds)
             self.nblock += m * n
             return True
         I, J = pt.I, pt.J
@@ -833,8 +851,8 @@ class Fused:
         return True
 
     def run(self, forces: "PyForces", fr: Frame, f: np.ndarray) -> int:
-        """One step added into ``f``; return the first row written sparsely that LAMMPS does
-        not integrate yet (at or after ``forces.nfirst``), or −1."""
+        """One step added into ``f``; return the first row written at or after
+        ``forces.nfirst`` (one LAMMPS does not integrate yet), or −1."""
         ov = forces.overlaps
         hits = [ov._candidates(fr, A, B) for A, B in self.lists]
         if self._hits is None or any(h is not o for h, o in zip(hits, self._hits)):
@@ -863,7 +881,7 @@ class Fused:
             self.bcJ, self.pi, self.pj, self.pcI, self.pcJ, self.pq, self.frows, self.ca,
             self.cb, self.cR2, self.loff, self.ov, self.ovn, self.near, self.nnear, self.valid,
             self.urow, self.uoff, self.uref, self.margin, F.sacc, F.sflag, F.stouched,
-            F.snt, F.nfirst, F.mass, fr.tag)
+            F.snt, F.mass, fr.tag, F.nfirst)
         if L >= 0:
             a, b = fr.particles(self.ca[k:k + 1])[0], fr.particles(self.cb[k:k + 1])[0]
             raise PartnerLost(f"{self.names[L]}: atom ids {int(a) + 1} and {int(b) + 1} "
