@@ -105,6 +105,10 @@ def warm() -> dict:
     k.candidates(x, r, s, 2.0, False, tag, 3.0)
     k.overlapping(x, r, s, np.full(2, 4.0))
     k.moved_below(x, 0, 1, 1, 2, x.copy(), 1.0)
+    lo, nc = np.full(3, -1.0), np.array([2, 2, 2], np.int64)
+    start, order = k.grid_build(x, lo, 2.0, nc)
+    k.grid_candidates(x, r, 2.0, 3.0, lo, 2.0, nc, start, order, x, np.zeros(3, np.bool_), 0,
+                      np.arange(3, dtype=np.int64), 0, tag, 3)
     flag, nt = np.zeros(3, np.bool_), np.zeros(1, np.int64)
     k.collide_add(x, r, s, np.full(2, 4.0), 3.0, acc, 1, np.zeros((3, 3)), flag,
                   np.zeros(3, np.int64), nt)
@@ -462,6 +466,98 @@ if nb is not None:
                                 ob[n] = b
                                 n += 1
         return oa[:n], ob[:n], ia[near_a], ib[near_b]
+
+    @nb.njit(**_OPTS)
+    def grid_build(pos, lo, size, nc):
+        """A cell grid of fixed points ``pos``: cell starts (CSR) and the points in cell order
+        (cells of edge ``size`` from ``lo``, ``nc`` per axis, x slowest)."""
+        m = len(pos)
+        ncell = nc[0] * nc[1] * nc[2]
+        cell = np.empty(m, np.int64)
+        start = np.zeros(ncell + 1, np.int64)
+        for k in range(m):
+            c0 = min(int((pos[k, 0] - lo[0]) / size), nc[0] - 1)
+            c1 = min(int((pos[k, 1] - lo[1]) / size), nc[1] - 1)
+            c2 = min(int((pos[k, 2] - lo[2]) / size), nc[2] - 1)
+            cell[k] = (c0 * nc[1] + c1) * nc[2] + c2
+            start[cell[k] + 1] += 1
+        for c in range(ncell):
+            start[c + 1] += start[c]
+        fill = start[:-1].copy()
+        order = np.empty(m, np.int64)
+        for k in range(m):
+            order[fill[cell[k]]] = k
+            fill[cell[k]] += 1
+        return start, order
+
+    @nb.njit(**_OPTS)
+    def grid_candidates(x, ia, cut, wide, lo, size, nc, start, order, pos, active, b0, prow,
+                        span, tag, nlocal):
+        """:func:`candidates` of rows ``ia`` against the resting particles of a group in a
+        grid of :func:`grid_build` (``pos``: particle b0 + k at pos[k], never moved; the
+        ``active`` ones skipped): unsorted pairs (rows), which rows of ia have a partner
+        within ``wide``, the rows of the group's particles within ``wide`` (repeated), and
+        whether a particle's row (``prow[p − span]``) did not hold it (atom id ``tag``)."""
+        cut2 = cut * cut
+        wide2 = wide * wide
+        near_a = np.zeros(len(ia), np.bool_)
+        cap = 16 * len(ia) + 16
+        oa = np.empty(cap, np.int64)
+        ob = np.empty(cap, np.int64)
+        nbr = np.empty(cap, np.int64)
+        n = 0
+        m = 0
+        lohi = np.empty((3, 2), np.int64)
+        for k in range(len(ia)):
+            a = ia[k]
+            xa0, xa1, xa2 = x[a, 0], x[a, 1], x[a, 2]
+            empty = False
+            for d in range(3):
+                l_ = np.floor((x[a, d] - wide - lo[d]) / size)
+                h_ = np.floor((x[a, d] + wide - lo[d]) / size)
+                if h_ < 0 or l_ > nc[d] - 1:
+                    empty = True
+                    break
+                lohi[d, 0] = max(int(l_), 0)
+                lohi[d, 1] = min(int(h_), nc[d] - 1)
+            if empty:
+                continue
+            for c0 in range(lohi[0, 0], lohi[0, 1] + 1):
+                for c1 in range(lohi[1, 0], lohi[1, 1] + 1):
+                    for c2 in range(lohi[2, 0], lohi[2, 1] + 1):
+                        c = (c0 * nc[1] + c1) * nc[2] + c2
+                        for q in range(start[c], start[c + 1]):
+                            j = order[q]
+                            p = b0 + j
+                            if active[p]:
+                                continue
+                            e0 = pos[j, 0] - xa0
+                            e1 = pos[j, 1] - xa1
+                            e2 = pos[j, 2] - xa2
+                            e = e0 * e0 + e1 * e1 + e2 * e2
+                            if e > wide2:
+                                continue
+                            r = prow[p - span]
+                            if r < 0 or r >= nlocal or tag[r] != p + 1:
+                                return oa[:0], ob[:0], near_a, nbr[:0], True
+                            near_a[k] = True
+                            if m == len(nbr):
+                                nbr2 = np.empty(2 * m, np.int64)
+                                nbr2[:m] = nbr[:m]
+                                nbr = nbr2
+                            nbr[m] = r
+                            m += 1
+                            if e <= cut2:
+                                if n == len(oa):
+                                    oa2 = np.empty(2 * n, np.int64)
+                                    ob2 = np.empty(2 * n, np.int64)
+                                    oa2[:n] = oa[:n]
+                                    ob2[:n] = ob[:n]
+                                    oa, ob = oa2, ob2
+                                oa[n] = a
+                                ob[n] = r
+                                n += 1
+        return oa[:n], ob[:n], near_a, nbr[:m], False
 
     @nb.njit(**_OPTS)
     def moved_below(x, a0, na, b0, nb_, ref, lim2):

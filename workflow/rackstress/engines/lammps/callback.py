@@ -353,8 +353,14 @@ class Overlaps:
     """
 
     def __init__(self, radius: np.ndarray, skin: float, compiled=None, activate=None,
-                 passive=None):
+                 passive=None, bed=None, own=None):
         self.radius, self.skin, self.k = radius, skin, compiled
+        #: serial, when LAMMPS' skin (``skin``) is wider: the callback's own skin, its lists
+        #: searched again whenever an atom has moved half of it (PyForces' own check)
+        self.own = own
+        #: the resting particles of the passive groups in cell grids made once (serial,
+        #: compiled): a search against a passive group looks only near the searching group
+        self.bed = bed
         #: which particles belong to passive groups (activated when first within reach)
         self.passive = np.zeros(len(radius), dtype=bool) if passive is None else passive
         #: called with the candidate rows of every new list (a resting particle that may be
@@ -377,11 +383,21 @@ class Overlaps:
         hit = fr.memo.get(key)
         if hit is not None:
             return hit
-        cut = self._reach(A) + self._reach(B) + self.skin
-        # resting particles join the moving group one reneighbouring early (a partner within
-        # reach + 2 skins), so LAMMPS has put them among the integrated rows (atom_modify
-        # first) before anything can touch them; the contact candidates are those within cut
-        wide = cut + self.skin if self.activate is not None and self._passive(A, B) else cut
+        # the lists' skin: LAMMPS' (its reneighbouring renews them), or in serial the
+        # callback's own where LAMMPS' is wider (its own displacement check renews them)
+        h = self.own if self.own is not None and fr.identity else self.skin
+        reach = self._reach(A) + self._reach(B)
+        cut = reach + h
+        # resting particles join the moving group one LAMMPS reneighbouring early (a partner
+        # within reach + 2 of LAMMPS' skins), so LAMMPS has put them among the integrated rows
+        # (atom_modify first) before anything can touch them; the contact candidates are
+        # those within cut
+        # (once a layout: a search the callback's own check asks for in between need not)
+        passive = self.activate is not None and self._passive(A, B)
+        wide = cut
+        if passive and ("act", A.start, B.start) not in fr.memo:
+            wide = reach + 2 * self.skin
+            fr.memo[("act", A.start, B.start)] = True
         stable = self.k is not None and wide == cut and fr.ident(A) and fr.ident(B)
         if stable:
             # a list of two groups whose rows are their particles is searched with two skins
@@ -393,14 +409,21 @@ class Overlaps:
             kept = self._kept.get((A.start, B.start))
             if kept is not None and self.k.moved_below(
                     fr.x, A.start, A.stop - A.start, B.start, B.stop - B.start, kept[0],
-                    0.25 * self.skin * self.skin):
+                    0.25 * h * h):
                 hit = fr.memo[key] = kept[1]
                 return hit
-            cut = wide = cut + self.skin
-        ia, ib = fr.seen(A), fr.seen(B)
-        if self.k is not None:      # a compiled cell list
+            cut = wide = cut + h
+        if (self.bed is not None and passive and fr.identity and fr.ident(A)
+                and B.start >= fr.span):
+            # a group whose rows are its particles against a passive group: the resting
+            # particles from the bed's grid, the activated ones from a cell list of their own
+            ia = fr.seen(A)
+            a, b, near_a, near_b = self.bed.candidates(fr, ia, B, cut, wide)
+        elif self.k is not None:      # a compiled cell list
+            ia, ib = fr.seen(A), fr.seen(B)
             a, b, near_a, near_b = self.k.candidates(fr.x, ia, ib, cut, A == B, fr.tag, wide)
         else:
+            ia, ib = fr.seen(A), fr.seen(B)
             a, b = contact_candidates(fr.x[ia], fr.x[ib], wide, same=A == B)
             a, b = ia[a], ib[b]
             order = np.lexsort((fr.index[b], fr.index[a]))
@@ -410,7 +433,7 @@ class Overlaps:
                 diff = fr.x[b] - fr.x[a]
                 near = rowdot(diff, diff) <= cut * cut
                 a, b = a[near], b[near]
-        if wide > cut:
+        if passive:
             self.activate(fr, near_a)
             self.activate(fr, near_b)
         R2 = (self.radius[fr.particles(a)] + self.radius[fr.particles(b)]) ** 2
@@ -455,6 +478,97 @@ class Overlaps:
                 u, w, r2 = u[own], w[own], r2[own]
             fr.cache[k2] = (u, w, r2)
         return fr.cache[key]
+
+
+class RestingBed:
+    """Where the resting particles of the passive groups are, for the contact search (serial).
+
+    A resting particle never moves until it is activated (Eq. 5 leaves a particle with zero
+    velocity and force where it is), so each passive group's particles go into a cell grid
+    once, at the positions LAMMPS has them; a search against the group then visits only the
+    cells near the searching particles and skips the activated ones, which are searched apart
+    in a cell list of their own (they are few). The pairs found, and their order (by the
+    particles), are those of a search over every particle of the group.
+
+    LAMMPS reorders the passive rows when it reneighbours (``atom_modify first``), so the row
+    of each passive particle is kept in ``prow``, brought up to date at each new layout from
+    the only rows a reordering changes: those it moved the activated particles to (from the
+    old ``nfirst`` to the new) and those they came from. Every row taken from it is checked
+    against LAMMPS' atom id; a mismatch rebuilds it from scratch.
+    """
+
+    def __init__(self, n: int, span: int, compiled):
+        self.n, self.span, self.k = n, span, compiled
+        #: row of every passive particle (index − span), or None until first needed
+        self.prow = None
+        #: activated particles (global index), and their rows when activated
+        self.active = np.zeros(n, dtype=np.bool_)
+        self._act = []
+        self._pending = []
+        self._nfirst = 0
+        #: (group start, stop) → (lo, cell size, cells per axis, cell starts, order, positions)
+        self._grids = {}
+
+    def activated(self, fr: Frame, rows: np.ndarray) -> None:
+        """Rows of passive particles just added to the moving group."""
+        parts = fr.particles(rows)
+        self.active[parts] = True
+        self._act.append(parts)
+        self._pending.append(rows)
+
+    def relayout(self, fr: Frame, nfirst: int) -> None:
+        """A new layout (LAMMPS may have reordered): update the rows a reordering changes."""
+        if self.prow is not None and fr.identity:
+            rows = np.concatenate(self._pending + [np.arange(min(self._nfirst, nfirst), nfirst)])
+            rows = rows[(rows >= self.span) & (rows < fr.nlocal)]
+            self.prow[fr.tag[rows].astype(np.int64) - 1 - self.span] = rows
+        self._pending, self._nfirst = [], nfirst
+
+    def _rebuild(self, fr: Frame, nfirst: int) -> None:
+        tag = fr.tag[self.span:fr.nlocal].astype(np.int64)
+        self.prow = np.full(self.n - self.span, -1, dtype=np.int64)
+        self.prow[tag - 1 - self.span] = np.arange(self.span, fr.nlocal)
+        self._pending, self._nfirst = [], nfirst
+
+    def _grid(self, fr: Frame, B: slice, size: float):
+        key = (B.start, B.stop)
+        if key not in self._grids:
+            pos = np.ascontiguousarray(fr.x[self.prow[B.start - self.span:B.stop - self.span]])
+            lo = pos.min(axis=0) - 1.0
+            nc = (np.floor((pos.max(axis=0) + 1.0 - lo) / size).astype(np.int64) + 1)
+            start, order = self.k.grid_build(pos, lo, size, nc)
+            self._grids[key] = (lo, size, nc, start, order, pos)
+        return self._grids[key]
+
+    def candidates(self, fr: Frame, ia: np.ndarray, B: slice, cut: float, wide: float):
+        """As :func:`kernels.candidates` of ``ia`` against every particle of passive group
+        ``B`` (rows, sorted by particles; near rows of both sides)."""
+        for attempt in (0, 1):
+            if self.prow is None or attempt:
+                self._rebuild(fr, self._nfirst)
+            lo, size, nc, start, order, pos = self._grid(fr, B, wide)
+            sa, sb, snear_a, snear_b, bad = self.k.grid_candidates(
+                fr.x, ia, cut, wide, lo, size, nc, start, order, pos, self.active, B.start,
+                self.prow, self.span, fr.tag, fr.nlocal)
+            if not bad:
+                break
+        else:
+            raise RuntimeError("the rows of the resting particles could not be found")
+        act = np.concatenate(self._act) if self._act else np.zeros(0, dtype=np.int64)
+        if len(self._act) > 1:
+            self._act = [act]
+        act = act[(act >= B.start) & (act < B.stop)]
+        rows = self.prow[act - self.span]
+        if len(rows) and (rows.min() < 0 or not np.array_equal(
+                fr.tag[rows].astype(np.int64) - 1, act)):
+            self._rebuild(fr, self._nfirst)
+            rows = self.prow[act - self.span]
+        da, db, dnear_a, dnear_b = self.k.candidates(fr.x, ia, rows, cut, False, fr.tag, wide)
+        a, b = np.concatenate([sa, da]), np.concatenate([sb, db])
+        order = np.lexsort((fr.tag[b], fr.tag[a]))
+        near_a = np.union1d(ia[snear_a], dnear_a)
+        near_b = np.concatenate([np.unique(snear_b), dnear_b])
+        return a[order], b[order], near_a, near_b
 
 
 # ----------------------------------------------------------------------------- terms
@@ -634,7 +748,7 @@ class Fused:
         self.nblock = self.npairs = self.nrows = 0
         #: the contact lists: (A, B) slices (A first in the scene), and a name for errors
         self.lists, self.names = [], []
-        self._hits = self._hits_rows = self._frame = None
+        self._hits = self._hits_rows = None
 
     @classmethod
     def make(cls, forces: "PyForces") -> "Fused | None":
@@ -739,12 +853,9 @@ class Fused:
     def run(self, forces: "PyForces", fr: Frame, f: np.ndarray) -> int:
         """One step added into ``f``; return the first row written at or after
         ``forces.nfirst`` (one LAMMPS does not integrate yet), or −1."""
-        # the lists change only when LAMMPS reneighbours (a new frame), and not always then
-        if fr is not self._frame:
-            self._frame = fr
-            hits = [forces.overlaps._candidates(fr, A, B) for A, B in self.lists]
-        else:
-            hits = self._hits
+        # the same lists (objects) until LAMMPS reneighbours or the callback's own check renews
+        # them (Overlaps keeps them in the frame's memo)
+        hits = [forces.overlaps._candidates(fr, A, B) for A, B in self.lists]
         if self._hits is None or any(h is not o for h, o in zip(hits, self._hits)):
             self._hits = hits
             i64 = np.int64
@@ -810,15 +921,24 @@ class PyForces:
             self.passive[self.scene.slice(name)] = True
         self.move_bit = self._move_bit(lmp, deck) if self.passive.any() else None
         self._scan_moving = self.move_bit is not None   # once: a resumed run's moving ones
-        self.overlaps = Overlaps(self.radius, deck.skin, self.compiled,
-                                 self._activate if self.move_bit is not None else None,
-                                 self.passive)
         #: rows below this are particles (serial): every group before the passive ones, which
         #: LAMMPS keeps first (they are never reordered) when the passive groups come last
         first_passive = min((self.scene.offset(g) for g in getattr(deck, "passive", ())),
                             default=self.n)
         self.span = first_passive if not self.passive[:first_passive].any() and \
             self.passive[first_passive:].all() else 0
+        serial = comm is None or comm.Get_size() == 1
+        self.bed = (RestingBed(self.n, self.span, self.compiled)
+                    if self.move_bit is not None and self.span and self.compiled is not None
+                    and serial else None)
+        own = getattr(deck, "skin", None)
+        lammps_skin = getattr(deck, "lammps_skin", own)
+        #: serial, LAMMPS' skin wider than the lists': the lists' own displacement check
+        self.own = own if own != lammps_skin else None
+        self._xref = None
+        self.overlaps = Overlaps(self.radius, lammps_skin, self.compiled,
+                                 self._activate if self.move_bit is not None else None,
+                                 self.passive, self.bed, self.own)
         #: LAMMPS integrates only its first ``nfirst`` rows (atom_modify first); a force on a
         #: later row (a passive particle activated too late) would be lost: (step, particle)
         self.nfirst = self.n
@@ -882,10 +1002,16 @@ class PyForces:
             if len(new) and new.max() >= self.nfirst:
                 self.activated_late = True   # integrated from LAMMPS' next reordering on
             mask[own] |= self.move_bit
+            if self.bed is not None and len(new):
+                self.bed.activated(fr, new)
 
     def _activate_moving(self, fr: Frame) -> None:
         """Once, at the first call: passive particles already moving (a resumed run) join."""
         self._scan_moving = False
+        if fr.identity and self.span:       # the passive rows are those after span
+            own = self.span + np.flatnonzero(np.any(fr.v[self.span:fr.nlocal] != 0.0, axis=1))
+            self._activate(fr, own)
+            return
         own = np.arange(fr.nlocal)
         own = own[self.passive[fr.index[own]]]
         v = fr.v[own]
@@ -984,9 +1110,36 @@ class PyForces:
                 # come first, and only they are integrated until it reorders again
                 self.nfirst = _leading(lmp.numpy.extract_atom("mask"), self.move_bit, nlocal)
             fr = self.frame = Frame(lmp, self.n, nlocal, self.dense_span, self.mass, self.span)
+            if self.bed is not None:
+                self.bed.relayout(fr, self.nfirst)
+            if self.own is not None:
+                self._own_check(fr, True)
         else:
             fr.refresh()
+            if self.own is not None:
+                self._own_check(fr, False)
         return fr
+
+    def _own_check(self, fr: Frame, new: bool) -> None:
+        """Serial, LAMMPS' skin wider than the contact lists' (Deck.neighbor_skin): the lists
+        are searched again once any atom has moved half the lists' skin since they were, as
+        LAMMPS' own check would with that skin. Only LAMMPS' first ``nfirst`` rows move (the
+        later ones rest until LAMMPS reorders them, which makes a new layout)."""
+        if not fr.identity:
+            return
+        n = min(self.nfirst, fr.nlocal)
+        if not new and self._xref is not None and len(self._xref) == n:
+            lim2 = 0.25 * self.own * self.own
+            if self.compiled is not None:
+                kept = self.compiled.moved_below(fr.x, 0, n, 0, 0, self._xref, lim2)
+            else:
+                d = fr.x[:n] - self._xref
+                kept = not len(d) or rowdot(d, d).max() <= lim2
+            if kept:
+                return
+            for key in [k for k in fr.memo if k[0] == "cand"]:
+                del fr.memo[key]
+        self._xref = np.array(fr.x[:n])
 
     # ------------------------------------------------------------------ callback
     def __call__(self, caller, step, nlocal, tag, x, f):
@@ -1027,22 +1180,17 @@ class PyForces:
         try:
             if fr is not old and self._scan_moving:
                 self._activate_moving(fr)
+            out = fr.f
+            if self.natives is not None:
+                self._add_natives(fr, out)
             plan = self._fused(fr)
-            if plan is not None:        # every term in one compiled pass, added to fr.f there
-                if self.natives is not None:
-                    self._add_natives(fr, fr.f)
-                r = plan.run(self, fr, fr.f)
-                if self.move_bit is not None and r >= 0:
-                    # a force on a row LAMMPS does not integrate yet: exactness would be lost
-                    self.late = (int(self.lmp.extract_global("ntimestep")), int(fr.tag[r]) - 1)
+            if plan is not None:        # every term in one compiled pass, added to f there
+                self._mark_late(fr, plan.run(self, fr, out))
                 return
             acc = np.zeros((fr.acc_rows, 3))
             for term in self.active:
                 term.add(fr, acc)
             fr.flush(acc)
-            out = fr.f
-            if self.natives is not None:
-                self._add_natives(fr, out)
             if fr.identity:
                 out[:fr.acc_rows] += acc * fr.dense_mass
             else:
@@ -1052,11 +1200,15 @@ class PyForces:
                                              self.mass, fr.tag, self.nfirst)
             else:
                 r = self._add_sparse(fr, out)
-            if self.move_bit is not None and r >= 0:
-                # a force on a row LAMMPS does not integrate yet: exactness would be lost
-                self.late = (int(self.lmp.extract_global("ntimestep")), int(fr.tag[r]) - 1)
+            self._mark_late(fr, r)
         except Exception as exc:  # noqa: BLE001 - reported by the runner after the chunk
             self._fail_here = exc
+
+    def _mark_late(self, fr: Frame, r: int) -> None:
+        """Row ``r`` ≥ 0 got a force though LAMMPS does not integrate it yet: exactness would
+        be lost (the step and the particle are kept in ``late``)."""
+        if self.move_bit is not None and r >= 0:
+            self.late = (int(self.lmp.extract_global("ntimestep")), int(fr.tag[r]) - 1)
 
     def _add_natives(self, fr: Frame, f) -> None:
         """f = (f + F) − γ·v on the rows LAMMPS integrates (its first ``nfirst``; every other

@@ -43,15 +43,20 @@ skipping it is exact. ``atom_modify first rs_move`` makes LAMMPS keep the group'
 its arrays (it reorders them when it reneighbours) and ``fix nve`` loop over those rows only, so
 the resting ones cost nothing there; in serial runs the runner adds ``neigh_modify include
 rs_move`` (forces cleared, displacements checked and atoms binned over those rows only; a resting
-row's force is zeroed once and nothing writes it), and ``fix external`` acts on ``rs_move`` too
-(its add pass skips resting rows, whose external force is zero). The callback adds a passive particle to ``rs_move`` (its
+row's force is zeroed once and nothing writes it); the callback adds forces only on the rows it
+computed (never a resting one). The callback adds a passive particle to ``rs_move`` (its
 group bit in LAMMPS' per-atom mask), for good, as soon as a partner comes within reach + 2 skins
 when LAMMPS reneighbours: one reneighbouring before anything can touch it, so LAMMPS has reordered
 it among the integrated rows by then. A particle touched at the start is reordered by a second
 ``run 0``; a force on a row LAMMPS does not integrate yet (a particle that moved more than a skin
 between two reneighbourings) stops the run with an error rather than lose exactness. A run
 resumed from a checkpoint re-adds every passive particle that is moving. Atom ids stay the
-particles' ids (dumps, checkpoints and gathers go by id).
+particles' ids (dumps, checkpoints and gathers go by id). In such a deck LAMMPS would still pass
+over every atom each step in ``fix addforce``, ``fix viscous`` and fix external's add pass, so
+the callback adds its forces into LAMMPS' force array itself (fix external's Napply is never
+reached) and the static constant forces and damping too, on the moving rows, in the fixes' own
+arithmetic and order (:attr:`Deck.callback_natives`); and LAMMPS' skin is ``PASSIVE_SKIN``, the
+callback's contact lists keeping ``SKIN`` with a displacement check of their own.
 """
 from __future__ import annotations
 
@@ -82,6 +87,12 @@ MOVE_GROUP = "rs_move"
 #: Neighbour skin (distance units). 2 rather than 1 halves the rebuilds of a MagPod run (measured:
 #: 52 against 99 in 300 iterations), each of which re-bins all the resting sediment.
 SKIN = 2.0
+#: LAMMPS' neighbour skin of a deck with passive groups (module doc, "Active particles"): each
+#: reneighbouring there passes over every atom, resting or not (exchange, reordering, atom map,
+#: box), ~15 ms for a million atoms, so LAMMPS reneighbours only for the moving rows' reordering
+#: (9 rather than 57 times in the first 1200 iterations of sediment-large, measured) while the
+#: callback keeps its contact lists with SKIN and its own displacement check (serial).
+PASSIVE_SKIN = 8.0
 #: Relative tolerance under which two original lengths count as one bond type (fast mode).
 L0_DIGITS = 10
 
@@ -120,8 +131,11 @@ class Deck:
     bonds: tuple | None = None            # (types, i, j) 1-based atom ids, fast mode only
     bond_types: list = field(default_factory=list)   # [(K, r0)]
     lepton: dict = field(default_factory=dict)       # (type_i, type_j) → (K, R)
-    #: neighbour skin: LAMMPS' (``neighbor``) and the callback's Verlet list of contacts
+    #: the callback's Verlet lists of contacts: candidates within reach + skin
     skin: float = SKIN
+    #: LAMMPS' neighbour skin (``neighbor``), if not ``skin``: it reneighbours once an atom has
+    #: moved half of it (PASSIVE_SKIN for decks with passive groups)
+    neighbor_skin: float | None = None
     #: "euler" (Eq. 5) or "verlet": then ``scene`` is the scaled scene of
     #: :func:`rackstress.model.verlet.scaled_scene` and fix nve starts from v without Eq. 5's
     #: half-step shift (plain velocity Verlet, fix viscous at v_{n+1/2}).
@@ -129,6 +143,11 @@ class Deck:
     #: groups whose particles rest until touched (only python-realized collides and dampen act
     #: on them): LAMMPS integrates them only once the callback has activated them
     passive: tuple = ()
+
+    @property
+    def lammps_skin(self) -> float:
+        """LAMMPS' neighbour skin (``neighbor_skin``, else ``skin``)."""
+        return self.skin if self.neighbor_skin is None else self.neighbor_skin
 
     @property
     def moving(self) -> str:
@@ -171,12 +190,12 @@ class Deck:
             L.append("special_bonds lj/coul 1.0 1.0 1.0")
         L.append(f"read_data {data_file}")
         L.append(f"comm_modify cutoff {self.ghost_cutoff:.6g}")
-        L.append(f"neighbor {self.skin:g} bin")
+        L.append(f"neighbor {self.lammps_skin:g} bin")
         binsize = ""
         if self.lepton:
             # bins as wide as the cutoff: a flat sediment in a tall box otherwise makes millions
             # of near-empty bins that every rebuild sweeps (measured: 3x faster rebuilds)
-            cut = max(R for _, R in self.lepton.values()) + self.skin
+            cut = max(R for _, R in self.lepton.values()) + self.lammps_skin
             binsize = f" binsize {_f(cut)}"
         L.append(f"neigh_modify delay 0 every 1 check yes{binsize}")
         L.append(f"timestep {_f(sc.dt)}")
@@ -641,9 +660,11 @@ def compile_deck(scene: Scene, mode: str = "exact", measure_fast: bool = False,
         first[inv[::-1]] = np.arange(len(inv))[::-1]
         bond_types = [(float(K[f]), float(r0[f])) for f in first]
         bonds = (inv.reshape(-1) + 1, i, j)
-    deck = Deck(scene, mode, masses, realized, ghost_cutoff(scene), bonds, bond_types, lepton,
-                integrator=integrator,
-                passive=passive_groups(scene, realized) if active_only else ())
+    passive = passive_groups(scene, realized) if active_only else ()
+    skin = PASSIVE_SKIN if passive else SKIN
+    deck = Deck(scene, mode, masses, realized, ghost_cutoff(scene, skin), bonds, bond_types,
+                lepton, integrator=integrator, passive=passive,
+                neighbor_skin=skin if skin != SKIN else None)
     if mode == "fast" and deck.python_ops and not measure_fast:
         kept = sorted({f"{r.target} <- {r.op.kind}" for r in deck.python_ops})
         raise SceneError(
@@ -667,8 +688,9 @@ def _bonds_of(scene: Scene, target: str, op: Bind, K: float):
     return lo, hi, np.full(len(lo), K), np.sqrt(L0sq)
 
 
-def ghost_cutoff(scene: Scene) -> float:
-    """Ghost-atom cutoff covering every bind/attract partner with room to deform (MPI runs)."""
+def ghost_cutoff(scene: Scene, skin: float = SKIN) -> float:
+    """Ghost-atom cutoff covering every bind/attract partner with room to deform (MPI runs);
+    ``skin``: LAMMPS' neighbour skin."""
     o = scene.original_positions()
     reach = 0.0
     for target, seq in scene.operators.items():
@@ -679,7 +701,7 @@ def ghost_cutoff(scene: Scene) -> float:
                 hi = np.maximum(o[a].max(0), o[b].max(0))
                 reach = max(reach, float(np.linalg.norm(hi - lo)))
     rmax = float(scene.radii().max())
-    return 1.5 * reach + 2 * rmax + SKIN + 1.0
+    return 1.5 * reach + 2 * rmax + skin + 1.0
 
 
 # ---------------------------------------------------------------------------- data file

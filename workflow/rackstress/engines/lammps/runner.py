@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from rackstress.engines.lammps.callback import PyForces
-from rackstress.engines.lammps.deck import MOVE_GROUP, PY_FIX, PY_NAPPLY, SKIN, Deck
+from rackstress.engines.lammps.deck import MOVE_GROUP, PY_FIX, PY_NAPPLY, Deck
 from rackstress.errors import DivergenceError, RackstressError, StorageError
 from rackstress.engines.watchdog import divergence_error, find_divergence
 
@@ -94,8 +94,8 @@ class LammpsRun:
         self._dump_file = str(out / "trajectory.dump") if out is not None else None
         self.cutoff = float(deck.ghost_cutoff)
         self._reach = _reach_pairs(self.scene)
-        # the deck's cutoff is 1.5 reach + 2 r_max + skin + 1 (deck.ghost_cutoff)
-        self._extra = 2 * float(self.scene.radii().max()) + SKIN + 1.0
+        # the deck's cutoff is 1.5 reach + 2 r_max + LAMMPS' skin + 1 (deck.ghost_cutoff)
+        self._extra = 2 * float(self.scene.radii().max()) + deck.lammps_skin + 1.0
         self._reach0 = (self.cutoff - self._extra) / 1.5
         self._span = max((self.scene.slice(g).stop for pair in self._reach for g in pair),
                          default=0)
@@ -356,12 +356,14 @@ class LammpsRun:
                               f"{kind}: {text}")
 
     # ------------------------------------------------------------------ state
-    def positions_local(self):
+    def positions_local(self, rows: int | None = None):
+        """Positions, velocities and atom ids of the owned atoms (the first ``rows`` of them)."""
         try:
             nlocal = self.lmp.extract_global("nlocal")
-            x = self.lmp.numpy.extract_atom("x")[:nlocal]
-            v = self.lmp.numpy.extract_atom("v")[:nlocal]
-            tag = self.lmp.numpy.extract_atom("id")[:nlocal].astype(np.int64)
+            n = nlocal if rows is None else min(rows, nlocal)
+            x = self.lmp.numpy.extract_atom("x")[:n]
+            v = self.lmp.numpy.extract_atom("v")[:n]
+            tag = self.lmp.numpy.extract_atom("id")[:n].astype(np.int64)
             return x, v, tag
         except Exception:  # noqa: BLE001
             return None
@@ -369,22 +371,16 @@ class LammpsRun:
     def check(self) -> None:
         """The watchdog on every rank's atoms; all ranks raise the same DivergenceError. Under
         MPI it also keeps the ghost cutoff ahead of the scene's reach (:meth:`_grow_cutoff`)."""
-        lmp = self.lmp
-        n = lmp.extract_global("nlocal")
-        if self._py_on and self.py.move_bit is not None:
-            # only LAMMPS' first rows move (atom_modify first, Deck.passive): a resting particle
-            # after them is where the data file put it, with v = 0
-            n = min(n, self.py.nfirst)
-        # views of the rows checked only (LAMMPS' own arrays; the ids as LAMMPS keeps them)
-        x = lmp.numpy.extract_atom("x")[:n]
-        v = lmp.numpy.extract_atom("v")[:n]
-        tag = lmp.numpy.extract_atom("id")[:n]
+        # only LAMMPS' first rows move (atom_modify first, Deck.passive): a resting particle
+        # after them is where the data file put it, with v = 0
+        moving = self._py_on and self.py.move_bit is not None
+        x, v, tag = self.positions_local(self.py.nfirst if moving else None)
         o = self.scene.original_positions()
-        if n and tag[0] == 1 and tag[-1] == n and np.array_equal(tag, self._ids[:n]):
-            found = find_divergence(self.scene, x, v, o[:n])   # row k holds particle k
+        if len(tag) and tag[0] == 1 and tag[-1] == len(tag) and np.array_equal(
+                tag, self._ids[:len(tag)]):
+            found = find_divergence(self.scene, x, v, o[:len(tag)])   # row k holds particle k
         else:
-            idx = tag.astype(np.int64) - 1
-            found = find_divergence(self.scene, x, v, o[idx], idx)
+            found = find_divergence(self.scene, x, v, o[tag - 1], tag - 1)
         everything = ([found] if self.comm.Get_size() == 1 else self.comm.allgather(found))
         everything = [f for f in everything if f is not None]
         if everything:
@@ -392,7 +388,7 @@ class LammpsRun:
             worst["count"] = sum(f["count"] for f in everything)
             raise divergence_error(self.scene, self.step, worst)
         if self.comm.Get_size() > 1 and self._reach:
-            self._grow_cutoff(x, tag.astype(np.int64))
+            self._grow_cutoff(x, tag)
 
     def _grow_cutoff(self, x, tag) -> None:
         """Raise the ghost cutoff once a bind's or attraction's reach (the diagonal of its two
