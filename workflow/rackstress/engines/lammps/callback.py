@@ -854,8 +854,9 @@ class Fused:
     def run(self, forces: "PyForces", fr: Frame, f: np.ndarray) -> int:
         """One step added into ``f``; return the first row written at or after
         ``forces.nfirst`` (one LAMMPS does not integrate yet), or −1."""
-        ov = forces.overlaps
-        hits = [ov._candidates(fr, A, B) for A, B in self.lists]
+        # the same lists (objects) until LAMMPS reneighbours or the callback's own check renews
+        # them (Overlaps keeps them in the frame's memo)
+        hits = [forces.overlaps._candidates(fr, A, B) for A, B in self.lists]
         if self._hits is None or any(h is not o for h, o in zip(hits, self._hits)):
             self._hits = hits
             i64 = np.int64

@@ -381,7 +381,8 @@ class LammpsRun:
             found = find_divergence(self.scene, x, v, o[:len(tag)])   # row k holds particle k
         else:
             found = find_divergence(self.scene, x, v, o[tag - 1], tag - 1)
-        everything = [f for f in self.comm.allgather(found) if f is not None]
+        everything = ([found] if self.comm.Get_size() == 1 else self.comm.allgather(found))
+        everything = [f for f in everything if f is not None]
         if everything:
             worst = max(everything, key=lambda f: (not f["finite"], f["disp"]))
             worst["count"] = sum(f["count"] for f in everything)
