@@ -105,6 +105,9 @@ def warm() -> dict:
     k.candidates(x, r, s, 2.0, False, tag, 3.0)
     k.overlapping(x, r, s, np.full(2, 4.0))
     k.moved_below(x, 0, 1, 1, 2, x.copy(), 1.0)
+    k.passive_rows(tag, 1, 3, np.zeros(2, np.int64))
+    k.moving_rows(x, 0, 3)
+    k.gather_rows(x, r)
     lo, nc = np.full(3, -1.0), np.array([2, 2, 2], np.int64)
     start, order = k.grid_build(x, lo, 2.0, nc)
     k.grid_candidates(x, r, 2.0, 3.0, lo, 2.0, nc, start, order, x, np.zeros(3, np.bool_), 0,
@@ -469,6 +472,42 @@ if nb is not None:
                                 ob[n] = b
                                 n += 1
         return oa[:n], ob[:n], ia[near_a], ib[near_b]
+
+    @nb.njit(**_OPTS)
+    def passive_rows(tag, span, nlocal, prow):
+        """prow[p − span] = the row holding particle p (atom id p + 1), for the rows from
+        ``span`` on; −1 for a particle not here."""
+        for k in range(len(prow)):
+            prow[k] = -1
+        for r in range(span, nlocal):
+            prow[tag[r] - 1 - span] = r
+
+    @nb.njit(**_OPTS)
+    def moving_rows(v, start, stop):
+        """Rows in start..stop with a nonzero velocity."""
+        out = np.empty(stop - start, np.int64)
+        n = 0
+        for r in range(start, stop):
+            if v[r, 0] != 0.0 or v[r, 1] != 0.0 or v[r, 2] != 0.0:
+                out[n] = r
+                n += 1
+        return out[:n]
+
+    @nb.njit(**_OPTS)
+    def gather_rows(x, rows):
+        """x[rows] and its bounding box (lo, hi)."""
+        out = np.empty((len(rows), 3))
+        lo = np.full(3, np.inf)
+        hi = np.full(3, -np.inf)
+        for k in range(len(rows)):
+            for d in range(3):
+                v = x[rows[k], d]
+                out[k, d] = v
+                if v < lo[d]:
+                    lo[d] = v
+                if v > hi[d]:
+                    hi[d] = v
+        return out, lo, hi
 
     @nb.njit(**_OPTS)
     def grid_build(pos, lo, size, nc):

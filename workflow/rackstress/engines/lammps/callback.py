@@ -525,17 +525,18 @@ class RestingBed:
         self._pending, self._nfirst = [], nfirst
 
     def _rebuild(self, fr: Frame, nfirst: int) -> None:
-        tag = fr.tag[self.span:fr.nlocal].astype(np.int64)
-        self.prow = np.full(self.n - self.span, -1, dtype=np.int64)
-        self.prow[tag - 1 - self.span] = np.arange(self.span, fr.nlocal)
+        if self.prow is None:
+            self.prow = np.empty(self.n - self.span, dtype=np.int64)
+        self.k.passive_rows(fr.tag, self.span, fr.nlocal, self.prow)
         self._pending, self._nfirst = [], nfirst
 
     def _grid(self, fr: Frame, B: slice, size: float):
         key = (B.start, B.stop)
         if key not in self._grids:
-            pos = np.ascontiguousarray(fr.x[self.prow[B.start - self.span:B.stop - self.span]])
-            lo = pos.min(axis=0) - 1.0
-            nc = (np.floor((pos.max(axis=0) + 1.0 - lo) / size).astype(np.int64) + 1)
+            pos, lo, hi = self.k.gather_rows(fr.x, self.prow[B.start - self.span:
+                                                             B.stop - self.span])
+            lo = lo - 1.0
+            nc = (np.floor((hi + 1.0 - lo) / size).astype(np.int64) + 1)
             start, order = self.k.grid_build(pos, lo, size, nc)
             self._grids[key] = (lo, size, nc, start, order, pos)
         return self._grids[key]
@@ -1008,9 +1009,9 @@ class PyForces:
     def _activate_moving(self, fr: Frame) -> None:
         """Once, at the first call: passive particles already moving (a resumed run) join."""
         self._scan_moving = False
-        if fr.identity and self.span:       # the passive rows are those after span
-            own = self.span + np.flatnonzero(np.any(fr.v[self.span:fr.nlocal] != 0.0, axis=1))
-            self._activate(fr, own)
+        if fr.identity and self.span and self.compiled is not None:
+            # the passive rows are those after span
+            self._activate(fr, self.compiled.moving_rows(fr.v, self.span, fr.nlocal))
             return
         own = np.arange(fr.nlocal)
         own = own[self.passive[fr.index[own]]]

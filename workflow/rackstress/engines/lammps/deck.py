@@ -394,12 +394,14 @@ class Deck:
         v_{n−½}, the velocity the scheme damps with, not the full-step one) and then restores v."""
         if self.integrator == "verlet" and previous is None:
             return self.phase_commands(phase_vars, previous) + ["run 0 post no"]
+        # only the particles that can move: a resting one has v = 0 and f = 0 (Active
+        # particles), which both settings leave as they are
         L = []
         if previous is not None:
-            L.append("velocity all set v_rs_vpx v_rs_vpy v_rs_vpz units box")
+            L.append(f"velocity {self.moving} set v_rs_vpx v_rs_vpy v_rs_vpz units box")
         L += self.phase_commands(phase_vars, previous)
         L.append("run 0 post no")
-        L.append("velocity all set v_rs_vhx v_rs_vhy v_rs_vhz units box")
+        L.append(f"velocity {self.moving} set v_rs_vhx v_rs_vhy v_rs_vhz units box")
         return L
 
     def input_text(self, dump_every: int = 100) -> str:
