@@ -488,7 +488,7 @@ class RestingBed:
 
     A resting particle never moves until it is activated (Eq. 5 leaves a particle with zero
     velocity and force where it is), so each passive group's particles go into a cell grid
-    once, at the positions LAMMPS has them; a search against the group then visits only the
+    once, at the positions LAMMPS has them (read from LAMMPS' rows when searched); a search against the group then visits only the
     cells near the searching particles and skips the activated ones, which are searched apart
     in a cell list of their own (they are few). The pairs found, and their order (by the
     particles), are those of a search over every particle of the group.
@@ -509,7 +509,7 @@ class RestingBed:
         self._act = []
         self._pending = []
         self._nfirst = 0
-        #: (group start, stop) → (lo, cell size, cells per axis, cell starts, order, positions)
+        #: (group start, stop) → (lo, cell size, cells per axis, cell starts, order)
         self._grids = {}
 
     def activated(self, fr: Frame, rows: np.ndarray) -> None:
@@ -542,11 +542,11 @@ class RestingBed:
                                                     np.arange(B.start + 1, B.stop + 1)):
                 self._rebuild(fr)
                 rows = self.prow[B.start - self.span:B.stop - self.span]
-            pos, lo, hi = self.k.gather_rows(fr.x, rows)
+            lo, hi = self.k.bbox_rows(fr.x, rows)
             lo = lo - 1.0
             nc = (np.floor((hi + 1.0 - lo) / size).astype(np.int64) + 1)
-            start, order = self.k.grid_build(pos, lo, size, nc)
-            self._grids[key] = (lo, size, nc, start, order, pos)
+            start, order = self.k.grid_build(fr.x, rows, lo, size, nc)
+            self._grids[key] = (lo, size, nc, start, order)
         return self._grids[key]
 
     def candidates(self, fr: Frame, ia: np.ndarray, B: slice, cut: float, wide: float):
@@ -555,9 +555,9 @@ class RestingBed:
         for attempt in (0, 1):
             if self.prow is None or attempt:
                 self._rebuild(fr)
-            lo, size, nc, start, order, pos = self._grid(fr, B, wide)
+            lo, size, nc, start, order = self._grid(fr, B, wide)
             sa, sb, snear_a, snear_b, bad = self.k.grid_candidates(
-                fr.x, ia, cut, wide, lo, size, nc, start, order, pos, self.active, B.start,
+                fr.x, ia, cut, wide, lo, size, nc, start, order, self.active, B.start,
                 self.prow, self.span, fr.tag, fr.nlocal)
             if not bad:
                 break
