@@ -107,11 +107,12 @@ def warm() -> dict:
     k.moved_below(x, 0, 1, 1, 2, x.copy(), 1.0)
     k.passive_rows(tag, 1, 3, np.zeros(2, np.int64))
     k.moving_rows(x, 0, 3)
-    k.gather_rows(x, r)
+    rows3 = np.arange(3, dtype=np.int64)
+    k.bbox_rows(x, rows3)
     lo, nc = np.full(3, -1.0), np.array([2, 2, 2], np.int64)
-    start, order = k.grid_build(x, lo, 2.0, nc)
-    k.grid_candidates(x, r, 2.0, 3.0, lo, 2.0, nc, start, order, x, np.zeros(3, np.bool_), 0,
-                      np.arange(3, dtype=np.int64), 0, tag, 3)
+    start, order = k.grid_build(x, rows3, lo, 2.0, nc)
+    k.grid_candidates(x, r, 2.0, 3.0, lo, 2.0, nc, start, order, np.zeros(3, np.bool_), 0,
+                      rows3, 0, tag, 3)
     flag, nt = np.zeros(3, np.bool_), np.zeros(1, np.int64)
     k.collide_add(x, r, s, np.full(2, 4.0), 3.0, acc, 1, np.zeros((3, 3)), flag,
                   np.zeros(3, np.int64), nt)
@@ -494,33 +495,33 @@ if nb is not None:
         return out[:n]
 
     @nb.njit(**_OPTS)
-    def gather_rows(x, rows):
-        """x[rows] and its bounding box (lo, hi)."""
-        out = np.empty((len(rows), 3))
+    def bbox_rows(x, rows):
+        """The bounding box (lo, hi) of x[rows]."""
         lo = np.full(3, np.inf)
         hi = np.full(3, -np.inf)
         for k in range(len(rows)):
             for d in range(3):
                 v = x[rows[k], d]
-                out[k, d] = v
                 if v < lo[d]:
                     lo[d] = v
                 if v > hi[d]:
                     hi[d] = v
-        return out, lo, hi
+        return lo, hi
 
     @nb.njit(**_OPTS)
-    def grid_build(pos, lo, size, nc):
-        """A cell grid of fixed points ``pos``: cell starts (CSR) and the points in cell order
-        (cells of edge ``size`` from ``lo``, ``nc`` per axis, x slowest)."""
-        m = len(pos)
+    def grid_build(x, rows, lo, size, nc):
+        """A cell grid of the points x[rows] (which stay where they are): cell starts (CSR)
+        and the points' indices k in cell order (cells of edge ``size`` from ``lo``, ``nc``
+        per axis, x slowest)."""
+        m = len(rows)
         ncell = nc[0] * nc[1] * nc[2]
         cell = np.empty(m, np.int64)
         start = np.zeros(ncell + 1, np.int64)
         for k in range(m):
-            c0 = min(int((pos[k, 0] - lo[0]) / size), nc[0] - 1)
-            c1 = min(int((pos[k, 1] - lo[1]) / size), nc[1] - 1)
-            c2 = min(int((pos[k, 2] - lo[2]) / size), nc[2] - 1)
+            r = rows[k]
+            c0 = min(int((x[r, 0] - lo[0]) / size), nc[0] - 1)
+            c1 = min(int((x[r, 1] - lo[1]) / size), nc[1] - 1)
+            c2 = min(int((x[r, 2] - lo[2]) / size), nc[2] - 1)
             cell[k] = (c0 * nc[1] + c1) * nc[2] + c2
             start[cell[k] + 1] += 1
         for c in range(ncell):
@@ -533,13 +534,14 @@ if nb is not None:
         return start, order
 
     @nb.njit(**_OPTS)
-    def grid_candidates(x, ia, cut, wide, lo, size, nc, start, order, pos, active, b0, prow,
+    def grid_candidates(x, ia, cut, wide, lo, size, nc, start, order, active, b0, prow,
                         span, tag, nlocal):
         """:func:`candidates` of rows ``ia`` against the resting particles of a group in a
-        grid of :func:`grid_build` (``pos``: particle b0 + k at pos[k], never moved; the
-        ``active`` ones skipped): unsorted pairs (rows), which rows of ia have a partner
-        within ``wide``, the rows of the group's particles within ``wide`` (repeated), and
-        whether a particle's row (``prow[p − span]``) did not hold it (atom id ``tag``)."""
+        grid of :func:`grid_build` (point k: particle b0 + k, at x[prow[b0 + k − span]], which
+        has not moved since; the ``active`` ones skipped): unsorted pairs (rows), which rows
+        of ia have a partner within ``wide``, the rows of the group's particles within
+        ``wide`` (repeated), and whether a particle's row (``prow[p − span]``) did not hold it
+        (atom id ``tag``)."""
         cut2 = cut * cut
         wide2 = wide * wide
         near_a = np.zeros(len(ia), np.bool_)
@@ -573,15 +575,15 @@ if nb is not None:
                             p = b0 + j
                             if active[p]:
                                 continue
-                            e0 = pos[j, 0] - xa0
-                            e1 = pos[j, 1] - xa1
-                            e2 = pos[j, 2] - xa2
-                            e = e0 * e0 + e1 * e1 + e2 * e2
-                            if e > wide2:
-                                continue
                             r = prow[p - span]
                             if r < 0 or r >= nlocal or tag[r] != p + 1:
                                 return oa[:0], ob[:0], near_a, nbr[:0], True
+                            e0 = x[r, 0] - xa0
+                            e1 = x[r, 1] - xa1
+                            e2 = x[r, 2] - xa2
+                            e = e0 * e0 + e1 * e1 + e2 * e2
+                            if e > wide2:
+                                continue
                             near_a[k] = True
                             if m == len(nbr):
                                 nbr2 = np.empty(2 * m, np.int64)

@@ -350,6 +350,9 @@ class Overlaps:
     pair that was farther apart than reach + skin then cannot have come within reach, so each
     step only measures the candidates (``Collide.touching``). Shared by the collide terms of
     both directions and by the contact conditions (Eq. 28's damping) of the same two groups.
+    Where LAMMPS' skin is wider than the lists' (a deck with passive groups, serial), the lists
+    keep their own skin ``own`` and are searched again when the callback's own check finds that
+    an atom has moved half of it (``PyForces._own_check``), as LAMMPS would with that skin.
     """
 
     def __init__(self, radius: np.ndarray, skin: float, compiled=None, activate=None,
@@ -485,7 +488,7 @@ class RestingBed:
 
     A resting particle never moves until it is activated (Eq. 5 leaves a particle with zero
     velocity and force where it is), so each passive group's particles go into a cell grid
-    once, at the positions LAMMPS has them; a search against the group then visits only the
+    once, at the positions LAMMPS has them (read from LAMMPS' rows when searched); a search against the group then visits only the
     cells near the searching particles and skips the activated ones, which are searched apart
     in a cell list of their own (they are few). The pairs found, and their order (by the
     particles), are those of a search over every particle of the group.
@@ -506,7 +509,7 @@ class RestingBed:
         self._act = []
         self._pending = []
         self._nfirst = 0
-        #: (group start, stop) → (lo, cell size, cells per axis, cell starts, order, positions)
+        #: (group start, stop) → (lo, cell size, cells per axis, cell starts, order)
         self._grids = {}
 
     def activated(self, fr: Frame, rows: np.ndarray) -> None:
@@ -524,21 +527,26 @@ class RestingBed:
             self.prow[fr.tag[rows].astype(np.int64) - 1 - self.span] = rows
         self._pending, self._nfirst = [], nfirst
 
-    def _rebuild(self, fr: Frame, nfirst: int) -> None:
+    def _rebuild(self, fr: Frame) -> None:
+        """``prow`` read from this layout (the rows activated in it stay pending: LAMMPS'
+        next reordering moves other particles there)."""
         if self.prow is None:
             self.prow = np.empty(self.n - self.span, dtype=np.int64)
         self.k.passive_rows(fr.tag, self.span, fr.nlocal, self.prow)
-        self._pending, self._nfirst = [], nfirst
 
     def _grid(self, fr: Frame, B: slice, size: float):
         key = (B.start, B.stop)
         if key not in self._grids:
-            pos, lo, hi = self.k.gather_rows(fr.x, self.prow[B.start - self.span:
-                                                             B.stop - self.span])
+            rows = self.prow[B.start - self.span:B.stop - self.span]
+            if rows.min() < 0 or not np.array_equal(fr.tag[rows],
+                                                    np.arange(B.start + 1, B.stop + 1)):
+                self._rebuild(fr)
+                rows = self.prow[B.start - self.span:B.stop - self.span]
+            lo, hi = self.k.bbox_rows(fr.x, rows)
             lo = lo - 1.0
             nc = (np.floor((hi + 1.0 - lo) / size).astype(np.int64) + 1)
-            start, order = self.k.grid_build(pos, lo, size, nc)
-            self._grids[key] = (lo, size, nc, start, order, pos)
+            start, order = self.k.grid_build(fr.x, rows, lo, size, nc)
+            self._grids[key] = (lo, size, nc, start, order)
         return self._grids[key]
 
     def candidates(self, fr: Frame, ia: np.ndarray, B: slice, cut: float, wide: float):
@@ -546,10 +554,10 @@ class RestingBed:
         ``B`` (rows, sorted by particles; near rows of both sides)."""
         for attempt in (0, 1):
             if self.prow is None or attempt:
-                self._rebuild(fr, self._nfirst)
-            lo, size, nc, start, order, pos = self._grid(fr, B, wide)
+                self._rebuild(fr)
+            lo, size, nc, start, order = self._grid(fr, B, wide)
             sa, sb, snear_a, snear_b, bad = self.k.grid_candidates(
-                fr.x, ia, cut, wide, lo, size, nc, start, order, pos, self.active, B.start,
+                fr.x, ia, cut, wide, lo, size, nc, start, order, self.active, B.start,
                 self.prow, self.span, fr.tag, fr.nlocal)
             if not bad:
                 break
@@ -562,7 +570,7 @@ class RestingBed:
         rows = self.prow[act - self.span]
         if len(rows) and (rows.min() < 0 or not np.array_equal(
                 fr.tag[rows].astype(np.int64) - 1, act)):
-            self._rebuild(fr, self._nfirst)
+            self._rebuild(fr)
             rows = self.prow[act - self.span]
         da, db, dnear_a, dnear_b = self.k.candidates(fr.x, ia, rows, cut, False, fr.tag, wide)
         a, b = np.concatenate([sa, da]), np.concatenate([sb, db])
