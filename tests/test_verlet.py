@@ -175,3 +175,38 @@ def test_verlet_on_lammps_warns_of_the_lagged_contact_damping():
     assert verlet_lag(verlet, "reference") == [] and verlet_lag(mp, "lammps") == []
     plane = dataclasses.replace(scenes.build("plane-rack"), integrator="verlet")
     assert verlet_lag(plane, "lammps") == []
+
+
+def _spring_frequency(integrator, t, c=100.0, steps=400, amp=1e-6):
+    """Measured angular frequency θ/t of one particle bound (Eq. 12) to a held partner, started
+    along the bond with a small velocity. A sampled rotation by θ per step satisfies
+    x_{n+1} + x_{n−1} = 2cos θ·x_n; cos θ is its least-squares fit over the trajectory."""
+    w = math.sqrt(2.0 * c)      # linearized Eq. 12 at rest: stiffness 2c along the bond, m = 1
+    a = Group("a", np.array([[1.0, 0.0, 0.0]]), 0.1, v0=[amp, 0.0, 0.0])
+    b = Group("b", np.zeros((1, 3)), 0.1, held=[True])
+    sc = Scene("spring", {"a": a, "b": b}, {"a": [Bind("b", Const(c))]}, [Phase("p", steps)],
+               dt=t, integrator=integrator)
+    eng = Reference(sc)
+    x = np.empty(steps)
+    for n in range(steps):
+        eng.step({})
+        x[n] = eng.p[0, 0] - 1.0
+    cos = np.dot(x[1:-1], x[2:] + x[:-2]) / (2.0 * np.dot(x[1:-1], x[1:-1]))
+    return math.acos(cos) / t, w
+
+
+@pytest.mark.parametrize("t", [0.02, 0.01])
+def test_eq5_and_verlet_carry_an_undamped_mode_at_the_same_modified_frequency(t):
+    """Why the verlet mode's gain over Eq. 5 is capped on lightly damped stiff scenes: both
+    rotate an undamped mode by arccos(1 − ω²t²/2) per step (hand calculation from the common
+    recursion p_{n+1} − 2p_n + p_{n−1} = t²·a(p_n)), not by ωt."""
+    from rackstress.model.verlet import modified_frequency
+
+    f_euler, w = _spring_frequency("euler", t)
+    f_verlet, _ = _spring_frequency("verlet", t)
+    expected = math.acos(1.0 - 0.5 * (w * t) ** 2) / t
+    assert f_euler == pytest.approx(expected, rel=1e-8)
+    assert f_verlet == pytest.approx(expected, rel=1e-8)
+    # the shift is real: ω²t²/24 relative (8e-4 at t = 0.01), far above the tolerance
+    assert abs(f_euler / w - 1.0) > 1e4 * 1e-8
+    assert modified_frequency(w, t) == pytest.approx(expected, rel=1e-14)

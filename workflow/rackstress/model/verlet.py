@@ -75,6 +75,26 @@ def t_limit_verlet(lam, gamma: float = 0.0) -> float:
     return largest_stable(stable, 8.0 / math.sqrt(abs(lam)))
 
 
+def modified_frequency(omega: float, t: float) -> float:
+    """The frequency at which Eq. 5 *and* the verlet mode carry an undamped mode of frequency ω.
+
+    Both obey p_{n+1} − 2p_n + p_{n−1} = t²·a(p_n) on such a mode (module docstring), whose
+    solutions rotate by θ per step with cos θ = 1 − ω²t²/2: ω̃ = θ/t = ω(1 + ω²t²/24 + …). The
+    two schemes differ only in their start and their damping (first order in Eq. 5), never in
+    this phase, so a lightly damped stiff mode leaves both with the same error ∝ ω³t²·T, and
+    Eq. 5's error over the verlet mode's is at most about 1 + A/(B·t) (README, "What the
+    picture means"; ``scripts/phase_error.py`` shows no other two-stage splitting does better
+    at the same cost). NaN beyond the stability limit ωt ≥ 2.
+
+    Example
+    -------
+    >>> round(modified_frequency(10.0, 0.01) / 10.0 - 1.0, 6)    # ≈ ω²t²/24
+    0.000417
+    """
+    c = 1.0 - 0.5 * (omega * t) ** 2
+    return math.acos(c) / t if -1.0 < c <= 1.0 else math.nan
+
+
 def group_damping(scene) -> dict:
     """Unconditional damping γ of each group (sum of its dampen coefficients, Eq. 9)."""
     out = {}
@@ -112,4 +132,4 @@ def scaled_scene(scene):
     return dataclasses.replace(scene, operators=ops, integrator="euler")
 
 
-__all__ = ["INTEGRATORS", "integrate_verlet", "t_limit_verlet", "group_damping", "scaled_scene"]
+__all__ = ["INTEGRATORS", "integrate_verlet", "t_limit_verlet", "modified_frequency", "group_damping", "scaled_scene"]

@@ -1,0 +1,135 @@
+#!/usr/bin/env python
+"""Phase error per unit cost of one-step schemes on an undamped mode x'' = −ω²x.
+
+    python scripts/phase_error.py [--out docs/benchmarks/phase-error.md]
+
+Why the verlet mode's gain over Eq. 5 is capped on lightly damped stiff scenes (README, "What
+the picture means"): Eq. 5 and the verlet mode carry such a mode at the same modified frequency
+arccos(1 − ω²t²/2)/t (``rackstress.model.verlet.modified_frequency``; a test measures it on both),
+so their errors share a term B·t² that grows with the run's length, and Eq. 5's error over the
+verlet mode's is at most about 1 + A/(B·t). A scheme with a smaller phase error at the *same
+cost* (force evaluations per unit time, h = time per evaluation) would lower B. This script
+scans the candidates exactly (2×2 one-step matrices, no simulation):
+
+* Störmer–Verlet = Eq. 5 = the verlet mode: one evaluation a step, step h;
+* every symmetric two-stage splitting e^{λHB} e^{HA/2} e^{(1−2λ)HB} e^{HA/2} e^{λHB}, 0 < λ ≤ ¼
+  (λ ≈ 0.1932 is the "minimum error" scheme of Omelyan et al. 2002; λ = ¼ is two Verlet steps),
+  two evaluations a step, step H = 2h;
+* Yoshida's fourth-order triple jump of Verlet, three evaluations a step, step H = 3h.
+
+For a scene whose modes reach ω_max, the worst relative frequency error |ω̃/ω − 1| over its
+modes 0 < ω ≤ ω_max, for each ω_max·h, and whether every mode is stable.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+import numpy as np
+
+#: ω_max·h up to 1.4: beyond it a two-stage step (2h) turns a mode by more than π, and the
+#: angle read from its matrix aliases.
+OMEGA_H = (0.05, 0.1, 0.25, 0.5, 1.0, 1.4)
+
+
+def kick(h, w):
+    return np.array([[1.0, 0.0], [-w * w * h, 1.0]])
+
+
+def drift(h):
+    return np.array([[1.0, h], [0.0, 1.0]])
+
+
+def verlet(H, w):
+    return kick(H / 2, w) @ drift(H) @ kick(H / 2, w)
+
+
+def two_stage(H, w, lam):
+    return (kick(lam * H, w) @ drift(H / 2) @ kick((1 - 2 * lam) * H, w) @ drift(H / 2)
+            @ kick(lam * H, w))
+
+
+def yoshida(H, w):
+    a = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
+    b = 1.0 - 2.0 * a
+    return verlet(a * H, w) @ verlet(b * H, w) @ verlet(a * H, w)
+
+
+def rel_error(M, H, w=1.0):
+    """|ω̃/ω − 1| of a one-step matrix of step H (NaN when it is unstable: |trace| ≥ 2)."""
+    c = np.trace(M) / 2.0
+    if not -1.0 < c < 1.0:
+        return math.nan
+    return abs(math.acos(c) / H / w - 1.0)
+
+
+def band_error(scheme, wh_max, n=200):
+    """Largest |ω̃/ω − 1| over the modes 0 < ω·h ≤ wh_max (a scene has a spectrum up to its
+    stiffest mode); NaN if any of them is unstable."""
+    worst = 0.0
+    for wh in np.linspace(wh_max / n, wh_max, n):
+        e = scheme(wh)
+        if math.isnan(e):
+            return math.nan
+        worst = max(worst, e)
+    return worst
+
+
+def table():
+    lams = np.linspace(0.01, 0.25, 97)
+    rows = []
+    for wh in OMEGA_H:
+        ev = band_error(lambda x: rel_error(verlet(x, 1.0), x), wh)
+        ok = []
+        for lam in lams:
+            e = band_error(lambda x: rel_error(two_stage(2 * x, 1.0, lam), 2 * x), wh)
+            if not math.isnan(e):
+                ok.append((e, lam))
+        best = min(ok) if ok else (math.nan, math.nan)
+        om = band_error(lambda x: rel_error(two_stage(2 * x, 1.0, 0.1931833275037836), 2 * x),
+                        wh)
+        y4 = band_error(lambda x: rel_error(yoshida(3 * x, 1.0), 3 * x), wh)
+        rows.append((wh, ev, best[0], best[1], om, y4))
+    return rows
+
+
+def fmt(x):
+    return "unstable" if math.isnan(x) else f"{x:.3g}"
+
+
+def markdown(rows) -> str:
+    out = ["# Phase error per unit cost on an undamped mode", "",
+           "Regenerate: `python scripts/phase_error.py` (exact 2×2 one-step matrices of "
+           "x'' = −ω²x; h = time per force evaluation, so every column costs the same per unit "
+           "time). Entries: the worst relative frequency error |ω̃/ω − 1| over all modes "
+           "0 < ω ≤ ω_max (a scene's spectrum up to its stiffest mode); 'unstable' where one of "
+           "them diverges.", "",
+           "| ω_max·h | Störmer–Verlet = Eq. 5 = verlet mode (step h) | best two-stage splitting "
+           "(step 2h) | its λ | Omelyan λ = 0.1932 (step 2h) | Yoshida 4th order (step 3h) |",
+           "|---|---|---|---|---|---|"]
+    for wh, ev, best, lam, om, y4 in rows:
+        out.append(f"| {wh:g} | {fmt(ev)} | {fmt(best)} | {lam:.3f} | {fmt(om)} | {fmt(y4)} |")
+    out += ["", "Reading: no two-stage splitting beats Störmer–Verlet at equal cost (the best "
+            "λ is ¼: two Verlet half-size steps, the same scheme); Yoshida's fourth order "
+            "wins only for small ω·h and is unstable from ω·h ≈ 0.52 (its step 3h reaches its "
+            "limit ≈ 1.57). On plane-bound (d = 10) the stiffest mode has ω ≈ 84 (Eq. 5's "
+            "predicted limit 0.0238 ≈ 2/ω), so ω·t = 0.84 at the default t = 0.01 and 1.68 "
+            "at t = 0.02 (beyond this table, where Verlet's error is already 13 % at ω·h = 1.5): "
+            "there no scheme of the same cost has a smaller phase error than Eq. 5, and the "
+            "fourth-order one is unstable.", ""]
+    return "\n".join(out)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path,
+                    default=Path(__file__).resolve().parents[1] / "docs/benchmarks/phase-error.md")
+    args = ap.parse_args()
+    text = markdown(table())
+    args.out.write_text(text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()
