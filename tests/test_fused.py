@@ -155,3 +155,43 @@ def test_fused_contact_damping_follows_the_contact():
     assert np.all(ref.p[:8, 1] > o[:8, 1] - 20.0 * 1.2 + 1.0)
     d = np.linalg.norm(ref.p[:8, None] - ref.p[None, 8:], axis=2)
     assert d.min() > 1.0
+
+
+def test_compiled_watchdog_pass_agrees_with_the_watchdog():
+    """The LAMMPS runner's one-pass watchdog test (rows in any order, by atom id) is true
+    exactly when the NumPy watchdog finds nothing: in bound, beyond it, NaN and infinite
+    positions or velocities, and a finite velocity so large that NumPy's sum overflows."""
+    from rackstress.engines.watchdog import find_divergence
+
+    sc = scenes.build("plane-bound", d=2.0)
+    o = sc.original_positions()
+    n = len(o)
+    rng = np.random.default_rng(3)
+    bound2 = float(sc.bound) ** 2
+    cases = []
+    for kind in ("ok", "far", "nan-x", "inf-v", "nan-v", "huge-v", "edge"):
+        x = o + rng.normal(scale=2.0, size=o.shape)
+        v = rng.normal(size=o.shape)
+        k = int(rng.integers(n))
+        if kind == "far":
+            x[k, 1] = o[k, 1] + 1.0001 * sc.bound
+        elif kind == "nan-x":
+            x[k, 2] = np.nan
+        elif kind == "inf-v":
+            v[k, 0] = -np.inf
+        elif kind == "nan-v":
+            v[k, 1] = np.nan
+        elif kind == "huge-v":
+            v[:, 0] = 1e308           # finite, but their sum is not
+        elif kind == "edge":
+            x[k] = o[k] + np.array([sc.bound, 0.0, 0.0])       # exactly at the bound: inside
+        cases.append((kind, x, v))
+    for kind, x, v in cases:
+        perm = rng.permutation(n)              # LAMMPS' rows in another order
+        tag = (perm + 1).astype(np.int64)
+        fast = K.within_bound(np.ascontiguousarray(x[perm]), np.ascontiguousarray(v[perm]), o,
+                              tag, bound2)
+        with np.errstate(over="ignore"):       # huge-v: the sum overflows, as meant
+            slow = find_divergence(sc, x[perm], v[perm], o[perm], perm)
+        assert fast == (slow is None), kind
+        assert fast == (kind in ("ok", "huge-v", "edge")), kind

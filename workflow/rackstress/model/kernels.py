@@ -120,6 +120,9 @@ def warm() -> dict:
     k.add_sparse(np.zeros((3, 3)), np.zeros((3, 3)), flag, np.zeros(3, np.int64), nt,
                  np.ones(3), tag, 3)
     k.members(r, s, np.zeros(3, np.bool_))
+    o = x.copy()
+    o.flags.writeable = False       # as Scene.original_positions() is
+    k.within_bound(x, np.ones((3, 3)), o, np.arange(1, 4, dtype=np.int64), 4.0)
     # one instruction of every kind through the fused step (the types LAMMPS' arrays have)
     ops = np.array([[OP_BLOCK, 0, 1, 1, 2, 0, 0, 0], [OP_BIND, 0, 2, 0, 0, 0, 0, 0],
                     [OP_ATTRACT, 0, 2, 0, 0, 0, 0, 0], [OP_COLLIDE, 0, 1, 0, 0, 0, 0, 1],
@@ -691,6 +694,23 @@ if nb is not None:
 
 
 if nb is not None:
+    @nb.njit(**_OPTS)
+    def within_bound(x, v, o, tag, bound2):
+        """The watchdog's common case in one pass: every row's particle (atom id ``tag[row]``)
+        within √bound2 of its original position ``o`` and its velocity finite. False sends the
+        caller to the full test (:func:`~rackstress.engines.watchdog.find_divergence`), which
+        names the particle."""
+        for r in range(len(tag)):
+            p = tag[r] - 1
+            d0 = x[r, 0] - o[p, 0]
+            d1 = x[r, 1] - o[p, 1]
+            d2 = x[r, 2] - o[p, 2]
+            if not d0 * d0 + d1 * d1 + d2 * d2 <= bound2:      # also NaN
+                return False
+            if not (np.isfinite(v[r, 0]) and np.isfinite(v[r, 1]) and np.isfinite(v[r, 2])):
+                return False
+        return True
+
     @nb.njit(**_OPTS)
     def members(a, b, flag):
         """The distinct rows of ``a`` and ``b`` (``flag``: False over every row; left so)."""

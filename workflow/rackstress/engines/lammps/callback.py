@@ -748,8 +748,9 @@ class Fused:
     that phase runs term by term).
     """
 
-    #: the near candidates' margin (kernels.step's h), in length units
-    margin = 0.5
+    #: the near candidates' margin (kernels.step's h) as a fraction of the contact lists' skin
+    #: (MagPod: 0.5 of 2 length units)
+    MARGIN = 0.25
 
     def __init__(self):
         self.ops, self.fpar, self.conds = [], [], []
@@ -764,6 +765,8 @@ class Fused:
         """The plan of ``forces``' active terms in its current phase, or None."""
         span, acc_rows, scene = forces.span, forces.dense_span, forces.scene
         self = cls()
+        ov = forces.overlaps
+        self.margin = cls.MARGIN * (ov.own if ov.own is not None else ov.skin)
         for t in forces.active:
             if not t.phase_ok:
                 continue            # holds() is false the whole phase

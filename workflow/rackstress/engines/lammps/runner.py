@@ -376,7 +376,10 @@ class LammpsRun:
         moving = self._py_on and self.py.move_bit is not None
         x, v, tag = self.positions_local(self.py.nfirst if moving else None)
         o = self.scene.original_positions()
-        if len(tag) and tag[0] == 1 and tag[-1] == len(tag) and np.array_equal(
+        k = self.py.compiled if self.py is not None else None
+        if k is not None and k.within_bound(x, v, o, tag, float(self.scene.bound) ** 2):
+            found = None            # the common case, in one compiled pass
+        elif len(tag) and tag[0] == 1 and tag[-1] == len(tag) and np.array_equal(
                 tag, self._ids[:len(tag)]):
             found = find_divergence(self.scene, x, v, o[:len(tag)])   # row k holds particle k
         else:
