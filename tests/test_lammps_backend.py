@@ -631,3 +631,47 @@ def test_resting_bed_search_equals_a_search_over_the_whole_group(monkeypatch):
     finally:
         run.close()
     assert seen["calls"] >= 5 and seen["from_activated"] > 0 and seen["reordered"] > 0
+
+
+@pytest.mark.lammps
+def test_contact_lists_renewed_by_the_callbacks_own_check(monkeypatch):
+    """With a resting group in the scene, LAMMPS' skin is 8 and the callback keeps its contact
+    lists with skin 2 by its own displacement check. Two particles 6 apart close in at 4
+    units/time each: LAMMPS reneighbours only once an atom has moved 4 (step ~100), the
+    callback's lists are searched (reach + 2 skins = 5, beyond 6 at the start) and renewed once
+    an atom has moved 1 (step ~25); they touch (d < 1) at step ~63. LAMMPS must see that
+    contact when it happens: equal to the reference engine to 1e-10."""
+    from rackstress.engines.lammps import callback as cb
+
+    a = Group("a", np.array([[0.0, 0.0, 0.0]]), 0.5, kind="body")
+    b = Group("b", np.array([[6.0, 0.0, 0.0]]), 0.5, kind="body")
+    bed = Group("bed", lattice((3, 1, 3), 1.0, origin=(0.0, -40.0, 0.0)), 0.5, kind="leg")
+    a.v0, b.v0 = np.array([[4.0, 0, 0]]), np.array([[-4.0, 0, 0]])
+    ops = {"a": [Collide("b", Const(50.0)), Dampen(0.0, extra=1.0, when=(Contact("b"),))],
+           "b": [Collide("a", Const(20.0))],
+           "bed": [Collide("a", Const(20.0)), Dampen(5.0)]}
+    sc = Scene("own-check", {"a": a, "b": b, "bed": bed}, ops, [Phase("go", 90, {})], dt=0.01)
+    deck = compile_deck(sc, "exact")
+    assert deck.passive == ("bed",) and deck.lammps_skin == 8.0 and deck.skin == 2.0
+    renewed = [0]
+    own_check = cb.PyForces._own_check
+
+    def counted(self, fr, new):
+        before = self._xref
+        own_check(self, fr, new)
+        renewed[0] += (not new) and self._xref is not before
+    monkeypatch.setattr(cb.PyForces, "_own_check", counted)
+    run = LammpsRun(deck, None)
+    try:
+        run.run_schedule()
+        p = run.gather_positions()
+    finally:
+        run.close()
+    ref = Reference(sc)
+    drive(ref)
+    # they touched and bounced: without the contact they would have passed through each
+    # other (gap 6 − 8·0.9 = −1.2 at the end); a list renewed only when LAMMPS reneighbours
+    # misses it (measured: 1.86 off the reference)
+    assert renewed[0] >= 2
+    assert ref.p[1, 0] - ref.p[0, 0] > 0.0
+    assert np.abs(p - ref.p).max() <= 1e-10

@@ -125,8 +125,8 @@ class LammpsRun:
         if deck.passive and self.comm.Get_size() == 1:
             # serial: LAMMPS clears forces, checks displacements and bins only its first rows
             # (the moving group, atom_modify first). A resting row's force then stays what it
-            # is, so it is zeroed once here; nothing writes it later (fix external's rows there
-            # are zero, fix viscous multiplies v = 0), so v + dt/2·f/m keeps it at rest.
+            # is, so it is zeroed once here; nothing writes it later (the callback adds forces
+            # only on rows it computed, never a resting one), so v + dt/2·f/m keeps it at rest.
             self.command(f"neigh_modify include {MOVE_GROUP}")
             self.scatter("f", np.zeros((self.scene.n_particles, 3)))
         for cmd in balance_commands(self.scene, self.comm.Get_size()):
