@@ -752,9 +752,9 @@ if nb is not None:
         ``uref``); while none of them has moved h/2 since, no other candidate can overlap
         (its gap, ≥ h then, has closed by less than h), and once one has — or the list is new
         (``valid[L] = 0``) — every candidate is measured and the near ones chosen again. The
-        overlapping pairs, and their order, are those of a pass over every candidate.
-        Each term adds exactly what
-        its own kernel adds (:func:`bind_block`, :func:`bind_pairs`, :func:`attract_pairs`,
+        overlapping pairs, and their order, are those of a pass over every candidate. Each
+        term adds exactly what its own kernel adds (:func:`bind_block` or
+        :func:`bind_block_const`, :func:`bind_pairs`, :func:`attract_pairs`,
         :func:`collide_add`, :func:`dampen`, a force's vector), in the same order, so the sums
         are those of the term-by-term path. Then f += acc·m on the dense rows and the sparse
         rows as :func:`add_sparse`.

@@ -719,6 +719,19 @@ class AttractTerm(Term):
         return self._by_phase[key]
 
 
+def _global_int(lmp, name: str):
+    """A pointer to one of LAMMPS' global ints (``lammps_extract_global``): read each step
+    in a fraction of a microsecond, where ``lmp.extract_global`` takes a few."""
+    import ctypes
+
+    fn = lmp.lib.lammps_extract_global
+    fn.restype = ctypes.POINTER(ctypes.c_int32)   # lmp.extract_global sets it on each call
+    ptr = fn(lmp.lmp, name.encode())
+    if not ptr:
+        raise RuntimeError(f"LAMMPS has no global '{name}'")
+    return ptr
+
+
 def _leading(mask: np.ndarray, bit: int, n: int) -> int:
     """How many leading rows have ``bit`` set, when every row with it comes before every row
     without it (LAMMPS' ``atom_modify first`` order just after it reordered): a bisection."""
@@ -1116,12 +1129,13 @@ class PyForces:
         lmp, fr = self.lmp, self.frame
         ago = lmp.extract_setting("neigh_ago")
         if (fr is None or self._fresh or not self.verlet or fr.nlocal != nlocal or ago == 0
-                or lmp.extract_global("nghost") != fr.nghost):
+                or self._nghost[0] != fr.nghost):
             if self.move_bit is not None and (ago == 0 or self._fresh):
                 # LAMMPS has just reordered (atom_modify first): the moving group's rows
                 # come first, and only they are integrated until it reorders again
                 self.nfirst = _leading(lmp.numpy.extract_atom("mask"), self.move_bit, nlocal)
             fr = self.frame = Frame(lmp, self.n, nlocal, self.dense_span, self.mass, self.span)
+            self._nghost = _global_int(lmp, "nghost")
             if self.bed is not None:
                 self.bed.relayout(fr, self.nfirst)
             if self.own is not None:
