@@ -405,12 +405,14 @@ class Overlaps:
         if stable:
             # a list of two groups whose rows are their particles is searched with two skins
             # of margin (reach + 2 skins) and kept at a later reneighbouring while none of
-            # *their* atoms has moved half a skin since the search: until the next
-            # reneighbouring each atom then stays within one skin of where it was searched
-            # (LAMMPS reneighbours once any atom has moved half a skin), so a pair can have
-            # closed by less than two skins and none outside the list can be within reach
+            # *their* atoms has moved half a skin since the search, once the translation
+            # common to both groups is taken off (kernels.moved_below_shifted: a body and
+            # its legs walk together): until the next reneighbouring each atom then stays
+            # within one skin of where it was searched plus that translation (LAMMPS
+            # reneighbours once any atom has moved half a skin), so a pair can have closed by
+            # less than two skins and none outside the list can be within reach
             kept = self._kept.get((A.start, B.start))
-            if kept is not None and self.k.moved_below(
+            if kept is not None and self.k.moved_below_shifted(
                     fr.x, A.start, A.stop - A.start, B.start, B.stop - B.start, kept[0],
                     0.25 * h * h):
                 hit = fr.memo[key] = kept[1]
