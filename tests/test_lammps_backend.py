@@ -434,20 +434,23 @@ def test_active_only_is_exact_when_touched_at_the_start():
 
 @pytest.mark.lammps
 def test_active_only_refuses_a_touch_it_cannot_integrate():
-    """A block thrown at the bed 7 units a step (the skin is 2) overlaps resting bed particles
-    one step after being farther than reach + 2 skins: LAMMPS has not put them among its
-    integrated rows yet, so the run stops with a divergence naming the step and a bed particle,
-    rather than go on inexactly; integrating every particle runs it."""
-    block = Group("block", lattice((2, 2, 2), 1.0, origin=(10.0, 7.5, 2.0)), 0.5, kind="body")
-    block.v0 = np.tile([0.0, -700.0, 0.0], (8, 1))
+    """A block thrown at the bed 25 units a step (LAMMPS' skin with a resting group is 8)
+    overlaps resting bed particles one step after being farther than reach + 2 skins
+    (1 + 16): LAMMPS has not put them among its integrated rows yet, so the run stops with a
+    divergence naming the step and a bed particle, rather than go on inexactly; integrating
+    every particle runs it."""
+    block = Group("block", lattice((2, 2, 2), 1.0, origin=(10.0, 25.5, 2.0)), 0.5, kind="body")
+    block.v0 = np.tile([0.0, -2500.0, 0.0], (8, 1))
     bed = Group("bed", lattice((24, 1, 6), 1.0), 0.5, kind="leg")
     ops = {"block": [Collide("bed", Const(50.0)), Dampen(0.0, extra=2.0, when=(Contact("bed"),))],
            "bed": [Collide("block", Const(20.0)), Dampen(5.0)]}
     sc = Scene("thrown", {"block": block, "bed": bed}, ops, [Phase("fall", 20, {})], dt=0.01)
     o = sc.original_positions()
-    # the block's bottom layer is 7.5 above the bed at step 0 and 0.5 (overlapping) at step 1
-    assert np.isclose(o[:8, 1].min() - 700.0 * 0.01, 0.5)
-    run = LammpsRun(compile_deck(sc, "exact"), None)
+    # the block's bottom layer is 25.5 above the bed at step 0 and 0.5 (overlapping) at step 1
+    assert np.isclose(o[:8, 1].min() - 2500.0 * 0.01, 0.5)
+    deck = compile_deck(sc, "exact")
+    assert deck.passive == ("bed",) and 25.5 > 1.0 + 2 * deck.lammps_skin
+    run = LammpsRun(deck, None)
     try:
         with pytest.raises(DivergenceError) as err:
             drive(run)
@@ -559,3 +562,116 @@ def test_equal_constant_forces_add_up_on_lammps():
     ref = Reference(sc)
     drive(ref)
     assert np.abs(p - ref.p).max() <= 1e-12
+
+
+@pytest.mark.lammps
+def test_passive_deck_adds_constant_forces_and_damping_in_the_callback():
+    """With a resting group, the deck leaves ``fix addforce`` and ``fix viscous`` (which pass
+    over every atom each step) to the callback, which adds F and −γ·v on the moving rows: the
+    deck shows the fixes commented out, and the F and γ per particle are MagPod's Eqs. 27–31
+    (unit masses: legs pulled by (0, −50, 0); damping 10 on body and legs, 1 on the racks, 50
+    on the sediment). Without a resting group the fixes stay."""
+    sc = scenes.build("magpod-small")
+    deck = compile_deck(sc, "exact")
+    text = deck.input_text().splitlines()
+    assert deck.callback_natives and deck.lammps_skin == 8.0 and deck.skin == 2.0
+    assert "neighbor 8 bin" in text
+    assert not any(line.startswith(("fix rs_damp", "fix rs_force")) for line in text)
+    assert any(line.startswith("# fix rs_damp rs_move viscous") for line in text)
+    assert any(line.startswith("# fix rs_force") and "addforce 0.0 -50.0 0.0" in line
+               for line in text)
+    F, g = deck.natives_per_particle()
+    want_F = {"rightleg": (0.0, -50.0, 0.0), "leftleg": (0.0, -50.0, 0.0)}
+    want_g = {"body": 10.0, "rightleg": 10.0, "leftleg": 10.0, "bodyrack": 1.0,
+              "rightrack": 1.0, "leftrack": 1.0, "sediment": 50.0}
+    for name in sc.groups:
+        sl = sc.slice(name)
+        assert np.all(F[sl] == np.array(want_F.get(name, (0.0, 0.0, 0.0)))), name
+        assert np.all(g[sl] == want_g[name]), name
+    every = compile_deck(sc, "exact", active_only=False)
+    assert not every.callback_natives and every.lammps_skin == 2.0
+    assert any(line.startswith("fix rs_damp all viscous") for line in every.input_text().splitlines())
+
+
+@pytest.mark.lammps
+def test_resting_bed_search_equals_a_search_over_the_whole_group(monkeypatch):
+    """The contact search against a resting group (its resting particles from a grid made once,
+    its activated ones apart, their rows followed through LAMMPS' reorderings) finds the same
+    pairs in the same order, and the same particles to activate, as a cell-list search over
+    every particle of the group, at every search of a run in which the block reaches new bed
+    particles and LAMMPS reorders them (an independent path: kernels.candidates over all rows)."""
+    from rackstress.engines.lammps import callback as cb
+    from rackstress.model import kernels
+
+    seen = {"calls": 0, "from_activated": 0, "reordered": 0}
+    bed_candidates = cb.RestingBed.candidates
+
+    def checked(self, fr, ia, B, cut, wide):
+        a, b, near_a, near_b = bed_candidates(self, fr, ia, B, cut, wide)
+        rows = fr.tag[:fr.nlocal].astype(np.int64) - 1     # every row of B, whatever its order
+        ib = np.flatnonzero((rows >= B.start) & (rows < B.stop))
+        fa, fb, fnear_a, fnear_b = kernels.candidates(fr.x, ia, ib, cut, False, fr.tag, wide)
+        np.testing.assert_array_equal(a, fa)
+        np.testing.assert_array_equal(b, fb)
+        assert set(near_a.tolist()) == set(fnear_a.tolist())
+        assert set(near_b.tolist()) == set(fnear_b.tolist())
+        seen["calls"] += 1
+        seen["from_activated"] += int(self.active[rows[b]].sum())
+        # LAMMPS has moved activated bed particles ahead of resting ones (atom_modify first)
+        seen["reordered"] += int(not np.array_equal(rows[fr.span:fr.nlocal],
+                                                    np.arange(fr.span, fr.nlocal)))
+        return a, b, near_a, near_b
+
+    monkeypatch.setattr(cb.RestingBed, "candidates", checked)
+    sc = _bed_scene()
+    run = LammpsRun(compile_deck(sc, "exact"), None)
+    try:
+        assert run.py.bed is not None
+        drive(run)
+    finally:
+        run.close()
+    assert seen["calls"] >= 5 and seen["from_activated"] > 0 and seen["reordered"] > 0
+
+
+@pytest.mark.lammps
+def test_contact_lists_renewed_by_the_callbacks_own_check(monkeypatch):
+    """With a resting group in the scene, LAMMPS' skin is 8 and the callback keeps its contact
+    lists with skin 2 by its own displacement check. Two particles 6 apart close in at 4
+    units/time each: LAMMPS reneighbours only once an atom has moved 4 (step ~100), the
+    callback's lists are searched (reach + 2 skins = 5, beyond 6 at the start) and renewed once
+    an atom has moved 1 (step ~25); they touch (d < 1) at step ~63. LAMMPS must see that
+    contact when it happens: equal to the reference engine to 1e-10."""
+    from rackstress.engines.lammps import callback as cb
+
+    a = Group("a", np.array([[0.0, 0.0, 0.0]]), 0.5, kind="body")
+    b = Group("b", np.array([[6.0, 0.0, 0.0]]), 0.5, kind="body")
+    bed = Group("bed", lattice((3, 1, 3), 1.0, origin=(0.0, -40.0, 0.0)), 0.5, kind="leg")
+    a.v0, b.v0 = np.array([[4.0, 0, 0]]), np.array([[-4.0, 0, 0]])
+    ops = {"a": [Collide("b", Const(50.0)), Dampen(0.0, extra=1.0, when=(Contact("b"),))],
+           "b": [Collide("a", Const(20.0))],
+           "bed": [Collide("a", Const(20.0)), Dampen(5.0)]}
+    sc = Scene("own-check", {"a": a, "b": b, "bed": bed}, ops, [Phase("go", 90, {})], dt=0.01)
+    deck = compile_deck(sc, "exact")
+    assert deck.passive == ("bed",) and deck.lammps_skin == 8.0 and deck.skin == 2.0
+    renewed = [0]
+    own_check = cb.PyForces._own_check
+
+    def counted(self, fr, new):
+        before = self._xref
+        own_check(self, fr, new)
+        renewed[0] += (not new) and self._xref is not before
+    monkeypatch.setattr(cb.PyForces, "_own_check", counted)
+    run = LammpsRun(deck, None)
+    try:
+        run.run_schedule()
+        p = run.gather_positions()
+    finally:
+        run.close()
+    ref = Reference(sc)
+    drive(ref)
+    # they touched and bounced: without the contact they would have passed through each
+    # other (gap 6 − 8·0.9 = −1.2 at the end); a list renewed only when LAMMPS reneighbours
+    # misses it (measured: 1.86 off the reference)
+    assert renewed[0] >= 2
+    assert ref.p[1, 0] - ref.p[0, 0] > 0.0
+    assert np.abs(p - ref.p).max() <= 1e-10

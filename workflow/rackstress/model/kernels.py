@@ -105,11 +105,36 @@ def warm() -> dict:
     k.candidates(x, r, s, 2.0, False, tag, 3.0)
     k.overlapping(x, r, s, np.full(2, 4.0))
     k.moved_below(x, 0, 1, 1, 2, x.copy(), 1.0)
+    k.passive_rows(tag, 1, 3, np.zeros(2, np.int64))
+    k.moving_rows(x, 0, 3)
+    rows3 = np.arange(3, dtype=np.int64)
+    k.bbox_rows(x, rows3)
+    lo, nc = np.full(3, -1.0), np.array([2, 2, 2], np.int64)
+    start, order = k.grid_build(x, rows3, lo, 2.0, nc)
+    k.grid_candidates(x, r, 2.0, 3.0, lo, 2.0, nc, start, order, np.zeros(3, np.bool_), 0,
+                      rows3, 0, tag, 3)
     flag, nt = np.zeros(3, np.bool_), np.zeros(1, np.int64)
     k.collide_add(x, r, s, np.full(2, 4.0), 3.0, acc, 1, np.zeros((3, 3)), flag,
                   np.zeros(3, np.int64), nt)
-    k.write_sparse(np.zeros((3, 3)), np.zeros(3, np.int64), 0, np.zeros((3, 3)), flag,
-                   np.zeros(3, np.int64), nt, np.ones(3), tag)
+    k.add_natives(np.zeros((3, 3)), np.ones((3, 3)), tag, 3, 1, np.ones((3, 3)), np.ones(3))
+    k.add_sparse(np.zeros((3, 3)), np.zeros((3, 3)), flag, np.zeros(3, np.int64), nt,
+                 np.ones(3), tag, 3)
+    k.members(r, s, np.zeros(3, np.bool_))
+    o = x.copy()
+    o.flags.writeable = False       # as Scene.original_positions() is
+    k.within_bound(x, np.ones((3, 3)), o, np.arange(1, 4, dtype=np.int64), 4.0)
+    # one instruction of every kind through the fused step (the types LAMMPS' arrays have)
+    ops = np.array([[OP_BLOCK, 0, 1, 1, 2, 0, 0, 0], [OP_BIND, 0, 2, 0, 0, 0, 0, 0],
+                    [OP_ATTRACT, 0, 2, 0, 0, 0, 0, 0], [OP_COLLIDE, 0, 1, 0, 0, 0, 0, 1],
+                    [OP_DAMPEN, 0, 3, 0, 0, 0, 0, 1], [OP_FORCE, 0, 1, 0, 0, 0, 0, 0],
+                    [OP_BLOCKC, 0, 1, 1, 1, 0, 0, 0]], np.int64)
+    k.step(x, np.ones((3, 3)), np.zeros((3, 3)), np.zeros((3, 3)), np.ones(3), ops,
+           np.ones((len(ops), 3)), np.zeros(1, np.int64), np.ones(2), np.ones(2), np.ones(2),
+           r, s, one, one, one, np.zeros(1, np.int64), r, s, np.full(2, 4.0),
+           np.array([0, 2], np.int64), np.zeros(2, np.int64), np.zeros(1, np.int64),
+           np.zeros(2, np.int64), np.zeros(1, np.int64), np.zeros(1, np.int64),
+           np.array([0, 1, 2], np.int64), np.array([0, 3], np.int64), np.zeros((3, 3)), 0.5,
+           np.zeros((3, 3)), flag, np.zeros(3, np.int64), nt, np.ones(3), tag, 3)
     seconds = time.perf_counter() - t0
     if first and os.environ.get("PMI_RANK", "0") == "0":
         print(f"rackstress: kernels compiled in {seconds:.1f} s", file=sys.stderr, flush=True)
@@ -125,30 +150,129 @@ if nb is not None:
     @nb.njit(**_OPTS)
     def bind_block(x, t0, m, s0, n, qT, cIT, cJT, fold, acc):
         """Every (target t, source s) pair of two groups (serial rows = particles): Eq. 12 on
-        t with cIT, and its reverse bind on s with cJT when ``fold``."""
+        t with cIT, and its reverse bind on s with cJT when ``fold``.
+
+        The order of the sums is fixed: a target's acceleration gains its sources' terms in
+        source order (s = 0, 1, ...), a source's in target order (t = 0, 1, ...), each
+        source's sum added to its accumulator row once, after the block. The targets' rows
+        and positions are copied into contiguous columns first, so that the pass over the
+        targets of one source (a division each) vectorizes; the copies change no arithmetic.
+        """
+        X0 = np.empty(m)
+        X1 = np.empty(m)
+        X2 = np.empty(m)
+        A0 = np.empty(m)
+        A1 = np.empty(m)
+        A2 = np.empty(m)
+        for t in range(m):
+            X0[t] = x[t0 + t, 0]
+            X1[t] = x[t0 + t, 1]
+            X2[t] = x[t0 + t, 2]
+            A0[t] = acc[t0 + t, 0]
+            A1[t] = acc[t0 + t, 1]
+            A2[t] = acc[t0 + t, 2]
+        D0 = np.empty(m)
+        D1 = np.empty(m)
+        D2 = np.empty(m)
+        W = np.empty(m)
         for s in range(n):
             xs0, xs1, xs2 = x[s0 + s, 0], x[s0 + s, 1], x[s0 + s, 2]
-            a0 = 0.0
-            a1 = 0.0
-            a2 = 0.0
+            q = qT[s]
+            c = cIT[s]
             for t in range(m):
-                d0 = xs0 - x[t0 + t, 0]
-                d1 = xs1 - x[t0 + t, 1]
-                d2_ = xs2 - x[t0 + t, 2]
-                w = bind_f(d0 * d0 + d1 * d1 + d2_ * d2_, qT[s, t])
-                c = cIT[s, t] * w
-                acc[t0 + t, 0] += c * d0
-                acc[t0 + t, 1] += c * d1
-                acc[t0 + t, 2] += c * d2_
-                if fold:
-                    cj = cJT[s, t] * w
-                    a0 -= cj * d0
-                    a1 -= cj * d1
-                    a2 -= cj * d2_
+                d0 = xs0 - X0[t]
+                d1 = xs1 - X1[t]
+                d2_ = xs2 - X2[t]
+                w = bind_f(d0 * d0 + d1 * d1 + d2_ * d2_, q[t])
+                D0[t] = d0
+                D1[t] = d1
+                D2[t] = d2_
+                W[t] = w
+                ct = c[t] * w
+                A0[t] += ct * d0
+                A1[t] += ct * d1
+                A2[t] += ct * d2_
             if fold:
+                cj = cJT[s]
+                a0 = 0.0
+                a1 = 0.0
+                a2 = 0.0
+                for t in range(m):
+                    e = cj[t] * W[t]
+                    a0 -= e * D0[t]
+                    a1 -= e * D1[t]
+                    a2 -= e * D2[t]
                 acc[s0 + s, 0] += a0
                 acc[s0 + s, 1] += a1
                 acc[s0 + s, 2] += a2
+        for t in range(m):
+            acc[t0 + t, 0] = A0[t]
+            acc[t0 + t, 1] = A1[t]
+            acc[t0 + t, 2] = A2[t]
+
+    @nb.njit(**_OPTS)
+    def bind_block_const(x, t0, m, s0, n, o, cI, cJ, fold, acc):
+        """:func:`bind_block` with one coefficient each way (``cI``, ``cJ``: Const binds such
+        as host ↔ rack) and each pair's L0² computed from the original positions ``o`` (the
+        targets' x, y, z columns, then the sources' rows: 3m + 3n values) as
+        :meth:`Bind.pairs` computes it, (u_o − p_o)·(u_o − p_o) in the order x, y, z — the same
+        numbers, read from 3(m + n) values instead of 3mn. Sums in :func:`bind_block`'s
+        order."""
+        X0 = np.empty(m)
+        X1 = np.empty(m)
+        X2 = np.empty(m)
+        A0 = np.empty(m)
+        A1 = np.empty(m)
+        A2 = np.empty(m)
+        for t in range(m):
+            X0[t] = x[t0 + t, 0]
+            X1[t] = x[t0 + t, 1]
+            X2[t] = x[t0 + t, 2]
+            A0[t] = acc[t0 + t, 0]
+            A1[t] = acc[t0 + t, 1]
+            A2[t] = acc[t0 + t, 2]
+        O0 = o[0:m]
+        O1 = o[m:2 * m]
+        O2 = o[2 * m:3 * m]
+        D0 = np.empty(m)
+        D1 = np.empty(m)
+        D2 = np.empty(m)
+        W = np.empty(m)
+        for s in range(n):
+            xs0, xs1, xs2 = x[s0 + s, 0], x[s0 + s, 1], x[s0 + s, 2]
+            os0, os1, os2 = o[3 * m + 3 * s], o[3 * m + 3 * s + 1], o[3 * m + 3 * s + 2]
+            for t in range(m):
+                e0 = os0 - O0[t]
+                e1 = os1 - O1[t]
+                e2 = os2 - O2[t]
+                d0 = xs0 - X0[t]
+                d1 = xs1 - X1[t]
+                d2_ = xs2 - X2[t]
+                w = bind_f(d0 * d0 + d1 * d1 + d2_ * d2_, e0 * e0 + e1 * e1 + e2 * e2)
+                D0[t] = d0
+                D1[t] = d1
+                D2[t] = d2_
+                W[t] = w
+                ct = cI * w
+                A0[t] += ct * d0
+                A1[t] += ct * d1
+                A2[t] += ct * d2_
+            if fold:
+                a0 = 0.0
+                a1 = 0.0
+                a2 = 0.0
+                for t in range(m):
+                    e = cJ * W[t]
+                    a0 -= e * D0[t]
+                    a1 -= e * D1[t]
+                    a2 -= e * D2[t]
+                acc[s0 + s, 0] += a0
+                acc[s0 + s, 1] += a1
+                acc[s0 + s, 2] += a2
+        for t in range(m):
+            acc[t0 + t, 0] = A0[t]
+            acc[t0 + t, 1] = A1[t]
+            acc[t0 + t, 2] = A2[t]
 
     @nb.njit(**_OPTS)
     def bind_pairs(x, ri, rj, ai, aj, cI, cJ, q, fold, acc):
@@ -351,6 +475,135 @@ if nb is not None:
         return oa[:n], ob[:n], ia[near_a], ib[near_b]
 
     @nb.njit(**_OPTS)
+    def passive_rows(tag, span, nlocal, prow):
+        """prow[p − span] = the row holding particle p (atom id p + 1), for the rows from
+        ``span`` on; −1 for a particle not here."""
+        for k in range(len(prow)):
+            prow[k] = -1
+        for r in range(span, nlocal):
+            prow[tag[r] - 1 - span] = r
+
+    @nb.njit(**_OPTS)
+    def moving_rows(v, start, stop):
+        """Rows in start..stop with a nonzero velocity."""
+        out = np.empty(stop - start, np.int64)
+        n = 0
+        for r in range(start, stop):
+            if v[r, 0] != 0.0 or v[r, 1] != 0.0 or v[r, 2] != 0.0:
+                out[n] = r
+                n += 1
+        return out[:n]
+
+    @nb.njit(**_OPTS)
+    def bbox_rows(x, rows):
+        """The bounding box (lo, hi) of x[rows]."""
+        lo = np.full(3, np.inf)
+        hi = np.full(3, -np.inf)
+        for k in range(len(rows)):
+            for d in range(3):
+                v = x[rows[k], d]
+                if v < lo[d]:
+                    lo[d] = v
+                if v > hi[d]:
+                    hi[d] = v
+        return lo, hi
+
+    @nb.njit(**_OPTS)
+    def grid_build(x, rows, lo, size, nc):
+        """A cell grid of the points x[rows] (which stay where they are): cell starts (CSR)
+        and the points' indices k in cell order (cells of edge ``size`` from ``lo``, ``nc``
+        per axis, x slowest)."""
+        m = len(rows)
+        ncell = nc[0] * nc[1] * nc[2]
+        cell = np.empty(m, np.int64)
+        start = np.zeros(ncell + 1, np.int64)
+        for k in range(m):
+            r = rows[k]
+            c0 = min(int((x[r, 0] - lo[0]) / size), nc[0] - 1)
+            c1 = min(int((x[r, 1] - lo[1]) / size), nc[1] - 1)
+            c2 = min(int((x[r, 2] - lo[2]) / size), nc[2] - 1)
+            cell[k] = (c0 * nc[1] + c1) * nc[2] + c2
+            start[cell[k] + 1] += 1
+        for c in range(ncell):
+            start[c + 1] += start[c]
+        fill = start[:-1].copy()
+        order = np.empty(m, np.int64)
+        for k in range(m):
+            order[fill[cell[k]]] = k
+            fill[cell[k]] += 1
+        return start, order
+
+    @nb.njit(**_OPTS)
+    def grid_candidates(x, ia, cut, wide, lo, size, nc, start, order, active, b0, prow,
+                        span, tag, nlocal):
+        """:func:`candidates` of rows ``ia`` against the resting particles of a group in a
+        grid of :func:`grid_build` (point k: particle b0 + k, at x[prow[b0 + k − span]], which
+        has not moved since; the ``active`` ones skipped): unsorted pairs (rows), which rows
+        of ia have a partner within ``wide``, the rows of the group's particles within
+        ``wide`` (repeated), and whether a particle's row (``prow[p − span]``) did not hold it
+        (atom id ``tag``)."""
+        cut2 = cut * cut
+        wide2 = wide * wide
+        near_a = np.zeros(len(ia), np.bool_)
+        cap = 16 * len(ia) + 16
+        oa = np.empty(cap, np.int64)
+        ob = np.empty(cap, np.int64)
+        nbr = np.empty(cap, np.int64)
+        n = 0
+        m = 0
+        lohi = np.empty((3, 2), np.int64)
+        for k in range(len(ia)):
+            a = ia[k]
+            xa0, xa1, xa2 = x[a, 0], x[a, 1], x[a, 2]
+            empty = False
+            for d in range(3):
+                l_ = np.floor((x[a, d] - wide - lo[d]) / size)
+                h_ = np.floor((x[a, d] + wide - lo[d]) / size)
+                if h_ < 0 or l_ > nc[d] - 1:
+                    empty = True
+                    break
+                lohi[d, 0] = max(int(l_), 0)
+                lohi[d, 1] = min(int(h_), nc[d] - 1)
+            if empty:
+                continue
+            for c0 in range(lohi[0, 0], lohi[0, 1] + 1):
+                for c1 in range(lohi[1, 0], lohi[1, 1] + 1):
+                    for c2 in range(lohi[2, 0], lohi[2, 1] + 1):
+                        c = (c0 * nc[1] + c1) * nc[2] + c2
+                        for q in range(start[c], start[c + 1]):
+                            j = order[q]
+                            p = b0 + j
+                            if active[p]:
+                                continue
+                            r = prow[p - span]
+                            if r < 0 or r >= nlocal or tag[r] != p + 1:
+                                return oa[:0], ob[:0], near_a, nbr[:0], True
+                            e0 = x[r, 0] - xa0
+                            e1 = x[r, 1] - xa1
+                            e2 = x[r, 2] - xa2
+                            e = e0 * e0 + e1 * e1 + e2 * e2
+                            if e > wide2:
+                                continue
+                            near_a[k] = True
+                            if m == len(nbr):
+                                nbr2 = np.empty(2 * m, np.int64)
+                                nbr2[:m] = nbr[:m]
+                                nbr = nbr2
+                            nbr[m] = r
+                            m += 1
+                            if e <= cut2:
+                                if n == len(oa):
+                                    oa2 = np.empty(2 * n, np.int64)
+                                    ob2 = np.empty(2 * n, np.int64)
+                                    oa2[:n] = oa[:n]
+                                    ob2[:n] = ob[:n]
+                                    oa, ob = oa2, ob2
+                                oa[n] = a
+                                ob[n] = r
+                                n += 1
+        return oa[:n], ob[:n], near_a, nbr[:m], False
+
+    @nb.njit(**_OPTS)
     def moved_below(x, a0, na, b0, nb_, ref, lim2):
         """Whether every row of the ranges a0..a0+na and b0..b0+nb_ (``ref``: their positions,
         one range after the other) is within √lim2 of where ``ref`` has it."""
@@ -409,27 +662,225 @@ if nb is not None:
                 sacc[i, 2] += w * d2_
 
     @nb.njit(**_OPTS)
-    def write_sparse(f, last, nlast, sacc, flag, touched, nt, mass, tag):
-        """f rows outside the dense accumulator: last step's zeroed, this step's = sacc·m
-        (``mass`` of the particle with atom id ``tag[row]``; then sacc cleared); returns how
-        many rows were written (they become ``last``)."""
-        for k in range(nlast):
-            r = last[k]
-            f[r, 0] = 0.0
-            f[r, 1] = 0.0
-            f[r, 2] = 0.0
-        n = 0
+    def add_natives(f, v, tag, n, ident, F, g):
+        """Eqs. 8 and 9 as LAMMPS' fix addforce and fix viscous compute them, on rows below
+        ``n``: f = (f + F) − γ·v with F, γ of the row's particle (the row itself below
+        ``ident``, else atom id ``tag[row]`` − 1)."""
+        for r in range(n):
+            p = r if r < ident else tag[r] - 1
+            for k in range(3):
+                f[r, k] = (f[r, k] + F[p, k]) - g[p] * v[r, k]
+
+    @nb.njit(**_OPTS)
+    def add_sparse(f, sacc, flag, touched, nt, mass, tag, nfirst):
+        """f rows outside the dense accumulator += sacc·m (``mass`` of the particle with atom
+        id ``tag[row]``; then sacc cleared), for the rows this step touched; returns the first
+        of them at or after ``nfirst`` (a row LAMMPS does not integrate yet), or −1."""
+        late = -1
         for k in range(nt[0]):
             r = touched[k]
             m = mass[tag[r] - 1]
-            f[r, 0] = sacc[r, 0] * m
-            f[r, 1] = sacc[r, 1] * m
-            f[r, 2] = sacc[r, 2] * m
+            f[r, 0] += sacc[r, 0] * m
+            f[r, 1] += sacc[r, 1] * m
+            f[r, 2] += sacc[r, 2] * m
             sacc[r, 0] = 0.0
             sacc[r, 1] = 0.0
             sacc[r, 2] = 0.0
             flag[r] = False
-            last[n] = r
-            n += 1
+            if r >= nfirst and late < 0:
+                late = r
         nt[0] = 0
-        return n
+        return late
+
+
+if nb is not None:
+    @nb.njit(**_OPTS)
+    def within_bound(x, v, o, tag, bound2):
+        """The watchdog's common case in one pass: every row's particle (atom id ``tag[row]``)
+        within √bound2 of its original position ``o`` and its velocity finite. False sends the
+        caller to the full test (:func:`~rackstress.engines.watchdog.find_divergence`), which
+        names the particle."""
+        for r in range(len(tag)):
+            p = tag[r] - 1
+            d0 = x[r, 0] - o[p, 0]
+            d1 = x[r, 1] - o[p, 1]
+            d2 = x[r, 2] - o[p, 2]
+            if not d0 * d0 + d1 * d1 + d2 * d2 <= bound2:      # also NaN
+                return False
+            if not (np.isfinite(v[r, 0]) and np.isfinite(v[r, 1]) and np.isfinite(v[r, 2])):
+                return False
+        return True
+
+    @nb.njit(**_OPTS)
+    def members(a, b, flag):
+        """The distinct rows of ``a`` and ``b`` (``flag``: False over every row; left so)."""
+        out = np.empty(len(a) + len(b), np.int64)
+        n = 0
+        for arr in (a, b):
+            for k in range(len(arr)):
+                r = arr[k]
+                if not flag[r]:
+                    flag[r] = True
+                    out[n] = r
+                    n += 1
+        for k in range(n):
+            flag[out[k]] = False
+        return out[:n]
+
+
+#: Instruction kinds of :func:`step` (column 0 of its ``ops`` table).
+OP_BLOCK, OP_BIND, OP_ATTRACT, OP_COLLIDE, OP_DAMPEN, OP_FORCE, OP_BLOCKC = range(7)
+
+if nb is not None:
+    @nb.njit(**_OPTS)
+    def step(x, v, f, acc, dmass, ops, fpar, conds, bq, bcI, bcJ, pi, pj, pcI, pcJ, pq, frows,
+             ca, cb, cR2, loff, ov, ovn, near, nnear, valid, urow, uoff, uref, h,
+             sacc, sflag, stouched, snt, mass, tag, nfirst):
+        """One callback step of the serial path (rows of the dense groups = particles): every
+        active term of the phase, in the terms' order, then the forces into LAMMPS' ``f``.
+
+        ``ops`` (one row a term, in the order of the callback's terms): kind (``OP_*``; a
+        Const bind block is ``OP_BLOCKC``: its L0² from the original positions in ``bq``), five
+        integer arguments, and the range ``conds[cs:ce]`` of contact lists that must overlap
+        (⟨contact⟩ of Eq. 4) for the term to act; ``fpar``: its floats (c, or a force's
+        vector). The contact lists are candidate pairs ``ca, cb, cR2`` (list L is
+        ``loff[L]:loff[L+1]``, sorted by particles); their overlapping pairs (Eq. 10's
+        support, d² < R²) are found once here, into ``ov``/``ovn``, and serve every collide
+        (both directions) and every contact condition of the step. Only a list's *near*
+        candidates are measured (``near[loff[L]:loff[L] + nnear[L]]``, in list order: those
+        closer than R + ``h`` when the list's particles, ``urow[uoff[L]:uoff[L+1]]``, were at
+        ``uref``); while none of them has moved h/2 since, no other candidate can overlap
+        (its gap, ≥ h then, has closed by less than h), and once one has — or the list is new
+        (``valid[L] = 0``) — every candidate is measured and the near ones chosen again. The
+        overlapping pairs, and their order, are those of a pass over every candidate. Each
+        term adds exactly what its own kernel adds (:func:`bind_block` or
+        :func:`bind_block_const`, :func:`bind_pairs`, :func:`attract_pairs`,
+        :func:`collide_add`, :func:`dampen`, a force's vector), in the same order, so the sums
+        are those of the term-by-term path. Then f += acc·m on the dense rows and the sparse
+        rows as :func:`add_sparse`.
+
+        Returns (:func:`add_sparse`'s first row at or after ``nfirst``, or −1; L; k): L ≥ 0
+        names a list whose candidate k coincides (d = 0, Eq. 10 undefined); then nothing is
+        added.
+        """
+        nl = len(loff) - 1
+        # each particle may move h/2 less a margin far above rounding (1e-6 relative)
+        lim2 = (0.5 * h * (1.0 - 1e-6)) ** 2
+        for L in range(nl):
+            base = loff[L]
+            ok = valid[L] != 0
+            if ok:
+                for u in range(uoff[L], uoff[L + 1]):
+                    r = urow[u]
+                    e0 = x[r, 0] - uref[u, 0]
+                    e1 = x[r, 1] - uref[u, 1]
+                    e2 = x[r, 2] - uref[u, 2]
+                    if e0 * e0 + e1 * e1 + e2 * e2 > lim2:
+                        ok = False
+                        break
+            if not ok:      # measure every candidate, keep the near ones and where they are
+                nn = 0
+                for k in range(loff[L], loff[L + 1]):
+                    a, b = ca[k], cb[k]
+                    d0 = x[b, 0] - x[a, 0]
+                    d1 = x[b, 1] - x[a, 1]
+                    d2_ = x[b, 2] - x[a, 2]
+                    reach = np.sqrt(cR2[k]) + h
+                    if d0 * d0 + d1 * d1 + d2_ * d2_ < reach * reach:
+                        near[base + nn] = k
+                        nn += 1
+                nnear[L] = nn
+                for u in range(uoff[L], uoff[L + 1]):
+                    r = urow[u]
+                    uref[u, 0] = x[r, 0]
+                    uref[u, 1] = x[r, 1]
+                    uref[u, 2] = x[r, 2]
+                valid[L] = 1
+            cnt = 0
+            for j in range(nnear[L]):
+                k = near[base + j]
+                a, b = ca[k], cb[k]
+                d0 = x[b, 0] - x[a, 0]
+                d1 = x[b, 1] - x[a, 1]
+                d2_ = x[b, 2] - x[a, 2]
+                d2 = d0 * d0 + d1 * d1 + d2_ * d2_
+                if d2 < cR2[k]:
+                    if d2 == 0.0:
+                        valid[L] = 0
+                        return -1, L, k
+                    ov[base + cnt] = k
+                    cnt += 1
+            ovn[L] = cnt
+        nacc = acc.shape[0]
+        for r in range(nacc):
+            acc[r, 0] = 0.0
+            acc[r, 1] = 0.0
+            acc[r, 2] = 0.0
+        for o in range(ops.shape[0]):
+            held = True
+            for c in range(ops[o, 6], ops[o, 7]):
+                if ovn[conds[c]] == 0:
+                    held = False
+                    break
+            if not held:
+                continue
+            kind = ops[o, 0]
+            if kind == OP_BLOCK:
+                t0, m, s0, n, off = ops[o, 1], ops[o, 2], ops[o, 3], ops[o, 4], ops[o, 5]
+                e = off + n * m
+                bind_block(x, t0, m, s0, n, bq[off:e].reshape((n, m)),
+                           bcI[off:e].reshape((n, m)), bcJ[off:e].reshape((n, m)),
+                           fpar[o, 0] != 0.0, acc)
+            elif kind == OP_BLOCKC:
+                t0, m, s0, n, off = ops[o, 1], ops[o, 2], ops[o, 3], ops[o, 4], ops[o, 5]
+                bind_block_const(x, t0, m, s0, n, bq[off:off + 3 * (m + n)], fpar[o, 1],
+                                 fpar[o, 2], fpar[o, 0] != 0.0, acc)
+            elif kind == OP_BIND:
+                k0, k1 = ops[o, 1], ops[o, 2]
+                bind_pairs(x, pi[k0:k1], pj[k0:k1], pi[k0:k1], pj[k0:k1], pcI[k0:k1],
+                           pcJ[k0:k1], pq[k0:k1], fpar[o, 0] != 0.0, acc)
+            elif kind == OP_ATTRACT:
+                k0, k1 = ops[o, 1], ops[o, 2]
+                attract_pairs(x, pi[k0:k1], pj[k0:k1], pi[k0:k1], pcI[k0:k1], acc)
+            elif kind == OP_COLLIDE:
+                L, rev = ops[o, 1], ops[o, 2]
+                c = fpar[o, 0]
+                base = loff[L]
+                for j in range(ovn[L]):
+                    k = ov[base + j]
+                    if rev == 0:
+                        i, s = ca[k], cb[k]
+                    else:
+                        i, s = cb[k], ca[k]
+                    d0 = x[s, 0] - x[i, 0]
+                    d1 = x[s, 1] - x[i, 1]
+                    d2_ = x[s, 2] - x[i, 2]
+                    w = c * col_f(d0 * d0 + d1 * d1 + d2_ * d2_, cR2[k])
+                    if i < nacc:
+                        acc[i, 0] += w * d0
+                        acc[i, 1] += w * d1
+                        acc[i, 2] += w * d2_
+                    else:
+                        if not sflag[i]:
+                            sflag[i] = True
+                            stouched[snt[0]] = i
+                            snt[0] += 1
+                        sacc[i, 0] += w * d0
+                        sacc[i, 1] += w * d1
+                        sacc[i, 2] += w * d2_
+            elif kind == OP_DAMPEN:
+                c = fpar[o, 0]
+                for r in range(ops[o, 1], ops[o, 2]):
+                    for m3 in range(3):
+                        acc[r, m3] += -c * v[r, m3]
+            elif kind == OP_FORCE:
+                for k in range(ops[o, 1], ops[o, 2]):
+                    r = frows[k]
+                    acc[r, 0] = acc[r, 0] + fpar[o, 0]
+                    acc[r, 1] = acc[r, 1] + fpar[o, 1]
+                    acc[r, 2] = acc[r, 2] + fpar[o, 2]
+        for r in range(nacc):
+            f[r, 0] += acc[r, 0] * dmass[r]
+            f[r, 1] += acc[r, 1] * dmass[r]
+            f[r, 2] += acc[r, 2] * dmass[r]
+        return add_sparse(f, sacc, sflag, stouched, snt, mass, tag, nfirst), -1, -1

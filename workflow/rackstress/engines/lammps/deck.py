@@ -43,15 +43,20 @@ skipping it is exact. ``atom_modify first rs_move`` makes LAMMPS keep the group'
 its arrays (it reorders them when it reneighbours) and ``fix nve`` loop over those rows only, so
 the resting ones cost nothing there; in serial runs the runner adds ``neigh_modify include
 rs_move`` (forces cleared, displacements checked and atoms binned over those rows only; a resting
-row's force is zeroed once and nothing writes it), and ``fix external`` acts on ``rs_move`` too
-(its add pass skips resting rows, whose external force is zero). The callback adds a passive particle to ``rs_move`` (its
+row's force is zeroed once and nothing writes it); the callback adds forces only on the rows it
+computed (never a resting one). The callback adds a passive particle to ``rs_move`` (its
 group bit in LAMMPS' per-atom mask), for good, as soon as a partner comes within reach + 2 skins
 when LAMMPS reneighbours: one reneighbouring before anything can touch it, so LAMMPS has reordered
 it among the integrated rows by then. A particle touched at the start is reordered by a second
 ``run 0``; a force on a row LAMMPS does not integrate yet (a particle that moved more than a skin
 between two reneighbourings) stops the run with an error rather than lose exactness. A run
 resumed from a checkpoint re-adds every passive particle that is moving. Atom ids stay the
-particles' ids (dumps, checkpoints and gathers go by id).
+particles' ids (dumps, checkpoints and gathers go by id). In such a deck LAMMPS would still pass
+over every atom each step in ``fix addforce``, ``fix viscous`` and fix external's add pass, so
+the callback adds its forces into LAMMPS' force array itself (fix external's Napply is never
+reached) and the static constant forces and damping too, on the moving rows, in the fixes' own
+arithmetic and order (:attr:`Deck.callback_natives`); and LAMMPS' skin is ``PASSIVE_SKIN``, the
+callback's contact lists keeping ``SKIN`` with a displacement check of their own.
 """
 from __future__ import annotations
 
@@ -72,12 +77,22 @@ from rackstress.model.verlet import scaled_scene
 MODES = ("exact", "fast")
 #: The fix external that carries every Python-realized operator.
 PY_FIX = "rs_py"
+#: fix external's Napply: how often its own pass adds its force array to every owned atom of
+#: its group. Never after step 0 (LAMMPS' largest int): the callback adds its forces into
+#: LAMMPS' force array itself, on the rows it computed; at step 0 the pass adds zeros.
+PY_NAPPLY = 2**31 - 1
 #: The group LAMMPS integrates and damps: every particle but the resting ones of passive groups
 #: (module doc, "Active particles"); the callback adds a passive particle the moment it can move.
 MOVE_GROUP = "rs_move"
 #: Neighbour skin (distance units). 2 rather than 1 halves the rebuilds of a MagPod run (measured:
 #: 52 against 99 in 300 iterations), each of which re-bins all the resting sediment.
 SKIN = 2.0
+#: LAMMPS' neighbour skin of a deck with passive groups (module doc, "Active particles"): each
+#: reneighbouring there passes over every atom, resting or not (exchange, reordering, atom map,
+#: box), ~15 ms for a million atoms, so LAMMPS reneighbours only for the moving rows' reordering
+#: (9 rather than 57 times in the first 1200 iterations of sediment-large, measured) while the
+#: callback keeps its contact lists with SKIN and its own displacement check (serial).
+PASSIVE_SKIN = 8.0
 #: Relative tolerance under which two original lengths count as one bond type (fast mode).
 L0_DIGITS = 10
 
@@ -116,8 +131,11 @@ class Deck:
     bonds: tuple | None = None            # (types, i, j) 1-based atom ids, fast mode only
     bond_types: list = field(default_factory=list)   # [(K, r0)]
     lepton: dict = field(default_factory=dict)       # (type_i, type_j) → (K, R)
-    #: neighbour skin: LAMMPS' (``neighbor``) and the callback's Verlet list of contacts
+    #: the callback's Verlet lists of contacts: candidates within reach + skin
     skin: float = SKIN
+    #: LAMMPS' neighbour skin (``neighbor``), if not ``skin``: it reneighbours once an atom has
+    #: moved half of it (PASSIVE_SKIN for decks with passive groups)
+    neighbor_skin: float | None = None
     #: "euler" (Eq. 5) or "verlet": then ``scene`` is the scaled scene of
     #: :func:`rackstress.model.verlet.scaled_scene` and fix nve starts from v without Eq. 5's
     #: half-step shift (plain velocity Verlet, fix viscous at v_{n+1/2}).
@@ -125,6 +143,11 @@ class Deck:
     #: groups whose particles rest until touched (only python-realized collides and dampen act
     #: on them): LAMMPS integrates them only once the callback has activated them
     passive: tuple = ()
+
+    @property
+    def lammps_skin(self) -> float:
+        """LAMMPS' neighbour skin (``neighbor_skin``, else ``skin``)."""
+        return self.skin if self.neighbor_skin is None else self.neighbor_skin
 
     @property
     def moving(self) -> str:
@@ -167,12 +190,12 @@ class Deck:
             L.append("special_bonds lj/coul 1.0 1.0 1.0")
         L.append(f"read_data {data_file}")
         L.append(f"comm_modify cutoff {self.ghost_cutoff:.6g}")
-        L.append(f"neighbor {self.skin:g} bin")
+        L.append(f"neighbor {self.lammps_skin:g} bin")
         binsize = ""
         if self.lepton:
             # bins as wide as the cutoff: a flat sediment in a tall box otherwise makes millions
             # of near-empty bins that every rebuild sweeps (measured: 3x faster rebuilds)
-            cut = max(R for _, R in self.lepton.values()) + self.skin
+            cut = max(R for _, R in self.lepton.values()) + self.lammps_skin
             binsize = f" binsize {_f(cut)}"
         L.append(f"neigh_modify delay 0 every 1 check yes{binsize}")
         L.append(f"timestep {_f(sc.dt)}")
@@ -191,6 +214,48 @@ class Deck:
         L.append("# operators (paper order) and their realization:")
         for r in self.realized:
             L.append(f"#   {r.target} <- {r.op.label()}: {r.how}")
+        forces, gamma = self.static_natives()
+        if self.callback_natives:
+            L.append(f"# the constant forces and damping of the moving particles are added by the "
+                     f"callback (fix external {PY_FIX}),")
+            L.append(f"# f = F - gamma*v over the rows fix nve integrates (these fixes, which would "
+                     "pass over every atom):")
+            L += ["# " + c for cmds, _, _ in forces for c in cmds]
+            if any(gamma.values()):
+                L.append("# " + self._damp_command(gamma))
+        else:
+            L += [c for cmds, _, _ in forces for c in cmds]
+            if any(gamma.values()):
+                L.append(self._damp_command(gamma))
+        held_cmds, nve_group = support_commands(sc)   # supports and v0 (scene-level)
+        L += held_cmds
+        # a scene with supports has no passive group (passive_groups), so the two never meet
+        L.append(f"fix rs_nve {self.moving if self.passive else nve_group} nve")
+        L.append("thermo_style custom step")
+        L.append(f"thermo {max(1, dump_every)}")
+        if dump_file:
+            L.append(f"dump rs_dump all custom {dump_every} {dump_file} id type mol x y z")
+            L.append("dump_modify rs_dump sort id format float %.10g")
+        return L
+
+    @property
+    def callback_natives(self) -> bool:
+        """Whether the static ``fix addforce`` and ``fix viscous`` are evaluated by the callback
+        instead (module doc, "Active particles"): a deck with passive groups, where those fixes
+        would pass over every atom each step, resting or not, while the callback passes over
+        the rows ``fix nve`` integrates. Only where nothing else adds to those forces before
+        the callback (no pair style, no bonds, no phase-conditioned native fix), so each atom's
+        force is summed in LAMMPS' own order and the trajectory is the same bit for bit."""
+        return (bool(self.passive) and not self.lepton and self.bonds is None
+                and not any(r.op.when and not r.python and r.native in ("addforce", "viscous")
+                            for r in self.realized))
+
+    def static_natives(self) -> tuple[list, dict]:
+        """The static constant forces and damping: ``([(commands, particles, F)], {type: γ})``,
+        the ``fix addforce`` in LAMMPS' fix order (F = m·â on the particles, global indices)
+        and γ = Σ c·m per atom type of the one ``fix viscous``."""
+        sc, types = self.scene, topology.group_types(self.scene)
+        out = []
         gamma = dict.fromkeys(range(1, len(sc.groups) + 1), 0.0)   # static damping per type
         # constant forces: groups whose one constant force is the same vector share one fix
         # addforce (MagPod's two legs: one pass over the atoms, not one per group; each atom
@@ -202,36 +267,46 @@ class Deck:
         same = defaultdict(list)
         for idx, r in static:
             cmds = self._addforce(idx, r)
+            sl = sc.slice(r.target)
+            parts = (np.arange(sl.start, sl.stop) if r.op.where is None
+                     else np.flatnonzero(np.asarray(r.op.where, bool)) + sl.start)
+            F = tuple(self.masses[r.target] * float(a) for a in r.op.accel)
             if r.op.where is None and per_group[r.target] == 1:
-                same[cmds[-1].split(" addforce ")[1]].append((idx, cmds))
+                same[cmds[-1].split(" addforce ")[1]].append((idx, cmds, parts, F))
             else:
-                L += cmds
+                out.append((cmds, parts, F))
         for idx, r in enumerate(self.realized):
             if r.native == "viscous" and (r.python or not r.op.when):
                 gamma[types[r.target]] += r.op.c * self.masses[r.target]
-        for F, fixes in same.items():
+        for Fs, fixes in same.items():
             if len(fixes) == 1:
-                L += fixes[0][1]
+                out.append(fixes[0][1:])
                 continue
-            sel = [cmds[-1].split()[2] for _, cmds in fixes]
+            sel = [cmds[-1].split()[2] for _, cmds, _, _ in fixes]
             idx = fixes[0][0]
-            L.append(f"group rs_fu{idx} union {' '.join(sel)}")
-            L.append(f"fix rs_force{idx} rs_fu{idx} addforce {F}")
-        if any(gamma.values()):
-            # one fix for every group's constant damping: one pass over the atoms, not one per
-            # group (gamma 1 times scale γ_type is γ_type exactly; an unnamed type would get 1)
-            scale = " ".join(f"scale {t} {_f(g)}" for t, g in gamma.items())
-            L.append(f"fix rs_damp {self.moving} viscous 1.0 {scale}")
-        held_cmds, nve_group = support_commands(sc)   # supports and v0 (scene-level)
-        L += held_cmds
-        # a scene with supports has no passive group (passive_groups), so the two never meet
-        L.append(f"fix rs_nve {self.moving if self.passive else nve_group} nve")
-        L.append("thermo_style custom step")
-        L.append(f"thermo {max(1, dump_every)}")
-        if dump_file:
-            L.append(f"dump rs_dump all custom {dump_every} {dump_file} id type mol x y z")
-            L.append("dump_modify rs_dump sort id format float %.10g")
-        return L
+            out.append(([f"group rs_fu{idx} union {' '.join(sel)}",
+                         f"fix rs_force{idx} rs_fu{idx} addforce {Fs}"],
+                        np.sort(np.concatenate([p for _, _, p, _ in fixes])), fixes[0][3]))
+        return out, gamma
+
+    def _damp_command(self, gamma: dict) -> str:
+        # one fix for every group's constant damping: one pass over the atoms, not one per
+        # group (gamma 1 times scale γ_type is γ_type exactly; an unnamed type would get 1)
+        scale = " ".join(f"scale {t} {_f(g)}" for t, g in gamma.items())
+        return f"fix rs_damp {self.moving} viscous 1.0 {scale}"
+
+    def natives_per_particle(self) -> tuple[np.ndarray, np.ndarray]:
+        """(F, γ) per particle of :meth:`static_natives`: F summed in fix order from 0, as
+        LAMMPS adds the fixes to a cleared force, and γ of the particle's type."""
+        sc, types = self.scene, topology.group_types(self.scene)
+        forces, gamma = self.static_natives()
+        F = np.zeros((sc.n_particles, 3))
+        for _, parts, vec in forces:
+            F[parts] += np.array(vec)
+        g = np.zeros(sc.n_particles)
+        for name in sc.groups:
+            g[sc.slice(name)] = gamma[types[name]]
+        return F, g
 
     def _pair_commands(self) -> list[str]:
         if not self.lepton:
@@ -319,19 +394,21 @@ class Deck:
         v_{n−½}, the velocity the scheme damps with, not the full-step one) and then restores v."""
         if self.integrator == "verlet" and previous is None:
             return self.phase_commands(phase_vars, previous) + ["run 0 post no"]
+        # only the particles that can move: a resting one has v = 0 and f = 0 (Active
+        # particles), which both settings leave as they are
         L = []
         if previous is not None:
-            L.append("velocity all set v_rs_vpx v_rs_vpy v_rs_vpz units box")
+            L.append(f"velocity {self.moving} set v_rs_vpx v_rs_vpy v_rs_vpz units box")
         L += self.phase_commands(phase_vars, previous)
         L.append("run 0 post no")
-        L.append("velocity all set v_rs_vhx v_rs_vhy v_rs_vhz units box")
+        L.append(f"velocity {self.moving} set v_rs_vhx v_rs_vhy v_rs_vhz units box")
         return L
 
     def input_text(self, dump_every: int = 100) -> str:
         py = self.python_ops
         L = self.setup_commands(dump_every=dump_every)
         if py:
-            L.append(f"fix {PY_FIX} {self.moving} external pf/callback 1 1")
+            L.append(f"fix {PY_FIX} {self.moving} external pf/callback 1 {PY_NAPPLY}")
         L += self.schedule_commands()
         return "\n".join(L) + "\n"
 
@@ -585,9 +662,11 @@ def compile_deck(scene: Scene, mode: str = "exact", measure_fast: bool = False,
         first[inv[::-1]] = np.arange(len(inv))[::-1]
         bond_types = [(float(K[f]), float(r0[f])) for f in first]
         bonds = (inv.reshape(-1) + 1, i, j)
-    deck = Deck(scene, mode, masses, realized, ghost_cutoff(scene), bonds, bond_types, lepton,
-                integrator=integrator,
-                passive=passive_groups(scene, realized) if active_only else ())
+    passive = passive_groups(scene, realized) if active_only else ()
+    skin = PASSIVE_SKIN if passive else SKIN
+    deck = Deck(scene, mode, masses, realized, ghost_cutoff(scene, skin), bonds, bond_types,
+                lepton, integrator=integrator, passive=passive,
+                neighbor_skin=skin if skin != SKIN else None)
     if mode == "fast" and deck.python_ops and not measure_fast:
         kept = sorted({f"{r.target} <- {r.op.kind}" for r in deck.python_ops})
         raise SceneError(
@@ -611,8 +690,9 @@ def _bonds_of(scene: Scene, target: str, op: Bind, K: float):
     return lo, hi, np.full(len(lo), K), np.sqrt(L0sq)
 
 
-def ghost_cutoff(scene: Scene) -> float:
-    """Ghost-atom cutoff covering every bind/attract partner with room to deform (MPI runs)."""
+def ghost_cutoff(scene: Scene, skin: float = SKIN) -> float:
+    """Ghost-atom cutoff covering every bind/attract partner with room to deform (MPI runs);
+    ``skin``: LAMMPS' neighbour skin."""
     o = scene.original_positions()
     reach = 0.0
     for target, seq in scene.operators.items():
@@ -623,7 +703,7 @@ def ghost_cutoff(scene: Scene) -> float:
                 hi = np.maximum(o[a].max(0), o[b].max(0))
                 reach = max(reach, float(np.linalg.norm(hi - lo)))
     rmax = float(scene.radii().max())
-    return 1.5 * reach + 2 * rmax + SKIN + 1.0
+    return 1.5 * reach + 2 * rmax + skin + 1.0
 
 
 # ---------------------------------------------------------------------------- data file

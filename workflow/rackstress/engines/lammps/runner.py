@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from rackstress.engines.lammps.callback import PyForces
-from rackstress.engines.lammps.deck import MOVE_GROUP, PY_FIX, SKIN, Deck
+from rackstress.engines.lammps.deck import MOVE_GROUP, PY_FIX, PY_NAPPLY, Deck
 from rackstress.errors import DivergenceError, RackstressError, StorageError
 from rackstress.engines.watchdog import divergence_error, find_divergence
 
@@ -94,8 +94,8 @@ class LammpsRun:
         self._dump_file = str(out / "trajectory.dump") if out is not None else None
         self.cutoff = float(deck.ghost_cutoff)
         self._reach = _reach_pairs(self.scene)
-        # the deck's cutoff is 1.5 reach + 2 r_max + skin + 1 (deck.ghost_cutoff)
-        self._extra = 2 * float(self.scene.radii().max()) + SKIN + 1.0
+        # the deck's cutoff is 1.5 reach + 2 r_max + LAMMPS' skin + 1 (deck.ghost_cutoff)
+        self._extra = 2 * float(self.scene.radii().max()) + deck.lammps_skin + 1.0
         self._reach0 = (self.cutoff - self._extra) / 1.5
         self._span = max((self.scene.slice(g).stop for pair in self._reach for g in pair),
                          default=0)
@@ -125,8 +125,8 @@ class LammpsRun:
         if deck.passive and self.comm.Get_size() == 1:
             # serial: LAMMPS clears forces, checks displacements and bins only its first rows
             # (the moving group, atom_modify first). A resting row's force then stays what it
-            # is, so it is zeroed once here; nothing writes it later (fix external's rows there
-            # are zero, fix viscous multiplies v = 0), so v + dt/2·f/m keeps it at rest.
+            # is, so it is zeroed once here; nothing writes it later (the callback adds forces
+            # only on rows it computed, never a resting one), so v + dt/2·f/m keeps it at rest.
             self.command(f"neigh_modify include {MOVE_GROUP}")
             self.scatter("f", np.zeros((self.scene.n_particles, 3)))
         for cmd in balance_commands(self.scene, self.comm.Get_size()):
@@ -301,12 +301,13 @@ class LammpsRun:
             step=int(step), index=int(k), group=group, local=int(local))
 
     def _toggle_callback(self, phase_vars) -> None:
-        """The fix external exists only in phases where a Python operator is active."""
+        """The fix external exists only in phases where the callback has work: a Python operator
+        is active, or it adds the constant forces and damping (Deck.callback_natives)."""
         if self.py is None:
             return
         want = self.py.set_phase(phase_vars)
         if want and not self._py_on:
-            self.command(f"fix {PY_FIX} {self.deck.moving} external pf/callback 1 1")
+            self.command(f"fix {PY_FIX} {self.deck.moving} external pf/callback 1 {PY_NAPPLY}")
             attach_callback(self.lmp, PY_FIX, self.py, self)
         elif self._py_on and not want:
             self.command(f"unfix {PY_FIX}")
@@ -355,12 +356,14 @@ class LammpsRun:
                               f"{kind}: {text}")
 
     # ------------------------------------------------------------------ state
-    def positions_local(self):
+    def positions_local(self, rows: int | None = None):
+        """Positions, velocities and atom ids of the owned atoms (the first ``rows`` of them)."""
         try:
             nlocal = self.lmp.extract_global("nlocal")
-            x = self.lmp.numpy.extract_atom("x")[:nlocal]
-            v = self.lmp.numpy.extract_atom("v")[:nlocal]
-            tag = self.lmp.numpy.extract_atom("id")[:nlocal].astype(np.int64)
+            n = nlocal if rows is None else min(rows, nlocal)
+            x = self.lmp.numpy.extract_atom("x")[:n]
+            v = self.lmp.numpy.extract_atom("v")[:n]
+            tag = self.lmp.numpy.extract_atom("id")[:n].astype(np.int64)
             return x, v, tag
         except Exception:  # noqa: BLE001
             return None
@@ -368,18 +371,21 @@ class LammpsRun:
     def check(self) -> None:
         """The watchdog on every rank's atoms; all ranks raise the same DivergenceError. Under
         MPI it also keeps the ghost cutoff ahead of the scene's reach (:meth:`_grow_cutoff`)."""
-        x, v, tag = self.positions_local()
+        # only LAMMPS' first rows move (atom_modify first, Deck.passive): a resting particle
+        # after them is where the data file put it, with v = 0
+        moving = self._py_on and self.py.move_bit is not None
+        x, v, tag = self.positions_local(self.py.nfirst if moving else None)
         o = self.scene.original_positions()
-        if self._py_on and self.py.move_bit is not None:
-            # only LAMMPS' first rows move (atom_modify first, Deck.passive): a resting particle
-            # after them is where the data file put it, with v = 0
-            x, v, tag = x[:self.py.nfirst], v[:self.py.nfirst], tag[:self.py.nfirst]
-        if len(tag) and tag[0] == 1 and tag[-1] == len(tag) and np.array_equal(
+        k = self.py.compiled if self.py is not None else None
+        if k is not None and k.within_bound(x, v, o, tag, float(self.scene.bound) ** 2):
+            found = None            # the common case, in one compiled pass
+        elif len(tag) and tag[0] == 1 and tag[-1] == len(tag) and np.array_equal(
                 tag, self._ids[:len(tag)]):
             found = find_divergence(self.scene, x, v, o[:len(tag)])   # row k holds particle k
         else:
             found = find_divergence(self.scene, x, v, o[tag - 1], tag - 1)
-        everything = [f for f in self.comm.allgather(found) if f is not None]
+        everything = ([found] if self.comm.Get_size() == 1 else self.comm.allgather(found))
+        everything = [f for f in everything if f is not None]
         if everything:
             worst = max(everything, key=lambda f: (not f["finite"], f["disp"]))
             worst["count"] = sum(f["count"] for f in everything)
@@ -521,7 +527,11 @@ def attach_callback(lmp, fix_id: str, fn, caller) -> None:
     """``lmp.set_fix_external_callback`` without its per-step cost: the ``lammps`` module
     wraps each call's three pointers into new NumPy arrays (~30 µs a step); the callback here
     only needs fix external's force array, whose view is kept until its address or the number
-    of owned atoms changes (LAMMPS grows or exchanges arrays only when it reneighbours)."""
+    of owned atoms changes (LAMMPS grows or exchanges arrays only when it reneighbours).
+
+    The callback adds its forces into LAMMPS' force array itself; fix external's own pass,
+    which would add its array to every owned atom of its group, runs only at steps that are
+    multiples of ``PY_NAPPLY`` (step 0): its array is zeroed before those."""
     import ctypes
 
     view = {}
@@ -532,6 +542,8 @@ def attach_callback(lmp, fix_id: str, fn, caller) -> None:
         if f is None:
             view.clear()
             f = view[key] = lmp.numpy.darray(fext_ptr, nlocal, 3)
+        if step % PY_NAPPLY == 0:
+            f[:] = 0.0       # fix external's add pass runs this step: let it add nothing
         fn(caller_, step, nlocal, None, None, f)
 
     cfunc = lmp.FIX_EXTERNAL_CALLBACK_FUNC(wrapper)

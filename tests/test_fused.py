@@ -1,0 +1,197 @@
+"""The callback's fused step (``kernels.step``, ``callback.Fused``): one compiled pass a step.
+
+Expected values come from independent paths: the overlapping pairs of a candidate list from
+NumPy (d² < R² over every candidate), the trajectories from the callback's term-by-term path
+(bit for bit: the fused pass promises the same sums in the same order), its NumPy path and the
+reference engine (1e-10).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rackstress import (Collide, Const, Contact, Dampen, Group, Phase, Scene, lattice,
+                        scenes)
+from rackstress.engines.driver import drive
+from rackstress.engines.lammps.deck import compile_deck
+from rackstress.engines.lammps.runner import LammpsRun
+from rackstress.engines.reference import Reference
+from rackstress.model import kernels as K
+
+from test_lammps_backend import every_operator_scene
+
+
+def _step_lists(x, ca, cb, cR2, loff, state, h):
+    """kernels.step with no terms: only the contact lists' overlapping pairs (ov, ovn)."""
+    n = len(x)
+    ov, ovn, near, nnear, valid, urow, uoff, uref = state
+    out = K.step(x, np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((0, 3)), np.zeros(0),
+                 np.zeros((0, 8), np.int64), np.zeros((0, 3)), np.zeros(1, np.int64),
+                 np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, np.int64),
+                 np.zeros(0, np.int64), np.zeros(0), np.zeros(0), np.zeros(0),
+                 np.zeros(0, np.int64), ca, cb, cR2, loff, ov, ovn, near, nnear, valid, urow,
+                 uoff, uref, h, np.zeros((n, 3)), np.zeros(n, np.bool_), np.zeros(n, np.int64),
+                 np.zeros(1, np.int64), np.ones(n), np.arange(1, n + 1, dtype=np.int32), n)
+    return out
+
+
+def test_near_candidates_find_every_overlap_as_a_full_pass():
+    """Particles drifting and jittering (steps from 0.001 to 0.4, some beyond h/2 in one go):
+    at every step the overlapping pairs, in list order, are those of NumPy's d² < R² over
+    every candidate, though most steps measure only the near candidates."""
+    rng = np.random.default_rng(7)
+    n = 60
+    x = rng.uniform(0.0, 6.0, size=(n, 3))
+    # two lists: rows 0-29 against 30-59, and 10-19 against themselves (both orders)
+    a1, b1 = np.meshgrid(np.arange(30), np.arange(30, 60), indexing="ij")
+    a2, b2 = np.meshgrid(np.arange(10, 20), np.arange(10, 20), indexing="ij")
+    keep = a2 != b2
+    ca = np.concatenate([a1.ravel(), a2[keep]]).astype(np.int64)
+    cb = np.concatenate([b1.ravel(), b2[keep]]).astype(np.int64)
+    loff = np.array([0, 900, len(ca)], np.int64)
+    cR2 = rng.uniform(0.5, 2.0, size=len(ca)) ** 2
+    flag = np.zeros(n, np.bool_)
+    rows = [K.members(ca[loff[L]:loff[L + 1]], cb[loff[L]:loff[L + 1]], flag) for L in (0, 1)]
+    assert sorted(rows[1]) == list(range(10, 20)) and not flag.any()
+    state = (np.empty(len(ca), np.int64), np.zeros(2, np.int64), np.empty(len(ca), np.int64),
+             np.zeros(2, np.int64), np.zeros(2, np.int64),
+             np.concatenate(rows).astype(np.int64),
+             np.array([0, len(rows[0]), len(rows[0]) + len(rows[1])], np.int64),
+             np.zeros((len(rows[0]) + len(rows[1]), 3)))
+    h = 0.5
+    reused = remeasured = seen = 0
+    for step in range(400):
+        scale = rng.choice([0.001, 0.01, 0.05, 0.4], p=[0.4, 0.3, 0.25, 0.05])
+        x = x + rng.normal(scale=scale, size=x.shape)
+        before = state[3].copy()
+        nrows, L, k = _step_lists(x, ca, cb, cR2, loff, state, h)
+        assert L == -1
+        d2 = ((x[cb] - x[ca]) ** 2).sum(axis=1)
+        for L in (0, 1):
+            expect = np.flatnonzero(d2[loff[L]:loff[L + 1]] < cR2[loff[L]:loff[L + 1]])
+            got = state[0][loff[L]:loff[L] + state[1][L]] - loff[L]
+            np.testing.assert_array_equal(got, expect)
+            seen += len(expect)
+        # the near lists were chosen again (their sizes changed) on some steps, not on all
+        changed = int((before != state[3]).any())
+        remeasured += changed
+        reused += 1 - changed
+    assert seen > 100 and remeasured > 10 and reused > 10
+
+
+def test_step_reports_a_coincident_pair():
+    """A candidate pair at d = 0 stops the step (nothing written) and names the list and the
+    candidate: the first coincident one in list order."""
+    x = np.array([[0.0, 0, 0], [1.0, 0, 0], [1.0, 0, 0], [5.0, 0, 0]])
+    ca, cb = np.array([0, 1, 0], np.int64), np.array([1, 2, 3], np.int64)
+    loff = np.array([0, 3], np.int64)
+    state = (np.empty(3, np.int64), np.zeros(1, np.int64), np.empty(3, np.int64),
+             np.zeros(1, np.int64), np.zeros(1, np.int64), np.arange(4, dtype=np.int64),
+             np.array([0, 4], np.int64), np.zeros((4, 3)))
+    assert tuple(_step_lists(x, ca, cb, np.full(3, 4.0), loff, state, 0.5))[1:] == (0, 1)
+
+
+def _final(scene, fuse: bool, monkeypatch, kernels="numba"):
+    monkeypatch.setenv("RACKSTRESS_KERNELS", kernels)
+    run = LammpsRun(compile_deck(scene, "exact"), None)
+    try:
+        run.py.fuse = fuse and run.py.fuse
+        run.run_schedule()
+        used = [p is not None for p in run.py._plans.values()]
+        return run.gather_positions(), run.gather_velocities(), used
+    finally:
+        run.close()
+
+
+@pytest.mark.lammps
+@pytest.mark.parametrize("name", ["every-operator", "magpod-small"])
+def test_fused_pass_equals_the_term_by_term_path(name, monkeypatch):
+    """Every operator kind through two phase switches (contact-conditioned damping, one-way
+    and reciprocal collides, binds folded and within(d), attraction by phase, a force), and 300
+    MagPod iterations with the soles landing on the resting sediment: the fused pass gives the
+    term-by-term path's trajectory bit for bit, and the reference engine's to 1e-10."""
+    scene = (every_operator_scene(steps=60) if name == "every-operator"
+             else scenes.build("magpod-small").with_steps(300))
+    p, v, used = _final(scene, True, monkeypatch)
+    p0, v0, unused = _final(scene, False, monkeypatch)
+    assert used and all(used) and not unused        # every phase fused, then none
+    assert np.abs(p - scene.original_positions()).max() > 0.1      # it moved
+    np.testing.assert_array_equal(p, p0)
+    np.testing.assert_array_equal(v, v0)
+    if name == "every-operator":
+        ref = Reference(scene)
+        drive(ref)
+        assert np.abs(p - ref.p).max() <= 1e-10
+
+
+@pytest.mark.lammps
+def test_fused_contact_damping_follows_the_contact():
+    """A block thrown at a loose bed (a layer held by nothing but its damping) meets it and
+    partly passes through it; its damping extra holds only while it touches the bed (Eq. 28's
+    ⟨contact⟩): the fused pass equals the reference engine to 1e-10, through a contact that
+    began and ended."""
+    block = Group("block", lattice((2, 2, 2), 1.0, origin=(1.0, 3.0, 1.0)), 0.5, kind="body")
+    block.v0 = np.tile([0.0, -20.0, 0.0], (8, 1))
+    bed = Group("bed", lattice((5, 1, 5), 1.0), 0.5, kind="leg")
+    ops = {"block": [Collide("bed", Const(400.0)), Dampen(0.0, extra=3.0, when=(Contact("bed"),))],
+           "bed": [Collide("block", Const(400.0)), Dampen(0.5)]}
+    sc = Scene("through", {"block": block, "bed": bed}, ops, [Phase("fall", 120, {})], dt=0.01)
+    run = LammpsRun(compile_deck(sc, "exact"), None)
+    try:
+        assert run.py.fuse
+        run.run_schedule()
+        assert all(p is not None for p in run.py._plans.values())
+        p = run.gather_positions()
+    finally:
+        run.close()
+    ref = Reference(sc)
+    drive(ref)
+    assert np.abs(p - ref.p).max() <= 1e-10
+    # the block started 3 units above the bed (no contact); only a touch can slow it (its one
+    # force is the collide, its damping holds only in contact), and it ended well short of
+    # free flight (y0 − 20·1.2); at the end no block particle touches a bed particle (d ≥ 1)
+    o = sc.original_positions()
+    assert o[:8, 1].min() - o[8:, 1].max() == pytest.approx(3.0)
+    assert np.all(ref.p[:8, 1] > o[:8, 1] - 20.0 * 1.2 + 1.0)
+    d = np.linalg.norm(ref.p[:8, None] - ref.p[None, 8:], axis=2)
+    assert d.min() > 1.0
+
+
+def test_compiled_watchdog_pass_agrees_with_the_watchdog():
+    """The LAMMPS runner's one-pass watchdog test (rows in any order, by atom id) is true
+    exactly when the NumPy watchdog finds nothing: in bound, beyond it, NaN and infinite
+    positions or velocities, and a finite velocity so large that NumPy's sum overflows."""
+    from rackstress.engines.watchdog import find_divergence
+
+    sc = scenes.build("plane-bound", d=2.0)
+    o = sc.original_positions()
+    n = len(o)
+    rng = np.random.default_rng(3)
+    bound2 = float(sc.bound) ** 2
+    cases = []
+    for kind in ("ok", "far", "nan-x", "inf-v", "nan-v", "huge-v", "edge"):
+        x = o + rng.normal(scale=2.0, size=o.shape)
+        v = rng.normal(size=o.shape)
+        k = int(rng.integers(n))
+        if kind == "far":
+            x[k, 1] = o[k, 1] + 1.0001 * sc.bound
+        elif kind == "nan-x":
+            x[k, 2] = np.nan
+        elif kind == "inf-v":
+            v[k, 0] = -np.inf
+        elif kind == "nan-v":
+            v[k, 1] = np.nan
+        elif kind == "huge-v":
+            v[:, 0] = 1e308           # finite, but their sum is not
+        elif kind == "edge":
+            x[k] = o[k] + np.array([sc.bound, 0.0, 0.0])       # exactly at the bound: inside
+        cases.append((kind, x, v))
+    for kind, x, v in cases:
+        perm = rng.permutation(n)              # LAMMPS' rows in another order
+        tag = (perm + 1).astype(np.int64)
+        fast = K.within_bound(np.ascontiguousarray(x[perm]), np.ascontiguousarray(v[perm]), o,
+                              tag, bound2)
+        with np.errstate(over="ignore"):       # huge-v: the sum overflows, as meant
+            slow = find_divergence(sc, x[perm], v[perm], o[perm], perm)
+        assert fast == (slow is None), kind
+        assert fast == (kind in ("ok", "huge-v", "edge")), kind
