@@ -467,6 +467,39 @@ def test_positions_of_a_passive_deck_equal_gathering_every_atom():
     assert moved[-1] <= integrated < sc.n_particles     # some rest: the shortcut had work
 
 
+@pytest.mark.lammps
+def test_positions_after_resuming_with_a_displaced_particle_at_rest():
+    """A checkpoint can hold a resting-group particle away from its original position with
+    v = 0 exactly (it moved and stopped): the resumed run does not integrate it (it is at
+    rest), so the shortcut must not put it back at its original position."""
+    from types import SimpleNamespace
+
+    sc = _bed_scene()
+    deck = compile_deck(sc, "exact")
+    run = LammpsRun(deck, None)
+    try:
+        first = sc.phases[0]
+        run.enter_phase(first.vars)
+        run.advance(20)
+        x, v = run.gather_positions(), run.gather_velocities()
+        f = run.gather_forces()
+    finally:
+        run.close()
+    far = sc.slice("bed").stop - 1                  # the bed's far corner: never reached
+    assert np.all(v[far] == 0) and np.all(x[far] == sc.original_positions()[far])
+    x[far] += (0.0, 0.0, 0.25)
+    ck = SimpleNamespace(phase_index=0, step=20, x=x, v=v, f=f)
+    run = LammpsRun(deck, None)
+    try:
+        run.restore(ck)
+        np.testing.assert_array_equal(run.positions(), run.gather_positions())
+        np.testing.assert_array_equal(run.positions()[far], x[far])
+        run.advance(10)
+        np.testing.assert_array_equal(run.state()[0], run.gather_positions())
+    finally:
+        run.close()
+
+
 @pytest.mark.mpi
 @pytest.mark.lammps
 def test_positions_of_a_passive_deck_equal_gathering_every_atom_under_mpi(tmp_path):

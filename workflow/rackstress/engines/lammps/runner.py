@@ -135,6 +135,9 @@ class LammpsRun:
         #: atom without it has never moved, so it sits at its original position with v = 0
         self._move_bit = (1 << list(self.lmp.available_ids("group")).index(MOVE_GROUP)
                           if deck.passive else None)
+        #: particles a resumed run found displaced yet at rest (v = 0 exactly), which the
+        #: callback does not re-add to the moving group: (indices, positions), else None
+        self._still = None
         if deck.python_ops:
             self.py = PyForces(self.lmp, deck, self.comm)
 
@@ -497,6 +500,8 @@ class LammpsRun:
         out = []
         if x:
             out.append(np.array(self.scene.original_positions()))
+            if self._still is not None:
+                out[0][self._still[0]] = self._still[1]
         if v:
             out.append(np.zeros((n, 3)))
         for part in parts:
@@ -577,6 +582,12 @@ class LammpsRun:
             self.command(f"dump_modify {self._dump_id} delay {int(ck.step) + 1}")
         self.scatter("x", ck.x)
         self.scatter("v", ck.v)
+        if self._move_bit is not None:
+            # the callback re-adds the moving particles (v ≠ 0) to the moving group; one that
+            # moved and came to rest exactly stays outside it, where it is (_moved_only)
+            o = self.scene.original_positions()
+            still = np.flatnonzero((ck.x != o).any(axis=1) & ~(ck.v != 0).any(axis=1))
+            self._still = (still, ck.x[still].copy()) if len(still) else None
         self.step = int(ck.step)
         self.realign(ck.f)
         self._phase = previous
