@@ -285,7 +285,7 @@ class LammpsRun:
             return False                                 # (held atoms: the deck's gmask form)
         lmp = self.lmp
         nlocal = lmp.extract_global("nlocal")
-        rows = np.flatnonzero(lmp.numpy.extract_atom("mask")[:nlocal] & self._move_bit)
+        rows = np.flatnonzero((lmp.numpy.extract_atom("mask")[:nlocal] & self._move_bit) != 0)
         v, f = lmp.numpy.extract_atom("v"), lmp.numpy.extract_atom("f")
         m = lmp.numpy.extract_atom("mass")[lmp.numpy.extract_atom("type")[rows]]
         h = 0.5 * float(self.scene.dt)
@@ -487,7 +487,7 @@ class LammpsRun:
         lmp, n = self.lmp, self.scene.n_particles
         nlocal = lmp.extract_global("nlocal")
         mask = lmp.numpy.extract_atom("mask")[:nlocal]
-        rows = np.flatnonzero(mask & self._move_bit)
+        rows = np.flatnonzero((mask & self._move_bit) != 0)       # (a bool: nonzero is faster)
         idx = lmp.numpy.extract_atom("id")[:nlocal][rows].astype(np.int64) - 1
         mine = [idx, int(nlocal)]
         if x:
