@@ -517,9 +517,12 @@ from rackstress.engines.lammps.runner import LammpsRun
 run = LammpsRun(compile_deck(_bed_scene(), "exact"), None)
 seen = []
 drive(run, on_chunk=lambda r: _shortcut_equals_full_gathers(r, seen))
-counts = run.comm.allgather(run.lmp.extract_global("nlocal"))
+mine = (len(seen), seen[0][0], seen[-1][0], run.lmp.extract_global("nlocal"))
+every = run.comm.gather(mine, root=0)
 run.close()
-print("SEEN", len(seen), seen[0][0], seen[-1][0], min(counts))
+if every is not None:
+    for chunks, first, last, nlocal in every:
+        print("SEEN", chunks, first, last, nlocal)
 """)
     from conftest import MPIEXEC
 
@@ -528,8 +531,8 @@ print("SEEN", len(seen), seen[0][0], seen[-1][0], min(counts))
     assert r.returncode == 0, r.stderr[-3000:]
     lines = [ln.split() for ln in r.stdout.splitlines() if ln.startswith("SEEN")]
     assert len(lines) == 2                                       # both ranks compared
-    for _, chunks, first, last, fewest in lines:
-        assert int(chunks) == 15 and int(last) > int(first) > 0 and int(fewest) > 0
+    for _, chunks, first, last, nlocal in lines:
+        assert int(chunks) == 15 and int(last) > int(first) > 0 and int(nlocal) > 0
 
 
 @pytest.mark.lammps
