@@ -30,6 +30,7 @@ import json
 import os
 import re
 import resource
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -158,6 +159,7 @@ def worker(engine: str, mode: str, steps: int, profile_steps: int, scene_name: s
         cb_prof = (runner.py.seconds if runner.py is not None else 0.0) - cb0
         if comm.Get_rank() == 0:
             breakdown = parse_breakdown(Path(tmp, "log.lammps").read_text())
+            shutil.rmtree(tmp, ignore_errors=True)     # the log is read: leave nothing behind
             breakdown["_profile_wall_s"] = prof_wall
         cb_prof_all = comm.gather(cb_prof, root=0)
         if comm.Get_rank() == 0:

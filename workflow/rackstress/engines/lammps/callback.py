@@ -102,7 +102,7 @@ class Frame:
             self.x = lmp.numpy.extract_atom("x")[:nall]
             self.v = lmp.numpy.extract_atom("v")[:self.nlocal]
             #: LAMMPS' force array: the callback adds its forces here itself (fix external's
-            #: own add pass over every owned atom never runs: runner.PY_NAPPLY)
+            #: own add pass over every owned atom never runs: deck.PY_NAPPLY)
             self.f = lmp.numpy.extract_atom("f")[:self.nlocal]
         #: per-step results shared between terms (overlapping pairs of a pair of groups)
         self.cache = {}
@@ -955,6 +955,7 @@ class PyForces:
                                     for name, g in self.scene.groups.items()])
         self.error = None
         self._keys = None        # contact conditions of the active terms (per phase)
+        self._lists = None       # contact lists the phase can use (per phase)
         self._agreed = None      # MPI: this step's agreed contact conditions
         self._fail_here = None
         #: passive particles (deck.passive) join LAMMPS' moving group when first reachable
@@ -1069,6 +1070,7 @@ class PyForces:
         do (a term is active, or it adds the deck's constant forces and damping)."""
         self.phase = dict(phase_vars)
         self._keys = None
+        self._lists = None
         self._fresh = True     # the fix (and its force array) may be new
         for t in self.terms:
             t.phase_ok = phase_active(t.op.when, self.phase)
@@ -1112,6 +1114,31 @@ class PyForces:
                     keys += [(t.target, g) for g in contact_groups(t.op.when)]
             self._keys = list(dict.fromkeys(keys))
         return self._keys
+
+    def _phase_lists(self) -> list:
+        """(A, B) of every contact list this phase can use: each active collide's two groups
+        and each contact condition's (per phase)."""
+        if self._lists is None:
+            sc, lists = self.scene, []
+            pairs = [(t.sl, t.s) for t in self.active if isinstance(t, CollideTerm) and t.phase_ok]
+            pairs += [(sc.slice(a), sc.slice(b)) for a, b in self._contact_keys()]
+            for t, s in pairs:
+                AB = (s, t) if t.start > s.start else (t, s)
+                if AB not in lists:
+                    lists.append(AB)
+            self._lists = lists
+        return self._lists
+
+    def _search_lists(self, fr: Frame) -> None:
+        """Search every list of the phase when the frame has none: each list is then as old as
+        the frame, which both renewal checks (LAMMPS' reneighbouring, :meth:`_own_check`)
+        measure from. A list first searched later in the frame (a contact condition asked only
+        once another held, a collide gated on a contact) could miss a pair that closed in by
+        more than a skin since the frame began."""
+        if any(k[0] == "cand" for k in fr.memo):
+            return
+        for A, B in self._phase_lists():
+            self.overlaps._candidates(fr, A, B)
 
     def _agree(self, fr, failed: bool) -> bool:
         """MPI: one reduction of this rank's failure and contact conditions; every rank learns
@@ -1161,6 +1188,7 @@ class PyForces:
             fr.refresh()
             if self.own is not None:
                 self._own_check(fr, False)
+        self._search_lists(fr)
         return fr
 
     def _own_check(self, fr: Frame, new: bool) -> None:
@@ -1211,7 +1239,8 @@ class PyForces:
                 self.error = (step, self._fail_here)
             f[:] = 0.0
             # stop LAMMPS before the next step (it checks its timer there; all ranks do this
-            # in the same step), so no step runs on without these forces
+            # in the same step). This step ends with the forces added so far; its positions
+            # were made before them, and its velocities are not kept (the run stops here)
             self.lmp.force_timeout()
 
     def _evaluate(self, fr, old, f, fresh=False) -> None:

@@ -323,7 +323,7 @@ class LammpsRun:
         raise DivergenceError(
             f"run diverged at step {step}: resting '{group}' particle {local} (atom id {k + 1}) "
             "was touched before LAMMPS integrated it: a particle moved more than the neighbour "
-            f"skin ({self.deck.skin:g}) between two reneighbourings, so the run could not stay "
+            f"skin ({self.deck.lammps_skin:g}) between two reneighbourings, so the run could not stay "
             f"exact. A smaller time step (dt = {self.scene.dt:g} now) or weaker coefficients "
             "keep Eq. 5 stable; the output written up to here is kept.",
             step=int(step), index=int(k), group=group, local=int(local))
