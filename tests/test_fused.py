@@ -17,6 +17,7 @@ from rackstress.engines.lammps.deck import compile_deck
 from rackstress.engines.lammps.runner import LammpsRun
 from rackstress.engines.reference import Reference
 from rackstress.model import kernels as K
+from rackstress.model.operators import contact_candidates
 
 from test_lammps_backend import every_operator_scene
 
@@ -195,3 +196,120 @@ def test_compiled_watchdog_pass_agrees_with_the_watchdog():
             slow = find_divergence(sc, x[perm], v[perm], o[perm], perm)
         assert fast == (slow is None), kind
         assert fast == (kind in ("ok", "huge-v", "edge")), kind
+
+
+def test_candidate_search_equals_a_full_search():
+    """kernels.candidates (cell grid over the joint region only, pairs put in particle order
+    as found) gives the pairs of the NumPy path's cKDTree search (operators.contact_candidates)
+    over every particle, in the order of a full sort by particles: two bodies touching at a
+    joint, random clouds, one group against itself, rows not in particle order, a wider
+    near radius; and the near rows of both sides are those of a distance matrix."""
+    rng = np.random.default_rng(11)
+    # a body and a leg meeting at a hip (lattices of spacing 2, as MagPod's)
+    g = np.stack(np.meshgrid(np.arange(20), np.arange(6), np.arange(8), indexing="ij"),
+                 -1).reshape(-1, 3)[:, [0, 1, 2]] * 2.0
+    leg = np.stack(np.meshgrid(np.arange(3), np.arange(15), np.arange(3), indexing="ij"),
+                   -1).reshape(-1, 3) * 2.0 + [3.1, -29.0, 4.3]
+    cases = [(np.concatenate([g, leg]), len(g), False, 6.0, 6.0, False)]
+    for trial in range(60):
+        n = int(rng.integers(2, 250))
+        x = rng.uniform(0.0, rng.uniform(2.0, 25.0), size=(n, 3))
+        x[: n // 3] += [rng.uniform(0.0, 30.0), 0.0, 0.0]
+        cut = rng.uniform(0.5, 5.0)
+        cases.append((x, int(rng.integers(1, n)), trial % 4 == 0, cut,
+                      cut + rng.choice([0.0, rng.uniform(0.0, 3.0)]), trial % 2 == 1))
+    found, first = 0, None
+    for x, k, same, cut, wide, shuffle in cases:
+        n = len(x)
+        tag = (rng.permutation(n) + 1 if shuffle else np.arange(1, n + 1)).astype(np.int32)
+        if same:
+            ia = ib = rng.permutation(n)[: n // 2 + 1].astype(np.int64)
+        else:
+            ia, ib = np.arange(k, dtype=np.int64), rng.permutation(np.arange(k, n))
+        a, b, near_a, near_b = K.candidates(x, ia, ib, cut, same, tag, wide)
+        ea, eb = contact_candidates(x[ia], x[ib], cut, same=same)
+        ea, eb = ia[ea], ib[eb]
+        order = np.lexsort((tag[eb], tag[ea]))
+        np.testing.assert_array_equal(a, ea[order])
+        np.testing.assert_array_equal(b, eb[order])
+        d2 = ((x[ib][None, :, :] - x[ia][:, None, :]) ** 2).sum(-1)
+        w = d2 <= wide * wide
+        if same:
+            w[ia[:, None] == ib[None, :]] = False
+        np.testing.assert_array_equal(near_a, ia[w.any(1)])
+        np.testing.assert_array_equal(near_b, ib[w.any(0)])
+        found += len(a)
+        first = len(a) if first is None else first
+    assert found > 1000 and first > 20
+
+
+def test_relative_motion_check():
+    """kernels.moved_below_shifted: a translation common to both groups is not motion (a body
+    and a leg walking together keep their list); a displacement of one particle relative to
+    the others beyond the bound is; and whenever it says "below", every pairwise distance
+    has changed by at most twice the bound (the list's guarantee)."""
+    rng = np.random.default_rng(5)
+    x0 = rng.uniform(0.0, 10.0, size=(40, 3))
+    far = x0 + [7.0, -3.0, 2.5]
+    assert K.moved_below_shifted(far, 0, 25, 25, 15, x0, 0.01)
+    assert not K.moved_below(far, 0, 25, 25, 15, x0, 0.01)
+    bump = far.copy()
+    bump[30] += [0.0, 0.21, 0.0]          # 0.21 beyond the others: more than 2 × 0.1 apart
+    assert not K.moved_below_shifted(bump, 0, 25, 25, 15, x0, 0.01)
+    bump[30] -= [0.0, 0.02, 0.0]          # 0.19: the midpoint shift brings all within 0.1
+    assert K.moved_below_shifted(bump, 0, 25, 25, 15, x0, 0.01)
+    below = 0
+    for trial in range(300):
+        x = x0 + rng.normal(scale=3.0, size=3) + rng.normal(
+            scale=rng.choice([0.01, 0.02, 0.05]), size=x0.shape)
+        if K.moved_below_shifted(x, 0, 10, 20, 20, np.concatenate([x0[:10], x0[20:]]), 0.01):
+            below += 1
+            sub0, sub = np.concatenate([x0[:10], x0[20:]]), np.concatenate([x[:10], x[20:]])
+            d0 = np.linalg.norm(sub0[:, None] - sub0[None], axis=-1)
+            d = np.linalg.norm(sub[:, None] - sub[None], axis=-1)
+            assert np.abs(d - d0).max() <= 0.2 + 1e-12
+    assert 10 < below < 300
+
+
+class _CountingSearch:
+    """The compiled kernels, counting the contact candidate searches (kernels.candidates)."""
+
+    def __init__(self, k):
+        self.k, self.searches = k, 0
+
+    def __getattr__(self, name):
+        if name == "candidates":
+            self.searches += 1
+        return getattr(self.k, name)
+
+
+class _NothingKept(dict):
+    """Overlaps' kept lists, never kept: every list is searched again at every renewal."""
+
+    def get(self, key, default=None):
+        return default
+
+
+@pytest.mark.lammps
+def test_lists_kept_by_relative_motion_equal_fresh_searches(monkeypatch):
+    """The body–leg lists kept while the groups move together (relative motion below half a
+    skin, kernels.moved_below_shifted) give the trajectory of searching every list again at
+    every renewal, bit for bit, over a phase switch of magpod-small, with fewer searches."""
+    monkeypatch.setenv("RACKSTRESS_KERNELS", "numba")
+    scene = scenes.build("magpod-small", phase_steps=200, cycles=1).with_steps(400)
+    out = []
+    for keep in (True, False):
+        run = LammpsRun(compile_deck(scene, "exact"), None)
+        try:
+            count = run.py.overlaps.k = _CountingSearch(run.py.overlaps.k)
+            if not keep:
+                run.py.overlaps._kept = _NothingKept()
+            run.run_schedule()
+            out.append((run.gather_positions(), run.gather_velocities(), count.searches))
+        finally:
+            run.close()
+    (p, v, n), (p0, v0, n0) = out
+    assert np.abs(p - scene.original_positions()).max() > 0.1
+    np.testing.assert_array_equal(p, p0)
+    np.testing.assert_array_equal(v, v0)
+    assert 0 < n < n0

@@ -105,6 +105,7 @@ def warm() -> dict:
     k.candidates(x, r, s, 2.0, False, tag, 3.0)
     k.overlapping(x, r, s, np.full(2, 4.0))
     k.moved_below(x, 0, 1, 1, 2, x.copy(), 1.0)
+    k.moved_below_shifted(x, 0, 1, 1, 2, x.copy(), 1.0)
     k.passive_rows(tag, 1, 3, np.zeros(2, np.int64))
     k.moving_rows(x, 0, 3)
     rows3 = np.arange(3, dtype=np.int64)
@@ -350,38 +351,26 @@ if nb is not None:
         """Rows (a in ia, b in ib) closer than ``cut`` (d² ≤ cut², as
         :func:`~rackstress.model.operators.contact_candidates`), sorted by the particles
         (``tag``: the atom id of a row) of (a, b), whatever the rows' layout; and the rows of ia
-        and of ib with a partner closer than ``wide`` (≥ cut). The cell list holds the larger
-        side."""
-        if len(ia) > len(ib):
-            ob, oa, near_b, near_a = _cells(x, ib, ia, cut, same, wide)
-        else:
-            oa, ob, near_a, near_b = _cells(x, ia, ib, cut, same, wide)
-        # one order whatever the rows' layout: by the particles of (a, b)
-        n = len(oa)
-        key = np.empty(n, np.int64)
-        span = 0
-        for k in range(n):
-            if tag[ob[k]] >= span:
-                span = np.int64(tag[ob[k]]) + 1
-        for k in range(n):
-            key[k] = np.int64(tag[oa[k]]) * span + tag[ob[k]]
-        s = np.argsort(key)
-        return oa[s], ob[s], near_a, near_b
+        and of ib with a partner closer than ``wide`` (≥ cut), in their order there.
 
-    @nb.njit(**_OPTS)
-    def _cells(x, ia, ib, cut, same, wide):
-        """:func:`candidates`, unsorted: a cell list over the part of ``ib`` inside the bounding
-        box of ``ia`` grown by ``wide``, each row of ``ia`` looking in the 27 cells around it.
+        Only where the two sides can meet is looked at: the rows of ``ib`` inside the bounding
+        box of ``ia`` grown by ``wide`` go into a cell grid of cells about wide/2 on a side,
+        and only the rows of ``ia`` inside that grid's box grown by ``wide`` look into the
+        cells around them (two bodies touching at a joint search the joint only). The rows
+        of ``ia`` are visited by particle, and each one's partners are put in particle order
+        as found (nearly sorted already: the cells are visited with x fastest, as lattice ids
+        run), so the pairs come out in the order a full sort would give them.
         ``same``: one group, both orders of every pair, never a row with itself."""
         empty = np.zeros(0, np.int64)
-        if len(ia) == 0 or len(ib) == 0:
+        na_, nb0 = len(ia), len(ib)
+        if na_ == 0 or nb0 == 0:
             return empty, empty, empty, empty
         lo = np.empty(3)
         hi = np.empty(3)
         for m in range(3):
             lo[m] = np.inf
             hi[m] = -np.inf
-        for k in range(len(ia)):
+        for k in range(na_):
             for m in range(3):
                 v = x[ia[k], m]
                 if v < lo[m]:
@@ -391,35 +380,68 @@ if nb is not None:
         for m in range(3):
             lo[m] -= wide
             hi[m] += wide
-        keep = np.empty(len(ib), np.int64)      # positions in ib
+        keep = np.empty(nb0, np.int64)          # positions in ib
         nb_ = 0
-        for k in range(len(ib)):
+        blo = np.empty(3)
+        bhi = np.empty(3)
+        for m in range(3):
+            blo[m] = np.inf
+            bhi[m] = -np.inf
+        for k in range(nb0):
             r = ib[k]
             if (x[r, 0] >= lo[0] and x[r, 0] <= hi[0] and x[r, 1] >= lo[1]
                     and x[r, 1] <= hi[1] and x[r, 2] >= lo[2] and x[r, 2] <= hi[2]):
                 keep[nb_] = k
                 nb_ += 1
+                for m in range(3):
+                    if x[r, m] < blo[m]:
+                        blo[m] = x[r, m]
+                    if x[r, m] > bhi[m]:
+                        bhi[m] = x[r, m]
         if nb_ == 0:
             return empty, empty, empty, empty
-        # cells no smaller than wide (a pair within it is in neighbouring cells), at most a
-        # few per kept row
-        size = wide if wide > 0.0 else 1.0
+        # the rows of ia that can have a partner: inside the kept rows' box grown by wide,
+        # in particle order
+        sel = np.empty(na_, np.int64)           # positions in ia
+        ns = 0
+        for k in range(na_):
+            a = ia[k]
+            if (x[a, 0] >= blo[0] - wide and x[a, 0] <= bhi[0] + wide
+                    and x[a, 1] >= blo[1] - wide and x[a, 1] <= bhi[1] + wide
+                    and x[a, 2] >= blo[2] - wide and x[a, 2] <= bhi[2] + wide):
+                sel[ns] = k
+                ns += 1
+        sel = sel[:ns]
+        ordered = True
+        for k in range(1, ns):
+            if tag[ia[sel[k]]] < tag[ia[sel[k - 1]]]:
+                ordered = False
+                break
+        if not ordered:
+            tk = np.empty(ns, np.int64)
+            for k in range(ns):
+                tk[k] = tag[ia[sel[k]]]
+            sel = sel[np.argsort(tk, kind="mergesort")]
+        # cells about wide/2 on a side (a pair within wide is at most nr cells apart in each
+        # direction), at most a few per kept row
+        size = 0.5 * wide if wide > 0.0 else 1.0
         nc = np.empty(3, np.int64)
         while True:
             for m in range(3):
-                nc[m] = int((hi[m] - lo[m]) / size) + 1
+                nc[m] = int((bhi[m] - blo[m]) / size) + 1
             if nc[0] * nc[1] * nc[2] <= 4 * nb_ + 64:
                 break
             size *= 1.5
+        nr = int(np.ceil(wide / size)) if wide > 0.0 else 1
         ncell = nc[0] * nc[1] * nc[2]
         cell = np.empty(nb_, np.int64)
         count = np.zeros(ncell + 1, np.int64)
-        for k in range(nb_):
+        for k in range(nb_):                     # cell (c2 · nc1 + c1) · nc0 + c0: x fastest
             r = ib[keep[k]]
-            c0 = min(int((x[r, 0] - lo[0]) / size), nc[0] - 1)
-            c1 = min(int((x[r, 1] - lo[1]) / size), nc[1] - 1)
-            c2 = min(int((x[r, 2] - lo[2]) / size), nc[2] - 1)
-            cell[k] = (c0 * nc[1] + c1) * nc[2] + c2
+            c0 = min(int((x[r, 0] - blo[0]) / size), nc[0] - 1)
+            c1 = min(int((x[r, 1] - blo[1]) / size), nc[1] - 1)
+            c2 = min(int((x[r, 2] - blo[2]) / size), nc[2] - 1)
+            cell[k] = (c2 * nc[1] + c1) * nc[0] + c0
             count[cell[k] + 1] += 1
         for c in range(ncell):
             count[c + 1] += count[c]
@@ -430,25 +452,24 @@ if nb is not None:
             fill[cell[k]] += 1
         cut2 = cut * cut
         wide2 = wide * wide
-        near_a = np.zeros(len(ia), np.bool_)
-        near_b = np.zeros(len(ib), np.bool_)
-        cap = 16 * len(ia) + 16
+        near_a = np.zeros(na_, np.bool_)
+        near_b = np.zeros(nb0, np.bool_)
+        cap = 16 * ns + 16
         oa = np.empty(cap, np.int64)
         ob = np.empty(cap, np.int64)
         n = 0
-        for k in range(len(ia)):
+        for q in range(ns):
+            k = sel[q]
             a = ia[k]
             xa0, xa1, xa2 = x[a, 0], x[a, 1], x[a, 2]
-            if (xa0 < lo[0] - wide or xa0 > hi[0] + wide or xa1 < lo[1] - wide
-                    or xa1 > hi[1] + wide or xa2 < lo[2] - wide or xa2 > hi[2] + wide):
-                continue
-            c0 = int((xa0 - lo[0]) / size)
-            c1 = int((xa1 - lo[1]) / size)
-            c2 = int((xa2 - lo[2]) / size)
-            for d0 in range(max(c0 - 1, 0), min(c0 + 2, nc[0])):
-                for d1 in range(max(c1 - 1, 0), min(c1 + 2, nc[1])):
-                    for d2 in range(max(c2 - 1, 0), min(c2 + 2, nc[2])):
-                        c = (d0 * nc[1] + d1) * nc[2] + d2
+            c0 = int(np.floor((xa0 - blo[0]) / size))
+            c1 = int(np.floor((xa1 - blo[1]) / size))
+            c2 = int(np.floor((xa2 - blo[2]) / size))
+            first = n
+            for d2 in range(max(c2 - nr, 0), min(c2 + nr + 1, nc[2])):
+                for d1 in range(max(c1 - nr, 0), min(c1 + nr + 1, nc[1])):
+                    for d0 in range(max(c0 - nr, 0), min(c0 + nr + 1, nc[0])):
+                        c = (d2 * nc[1] + d1) * nc[0] + d0
                         for p in range(count[c], count[c + 1]):
                             pb = order[p]
                             b = ib[pb]
@@ -469,8 +490,14 @@ if nb is not None:
                                     oa2[:n] = oa[:n]
                                     ob2[:n] = ob[:n]
                                     oa, ob = oa2, ob2
+                                # insertion into this row's partners, by particle
+                                t = tag[b]
+                                j = n
+                                while j > first and tag[ob[j - 1]] > t:
+                                    ob[j] = ob[j - 1]
+                                    j -= 1
+                                ob[j] = b
                                 oa[n] = a
-                                ob[n] = b
                                 n += 1
         return oa[:n], ob[:n], ia[near_a], ib[near_b]
 
@@ -613,6 +640,42 @@ if nb is not None:
             d1 = x[r, 1] - ref[k, 1]
             d2 = x[r, 2] - ref[k, 2]
             if d0 * d0 + d1 * d1 + d2 * d2 > lim2:
+                return False
+        return True
+
+    @nb.njit(**_OPTS)
+    def moved_below_shifted(x, a0, na, b0, nb_, ref, lim2):
+        """Whether every row of the ranges a0..a0+na and b0..b0+nb_ is within √lim2 of where
+        ``ref`` has it (their positions, one range after the other) *once one common
+        translation t is taken off*: t is the centre of the displacements' bounding box.
+        Distances between these rows change by at most twice that bound, whatever t
+        (|Δ(x_b − x_a)| = |(Δx_b − t) − (Δx_a − t)|), so a contact list of two groups that
+        move together (a body and its legs) is judged by their relative motion only."""
+        n = na + nb_
+        lo = np.empty(3)
+        hi = np.empty(3)
+        for m in range(3):
+            lo[m] = np.inf
+            hi[m] = -np.inf
+        for k in range(n):
+            r = a0 + k if k < na else b0 + k - na
+            for m in range(3):
+                d = x[r, m] - ref[k, m]
+                if d < lo[m]:
+                    lo[m] = d
+                if d > hi[m]:
+                    hi[m] = d
+        if n == 0:
+            return True
+        t0 = 0.5 * (lo[0] + hi[0])
+        t1 = 0.5 * (lo[1] + hi[1])
+        t2 = 0.5 * (lo[2] + hi[2])
+        for k in range(n):
+            r = a0 + k if k < na else b0 + k - na
+            d0 = x[r, 0] - ref[k, 0] - t0
+            d1 = x[r, 1] - ref[k, 1] - t1
+            d2 = x[r, 2] - ref[k, 2] - t2
+            if not (d0 * d0 + d1 * d1 + d2 * d2 <= lim2):
                 return False
         return True
 

@@ -117,8 +117,7 @@ class Checkpointer:
 
     def write(self, runner, phase_index: int, phase_done: int, cycle: int) -> None:
         step = runner.step
-        x = runner.gather_positions()
-        v = runner.gather_velocities()
+        x, v = runner.state()       # a deck with a passive group: only the moving rows gathered
         f = runner.gather_forces()
         stem = f"state-{step:09d}"
         restart = self.dir / f"{stem}.restart"

@@ -405,12 +405,14 @@ class Overlaps:
         if stable:
             # a list of two groups whose rows are their particles is searched with two skins
             # of margin (reach + 2 skins) and kept at a later reneighbouring while none of
-            # *their* atoms has moved half a skin since the search: until the next
-            # reneighbouring each atom then stays within one skin of where it was searched
-            # (LAMMPS reneighbours once any atom has moved half a skin), so a pair can have
-            # closed by less than two skins and none outside the list can be within reach
+            # *their* atoms has moved half a skin since the search, once the translation
+            # common to both groups is taken off (kernels.moved_below_shifted: a body and
+            # its legs walk together): until the next reneighbouring each atom then stays
+            # within one skin of where it was searched plus that translation (LAMMPS
+            # reneighbours once any atom has moved half a skin), so a pair can have closed by
+            # less than two skins and none outside the list can be within reach
             kept = self._kept.get((A.start, B.start))
-            if kept is not None and self.k.moved_below(
+            if kept is not None and self.k.moved_below_shifted(
                     fr.x, A.start, A.stop - A.start, B.start, B.stop - B.start, kept[0],
                     0.25 * h * h):
                 hit = fr.memo[key] = kept[1]
@@ -436,14 +438,22 @@ class Overlaps:
                 diff = fr.x[b] - fr.x[a]
                 near = rowdot(diff, diff) <= cut * cut
                 a, b = a[near], b[near]
-        if passive:
-            self.activate(fr, near_a)
-            self.activate(fr, near_b)
+        if passive:             # (only passive particles are activated: skip a side without)
+            if self._any_passive(A):
+                self.activate(fr, near_a)
+            if self._any_passive(B):
+                self.activate(fr, near_b)
         R2 = (self.radius[fr.particles(a)] + self.radius[fr.particles(b)]) ** 2
         hit = fr.memo[key] = (a, b, R2)
         if stable:
             self._kept[(A.start, B.start)] = (np.concatenate([fr.x[A], fr.x[B]]), hit)
         return hit
+
+    def _any_passive(self, A: slice) -> bool:
+        key = ("any passive", A.start, A.stop)
+        if key not in self._rmax:
+            self._rmax[key] = bool(self.passive[A].any())
+        return self._rmax[key]
 
     def _passive(self, A: slice, B: slice) -> bool:
         key = ("passive", A.start, B.start)
@@ -572,11 +582,18 @@ class RestingBed:
                 fr.tag[rows].astype(np.int64) - 1, act)):
             self._rebuild(fr)
             rows = self.prow[act - self.span]
-        da, db, dnear_a, dnear_b = self.k.candidates(fr.x, ia, rows, cut, False, fr.tag, wide)
+        # the activated particles are integrated already (and ia's rows are not passive), so
+        # their near rows are only the pairs' own: searched within cut, not wide (which is
+        # reach + 2 of LAMMPS' skins at a layout's first search, 18 units in MagPod)
+        da, db, dnear_a, dnear_b = self.k.candidates(fr.x, ia, rows, cut, False, fr.tag, cut)
         a, b = np.concatenate([sa, da]), np.concatenate([sb, db])
         order = np.lexsort((fr.tag[b], fr.tag[a]))
         near_a = np.union1d(ia[snear_a], dnear_a)
-        near_b = np.concatenate([np.unique(snear_b), dnear_b])
+        # the resting rows within wide, once each, in row order (np.unique's result, by a
+        # flag per row: snear_b repeats a row for every searching row near it)
+        flag = np.zeros(fr.nlocal, dtype=bool)
+        flag[snear_b] = True
+        near_b = np.concatenate([np.flatnonzero(flag), dnear_b])
         return a[order], b[order], near_a, near_b
 
 

@@ -131,6 +131,13 @@ class LammpsRun:
             self.scatter("f", np.zeros((self.scene.n_particles, 3)))
         for cmd in balance_commands(self.scene, self.comm.Get_size()):
             self.command(cmd)
+        #: LAMMPS' mask bit of the moving group (a deck with a passive group), else None: an
+        #: atom without it has never moved, so it sits at its original position with v = 0
+        self._move_bit = (1 << list(self.lmp.available_ids("group")).index(MOVE_GROUP)
+                          if deck.passive else None)
+        #: particles a resumed run found displaced yet at rest (v = 0 exactly), which the
+        #: callback does not re-add to the moving group: (indices, positions), else None
+        self._still = None
         if deck.python_ops:
             self.py = PyForces(self.lmp, deck, self.comm)
 
@@ -260,10 +267,31 @@ class LammpsRun:
         for cmd in cmds[run0:]:
             if cmd == "run 0 post no":
                 self._run0()
-            else:
+            elif not self._set_velocity(cmd):
                 self.command(cmd)
         self._check_callback()
         self._phase = dict(phase_vars)
+
+    def _set_velocity(self, cmd: str) -> bool:
+        """The deck's half-step velocity shift (``velocity rs_move set v_rs_vh… units box``,
+        v ± dt/2·f/m) done here on the moving group's rows, if the deck has a passive group:
+        LAMMPS' command evaluates its atom variables into a fresh array over every atom. The
+        same arithmetic in the same order (v + (dt/2·f)/m, m of the atom's type), so the same
+        bits. Returns whether ``cmd`` was such a command (else the caller runs it)."""
+        if self._move_bit is None or not cmd.startswith(f"velocity {MOVE_GROUP} set v_rs_v"):
+            return False
+        sign = cmd.split()[3][len("v_rs_v"):-1]         # h: v + dt/2·f/m; p: v − dt/2·f/m
+        if sign not in ("h", "p") or self.scene.held().any():
+            return False                                 # (held atoms: the deck's gmask form)
+        lmp = self.lmp
+        nlocal = lmp.extract_global("nlocal")
+        rows = np.flatnonzero((lmp.numpy.extract_atom("mask")[:nlocal] & self._move_bit) != 0)
+        v, f = lmp.numpy.extract_atom("v"), lmp.numpy.extract_atom("f")
+        m = lmp.numpy.extract_atom("mass")[lmp.numpy.extract_atom("type")[rows]]
+        h = 0.5 * float(self.scene.dt)
+        shift = (h * f[rows]) / m[:, None]
+        v[rows] = v[rows] + shift if sign == "h" else v[rows] - shift
+        return True
 
     def _run0(self) -> None:
         """``run 0 post no`` (forces at the current state). If the callback activated resting
@@ -431,6 +459,10 @@ class LammpsRun:
     def positions(self) -> np.ndarray:
         """All positions in global particle order (on every rank); NaN for lost atoms."""
         n = self.scene.n_particles
+        if self._move_bit is not None:
+            fast = self._moved_only(x=True)         # None if an atom was lost
+            if fast is not None:
+                return fast[0]
         got = self.positions_local()
         if self.comm.allreduce(0 if got is None else len(got[2])) == n:
             return self.gather_positions()
@@ -442,8 +474,44 @@ class LammpsRun:
 
     def state(self) -> tuple[np.ndarray, np.ndarray]:
         """Positions and velocities in global particle order (on every rank)."""
-        return self.gather_positions(), self.gather_velocities()
+        fast = self._moved_only(x=True, v=True)
+        return fast if fast is not None else (self.gather_positions(), self.gather_velocities())
 
+    def _moved_only(self, x: bool = False, v: bool = False):
+        """Positions and/or velocities in global order without gathering every atom (a deck
+        with a passive group, every atom present; else None): an atom outside LAMMPS' moving
+        group has never moved (Deck.passive: it has had zero velocity and zero force since step
+        0), so its position is its original one, exactly as the data file gave it, and its
+        velocity 0. The global arrays are those, with the moving group's rows written in
+        (under MPI, every rank's moving rows gathered). The same arrays as
+        :meth:`gather_positions` and :meth:`gather_velocities`, bit for bit."""
+        if self._move_bit is None:
+            return None
+        lmp, n = self.lmp, self.scene.n_particles
+        nlocal = lmp.extract_global("nlocal")
+        mask = lmp.numpy.extract_atom("mask")[:nlocal]
+        rows = np.flatnonzero((mask & self._move_bit) != 0)       # (a bool: nonzero is faster)
+        idx = lmp.numpy.extract_atom("id")[:nlocal][rows].astype(np.int64) - 1
+        mine = [idx, int(nlocal)]
+        if x:
+            mine.append(lmp.numpy.extract_atom("x")[:nlocal][rows])
+        if v:
+            mine.append(lmp.numpy.extract_atom("v")[:nlocal][rows])
+        parts = [mine] if self.comm.Get_size() == 1 else self.comm.allgather(mine)
+        if sum(p[1] for p in parts) != n:
+            return None     # an atom was lost: the full gathers decide
+        out = []
+        if x:
+            out.append(_fresh(n))
+            out[0][:] = self.scene.original_positions()
+            if self._still is not None:
+                out[0][self._still[0]] = self._still[1]
+        if v:
+            out.append(_fresh(n))
+        for part in parts:
+            for arr, vals in zip(out, part[2:]):
+                arr[part[0]] = vals
+        return tuple(out)
     def gather_positions(self) -> np.ndarray:
         """All positions in global particle order (on every rank)."""
         x = self.lmp.gather_atoms("x", 1, 3)
@@ -518,9 +586,23 @@ class LammpsRun:
             self.command(f"dump_modify {self._dump_id} delay {int(ck.step) + 1}")
         self.scatter("x", ck.x)
         self.scatter("v", ck.v)
+        if self._move_bit is not None:
+            # the callback re-adds the moving particles (v ≠ 0) to the moving group; one that
+            # moved and came to rest exactly stays outside it, where it is (_moved_only)
+            o = self.scene.original_positions()
+            still = np.flatnonzero((ck.x != o).any(axis=1) & ~(ck.v != 0).any(axis=1))
+            self._still = (still, ck.x[still].copy()) if len(still) else None
         self.step = int(ck.step)
         self.realign(ck.f)
         self._phase = previous
+
+
+def _fresh(n: int) -> np.ndarray:
+    """A new (n, 3) float64 array of zeros, in memory NumPy has not advised the kernel to back
+    with huge pages: NumPy asks for them on every large array, and where the kernel honours
+    that only on request (transparent huge pages "madvise", as on the machine measured) the
+    first touch of a fresh 24 MB array took ~100 ms in a run's process, against ~25 ms here."""
+    return np.frombuffer(bytearray(24 * n), dtype=np.float64).reshape(n, 3)
 
 
 def attach_callback(lmp, fix_id: str, fn, caller) -> None:
