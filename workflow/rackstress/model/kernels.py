@@ -148,17 +148,10 @@ if nb is not None:
     col_f = nb.njit(inline="always")(Collide.factor)      # Eq. 10
     att_f = nb.njit(inline="always")(Attract.factor)      # Eq. 14
 
-    @nb.njit(**_OPTS)
-    def bind_block(x, t0, m, s0, n, qT, cIT, cJT, fold, acc):
-        """Every (target t, source s) pair of two groups (serial rows = particles): Eq. 12 on
-        t with cIT, and its reverse bind on s with cJT when ``fold``.
-
-        The order of the sums is fixed: a target's acceleration gains its sources' terms in
-        source order (s = 0, 1, ...), a source's in target order (t = 0, 1, ...), each
-        source's sum added to its accumulator row once, after the block. The targets' rows
-        and positions are copied into contiguous columns first, so that the pass over the
-        targets of one source (a division each) vectorizes; the copies change no arithmetic.
-        """
+    @nb.njit(inline="always")
+    def _target_columns(x, acc, t0, m):
+        """A bind block's targets' positions and accumulators as contiguous columns (copies:
+        no arithmetic), so that the pass over the targets of one source vectorizes."""
         X0 = np.empty(m)
         X1 = np.empty(m)
         X2 = np.empty(m)
@@ -172,6 +165,43 @@ if nb is not None:
             A0[t] = acc[t0 + t, 0]
             A1[t] = acc[t0 + t, 1]
             A2[t] = acc[t0 + t, 2]
+        return X0, X1, X2, A0, A1, A2
+
+    @nb.njit(inline="always")
+    def _store_targets(acc, t0, m, A0, A1, A2):
+        for t in range(m):
+            acc[t0 + t, 0] = A0[t]
+            acc[t0 + t, 1] = A1[t]
+            acc[t0 + t, 2] = A2[t]
+
+    @nb.njit(inline="always")
+    def _fold_source(acc, row, cj, W, D0, D1, D2, m):
+        """The reverse bind on one source (Eq. 12 with its own coefficients ``cj``): its
+        targets' terms summed in target order, added to its row once."""
+        a0 = 0.0
+        a1 = 0.0
+        a2 = 0.0
+        for t in range(m):
+            e = cj[t] * W[t]
+            a0 -= e * D0[t]
+            a1 -= e * D1[t]
+            a2 -= e * D2[t]
+        acc[row, 0] += a0
+        acc[row, 1] += a1
+        acc[row, 2] += a2
+
+    @nb.njit(**_OPTS)
+    def bind_block(x, t0, m, s0, n, qT, cIT, cJT, fold, acc):
+        """Every (target t, source s) pair of two groups (serial rows = particles): Eq. 12 on
+        t with cIT, and its reverse bind on s with cJT when ``fold``.
+
+        The order of the sums is fixed: a target's acceleration gains its sources' terms in
+        source order (s = 0, 1, ...), a source's in target order (t = 0, 1, ...), each
+        source's sum added to its accumulator row once, after the block. The targets' rows
+        and positions are copied into contiguous columns first, so that the pass over the
+        targets of one source (a division each) vectorizes; the copies change no arithmetic.
+        """
+        X0, X1, X2, A0, A1, A2 = _target_columns(x, acc, t0, m)
         D0 = np.empty(m)
         D1 = np.empty(m)
         D2 = np.empty(m)
@@ -194,22 +224,8 @@ if nb is not None:
                 A1[t] += ct * d1
                 A2[t] += ct * d2_
             if fold:
-                cj = cJT[s]
-                a0 = 0.0
-                a1 = 0.0
-                a2 = 0.0
-                for t in range(m):
-                    e = cj[t] * W[t]
-                    a0 -= e * D0[t]
-                    a1 -= e * D1[t]
-                    a2 -= e * D2[t]
-                acc[s0 + s, 0] += a0
-                acc[s0 + s, 1] += a1
-                acc[s0 + s, 2] += a2
-        for t in range(m):
-            acc[t0 + t, 0] = A0[t]
-            acc[t0 + t, 1] = A1[t]
-            acc[t0 + t, 2] = A2[t]
+                _fold_source(acc, s0 + s, cJT[s], W, D0, D1, D2, m)
+        _store_targets(acc, t0, m, A0, A1, A2)
 
     @nb.njit(**_OPTS)
     def bind_block_const(x, t0, m, s0, n, o, cI, cJ, fold, acc):
@@ -219,19 +235,8 @@ if nb is not None:
         :meth:`Bind.pairs` computes it, (u_o − p_o)·(u_o − p_o) in the order x, y, z — the same
         numbers, read from 3(m + n) values instead of 3mn. Sums in :func:`bind_block`'s
         order."""
-        X0 = np.empty(m)
-        X1 = np.empty(m)
-        X2 = np.empty(m)
-        A0 = np.empty(m)
-        A1 = np.empty(m)
-        A2 = np.empty(m)
-        for t in range(m):
-            X0[t] = x[t0 + t, 0]
-            X1[t] = x[t0 + t, 1]
-            X2[t] = x[t0 + t, 2]
-            A0[t] = acc[t0 + t, 0]
-            A1[t] = acc[t0 + t, 1]
-            A2[t] = acc[t0 + t, 2]
+        X0, X1, X2, A0, A1, A2 = _target_columns(x, acc, t0, m)
+        cJv = np.full(m, cJ)      # the same products cJ·w as a scalar gives
         O0 = o[0:m]
         O1 = o[m:2 * m]
         O2 = o[2 * m:3 * m]
@@ -259,21 +264,8 @@ if nb is not None:
                 A1[t] += ct * d1
                 A2[t] += ct * d2_
             if fold:
-                a0 = 0.0
-                a1 = 0.0
-                a2 = 0.0
-                for t in range(m):
-                    e = cJ * W[t]
-                    a0 -= e * D0[t]
-                    a1 -= e * D1[t]
-                    a2 -= e * D2[t]
-                acc[s0 + s, 0] += a0
-                acc[s0 + s, 1] += a1
-                acc[s0 + s, 2] += a2
-        for t in range(m):
-            acc[t0 + t, 0] = A0[t]
-            acc[t0 + t, 1] = A1[t]
-            acc[t0 + t, 2] = A2[t]
+                _fold_source(acc, s0 + s, cJv, W, D0, D1, D2, m)
+        _store_targets(acc, t0, m, A0, A1, A2)
 
     @nb.njit(**_OPTS)
     def bind_pairs(x, ri, rj, ai, aj, cI, cJ, q, fold, acc):

@@ -218,7 +218,7 @@ class Deck:
         if self.callback_natives:
             L.append(f"# the constant forces and damping of the moving particles are added by the "
                      f"callback (fix external {PY_FIX}),")
-            L.append(f"# f = F - gamma*v over the rows fix nve integrates (these fixes, which would "
+            L.append("# f = F - gamma*v over the rows fix nve integrates (these fixes, which would "
                      "pass over every atom):")
             L += ["# " + c for cmds, _, _ in forces for c in cmds]
             if any(gamma.values()):
