@@ -692,29 +692,34 @@ if nb is not None:
         keep = keep[:m]
         return a[keep], b[keep], R2[keep], bad
 
+    @nb.njit(inline="always")
+    def _collide_pair(x, i, j, R2, c, acc, nacc, sacc, flag, touched, nt):
+        """Eq. 10 on row i from row j: into ``acc`` below ``nacc``, else into ``sacc``
+        (the row listed once: ``flag``, ``touched[:nt[0]]``)."""
+        d0 = x[j, 0] - x[i, 0]
+        d1 = x[j, 1] - x[i, 1]
+        d2_ = x[j, 2] - x[i, 2]
+        w = c * col_f(d0 * d0 + d1 * d1 + d2_ * d2_, R2)
+        if i < nacc:
+            acc[i, 0] += w * d0
+            acc[i, 1] += w * d1
+            acc[i, 2] += w * d2_
+        else:
+            if not flag[i]:
+                flag[i] = True
+                touched[nt[0]] = i
+                nt[0] += 1
+            sacc[i, 0] += w * d0
+            sacc[i, 1] += w * d1
+            sacc[i, 2] += w * d2_
+
     @nb.njit(**_OPTS)
     def collide_add(x, a, b, R2, c, acc, nacc, sacc, flag, touched, nt):
         """Eq. 10 for overlapping rows (a from b) added in place: rows below ``nacc`` into
         ``acc``, the others into ``sacc`` (same rows), listed once (``flag``) in
         ``touched[:nt[0]]``."""
         for k in range(len(a)):
-            i = a[k]
-            d0 = x[b[k], 0] - x[i, 0]
-            d1 = x[b[k], 1] - x[i, 1]
-            d2_ = x[b[k], 2] - x[i, 2]
-            w = c * col_f(d0 * d0 + d1 * d1 + d2_ * d2_, R2[k])
-            if i < nacc:
-                acc[i, 0] += w * d0
-                acc[i, 1] += w * d1
-                acc[i, 2] += w * d2_
-            else:
-                if not flag[i]:
-                    flag[i] = True
-                    touched[nt[0]] = i
-                    nt[0] += 1
-                sacc[i, 0] += w * d0
-                sacc[i, 1] += w * d1
-                sacc[i, 2] += w * d2_
+            _collide_pair(x, a[k], b[k], R2[k], c, acc, nacc, sacc, flag, touched, nt)
 
     @nb.njit(**_OPTS)
     def add_natives(f, v, tag, n, ident, F, g):
@@ -907,22 +912,7 @@ if nb is not None:
                         i, s = ca[k], cb[k]
                     else:
                         i, s = cb[k], ca[k]
-                    d0 = x[s, 0] - x[i, 0]
-                    d1 = x[s, 1] - x[i, 1]
-                    d2_ = x[s, 2] - x[i, 2]
-                    w = c * col_f(d0 * d0 + d1 * d1 + d2_ * d2_, cR2[k])
-                    if i < nacc:
-                        acc[i, 0] += w * d0
-                        acc[i, 1] += w * d1
-                        acc[i, 2] += w * d2_
-                    else:
-                        if not sflag[i]:
-                            sflag[i] = True
-                            stouched[snt[0]] = i
-                            snt[0] += 1
-                        sacc[i, 0] += w * d0
-                        sacc[i, 1] += w * d1
-                        sacc[i, 2] += w * d2_
+                    _collide_pair(x, i, s, cR2[k], c, acc, nacc, sacc, sflag, stouched, snt)
             elif kind == OP_DAMPEN:
                 c = fpar[o, 0]
                 for r in range(ops[o, 1], ops[o, 2]):
