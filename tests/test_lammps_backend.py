@@ -500,6 +500,60 @@ def test_positions_after_resuming_with_a_displaced_particle_at_rest():
         run.close()
 
 
+@pytest.mark.lammps
+def test_resumed_in_a_phase_without_the_callback_keeps_the_moving_bed_particles():
+    """Resumed from a checkpoint in a phase where no Python operator acts (the callback is off:
+    a collide and a force gated on the phase), the bed particles moving at the checkpoint still
+    move, the positions are theirs, and when the callback comes back it finds them among the
+    moving ones: bit for bit the uninterrupted run."""
+    from types import SimpleNamespace
+
+    push = (PhaseIn("s", (1,)),)
+    block = Group("block", lattice((2, 2, 2), 1.0, origin=(1.0, 0.8, 1.0)), 0.5, kind="body")
+    bed = Group("bed", lattice((40, 1, 6), 1.0), 0.5, kind="leg")
+    ops = {"block": [Force((40.0, -10.0, 0.0), when=push), Collide("bed", Const(50.0), when=push),
+                     Dampen(1.0)],
+           "bed": [Collide("block", Const(20.0), when=push), Dampen(5.0)]}
+    sc = Scene("bed-phases", {"block": block, "bed": bed}, ops,
+               [Phase("push", 60, {"s": 1}), Phase("coast", 30, {"s": 0}),
+                Phase("push", 40, {"s": 1})], dt=0.01)
+    deck = compile_deck(sc, "exact")
+    assert deck.passive == ("bed",) and not deck.callback_natives
+
+    def rest_of_it(run):
+        run.advance(25)                                   # coast: the callback is off
+        after_coast = run.positions(), run.gather_positions()
+        run.enter_phase({"s": 1})
+        run.advance(40)
+        # the resting bed's account of which bed particles move (its search skips them)
+        return after_coast, run.gather_positions(), run.py.bed.active.copy()
+
+    run = LammpsRun(deck, None)
+    try:
+        run.enter_phase({"s": 1})
+        run.advance(60)
+        run.enter_phase({"s": 0})
+        run.advance(5)
+        assert not run._py_on
+        ck = SimpleNamespace(phase_index=1, step=65, x=run.gather_positions(),
+                             v=run.gather_velocities(), f=run.gather_forces())
+        (_, coast_ref), end_ref, bed_ref = rest_of_it(run)
+    finally:
+        run.close()
+    assert (ck.v[sc.slice("bed")] != 0).any(axis=1).sum() >= 5      # bed particles moving
+    run = LammpsRun(deck, None)
+    try:
+        run.restore(ck)
+        np.testing.assert_array_equal(run.positions(), ck.x)
+        (shortcut, gathered), end, bed_now = rest_of_it(run)
+    finally:
+        run.close()
+    np.testing.assert_array_equal(shortcut, gathered)
+    np.testing.assert_array_equal(gathered, coast_ref)
+    np.testing.assert_array_equal(end, end_ref)
+    np.testing.assert_array_equal(bed_now, bed_ref)
+
+
 @pytest.mark.mpi
 @pytest.mark.lammps
 def test_positions_of_a_passive_deck_equal_gathering_every_atom_under_mpi(tmp_path):

@@ -1049,17 +1049,25 @@ class PyForces:
                 self.bed.activated(fr, new)
 
     def _activate_moving(self, fr: Frame) -> None:
-        """Once, at the first call: passive particles already moving (a resumed run) join."""
+        """Once, at the first call: passive particles already moving (a resumed run) join, and
+        the resting bed learns of every passive particle already in the moving group
+        (LammpsRun.restore puts there those the checkpoint holds displaced or moving)."""
         self._scan_moving = False
         if fr.identity and self.span and self.compiled is not None:
             # the passive rows are those after span
             self._activate(fr, self.compiled.moving_rows(fr.v, self.span, fr.nlocal))
-            return
-        own = np.arange(fr.nlocal)
-        own = own[self.passive[fr.index[own]]]
-        v = fr.v[own]
-        moving = own[(v[:, 0] != 0.0) | (v[:, 1] != 0.0) | (v[:, 2] != 0.0)]
-        self._activate(fr, moving)
+        else:
+            own = np.arange(fr.nlocal)
+            own = own[self.passive[fr.index[own]]]
+            v = fr.v[own]
+            self._activate(fr, own[(v[:, 0] != 0.0) | (v[:, 1] != 0.0) | (v[:, 2] != 0.0)])
+        if self.bed is not None:
+            mask = self.lmp.numpy.extract_atom("mask")[:fr.nlocal]
+            rows = np.flatnonzero((mask & self.move_bit) != 0)
+            rows = rows[self.passive[fr.particles(rows)]]
+            rows = rows[~self.bed.active[fr.particles(rows)]]
+            if len(rows):
+                self.bed.activated(fr, rows)
 
     def op_at(self, site):
         return self.scene.operators[site[0]][site[1]]

@@ -135,9 +135,6 @@ class LammpsRun:
         #: atom without it has never moved, so it sits at its original position with v = 0
         self._move_bit = (1 << list(self.lmp.available_ids("group")).index(MOVE_GROUP)
                           if deck.passive else None)
-        #: particles a resumed run found displaced yet at rest (v = 0 exactly), which the
-        #: callback does not re-add to the moving group: (indices, positions), else None
-        self._still = None
         if deck.python_ops:
             self.py = PyForces(self.lmp, deck, self.comm)
 
@@ -504,8 +501,6 @@ class LammpsRun:
         if x:
             out.append(_fresh(n))
             out[0][:] = self.scene.original_positions()
-            if self._still is not None:
-                out[0][self._still[0]] = self._still[1]
         if v:
             out.append(_fresh(n))
         for part in parts:
@@ -587,11 +582,16 @@ class LammpsRun:
         self.scatter("x", ck.x)
         self.scatter("v", ck.v)
         if self._move_bit is not None:
-            # the callback re-adds the moving particles (v ≠ 0) to the moving group; one that
-            # moved and came to rest exactly stays outside it, where it is (_moved_only)
+            # every particle the checkpoint holds displaced or moving was in the moving group of
+            # the uninterrupted run (a resting particle joins it once touched and never leaves):
+            # it joins again here, before the run 0 that reorders the rows, whether or not the
+            # callback runs in this phase (it tells the resting bed at its first call)
             o = self.scene.original_positions()
-            still = np.flatnonzero((ck.x != o).any(axis=1) & ~(ck.v != 0).any(axis=1))
-            self._still = (still, ck.x[still].copy()) if len(still) else None
+            off = (ck.x != o).any(axis=1) | (ck.v != 0).any(axis=1)
+            nlocal = self.lmp.extract_global("nlocal")
+            mask = self.lmp.numpy.extract_atom("mask")[:nlocal]
+            ids = self.lmp.numpy.extract_atom("id")[:nlocal].astype(np.int64) - 1
+            mask[off[ids]] |= self._move_bit
         self.step = int(ck.step)
         self.realign(ck.f)
         self._phase = previous
