@@ -1196,6 +1196,8 @@ class PyForces:
             fr.refresh()
             if self.own is not None:
                 self._own_check(fr, False)
+        if self._scan_moving:       # first call: before any search reads the moving set
+            self._activate_moving(fr)
         self._search_lists(fr)
         return fr
 
@@ -1225,7 +1227,6 @@ class PyForces:
         mpi = self.comm is not None and self.comm.Get_size() > 1
         self._fail_here, self._agreed, fr = None, None, None
         try:
-            old, fresh = self.frame, self._fresh
             fr = self._frame(nlocal)
             self._fresh = False
         except Exception as exc:  # noqa: BLE001 - agreed on below
@@ -1235,7 +1236,7 @@ class PyForces:
         failed = (self._agree(fr, self._fail_here is not None)
                   if mpi and self._contact_keys() else self._fail_here is not None)
         if not failed:
-            self._evaluate(fr, old, f, fresh)
+            self._evaluate(fr, f)
         if mpi:
             from mpi4py import MPI
 
@@ -1251,15 +1252,13 @@ class PyForces:
             # were made before them, and its velocities are not kept (the run stops here)
             self.lmp.force_timeout()
 
-    def _evaluate(self, fr, old, f, fresh=False) -> None:
+    def _evaluate(self, fr, f) -> None:
         """This step's forces of the active terms, added into LAMMPS' force array ``fr.f``
         (LAMMPS cleared it at the start of the step; a failure is kept in _fail_here).
 
         The sums are LAMMPS' own: each row gets f + a·m, as fix external's add pass would have
         done with a·m in its array, so the trajectory is the same bit for bit."""
         try:
-            if fr is not old and self._scan_moving:
-                self._activate_moving(fr)
             out = fr.f
             if self.natives is not None:
                 self._add_natives(fr, out)
