@@ -65,8 +65,9 @@ def test_killed_and_resumed_equals_uninterrupted(tmp_path):
         raise AssertionError("could not kill the run between step 600 and its end")
     assert 600 <= step < 1200
     assert not (cut / "summary.json").exists()
-    # post-processing the killed part writes a stress dump of its frames only ...
-    r = _run(["stress", str(cut)])
+    # post-processing the killed part writes a stress dump of its frames only (the kill may
+    # have landed while LAMMPS wrote a frame: that partial frame is left out, as asked) ...
+    r = _run(["stress", str(cut), "--allow-truncated"])
     assert r.returncode == 0, r.stderr
     assert (cut / "stress.dump").exists()
     r = _run(["run", "--resume", str(cut), "--no-render", "--no-progress"])
