@@ -338,6 +338,22 @@ if nb is not None:
                 acc[arows[k], m] += -c * v[rows[k], m]
 
 
+    @nb.njit(inline="always")
+    def _cell_sort(cell, ncell):
+        """A stable counting sort of points by cell: the cells' starts (CSR, ncell + 1) and
+        the points' indices k in cell order (within a cell, in k order)."""
+        start = np.zeros(ncell + 1, np.int64)
+        for k in range(len(cell)):
+            start[cell[k] + 1] += 1
+        for c in range(ncell):
+            start[c + 1] += start[c]
+        fill = start[:-1].copy()
+        order = np.empty(len(cell), np.int64)
+        for k in range(len(cell)):
+            order[fill[cell[k]]] = k
+            fill[cell[k]] += 1
+        return start, order
+
     @nb.njit(**_OPTS)
     def candidates(x, ia, ib, cut, same, tag, wide):
         """Rows (a in ia, b in ib) closer than ``cut`` (d² ≤ cut², as
@@ -427,21 +443,14 @@ if nb is not None:
         nr = int(np.ceil(wide / size)) if wide > 0.0 else 1
         ncell = nc[0] * nc[1] * nc[2]
         cell = np.empty(nb_, np.int64)
-        count = np.zeros(ncell + 1, np.int64)
         for k in range(nb_):                     # cell (c2 · nc1 + c1) · nc0 + c0: x fastest
             r = ib[keep[k]]
             c0 = min(int((x[r, 0] - blo[0]) / size), nc[0] - 1)
             c1 = min(int((x[r, 1] - blo[1]) / size), nc[1] - 1)
             c2 = min(int((x[r, 2] - blo[2]) / size), nc[2] - 1)
             cell[k] = (c2 * nc[1] + c1) * nc[0] + c0
-            count[cell[k] + 1] += 1
-        for c in range(ncell):
-            count[c + 1] += count[c]
-        fill = count[:-1].copy()
-        order = np.empty(nb_, np.int64)
-        for k in range(nb_):
-            order[fill[cell[k]]] = keep[k]
-            fill[cell[k]] += 1
+        count, by_cell = _cell_sort(cell, ncell)
+        order = keep[by_cell]
         cut2 = cut * cut
         wide2 = wide * wide
         near_a = np.zeros(na_, np.bool_)
@@ -535,22 +544,13 @@ if nb is not None:
         m = len(rows)
         ncell = nc[0] * nc[1] * nc[2]
         cell = np.empty(m, np.int64)
-        start = np.zeros(ncell + 1, np.int64)
         for k in range(m):
             r = rows[k]
             c0 = min(int((x[r, 0] - lo[0]) / size), nc[0] - 1)
             c1 = min(int((x[r, 1] - lo[1]) / size), nc[1] - 1)
             c2 = min(int((x[r, 2] - lo[2]) / size), nc[2] - 1)
             cell[k] = (c0 * nc[1] + c1) * nc[2] + c2
-            start[cell[k] + 1] += 1
-        for c in range(ncell):
-            start[c + 1] += start[c]
-        fill = start[:-1].copy()
-        order = np.empty(m, np.int64)
-        for k in range(m):
-            order[fill[cell[k]]] = k
-            fill[cell[k]] += 1
-        return start, order
+        return _cell_sort(cell, ncell)
 
     @nb.njit(**_OPTS)
     def grid_candidates(x, ia, cut, wide, lo, size, nc, start, order, active, b0, prow,
