@@ -93,3 +93,102 @@ scenes_ = {"gated": gated_collide_scene(), "lazy": lazy_condition_scene()}
     for key, build in (("gated", gated_collide_scene), ("lazy", lazy_condition_scene)):
         p, counts = runs[key]
         assert np.abs(p - _reference(build())).max() <= 1e-10, key
+
+
+class _CountingSearch:
+    """The compiled kernels, counting the searches of lists between moving groups (the resting
+    bed's searches go through RestingBed's own reference to the kernels)."""
+
+    def __init__(self, k):
+        self.k, self.searches = k, 0
+
+    def __getattr__(self, name):
+        if name == "candidates":
+            self.searches += 1
+        return getattr(self.k, name)
+
+
+def racing_rack_scene() -> Scene:
+    """a and b close in at 4 units/time each from 6 apart and touch (d < 1) at step ~63; a
+    third particle in no contact list (a rack's role) flies at 30, so LAMMPS (skin 8)
+    reneighbours every ~13 steps and any global displacement check would fire every ~4."""
+    a = Group("a", np.array([[0.0, 0.0, 0.0]]), 0.5, kind="body", v0=[[4.0, 0.0, 0.0]])
+    b = Group("b", np.array([[6.0, 0.0, 0.0]]), 0.5, kind="body", v0=[[-4.0, 0.0, 0.0]])
+    rack = Group("rack", np.array([[0.0, 30.0, 0.0]]), 0.5, kind="rack", v0=[[30.0, 0.0, 0.0]])
+    ops = {"a": [Collide("b", Const(50.0)), Dampen(0.0, extra=1.0, when=(Contact("b"),))],
+           "b": [Collide("a", Const(20.0))],
+           "bed": [Collide("a", Const(20.0)), Dampen(5.0)]}
+    return Scene("racing-rack", {"a": a, "b": b, "rack": rack, "bed": _bed()}, ops,
+                 [Phase("go", 90, {})], dt=0.01)
+
+
+@pytest.mark.lammps
+@pytest.mark.parametrize("kernels", ["numpy", "numba"])
+def test_a_particle_in_no_list_renews_no_list(kernels, monkeypatch):
+    """Each contact list is renewed by its own particles' motion only (skin 2: once one of
+    them has moved 1, relative to the other group for two moving groups): the (a, b) list is
+    searched about once per 25 steps of their closing in, not every time the fast particle in
+    no list has moved 1 (every ~4 steps), and the contact at step ~63 is seen when it happens:
+    equal to the reference engine to 1e-10."""
+    monkeypatch.setenv("RACKSTRESS_KERNELS", kernels)
+    sc = racing_rack_scene()
+    deck = compile_deck(sc, "exact")
+    assert deck.passive == ("bed",) and deck.lammps_skin == 8.0 and deck.skin == 2.0
+    run = LammpsRun(deck, None, log=False)
+    try:
+        count = None
+        if kernels == "numba":
+            count = run.py.overlaps.k = _CountingSearch(run.py.overlaps.k)
+        drive(run)
+        p = run.gather_positions()
+    finally:
+        run.close()
+    ref = _reference(sc)
+    # they touched and bounced (without the contact they would pass through each other:
+    # gap 6 − 8·0.9 < 0 at the end)
+    assert ref[1, 0] - ref[0, 0] > 0.0
+    assert np.abs(p - ref).max() <= 1e-10
+    if count is not None:   # (measured: 5 searches; a global check: 23)
+        assert 2 <= count.searches <= 8
+
+
+def kicked_bed_scene() -> Scene:
+    """A resting bed particle p overlaps a still kicker k at step 0 (so it is activated before
+    the first step) and is pushed off towards a still particle s, 3.2 away (outside the (s,
+    bed) list: reach + skin = 3); p reaches s (d < 1) after ~2.2 of travel, before it has
+    moved 4 (LAMMPS' half skin): only p moves, so only a renewal of the list driven by the
+    bed's moving particles (not by s, which stands still) sees the contact."""
+    p0 = np.array([0.0, 0.0, 0.0])
+    s = Group("s", np.array([p0 + [3.2, 0.0, 0.0]]), 0.5, kind="body")
+    k = Group("k", np.array([p0 - [0.6, 0.0, 0.0]]), 0.5, kind="body")
+    bed = Group("bed", np.array([p0, p0 + [0.0, -1.0, 0.0], p0 + [0.0, 0.0, -1.0]]), 0.5,
+                kind="leg")
+    # (the contact-conditioned dampings put the collisions in the callback's search)
+    ops = {"s": [Collide("bed", Const(30.0)), Dampen(0.0, extra=1.0, when=(Contact("bed"),))],
+           "k": [Dampen(0.0, extra=1.0, when=(Contact("bed"),))],
+           "bed": [Collide("k", Const(40.0)), Collide("s", Const(30.0)), Dampen(0.1)]}
+    return Scene("kicked-bed", {"s": s, "k": k, "bed": bed}, ops, [Phase("go", 120, {})],
+                 dt=0.01)
+
+
+@pytest.mark.lammps
+@pytest.mark.parametrize("kernels", ["numpy", "numba"])
+def test_a_moving_bed_particle_renews_its_list(kernels, monkeypatch):
+    """A list against a resting group is renewed when one of the group's *moving* particles
+    has moved half a skin, even though the searching group stands still: equal to the
+    reference engine to 1e-10 (renewed only by s's motion or LAMMPS' reneighbouring, the
+    contact is missed)."""
+    monkeypatch.setenv("RACKSTRESS_KERNELS", kernels)
+    sc = kicked_bed_scene()
+    deck = compile_deck(sc, "exact")
+    assert deck.passive == ("bed",) and deck.lammps_skin == 8.0 and deck.skin == 2.0
+    o = sc.original_positions()
+    first = Reference(sc)           # the contact p–s: when, and how far p has travelled
+    for n in range(120):
+        first.advance(1)
+        if np.linalg.norm(first.p[2] - first.p[0]) < 1.0:
+            break
+    assert 2.05 < np.linalg.norm(first.p[2] - o[2]) < 4.0 and (first.p[0] == o[0]).all()
+    ref = _reference(sc)
+    assert np.linalg.norm(ref[0] - o[0]) > 0.01      # p pushed s
+    assert np.abs(_lammps(sc) - ref).max() <= 1e-10

@@ -290,19 +290,35 @@ class _NothingKept(dict):
         return default
 
 
+def _search_every_step(overlaps):
+    """Overlaps.renew replaced by dropping every list at every step: each step searches every
+    list afresh (the brute-force reference of the callback's own renewal)."""
+    def renew(fr):
+        for key in [k for k in fr.memo if k[0] == "cand"]:
+            del fr.memo[key]
+    overlaps.renew = renew
+
+
 @pytest.mark.lammps
-def test_lists_kept_by_relative_motion_equal_fresh_searches(monkeypatch):
-    """The body–leg lists kept while the groups move together (relative motion below half a
-    skin, kernels.moved_below_shifted) give the trajectory of searching every list again at
-    every renewal, bit for bit, over a phase switch of magpod-small, with fewer searches."""
+@pytest.mark.parametrize("active_only", [True, False])
+def test_lists_kept_by_relative_motion_equal_fresh_searches(monkeypatch, active_only):
+    """The lists kept while their own particles have not moved half a skin (the body–leg lists
+    judged by the groups' relative motion, kernels.moved_below_shifted) give the trajectory of
+    searching every list afresh, bit for bit, over a phase switch of magpod-small, with fewer
+    searches. Active only (the callback renews each list itself, Overlaps.renew): against a
+    search of every list at every step. Every particle integrated (LAMMPS' reneighbouring
+    renews the lists): against searching every list again at every reneighbouring."""
     monkeypatch.setenv("RACKSTRESS_KERNELS", "numba")
     scene = scenes.build("magpod-small", phase_steps=200, cycles=1).with_steps(400)
     out = []
     for keep in (True, False):
-        run = LammpsRun(compile_deck(scene, "exact"), None)
+        run = LammpsRun(compile_deck(scene, "exact", active_only=active_only), None)
         try:
+            assert (run.py.overlaps.own is not None) == active_only
             count = run.py.overlaps.k = _CountingSearch(run.py.overlaps.k)
-            if not keep:
+            if not keep and active_only:
+                _search_every_step(run.py.overlaps)
+            elif not keep:
                 run.py.overlaps._kept = _NothingKept()
             run.run_schedule()
             out.append((run.gather_positions(), run.gather_velocities(), count.searches))
@@ -313,3 +329,5 @@ def test_lists_kept_by_relative_motion_equal_fresh_searches(monkeypatch):
     np.testing.assert_array_equal(p, p0)
     np.testing.assert_array_equal(v, v0)
     assert 0 < n < n0
+    if active_only:
+        assert n0 >= 2 * 400 and n < n0 / 4

@@ -832,7 +832,7 @@ def test_resting_bed_search_equals_a_search_over_the_whole_group(monkeypatch):
 @pytest.mark.lammps
 def test_contact_lists_renewed_by_the_callbacks_own_check(monkeypatch):
     """With a resting group in the scene, LAMMPS' skin is 8 and the callback keeps its contact
-    lists with skin 2 by its own displacement check. Two particles 6 apart close in at 4
+    lists with skin 2 by its own displacement check (each list by its own particles'). Two particles 6 apart close in at 4
     units/time each: LAMMPS reneighbours only once an atom has moved 4 (step ~100), the
     callback's lists are searched (reach + 2 skins = 5, beyond 6 at the start) and renewed once
     an atom has moved 1 (step ~25); they touch (d < 1) at step ~63. LAMMPS must see that
@@ -850,13 +850,13 @@ def test_contact_lists_renewed_by_the_callbacks_own_check(monkeypatch):
     deck = compile_deck(sc, "exact")
     assert deck.passive == ("bed",) and deck.lammps_skin == 8.0 and deck.skin == 2.0
     renewed = [0]
-    own_check = cb.PyForces._own_check
+    renew = cb.Overlaps.renew
 
-    def counted(self, fr, new):
-        before = self._xref
-        own_check(self, fr, new)
-        renewed[0] += (not new) and self._xref is not before
-    monkeypatch.setattr(cb.PyForces, "_own_check", counted)
+    def counted(self, fr):
+        before = set(self._lists)
+        renew(self, fr)
+        renewed[0] += len(before - set(self._lists))     # lists dropped: searched again
+    monkeypatch.setattr(cb.Overlaps, "renew", counted)
     run = LammpsRun(deck, None)
     try:
         run.run_schedule()

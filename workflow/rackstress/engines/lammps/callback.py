@@ -373,6 +373,15 @@ class Overlaps:
         #: serial lists between groups whose rows are their particles, with the positions they
         #: were searched at: kept while no atom of the two groups has moved half a skin
         self._kept = {}
+        #: the lists the callback renews itself (``own``): list key → (list, positions its
+        #: particles were searched at, their row ranges, relative test?, its layout's frame
+        #: or None, (h/2)²), see :meth:`renew`
+        self._lists = {}
+        self._packed = None
+        #: the lists' skins where the callback renews them (None: ``own``), see list_skin
+        self.bed_skin = self.moving_skin = None
+        #: LAMMPS integrates only its first ``nfirst`` rows (PyForces keeps this up to date)
+        self.nfirst = len(radius)
 
     def _reach(self, sl: slice) -> float:
         key = (sl.start, sl.stop)
@@ -386,9 +395,11 @@ class Overlaps:
         hit = fr.memo.get(key)
         if hit is not None:
             return hit
+        mine = self.own is not None and fr.identity
         # the lists' skin: LAMMPS' (its reneighbouring renews them), or in serial the
-        # callback's own where LAMMPS' is wider (its own displacement check renews them)
-        h = self.own if self.own is not None and fr.identity else self.skin
+        # callback's own where LAMMPS' is wider (each list renewed by its own displacement
+        # check, :meth:`renew`)
+        h = self.list_skin(A, B) if mine else self.skin
         reach = self._reach(A) + self._reach(B)
         cut = reach + h
         # resting particles join the moving group one LAMMPS reneighbouring early (a partner
@@ -401,16 +412,18 @@ class Overlaps:
         if passive and ("act", A.start, B.start) not in fr.memo:
             wide = reach + 2 * self.skin
             fr.memo[("act", A.start, B.start)] = True
-        stable = self.k is not None and wide == cut and fr.ident(A) and fr.ident(B)
+        stable = (not mine and self.k is not None and wide == cut and fr.ident(A)
+                  and fr.ident(B))
         if stable:
-            # a list of two groups whose rows are their particles is searched with two skins
-            # of margin (reach + 2 skins) and kept at a later reneighbouring while none of
-            # *their* atoms has moved half a skin since the search, once the translation
-            # common to both groups is taken off (kernels.moved_below_shifted: a body and
-            # its legs walk together): until the next reneighbouring each atom then stays
-            # within one skin of where it was searched plus that translation (LAMMPS
-            # reneighbours once any atom has moved half a skin), so a pair can have closed by
-            # less than two skins and none outside the list can be within reach
+            # (LAMMPS' skin renews the lists) a list of two groups whose rows are their
+            # particles is searched with two skins of margin (reach + 2 skins) and kept at a
+            # later reneighbouring while none of *their* atoms has moved half a skin since the
+            # search, once the translation common to both groups is taken off
+            # (kernels.moved_below_shifted: a body and its legs walk together): until the
+            # next reneighbouring each atom then stays within one skin of where it was
+            # searched plus that translation (LAMMPS reneighbours once any atom has moved half
+            # a skin), so a pair can have closed by less than two skins and none outside the
+            # list can be within reach
             kept = self._kept.get((A.start, B.start))
             if kept is not None and self.k.moved_below_shifted(
                     fr.x, A.start, A.stop - A.start, B.start, B.stop - B.start, kept[0],
@@ -447,7 +460,102 @@ class Overlaps:
         hit = fr.memo[key] = (a, b, R2)
         if stable:
             self._kept[(A.start, B.start)] = (np.concatenate([fr.x[A], fr.x[B]]), hit)
+        if mine:
+            self._remember(fr, key, A, B, hit, h)
         return hit
+
+    def list_skin(self, A: slice, B: slice) -> float:
+        """The skin of the list of groups A and B when the callback renews it itself: a list
+        against a passive group (the bed under a sole) ``bed_skin``, else ``moving_skin``
+        (both the deck's ``skin`` unless set)."""
+        if self._passive(A, B):
+            return self.own if self.bed_skin is None else self.bed_skin
+        return self.own if self.moving_skin is None else self.moving_skin
+
+    def _segments(self, fr: Frame, A: slice, B: slice):
+        """The rows whose motion can change the list of A and B (at most two ranges, as
+        (start, stop)): a group whose rows are its particles, its rows; a passive group,
+        the rows LAMMPS integrates after ``fr.span`` (its activated particles; the resting
+        ones, at rows LAMMPS does not integrate, stay where they are until it reorders,
+        which makes a new layout and a new search)."""
+        segs = []
+        for G in (A, B):
+            seg = ((G.start, G.stop) if fr.ident(G)
+                   else (fr.span, max(fr.span, min(self.nfirst, fr.nlocal))))
+            if seg not in segs:
+                segs.append(seg)
+        return segs
+
+    def _remember(self, fr: Frame, key, A: slice, B: slice, hit, h: float) -> None:
+        """Keep a list the callback renews itself, with where its particles were searched.
+
+        A list of two groups whose rows are their particles (a body and a leg) is kept across
+        LAMMPS' reneighbourings (its rows do not change) and judged by the two groups'
+        motion relative to each other (``shifted``); a list against a passive group holds
+        rows LAMMPS reorders, so it lives as long as the layout, and the resting particles in
+        it do not move, so its particles' own displacement is measured."""
+        segs = self._segments(fr, A, B)
+        ref = np.concatenate([fr.x[s0:s1] for s0, s1 in segs])
+        shifted = fr.ident(A) and fr.ident(B)
+        # h/2 less a margin far above rounding (1e-6 relative), as the step's near sets
+        lim2 = (0.5 * h * (1.0 - 1e-6)) ** 2
+        self._lists[key] = (hit, ref, segs, shifted, None if shifted else fr, lim2)
+        self._packed = None
+
+    def renew(self, fr: Frame) -> None:
+        """Drop from ``fr.memo`` every list the callback renews itself that may now miss a
+        pair within reach (the next use searches it again); put back, in a new layout's
+        frame, those still good from an earlier one. Once a step, before any list is used.
+
+        A list's particles (:meth:`_segments`) that were not in it were farther apart than
+        reach + h when it was searched; while each has moved at most h/2 since (for two
+        moving groups once the translation common to them is taken off: distances then
+        change by at most twice the bound, see :func:`kernels.moved_below_shifted`), no pair
+        outside it has closed in by h, so it holds every pair within reach. Only the list's
+        own particles count: a particle in no list (a rack) never renews one, and a list
+        whose groups stand still relative to each other is kept however far they travel."""
+        if not self._lists:
+            return
+        stale = [key for key, st in self._lists.items()
+                 if st[4] is not None and st[4] is not fr]
+        for key in stale:       # lists of rows from another layout
+            del self._lists[key]
+            self._packed = None
+        if not self._lists:
+            return
+        if self._packed is None:
+            keys = list(self._lists)
+            segs = np.zeros((len(keys), 4), np.int64)
+            for L, key in enumerate(keys):
+                sg = self._lists[key][2]
+                segs[L, :2] = sg[0]
+                if len(sg) > 1:
+                    segs[L, 2:] = sg[1]
+            refs = [self._lists[key][1] for key in keys]
+            self._packed = (keys, segs,
+                            np.cumsum([0] + [len(r) for r in refs]).astype(np.int64),
+                            np.ascontiguousarray(np.concatenate(refs)),
+                            np.array([self._lists[key][3] for key in keys], np.bool_),
+                            np.zeros((len(keys), 3)),
+                            np.array([self._lists[key][5] for key in keys]),
+                            np.zeros(len(keys), np.bool_))
+        keys, segs, roff, ref, shifted, shift, lim2, moved = self._packed
+        if self.k is not None:
+            self.k.lists_moved(fr.x, segs, roff, ref, shifted, shift, lim2, moved)
+        else:
+            for L in range(len(keys)):
+                s0, s1, s2, s3 = segs[L]
+                d = np.concatenate([fr.x[s0:s1], fr.x[s2:s3]]) - ref[roff[L]:roff[L + 1]]
+                if shifted[L] and len(d):
+                    d = d - 0.5 * (d.min(axis=0) + d.max(axis=0))
+                moved[L] = len(d) and not rowdot(d, d).max() <= lim2[L]
+        for L, key in enumerate(keys):
+            if moved[L]:
+                del self._lists[key]
+                fr.memo.pop(key, None)
+                self._packed = None
+            else:
+                fr.memo[key] = self._lists[key][0]
 
     def _any_passive(self, A: slice) -> bool:
         key = ("any passive", A.start, A.stop)
@@ -978,7 +1086,6 @@ class PyForces:
         lammps_skin = getattr(deck, "lammps_skin", own)
         #: serial, LAMMPS' skin wider than the lists': the lists' own displacement check
         self.own = own if own != lammps_skin else None
-        self._xref = None
         self.overlaps = Overlaps(self.radius, lammps_skin, self.compiled,
                                  self._activate if self.move_bit is not None else None,
                                  self.passive, self.bed, self.own)
@@ -1188,39 +1295,17 @@ class PyForces:
                 self.nfirst = _leading(lmp.numpy.extract_atom("mask"), self.move_bit, nlocal)
             fr = self.frame = Frame(lmp, self.n, nlocal, self.dense_span, self.mass, self.span)
             self._nghost = _global_int(lmp, "nghost")
+            self.overlaps.nfirst = self.nfirst
             if self.bed is not None:
                 self.bed.relayout(fr, self.nfirst)
-            if self.own is not None:
-                self._own_check(fr, True)
         else:
             fr.refresh()
-            if self.own is not None:
-                self._own_check(fr, False)
+        if self.own is not None:    # serial: each list renewed by its own particles' motion
+            self.overlaps.renew(fr)
         if self._scan_moving:       # first call: before any search reads the moving set
             self._activate_moving(fr)
         self._search_lists(fr)
         return fr
-
-    def _own_check(self, fr: Frame, new: bool) -> None:
-        """Serial, LAMMPS' skin wider than the contact lists' (Deck.neighbor_skin): the lists
-        are searched again once any atom has moved half the lists' skin since they were, as
-        LAMMPS' own check would with that skin. Only LAMMPS' first ``nfirst`` rows move (the
-        later ones rest until LAMMPS reorders them, which makes a new layout)."""
-        if not fr.identity:
-            return
-        n = min(self.nfirst, fr.nlocal)
-        if not new and self._xref is not None and len(self._xref) == n:
-            lim2 = 0.25 * self.own * self.own
-            if self.compiled is not None:
-                kept = self.compiled.moved_below(fr.x, 0, n, 0, 0, self._xref, lim2)
-            else:
-                d = fr.x[:n] - self._xref
-                kept = not len(d) or rowdot(d, d).max() <= lim2
-            if kept:
-                return
-            for key in [k for k in fr.memo if k[0] == "cand"]:
-                del fr.memo[key]
-        self._xref = np.array(fr.x[:n])
 
     # ------------------------------------------------------------------ callback
     def __call__(self, caller, step, nlocal, tag, x, f):
