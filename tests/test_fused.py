@@ -243,6 +243,46 @@ def test_candidate_search_equals_a_full_search():
     assert found > 1000 and first > 20
 
 
+def test_bed_join_equals_sorting_the_joined_pairs():
+    """kernels.bed_join (the resting bed's two searches merged in compiled code) gives what
+    sorting the joined pairs by particles (np.lexsort) and uniting the near rows (np.union1d,
+    np.unique) gives: searching rows in particle order, resting partners in any order (a
+    grid's cells), activated ones sorted, rows not in particle order on the bed's side."""
+    rng = np.random.default_rng(3)
+    for trial in range(200):
+        n = int(rng.integers(5, 120))
+        na = int(rng.integers(1, n))
+        tag = np.concatenate([np.arange(1, na + 1), na + 1 + rng.permutation(n - na)])
+        tag = tag.astype(np.int32)
+        ia = np.arange(na, dtype=np.int64)
+        bed = np.arange(na, n)
+        sa, sb, da, db = [], [], [], []
+        for a in ia:                       # grouped by searching row, in ia's order
+            part = rng.permutation(bed)[: int(rng.integers(0, 6))]
+            k = int(rng.integers(0, len(part) + 1))
+            sa += [a] * k
+            sb += list(part[:k])                                # resting: cell order
+            act = part[k:]
+            act = act[np.argsort(tag[act])]
+            da += [a] * len(act)
+            db += list(act)                                     # activated: sorted
+        sa, sb, da, db = (np.array(v, np.int64) for v in (sa, sb, da, db))
+        snear_a = rng.random(na) < 0.3
+        snear_b = rng.choice(bed, size=int(rng.integers(0, 30)))
+        dnear_a = np.unique(rng.choice(ia, size=int(rng.integers(0, 5)))).astype(np.int64)
+        dnear_b = rng.choice(bed, size=int(rng.integers(0, 5))).astype(np.int64)
+        flag = np.zeros(n, np.bool_)
+        a, b, near_a, near_b = K.bed_join(ia, sa, sb, snear_a, snear_b, da, db, dnear_a,
+                                          dnear_b, tag, flag)
+        ja, jb = np.concatenate([sa, da]), np.concatenate([sb, db])
+        order = np.lexsort((tag[jb], tag[ja]))
+        np.testing.assert_array_equal(a, ja[order])
+        np.testing.assert_array_equal(b, jb[order])
+        np.testing.assert_array_equal(near_a, np.union1d(ia[snear_a], dnear_a))
+        np.testing.assert_array_equal(near_b, np.concatenate([np.unique(snear_b), dnear_b]))
+        assert not flag.any()
+
+
 def test_relative_motion_check():
     """kernels.moved_below_shifted: a translation common to both groups is not motion (a body
     and a leg walking together keep their list); a displacement of one particle relative to

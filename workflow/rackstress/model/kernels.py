@@ -105,6 +105,7 @@ def warm() -> dict:
     k.candidates(x, r, s, 2.0, False, tag, 3.0)
     k.overlapping(x, r, s, np.full(2, 4.0))
     k.moved_below(x, 0, 1, 1, 2, x.copy(), 1.0)
+    k.bed_join(r, r, s, np.ones(2, np.bool_), s, r, s, r, s, tag, np.zeros(3, np.bool_))
     k.moved_below_shifted(x, 0, 1, 1, 2, x.copy(), 1.0)
     k.lists_moved(x, np.array([[0, 1, 1, 3]], np.int64), np.array([0, 3], np.int64), x.copy(),
                   np.ones(1, np.bool_), np.zeros((1, 3)), np.ones(1), np.zeros(1, np.bool_))
@@ -623,6 +624,98 @@ if nb is not None:
                                 ob[n] = r
                                 n += 1
         return oa[:n], ob[:n], near_a, nbr[:m], False
+
+    @nb.njit(**_OPTS)
+    def bed_join(ia, sa, sb, snear_a, snear_b, da, db, dnear_a, dnear_b, tag, flag):
+        """The resting bed's search as one search over the whole group would give it
+        (:meth:`RestingBed.candidates`): the pairs from the grid of resting particles
+        (``sa, sb``: grouped by searching row in the order of ``ia``, which is by particle;
+        partners in cell order) and from the activated ones (``da, db``: sorted by particles),
+        merged in particle order (a, then b: ``tag`` is a row's atom id); the searching rows
+        with a partner (``ia[snear_a]`` and ``dnear_a``, once each, in row order); the
+        resting rows within reach (``snear_b``, repeated: once each, in row order) and then
+        ``dnear_b``. ``flag``: False over every row (left so)."""
+        n = len(sa) + len(da)
+        oa = np.empty(n, np.int64)
+        ob = np.empty(n, np.int64)
+        m = 0
+        i = 0
+        j = 0
+        while i < len(sa) or j < len(da):
+            # the next searching row: the smaller particle of the two heads
+            if j >= len(da) or (i < len(sa) and tag[sa[i]] <= tag[da[j]]):
+                a = sa[i]
+            else:
+                a = da[j]
+            first = m
+            while i < len(sa) and sa[i] == a:   # its resting partners, by particle
+                b = sb[i]
+                t = tag[b]
+                k = m
+                while k > first and tag[ob[k - 1]] > t:
+                    ob[k] = ob[k - 1]
+                    k -= 1
+                ob[k] = b
+                oa[m] = a
+                m += 1
+                i += 1
+            mid = m
+            while j < len(da) and da[j] == a:   # its activated partners (sorted): merged
+                b = db[j]
+                t = tag[b]
+                k = m
+                while k > mid and tag[ob[k - 1]] > t:
+                    ob[k] = ob[k - 1]
+                    k -= 1
+                ob[k] = b
+                oa[m] = a
+                m += 1
+                j += 1
+            if mid > first and m > mid:         # both kinds: one insertion pass over all
+                for q in range(first + 1, m):
+                    b = ob[q]
+                    t = tag[b]
+                    k = q
+                    while k > first and tag[ob[k - 1]] > t:
+                        ob[k] = ob[k - 1]
+                        k -= 1
+                    ob[k] = b
+        na = 0
+        for k in range(len(ia)):
+            if snear_a[k] and not flag[ia[k]]:
+                flag[ia[k]] = True
+                na += 1
+        for k in range(len(dnear_a)):
+            if not flag[dnear_a[k]]:
+                flag[dnear_a[k]] = True
+                na += 1
+        near_a = np.empty(na, np.int64)
+        q = 0
+        for k in range(len(ia)):
+            if snear_a[k] and flag[ia[k]]:
+                flag[ia[k]] = False
+                near_a[q] = ia[k]
+                q += 1
+        for k in range(len(dnear_a)):
+            if flag[dnear_a[k]]:
+                flag[dnear_a[k]] = False
+                near_a[q] = dnear_a[k]
+                q += 1
+        near_a = np.sort(near_a)
+        nb_ = 0
+        rows = np.empty(len(snear_b), np.int64)
+        for k in range(len(snear_b)):
+            r = snear_b[k]
+            if not flag[r]:
+                flag[r] = True
+                rows[nb_] = r
+                nb_ += 1
+        for k in range(nb_):
+            flag[rows[k]] = False
+        near_b = np.empty(nb_ + len(dnear_b), np.int64)
+        near_b[:nb_] = np.sort(rows[:nb_])
+        near_b[nb_:] = dnear_b
+        return oa[:m], ob[:m], near_a, near_b
 
     @nb.njit(**_OPTS)
     def moved_below(x, a0, na, b0, nb_, ref, lim2):

@@ -629,6 +629,8 @@ class RestingBed:
         self._nfirst = 0
         #: (group start, stop) → (lo, cell size, cells per axis, cell starts, order)
         self._grids = {}
+        #: a False flag per row (scratch of kernels.bed_join)
+        self._flag = np.zeros(0, dtype=np.bool_)
 
     def activated(self, fr: Frame, rows: np.ndarray) -> None:
         """Rows of passive particles just added to the moving group."""
@@ -694,15 +696,11 @@ class RestingBed:
         # their near rows are only the pairs' own: searched within cut, not wide (which is
         # reach + 2 of LAMMPS' skins at a layout's first search, 18 units in MagPod)
         da, db, dnear_a, dnear_b = self.k.candidates(fr.x, ia, rows, cut, False, fr.tag, cut)
-        a, b = np.concatenate([sa, da]), np.concatenate([sb, db])
-        order = np.lexsort((fr.tag[b], fr.tag[a]))
-        near_a = np.union1d(ia[snear_a], dnear_a)
-        # the resting rows within wide, once each, in row order (np.unique's result, by a
-        # flag per row: snear_b repeats a row for every searching row near it)
-        flag = np.zeros(fr.nlocal, dtype=bool)
-        flag[snear_b] = True
-        near_b = np.concatenate([np.flatnonzero(flag), dnear_b])
-        return a[order], b[order], near_a, near_b
+        # merged in particle order, the near rows once each (kernels.bed_join)
+        if len(self._flag) < fr.nlocal:
+            self._flag = np.zeros(fr.nlocal, dtype=np.bool_)
+        return self.k.bed_join(ia, sa, sb, snear_a, snear_b, da, db, dnear_a, dnear_b, fr.tag,
+                               self._flag)
 
 
 # ----------------------------------------------------------------------------- terms
