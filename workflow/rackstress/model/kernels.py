@@ -110,11 +110,16 @@ def warm() -> dict:
     k.lists_moved(x, np.array([[0, 1, 1, 3]], np.int64), np.array([0, 3], np.int64), x.copy(),
                   np.ones(1, np.bool_), np.zeros((1, 3)), np.ones(1), np.zeros(1, np.bool_))
     k.passive_rows(tag, 1, 3, np.zeros(2, np.int64))
+    k.count_from(np.zeros(2, np.int64), 1)
     k.moving_rows(x, 0, 3)
     rows3 = np.arange(3, dtype=np.int64)
+    k.bbox_points(x)
     k.bbox_rows(x, rows3)
+    o = x.copy()
+    o.flags.writeable = False       # as Scene.original_positions() is
     lo, nc = np.full(3, -1.0), np.array([2, 2, 2], np.int64)
-    start, order = k.grid_build(x, rows3, lo, 2.0, nc)
+    start, order = k.grid_build(o, lo, np.full(3, 3.0), 2.0, nc)
+    k.bbox_points(o)
     k.grid_candidates(x, r, 2.0, 3.0, lo, 2.0, nc, start, order, np.zeros(3, np.bool_), 0,
                       rows3, 0, tag, 3)
     flag, nt = np.zeros(3, np.bool_), np.zeros(1, np.int64)
@@ -515,6 +520,12 @@ if nb is not None:
             prow[tag[r] - 1 - span] = r
 
     @nb.njit(**_OPTS)
+    def count_from(out, start):
+        """out[k] = start + k (np.arange into a given array)."""
+        for k in range(len(out)):
+            out[k] = start + k
+
+    @nb.njit(**_OPTS)
     def moving_rows(v, start, stop):
         """Rows in start..stop with a nonzero velocity."""
         out = np.empty(stop - start, np.int64)
@@ -540,30 +551,51 @@ if nb is not None:
         return lo, hi
 
     @nb.njit(**_OPTS)
-    def grid_build(x, rows, lo, size, nc):
-        """A cell grid of the points x[rows] (which stay where they are): cell starts (CSR)
-        and the points' indices k in cell order (cells of edge ``size`` from ``lo``, ``nc``
-        per axis, x slowest)."""
-        m = len(rows)
+    def bbox_points(p):
+        """The bounding box (lo, hi) of the points p (m, 3)."""
+        lo = np.full(3, np.inf)
+        hi = np.full(3, -np.inf)
+        for k in range(p.shape[0]):
+            for d in range(3):
+                v = p[k, d]
+                if v < lo[d]:
+                    lo[d] = v
+                if v > hi[d]:
+                    hi[d] = v
+        return lo, hi
+
+    @nb.njit(**_OPTS)
+    def grid_build(p, lo, hi, size, nc):
+        """A cell grid of the points p (m, 3) inside the box lo..hi (which stay where they
+        are): cell starts (CSR) and the indices k of those points in cell order (cells of edge
+        ``size`` from ``lo``, ``nc`` per axis, x slowest)."""
+        m = p.shape[0]
         ncell = nc[0] * nc[1] * nc[2]
         cell = np.empty(m, np.int64)
+        idx = np.empty(m, np.int64)
+        n = 0
         for k in range(m):
-            r = rows[k]
-            c0 = min(int((x[r, 0] - lo[0]) / size), nc[0] - 1)
-            c1 = min(int((x[r, 1] - lo[1]) / size), nc[1] - 1)
-            c2 = min(int((x[r, 2] - lo[2]) / size), nc[2] - 1)
-            cell[k] = (c0 * nc[1] + c1) * nc[2] + c2
-        return _cell_sort(cell, ncell)
+            if not (p[k, 0] >= lo[0] and p[k, 0] <= hi[0] and p[k, 1] >= lo[1]
+                    and p[k, 1] <= hi[1] and p[k, 2] >= lo[2] and p[k, 2] <= hi[2]):
+                continue
+            c0 = min(int((p[k, 0] - lo[0]) / size), nc[0] - 1)
+            c1 = min(int((p[k, 1] - lo[1]) / size), nc[1] - 1)
+            c2 = min(int((p[k, 2] - lo[2]) / size), nc[2] - 1)
+            cell[n] = (c0 * nc[1] + c1) * nc[2] + c2
+            idx[n] = k
+            n += 1
+        start, order = _cell_sort(cell[:n], ncell)
+        return start, idx[order]
 
     @nb.njit(**_OPTS)
     def grid_candidates(x, ia, cut, wide, lo, size, nc, start, order, active, b0, prow,
                         span, tag, nlocal):
         """:func:`candidates` of rows ``ia`` against the resting particles of a group in a
-        grid of :func:`grid_build` (point k: particle b0 + k, at x[prow[b0 + k − span]], which
-        has not moved since; the ``active`` ones skipped): unsorted pairs (rows), which rows
-        of ia have a partner within ``wide``, the rows of the group's particles within
-        ``wide`` (repeated), and whether a particle's row (``prow[p − span]``) did not hold it
-        (atom id ``tag``)."""
+        grid of :func:`grid_build` (point k: particle b0 + k, at x[prow[b0 + k − span]], where
+        it has been since the start; the ``active`` ones skipped): pairs (rows) grouped by the
+        searching row in the order of ``ia``, which rows of ia have a partner within ``wide``,
+        the rows of the group's particles within ``wide`` (repeated), and whether a
+        particle's row (``prow[p − span]``) did not hold it (atom id ``tag``)."""
         cut2 = cut * cut
         wide2 = wide * wide
         near_a = np.zeros(len(ia), np.bool_)

@@ -436,7 +436,7 @@ class Overlaps:
             # a group whose rows are its particles against a passive group: the resting
             # particles from the bed's grid, the activated ones from a cell list of their own
             ia = fr.seen(A)
-            a, b, near_a, near_b = self.bed.candidates(fr, ia, B, cut, wide)
+            a, b, near_a, near_b = self.bed.candidates(fr, ia, B, cut, wide, A)
         elif self.k is not None:      # a compiled cell list
             ia, ib = fr.seen(A), fr.seen(B)
             a, b, near_a, near_b = self.k.candidates(fr.x, ia, ib, cut, A == B, fr.tag, wide)
@@ -606,20 +606,25 @@ class RestingBed:
 
     A resting particle never moves until it is activated (Eq. 5 leaves a particle with zero
     velocity and force where it is), so each passive group's particles go into a cell grid
-    once, at the positions LAMMPS has them (read from LAMMPS' rows when searched); a search against the group then visits only the
-    cells near the searching particles and skips the activated ones, which are searched apart
-    in a cell list of their own (they are few). The pairs found, and their order (by the
-    particles), are those of a search over every particle of the group.
+    once, at their original positions (where LAMMPS holds every resting one); a search
+    against the group then visits only the cells near the searching particles and skips the
+    activated ones, which are searched apart in a cell list of their own (they are few). The
+    pairs found, and their order (by the particles), are those of a search over every
+    particle of the group; the two are merged in compiled code (:func:`kernels.bed_join`).
 
     LAMMPS reorders the passive rows when it reneighbours (``atom_modify first``), so the row
     of each passive particle is kept in ``prow``, brought up to date at each new layout from
     the only rows a reordering changes: those it moved the activated particles to (from the
     old ``nfirst`` to the new) and those they came from. Every row taken from it is checked
-    against LAMMPS' atom id; a mismatch rebuilds it from scratch.
+    against LAMMPS' atom id; a mismatch rebuilds it from scratch. It starts as the order
+    LAMMPS reads the particles in (row p holds particle p), which holds at a fresh run's
+    first search; after a resumed run's reordering the first check rebuilds it.
     """
 
-    def __init__(self, n: int, span: int, compiled):
+    def __init__(self, n: int, span: int, compiled, origin: np.ndarray):
         self.n, self.span, self.k = n, span, compiled
+        #: every particle's original position (the scene's, read-only)
+        self.origin = origin
         #: row of every passive particle (index − span), or None until first needed
         self.prow = None
         #: activated particles (global index), and their rows when activated
@@ -627,7 +632,8 @@ class RestingBed:
         self._act = []
         self._pending = []
         self._nfirst = 0
-        #: (group start, stop) → (lo, cell size, cells per axis, cell starts, order)
+        #: (group start, stop, searching group's start) → (lo, cell size, cells per axis,
+        #: cell starts, order, hi)
         self._grids = {}
         #: a False flag per row (scratch of kernels.bed_join)
         self._flag = np.zeros(0, dtype=np.bool_)
@@ -651,31 +657,50 @@ class RestingBed:
         """``prow`` read from this layout (the rows activated in it stay pending: LAMMPS'
         next reordering moves other particles there)."""
         if self.prow is None:
-            self.prow = np.empty(self.n - self.span, dtype=np.int64)
+            self.prow = _fresh_int64(self.n - self.span)
         self.k.passive_rows(fr.tag, self.span, fr.nlocal, self.prow)
 
-    def _grid(self, fr: Frame, B: slice, size: float):
-        key = (B.start, B.stop)
-        if key not in self._grids:
-            rows = self.prow[B.start - self.span:B.stop - self.span]
-            if rows.min() < 0 or not np.array_equal(fr.tag[rows],
-                                                    np.arange(B.start + 1, B.stop + 1)):
-                self._rebuild(fr)
-                rows = self.prow[B.start - self.span:B.stop - self.span]
-            lo, hi = self.k.bbox_rows(fr.x, rows)
-            lo = lo - 1.0
-            nc = (np.floor((hi + 1.0 - lo) / size).astype(np.int64) + 1)
-            start, order = self.k.grid_build(fr.x, rows, lo, size, nc)
-            self._grids[key] = (lo, size, nc, start, order)
-        return self._grids[key]
+    def _grid(self, fr: Frame, B: slice, ia: np.ndarray, wide: float, A: slice | None):
+        """The grid of group B's particles at their original positions, where every resting
+        one still is (Eq. 5 leaves a particle with zero velocity and force where it is;
+        LAMMPS holds them bit for bit as read, which the passive decks' gathered positions
+        rely on too), built from the scene's contiguous array, not from LAMMPS' rows.
 
-    def candidates(self, fr: Frame, ia: np.ndarray, B: slice, cut: float, wide: float):
+        It holds the particles inside a box: round the searching rows ``ia`` grown by
+        ``wide`` and twice the first search's reach (its cell size) beyond, and is built
+        again, round the rows then, when a search would reach beyond it (every particle
+        within ``wide`` of a searching row must be in it): a million-particle bed is not
+        sorted into cells for the few thousand under the soles. One grid per searching
+        group A (a sole walks, the other stands)."""
+        key = (B.start, B.stop, None if A is None else A.start)
+        g = self._grids.get(key)
+        qlo, qhi = self.k.bbox_rows(fr.x, ia)
+        if not (np.isfinite(qlo).all() and np.isfinite(qhi).all()):
+            qlo, qhi = self.k.bbox_points(self.origin[B])        # (no searching rows)
+        if g is not None and (qlo - wide - 1.0 >= g[0]).all() and (qhi + wide + 1.0 <= g[5]).all():
+            return g
+        size = wide if g is None else g[1]
+        lo, hi = qlo - (wide + 2.0 * size + 1.0), qhi + (wide + 2.0 * size + 1.0)
+        nc = (np.floor((hi - lo) / size).astype(np.int64) + 1)
+        start, order = self.k.grid_build(self.origin[B], lo, hi, size, nc)
+        g = self._grids[key] = (lo, size, nc, start, order, hi)
+        return g
+
+    def candidates(self, fr: Frame, ia: np.ndarray, B: slice, cut: float, wide: float,
+                   A: slice | None = None):
         """As :func:`kernels.candidates` of ``ia`` against every particle of passive group
-        ``B`` (rows, sorted by particles; near rows of both sides)."""
+        ``B`` (rows, sorted by particles; near rows of both sides); ``A``: the searching
+        group (each has a grid of its own)."""
         for attempt in (0, 1):
-            if self.prow is None or attempt:
+            if self.prow is None:
+                # LAMMPS reads the particles in order: row p holds particle p until it
+                # reorders, and relayout follows every reordering from the first frame on;
+                # each row used is checked against LAMMPS' atom id (a miss rebuilds it)
+                self.prow = _fresh_int64(self.n - self.span)
+                self.k.count_from(self.prow, self.span)
+            elif attempt:
                 self._rebuild(fr)
-            lo, size, nc, start, order = self._grid(fr, B, wide)
+            lo, size, nc, start, order = self._grid(fr, B, ia, wide, A)[:5]
             sa, sb, snear_a, snear_b, bad = self.k.grid_candidates(
                 fr.x, ia, cut, wide, lo, size, nc, start, order, self.active, B.start,
                 self.prow, self.span, fr.tag, fr.nlocal)
@@ -701,6 +726,13 @@ class RestingBed:
             self._flag = np.zeros(fr.nlocal, dtype=np.bool_)
         return self.k.bed_join(ia, sa, sb, snear_a, snear_b, da, db, dnear_a, dnear_b, fr.tag,
                                self._flag)
+
+
+def _fresh_int64(n: int) -> np.ndarray:
+    """A new int64 array of n zeros in memory NumPy has not advised the kernel to back with
+    huge pages (its first touch, 8 MB for a million resting particles, took ~19 ms as
+    np.arange here against a few; see the runner's ``_fresh``)."""
+    return np.frombuffer(bytearray(8 * n), dtype=np.int64)
 
 
 # ----------------------------------------------------------------------------- terms
@@ -1070,6 +1102,7 @@ class PyForces:
             self.passive[self.scene.slice(name)] = True
         self.move_bit = self._move_bit(lmp, deck) if self.passive.any() else None
         self._scan_moving = self.move_bit is not None   # once: a resumed run's moving ones
+        self._mask = None        # (frame, LAMMPS' mask array) of the last activation
         #: rows below this are particles (serial): every group before the passive ones, which
         #: LAMMPS keeps first (they are never reordered) when the passive groups come last
         first_passive = min((self.scene.offset(g) for g in getattr(deck, "passive", ())),
@@ -1077,7 +1110,8 @@ class PyForces:
         self.span = first_passive if not self.passive[:first_passive].any() and \
             self.passive[first_passive:].all() else 0
         serial = comm is None or comm.Get_size() == 1
-        self.bed = (RestingBed(self.n, self.span, self.compiled)
+        self.bed = (RestingBed(self.n, self.span, self.compiled,
+                               self.scene.original_positions())
                     if self.move_bit is not None and self.span and self.compiled is not None
                     and serial else None)
         own = getattr(deck, "skin", None)
@@ -1145,7 +1179,11 @@ class PyForces:
         own = rows[rows < fr.nlocal]
         own = own[self.passive[fr.particles(own)]]
         if len(own):
-            mask = self.lmp.numpy.extract_atom("mask")
+            if self._mask is None or self._mask[0] is not fr:
+                # LAMMPS reallocates its per-atom arrays only when it reneighbours (a new
+                # frame): one view a frame (extract_atom costs tens of µs)
+                self._mask = (fr, self.lmp.numpy.extract_atom("mask"))
+            mask = self._mask[1]
             new = own[(mask[own] & self.move_bit) == 0]
             if len(new) and new.max() >= self.nfirst:
                 self.activated_late = True   # integrated from LAMMPS' next reordering on
