@@ -135,7 +135,23 @@ def test_a_particle_in_no_list_renews_no_list(kernels, monkeypatch):
     searched once per 25 steps of their closing in, not every time the fast particle in no
     list has moved 1 (every ~4 steps), and the contact at step 77 is seen when it happens:
     equal to the reference engine to 1e-10."""
+    from rackstress.engines.lammps import callback as cb
+
     monkeypatch.setenv("RACKSTRESS_KERNELS", kernels)
+    # every list of the phase is searched (or kept) at each layout's first step, though the
+    # (a, b) list kept from the layout before is there already: the (a, bed) list makes the
+    # layout's activation search then
+    frame, layouts = cb.PyForces._frame, []
+
+    def checked(self, nlocal):
+        fr = frame(self, nlocal)
+        if not layouts or layouts[-1] is not fr:
+            layouts.append(fr)
+            missing = [AB for AB in self._phase_lists()
+                       if ("cand", AB[0].start, AB[1].start) not in fr.memo]
+            assert not missing, f"lists not searched at a layout's first step: {missing}"
+        return fr
+    monkeypatch.setattr(cb.PyForces, "_frame", checked)
     sc = racing_rack_scene()
     deck = compile_deck(sc, "exact")
     assert deck.passive == ("bed",) and deck.lammps_skin == 8.0 and deck.skin == 2.0
@@ -154,6 +170,7 @@ def test_a_particle_in_no_list_renews_no_list(kernels, monkeypatch):
     # gap 7.05 − 8·1.1 < 0 at the end)
     assert ref[1, 0] - ref[0, 0] > 0.0
     assert np.abs(p - ref).max() <= 1e-10
+    assert len(layouts) >= 6
     if pair is not None:
         # measured: 4 and 8 (the bed's list also at each of LAMMPS' ~8 reneighbourings);
         # renewed whenever any particle has moved 1: 4 (kept by relative motion) and 32

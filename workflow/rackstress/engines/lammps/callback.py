@@ -351,15 +351,16 @@ class Overlaps:
     step only measures the candidates (``Collide.touching``). Shared by the collide terms of
     both directions and by the contact conditions (Eq. 28's damping) of the same two groups.
     Where LAMMPS' skin is wider than the lists' (a deck with passive groups, serial), the lists
-    keep their own skin ``own`` and are searched again when the callback's own check finds that
-    an atom has moved half of it (``PyForces._own_check``), as LAMMPS would with that skin.
+    keep their own skin (``own``; :meth:`list_skin`) and each is searched again once one of its
+    own particles has moved half of it (:meth:`renew`, once a step): a particle in no list
+    never renews one, and two groups walking together keep theirs.
     """
 
     def __init__(self, radius: np.ndarray, skin: float, compiled=None, activate=None,
                  passive=None, bed=None, own=None):
         self.radius, self.skin, self.k = radius, skin, compiled
-        #: serial, when LAMMPS' skin (``skin``) is wider: the callback's own skin, its lists
-        #: searched again whenever an atom has moved half of it (PyForces' own check)
+        #: serial, when LAMMPS' skin (``skin``) is wider: the callback's own skin, each list
+        #: searched again once one of its own particles has moved half of it (renew)
         self.own = own
         #: the resting particles of the passive groups in cell grids made once (serial,
         #: compiled): a search against a passive group looks only near the searching group
@@ -406,7 +407,8 @@ class Overlaps:
         # within reach + 2 of LAMMPS' skins), so LAMMPS has put them among the integrated rows
         # (atom_modify first) before anything can touch them; the contact candidates are
         # those within cut
-        # (once a layout: a search the callback's own check asks for in between need not)
+        # (once a layout: a renewal in between need not; every list against a passive group
+        # is searched at a layout's first step, _search_lists, and dropped at the next layout)
         passive = self.activate is not None and self._passive(A, B)
         wide = cut
         if passive and ("act", A.start, B.start) not in fr.memo:
@@ -1281,13 +1283,17 @@ class PyForces:
         return self._lists
 
     def _search_lists(self, fr: Frame) -> None:
-        """Search every list of the phase when the frame has none: each list is then as old as
-        the frame, which both renewal checks (LAMMPS' reneighbouring, :meth:`_own_check`)
-        measure from. A list first searched later in the frame (a contact condition asked only
-        once another held, a collide gated on a contact) could miss a pair that closed in by
-        more than a skin since the frame began."""
-        if any(k[0] == "cand" for k in fr.memo):
+        """Search every list of the phase at a frame's first step (a new LAMMPS layout): a
+        list renewed by LAMMPS' reneighbouring is then as old as the frame it measures from (a
+        list first searched later in the frame, such as a contact condition asked only once
+        another held, could miss a pair that closed in by more than a skin since the frame
+        began), and every list against a passive group makes the layout's activation search
+        at its first step. (Lists the callback renews itself measure from their own search,
+        :meth:`Overlaps.renew`; those kept from an earlier layout are in the memo already,
+        which must not stop the others' search.)"""
+        if ("all searched",) in fr.memo:
             return
+        fr.memo[("all searched",)] = True
         for A, B in self._phase_lists():
             self.overlaps._candidates(fr, A, B)
 
