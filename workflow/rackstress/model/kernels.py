@@ -107,7 +107,7 @@ def warm() -> dict:
     k.moved_below(x, 0, 1, 1, 2, x.copy(), 1.0)
     k.bed_join(r, r, s, np.ones(2, np.bool_), s, r, s, r, s, tag, np.zeros(3, np.bool_))
     k.moved_below_shifted(x, 0, 1, 1, 2, x.copy(), 1.0)
-    k.lists_moved(x, np.array([[0, 1, 1, 3]], np.int64), np.array([0, 3], np.int64), x.copy(),
+    k.lists_moved(x, np.arange(3, dtype=np.int64), np.array([0, 3], np.int64), x.copy(),
                   np.ones(1, np.bool_), np.zeros((1, 3)), np.ones(1), np.zeros(1, np.bool_))
     k.passive_rows(tag, 1, 3, np.zeros(2, np.int64))
     k.count_from(np.zeros(2, np.int64), 1)
@@ -799,45 +799,30 @@ if nb is not None:
         return True
 
     @nb.njit(inline="always")
-    def _farthest(x, s0, s1, s2, s3, ref, o, t0, t1, t2):
-        """The largest |x[r] − ref[k] − t|² over the rows s0..s1 then s2..s3 (ref from o);
-        inf if one is NaN."""
+    def _farthest(x, rows, ref, k0, k1, t0, t1, t2):
+        """The largest |x[rows[k]] − ref[k] − t|² over k0 ≤ k < k1 (NaN positions are left to
+        the watchdog, as LAMMPS' own displacement check leaves them)."""
         worst = 0.0
-        total = 0.0         # NaN if any is (max() would skip a NaN)
-        k = o
-        for r in range(s0, s1):
+        for k in range(k0, k1):
+            r = rows[k]
             d0 = x[r, 0] - ref[k, 0] - t0
             d1 = x[r, 1] - ref[k, 1] - t1
             d2 = x[r, 2] - ref[k, 2] - t2
-            e = d0 * d0 + d1 * d1 + d2 * d2
-            worst = max(worst, e)
-            total += e
-            k += 1
-        for r in range(s2, s3):
-            d0 = x[r, 0] - ref[k, 0] - t0
-            d1 = x[r, 1] - ref[k, 1] - t1
-            d2 = x[r, 2] - ref[k, 2] - t2
-            e = d0 * d0 + d1 * d1 + d2 * d2
-            worst = max(worst, e)
-            total += e
-            k += 1
-        return worst if total == total else np.inf
+            worst = max(worst, d0 * d0 + d1 * d1 + d2 * d2)
+        return worst
 
     @nb.njit(**_OPTS)
-    def lists_moved(x, segs, roff, ref, shifted, shift, lim2, moved):
+    def lists_moved(x, rows, roff, ref, shifted, shift, lim2, moved):
         """Which contact lists must be searched again: ``moved[L]`` is set when a row of list
-        L (``segs[L]``: two row ranges s0..s1, s2..s3; their positions when it was searched:
-        ``ref[roff[L]:roff[L + 1]]``) is farther than √lim2[L] from there; for a list with
-        ``shifted[L]``, once one translation t common to its rows is taken off (any t bounds
-        the change of every distance between them by twice the largest |Δx − t|: the one
-        that held at the last step, ``shift[L]``, is tried first, one pass; then the centre
-        of the displacements' bounding box, as :func:`moved_below_shifted`, kept in
-        ``shift[L]`` when it holds). A NaN position counts as moved."""
+        L (``rows[roff[L]:roff[L + 1]]``; their positions when it was searched: ``ref``, row
+        for row) is farther than √lim2[L] from there; for a list with ``shifted[L]``, once one
+        translation t common to its rows is taken off (any t bounds the change of every
+        distance between them by twice the largest |Δx − t|: the one that held at the last
+        step, ``shift[L]``, is tried first, one pass; then the centre of the displacements'
+        bounding box, as :func:`moved_below_shifted`, kept in ``shift[L]`` when it holds)."""
         for L in range(len(roff) - 1):
-            s0, s1, s2, s3 = segs[L, 0], segs[L, 1], segs[L, 2], segs[L, 3]
-            o = roff[L]
-            t0, t1, t2 = shift[L, 0], shift[L, 1], shift[L, 2]
-            w = _farthest(x, s0, s1, s2, s3, ref, o, t0, t1, t2)
+            k0, k1 = roff[L], roff[L + 1]
+            w = _farthest(x, rows, ref, k0, k1, shift[L, 0], shift[L, 1], shift[L, 2])
             if w <= lim2[L]:
                 moved[L] = False
                 continue
@@ -846,22 +831,19 @@ if nb is not None:
                 continue
             lo0 = lo1 = lo2 = np.inf
             hi0 = hi1 = hi2 = -np.inf
-            k = o
-            for seg in range(2):
-                a, b = (s0, s1) if seg == 0 else (s2, s3)
-                for r in range(a, b):
-                    d0 = x[r, 0] - ref[k, 0]
-                    d1 = x[r, 1] - ref[k, 1]
-                    d2 = x[r, 2] - ref[k, 2]
-                    lo0 = min(lo0, d0)
-                    hi0 = max(hi0, d0)
-                    lo1 = min(lo1, d1)
-                    hi1 = max(hi1, d1)
-                    lo2 = min(lo2, d2)
-                    hi2 = max(hi2, d2)
-                    k += 1
+            for k in range(k0, k1):
+                r = rows[k]
+                d0 = x[r, 0] - ref[k, 0]
+                d1 = x[r, 1] - ref[k, 1]
+                d2 = x[r, 2] - ref[k, 2]
+                lo0 = min(lo0, d0)
+                hi0 = max(hi0, d0)
+                lo1 = min(lo1, d1)
+                hi1 = max(hi1, d1)
+                lo2 = min(lo2, d2)
+                hi2 = max(hi2, d2)
             t0, t1, t2 = 0.5 * (lo0 + hi0), 0.5 * (lo1 + hi1), 0.5 * (lo2 + hi2)
-            if _farthest(x, s0, s1, s2, s3, ref, o, t0, t1, t2) <= lim2[L]:
+            if _farthest(x, rows, ref, k0, k1, t0, t1, t2) <= lim2[L]:
                 moved[L] = False
                 shift[L, 0] = t0
                 shift[L, 1] = t1

@@ -375,8 +375,8 @@ class Overlaps:
         #: were searched at: kept while no atom of the two groups has moved half a skin
         self._kept = {}
         #: the lists the callback renews itself (``own``): list key → (list, positions its
-        #: particles were searched at, their row ranges, relative test?, its layout's frame
-        #: or None, (h/2)²), see :meth:`renew`
+        #: watched rows were searched at, those rows, relative test?, its layout's frame or
+        #: None, (h/2)²), see :meth:`renew`
         self._lists = {}
         self._packed = None
         #: the lists' skins where the callback renews them (None: ``own``), see list_skin
@@ -474,19 +474,34 @@ class Overlaps:
             return self.own if self.bed_skin is None else self.bed_skin
         return self.own if self.moving_skin is None else self.moving_skin
 
-    def _segments(self, fr: Frame, A: slice, B: slice):
-        """The rows whose motion can change the list of A and B (at most two ranges, as
-        (start, stop)): a group whose rows are its particles, its rows; a passive group,
-        the rows LAMMPS integrates after ``fr.span`` (its activated particles; the resting
-        ones, at rows LAMMPS does not integrate, stay where they are until it reorders,
-        which makes a new layout and a new search)."""
-        segs = []
-        for G in (A, B):
-            seg = ((G.start, G.stop) if fr.ident(G)
-                   else (fr.span, max(fr.span, min(self.nfirst, fr.nlocal))))
-            if seg not in segs:
-                segs.append(seg)
-        return segs
+    def _watched(self, fr: Frame, A: slice, B: slice, h: float) -> np.ndarray:
+        """The rows whose motion can bring a pair of A and B into reach unseen by their list
+        (searched now with skin ``h``): a group whose rows are its particles, its rows; a
+        passive group, its activated particles, at the rows LAMMPS integrates after
+        ``fr.span`` (the resting ones, at rows LAMMPS does not integrate, stay where they
+        are until it reorders, which makes a new layout and a new search) — and of those only
+        the ones inside the searching group's bounding box grown by reach + h + LAMMPS' skin.
+        The list lives only as long as the layout, in which no integrated atom moves more
+        than half LAMMPS' skin from where it was at the layout's start (LAMMPS reneighbours
+        first), so any two of its positions are less than a skin apart: a particle farther
+        than reach + h/2 + a skin from every searching particle now, while those move less
+        than h/2, stays out of reach until the list is dropped."""
+        parts = []      # disjoint: a passive group's rows come after span, the others' before
+        for G in ((A,) if A == B else (A, B)):
+            if fr.ident(G):
+                parts.append(np.arange(G.start, G.stop, dtype=np.int64))
+                continue
+            stop = max(fr.span, min(self.nfirst, fr.nlocal))
+            rows = np.arange(fr.span, stop, dtype=np.int64)
+            other = B if G is A else A
+            if fr.ident(other) and other != G and len(rows):
+                lo, hi = self.k.bbox_rows(fr.x, fr.seen(other)) if self.k is not None else (
+                    fr.x[other].min(axis=0), fr.x[other].max(axis=0))
+                g = self._reach(A) + self._reach(B) + h + self.skin + 1.0
+                xr = fr.x[fr.span:stop]
+                rows = rows[((xr >= lo - g) & (xr <= hi + g)).all(axis=1)]
+            parts.append(rows)
+        return np.concatenate(parts)
 
     def _remember(self, fr: Frame, key, A: slice, B: slice, hit, h: float) -> None:
         """Keep a list the callback renews itself, with where its particles were searched.
@@ -496,12 +511,12 @@ class Overlaps:
         motion relative to each other (``shifted``); a list against a passive group holds
         rows LAMMPS reorders, so it lives as long as the layout, and the resting particles in
         it do not move, so its particles' own displacement is measured."""
-        segs = self._segments(fr, A, B)
-        ref = np.concatenate([fr.x[s0:s1] for s0, s1 in segs])
+        rows = self._watched(fr, A, B, h)
         shifted = fr.ident(A) and fr.ident(B)
         # h/2 less a margin far above rounding (1e-6 relative), as the step's near sets
         lim2 = (0.5 * h * (1.0 - 1e-6)) ** 2
-        self._lists[key] = (hit, ref, segs, shifted, None if shifted else fr, lim2)
+        self._lists[key] = (hit, np.array(fr.x[rows]), rows, shifted, None if shifted else fr,
+                            lim2)
         self._packed = None
 
     def renew(self, fr: Frame) -> None:
@@ -509,7 +524,7 @@ class Overlaps:
         pair within reach (the next use searches it again); put back, in a new layout's
         frame, those still good from an earlier one. Once a step, before any list is used.
 
-        A list's particles (:meth:`_segments`) that were not in it were farther apart than
+        A list's particles (:meth:`_watched`) that were not in it were farther apart than
         reach + h when it was searched; while each has moved at most h/2 since (for two
         moving groups once the translation common to them is taken off: distances then
         change by at most twice the bound, see :func:`kernels.moved_below_shifted`), no pair
@@ -527,27 +542,20 @@ class Overlaps:
             return
         if self._packed is None:
             keys = list(self._lists)
-            segs = np.zeros((len(keys), 4), np.int64)
-            for L, key in enumerate(keys):
-                sg = self._lists[key][2]
-                segs[L, :2] = sg[0]
-                if len(sg) > 1:
-                    segs[L, 2:] = sg[1]
-            refs = [self._lists[key][1] for key in keys]
-            self._packed = (keys, segs,
-                            np.cumsum([0] + [len(r) for r in refs]).astype(np.int64),
-                            np.ascontiguousarray(np.concatenate(refs)),
-                            np.array([self._lists[key][3] for key in keys], np.bool_),
+            sts = [self._lists[key] for key in keys]
+            self._packed = (keys, np.concatenate([st[2] for st in sts]),
+                            np.cumsum([0] + [len(st[2]) for st in sts]).astype(np.int64),
+                            np.ascontiguousarray(np.concatenate([st[1] for st in sts])),
+                            np.array([st[3] for st in sts], np.bool_),
                             np.zeros((len(keys), 3)),
-                            np.array([self._lists[key][5] for key in keys]),
+                            np.array([st[5] for st in sts]),
                             np.zeros(len(keys), np.bool_))
-        keys, segs, roff, ref, shifted, shift, lim2, moved = self._packed
+        keys, rows, roff, ref, shifted, shift, lim2, moved = self._packed
         if self.k is not None:
-            self.k.lists_moved(fr.x, segs, roff, ref, shifted, shift, lim2, moved)
+            self.k.lists_moved(fr.x, rows, roff, ref, shifted, shift, lim2, moved)
         else:
             for L in range(len(keys)):
-                s0, s1, s2, s3 = segs[L]
-                d = np.concatenate([fr.x[s0:s1], fr.x[s2:s3]]) - ref[roff[L]:roff[L + 1]]
+                d = fr.x[rows[roff[L]:roff[L + 1]]] - ref[roff[L]:roff[L + 1]]
                 if shifted[L] and len(d):
                     d = d - 0.5 * (d.min(axis=0) + d.max(axis=0))
                 moved[L] = len(d) and not rowdot(d, d).max() <= lim2[L]
