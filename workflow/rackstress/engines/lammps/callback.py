@@ -354,6 +354,17 @@ class Overlaps:
     keep their own skin (``own``; :meth:`list_skin`) and each is searched again once one of its
     own particles has moved half of it (:meth:`renew`, once a step): a particle in no list
     never renews one, and two groups walking together keep theirs.
+
+    Resting particles of a passive group are activated (``activate``) one LAMMPS
+    reneighbouring before anything can touch them: every list against a passive group is
+    searched at each LAMMPS layout's first step (``PyForces._search_lists``) with reach + two of
+    LAMMPS' skins S. A resting particle not activated there was farther than that from every
+    searching particle; LAMMPS reneighbours before any atom has moved S/2, so at the next
+    layout's first search it is still more than reach + 3S/2 away (the searching particles
+    moved less than S/2; it did not move) and is activated there if within reach + 2S; then it
+    stays more than reach + S away until that layout ends (less than S/2 more), when LAMMPS'
+    reordering (``atom_modify first``) puts it among the integrated rows. Renewals in between
+    search within reach + the list's skin only.
     """
 
     def __init__(self, radius: np.ndarray, skin: float, compiled=None, activate=None,
