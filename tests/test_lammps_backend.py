@@ -859,11 +859,12 @@ def test_resting_bed_search_equals_a_search_over_the_whole_group(monkeypatch, bu
 @pytest.mark.lammps
 def test_contact_lists_renewed_by_the_callbacks_own_check(monkeypatch):
     """With a resting group in the scene, LAMMPS' skin is 8 and the callback keeps its contact
-    lists with skin 2 by its own displacement check (each list by its own particles'). Two particles 6 apart close in at 4
-    units/time each: LAMMPS reneighbours only once an atom has moved 4 (step ~100), the
-    callback's lists are searched (reach + 2 skins = 5, beyond 6 at the start) and renewed once
-    an atom has moved 1 (step ~25); they touch (d < 1) at step ~63. LAMMPS must see that
-    contact when it happens: equal to the reference engine to 1e-10."""
+    lists with skin 2 by its own displacement check (each list by its own particles'). Two
+    particles 6 apart close in at 4 units/time each: LAMMPS reneighbours only once an atom has
+    moved 4 (step ~100), the callback's list of the two is searched (reach + skin = 3, beyond
+    6 at the start) and renewed once each has moved 1 (every 25 steps); they touch (d < 1) at
+    step ~63. LAMMPS must see that contact when it happens: equal to the reference engine to
+    1e-10."""
     from rackstress.engines.lammps import callback as cb
 
     a = Group("a", np.array([[0.0, 0.0, 0.0]]), 0.5, kind="body")

@@ -698,7 +698,8 @@ class RestingBed:
         qlo, qhi = self.k.bbox_rows(fr.x, ia)
         if not (np.isfinite(qlo).all() and np.isfinite(qhi).all()):
             qlo, qhi = self.k.bbox_points(self.origin[B])        # (no searching rows)
-        if g is not None and (qlo - wide - 1.0 >= g[0]).all() and (qhi + wide + 1.0 <= g[5]).all():
+        if (g is not None and (qlo - wide - 1.0 >= g[0]).all()
+                and (qhi + wide + 1.0 <= g[5]).all()):
             return g
         size = wide if g is None else g[1]
         lo, hi = qlo - (wide + 2.0 * size + 1.0), qhi + (wide + 2.0 * size + 1.0)
