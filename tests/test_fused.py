@@ -30,9 +30,10 @@ def _step_lists(x, ca, cb, cR2, loff, state, h):
                  np.zeros((0, 8), np.int64), np.zeros((0, 3)), np.zeros(1, np.int64),
                  np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, np.int64),
                  np.zeros(0, np.int64), np.zeros(0), np.zeros(0), np.zeros(0),
-                 np.zeros(0, np.int64), ca, cb, cR2, loff, ov, ovn, near, nnear, valid, urow,
-                 uoff, uref, h, np.zeros((n, 3)), np.zeros(n, np.bool_), np.zeros(n, np.int64),
-                 np.zeros(1, np.int64), np.ones(n), np.arange(1, n + 1, dtype=np.int32), n)
+                 np.zeros(0, np.int64), ca, cb, cR2, loff, ov, np.empty((len(ca), 4)), ovn, near,
+                 nnear, valid, urow, uoff, uref, h, np.zeros((n, 3)), np.zeros(n, np.bool_),
+                 np.zeros(n, np.int64), np.zeros(1, np.int64), np.ones(n),
+                 np.arange(1, n + 1, dtype=np.int32), n, np.zeros((0, 3)), np.zeros(0), 0, 0)
     return out
 
 
@@ -156,6 +157,52 @@ def test_fused_contact_damping_follows_the_contact():
     assert np.all(ref.p[:8, 1] > o[:8, 1] - 20.0 * 1.2 + 1.0)
     d = np.linalg.norm(ref.p[:8, None] - ref.p[None, 8:], axis=2)
     assert d.min() > 1.0
+
+
+def _block_in_order(x, t0, m, s0, n, q, cI, cJ, fold, acc):
+    """Eq. 12 over every (target, source) pair of a block in plain Python floats, in the order
+    the kernels document: a target's sum over its sources in source order, a source's reverse
+    sum over its targets in target order from 0, added to its row after the block."""
+    out = acc.copy()
+    rev = np.zeros((n, 3))
+    for s in range(n):
+        for t in range(m):
+            d = [float(x[s0 + s, k]) - float(x[t0 + t, k]) for k in range(3)]
+            w = 1.0 - float(q[s][t]) / (d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+            ct, e = float(cI[s][t]) * w, float(cJ[s][t]) * w
+            for k in range(3):
+                out[t0 + t, k] = float(out[t0 + t, k]) + ct * d[k]
+                rev[s, k] = float(rev[s, k]) - e * d[k]
+    if fold:
+        out[s0:s0 + n] += rev
+    return out
+
+
+@pytest.mark.parametrize("m,n", [(1, 1), (5, 3), (127, 4), (128, 5), (129, 9), (300, 6)])
+def test_bind_blocks_sum_in_the_documented_order(m, n):
+    """kernels.bind_block and bind_block_const (targets taken a tile at a time, four sources'
+    reverse sums at once) give, bit for bit, the plain sequential sums of every pair in the
+    order they document, on blocks smaller than, equal to and across the tile size."""
+    rng = np.random.default_rng(m * 31 + n)
+    x = rng.normal(scale=3.0, size=(m + n + 4, 3))
+    o = x + rng.normal(scale=0.3, size=x.shape)        # original positions
+    t0, s0 = 2, 2 + m + 1
+    # L0² as Bind.pairs has it: (u_o − p_o)·(u_o − p_o) in the order x, y, z
+    e = [o[s0:s0 + n, k][:, None] - o[t0:t0 + m, k][None, :] for k in range(3)]
+    q = e[0] * e[0] + e[1] * e[1] + e[2] * e[2]
+    cI, cJ = rng.uniform(0.5, 3.0, size=(n, m)), rng.uniform(0.5, 3.0, size=(n, m))
+    acc = rng.normal(size=(len(x), 3))
+    for fold in (True, False):
+        got = acc.copy()
+        K.bind_block(x, t0, m, s0, n, q, cI, cJ, fold, got)
+        np.testing.assert_array_equal(got, _block_in_order(x, t0, m, s0, n, q, cI, cJ, fold,
+                                                           acc))
+        got = acc.copy()
+        oc = np.concatenate([o[t0:t0 + m].T.ravel(), o[s0:s0 + n].ravel()])
+        K.bind_block_const(x, t0, m, s0, n, oc, 2.5, 0.75, fold, got)
+        full = np.full((n, m), 2.5), np.full((n, m), 0.75)
+        np.testing.assert_array_equal(got, _block_in_order(x, t0, m, s0, n, q, *full, fold,
+                                                           acc))
 
 
 def test_compiled_watchdog_pass_agrees_with_the_watchdog():

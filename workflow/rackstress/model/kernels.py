@@ -132,10 +132,11 @@ def warm() -> dict:
     k.step(x, np.ones((3, 3)), np.zeros((3, 3)), np.zeros((3, 3)), np.ones(3), ops,
            np.ones((len(ops), 3)), np.zeros(1, np.int64), np.ones(2), np.ones(2), np.ones(2),
            r, s, one, one, one, np.zeros(1, np.int64), r, s, np.full(2, 4.0),
-           np.array([0, 2], np.int64), np.zeros(2, np.int64), np.zeros(1, np.int64),
-           np.zeros(2, np.int64), np.zeros(1, np.int64), np.zeros(1, np.int64),
-           np.array([0, 1, 2], np.int64), np.array([0, 3], np.int64), np.zeros((3, 3)), 0.5,
-           np.zeros((3, 3)), flag, np.zeros(3, np.int64), nt, np.ones(3), tag, 3)
+           np.array([0, 2], np.int64), np.zeros(2, np.int64), np.zeros((2, 4)),
+           np.zeros(1, np.int64), np.zeros(2, np.int64), np.zeros(1, np.int64),
+           np.zeros(1, np.int64), np.array([0, 1, 2], np.int64), np.array([0, 3], np.int64),
+           np.zeros((3, 3)), 0.5, np.zeros((3, 3)), flag, np.zeros(3, np.int64), nt, np.ones(3),
+           tag, 3, np.zeros((3, 3)), np.zeros(3), 3, 1)
     seconds = time.perf_counter() - t0
     if first and os.environ.get("PMI_RANK", "0") == "0":
         print(f"rackstress: kernels compiled in {seconds:.1f} s", file=sys.stderr, flush=True)
@@ -149,23 +150,16 @@ if nb is not None:
     att_f = nb.njit(inline="always")(Attract.factor)      # Eq. 14
 
     @nb.njit(inline="always")
-    def _target_columns(x, acc, t0, m):
-        """A bind block's targets' positions and accumulators as contiguous columns (copies:
-        no arithmetic), so that the pass over the targets of one source vectorizes."""
-        X0 = np.empty(m)
-        X1 = np.empty(m)
-        X2 = np.empty(m)
-        A0 = np.empty(m)
-        A1 = np.empty(m)
-        A2 = np.empty(m)
-        for t in range(m):
-            X0[t] = x[t0 + t, 0]
-            X1[t] = x[t0 + t, 1]
-            X2[t] = x[t0 + t, 2]
-            A0[t] = acc[t0 + t, 0]
-            A1[t] = acc[t0 + t, 1]
-            A2[t] = acc[t0 + t, 2]
-        return X0, X1, X2, A0, A1, A2
+    def _tile_columns(x, acc, r0, k, x0, x1, x2, a0, a1, a2):
+        """The positions and accumulator rows r0..r0+k of a tile of a bind block's targets as
+        contiguous columns (copies: no arithmetic), so that the pass over them vectorizes."""
+        for u in range(k):
+            x0[u] = x[r0 + u, 0]
+            x1[u] = x[r0 + u, 1]
+            x2[u] = x[r0 + u, 2]
+            a0[u] = acc[r0 + u, 0]
+            a1[u] = acc[r0 + u, 1]
+            a2[u] = acc[r0 + u, 2]
 
     @nb.njit(inline="always")
     def _store_targets(acc, t0, m, A0, A1, A2):
@@ -174,21 +168,46 @@ if nb is not None:
             acc[t0 + t, 1] = A1[t]
             acc[t0 + t, 2] = A2[t]
 
+    #: a bind block's targets are taken this many at a time (their columns and the reverse
+    #: binds' terms of four sources stay in the first-level cache)
+    _TILE = 128
+
     @nb.njit(inline="always")
-    def _fold_source(acc, row, cj, W, D0, D1, D2, m):
-        """The reverse bind on one source (Eq. 12 with its own coefficients ``cj``): its
-        targets' terms summed in target order, added to its row once."""
-        a0 = 0.0
-        a1 = 0.0
-        a2 = 0.0
-        for t in range(m):
-            e = cj[t] * W[t]
-            a0 -= e * D0[t]
-            a1 -= e * D1[t]
-            a2 -= e * D2[t]
-        acc[row, 0] += a0
-        acc[row, 1] += a1
-        acc[row, 2] += a2
+    def _fold_tile(F, g, P0, P1, P2, k):
+        """The reverse binds' sums of the four sources g..g+3 (``F``: their running sums),
+        continued over the k targets of a tile in target order (``P[j]``: source g + j's
+        terms). Each sum stays sequential (no reassociation); the four sources' twelve sums
+        are independent chains, so that the pass is not bound by one addition's latency (rows
+        past the last source hold zeros and are never read back)."""
+        f00, f01, f02 = F[g, 0], F[g, 1], F[g, 2]
+        f10, f11, f12 = F[g + 1, 0], F[g + 1, 1], F[g + 1, 2]
+        f20, f21, f22 = F[g + 2, 0], F[g + 2, 1], F[g + 2, 2]
+        f30, f31, f32 = F[g + 3, 0], F[g + 3, 1], F[g + 3, 2]
+        for u in range(k):
+            f00 -= P0[0, u]
+            f01 -= P1[0, u]
+            f02 -= P2[0, u]
+            f10 -= P0[1, u]
+            f11 -= P1[1, u]
+            f12 -= P2[1, u]
+            f20 -= P0[2, u]
+            f21 -= P1[2, u]
+            f22 -= P2[2, u]
+            f30 -= P0[3, u]
+            f31 -= P1[3, u]
+            f32 -= P2[3, u]
+        F[g, 0], F[g, 1], F[g, 2] = f00, f01, f02
+        F[g + 1, 0], F[g + 1, 1], F[g + 1, 2] = f10, f11, f12
+        F[g + 2, 0], F[g + 2, 1], F[g + 2, 2] = f20, f21, f22
+        F[g + 3, 0], F[g + 3, 1], F[g + 3, 2] = f30, f31, f32
+
+    @nb.njit(inline="always")
+    def _store_sources(acc, s0, n, F):
+        """Each source's reverse-bind sum added to its accumulator row once, after the block."""
+        for s in range(n):
+            acc[s0 + s, 0] += F[s, 0]
+            acc[s0 + s, 1] += F[s, 1]
+            acc[s0 + s, 2] += F[s, 2]
 
     @nb.njit(**_OPTS)
     def bind_block(x, t0, m, s0, n, qT, cIT, cJT, fold, acc):
@@ -196,36 +215,58 @@ if nb is not None:
         t with cIT, and its reverse bind on s with cJT when ``fold``.
 
         The order of the sums is fixed: a target's acceleration gains its sources' terms in
-        source order (s = 0, 1, ...), a source's in target order (t = 0, 1, ...), each
-        source's sum added to its accumulator row once, after the block. The targets' rows
-        and positions are copied into contiguous columns first, so that the pass over the
-        targets of one source (a division each) vectorizes; the copies change no arithmetic.
+        source order (s = 0, 1, ...), a source's in target order (t = 0, 1, ...) starting from
+        0, each source's sum added to its accumulator row once, after the block. The targets
+        are taken a tile at a time (their positions and rows copied into contiguous columns:
+        no arithmetic), and within a tile the sources one after another, so that the pass over
+        a tile's targets (a division each) vectorizes; the sources' sums continue tile after
+        tile in target order (:func:`_fold_tile`). Neither order depends on the tiling.
         """
-        X0, X1, X2, A0, A1, A2 = _target_columns(x, acc, t0, m)
-        D0 = np.empty(m)
-        D1 = np.empty(m)
-        D2 = np.empty(m)
-        W = np.empty(m)
-        for s in range(n):
-            xs0, xs1, xs2 = x[s0 + s, 0], x[s0 + s, 1], x[s0 + s, 2]
-            q = qT[s]
-            c = cIT[s]
-            for t in range(m):
-                d0 = xs0 - X0[t]
-                d1 = xs1 - X1[t]
-                d2_ = xs2 - X2[t]
-                w = bind_f(d0 * d0 + d1 * d1 + d2_ * d2_, q[t])
-                D0[t] = d0
-                D1[t] = d1
-                D2[t] = d2_
-                W[t] = w
-                ct = c[t] * w
-                A0[t] += ct * d0
-                A1[t] += ct * d1
-                A2[t] += ct * d2_
-            if fold:
-                _fold_source(acc, s0 + s, cJT[s], W, D0, D1, D2, m)
-        _store_targets(acc, t0, m, A0, A1, A2)
+        T = _TILE
+        x0, x1, x2, a0, a1, a2 = (np.empty(T), np.empty(T), np.empty(T), np.empty(T),
+                                  np.empty(T), np.empty(T))
+        P0 = np.zeros((4, T))
+        P1 = np.zeros((4, T))
+        P2 = np.zeros((4, T))
+        F = np.zeros((n + 3, 3))
+        for a in range(0, m, T):
+            k = min(T, m - a)
+            _tile_columns(x, acc, t0 + a, k, x0, x1, x2, a0, a1, a2)
+            for g in range(0, n, 4):
+                for s in range(g, min(g + 4, n)):
+                    xs0, xs1, xs2 = x[s0 + s, 0], x[s0 + s, 1], x[s0 + s, 2]
+                    q = qT[s, a:a + k]
+                    c = cIT[s, a:a + k]
+                    cj = cJT[s, a:a + k]
+                    p0, p1, p2 = P0[s - g], P1[s - g], P2[s - g]
+                    if fold:
+                        for u in range(k):
+                            d0 = xs0 - x0[u]
+                            d1 = xs1 - x1[u]
+                            d2_ = xs2 - x2[u]
+                            w = bind_f(d0 * d0 + d1 * d1 + d2_ * d2_, q[u])
+                            ct = c[u] * w
+                            a0[u] += ct * d0
+                            a1[u] += ct * d1
+                            a2[u] += ct * d2_
+                            e = cj[u] * w
+                            p0[u] = e * d0
+                            p1[u] = e * d1
+                            p2[u] = e * d2_
+                    else:
+                        for u in range(k):
+                            d0 = xs0 - x0[u]
+                            d1 = xs1 - x1[u]
+                            d2_ = xs2 - x2[u]
+                            ct = c[u] * bind_f(d0 * d0 + d1 * d1 + d2_ * d2_, q[u])
+                            a0[u] += ct * d0
+                            a1[u] += ct * d1
+                            a2[u] += ct * d2_
+                if fold:
+                    _fold_tile(F, g, P0, P1, P2, k)
+            _store_targets(acc, t0 + a, k, a0, a1, a2)
+        if fold:
+            _store_sources(acc, s0, n, F)
 
     @nb.njit(**_OPTS)
     def bind_block_const(x, t0, m, s0, n, o, cI, cJ, fold, acc):
@@ -234,38 +275,59 @@ if nb is not None:
         targets' x, y, z columns, then the sources' rows: 3m + 3n values) as
         :meth:`Bind.pairs` computes it, (u_o − p_o)·(u_o − p_o) in the order x, y, z — the same
         numbers, read from 3(m + n) values instead of 3mn. Sums in :func:`bind_block`'s
-        order."""
-        X0, X1, X2, A0, A1, A2 = _target_columns(x, acc, t0, m)
-        cJv = np.full(m, cJ)      # the same products cJ·w as a scalar gives
-        O0 = o[0:m]
-        O1 = o[m:2 * m]
-        O2 = o[2 * m:3 * m]
-        D0 = np.empty(m)
-        D1 = np.empty(m)
-        D2 = np.empty(m)
-        W = np.empty(m)
-        for s in range(n):
-            xs0, xs1, xs2 = x[s0 + s, 0], x[s0 + s, 1], x[s0 + s, 2]
-            os0, os1, os2 = o[3 * m + 3 * s], o[3 * m + 3 * s + 1], o[3 * m + 3 * s + 2]
-            for t in range(m):
-                e0 = os0 - O0[t]
-                e1 = os1 - O1[t]
-                e2 = os2 - O2[t]
-                d0 = xs0 - X0[t]
-                d1 = xs1 - X1[t]
-                d2_ = xs2 - X2[t]
-                w = bind_f(d0 * d0 + d1 * d1 + d2_ * d2_, e0 * e0 + e1 * e1 + e2 * e2)
-                D0[t] = d0
-                D1[t] = d1
-                D2[t] = d2_
-                W[t] = w
-                ct = cI * w
-                A0[t] += ct * d0
-                A1[t] += ct * d1
-                A2[t] += ct * d2_
-            if fold:
-                _fold_source(acc, s0 + s, cJv, W, D0, D1, D2, m)
-        _store_targets(acc, t0, m, A0, A1, A2)
+        order, in its tiles."""
+        T = _TILE
+        x0, x1, x2, a0, a1, a2 = (np.empty(T), np.empty(T), np.empty(T), np.empty(T),
+                                  np.empty(T), np.empty(T))
+        P0 = np.zeros((4, T))
+        P1 = np.zeros((4, T))
+        P2 = np.zeros((4, T))
+        F = np.zeros((n + 3, 3))
+        for a in range(0, m, T):
+            k = min(T, m - a)
+            _tile_columns(x, acc, t0 + a, k, x0, x1, x2, a0, a1, a2)
+            o0, o1, o2 = o[a:a + k], o[m + a:m + a + k], o[2 * m + a:2 * m + a + k]
+            for g in range(0, n, 4):
+                for s in range(g, min(g + 4, n)):
+                    xs0, xs1, xs2 = x[s0 + s, 0], x[s0 + s, 1], x[s0 + s, 2]
+                    os0, os1, os2 = o[3 * m + 3 * s], o[3 * m + 3 * s + 1], o[3 * m + 3 * s + 2]
+                    p0, p1, p2 = P0[s - g], P1[s - g], P2[s - g]
+                    if fold:
+                        for u in range(k):
+                            e0 = os0 - o0[u]
+                            e1 = os1 - o1[u]
+                            e2 = os2 - o2[u]
+                            d0 = xs0 - x0[u]
+                            d1 = xs1 - x1[u]
+                            d2_ = xs2 - x2[u]
+                            w = bind_f(d0 * d0 + d1 * d1 + d2_ * d2_,
+                                       e0 * e0 + e1 * e1 + e2 * e2)
+                            ct = cI * w
+                            a0[u] += ct * d0
+                            a1[u] += ct * d1
+                            a2[u] += ct * d2_
+                            e = cJ * w
+                            p0[u] = e * d0
+                            p1[u] = e * d1
+                            p2[u] = e * d2_
+                    else:
+                        for u in range(k):
+                            e0 = os0 - o0[u]
+                            e1 = os1 - o1[u]
+                            e2 = os2 - o2[u]
+                            d0 = xs0 - x0[u]
+                            d1 = xs1 - x1[u]
+                            d2_ = xs2 - x2[u]
+                            ct = cI * bind_f(d0 * d0 + d1 * d1 + d2_ * d2_,
+                                             e0 * e0 + e1 * e1 + e2 * e2)
+                            a0[u] += ct * d0
+                            a1[u] += ct * d1
+                            a2[u] += ct * d2_
+                if fold:
+                    _fold_tile(F, g, P0, P1, P2, k)
+            _store_targets(acc, t0 + a, k, a0, a1, a2)
+        if fold:
+            _store_sources(acc, s0, n, F)
 
     @nb.njit(**_OPTS)
     def bind_pairs(x, ri, rj, ai, aj, cI, cJ, q, fold, acc):
@@ -692,34 +754,30 @@ if nb is not None:
         keep = keep[:m]
         return a[keep], b[keep], R2[keep], bad
 
-    @nb.njit(inline="always")
-    def _collide_pair(x, i, j, R2, c, acc, nacc, sacc, flag, touched, nt):
-        """Eq. 10 on row i from row j: into ``acc`` below ``nacc``, else into ``sacc``
-        (the row listed once: ``flag``, ``touched[:nt[0]]``)."""
-        d0 = x[j, 0] - x[i, 0]
-        d1 = x[j, 1] - x[i, 1]
-        d2_ = x[j, 2] - x[i, 2]
-        w = c * col_f(d0 * d0 + d1 * d1 + d2_ * d2_, R2)
-        if i < nacc:
-            acc[i, 0] += w * d0
-            acc[i, 1] += w * d1
-            acc[i, 2] += w * d2_
-        else:
-            if not flag[i]:
-                flag[i] = True
-                touched[nt[0]] = i
-                nt[0] += 1
-            sacc[i, 0] += w * d0
-            sacc[i, 1] += w * d1
-            sacc[i, 2] += w * d2_
-
     @nb.njit(**_OPTS)
     def collide_add(x, a, b, R2, c, acc, nacc, sacc, flag, touched, nt):
         """Eq. 10 for overlapping rows (a from b) added in place: rows below ``nacc`` into
         ``acc``, the others into ``sacc`` (same rows), listed once (``flag``) in
-        ``touched[:nt[0]]``."""
+        ``touched[:nt[0]]``. (Written out in the loop, as in :func:`step`: a helper taking
+        the arrays cost a reference count update per array and pair.)"""
         for k in range(len(a)):
-            _collide_pair(x, a[k], b[k], R2[k], c, acc, nacc, sacc, flag, touched, nt)
+            i, j = a[k], b[k]
+            d0 = x[j, 0] - x[i, 0]
+            d1 = x[j, 1] - x[i, 1]
+            d2_ = x[j, 2] - x[i, 2]
+            w = c * col_f(d0 * d0 + d1 * d1 + d2_ * d2_, R2[k])
+            if i < nacc:
+                acc[i, 0] += w * d0
+                acc[i, 1] += w * d1
+                acc[i, 2] += w * d2_
+            else:
+                if not flag[i]:
+                    flag[i] = True
+                    touched[nt[0]] = i
+                    nt[0] += 1
+                sacc[i, 0] += w * d0
+                sacc[i, 1] += w * d1
+                sacc[i, 2] += w * d2_
 
     @nb.njit(**_OPTS)
     def add_natives(f, v, tag, n, ident, F, g):
@@ -794,10 +852,12 @@ OP_BLOCK, OP_BIND, OP_ATTRACT, OP_COLLIDE, OP_DAMPEN, OP_FORCE, OP_BLOCKC = rang
 if nb is not None:
     @nb.njit(**_OPTS)
     def step(x, v, f, acc, dmass, ops, fpar, conds, bq, bcI, bcJ, pi, pj, pcI, pcJ, pq, frows,
-             ca, cb, cR2, loff, ov, ovn, near, nnear, valid, urow, uoff, uref, h,
-             sacc, sflag, stouched, snt, mass, tag, nfirst):
-        """One callback step of the serial path (rows of the dense groups = particles): every
-        active term of the phase, in the terms' order, then the forces into LAMMPS' ``f``.
+             ca, cb, cR2, loff, ov, ovd, ovn, near, nnear, valid, urow, uoff, uref, h,
+             sacc, sflag, stouched, snt, mass, tag, nfirst, natF, natg, nnat, ident):
+        """One callback step of the serial path (rows of the dense groups = particles): the
+        deck's constant forces and damping as :func:`add_natives` adds them (rows below
+        ``nnat``; none if 0), every active term of the phase, in the terms' order, then the
+        terms' forces into LAMMPS' ``f``.
 
         ``ops`` (one row a term, in the order of the callback's terms): kind (``OP_*``; a
         Const bind block is ``OP_BLOCKC``: its L0² from the original positions in ``bq``), five
@@ -806,7 +866,11 @@ if nb is not None:
         vector). The contact lists are candidate pairs ``ca, cb, cR2`` (list L is
         ``loff[L]:loff[L+1]``, sorted by particles); their overlapping pairs (Eq. 10's
         support, d² < R²) are found once here, into ``ov``/``ovn``, and serve every collide
-        (both directions) and every contact condition of the step. Only a list's *near*
+        (both directions) and every contact condition of the step: with each one its
+        difference d = x_b − x_a and Eq. 10's factor min(0, 1 − R²/d²) (``ovd``), which a
+        collide of either direction scales by its c (the reverse direction's difference is −d
+        and its d² the same, exactly: IEEE subtraction is antisymmetric), so a pair's Eq. 10
+        is evaluated once a step, not once per direction. Only a list's *near*
         candidates are measured (``near[loff[L]:loff[L] + nnear[L]]``, in list order: those
         closer than R + ``h`` when the list's particles, ``urow[uoff[L]:uoff[L+1]]``, were at
         ``uref``); while none of them has moved h/2 since, no other candidate can overlap
@@ -820,9 +884,13 @@ if nb is not None:
         rows as :func:`add_sparse`.
 
         Returns (:func:`add_sparse`'s first row at or after ``nfirst``, or −1; L; k): L ≥ 0
-        names a list whose candidate k coincides (d = 0, Eq. 10 undefined); then nothing is
+        names a list whose candidate k coincides (d = 0, Eq. 10 undefined); then no term is
         added.
         """
+        for r in range(nnat):
+            p = r if r < ident else tag[r] - 1
+            for m3 in range(3):
+                f[r, m3] = (f[r, m3] + natF[p, m3]) - natg[p] * v[r, m3]
         nl = len(loff) - 1
         # each particle may move h/2 less a margin far above rounding (1e-6 relative)
         lim2 = (0.5 * h * (1.0 - 1e-6)) ** 2
@@ -869,6 +937,10 @@ if nb is not None:
                         valid[L] = 0
                         return -1, L, k
                     ov[base + cnt] = k
+                    ovd[base + cnt, 0] = d0
+                    ovd[base + cnt, 1] = d1
+                    ovd[base + cnt, 2] = d2_
+                    ovd[base + cnt, 3] = col_f(d2, cR2[k])
                     cnt += 1
             ovn[L] = cnt
         nacc = acc.shape[0]
@@ -905,14 +977,27 @@ if nb is not None:
             elif kind == OP_COLLIDE:
                 L, rev = ops[o, 1], ops[o, 2]
                 c = fpar[o, 0]
-                base = loff[L]
-                for j in range(ovn[L]):
-                    k = ov[base + j]
+                for p in range(loff[L], loff[L] + ovn[L]):
+                    # Eq. 10 on i from its partner, as collide_add computes it: w·(x_s − x_i)
+                    w = c * ovd[p, 3]
                     if rev == 0:
-                        i, s = ca[k], cb[k]
+                        i = ca[ov[p]]
+                        d0, d1, d2_ = ovd[p, 0], ovd[p, 1], ovd[p, 2]
                     else:
-                        i, s = cb[k], ca[k]
-                    _collide_pair(x, i, s, cR2[k], c, acc, nacc, sacc, sflag, stouched, snt)
+                        i = cb[ov[p]]
+                        d0, d1, d2_ = -ovd[p, 0], -ovd[p, 1], -ovd[p, 2]
+                    if i < nacc:
+                        acc[i, 0] += w * d0
+                        acc[i, 1] += w * d1
+                        acc[i, 2] += w * d2_
+                    else:
+                        if not sflag[i]:
+                            sflag[i] = True
+                            stouched[snt[0]] = i
+                            snt[0] += 1
+                        sacc[i, 0] += w * d0
+                        sacc[i, 1] += w * d1
+                        sacc[i, 2] += w * d2_
             elif kind == OP_DAMPEN:
                 c = fpar[o, 0]
                 for r in range(ops[o, 1], ops[o, 2]):

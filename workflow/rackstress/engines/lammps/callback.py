@@ -781,6 +781,8 @@ class Fused:
     #: the near candidates' margin (kernels.step's h) as a fraction of the contact lists' skin
     #: (MagPod: 0.5 of 2 length units)
     MARGIN = 0.25
+    #: kernels.step's constant forces and damping when the deck has none for the callback
+    NO_NATIVES = (np.zeros((0, 3)), np.zeros(0))
 
     def __init__(self):
         self.ops, self.fpar, self.conds = [], [], []
@@ -907,6 +909,7 @@ class Fused:
                                             np.float64)
             self.loff = np.cumsum([0] + [len(h[0]) for h in hits]).astype(i64)
             self.ov = np.empty(len(self.ca), i64)
+            self.ovd = np.empty((len(self.ca), 4))
             self.ovn = np.zeros(len(hits), i64)
             self.near = np.empty(len(self.ca), i64)
             self.nnear = np.zeros(len(hits), i64)
@@ -919,12 +922,14 @@ class Fused:
             self.uoff = np.cumsum([0] + [len(r) for r in rows]).astype(i64)
             self.uref = np.zeros((len(self.urow), 3))
         F = forces
+        natF, natg = F.natives if F.natives is not None else self.NO_NATIVES
+        nnat = min(F.nfirst, fr.nlocal) if F.natives is not None else 0
         n, L, k = F.compiled.step(
             fr.x, fr.v, f, F.facc, F.fmass, self.ops, self.fpar, self.conds, self.bq, self.bcI,
             self.bcJ, self.pi, self.pj, self.pcI, self.pcJ, self.pq, self.frows, self.ca,
-            self.cb, self.cR2, self.loff, self.ov, self.ovn, self.near, self.nnear, self.valid,
-            self.urow, self.uoff, self.uref, self.margin, F.sacc, F.sflag, F.stouched,
-            F.snt, F.mass, fr.tag, F.nfirst)
+            self.cb, self.cR2, self.loff, self.ov, self.ovd, self.ovn, self.near, self.nnear,
+            self.valid, self.urow, self.uoff, self.uref, self.margin, F.sacc, F.sflag,
+            F.stouched, F.snt, F.mass, fr.tag, F.nfirst, natF, natg, nnat, fr.span)
         if L >= 0:
             a, b = fr.particles(self.ca[k:k + 1])[0], fr.particles(self.cb[k:k + 1])[0]
             raise PartnerLost(f"{self.names[L]}: atom ids {int(a) + 1} and {int(b) + 1} "
@@ -1260,12 +1265,12 @@ class PyForces:
         done with a·m in its array, so the trajectory is the same bit for bit."""
         try:
             out = fr.f
-            if self.natives is not None:
-                self._add_natives(fr, out)
             plan = self._fused(fr)
-            if plan is not None:        # every term in one compiled pass, added to f there
+            if plan is not None:        # natives and every term in one compiled pass
                 self._mark_late(fr, plan.run(self, fr, out))
                 return
+            if self.natives is not None:
+                self._add_natives(fr, out)
             acc = np.zeros((fr.acc_rows, 3))
             for term in self.active:
                 term.add(fr, acc)
