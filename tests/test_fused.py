@@ -25,14 +25,15 @@ from test_lammps_backend import every_operator_scene
 def _step_lists(x, ca, cb, cR2, loff, state, h):
     """kernels.step with no terms: only the contact lists' overlapping pairs (ov, ovn)."""
     n = len(x)
-    ov, ovn, near, nnear, valid, urow, uoff, uref = state
+    ov, ovn, near, nnear, valid, urow, uoff, uref = state[:8]
+    nR2, reach2 = state[8:] if len(state) > 8 else (np.empty(len(ca)), np.empty(len(ca)))
     out = K.step(x, np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((0, 3)), np.zeros(0),
                  np.zeros((0, 8), np.int64), np.zeros((0, 3)), np.zeros(1, np.int64),
                  np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, np.int64),
                  np.zeros(0, np.int64), np.zeros(0), np.zeros(0), np.zeros(0),
                  np.zeros(0, np.int64), ca, cb, cR2, loff, ov, np.empty((len(ca), 4)), ovn, near,
-                 nnear, valid, urow, uoff, uref, h, np.zeros((n, 3)), np.zeros(n, np.bool_),
-                 np.zeros(n, np.int64), np.zeros(1, np.int64), np.ones(n),
+                 nR2, reach2, nnear, valid, urow, uoff, uref, h,
+                 np.zeros((n, 3)), np.zeros(n, np.bool_), np.zeros(n, np.int64), np.zeros(1, np.int64), np.ones(n),
                  np.arange(1, n + 1, dtype=np.int32), n, np.zeros((0, 3)), np.zeros(0), 0, 0)
     return out
 
@@ -55,11 +56,12 @@ def test_near_candidates_find_every_overlap_as_a_full_pass():
     flag = np.zeros(n, np.bool_)
     rows = [K.members(ca[loff[L]:loff[L + 1]], cb[loff[L]:loff[L + 1]], flag) for L in (0, 1)]
     assert sorted(rows[1]) == list(range(10, 20)) and not flag.any()
-    state = (np.empty(len(ca), np.int64), np.zeros(2, np.int64), np.empty(len(ca), np.int64),
+    state = (np.empty(len(ca), np.int64), np.zeros(2, np.int64),
+             np.empty((len(ca), 3), np.int64),
              np.zeros(2, np.int64), np.zeros(2, np.int64),
              np.concatenate(rows).astype(np.int64),
              np.array([0, len(rows[0]), len(rows[0]) + len(rows[1])], np.int64),
-             np.zeros((len(rows[0]) + len(rows[1]), 3)))
+             np.zeros((len(rows[0]) + len(rows[1]), 3)), np.empty(len(ca)), np.empty(len(ca)))
     h = 0.5
     reused = remeasured = seen = 0
     for step in range(400):
@@ -81,13 +83,43 @@ def test_near_candidates_find_every_overlap_as_a_full_pass():
     assert seen > 100 and remeasured > 10 and reused > 10
 
 
+def test_near_sets_kept_while_a_list_moves_as_one():
+    """Two groups carried together (a body and its legs) by 0.6 a step, more than h/2 = 0.25,
+    with a small relative jitter: the near candidates are not measured again (their reference
+    positions stay), and the overlapping pairs are still NumPy's d² < R² over every
+    candidate, in list order; a relative move past h/2 does measure them again."""
+    rng = np.random.default_rng(11)
+    n = 40
+    x = rng.uniform(0.0, 5.0, size=(n, 3))
+    a, b = np.meshgrid(np.arange(20), np.arange(20, 40), indexing="ij")
+    ca, cb = a.ravel().astype(np.int64), b.ravel().astype(np.int64)
+    loff = np.array([0, len(ca)], np.int64)
+    cR2 = rng.uniform(0.8, 2.0, size=len(ca)) ** 2
+    state = (np.empty(len(ca), np.int64), np.zeros(1, np.int64),
+             np.empty((len(ca), 3), np.int64), np.zeros(1, np.int64), np.zeros(1, np.int64),
+             np.arange(n, dtype=np.int64), np.array([0, n], np.int64), np.zeros((n, 3)),
+             np.empty(len(ca)), np.empty(len(ca)))
+    _step_lists(x, ca, cb, cR2, loff, state, 0.5)
+    ref = state[7].copy()
+    for step in range(30):
+        x = x + np.array([0.6, -0.3, 0.2]) + rng.normal(scale=0.002, size=x.shape)
+        assert _step_lists(x, ca, cb, cR2, loff, state, 0.5)[1] == -1
+        np.testing.assert_array_equal(state[7], ref)          # not measured again
+        expect = np.flatnonzero(((x[cb] - x[ca]) ** 2).sum(axis=1) < cR2)
+        np.testing.assert_array_equal(state[0][:state[1][0]], expect)
+    assert len(expect) > 5
+    x[3] += 0.3         # one particle, relative to the others: measured again
+    _step_lists(x, ca, cb, cR2, loff, state, 0.5)
+    np.testing.assert_array_equal(state[7], x)
+
+
 def test_step_reports_a_coincident_pair():
     """A candidate pair at d = 0 stops the step (nothing written) and names the list and the
     candidate: the first coincident one in list order."""
     x = np.array([[0.0, 0, 0], [1.0, 0, 0], [1.0, 0, 0], [5.0, 0, 0]])
     ca, cb = np.array([0, 1, 0], np.int64), np.array([1, 2, 3], np.int64)
     loff = np.array([0, 3], np.int64)
-    state = (np.empty(3, np.int64), np.zeros(1, np.int64), np.empty(3, np.int64),
+    state = (np.empty(3, np.int64), np.zeros(1, np.int64), np.empty((3, 3), np.int64),
              np.zeros(1, np.int64), np.zeros(1, np.int64), np.arange(4, dtype=np.int64),
              np.array([0, 4], np.int64), np.zeros((4, 3)))
     assert tuple(_step_lists(x, ca, cb, np.full(3, 4.0), loff, state, 0.5))[1:] == (0, 1)

@@ -133,8 +133,9 @@ def warm() -> dict:
            np.ones((len(ops), 3)), np.zeros(1, np.int64), np.ones(2), np.ones(2), np.ones(2),
            r, s, one, one, one, np.zeros(1, np.int64), r, s, np.full(2, 4.0),
            np.array([0, 2], np.int64), np.zeros(2, np.int64), np.zeros((2, 4)),
-           np.zeros(1, np.int64), np.zeros(2, np.int64), np.zeros(1, np.int64),
-           np.zeros(1, np.int64), np.array([0, 1, 2], np.int64), np.array([0, 3], np.int64),
+           np.zeros(1, np.int64), np.zeros((2, 3), np.int64), np.zeros(2), np.zeros(2),
+           np.zeros(1, np.int64), np.zeros(1, np.int64), np.array([0, 1, 2], np.int64),
+           np.array([0, 3], np.int64),
            np.zeros((3, 3)), 0.5, np.zeros((3, 3)), flag, np.zeros(3, np.int64), nt, np.ones(3),
            tag, 3, np.zeros((3, 3)), np.zeros(3), 3, 1)
     seconds = time.perf_counter() - t0
@@ -850,14 +851,62 @@ if nb is not None:
 OP_BLOCK, OP_BIND, OP_ATTRACT, OP_COLLIDE, OP_DAMPEN, OP_FORCE, OP_BLOCKC = range(7)
 
 if nb is not None:
+    @nb.njit(inline="always")
+    def _natives(f, v, tag, r0, r1, ident, F, g):
+        """:func:`add_natives` on rows r0..r1 − 1."""
+        for r in range(r0, r1):
+            p = r if r < ident else tag[r] - 1
+            for k in range(3):
+                f[r, k] = (f[r, k] + F[p, k]) - g[p] * v[r, k]
+
+    @nb.njit(inline="always")
+    def _within(x, urow, uref, u0, u1, lim2):
+        """Whether the rows urow[u0:u1] are each within √lim2 of ``uref`` — as they are, or
+        once one common translation t (the centre of their displacements' bounding box) is
+        taken off: either bounds the change of every distance between them by 2√lim2 (as
+        :func:`moved_below_shifted` argues), so a list of two groups that move together is
+        judged by their relative motion only. NaN is not within."""
+        inside = True
+        for u in range(u0, u1):
+            r = urow[u]
+            e0 = x[r, 0] - uref[u, 0]
+            e1 = x[r, 1] - uref[u, 1]
+            e2 = x[r, 2] - uref[u, 2]
+            if not e0 * e0 + e1 * e1 + e2 * e2 <= lim2:
+                inside = False
+                break
+        if inside:
+            return True
+        lo0 = lo1 = lo2 = np.inf
+        hi0 = hi1 = hi2 = -np.inf
+        for u in range(u0, u1):
+            r = urow[u]
+            e0 = x[r, 0] - uref[u, 0]
+            e1 = x[r, 1] - uref[u, 1]
+            e2 = x[r, 2] - uref[u, 2]
+            lo0, hi0 = min(lo0, e0), max(hi0, e0)
+            lo1, hi1 = min(lo1, e1), max(hi1, e1)
+            lo2, hi2 = min(lo2, e2), max(hi2, e2)
+        t0 = 0.5 * (lo0 + hi0)
+        t1 = 0.5 * (lo1 + hi1)
+        t2 = 0.5 * (lo2 + hi2)
+        for u in range(u0, u1):
+            r = urow[u]
+            e0 = x[r, 0] - uref[u, 0] - t0
+            e1 = x[r, 1] - uref[u, 1] - t1
+            e2 = x[r, 2] - uref[u, 2] - t2
+            if not e0 * e0 + e1 * e1 + e2 * e2 <= lim2:
+                return False
+        return True
+
     @nb.njit(**_OPTS)
     def step(x, v, f, acc, dmass, ops, fpar, conds, bq, bcI, bcJ, pi, pj, pcI, pcJ, pq, frows,
-             ca, cb, cR2, loff, ov, ovd, ovn, near, nnear, valid, urow, uoff, uref, h,
-             sacc, sflag, stouched, snt, mass, tag, nfirst, natF, natg, nnat, ident):
-        """One callback step of the serial path (rows of the dense groups = particles): the
-        deck's constant forces and damping as :func:`add_natives` adds them (rows below
-        ``nnat``; none if 0), every active term of the phase, in the terms' order, then the
-        terms' forces into LAMMPS' ``f``.
+             ca, cb, cR2, loff, ov, ovd, ovn, near, nR2, reach2, nnear, valid, urow, uoff,
+             uref, h, sacc, sflag, stouched, snt, mass, tag, nfirst, natF, natg, nnat, ident):
+        """One callback step of the serial path (rows of the dense groups = particles): every
+        active term of the phase, in the terms' order, then, on each row of LAMMPS' ``f``,
+        the deck's constant forces and damping as :func:`add_natives` adds them (rows below
+        ``nnat``, ``natF``/``natg`` per particle; none if 0) followed by the terms' a·m.
 
         ``ops`` (one row a term, in the order of the callback's terms): kind (``OP_*``; a
         Const bind block is ``OP_BLOCKC``: its L0² from the original positions in ``bq``), five
@@ -871,26 +920,27 @@ if nb is not None:
         collide of either direction scales by its c (the reverse direction's difference is −d
         and its d² the same, exactly: IEEE subtraction is antisymmetric), so a pair's Eq. 10
         is evaluated once a step, not once per direction. Only a list's *near*
-        candidates are measured (``near[loff[L]:loff[L] + nnear[L]]``, in list order: those
-        closer than R + ``h`` when the list's particles, ``urow[uoff[L]:uoff[L+1]]``, were at
-        ``uref``); while none of them has moved h/2 since, no other candidate can overlap
-        (its gap, ≥ h then, has closed by less than h), and once one has — or the list is new
-        (``valid[L] = 0``) — every candidate is measured and the near ones chosen again. The
-        overlapping pairs, and their order, are those of a pass over every candidate. Each
+        candidates are measured (rows ``near[loff[L]:loff[L] + nnear[L]]``: their two rows
+        and candidate index, their R² in ``nR2``, in list order: those closer than R + ``h``
+        when the list's particles, ``urow[uoff[L]:uoff[L+1]]``, were at ``uref``); while none
+        of them has moved h/2 since — as they are or relative to one common translation
+        (:func:`_within`) — no other candidate can overlap (its gap, ≥ h then, has closed by
+        less than h), and once one has — or the list is new (``valid[L] = 0``; then each
+        candidate's (R + h)² is kept in ``reach2``) — every candidate is measured and the near
+        ones chosen again. The overlapping pairs, and their order, are those of a pass over
+        every candidate. Each
         term adds exactly what its own kernel adds (:func:`bind_block` or
         :func:`bind_block_const`, :func:`bind_pairs`, :func:`attract_pairs`,
         :func:`collide_add`, :func:`dampen`, a force's vector), in the same order, so the sums
-        are those of the term-by-term path. Then f += acc·m on the dense rows and the sparse
+        are those of the term-by-term path. Then f += acc·m on the dense rows, in the pass that
+        adds the natives and clears ``acc`` (zero on entry, zero on return), and the sparse
         rows as :func:`add_sparse`.
 
         Returns (:func:`add_sparse`'s first row at or after ``nfirst``, or −1; L; k): L ≥ 0
-        names a list whose candidate k coincides (d = 0, Eq. 10 undefined); then no term is
-        added.
+        names a list whose candidate k coincides (d = 0, Eq. 10 undefined); then only the
+        natives are added.
         """
-        for r in range(nnat):
-            p = r if r < ident else tag[r] - 1
-            for m3 in range(3):
-                f[r, m3] = (f[r, m3] + natF[p, m3]) - natg[p] * v[r, m3]
+        nacc = acc.shape[0]
         nl = len(loff) - 1
         # each particle may move h/2 less a margin far above rounding (1e-6 relative)
         lim2 = (0.5 * h * (1.0 - 1e-6)) ** 2
@@ -898,24 +948,23 @@ if nb is not None:
             base = loff[L]
             ok = valid[L] != 0
             if ok:
-                for u in range(uoff[L], uoff[L + 1]):
-                    r = urow[u]
-                    e0 = x[r, 0] - uref[u, 0]
-                    e1 = x[r, 1] - uref[u, 1]
-                    e2 = x[r, 2] - uref[u, 2]
-                    if e0 * e0 + e1 * e1 + e2 * e2 > lim2:
-                        ok = False
-                        break
+                ok = _within(x, urow, uref, uoff[L], uoff[L + 1], lim2)
             if not ok:      # measure every candidate, keep the near ones and where they are
+                if valid[L] == 0:       # a new list: each candidate's (R + h)², once
+                    for k in range(loff[L], loff[L + 1]):
+                        reach = np.sqrt(cR2[k]) + h
+                        reach2[k] = reach * reach
                 nn = 0
                 for k in range(loff[L], loff[L + 1]):
                     a, b = ca[k], cb[k]
                     d0 = x[b, 0] - x[a, 0]
                     d1 = x[b, 1] - x[a, 1]
                     d2_ = x[b, 2] - x[a, 2]
-                    reach = np.sqrt(cR2[k]) + h
-                    if d0 * d0 + d1 * d1 + d2_ * d2_ < reach * reach:
-                        near[base + nn] = k
+                    if d0 * d0 + d1 * d1 + d2_ * d2_ < reach2[k]:
+                        near[base + nn, 0] = a
+                        near[base + nn, 1] = b
+                        near[base + nn, 2] = k
+                        nR2[base + nn] = cR2[k]
                         nn += 1
                 nnear[L] = nn
                 for u in range(uoff[L], uoff[L + 1]):
@@ -925,29 +974,25 @@ if nb is not None:
                     uref[u, 2] = x[r, 2]
                 valid[L] = 1
             cnt = 0
-            for j in range(nnear[L]):
-                k = near[base + j]
-                a, b = ca[k], cb[k]
+            for p in range(base, base + nnear[L]):
+                a, b = near[p, 0], near[p, 1]
                 d0 = x[b, 0] - x[a, 0]
                 d1 = x[b, 1] - x[a, 1]
                 d2_ = x[b, 2] - x[a, 2]
                 d2 = d0 * d0 + d1 * d1 + d2_ * d2_
-                if d2 < cR2[k]:
+                if d2 < nR2[p]:
                     if d2 == 0.0:
                         valid[L] = 0
-                        return -1, L, k
-                    ov[base + cnt] = k
-                    ovd[base + cnt, 0] = d0
-                    ovd[base + cnt, 1] = d1
-                    ovd[base + cnt, 2] = d2_
-                    ovd[base + cnt, 3] = col_f(d2, cR2[k])
+                        _natives(f, v, tag, 0, nnat, ident, natF, natg)
+                        return -1, L, near[p, 2]
+                    q = base + cnt
+                    ov[q] = near[p, 2]
+                    ovd[q, 0] = d0
+                    ovd[q, 1] = d1
+                    ovd[q, 2] = d2_
+                    ovd[q, 3] = col_f(d2, nR2[p])
                     cnt += 1
             ovn[L] = cnt
-        nacc = acc.shape[0]
-        for r in range(nacc):
-            acc[r, 0] = 0.0
-            acc[r, 1] = 0.0
-            acc[r, 2] = 0.0
         for o in range(ops.shape[0]):
             held = True
             for c in range(ops[o, 6], ops[o, 7]):
@@ -1009,8 +1054,17 @@ if nb is not None:
                     acc[r, 0] = acc[r, 0] + fpar[o, 0]
                     acc[r, 1] = acc[r, 1] + fpar[o, 1]
                     acc[r, 2] = acc[r, 2] + fpar[o, 2]
-        for r in range(nacc):
-            f[r, 0] += acc[r, 0] * dmass[r]
-            f[r, 1] += acc[r, 1] * dmass[r]
-            f[r, 2] += acc[r, 2] * dmass[r]
+        # f = ((f + F) − γ·v) + acc·m on the dense rows, one pass (acc left zero for the next
+        # step), then the natives alone on the other rows, then the sparse rows' acc·m
+        n1 = min(nnat, nacc)
+        for r in range(n1):
+            p = r if r < ident else tag[r] - 1
+            for m3 in range(3):
+                f[r, m3] = ((f[r, m3] + natF[p, m3]) - natg[p] * v[r, m3]) + acc[r, m3] * dmass[r]
+                acc[r, m3] = 0.0
+        for r in range(n1, nacc):
+            for m3 in range(3):
+                f[r, m3] += acc[r, m3] * dmass[r]
+                acc[r, m3] = 0.0
+        _natives(f, v, tag, nacc, nnat, ident, natF, natg)
         return add_sparse(f, sacc, sflag, stouched, snt, mass, tag, nfirst), -1, -1

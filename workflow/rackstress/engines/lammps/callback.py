@@ -911,7 +911,9 @@ class Fused:
             self.ov = np.empty(len(self.ca), i64)
             self.ovd = np.empty((len(self.ca), 4))
             self.ovn = np.zeros(len(hits), i64)
-            self.near = np.empty(len(self.ca), i64)
+            self.near = np.empty((len(self.ca), 3), i64)
+            self.nR2 = np.empty(len(self.ca))
+            self.reach2 = np.empty(len(self.ca))
             self.nnear = np.zeros(len(hits), i64)
             self.valid = np.zeros(len(hits), i64)       # measure every candidate first
             old = {} if self._hits_rows is None else self._hits_rows
@@ -927,8 +929,9 @@ class Fused:
         n, L, k = F.compiled.step(
             fr.x, fr.v, f, F.facc, F.fmass, self.ops, self.fpar, self.conds, self.bq, self.bcI,
             self.bcJ, self.pi, self.pj, self.pcI, self.pcJ, self.pq, self.frows, self.ca,
-            self.cb, self.cR2, self.loff, self.ov, self.ovd, self.ovn, self.near, self.nnear,
-            self.valid, self.urow, self.uoff, self.uref, self.margin, F.sacc, F.sflag,
+            self.cb, self.cR2, self.loff, self.ov, self.ovd, self.ovn, self.near, self.nR2,
+            self.reach2, self.nnear, self.valid, self.urow, self.uoff, self.uref, self.margin,
+            F.sacc, F.sflag,
             F.stouched, F.snt, F.mass, fr.tag, F.nfirst, natF, natg, nnat, fr.span)
         if L >= 0:
             a, b = fr.particles(self.ca[k:k + 1])[0], fr.particles(self.cb[k:k + 1])[0]
