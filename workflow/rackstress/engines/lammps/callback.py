@@ -24,6 +24,8 @@ particle: the runner reports it as a divergence.
 """
 from __future__ import annotations
 
+import operator
+
 import numpy as np
 
 from rackstress.lib.vec import rowdot
@@ -791,6 +793,8 @@ class Fused:
         #: the contact lists: (A, B) slices (A first in the scene), and a name for errors
         self.lists, self.names = [], []
         self._hits = self._hits_rows = None
+        #: kernels.step's arguments and what they were made for (frame, force array, nfirst)
+        self._args = self._key = None
 
     @classmethod
     def make(cls, forces: "PyForces") -> "Fused | None":
@@ -899,9 +903,11 @@ class Fused:
         ``forces.nfirst`` (one LAMMPS does not integrate yet), or −1."""
         # the same lists (objects) until LAMMPS reneighbours or the callback's own check renews
         # them (Overlaps keeps them in the frame's memo)
-        hits = [forces.overlaps._candidates(fr, A, B) for A, B in self.lists]
-        if self._hits is None or any(h is not o for h, o in zip(hits, self._hits)):
+        cand = forces.overlaps._candidates
+        hits = [cand(fr, A, B) for A, B in self.lists]
+        if self._hits is None or not all(map(operator.is_, hits, self._hits)):
             self._hits = hits
+            self._args = None
             i64 = np.int64
             self.ca = np.ascontiguousarray(np.concatenate([h[0] for h in hits] + [[]]), i64)
             self.cb = np.ascontiguousarray(np.concatenate([h[1] for h in hits] + [[]]), i64)
@@ -923,21 +929,27 @@ class Fused:
             self.urow = np.ascontiguousarray(np.concatenate(rows + [[]]), i64)
             self.uoff = np.cumsum([0] + [len(r) for r in rows]).astype(i64)
             self.uref = np.zeros((len(self.urow), 3))
-        F = forces
-        natF, natg = F.natives if F.natives is not None else self.NO_NATIVES
-        nnat = min(F.nfirst, fr.nlocal) if F.natives is not None else 0
-        n, L, k = F.compiled.step(
-            fr.x, fr.v, f, F.facc, F.fmass, self.ops, self.fpar, self.conds, self.bq, self.bcI,
-            self.bcJ, self.pi, self.pj, self.pcI, self.pcJ, self.pq, self.frows, self.ca,
-            self.cb, self.cR2, self.loff, self.ov, self.ovd, self.ovn, self.near, self.nR2,
-            self.reach2, self.nnear, self.valid, self.urow, self.uoff, self.uref, self.margin,
-            F.sacc, F.sflag,
-            F.stouched, F.snt, F.mass, fr.tag, F.nfirst, natF, natg, nnat, fr.span)
+        key = (fr, f, forces.nfirst)
+        if self._args is None or not all(map(operator.is_, key, self._key)):
+            self._key, self._args = key, self._step_args(forces, fr, f)
+        n, L, k = forces.compiled.step(*self._args)
         if L >= 0:
             a, b = fr.particles(self.ca[k:k + 1])[0], fr.particles(self.cb[k:k + 1])[0]
             raise PartnerLost(f"{self.names[L]}: atom ids {int(a) + 1} and {int(b) + 1} "
                               "coincide (Eq. 10 is undefined at d = 0)", int(a))
         return n
+
+    def _step_args(self, F: "PyForces", fr: Frame, f: np.ndarray) -> tuple:
+        """kernels.step's arguments: the same objects every step of a frame (LAMMPS' arrays
+        are views taken when the frame was made) while the contact lists stay."""
+        natF, natg = F.natives if F.natives is not None else self.NO_NATIVES
+        nnat = min(F.nfirst, fr.nlocal) if F.natives is not None else 0
+        return (fr.x, fr.v, f, F.facc, F.fmass, self.ops, self.fpar, self.conds, self.bq,
+                self.bcI, self.bcJ, self.pi, self.pj, self.pcI, self.pcJ, self.pq, self.frows,
+                self.ca, self.cb, self.cR2, self.loff, self.ov, self.ovd, self.ovn, self.near,
+                self.nR2, self.reach2, self.nnear, self.valid, self.urow, self.uoff, self.uref,
+                self.margin, F.sacc, F.sflag, F.stouched, F.snt, F.mass, fr.tag, F.nfirst, natF,
+                natg, nnat, fr.span)
 
 
 #: The term realizing each operator class in the callback.
@@ -979,6 +991,7 @@ class PyForces:
         self.span = first_passive if not self.passive[:first_passive].any() and \
             self.passive[first_passive:].all() else 0
         serial = comm is None or comm.Get_size() == 1
+        self._mpi = not serial
         self.bed = (RestingBed(self.n, self.span, self.compiled)
                     if self.move_bit is not None and self.span and self.compiled is not None
                     and serial else None)
@@ -1187,7 +1200,7 @@ class PyForces:
     def _frame(self, nlocal: int) -> Frame:
         """This step's frame: the last one refreshed, or a new layout after a reneighbouring."""
         lmp, fr = self.lmp, self.frame
-        ago = lmp.extract_setting("neigh_ago")
+        ago = lmp.lib.lammps_extract_setting(lmp.lmp, b"neigh_ago")    # lmp.extract_setting's
         if (fr is None or self._fresh or not self.verlet or fr.nlocal != nlocal or ago == 0
                 or self._nghost[0] != fr.nghost):
             if self.move_bit is not None and (ago == 0 or self._fresh):
@@ -1232,7 +1245,7 @@ class PyForces:
 
     # ------------------------------------------------------------------ callback
     def __call__(self, caller, step, nlocal, tag, x, f):
-        mpi = self.comm is not None and self.comm.Get_size() > 1
+        mpi = self._mpi
         self._fail_here, self._agreed, fr = None, None, None
         try:
             fr = self._frame(nlocal)

