@@ -792,7 +792,9 @@ class Fused:
         self.nblock = self.npairs = self.nrows = 0
         #: the contact lists: (A, B) slices (A first in the scene), and a name for errors
         self.lists, self.names = [], []
-        self._hits = self._hits_rows = None
+        self._hits = self._rows = None
+        #: the two sets of per-candidate buffers (:meth:`_buffers`) and the one in use
+        self._sets, self._set = [None, None], 1
         #: kernels.step's arguments and what they were made for (frame, force array, nfirst)
         self._args = self._key = None
 
@@ -906,29 +908,7 @@ class Fused:
         cand = forces.overlaps._candidates
         hits = [cand(fr, A, B) for A, B in self.lists]
         if self._hits is None or not all(map(operator.is_, hits, self._hits)):
-            self._hits = hits
-            self._args = None
-            i64 = np.int64
-            self.ca = np.ascontiguousarray(np.concatenate([h[0] for h in hits] + [[]]), i64)
-            self.cb = np.ascontiguousarray(np.concatenate([h[1] for h in hits] + [[]]), i64)
-            self.cR2 = np.ascontiguousarray(np.concatenate([h[2] for h in hits] + [[]]),
-                                            np.float64)
-            self.loff = np.cumsum([0] + [len(h[0]) for h in hits]).astype(i64)
-            self.ov = np.empty(len(self.ca), i64)
-            self.ovd = np.empty((len(self.ca), 4))
-            self.ovn = np.zeros(len(hits), i64)
-            self.near = np.empty((len(self.ca), 3), i64)
-            self.nR2 = np.empty(len(self.ca))
-            self.reach2 = np.empty(len(self.ca))
-            self.nnear = np.zeros(len(hits), i64)
-            self.valid = np.zeros(len(hits), i64)       # measure every candidate first
-            old = {} if self._hits_rows is None else self._hits_rows
-            rows = [old[id(h)][1] if id(h) in old and old[id(h)][0] is h else
-                    forces.compiled.members(h[0], h[1], forces.flag_rows(fr)) for h in hits]
-            self._hits_rows = {id(h): (h, r) for h, r in zip(hits, rows)}
-            self.urow = np.ascontiguousarray(np.concatenate(rows + [[]]), i64)
-            self.uoff = np.cumsum([0] + [len(r) for r in rows]).astype(i64)
-            self.uref = np.zeros((len(self.urow), 3))
+            self._relist(forces, fr, hits)
         key = (fr, f, forces.nfirst)
         if self._args is None or not all(map(operator.is_, key, self._key)):
             self._key, self._args = key, self._step_args(forces, fr, f)
@@ -938,6 +918,71 @@ class Fused:
             raise PartnerLost(f"{self.names[L]}: atom ids {int(a) + 1} and {int(b) + 1} "
                               "coincide (Eq. 10 is undefined at d = 0)", int(a))
         return n
+
+    #: kernels.step's per-candidate arrays: (name, columns, dtype)
+    _BUFFERS = (("ca", 0, np.int64), ("cb", 0, np.int64), ("cR2", 0, np.float64),
+                ("ov", 0, np.int64), ("ovd", 4, np.float64), ("near", 3, np.int64),
+                ("nR2", 0, np.float64), ("reach2", 0, np.float64))
+
+    def _buffers(self, n: int) -> dict:
+        """The set of per-candidate buffers not in use now, grown to hold ``n`` candidates
+        (two sets used in turn: the lists' renewal reads the old set while it fills the new
+        one, and neither is allocated again, nor its memory faulted in, at every renewal)."""
+        sets = self._sets
+        spare = 1 - self._set
+        if sets[spare] is None or len(sets[spare]["ca"]) < n:
+            cap = n + n // 2 + 64           # room for the lists to grow
+            sets[spare] = {name: np.zeros((cap, cols) if cols else cap, dt)
+                           for name, cols, dt in self._BUFFERS}
+        self._set = spare
+        return sets[spare]
+
+    def _relist(self, forces: "PyForces", fr: Frame, hits: list) -> None:
+        """Join the contact lists for kernels.step after one of them was renewed (a new list
+        object): each list's candidates copied to its place in the buffers (:meth:`_buffers`).
+        A list that is the same object as before keeps, moved to its new place, its near
+        candidates, their particles' reference positions and its (R + h)², so only the new
+        lists are measured in full at the next step (kernels.step's ``valid``)."""
+        i64 = np.int64
+        old = None
+        if self._hits is not None:
+            old = dict(loff=self.loff, uoff=self.uoff, near=self.near, nR2=self.nR2,
+                       reach2=self.reach2, nnear=self.nnear, valid=self.valid, uref=self.uref,
+                       rows=self._rows, index={id(h): L for L, h in enumerate(self._hits)})
+        sizes = [len(h[0]) for h in hits]
+        loff = np.zeros(len(hits) + 1, i64)
+        np.cumsum(sizes, out=loff[1:])
+        n = int(loff[-1])
+        buf = self._buffers(n)
+        for name, _, _ in self._BUFFERS:
+            setattr(self, name, buf[name][:n])
+        self.loff = loff
+        self.ovn = np.zeros(len(hits), i64)
+        self.nnear = np.zeros(len(hits), i64)
+        self.valid = np.zeros(len(hits), i64)       # measure every candidate first
+        kept = [None if old is None else old["index"].get(id(h)) for h in hits]
+        rows = [old["rows"][Lo] if Lo is not None else
+                forces.compiled.members(h[0], h[1], forces.flag_rows(fr))
+                for h, Lo in zip(hits, kept)]
+        self._rows = rows
+        self.urow = np.ascontiguousarray(np.concatenate(rows + [[]]), i64)
+        self.uoff = np.cumsum([0] + [len(r) for r in rows]).astype(i64)
+        self.uref = np.zeros((len(self.urow), 3))
+        for L, (h, Lo) in enumerate(zip(hits, kept)):
+            k0, k1 = loff[L], loff[L + 1]
+            self.ca[k0:k1], self.cb[k0:k1], self.cR2[k0:k1] = h[0], h[1], h[2]
+            if Lo is None or not old["valid"][Lo]:
+                continue
+            o0, nn = old["loff"][Lo], old["nnear"][Lo]
+            self.near[k0:k0 + nn] = old["near"][o0:o0 + nn]
+            self.near[k0:k0 + nn, 2] += k0 - o0          # candidate indices, moved
+            self.nR2[k0:k0 + nn] = old["nR2"][o0:o0 + nn]
+            self.reach2[k0:k1] = old["reach2"][o0:old["loff"][Lo + 1]]
+            self.uref[self.uoff[L]:self.uoff[L + 1]] = \
+                old["uref"][old["uoff"][Lo]:old["uoff"][Lo + 1]]
+            self.nnear[L], self.valid[L] = nn, 1
+        self._hits = hits
+        self._args = None
 
     def _step_args(self, F: "PyForces", fr: Frame, f: np.ndarray) -> tuple:
         """kernels.step's arguments: the same objects every step of a frame (LAMMPS' arrays
