@@ -129,7 +129,7 @@ def warm() -> dict:
                     [OP_ATTRACT, 0, 2, 0, 0, 0, 0, 0], [OP_COLLIDE, 0, 1, 0, 0, 0, 0, 1],
                     [OP_DAMPEN, 0, 3, 0, 0, 0, 0, 1], [OP_FORCE, 0, 1, 0, 0, 0, 0, 0],
                     [OP_BLOCKC, 0, 1, 1, 1, 0, 0, 0]], np.int64)
-    k.step(x, np.ones((3, 3)), np.zeros((3, 3)), np.zeros((3, 3)), np.ones(3), ops,
+    k.step(x, np.ones((3, 3)), np.zeros((3, 3)), np.zeros((3, 3)), np.ones(9), ops,
            np.ones((len(ops), 3)), np.zeros(1, np.int64), np.ones(2), np.ones(2), np.ones(2),
            r, s, one, one, one, np.zeros(1, np.int64), r, s, np.full(2, 4.0),
            np.array([0, 2], np.int64), np.zeros(2, np.int64), np.zeros((2, 4)),
@@ -137,7 +137,7 @@ def warm() -> dict:
            np.zeros(1, np.int64), np.zeros(1, np.int64), np.array([0, 1, 2], np.int64),
            np.array([0, 3], np.int64),
            np.zeros((3, 3)), 0.5, np.zeros((3, 3)), flag, np.zeros(3, np.int64), nt, np.ones(3),
-           tag, 3, np.zeros((3, 3)), np.zeros(3), 3, 1)
+           tag, 3, np.zeros((3, 3)), np.zeros(9), 3, 1)
     seconds = time.perf_counter() - t0
     if first and os.environ.get("PMI_RANK", "0") == "0":
         print(f"rackstress: kernels compiled in {seconds:.1f} s", file=sys.stderr, flush=True)
@@ -151,23 +151,30 @@ if nb is not None:
     att_f = nb.njit(inline="always")(Attract.factor)      # Eq. 14
 
     @nb.njit(inline="always")
-    def _tile_columns(x, acc, r0, k, x0, x1, x2, a0, a1, a2):
+    def _tile_columns(xf, af, r0, k, x0, x1, x2, a0, a1, a2):
         """The positions and accumulator rows r0..r0+k of a tile of a bind block's targets as
-        contiguous columns (copies: no arithmetic), so that the pass over them vectorizes."""
+        contiguous columns (copies: no arithmetic), so that the pass over them vectorizes
+        (``xf``, ``af``: the (n, 3) arrays' rows one after another, whose stride-3 reads
+        vectorize too)."""
+        xt = xf[3 * r0:3 * (r0 + k)]
+        at = af[3 * r0:3 * (r0 + k)]
         for u in range(k):
-            x0[u] = x[r0 + u, 0]
-            x1[u] = x[r0 + u, 1]
-            x2[u] = x[r0 + u, 2]
-            a0[u] = acc[r0 + u, 0]
-            a1[u] = acc[r0 + u, 1]
-            a2[u] = acc[r0 + u, 2]
+            x0[u] = xt[3 * u]
+            x1[u] = xt[3 * u + 1]
+            x2[u] = xt[3 * u + 2]
+            a0[u] = at[3 * u]
+            a1[u] = at[3 * u + 1]
+            a2[u] = at[3 * u + 2]
 
     @nb.njit(inline="always")
-    def _store_targets(acc, t0, m, A0, A1, A2):
-        for t in range(m):
-            acc[t0 + t, 0] = A0[t]
-            acc[t0 + t, 1] = A1[t]
-            acc[t0 + t, 2] = A2[t]
+    def _store_targets(af, r0, k, a0, a1, a2):
+        """A tile's accumulator columns back into its rows (``af``: the rows one after
+        another)."""
+        at = af[3 * r0:3 * (r0 + k)]
+        for u in range(k):
+            at[3 * u] = a0[u]
+            at[3 * u + 1] = a1[u]
+            at[3 * u + 2] = a2[u]
 
     #: a bind block's targets are taken this many at a time (their columns and the reverse
     #: binds' terms of four sources stay in the first-level cache)
@@ -223,16 +230,17 @@ if nb is not None:
         a tile's targets (a division each) vectorizes; the sources' sums continue tile after
         tile in target order (:func:`_fold_tile`). Neither order depends on the tiling.
         """
-        T = _TILE
+        T = max(1, min(_TILE, m))
         x0, x1, x2, a0, a1, a2 = (np.empty(T), np.empty(T), np.empty(T), np.empty(T),
                                   np.empty(T), np.empty(T))
         P0 = np.zeros((4, T))
         P1 = np.zeros((4, T))
         P2 = np.zeros((4, T))
         F = np.zeros((n + 3, 3))
+        xf, af = x.reshape(x.size), acc.reshape(acc.size)    # views (C-contiguous only)
         for a in range(0, m, T):
             k = min(T, m - a)
-            _tile_columns(x, acc, t0 + a, k, x0, x1, x2, a0, a1, a2)
+            _tile_columns(xf, af, t0 + a, k, x0, x1, x2, a0, a1, a2)
             for g in range(0, n, 4):
                 for s in range(g, min(g + 4, n)):
                     xs0, xs1, xs2 = x[s0 + s, 0], x[s0 + s, 1], x[s0 + s, 2]
@@ -265,7 +273,7 @@ if nb is not None:
                             a2[u] += ct * d2_
                 if fold:
                     _fold_tile(F, g, P0, P1, P2, k)
-            _store_targets(acc, t0 + a, k, a0, a1, a2)
+            _store_targets(af, t0 + a, k, a0, a1, a2)
         if fold:
             _store_sources(acc, s0, n, F)
 
@@ -277,16 +285,17 @@ if nb is not None:
         :meth:`Bind.pairs` computes it, (u_o − p_o)·(u_o − p_o) in the order x, y, z — the same
         numbers, read from 3(m + n) values instead of 3mn. Sums in :func:`bind_block`'s
         order, in its tiles."""
-        T = _TILE
+        T = max(1, min(_TILE, m))
         x0, x1, x2, a0, a1, a2 = (np.empty(T), np.empty(T), np.empty(T), np.empty(T),
                                   np.empty(T), np.empty(T))
         P0 = np.zeros((4, T))
         P1 = np.zeros((4, T))
         P2 = np.zeros((4, T))
         F = np.zeros((n + 3, 3))
+        xf, af = x.reshape(x.size), acc.reshape(acc.size)    # views (C-contiguous only)
         for a in range(0, m, T):
             k = min(T, m - a)
-            _tile_columns(x, acc, t0 + a, k, x0, x1, x2, a0, a1, a2)
+            _tile_columns(xf, af, t0 + a, k, x0, x1, x2, a0, a1, a2)
             o0, o1, o2 = o[a:a + k], o[m + a:m + a + k], o[2 * m + a:2 * m + a + k]
             for g in range(0, n, 4):
                 for s in range(g, min(g + 4, n)):
@@ -326,7 +335,7 @@ if nb is not None:
                             a2[u] += ct * d2_
                 if fold:
                     _fold_tile(F, g, P0, P1, P2, k)
-            _store_targets(acc, t0 + a, k, a0, a1, a2)
+            _store_targets(af, t0 + a, k, a0, a1, a2)
         if fold:
             _store_sources(acc, s0, n, F)
 
@@ -852,12 +861,17 @@ OP_BLOCK, OP_BIND, OP_ATTRACT, OP_COLLIDE, OP_DAMPEN, OP_FORCE, OP_BLOCKC = rang
 
 if nb is not None:
     @nb.njit(inline="always")
-    def _natives(f, v, tag, r0, r1, ident, F, g):
-        """:func:`add_natives` on rows r0..r1 − 1."""
-        for r in range(r0, r1):
-            p = r if r < ident else tag[r] - 1
+    def _natives(f, v, tag, r0, r1, ident, F, g3):
+        """:func:`add_natives` on rows r0..r1 − 1 (``g3``: γ per particle, three times), on
+        the arrays' rows one after another: the rows below ``ident`` (their own particles)
+        in one pass that vectorizes."""
+        fa, va, Fa = f.reshape(f.size), v.reshape(v.size), F.reshape(F.size)
+        for i in range(3 * r0, 3 * max(r0, min(r1, ident))):
+            fa[i] = (fa[i] + Fa[i]) - g3[i] * va[i]
+        for r in range(max(r0, ident), r1):
+            p = tag[r] - 1
             for k in range(3):
-                f[r, k] = (f[r, k] + F[p, k]) - g[p] * v[r, k]
+                f[r, k] = (f[r, k] + F[p, k]) - g3[3 * p + k] * v[r, k]
 
     @nb.njit(inline="always")
     def _within(x, urow, uref, u0, u1, lim2):
@@ -900,13 +914,14 @@ if nb is not None:
         return True
 
     @nb.njit(**_OPTS)
-    def step(x, v, f, acc, dmass, ops, fpar, conds, bq, bcI, bcJ, pi, pj, pcI, pcJ, pq, frows,
+    def step(x, v, f, acc, dmass3, ops, fpar, conds, bq, bcI, bcJ, pi, pj, pcI, pcJ, pq, frows,
              ca, cb, cR2, loff, ov, ovd, ovn, near, nR2, reach2, nnear, valid, urow, uoff,
-             uref, h, sacc, sflag, stouched, snt, mass, tag, nfirst, natF, natg, nnat, ident):
+             uref, h, sacc, sflag, stouched, snt, mass, tag, nfirst, natF, natg3, nnat, ident):
         """One callback step of the serial path (rows of the dense groups = particles): every
         active term of the phase, in the terms' order, then, on each row of LAMMPS' ``f``,
         the deck's constant forces and damping as :func:`add_natives` adds them (rows below
-        ``nnat``, ``natF``/``natg`` per particle; none if 0) followed by the terms' a·m.
+        ``nnat``, ``natF`` per particle, ``natg3`` its γ three times; none if 0) followed by
+        the terms' a·m (``dmass3``: the dense rows' masses, three times).
 
         ``ops`` (one row a term, in the order of the callback's terms): kind (``OP_*``; a
         Const bind block is ``OP_BLOCKC``: its L0² from the original positions in ``bq``), five
@@ -983,7 +998,7 @@ if nb is not None:
                 if d2 < nR2[p]:
                     if d2 == 0.0:
                         valid[L] = 0
-                        _natives(f, v, tag, 0, nnat, ident, natF, natg)
+                        _natives(f, v, tag, 0, nnat, ident, natF, natg3)
                         return -1, L, near[p, 2]
                     q = base + cnt
                     ov[q] = near[p, 2]
@@ -1056,15 +1071,23 @@ if nb is not None:
                     acc[r, 2] = acc[r, 2] + fpar[o, 2]
         # f = ((f + F) − γ·v) + acc·m on the dense rows, one pass (acc left zero for the next
         # step), then the natives alone on the other rows, then the sparse rows' acc·m
+        # (on the arrays' rows one after another: the passes over rows that are their own
+        # particles vectorize; dmass3, natg3: a row's mass and γ three times)
+        fa, aa, va = f.reshape(f.size), acc.reshape(acc.size), v.reshape(v.size)
+        Fa = natF.reshape(natF.size)
         n1 = min(nnat, nacc)
-        for r in range(n1):
-            p = r if r < ident else tag[r] - 1
+        i1 = 3 * min(n1, ident)
+        for i in range(i1):
+            fa[i] = ((fa[i] + Fa[i]) - natg3[i] * va[i]) + aa[i] * dmass3[i]
+            aa[i] = 0.0
+        for r in range(min(n1, ident), n1):
+            p = tag[r] - 1
             for m3 in range(3):
-                f[r, m3] = ((f[r, m3] + natF[p, m3]) - natg[p] * v[r, m3]) + acc[r, m3] * dmass[r]
-                acc[r, m3] = 0.0
-        for r in range(n1, nacc):
-            for m3 in range(3):
-                f[r, m3] += acc[r, m3] * dmass[r]
-                acc[r, m3] = 0.0
-        _natives(f, v, tag, nacc, nnat, ident, natF, natg)
+                i, j = 3 * r + m3, 3 * p + m3
+                fa[i] = ((fa[i] + Fa[j]) - natg3[j] * va[i]) + aa[i] * dmass3[i]
+                aa[i] = 0.0
+        for i in range(3 * n1, 3 * nacc):
+            fa[i] += aa[i] * dmass3[i]
+            aa[i] = 0.0
+        _natives(f, v, tag, nacc, nnat, ident, natF, natg3)
         return add_sparse(f, sacc, sflag, stouched, snt, mass, tag, nfirst), -1, -1

@@ -987,14 +987,14 @@ class Fused:
     def _step_args(self, F: "PyForces", fr: Frame, f: np.ndarray) -> tuple:
         """kernels.step's arguments: the same objects every step of a frame (LAMMPS' arrays
         are views taken when the frame was made) while the contact lists stay."""
-        natF, natg = F.natives if F.natives is not None else self.NO_NATIVES
+        natF, natg3 = F.natives3 if F.natives is not None else self.NO_NATIVES
         nnat = min(F.nfirst, fr.nlocal) if F.natives is not None else 0
-        return (fr.x, fr.v, f, F.facc, F.fmass, self.ops, self.fpar, self.conds, self.bq,
+        return (fr.x, fr.v, f, F.facc, F.fmass3, self.ops, self.fpar, self.conds, self.bq,
                 self.bcI, self.bcJ, self.pi, self.pj, self.pcI, self.pcJ, self.pq, self.frows,
                 self.ca, self.cb, self.cR2, self.loff, self.ov, self.ovd, self.ovn, self.near,
                 self.nR2, self.reach2, self.nnear, self.valid, self.urow, self.uoff, self.uref,
                 self.margin, F.sacc, F.sflag, F.stouched, F.snt, F.mass, fr.tag, F.nfirst, natF,
-                natg, nnat, fr.span)
+                natg3, nnat, fr.span)
 
 
 #: The term realizing each operator class in the callback.
@@ -1087,7 +1087,12 @@ class PyForces:
         self._flags = np.zeros(0, dtype=np.bool_)
         if self.fuse:
             self.facc = np.zeros((self.dense_span, 3))
-            self.fmass = np.ascontiguousarray(self.mass[:self.dense_span])
+            #: the masses of the dense rows and the natives' γ, each three times (kernels.step
+            #: goes over the rows' x, y, z one after another)
+            self.fmass3 = np.repeat(self.mass[:self.dense_span], 3)
+            if self.natives is not None:
+                self.natives3 = (np.ascontiguousarray(self.natives[0]),
+                                 np.repeat(self.natives[1], 3))
         # LAMMPS' own displacement check keeps the per-layout memos valid (Overlaps); with any
         # other neighbour settings every step starts from scratch
         self.verlet = (lmp.extract_setting("neigh_every") == 1
