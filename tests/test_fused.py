@@ -31,10 +31,11 @@ def _step_lists(x, ca, cb, cR2, loff, state, h):
                  np.zeros((0, 8), np.int64), np.zeros((0, 3)), np.zeros(1, np.int64),
                  np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, np.int64),
                  np.zeros(0, np.int64), np.zeros(0), np.zeros(0), np.zeros(0),
-                 np.zeros(0, np.int64), ca, cb, cR2, loff, ov, np.empty((len(ca), 4)), ovn, near,
-                 nR2, reach2, nnear, valid, urow, uoff, uref, h,
-                 np.zeros((n, 3)), np.zeros(n, np.bool_), np.zeros(n, np.int64), np.zeros(1, np.int64), np.ones(n),
-                 np.arange(1, n + 1, dtype=np.int32), n, np.zeros((0, 3)), np.zeros(0), 0, 0)
+                 np.zeros(0, np.int64), ca, cb, cR2, loff, ov, np.empty((len(ca), 2), np.int64),
+                 np.empty((len(ca), 4)), ovn, near, nR2, reach2, nnear, valid, urow, uoff, uref,
+                 h, np.zeros((n, 3)), np.zeros(n, np.bool_), np.zeros(n, np.int64),
+                 np.zeros(1, np.int64), np.ones(n), np.arange(1, n + 1, dtype=np.int32), n,
+                 np.zeros((0, 3)), np.zeros(0), 0, 0)
     return out
 
 

@@ -132,7 +132,8 @@ def warm() -> dict:
     k.step(x, np.ones((3, 3)), np.zeros((3, 3)), np.zeros((3, 3)), np.ones(9), ops,
            np.ones((len(ops), 3)), np.zeros(1, np.int64), np.ones(2), np.ones(2), np.ones(2),
            r, s, one, one, one, np.zeros(1, np.int64), r, s, np.full(2, 4.0),
-           np.array([0, 2], np.int64), np.zeros(2, np.int64), np.zeros((2, 4)),
+           np.array([0, 2], np.int64), np.zeros(2, np.int64), np.zeros((2, 2), np.int64),
+           np.zeros((2, 4)),
            np.zeros(1, np.int64), np.zeros((2, 3), np.int64), np.zeros(2), np.zeros(2),
            np.zeros(1, np.int64), np.zeros(1, np.int64), np.array([0, 1, 2], np.int64),
            np.array([0, 3], np.int64),
@@ -915,7 +916,7 @@ if nb is not None:
 
     @nb.njit(**_OPTS)
     def step(x, v, f, acc, dmass3, ops, fpar, conds, bq, bcI, bcJ, pi, pj, pcI, pcJ, pq, frows,
-             ca, cb, cR2, loff, ov, ovd, ovn, near, nR2, reach2, nnear, valid, urow, uoff,
+             ca, cb, cR2, loff, ov, ovr, ovd, ovn, near, nR2, reach2, nnear, valid, urow, uoff,
              uref, h, sacc, sflag, stouched, snt, mass, tag, nfirst, natF, natg3, nnat, ident):
         """One callback step of the serial path (rows of the dense groups = particles): every
         active term of the phase, in the terms' order, then, on each row of LAMMPS' ``f``,
@@ -924,32 +925,33 @@ if nb is not None:
         the terms' a·m (``dmass3``: the dense rows' masses, three times).
 
         ``ops`` (one row a term, in the order of the callback's terms): kind (``OP_*``; a
-        Const bind block is ``OP_BLOCKC``: its L0² from the original positions in ``bq``), five
-        integer arguments, and the range ``conds[cs:ce]`` of contact lists that must overlap
-        (⟨contact⟩ of Eq. 4) for the term to act; ``fpar``: its floats (c, or a force's
-        vector). The contact lists are candidate pairs ``ca, cb, cR2`` (list L is
+        Const bind block is ``OP_BLOCKC``: its L0² from the original positions in ``bq``),
+        five integer arguments, and the range ``conds[cs:ce]`` of contact lists that must
+        overlap (⟨contact⟩ of Eq. 4) for the term to act; ``fpar``: its floats (c, or a
+        force's vector). The contact lists are candidate pairs ``ca, cb, cR2`` (list L is
         ``loff[L]:loff[L+1]``, sorted by particles); their overlapping pairs (Eq. 10's
-        support, d² < R²) are found once here, into ``ov``/``ovn``, and serve every collide
-        (both directions) and every contact condition of the step: with each one its
-        difference d = x_b − x_a and Eq. 10's factor min(0, 1 − R²/d²) (``ovd``), which a
-        collide of either direction scales by its c (the reverse direction's difference is −d
-        and its d² the same, exactly: IEEE subtraction is antisymmetric), so a pair's Eq. 10
-        is evaluated once a step, not once per direction. Only a list's *near*
-        candidates are measured (rows ``near[loff[L]:loff[L] + nnear[L]]``: their two rows
-        and candidate index, their R² in ``nR2``, in list order: those closer than R + ``h``
-        when the list's particles, ``urow[uoff[L]:uoff[L+1]]``, were at ``uref``); while none
-        of them has moved h/2 since — as they are or relative to one common translation
-        (:func:`_within`) — no other candidate can overlap (its gap, ≥ h then, has closed by
-        less than h), and once one has — or the list is new (``valid[L] = 0``; then each
-        candidate's (R + h)² is kept in ``reach2``) — every candidate is measured and the near
-        ones chosen again. The overlapping pairs, and their order, are those of a pass over
-        every candidate. Each
-        term adds exactly what its own kernel adds (:func:`bind_block` or
+        support, d² < R²) are found once here, into ``ov``/``ovn`` (their rows in ``ovr``),
+        and serve every collide (both directions) and every contact condition of the step:
+        with each one its difference d = x_b − x_a and Eq. 10's factor min(0, 1 − R²/d²)
+        (``ovd``), which a collide of either direction scales by its c (the reverse
+        direction's difference is −d and its d² the same, exactly: IEEE subtraction is
+        antisymmetric), so a pair's Eq. 10 is evaluated once a step, not once per direction.
+        Only a list's *near* candidates are measured (rows ``near[loff[L]:loff[L] +
+        nnear[L]]``: their two rows and candidate index, their R² in ``nR2``, in list order:
+        those closer than R + ``h`` when the list's particles, ``urow[uoff[L]:uoff[L+1]]``,
+        were at ``uref``); while none of them has moved h/2 since — as they are or relative
+        to one common translation (:func:`_within`) — no other candidate can overlap (its
+        gap, ≥ h then, has closed by less than h), and once one has — or the list is new
+        (``valid[L] = 0``; then each candidate's (R + h)² is kept in ``reach2``) — every
+        candidate is measured and the near ones chosen again. The overlapping pairs, and
+        their order, are those of a pass over every candidate.
+
+        Each term adds exactly what its own kernel adds (:func:`bind_block` or
         :func:`bind_block_const`, :func:`bind_pairs`, :func:`attract_pairs`,
-        :func:`collide_add`, :func:`dampen`, a force's vector), in the same order, so the sums
-        are those of the term-by-term path. Then f += acc·m on the dense rows, in the pass that
-        adds the natives and clears ``acc`` (zero on entry, zero on return), and the sparse
-        rows as :func:`add_sparse`.
+        :func:`collide_add`, :func:`dampen`, a force's vector), in the same order, so the
+        sums are those of the term-by-term path. Then f += acc·m on the dense rows, in the
+        pass that adds the natives and clears ``acc`` (zero on entry, zero on return), and
+        the sparse rows as :func:`add_sparse`.
 
         Returns (:func:`add_sparse`'s first row at or after ``nfirst``, or −1; L; k): L ≥ 0
         names a list whose candidate k coincides (d = 0, Eq. 10 undefined); then only the
@@ -1002,6 +1004,8 @@ if nb is not None:
                         return -1, L, near[p, 2]
                     q = base + cnt
                     ov[q] = near[p, 2]
+                    ovr[q, 0] = a
+                    ovr[q, 1] = b
                     ovd[q, 0] = d0
                     ovd[q, 1] = d1
                     ovd[q, 2] = d2_
@@ -1041,10 +1045,10 @@ if nb is not None:
                     # Eq. 10 on i from its partner, as collide_add computes it: w·(x_s − x_i)
                     w = c * ovd[p, 3]
                     if rev == 0:
-                        i = ca[ov[p]]
+                        i = ovr[p, 0]
                         d0, d1, d2_ = ovd[p, 0], ovd[p, 1], ovd[p, 2]
                     else:
-                        i = cb[ov[p]]
+                        i = ovr[p, 1]
                         d0, d1, d2_ = -ovd[p, 0], -ovd[p, 1], -ovd[p, 2]
                     if i < nacc:
                         acc[i, 0] += w * d0

@@ -921,8 +921,8 @@ class Fused:
 
     #: kernels.step's per-candidate arrays: (name, columns, dtype)
     _BUFFERS = (("ca", 0, np.int64), ("cb", 0, np.int64), ("cR2", 0, np.float64),
-                ("ov", 0, np.int64), ("ovd", 4, np.float64), ("near", 3, np.int64),
-                ("nR2", 0, np.float64), ("reach2", 0, np.float64))
+                ("ov", 0, np.int64), ("ovr", 2, np.int64), ("ovd", 4, np.float64),
+                ("near", 3, np.int64), ("nR2", 0, np.float64), ("reach2", 0, np.float64))
 
     def _buffers(self, n: int) -> dict:
         """The set of per-candidate buffers not in use now, grown to hold ``n`` candidates
@@ -991,10 +991,10 @@ class Fused:
         nnat = min(F.nfirst, fr.nlocal) if F.natives is not None else 0
         return (fr.x, fr.v, f, F.facc, F.fmass3, self.ops, self.fpar, self.conds, self.bq,
                 self.bcI, self.bcJ, self.pi, self.pj, self.pcI, self.pcJ, self.pq, self.frows,
-                self.ca, self.cb, self.cR2, self.loff, self.ov, self.ovd, self.ovn, self.near,
-                self.nR2, self.reach2, self.nnear, self.valid, self.urow, self.uoff, self.uref,
-                self.margin, F.sacc, F.sflag, F.stouched, F.snt, F.mass, fr.tag, F.nfirst, natF,
-                natg3, nnat, fr.span)
+                self.ca, self.cb, self.cR2, self.loff, self.ov, self.ovr, self.ovd, self.ovn,
+                self.near, self.nR2, self.reach2, self.nnear, self.valid, self.urow, self.uoff,
+                self.uref, self.margin, F.sacc, F.sflag, F.stouched, F.snt, F.mass, fr.tag,
+                F.nfirst, natF, natg3, nnat, fr.span)
 
 
 #: The term realizing each operator class in the callback.
