@@ -79,6 +79,22 @@ def test_error_constants_of_first_and_second_order_errors_by_hand():
     assert accuracy.error_constants(rows, [2.0, 1.1])["reference"] is None   # not second order
 
 
+def test_equal_t_ratios_by_hand():
+    """Eq. 5's error over the verlet mode's at each t, in both norms, paired by engine and t."""
+    rows = [{"engine": "reference", "mode": "exact", "integrator": "euler", "t": 0.01,
+             "pos_max": 0.04, "pos_rms": 0.03},
+            {"engine": "reference", "mode": "exact", "integrator": "verlet", "t": 0.01,
+             "pos_max": 0.01, "pos_rms": 0.002},
+            {"engine": "lammps", "mode": "fast", "integrator": "euler", "t": 0.01,
+             "pos_max": 1.0, "pos_rms": 1.0},      # fast mode: not Eq. 5 exactly, not paired
+            {"engine": "reference", "mode": "exact", "integrator": "verlet", "t": 0.005,
+             "pos_max": 0.001, "pos_rms": 0.001}]  # no Eq. 5 run at this t: no ratio
+    got = accuracy.equal_t_ratios(rows)
+    assert len(got) == 1
+    assert got[0]["engine"] == "reference" and got[0]["t"] == 0.01
+    assert got[0]["max"] == pytest.approx(4.0) and got[0]["rms"] == pytest.approx(15.0)
+
+
 @pytest.mark.lammps
 def test_bench_perf_smoke(tmp_path):
     data = perf.run_bench(tmp_path, steps=4, profile_steps=4, scene_name="magpod-small",

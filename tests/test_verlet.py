@@ -210,3 +210,38 @@ def test_eq5_and_verlet_carry_an_undamped_mode_at_the_same_modified_frequency(t)
     # the shift is real: ω²t²/24 relative (8e-4 at t = 0.01), far above the tolerance
     assert abs(f_euler / w - 1.0) > 1e4 * 1e-8
     assert modified_frequency(w, t) == pytest.approx(expected, rel=1e-14)
+
+
+def _phase_error_script():
+    """scripts/phase_error.py, loaded from its file (scripts are not a package)."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "phase_error.py"
+    spec = importlib.util.spec_from_file_location("phase_error", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_phase_error_scan_matrices_against_closed_forms():
+    """The scan's one-step matrices against hand-derived results. Störmer–Verlet's modified
+    frequency is arccos(1 − ω²h²/2)/h. Chin's force-gradient scheme 4A (kicks H/6, middle
+    2H/3 with ω²·(1 − ω²H²/24), drifts H/2) multiplied out by hand with x = ω²H²:
+    trace/2 = 1 − x/2 + x²/24 − x³/864, which is cos(ωH) through x² (fourth order: halving
+    the step divides the frequency error by 16) and reaches −1 at (x − 12)³ = 0, so it is
+    stable for ωH < 2√3."""
+    pe = _phase_error_script()
+    for wh in (0.1, 0.5, 1.2):
+        want = math.acos(1.0 - wh * wh / 2.0) / wh - 1.0
+        assert pe.rel_error(pe.verlet(wh, 1.0), wh) == pytest.approx(abs(want), rel=1e-9)
+    for z in (0.3, 1.0, 2.0, 3.0, 3.6):
+        x = z * z
+        want = 1.0 - x / 2.0 + x * x / 24.0 - x ** 3 / 864.0
+        assert np.trace(pe.force_gradient(z, 1.0)) / 2.0 == pytest.approx(want, rel=1e-12)
+    e1 = pe.rel_error(pe.force_gradient(0.1, 1.0), 0.1)
+    e2 = pe.rel_error(pe.force_gradient(0.05, 1.0), 0.05)
+    assert 15.5 < e1 / e2 < 16.5
+    limit = 2.0 * math.sqrt(3.0)
+    assert abs(np.trace(pe.force_gradient(limit * 0.999, 1.0))) < 2.0
+    assert abs(np.trace(pe.force_gradient(limit * 1.001, 1.0))) > 2.0

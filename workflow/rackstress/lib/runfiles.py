@@ -15,6 +15,9 @@ STRESS_DUMP = "stress.dump"
 VTK_DIR, PVD = "vtk", "run.pvd"
 #: the one-page HTML report (:mod:`rackstress.render.report`)
 REPORT = "report.html"
+#: Eq. 5's predicted stability limit for the run's scene and time step: written when the run
+#: starts (the prediction its time step was checked with), read by the report's stability margin
+STABILITY = "stability.json"
 
 #: what ``--resume`` removes before the trajectory grows (written again at the run's end)
 DERIVED = (STRESS_DUMP, STRESS_JSON, CACHE, REPORT, VTK_DIR)

@@ -21,9 +21,8 @@ import os
 import time
 from pathlib import Path
 
-from rackstress.lib.runfiles import REPORT, STRESS_JSON
+from rackstress.lib.runfiles import REPORT, STABILITY, STRESS_JSON
 
-STABILITY = "stability.json"
 FIGURES = "figures"
 PLOTS = (("stress_over_time.png", "The measure per part over time (max solid, mean dashed; "
                                   "★ the peak)"),

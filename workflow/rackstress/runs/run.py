@@ -232,7 +232,7 @@ def plan(scene: Scene, engine: str = "lammps", mode: str = "exact",
     from rackstress.model.stability import check_dt
     from rackstress.runs.fingerprint import fingerprint
 
-    check_dt(scene, allow=allow_unstable)
+    pred = check_dt(scene, allow=allow_unstable)
     if engine not in ENGINES:
         raise RunDirError(f"unknown engine '{engine}'; choose one of {', '.join(ENGINES)}")
     dump_every = dump_every or default_dump_every(scene)
@@ -245,7 +245,7 @@ def plan(scene: Scene, engine: str = "lammps", mode: str = "exact",
             raise RunDirError("the reference engine runs on one rank; run it without mpiexec")
     check_memory(scene, engine, comm.Get_size())
     return {"engine": engine, "mode": mode, "dump_every": int(dump_every),
-            "deck": compile_deck(scene, mode),
+            "deck": compile_deck(scene, mode), "stability": pred,
             "fingerprint": fingerprint(scene, engine=engine, mode=mode, dump_every=dump_every)}
 
 
@@ -310,6 +310,14 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
         claim(out, overwrite)
         write_json(out / "scene.json", {**scene_record(scene), "engine": engine, "mode": mode,
                                         "dump_every": dump_every, "fingerprint": fp})
+        if p.get("stability") is not None:      # the report's stability margin, predicted once
+            from rackstress.lib.runfiles import STABILITY
+            from rackstress.model.stability import describe_limit
+
+            pred = p["stability"]
+            write_json(out / STABILITY, {"t_max": pred["t_max"], "dt": scene.dt,
+                                         "ratio": pred["ratio"], "set_by": describe_limit(pred),
+                                         "scene": scene.name, "params": scene.params})
         try:
             (out / "particles.data").write_text(deck.data_text())
             if engine == "lammps":
