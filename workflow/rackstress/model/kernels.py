@@ -124,6 +124,7 @@ def warm() -> dict:
     o = x.copy()
     o.flags.writeable = False       # as Scene.original_positions() is
     k.within_bound(x, np.ones((3, 3)), o, np.arange(1, 4, dtype=np.int64), 4.0)
+    k.within_bound(x, np.ones((3, 3)), o, tag, 4.0)      # LAMMPS' ids, as the runner has them
     # one instruction of every kind through the fused step (the types LAMMPS' arrays have)
     ops = np.array([[OP_BLOCK, 0, 1, 1, 2, 0, 0, 0], [OP_BIND, 0, 2, 0, 0, 0, 0, 0],
                     [OP_ATTRACT, 0, 2, 0, 0, 0, 0, 0], [OP_COLLIDE, 0, 1, 0, 0, 0, 0, 1],
