@@ -114,6 +114,69 @@ def test_near_sets_kept_while_a_list_moves_as_one():
     np.testing.assert_array_equal(state[7], x)
 
 
+def test_relist_keeps_the_lists_not_renewed():
+    """kernels.relist after one list of two was renewed and the other moved to a new place:
+    the kept list's near candidates (their indices shifted by its move), reference positions,
+    (R + h)² and near count are the old ones, the new list is to be measured in full and has
+    its distinct rows in order of first appearance; the next step's overlapping pairs are
+    NumPy's d² < R² over every candidate."""
+    rng = np.random.default_rng(5)
+    n = 50
+    x = rng.uniform(0.0, 5.0, size=(n, 3))
+
+    def pairs(ra, rb):
+        a, b = np.meshgrid(ra, rb, indexing="ij")
+        return a.ravel().astype(np.int64), b.ravel().astype(np.int64)
+
+    lists = [pairs(np.arange(0, 10), np.arange(10, 25)), pairs(np.arange(25, 35),
+                                                              np.arange(35, 50))]
+    R2 = [rng.uniform(0.8, 2.0, size=len(a)) ** 2 for a, _ in lists]
+    ca, cb = np.concatenate([a for a, _ in lists]), np.concatenate([b for _, b in lists])
+    cR2 = np.concatenate(R2)
+    loff = np.array([0, len(lists[0][0]), len(ca)], np.int64)
+    flag = np.zeros(n, np.bool_)
+    rows = [K.members(a, b, flag) for a, b in lists]
+    N = len(ca)
+    state = (np.empty(N, np.int64), np.zeros(2, np.int64), np.empty((N, 3), np.int64),
+             np.zeros(2, np.int64), np.zeros(2, np.int64), np.concatenate(rows),
+             np.array([0, len(rows[0]), len(rows[0]) + len(rows[1])], np.int64),
+             np.zeros((len(rows[0]) + len(rows[1]), 3)), np.empty(N), np.empty(N))
+    _step_lists(x, ca, cb, cR2, loff, state, 0.5)
+    x = x + rng.normal(scale=0.01, size=x.shape)
+    # list 0 renewed (fewer candidates, its rows in another order), list 1 kept: [new, old 1]
+    na, nb = pairs(np.arange(9, -1, -1), np.arange(12, 25))
+    nR2_ = rng.uniform(0.8, 2.0, size=len(na)) ** 2
+    ca2, cb2 = np.concatenate([na, lists[1][0]]), np.concatenate([nb, lists[1][1]])
+    cR22 = np.concatenate([nR2_, R2[1]])
+    loff2 = np.array([0, len(na), len(ca2)], np.int64)
+    N2 = len(ca2)
+    near, nR2, reach2 = np.empty((N2, 3), np.int64), np.empty(N2), np.empty(N2)
+    ov, ovn, o_near, o_nnear, o_valid, o_urow, o_uoff, o_uref, o_nR2, o_reach2 = state
+    urow, uoff, uref, nnear, valid = K.relist(
+        ca2, cb2, loff2, np.array([-1, 1], np.int64), flag, loff, o_near, o_nR2, o_reach2,
+        o_nnear, o_valid, o_urow, o_uoff, o_uref, near, nR2, reach2)
+    assert list(valid) == [0, 1] and nnear[1] == o_nnear[1] > 5 and not flag.any()
+    first = list(dict.fromkeys(np.concatenate([na, nb]).tolist()))
+    assert urow[:uoff[1]].tolist() == first
+    np.testing.assert_array_equal(urow[uoff[1]:], o_urow[o_uoff[1]:])
+    np.testing.assert_array_equal(uref[uoff[1]:], o_uref[o_uoff[1]:])
+    k, o0 = loff2[1], loff[1]
+    m = nnear[1]
+    np.testing.assert_array_equal(near[k:k + m, :2], o_near[o0:o0 + m, :2])
+    np.testing.assert_array_equal(near[k:k + m, 2], o_near[o0:o0 + m, 2] - o0 + k)
+    np.testing.assert_array_equal(nR2[k:k + m], o_nR2[o0:o0 + m])
+    np.testing.assert_array_equal(reach2[k:], o_reach2[o0:])
+    state2 = (np.empty(N2, np.int64), np.zeros(2, np.int64), near, nnear, valid, urow, uoff,
+              uref, nR2, reach2)
+    _step_lists(x, ca2, cb2, cR22, loff2, state2, 0.5)
+    d2 = ((x[cb2] - x[ca2]) ** 2).sum(axis=1)
+    for L in (0, 1):
+        expect = np.flatnonzero(d2[loff2[L]:loff2[L + 1]] < cR22[loff2[L]:loff2[L + 1]])
+        got = state2[0][loff2[L]:loff2[L] + state2[1][L]] - loff2[L]
+        np.testing.assert_array_equal(got, expect)
+    assert state2[1].sum() > 5
+
+
 def test_step_reports_a_coincident_pair():
     """A candidate pair at d = 0 stops the step (nothing written) and names the list and the
     candidate: the first coincident one in list order."""

@@ -121,6 +121,11 @@ def warm() -> dict:
     k.add_sparse(np.zeros((3, 3)), np.zeros((3, 3)), flag, np.zeros(3, np.int64), nt,
                  np.ones(3), tag, 3)
     k.members(r, s, np.zeros(3, np.bool_))
+    k.relist(r, s, np.array([0, 1, 2], np.int64), np.array([-1, 0], np.int64),
+             np.zeros(3, np.bool_), np.array([0, 2], np.int64), np.zeros((2, 3), np.int64),
+             np.zeros(2), np.zeros(2), np.zeros(1, np.int64), np.ones(1, np.int64), r,
+             np.array([0, 2], np.int64), np.zeros((2, 3)), np.zeros((2, 3), np.int64),
+             np.zeros(2), np.zeros(2))
     o = x.copy()
     o.flags.writeable = False       # as Scene.original_positions() is
     k.within_bound(x, np.ones((3, 3)), o, np.arange(1, 4, dtype=np.int64), 4.0)
@@ -856,6 +861,67 @@ if nb is not None:
         for k in range(n):
             flag[out[k]] = False
         return out[:n]
+
+
+if nb is not None:
+    @nb.njit(**_OPTS)
+    def relist(ca, cb, loff, kept, flag, o_loff, o_near, o_nR2, o_reach2, o_nnear, o_valid,
+               o_urow, o_uoff, o_uref, near, nR2, reach2):
+        """:func:`step`'s per-list state for the joined contact lists ``ca, cb`` (list L at
+        ``loff[L]:loff[L+1]``) after some were renewed: list L is old list ``kept[L]`` (−1: a
+        new list) whose state (``o_*``) it keeps, moved to its new place — its particles'
+        rows, their reference positions and, if it was measured, its near candidates (their
+        candidate indices shifted), their R² and the list's (R + h)² — into ``near``, ``nR2``,
+        ``reach2``; a new list gets its distinct rows (as :func:`members`; ``flag``: False
+        over every row, left so) and is measured in full at the next step (``valid`` 0).
+        Returns (urow, uoff, uref, nnear, valid)."""
+        nl = len(loff) - 1
+        cap = 0
+        for L in range(nl):
+            Lo = kept[L]
+            cap += (o_uoff[Lo + 1] - o_uoff[Lo]) if Lo >= 0 else 2 * (loff[L + 1] - loff[L])
+        urow = np.empty(cap, np.int64)
+        uoff = np.zeros(nl + 1, np.int64)
+        n = 0
+        for L in range(nl):
+            Lo = kept[L]
+            if Lo >= 0:
+                for u in range(o_uoff[Lo], o_uoff[Lo + 1]):
+                    urow[n] = o_urow[u]
+                    n += 1
+            else:
+                n0 = n
+                for arr in (ca, cb):
+                    for k in range(loff[L], loff[L + 1]):
+                        r = arr[k]
+                        if not flag[r]:
+                            flag[r] = True
+                            urow[n] = r
+                            n += 1
+                for u in range(n0, n):
+                    flag[urow[u]] = False
+            uoff[L + 1] = n
+        uref = np.zeros((n, 3))
+        nnear = np.zeros(nl, np.int64)
+        valid = np.zeros(nl, np.int64)
+        for L in range(nl):
+            Lo = kept[L]
+            if Lo < 0 or o_valid[Lo] == 0:
+                continue
+            k0, o0, nn = loff[L], o_loff[Lo], o_nnear[Lo]
+            for j in range(nn):
+                near[k0 + j, 0] = o_near[o0 + j, 0]
+                near[k0 + j, 1] = o_near[o0 + j, 1]
+                near[k0 + j, 2] = o_near[o0 + j, 2] + (k0 - o0)
+                nR2[k0 + j] = o_nR2[o0 + j]
+            for j in range(loff[L + 1] - k0):
+                reach2[k0 + j] = o_reach2[o0 + j]
+            for j in range(uoff[L + 1] - uoff[L]):
+                for m3 in range(3):
+                    uref[uoff[L] + j, m3] = o_uref[o_uoff[Lo] + j, m3]
+            nnear[L] = nn
+            valid[L] = 1
+        return urow[:n], uoff, uref, nnear, valid
 
 
 #: Instruction kinds of :func:`step` (column 0 of its ``ops`` table).

@@ -792,7 +792,7 @@ class Fused:
         self.nblock = self.npairs = self.nrows = 0
         #: the contact lists: (A, B) slices (A first in the scene), and a name for errors
         self.lists, self.names = [], []
-        self._hits = self._rows = None
+        self._hits = None
         #: the two sets of per-candidate buffers (:meth:`_buffers`) and the one in use
         self._sets, self._set = [None, None], 1
         #: kernels.step's arguments and what they were made for (frame, force array, nfirst)
@@ -919,7 +919,7 @@ class Fused:
                               "coincide (Eq. 10 is undefined at d = 0)", int(a))
         return n
 
-    #: kernels.step's per-candidate arrays: (name, columns, dtype)
+    #: kernels.step's per-candidate scratch arrays: (name, columns, dtype)
     _BUFFERS = (("ca", 0, np.int64), ("cb", 0, np.int64), ("cR2", 0, np.float64),
                 ("ov", 0, np.int64), ("ovr", 2, np.int64), ("ovd", 4, np.float64),
                 ("near", 3, np.int64), ("nR2", 0, np.float64), ("reach2", 0, np.float64))
@@ -931,7 +931,7 @@ class Fused:
         sets = self._sets
         spare = 1 - self._set
         if sets[spare] is None or len(sets[spare]["ca"]) < n:
-            cap = n + n // 2 + 64           # room for the lists to grow
+            cap = 2 * n + 64            # room for the lists to grow
             sets[spare] = {name: np.zeros((cap, cols) if cols else cap, dt)
                            for name, cols, dt in self._BUFFERS}
         self._set = spare
@@ -939,48 +939,34 @@ class Fused:
 
     def _relist(self, forces: "PyForces", fr: Frame, hits: list) -> None:
         """Join the contact lists for kernels.step after one of them was renewed (a new list
-        object): each list's candidates copied to its place in the buffers (:meth:`_buffers`).
-        A list that is the same object as before keeps, moved to its new place, its near
-        candidates, their particles' reference positions and its (R + h)², so only the new
-        lists are measured in full at the next step (kernels.step's ``valid``)."""
+        object). A list that is the same object as before keeps, moved to its new place, its
+        near candidates, their particles' reference positions and its (R + h)², so only the
+        new lists are measured in full at the next step (:func:`kernels.relist`)."""
         i64 = np.int64
-        old = None
-        if self._hits is not None:
-            old = dict(loff=self.loff, uoff=self.uoff, near=self.near, nR2=self.nR2,
-                       reach2=self.reach2, nnear=self.nnear, valid=self.valid, uref=self.uref,
-                       rows=self._rows, index={id(h): L for L, h in enumerate(self._hits)})
-        sizes = [len(h[0]) for h in hits]
+        index = {} if self._hits is None else {id(h): L for L, h in enumerate(self._hits)}
+        kept = np.array([index.get(id(h), -1) for h in hits] + [0], i64)[:-1]
         loff = np.zeros(len(hits) + 1, i64)
-        np.cumsum(sizes, out=loff[1:])
+        np.cumsum([len(h[0]) for h in hits], out=loff[1:])
         n = int(loff[-1])
+        if self._hits is None:      # nothing to keep: an empty old state
+            z = np.zeros(1, i64)
+            old = (z, np.zeros((0, 3), i64), np.zeros(0), np.zeros(0), z, z, np.zeros(0, i64),
+                   z, np.zeros((0, 3)))
+        else:
+            old = (self.loff, self.near, self.nR2, self.reach2, self.nnear, self.valid,
+                   self.urow, self.uoff, self.uref)
         buf = self._buffers(n)
-        for name, _, _ in self._BUFFERS:
-            setattr(self, name, buf[name][:n])
+        new = {name: buf[name][:n] for name, _, _ in self._BUFFERS}
+        ca, cb, cR2 = new["ca"], new["cb"], new["cR2"]
+        for h, k0, k1 in zip(hits, loff[:-1], loff[1:]):
+            ca[k0:k1], cb[k0:k1], cR2[k0:k1] = h
+        self.urow, self.uoff, self.uref, self.nnear, self.valid = forces.compiled.relist(
+            ca, cb, loff, kept, forces.flag_rows(fr), *old, new["near"], new["nR2"],
+            new["reach2"])
+        for name, a in new.items():
+            setattr(self, name, a)
         self.loff = loff
         self.ovn = np.zeros(len(hits), i64)
-        self.nnear = np.zeros(len(hits), i64)
-        self.valid = np.zeros(len(hits), i64)       # measure every candidate first
-        kept = [None if old is None else old["index"].get(id(h)) for h in hits]
-        rows = [old["rows"][Lo] if Lo is not None else
-                forces.compiled.members(h[0], h[1], forces.flag_rows(fr))
-                for h, Lo in zip(hits, kept)]
-        self._rows = rows
-        self.urow = np.ascontiguousarray(np.concatenate(rows + [[]]), i64)
-        self.uoff = np.cumsum([0] + [len(r) for r in rows]).astype(i64)
-        self.uref = np.zeros((len(self.urow), 3))
-        for L, (h, Lo) in enumerate(zip(hits, kept)):
-            k0, k1 = loff[L], loff[L + 1]
-            self.ca[k0:k1], self.cb[k0:k1], self.cR2[k0:k1] = h[0], h[1], h[2]
-            if Lo is None or not old["valid"][Lo]:
-                continue
-            o0, nn = old["loff"][Lo], old["nnear"][Lo]
-            self.near[k0:k0 + nn] = old["near"][o0:o0 + nn]
-            self.near[k0:k0 + nn, 2] += k0 - o0          # candidate indices, moved
-            self.nR2[k0:k0 + nn] = old["nR2"][o0:o0 + nn]
-            self.reach2[k0:k1] = old["reach2"][o0:old["loff"][Lo + 1]]
-            self.uref[self.uoff[L]:self.uoff[L + 1]] = \
-                old["uref"][old["uoff"][Lo]:old["uoff"][Lo + 1]]
-            self.nnear[L], self.valid[L] = nn, 1
         self._hits = hits
         self._args = None
 
