@@ -217,6 +217,27 @@ if nb is not None:
         F[g + 3, 0], F[g + 3, 1], F[g + 3, 2] = f30, f31, f32
 
     @nb.njit(inline="always")
+    def _fold_tile3(F, g, P0, P1, P2, k):
+        """:func:`_fold_tile` for three sources g..g+2 (a block of 3, 6, 9 ... sources: no
+        chain on padding)."""
+        f00, f01, f02 = F[g, 0], F[g, 1], F[g, 2]
+        f10, f11, f12 = F[g + 1, 0], F[g + 1, 1], F[g + 1, 2]
+        f20, f21, f22 = F[g + 2, 0], F[g + 2, 1], F[g + 2, 2]
+        for u in range(k):
+            f00 -= P0[0, u]
+            f01 -= P1[0, u]
+            f02 -= P2[0, u]
+            f10 -= P0[1, u]
+            f11 -= P1[1, u]
+            f12 -= P2[1, u]
+            f20 -= P0[2, u]
+            f21 -= P1[2, u]
+            f22 -= P2[2, u]
+        F[g, 0], F[g, 1], F[g, 2] = f00, f01, f02
+        F[g + 1, 0], F[g + 1, 1], F[g + 1, 2] = f10, f11, f12
+        F[g + 2, 0], F[g + 2, 1], F[g + 2, 2] = f20, f21, f22
+
+    @nb.njit(inline="always")
     def _store_sources(acc, s0, n, F):
         """Each source's reverse-bind sum added to its accumulator row once, after the block."""
         for s in range(n):
@@ -244,12 +265,13 @@ if nb is not None:
         P1 = np.zeros((4, T))
         P2 = np.zeros((4, T))
         F = np.zeros((n + 3, 3))
+        G = 3 if n % 4 != 0 and n % 3 == 0 else 4      # sources whose sums run together
         xf, af = x.reshape(x.size), acc.reshape(acc.size)    # views (C-contiguous only)
         for a in range(0, m, T):
             k = min(T, m - a)
             _tile_columns(xf, af, t0 + a, k, x0, x1, x2, a0, a1, a2)
-            for g in range(0, n, 4):
-                for s in range(g, min(g + 4, n)):
+            for g in range(0, n, G):
+                for s in range(g, min(g + G, n)):
                     xs0, xs1, xs2 = x[s0 + s, 0], x[s0 + s, 1], x[s0 + s, 2]
                     q = qT[s, a:a + k]
                     c = cIT[s, a:a + k]
@@ -279,7 +301,10 @@ if nb is not None:
                             a1[u] += ct * d1
                             a2[u] += ct * d2_
                 if fold:
-                    _fold_tile(F, g, P0, P1, P2, k)
+                    if G == 3:
+                        _fold_tile3(F, g, P0, P1, P2, k)
+                    else:
+                        _fold_tile(F, g, P0, P1, P2, k)
             _store_targets(af, t0 + a, k, a0, a1, a2)
         if fold:
             _store_sources(acc, s0, n, F)
@@ -299,13 +324,14 @@ if nb is not None:
         P1 = np.zeros((4, T))
         P2 = np.zeros((4, T))
         F = np.zeros((n + 3, 3))
+        G = 3 if n % 4 != 0 and n % 3 == 0 else 4      # sources whose sums run together
         xf, af = x.reshape(x.size), acc.reshape(acc.size)    # views (C-contiguous only)
         for a in range(0, m, T):
             k = min(T, m - a)
             _tile_columns(xf, af, t0 + a, k, x0, x1, x2, a0, a1, a2)
             o0, o1, o2 = o[a:a + k], o[m + a:m + a + k], o[2 * m + a:2 * m + a + k]
-            for g in range(0, n, 4):
-                for s in range(g, min(g + 4, n)):
+            for g in range(0, n, G):
+                for s in range(g, min(g + G, n)):
                     xs0, xs1, xs2 = x[s0 + s, 0], x[s0 + s, 1], x[s0 + s, 2]
                     os0, os1, os2 = o[3 * m + 3 * s], o[3 * m + 3 * s + 1], o[3 * m + 3 * s + 2]
                     p0, p1, p2 = P0[s - g], P1[s - g], P2[s - g]
@@ -341,7 +367,10 @@ if nb is not None:
                             a1[u] += ct * d1
                             a2[u] += ct * d2_
                 if fold:
-                    _fold_tile(F, g, P0, P1, P2, k)
+                    if G == 3:
+                        _fold_tile3(F, g, P0, P1, P2, k)
+                    else:
+                        _fold_tile(F, g, P0, P1, P2, k)
             _store_targets(af, t0 + a, k, a0, a1, a2)
         if fold:
             _store_sources(acc, s0, n, F)
