@@ -772,12 +772,14 @@ class Fused:
     callback's order of terms, and their pair data is concatenated once a phase (bind blocks,
     bind and attraction pairs, selected force rows). Each step then costs one look-up of the
     contact candidate lists (:class:`Overlaps`, kept between reneighbourings), re-joined only
-    when one of them is new, and one compiled call that finds the overlapping pairs of every
-    list once (shared by the collides of both directions and by the contact conditions),
-    evaluates every term exactly as its own kernel does, in the same order, and writes LAMMPS'
-    force array. The sums are therefore those of the term-by-term path, bit for bit, whatever
-    the order of LAMMPS' rows (:meth:`make` returns None where a term cannot be expressed so:
-    that phase runs term by term).
+    when one of them is new (:meth:`_relist`: the others keep their state), and one compiled
+    call, its arguments kept while the frame and the lists stay, that finds the overlapping
+    pairs of every list once (shared by the collides of both directions and by the contact
+    conditions), evaluates every term exactly as its own kernel does, in the same order, and
+    writes LAMMPS' force array, with the deck's constant forces and damping (Deck.
+    callback_natives) in LAMMPS' order. The sums are therefore those of the term-by-term path,
+    bit for bit, whatever the order of LAMMPS' rows (:meth:`make` returns None where a term
+    cannot be expressed so: that phase runs term by term).
     """
 
     #: the near candidates' margin (kernels.step's h) as a fraction of the contact lists' skin
@@ -1236,7 +1238,7 @@ class PyForces:
     def _frame(self, nlocal: int) -> Frame:
         """This step's frame: the last one refreshed, or a new layout after a reneighbouring."""
         lmp, fr = self.lmp, self.frame
-        ago = lmp.lib.lammps_extract_setting(lmp.lmp, b"neigh_ago")    # lmp.extract_setting's
+        ago = lmp.lib.lammps_extract_setting(lmp.lmp, b"neigh_ago")  # (no per-step wrapper)
         if (fr is None or self._fresh or not self.verlet or fr.nlocal != nlocal or ago == 0
                 or self._nghost[0] != fr.nghost):
             if self.move_bit is not None and (ago == 0 or self._fresh):
