@@ -386,6 +386,46 @@ def test_candidate_search_equals_a_full_search():
     assert found > 1000 and first > 20
 
 
+def test_bed_join_equals_sorting_the_joined_pairs():
+    """kernels.bed_join (the resting bed's two searches merged in compiled code) gives what
+    sorting the joined pairs by particles (np.lexsort) and uniting the near rows (np.union1d,
+    np.unique) gives: searching rows in particle order, resting partners in any order (a
+    grid's cells), activated ones sorted, rows not in particle order on the bed's side."""
+    rng = np.random.default_rng(3)
+    for trial in range(200):
+        n = int(rng.integers(5, 120))
+        na = int(rng.integers(1, n))
+        tag = np.concatenate([np.arange(1, na + 1), na + 1 + rng.permutation(n - na)])
+        tag = tag.astype(np.int32)
+        ia = np.arange(na, dtype=np.int64)
+        bed = np.arange(na, n)
+        sa, sb, da, db = [], [], [], []
+        for a in ia:                       # grouped by searching row, in ia's order
+            part = rng.permutation(bed)[: int(rng.integers(0, 6))]
+            k = int(rng.integers(0, len(part) + 1))
+            sa += [a] * k
+            sb += list(part[:k])                                # resting: cell order
+            act = part[k:]
+            act = act[np.argsort(tag[act])]
+            da += [a] * len(act)
+            db += list(act)                                     # activated: sorted
+        sa, sb, da, db = (np.array(v, np.int64) for v in (sa, sb, da, db))
+        snear_a = rng.random(na) < 0.3
+        snear_b = rng.choice(bed, size=int(rng.integers(0, 30)))
+        dnear_a = np.unique(rng.choice(ia, size=int(rng.integers(0, 5)))).astype(np.int64)
+        dnear_b = rng.choice(bed, size=int(rng.integers(0, 5))).astype(np.int64)
+        flag = np.zeros(n, np.bool_)
+        a, b, near_a, near_b = K.bed_join(ia, sa, sb, snear_a, snear_b, da, db, dnear_a,
+                                          dnear_b, tag, flag)
+        ja, jb = np.concatenate([sa, da]), np.concatenate([sb, db])
+        order = np.lexsort((tag[jb], tag[ja]))
+        np.testing.assert_array_equal(a, ja[order])
+        np.testing.assert_array_equal(b, jb[order])
+        np.testing.assert_array_equal(near_a, np.union1d(ia[snear_a], dnear_a))
+        np.testing.assert_array_equal(near_b, np.concatenate([np.unique(snear_b), dnear_b]))
+        assert not flag.any()
+
+
 def test_relative_motion_check():
     """kernels.moved_below_shifted: a translation common to both groups is not motion (a body
     and a leg walking together keep their list); a displacement of one particle relative to
@@ -433,19 +473,35 @@ class _NothingKept(dict):
         return default
 
 
+def _search_every_step(overlaps):
+    """Overlaps.renew replaced by dropping every list at every step: each step searches every
+    list afresh (the brute-force reference of the callback's own renewal)."""
+    def renew(fr):
+        for key in [k for k in fr.memo if k[0] == "cand"]:
+            del fr.memo[key]
+    overlaps.renew = renew
+
+
 @pytest.mark.lammps
-def test_lists_kept_by_relative_motion_equal_fresh_searches(monkeypatch):
-    """The body–leg lists kept while the groups move together (relative motion below half a
-    skin, kernels.moved_below_shifted) give the trajectory of searching every list again at
-    every renewal, bit for bit, over a phase switch of magpod-small, with fewer searches."""
+@pytest.mark.parametrize("active_only", [True, False])
+def test_lists_kept_by_relative_motion_equal_fresh_searches(monkeypatch, active_only):
+    """The lists kept while their own particles have not moved half a skin (the body–leg lists
+    judged by the groups' relative motion, kernels.moved_below_shifted) give the trajectory of
+    searching every list afresh, bit for bit, over a phase switch of magpod-small, with fewer
+    searches. Active only (the callback renews each list itself, Overlaps.renew): against a
+    search of every list at every step. Every particle integrated (LAMMPS' reneighbouring
+    renews the lists): against searching every list again at every reneighbouring."""
     monkeypatch.setenv("RACKSTRESS_KERNELS", "numba")
     scene = scenes.build("magpod-small", phase_steps=200, cycles=1).with_steps(400)
     out = []
     for keep in (True, False):
-        run = LammpsRun(compile_deck(scene, "exact"), None)
+        run = LammpsRun(compile_deck(scene, "exact", active_only=active_only), None)
         try:
+            assert (run.py.overlaps.own is not None) == active_only
             count = run.py.overlaps.k = _CountingSearch(run.py.overlaps.k)
-            if not keep:
+            if not keep and active_only:
+                _search_every_step(run.py.overlaps)
+            elif not keep:
                 run.py.overlaps._kept = _NothingKept()
             run.run_schedule()
             out.append((run.gather_positions(), run.gather_velocities(), count.searches))
@@ -456,3 +512,5 @@ def test_lists_kept_by_relative_motion_equal_fresh_searches(monkeypatch):
     np.testing.assert_array_equal(p, p0)
     np.testing.assert_array_equal(v, v0)
     assert 0 < n < n0
+    if active_only:
+        assert n0 >= 2 * 400 and n < n0 / 4

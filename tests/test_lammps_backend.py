@@ -780,21 +780,37 @@ def test_passive_deck_adds_constant_forces_and_damping_in_the_callback():
     assert any(line.startswith("fix rs_damp all viscous") for line in every.input_text().splitlines())
 
 
+def _long_bed_scene() -> Scene:
+    """_bed_scene's block dragged ~60 units along a bed 150 long: farther than the resting
+    bed's grid reaches round the block at its first search (one reach beyond the search's,
+    17 + 2 · 17 + 1 here), so the grid is built again on the way."""
+    block = Group("block", lattice((2, 2, 2), 1.0, origin=(1.0, 0.8, 1.0)), 0.5, kind="body")
+    bed = Group("bed", lattice((150, 1, 3), 1.0), 0.5, kind="leg")
+    ops = {"block": [Force((60.0, -10.0, 0.0)), Collide("bed", Const(50.0)),
+                     Dampen(0.5, extra=0.5, when=(Contact("bed"),))],
+           "bed": [Collide("block", Const(20.0)), Dampen(5.0)]}
+    return Scene("long-bed", {"block": block, "bed": bed}, ops, [Phase("drag", 400, {})],
+                 dt=0.01)
+
+
 @pytest.mark.lammps
-def test_resting_bed_search_equals_a_search_over_the_whole_group(monkeypatch):
-    """The contact search against a resting group (its resting particles from a grid made once,
-    its activated ones apart, their rows followed through LAMMPS' reorderings) finds the same
-    pairs in the same order, and the same particles to activate, as a cell-list search over
-    every particle of the group, at every search of a run in which the block reaches new bed
-    particles and LAMMPS reorders them (an independent path: kernels.candidates over all rows)."""
+@pytest.mark.parametrize("build", ["short", "long"])
+def test_resting_bed_search_equals_a_search_over_the_whole_group(monkeypatch, build):
+    """The contact search against a resting group (its resting particles from a grid made once
+    round the searching group and again when it has gone beyond, its activated ones apart,
+    their rows followed through LAMMPS' reorderings) finds the same pairs in the same order,
+    and the same particles to activate, as a cell-list search over every particle of the
+    group, at every search of a run in which the block reaches new bed particles and LAMMPS
+    reorders them (an independent path: kernels.candidates over all rows); on the long bed
+    the grid is built again at least once."""
     from rackstress.engines.lammps import callback as cb
     from rackstress.model import kernels
 
     seen = {"calls": 0, "from_activated": 0, "reordered": 0, "to_activate": 0}
     bed_candidates = cb.RestingBed.candidates
 
-    def checked(self, fr, ia, B, cut, wide):
-        a, b, near_a, near_b = bed_candidates(self, fr, ia, B, cut, wide)
+    def checked(self, fr, ia, B, cut, wide, A=None):
+        a, b, near_a, near_b = bed_candidates(self, fr, ia, B, cut, wide, A)
         rows = fr.tag[:fr.nlocal].astype(np.int64) - 1     # every row of B, whatever its order
         ib = np.flatnonzero((rows >= B.start) & (rows < B.stop))
         fa, fb, fnear_a, fnear_b = kernels.candidates(fr.x, ia, ib, cut, False, fr.tag, wide)
@@ -818,25 +834,37 @@ def test_resting_bed_search_equals_a_search_over_the_whole_group(monkeypatch):
         return a, b, near_a, near_b
 
     monkeypatch.setattr(cb.RestingBed, "candidates", checked)
-    sc = _bed_scene()
+    grid_build, builds = kernels.grid_build, [0]
+
+    def counted(*args):
+        builds[0] += 1
+        return grid_build(*args)
+    monkeypatch.setattr(kernels, "grid_build", counted)
+    sc = _bed_scene() if build == "short" else _long_bed_scene()
     run = LammpsRun(compile_deck(sc, "exact"), None)
     try:
         assert run.py.bed is not None
         drive(run)
+        p = run.gather_positions()
     finally:
         run.close()
     assert seen["calls"] >= 5 and seen["from_activated"] > 0 and seen["reordered"] > 0
     assert seen["to_activate"] > 0
+    if build == "long":
+        travel = p[sc.slice("block"), 0].mean() - sc.original_positions()[sc.slice("block"),
+                                                                          0].mean()
+        assert travel > 55.0 and builds[0] >= 2
 
 
 @pytest.mark.lammps
 def test_contact_lists_renewed_by_the_callbacks_own_check(monkeypatch):
     """With a resting group in the scene, LAMMPS' skin is 8 and the callback keeps its contact
-    lists with skin 2 by its own displacement check. Two particles 6 apart close in at 4
-    units/time each: LAMMPS reneighbours only once an atom has moved 4 (step ~100), the
-    callback's lists are searched (reach + 2 skins = 5, beyond 6 at the start) and renewed once
-    an atom has moved 1 (step ~25); they touch (d < 1) at step ~63. LAMMPS must see that
-    contact when it happens: equal to the reference engine to 1e-10."""
+    lists with skin 2 by its own displacement check (each list by its own particles'). Two
+    particles 6 apart close in at 4 units/time each: LAMMPS reneighbours only once an atom has
+    moved 4 (step ~100), the callback's list of the two is searched (reach + skin = 3, beyond
+    6 at the start) and renewed once each has moved 1 (every 25 steps); they touch (d < 1) at
+    step ~63. LAMMPS must see that contact when it happens: equal to the reference engine to
+    1e-10."""
     from rackstress.engines.lammps import callback as cb
 
     a = Group("a", np.array([[0.0, 0.0, 0.0]]), 0.5, kind="body")
@@ -850,13 +878,13 @@ def test_contact_lists_renewed_by_the_callbacks_own_check(monkeypatch):
     deck = compile_deck(sc, "exact")
     assert deck.passive == ("bed",) and deck.lammps_skin == 8.0 and deck.skin == 2.0
     renewed = [0]
-    own_check = cb.PyForces._own_check
+    renew = cb.Overlaps.renew
 
-    def counted(self, fr, new):
-        before = self._xref
-        own_check(self, fr, new)
-        renewed[0] += (not new) and self._xref is not before
-    monkeypatch.setattr(cb.PyForces, "_own_check", counted)
+    def counted(self, fr):
+        before = set(self._lists)
+        renew(self, fr)
+        renewed[0] += len(before - set(self._lists))     # lists dropped: searched again
+    monkeypatch.setattr(cb.Overlaps, "renew", counted)
     run = LammpsRun(deck, None)
     try:
         run.run_schedule()

@@ -105,13 +105,21 @@ def warm() -> dict:
     k.candidates(x, r, s, 2.0, False, tag, 3.0)
     k.overlapping(x, r, s, np.full(2, 4.0))
     k.moved_below(x, 0, 1, 1, 2, x.copy(), 1.0)
+    k.bed_join(r, r, s, np.ones(2, np.bool_), s, r, s, r, s, tag, np.zeros(3, np.bool_))
     k.moved_below_shifted(x, 0, 1, 1, 2, x.copy(), 1.0)
+    k.lists_moved(x, np.arange(3, dtype=np.int64), np.array([0, 3], np.int64), x.copy(),
+                  np.ones(1, np.bool_), np.zeros((1, 3)), np.ones(1), np.zeros(1, np.bool_))
     k.passive_rows(tag, 1, 3, np.zeros(2, np.int64))
+    k.count_from(np.zeros(2, np.int64), 1)
     k.moving_rows(x, 0, 3)
     rows3 = np.arange(3, dtype=np.int64)
+    k.bbox_points(x)
     k.bbox_rows(x, rows3)
+    o = x.copy()
+    o.flags.writeable = False       # as Scene.original_positions() is
     lo, nc = np.full(3, -1.0), np.array([2, 2, 2], np.int64)
-    start, order = k.grid_build(x, rows3, lo, 2.0, nc)
+    start, order = k.grid_build(o, lo, np.full(3, 3.0), 2.0, nc)
+    k.bbox_points(o)
     k.grid_candidates(x, r, 2.0, 3.0, lo, 2.0, nc, start, order, np.zeros(3, np.bool_), 0,
                       rows3, 0, tag, 3)
     flag, nt = np.zeros(3, np.bool_), np.zeros(1, np.int64)
@@ -126,8 +134,6 @@ def warm() -> dict:
              np.zeros(2), np.zeros(2), np.zeros(1, np.int64), np.ones(1, np.int64), r,
              np.array([0, 2], np.int64), np.zeros((2, 3)), np.zeros((2, 3), np.int64),
              np.zeros(2), np.zeros(2))
-    o = x.copy()
-    o.flags.writeable = False       # as Scene.original_positions() is
     k.within_bound(x, np.ones((3, 3)), o, np.arange(1, 4, dtype=np.int64), 4.0)
     k.within_bound(x, np.ones((3, 3)), o, tag, 4.0)      # LAMMPS' ids, as the runner has them
     # one instruction of every kind through the fused step (the types LAMMPS' arrays have)
@@ -620,6 +626,12 @@ if nb is not None:
             prow[tag[r] - 1 - span] = r
 
     @nb.njit(**_OPTS)
+    def count_from(out, start):
+        """out[k] = start + k (np.arange into a given array)."""
+        for k in range(len(out)):
+            out[k] = start + k
+
+    @nb.njit(**_OPTS)
     def moving_rows(v, start, stop):
         """Rows in start..stop with a nonzero velocity."""
         out = np.empty(stop - start, np.int64)
@@ -645,30 +657,51 @@ if nb is not None:
         return lo, hi
 
     @nb.njit(**_OPTS)
-    def grid_build(x, rows, lo, size, nc):
-        """A cell grid of the points x[rows] (which stay where they are): cell starts (CSR)
-        and the points' indices k in cell order (cells of edge ``size`` from ``lo``, ``nc``
-        per axis, x slowest)."""
-        m = len(rows)
+    def bbox_points(p):
+        """The bounding box (lo, hi) of the points p (m, 3)."""
+        lo = np.full(3, np.inf)
+        hi = np.full(3, -np.inf)
+        for k in range(p.shape[0]):
+            for d in range(3):
+                v = p[k, d]
+                if v < lo[d]:
+                    lo[d] = v
+                if v > hi[d]:
+                    hi[d] = v
+        return lo, hi
+
+    @nb.njit(**_OPTS)
+    def grid_build(p, lo, hi, size, nc):
+        """A cell grid of the points p (m, 3) inside the box lo..hi (which stay where they
+        are): cell starts (CSR) and the indices k of those points in cell order (cells of edge
+        ``size`` from ``lo``, ``nc`` per axis, x slowest)."""
+        m = p.shape[0]
         ncell = nc[0] * nc[1] * nc[2]
         cell = np.empty(m, np.int64)
+        idx = np.empty(m, np.int64)
+        n = 0
         for k in range(m):
-            r = rows[k]
-            c0 = min(int((x[r, 0] - lo[0]) / size), nc[0] - 1)
-            c1 = min(int((x[r, 1] - lo[1]) / size), nc[1] - 1)
-            c2 = min(int((x[r, 2] - lo[2]) / size), nc[2] - 1)
-            cell[k] = (c0 * nc[1] + c1) * nc[2] + c2
-        return _cell_sort(cell, ncell)
+            if not (p[k, 0] >= lo[0] and p[k, 0] <= hi[0] and p[k, 1] >= lo[1]
+                    and p[k, 1] <= hi[1] and p[k, 2] >= lo[2] and p[k, 2] <= hi[2]):
+                continue
+            c0 = min(int((p[k, 0] - lo[0]) / size), nc[0] - 1)
+            c1 = min(int((p[k, 1] - lo[1]) / size), nc[1] - 1)
+            c2 = min(int((p[k, 2] - lo[2]) / size), nc[2] - 1)
+            cell[n] = (c0 * nc[1] + c1) * nc[2] + c2
+            idx[n] = k
+            n += 1
+        start, order = _cell_sort(cell[:n], ncell)
+        return start, idx[order]
 
     @nb.njit(**_OPTS)
     def grid_candidates(x, ia, cut, wide, lo, size, nc, start, order, active, b0, prow,
                         span, tag, nlocal):
         """:func:`candidates` of rows ``ia`` against the resting particles of a group in a
-        grid of :func:`grid_build` (point k: particle b0 + k, at x[prow[b0 + k − span]], which
-        has not moved since; the ``active`` ones skipped): unsorted pairs (rows), which rows
-        of ia have a partner within ``wide``, the rows of the group's particles within
-        ``wide`` (repeated), and whether a particle's row (``prow[p − span]``) did not hold it
-        (atom id ``tag``)."""
+        grid of :func:`grid_build` (point k: particle b0 + k, at x[prow[b0 + k − span]], where
+        it has been since the start; the ``active`` ones skipped): pairs (rows) grouped by the
+        searching row in the order of ``ia``, which rows of ia have a partner within ``wide``,
+        the rows of the group's particles within ``wide`` (repeated), and whether a
+        particle's row (``prow[p − span]``) did not hold it (atom id ``tag``)."""
         cut2 = cut * cut
         wide2 = wide * wide
         near_a = np.zeros(len(ia), np.bool_)
@@ -731,6 +764,98 @@ if nb is not None:
         return oa[:n], ob[:n], near_a, nbr[:m], False
 
     @nb.njit(**_OPTS)
+    def bed_join(ia, sa, sb, snear_a, snear_b, da, db, dnear_a, dnear_b, tag, flag):
+        """The resting bed's search as one search over the whole group would give it
+        (:meth:`RestingBed.candidates`): the pairs from the grid of resting particles
+        (``sa, sb``: grouped by searching row in the order of ``ia``, which is by particle;
+        partners in cell order) and from the activated ones (``da, db``: sorted by particles),
+        merged in particle order (a, then b: ``tag`` is a row's atom id); the searching rows
+        with a partner (``ia[snear_a]`` and ``dnear_a``, once each, in row order); the
+        resting rows within reach (``snear_b``, repeated: once each, in row order) and then
+        ``dnear_b``. ``flag``: False over every row (left so)."""
+        n = len(sa) + len(da)
+        oa = np.empty(n, np.int64)
+        ob = np.empty(n, np.int64)
+        m = 0
+        i = 0
+        j = 0
+        while i < len(sa) or j < len(da):
+            # the next searching row: the smaller particle of the two heads
+            if j >= len(da) or (i < len(sa) and tag[sa[i]] <= tag[da[j]]):
+                a = sa[i]
+            else:
+                a = da[j]
+            first = m
+            while i < len(sa) and sa[i] == a:   # its resting partners, by particle
+                b = sb[i]
+                t = tag[b]
+                k = m
+                while k > first and tag[ob[k - 1]] > t:
+                    ob[k] = ob[k - 1]
+                    k -= 1
+                ob[k] = b
+                oa[m] = a
+                m += 1
+                i += 1
+            mid = m
+            while j < len(da) and da[j] == a:   # its activated partners (sorted): merged
+                b = db[j]
+                t = tag[b]
+                k = m
+                while k > mid and tag[ob[k - 1]] > t:
+                    ob[k] = ob[k - 1]
+                    k -= 1
+                ob[k] = b
+                oa[m] = a
+                m += 1
+                j += 1
+            if mid > first and m > mid:         # both kinds: one insertion pass over all
+                for q in range(first + 1, m):
+                    b = ob[q]
+                    t = tag[b]
+                    k = q
+                    while k > first and tag[ob[k - 1]] > t:
+                        ob[k] = ob[k - 1]
+                        k -= 1
+                    ob[k] = b
+        na = 0
+        for k in range(len(ia)):
+            if snear_a[k] and not flag[ia[k]]:
+                flag[ia[k]] = True
+                na += 1
+        for k in range(len(dnear_a)):
+            if not flag[dnear_a[k]]:
+                flag[dnear_a[k]] = True
+                na += 1
+        near_a = np.empty(na, np.int64)
+        q = 0
+        for k in range(len(ia)):
+            if snear_a[k] and flag[ia[k]]:
+                flag[ia[k]] = False
+                near_a[q] = ia[k]
+                q += 1
+        for k in range(len(dnear_a)):
+            if flag[dnear_a[k]]:
+                flag[dnear_a[k]] = False
+                near_a[q] = dnear_a[k]
+                q += 1
+        near_a = np.sort(near_a)
+        nb_ = 0
+        rows = np.empty(len(snear_b), np.int64)
+        for k in range(len(snear_b)):
+            r = snear_b[k]
+            if not flag[r]:
+                flag[r] = True
+                rows[nb_] = r
+                nb_ += 1
+        for k in range(nb_):
+            flag[rows[k]] = False
+        near_b = np.empty(nb_ + len(dnear_b), np.int64)
+        near_b[:nb_] = np.sort(rows[:nb_])
+        near_b[nb_:] = dnear_b
+        return oa[:m], ob[:m], near_a, near_b
+
+    @nb.njit(**_OPTS)
     def moved_below(x, a0, na, b0, nb_, ref, lim2):
         """Whether every row of the ranges a0..a0+na and b0..b0+nb_ (``ref``: their positions,
         one range after the other) is within √lim2 of where ``ref`` has it."""
@@ -778,6 +903,57 @@ if nb is not None:
             if not (d0 * d0 + d1 * d1 + d2 * d2 <= lim2):
                 return False
         return True
+
+    @nb.njit(inline="always")
+    def _farthest(x, rows, ref, k0, k1, t0, t1, t2):
+        """The largest |x[rows[k]] − ref[k] − t|² over k0 ≤ k < k1 (NaN positions are left to
+        the watchdog, as LAMMPS' own displacement check leaves them)."""
+        worst = 0.0
+        for k in range(k0, k1):
+            r = rows[k]
+            d0 = x[r, 0] - ref[k, 0] - t0
+            d1 = x[r, 1] - ref[k, 1] - t1
+            d2 = x[r, 2] - ref[k, 2] - t2
+            worst = max(worst, d0 * d0 + d1 * d1 + d2 * d2)
+        return worst
+
+    @nb.njit(**_OPTS)
+    def lists_moved(x, rows, roff, ref, shifted, shift, lim2, moved):
+        """Which contact lists must be searched again: ``moved[L]`` is set when a row of list
+        L (``rows[roff[L]:roff[L + 1]]``; their positions when it was searched: ``ref``, row
+        for row) is farther than √lim2[L] from there; for a list with ``shifted[L]``, once one
+        translation t common to its rows is taken off (any t bounds the change of every
+        distance between them by twice the largest |Δx − t|: the one that held at the last
+        step, ``shift[L]``, is tried first, one pass; then the centre of the displacements'
+        bounding box, as :func:`moved_below_shifted`, kept in ``shift[L]`` when it holds)."""
+        for L in range(len(roff) - 1):
+            k0, k1 = roff[L], roff[L + 1]
+            w = _farthest(x, rows, ref, k0, k1, shift[L, 0], shift[L, 1], shift[L, 2])
+            if w <= lim2[L]:
+                moved[L] = False
+                continue
+            moved[L] = True
+            if not shifted[L]:
+                continue
+            lo0 = lo1 = lo2 = np.inf
+            hi0 = hi1 = hi2 = -np.inf
+            for k in range(k0, k1):
+                r = rows[k]
+                d0 = x[r, 0] - ref[k, 0]
+                d1 = x[r, 1] - ref[k, 1]
+                d2 = x[r, 2] - ref[k, 2]
+                lo0 = min(lo0, d0)
+                hi0 = max(hi0, d0)
+                lo1 = min(lo1, d1)
+                hi1 = max(hi1, d1)
+                lo2 = min(lo2, d2)
+                hi2 = max(hi2, d2)
+            t0, t1, t2 = 0.5 * (lo0 + hi0), 0.5 * (lo1 + hi1), 0.5 * (lo2 + hi2)
+            if _farthest(x, rows, ref, k0, k1, t0, t1, t2) <= lim2[L]:
+                moved[L] = False
+                shift[L, 0] = t0
+                shift[L, 1] = t1
+                shift[L, 2] = t2
 
     @nb.njit(**_OPTS)
     def overlapping(x, a, b, R2):

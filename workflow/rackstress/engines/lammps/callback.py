@@ -353,15 +353,27 @@ class Overlaps:
     step only measures the candidates (``Collide.touching``). Shared by the collide terms of
     both directions and by the contact conditions (Eq. 28's damping) of the same two groups.
     Where LAMMPS' skin is wider than the lists' (a deck with passive groups, serial), the lists
-    keep their own skin ``own`` and are searched again when the callback's own check finds that
-    an atom has moved half of it (``PyForces._own_check``), as LAMMPS would with that skin.
+    keep their own skin (``own``; :meth:`list_skin`) and each is searched again once one of its
+    own particles has moved half of it (:meth:`renew`, once a step): a particle in no list
+    never renews one, and two groups walking together keep theirs.
+
+    Resting particles of a passive group are activated (``activate``) one LAMMPS
+    reneighbouring before anything can touch them: every list against a passive group is
+    searched at each LAMMPS layout's first step (``PyForces._search_lists``) with reach + two of
+    LAMMPS' skins S. A resting particle not activated there was farther than that from every
+    searching particle; LAMMPS reneighbours before any atom has moved S/2, so at the next
+    layout's first search it is still more than reach + 3S/2 away (the searching particles
+    moved less than S/2; it did not move) and is activated there if within reach + 2S; then it
+    stays more than reach + S away until that layout ends (less than S/2 more), when LAMMPS'
+    reordering (``atom_modify first``) puts it among the integrated rows. Renewals in between
+    search within reach + the list's skin only.
     """
 
     def __init__(self, radius: np.ndarray, skin: float, compiled=None, activate=None,
                  passive=None, bed=None, own=None):
         self.radius, self.skin, self.k = radius, skin, compiled
-        #: serial, when LAMMPS' skin (``skin``) is wider: the callback's own skin, its lists
-        #: searched again whenever an atom has moved half of it (PyForces' own check)
+        #: serial, when LAMMPS' skin (``skin``) is wider: the callback's own skin, each list
+        #: searched again once one of its own particles has moved half of it (renew)
         self.own = own
         #: the resting particles of the passive groups in cell grids made once (serial,
         #: compiled): a search against a passive group looks only near the searching group
@@ -375,6 +387,15 @@ class Overlaps:
         #: serial lists between groups whose rows are their particles, with the positions they
         #: were searched at: kept while no atom of the two groups has moved half a skin
         self._kept = {}
+        #: the lists the callback renews itself (``own``): list key → (list, positions its
+        #: watched rows were searched at, those rows, relative test?, its layout's frame or
+        #: None, (h/2)²), see :meth:`renew`
+        self._lists = {}
+        self._packed = None
+        #: the lists' skins where the callback renews them (None: ``own``), see list_skin
+        self.bed_skin = self.moving_skin = None
+        #: LAMMPS integrates only its first ``nfirst`` rows (PyForces keeps this up to date)
+        self.nfirst = len(radius)
 
     def _reach(self, sl: slice) -> float:
         key = (sl.start, sl.stop)
@@ -388,31 +409,36 @@ class Overlaps:
         hit = fr.memo.get(key)
         if hit is not None:
             return hit
+        mine = self.own is not None and fr.identity
         # the lists' skin: LAMMPS' (its reneighbouring renews them), or in serial the
-        # callback's own where LAMMPS' is wider (its own displacement check renews them)
-        h = self.own if self.own is not None and fr.identity else self.skin
+        # callback's own where LAMMPS' is wider (each list renewed by its own displacement
+        # check, :meth:`renew`)
+        h = self.list_skin(A, B) if mine else self.skin
         reach = self._reach(A) + self._reach(B)
         cut = reach + h
         # resting particles join the moving group one LAMMPS reneighbouring early (a partner
         # within reach + 2 of LAMMPS' skins), so LAMMPS has put them among the integrated rows
         # (atom_modify first) before anything can touch them; the contact candidates are
         # those within cut
-        # (once a layout: a search the callback's own check asks for in between need not)
+        # (once a layout: a renewal in between need not; every list against a passive group
+        # is searched at a layout's first step, _search_lists, and dropped at the next layout)
         passive = self.activate is not None and self._passive(A, B)
         wide = cut
         if passive and ("act", A.start, B.start) not in fr.memo:
             wide = reach + 2 * self.skin
             fr.memo[("act", A.start, B.start)] = True
-        stable = self.k is not None and wide == cut and fr.ident(A) and fr.ident(B)
+        stable = (not mine and self.k is not None and wide == cut and fr.ident(A)
+                  and fr.ident(B))
         if stable:
-            # a list of two groups whose rows are their particles is searched with two skins
-            # of margin (reach + 2 skins) and kept at a later reneighbouring while none of
-            # *their* atoms has moved half a skin since the search, once the translation
-            # common to both groups is taken off (kernels.moved_below_shifted: a body and
-            # its legs walk together): until the next reneighbouring each atom then stays
-            # within one skin of where it was searched plus that translation (LAMMPS
-            # reneighbours once any atom has moved half a skin), so a pair can have closed by
-            # less than two skins and none outside the list can be within reach
+            # (LAMMPS' skin renews the lists) a list of two groups whose rows are their
+            # particles is searched with two skins of margin (reach + 2 skins) and kept at a
+            # later reneighbouring while none of *their* atoms has moved half a skin since the
+            # search, once the translation common to both groups is taken off
+            # (kernels.moved_below_shifted: a body and its legs walk together): until the
+            # next reneighbouring each atom then stays within one skin of where it was
+            # searched plus that translation (LAMMPS reneighbours once any atom has moved half
+            # a skin), so a pair can have closed by less than two skins and none outside the
+            # list can be within reach
             kept = self._kept.get((A.start, B.start))
             if kept is not None and self.k.moved_below_shifted(
                     fr.x, A.start, A.stop - A.start, B.start, B.stop - B.start, kept[0],
@@ -425,7 +451,7 @@ class Overlaps:
             # a group whose rows are its particles against a passive group: the resting
             # particles from the bed's grid, the activated ones from a cell list of their own
             ia = fr.seen(A)
-            a, b, near_a, near_b = self.bed.candidates(fr, ia, B, cut, wide)
+            a, b, near_a, near_b = self.bed.candidates(fr, ia, B, cut, wide, A)
         elif self.k is not None:      # a compiled cell list
             ia, ib = fr.seen(A), fr.seen(B)
             a, b, near_a, near_b = self.k.candidates(fr.x, ia, ib, cut, A == B, fr.tag, wide)
@@ -449,7 +475,110 @@ class Overlaps:
         hit = fr.memo[key] = (a, b, R2)
         if stable:
             self._kept[(A.start, B.start)] = (np.concatenate([fr.x[A], fr.x[B]]), hit)
+        if mine:
+            self._remember(fr, key, A, B, hit, h)
         return hit
+
+    def list_skin(self, A: slice, B: slice) -> float:
+        """The skin of the list of groups A and B when the callback renews it itself: a list
+        against a passive group (the bed under a sole) ``bed_skin``, else ``moving_skin``
+        (both the deck's ``skin`` unless set)."""
+        if self._passive(A, B):
+            return self.own if self.bed_skin is None else self.bed_skin
+        return self.own if self.moving_skin is None else self.moving_skin
+
+    def _watched(self, fr: Frame, A: slice, B: slice, h: float) -> np.ndarray:
+        """The rows whose motion can bring a pair of A and B into reach unseen by their list
+        (searched now with skin ``h``): a group whose rows are its particles, its rows; a
+        passive group, its activated particles, at the rows LAMMPS integrates after
+        ``fr.span`` (the resting ones, at rows LAMMPS does not integrate, stay where they
+        are until it reorders, which makes a new layout and a new search) — and of those only
+        the ones inside the searching group's bounding box grown by reach + h + LAMMPS' skin.
+        The list lives only as long as the layout, in which no integrated atom moves more
+        than half LAMMPS' skin from where it was at the layout's start (LAMMPS reneighbours
+        first), so any two of its positions are less than a skin apart: a particle farther
+        than reach + h/2 + a skin from every searching particle now, while those move less
+        than h/2, stays out of reach until the list is dropped."""
+        parts = []      # disjoint: a passive group's rows come after span, the others' before
+        for G in ((A,) if A == B else (A, B)):
+            if fr.ident(G):
+                parts.append(np.arange(G.start, G.stop, dtype=np.int64))
+                continue
+            stop = max(fr.span, min(self.nfirst, fr.nlocal))
+            rows = np.arange(fr.span, stop, dtype=np.int64)
+            other = B if G is A else A
+            if fr.ident(other) and other != G and len(rows):
+                lo, hi = self.k.bbox_rows(fr.x, fr.seen(other)) if self.k is not None else (
+                    fr.x[other].min(axis=0), fr.x[other].max(axis=0))
+                g = self._reach(A) + self._reach(B) + h + self.skin + 1.0
+                xr = fr.x[fr.span:stop]
+                rows = rows[((xr >= lo - g) & (xr <= hi + g)).all(axis=1)]
+            parts.append(rows)
+        return np.concatenate(parts)
+
+    def _remember(self, fr: Frame, key, A: slice, B: slice, hit, h: float) -> None:
+        """Keep a list the callback renews itself, with where its particles were searched.
+
+        A list of two groups whose rows are their particles (a body and a leg) is kept across
+        LAMMPS' reneighbourings (its rows do not change) and judged by the two groups'
+        motion relative to each other (``shifted``); a list against a passive group holds
+        rows LAMMPS reorders, so it lives as long as the layout, and the resting particles in
+        it do not move, so its particles' own displacement is measured."""
+        rows = self._watched(fr, A, B, h)
+        shifted = fr.ident(A) and fr.ident(B)
+        # h/2 less a margin far above rounding (1e-6 relative), as the step's near sets
+        lim2 = (0.5 * h * (1.0 - 1e-6)) ** 2
+        self._lists[key] = (hit, np.array(fr.x[rows]), rows, shifted, None if shifted else fr,
+                            lim2)
+        self._packed = None
+
+    def renew(self, fr: Frame) -> None:
+        """Drop from ``fr.memo`` every list the callback renews itself that may now miss a
+        pair within reach (the next use searches it again); put back, in a new layout's
+        frame, those still good from an earlier one. Once a step, before any list is used.
+
+        A list's particles (:meth:`_watched`) that were not in it were farther apart than
+        reach + h when it was searched; while each has moved at most h/2 since (for two
+        moving groups once the translation common to them is taken off: distances then
+        change by at most twice the bound, see :func:`kernels.moved_below_shifted`), no pair
+        outside it has closed in by h, so it holds every pair within reach. Only the list's
+        own particles count: a particle in no list (a rack) never renews one, and a list
+        whose groups stand still relative to each other is kept however far they travel."""
+        if not self._lists:
+            return
+        stale = [key for key, st in self._lists.items()
+                 if st[4] is not None and st[4] is not fr]
+        for key in stale:       # lists of rows from another layout
+            del self._lists[key]
+            self._packed = None
+        if not self._lists:
+            return
+        if self._packed is None:
+            keys = list(self._lists)
+            sts = [self._lists[key] for key in keys]
+            self._packed = (keys, np.concatenate([st[2] for st in sts]),
+                            np.cumsum([0] + [len(st[2]) for st in sts]).astype(np.int64),
+                            np.ascontiguousarray(np.concatenate([st[1] for st in sts])),
+                            np.array([st[3] for st in sts], np.bool_),
+                            np.zeros((len(keys), 3)),
+                            np.array([st[5] for st in sts]),
+                            np.zeros(len(keys), np.bool_))
+        keys, rows, roff, ref, shifted, shift, lim2, moved = self._packed
+        if self.k is not None:
+            self.k.lists_moved(fr.x, rows, roff, ref, shifted, shift, lim2, moved)
+        else:
+            for L in range(len(keys)):
+                d = fr.x[rows[roff[L]:roff[L + 1]]] - ref[roff[L]:roff[L + 1]]
+                if shifted[L] and len(d):
+                    d = d - 0.5 * (d.min(axis=0) + d.max(axis=0))
+                moved[L] = len(d) and not rowdot(d, d).max() <= lim2[L]
+        for L, key in enumerate(keys):
+            if moved[L]:
+                del self._lists[key]
+                fr.memo.pop(key, None)
+                self._packed = None
+            else:
+                fr.memo[key] = self._lists[key][0]
 
     def _any_passive(self, A: slice) -> bool:
         key = ("any passive", A.start, A.stop)
@@ -500,20 +629,25 @@ class RestingBed:
 
     A resting particle never moves until it is activated (Eq. 5 leaves a particle with zero
     velocity and force where it is), so each passive group's particles go into a cell grid
-    once, at the positions LAMMPS has them (read from LAMMPS' rows when searched); a search against the group then visits only the
-    cells near the searching particles and skips the activated ones, which are searched apart
-    in a cell list of their own (they are few). The pairs found, and their order (by the
-    particles), are those of a search over every particle of the group.
+    once, at their original positions (where LAMMPS holds every resting one); a search
+    against the group then visits only the cells near the searching particles and skips the
+    activated ones, which are searched apart in a cell list of their own (they are few). The
+    pairs found, and their order (by the particles), are those of a search over every
+    particle of the group; the two are merged in compiled code (:func:`kernels.bed_join`).
 
     LAMMPS reorders the passive rows when it reneighbours (``atom_modify first``), so the row
     of each passive particle is kept in ``prow``, brought up to date at each new layout from
     the only rows a reordering changes: those it moved the activated particles to (from the
     old ``nfirst`` to the new) and those they came from. Every row taken from it is checked
-    against LAMMPS' atom id; a mismatch rebuilds it from scratch.
+    against LAMMPS' atom id; a mismatch rebuilds it from scratch. It starts as the order
+    LAMMPS reads the particles in (row p holds particle p), which holds at a fresh run's
+    first search; after a resumed run's reordering the first check rebuilds it.
     """
 
-    def __init__(self, n: int, span: int, compiled):
+    def __init__(self, n: int, span: int, compiled, origin: np.ndarray):
         self.n, self.span, self.k = n, span, compiled
+        #: every particle's original position (the scene's, read-only)
+        self.origin = origin
         #: row of every passive particle (index − span), or None until first needed
         self.prow = None
         #: activated particles (global index), and their rows when activated
@@ -521,8 +655,11 @@ class RestingBed:
         self._act = []
         self._pending = []
         self._nfirst = 0
-        #: (group start, stop) → (lo, cell size, cells per axis, cell starts, order)
+        #: (group start, stop, searching group's start) → (lo, cell size, cells per axis,
+        #: cell starts, order, hi)
         self._grids = {}
+        #: a False flag per row (scratch of kernels.bed_join)
+        self._flag = np.zeros(0, dtype=np.bool_)
 
     def activated(self, fr: Frame, rows: np.ndarray) -> None:
         """Rows of passive particles just added to the moving group."""
@@ -543,31 +680,51 @@ class RestingBed:
         """``prow`` read from this layout (the rows activated in it stay pending: LAMMPS'
         next reordering moves other particles there)."""
         if self.prow is None:
-            self.prow = np.empty(self.n - self.span, dtype=np.int64)
+            self.prow = _fresh_int64(self.n - self.span)
         self.k.passive_rows(fr.tag, self.span, fr.nlocal, self.prow)
 
-    def _grid(self, fr: Frame, B: slice, size: float):
-        key = (B.start, B.stop)
-        if key not in self._grids:
-            rows = self.prow[B.start - self.span:B.stop - self.span]
-            if rows.min() < 0 or not np.array_equal(fr.tag[rows],
-                                                    np.arange(B.start + 1, B.stop + 1)):
-                self._rebuild(fr)
-                rows = self.prow[B.start - self.span:B.stop - self.span]
-            lo, hi = self.k.bbox_rows(fr.x, rows)
-            lo = lo - 1.0
-            nc = (np.floor((hi + 1.0 - lo) / size).astype(np.int64) + 1)
-            start, order = self.k.grid_build(fr.x, rows, lo, size, nc)
-            self._grids[key] = (lo, size, nc, start, order)
-        return self._grids[key]
+    def _grid(self, fr: Frame, B: slice, ia: np.ndarray, wide: float, A: slice | None):
+        """The grid of group B's particles at their original positions, where every resting
+        one still is (Eq. 5 leaves a particle with zero velocity and force where it is;
+        LAMMPS holds them bit for bit as read, which the passive decks' gathered positions
+        rely on too), built from the scene's contiguous array, not from LAMMPS' rows.
 
-    def candidates(self, fr: Frame, ia: np.ndarray, B: slice, cut: float, wide: float):
+        It holds the particles inside a box: round the searching rows ``ia`` grown by
+        ``wide`` and twice the first search's reach (its cell size) beyond, and is built
+        again, round the rows then, when a search would reach beyond it (every particle
+        within ``wide`` of a searching row must be in it): a million-particle bed is not
+        sorted into cells for the few thousand under the soles. One grid per searching
+        group A (a sole walks, the other stands)."""
+        key = (B.start, B.stop, None if A is None else A.start)
+        g = self._grids.get(key)
+        qlo, qhi = self.k.bbox_rows(fr.x, ia)
+        if not (np.isfinite(qlo).all() and np.isfinite(qhi).all()):
+            qlo, qhi = self.k.bbox_points(self.origin[B])        # (no searching rows)
+        if (g is not None and (qlo - wide - 1.0 >= g[0]).all()
+                and (qhi + wide + 1.0 <= g[5]).all()):
+            return g
+        size = wide if g is None else g[1]
+        lo, hi = qlo - (wide + 2.0 * size + 1.0), qhi + (wide + 2.0 * size + 1.0)
+        nc = (np.floor((hi - lo) / size).astype(np.int64) + 1)
+        start, order = self.k.grid_build(self.origin[B], lo, hi, size, nc)
+        g = self._grids[key] = (lo, size, nc, start, order, hi)
+        return g
+
+    def candidates(self, fr: Frame, ia: np.ndarray, B: slice, cut: float, wide: float,
+                   A: slice | None = None):
         """As :func:`kernels.candidates` of ``ia`` against every particle of passive group
-        ``B`` (rows, sorted by particles; near rows of both sides)."""
+        ``B`` (rows, sorted by particles; near rows of both sides); ``A``: the searching
+        group (each has a grid of its own)."""
         for attempt in (0, 1):
-            if self.prow is None or attempt:
+            if self.prow is None:
+                # LAMMPS reads the particles in order: row p holds particle p until it
+                # reorders, and relayout follows every reordering from the first frame on;
+                # each row used is checked against LAMMPS' atom id (a miss rebuilds it)
+                self.prow = _fresh_int64(self.n - self.span)
+                self.k.count_from(self.prow, self.span)
+            elif attempt:
                 self._rebuild(fr)
-            lo, size, nc, start, order = self._grid(fr, B, wide)
+            lo, size, nc, start, order = self._grid(fr, B, ia, wide, A)[:5]
             sa, sb, snear_a, snear_b, bad = self.k.grid_candidates(
                 fr.x, ia, cut, wide, lo, size, nc, start, order, self.active, B.start,
                 self.prow, self.span, fr.tag, fr.nlocal)
@@ -588,15 +745,18 @@ class RestingBed:
         # their near rows are only the pairs' own: searched within cut, not wide (which is
         # reach + 2 of LAMMPS' skins at a layout's first search, 18 units in MagPod)
         da, db, dnear_a, dnear_b = self.k.candidates(fr.x, ia, rows, cut, False, fr.tag, cut)
-        a, b = np.concatenate([sa, da]), np.concatenate([sb, db])
-        order = np.lexsort((fr.tag[b], fr.tag[a]))
-        near_a = np.union1d(ia[snear_a], dnear_a)
-        # the resting rows within wide, once each, in row order (np.unique's result, by a
-        # flag per row: snear_b repeats a row for every searching row near it)
-        flag = np.zeros(fr.nlocal, dtype=bool)
-        flag[snear_b] = True
-        near_b = np.concatenate([np.flatnonzero(flag), dnear_b])
-        return a[order], b[order], near_a, near_b
+        # merged in particle order, the near rows once each (kernels.bed_join)
+        if len(self._flag) < fr.nlocal:
+            self._flag = np.zeros(fr.nlocal, dtype=np.bool_)
+        return self.k.bed_join(ia, sa, sb, snear_a, snear_b, da, db, dnear_a, dnear_b, fr.tag,
+                               self._flag)
+
+
+def _fresh_int64(n: int) -> np.ndarray:
+    """A new int64 array of n zeros in memory NumPy has not advised the kernel to back with
+    huge pages (its first touch, 8 MB for a million resting particles, took ~19 ms as
+    np.arange here against a few; see the runner's ``_fresh``)."""
+    return np.frombuffer(bytearray(8 * n), dtype=np.int64)
 
 
 # ----------------------------------------------------------------------------- terms
@@ -1017,6 +1177,7 @@ class PyForces:
             self.passive[self.scene.slice(name)] = True
         self.move_bit = self._move_bit(lmp, deck) if self.passive.any() else None
         self._scan_moving = self.move_bit is not None   # once: a resumed run's moving ones
+        self._mask = None        # (frame, LAMMPS' mask array) of the last activation
         #: rows below this are particles (serial): every group before the passive ones, which
         #: LAMMPS keeps first (they are never reordered) when the passive groups come last
         first_passive = min((self.scene.offset(g) for g in getattr(deck, "passive", ())),
@@ -1025,14 +1186,14 @@ class PyForces:
             self.passive[first_passive:].all() else 0
         serial = comm is None or comm.Get_size() == 1
         self._mpi = not serial
-        self.bed = (RestingBed(self.n, self.span, self.compiled)
+        self.bed = (RestingBed(self.n, self.span, self.compiled,
+                               self.scene.original_positions())
                     if self.move_bit is not None and self.span and self.compiled is not None
                     and serial else None)
         own = getattr(deck, "skin", None)
         lammps_skin = getattr(deck, "lammps_skin", own)
         #: serial, LAMMPS' skin wider than the lists': the lists' own displacement check
         self.own = own if own != lammps_skin else None
-        self._xref = None
         self.overlaps = Overlaps(self.radius, lammps_skin, self.compiled,
                                  self._activate if self.move_bit is not None else None,
                                  self.passive, self.bed, self.own)
@@ -1099,7 +1260,11 @@ class PyForces:
         own = rows[rows < fr.nlocal]
         own = own[self.passive[fr.particles(own)]]
         if len(own):
-            mask = self.lmp.numpy.extract_atom("mask")
+            if self._mask is None or self._mask[0] is not fr:
+                # LAMMPS reallocates its per-atom arrays only when it reneighbours (a new
+                # frame): one view a frame (extract_atom costs tens of µs)
+                self._mask = (fr, self.lmp.numpy.extract_atom("mask"))
+            mask = self._mask[1]
             new = own[(mask[own] & self.move_bit) == 0]
             if len(new) and new.max() >= self.nfirst:
                 self.activated_late = True   # integrated from LAMMPS' next reordering on
@@ -1197,13 +1362,17 @@ class PyForces:
         return self._lists
 
     def _search_lists(self, fr: Frame) -> None:
-        """Search every list of the phase when the frame has none: each list is then as old as
-        the frame, which both renewal checks (LAMMPS' reneighbouring, :meth:`_own_check`)
-        measure from. A list first searched later in the frame (a contact condition asked only
-        once another held, a collide gated on a contact) could miss a pair that closed in by
-        more than a skin since the frame began."""
-        if any(k[0] == "cand" for k in fr.memo):
+        """Search every list of the phase at a frame's first step (a new LAMMPS layout): a
+        list renewed by LAMMPS' reneighbouring is then as old as the frame it measures from (a
+        list first searched later in the frame, such as a contact condition asked only once
+        another held, could miss a pair that closed in by more than a skin since the frame
+        began), and every list against a passive group makes the layout's activation search
+        at its first step. (Lists the callback renews itself measure from their own search,
+        :meth:`Overlaps.renew`; those kept from an earlier layout are in the memo already,
+        which must not stop the others' search.)"""
+        if ("all searched",) in fr.memo:
             return
+        fr.memo[("all searched",)] = True
         for A, B in self._phase_lists():
             self.overlaps._candidates(fr, A, B)
 
@@ -1247,39 +1416,17 @@ class PyForces:
                 self.nfirst = _leading(lmp.numpy.extract_atom("mask"), self.move_bit, nlocal)
             fr = self.frame = Frame(lmp, self.n, nlocal, self.dense_span, self.mass, self.span)
             self._nghost = _global_int(lmp, "nghost")
+            self.overlaps.nfirst = self.nfirst
             if self.bed is not None:
                 self.bed.relayout(fr, self.nfirst)
-            if self.own is not None:
-                self._own_check(fr, True)
         else:
             fr.refresh()
-            if self.own is not None:
-                self._own_check(fr, False)
+        if self.own is not None:    # serial: each list renewed by its own particles' motion
+            self.overlaps.renew(fr)
         if self._scan_moving:       # first call: before any search reads the moving set
             self._activate_moving(fr)
         self._search_lists(fr)
         return fr
-
-    def _own_check(self, fr: Frame, new: bool) -> None:
-        """Serial, LAMMPS' skin wider than the contact lists' (Deck.neighbor_skin): the lists
-        are searched again once any atom has moved half the lists' skin since they were, as
-        LAMMPS' own check would with that skin. Only LAMMPS' first ``nfirst`` rows move (the
-        later ones rest until LAMMPS reorders them, which makes a new layout)."""
-        if not fr.identity:
-            return
-        n = min(self.nfirst, fr.nlocal)
-        if not new and self._xref is not None and len(self._xref) == n:
-            lim2 = 0.25 * self.own * self.own
-            if self.compiled is not None:
-                kept = self.compiled.moved_below(fr.x, 0, n, 0, 0, self._xref, lim2)
-            else:
-                d = fr.x[:n] - self._xref
-                kept = not len(d) or rowdot(d, d).max() <= lim2
-            if kept:
-                return
-            for key in [k for k in fr.memo if k[0] == "cand"]:
-                del fr.memo[key]
-        self._xref = np.array(fr.x[:n])
 
     # ------------------------------------------------------------------ callback
     def __call__(self, caller, step, nlocal, tag, x, f):
