@@ -152,9 +152,15 @@ def test_relist_keeps_the_lists_not_renewed():
     N2 = len(ca2)
     near, nR2, reach2 = np.empty((N2, 3), np.int64), np.empty(N2), np.empty(N2)
     ov, ovn, o_near, o_nnear, o_valid, o_urow, o_uoff, o_uref, o_nR2, o_reach2 = state
+    # the new list's candidates in place, the kept one's left for relist to move
+    ja, jb, jR2 = np.zeros(N2, np.int64), np.zeros(N2, np.int64), np.zeros(N2)
+    ja[:len(na)], jb[:len(na)], jR2[:len(na)] = na, nb, nR2_
     urow, uoff, uref, nnear, valid = K.relist(
-        ca2, cb2, loff2, np.array([-1, 1], np.int64), flag, loff, o_near, o_nR2, o_reach2,
-        o_nnear, o_valid, o_urow, o_uoff, o_uref, near, nR2, reach2)
+        ja, jb, jR2, loff2, np.array([-1, 1], np.int64), flag, ca, cb, cR2, loff, o_near,
+        o_nR2, o_reach2, o_nnear, o_valid, o_urow, o_uoff, o_uref, near, nR2, reach2)
+    np.testing.assert_array_equal(ja, ca2)
+    np.testing.assert_array_equal(jb, cb2)
+    np.testing.assert_array_equal(jR2, cR22)
     assert list(valid) == [0, 1] and nnear[1] == o_nnear[1] > 5 and not flag.any()
     first = list(dict.fromkeys(np.concatenate([na, nb]).tolist()))
     assert urow[:uoff[1]].tolist() == first

@@ -129,8 +129,9 @@ def warm() -> dict:
     k.add_sparse(np.zeros((3, 3)), np.zeros((3, 3)), flag, np.zeros(3, np.int64), nt,
                  np.ones(3), tag, 3)
     k.members(r, s, np.zeros(3, np.bool_))
-    k.relist(r, s, np.array([0, 1, 2], np.int64), np.array([-1, 0], np.int64),
-             np.zeros(3, np.bool_), np.array([0, 2], np.int64), np.zeros((2, 3), np.int64),
+    k.relist(r.copy(), s.copy(), np.ones(2), np.array([0, 1, 2], np.int64),
+             np.array([-1, 0], np.int64), np.zeros(3, np.bool_), r, s, np.ones(2),
+             np.array([0, 2], np.int64), np.zeros((2, 3), np.int64),
              np.zeros(2), np.zeros(2), np.zeros(1, np.int64), np.ones(1, np.int64), r,
              np.array([0, 2], np.int64), np.zeros((2, 3)), np.zeros((2, 3), np.int64),
              np.zeros(2), np.zeros(2))
@@ -1070,17 +1071,26 @@ if nb is not None:
 
 if nb is not None:
     @nb.njit(**_OPTS)
-    def relist(ca, cb, loff, kept, flag, o_loff, o_near, o_nR2, o_reach2, o_nnear, o_valid,
-               o_urow, o_uoff, o_uref, near, nR2, reach2):
-        """:func:`step`'s per-list state for the joined contact lists ``ca, cb`` (list L at
-        ``loff[L]:loff[L+1]``) after some were renewed: list L is old list ``kept[L]`` (−1: a
-        new list) whose state (``o_*``) it keeps, moved to its new place — its particles'
-        rows, their reference positions and, if it was measured, its near candidates (their
-        candidate indices shifted), their R² and the list's (R + h)² — into ``near``, ``nR2``,
-        ``reach2``; a new list gets its distinct rows (as :func:`members`; ``flag``: False
-        over every row, left so) and is measured in full at the next step (``valid`` 0).
+    def relist(ca, cb, cR2, loff, kept, flag, o_ca, o_cb, o_cR2, o_loff, o_near, o_nR2,
+               o_reach2, o_nnear, o_valid, o_urow, o_uoff, o_uref, near, nR2, reach2):
+        """:func:`step`'s per-list state for the joined contact lists ``ca, cb, cR2`` (list L
+        at ``loff[L]:loff[L+1]``; the new lists' candidates already in place) after some were
+        renewed: list L is old list ``kept[L]`` (−1: a new list) whose candidates and state
+        (``o_*``) it keeps, moved to its new place — its particles' rows, their reference
+        positions and, if it was measured, its near candidates (their candidate indices
+        shifted), their R² and the list's (R + h)² — into ``near``, ``nR2``, ``reach2``; a new
+        list gets its distinct rows (as :func:`members`; ``flag``: False over every row, left
+        so) and is measured in full at the next step (``valid`` 0).
         Returns (urow, uoff, uref, nnear, valid)."""
         nl = len(loff) - 1
+        for L in range(nl):
+            Lo = kept[L]
+            if Lo >= 0:
+                k0, o0 = loff[L], o_loff[Lo]
+                for j in range(loff[L + 1] - k0):
+                    ca[k0 + j] = o_ca[o0 + j]
+                    cb[k0 + j] = o_cb[o0 + j]
+                    cR2[k0 + j] = o_cR2[o0 + j]
         cap = 0
         for L in range(nl):
             Lo = kept[L]

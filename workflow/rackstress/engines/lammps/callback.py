@@ -1112,21 +1112,20 @@ class Fused:
         n = int(loff[-1])
         if self._hits is None:      # nothing to keep: an empty old state
             z = np.zeros(1, i64)
-            old = (z, np.zeros((0, 3), i64), np.zeros(0), np.zeros(0), z, z, np.zeros(0, i64),
-                   z, np.zeros((0, 3)))
+            old = (np.zeros(0, i64), np.zeros(0, i64), np.zeros(0), z, np.zeros((0, 3), i64),
+                   np.zeros(0), np.zeros(0), z, z, np.zeros(0, i64), z, np.zeros((0, 3)))
         else:
-            old = (self.loff, self.near, self.nR2, self.reach2, self.nnear, self.valid,
-                   self.urow, self.uoff, self.uref)
+            old = (self.ca, self.cb, self.cR2, self.loff, self.near, self.nR2, self.reach2,
+                   self.nnear, self.valid, self.urow, self.uoff, self.uref)
         buf = self._buffers(n)
-        new = {name: buf[name][:n] for name, _, _ in self._BUFFERS}
-        ca, cb, cR2 = new["ca"], new["cb"], new["cR2"]
-        for h, k0, k1 in zip(hits, loff[:-1], loff[1:]):
-            ca[k0:k1], cb[k0:k1], cR2[k0:k1] = h
+        for name, _, _ in self._BUFFERS:
+            setattr(self, name, buf[name][:n])
+        for h, Lo, k0, k1 in zip(hits, kept, loff[:-1], loff[1:]):
+            if Lo < 0:          # a new list's candidates (the kept ones' are moved below)
+                self.ca[k0:k1], self.cb[k0:k1], self.cR2[k0:k1] = h
         self.urow, self.uoff, self.uref, self.nnear, self.valid = forces.compiled.relist(
-            ca, cb, loff, kept, forces.flag_rows(fr), *old, new["near"], new["nR2"],
-            new["reach2"])
-        for name, a in new.items():
-            setattr(self, name, a)
+            self.ca, self.cb, self.cR2, loff, kept, forces.flag_rows(fr), *old, self.near,
+            self.nR2, self.reach2)
         self.loff = loff
         self.ovn = np.zeros(len(hits), i64)
         self._hits = hits
