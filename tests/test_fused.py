@@ -25,14 +25,17 @@ from test_lammps_backend import every_operator_scene
 def _step_lists(x, ca, cb, cR2, loff, state, h):
     """kernels.step with no terms: only the contact lists' overlapping pairs (ov, ovn)."""
     n = len(x)
-    ov, ovn, near, nnear, valid, urow, uoff, uref = state
+    ov, ovn, near, nnear, valid, urow, uoff, uref = state[:8]
+    nR2, reach2 = state[8:] if len(state) > 8 else (np.empty(len(ca)), np.empty(len(ca)))
     out = K.step(x, np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((0, 3)), np.zeros(0),
                  np.zeros((0, 8), np.int64), np.zeros((0, 3)), np.zeros(1, np.int64),
                  np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, np.int64),
                  np.zeros(0, np.int64), np.zeros(0), np.zeros(0), np.zeros(0),
-                 np.zeros(0, np.int64), ca, cb, cR2, loff, ov, ovn, near, nnear, valid, urow,
-                 uoff, uref, h, np.zeros((n, 3)), np.zeros(n, np.bool_), np.zeros(n, np.int64),
-                 np.zeros(1, np.int64), np.ones(n), np.arange(1, n + 1, dtype=np.int32), n)
+                 np.zeros(0, np.int64), ca, cb, cR2, loff, ov, np.empty((len(ca), 2), np.int64),
+                 np.empty((len(ca), 4)), ovn, near, nR2, reach2, nnear, valid, urow, uoff, uref,
+                 h, np.zeros((n, 3)), np.zeros(n, np.bool_), np.zeros(n, np.int64),
+                 np.zeros(1, np.int64), np.ones(n), np.arange(1, n + 1, dtype=np.int32), n,
+                 np.zeros((0, 3)), np.zeros(0), 0, 0)
     return out
 
 
@@ -54,11 +57,12 @@ def test_near_candidates_find_every_overlap_as_a_full_pass():
     flag = np.zeros(n, np.bool_)
     rows = [K.members(ca[loff[L]:loff[L + 1]], cb[loff[L]:loff[L + 1]], flag) for L in (0, 1)]
     assert sorted(rows[1]) == list(range(10, 20)) and not flag.any()
-    state = (np.empty(len(ca), np.int64), np.zeros(2, np.int64), np.empty(len(ca), np.int64),
+    state = (np.empty(len(ca), np.int64), np.zeros(2, np.int64),
+             np.empty((len(ca), 3), np.int64),
              np.zeros(2, np.int64), np.zeros(2, np.int64),
              np.concatenate(rows).astype(np.int64),
              np.array([0, len(rows[0]), len(rows[0]) + len(rows[1])], np.int64),
-             np.zeros((len(rows[0]) + len(rows[1]), 3)))
+             np.zeros((len(rows[0]) + len(rows[1]), 3)), np.empty(len(ca)), np.empty(len(ca)))
     h = 0.5
     reused = remeasured = seen = 0
     for step in range(400):
@@ -80,13 +84,112 @@ def test_near_candidates_find_every_overlap_as_a_full_pass():
     assert seen > 100 and remeasured > 10 and reused > 10
 
 
+def test_near_sets_kept_while_a_list_moves_as_one():
+    """Two groups carried together (a body and its legs) by 0.6 a step, more than h/2 = 0.25,
+    with a small relative jitter: the near candidates are not measured again (their reference
+    positions stay), and the overlapping pairs are still NumPy's d² < R² over every
+    candidate, in list order; a relative move past h/2 does measure them again."""
+    rng = np.random.default_rng(11)
+    n = 40
+    x = rng.uniform(0.0, 5.0, size=(n, 3))
+    a, b = np.meshgrid(np.arange(20), np.arange(20, 40), indexing="ij")
+    ca, cb = a.ravel().astype(np.int64), b.ravel().astype(np.int64)
+    loff = np.array([0, len(ca)], np.int64)
+    cR2 = rng.uniform(0.8, 2.0, size=len(ca)) ** 2
+    state = (np.empty(len(ca), np.int64), np.zeros(1, np.int64),
+             np.empty((len(ca), 3), np.int64), np.zeros(1, np.int64), np.zeros(1, np.int64),
+             np.arange(n, dtype=np.int64), np.array([0, n], np.int64), np.zeros((n, 3)),
+             np.empty(len(ca)), np.empty(len(ca)))
+    _step_lists(x, ca, cb, cR2, loff, state, 0.5)
+    ref = state[7].copy()
+    for step in range(30):
+        x = x + np.array([0.6, -0.3, 0.2]) + rng.normal(scale=0.002, size=x.shape)
+        assert _step_lists(x, ca, cb, cR2, loff, state, 0.5)[1] == -1
+        np.testing.assert_array_equal(state[7], ref)          # not measured again
+        expect = np.flatnonzero(((x[cb] - x[ca]) ** 2).sum(axis=1) < cR2)
+        np.testing.assert_array_equal(state[0][:state[1][0]], expect)
+    assert len(expect) > 5
+    x[3] += 0.3         # one particle, relative to the others: measured again
+    _step_lists(x, ca, cb, cR2, loff, state, 0.5)
+    np.testing.assert_array_equal(state[7], x)
+
+
+def test_relist_keeps_the_lists_not_renewed():
+    """kernels.relist after one list of two was renewed and the other moved to a new place:
+    the kept list's near candidates (their indices shifted by its move), reference positions,
+    (R + h)² and near count are the old ones, the new list is to be measured in full and has
+    its distinct rows in order of first appearance; the next step's overlapping pairs are
+    NumPy's d² < R² over every candidate."""
+    rng = np.random.default_rng(5)
+    n = 50
+    x = rng.uniform(0.0, 5.0, size=(n, 3))
+
+    def pairs(ra, rb):
+        a, b = np.meshgrid(ra, rb, indexing="ij")
+        return a.ravel().astype(np.int64), b.ravel().astype(np.int64)
+
+    lists = [pairs(np.arange(0, 10), np.arange(10, 25)), pairs(np.arange(25, 35),
+                                                              np.arange(35, 50))]
+    R2 = [rng.uniform(0.8, 2.0, size=len(a)) ** 2 for a, _ in lists]
+    ca, cb = np.concatenate([a for a, _ in lists]), np.concatenate([b for _, b in lists])
+    cR2 = np.concatenate(R2)
+    loff = np.array([0, len(lists[0][0]), len(ca)], np.int64)
+    flag = np.zeros(n, np.bool_)
+    rows = [K.members(a, b, flag) for a, b in lists]
+    N = len(ca)
+    state = (np.empty(N, np.int64), np.zeros(2, np.int64), np.empty((N, 3), np.int64),
+             np.zeros(2, np.int64), np.zeros(2, np.int64), np.concatenate(rows),
+             np.array([0, len(rows[0]), len(rows[0]) + len(rows[1])], np.int64),
+             np.zeros((len(rows[0]) + len(rows[1]), 3)), np.empty(N), np.empty(N))
+    _step_lists(x, ca, cb, cR2, loff, state, 0.5)
+    x = x + rng.normal(scale=0.01, size=x.shape)
+    # list 0 renewed (fewer candidates, its rows in another order), list 1 kept: [new, old 1]
+    na, nb = pairs(np.arange(9, -1, -1), np.arange(12, 25))
+    nR2_ = rng.uniform(0.8, 2.0, size=len(na)) ** 2
+    ca2, cb2 = np.concatenate([na, lists[1][0]]), np.concatenate([nb, lists[1][1]])
+    cR22 = np.concatenate([nR2_, R2[1]])
+    loff2 = np.array([0, len(na), len(ca2)], np.int64)
+    N2 = len(ca2)
+    near, nR2, reach2 = np.empty((N2, 3), np.int64), np.empty(N2), np.empty(N2)
+    ov, ovn, o_near, o_nnear, o_valid, o_urow, o_uoff, o_uref, o_nR2, o_reach2 = state
+    # the new list's candidates in place, the kept one's left for relist to move
+    ja, jb, jR2 = np.zeros(N2, np.int64), np.zeros(N2, np.int64), np.zeros(N2)
+    ja[:len(na)], jb[:len(na)], jR2[:len(na)] = na, nb, nR2_
+    urow, uoff, uref, nnear, valid = K.relist(
+        ja, jb, jR2, loff2, np.array([-1, 1], np.int64), flag, ca, cb, cR2, loff, o_near,
+        o_nR2, o_reach2, o_nnear, o_valid, o_urow, o_uoff, o_uref, near, nR2, reach2)
+    np.testing.assert_array_equal(ja, ca2)
+    np.testing.assert_array_equal(jb, cb2)
+    np.testing.assert_array_equal(jR2, cR22)
+    assert list(valid) == [0, 1] and nnear[1] == o_nnear[1] > 5 and not flag.any()
+    first = list(dict.fromkeys(np.concatenate([na, nb]).tolist()))
+    assert urow[:uoff[1]].tolist() == first
+    np.testing.assert_array_equal(urow[uoff[1]:], o_urow[o_uoff[1]:])
+    np.testing.assert_array_equal(uref[uoff[1]:], o_uref[o_uoff[1]:])
+    k, o0 = loff2[1], loff[1]
+    m = nnear[1]
+    np.testing.assert_array_equal(near[k:k + m, :2], o_near[o0:o0 + m, :2])
+    np.testing.assert_array_equal(near[k:k + m, 2], o_near[o0:o0 + m, 2] - o0 + k)
+    np.testing.assert_array_equal(nR2[k:k + m], o_nR2[o0:o0 + m])
+    np.testing.assert_array_equal(reach2[k:], o_reach2[o0:])
+    state2 = (np.empty(N2, np.int64), np.zeros(2, np.int64), near, nnear, valid, urow, uoff,
+              uref, nR2, reach2)
+    _step_lists(x, ca2, cb2, cR22, loff2, state2, 0.5)
+    d2 = ((x[cb2] - x[ca2]) ** 2).sum(axis=1)
+    for L in (0, 1):
+        expect = np.flatnonzero(d2[loff2[L]:loff2[L + 1]] < cR22[loff2[L]:loff2[L + 1]])
+        got = state2[0][loff2[L]:loff2[L] + state2[1][L]] - loff2[L]
+        np.testing.assert_array_equal(got, expect)
+    assert state2[1].sum() > 5
+
+
 def test_step_reports_a_coincident_pair():
     """A candidate pair at d = 0 stops the step (nothing written) and names the list and the
     candidate: the first coincident one in list order."""
     x = np.array([[0.0, 0, 0], [1.0, 0, 0], [1.0, 0, 0], [5.0, 0, 0]])
     ca, cb = np.array([0, 1, 0], np.int64), np.array([1, 2, 3], np.int64)
     loff = np.array([0, 3], np.int64)
-    state = (np.empty(3, np.int64), np.zeros(1, np.int64), np.empty(3, np.int64),
+    state = (np.empty(3, np.int64), np.zeros(1, np.int64), np.empty((3, 3), np.int64),
              np.zeros(1, np.int64), np.zeros(1, np.int64), np.arange(4, dtype=np.int64),
              np.array([0, 4], np.int64), np.zeros((4, 3)))
     assert tuple(_step_lists(x, ca, cb, np.full(3, 4.0), loff, state, 0.5))[1:] == (0, 1)
@@ -156,6 +259,52 @@ def test_fused_contact_damping_follows_the_contact():
     assert np.all(ref.p[:8, 1] > o[:8, 1] - 20.0 * 1.2 + 1.0)
     d = np.linalg.norm(ref.p[:8, None] - ref.p[None, 8:], axis=2)
     assert d.min() > 1.0
+
+
+def _block_in_order(x, t0, m, s0, n, q, cI, cJ, fold, acc):
+    """Eq. 12 over every (target, source) pair of a block in plain Python floats, in the order
+    the kernels document: a target's sum over its sources in source order, a source's reverse
+    sum over its targets in target order from 0, added to its row after the block."""
+    out = acc.copy()
+    rev = np.zeros((n, 3))
+    for s in range(n):
+        for t in range(m):
+            d = [float(x[s0 + s, k]) - float(x[t0 + t, k]) for k in range(3)]
+            w = 1.0 - float(q[s][t]) / (d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+            ct, e = float(cI[s][t]) * w, float(cJ[s][t]) * w
+            for k in range(3):
+                out[t0 + t, k] = float(out[t0 + t, k]) + ct * d[k]
+                rev[s, k] = float(rev[s, k]) - e * d[k]
+    if fold:
+        out[s0:s0 + n] += rev
+    return out
+
+
+@pytest.mark.parametrize("m,n", [(1, 1), (5, 3), (127, 4), (128, 5), (129, 9), (300, 6)])
+def test_bind_blocks_sum_in_the_documented_order(m, n):
+    """kernels.bind_block and bind_block_const (targets taken a tile at a time, four sources'
+    reverse sums at once) give, bit for bit, the plain sequential sums of every pair in the
+    order they document, on blocks smaller than, equal to and across the tile size."""
+    rng = np.random.default_rng(m * 31 + n)
+    x = rng.normal(scale=3.0, size=(m + n + 4, 3))
+    o = x + rng.normal(scale=0.3, size=x.shape)        # original positions
+    t0, s0 = 2, 2 + m + 1
+    # L0² as Bind.pairs has it: (u_o − p_o)·(u_o − p_o) in the order x, y, z
+    e = [o[s0:s0 + n, k][:, None] - o[t0:t0 + m, k][None, :] for k in range(3)]
+    q = e[0] * e[0] + e[1] * e[1] + e[2] * e[2]
+    cI, cJ = rng.uniform(0.5, 3.0, size=(n, m)), rng.uniform(0.5, 3.0, size=(n, m))
+    acc = rng.normal(size=(len(x), 3))
+    for fold in (True, False):
+        got = acc.copy()
+        K.bind_block(x, t0, m, s0, n, q, cI, cJ, fold, got)
+        np.testing.assert_array_equal(got, _block_in_order(x, t0, m, s0, n, q, cI, cJ, fold,
+                                                           acc))
+        got = acc.copy()
+        oc = np.concatenate([o[t0:t0 + m].T.ravel(), o[s0:s0 + n].ravel()])
+        K.bind_block_const(x, t0, m, s0, n, oc, 2.5, 0.75, fold, got)
+        full = np.full((n, m), 2.5), np.full((n, m), 0.75)
+        np.testing.assert_array_equal(got, _block_in_order(x, t0, m, s0, n, q, *full, fold,
+                                                           acc))
 
 
 def test_compiled_watchdog_pass_agrees_with_the_watchdog():

