@@ -220,11 +220,13 @@ def test_resume_of_a_toml_run_started_with_set_or_dt(tmp_path, args):
     dt, resumes: the rebuilt scene is the one the run started with (the file read with the
     recorded parameters, its phases' steps from the duration at the run's dt)."""
     scene = tmp_path / "blobs.toml"
-    scene.write_text(PARAMS_TOML.format(duration=30.0))
+    # long enough that the kill lands mid-run however loaded the machine (3000 steps took
+    # ~1 s, which a busy test process could let finish between the checkpoint and the kill)
+    scene.write_text(PARAMS_TOML.format(duration=100.0))
     out = tmp_path / "run"
     step = _kill_after_checkpoint([RS, "run", str(scene), *args, "--restart-every", "100",
                                    "--dump-every", "50", "--out", str(out), *QUIET], out)
-    total = 6000 if "--dt" in args else 3000
+    total = 20000 if "--dt" in args else 10000
     assert step is not None and step < total and not (out / "summary.json").exists()
     r = rs("run", "--resume", out, *QUIET, timeout=300)
     assert r.returncode == 0, r.stderr
