@@ -217,3 +217,30 @@ def test_a_moving_bed_particle_renews_its_list(kernels, monkeypatch):
     ref = _reference(sc)
     assert np.linalg.norm(ref[0] - o[0]) > 0.01      # p pushed s
     assert np.abs(_lammps(sc) - ref).max() <= 1e-10
+
+
+@pytest.mark.lammps
+def test_a_diverging_run_keeps_the_resting_bed_grid_within_the_bed():
+    """A run beyond its stability limit (magpod-small at t = 0.022, > the predicted 0.0194)
+    flings leg particles thousands of units away before the watchdog stops it. The resting
+    bed's grid is built round the searching sole, but never beyond the bed itself: it has at
+    most as many cells as a grid over the bed's own bounding box (from the scene's geometry),
+    grown by a cell a side (before, it grew with the flung particles to ~3e8 cells and
+    gigabytes), and the run ends in the watchdog's DivergenceError."""
+    from rackstress import scenes
+    from rackstress.errors import DivergenceError
+
+    sc = scenes.build("magpod-small", dt=0.022).with_steps(1000)
+    run = LammpsRun(compile_deck(sc, "exact"), None, log=False)
+    try:
+        with pytest.raises(DivergenceError):
+            drive(run)
+        bed = run.py.bed
+        o = sc.original_positions()[sc.slice("sediment")]
+        extent = o.max(axis=0) - o.min(axis=0)
+        grids = [g for key, g in bed._grids.items() if key[0] != "box"]
+        assert grids
+        for lo, size, nc, *_ in grids:
+            assert np.prod(nc) <= np.prod(np.floor(extent / size) + 3)
+    finally:
+        run.close()

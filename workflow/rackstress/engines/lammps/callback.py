@@ -375,8 +375,9 @@ class Overlaps:
         #: serial, when LAMMPS' skin (``skin``) is wider: the callback's own skin, each list
         #: searched again once one of its own particles has moved half of it (renew)
         self.own = own
-        #: the resting particles of the passive groups in cell grids made once (serial,
-        #: compiled): a search against a passive group looks only near the searching group
+        #: the resting particles of the passive groups in cell grids of their original
+        #: positions round each searching group (serial, compiled): a search against a
+        #: passive group looks only near the searching group
         self.bed = bed
         #: which particles belong to passive groups (activated when first within reach)
         self.passive = np.zeros(len(radius), dtype=bool) if passive is None else passive
@@ -499,7 +500,10 @@ class Overlaps:
         first), so any two of its positions are less than a skin apart: a particle farther
         than reach + h/2 + a skin from every searching particle now, while those move less
         than h/2, stays out of reach until the list is dropped."""
-        parts = []      # disjoint: a passive group's rows come after span, the others' before
+        # a passive group's rows come after span, the others' before (a list between two
+        # passive groups, or with span 0, has both sides in the same rows: watched twice,
+        # which only costs)
+        parts = []
         for G in ((A,) if A == B else (A, B)):
             if fr.ident(G):
                 parts.append(np.arange(G.start, G.stop, dtype=np.int64))
@@ -628,10 +632,11 @@ class RestingBed:
     """Where the resting particles of the passive groups are, for the contact search (serial).
 
     A resting particle never moves until it is activated (Eq. 5 leaves a particle with zero
-    velocity and force where it is), so each passive group's particles go into a cell grid
-    once, at their original positions (where LAMMPS holds every resting one); a search
-    against the group then visits only the cells near the searching particles and skips the
-    activated ones, which are searched apart in a cell list of their own (they are few). The
+    velocity and force where it is), so a passive group's particles go into a cell grid of
+    their original positions (where LAMMPS holds every resting one), built round each
+    searching group within the bed's own box and again when a search would reach beyond it;
+    a search against the group then visits only the cells near the searching particles and
+    skips the activated ones, which are searched apart in a cell list of their own (they are few). The
     pairs found, and their order (by the particles), are those of a search over every
     particle of the group; the two are merged in compiled code (:func:`kernels.bed_join`).
 
@@ -697,14 +702,24 @@ class RestingBed:
         group A (a sole walks, the other stands)."""
         key = (B.start, B.stop, None if A is None else A.start)
         g = self._grids.get(key)
+        bkey = ("box", B.start, B.stop)
+        if bkey not in self._grids:     # the bed's own box: no particle of B lies outside it
+            self._grids[bkey] = self.k.bbox_points(self.origin[B])
+        blo, bhi = self._grids[bkey]
         qlo, qhi = self.k.bbox_rows(fr.x, ia)
         if not (np.isfinite(qlo).all() and np.isfinite(qhi).all()):
-            qlo, qhi = self.k.bbox_points(self.origin[B])        # (no searching rows)
-        if (g is not None and (qlo - wide - 1.0 >= g[0]).all()
-                and (qhi + wide + 1.0 <= g[5]).all()):
+            qlo, qhi = blo, bhi                                  # (no searching rows)
+        # what a search must see: the searching rows' box grown by wide, within the bed's box
+        # (a particle flying off — a diverging run — then does not stretch the grid beyond
+        # the bed: the grid stays as large as the bed at most)
+        nlo, nhi = np.maximum(qlo - wide - 1.0, blo), np.minimum(qhi + wide + 1.0, bhi)
+        if g is not None and ((nlo > nhi).any() or ((nlo >= g[0]).all()
+                                                    and (nhi <= g[5]).all())):
             return g
         size = wide if g is None else g[1]
-        lo, hi = qlo - (wide + 2.0 * size + 1.0), qhi + (wide + 2.0 * size + 1.0)
+        lo = np.maximum(qlo - (wide + 2.0 * size + 1.0), blo - 1.0)
+        hi = np.minimum(qhi + (wide + 2.0 * size + 1.0), bhi + 1.0)
+        hi = np.maximum(hi, lo)         # far from the bed on an axis: a slab holding no one
         nc = (np.floor((hi - lo) / size).astype(np.int64) + 1)
         start, order = self.k.grid_build(self.origin[B], lo, hi, size, nc)
         g = self._grids[key] = (lo, size, nc, start, order, hi)
@@ -1192,7 +1207,8 @@ class PyForces:
         own = getattr(deck, "skin", None)
         lammps_skin = getattr(deck, "lammps_skin", own)
         #: serial, LAMMPS' skin wider than the lists': the lists' own displacement check
-        self.own = own if own != lammps_skin else None
+        #: (under MPI the lists use LAMMPS' skin, renewed by its reneighbouring)
+        self.own = own if own != lammps_skin and serial else None
         self.overlaps = Overlaps(self.radius, lammps_skin, self.compiled,
                                  self._activate if self.move_bit is not None else None,
                                  self.passive, self.bed, self.own)
