@@ -104,7 +104,6 @@ def warm() -> dict:
     tag = np.arange(1, 4, dtype=np.int32)    # LAMMPS' atom ids (tagint: int32)
     k.candidates(x, r, s, 2.0, False, tag, 3.0)
     k.overlapping(x, r, s, np.full(2, 4.0))
-    k.moved_below(x, 0, 1, 1, 2, x.copy(), 1.0)
     k.bed_join(r, r, s, np.ones(2, np.bool_), s, r, s, r, s, tag, np.zeros(3, np.bool_))
     k.moved_below_shifted(x, 0, 1, 1, 2, x.copy(), 1.0)
     k.lists_moved(x, np.arange(3, dtype=np.int64), np.array([0, 3], np.int64), x.copy(),
@@ -855,19 +854,6 @@ if nb is not None:
         near_b[:nb_] = np.sort(rows[:nb_])
         near_b[nb_:] = dnear_b
         return oa[:m], ob[:m], near_a, near_b
-
-    @nb.njit(**_OPTS)
-    def moved_below(x, a0, na, b0, nb_, ref, lim2):
-        """Whether every row of the ranges a0..a0+na and b0..b0+nb_ (``ref``: their positions,
-        one range after the other) is within √lim2 of where ``ref`` has it."""
-        for k in range(na + nb_):
-            r = a0 + k if k < na else b0 + k - na
-            d0 = x[r, 0] - ref[k, 0]
-            d1 = x[r, 1] - ref[k, 1]
-            d2 = x[r, 2] - ref[k, 2]
-            if d0 * d0 + d1 * d1 + d2 * d2 > lim2:
-                return False
-        return True
 
     @nb.njit(**_OPTS)
     def moved_below_shifted(x, a0, na, b0, nb_, ref, lim2):
