@@ -199,7 +199,8 @@ if nb is not None:
         continued over the k targets of a tile in target order (``P[j]``: source g + j's
         terms). Each sum stays sequential (no reassociation); the four sources' twelve sums
         are independent chains, so that the pass is not bound by one addition's latency (rows
-        past the last source hold zeros and are never read back)."""
+        of ``P`` past the last source may hold an earlier group's terms: they only reach F's
+        padding rows, which are never read)."""
         f00, f01, f02 = F[g, 0], F[g, 1], F[g, 2]
         f10, f11, f12 = F[g + 1, 0], F[g + 1, 1], F[g + 1, 2]
         f20, f21, f22 = F[g + 2, 0], F[g + 2, 1], F[g + 2, 2]
