@@ -124,7 +124,7 @@ def warm() -> dict:
     flag, nt = np.zeros(3, np.bool_), np.zeros(1, np.int64)
     k.collide_add(x, r, s, np.full(2, 4.0), 3.0, acc, 1, np.zeros((3, 3)), flag,
                   np.zeros(3, np.int64), nt)
-    k.add_natives(np.zeros((3, 3)), np.ones((3, 3)), tag, 3, 1, np.ones((3, 3)), np.ones(3))
+    k.add_natives(np.zeros((3, 3)), np.ones((3, 3)), tag, 3, 1, np.ones((3, 3)), np.ones(9))
     k.add_sparse(np.zeros((3, 3)), np.zeros((3, 3)), flag, np.zeros(3, np.int64), nt,
                  np.ones(3), tag, 3)
     k.members(r, s, np.zeros(3, np.bool_))
@@ -893,6 +893,26 @@ if nb is not None:
         return True
 
     @nb.njit(inline="always")
+    def _centre(x, rows, ref, k0, k1):
+        """The centre of the bounding box of the displacements x[rows[k]] − ref[k],
+        k0 ≤ k < k1: the one translation taken off when rows are judged by their motion
+        relative to each other."""
+        lo0 = lo1 = lo2 = np.inf
+        hi0 = hi1 = hi2 = -np.inf
+        for k in range(k0, k1):
+            r = rows[k]
+            d0 = x[r, 0] - ref[k, 0]
+            d1 = x[r, 1] - ref[k, 1]
+            d2 = x[r, 2] - ref[k, 2]
+            lo0 = min(lo0, d0)
+            hi0 = max(hi0, d0)
+            lo1 = min(lo1, d1)
+            hi1 = max(hi1, d1)
+            lo2 = min(lo2, d2)
+            hi2 = max(hi2, d2)
+        return 0.5 * (lo0 + hi0), 0.5 * (lo1 + hi1), 0.5 * (lo2 + hi2)
+
+    @nb.njit(inline="always")
     def _farthest(x, rows, ref, k0, k1, t0, t1, t2):
         """The largest |x[rows[k]] − ref[k] − t|² over k0 ≤ k < k1 (NaN positions are left to
         the watchdog, as LAMMPS' own displacement check leaves them)."""
@@ -923,20 +943,7 @@ if nb is not None:
             moved[L] = True
             if not shifted[L]:
                 continue
-            lo0 = lo1 = lo2 = np.inf
-            hi0 = hi1 = hi2 = -np.inf
-            for k in range(k0, k1):
-                r = rows[k]
-                d0 = x[r, 0] - ref[k, 0]
-                d1 = x[r, 1] - ref[k, 1]
-                d2 = x[r, 2] - ref[k, 2]
-                lo0 = min(lo0, d0)
-                hi0 = max(hi0, d0)
-                lo1 = min(lo1, d1)
-                hi1 = max(hi1, d1)
-                lo2 = min(lo2, d2)
-                hi2 = max(hi2, d2)
-            t0, t1, t2 = 0.5 * (lo0 + hi0), 0.5 * (lo1 + hi1), 0.5 * (lo2 + hi2)
+            t0, t1, t2 = _centre(x, rows, ref, k0, k1)
             if _farthest(x, rows, ref, k0, k1, t0, t1, t2) <= lim2[L]:
                 moved[L] = False
                 shift[L, 0] = t0
@@ -988,16 +995,6 @@ if nb is not None:
                 sacc[i, 0] += w * d0
                 sacc[i, 1] += w * d1
                 sacc[i, 2] += w * d2_
-
-    @nb.njit(**_OPTS)
-    def add_natives(f, v, tag, n, ident, F, g):
-        """Eqs. 8 and 9 as LAMMPS' fix addforce and fix viscous compute them, on rows below
-        ``n``: f = (f + F) − γ·v with F, γ of the row's particle (the row itself below
-        ``ident``, else atom id ``tag[row]`` − 1)."""
-        for r in range(n):
-            p = r if r < ident else tag[r] - 1
-            for k in range(3):
-                f[r, k] = (f[r, k] + F[p, k]) - g[p] * v[r, k]
 
     @nb.njit(**_OPTS)
     def add_sparse(f, sacc, flag, touched, nt, mass, tag, nfirst):
@@ -1143,6 +1140,14 @@ if nb is not None:
             for k in range(3):
                 f[r, k] = (f[r, k] + F[p, k]) - g3[3 * p + k] * v[r, k]
 
+    @nb.njit(**_OPTS)
+    def add_natives(f, v, tag, n, ident, F, g3):
+        """Eqs. 8 and 9 as LAMMPS' fix addforce and fix viscous compute them, on rows below
+        ``n``: f = (f + F) − γ·v with F, γ of the row's particle (the row itself below
+        ``ident``, else atom id ``tag[row]`` − 1; ``g3``: γ per particle, three times), the
+        term-by-term path's call of what :func:`step` does inline."""
+        _natives(f, v, tag, 0, n, ident, F, g3)
+
     @nb.njit(inline="always")
     def _within(x, urow, uref, u0, u1, lim2):
         """Whether the rows urow[u0:u1] are each within √lim2 of ``uref`` — as they are, or
@@ -1161,19 +1166,7 @@ if nb is not None:
                 break
         if inside:
             return True
-        lo0 = lo1 = lo2 = np.inf
-        hi0 = hi1 = hi2 = -np.inf
-        for u in range(u0, u1):
-            r = urow[u]
-            e0 = x[r, 0] - uref[u, 0]
-            e1 = x[r, 1] - uref[u, 1]
-            e2 = x[r, 2] - uref[u, 2]
-            lo0, hi0 = min(lo0, e0), max(hi0, e0)
-            lo1, hi1 = min(lo1, e1), max(hi1, e1)
-            lo2, hi2 = min(lo2, e2), max(hi2, e2)
-        t0 = 0.5 * (lo0 + hi0)
-        t1 = 0.5 * (lo1 + hi1)
-        t2 = 0.5 * (lo2 + hi2)
+        t0, t1, t2 = _centre(x, urow, uref, u0, u1)
         for u in range(u0, u1):
             r = urow[u]
             e0 = x[r, 0] - uref[u, 0] - t0

@@ -28,7 +28,7 @@ import operator
 
 import numpy as np
 
-from rackstress.lib.vec import rowdot
+from rackstress.lib.vec import fresh_zeros, rowdot
 from rackstress.model import kernels
 from rackstress.model.kernels import choice as kernel_choice
 from rackstress.model.kernels import compiled as compiled_kernels
@@ -636,9 +636,10 @@ class RestingBed:
     their original positions (where LAMMPS holds every resting one), built round each
     searching group within the bed's own box and again when a search would reach beyond it;
     a search against the group then visits only the cells near the searching particles and
-    skips the activated ones, which are searched apart in a cell list of their own (they are few). The
-    pairs found, and their order (by the particles), are those of a search over every
-    particle of the group; the two are merged in compiled code (:func:`kernels.bed_join`).
+    skips the activated ones, which are searched apart in a cell list of their own (they are
+    few). The pairs found, and their order (by the particles), are those of a search over
+    every particle of the group; the two are merged in compiled code
+    (:func:`kernels.bed_join`).
 
     LAMMPS reorders the passive rows when it reneighbours (``atom_modify first``), so the row
     of each passive particle is kept in ``prow``, brought up to date at each new layout from
@@ -663,6 +664,8 @@ class RestingBed:
         #: (group start, stop, searching group's start) → (lo, cell size, cells per axis,
         #: cell starts, order, hi)
         self._grids = {}
+        #: (group start, stop) → the group's own box (lo, hi) of original positions
+        self._boxes = {}
         #: a False flag per row (scratch of kernels.bed_join)
         self._flag = np.zeros(0, dtype=np.bool_)
 
@@ -685,7 +688,7 @@ class RestingBed:
         """``prow`` read from this layout (the rows activated in it stay pending: LAMMPS'
         next reordering moves other particles there)."""
         if self.prow is None:
-            self.prow = _fresh_int64(self.n - self.span)
+            self.prow = fresh_zeros(self.n - self.span, np.int64)
         self.k.passive_rows(fr.tag, self.span, fr.nlocal, self.prow)
 
     def _grid(self, fr: Frame, B: slice, ia: np.ndarray, wide: float, A: slice | None):
@@ -702,10 +705,10 @@ class RestingBed:
         group A (a sole walks, the other stands)."""
         key = (B.start, B.stop, None if A is None else A.start)
         g = self._grids.get(key)
-        bkey = ("box", B.start, B.stop)
-        if bkey not in self._grids:     # the bed's own box: no particle of B lies outside it
-            self._grids[bkey] = self.k.bbox_points(self.origin[B])
-        blo, bhi = self._grids[bkey]
+        bkey = (B.start, B.stop)
+        if bkey not in self._boxes:     # the bed's own box: no particle of B lies outside it
+            self._boxes[bkey] = self.k.bbox_points(self.origin[B])
+        blo, bhi = self._boxes[bkey]
         qlo, qhi = self.k.bbox_rows(fr.x, ia)
         if not (np.isfinite(qlo).all() and np.isfinite(qhi).all()):
             qlo, qhi = blo, bhi                                  # (no searching rows)
@@ -735,7 +738,7 @@ class RestingBed:
                 # LAMMPS reads the particles in order: row p holds particle p until it
                 # reorders, and relayout follows every reordering from the first frame on;
                 # each row used is checked against LAMMPS' atom id (a miss rebuilds it)
-                self.prow = _fresh_int64(self.n - self.span)
+                self.prow = fresh_zeros(self.n - self.span, np.int64)
                 self.k.count_from(self.prow, self.span)
             elif attempt:
                 self._rebuild(fr)
@@ -765,13 +768,6 @@ class RestingBed:
             self._flag = np.zeros(fr.nlocal, dtype=np.bool_)
         return self.k.bed_join(ia, sa, sb, snear_a, snear_b, da, db, dnear_a, dnear_b, fr.tag,
                                self._flag)
-
-
-def _fresh_int64(n: int) -> np.ndarray:
-    """A new int64 array of n zeros in memory NumPy has not advised the kernel to back with
-    huge pages (its first touch, 8 MB for a million resting particles, took ~19 ms as
-    np.arange here against a few; see the runner's ``_fresh``)."""
-    return np.frombuffer(bytearray(8 * n), dtype=np.int64)
 
 
 # ----------------------------------------------------------------------------- terms
@@ -1249,14 +1245,14 @@ class PyForces:
         self.fuse = self.compiled is not None and (comm is None or comm.Get_size() == 1)
         self._plans, self._plan = {}, None
         self._flags = np.zeros(0, dtype=np.bool_)
+        #: the natives' F and γ for the compiled kernels, γ three times (they go over the rows'
+        #: x, y, z one after another)
+        self.natives3 = (None if self.natives is None or self.compiled is None else
+                         (np.ascontiguousarray(self.natives[0]), np.repeat(self.natives[1], 3)))
         if self.fuse:
             self.facc = np.zeros((self.dense_span, 3))
-            #: the masses of the dense rows and the natives' γ, each three times (kernels.step
-            #: goes over the rows' x, y, z one after another)
+            #: the masses of the dense rows, three times (kernels.step, likewise)
             self.fmass3 = np.repeat(self.mass[:self.dense_span], 3)
-            if self.natives is not None:
-                self.natives3 = (np.ascontiguousarray(self.natives[0]),
-                                 np.repeat(self.natives[1], 3))
         # LAMMPS' own displacement check keeps the per-layout memos valid (Overlaps); with any
         # other neighbour settings every step starts from scratch
         self.verlet = (lmp.extract_setting("neigh_every") == 1
@@ -1518,7 +1514,7 @@ class PyForces:
         n = min(self.nfirst, fr.nlocal)
         ident = fr.span if fr.identity else 0
         if self.compiled is not None:
-            self.compiled.add_natives(f, fr.v, fr.tag, n, ident, F, g)
+            self.compiled.add_natives(f, fr.v, fr.tag, n, ident, *self.natives3)
             return
         p = fr.tag[:n].astype(np.int64) - 1
         f[:n] = (f[:n] + F[p]) - g[p, None] * fr.v[:n]

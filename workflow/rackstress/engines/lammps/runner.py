@@ -29,6 +29,7 @@ import numpy as np
 from rackstress.engines.lammps.callback import PyForces, _global_int
 from rackstress.engines.lammps.deck import MOVE_GROUP, PY_FIX, PY_NAPPLY, Deck
 from rackstress.errors import DivergenceError, RackstressError, StorageError
+from rackstress.lib.vec import fresh_zeros
 from rackstress.engines.watchdog import divergence_error, find_divergence
 
 #: Steps between watchdog checks (and progress updates) on LAMMPS.
@@ -526,14 +527,15 @@ class LammpsRun:
             return None     # an atom was lost: the full gathers decide
         out = []
         if x:
-            out.append(_fresh(n))
+            out.append(fresh_zeros((n, 3)))
             out[0][:] = self.scene.original_positions()
         if v:
-            out.append(_fresh(n))
+            out.append(fresh_zeros((n, 3)))
         for part in parts:
             for arr, vals in zip(out, part[2:]):
                 arr[part[0]] = vals
         return tuple(out)
+
     def gather_positions(self) -> np.ndarray:
         """All positions in global particle order (on every rank)."""
         x = self.lmp.gather_atoms("x", 1, 3)
@@ -622,14 +624,6 @@ class LammpsRun:
         self.step = int(ck.step)
         self.realign(ck.f)
         self._phase = previous
-
-
-def _fresh(n: int) -> np.ndarray:
-    """A new (n, 3) float64 array of zeros, in memory NumPy has not advised the kernel to back
-    with huge pages: NumPy asks for them on every large array, and where the kernel honours
-    that only on request (transparent huge pages "madvise", as on the machine measured) the
-    first touch of a fresh 24 MB array took ~100 ms in a run's process, against ~25 ms here."""
-    return np.frombuffer(bytearray(24 * n), dtype=np.float64).reshape(n, 3)
 
 
 def attach_callback(lmp, fix_id: str, fn, caller) -> None:
