@@ -49,7 +49,7 @@ def _fail_any(err: BaseException, out=None):
 
     Errors rackstress raises reach every rank alike; anything else may have reached one rank
     only while the others wait for it, so under MPI it ends all of them (MPI_Abort)."""
-    from rackstress.lib.mpi import world
+    from rackstress.lib.mpi import abort, world
 
     if isinstance(err, DivergenceError):
         msg, code = f"{err} (run directory: {out})", EXIT_DIVERGED
@@ -67,16 +67,14 @@ def _fail_any(err: BaseException, out=None):
 
             traceback.print_exception(err)
             sys.stderr.write(f"rackstress: error on rank {comm.Get_rank()}: ending all ranks\n")
-            sys.stderr.flush()
-            comm.Abort(EXIT_BUG)
+            abort(comm, EXIT_BUG)
         raise err
     comm = world()
     # errors rackstress raises reach every rank alike: one message, from rank 0
     if comm.Get_rank() == 0 or not isinstance(err, RackstressError):
         click.echo(f"rackstress: error: {msg}", err=True)
     if comm.Get_size() > 1 and not isinstance(err, RackstressError):
-        sys.stderr.flush()
-        comm.Abort(code)
+        abort(comm, code)
     sys.exit(code)
 
 

@@ -59,3 +59,21 @@ def agree(err, comm):
         return err
     errs = comm.allgather(err)
     return next((e for e in errs if e is not None), None)
+
+
+#: Seconds a rank that ends every rank waits between writing its message and MPI_Abort: the
+#: abort has the launcher end every process at once, and a message still in the pipe to the
+#: launcher can be lost with them (seen once: a full disk under ``mpiexec -n 2`` ended with the
+#: storage status and an empty stderr).
+ABORT_GRACE_S = 0.5
+
+
+def abort(comm, code: int) -> None:
+    """End every rank of ``comm`` with ``code`` (MPI_Abort), once what this rank has written
+    to stderr has had time to reach the launcher."""
+    import sys
+    import time
+
+    sys.stderr.flush()
+    time.sleep(ABORT_GRACE_S)
+    comm.Abort(code)

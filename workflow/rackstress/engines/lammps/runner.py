@@ -679,7 +679,8 @@ def abort_all(comm, message: str, code: int) -> None:
     in a collective inside LAMMPS). Print one message and end every rank with ``code``."""
     import sys
 
+    from rackstress.lib.mpi import abort
+
     sys.stderr.write(f"rackstress: error: {message} (rank {comm.Get_rank()}; all ranks "
                      "ended)\n")
-    sys.stderr.flush()
-    comm.Abort(code)
+    abort(comm, code)
