@@ -16,6 +16,8 @@ status  meaning
 4       the run finished, but its pictures could not be rendered (retry ``rackstress render``)
 5       the operating system refused a write: disk full, no permission, read-only file system
         (:class:`StorageError`); no temporary file is left, earlier checkpoints stay intact
+6       a static analysis did not settle: its residual force stayed above the tolerance
+        (``summary.json`` says ``"status": "not settled"`` with the residual)
 1       anything else: a bug (please report the traceback)
 ======  ==========================================================================================
 
@@ -29,6 +31,8 @@ import errno as _errno
 
 #: Exit statuses of the ``rackstress`` command (see the module docstring).
 EXIT_OK, EXIT_BUG, EXIT_INPUT, EXIT_DIVERGED, EXIT_RENDER, EXIT_STORAGE = 0, 1, 2, 3, 4, 5
+#: a static analysis that did not reach equilibrium (``summary.json``: ``"settled": false``)
+EXIT_UNSETTLED = 6
 
 
 class RackstressError(Exception):

@@ -52,6 +52,9 @@ class Group:
     meta: dict = field(default_factory=dict)
     held: np.ndarray | None = None
     v0: np.ndarray | None = None
+    #: the part's material (:mod:`rackstress.model.materials`), None for the paper's unit-mass
+    #: particles
+    material: object = None
 
     def __post_init__(self):
         self.o = np.ascontiguousarray(self.o, dtype=np.float64).reshape(-1, 3)

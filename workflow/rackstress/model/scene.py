@@ -12,6 +12,7 @@ from typing import Mapping
 import numpy as np
 
 from rackstress.model import operators as ops_mod
+from rackstress.model.units import PAPER
 from rackstress.errors import SceneError
 
 #: Distance below which two particles count as coincident (their col/bin is undefined): this
@@ -75,8 +76,15 @@ class Scene:
     #: ``"euler"``: Eq. 5, the paper's (default); ``"verlet"``: the second-order mode of
     #: :mod:`rackstress.model.verlet` (leapfrog with trapezoidal damping).
     integrator: str = "euler"
+    #: what the scene's numbers mean (:mod:`rackstress.model.units`); the paper's dimensionless
+    #: units unless a scene declares another system
+    units: object = None
+    #: ``"dynamic"``: time stepping (the paper's); ``"static"``: find the equilibrium
+    analysis: str = "dynamic"
 
     def __post_init__(self):
+        if self.units is None:
+            self.units = PAPER
         # engines key what they prepare by an operator's place (group, index in its sequence),
         # so the same Dampen(1) object may well sit on several groups
         self.operators = {t: list(seq) for t, seq in self.operators.items()}
