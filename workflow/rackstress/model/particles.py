@@ -55,6 +55,9 @@ class Group:
     #: the part's material (:mod:`rackstress.model.materials`), None for the paper's unit-mass
     #: particles
     material: object = None
+    #: volume each particle stands for, in the scene's length unit cubed (a filled lattice:
+    #: spacing³ cubic, spacing³/√2 hcp); None where the scene has no material
+    volume: float | None = None
 
     def __post_init__(self):
         self.o = np.ascontiguousarray(self.o, dtype=np.float64).reshape(-1, 3)
@@ -93,6 +96,13 @@ class Group:
     @property
     def n(self) -> int:
         return len(self.o)
+
+    def mass(self, units) -> float:
+        """Mass of one particle in the unit system ``units`` (the scene's): density × volume
+        for a part with a material, else the paper's unit mass."""
+        if self.material is None or self.volume is None:
+            return 1.0
+        return self.material.in_units(units)["density"] * self.volume
 
 
 def bounds(o: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
