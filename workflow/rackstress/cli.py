@@ -191,7 +191,7 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True) ->
                    + (f"{md:.4g}" if md is not None else "-"))
     _post_run(out, progress)
     if do_render:
-        from rackstress.render.pictures import render_default
+        from rackstress.render.report import render_default
 
         t0 = time.perf_counter()
         try:

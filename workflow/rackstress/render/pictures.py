@@ -749,23 +749,6 @@ class _Background:
             self.proc.join()
 
 
-def render_default(rundir, progress: bool = False) -> RenderReport:
-    """What ``rackstress run`` renders at the end: the paper measure, default frames and views,
-    sheet and plots (no movie); the render's wall time goes into ``summary.json``, and
-    ``RUNDIR/report.html`` is written."""
-    from rackstress.render.report import write_report
-
-    t0 = time.perf_counter()
-    rep = render(rundir, progress=progress)
-    wall = time.perf_counter() - t0
-    record_render(Path(rundir), rep, wall)          # first, so that the report shows it
-    t = time.perf_counter()
-    rep.report = write_report(rundir)
-    rep.timings["report_s"] = time.perf_counter() - t
-    record_render(Path(rundir), rep, wall)
-    return rep
-
-
 def record_render(rundir: Path, rep: RenderReport, wall_s: float) -> None:
     """``summary.json``'s ``render``: wall time, pictures, where (atomically)."""
     path = rundir / "summary.json"
