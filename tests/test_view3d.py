@@ -143,3 +143,33 @@ def test_view_holds_the_peak_frame_and_marks_the_peak(rundir):
     rgb = np.frombuffer(base64.b64decode(info["frames"][k]["rgb"]), dtype=np.uint8).reshape(-1, 3)
     assert tuple(rgb[peak["particle"] - 1]) == (255, 0, 0)
     assert rgb.shape == (400, 3)
+
+
+def test_large_context_keeps_the_particles_nearest_the_parts():
+    """MagPod's 30,000 sediment particles: the view keeps MAX_CONTEXT, the nearest to the
+    coloured parts' box. On a line of points x = 0 … 24,999 and a box over x ∈ [0, 10] the
+    nearest 20,000 are x < 20,000."""
+    from rackstress.render.view3d import MAX_CONTEXT, _context_subset
+
+    q = np.column_stack([np.arange(25000.0), np.zeros(25000), np.zeros(25000)])
+    keep = _context_subset(q, np.array([0.0, 0, 0]), np.array([10.0, 0, 0]))
+    assert MAX_CONTEXT == 20000
+    np.testing.assert_array_equal(keep, np.arange(20000))
+    small = q[:500]
+    np.testing.assert_array_equal(_context_subset(small, np.zeros(3), np.zeros(3)),
+                                  np.arange(500))
+
+
+@pytest.mark.parametrize("n, per_frame, peak", [(101, 100_000, 37), (101, 10, 100), (5, 10, 0),
+                                                (1, 10, 0)])
+def test_slider_frames_fit_the_budget_and_hold_the_peak(n, per_frame, peak):
+    from types import SimpleNamespace
+
+    from rackstress.render.view3d import FRAME_BUDGET, MAX_FRAMES, _frames
+
+    run = SimpleNamespace(steps=np.arange(n) * 10)
+    ks = _frames(run, peak, per_frame)
+    cap = min(MAX_FRAMES, n, max(1, FRAME_BUDGET // per_frame))
+    assert peak in ks and ks == sorted(set(ks))
+    assert len(ks) == cap
+    assert ks[-1] == n - 1 or cap == 1
