@@ -126,6 +126,19 @@ def _marker(radius: float, height: float):
     return out
 
 
+def _view_direction(centre, peak_position) -> np.ndarray:
+    """From the parts' centre towards the camera: from the side of the peak particle, raised
+    by 30° (the peak faces the viewer when it is on the parts' surface); iso without a peak."""
+    d = np.array([1.0, 0.0, 1.0]) if peak_position is None else \
+        np.asarray(peak_position, float) - np.asarray(centre, float)
+    h = np.array([d[0], 0.0, d[2]])
+    if np.linalg.norm(h) < 1e-9 * (1.0 + np.linalg.norm(d)):
+        h = np.array([1.0, 0.0, 1.0])
+    h /= np.linalg.norm(h)
+    out = h * np.cos(np.radians(30.0)) + np.array([0.0, np.sin(np.radians(30.0)), 0.0])
+    return out / np.linalg.norm(out)
+
+
 def _frames(run, peak_frame: int, per_frame: int) -> list[int]:
     """Frame indices for the slider: evenly spread, the peak frame and the last included."""
     n = len(run.steps)
@@ -272,7 +285,8 @@ def build_view(rundir, measure: str | None = None, cmap: str | None = None) -> d
     centre = 0.5 * (lo + hi)
     size = float(np.linalg.norm(hi - lo)) or 1.0
     cam.SetFocalPoint(*map(float, centre))
-    cam.SetPosition(*map(float, centre + np.array([1.0, 0.8, 1.0]) / np.sqrt(2.64) * 2.0 * size))
+    cam.SetPosition(*map(float, centre + _view_direction(centre, p[peak["row"]] if peak else None)
+                         * 2.0 * size))
     cam.SetViewUp(0.0, 1.0, 0.0)
     ren.ResetCameraClippingRange()
 
@@ -304,9 +318,11 @@ def build_view(rundir, measure: str | None = None, cmap: str | None = None) -> d
                        "rgb": base64.b64encode(rgb.tobytes()).decode(),
                        "marker": [float(x) for x in pk[peak["row"]]] if peak else None})
     label = fields.label(measure)
+    stops = _rgb(np.linspace(0.0, vmax, 9), vmax, cmap)
     info = {"parts": [q.n for q in parts], "frames": frames,
-            "peak_frame": ks.index(kpk), "label": label,
-            "note": f"{label}, 0 to {vmax:.4g}; blue: the peak particle"}
+            "peak_frame": ks.index(kpk), "label": label, "vmax": f"{vmax:.4g}",
+            "gradient": ", ".join("#%02x%02x%02x" % tuple(int(c) for c in rgb) for rgb in stops),
+            "note": f"{label}; blue: the peak particle"}
     rec = {"file": VIEW, "measure": measure, "label": label, "vmax": vmax, "cmap": cmap,
            "peak": {k: peak[k] for k in ("value", "iteration", "particle", "group")}
            if peak else None,
@@ -322,8 +338,10 @@ CONTROLS = r"""
 rgba(255,255,255,.9);font:13px DejaVu Sans,Helvetica,Arial,sans-serif;padding:6px 10px;
 border-top:1px solid #ccc">
 <label for="rs-frame">iteration <b id="rs-iteration"></b></label>
-<input id="rs-frame" type="range" min="0" step="1" style="width:50%;vertical-align:middle">
-<span id="rs-note"></span></div>
+<input id="rs-frame" type="range" min="0" step="1" style="width:40%;vertical-align:middle">
+<span id="rs-scale" style="white-space:nowrap">0 <span id="rs-bar" style="display:inline-block;
+width:120px;height:10px;vertical-align:middle;border:1px solid #999"></span>
+<span id="rs-vmax"></span></span> <span id="rs-note"></span></div>
 <script>
 (function () {
   const info = JSON.parse(document.getElementById("rs-frames").textContent);
@@ -371,6 +389,9 @@ border-top:1px solid #ccc">
   document.getElementById("rs-iteration").textContent =
     info.frames[info.peak_frame].iteration + " (peak)";
   document.getElementById("rs-note").textContent = info.note;
+  document.getElementById("rs-vmax").textContent = info.vmax;
+  document.getElementById("rs-bar").style.background =
+    "linear-gradient(to right, " + info.gradient + ")";
 })();
 </script>
 """
