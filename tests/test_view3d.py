@@ -173,3 +173,17 @@ def test_slider_frames_fit_the_budget_and_hold_the_peak(n, per_frame, peak):
     assert peak in ks and ks == sorted(set(ks))
     assert len(ks) == cap
     assert ks[-1] == n - 1 or cap == 1
+
+
+def test_camera_looks_from_the_peak_side_raised_30_degrees():
+    from rackstress.render.view3d import _view_direction
+
+    d = _view_direction(np.zeros(3), np.array([3.0, -2.0, 4.0]))
+    assert np.linalg.norm(d) == pytest.approx(1.0)
+    assert d[1] == pytest.approx(0.5)                                # sin 30°
+    np.testing.assert_allclose(d[[0, 2]] / np.linalg.norm(d[[0, 2]]), [0.6, 0.8])
+    # a peak straight above the centre, or none: the iso side
+    for peak in (np.array([0.0, 5.0, 0.0]), None):
+        d = _view_direction(np.zeros(3), peak)
+        np.testing.assert_allclose(d, [np.cos(np.pi / 6) / np.sqrt(2), 0.5,
+                                       np.cos(np.pi / 6) / np.sqrt(2)])
