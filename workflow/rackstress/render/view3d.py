@@ -193,7 +193,8 @@ def build_view(rundir, measure: str | None = None, cmap: str | None = None) -> d
     >>> rec["shown"], rec["context"], len(rec["frames"])          # doctest: +SKIP
     (3671, (2016, 2016), 40)
     """
-    from rackstress.render.pictures import _offscreen, _part_radius, find_peak, select_parts
+    from rackstress.render.pictures import (_offscreen, _part_radius, _positions, find_peak,
+                                            select_parts)
     from rackstress.stress import load_run
     from rackstress.stress.post import compute_fields
 
@@ -214,7 +215,7 @@ def build_view(rundir, measure: str | None = None, cmap: str | None = None) -> d
     if not vmax > 0:
         vmax = peak["value"] if peak and peak["value"] > 0 else 1.0
     kpk = peak["frame"] if peak else len(run.steps) - 1
-    p = run.trajectory[kpk].data["positions64"].copy()
+    p = _positions(run, [kpk])[kpk]            # the pictures' own reading of a frame
 
     _offscreen()
     import vtkmodules.vtkRenderingOpenGL2  # noqa: F401 - registers the OpenGL classes
@@ -310,7 +311,7 @@ def build_view(rundir, measure: str | None = None, cmap: str | None = None) -> d
     ks = _frames(run, kpk, n_col * 15)
     frames = []
     for k in ks:
-        pk = run.trajectory[k].data["positions64"]
+        pk = _positions(run, [k])[k]
         pos = np.concatenate([pk[q.index] for q in parts]).astype(np.float32)
         rgb = np.concatenate([_rgb(values[k, q.index], vmax, cmap) for q in parts])
         frames.append({"iteration": int(run.steps[k]), "peak": k == kpk,
