@@ -187,3 +187,22 @@ def test_camera_looks_from_the_peak_side_raised_30_degrees():
         d = _view_direction(np.zeros(3), peak)
         np.testing.assert_allclose(d, [np.cos(np.pi / 6) / np.sqrt(2), 0.5,
                                        np.cos(np.pi / 6) / np.sqrt(2)])
+
+
+def test_report_without_a_trajectory_says_why_there_is_no_view(rundir, tmp_path):
+    """A run directory whose dump is gone still gets its report, with one line in place of the
+    view (the rest of the page as before)."""
+    import shutil
+
+    from rackstress.render.report import write_report
+
+    bare = tmp_path / "bare"
+    bare.mkdir()
+    for name in ("summary.json", "scene.json", "particles.data"):
+        shutil.copy(rundir / name, bare / name)
+    write_report(bare)
+    page = parse(bare / "report.html")
+    ids = {a.get("id") for _, a in page.tags}
+    assert "view3d-missing" in ids and "peaks" in ids and "view3d-frame" not in ids
+    assert not (bare / "view3d.html").exists()
+    assert "trajectory.dump" in (bare / "report.html").read_text()
