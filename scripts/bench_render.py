@@ -33,7 +33,7 @@ if what == "post":
     info = postprocess(rundir, vtk=True, dump=False)
     extra = {"peak": info["peak"]}
 else:
-    from rackstress.render.report import render_default
+    from rackstress.render.pictures import render_default
     rep = render_default(rundir)
     extra = {"timings": rep.timings, "pictures": sum(f.endswith(".png") for f in rep.files)}
 wall, cpu = time.perf_counter() - t, time.process_time() - c

@@ -192,7 +192,7 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True) ->
                    + (f"{md:.4g}" if md is not None else "-"))
     _post_run(out, progress)
     if do_render:
-        from rackstress.render.report import render_default
+        from rackstress.render.pictures import render_default
 
         t0 = time.perf_counter()
         try:
@@ -274,7 +274,7 @@ def _post_job(rundir, render: bool = True):
 
     postprocess(rundir, vtk=False, dump=False)
     if render:
-        from rackstress.render.report import render_default
+        from rackstress.render.pictures import render_default
 
         render_default(rundir)
 

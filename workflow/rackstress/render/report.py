@@ -295,20 +295,3 @@ def write_report(rundir, stability: bool = True, view: bool = True) -> Path:
     tmp.write_text("\n".join(out) + "\n", encoding="utf-8")
     os.replace(tmp, path)
     return path
-
-
-def render_default(rundir, progress: bool = False):
-    """What ``rackstress run`` renders at the end: the paper measure, default frames and views,
-    sheet and plots (no movie); the render's wall time goes into ``summary.json``, and
-    ``RUNDIR/report.html`` is written."""
-    from rackstress.render.pictures import record_render, render
-
-    t0 = time.perf_counter()
-    rep = render(rundir, progress=progress)
-    wall = time.perf_counter() - t0
-    record_render(Path(rundir), rep, wall)          # first, so that the report shows it
-    t = time.perf_counter()
-    rep.report = write_report(rundir)
-    rep.timings["report_s"] = time.perf_counter() - t
-    record_render(Path(rundir), rep, wall)
-    return rep

@@ -139,6 +139,37 @@ def _view_direction(centre, peak_position) -> np.ndarray:
     return out / np.linalg.norm(out)
 
 
+def _frame(run, k: int) -> np.ndarray:
+    """Positions (float64, atom-id order) of dumped frame ``k``."""
+    return run.trajectory[k].data["positions64"].copy()
+
+
+def _peak(rundir: Path, run, values, parts, measure: str) -> dict | None:
+    """The run's peak of ``measure`` over ``parts``: summary.json's record (the number every
+    other page shows), with ``row``, the particle's place in the run's arrays; straight from
+    ``values`` if the summary lacks it."""
+    best = None
+    try:
+        groups = json.loads((Path(rundir) / "summary.json").read_text()).get("groups") or {}
+    except (OSError, json.JSONDecodeError):
+        groups = {}
+    for part in parts:
+        rec = ((groups.get(part.name) or {}).get("peak") or {}).get(measure)
+        if rec and (best is None or rec["value"] > best["value"]):
+            best = {**rec, "group": part.name, "row": int(part.index[rec["index"]])}
+    if best is not None:
+        return best
+    idx = np.concatenate([q.index for q in parts])
+    sub = np.where(np.isfinite(values[:, idx]), values[:, idx], -np.inf)
+    if not np.isfinite(sub).any():
+        return None
+    k, j = np.unravel_index(int(np.argmax(sub)), sub.shape)
+    row = int(idx[j])
+    part = next(q for q in parts if row in set(q.index.tolist()))
+    return {"value": float(sub[k, j]), "frame": int(k), "iteration": int(run.steps[k]),
+            "group": part.name, "row": row, "particle": int(run.data.ids[row])}
+
+
 def _frames(run, peak_frame: int, per_frame: int) -> list[int]:
     """Frame indices for the slider: evenly spread, the peak frame and the last included."""
     n = len(run.steps)
@@ -152,7 +183,7 @@ def _frames(run, peak_frame: int, per_frame: int) -> list[int]:
 
 
 def _rgb(values, vmax: float, cmap: str) -> np.ndarray:
-    from rackstress.render.pictures import colour_table
+    from rackstress.render.draw import colour_table
 
     s = np.clip(np.nan_to_num(np.asarray(values, float), nan=0.0) / vmax, 0.0, 1.0)
     table = colour_table(cmap)
@@ -193,8 +224,7 @@ def build_view(rundir, measure: str | None = None, cmap: str | None = None) -> d
     >>> rec["shown"], rec["context"], len(rec["frames"])          # doctest: +SKIP
     (3671, (2016, 2016), 40)
     """
-    from rackstress.render.pictures import (_offscreen, _part_radius, _positions, find_peak,
-                                            select_parts)
+    from rackstress.render.draw import offscreen, part_radius
     from rackstress.stress import load_run
     from rackstress.stress.post import compute_fields
 
@@ -209,15 +239,17 @@ def build_view(rundir, measure: str | None = None, cmap: str | None = None) -> d
     run = load_run(rundir)
     fields = compute_fields(run, cache=True)
     values = fields.values[measure]
-    coloured, context, _ = select_parts(run, None)
-    peak = find_peak(run, values, coloured)
+    coloured, context = run.displayed(), run.context()      # the pictures' default parts
+    if not coloured:
+        raise ValueError(f"{rundir}: no part to colour (every group is a rack or sediment)")
+    peak = _peak(rundir, run, values, coloured, measure)
     vmax = float(manifest.get("vmax") or 0.0) if manifest.get("measure") == measure else 0.0
     if not vmax > 0:
         vmax = peak["value"] if peak and peak["value"] > 0 else 1.0
-    kpk = peak["frame"] if peak else len(run.steps) - 1
-    p = _positions(run, [kpk])[kpk]            # the pictures' own reading of a frame
+    kpk = run.nearest_frames([peak["iteration"]])[0][1] if peak else len(run.steps) - 1
+    p = _frame(run, kpk)
 
-    _offscreen()
+    offscreen()
     import vtkmodules.vtkRenderingOpenGL2  # noqa: F401 - registers the OpenGL classes
     from trame_vtk.modules.vtk.serializers import (SynchronizationContext, extract_array_hash,
                                                    initialize_serializers, reference_id,
@@ -256,7 +288,7 @@ def build_view(rundir, measure: str | None = None, cmap: str | None = None) -> d
 
     parts = []
     for part in coloured:
-        glyphs(p[part.index], _part_radius(run, part), _rgb(values[kpk, part.index], vmax, cmap))
+        glyphs(p[part.index], part_radius(run, part), _rgb(values[kpk, part.index], vmax, cmap))
         parts.append(part)
     allq = np.concatenate([p[q.index] for q in coloured])
     lo, hi = allq.min(axis=0), allq.max(axis=0)
@@ -266,8 +298,8 @@ def build_view(rundir, measure: str | None = None, cmap: str | None = None) -> d
         sub = _context_subset(q, lo, hi)
         ctx_total += len(q)
         ctx_shown += len(sub)
-        glyphs(q[sub], _part_radius(run, part), colour=SAND)
-    marker_r = 3.0 * max(_part_radius(run, q) for q in coloured)
+        glyphs(q[sub], part_radius(run, part), colour=SAND)
+    marker_r = 3.0 * max(part_radius(run, q) for q in coloured)
     pin = 0.6 * float(np.max(hi - lo)) + marker_r
     if peak:
         m = vtkPolyDataMapper()
@@ -311,7 +343,7 @@ def build_view(rundir, measure: str | None = None, cmap: str | None = None) -> d
     ks = _frames(run, kpk, n_col * 15)
     frames = []
     for k in ks:
-        pk = _positions(run, [k])[k]
+        pk = _frame(run, k)
         pos = np.concatenate([pk[q.index] for q in parts]).astype(np.float32)
         rgb = np.concatenate([_rgb(values[k, q.index], vmax, cmap) for q in parts])
         frames.append({"iteration": int(run.steps[k]), "peak": k == kpk,
