@@ -1,0 +1,123 @@
+/* ----------------------------------------------------------------------
+   rackstress plugin: fix rs/rack — the rack coupling of Eq. 23.
+
+     fix ID TARGET rs/rack SOURCE c
+
+   rackForces(host) (Eq. 23) binds a rack to its host with bind over every pair (Eq. 13 with
+   ĉ = [c]), and the host to its rack the same way. On each target particle p, from every source
+   particle u (never p itself), the acceleration of Eq. 12:
+
+     c·(u − p)·(1 − L0²/‖u − p‖²),   L0 = ‖u_o − p_o‖ (original positions)
+
+   Every pair couples a whole body, so ghosts cannot carry it. As fix rigid sums its bodies, the
+   smaller group (the six rack particles) is gathered on every rank with one MPI_Allreduce a step;
+   a host particle's term is then local, and a rack particle's sum over its host is each rank's
+   partial sum over the hosts it owns, added up by one more MPI_Allreduce.
+------------------------------------------------------------------------- */
+
+#include "fix_rs_rack.h"
+
+#include "atom.h"
+#include "error.h"
+#include "group.h"
+#include "update.h"
+#include "utils.h"
+
+#include <cmath>
+
+using namespace LAMMPS_NS;
+using namespace FixConst;
+
+FixRSRack::FixRSRack(LAMMPS *lmp, int narg, char **arg) :
+    Fix(lmp, narg, arg), gather_source(true), ready(false)
+{
+  if (narg != 5) error->all(FLERR, "Illegal fix rs/rack command: fix ID TARGET rs/rack SOURCE c");
+  sourcebit = RackStress::groupbit(group, error, "rs/rack", "source", arg[3]);
+  c = utils::numeric(FLERR, arg[4], false, lmp);
+  if (!std::isfinite(c)) error->all(FLERR, "Fix rs/rack: coefficient c must be finite, got {}", arg[4]);
+}
+
+int FixRSRack::setmask()
+{
+  return POST_FORCE;
+}
+
+void FixRSRack::init()
+{
+  RackStress::originals(atom, error, "rs/rack");
+}
+
+void FixRSRack::setup(int vflag)
+{
+  if (!ready) {
+    // gather whichever side is smaller: the rack (host <- rack: the sources; rack <- host: the
+    // targets, whose sums over the host are reduced)
+    int sgroup = -1;
+    for (int g = 0; g < group->ngroup; g++)
+      if (group->bitmask[g] == sourcebit) sgroup = g;
+    gather_source = group->count(sgroup) <= group->count(igroup);
+    few.collect(lmp, gather_source ? sourcebit : groupbit, nullptr);
+    sum.assign(3 * few.size(), 0.0);
+    total.assign(3 * few.size(), 0.0);
+    ready = true;
+  }
+  post_force(vflag);
+}
+
+void FixRSRack::post_force(int /*vflag*/)
+{
+  double **x = atom->x, **f = atom->f, **o = RackStress::originals(atom, error, "rs/rack");
+  int *mask = atom->mask;
+  tagint *tag = atom->tag;
+  int nlocal = atom->nlocal, n = few.size();
+  few.positions(lmp);
+  const double *X = few.x.data(), *O = few.o.data();
+
+  if (gather_source) {
+    // a target p gains the term of every gathered source u (Eq. 12), in atom-id order
+    for (int i = 0; i < nlocal; i++) {
+      if (!(mask[i] & groupbit)) continue;
+      double a[3] = {0.0, 0.0, 0.0};
+      for (int k = 0; k < n; k++) {
+        if (few.tag[k] == tag[i]) continue;
+        double d[3], q = 0.0, d2 = 0.0;
+        for (int e = 0; e < 3; e++) {
+          d[e] = X[3 * k + e] - x[i][e];
+          double l = O[3 * k + e] - o[i][e];
+          q += l * l;
+          d2 += d[e] * d[e];
+        }
+        double s = c * (1.0 - q / d2);
+        for (int e = 0; e < 3; e++) a[e] += s * d[e];
+      }
+      double m = RackStress::mass(atom, i);
+      for (int e = 0; e < 3; e++) f[i][e] += m * a[e];
+    }
+    return;
+  }
+  // the gathered targets (a rack) sum over every source u (the host); each rank adds the hosts
+  // it owns, one MPI_Allreduce adds the ranks, the target's owner adds the force
+  std::fill(sum.begin(), sum.end(), 0.0);
+  for (int j = 0; j < nlocal; j++) {
+    if (!(mask[j] & sourcebit)) continue;
+    for (int k = 0; k < n; k++) {
+      if (few.tag[k] == tag[j]) continue;
+      double d[3], q = 0.0, d2 = 0.0;
+      for (int e = 0; e < 3; e++) {
+        d[e] = x[j][e] - X[3 * k + e];
+        double l = o[j][e] - O[3 * k + e];
+        q += l * l;
+        d2 += d[e] * d[e];
+      }
+      double s = c * (1.0 - q / d2);
+      for (int e = 0; e < 3; e++) sum[3 * k + e] += s * d[e];
+    }
+  }
+  MPI_Allreduce(sum.data(), total.data(), 3 * n, MPI_DOUBLE, MPI_SUM, world);
+  for (int k = 0; k < n; k++) {
+    int i = atom->map(few.tag[k]);
+    if (i < 0 || i >= nlocal) continue;
+    double m = RackStress::mass(atom, i);
+    for (int e = 0; e < 3; e++) f[i][e] += m * total[3 * k + e];
+  }
+}

@@ -1,0 +1,39 @@
+/* -*- c++ -*- ----------------------------------------------------------
+   rackstress plugin: the rack coupling, Eq. 23 (bind over every pair, Eqs. 12-13)
+------------------------------------------------------------------------- */
+
+#ifdef FIX_CLASS
+// clang-format off
+FixStyle(rs/rack,FixRSRack);
+// clang-format on
+#else
+
+#ifndef RS_FIX_RACK_H
+#define RS_FIX_RACK_H
+
+#include "fix.h"
+#include "rs_common.h"
+
+namespace LAMMPS_NS {
+
+class FixRSRack : public Fix {
+ public:
+  FixRSRack(class LAMMPS *, int, char **);
+  int setmask() override;
+  void init() override;
+  void setup(int) override;
+  void post_force(int) override;
+
+ private:
+  int sourcebit;
+  double c;
+  bool gather_source;     // gather the smaller of the two groups on every rank
+  bool ready;
+  RackStress::Gathered few;
+  std::vector<double> sum, total;
+};
+
+}    // namespace LAMMPS_NS
+
+#endif
+#endif
