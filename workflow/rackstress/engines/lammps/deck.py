@@ -166,10 +166,7 @@ class Deck:
 
     # ------------------------------------------------------------------ data file
     def data_text(self) -> str:
-        text = data_text(self.scene, self.masses, self.bonds, len(self.bond_types))
-        if self.plugin:
-            text += plugin_properties_section(self.scene)
-        return text
+        return data_text(self.scene, self.masses, self.bonds, len(self.bond_types))
 
     # ------------------------------------------------------------------ input deck
     def setup_commands(self, data_file: str = "particles.data", dump_file: str | None = "trajectory.dump",
@@ -201,11 +198,11 @@ class Deck:
         if self.bonds is not None:
             # A rack bonded to thousands of hosts: keep LAMMPS from building 1-3/1-4 lists.
             L.append("special_bonds lj/coul 1.0 1.0 1.0")
-        read = f"read_data {data_file}"
         if self.plugin:
             L += plugin_setup_commands(self)
-            read += f" fix {PROP_FIX} NULL {PROP_SECTION}"
-        L.append(read)
+        L.append(f"read_data {data_file}")
+        if self.plugin:
+            L += plugin_property_commands(self.scene)
         L.append(f"comm_modify cutoff {self.ghost_cutoff:.6g}")
         L.append(f"neighbor {self.lammps_skin:g} bin")
         binsize = ""
@@ -667,9 +664,8 @@ def passive_groups(scene: Scene, realized: list) -> tuple:
 # ---------------------------------------------------------------------------- plugin
 #: the plugin fixes' ids (rs_p + the operator's place in Deck.realized)
 PLUGIN_FIX = "rs_p"
-#: LAMMPS' own fix property/atom holding what the plugin's styles read per atom, and the data
-#: file section read_data fills it from
-PROP_FIX, PROP_SECTION = "rs_prop", "RSProperties"
+#: LAMMPS' own fix property/atom holding what the plugin's styles read per atom
+PROP_FIX = "rs_prop"
 
 
 def _prop_name(region: str) -> str:
@@ -692,20 +688,34 @@ def plugin_setup_commands(deck: Deck) -> list[str]:
     return L
 
 
-def plugin_properties_section(scene: Scene) -> str:
-    """The data file section of :func:`plugin_setup_commands`' properties: id, o, r, indices."""
-    o, r = scene.original_positions(), scene.radii()
-    names = _region_names(scene)
-    idx = np.zeros((len(o), len(names)), dtype=np.int64)
-    for g_name, g in scene.groups.items():
-        regions = (g.meta or {}).get("regions", {})
-        sl = scene.slice(g_name)
-        for k, name in enumerate(names):
+def _id_runs(values: np.ndarray, offset: int = 0):
+    """(first id, last id, value) for each run of equal values in id order (atom ids 1-based)."""
+    values = np.asarray(values)
+    if not len(values):
+        return []
+    cut = np.flatnonzero(values[1:] != values[:-1]) + 1
+    starts = np.concatenate([[0], cut])
+    ends = np.concatenate([cut, [len(values)]]) - 1
+    return [(int(a) + offset + 1, int(b) + offset + 1, values[a]) for a, b in zip(starts, ends)]
+
+
+def plugin_property_commands(scene: Scene) -> list[str]:
+    """After read_data: fill :func:`plugin_setup_commands`' properties. The original position is
+    where read_data put each atom (the data file is the original state), copied exactly through
+    atom-style variables; radii and region indices by runs of atom ids (a data file section would
+    do it in one pass, but MDAnalysis and OVITO, which read ``particles.data``, reject unknown
+    sections)."""
+    L = [f"variable rs_o{k} atom {c}" for k, c in enumerate("xyz", start=1)]
+    L += [f"set group all d2_rso[{k}] v_rs_o{k}" for k in (1, 2, 3)]
+    L += [f"variable rs_o{k} delete" for k in (1, 2, 3)]
+    L += [f"set atom {a}*{b} d_rsr {_f(v)}" for a, b, v in _id_runs(scene.radii())]
+    for name in _region_names(scene):
+        for g_name, g in scene.groups.items():
+            regions = (g.meta or {}).get("regions", {})
             if name in regions:
-                idx[sl, k] = np.asarray(regions[name], dtype=np.int64)
-    rows = (f"{i + 1} {_f(x)} {_f(y)} {_f(z)} {_f(rr)}" + "".join(f" {v}" for v in iv)
-            for i, ((x, y, z), rr, iv) in enumerate(zip(o.tolist(), r.tolist(), idx.tolist())))
-    return f"\n{PROP_SECTION}\n\n" + "\n".join(rows) + "\n"
+                L += [f"set atom {a}*{b} i_{_prop_name(name)} {int(v)}"
+                      for a, b, v in _id_runs(regions[name], scene.offset(g_name)) if v != 0]
+    return L
 
 
 def _plugin_realize(scene: Scene, realized: list) -> tuple | None:
@@ -932,11 +942,15 @@ def data_text(scene: Scene, masses: dict, bonds=None, n_bond_types: int = 0) -> 
     return text
 
 
-def write_deck(scene: Scene, out: Path, mode: str = "exact", dump_every: int = 100) -> Deck:
-    """Write ``particles.data`` and ``in.lammps`` into ``out``; return the compiled deck."""
+def write_deck(scene: Scene, out: Path, mode: str = "exact", dump_every: int = 100,
+               plugin: bool | None = None) -> Deck:
+    """Write ``particles.data`` and ``in.lammps`` into ``out``; return the compiled deck.
+
+    By default the operators LAMMPS has no style for are the plugin's fixes whenever the plugin
+    is there (``plugin=None``), so the deck runs standalone: ``lmp -in in.lammps``."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    deck = compile_deck(scene, mode)
+    deck = compile_deck(scene, mode, plugin=plugin)
     (out / "particles.data").write_text(deck.data_text())
     (out / "in.lammps").write_text(deck.input_text(dump_every))
     return deck
