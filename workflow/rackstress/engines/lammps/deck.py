@@ -796,7 +796,9 @@ def use_plugin(requested: bool | None = None) -> bool:
 
     from rackstress.engines.lammps import plugin
 
-    if requested is False:
+    if requested is not None:
+        return requested      # a deck is text: running it is where the library must be there
+    if os.environ.get("RACKSTRESS_PLUGIN", "1") in ("0", "no", "off"):
         return False
     if requested is None and os.environ.get("RACKSTRESS_KERNELS") in ("numba", "numpy"):
         return False
