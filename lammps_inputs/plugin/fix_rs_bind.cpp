@@ -29,7 +29,7 @@
 using namespace LAMMPS_NS;
 using namespace FixConst;
 
-FixRSBind::FixRSBind(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, arg)
+FixRSBind::FixRSBind(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, arg), built(false)
 {
   if (narg != 7 || strcmp(arg[5], "btype") != 0)
     error->all(FLERR, "Illegal fix rs/bind command: fix ID TARGET rs/bind SOURCE c btype N");
@@ -56,35 +56,67 @@ void FixRSBind::init()
 
 void FixRSBind::setup(int vflag)
 {
+  built = false;
   post_force(vflag);
+}
+
+/* this rank's pairs from LAMMPS' bond list (rebuilt when it reneighbours): L0² per pair from
+   the original positions, and the ends this fix acts on (an owned target with a source partner) */
+void FixRSBind::collect()
+{
+  double **o = RackStress::originals(atom, error, "rs/bind");
+  int *mask = atom->mask;
+  int nlocal = atom->nlocal;
+  int **bondlist = neighbor->bondlist;
+  p1.clear();
+  p2.clear();
+  ends.clear();
+  q.clear();
+  for (int n = 0; n < neighbor->nbondlist; n++) {
+    if (bondlist[n][2] != btype) continue;
+    int i1 = bondlist[n][0], i2 = bondlist[n][1];
+    int e = 0;
+    if (i1 < nlocal && (mask[i1] & groupbit) && (mask[i2] & sourcebit)) e |= 1;
+    if (i2 < nlocal && (mask[i2] & groupbit) && (mask[i1] & sourcebit)) e |= 2;
+    if (!e) continue;
+    double l2 = 0.0;
+    for (int k = 0; k < 3; k++) {
+      double l = o[i2][k] - o[i1][k];
+      l2 += l * l;
+    }
+    p1.push_back(i1);
+    p2.push_back(i2);
+    ends.push_back(e);
+    q.push_back(l2);
+  }
+  built = true;
 }
 
 void FixRSBind::post_force(int /*vflag*/)
 {
-  double **x = atom->x, **f = atom->f, **o = RackStress::originals(atom, error, "rs/bind");
-  int *mask = atom->mask;
-  int nlocal = atom->nlocal;
-  int **bondlist = neighbor->bondlist;
-  int nbondlist = neighbor->nbondlist;
-
-  for (int n = 0; n < nbondlist; n++) {
-    if (bondlist[n][2] != btype) continue;
-    int i1 = bondlist[n][0], i2 = bondlist[n][1];
-    double d[3], q = 0.0, d2 = 0.0;
-    for (int e = 0; e < 3; e++) {
-      d[e] = x[i2][e] - x[i1][e];
-      double l = o[i2][e] - o[i1][e];
-      q += l * l;
-      d2 += d[e] * d[e];
+  if (!built || neighbor->ago == 0) collect();
+  double **x = atom->x, **f = atom->f;
+  const double *mass = atom->mass;
+  const double *rmass = atom->rmass;
+  const int *type = atom->type;
+  const int n = (int) p1.size();
+  for (int k = 0; k < n; k++) {
+    const int i1 = p1[k], i2 = p2[k];
+    const double dx = x[i2][0] - x[i1][0], dy = x[i2][1] - x[i1][1], dz = x[i2][2] - x[i1][2];
+    const double d2 = dx * dx + dy * dy + dz * dz;
+    const double s = c * (1.0 - q[k] / d2);
+    const double ax = s * dx, ay = s * dy, az = s * dz;
+    if (ends[k] & 1) {
+      const double m = rmass ? rmass[i1] : mass[type[i1]];
+      f[i1][0] += m * ax;
+      f[i1][1] += m * ay;
+      f[i1][2] += m * az;
     }
-    double s = c * (1.0 - q / d2);
-    if (i1 < nlocal && (mask[i1] & groupbit) && (mask[i2] & sourcebit)) {
-      double m = RackStress::mass(atom, i1);
-      for (int e = 0; e < 3; e++) f[i1][e] += m * (s * d[e]);
-    }
-    if (i2 < nlocal && (mask[i2] & groupbit) && (mask[i1] & sourcebit)) {
-      double m = RackStress::mass(atom, i2);
-      for (int e = 0; e < 3; e++) f[i2][e] -= m * (s * d[e]);
+    if (ends[k] & 2) {
+      const double m = rmass ? rmass[i2] : mass[type[i2]];
+      f[i2][0] -= m * ax;
+      f[i2][1] -= m * ay;
+      f[i2][2] -= m * az;
     }
   }
 }

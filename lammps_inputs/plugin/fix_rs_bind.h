@@ -14,6 +14,8 @@ FixStyle(rs/bind,FixRSBind);
 #include "fix.h"
 #include "rs_common.h"
 
+#include <vector>
+
 namespace LAMMPS_NS {
 
 class FixRSBind : public Fix {
@@ -27,6 +29,12 @@ class FixRSBind : public Fix {
  private:
   int sourcebit, btype;
   double c;
+  bool built;
+  // this rank's pairs of bond type btype, kept from one reneighbouring to the next: the rows,
+  // L0² (from the original positions, once) and which end(s) gain the term (1: i1, 2: i2)
+  std::vector<int> p1, p2, ends;
+  std::vector<double> q;
+  void collect();
 };
 
 }    // namespace LAMMPS_NS

