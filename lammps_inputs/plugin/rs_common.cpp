@@ -121,27 +121,46 @@ void Contacts::build(LAMMPS *lmp, int tbit, int sbit, const double *radius)
   int nlocal = atom->nlocal, nall = atom->nlocal + atom->nghost;
   double skin = lmp->neighbor->skin;
 
+  // each side cut to the other's bounding box grown by the reach (a leg meets a few hundred of
+  // a sediment's particles, not all): a target left out is farther than r_max + skin from every
+  // source, so nothing reaches it before LAMMPS reneighbours
   rows.clear();
   std::vector<int> src;
   double smax = 0.0, tmax = 0.0;
-  double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  double tlo[3] = {INFINITY, INFINITY, INFINITY}, thi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  double slo[3] = {INFINITY, INFINITY, INFINITY}, shi[3] = {-INFINITY, -INFINITY, -INFINITY};
   for (int i = 0; i < nlocal; i++)
     if (mask[i] & tbit) {
-      rows.push_back(i);
       tmax = std::max(tmax, radius[i]);
+      for (int d = 0; d < 3; d++) {
+        tlo[d] = std::min(tlo[d], x[i][d]);
+        thi[d] = std::max(thi[d], x[i][d]);
+      }
+    }
+  for (int j = 0; j < nall; j++)
+    if (mask[j] & sbit) {
+      smax = std::max(smax, radius[j]);
+      for (int d = 0; d < 3; d++) {
+        slo[d] = std::min(slo[d], x[j][d]);
+        shi[d] = std::max(shi[d], x[j][d]);
+      }
+    }
+  double cut = tmax + smax + skin;
+  auto within = [&](const double *p, const double *lo, const double *hi) {
+    return p[0] > lo[0] - cut && p[0] < hi[0] + cut && p[1] > lo[1] - cut &&
+        p[1] < hi[1] + cut && p[2] > lo[2] - cut && p[2] < hi[2] + cut;
+  };
+  for (int j = 0; j < nall; j++)
+    if ((mask[j] & sbit) && within(x[j], tlo, thi)) src.push_back(j);
+  double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  for (int i = 0; i < nlocal; i++)
+    if ((mask[i] & tbit) && within(x[i], slo, shi)) {
+      rows.push_back(i);
       for (int d = 0; d < 3; d++) {
         lo[d] = std::min(lo[d], x[i][d]);
         hi[d] = std::max(hi[d], x[i][d]);
       }
     }
-  for (int j = 0; j < nall; j++)
-    if (mask[j] & sbit) smax = std::max(smax, radius[j]);
-  double cut = tmax + smax + skin;
-  for (int j = 0; j < nall; j++)
-    if ((mask[j] & sbit) && x[j][0] > lo[0] - cut && x[j][0] < hi[0] + cut &&
-        x[j][1] > lo[1] - cut && x[j][1] < hi[1] + cut && x[j][2] > lo[2] - cut &&
-        x[j][2] < hi[2] + cut)
-      src.push_back(j);
   first.assign(rows.size() + 1, 0);
   partner.clear();
   if (rows.empty() || src.empty()) return;
