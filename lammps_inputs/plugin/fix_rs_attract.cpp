@@ -11,8 +11,8 @@
    Matched (Eqs. 27–28): c⟨TIDX_p = SIDX_u ≠ 0⟩, with TIDX and SIDX per-atom integer properties
    (fix property/atom i_TIDX i_SIDX, from the data file); the deck names the phase's index (the
    active body region follows the gait). TIDX = SIDX = all: every pair (a constant ĉ = [c]).
-   The matched source particles are a small set gathered on every rank each step (one
-   MPI_Allreduce), so the attraction needs no ghosts however far the two regions are apart.
+   The matched source particles are a small set gathered on every rank each step (an
+   MPI_Allreduce fused with the step's other gathers, rs_common.h), so the attraction needs no ghosts however far the two regions are apart.
 ------------------------------------------------------------------------- */
 
 #include "fix_rs_attract.h"
@@ -44,6 +44,11 @@ FixRSAttract::FixRSAttract(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, a
   }
 }
 
+FixRSAttract::~FixRSAttract()
+{
+  RackStress::leave(lmp, this);
+}
+
 int FixRSAttract::setmask()
 {
   return POST_FORCE;
@@ -71,8 +76,10 @@ void FixRSAttract::setup(int vflag)
     by_key.assign(few.size(), 0);
     std::vector<int> fill(by_key_first.begin(), by_key_first.end() - 1);
     for (int k = 0; k < few.size(); k++) by_key[fill[few.key[k]]++] = k;
+    RackStress::enroll(lmp, this);
     ready = true;
   }
+  RackStress::invalidate(lmp);
   post_force(vflag);
 }
 
@@ -84,7 +91,7 @@ void FixRSAttract::post_force(int /*vflag*/)
   tagint *tag = atom->tag;
   int nlocal = atom->nlocal;
   int maxkey = (int) by_key_first.size() - 2;
-  few.positions(lmp);
+  RackStress::reduce_positions(lmp);    // fused with the step's other gathers
   const double *X = few.x.data();
   for (int i = 0; i < nlocal; i++) {
     if (!(mask[i] & groupbit)) continue;

@@ -16,9 +16,11 @@ FixStyle(rs/attract,FixRSAttract);
 
 namespace LAMMPS_NS {
 
-class FixRSAttract : public Fix {
+class FixRSAttract : public Fix, public RackStress::Reduced {
  public:
   FixRSAttract(class LAMMPS *, int, char **);
+  ~FixRSAttract() override;
+  RackStress::Gathered *gathered() override { return &few; }
   int setmask() override;
   void init() override;
   void setup(int) override;

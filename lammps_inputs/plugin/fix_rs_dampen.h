@@ -16,9 +16,13 @@ FixStyle(rs/dampen,FixRSDampen);
 
 namespace LAMMPS_NS {
 
-class FixRSDampen : public Fix {
+class FixRSDampen : public Fix, public RackStress::Reduced {
  public:
   FixRSDampen(class LAMMPS *, int, char **);
+  ~FixRSDampen() override;
+  int partial_size() override { return 1; }
+  void partial(double *) override;
+  void total(const double *) override;
   int setmask() override;
   void init() override;
   void setup(int) override;
@@ -27,7 +31,7 @@ class FixRSDampen : public Fix {
  private:
   int contactbit;
   double c;
-  bool built;
+  bool built, ready, holds;
   RackStress::Contacts list;
 };
 

@@ -10,9 +10,10 @@
      c·(u − p)·(1 − L0²/‖u − p‖²),   L0 = ‖u_o − p_o‖ (original positions)
 
    Every pair couples a whole body, so ghosts cannot carry it. As fix rigid sums its bodies, the
-   smaller group (the six rack particles) is gathered on every rank with one MPI_Allreduce a step;
+   smaller group (the six rack particles) is gathered on every rank with an MPI_Allreduce a step;
    a host particle's term is then local, and a rack particle's sum over its host is each rank's
-   partial sum over the hosts it owns, added up by one more MPI_Allreduce.
+   partial sum over the hosts it owns, added up by one more MPI_Allreduce. Both are fused with
+   every other style's reductions of the step (rs_common.h, Reduced): two collectives a step.
 ------------------------------------------------------------------------- */
 
 #include "fix_rs_rack.h"
@@ -23,6 +24,7 @@
 #include "update.h"
 #include "utils.h"
 
+#include <algorithm>
 #include <cmath>
 
 using namespace LAMMPS_NS;
@@ -35,6 +37,11 @@ FixRSRack::FixRSRack(LAMMPS *lmp, int narg, char **arg) :
   sourcebit = RackStress::groupbit(group, error, "rs/rack", "source", arg[3]);
   c = utils::numeric(FLERR, arg[4], false, lmp);
   if (!std::isfinite(c)) error->all(FLERR, "Fix rs/rack: coefficient c must be finite, got {}", arg[4]);
+}
+
+FixRSRack::~FixRSRack()
+{
+  RackStress::leave(lmp, this);
 }
 
 int FixRSRack::setmask()
@@ -57,24 +64,62 @@ void FixRSRack::setup(int vflag)
       if (group->bitmask[g] == sourcebit) sgroup = g;
     gather_source = group->count(sgroup) <= group->count(igroup);
     few.collect(lmp, gather_source ? sourcebit : groupbit, nullptr);
-    sum.assign(3 * few.size(), 0.0);
-    total.assign(3 * few.size(), 0.0);
+    sums.assign(3 * few.size(), 0.0);
+    RackStress::enroll(lmp, this);
     ready = true;
   }
+  RackStress::invalidate(lmp);
   post_force(vflag);
+}
+
+int FixRSRack::partial_size()
+{
+  return gather_source ? 0 : 3 * few.size();
+}
+
+/* the gathered targets (a rack) sum over every source u (the host): this rank's hosts */
+void FixRSRack::partial(double *sum)
+{
+  if (gather_source) return;
+  double **x = atom->x, **o = RackStress::originals(atom, error, "rs/rack");
+  int *mask = atom->mask;
+  tagint *tag = atom->tag;
+  int nlocal = atom->nlocal, n = few.size();
+  const double *X = few.x.data(), *O = few.o.data();
+  for (int j = 0; j < nlocal; j++) {
+    if (!(mask[j] & sourcebit)) continue;
+    for (int k = 0; k < n; k++) {
+      if (few.tag[k] == tag[j]) continue;
+      double d[3], q = 0.0, d2 = 0.0;
+      for (int e = 0; e < 3; e++) {
+        d[e] = x[j][e] - X[3 * k + e];
+        double l = o[j][e] - O[3 * k + e];
+        q += l * l;
+        d2 += d[e] * d[e];
+      }
+      double s = c * (1.0 - q / d2);
+      for (int e = 0; e < 3; e++) sum[3 * k + e] += s * d[e];
+    }
+  }
+}
+
+void FixRSRack::total(const double *sum)
+{
+  std::copy(sum, sum + sums.size(), sums.begin());
 }
 
 void FixRSRack::post_force(int /*vflag*/)
 {
-  double **x = atom->x, **f = atom->f, **o = RackStress::originals(atom, error, "rs/rack");
+  double **x = atom->x, **f = atom->f;
   int *mask = atom->mask;
   tagint *tag = atom->tag;
   int nlocal = atom->nlocal, n = few.size();
-  few.positions(lmp);
-  const double *X = few.x.data(), *O = few.o.data();
 
   if (gather_source) {
     // a target p gains the term of every gathered source u (Eq. 12), in atom-id order
+    RackStress::reduce_positions(lmp);
+    double **o = RackStress::originals(atom, error, "rs/rack");
+    const double *X = few.x.data(), *O = few.o.data();
     for (int i = 0; i < nlocal; i++) {
       if (!(mask[i] & groupbit)) continue;
       double a[3] = {0.0, 0.0, 0.0};
@@ -95,29 +140,13 @@ void FixRSRack::post_force(int /*vflag*/)
     }
     return;
   }
-  // the gathered targets (a rack) sum over every source u (the host); each rank adds the hosts
-  // it owns, one MPI_Allreduce adds the ranks, the target's owner adds the force
-  std::fill(sum.begin(), sum.end(), 0.0);
-  for (int j = 0; j < nlocal; j++) {
-    if (!(mask[j] & sourcebit)) continue;
-    for (int k = 0; k < n; k++) {
-      if (few.tag[k] == tag[j]) continue;
-      double d[3], q = 0.0, d2 = 0.0;
-      for (int e = 0; e < 3; e++) {
-        d[e] = x[j][e] - X[3 * k + e];
-        double l = o[j][e] - O[3 * k + e];
-        q += l * l;
-        d2 += d[e] * d[e];
-      }
-      double s = c * (1.0 - q / d2);
-      for (int e = 0; e < 3; e++) sum[3 * k + e] += s * d[e];
-    }
-  }
-  MPI_Allreduce(sum.data(), total.data(), 3 * n, MPI_DOUBLE, MPI_SUM, world);
+  // each rank's partial sums over the hosts it owns, added over the ranks (fused with every
+  // other style's, rs_common.h); the target's owner adds the force
+  RackStress::reduce_sums(lmp);
   for (int k = 0; k < n; k++) {
     int i = atom->map(few.tag[k]);
     if (i < 0 || i >= nlocal) continue;
     double m = RackStress::mass(atom, i);
-    for (int e = 0; e < 3; e++) f[i][e] += m * total[3 * k + e];
+    for (int e = 0; e < 3; e++) f[i][e] += m * sums[3 * k + e];
   }
 }

@@ -16,9 +16,14 @@ FixStyle(rs/rack,FixRSRack);
 
 namespace LAMMPS_NS {
 
-class FixRSRack : public Fix {
+class FixRSRack : public Fix, public RackStress::Reduced {
  public:
   FixRSRack(class LAMMPS *, int, char **);
+  ~FixRSRack() override;
+  RackStress::Gathered *gathered() override { return &few; }
+  int partial_size() override;
+  void partial(double *) override;
+  void total(const double *) override;
   int setmask() override;
   void init() override;
   void setup(int) override;
@@ -30,7 +35,7 @@ class FixRSRack : public Fix {
   bool gather_source;     // gather the smaller of the two groups on every rank
   bool ready;
   RackStress::Gathered few;
-  std::vector<double> sum, total;
+  std::vector<double> sums;
 };
 
 }    // namespace LAMMPS_NS

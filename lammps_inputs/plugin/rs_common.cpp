@@ -4,6 +4,9 @@
 
 #include "domain.h"
 #include "neighbor.h"
+#include "update.h"
+
+#include <map>
 
 #include <algorithm>
 #include <cmath>
@@ -97,21 +100,102 @@ void Gathered::collect(LAMMPS *lmp, int bit, const int *keys)
   x.assign(3 * total, 0.0);
 }
 
-void Gathered::positions(LAMMPS *lmp)
+void Gathered::fill(LAMMPS *lmp, double *into) const
 {
   Atom *atom = lmp->atom;
   double **xx = atom->x;
   int n = size();
-  std::fill(buf.begin(), buf.end(), 0.0);
   for (int k = 0; k < n; k++) {
     int m = atom->map(tag[k]);
     if (m >= 0 && m < atom->nlocal)
-      for (int d = 0; d < 3; d++) buf[3 * k + d] = xx[m][d];
+      for (int d = 0; d < 3; d++) into[3 * k + d] = xx[m][d];
   }
-  MPI_Allreduce(buf.data(), x.data(), 3 * n, MPI_DOUBLE, MPI_SUM, lmp->world);
 }
 
 /* ---------------------------------------------------------------------- */
+
+namespace {
+struct Registry {
+  std::vector<Reduced *> members;
+  bigint pos_step = -1, sum_step = -1;
+  std::vector<double> send, recv;
+};
+std::map<LAMMPS *, Registry> registry;
+}    // namespace
+
+void RackStress::enroll(LAMMPS *lmp, Reduced *r)
+{
+  Registry &reg = registry[lmp];
+  if (std::find(reg.members.begin(), reg.members.end(), r) == reg.members.end())
+    reg.members.push_back(r);
+  reg.pos_step = reg.sum_step = -1;
+}
+
+void RackStress::leave(LAMMPS *lmp, Reduced *r)
+{
+  auto it = registry.find(lmp);
+  if (it == registry.end()) return;
+  auto &m = it->second.members;
+  m.erase(std::remove(m.begin(), m.end(), r), m.end());
+  it->second.pos_step = it->second.sum_step = -1;
+  if (m.empty()) registry.erase(it);
+}
+
+void RackStress::invalidate(LAMMPS *lmp)
+{
+  Registry &reg = registry[lmp];
+  reg.pos_step = reg.sum_step = -1;
+}
+
+void RackStress::reduce_positions(LAMMPS *lmp)
+{
+  Registry &reg = registry[lmp];
+  bigint now = lmp->update->ntimestep;
+  if (reg.pos_step == now) return;
+  size_t n = 0;
+  for (Reduced *r : reg.members)
+    if (Gathered *g = r->gathered()) n += 3 * g->size();
+  reg.send.assign(n, 0.0);
+  reg.recv.assign(n, 0.0);
+  size_t at = 0;
+  for (Reduced *r : reg.members)
+    if (Gathered *g = r->gathered()) {
+      g->fill(lmp, reg.send.data() + at);
+      at += 3 * g->size();
+    }
+  if (n) MPI_Allreduce(reg.send.data(), reg.recv.data(), (int) n, MPI_DOUBLE, MPI_SUM, lmp->world);
+  at = 0;
+  for (Reduced *r : reg.members)
+    if (Gathered *g = r->gathered()) {
+      std::copy(reg.recv.begin() + at, reg.recv.begin() + at + 3 * g->size(), g->x.begin());
+      at += 3 * g->size();
+    }
+  reg.pos_step = now;
+}
+
+void RackStress::reduce_sums(LAMMPS *lmp)
+{
+  reduce_positions(lmp);
+  Registry &reg = registry[lmp];
+  bigint now = lmp->update->ntimestep;
+  if (reg.sum_step == now) return;
+  size_t n = 0;
+  for (Reduced *r : reg.members) n += r->partial_size();
+  reg.send.assign(n, 0.0);
+  reg.recv.assign(n, 0.0);
+  size_t at = 0;
+  for (Reduced *r : reg.members) {
+    r->partial(reg.send.data() + at);
+    at += r->partial_size();
+  }
+  if (n) MPI_Allreduce(reg.send.data(), reg.recv.data(), (int) n, MPI_DOUBLE, MPI_SUM, lmp->world);
+  at = 0;
+  for (Reduced *r : reg.members) {
+    r->total(reg.recv.data() + at);
+    at += r->partial_size();
+  }
+  reg.sum_step = now;
+}
 
 void Contacts::build(LAMMPS *lmp, int tbit, int sbit, const double *radius)
 {

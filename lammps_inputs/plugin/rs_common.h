@@ -56,13 +56,35 @@ namespace RackStress {
     std::vector<double> o, x;     // 3 per member
     //! collect the owned atoms with `bit` (and key != 0 when keys is given), on every rank
     void collect(LAMMPS *lmp, int bit, const int *keys);
-    //! this step's positions
-    void positions(LAMMPS *lmp);
+    //! this rank's share of the positions (the owners' rows, zeros elsewhere) into `into`
+    void fill(LAMMPS *lmp, double *into) const;
     int size() const { return (int) tag.size(); }
 
    private:
     std::vector<double> buf;
   };
+  class Reduced;
+
+  /* What a style reduces over the ranks each step. Every style's reductions of one step are
+     fused (all gathered positions in one MPI_Allreduce, then all partial sums and contact flags
+     in one more), so a step costs two collectives however many racks, regions and contact
+     conditions a scene has: ranks meet twice a step, not once per operator. */
+  class Reduced {
+   public:
+    virtual ~Reduced() noexcept(false) = default;    // as LAMMPS' Fix
+    virtual Gathered *gathered() { return nullptr; }    // positions to gather, if any
+    virtual int partial_size() { return 0; }           // doubles of partial sums, if any
+    virtual void partial(double *) {}                  // this rank's partial sums (phase 2)
+    virtual void total(const double *) {}              // their sums over the ranks
+  };
+  void enroll(LAMMPS *, Reduced *);
+  void leave(LAMMPS *, Reduced *);
+  //! a fix's setup: the next request reduces again (same step, new state or new styles)
+  void invalidate(LAMMPS *);
+  //! this step's gathered positions of every enrolled style (one collective, once a step)
+  void reduce_positions(LAMMPS *);
+  //! this step's partial sums of every enrolled style (one collective, once a step)
+  void reduce_sums(LAMMPS *);
 
   /* Candidate pairs (i owned with `tbit`, j owned or ghost with `sbit`) within the reach
      r_i + r_max(source) + skin, searched on a cell grid whenever LAMMPS reneighbours: no atom
