@@ -166,3 +166,40 @@ def test_standalone_deck_runs_the_reference_trajectory(tmp_path, scene, sets):
     shutil.copytree(tmp_path / "deck1", tmp_path / "deck2")
     _same_to_dump_precision(_lmp(tmp_path / "deck1", 1), ref)
     _same_to_dump_precision(_lmp(tmp_path / "deck2", 2), ref)
+
+
+# ------------------------------------------------------------------ fallback
+def test_without_a_compiler_the_callback_runs_and_says_why(tmp_path, monkeypatch, capsys):
+    """No plugin built and no compiler: the deck is the Python callback's, and one line says
+    why; a plugin built for another LAMMPS is not used."""
+    from rackstress.engines.lammps import deck as deckmod
+
+    monkeypatch.setattr(plugin, "PACKAGED", tmp_path / "none")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    monkeypatch.setenv("CXX", str(tmp_path / "no-such-compiler"))
+    monkeypatch.setattr(plugin.shutil, "which", lambda name: None)
+    monkeypatch.delenv("RACKSTRESS_KERNELS", raising=False)
+    deckmod._WARNED.clear()
+    deck = compile_deck(scenes.build("plane-rack"), "exact", plugin=None)
+    assert not deck.plugin and deck.python_ops
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "Python callback" in err[0]
+    # a plugin whose build.json names another LAMMPS is stale
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / plugin.LIBRARY).write_bytes(b"")
+    (other / plugin.STAMP).write_text('{"lammps": "2024.8.29.0.0"}')
+    assert not plugin._usable(other, plugin.lammps_version())
+
+
+def test_switched_off_runs_the_callback(tmp_path, monkeypatch, capsys):
+    from rackstress.engines.lammps import deck as deckmod
+
+    monkeypatch.setenv("RACKSTRESS_PLUGIN", "0")
+    deckmod._WARNED.clear()
+    assert not compile_deck(scenes.build("plane-rack"), "exact", plugin=None).plugin
+    monkeypatch.setenv("RACKSTRESS_PLUGIN", "1")
+    monkeypatch.setenv("RACKSTRESS_KERNELS", "numba")       # the callback asked for
+    assert not compile_deck(scenes.build("plane-rack"), "exact", plugin=None).plugin
+    monkeypatch.delenv("RACKSTRESS_KERNELS")
+    assert compile_deck(scenes.build("plane-rack"), "exact", plugin=None).plugin
