@@ -71,6 +71,17 @@ def test_plugin_trajectory_parity_plane_scenes(name, params):
     assert np.abs(_plugin_final(scene) - ref).max() <= 1e-10
 
 
+@pytest.mark.parametrize("name", ["cantilever", "plate-hole", "l-bracket"])
+def test_plugin_trajectory_parity_validation_scenes(name):
+    """The validation scenes (rack coupling and within(1.5) binds, WithinInside's pairs as
+    bonds, held supports), 2000 steps: equal to the reference engine to 1e-10."""
+    scene = scenes.build(name, steps=2000)
+    ref = _reference_final(scene)
+    moved = np.abs(ref - scene.original_positions()).max()
+    assert moved > 1e-5
+    assert np.abs(_plugin_final(scene) - ref).max() <= 1e-10
+
+
 @pytest.mark.slow
 def test_plugin_trajectory_parity_gait_cycle():
     """plugin = reference engine ≤ 1e-10 over magpod-small's whole gait cycle."""
