@@ -21,6 +21,7 @@
 #include "atom.h"
 #include "error.h"
 #include "group.h"
+#include "neighbor.h"
 #include "update.h"
 #include "utils.h"
 
@@ -31,7 +32,7 @@ using namespace LAMMPS_NS;
 using namespace FixConst;
 
 FixRSRack::FixRSRack(LAMMPS *lmp, int narg, char **arg) :
-    Fix(lmp, narg, arg), gather_source(true), ready(false)
+    Fix(lmp, narg, arg), gather_source(true), ready(false), rows_built(false), overlap(true)
 {
   if (narg != 5) error->all(FLERR, "Illegal fix rs/rack command: fix ID TARGET rs/rack SOURCE c");
   sourcebit = RackStress::groupbit(group, error, "rs/rack", "source", arg[3]);
@@ -65,11 +66,29 @@ void FixRSRack::setup(int vflag)
     gather_source = group->count(sgroup) <= group->count(igroup);
     few.collect(lmp, gather_source ? sourcebit : groupbit, nullptr);
     sums.assign(3 * few.size(), 0.0);
+    int both = 0, any = 0;
+    for (int i = 0; i < atom->nlocal; i++)
+      if ((atom->mask[i] & groupbit) && (atom->mask[i] & sourcebit)) both = 1;
+    MPI_Allreduce(&both, &any, 1, MPI_INT, MPI_MAX, world);
+    overlap = any != 0;
     RackStress::enroll(lmp, this);
     ready = true;
   }
+  rows_built = false;
   RackStress::invalidate(lmp);
   post_force(vflag);
+}
+
+const std::vector<int> &FixRSRack::owned_rows()
+{
+  if (!rows_built || neighbor->ago == 0) {
+    int bit = gather_source ? groupbit : sourcebit;
+    rows.clear();
+    for (int i = 0; i < atom->nlocal; i++)
+      if (atom->mask[i] & bit) rows.push_back(i);
+    rows_built = true;
+  }
+  return rows;
 }
 
 int FixRSRack::partial_size()
@@ -82,14 +101,12 @@ void FixRSRack::partial(double *sum)
 {
   if (gather_source) return;
   double **x = atom->x, **o = RackStress::originals(atom, error, "rs/rack");
-  int *mask = atom->mask;
   tagint *tag = atom->tag;
-  int nlocal = atom->nlocal, n = few.size();
+  int n = few.size();
   const double *X = few.x.data(), *O = few.o.data();
-  for (int j = 0; j < nlocal; j++) {
-    if (!(mask[j] & sourcebit)) continue;
+  for (int j : owned_rows()) {
     for (int k = 0; k < n; k++) {
-      if (few.tag[k] == tag[j]) continue;
+      if (overlap && few.tag[k] == tag[j]) continue;
       double d[3], q = 0.0, d2 = 0.0;
       for (int e = 0; e < 3; e++) {
         d[e] = x[j][e] - X[3 * k + e];
@@ -111,7 +128,6 @@ void FixRSRack::total(const double *sum)
 void FixRSRack::post_force(int /*vflag*/)
 {
   double **x = atom->x, **f = atom->f;
-  int *mask = atom->mask;
   tagint *tag = atom->tag;
   int nlocal = atom->nlocal, n = few.size();
 
@@ -120,11 +136,10 @@ void FixRSRack::post_force(int /*vflag*/)
     RackStress::reduce_positions(lmp);
     double **o = RackStress::originals(atom, error, "rs/rack");
     const double *X = few.x.data(), *O = few.o.data();
-    for (int i = 0; i < nlocal; i++) {
-      if (!(mask[i] & groupbit)) continue;
+    for (int i : owned_rows()) {
       double a[3] = {0.0, 0.0, 0.0};
       for (int k = 0; k < n; k++) {
-        if (few.tag[k] == tag[i]) continue;
+        if (overlap && few.tag[k] == tag[i]) continue;
         double d[3], q = 0.0, d2 = 0.0;
         for (int e = 0; e < 3; e++) {
           d[e] = X[3 * k + e] - x[i][e];

@@ -36,6 +36,11 @@ class FixRSRack : public Fix, public RackStress::Reduced {
   bool ready;
   RackStress::Gathered few;
   std::vector<double> sums;
+  // the owned rows of the side summed over (kept from one reneighbouring to the next), and
+  // whether the two groups share atoms (a particle is never bound to itself)
+  std::vector<int> rows;
+  bool rows_built, overlap;
+  const std::vector<int> &owned_rows();
 };
 
 }    // namespace LAMMPS_NS
