@@ -57,6 +57,19 @@ the callback adds its forces into LAMMPS' force array itself (fix external's Nap
 reached) and the static constant forces and damping too, on the moving rows, in the fixes' own
 arithmetic and order (:attr:`Deck.callback_natives`); and LAMMPS' skin is ``PASSIVE_SKIN``, the
 callback's contact lists keeping ``SKIN`` with a displacement check of their own.
+
+Plugin (``compile_deck(..., plugin=True)``; ``None``: whenever the compiled plugin is there for
+this LAMMPS, what ``rackstress run`` and ``rackstress deck`` ask for): every operator the table
+gives to the Python callback becomes a fix of the compiled plugin instead (docs/plugin.md) —
+collide ``rs/collide``, bind over every pair (the rack coupling, Eq. 23) ``rs/rack``, bind
+within(d) ``rs/bind`` over the data file's bonds (one bond type per bind and its reverse,
+``bond_style zero``, ``newton_bond off``), attract ``rs/attract`` (its region index named for the
+phase), the contact-conditioned extra of dampen ``rs/dampen``. A phase-conditioned one is defined
+while its phase holds (:meth:`Deck.phase_commands`). The styles read per-atom originals, radii
+and region indices from ``fix property/atom`` (set right after read_data). Such a deck has no
+Python operator and runs standalone; it integrates every particle (no passive group), and its
+ghost cutoff is the interaction range (:func:`plugin_ghost_cutoff`). A scene with an operator the
+plugin has no style for (a contact-conditioned force) keeps the callback, and one line says so.
 """
 from __future__ import annotations
 
