@@ -564,6 +564,21 @@ def bench_perf(out, steps, quick, profile_steps, scene_name, no_mpi):
     click.echo(md_table(*mod.breakdown_rows(data)))
 
 
+@bench.command("scaling")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
+              help="Output directory (default: docs/benchmarks/ of the repository).")
+@click.option("--quick", is_flag=True, help="A 40 x 20 x 20 block and 60 MagPod steps.")
+@click.option("--remodel", is_flag=True, help="Recompute the model from scaling.json, no runs.")
+def bench_scaling(out, quick, remodel):
+    """The compiled plugin on 1 and 2 ranks (standalone decks in plain lmp), modelled to 1,024
+    ranks from the measured ghosts, communication and reductions (docs/benchmarks/scaling.md)."""
+    from rackstress.bench import scaling as mod
+
+    data = (mod.from_json(out) if remodel
+            else mod.run_bench(out, quick=quick, echo=click.echo))
+    _bench_report(data, mod)
+
+
 @bench.command("validity")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path),
               help="Output directory (default: docs/benchmarks/ of the repository).")

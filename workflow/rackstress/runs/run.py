@@ -244,9 +244,20 @@ def plan(scene: Scene, engine: str = "lammps", mode: str = "exact",
         if comm.Get_size() > 1:
             raise RunDirError("the reference engine runs on one rank; run it without mpiexec")
     check_memory(scene, engine, comm.Get_size())
+    # LAMMPS runs the exact operators in the compiled plugin when it is there for this LAMMPS
+    # (docs/plugin.md), else in the Python callback (one line says why); a resumed run keeps it
+    deck = compile_deck(scene, mode, plugin=None if engine == "lammps" else False)
+    fp = fingerprint(scene, engine=engine, mode=mode, dump_every=dump_every)
+    if engine == "lammps":
+        fp["operators"] = operators_path(deck)
     return {"engine": engine, "mode": mode, "dump_every": int(dump_every),
-            "deck": compile_deck(scene, mode), "stability": pred,
-            "fingerprint": fingerprint(scene, engine=engine, mode=mode, dump_every=dump_every)}
+            "deck": deck, "stability": pred, "fingerprint": fp}
+
+
+def operators_path(deck) -> str:
+    """Where a LAMMPS deck evaluates the operators LAMMPS has no style for: 'plugin' (the
+    compiled styles) or 'callback' (Python); a run's fingerprint records it for its resumption."""
+    return "plugin" if deck.plugin else "callback"
 
 
 def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
