@@ -9,7 +9,8 @@ from pathlib import Path
 import click
 
 from rackstress.errors import (EXIT_BUG, EXIT_DIVERGED, EXIT_INPUT, EXIT_RENDER,  # noqa: F401
-                               EXIT_STORAGE, DivergenceError, RackstressError, os_error_message)
+                               EXIT_STORAGE, DivergenceError, RackstressError, StorageError,
+                               os_error_message)
 
 
 def _load_scene(scene: str, steps, dt, sets, integrator: str | None = None):
@@ -199,7 +200,7 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True) ->
         except Exception as err:  # noqa: BLE001 - the run itself is complete and kept
             click.echo(f"rackstress: error: the run finished, but rendering its pictures "
                        f"failed: {err} (retry with 'rackstress render {out}')", err=True)
-            sys.exit(EXIT_RENDER)
+            sys.exit(EXIT_STORAGE if isinstance(err, StorageError) else EXIT_RENDER)
         click.echo(f"  pictures: {rep.outdir} ({len(rep.files)} files, "
                    f"{time.perf_counter() - t0:.1f} s)")
 
@@ -257,6 +258,11 @@ def _post_run(out, progress):
     except TooLargeError as err:
         click.echo(f"  note: no stress peaks or VTK files: {err}")
         return
+    except OSError as err:     # a full disk (StorageError): the run itself is complete and kept
+        msg = str(err) if isinstance(err, StorageError) else os_error_message(err, "write")
+        click.echo(f"rackstress: error: the run finished, but its stress files could not be "
+                   f"written: {msg} (then retry with 'rackstress stress {out}')", err=True)
+        sys.exit(EXIT_STORAGE)
     except Exception as err:  # noqa: BLE001 - the run itself is complete and kept
         click.echo(f"rackstress: error: the run finished, but post-processing its stress "
                    f"failed: {err} (retry with 'rackstress stress {out}')", err=True)
@@ -416,7 +422,7 @@ def stress(inputs, out, vtk, write_dump, parts, atom_style, dt, allow_truncated,
         else:
             raise RackstressError("give one run directory, or a data file and a dump")
     except RackstressError as err:
-        _fail(err, EXIT_INPUT)
+        _fail(err, err.exit_code)
     for line in describe(info):
         click.echo(line)
     click.echo(f"wrote {Path(where) / 'stress.json'} ({time.perf_counter() - t0:.1f} s)")

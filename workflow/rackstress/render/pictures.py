@@ -66,6 +66,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rackstress.errors import EXIT_STORAGE, StorageError, storage_error
 from rackstress.lib.jsonio import write_json
 from rackstress.stress import PartMotion, StressInputError, load_run
 from rackstress.stress.post import LABELS, compute_fields
@@ -684,10 +685,12 @@ def render(rundir, frames=None, measure: str = "paper", views=DEFAULT_VIEWS, mov
         write_json(tmp / "render.json", manifest)
         report.files.append("render.json")
         _move_in(tmp, outdir)
-    except BaseException:
+    except BaseException as exc:
         if plots and "plotter" in locals() and plotter is not None:
             plotter.kill()
         shutil.rmtree(tmp, ignore_errors=True)
+        if isinstance(exc, OSError) and not isinstance(exc, StorageError) and exc.errno:
+            raise storage_error(exc, "write the pictures into", outdir) from None
         raise
     return report
 
@@ -720,8 +723,12 @@ class _Background:
             rec = {"files": report.files, "notes": report.notes,
                    "wall_s": time.perf_counter() - t}
         except BaseException as exc:  # noqa: BLE001 - handed to the parent
-            rec = {"error": f"{type(exc).__name__}: {exc}"}
-        self.result.write_text(json.dumps(rec))
+            rec = {"error": f"{type(exc).__name__}: {exc}",
+                   "errno": getattr(exc, "errno", None)}
+        try:
+            self.result.write_text(json.dumps(rec))
+        except OSError:      # a full disk: the parent learns it from the exit status
+            os._exit(EXIT_STORAGE)
         os._exit(0)
 
     def join(self):
@@ -737,8 +744,13 @@ class _Background:
         try:
             rec = json.loads(self.result.read_text())
         except (OSError, json.JSONDecodeError):
+            if self.proc.exitcode == EXIT_STORAGE:
+                raise StorageError(f"could not write the plots into {self.args[-1]}: the file "
+                                   "system refused the write (full?); free space on it") from None
             raise RuntimeError(f"drawing the plots failed (exit code {self.proc.exitcode})")
         self.result.unlink()
+        if rec.get("errno"):
+            raise StorageError(f"could not draw the plots into {self.args[-1]}: {rec['error']}")
         if "error" in rec:
             raise RuntimeError(f"drawing the plots failed: {rec['error']}")
         return rec["files"], rec["notes"], rec["wall_s"]
