@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from test_faults import QUIET, RS, fill, frames, leftovers, rs, tmpfs  # noqa: F401 (fixture)
+from test_faults import QUIET, RS, fill, frames, leftovers, rs, tmpfs, wait_for  # noqa: F401
 
 
 # ---------------------------------------------------------------------------- disks
@@ -49,3 +49,75 @@ def test_full_disk_while_rendering_is_a_storage_error(tmpfs):
     assert str(out / "figures") in r.stderr
     assert not (out / "figures").exists() and not (out / "report.html").exists()
     assert leftovers(out) == [] and not [p for p in out.iterdir() if ".tmp" in p.name]
+
+
+# ---------------------------------------------------------------------------- long schedules
+def _split_plane_bound(steps):
+    """plane-bound with its cycle cut into two phases (7 + 5 steps), run for ``steps``."""
+    from rackstress import scenes
+    from rackstress.model.scene import Phase, Scene
+
+    sc = scenes.build("plane-bound")
+    return Scene(sc.name, sc.groups, sc.operators, [Phase("a", 7), Phase("b", 5)],
+                 sc.dt).with_steps(steps)
+
+
+@pytest.mark.lammps
+def test_a_looped_deck_runs_as_the_written_out_one(tmp_path):
+    """A long schedule becomes a LAMMPS loop over its identical cycles: plain ``lmp`` runs the
+    looped deck (4 whole cycles of 2 phases and a cut one: 7 + 2 steps) to the same dump, byte
+    for byte, as the deck with every phase written out."""
+    import sys
+
+    from rackstress.engines.lammps.deck import compile_deck
+
+    lmp = Path(sys.executable).parent / "lmp"
+    sc = _split_plane_bound(4 * 12 + 9)
+    deck = compile_deck(sc, "fast")
+    assert not deck.python_ops                    # plain lmp runs it alone
+    dumps = {}
+    for name, loop_after in (("written", 10**9), ("looped", 0)):
+        d = tmp_path / name
+        d.mkdir()
+        (d / "particles.data").write_text(deck.data_text())
+        text = deck.input_text(dump_every=1, loop_after=loop_after)
+        (d / "in.lammps").write_text(text)
+        assert ("jump SELF" in text) == (name == "looped")
+        r = subprocess.run([str(lmp), "-in", "in.lammps"], cwd=d, capture_output=True,
+                           text=True, timeout=300)
+        assert r.returncode == 0, r.stdout[-2000:]
+        dumps[name] = (d / "trajectory.dump").read_text()
+    assert frames_of(dumps["looped"]) == list(range(0, 58))
+    assert dumps["looped"] == dumps["written"]
+
+
+def frames_of(text):
+    import re
+
+    return [int(m) for m in re.findall(r"ITEM: TIMESTEP\n(\d+)\n", text)]
+
+
+@pytest.mark.lammps
+def test_any_number_of_steps_costs_no_memory_up_front_on_lammps(tmp_path):
+    """``--steps 1000000000000`` on LAMMPS: the deck's schedule was built eagerly (MemoryError
+    after minutes); now its in.lammps is a few lines and the run's memory stays flat."""
+    out = tmp_path / "r"
+    err = tmp_path / "stderr"
+    p = subprocess.Popen([RS, "run", "plane-bound", "--steps", "1000000000000",
+                          "--restart-every", "0", "--out", str(out), *QUIET],
+                         stdout=subprocess.DEVNULL, stderr=err.open("w"))
+
+    def rss():
+        for line in open(f"/proc/{p.pid}/status"):
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) * 1024
+    try:
+        assert wait_for(lambda: (out / "trajectory.dump").exists(), 60, p), err.read_text()
+        first = rss()
+        time.sleep(3)
+        assert p.poll() is None, err.read_text()
+        assert rss() - first < 20e6
+        assert len((out / "in.lammps").read_text().splitlines()) < 200
+    finally:
+        p.kill()
+        p.wait()

@@ -28,9 +28,14 @@ from rackstress.model.scene import PhaseEnd, Scene
 ENGINES = ("lammps", "reference")
 
 
+#: LAMMPS reads the intervals of ``dump`` and ``thermo`` as a C int.
+LAMMPS_MAX_INT = 2**31 - 1
+
+
 def default_dump_every(scene: Scene) -> int:
-    """About 100 frames a run, never fewer than every step."""
-    return max(1, scene.total_steps // 100)
+    """About 100 frames a run, never fewer than every step, nor more steps apart than LAMMPS
+    can count in a ``dump`` interval (a run of 10¹² steps gets more frames)."""
+    return min(max(1, scene.total_steps // 100), LAMMPS_MAX_INT)
 
 
 #: Bytes a particle costs, measured (peak RSS over particles, ``scripts/bench_large.py``:
@@ -238,6 +243,9 @@ def plan(scene: Scene, engine: str = "lammps", mode: str = "exact",
     dump_every = dump_every or default_dump_every(scene)
     if dump_every < 1:
         raise RunDirError(f"--dump-every must be >= 1, got {dump_every}")
+    if engine == "lammps" and dump_every > LAMMPS_MAX_INT:
+        raise RunDirError(f"--dump-every {dump_every} is more than LAMMPS can take in a dump "
+                          f"interval ({LAMMPS_MAX_INT}); give a smaller one")
     comm = comm or world()
     if engine == "reference":
         mode = "exact"
