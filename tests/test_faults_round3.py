@@ -121,3 +121,63 @@ def test_any_number_of_steps_costs_no_memory_up_front_on_lammps(tmp_path):
     finally:
         p.kill()
         p.wait()
+
+
+# ---------------------------------------------------------------------------- scene expressions
+def _scene(tmp_path, radius, params=""):
+    p = tmp_path / "s.toml"
+    p.write_text(f'name = "s"\nsteps = 1\n[params]\n{params}\n[[group]]\nname = "a"\n'
+                 'kind = "part"\npositions = [[0.0, 0.0, 0.0], [3.0, 0.0, 0.0]]\n'
+                 f"radius = {radius}\n")
+    return p
+
+
+@pytest.mark.parametrize("expr, says", [
+    ("9**9**9**9", "beyond the largest number"),     # hung forever: unbounded integers
+    ("10**400", "beyond the largest number"),
+    (" * ".join(["2**62"] * 20), "evaluates to inf"),
+    ("(-8)**0.5", "not a real number"),
+    ("gap + word", "parameter 'word', which is 'hi' (a string), not a number"),
+])
+def test_an_expression_takes_bounded_time_and_says_what_is_wrong(tmp_path, expr, says):
+    scene = _scene(tmp_path, f'"$({expr})"', 'gap = 2\nword = "hi"')
+    t0 = time.monotonic()
+    r = rs("deck", scene, "--out", tmp_path / "d", timeout=60)
+    assert time.monotonic() - t0 < 30
+    assert r.returncode == 2, r.stderr
+    assert says in r.stderr and "group[0].radius" in r.stderr and "Traceback" not in r.stderr
+    assert not (tmp_path / "d").exists()
+
+
+def test_an_expression_too_long_is_refused(tmp_path):
+    scene = _scene(tmp_path, '"$(' + "+".join(["1"] * 2000) + ')"')
+    r = rs("deck", scene, "--out", tmp_path / "d")
+    assert r.returncode == 2 and "at most 1000" in r.stderr, r.stderr
+
+
+def test_small_integer_powers_stay_exact(tmp_path):
+    """2**3 = 8 and 10**6 stay integers (a lattice shape takes them); 2**0.5 is a float."""
+    scene = tmp_path / "l.toml"
+    scene.write_text('name = "l"\nsteps = 1\n[params]\nk = 3\n[[group]]\nname = "a"\n'
+                     'kind = "part"\nlattice = { shape = ["$(2**k)", 1, "$(10**6 - 999998)"],'
+                     ' spacing = "$(2**0.5)" }\nradius = 0.5\n')
+    from rackstress.scenes.toml import load_toml
+
+    sc = load_toml(scene)
+    assert sc.groups["a"].n == 8 * 1 * 2
+    o = sc.groups["a"].o
+    assert abs((o[:, 0].max() - o[:, 0].min()) - 7 * 2 ** 0.5) < 1e-12
+
+
+@pytest.mark.parametrize("params", ['gap = "$(1/0)"', 'gap = "$nosuch"',
+                                    'gap = "$other"\nother = "$gap"'])
+def test_a_parameter_that_is_an_expression_is_named(tmp_path, params):
+    """Was: "unsupported operand type(s) for +: 'float' and 'str'" at the field using it."""
+    scene = _scene(tmp_path, '"$(gap * 0.1 + 0.2)"', params)
+    r = rs("deck", scene, "--out", tmp_path / "d")
+    assert r.returncode == 2, r.stderr
+    assert "[params] gap" in r.stderr and "parameter 'gap'" in r.stderr
+    assert "must be a plain number, string or boolean" in r.stderr
+    r = rs("deck", _scene(tmp_path, '"$(gap * 0.1)"', "gap = 2"), "--set", "gap=$(1/0)",
+           "--out", tmp_path / "d")
+    assert r.returncode == 2 and "gap" in r.stderr and "Traceback" not in r.stderr, r.stderr
