@@ -181,3 +181,78 @@ def test_a_parameter_that_is_an_expression_is_named(tmp_path, params):
     r = rs("deck", _scene(tmp_path, '"$(gap * 0.1)"', "gap = 2"), "--set", "gap=$(1/0)",
            "--out", tmp_path / "d")
     assert r.returncode == 2 and "gap" in r.stderr and "Traceback" not in r.stderr, r.stderr
+
+
+# ---------------------------------------------------------------------------- divergence
+COINCIDE = """name = "co"
+dt = 1.0
+steps = 20
+
+[[group]]
+name = "a"
+kind = "part"
+positions = [[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 5.0, 0.0]]
+radius = 0.4
+
+[[operator]]
+on = "a"
+op = "bind"
+from = "a"
+c = 1.0
+
+[[operator]]
+on = "a"
+op = "force"
+accel = [1.0, 0.0, 0.0]
+where = { ids = [0] }
+
+[[operator]]
+on = "a"
+op = "force"
+accel = [-1.0, 0.0, 0.0]
+where = { ids = [1] }
+"""
+
+
+@pytest.mark.lammps
+@pytest.mark.parametrize("how", ["lammps", "reference", "mpi"])
+def test_a_bound_pair_that_coincides_keeps_finite_frames_and_names_its_step(tmp_path, how):
+    """Particles 0 and 1 (2 apart, bound at rest length 2) are pushed together with
+    acceleration 1 at dt = 1: Eq. 5 puts both exactly at x = 0 at step 1 (v₁ = 1, p₁ = −1 + 1),
+    where Eq. 12's direction is 0/0. The force of step 1 is the first bad value on every
+    engine; no frame of non-finite positions is kept (was: LAMMPS wrote 22 `nan` lines and
+    named step 10, its next watchdog check)."""
+    from test_faults import MPIEXEC
+
+    scene = tmp_path / "co.toml"
+    scene.write_text(COINCIDE)
+    out = tmp_path / "r"
+    args = ["run", scene, "--allow-unstable", "--dump-every", "1", "--out", out, *QUIET]
+    if how == "reference":
+        args += ["--engine", "reference"]
+    cmd = ([MPIEXEC, "-n", "2"] if how == "mpi" else []) + [RS, *map(str, args)]
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 3, r.stderr
+    assert "run diverged at step 1: the force on 'a' particle 0 (atom id 1) is not finite" \
+        in r.stderr
+    assert r.stderr.count("run diverged") == 1 and "Warning" not in r.stderr
+    s = json.loads((out / "summary.json").read_text())
+    assert s["status"] == "diverged" and s["error"]["step"] == 1
+    text = (out / "trajectory.dump").read_text()
+    assert "nan" not in text.lower() and frames(out / "trajectory.dump") == [0, 1]
+
+
+def test_trim_nonfinite_cuts_the_dump_before_the_first_bad_frame(tmp_path):
+    from rackstress.engines.dumpio import trim_nonfinite
+
+    def frame(step, x):
+        return (f"ITEM: TIMESTEP\n{step}\nITEM: NUMBER OF ATOMS\n2\nITEM: BOX BOUNDS pp pp pp\n"
+                f"0 1\n0 1\n0 1\nITEM: ATOMS id type mol x y z\n1 1 1 0 0 0\n2 1 1 {x} 0 0\n")
+    dump = tmp_path / "trajectory.dump"
+    good = frame(0, "1") + frame(10, "1.5")
+    dump.write_text(good + frame(20, "-nan") + frame(30, "nan"))
+    assert trim_nonfinite(dump) == 20
+    assert dump.read_text() == good
+    assert trim_nonfinite(dump) is None and dump.read_text() == good
+    dump.write_text(frame(0, "1") + frame(5, "inf"))
+    assert trim_nonfinite(dump) == 5 and frames(dump) == [0]

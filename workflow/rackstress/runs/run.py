@@ -212,6 +212,18 @@ def execute(scene: Scene, out: Path, engine: str, mode: str, dump_every: int, *,
                           "masses": eng.deck.masses})
     finally:
         eng.close()
+    if error is not None and root and engine == "lammps":
+        from rackstress.engines.dumpio import trim_nonfinite
+
+        # LAMMPS writes the dump itself: frames of non-finite positions written before the
+        # check that noticed them are cut, and the step named is the first bad one seen
+        bad = trim_nonfinite(Path(out) / "trajectory.dump")
+        if bad is not None:
+            extra["trimmed_from_step"] = bad
+            if bad < error.step:
+                error.args = (f"{error} (its positions were non-finite at step {bad} already: "
+                              f"the frames from step {bad} on were removed from the dump)",)
+                error.step, steps = bad, min(steps, bad)
     wall = wall_before + time.perf_counter() - t0
     if scene.report is not None and root:
         extra["report"] = scene.report(scene, records)
