@@ -256,3 +256,46 @@ def test_trim_nonfinite_cuts_the_dump_before_the_first_bad_frame(tmp_path):
     assert trim_nonfinite(dump) is None and dump.read_text() == good
     dump.write_text(frame(0, "1") + frame(5, "inf"))
     assert trim_nonfinite(dump) == 5 and frames(dump) == [0]
+
+
+# ---------------------------------------------------------------------------- no silent minutes
+def test_every_phase_says_so_in_a_log(tmp_path):
+    """Not on a terminal (a log, a batch job): one line per phase, in order, as it starts —
+    building the scene (a 70,000-particle part took 4 minutes here without a word), preparing,
+    running, post-processing, pictures."""
+    out = tmp_path / "r"
+    r = rs("run", "plane-rack", "--engine", "reference", "--steps", "30", "--out", out,
+           timeout=300)
+    assert r.returncode == 0, r.stderr
+    lines = [ln for ln in r.stderr.splitlines() if ln.startswith("rackstress: ")]
+    assert [ln.split()[1] for ln in lines] == ["building", "preparing", "running", "computing",
+                                               "rendering"], r.stderr
+    assert "406 particles" in lines[1] and "30 steps" in lines[2]
+    quiet = rs("run", "plane-rack", "--engine", "reference", "--steps", "30", "--out",
+               tmp_path / "q", *QUIET)
+    assert quiet.returncode == 0 and quiet.stderr == "", quiet.stderr
+
+
+def test_a_long_phase_ticks_on_a_terminal(tmp_path):
+    """On a terminal, a phase without a bar of its own shows its seconds after 2 s (a real
+    pseudo-terminal, a real process), and clears the line when done."""
+    import pty
+    import sys
+
+    script = ("import time\nfrom rackstress.lib.progress import phase\n"
+              "with phase(\"building the scene 'slow'\"):\n    time.sleep(3.2)\n"
+              "print('built')\n")
+    chunks = []
+
+    def read(fd):
+        data = os.read(fd, 1024)
+        chunks.append(data)
+        return data
+    t0 = time.monotonic()
+    status = pty.spawn([sys.executable, "-c", script], read)
+    text = b"".join(chunks).decode()
+    assert status == 0, text
+    assert time.monotonic() - t0 >= 3.2
+    assert "building the scene 'slow'… 2 s" in text or "building the scene 'slow'… 3 s" in text
+    assert "\r\x1b[K" in text and text.rstrip().endswith("built")
+    assert "rackstress: building" not in text          # the log line is for non-terminals

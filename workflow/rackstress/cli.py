@@ -8,6 +8,7 @@ from pathlib import Path
 
 import click
 
+from rackstress.lib.progress import phase
 from rackstress.errors import (EXIT_BUG, EXIT_DIVERGED, EXIT_INPUT, EXIT_RENDER,  # noqa: F401
                                EXIT_STORAGE, DivergenceError, RackstressError, StorageError,
                                os_error_message)
@@ -154,10 +155,14 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
             from rackstress.runs.resume import resume_run
 
             with locked(out, create=False) as held:
-                summary = resume_run(resume_dir, scene, progress=progress and rank() == 0)
+                with phase(f"resuming the run in {out}", progress and rank() == 0,
+                           ticker=False):
+                    summary = resume_run(resume_dir, scene, progress=progress and rank() == 0)
                 _finish(summary, out, do_render, progress)
             return
-        sc = _load_scene(scene, steps, dt, sets, integrator)
+        shown = progress and rank() == 0
+        with phase(f"building the scene {scene}", shown):
+            sc = _load_scene(scene, steps, dt, sets, integrator)
         if out is None:
             out = Path("runs") / f"{sc.name}-{time.strftime('%Y%m%d-%H%M%S')}"
         if restart_every is None and engine == "lammps":
@@ -165,13 +170,15 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
 
             restart_every = default_restart_every(sc.total_steps)
         # bad input is refused before the run directory is touched
-        planned = run_mod.plan(sc, engine, mode, dump_every, allow_unstable=allow_unstable)
+        with phase(f"preparing the run ({sc.n_particles:,} particles on {engine})", shown):
+            planned = run_mod.plan(sc, engine, mode, dump_every, allow_unstable=allow_unstable)
         # the lock is held from before anything is written until the pictures are done
         with locked(out) as held:   # noqa: F841
-            summary = run_mod.run(sc, out, engine=engine, mode=mode, dump_every=dump_every,
-                                  progress=progress and rank() == 0, overwrite=overwrite,
-                                  restart_every=restart_every or None,
-                                  allow_unstable=allow_unstable, planned=planned)
+            with phase(f"running {sc.total_steps:,} steps into {out}", shown, ticker=False):
+                summary = run_mod.run(sc, out, engine=engine, mode=mode,
+                                      dump_every=dump_every, progress=shown,
+                                      overwrite=overwrite, restart_every=restart_every or None,
+                                      allow_unstable=allow_unstable, planned=planned)
             _finish(summary, out, do_render, progress)
     except Exception as err:  # noqa: BLE001 - each kind has its exit status (_fail_any)
         _fail_any(err, out)
@@ -196,7 +203,8 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True) ->
 
         t0 = time.perf_counter()
         try:
-            rep = render_default(out, progress=progress)
+            with phase("rendering the pictures and report.html", progress, ticker=False):
+                rep = render_default(out, progress=progress)
         except Exception as err:  # noqa: BLE001 - the run itself is complete and kept
             click.echo(f"rackstress: error: the run finished, but rendering its pictures "
                        f"failed: {err} (retry with 'rackstress render {out}')", err=True)
@@ -254,7 +262,8 @@ def _post_run(out, progress):
     from rackstress.stress.post import TooLargeError, describe, postprocess
 
     try:
-        info = postprocess(out, vtk=True, dump=False, progress=progress)
+        with phase("computing the stress measures and the VTK series", progress, ticker=False):
+            info = postprocess(out, vtk=True, dump=False, progress=progress)
     except TooLargeError as err:
         click.echo(f"  note: no stress peaks or VTK files: {err}")
         return
@@ -336,10 +345,11 @@ def render(rundir, frames, measure, views, groups, out, movie, movie_view, vmax,
             from rackstress.runs.rundir import remove_temporaries
 
             remove_temporaries(rundir)       # of a render or run killed midway
-            rep = render_run(rundir, frames=its, measure=measure, views=_csv(views) or [],
-                             movie=movie, movie_view=movie_view, vmax=vmax, cmap=cmap,
-                             groups=_csv(groups), out=out, allow_truncated=allow_truncated,
-                             progress=progress)
+            with phase(f"rendering the pictures of {rundir}", progress, ticker=False):
+                rep = render_run(rundir, frames=its, measure=measure,
+                                 views=_csv(views) or [], movie=movie, movie_view=movie_view,
+                                 vmax=vmax, cmap=cmap, groups=_csv(groups), out=out,
+                                 allow_truncated=allow_truncated, progress=progress)
             record_render(rundir, rep, time.perf_counter() - t0)
             report = _write_report(rundir)
     except Exception as err:  # noqa: BLE001 - each kind has its exit status (_fail_any)
@@ -405,7 +415,8 @@ def stress(inputs, out, vtk, write_dump, parts, atom_style, dt, allow_truncated,
                                       "dump (rackstress stress DATA DUMP --out DIR)")
             from rackstress.runs.rundir import locked
 
-            with locked(inputs[0], create=False):      # not while a run or render holds it
+            with locked(inputs[0], create=False), \
+                    phase("computing the stress measures", progress, ticker=False):
                 info = postprocess(inputs[0], vtk=vtk, dump=write_dump, progress=progress,
                                    out=out)
             where = out or inputs[0]
