@@ -81,6 +81,7 @@ import numpy as np
 from rackstress.model import operators as ops_mod
 from rackstress.lib.toml import tomllib
 from rackstress.errors import SceneError
+from rackstress.lib.suggest import did_you_mean
 from rackstress.model.operators import (Attract, Bind, Collide, Const, Contact, Dampen, Force, Matched, PhaseIn,
                         Within)
 from rackstress.model import regions as rg
@@ -152,8 +153,15 @@ def _is_number(x) -> bool:
 def _check_keys(ctx: _Ctx, table: dict, allowed, what: str = "key") -> None:
     unknown = [k for k in table if k not in allowed]
     if unknown:
-        raise ctx.error(f"unknown {what} {', '.join(map(repr, unknown))}; allowed: "
-                        f"{', '.join(allowed)}")
+        hint = did_you_mean(unknown[0], allowed)
+        raise ctx.error(f"unknown {what} {', '.join(map(repr, unknown))}"
+                        f"{' (' + hint + ')' if hint else ''}; allowed: {', '.join(allowed)}")
+
+
+def _hint(word, names) -> str:
+    """``" (did you mean 'X'?)"`` for the closest of ``names``, or ``""``."""
+    hint = did_you_mean(str(word), list(names))
+    return f" ({hint})" if hint else ""
 
 
 def _table(ctx: _Ctx, value, field: str) -> dict:
@@ -276,8 +284,9 @@ def _load_builtin(ctx: _Ctx, data: dict, overrides: dict) -> Scene:
                 "key (a file naming a built-in scene takes only 'scene' and [params])")
     name = _string(ctx, data["scene"], "scene")
     if name not in scenes.BUILDERS:
-        raise ctx.error(f"unknown built-in scene '{name}'; built-in scenes: "
-                        f"{', '.join(scenes.BUILDERS)} (or describe the scene explicitly with "
+        raise ctx.error(f"unknown built-in scene '{name}'{_hint(name, scenes.BUILDERS)}; "
+                        f"built-in scenes: {', '.join(scenes.BUILDERS)} (or describe the scene "
+                        "explicitly with "
                         "[[group]] and [[operator]] tables)", "scene")
     params = dict(_table(ctx, data.get("params", {}), "[params]"))
     known = scenes.parameters(name)
@@ -353,7 +362,9 @@ def _scene_params(ctx: _Ctx, data: dict, overrides: dict) -> tuple[dict, dict]:
             continue
         if key not in table:
             listing = ", ".join(f"{k}={v!r}" for k, v in table.items()) or "none"
-            raise ctx.error(f"the scene has no parameter '{key}'; --set takes "
+            hint = did_you_mean(key, [*OVERRIDABLE, *table])
+            raise ctx.error(f"the scene has no parameter '{key}'"
+                            f"{' (' + hint + ')' if hint else ''}; --set takes "
                             f"{', '.join(OVERRIDABLE)} and the scene's [params]: {listing}",
                             "--set")
         default = table[key]
@@ -421,8 +432,9 @@ def _evaluate(text: str, params: dict, where: str, ctx: _Ctx):
             if node.id == "pi":
                 return math.pi
             listing = ", ".join(params) or "none"
+            hint = did_you_mean(node.id, params)
             raise ctx.error(f"'{text}' refers to '{node.id}', which is not in [params] "
-                            f"(defined: {listing})", where)
+                            f"({hint + ' ' if hint else ''}defined: {listing})", where)
         if isinstance(node, ast.BinOp) and type(node.op) in _BINOPS:
             return _bounded(_BINOPS[type(node.op)](ev(node.left), ev(node.right)))
         if isinstance(node, ast.UnaryOp) and type(node.op) in _UNOPS:
@@ -584,7 +596,8 @@ def _kind(c: _Ctx, t: dict, default: str) -> str:
         return default
     kind = _string(c, t["kind"], "kind")
     if kind not in KINDS:
-        raise c.error(f"unknown kind '{kind}'; kinds: {', '.join(KINDS)} (rack: not drawn, "
+        raise c.error(f"unknown kind '{kind}'{_hint(kind, KINDS)}; kinds: {', '.join(KINDS)} "
+                      "(rack: not drawn, "
                       "no stress; sediment: drawn grey, footprints; the others: a part "
                       "coloured by its stress)", "kind")
     return kind
@@ -922,10 +935,12 @@ def _operators(ctx: _Ctx, value, groups: dict, phases: list, base: Path) -> dict
         on = _string(c, _require(c, t, "on"), "on")
         c = ctx.at(f"[[operator]] #{k} (on '{on}')")
         if on not in groups:
-            raise c.error(f"unknown group '{on}' (groups: {', '.join(groups)})", "on")
+            raise c.error(f"unknown group '{on}'{_hint(on, groups)} (groups: "
+                          f"{', '.join(groups)})", "on")
         kind = _string(c, _require(c, t, "op"), "op")
         if kind not in _OP_KEYS:
-            raise c.error(f"unknown operator '{kind}'; known operators: {kinds}")
+            raise c.error(f"unknown operator '{kind}'{_hint(kind, _OP_KEYS)}; known operators: "
+                          f"{kinds}")
         _check_keys(c, t, _COMMON_OP_KEYS + _OP_KEYS[kind], f"key for {kind}")
         when = _conditions(c, t, groups, phases)
         op = _operator(c, kind, t, on, groups, when, phases, base)
@@ -961,7 +976,8 @@ def _conditions(c: _Ctx, t: dict, groups: dict, phases: list) -> tuple:
     if "contact" in t:
         group = _string(c, t["contact"], "contact")
         if group not in groups:
-            raise c.error(f"unknown group '{group}' (groups: {', '.join(groups)})", "contact")
+            raise c.error(f"unknown group '{group}'{_hint(group, groups)} (groups: "
+                          f"{', '.join(groups)})", "contact")
         conds.append(Contact(group))
     return tuple(conds)
 
@@ -969,7 +985,8 @@ def _conditions(c: _Ctx, t: dict, groups: dict, phases: list) -> tuple:
 def _source(c: _Ctx, t: dict, groups: dict) -> str:
     src = _string(c, _require(c, t, "from"), "from")
     if src not in groups:
-        raise c.error(f"unknown source group '{src}' (groups: {', '.join(groups)})", "from")
+        raise c.error(f"unknown source group '{src}'{_hint(src, groups)} (groups: "
+                      f"{', '.join(groups)})", "from")
     return src
 
 
