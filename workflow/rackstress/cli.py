@@ -715,6 +715,36 @@ TEACH = {
         "rackstress bench validity --quick --out /tmp/bench",
         "rackstress bench validity --out docs/benchmarks",
     ]),
+    # commands the other engineers of this round add (applied when the command exists)
+    "fea": ("Check a run's part against linear-elastic FEA of the same part.", [
+        "rackstress fea runs/bracket",
+        "rackstress fea runs/bracket --E 70e3 --nu 0.33 --size 0.5",
+        "rackstress fea runs/ms --group rightleg --measure strain",
+    ]),
+    "bench cantilever": ("The aluminium cantilever against beam theory, to equilibrium.", [
+        "rackstress bench cantilever --quick --out /tmp/bench",
+        "rackstress bench cantilever --out docs/benchmarks",
+    ]),
+    "bench inside": ("Binding a mesh part inside its shape, up to 10^6 particles.", [
+        "rackstress bench inside --quick --out /tmp/bench",
+        "rackstress bench inside --out docs/benchmarks",
+    ]),
+    "bench validity3d": ("The bracket STL's particle strain against tetrahedral FEA.", [
+        "rackstress bench validity3d --quick --out /tmp/bench",
+        "rackstress bench validity3d --out docs/benchmarks",
+    ]),
+    "bench e2e": ("README's first command end to end, cold and warm, by phase.", [
+        "rackstress bench e2e --scene magpod-small --out /tmp/bench",
+        "rackstress bench e2e --repeat 2 --long-steps 600 --out /tmp/bench",
+    ]),
+    "bench scaling": ("The compiled plugin on 1 and 2 ranks, modelled to 1,024.", [
+        "rackstress bench scaling --quick --out /tmp/bench",
+        "rackstress bench scaling --out docs/benchmarks",
+    ]),
+    "bench stress": ("Stress from particles against tension and bending.", [
+        "rackstress bench stress --quick --out /tmp/bench",
+        "rackstress bench stress --out docs/benchmarks",
+    ]),
 }
 
 
