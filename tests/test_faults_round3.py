@@ -5,6 +5,7 @@ expressions, NaN positions kept by a divergence, and the progress every long pha
 from __future__ import annotations
 
 import json
+import re
 import os
 import subprocess
 import time
@@ -313,3 +314,17 @@ def test_a_long_phase_ticks_on_a_terminal(tmp_path):
     assert "building the scene 'slow'… 2 s" in text or "building the scene 'slow'… 3 s" in text
     assert "\r\x1b[K" in text and text.rstrip().endswith("built")
     assert "rackstress: building" not in text          # the log line is for non-terminals
+
+
+def test_a_batch_says_when_each_job_starts(tmp_path):
+    """A batch printed a line when a job ended only: a job of minutes was minutes of silence."""
+    sweep = tmp_path / "s.toml"
+    sweep.write_text('scene = "plane-bound"\nengine = "reference"\nsteps = 20\n'
+                     '[[job]]\nname = "a"\n[[job]]\nname = "b"\n')
+    r = rs("batch", sweep, "--out", tmp_path / "b", timeout=300)
+    assert r.returncode == 0, r.stderr
+    lines = [ln.strip() for ln in r.stdout.splitlines()]
+    for name in ("a", "b"):
+        start = lines.index(f"{name}: started (group 0)")
+        end = next(k for k, ln in enumerate(lines) if re.match(rf"\[\d/2\] {name}: ok", ln))
+        assert start < end
