@@ -50,6 +50,11 @@ def test_full_disk_while_rendering_is_a_storage_error(tmpfs):
     assert str(out / "figures") in r.stderr
     assert not (out / "figures").exists() and not (out / "report.html").exists()
     assert leftovers(out) == [] and not [p for p in out.iterdir() if ".tmp" in p.name]
+    # and 'rackstress stress' of it: the storage status (was 2, bad input), nothing half left
+    r = rs("stress", out, "--no-progress", timeout=300)
+    assert r.returncode == 5, (r.returncode, r.stderr)
+    assert "No space left on device" in r.stderr and "Traceback" not in r.stderr
+    assert not (out / "stress.dump").exists() and leftovers(out) == []
 
 
 # ---------------------------------------------------------------------------- long schedules

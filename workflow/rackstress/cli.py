@@ -510,8 +510,8 @@ def stress(inputs, out, vtk, write_dump, parts, atom_style, dt, allow_truncated,
                                out=where)
         else:
             raise RackstressError("give one run directory, or a data file and a dump")
-    except RackstressError as err:
-        _fail(err, err.exit_code)
+    except Exception as err:  # noqa: BLE001 - each kind has its exit status (_fail_any)
+        _fail_any(err)
     for line in describe(info):
         click.echo(line)
     click.echo(f"wrote {Path(where) / 'stress.json'} ({time.perf_counter() - t0:.1f} s)")
