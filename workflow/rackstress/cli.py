@@ -1,6 +1,7 @@
 """The ``rackstress`` command line: run a scene, write its LAMMPS deck, list scenes."""
 from __future__ import annotations
 
+import functools
 import json
 import re
 import sys
@@ -358,12 +359,17 @@ def _post_run(out, progress):
         click.echo(line)
 
 
-def _post_job(rundir):
+def _post_job(rundir, render: bool = True):
     """A batch job's post-processing: the stress peaks into its summary.json (no VTK: run
-    'rackstress stress BATCHDIR/JOB' for the files)."""
+    'rackstress stress BATCHDIR/JOB' for the files), and unless ``render`` is False its
+    default pictures, report.html and 3D view, as 'rackstress run' leaves them."""
     from rackstress.stress.post import postprocess
 
     postprocess(rundir, vtk=False, dump=False)
+    if render:
+        from rackstress.render.pictures import render_default
+
+        render_default(rundir)
 
 
 def _csv(text):
@@ -533,7 +539,10 @@ def stress(inputs, out, vtk, write_dump, parts, atom_style, dt, allow_truncated,
                                "(default: groups.FIRSTGROUP.max_deformation).")
 @click.option("--against", help="With --report: the swept parameter on the x axis "
                                 "(default: the first swept one).")
-def batch(sweep, out, ranks_per_job, retry_failed, manager, report_dir, figure, against):
+@click.option("--render/--no-render", "do_render", default=True, show_default=True,
+              help="Render each finished job's pictures, report.html and 3D view.")
+def batch(sweep, out, ranks_per_job, retry_failed, manager, report_dir, figure, against,
+          do_render):
     """Run every job of a SWEEP file (TOML), over MPI ranks when under mpiexec.
 
     Jobs that diverge or fail are recorded and the rest go on; a killed batch run again on the
@@ -546,6 +555,7 @@ def batch(sweep, out, ranks_per_job, retry_failed, manager, report_dir, figure, 
     try:
         if report_dir is not None:
             batch_mod.report(report_dir, figure, against, log=click.echo)
+            click.echo(f"page: {_batch_page(report_dir)}")
             return
         if sweep is None:
             raise click.UsageError("give a SWEEP file, or --report BATCHDIR")
@@ -555,7 +565,8 @@ def batch(sweep, out, ranks_per_job, retry_failed, manager, report_dir, figure, 
             check_out(out)
         index = batch_mod.run_batch(sweep, out, ranks_per_job, retry_failed, manager,
                                     log=lambda m: click.echo(m) if rank() == 0 else None,
-                                    post=_post_job)
+                                    post=functools.partial(_post_job, render=do_render))
+        page = _batch_page(out or Path("batches") / Path(sweep).stem) if rank() == 0 else None
     except click.UsageError:
         raise
     except Exception as err:  # noqa: BLE001 - each kind has its exit status (_fail_any)
@@ -565,6 +576,15 @@ def batch(sweep, out, ranks_per_job, retry_failed, manager, report_dir, figure, 
         click.echo(f"batch {'complete' if index['complete'] else 'incomplete'}: "
                    + ", ".join(f"{v} {k}" for k, v in sorted(index["counts"].items()))
                    + f"; this pass ran {p['jobs_run']} job(s) in {p['wall_s']:.2f} s")
+        click.echo(f"page: {page}")
+
+
+def _batch_page(batchdir):
+    """BATCHDIR/report.html: the sweep table, the peak against each swept parameter, links to
+    the jobs' reports."""
+    from rackstress.render.batch_report import write_batch_report
+
+    return write_batch_report(batchdir)
 
 
 @main.group()
