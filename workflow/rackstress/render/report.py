@@ -22,6 +22,7 @@ import os
 import time
 from pathlib import Path
 
+from rackstress.errors import storage_error
 from rackstress.lib.runfiles import REPORT, STABILITY, STRESS_JSON
 
 FIGURES = "figures"
@@ -292,6 +293,10 @@ def write_report(rundir, stability: bool = True, view: bool = True) -> Path:
     w("</ul></body></html>")
     path = rundir / REPORT
     tmp = rundir / f".{REPORT}.tmp{os.getpid()}"
-    tmp.write_text("\n".join(out) + "\n", encoding="utf-8")
-    os.replace(tmp, path)
+    try:
+        tmp.write_text("\n".join(out) + "\n", encoding="utf-8")
+        os.replace(tmp, path)
+    except OSError as exc:          # a full disk: no half report left
+        tmp.unlink(missing_ok=True)
+        raise storage_error(exc, "write", path) from None
     return path

@@ -84,12 +84,15 @@ from rackstress.model import topology
 from rackstress.errors import SceneError
 from rackstress.model.operators import (Attract, Bind, Collide, Const, Dampen, Force, Matched,
                                         Within, contact_groups, phase_active, reverse_of)
-from rackstress.model.scene import Scene
+from rackstress.model.scene import Phase, Scene
 from rackstress.model.verlet import scaled_scene
 
 MODES = ("exact", "fast")
 #: The fix external that carries every Python-realized operator.
 PY_FIX = "rs_py"
+#: A schedule of more phases than this is written with a LAMMPS loop over its identical cycles
+#: (:meth:`Deck.schedule_commands`); ``LOOP_VAR`` is the loop's variable and label.
+LOOP_AFTER, LOOP_VAR = 10_000, "rs_cycle"
 #: fix external's Napply: how often its own pass adds its force array to every owned atom of
 #: its group. Never after step 0 (LAMMPS' largest int): the callback adds its forces into
 #: LAMMPS' force array itself, on the rows it computed; at step 0 the pass adds zeros.
@@ -433,8 +436,17 @@ class Deck:
         return [f"variable rs_vh{c} atom v{c}+{h}*f{c}/mass" for c in "xyz"] + \
                [f"variable rs_vp{c} atom v{c}-{h}*f{c}/mass" for c in "xyz"]
 
-    def schedule_commands(self) -> list[str]:
-        """The whole schedule as plain LAMMPS commands (what the runner does, in one text)."""
+    def schedule_commands(self, loop_after: int = LOOP_AFTER) -> list[str]:
+        """The whole schedule as plain LAMMPS commands (what the runner does, in one text).
+
+        A schedule of more than ``loop_after`` phases (``--steps 1000000000000``: 8·10⁸ of them)
+        is written as its first cycle, one cycle in a LAMMPS ``loop``/``jump SELF`` over the
+        identical cycles after it, and the cut last cycle: the deck stays a few lines long."""
+        sc = self.scene
+        spc = sc.steps_per_cycle
+        full = (sc.total_steps // spc) if spc else 0
+        if full * len(sc.phases) > loop_after and full >= 3:
+            return self._looped_schedule(full)
         L = self.velocity_variables()
         previous = None
         for first, phase, cycle in self.scene.schedule():
@@ -443,6 +455,33 @@ class Deck:
             L += self.switch_commands(phase.vars, previous)
             L.append(f"run {phase.steps} pre no post no")
             previous = phase.vars
+        return L
+
+    def _looped_schedule(self, full: int) -> list[str]:
+        sc = self.scene
+        spc = sc.steps_per_cycle
+        L = self.velocity_variables()
+
+        def cycle(phases, previous, note):
+            for phase in phases:
+                L.append(f"# phase '{phase.name}' {dict(phase.vars)} ({note}), {phase.steps} steps")
+                L.extend(self.switch_commands(phase.vars, previous))
+                L.append(f"run {phase.steps} pre no post no")
+                previous = phase.vars
+            return previous
+
+        previous = cycle(sc.phases, None, f"cycle 1, steps 0..{spc}")
+        L += [f"# cycles 2..{full} are alike: a LAMMPS loop (steps {spc}..{full * spc})",
+              f"variable {LOOP_VAR} loop {full - 1}", f"label {LOOP_VAR}"]
+        previous = cycle(sc.phases, previous, f"cycles 2..{full}")
+        L += [f"next {LOOP_VAR}", f"jump SELF {LOOP_VAR}"]
+        rest, tail = sc.total_steps - full * spc, []
+        for phase in sc.phases:
+            take = min(phase.steps, rest)
+            if take > 0:
+                tail.append(Phase(phase.name, take, phase.vars))
+                rest -= take
+        cycle(tail, previous, f"cycle {full + 1}, cut short")
         return L
 
     def switch_commands(self, phase_vars, previous) -> list[str]:
@@ -463,12 +502,12 @@ class Deck:
         L.append(f"velocity {self.moving} set v_rs_vhx v_rs_vhy v_rs_vhz units box")
         return L
 
-    def input_text(self, dump_every: int = 100) -> str:
+    def input_text(self, dump_every: int = 100, loop_after: int = LOOP_AFTER) -> str:
         py = self.python_ops
         L = self.setup_commands(dump_every=dump_every)
         if py:
             L.append(f"fix {PY_FIX} {self.moving} external pf/callback 1 {PY_NAPPLY}")
-        L += self.schedule_commands()
+        L += self.schedule_commands(loop_after)
         return "\n".join(L) + "\n"
 
 

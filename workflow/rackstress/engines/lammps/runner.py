@@ -31,7 +31,7 @@ from rackstress.engines.lammps.deck import MOVE_GROUP, PY_FIX, PY_NAPPLY, Deck
 from rackstress.engines.lammps.plugin import locate as _locate_plugin
 from rackstress.errors import DivergenceError, RackstressError, StorageError
 from rackstress.lib.vec import fresh_zeros
-from rackstress.engines.watchdog import divergence_error, find_divergence
+from rackstress.engines.watchdog import divergence_error, find_divergence, force_error
 
 #: Steps between watchdog checks (and progress updates) on LAMMPS.
 CHECK_EVERY = 10
@@ -372,6 +372,8 @@ class LammpsRun:
         mine = None if err is None else (int(err[0]), type(err[1]).__name__, str(err[1]),
                                          getattr(err[1], "index", None))
         step, kind, text, index = next(e for e in self.comm.allgather(mine) if e is not None)
+        if kind == "NonFiniteForce":        # found in the step it arose in (before the finder,
+            raise force_error(self.scene, step, index)   # which sees its NaN velocities)
         # particles that flew apart (a partner out of ghost reach) are a divergence: the
         # watchdog names the particle first, else the callback's own account does
         found = self._finder()
