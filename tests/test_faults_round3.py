@@ -18,7 +18,7 @@ from test_faults import QUIET, RS, fill, frames, leftovers, rs, tmpfs, wait_for 
 
 # ---------------------------------------------------------------------------- disks
 @pytest.mark.lammps
-def test_full_disk_during_post_processing_is_a_storage_error(tmpfs):
+def test_full_disk_during_post_processing_is_a_storage_error(tmpfs):  # noqa: F811 (the fixture imported above)
     """The run (5.4 MB of dump) fits in 8 MB, its VTK series (~20 MB) does not: VTK's own file
     writer crashed the process there (SIGSEGV, exit 139, nothing printed)."""
     disk = tmpfs("8m")
@@ -38,7 +38,7 @@ def test_full_disk_during_post_processing_is_a_storage_error(tmpfs):
 
 
 @pytest.mark.lammps
-def test_full_disk_while_rendering_is_a_storage_error(tmpfs):
+def test_full_disk_while_rendering_is_a_storage_error(tmpfs):  # noqa: F811 (the fixture imported above)
     disk = tmpfs("8m")
     out = disk / "r"
     r = rs("run", "plane-rack", "--steps", "300", "--dump-every", "10", "--out", out, *QUIET)

@@ -83,7 +83,7 @@ import numpy as np
 from rackstress.model import topology
 from rackstress.errors import SceneError
 from rackstress.model.operators import (Attract, Bind, Collide, Const, Dampen, Force, Matched,
-                                        Within, contact_groups, phase_active, reverse_of)
+                                        contact_groups, phase_active, reverse_of)
 from rackstress.model.scene import Phase, Scene
 from rackstress.model.verlet import scaled_scene
 
