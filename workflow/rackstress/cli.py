@@ -544,6 +544,18 @@ def bench_perf(out, steps, quick, profile_steps, scene_name, no_mpi):
     click.echo(md_table(*mod.breakdown_rows(data)))
 
 
+@bench.command("inside")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
+              help="Output directory (default: docs/benchmarks/ of the repository).")
+@click.option("--quick", is_flag=True, help="3,000 and 17,600 particles only.")
+def bench_inside(out, quick):
+    """Binding a mesh part inside its shape: 17,600 / 100,000 / 1,000,000 particles."""
+    from rackstress.bench import inside as mod
+
+    data = mod.run_bench(out, quick=quick, echo=click.echo)
+    _bench_report(data, mod)
+
+
 @bench.command("validity")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path),
               help="Output directory (default: docs/benchmarks/ of the repository).")
