@@ -110,9 +110,10 @@ def test_boundary_from_a_scene():
 
     sc = cases.cantilever(body="bind", nx=6, ny=2)
     b = boundary_from_scene(sc)
-    assert b["held_ids"].tolist() == [1, 2, 7, 8] and b["held_mask"].all()
+    # particles column by column (x outer): the first two columns are held
+    assert b["held_ids"].tolist() == [1, 2, 3, 4] and b["held_mask"].all()
     # the tip's two particles share the load, unit mass: force = acceleration
-    assert b["load_ids"].tolist() == [6, 12]
+    assert b["load_ids"].tolist() == [11, 12]
     assert b["load_force"].sum(axis=0) == pytest.approx([0.0, -0.05, 0.0])
 
 
@@ -129,7 +130,29 @@ def test_a_mesh_part_by_gmsh_is_its_volume():
     P = p.T
     vol = np.abs(np.einsum("ij,ij->i", np.cross(P[t[1]] - P[t[0]], P[t[2]] - P[t[0]]),
                            P[t[3]] - P[t[0]])).sum() / 6
-    assert vol == pytest.approx(surf.volume, rel=1e-6)
+    # gmsh remeshes each patch from its own parametrization: the volume is the STL's to 0.5 %
+    assert vol == pytest.approx(surf.volume, rel=5e-3)
     # its re-entrant edge x = 3, y = 27 (and the holes' rims, concave towards the bolts)
     ce = concave_edges(p, t)
     assert np.any(np.hypot(ce[:, 0] - 3, ce[:, 1] - 27) < 1e-6)
+
+
+def test_a_sliver_is_removed_and_the_surface_stays_closed():
+    import trimesh
+
+    from rackstress.validity.solid import drop_slivers
+
+    # a tetrahedron whose edge 0–1 carries a middle vertex 4: one face is split at 4 into a
+    # sliver-free pair, the other face across 0–1 holds the zero-area triangle (0, 4, 1)'s
+    # partner: a closed surface with one sliver
+    v = np.array([[0, 0, 0], [2, 0, 0], [0, 2, 0], [0, 0, 2], [1, 0, 0]], float)
+    f = np.array([[0, 2, 1], [0, 4, 3], [4, 1, 3], [1, 2, 3], [0, 3, 2]])
+    tm = trimesh.Trimesh(v, f, process=False)
+    assert not tm.is_watertight               # 0–1 is one edge on one side, two on the other
+    f2 = np.vstack([f, [[0, 1, 4]]])          # close it with the sliver (0, 1, 4)
+    out = drop_slivers(v, f2)
+    t2 = trimesh.Trimesh(v, out, process=False)
+    assert t2.is_watertight and t2.is_winding_consistent
+    assert t2.volume == pytest.approx(8 / 6)
+    area = np.linalg.norm(np.cross(v[out[:, 1]] - v[out[:, 0]], v[out[:, 2]] - v[out[:, 0]]), axis=1)
+    assert (area > 1e-9).all() and len(out) == len(f2)

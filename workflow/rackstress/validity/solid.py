@@ -90,11 +90,47 @@ def cell_mesh(o: np.ndarray, spacing: float):
     return p, t
 
 
+def drop_slivers(vertices: np.ndarray, faces: np.ndarray, rel: float = 1e-9) -> np.ndarray:
+    """The triangles without the zero-area ones (three collinear vertices, as CSG leaves where
+    a hole meets a face), the surface kept closed and conforming: the neighbour across a
+    sliver's long edge is split at the sliver's middle vertex. gmsh cannot parametrize a patch
+    holding a sliver."""
+    v = np.asarray(vertices, float)
+    f = [list(map(int, t)) for t in np.asarray(faces)]
+    tiny = rel * float(np.ptp(v, axis=0).max()) ** 2
+    k = 0
+    while k < len(f):
+        a, b, c = f[k]
+        if np.linalg.norm(np.cross(v[b] - v[a], v[c] - v[a])) > tiny:
+            k += 1
+            continue
+        tri = f[k]
+        lens = [np.linalg.norm(v[tri[(i + 1) % 3]] - v[tri[(i + 2) % 3]]) for i in range(3)]
+        i = int(np.argmax(lens))
+        m, p, q = tri[i], tri[(i + 1) % 3], tri[(i + 2) % 3]
+        for j, t in enumerate(f):              # the triangle with the edge q → p
+            r = next((r for r in range(3) if t[r] == q and t[(r + 1) % 3] == p), None)
+            if j != k and r is not None:
+                d = t[(r + 2) % 3]
+                f[j] = [q, m, d]
+                f.append([m, p, d])
+                break
+        else:
+            k += 1                             # no neighbour: leave it to gmsh
+            continue
+        del f[k]
+        k = 0
+    return np.asarray(f, dtype=np.int64)
+
+
 def surface_mesh(vertices: np.ndarray, faces: np.ndarray, size: float):
     """Tetrahedra of the closed surface (vertices, triangles) by gmsh, largest edge ``size``:
-    (p 3×N, t 4×M). The surface is classified into patches (40° feature angle), each
-    reparametrized and remeshed, then the volume meshed (gmsh runs headless, quietly)."""
+    (p 3×N, t 4×M). Slivers are removed (:func:`drop_slivers`), the surface is classified into
+    patches (40° feature angle), each reparametrized and remeshed, then the volume meshed
+    (gmsh runs headless, quietly)."""
     import gmsh
+
+    faces = drop_slivers(vertices, faces)
 
     gmsh.initialize(["-noenv"], readConfigFiles=False)
     try:
