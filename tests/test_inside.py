@@ -43,10 +43,12 @@ def test_cells_a_segment_touches_by_hand():
 
 def test_lattice_is_found_and_refused():
     a = np.array([[0.25, 1.0, 3.0], [1.25, 1.0, 3.0]])
-    lo, s, ia, ib = lattice_of(a, a + [0.5, 0.5, 0.0])
-    assert s == pytest.approx(0.5) and (ib - ia).tolist() == [[1, 1, 0], [1, 1, 0]]
+    b = a + [0.5, 0.5, 0.0]
+    lo, s, ijk = lattice_of(np.concatenate([a, b]), a, b)
+    assert s == pytest.approx(0.5) and (ijk[2:] - ijk[:2]).tolist() == [[1, 1, 0], [1, 1, 0]]
     rng = np.random.default_rng(1)
-    assert lattice_of(rng.uniform(0, 1, (50, 3)), rng.uniform(0, 1, (50, 3))) is None
+    a, b = rng.uniform(0, 1, (50, 3)), rng.uniform(0, 1, (50, 3))
+    assert lattice_of(np.concatenate([a, b]), a, b) is None
 
 
 @pytest.mark.parametrize("make,kw,dropped", [

@@ -79,28 +79,29 @@ def sampled(region, a: np.ndarray, b: np.ndarray, d: float) -> np.ndarray:
     return out
 
 
-def lattice_of(a: np.ndarray, b: np.ndarray):
-    """(origin, spacing, ia, ib) when every segment end is origin + ijk·spacing on one cubic
-    grid (ia, ib: int64 n×3), else None. The spacing is the smallest non-zero coordinate
-    difference along a segment (a lattice's face or edge neighbour); a guess that is not the
-    grid's spacing fails the check, and the caller samples instead.
+def lattice_of(points: np.ndarray, a: np.ndarray, b: np.ndarray):
+    """(origin, spacing, ijk) when every one of ``points`` is origin + ijk·spacing on one
+    cubic grid (ijk int64 n×3), else None. The spacing is guessed from the segments a–b (some
+    of them): the smallest non-zero coordinate difference (a face or edge neighbour); a guess
+    that is not the grid's spacing fails the check, and the caller samples instead.
     """
-    if not len(a):
+    p = np.asarray(points, float).reshape(-1, 3)
+    if not len(p) or not len(a):
         return None
-    diff = np.abs(b - a)
-    scale = max(float(np.abs(a).max()), float(diff.max()), 1e-300)
+    k = slice(0, 200_000)
+    diff = np.abs(np.asarray(b[k], float) - np.asarray(a[k], float))
+    scale = max(float(np.abs(p).max()), float(diff.max()), 1e-300)
     nz = diff[diff > 1e-9 * scale]
     if not len(nz):
         return None
     s = float(nz.min())
-    lo = np.minimum(a.min(axis=0), b.min(axis=0))
-    ia, ib = np.rint((a - lo) / s).astype(np.int64), np.rint((b - lo) / s).astype(np.int64)
-    if max(np.abs(lo + ia * s - a).max(), np.abs(lo + ib * s - b).max()) > 1e-6 * s:
+    lo = p.min(axis=0)
+    ijk = np.rint((p - lo) / s).astype(np.int64)
+    if np.abs(lo + ijk * s - p).max() > 1e-6 * s:
         return None
-    top = np.maximum(ia.max(axis=0), ib.max(axis=0))
-    if float(np.prod(top + 3.0)) > GRID_PER_POINT * 2 * len(a) + 1000:
+    if float(np.prod(ijk.max(axis=0) + 3.0)) > GRID_PER_POINT * len(p) + 1000:
         return None
-    return lo, s, ia, ib
+    return lo, s, ijk
 
 
 @lru_cache(maxsize=256)
@@ -179,38 +180,53 @@ def segments_inside(region, a: np.ndarray, b: np.ndarray, d: float, name: str = 
     >>> segments_inside(box, np.zeros((1, 3)), np.array([[2., 0, 0]]), 2.5).tolist()
     [True]
     """
+    a, b = np.asarray(a, float).reshape(-1, 3), np.asarray(b, float).reshape(-1, 3)
+    pts = np.concatenate([a, b])
+    k = np.arange(len(a))
+    return pairs_inside(region, pts, k, k + len(a), d, name=name, report=report)
+
+
+def pairs_inside(region, points: np.ndarray, i: np.ndarray, j: np.ndarray, d: float,
+                 name: str = "part", report=None) -> np.ndarray:
+    """Whether each segment points[i[k]]–points[j[k]] lies inside ``region``: as
+    :func:`segments_inside`, without gathering the segments' coordinates (a million
+    particles' bindings: one lattice index per particle, not per binding end)."""
     from rackstress.model.regions import Surface
 
-    a, b = np.asarray(a, float).reshape(-1, 3), np.asarray(b, float).reshape(-1, 3)
-    n = len(a)
+    o = np.asarray(points, float).reshape(-1, 3)
+    i, j = np.asarray(i, np.int64), np.asarray(j, np.int64)
+    n = len(i)
     out = np.zeros(n, dtype=bool)
     if n == 0:
         return out
     t0 = time.perf_counter()
     loud = (n >= REPORT_AT) if report is None else bool(report)
-    lat = lattice_of(a, b)
+    lat = lattice_of(o, o[i[:200_000]], o[j[:200_000]])
     if lat is None:
-        out[:] = sampled(region, a, b, d)
+        out[:] = sampled(region, o[i], o[j], d)
         _say(loud, name, n, n, 0, int((~out).sum()), time.perf_counter() - t0)
         return out
-    lo, s, ia, ib = lat
+    lo, s, ijk = lat
     # the site grid, one cell of margin all round (a touched cell lies within it)
-    dims = tuple(int(x) for x in np.maximum(ia.max(axis=0), ib.max(axis=0)) + 3)
+    dims = tuple(int(x) for x in ijk.max(axis=0) + 3)
     solid = _solid_sites(region, lo - s, s, dims)
     strides = np.array([1, dims[0], dims[0] * dims[1]], dtype=np.int64)
-    fa = (ia + 1) @ strides
-    D = ib - ia
+    flat = (ijk + 1) @ strides
+    fa, fb = flat[i], flat[j]
+    D = ijk[j] - ijk[i]
     m = int(np.abs(D).max())
-    code = ((D[:, 0] + m) * (2 * m + 1) + D[:, 1] + m) * (2 * m + 1) + D[:, 2] + m
+    w = 2 * m + 1
+    code = ((D[:, 0] + m) * w + D[:, 1] + m) * w + D[:, 2] + m
+    del D
     certain = np.ones(n, dtype=bool)
     for k in np.flatnonzero(np.bincount(code)):
         rows = np.flatnonzero(code == k)
-        key = (k // (2 * m + 1) ** 2 - m, k // (2 * m + 1) % (2 * m + 1) - m, k % (2 * m + 1) - m)
+        key = (k // w ** 2 - m, k // w % w - m, k % w - m)
         for c in touched_cells(key):
             certain[rows] &= solid[fa[rows] + int(c @ strides)]
     out[certain] = True
     doubt = np.flatnonzero(~certain)
-    ends_solid = solid[fa[doubt]] & solid[(ib[doubt] + 1) @ strides]
+    ends_solid = solid[fa[doubt]] & solid[fb[doubt]]
     rayed = doubt[ends_solid] if isinstance(region, Surface) else doubt[:0]
     rest = np.setdiff1d(doubt, rayed, assume_unique=True)
     bar = None
@@ -221,14 +237,14 @@ def segments_inside(region, a: np.ndarray, b: np.ndarray, d: float, name: str = 
         bar.unit = "binding"
     try:
         if len(rayed):
-            hit = rayed[_ray_hits(region.polydata, a[rayed], b[rayed], 1e-6 * float(d), bar)]
-            out[np.setdiff1d(rayed, hit, assume_unique=True)] = True
-            rest = np.union1d(rest, hit)        # a hit within VTK's tolerance: sample it
+            hits = _ray_hits(region.polydata, o[i[rayed]], o[j[rayed]], 1e-6 * float(d), bar)
+            out[rayed[~hits]] = True
+            rest = np.union1d(rest, rayed[hits])    # a hit within VTK's tolerance: sample it
     finally:
         if bar is not None:
             bar.close()
     if len(rest):
-        out[rest] = sampled(region, a[rest], b[rest], d)
+        out[rest] = sampled(region, o[i[rest]], o[j[rest]], d)
     _say(loud, name, n, len(doubt), len(rayed), int((~out).sum()), time.perf_counter() - t0)
     return out
 

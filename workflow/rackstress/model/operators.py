@@ -192,6 +192,13 @@ class WithinInside(Within):
 
         return segments_inside(self.region, a, b, self.d, name=name)
 
+    def inside_pairs(self, points: np.ndarray, i: np.ndarray, j: np.ndarray,
+                     name: str = "part") -> np.ndarray:
+        """:meth:`inside` for the segments points[i[k]]–points[j[k]] (one group's pairs)."""
+        from rackstress.model.inside import pairs_inside
+
+        return pairs_inside(self.region, points, i, j, self.d, name=name)
+
 
 Coefficient = Union[Const, Within, Matched]
 
@@ -528,7 +535,7 @@ class Bind(PairOperator):
                 keep = rowdot(diff, diff) < coeff.d * coeff.d
                 i, j = i[keep], j[keep]
                 if isinstance(coeff, WithinInside):     # no binding across free space
-                    keep = coeff.inside(target.o[i], target.o[j], name=target.name)
+                    keep = coeff.inside_pairs(target.o, i, j, name=target.name)
                     i, j = i[keep], j[keep]
                 i, j = np.concatenate([i, j]), np.concatenate([j, i])
             else:
