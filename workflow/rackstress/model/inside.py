@@ -191,8 +191,6 @@ def pairs_inside(region, points: np.ndarray, i: np.ndarray, j: np.ndarray, d: fl
     """Whether each segment points[i[k]]–points[j[k]] lies inside ``region``: as
     :func:`segments_inside`, without gathering the segments' coordinates (a million
     particles' bindings: one lattice index per particle, not per binding end)."""
-    from rackstress.model.regions import Surface
-
     o = np.asarray(points, float).reshape(-1, 3)
     i, j = np.asarray(i, np.int64), np.asarray(j, np.int64)
     n = len(i)
@@ -227,7 +225,9 @@ def pairs_inside(region, points: np.ndarray, i: np.ndarray, j: np.ndarray, d: fl
     out[certain] = True
     doubt = np.flatnonzero(~certain)
     ends_solid = solid[fa[doubt]] & solid[fb[doubt]]
-    rayed = doubt[ends_solid] if isinstance(region, Surface) else doubt[:0]
+    # a mesh region (regions.Surface: its closed triangle surface) gets the ray test
+    mesh = getattr(region, "polydata", None)
+    rayed = doubt[ends_solid] if mesh is not None else doubt[:0]
     rest = np.setdiff1d(doubt, rayed, assume_unique=True)
     bar = None
     if loud and sys.stderr.isatty() and len(rayed):
@@ -237,7 +237,7 @@ def pairs_inside(region, points: np.ndarray, i: np.ndarray, j: np.ndarray, d: fl
         bar.unit = "binding"
     try:
         if len(rayed):
-            hits = _ray_hits(region.polydata, o[i[rayed]], o[j[rayed]], 1e-6 * float(d), bar)
+            hits = _ray_hits(mesh, o[i[rayed]], o[j[rayed]], 1e-6 * float(d), bar)
             out[rayed[~hits]] = True
             rest = np.union1d(rest, rayed[hits])    # a hit within VTK's tolerance: sample it
     finally:
