@@ -87,3 +87,27 @@ def test_fea_of_a_directory_that_is_not_a_run(tmp_path):
     r = _cli("fea", str(tmp_path))
     assert r.returncode == 2
     assert "no summary.json" in r.stderr and not (tmp_path / "fea.json").exists()
+
+
+def test_boundary_npz_is_used_when_present(run, tmp_path):
+    """boundary.npz (CONTRACT.md, written by runs of material scenes) takes precedence over
+    the scene: the same supports and twice the load give twice FEA's stress (linearity)."""
+    import shutil
+
+    first = json.loads((run / "fea.json").read_text()) if (run / "fea.json").is_file() else None
+    if first is None:
+        assert _cli("fea", str(run)).returncode == 0
+    base = np.load(run / "fea.npz")["fea_von_mises"]
+    twin = tmp_path / "twin"
+    shutil.copytree(run, twin)
+    o_ids = np.arange(1, 109)
+    x = (o_ids - 1) % 12                       # a filled part's id order: x fastest
+    np.savez(twin / "boundary.npz", held_ids=o_ids[x == 0].astype(np.int64),
+             held_mask=np.ones((9, 3), bool), load_ids=o_ids[x == 11].astype(np.int64),
+             load_force=np.tile([0.0, 0.0, -0.02], (9, 1)), units=np.str_("paper"))
+    r = _cli("fea", str(twin))
+    assert r.returncode == 0, r.stderr
+    data = json.loads((twin / "fea.json").read_text())
+    assert data["boundary"] == "boundary.npz"
+    assert data["total_force"] == pytest.approx([0, 0, -0.18])
+    assert np.load(twin / "fea.npz")["fea_von_mises"] == pytest.approx(2 * base, rel=1e-6)
