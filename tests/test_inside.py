@@ -124,3 +124,14 @@ def test_one_line_when_not_a_terminal(capfd):
     segments_inside(box, o[:-1], o[1:], 1.5, name="beam", report=True)
     err = capfd.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "bind inside beam: 3 bindings" in err[0]
+
+
+@pytest.mark.slow
+def test_bench_inside_writes_its_table(tmp_path):
+    from rackstress.bench import inside as bench
+
+    data = bench.run_bench(tmp_path, sizes=(1500,), echo=lambda *a: None)
+    (row,) = data["sizes"]
+    assert row["old_tested"] == row["bindings"] and row["differ"] == 0
+    assert (tmp_path / "inside.md").read_text().count("|") > 20
+    assert (tmp_path / "inside.json").is_file()
