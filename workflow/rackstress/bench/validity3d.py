@@ -134,7 +134,8 @@ def run_bench(out=None, quick: bool = False, echo=print) -> dict:
                  f"{r['top5_overlap']:.2f}, peak ratio {r['peak_ratio']:.3f}")
             rows.append(r)
     _figure(rows[0], out / "validity3d.png")
-    data = {"machine": machine(), "mesh": _stl().name, "target": {"spearman": 0.8,
+    data = {"machine": machine(), "mesh": _stl().name, "quick": bool(quick),
+            "target": {"spearman": 0.8,
             "top5_overlap": 0.5, "peak_ratio_error": 0.15},
             "rows": [{k: v for k, v in r.items() if not k.startswith("_")} for r in rows]}
     data["files"] = [str(out / f"validity3d.{x}") for x in ("json", "md", "png")]
@@ -153,7 +154,8 @@ def table_rows(data) -> list:
 def markdown(data) -> str:
     m = data["machine"]
     return ("# A 3D part from an STL against tetrahedral FEA\n\n"
-            "Written by `rackstress bench validity3d` (module docstring of "
+            "Written by `rackstress bench validity3d"
+            + (" --quick" if data.get("quick") else "") + "` (module docstring of "
             "`bench/validity3d.py`): the bracket of `examples/bracket` held at its bolts, a "
             "downward force on its arm's end; the particles' `strain` (η of the affine fit, "
             "bind-inside lattice at its linear equilibrium) against FEA's von Mises stress on "
