@@ -128,17 +128,19 @@ def touched_cells(offset: tuple) -> np.ndarray:
     return np.array(out, dtype=np.int64).reshape(-1, 3)
 
 
-def _solid_sites(region, origin, s: float, dims) -> np.ndarray:
+def _solid_sites(region, origin, s: float, dims, bar=None) -> np.ndarray:
     """Flat bool over the grid origin + (i, j, k)·s (x fastest): all 8 diagonal neighbours at
     ±DELTA·s are in ``region``."""
     out = None
     for off in _DIAG * (DELTA * s):
         m = np.asarray(region.grid_mask(np.asarray(origin) + off, (s, s, s), dims), dtype=bool)
         out = m if out is None else (out & m)
+        if bar is not None:
+            bar.update(1)
     return out
 
 
-def _ray_hits(polydata, a: np.ndarray, b: np.ndarray, eps: float, bar) -> np.ndarray:
+def _ray_hits(polydata, a: np.ndarray, b: np.ndarray, eps: float) -> np.ndarray:
     """Whether each segment a[k]–b[k], or one of its 8 copies moved by ±eps along the
     diagonals, meets the surface (VTK's OBB tree). The copies make a segment that only grazes
     an edge of the surface (through a re-entrant corner) count, as :func:`sampled`'s diagonal
@@ -152,15 +154,12 @@ def _ray_hits(polydata, a: np.ndarray, b: np.ndarray, eps: float, bar) -> np.nda
     pts, ids = vtkPoints(), vtkIdList()
     hit = np.zeros(len(a), dtype=bool)
     shifts = np.vstack([np.zeros((1, 3)), eps * _DIAG])
-    step = max(1, len(a) // 100)
     for k in range(len(a)):
         for sh in shifts:
             obb.IntersectWithLine((a[k] + sh).tolist(), (b[k] + sh).tolist(), pts, ids)
             if ids.GetNumberOfIds() > 0:
                 hit[k] = True
                 break
-        if bar is not None and (k + 1) % step == 0:
-            bar.update(step)
     return hit
 
 
@@ -205,9 +204,34 @@ def pairs_inside(region, points: np.ndarray, i: np.ndarray, j: np.ndarray, d: fl
         _say(loud, name, n, n, 0, int((~out).sum()), time.perf_counter() - t0)
         return out
     lo, s, ijk = lat
+    bar = None
+    if loud and sys.stderr.isatty():            # stages: 8 solid-site passes, cells, rays, samples
+        from rackstress.lib.progress import progress_bar
+
+        bar = progress_bar(11, True, f"bind inside {name}")
+        bar.unit = "stage"
+    try:
+        out, doubt, rayed = _decide(region, o, i, j, d, lo, s, ijk, bar)
+    finally:
+        if bar is not None:
+            bar.close()
+    _say(loud, name, n, doubt, rayed, int((~out).sum()), time.perf_counter() - t0)
+    return out
+
+
+def _tick(bar) -> None:
+    if bar is not None:
+        bar.update(1)
+
+
+def _decide(region, o, i, j, d, lo, s, ijk, bar):
+    """Steps 1–3 of the module docstring for the segments o[i]–o[j] on the lattice (lo, s,
+    ijk): (inside, how many were doubtful, how many of those were ray-tested)."""
+    n = len(i)
+    out = np.zeros(n, dtype=bool)
     # the site grid, one cell of margin all round (a touched cell lies within it)
     dims = tuple(int(x) for x in ijk.max(axis=0) + 3)
-    solid = _solid_sites(region, lo - s, s, dims)
+    solid = _solid_sites(region, lo - s, s, dims, bar)
     strides = np.array([1, dims[0], dims[0] * dims[1]], dtype=np.int64)
     flat = (ijk + 1) @ strides
     fa, fb = flat[i], flat[j]
@@ -229,24 +253,16 @@ def pairs_inside(region, points: np.ndarray, i: np.ndarray, j: np.ndarray, d: fl
     mesh = getattr(region, "polydata", None)
     rayed = doubt[ends_solid] if mesh is not None else doubt[:0]
     rest = np.setdiff1d(doubt, rayed, assume_unique=True)
-    bar = None
-    if loud and sys.stderr.isatty() and len(rayed):
-        from rackstress.lib.progress import progress_bar
-
-        bar = progress_bar(len(rayed), True, f"bind inside {name}")
-        bar.unit = "binding"
-    try:
-        if len(rayed):
-            hits = _ray_hits(mesh, o[i[rayed]], o[j[rayed]], 1e-6 * float(d), bar)
-            out[rayed[~hits]] = True
-            rest = np.union1d(rest, rayed[hits])    # a hit within VTK's tolerance: sample it
-    finally:
-        if bar is not None:
-            bar.close()
+    _tick(bar)
+    if len(rayed):
+        hits = _ray_hits(mesh, o[i[rayed]], o[j[rayed]], 1e-6 * float(d))
+        out[rayed[~hits]] = True
+        rest = np.union1d(rest, rayed[hits])        # a hit within VTK's tolerance: sample it
+    _tick(bar)
     if len(rest):
         out[rest] = sampled(region, o[i[rest]], o[j[rest]], d)
-    _say(loud, name, n, len(doubt), len(rayed), int((~out).sum()), time.perf_counter() - t0)
-    return out
+    _tick(bar)
+    return out, len(doubt), len(rayed)
 
 
 def _say(loud: bool, name: str, n: int, doubt: int, rayed: int, dropped: int, secs: float):
