@@ -440,6 +440,29 @@ def solve_part(o, spacing, shape, held_x, held_mask, load_x, load_F, E, nu, size
 
 
 # --------------------------------------------------------------------------- a run directory
+class _Recorded:
+    """A run's parts from its own record (scene.json's groups, the original positions) when
+    its scene cannot be rebuilt here (a scene file changed or gone): enough for the FEA of
+    the particles' cells, with boundary.npz's supports and loads."""
+
+    class _Group:
+        def __init__(self, name, o):
+            self.name, self.o, self.n, self.meta = name, o, len(o), {}
+
+    def __init__(self, rundir: Path):
+        from rackstress.stress.rundata import load_run
+
+        rec = json.loads((rundir / "scene.json").read_text())
+        o = np.asarray(load_run(rundir).o, float)
+        self._slices = {g["name"]: slice(g["first_id"] - 1, g["first_id"] - 1 + g["n"])
+                        for g in rec["groups"]}
+        self.groups = {n: self._Group(n, o[sl]) for n, sl in self._slices.items()}
+        self.operators = {}
+
+    def slice(self, name: str) -> slice:
+        return self._slices[name]
+
+
 def _part_group(scene, summary: dict, boundary: dict, group: str | None) -> str:
     if group is not None:
         if group not in scene.groups:
@@ -539,7 +562,13 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
     t0 = time.perf_counter()
     rundir = Path(rundir)
     summary = json.loads((rundir / "summary.json").read_text())
-    scene = rebuild_scene(rundir)
+    rebuilt = None
+    try:
+        scene = rebuild_scene(rundir)
+    except Exception as exc:  # noqa: BLE001 - the run's own record still serves (cells)
+        scene, rebuilt = _Recorded(rundir), f"the scene could not be rebuilt ({exc})"
+        if not (rundir / "boundary.npz").is_file():
+            raise ValueError(f"{rebuilt} and the run has no boundary.npz") from None
     bnd, bsource = _boundary(rundir, scene)
     name = _part_group(scene, summary, bnd, group)
     g, sl = scene.groups[name], scene.slice(name)
@@ -547,7 +576,7 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
     mat = ((summary.get("groups") or {}).get(name) or {}).get("material") or {}
     E_ = float(E if E is not None else mat.get("E", 1.0))
     nu_ = float(nu if nu is not None else mat.get("nu", 0.3))
-    shape = _shape(scene, name)
+    shape = None if rebuilt else _shape(scene, name)
     hk = np.asarray(bnd["held_ids"], np.int64) - 1 - sl.start
     hin = (hk >= 0) & (hk < g.n)
     lk = np.asarray(bnd["load_ids"], np.int64) - 1 - sl.start
@@ -573,7 +602,9 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
         "to_stress": to_stress, "units": str(bnd.get("units", summary.get("units", "paper"))),
         "material": {"E": E_, "nu": nu_, "from": "summary.json" if mat else
                      ("options" if E is not None else "default (E = 1, ν = 0.3)")},
-        "boundary": bsource, "mesh": how, "note": note, "fe": sol.info,
+        "boundary": bsource, "mesh": how, "fe": sol.info,
+        "note": "; ".join(x for x in (rebuilt and rebuilt + ": the part is the union of its "
+                                      "particles' cells", note) if x) or None,
         "held_particles": int(hin.sum()), "fixed_fe_nodes": int(fixed.any(axis=1).sum()),
         "loaded_particles": int(lin.sum()), "total_force": F_tot,
         "fe_total_force": forces.sum(axis=0),
