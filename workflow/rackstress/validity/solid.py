@@ -159,7 +159,8 @@ def surface_mesh(vertices: np.ndarray, faces: np.ndarray, size: float):
     index[tags.astype(np.int64)] = np.arange(len(tags))
     t = index[np.asarray(tet[0], np.int64).reshape(-1, 4)].T
     used, t = np.unique(t, return_inverse=True)
-    return coords.reshape(-1, 3)[used].T, t.reshape(4, -1)
+    return (np.ascontiguousarray(coords.reshape(-1, 3)[used].T),
+            np.ascontiguousarray(t.reshape(4, -1)))
 
 
 # --------------------------------------------------------------------------- solution
