@@ -587,6 +587,44 @@ def _batch_page(batchdir):
     return write_batch_report(batchdir)
 
 
+@main.command("fea")
+@click.argument("rundir", type=click.Path(file_okay=False, path_type=Path))
+@click.option("--E", "E", type=float, help="Young's modulus (default: the part's material in "
+              "summary.json, else 1: ranks do not depend on it).")
+@click.option("--nu", type=float, help="Poisson's ratio (default: the material's, else 0.3).")
+@click.option("--size", type=float, help="Largest FE edge (default: one particle spacing).")
+@click.option("--group", help="The part to solve (default: the one with a material, else the "
+              "largest with supports or loads).")
+@click.option("--measure", help="The particle measure compared (default: von_mises if the run "
+              "has it, else strain).")
+def fea(rundir, E, nu, size, group, measure):
+    """Check a run's part against linear-elastic FEA of the same part (the 'fem' extra).
+
+    Writes fea.json, fea.npz, vtk/fea.vtp, vtk/fea_mesh.vtu, figures/fea.png and the report's
+    "Finite-element check" (docs/fea.md). Exit 2 for a run it cannot read or solve.
+    """
+    try:
+        from rackstress.validity import solid
+    except ImportError as exc:
+        _fail(RackstressError(f"rackstress fea needs the 'fem' extra (scikit-fem, gmsh): "
+                              f"pip install 'rackstress[fem]' ({exc})"), 2)
+    if not (Path(rundir) / "summary.json").is_file():
+        _fail(RackstressError(f"{rundir}: no summary.json; is this a finished run directory "
+                              "(made by 'rackstress run')?"), 2)
+    try:
+        data = solid.check_run(rundir, E=E, nu=nu, size=size, group=group, measure=measure,
+                               echo=click.echo)
+    except (ValueError, RackstressError) as exc:
+        _fail(RackstressError(f"rackstress fea {rundir}: {exc}"), 2)
+    _write_report(rundir)
+    ag = data["agreement"]
+    ratio = ag.get("peak_ratio")
+    click.echo(f"fea: {data['group']} ({data['particles']:,} particles, {data['mesh']}): "
+               f"Spearman {ag['spearman']:.3f}, top-5 % overlap {ag['top5_overlap']:.2f}, "
+               f"peak ratio " + ("pending" if ratio is None else f"{ratio:.3f}")
+               + f" ({data['measure']}); wrote {rundir}/fea.json")
+
+
 @main.group()
 def bench():
     """Benchmarks of stability, work-precision and speed (outputs in docs/benchmarks/)."""
@@ -671,6 +709,30 @@ def bench_scaling(out, quick, remodel):
 
     data = (mod.from_json(out) if remodel
             else mod.run_bench(out, quick=quick, echo=click.echo))
+    _bench_report(data, mod)
+
+
+@bench.command("inside")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
+              help="Output directory (default: docs/benchmarks/ of the repository).")
+@click.option("--quick", is_flag=True, help="3,000 and 17,600 particles only.")
+def bench_inside(out, quick):
+    """Binding a mesh part inside its shape: 17,600 / 100,000 / 1,000,000 particles."""
+    from rackstress.bench import inside as mod
+
+    data = mod.run_bench(out, quick=quick, echo=click.echo)
+    _bench_report(data, mod)
+
+
+@bench.command("validity3d")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
+              help="Output directory (default: docs/benchmarks/ of the repository).")
+@click.option("--quick", is_flag=True, help="Spacing 1 only.")
+def bench_validity3d(out, quick):
+    """The bracket STL's particle strain against tetrahedral FEA (the 'fem' extra)."""
+    from rackstress.bench import validity3d as mod
+
+    data = mod.run_bench(out, quick=quick, echo=click.echo)
     _bench_report(data, mod)
 
 
