@@ -32,8 +32,8 @@ import numpy as np
 from rackstress.lib.jsonio import write_json
 from rackstress.lib.runfiles import CACHE, STRESS_DUMP, STRESS_JSON, VTK_DIR
 from rackstress.stress.dump import StressInputError
-from rackstress.stress.measures import (AccumulatedDistance, VirialStress, VonMisesStrain,
-                                        positions, stress_columns)
+from rackstress.stress.measures import (VirialStress, measure_frames, positions,
+                                        stress_columns)
 
 #: The measures every run gets, in this order (``virial`` too when the dump recorded it).
 MEASURES = ("paper", "accumulated", "strain", "d2min")
@@ -150,20 +150,17 @@ def compute_fields(run, cache: bool = True, progress: bool = False) -> Fields:
             f"{size:.3g} values per measure, more than the {MAX_VALUES:.3g} the stress "
             "post-processing holds in memory; dump fewer frames (--dump-every) or analyse "
             "a part of the run")
+    from rackstress.lib.progress import progress_bar
+
     virial = stress_columns(run.index.columns) is not None
-    analyses = [AccumulatedDistance(run, fit=FIT), VonMisesStrain(run)]
-    if virial:
-        analyses.append(VirialStress(run))
     tty = bool(progress) and sys.stderr.isatty()
-    for a in analyses:
-        a.run(verbose=tty, progressbar_kwargs={"desc": f"measure {a.NAME}", "leave": False}
-              if tty else None)
-    acc, strain = analyses[0].results, analyses[1].results
-    values = {"paper": acc.distance, "accumulated": acc.per_particle,
-              "strain": strain.von_mises, "d2min": strain.d2min}
+    with progress_bar(run.index.n_frames, tty, "measures") as bar:
+        bar.unit = "frame"
+        got = measure_frames(run, progress=bar.update)
+    values = {m: got[m] for m in MEASURES}
     if virial:
-        values["virial"] = analyses[2].results.per_particle
-    fields = Fields(np.asarray(acc.steps, dtype=np.int64), values)
+        values["virial"] = VirialStress(run).run().results.per_particle
+    fields = Fields(got["steps"], values)
     fields.timings["compute_s"] = time.perf_counter() - t0
     fields.timings["cached"] = False
     if cache and not run.truncation:
