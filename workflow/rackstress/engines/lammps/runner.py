@@ -118,7 +118,7 @@ class LammpsRun:
         dump = str(out / "trajectory.dump") if out is not None else None
         for cmd in deck.setup_commands(str(data), dump, dump_every):
             self.command(cmd)
-            if dump is not None and cmd.startswith("dump ") and " all custom " in cmd:
+            if dump is not None and cmd.startswith("dump ") and " custom " in cmd:
                 self._dump_id = cmd.split()[1]
                 if append:
                     self.command(f"dump_modify {self._dump_id} append yes")
@@ -550,8 +550,7 @@ class LammpsRun:
         format), unless the dump interval already wrote it."""
         if self._dump_id is None or self.step % self.dump_every == 0:
             return
-        self.command(f"write_dump all custom {self._dump_file} id type mol x y z modify sort id "
-                     "format float %.10g append yes")
+        self.command(self.deck.write_dump_command(self._dump_file))
 
     def close(self):
         try:
