@@ -157,6 +157,14 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
                 _finish(summary, out, do_render, progress)
             return
         sc = _load_scene(scene, steps, dt, sets, integrator)
+        if rank() == 0:
+            from rackstress.stress.kernels import warm_in_background
+
+            warm_in_background()        # a first run compiles the measures' loop meanwhile
+            if progress:
+                click.echo(f"{sc.name}: {sc.n_particles:,} particles, {sc.total_steps:,} "
+                           f"iterations on {engine}; checking dt against Eq. 5's limit and "
+                           "building the deck ...")
         if out is None:
             out = Path("runs") / f"{sc.name}-{time.strftime('%Y%m%d-%H%M%S')}"
         if restart_every is None and engine == "lammps":
@@ -189,19 +197,38 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True) ->
         md = g["max_deformation"]
         click.echo(f"  {name:12s} n={g['n']:6d}  max_deformation="
                    + (f"{md:.4g}" if md is not None else "-"))
-    _post_run(out, progress)
-    if do_render:
-        from rackstress.render.pictures import render_default
+    from rackstress.stress.post import cancel_files, wait_files
 
-        t0 = time.perf_counter()
+    if progress:
+        click.echo("  measuring the stress of every frame ...")
+    _post_run(out, progress, background=do_render)
+    if do_render and progress:
+        click.echo("  painting the pictures (the VTK files are written meanwhile) ...")
+    try:
+        if do_render:
+            from rackstress.render.pictures import render_default
+
+            t0 = time.perf_counter()
+            try:
+                rep = render_default(out, progress=progress)
+            except Exception as err:  # noqa: BLE001 - the run itself is complete and kept
+                try:
+                    wait_files(out)                   # the VTK files are still worth having
+                except Exception:  # noqa: BLE001, S110 - the render's error is the one to tell
+                    pass
+                click.echo(f"rackstress: error: the run finished, but rendering its pictures "
+                           f"failed: {err} (retry with 'rackstress render {out}')", err=True)
+                sys.exit(EXIT_RENDER)
+            click.echo(f"  pictures: {rep.outdir} ({len(rep.files)} files, "
+                       f"{time.perf_counter() - t0:.1f} s)")
         try:
-            rep = render_default(out, progress=progress)
+            wait_files(out)
         except Exception as err:  # noqa: BLE001 - the run itself is complete and kept
-            click.echo(f"rackstress: error: the run finished, but rendering its pictures "
-                       f"failed: {err} (retry with 'rackstress render {out}')", err=True)
+            click.echo(f"rackstress: error: the run finished, but writing its VTK files failed: "
+                       f"{err} (retry with 'rackstress stress {out}')", err=True)
             sys.exit(EXIT_RENDER)
-        click.echo(f"  pictures: {rep.outdir} ({len(rep.files)} files, "
-                   f"{time.perf_counter() - t0:.1f} s)")
+    finally:
+        cancel_files(out)
 
 
 @main.command()
@@ -248,12 +275,13 @@ def list_scenes(files):
         click.echo("  " + json.dumps(params))
 
 
-def _post_run(out, progress):
-    """After a run: the stress measures once, their peaks into summary.json, the VTK series."""
+def _post_run(out, progress, background: bool = False):
+    """After a run: the stress measures once, their peaks into summary.json, the VTK series
+    (``background``: written by a forked process while the pictures are painted)."""
     from rackstress.stress.post import TooLargeError, describe, postprocess
 
     try:
-        info = postprocess(out, vtk=True, dump=False, progress=progress)
+        info = postprocess(out, vtk=True, dump=False, progress=progress, background=background)
     except TooLargeError as err:
         click.echo(f"  note: no stress peaks or VTK files: {err}")
         return
@@ -367,7 +395,11 @@ def _write_report(rundir):
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path),
               help="Output folder (default: the run directory; for DATA DUMP the dump's folder).")
 @click.option("--vtk/--no-vtk", default=True, show_default=True,
-              help="Write vtk/run.pvd and one .vtp per frame (ParaView, OVITO, pyvista).")
+              help="Write vtk/run.pvd and one .vtp per frame (ParaView, pyvista; OVITO: "
+                   "--vtk-format ovito).")
+@click.option("--vtk-format", type=click.Choice(["paraview", "ovito"]), default="paraview",
+              show_default=True, help="paraview: compressed (ParaView, pyvista); ovito: "
+                                      "uncompressed inline arrays, which OVITO 3.17 also reads.")
 @click.option("--dump/--no-dump", "write_dump", default=True, show_default=True,
               help="Write stress.dump: a LAMMPS dump with the measures as named columns.")
 @click.option("--parts", type=click.Choice(["mol", "type"]),
@@ -380,7 +412,8 @@ def _write_report(rundir):
 @click.option("--allow-truncated", is_flag=True,
               help="Use the complete frames of a dump that ends mid-frame.")
 @click.option("--progress/--no-progress", default=True, show_default=True)
-def stress(inputs, out, vtk, write_dump, parts, atom_style, dt, allow_truncated, progress):
+def stress(inputs, out, vtk, write_dump, parts, atom_style, dt, allow_truncated, progress,
+           vtk_format="paraview"):
     """Compute every stress measure of a run once and write them for ParaView and OVITO.
 
     INPUTS is a run directory (RUNDIR), or a plain LAMMPS data file and dump (DATA DUMP) that
@@ -401,7 +434,7 @@ def stress(inputs, out, vtk, write_dump, parts, atom_style, dt, allow_truncated,
 
             with locked(inputs[0], create=False):      # not while a run or render holds it
                 info = postprocess(inputs[0], vtk=vtk, dump=write_dump, progress=progress,
-                                   out=out)
+                                   out=out, vtk_format=vtk_format)
             where = out or inputs[0]
         elif len(inputs) == 2:
             from rackstress.stress.foreign import load_plain
@@ -412,7 +445,7 @@ def stress(inputs, out, vtk, write_dump, parts, atom_style, dt, allow_truncated,
             run = load_plain(inputs[0], inputs[1], parts=parts, atom_style=atom_style, dt=dt,
                              outdir=where, allow_truncated=allow_truncated)
             info = postprocess(None, run=run, vtk=vtk, dump=write_dump, progress=progress,
-                               out=where)
+                               out=where, vtk_format=vtk_format)
         else:
             raise RackstressError("give one run directory, or a data file and a dump")
     except RackstressError as err:

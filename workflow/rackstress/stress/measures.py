@@ -434,6 +434,7 @@ def strain(hood: Neighbourhoods, o: np.ndarray, P: np.ndarray):
     from rackstress.stress import kernels
 
     if kernels.available():
+        kernels.wait_warm()
         return kernels.strain(hood, o, P)
     return strain_frames(hood, o, P)
 
