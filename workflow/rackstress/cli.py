@@ -80,7 +80,7 @@ def _fail_any(err: BaseException, out=None):
 
 #: Options of ``run`` that ``--resume`` cannot honour: the run goes on as it was started.
 RESUME_FIXED = ("engine", "mode", "steps", "dt", "sets", "dump_every", "overwrite",
-                "restart_every", "allow_unstable", "integrator")
+                "restart_every", "allow_unstable", "integrator", "dump_all")
 
 
 @click.group()
@@ -103,6 +103,10 @@ def main():
 @click.option("--out", type=click.Path(file_okay=False), callback=_out_path,
               help="Run directory (default: runs/SCENE-TIMESTAMP).")
 @click.option("--dump-every", type=click.IntRange(min=1), help="Steps between trajectory frames.")
+@click.option("--dump-all", is_flag=True,
+              help="Every particle in every frame of trajectory.dump (a plain LAMMPS dump for "
+                   "other tools); default: a scene with a resting sediment dumps the particles "
+                   "that moved, the others being where particles.data puts them.")
 @click.option("--overwrite", is_flag=True, help="Replace a finished run in --out.")
 @click.option("--progress/--no-progress", default=True, show_default=True)
 @click.option("--render/--no-render", "do_render", default=True, show_default=True,
@@ -119,7 +123,8 @@ def main():
               show_default=True, help="euler: Eq. 5, the paper's; verlet: the second-order mode "
               "(leapfrog with trapezoidal damping).")
 def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progress, do_render,
-        restart_every=None, resume_dir=None, allow_unstable=False, integrator="euler"):
+        restart_every=None, resume_dir=None, allow_unstable=False, integrator="euler",
+        dump_all=False):
     """Run SCENE (a built-in name or a .toml file) and write a run directory.
 
     Exit status (errors.py): 0 done, 2 bad input or a run directory in use or holding another
@@ -173,6 +178,7 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
             restart_every = default_restart_every(sc.total_steps)
         # bad input is refused before the run directory is touched
         planned = run_mod.plan(sc, engine, mode, dump_every, allow_unstable=allow_unstable)
+        planned["deck"].dump_all = bool(dump_all)
         # the lock is held from before anything is written until the pictures are done
         with locked(out) as held:   # noqa: F841
             summary = run_mod.run(sc, out, engine=engine, mode=mode, dump_every=dump_every,

@@ -229,6 +229,10 @@ def resume_run(rundir: Path, spec: str | None = None, progress: bool = True, com
             raise ResumeError(f"{rundir}: checkpoint holds {len(ck.x)} particles, the scene "
                               f"{scene.n_particles}")
         deck = compile_deck(scene, mode)
+        try:       # the trajectory goes on as it was begun: every particle, or the moving ones
+            deck.dump_all = json.loads((rundir / "scene.json").read_text()).get("dump") == "all"
+        except (OSError, json.JSONDecodeError):
+            pass
         on_root(lambda: (truncate_dump(rundir / "trajectory.dump", ck.step),
                          remove_derived(rundir)), comm)
         records = None

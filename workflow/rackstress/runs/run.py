@@ -308,8 +308,10 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
         from rackstress.errors import storage_error
 
         claim(out, overwrite)
+        dump = "moving" if (deck is not None and deck.dump_moving) else "all"
         write_json(out / "scene.json", {**scene_record(scene), "engine": engine, "mode": mode,
-                                        "dump_every": dump_every, "fingerprint": fp})
+                                        "dump_every": dump_every, "dump": dump,
+                                        "fingerprint": fp})
         if p.get("stability") is not None:      # the report's stability margin, predicted once
             from rackstress.lib.runfiles import STABILITY
             from rackstress.model.stability import describe_limit

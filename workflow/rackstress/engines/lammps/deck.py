@@ -143,6 +143,14 @@ class Deck:
     #: groups whose particles rest until touched (only python-realized collides and dampen act
     #: on them): LAMMPS integrates them only once the callback has activated them
     passive: tuple = ()
+    #: every particle in every frame of the trajectory, as a plain LAMMPS dump (``rackstress run
+    #: --dump-all``), instead of the ones that moved (:meth:`dump_commands`)
+    dump_all: bool = False
+
+    @property
+    def dump_moving(self) -> bool:
+        """Whether the trajectory's frames hold only the displaced particles."""
+        return bool(self.passive) and not self.dump_all
 
     @property
     def lammps_skin(self) -> float:
@@ -249,18 +257,18 @@ class Deck:
         (:func:`rackstress.engines.dumpio.read_frames`, the stress reader) put it. MagPod's
         resting sediment is then written once, in the data file."""
         L = []
-        if self.passive:
+        if self.dump_moving:
             L.append("# the dump follows what moves: a particle a frame does not hold sits at "
                      "its position in the data file")
             L.append("compute rs_disp all displace/atom")
         L.append(f"dump rs_dump all custom {dump_every} {dump_file} id type mol x y z")
         L.append("dump_modify rs_dump sort id format float %.10g"
-                 + (f" {self.DUMP_SELECT}" if self.passive else ""))
+                 + (f" {self.DUMP_SELECT}" if self.dump_moving else ""))
         return L
 
     def write_dump_command(self, dump_file: str) -> str:
         """One frame of the current step in the trajectory's own format (:meth:`dump_commands`)."""
-        sel = f" {self.DUMP_SELECT}" if self.passive else ""
+        sel = f" {self.DUMP_SELECT}" if self.dump_moving else ""
         return (f"write_dump all custom {dump_file} id type mol x y z modify sort id "
                 f"format float %.10g{sel} append yes")
 
