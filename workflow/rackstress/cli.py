@@ -560,6 +560,33 @@ def bench_accuracy(out, quick, scene_names):
     _bench_report(data, mod)
 
 
+@bench.command("e2e")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
+              help="Output directory (default: docs/benchmarks/ of the repository).")
+@click.option("--scene", "scene_names", multiple=True,
+              type=click.Choice(["magpod-small", "magpod", "sediment-large"]),
+              help="Scenes (default: all three).")
+@click.option("--repeat", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Cold and warm runs of each scene, interleaved.")
+@click.option("--long-steps", type=click.IntRange(min=1), default=1200, show_default=True,
+              help="Iterations of magpod and sediment-large (magpod-small runs its own 4800).")
+def bench_e2e(out, scene_names, repeat, long_steps):
+    """README's first command end to end, warm and cold: phases, run directory by file, the
+    trajectory's cost per frame -> docs/benchmarks/e2e.{json,md}."""
+    from rackstress import bench as b
+    from rackstress.bench import e2e
+
+    names = scene_names or e2e.SCENES
+    d = b.out_dir(out)
+    machine = b.machine()
+    data = e2e.run(d, names, repeat,
+                   steps={n: long_steps for n in ("magpod", "sediment-large")}, log=click.echo)
+    data["machine"] = machine
+    b.write_json(d / "e2e.json", data)
+    (d / "e2e.md").write_text(e2e.markdown(data, machine))
+    click.echo(f"wrote {d / 'e2e.md'}")
+
+
 @bench.command("perf")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path),
               help="Output directory (default: docs/benchmarks/ of the repository).")
