@@ -1,8 +1,9 @@
 """``rackstress bench e2e``: README's first command end to end, warm and cold, and what it leaves.
 
 For each scene, ``rackstress run SCENE --out DIR --overwrite`` runs as a user runs it (a new
-process), once with the machine's kernel cache (warm) and once with an empty one (cold:
-``NUMBA_CACHE_DIR`` pointed at a new directory, so every compiled loop is compiled again),
+process), once with the user's cache (warm) and once with an empty one (cold:
+``XDG_CACHE_HOME`` pointed at a new directory, so every compiled loop is compiled and Eq. 5's
+limit predicted again),
 interleaved ``repeat`` times. Its phases come from the run's own records: the simulation
 (``summary.json`` ``wall_s``), the measures (``stress.json``), the pictures (``summary.json``
 ``render``; the VTK files are written by a second process meanwhile, their time shown apart),
@@ -40,7 +41,8 @@ def _cli_run(scene: str, out: Path, cold: bool, args) -> dict:
     cache = None
     if cold:
         cache = tempfile.mkdtemp(prefix="rackstress-cold-")
-        env["NUMBA_CACHE_DIR"] = cache
+        env["XDG_CACHE_HOME"] = cache               # compiled loops, Eq. 5's prediction
+        env.pop("NUMBA_CACHE_DIR", None)
     t = time.perf_counter()
     r = subprocess.run([exe, "run", scene, "--out", str(out), "--overwrite", "--no-progress",
                         *args], capture_output=True, text=True, env=env)
