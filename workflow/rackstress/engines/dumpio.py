@@ -122,7 +122,7 @@ def read_frames(path, o: np.ndarray, want=None):
             if want is None or frame in want:
                 p = o.copy()
                 if n:
-                    t = np.array(mm[q:end].split(), dtype=np.float64).reshape(n, len(cols))
+                    t = np.fromstring(mm[q:end].decode("ascii"), sep=" ").reshape(n, len(cols))
                     ids = t[:, cols.index("id")].astype(np.int64) - 1
                     p[ids] = t[:, [cols.index(c) for c in ("x", "y", "z")]]
                 yield step, p

@@ -44,6 +44,25 @@ LABELS = {
     "d2min": ("non-affine displacement D²min", "length² units"),
     "virial": ("per-atom von Mises stress × volume", "energy units"),
 }
+#: Further measures, computed after the built-in ones by :func:`compute_fields` and carried
+#: everywhere the built-in ones go (peaks, VTK point arrays, pictures, report) with no special
+#: case: name → fn(run, values) → (n_frames, n_atoms[, k]) array, ``values`` being the measures
+#: computed so far (reuse them rather than computing twice). Add with :func:`register_measure`.
+EXTRA_MEASURES: dict = {}
+
+
+def register_measure(name: str, label: str, units: str, fn) -> None:
+    """Add a per-particle measure to every run's post-processing (see :data:`EXTRA_MEASURES`).
+
+    Example
+    -------
+    >>> register_measure("height", "height above the start", "length units",
+    ...                  lambda run, values: frame_heights(run))          # doctest: +SKIP
+    """
+    LABELS[name] = (label, units)
+    EXTRA_MEASURES[name] = fn
+
+
 #: Largest n_atoms × n_frames post-processed (each measure keeps n_frames × n_atoms float64,
 #: five such arrays while computing): about 1 GB at this size.
 MAX_VALUES = 25_000_000
@@ -55,7 +74,8 @@ class TooLargeError(StressInputError):
 
 #: The fit of the desired position (one for summary, pictures, report and files).
 FIT = "robust"
-CACHE_VERSION = 1
+#: 2: a sediment's paper measure is |p − o| (no rest shape, measures.paper_frames)
+CACHE_VERSION = 2
 
 
 @dataclass
@@ -79,7 +99,8 @@ class Fields:
 # ----------------------------------------------------------------------------- computing
 def _stamp(run) -> dict:
     """What the cache depends on: the dump's and data file's size and modification time."""
-    out = {"version": CACHE_VERSION, "fit": FIT, "n_frames": int(run.index.n_frames)}
+    out = {"version": CACHE_VERSION, "fit": FIT, "n_frames": int(run.index.n_frames),
+           "extra": sorted(EXTRA_MEASURES)}
     for key, path in (("dump", run.index.path), ("data", run.data.path)):
         st = os.stat(path)
         out[key] = [int(st.st_size), int(st.st_mtime_ns)]
@@ -184,6 +205,8 @@ def compute_fields(run, cache: bool = True, progress: bool = False,
     values = {m: got[m] for m in MEASURES}
     if virial:
         values["virial"] = VirialStress(run).run().results.per_particle
+    for name, fn in EXTRA_MEASURES.items():
+        values[name] = fn(run, values)
     fields = Fields(got["steps"], values)
     fields.timings["compute_s"] = time.perf_counter() - t0
     fields.timings["cached"] = False
