@@ -178,7 +178,9 @@ def markdown(data: dict, machine: dict) -> str:
                      f"{m['s_per_frame'] * 1e3:.1f} ms | {a['atoms_per_frame']:,}, "
                      f"{a['bytes_per_frame'] / 1e6:.2f} MB, {a['s_per_frame'] * 1e3:.1f} ms |")
         if len(data["dumps"]) == 2:
-            r = data["dumps"][1]["moving"]["s_per_frame"] / data["dumps"][0]["moving"]["s_per_frame"]
+            mag, large = data["dumps"]
+            r = large["moving"]["s_per_frame"] / mag["moving"]["s_per_frame"]
+            r_all = large["all"]["s_per_frame"] / mag["all"]["s_per_frame"]
             L += ["", f"sediment-large's frame costs {r:.2f}× magpod's (every particle: "
-                  f"{data['dumps'][1]['all']['s_per_frame'] / data['dumps'][0]['all']['s_per_frame']:.1f}×)."]
+                  f"{r_all:.1f}×)."]
     return "\n".join(L) + "\n"
