@@ -10,10 +10,10 @@ interleaved ``repeat`` times. Its phases come from the run's own records: the si
 and the rest of the wall time (start-up, the deck, the data file, the guards, the report).
 The run directory's size is listed by file.
 
-The dump's cost per frame is measured apart, in one process: the scene is run for
-``dump_steps`` iterations (the robot standing on the sediment), then the trajectory's frame is
-written ``reps`` times as the run writes it (the moving particles) and as ``--dump-all`` does,
-interleaved.
+The dump's cost per frame is measured apart, in one process: each scene is run for
+``dump_steps`` iterations (the robot standing on the sediment), then the trajectory's frame of
+each is written ``reps`` times, in turn, as the run writes it (the moving particles) and as
+``--dump-all`` does.
 """
 from __future__ import annotations
 
@@ -73,36 +73,52 @@ def _cli_run(scene: str, out: Path, cold: bool, args) -> dict:
 
 def dump_cost(scene: str, steps: int, reps: int = 5) -> dict:
     """Seconds and bytes per trajectory frame, moving particles against every particle."""
+    return dump_costs([scene], steps, reps)[0]
+
+
+def dump_costs(names, steps: int, reps: int = 5) -> list:
+    """:func:`dump_cost` of several scenes, their frames written in turn (scene after scene,
+    moving and every particle, ``reps`` rounds) so that the machine's load weighs on each
+    alike; the best of the rounds."""
     from rackstress import scenes
     from rackstress.engines.lammps.deck import compile_deck
     from rackstress.engines.lammps.runner import LammpsRun
 
-    sc = scenes.build(scene).with_steps(steps)
-    deck = compile_deck(sc, "exact")
-    out = {"scene": scene, "n_particles": sc.n_particles, "after_iterations": steps}
-    with tempfile.TemporaryDirectory() as d:
-        (Path(d) / "particles.data").write_text(deck.data_text())
-        eng = LammpsRun(deck, Path(d), dump_every=10 ** 8)
+    with tempfile.TemporaryDirectory() as tmp:
+        runs = []
         try:
-            eng.run_schedule()
-            times = {"moving": [], "all": []}
+            for name in names:
+                sc = scenes.build(name).with_steps(steps)
+                deck = compile_deck(sc, "exact")
+                d = Path(tmp) / name
+                d.mkdir()
+                (d / "particles.data").write_text(deck.data_text())
+                eng = LammpsRun(deck, d, dump_every=10 ** 8)
+                runs.append((name, sc, deck, d, eng))
+                eng.run_schedule()
+            times = {(name, m): [] for name in names for m in ("moving", "all")}
             for _ in range(reps):
+                for name, sc, deck, d, eng in runs:
+                    for mode in ("moving", "all"):
+                        deck.dump_all = mode == "all"
+                        t = time.perf_counter()
+                        eng.command(deck.write_dump_command(str(d / f"{mode}.dump")))
+                        times[(name, mode)].append(time.perf_counter() - t)
+                    deck.dump_all = False
+            out = []
+            for name, sc, deck, d, eng in runs:
+                rec = {"scene": name, "n_particles": sc.n_particles, "after_iterations": steps}
                 for mode in ("moving", "all"):
-                    deck.dump_all = mode == "all"
-                    path = Path(d) / f"{mode}.dump"
-                    t = time.perf_counter()
-                    eng.command(deck.write_dump_command(str(path)))
-                    times[mode].append(time.perf_counter() - t)
-            deck.dump_all = False
-            for mode in ("moving", "all"):
-                text = (Path(d) / f"{mode}.dump").read_bytes()
-                out[mode] = {"s_per_frame": min(times[mode]),
-                             "bytes_per_frame": len(text) // reps,
-                             "atoms_per_frame": int(text.split(b"ITEM: NUMBER OF ATOMS\n")[1]
-                                                    .split(b"\n")[0])}
+                    text = (d / f"{mode}.dump").read_bytes()
+                    rec[mode] = {"s_per_frame": min(times[(name, mode)]),
+                                 "bytes_per_frame": len(text) // reps,
+                                 "atoms_per_frame": int(text.split(b"ITEM: NUMBER OF ATOMS\n")[1]
+                                                        .split(b"\n")[0])}
+                out.append(rec)
+            return out
         finally:
-            eng.close()
-    return out
+            for *_, eng in runs:
+                eng.close()
 
 
 def run(out: Path, scene_names=SCENES, repeat: int = 1, steps: dict | None = None,
@@ -121,11 +137,9 @@ def run(out: Path, scene_names=SCENES, repeat: int = 1, steps: dict | None = Non
                     rec = _cli_run(name, rundir, cold, args)
                     rec.update(scene=name, steps=steps.get(name), repeat=k)
                     rows.append(rec)
-    dumps = []
-    for name in ("magpod", "sediment-large"):
-        if name in scene_names:
-            log(f"e2e: dump cost of {name} ...")
-            dumps.append(dump_cost(name, dump_steps))
+    names = [n for n in ("magpod", "sediment-large") if n in scene_names]
+    log(f"e2e: the trajectory's cost per frame ({', '.join(names)}) ...")
+    dumps = dump_costs(names, dump_steps) if names else []
     return {"runs": rows, "dumps": dumps}
 
 
@@ -156,6 +170,9 @@ def markdown(data: dict, machine: dict) -> str:
                  f"({p['vtk (beside the pictures)']:.2f} s) | {p['start-up and the rest']:.2f} s"
                  f" | {r['wall_s']:.2f} s | {r['wall_s'] / max(p['simulation'], 1e-9):.2f}× | "
                  f"{r['size_total'] / 1e6:.1f} MB |")
+    notes = {(r["scene"], r["note"]) for r in data["runs"] if r.get("exit") and r.get("note")}
+    for scene, note in sorted(notes):
+        L += ["", f"{scene}: exit 4 — {note}"]
     L += ["", "## The run directory, by file (warm runs)", ""]
     for r in data["runs"]:
         if r.get("cold") or "sizes" not in r or r.get("repeat"):
@@ -168,7 +185,8 @@ def markdown(data: dict, machine: dict) -> str:
         L += ["## The trajectory's cost per frame", "",
               "One frame written as the run writes it (the particles displaced from their "
               "original positions) and as `--dump-all` writes it, after the scene's first "
-              "iterations (the robot on the sediment); best of 5, interleaved.", "",
+              "iterations (the robot on the sediment); best of 5, the scenes' frames written "
+              "in turn in one process.", "",
               "| scene | particles | after | moving: atoms, bytes, time | every particle: "
               "atoms, bytes, time |", "|---|---|---|---|---|"]
         for d in data["dumps"]:

@@ -5,7 +5,7 @@ reads every run the same way. Frames are appended whole and flushed, so a run st
 watchdog keeps every complete frame written before it.
 
 A frame may hold only some particles: a LAMMPS deck with a resting (passive) group dumps the
-particles displaced from their original positions (:meth:`Deck.dump_commands
+particles of the moving group, which holds every particle displaced (:meth:`Deck.dump_commands
 <rackstress.engines.lammps.deck.Deck.dump_commands>`); a particle a frame does not hold sits at
 its original position, the data file's. :func:`read_frames` reads either kind into whole frames.
 """

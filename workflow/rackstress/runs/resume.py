@@ -65,8 +65,9 @@ def load_checkpoint(rundir: Path, meta: dict | None = None) -> Checkpoint:
     meta = meta or read_progress(rundir)
     with np.load(rundir / meta["state"]) as z:
         x, v, f = z["x"], z["v"], z["f"]
+        moving = z["moving"] if "moving" in z.files else None
     return Checkpoint(int(meta["step"]), int(meta["phase_index"]), int(meta["phase_done"]),
-                      int(meta["cycle"]), x, v, f, meta)
+                      int(meta["cycle"]), x, v, f, meta, moving)
 
 
 def load_phase_ends(rundir: Path, meta: dict) -> list[PhaseEnd]:

@@ -245,32 +245,34 @@ class Deck:
             L += self.dump_commands(dump_file, dump_every)
         return L
 
-    #: what selects a frame's atoms in a deck with passive groups: the displaced ones
-    DUMP_SELECT = "thresh c_rs_disp[4] > 0"
-
     def dump_commands(self, dump_file: str, dump_every: int) -> list[str]:
         """The trajectory's ``dump``. In a deck with passive groups it follows what moves: each
-        frame holds the atoms displaced from their original position (``compute
-        displace/atom``, made when the data file is read, so its reference is the original
-        position also in a resumed run; ``thresh`` on its magnitude); every other atom sits
-        exactly at its position in the data file, where the readers
-        (:func:`rackstress.engines.dumpio.read_frames`, the stress reader) put it. MagPod's
-        resting sediment is then written once, in the data file."""
+        frame holds the atoms of the moving group ``rs_move`` (module doc, "Active particles":
+        an atom outside it has never moved, so it sits exactly at its original position, the
+        data file's, with v = 0; it joins for good one reneighbouring before anything can
+        touch it, and a resumed run restores the group as the checkpoint recorded it). The
+        readers (:func:`rackstress.engines.dumpio.read_frames`, the stress reader) put every
+        other atom there. MagPod's resting sediment is then written once, in the data file,
+        and a frame costs what the moving atoms cost (the dump skips the others by their group
+        bit; no pass computes anything over them)."""
         L = []
         if self.dump_moving:
-            L.append("# the dump follows what moves: a particle a frame does not hold sits at "
-                     "its position in the data file")
-            L.append("compute rs_disp all displace/atom")
-        L.append(f"dump rs_dump all custom {dump_every} {dump_file} id type mol x y z")
-        L.append("dump_modify rs_dump sort id format float %.10g"
-                 + (f" {self.DUMP_SELECT}" if self.dump_moving else ""))
+            L.append(f"# the dump follows what moves ({MOVE_GROUP}): a particle a frame does not "
+                     "hold sits at its position in the data file")
+        L.append(f"dump rs_dump {self.dump_group} custom {dump_every} {dump_file} "
+                 "id type mol x y z")
+        L.append("dump_modify rs_dump sort id format float %.10g")
         return L
+
+    @property
+    def dump_group(self) -> str:
+        """The group the trajectory's frames hold (:meth:`dump_commands`)."""
+        return MOVE_GROUP if self.dump_moving else "all"
 
     def write_dump_command(self, dump_file: str) -> str:
         """One frame of the current step in the trajectory's own format (:meth:`dump_commands`)."""
-        sel = f" {self.DUMP_SELECT}" if self.dump_moving else ""
-        return (f"write_dump all custom {dump_file} id type mol x y z modify sort id "
-                f"format float %.10g{sel} append yes")
+        return (f"write_dump {self.dump_group} custom {dump_file} id type mol x y z modify "
+                "sort id format float %.10g append yes")
 
     @property
     def callback_natives(self) -> bool:
