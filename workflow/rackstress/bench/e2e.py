@@ -145,13 +145,16 @@ def run(out: Path, scene_names=SCENES, repeat: int = 1, steps: dict | None = Non
 
 def markdown(data: dict, machine: dict) -> str:
     """docs/benchmarks/e2e.md."""
+    load = machine.get("load_avg_at_start")
+    load = ", ".join(f"{x:.1f}" for x in load) if load else "?"
     L = ["# README's first command, end to end",
          "",
          "`rackstress bench e2e` (`workflow/rackstress/bench/e2e.py`): `rackstress run SCENE "
-         "--out DIR --overwrite` as a user runs it, cold (an empty kernel cache) and warm, "
+         "--out DIR --overwrite` as a user runs it, cold (an empty cache: kernels compiled, "
+         "Eq. 5's limit predicted) and warm, with the engine path of this branch (numba "
+         "callback kernels), "
          "interleaved; the phases from the run's own records, the run directory by file. "
-         f"Machine: {machine.get('cores', '?')} cores, load average at the start "
-         f"{machine.get('load_avg_at_start', '?')} "
+         f"Machine: {machine.get('cores', '?')} cores, load average at the start {load} "
          "(shared with other jobs: compare within a row, not across runs).",
          "",
          "| scene | iterations | cache | simulation | measures | pictures (VTK beside) | "
@@ -183,8 +186,8 @@ def markdown(data: dict, machine: dict) -> str:
         L.append("")
     if data["dumps"]:
         L += ["## The trajectory's cost per frame", "",
-              "One frame written as the run writes it (the particles displaced from their "
-              "original positions) and as `--dump-all` writes it, after the scene's first "
+              "One frame written as the run writes it (the moving group: the robot and the "
+              "sediment it reached) and as `--dump-all` writes it, after the scene's first "
               "iterations (the robot on the sediment); best of 5, the scenes' frames written "
               "in turn in one process.", "",
               "| scene | particles | after | moving: atoms, bytes, time | every particle: "
