@@ -99,7 +99,7 @@ def _fail_any(err: BaseException, out=None):
 
 #: Options of ``run`` that ``--resume`` cannot honour: the run goes on as it was started.
 RESUME_FIXED = ("engine", "mode", "steps", "dt", "sets", "dump_every", "overwrite",
-                "restart_every", "allow_unstable", "integrator")
+                "restart_every", "allow_unstable", "integrator", "dump_all")
 
 
 @click.group()
@@ -122,6 +122,10 @@ def main():
 @click.option("--out", type=click.Path(file_okay=False), callback=_out_path,
               help="Run directory (default: runs/SCENE-TIMESTAMP).")
 @click.option("--dump-every", type=click.IntRange(min=1), help="Steps between trajectory frames.")
+@click.option("--dump-all", is_flag=True,
+              help="Every particle in every frame of trajectory.dump (a plain LAMMPS dump for "
+                   "other tools); default: a scene with a resting sediment dumps the particles "
+                   "that moved, the others being where particles.data puts them.")
 @click.option("--overwrite", is_flag=True, help="Replace a finished run in --out.")
 @click.option("--progress/--no-progress", default=True, show_default=True)
 @click.option("--render/--no-render", "do_render", default=True, show_default=True,
@@ -138,7 +142,8 @@ def main():
               show_default=True, help="euler: Eq. 5, the paper's; verlet: the second-order mode "
               "(leapfrog with trapezoidal damping).")
 def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progress, do_render,
-        restart_every=None, resume_dir=None, allow_unstable=False, integrator="euler"):
+        restart_every=None, resume_dir=None, allow_unstable=False, integrator="euler",
+        dump_all=False):
     """Run SCENE (a built-in name or a .toml file) and write a run directory.
 
     Exit status (errors.py): 0 done, 2 bad input or a run directory in use or holding another
@@ -180,6 +185,10 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
         shown = progress and rank() == 0
         with phase(f"building the scene {scene}", shown):
             sc = _load_scene(scene, steps, dt, sets, integrator)
+        if rank() == 0:
+            from rackstress.stress.kernels import warm_in_background
+
+            warm_in_background()        # a first run compiles the measures' loop meanwhile
         if out is None:
             out = Path("runs") / f"{sc.name}-{time.strftime('%Y%m%d-%H%M%S')}"
         if restart_every is None and engine == "lammps":
@@ -189,6 +198,7 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
         # bad input is refused before the run directory is touched
         with phase(f"preparing the run ({sc.n_particles:,} particles on {engine})", shown):
             planned = run_mod.plan(sc, engine, mode, dump_every, allow_unstable=allow_unstable)
+        planned["deck"].dump_all = bool(dump_all)
         # the lock is held from before anything is written until the pictures are done
         with locked(out) as held:   # noqa: F841
             with phase(f"running {sc.total_steps:,} steps into {out}", shown, ticker=False):
@@ -214,20 +224,35 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True) ->
         md = g["max_deformation"]
         click.echo(f"  {name:12s} n={g['n']:6d}  max_deformation="
                    + (f"{md:.4g}" if md is not None else "-"))
-    _post_run(out, progress)
-    if do_render:
-        from rackstress.render.pictures import render_default
+    from rackstress.stress.post import cancel_files, wait_files
 
-        t0 = time.perf_counter()
-        try:
-            with phase("rendering the pictures and report.html", progress, ticker=False):
-                rep = render_default(out, progress=progress)
-        except Exception as err:  # noqa: BLE001 - the run itself is complete and kept
-            click.echo(f"rackstress: error: the run finished, but rendering its pictures "
-                       f"failed: {err} (retry with 'rackstress render {out}')", err=True)
-            sys.exit(EXIT_STORAGE if isinstance(err, StorageError) else EXIT_RENDER)
-        click.echo(f"  pictures: {rep.outdir} ({len(rep.files)} files, "
-                   f"{time.perf_counter() - t0:.1f} s)")
+    _post_run(out, progress, background=do_render)
+    try:
+        if do_render:
+            from rackstress.render.pictures import render_default
+
+            t0 = time.perf_counter()
+            try:
+                with phase("rendering the pictures and report.html (the VTK files are written "
+                           "meanwhile)", progress, ticker=False):
+                    rep = render_default(out, progress=progress)
+            except Exception as err:  # noqa: BLE001 - the run itself is complete and kept
+                try:
+                    wait_files(out)                   # the VTK files are still worth having
+                except Exception:  # noqa: BLE001, S110 - the render's error is the one to tell
+                    pass
+                click.echo(f"rackstress: error: the run finished, but rendering its pictures "
+                           f"failed: {err} (retry with 'rackstress render {out}')", err=True)
+                sys.exit(EXIT_STORAGE if isinstance(err, StorageError) else EXIT_RENDER)
+            click.echo(f"  pictures: {rep.outdir} ({len(rep.files)} files, "
+                       f"{time.perf_counter() - t0:.1f} s)")
+        wait_files(out)
+    except Exception as err:  # noqa: BLE001 - the run itself is complete and kept
+        click.echo(f"rackstress: error: the run finished, but writing its VTK files failed: "
+                   f"{err} (retry with 'rackstress stress {out}')", err=True)
+        sys.exit(EXIT_STORAGE if isinstance(err, StorageError) else EXIT_RENDER)
+    finally:
+        cancel_files(out)
 
 
 @main.command()
@@ -336,13 +361,15 @@ def scenes_table(rows: list, width: int = 100) -> str:
     return "\n".join(out)
 
 
-def _post_run(out, progress):
-    """After a run: the stress measures once, their peaks into summary.json, the VTK series."""
+def _post_run(out, progress, background: bool = False):
+    """After a run: the stress measures once, their peaks into summary.json, the VTK series
+    (``background``: written by a forked process while the pictures are painted)."""
     from rackstress.stress.post import TooLargeError, describe, postprocess
 
     try:
         with phase("computing the stress measures and the VTK series", progress, ticker=False):
-            info = postprocess(out, vtk=True, dump=False, progress=progress)
+            info = postprocess(out, vtk=True, dump=False, progress=progress,
+                               background=background)
     except TooLargeError as err:
         click.echo(f"  note: no stress peaks or VTK files: {err}")
         return
@@ -467,7 +494,11 @@ def _write_report(rundir):
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path),
               help="Output folder (default: the run directory; for DATA DUMP the dump's folder).")
 @click.option("--vtk/--no-vtk", default=True, show_default=True,
-              help="Write vtk/run.pvd and one .vtp per frame (ParaView, OVITO, pyvista).")
+              help="Write vtk/run.pvd and one .vtp per frame (ParaView, pyvista; OVITO: "
+                   "--vtk-format ovito).")
+@click.option("--vtk-format", type=click.Choice(["paraview", "ovito"]), default="paraview",
+              show_default=True, help="paraview: compressed (ParaView, pyvista); ovito: "
+                                      "uncompressed inline arrays, which OVITO 3.17 also reads.")
 @click.option("--dump/--no-dump", "write_dump", default=True, show_default=True,
               help="Write stress.dump: a LAMMPS dump with the measures as named columns.")
 @click.option("--parts", type=Choice(["mol", "type"]),
@@ -480,7 +511,8 @@ def _write_report(rundir):
 @click.option("--allow-truncated", is_flag=True,
               help="Use the complete frames of a dump that ends mid-frame.")
 @click.option("--progress/--no-progress", default=True, show_default=True)
-def stress(inputs, out, vtk, write_dump, parts, atom_style, dt, allow_truncated, progress):
+def stress(inputs, out, vtk, write_dump, parts, atom_style, dt, allow_truncated, progress,
+           vtk_format="paraview"):
     """Compute every stress measure of a run once and write them for ParaView and OVITO.
 
     INPUTS is a run directory (RUNDIR), or a plain LAMMPS data file and dump (DATA DUMP) that
@@ -502,7 +534,7 @@ def stress(inputs, out, vtk, write_dump, parts, atom_style, dt, allow_truncated,
             with locked(inputs[0], create=False), \
                     phase("computing the stress measures", progress, ticker=False):
                 info = postprocess(inputs[0], vtk=vtk, dump=write_dump, progress=progress,
-                                   out=out)
+                                   out=out, vtk_format=vtk_format)
             where = out or inputs[0]
         elif len(inputs) == 2:
             from rackstress.stress.foreign import load_plain
@@ -513,7 +545,7 @@ def stress(inputs, out, vtk, write_dump, parts, atom_style, dt, allow_truncated,
             run = load_plain(inputs[0], inputs[1], parts=parts, atom_style=atom_style, dt=dt,
                              outdir=where, allow_truncated=allow_truncated)
             info = postprocess(None, run=run, vtk=vtk, dump=write_dump, progress=progress,
-                               out=where)
+                               out=where, vtk_format=vtk_format)
         else:
             raise RackstressError("give one run directory, or a data file and a dump")
     except Exception as err:  # noqa: BLE001 - each kind has its exit status (_fail_any)
@@ -672,6 +704,33 @@ def bench_accuracy(out, quick, scene_names):
 
     data = mod.run_bench(out, quick=quick, scenes_=scene_names or None, echo=click.echo)
     _bench_report(data, mod)
+
+
+@bench.command("e2e")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
+              help="Output directory (default: docs/benchmarks/ of the repository).")
+@click.option("--scene", "scene_names", multiple=True,
+              type=click.Choice(["magpod-small", "magpod", "sediment-large"]),
+              help="Scenes (default: all three).")
+@click.option("--repeat", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Cold and warm runs of each scene, interleaved.")
+@click.option("--long-steps", type=click.IntRange(min=1), default=1200, show_default=True,
+              help="Iterations of magpod and sediment-large (magpod-small runs its own 4800).")
+def bench_e2e(out, scene_names, repeat, long_steps):
+    """README's first command end to end, warm and cold: phases, run directory by file, the
+    trajectory's cost per frame -> docs/benchmarks/e2e.{json,md}."""
+    from rackstress import bench as b
+    from rackstress.bench import e2e
+
+    names = scene_names or e2e.SCENES
+    d = b.out_dir(out)
+    machine = b.machine()
+    data = e2e.run(d, names, repeat,
+                   steps={n: long_steps for n in ("magpod", "sediment-large")}, log=click.echo)
+    data["machine"] = machine
+    b.write_json(d / "e2e.json", data)
+    (d / "e2e.md").write_text(e2e.markdown(data, machine))
+    click.echo(f"wrote {d / 'e2e.md'}")
 
 
 @bench.command("perf")

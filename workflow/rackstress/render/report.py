@@ -315,13 +315,16 @@ def write_report(rundir, stability: bool = True, view: bool = True) -> Path:
 
     # ---- files
     w('<h2 id="files">Files to open elsewhere</h2><ul>')
-    links = [("vtk/run.pvd", "VTK time series: open in ParaView, OVITO or pyvista (point data: "
+    links = [("vtk/run.pvd", "VTK time series: open in ParaView or pyvista (point data: "
                              "group_id and group_NAME, type, radius, displacement, every "
-                             "measure; time = iteration)"),
+                             "measure; time = iteration; for OVITO: rackstress stress RUNDIR "
+                             "--vtk-format ovito)"),
              ("stress.dump", "LAMMPS dump with the measures as named columns (OVITO)"),
              ("summary.json", "the run's summary, peaks included"),
              ("stress.json", "the post-processing record"),
-             ("trajectory.dump", "the trajectory (dump custom id type mol x y z)"),
+             ("trajectory.dump", "the trajectory (dump custom id type mol x y z; with a resting "
+                                 "sediment the particles that moved, the others as in "
+                                 "particles.data)"),
              ("particles.data", "LAMMPS data file (original positions)"),
              ("in.lammps", "the LAMMPS input deck"),
              (f"{FIGURES}/render.json", "what the pictures show")]

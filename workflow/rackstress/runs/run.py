@@ -249,7 +249,6 @@ def plan(scene: Scene, engine: str = "lammps", mode: str = "exact",
     from rackstress.model.stability import check_dt
     from rackstress.runs.fingerprint import fingerprint
 
-    pred = check_dt(scene, allow=allow_unstable)
     if engine not in ENGINES:
         raise RunDirError(f"unknown engine '{engine}'; choose one of {', '.join(ENGINES)}")
     dump_every = dump_every or default_dump_every(scene)
@@ -263,11 +262,13 @@ def plan(scene: Scene, engine: str = "lammps", mode: str = "exact",
         mode = "exact"
         if comm.Get_size() > 1:
             raise RunDirError("the reference engine runs on one rank; run it without mpiexec")
+    fp = fingerprint(scene, engine=engine, mode=mode, dump_every=dump_every)
+    pred = check_dt(scene, allow=allow_unstable, pred=_cached_prediction(fp))
+    _cache_prediction(fp, pred)
     check_memory(scene, engine, comm.Get_size())
     # LAMMPS runs the exact operators in the compiled plugin when it is there for this LAMMPS
     # (docs/plugin.md), else in the Python callback (one line says why); a resumed run keeps it
     deck = compile_deck(scene, mode, plugin=None if engine == "lammps" else False)
-    fp = fingerprint(scene, engine=engine, mode=mode, dump_every=dump_every)
     if engine == "lammps":
         fp["operators"] = operators_path(deck)
     return {"engine": engine, "mode": mode, "dump_every": int(dump_every),
@@ -278,6 +279,47 @@ def operators_path(deck) -> str:
     """Where a LAMMPS deck evaluates the operators LAMMPS has no style for: 'plugin' (the
     compiled styles) or 'callback' (Python); a run's fingerprint records it for its resumption."""
     return "plugin" if deck.plugin else "callback"
+
+
+def _prediction_path(fp: dict) -> Path:
+    """Where Eq. 5's predicted limit of a scene is kept between runs: the user's cache, by a
+    hash of everything the prediction depends on (the scene's parts, operators, schedule, dt)."""
+    import hashlib
+    import json
+    import os
+
+    key = {k: v for k, v in fp.items() if k not in ("engine", "mode", "dump_every")}
+    digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:32]
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "rackstress" / "stability" / f"{digest}.json"
+
+
+def _cached_prediction(fp: dict) -> dict | None:
+    """The prediction of an earlier run of the same scene (the dense eigenproblem of
+    :func:`rackstress.model.stability.predict` is a second of every start), or None."""
+    import json
+
+    try:
+        pred = json.loads(_prediction_path(fp).read_text())
+    except (OSError, ValueError):
+        return None
+    return pred if isinstance(pred, dict) and "t_max" in pred else None
+
+
+def _cache_prediction(fp: dict, pred: dict) -> None:
+    import json
+    import os
+
+    path = _prediction_path(fp)
+    if path.exists():
+        return
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.name}.{os.getpid()}")
+        tmp.write_text(json.dumps(pred))
+        os.replace(tmp, path)
+    except (OSError, TypeError, ValueError):
+        pass                    # a cache that cannot be written is only a cache
 
 
 def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
@@ -339,8 +381,10 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
         from rackstress.errors import storage_error
 
         claim(out, overwrite)
+        dump = "moving" if (deck is not None and deck.dump_moving) else "all"
         write_json(out / "scene.json", {**scene_record(scene), "engine": engine, "mode": mode,
-                                        "dump_every": dump_every, "fingerprint": fp})
+                                        "dump_every": dump_every, "dump": dump,
+                                        "fingerprint": fp})
         if p.get("stability") is not None:      # the report's stability margin, predicted once
             from rackstress.lib.runfiles import STABILITY
             from rackstress.model.stability import describe_limit

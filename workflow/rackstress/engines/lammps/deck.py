@@ -164,6 +164,14 @@ class Deck:
     #: the operators LAMMPS has no style for run as the compiled plugin's fixes (fix rs/...,
     #: module doc "Plugin"), not in the Python callback
     plugin: bool = False
+    #: every particle in every frame of the trajectory, as a plain LAMMPS dump (``rackstress run
+    #: --dump-all``), instead of the ones that moved (:meth:`dump_commands`)
+    dump_all: bool = False
+
+    @property
+    def dump_moving(self) -> bool:
+        """Whether the trajectory's frames hold only the displaced particles."""
+        return bool(self.passive) and not self.dump_all
 
     @property
     def lammps_skin(self) -> float:
@@ -268,9 +276,37 @@ class Deck:
         L.append("thermo_style custom step")
         L.append(f"thermo {max(1, dump_every)}")
         if dump_file:
-            L.append(f"dump rs_dump all custom {dump_every} {dump_file} id type mol x y z")
-            L.append("dump_modify rs_dump sort id format float %.10g")
+            L += self.dump_commands(dump_file, dump_every)
         return L
+
+    def dump_commands(self, dump_file: str, dump_every: int) -> list[str]:
+        """The trajectory's ``dump``. In a deck with passive groups it follows what moves: each
+        frame holds the atoms of the moving group ``rs_move`` (module doc, "Active particles":
+        an atom outside it has never moved, so it sits exactly at its original position, the
+        data file's, with v = 0; it joins for good one reneighbouring before anything can
+        touch it, and a resumed run restores the group as the checkpoint recorded it). The
+        readers (:func:`rackstress.engines.dumpio.read_frames`, the stress reader) put every
+        other atom there. MagPod's resting sediment is then written once, in the data file,
+        and a frame costs what the moving atoms cost (the dump skips the others by their group
+        bit; no pass computes anything over them)."""
+        L = []
+        if self.dump_moving:
+            L.append(f"# the dump follows what moves ({MOVE_GROUP}): a particle a frame does not "
+                     "hold sits at its position in the data file")
+        L.append(f"dump rs_dump {self.dump_group} custom {dump_every} {dump_file} "
+                 "id type mol x y z")
+        L.append("dump_modify rs_dump sort id format float %.10g")
+        return L
+
+    @property
+    def dump_group(self) -> str:
+        """The group the trajectory's frames hold (:meth:`dump_commands`)."""
+        return MOVE_GROUP if self.dump_moving else "all"
+
+    def write_dump_command(self, dump_file: str) -> str:
+        """One frame of the current step in the trajectory's own format (:meth:`dump_commands`)."""
+        return (f"write_dump {self.dump_group} custom {dump_file} id type mol x y z modify "
+                "sort id format float %.10g append yes")
 
     @property
     def callback_natives(self) -> bool:

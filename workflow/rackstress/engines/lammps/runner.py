@@ -123,7 +123,7 @@ class LammpsRun:
             self.command(f"plugin load {plugin_library()}")
         for cmd in deck.setup_commands(str(data), dump, dump_every):
             self.command(cmd)
-            if dump is not None and cmd.startswith("dump ") and " all custom " in cmd:
+            if dump is not None and cmd.startswith("dump ") and " custom " in cmd:
                 self._dump_id = cmd.split()[1]
                 if append:
                     self.command(f"dump_modify {self._dump_id} append yes")
@@ -509,6 +509,23 @@ class LammpsRun:
         fast = self._moved_only(x=True, v=True)
         return fast if fast is not None else (self.gather_positions(), self.gather_velocities())
 
+    def moving_mask(self) -> np.ndarray | None:
+        """Which particles (global order) are in LAMMPS' moving group, on every rank; None in
+        a deck without a passive group. A checkpoint keeps it, so that a resumed run's group,
+        and with it its trajectory's frames, are the uninterrupted run's."""
+        if self._move_bit is None:
+            return None
+        lmp = self.lmp
+        nlocal = lmp.extract_global("nlocal")
+        mask = lmp.numpy.extract_atom("mask")[:nlocal]
+        ids = lmp.numpy.extract_atom("id")[:nlocal].astype(np.int64) - 1
+        mine = ids[(mask & self._move_bit) != 0]
+        parts = [mine] if self.comm.Get_size() == 1 else self.comm.allgather(mine)
+        out = np.zeros(self.scene.n_particles, dtype=bool)
+        for part in parts:
+            out[part] = True
+        return out
+
     def _moved_only(self, x: bool = False, v: bool = False):
         """Positions and/or velocities in global order without gathering every atom (a deck
         with a passive group, every atom present; else None): an atom outside LAMMPS' moving
@@ -557,8 +574,7 @@ class LammpsRun:
         format), unless the dump interval already wrote it."""
         if self._dump_id is None or self.step % self.dump_every == 0:
             return
-        self.command(f"write_dump all custom {self._dump_file} id type mol x y z modify sort id "
-                     "format float %.10g append yes")
+        self.command(self.deck.write_dump_command(self._dump_file))
 
     def close(self):
         try:
@@ -624,6 +640,9 @@ class LammpsRun:
             # callback runs in this phase (it tells the resting bed at its first call)
             o = self.scene.original_positions()
             off = (ck.x != o).any(axis=1) | (ck.v != 0).any(axis=1)
+            moving = getattr(ck, "moving", None)
+            if moving is not None:        # the group as it was (joined, moving or not yet)
+                off = off | moving
             nlocal = self.lmp.extract_global("nlocal")
             mask = self.lmp.numpy.extract_atom("mask")[:nlocal]
             ids = self.lmp.numpy.extract_atom("id")[:nlocal].astype(np.int64) - 1
