@@ -94,13 +94,13 @@ DEFAULTS = {"dt": 0.01, "cycles": 1, "bound": 1.0e4, "steps": 1200}
 OVERRIDABLE = ("dt", "steps", "duration", "cycles", "bound")
 
 _TOP_KEYS = ("name", "dt", "cycles", "bound", "steps", "duration", "params", "group",
-             "operator", "phase")
+             "operator", "phase", "units", "analysis", "load", "support")
 _BUILTIN_KEYS = ("scene", "params")
 #: How a plain group's particles are made: exactly one of these (or ``rack``).
 _SOURCES = ("positions", "lattice", "mesh", "fill", "parts")
 _GROUP_KEYS = ("name", "kind", "rack", "offset") + _SOURCES + (
     "spacing", "packing", "origin", "translate", "rotate", "scale", "radius", "regions", "held",
-    "velocity")
+    "velocity", "material", "solid")
 _LATTICE_KEYS = ("shape", "spacing", "origin")
 _PHASE_KEYS = ("name", "steps", "duration", "vars")
 #: Region shapes (docs/scenes.md "Regions"): the one key a region table names.
@@ -461,15 +461,36 @@ def _build_explicit(ctx: _Ctx, data: dict, overrides: dict, user: dict) -> Scene
     dt = settings["dt"]
 
     base = Path(ctx.file).resolve().parent
+    from rackstress.scenes import physical
+
+    unit_system = physical.scene_units(ctx, data)
     groups = _groups(ctx, data["group"], base)
+    physical.check_materials(ctx, groups, unit_system)
+    physical.supports(ctx, data.get("support", []), groups, base)
+    ramp = physical.ramp_of(ctx, data.get("load", []))
+    if ramp is not None:
+        settings["ramp"] = physical.ramp_phases(ctx, data, ramp, length, dt)
     phases = _phases(ctx, data, settings, length)
     operators = _operators(ctx, data.get("operator", []), groups, phases, base)
+    operators = physical.solids(ctx, groups, operators, unit_system)
+    operators = physical.loads(ctx, data.get("load", []), groups, operators, unit_system, base,
+                               ramp)
+    analysis = physical.analysis_of(ctx, data, groups, operators, ramp)
 
     params = {"file": ctx.file, "dt": dt, "cycles": settings["cycles"],
               "bound": settings["bound"], **user}
     try:
         scene = Scene(name, groups, operators, phases, dt=dt, cycles=settings["cycles"],
-                      bound=settings["bound"], params=params)
+                      bound=settings["bound"], params=params, units=unit_system,
+                      analysis=analysis)
+        if analysis == "static":
+            scene.params["analysis"] = "static"
+        elif unit_system.physical and "dt" not in data and "dt" not in overrides:
+            # physical time: a solid's bindings are stiff (ω ~ 10⁶/s for aluminium at 1 mm);
+            # half the predicted stability limit of Eq. 5, durations kept
+            from rackstress.model.stability import predict
+
+            scene = scene.with_dt(0.5 * predict(scene)["t_max"])
         if "phase" not in data:
             if length and length[0] == "duration":
                 scene.params["duration"] = length[1]
@@ -588,6 +609,7 @@ def _plain_group(c: _Ctx, t: dict, base: Path) -> Group:
         o = np.array([_vec3(c, p, f"positions[{i}]") for i, p in enumerate(pos)], dtype=float)
     elif source == "lattice":
         o, spacing = _lattice(c, t["lattice"], "lattice")
+        packing, shape = "cubic", None
     else:
         spacing = _number(c, _require(c, t, "spacing"), "spacing", positive=True)
         packing = t.get("packing", "cubic")
@@ -634,6 +656,8 @@ def _plain_group(c: _Ctx, t: dict, base: Path) -> Group:
             except SceneError as exc:
                 raise SceneError(str(exc)) from None
         o = union_positions(*filled_o, *blocks)
+        shape = None if blocks or not solids else (solids[0] if len(solids) == 1
+                                                    else rg.Union(solids))
     if "radius" in t:
         r = _radii(c, t["radius"], len(o))
     elif spacing is not None:
@@ -645,6 +669,28 @@ def _plain_group(c: _Ctx, t: dict, base: Path) -> Group:
     v0 = _vec3(c, t["velocity"], "velocity") if "velocity" in t else None
     g = _wrap(c, lambda: Group(t["name"], o, r, kind=_kind(c, t, "part"), held=held, v0=v0))
     _regions(c, t, g, base)
+    if "material" in t or "solid" in t:
+        if source == "positions":
+            raise c.error("a material part is a filled lattice (mesh, fill, parts or lattice), "
+                          "whose spacing sets each particle's volume; positions have none",
+                          "material" if "material" in t else "solid")
+        if "material" not in t:
+            raise c.error("'solid' says whether a material part is bound as the elastic "
+                          "lattice; give the part a material", "solid")
+        from rackstress.model.materials import material
+
+        try:
+            g.material = material(t["material"])
+        except SceneError as exc:
+            raise c.error(str(exc), "material") from None
+        if packing != "cubic":
+            raise c.error("a material part is calibrated on the simple-cubic lattice "
+                          "(docs/calibration.md): leave packing at \"cubic\"", "packing")
+        g.volume = float(spacing) ** 3
+        solid = t.get("solid", True)
+        if not isinstance(solid, bool):
+            raise c.error(f"must be true or false, got {_describe(solid)}", "solid")
+        g.meta["solid"] = {"spacing": float(spacing), "shape": shape, "bind": solid}
     return g
 
 
@@ -824,6 +870,8 @@ def _wrap(c: _Ctx, make):
 
 def _phases(ctx: _Ctx, data: dict, settings: dict, length) -> list:
     dt = settings["dt"]
+    if "ramp" in settings:
+        return settings["ramp"]
     if "phase" not in data:
         if length is not None and length[0] == "duration":
             return [Phase("run", steps_for(length[1], dt), {}, length[1])]
