@@ -218,9 +218,14 @@ def execute_static(scene: Scene, out: Path, engine: str, mode: str, *, progress:
             if eng._dump is not None:
                 eng._dump.write(res.iterations, res.p)
         else:
+            if eng._dump_id is not None:      # LAMMPS resets no timestep under a dump
+                eng.command(f"undump {eng._dump_id}")
             eng.command(f"reset_timestep {max(1, res.iterations)}")
             eng.step = max(1, res.iterations)
-            engine_rel = engine_residual(scene, eng, res.p)   # its run 0 writes the frame
+            engine_rel = engine_residual(scene, eng, res.p)
+            if eng._dump_id is not None:
+                eng.command(f"write_dump all custom {eng._dump_file} id type mol x y z modify "
+                            "sort id format float %.10g append yes")
         extra = dict(extra or {}, dump_every=1)
         if engine == "lammps":
             extra.update({"ranks": eng.comm.Get_size(), "lammps_version": eng.lmp.version(),
