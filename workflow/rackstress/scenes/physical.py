@@ -59,7 +59,7 @@ def check_materials(ctx, groups: dict, u) -> None:
 
 
 def _group_of(c, t: dict, groups: dict):
-    from rackstress.scenes.toml import _require, _string
+    from rackstress.scenes.fields import _require, _string
 
     on = _string(c, _require(c, t, "on"), "on")
     if on not in groups:
@@ -67,28 +67,28 @@ def _group_of(c, t: dict, groups: dict):
     return on, groups[on]
 
 
-def _selection(c, t: dict, g, base) -> np.ndarray:
-    from rackstress.scenes.toml import _mask, _region
-
+def _selection(c, t: dict, g, select) -> np.ndarray:
+    """The particles ``where`` selects (default all); ``select(c, table, field, o)`` is the
+    scene reader's region → mask."""
     if "where" not in t:
         return np.ones(g.n, dtype=bool)
-    mask = _mask(c, _region(c, t["where"], "where", base), g.o, "where")
+    mask = select(c, t["where"], "where", g.o)
     if not mask.any():
         raise c.error("selects no particle of the group (check the region against the "
                       "part's positions and the scene's length unit)", "where")
     return mask
 
 
-def supports(ctx, tables, groups: dict, base) -> None:
+def supports(ctx, tables, groups: dict, select) -> None:
     """``[[support]]``: fix the listed directions (default all: held) of the selected particles."""
-    from rackstress.scenes.toml import _array_of_tables, _check_keys
+    from rackstress.scenes.fields import _array_of_tables, _check_keys
 
     for k, t in enumerate(_array_of_tables(ctx, tables, "support"), 1):
         c = ctx.at(f"[[support]] #{k}")
         _check_keys(c, t, _SUPPORT_KEYS)
         name, g = _group_of(c, t, groups)
         c = ctx.at(f"[[support]] #{k} (on '{name}')")
-        mask = _selection(c, t, g, base)
+        mask = _selection(c, t, g, select)
         fix = t.get("fix", ["x", "y", "z"])
         if (not isinstance(fix, list) or not fix
                 or not all(isinstance(a, str) and a in ("x", "y", "z") for a in fix)):
@@ -172,9 +172,9 @@ def _spacing(c, g) -> float:
     return float(a)
 
 
-def loads(ctx, tables, groups: dict, operators: dict, u, base, ramp) -> dict:
+def loads(ctx, tables, groups: dict, operators: dict, u, select, ramp) -> dict:
     """``[[load]]`` tables as force operators (module doc) and prescribed displacements."""
-    from rackstress.scenes.toml import _array_of_tables, _check_keys, _number, _vec3
+    from rackstress.scenes.fields import _array_of_tables, _check_keys, _number, _vec3
 
     out = {name: list(seq) for name, seq in operators.items()}
     for k, t in enumerate(_array_of_tables(ctx, tables, "load"), 1):
@@ -193,7 +193,7 @@ def loads(ctx, tables, groups: dict, operators: dict, u, base, ramp) -> dict:
                           kind)
         if "normal" in t and kind != "pressure":
             raise c.error("'normal' belongs to a pressure", "normal")
-        mask = _selection(c, t, g, base)
+        mask = _selection(c, t, g, select)
         m = g.mass(u)
         if kind == "force":
             F = np.asarray(_vec3(c, t["force"], "force"))

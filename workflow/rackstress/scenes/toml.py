@@ -118,83 +118,8 @@ _OP_KEYS = {
 
 
 # --------------------------------------------------------------------------- field checks
-class _Ctx:
-    """Where we are in the file, for messages: ``file: [[group]] 'a' (#2): radius: ...``."""
-
-    def __init__(self, file: str, where: str = ""):
-        self.file, self.where = file, where
-
-    def at(self, where: str) -> "_Ctx":
-        return _Ctx(self.file, where)
-
-    def error(self, msg: str, field: str | None = None) -> SceneError:
-        parts = [self.file]
-        if self.where:
-            parts.append(self.where)
-        if field:
-            parts.append(field)
-        return SceneError(": ".join(parts) + ": " + msg)
-
-
-def _describe(value) -> str:
-    return f"{value!r} ({_type_name(value)})"
-
-
-def _type_name(value) -> str:
-    return {bool: "a boolean", int: "an integer", float: "a number", str: "a string",
-            list: "an array", dict: "a table"}.get(type(value), type(value).__name__)
-
-
-def _is_number(x) -> bool:
-    return isinstance(x, (int, float)) and not isinstance(x, bool)
-
-
-def _check_keys(ctx: _Ctx, table: dict, allowed, what: str = "key") -> None:
-    unknown = [k for k in table if k not in allowed]
-    if unknown:
-        raise ctx.error(f"unknown {what} {', '.join(map(repr, unknown))}; allowed: "
-                        f"{', '.join(allowed)}")
-
-
-def _table(ctx: _Ctx, value, field: str) -> dict:
-    if not isinstance(value, dict):
-        raise ctx.error(f"must be a table, got {_describe(value)}", field)
-    return value
-
-
-def _string(ctx: _Ctx, value, field: str) -> str:
-    if not isinstance(value, str) or not value:
-        raise ctx.error(f"must be a non-empty string, got {_describe(value)}", field)
-    return value
-
-
-def _number(ctx: _Ctx, value, field: str, positive: bool = False) -> float:
-    if not _is_number(value) or not math.isfinite(value):
-        raise ctx.error(f"must be a finite number, got {_describe(value)}", field)
-    if positive and not value > 0:
-        raise ctx.error(f"must be positive, got {value!r}", field)
-    return float(value)
-
-
-def _integer(ctx: _Ctx, value, field: str, minimum: int = 0) -> int:
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise ctx.error(f"must be an integer, got {_describe(value)}", field)
-    if value < minimum:
-        raise ctx.error(f"must be >= {minimum}, got {value!r}", field)
-    return int(value)
-
-
-def _vec3(ctx: _Ctx, value, field: str) -> tuple:
-    if (not isinstance(value, list) or len(value) != 3
-            or not all(_is_number(x) and math.isfinite(x) for x in value)):
-        raise ctx.error(f"must be three finite numbers [x, y, z], got {value!r}", field)
-    return tuple(float(x) for x in value)
-
-
-def _require(ctx: _Ctx, table: dict, field: str):
-    if field not in table:
-        raise ctx.error(f"missing required field '{field}'")
-    return table[field]
+from rackstress.scenes.fields import (_Ctx, _array_of_tables, _check_keys, _describe, _integer, _is_number,  # noqa: E402,F401
+                                      _number, _require, _string, _table, _type_name, _vec3)
 
 
 # --------------------------------------------------------------------------- entry point
@@ -466,15 +391,16 @@ def _build_explicit(ctx: _Ctx, data: dict, overrides: dict, user: dict) -> Scene
     unit_system = physical.scene_units(ctx, data)
     groups = _groups(ctx, data["group"], base)
     physical.check_materials(ctx, groups, unit_system)
-    physical.supports(ctx, data.get("support", []), groups, base)
+    select = lambda c, value, field, o: _mask(c, _region(c, value, field, base), o, field)  # noqa: E731
+    physical.supports(ctx, data.get("support", []), groups, select)
     ramp = physical.ramp_of(ctx, data.get("load", []))
     if ramp is not None:
         settings["ramp"] = physical.ramp_phases(ctx, data, ramp, length, dt)
     phases = _phases(ctx, data, settings, length)
     operators = _operators(ctx, data.get("operator", []), groups, phases, base)
     operators = physical.solids(ctx, groups, operators, unit_system)
-    operators = physical.loads(ctx, data.get("load", []), groups, operators, unit_system, base,
-                               ramp)
+    operators = physical.loads(ctx, data.get("load", []), groups, operators, unit_system,
+                               select, ramp)
     analysis = physical.analysis_of(ctx, data, groups, operators, ramp)
 
     params = {"file": ctx.file, "dt": dt, "cycles": settings["cycles"],
@@ -508,13 +434,6 @@ def _build_explicit(ctx: _Ctx, data: dict, overrides: dict, user: dict) -> Scene
     except SceneError as exc:
         raise SceneError(f"{ctx.file}: {exc}") from None
     return scene
-
-
-def _array_of_tables(ctx: _Ctx, value, table: str) -> list:
-    if not isinstance(value, list) or not all(isinstance(t, dict) for t in value):
-        raise ctx.error(f"must be an array of tables ([[{table}]] sections), got "
-                        f"{_describe(value)}", f"[[{table}]]")
-    return value
 
 
 def _groups(ctx: _Ctx, value, base: Path) -> dict:
