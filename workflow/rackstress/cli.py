@@ -570,6 +570,24 @@ def bench_validity(out, quick):
 
     data = mod.run_bench(out, quick=quick, echo=click.echo)
     _bench_report(data, mod)
+    # the material solid in physical units: the cantilever at spacings 2, 1, 0.5 mm
+    from rackstress.bench import cantilever
+
+    cantilever.run_bench(out, quick=quick, echo=click.echo)
+
+
+@bench.command("cantilever")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
+              help="Output directory (default: docs/benchmarks/ of the repository).")
+@click.option("--quick", is_flag=True, help="Spacings 2 and 1 only, no 100,000-particle run.")
+def bench_cantilever(out, quick):
+    """The aluminium cantilever against beam theory (spacings 2, 1, 0.5 mm), the lattice's
+    calibration (E_eff, ν), what ν = 1/4 costs, and 100,000 particles to equilibrium beside
+    scikit-fem (docs/benchmarks/cantilever.md)."""
+    from rackstress.bench import cantilever
+
+    data = cantilever.run_bench(out, quick=quick, echo=click.echo)
+    click.echo(cantilever.report(data))
 
 
 if __name__ == "__main__":  # pragma: no cover
