@@ -43,6 +43,8 @@ LATTICE_NU = 0.25
 #: along its projection: half of it lies inside the part (the half-spacing skin), and a
 #: nearest binding carries twice a diagonal's C11 (k·n_x⁴·ℓ²: 1 against 1/2), so ½·½ = ¼
 FACE_SHARE = 0.25
+#: the last inside test of each Solid (by id): its pairs are asked for several times per run
+_INSIDE: dict = {}
 #: bind reach of a solid, in spacings: the 18 neighbours of the cubic lattice (1 and √2)
 REACH = 1.5
 
@@ -71,9 +73,19 @@ class Solid(WithinInside):
                 f"{self.c:g}")
 
     def inside(self, a, b):
+        """WithinInside's test, remembered: a run asks for the same pairs several times (the
+        memory estimate, the deck, the solver, the engine's check, the load-path warning)."""
+        a, b = np.asarray(a, float).reshape(-1, 3), np.asarray(b, float).reshape(-1, 3)
         if self.region is None:
-            return np.ones(len(np.asarray(a).reshape(-1, 3)), dtype=bool)
-        return super().inside(a, b)
+            return np.ones(len(a), dtype=bool)
+        import hashlib
+
+        key = hashlib.sha1(a.tobytes() + b.tobytes()).hexdigest()
+        cache = _INSIDE.setdefault(id(self), {})
+        if key not in cache:
+            cache.clear()
+            cache[key] = super().inside(a, b)
+        return cache[key]
 
     def weights(self, o: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
         """Per-binding factor on c: 1, plus ½ for each missing second-neighbour binding whose
