@@ -198,3 +198,38 @@ def test_material_needs_units(tmp_path):
     f.write_text(CANTILEVER.read_text().replace('units = "mm-N-s"', ""))
     with pytest.raises(Exception, match="units"):
         load_toml(f)
+
+
+RAMP = """
+name = "ramp"
+dt = 0.01
+duration = 0.5
+
+[[group]]
+name = "dot"
+positions = [[0, 0, 0], [5, 0, 0]]
+radius = 0.5
+
+[[load]]
+on = "dot"
+gravity = [0, 0, -10]
+ramp = 0.2
+"""
+
+
+def test_load_ramp_rises_in_ten_stairs(tmp_path):
+    """A ramp over 0.2 time units: ten phases of 0.02 (2 steps each at dt 0.01), the k-th
+    carrying k/10 of the load, then the full load to the end (0.3 more: 30 steps)."""
+    from rackstress.engines.reference import Reference
+
+    f = tmp_path / "ramp.toml"
+    f.write_text(RAMP)
+    sc = load_toml(f)
+    assert sc.analysis == "dynamic"
+    assert [p.name for p in sc.phases] == [f"ramp{k}" for k in range(1, 11)] + ["full"]
+    assert [p.steps for p in sc.phases] == [2] * 10 + [30]
+    eng = Reference(sc)
+    for k in (1, 3, 10):
+        a = eng.accelerations({"ramp": k})
+        assert np.allclose(a, [[0, 0, -k]] * 2, rtol=1e-12)
+    assert np.allclose(external_forces(sc), [[0, 0, -10]] * 2)      # full load, unit masses
