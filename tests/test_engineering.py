@@ -233,3 +233,15 @@ def test_load_ramp_rises_in_ten_stairs(tmp_path):
         a = eng.accelerations({"ramp": k})
         assert np.allclose(a, [[0, 0, -k]] * 2, rtol=1e-12)
     assert np.allclose(external_forces(sc), [[0, 0, -10]] * 2)      # full load, unit masses
+
+
+def test_static_run_under_mpi(tmp_path):
+    """mpiexec -n 2: the equilibrium is solved once, checked by LAMMPS on both ranks."""
+    out = tmp_path / "mpi"
+    mpiexec = Path(sys.executable).parent / "mpiexec"
+    r = subprocess.run([str(mpiexec), "-n", "2", sys.executable, "-m", "rackstress.cli", "run",
+                        str(CANTILEVER), "--set", "spacing=2", "--out", str(out), "--no-render"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    s = json.loads((out / "summary.json").read_text())
+    assert s["ranks"] == 2 and s["settled"] is True and s["residual_engine"] <= 1e-6

@@ -358,6 +358,10 @@ def plan(scene: Scene, engine: str = "lammps", mode: str = "exact",
     from rackstress.runs.fingerprint import fingerprint
 
     pred = None if scene.analysis == "static" else check_dt(scene, allow=allow_unstable)
+    if scene.analysis == "static" and mode == "fast" and engine == "lammps":
+        raise RunDirError(f"scene '{scene.name}' is a static analysis: its equilibrium is that "
+                          "of Eq. 12 exactly, which --mode fast replaces by harmonic bonds "
+                          "(equal only to first order); run it in --mode exact")
     if engine not in ENGINES:
         raise RunDirError(f"unknown engine '{engine}'; choose one of {', '.join(ENGINES)}")
     dump_every = 1 if scene.analysis == "static" else (dump_every or default_dump_every(scene))

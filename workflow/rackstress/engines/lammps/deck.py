@@ -718,11 +718,13 @@ def _bonds_of(scene: Scene, target: str, op: Bind, K: float):
     g_t, g_s = scene.groups[target], scene.groups[op.source]
     pl = op.pairs(g_t, g_s)
     I, J, L0sq = pl.i + scene.offset(target) + 1, pl.j + scene.offset(op.source) + 1, pl.q
+    # per-pair c (a material solid's face compensation) scales K pair by pair
+    scale = pl.c / float(op.coeff.c)
     if target == op.source:
         keep = I < J
-        I, J, L0sq = I[keep], J[keep], L0sq[keep]
+        I, J, L0sq, scale = I[keep], J[keep], L0sq[keep], scale[keep]
     lo, hi = np.minimum(I, J), np.maximum(I, J)
-    return lo, hi, np.full(len(lo), K), np.sqrt(L0sq)
+    return lo, hi, K * scale, np.sqrt(L0sq)
 
 
 def ghost_cutoff(scene: Scene, skin: float = SKIN) -> float:
