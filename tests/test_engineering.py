@@ -245,3 +245,21 @@ def test_static_run_under_mpi(tmp_path):
     assert r.returncode == 0, r.stderr
     s = json.loads((out / "summary.json").read_text())
     assert s["ranks"] == 2 and s["settled"] is True and s["residual_engine"] <= 1e-6
+
+
+def test_support_reactions_balance_the_load():
+    """Statics: the clamp's reactions (minus the bindings' pull on the held particles) carry
+    the 100 N and its moment about the clamp, P·L = 100 N × 100 mm = 10,000 N·mm."""
+    from rackstress.engines.static import _bind_pairs, forces
+
+    sc = load_toml(CANTILEVER, {"spacing": 2.0})
+    res = solve(sc)
+    f = forces(sc, res.p, _bind_pairs(sc), np.zeros((sc.n_particles, 3)), sc.masses())
+    held = sc.held()
+    reaction = -f[held]                       # what the support must push to hold them
+    assert np.allclose(reaction.sum(axis=0), [0, 0, 100.0], rtol=1e-5, atol=1e-3)
+    r = res.p[held]                           # moment about the y axis through the origin
+    My = float((r[:, 2] * reaction[:, 0] - r[:, 0] * reaction[:, 2]).sum())
+    # the load (0, 0, −100) acts at x ≈ 100 (+ its small deflection): its moment about y is
+    # z·Fx − x·Fz = 100·100; the reactions' is the opposite
+    assert abs(My + 100.0 * 100.0) < 0.01 * 100.0 * 100.0
