@@ -125,8 +125,8 @@ def summarize(scene: Scene, engine: str, mode: str, p_end: np.ndarray, steps_don
         s["error"] = {"message": str(error), "step": error.step, "group": error.group,
                       "particle": error.local, "index": error.index,
                       "atom_id": None if error.index is None else error.index + 1}
+    s["units"] = scene.units.name
     if scene.units.physical:
-        s["units"] = scene.units.name
         for name, g in scene.groups.items():
             if g.material is not None:
                 s["groups"][name]["material"] = {"name": g.material.name,
