@@ -4,7 +4,8 @@
     python scripts/make_decks.py [OUTDIR]      (default: lammps_inputs/ beside this script)
 
 Each deck is a directory with ``particles.data`` and ``in.lammps`` as ``rackstress deck`` writes
-them. A test regenerates them into a temporary directory and fails if any byte differs.
+them (the exact ones with the compiled plugin's fixes: they run standalone in the venv's
+``lmp``). A test regenerates them into a temporary directory and fails if any byte differs.
 """
 from __future__ import annotations
 
@@ -28,7 +29,7 @@ DECKS = {
 def main(out: Path) -> None:
     for name, (scene, params, mode) in DECKS.items():
         sc = scenes.build(scene, **params)
-        write_deck(sc, out / name, mode, default_dump_every(sc))
+        write_deck(sc, out / name, mode, default_dump_every(sc), plugin=mode == "exact")
         print(f"wrote {out / name}")
 
 

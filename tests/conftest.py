@@ -53,7 +53,7 @@ from rackstress.engines.lammps.runner import LammpsRun
 from rackstress.lib.mpi import world
 {setup}
 for key, scene in scenes_.items():
-    run = LammpsRun(compile_deck(scene, "exact"), None)
+    run = LammpsRun(compile_deck(scene, "exact"{compile_kw}), None)
     drive(run)
     p = run.gather_positions()
     counts = world().allgather(run.lmp.extract_global("nlocal"))
@@ -64,8 +64,9 @@ for key, scene in scenes_.items():
 """
 
 
-def lammps_under_mpi(tmp_path, setup: str, timeout: int = 900) -> dict:
-    """Run the scenes ``setup`` (Python source) defines in ``scenes_`` on two ranks, exact mode.
+def lammps_under_mpi(tmp_path, setup: str, timeout: int = 900, plugin: bool = False) -> dict:
+    """Run the scenes ``setup`` (Python source) defines in ``scenes_`` on two ranks, exact mode
+    (``plugin``: with the compiled operator styles instead of the Python callback).
 
     Returns key → (final positions, atoms per rank). The tests folder is importable in
     ``setup`` (e.g. ``from test_supports import impact_scene``).
@@ -73,7 +74,8 @@ def lammps_under_mpi(tmp_path, setup: str, timeout: int = 900) -> dict:
     import subprocess
 
     script = tmp_path / "mpi_run.py"
-    script.write_text(_MPI_SCRIPT.format(setup=setup))
+    script.write_text(_MPI_SCRIPT.format(setup=setup,
+                                         compile_kw=", plugin=True" if plugin else ""))
     proc = subprocess.run([MPIEXEC, "-n", "2", sys.executable, str(script), str(tmp_path),
                            str(Path(__file__).parent)], capture_output=True, text=True,
                           timeout=timeout)

@@ -37,7 +37,11 @@ def six_jobs(tmp_path: Path, steps: int) -> Path:
 
 
 def batch(args, mpi: int | None = None, **kw):
+    """``rackstress batch ARGS`` without the jobs' pictures (tests/test_batch_report.py
+    renders them): these tests time and kill the runs themselves."""
     cmd = ([MPIEXEC, "-n", str(mpi)] if mpi else []) + [RACKSTRESS, "batch", *args]
+    if "--report" not in args:
+        cmd.append("--no-render")
     return subprocess.run(cmd, capture_output=True, text=True, timeout=170, **kw)
 
 
@@ -114,7 +118,8 @@ def test_sweep_under_mpiexec_two_groups(reference, tmp_path):
 def test_killed_batch_restarts_and_runs_each_job_once(reference, tmp_path):
     figs, sw = reference
     d = tmp_path / "b"
-    p = subprocess.Popen([MPIEXEC, "-n", "2", RACKSTRESS, "batch", str(sw), "--out", str(d)],
+    p = subprocess.Popen([MPIEXEC, "-n", "2", RACKSTRESS, "batch", str(sw), "--out", str(d),
+                          "--no-render"],
                          start_new_session=True, stdout=subprocess.DEVNULL,
                          stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 120

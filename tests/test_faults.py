@@ -280,16 +280,30 @@ def test_divergence_inside_lammps_is_a_divergence(tmp_path):
 def test_callback_failure_stops_lammps_at_its_step(tmp_path):
     """dt = 0.5 makes plane particles coincide inside the Python callback at step 7, which is
     not a watchdog check (every 10 steps): the run stops there, with no frame after it (the
-    chunk used to run on to step 10 with the callback's forces zero, writing frame 9)."""
+    chunk used to run on to step 10 with the callback's forces zero, writing frame 9). The
+    Python callback's behaviour: selected with RACKSTRESS_KERNELS (the plugin's run stops at
+    LAMMPS' own "Lost atoms" instead, below)."""
+    import os
+
     out = tmp_path / "pr"
     r = rs("run", "plane-rack", "--dt", "0.5", "--steps", "300", "--allow-unstable",
-           "--dump-every", "3", "--out", out, *QUIET)
+           "--dump-every", "3", "--out", out, *QUIET,
+           env={**os.environ, "RACKSTRESS_KERNELS": "numba"})
     assert r.returncode == 3, r.stderr
     s = json.loads((out / "summary.json").read_text())
     step = s["error"]["step"]
     assert s["status"] == "diverged" and step % 10 != 0
     assert s["steps"] == step
     assert frames(out / "trajectory.dump") == list(range(0, step + 1, 3))
+    # the compiled plugin (the default): LAMMPS stops inside the step the atoms flew off in,
+    # a divergence (exit 3) naming that step; no frame of it is written
+    out = tmp_path / "plugin"
+    r = rs("run", "plane-rack", "--dt", "0.5", "--steps", "300", "--allow-unstable",
+           "--dump-every", "3", "--out", out, *QUIET)
+    assert r.returncode == 3, r.stderr
+    s = json.loads((out / "summary.json").read_text())
+    assert s["status"] == "diverged" and "Lost atoms" in s["error"]["message"]
+    assert frames(out / "trajectory.dump") == list(range(0, s["error"]["step"], 3))
 
 
 @pytest.mark.lammps

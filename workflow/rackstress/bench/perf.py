@@ -51,7 +51,12 @@ CONFIGS = (("reference", "exact", 1), ("lammps", "exact", 1, "numpy"),
            # the same iterations as magpod's (its first 1200): the ratio of the two is a target
            ("lammps", "exact", 1, "numba", "sediment-large", None),
            ("lammps", "exact", 1, "numba", "sediment-large", 200, "all"),
-           ("lammps", "exact", 2, "numba", "sediment-large", 200))
+           ("lammps", "exact", 2, "numba", "sediment-large", 200),
+           # the compiled plugin (docs/plugin.md), one and two ranks
+           ("lammps", "exact", 1, "plugin"), ("lammps", "exact", 2, "plugin"),
+           ("lammps", "exact", 1, "plugin", "magpod-small", 4800),
+           ("lammps", "exact", 1, "plugin", "sediment-large", 200),
+           ("lammps", "exact", 2, "plugin", "sediment-large", 200))
 
 
 def normalize(config, scene_name: str, steps: int) -> dict:
@@ -127,8 +132,11 @@ def worker(engine: str, mode: str, steps: int, profile_steps: int, scene_name: s
     from rackstress.engines.lammps.deck import compile_deck
     from rackstress.engines.lammps.runner import LammpsRun
 
+    # kernels "plugin": the compiled styles (docs/plugin.md) instead of the Python callback
     deck = compile_deck(sc, mode, measure_fast=True,
-                        active_only=os.environ.get("RACKSTRESS_PARTICLES", "active") == "active")
+                        active_only=os.environ.get("RACKSTRESS_PARTICLES", "active") == "active",
+                        plugin=os.environ.get("RACKSTRESS_KERNELS") == "plugin")
+    res["plugin"] = deck.plugin
     res["passive"] = list(deck.passive)
     runner = LammpsRun(deck, None, log=False)
     comm = runner.comm

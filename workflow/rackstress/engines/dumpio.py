@@ -78,3 +78,41 @@ class DumpWriter:
 
     def __exit__(self, *exc):
         self.close()
+
+
+def trim_nonfinite(path) -> int | None:
+    """Cut a dump before its first frame holding a non-finite value (``nan``, ``inf``); return
+    that frame's iteration, or None if every frame is finite (or there is no dump).
+
+    After a divergence: a check that noticed it only some steps later (the watchdog runs every
+    few steps; LAMMPS writes its dump itself) must not leave NaN frames kept as if whole. One
+    C-speed pass over the file (mmap and regular expressions)."""
+    import mmap
+    import re
+
+    path = Path(path)
+    try:
+        size = path.stat().st_size
+    except OSError:
+        return None
+    if size == 0:
+        return None
+    head = re.compile(rb"ITEM: TIMESTEP\n(\d+)\n")
+    bad = re.compile(rb"(?i)(?<![a-z])(nan|inf)")
+    with open(path, "r+b") as fh:
+        with mmap.mmap(fh.fileno(), 0) as mm:
+            starts = [(m.start(), int(m.group(1))) for m in head.finditer(mm)]
+            for k, (start, step) in enumerate(starts):
+                end = starts[k + 1][0] if k + 1 < len(starts) else size
+                atoms = mm.find(b"ITEM: ATOMS", start, end)
+                body = mm.find(b"\n", atoms, end) if atoms >= 0 else start
+                if bad.search(mm, body, end):
+                    cut = start
+                    break
+            else:
+                return None
+        try:
+            fh.truncate(cut)
+        except OSError as exc:
+            raise storage_error(exc, "trim the non-finite frames of", path) from None
+    return step

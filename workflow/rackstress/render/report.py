@@ -10,8 +10,9 @@ t against the t used), and links to the files to open elsewhere (``vtk/run.pvd``
 OVITO, ``stress.dump``, the trajectory, the movie).
 
 It is self-contained as a folder: the images are the PNG files beside it (relative links into
-``figures/``), no script, no network, so it opens from the file system in any browser. Written
-atomically.
+``figures/``), and the 3D view of the peak frame is ``view3d.html`` beside it in an
+``<iframe>`` (vtk.js inlined, :mod:`rackstress.render.view3d`); nothing comes from the network,
+so it opens from the file system in any browser. Written atomically.
 """
 from __future__ import annotations
 
@@ -21,6 +22,7 @@ import os
 import time
 from pathlib import Path
 
+from rackstress.errors import storage_error
 from rackstress.lib.runfiles import REPORT, STABILITY, STRESS_JSON
 
 FIGURES = "figures"
@@ -120,8 +122,11 @@ def _phase_runs(phases, steps) -> list:
     return out
 
 
-def write_report(rundir, stability: bool = True) -> Path:
+def write_report(rundir, stability: bool = True, view: bool = True) -> Path:
     """Write ``RUNDIR/report.html`` from what the run directory holds; return its path.
+
+    ``view``: also write ``RUNDIR/view3d.html``, the peak frame in 3D, and embed it
+    (:mod:`rackstress.render.view3d`).
 
     Example
     -------
@@ -178,6 +183,12 @@ def write_report(rundir, stability: bool = True) -> Path:
           "(<code>groups.NAME.peak.MEASURE</code>), the pictures' colour scale and the VTK files' "
           "point data. paper: distance from the desired position; accumulated: its time "
           "integral; strain: von Mises shear strain; d2min: non-affine D²min.</p>")
+
+    # ---- the peak frame in 3D
+    if view:
+        from rackstress.render.view3d import section
+
+        w(section(rundir))
 
     # ---- pictures
     w('<h2 id="pictures">Pictures</h2>')
@@ -291,6 +302,10 @@ def write_report(rundir, stability: bool = True) -> Path:
     w("</ul></body></html>")
     path = rundir / REPORT
     tmp = rundir / f".{REPORT}.tmp{os.getpid()}"
-    tmp.write_text("\n".join(out) + "\n", encoding="utf-8")
-    os.replace(tmp, path)
+    try:
+        tmp.write_text("\n".join(out) + "\n", encoding="utf-8")
+        os.replace(tmp, path)
+    except OSError as exc:          # a full disk: no half report left
+        tmp.unlink(missing_ok=True)
+        raise storage_error(exc, "write", path) from None
     return path

@@ -199,7 +199,7 @@ def resume_run(rundir: Path, spec: str | None = None, progress: bool = True, com
     from rackstress.engines.lammps.deck import compile_deck
     from rackstress.lib.mpi import on_root, world
     from rackstress.runs.fingerprint import compare, fingerprint
-    from rackstress.runs.run import check_memory, execute
+    from rackstress.runs.run import check_memory, execute, operators_path
     from rackstress.runs.rundir import check_out, locked
 
     comm = comm or world()
@@ -220,15 +220,20 @@ def resume_run(rundir: Path, spec: str | None = None, progress: bool = True, com
         meta = on_root(prepare, comm)
         scene = rebuild_scene(rundir, spec)
         mode, dump_every = meta["mode"], int(meta["dump_every"])
-        compare(meta.get("fingerprint"),
-                fingerprint(scene, engine="lammps", mode=mode, dump_every=dump_every),
+        # the operators where the interrupted run had them (plugin or callback: the sums'
+        # order, hence the bits, differ between the two)
+        recorded = meta.get("fingerprint") or {}
+        deck = compile_deck(scene, mode, plugin=recorded.get("operators") == "plugin")
+        now = fingerprint(scene, engine="lammps", mode=mode, dump_every=dump_every)
+        if "operators" in recorded:
+            now["operators"] = operators_path(deck)
+        compare(meta.get("fingerprint"), now,
                 f"the checkpoint in {rundir} (step {meta.get('step')})")
         check_memory(scene, "lammps", comm.Get_size())
         ck = load_checkpoint(rundir, meta)
         if ck.x.shape != (scene.n_particles, 3):
             raise ResumeError(f"{rundir}: checkpoint holds {len(ck.x)} particles, the scene "
                               f"{scene.n_particles}")
-        deck = compile_deck(scene, mode)
         on_root(lambda: (truncate_dump(rundir / "trajectory.dump", ck.step),
                          remove_derived(rundir)), comm)
         records = None

@@ -28,9 +28,14 @@ from rackstress.model.scene import PhaseEnd, Scene
 ENGINES = ("lammps", "reference")
 
 
+#: LAMMPS reads the intervals of ``dump`` and ``thermo`` as a C int.
+LAMMPS_MAX_INT = 2**31 - 1
+
+
 def default_dump_every(scene: Scene) -> int:
-    """About 100 frames a run, never fewer than every step."""
-    return max(1, scene.total_steps // 100)
+    """About 100 frames a run, never fewer than every step, nor more steps apart than LAMMPS
+    can count in a ``dump`` interval (a run of 10¹² steps gets more frames)."""
+    return min(max(1, scene.total_steps // 100), LAMMPS_MAX_INT)
 
 
 #: Bytes a particle costs, measured (peak RSS over particles, ``scripts/bench_large.py``:
@@ -332,6 +337,18 @@ def execute(scene: Scene, out: Path, engine: str, mode: str, dump_every: int, *,
                           "masses": eng.deck.masses})
     finally:
         eng.close()
+    if error is not None and root and engine == "lammps":
+        from rackstress.engines.dumpio import trim_nonfinite
+
+        # LAMMPS writes the dump itself: frames of non-finite positions written before the
+        # check that noticed them are cut, and the step named is the first bad one seen
+        bad = trim_nonfinite(Path(out) / "trajectory.dump")
+        if bad is not None:
+            extra["trimmed_from_step"] = bad
+            if bad < error.step:
+                error.args = (f"{error} (its positions were non-finite at step {bad} already: "
+                              f"the frames from step {bad} on were removed from the dump)",)
+                error.step, steps = bad, min(steps, bad)
     wall = wall_before + time.perf_counter() - t0
     if scene.report is not None and root:
         extra["report"] = scene.report(scene, records)
@@ -367,15 +384,29 @@ def plan(scene: Scene, engine: str = "lammps", mode: str = "exact",
     dump_every = 1 if scene.analysis == "static" else (dump_every or default_dump_every(scene))
     if dump_every < 1:
         raise RunDirError(f"--dump-every must be >= 1, got {dump_every}")
+    if engine == "lammps" and dump_every > LAMMPS_MAX_INT:
+        raise RunDirError(f"--dump-every {dump_every} is more than LAMMPS can take in a dump "
+                          f"interval ({LAMMPS_MAX_INT}); give a smaller one")
     comm = comm or world()
     if engine == "reference":
         mode = "exact"
         if comm.Get_size() > 1:
             raise RunDirError("the reference engine runs on one rank; run it without mpiexec")
     check_memory(scene, engine, comm.Get_size())
+    # LAMMPS runs the exact operators in the compiled plugin when it is there for this LAMMPS
+    # (docs/plugin.md), else in the Python callback (one line says why); a resumed run keeps it
+    deck = compile_deck(scene, mode, plugin=None if engine == "lammps" else False)
+    fp = fingerprint(scene, engine=engine, mode=mode, dump_every=dump_every)
+    if engine == "lammps":
+        fp["operators"] = operators_path(deck)
     return {"engine": engine, "mode": mode, "dump_every": int(dump_every),
-            "deck": compile_deck(scene, mode), "stability": pred,
-            "fingerprint": fingerprint(scene, engine=engine, mode=mode, dump_every=dump_every)}
+            "deck": deck, "stability": pred, "fingerprint": fp}
+
+
+def operators_path(deck) -> str:
+    """Where a LAMMPS deck evaluates the operators LAMMPS has no style for: 'plugin' (the
+    compiled styles) or 'callback' (Python); a run's fingerprint records it for its resumption."""
+    return "plugin" if deck.plugin else "callback"
 
 
 def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",

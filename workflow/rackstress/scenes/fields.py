@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 
 from rackstress.errors import SceneError
+from rackstress.lib.suggest import did_you_mean
 
 
 # --------------------------------------------------------------------------- field checks
@@ -45,8 +46,15 @@ def _is_number(x) -> bool:
 def _check_keys(ctx: _Ctx, table: dict, allowed, what: str = "key") -> None:
     unknown = [k for k in table if k not in allowed]
     if unknown:
-        raise ctx.error(f"unknown {what} {', '.join(map(repr, unknown))}; allowed: "
-                        f"{', '.join(allowed)}")
+        hint = did_you_mean(unknown[0], allowed)
+        raise ctx.error(f"unknown {what} {', '.join(map(repr, unknown))}"
+                        f"{' (' + hint + ')' if hint else ''}; allowed: {', '.join(allowed)}")
+
+
+def _hint(word, names) -> str:
+    """``" (did you mean 'X'?)"`` for the closest of ``names``, or ``""``."""
+    hint = did_you_mean(str(word), list(names))
+    return f" ({hint})" if hint else ""
 
 
 def _table(ctx: _Ctx, value, field: str) -> dict:

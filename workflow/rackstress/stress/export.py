@@ -36,6 +36,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
+from rackstress.errors import storage_error
 from rackstress.lib.runfiles import PVD
 from rackstress.engines.dumpio import frame_text
 from rackstress.stress.measures import positions
@@ -175,6 +176,8 @@ def write_vtk(run, fields, outdir, progress: bool = False) -> Path:
     writer.SetDataModeToBinary()          # inline base64: OVITO reads neither appended data
     writer.SetCompressorTypeToNone()      # nor compressed arrays, only Int32/64 and Float32/64
     #                                       arrays, no field data (checked with OVITO 3.17)
+    writer.WriteToOutputStringOn()        # VTK's own file output crashes (SIGSEGV) when the
+    #                                       disk fills: it writes to memory, Python to the disk
     entries = []
     try:
         with progress_bar(len(fields.steps), progress, "VTK frames") as bar:
@@ -195,10 +198,10 @@ def write_vtk(run, fields, outdir, progress: bool = False) -> Path:
                 for m, vals in fields.values.items():
                     pd.AddArray(arr(vals[k], m))
                 name = frame_name(step)
-                writer.SetFileName(str(tmp / name))
                 writer.SetInputData(poly)
                 if not writer.Write():
                     raise OSError(f"{tmp / name}: VTK could not write the frame")
+                _write_bytes(tmp / name, writer.GetOutputString())
                 entries.append((int(step), name))
                 bar.update(1)
         lines = ['<?xml version="1.0"?>',
@@ -207,12 +210,21 @@ def write_vtk(run, fields, outdir, progress: bool = False) -> Path:
         lines += [f'    <DataSet timestep="{s}" group="" part="0" file={quoteattr(f)}/>'
                   for s, f in entries]
         lines += ["  </Collection>", "</VTKFile>", ""]
-        (tmp / PVD).write_text("\n".join(lines))
+        _write_bytes(tmp / PVD, "\n".join(lines).encode())
         _swap_in(tmp, outdir)
-    except BaseException:
+    except BaseException as exc:
         shutil.rmtree(tmp, ignore_errors=True)
+        if isinstance(exc, OSError) and exc.errno is not None:
+            raise storage_error(exc, "write the VTK series", exc.filename or outdir) from None
         raise
     return outdir / PVD
+
+
+def _write_bytes(path: Path, data) -> None:
+    """Write ``data`` (bytes or str) to ``path``; an OS error (a full disk) raises ``OSError``
+    naming the path."""
+    with open(path, "wb") as fh:
+        fh.write(data if isinstance(data, bytes) else data.encode())
 
 
 # ----------------------------------------------------------------------------- LAMMPS dump
@@ -256,7 +268,9 @@ def write_stress_dump(run, fields, path, progress: bool = False) -> Path:
                 fh.write(frame_text(step, p, cols, np.column_stack(blocks), fmt))
                 bar.update(1)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         tmp.unlink(missing_ok=True)
+        if isinstance(exc, OSError) and exc.errno is not None:
+            raise storage_error(exc, "write", path) from None
         raise
     return path

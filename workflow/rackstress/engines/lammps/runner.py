@@ -28,9 +28,10 @@ import numpy as np
 
 from rackstress.engines.lammps.callback import PyForces, _global_int
 from rackstress.engines.lammps.deck import MOVE_GROUP, PY_FIX, PY_NAPPLY, Deck
+from rackstress.engines.lammps.plugin import locate as _locate_plugin
 from rackstress.errors import DivergenceError, RackstressError, StorageError
 from rackstress.lib.vec import fresh_zeros
-from rackstress.engines.watchdog import divergence_error, find_divergence
+from rackstress.engines.watchdog import divergence_error, find_divergence, force_error
 
 #: Steps between watchdog checks (and progress updates) on LAMMPS.
 CHECK_EVERY = 10
@@ -94,7 +95,9 @@ class LammpsRun:
         self.dump_every = int(dump_every)
         self._dump_file = str(out / "trajectory.dump") if out is not None else None
         self.cutoff = float(deck.ghost_cutoff)
-        self._reach = _reach_pairs(self.scene)
+        # a plugin deck's ghosts cover the real interaction range (rack couplings and
+        # attraction are reductions): nothing grows with a body's size
+        self._reach = [] if deck.plugin else _reach_pairs(self.scene)
         # the deck's cutoff is 1.5 reach + 2 r_max + LAMMPS' skin + 1 (deck.ghost_cutoff)
         self._extra = 2 * float(self.scene.radii().max()) + deck.lammps_skin + 1.0
         self._reach0 = (self.cutoff - self._extra) / 1.5
@@ -116,6 +119,8 @@ class LammpsRun:
             data = Path(self.comm.bcast(str(data), root=0))
             self.comm.Barrier()
         dump = str(out / "trajectory.dump") if out is not None else None
+        if deck.plugin:
+            self.command(f"plugin load {plugin_library()}")
         for cmd in deck.setup_commands(str(data), dump, dump_every):
             self.command(cmd)
             if dump is not None and cmd.startswith("dump ") and " all custom " in cmd:
@@ -371,6 +376,8 @@ class LammpsRun:
         mine = None if err is None else (int(err[0]), type(err[1]).__name__, str(err[1]),
                                          getattr(err[1], "index", None))
         step, kind, text, index = next(e for e in self.comm.allgather(mine) if e is not None)
+        if kind == "NonFiniteForce":        # found in the step it arose in (before the finder,
+            raise force_error(self.scene, step, index)   # which sees its NaN velocities)
         # particles that flew apart (a partner out of ghost reach) are a divergence: the
         # watchdog names the particle first, else the callback's own account does
         found = self._finder()
@@ -667,6 +674,15 @@ def attach_callback(lmp, fix_id: str, fn, caller) -> None:
     with ExceptionCheck(lmp):          # a bad fix id raises, as lmp.set_fix_external_callback's
         lmp.lib.lammps_set_fix_external_callback(
             lmp.lmp, fix_id.encode(), ctypes.cast(cfunc, lmp.FIX_EXTERNAL_CALLBACK_FUNC), caller)
+
+
+def plugin_library() -> str:
+    """The compiled plugin for a plugin deck (deck.use_plugin found it when the deck was made)."""
+    lib, why = _locate_plugin()
+    if lib is None:
+        raise RackstressError(f"the deck needs the rackstress LAMMPS plugin, which is not "
+                              f"available: {why}")
+    return str(lib)
 
 
 def _reach_pairs(scene) -> list[tuple[str, str]]:

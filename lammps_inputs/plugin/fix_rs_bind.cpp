@@ -1,0 +1,122 @@
+/* ----------------------------------------------------------------------
+   rackstress plugin: fix rs/bind — directed bind with a per-pair L0, Eqs. 12–13.
+
+     fix ID TARGET rs/bind SOURCE c btype N
+
+   bind(u, ĉ) (Eq. 13) over the pairs of a coefficient matrix such as within(d) (Eq. 16): the
+   pairs are the data file's bonds of type N (one bond per unordered pair, carried by LAMMPS
+   with their atoms: bond_style zero, newton_bond off, so each rank lists every bond of the atoms
+   it owns). On each target particle p of a pair, from its source partner u, Eq. 12:
+
+     c·(u − p)·(1 − L0²/‖u − p‖²),   L0 = ‖u_o − p_o‖ per pair (original positions d2_rso)
+
+   LAMMPS bond styles keep r0 per bond type; here every pair has its own L0. Directed: this fix
+   adds only the acceleration on TARGET from SOURCE; the reverse is its own fix (and one fix does
+   both ends when a group is bound to itself, where ĉ holds (i, j) and (j, i)).
+------------------------------------------------------------------------- */
+
+#include "fix_rs_bind.h"
+
+#include "atom.h"
+#include "error.h"
+#include "force.h"
+#include "neighbor.h"
+#include "utils.h"
+
+#include <cmath>
+#include <cstring>
+
+using namespace LAMMPS_NS;
+using namespace FixConst;
+
+FixRSBind::FixRSBind(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, arg), built(false)
+{
+  if (narg != 7 || strcmp(arg[5], "btype") != 0)
+    error->all(FLERR, "Illegal fix rs/bind command: fix ID TARGET rs/bind SOURCE c btype N");
+  sourcebit = RackStress::groupbit(group, error, "rs/bind", "source", arg[3]);
+  c = utils::numeric(FLERR, arg[4], false, lmp);
+  if (!std::isfinite(c)) error->all(FLERR, "Fix rs/bind: coefficient c must be finite, got {}", arg[4]);
+  btype = utils::inumeric(FLERR, arg[6], false, lmp);
+  if (btype < 1 || btype > atom->nbondtypes)
+    error->all(FLERR, "Fix rs/bind: btype {} is not a bond type (1..{})", btype, atom->nbondtypes);
+}
+
+int FixRSBind::setmask()
+{
+  return POST_FORCE;
+}
+
+void FixRSBind::init()
+{
+  RackStress::originals(atom, error, "rs/bind");
+  if (force->newton_bond)
+    error->all(FLERR, "Fix rs/bind needs newton_bond off ('newton on off' before read_data): "
+               "each rank must list every bond of the atoms it owns");
+}
+
+void FixRSBind::setup(int vflag)
+{
+  built = false;
+  post_force(vflag);
+}
+
+/* this rank's pairs from LAMMPS' bond list (rebuilt when it reneighbours): L0² per pair from
+   the original positions, and the ends this fix acts on (an owned target with a source partner) */
+void FixRSBind::collect()
+{
+  double **o = RackStress::originals(atom, error, "rs/bind");
+  int *mask = atom->mask;
+  int nlocal = atom->nlocal;
+  int **bondlist = neighbor->bondlist;
+  p1.clear();
+  p2.clear();
+  ends.clear();
+  q.clear();
+  for (int n = 0; n < neighbor->nbondlist; n++) {
+    if (bondlist[n][2] != btype) continue;
+    int i1 = bondlist[n][0], i2 = bondlist[n][1];
+    int e = 0;
+    if (i1 < nlocal && (mask[i1] & groupbit) && (mask[i2] & sourcebit)) e |= 1;
+    if (i2 < nlocal && (mask[i2] & groupbit) && (mask[i1] & sourcebit)) e |= 2;
+    if (!e) continue;
+    double l2 = 0.0;
+    for (int k = 0; k < 3; k++) {
+      double l = o[i2][k] - o[i1][k];
+      l2 += l * l;
+    }
+    p1.push_back(i1);
+    p2.push_back(i2);
+    ends.push_back(e);
+    q.push_back(l2);
+  }
+  built = true;
+}
+
+void FixRSBind::post_force(int /*vflag*/)
+{
+  if (!built || neighbor->ago == 0) collect();
+  double **x = atom->x, **f = atom->f;
+  const double *mass = atom->mass;
+  const double *rmass = atom->rmass;
+  const int *type = atom->type;
+  const int n = (int) p1.size();
+  for (int k = 0; k < n; k++) {
+    const int i1 = p1[k], i2 = p2[k];
+    const double dx = x[i2][0] - x[i1][0], dy = x[i2][1] - x[i1][1], dz = x[i2][2] - x[i1][2];
+    const double d2 = dx * dx + dy * dy + dz * dz;
+    const double s = c * (1.0 - q[k] / d2);
+    const double ax = s * dx, ay = s * dy, az = s * dz;
+    if (ends[k] & 1) {
+      const double m = rmass ? rmass[i1] : mass[type[i1]];
+      f[i1][0] += m * ax;
+      f[i1][1] += m * ay;
+      f[i1][2] += m * az;
+    }
+    if (ends[k] & 2) {
+      const double m = rmass ? rmass[i2] : mass[type[i2]];
+      f[i2][0] -= m * ax;
+      f[i2][1] -= m * ay;
+      f[i2][2] -= m * az;
+    }
+  }
+}

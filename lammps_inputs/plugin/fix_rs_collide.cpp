@@ -1,0 +1,94 @@
+/* ----------------------------------------------------------------------
+   rackstress plugin: fix rs/collide — directed collide, Eqs. 10–11.
+
+     fix ID TARGET rs/collide SOURCE c
+
+   On each target particle p, from every source particle u that overlaps it (Eq. 11), Eq. 10
+   with the reach the paper's prose gives (R = r_p + r_u, docs/model.md erratum 1):
+
+     c·(u − p)·min(0, 1 − R²/‖u − p‖²)
+
+   Directed: only the target gains it (the reverse, if any, is its own fix with its own c), so a
+   one-way or phase-conditioned collision is exact where a pair style (Newton's third law) is not.
+   Candidates within r_p + r_max + skin are searched among owned and ghost atoms when LAMMPS
+   reneighbours (rs_common.h, Contacts); each step measures them. Radii: per-atom d_rsr.
+------------------------------------------------------------------------- */
+
+#include "fix_rs_collide.h"
+
+#include "atom.h"
+#include "error.h"
+#include "neighbor.h"
+#include "utils.h"
+
+#include <cmath>
+#include <cstring>
+
+using namespace LAMMPS_NS;
+using namespace FixConst;
+
+FixRSCollide::FixRSCollide(LAMMPS *lmp, int narg, char **arg) :
+    Fix(lmp, narg, arg), built(false), touching(0)
+{
+  if (narg != 5) error->all(FLERR, "Illegal fix rs/collide command: fix ID TARGET rs/collide SOURCE c");
+  sourcebit = RackStress::groupbit(group, error, "rs/collide", "source", arg[3]);
+  c = utils::numeric(FLERR, arg[4], false, lmp);
+  if (!std::isfinite(c)) error->all(FLERR, "Fix rs/collide: coefficient c must be finite, got {}", arg[4]);
+}
+
+int FixRSCollide::setmask()
+{
+  return POST_FORCE;
+}
+
+void FixRSCollide::init()
+{
+  RackStress::radii(atom, error, "rs/collide");
+}
+
+void FixRSCollide::setup(int vflag)
+{
+  built = false;
+  post_force(vflag);
+}
+
+void FixRSCollide::post_force(int /*vflag*/)
+{
+  double *r = RackStress::radii(atom, error, "rs/collide");
+  if (!built || neighbor->ago == 0) {
+    list.build(lmp, groupbit, sourcebit, r);
+    built = true;
+  }
+  double **x = atom->x, **f = atom->f;
+  touching = 0;
+  for (size_t k = 0; k < list.rows.size(); k++) {
+    int i = list.rows[k];
+    double a[3] = {0.0, 0.0, 0.0};
+    bool any = false;
+    for (int n = list.first[k]; n < list.first[k + 1]; n++) {
+      int j = list.partner[n];
+      double d[3], d2 = 0.0;
+      for (int e = 0; e < 3; e++) {
+        d[e] = x[j][e] - x[i][e];
+        d2 += d[e] * d[e];
+      }
+      double R = r[i] + r[j], R2 = R * R;
+      if (!(d2 < R2)) continue;    // Eq. 11: only overlapping pairs (Eq. 10 is zero beyond)
+      double s = c * std::fmin(0.0, 1.0 - R2 / d2);
+      for (int e = 0; e < 3; e++) a[e] += s * d[e];
+      any = true;
+    }
+    if (!any) continue;
+    touching = 1;
+    double m = RackStress::mass(atom, i);
+    for (int e = 0; e < 3; e++) f[i][e] += m * a[e];
+  }
+}
+
+/* whether one of this rank's target particles overlaps a source particle this step */
+void *FixRSCollide::extract(const char *name, int &dim)
+{
+  dim = 0;
+  if (strcmp(name, "touching") == 0) return &touching;
+  return nullptr;
+}

@@ -1,0 +1,41 @@
+/* -*- c++ -*- ----------------------------------------------------------
+   rackstress plugin: conditional dampen, Eq. 28 (Eq. 9 while a contact holds)
+------------------------------------------------------------------------- */
+
+#ifdef FIX_CLASS
+// clang-format off
+FixStyle(rs/dampen,FixRSDampen);
+// clang-format on
+#else
+
+#ifndef RS_FIX_DAMPEN_H
+#define RS_FIX_DAMPEN_H
+
+#include "fix.h"
+#include "rs_common.h"
+
+namespace LAMMPS_NS {
+
+class FixRSDampen : public Fix, public RackStress::Reduced {
+ public:
+  FixRSDampen(class LAMMPS *, int, char **);
+  ~FixRSDampen() override;
+  int partial_size() override { return 1; }
+  void partial(double *) override;
+  void total(const double *) override;
+  int setmask() override;
+  void init() override;
+  void setup(int) override;
+  void post_force(int) override;
+
+ private:
+  int contactbit;
+  double c;
+  bool built, ready, holds;
+  RackStress::Contacts list;
+};
+
+}    // namespace LAMMPS_NS
+
+#endif
+#endif

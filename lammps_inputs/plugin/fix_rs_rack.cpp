@@ -1,0 +1,167 @@
+/* ----------------------------------------------------------------------
+   rackstress plugin: fix rs/rack — the rack coupling of Eq. 23.
+
+     fix ID TARGET rs/rack SOURCE c
+
+   rackForces(host) (Eq. 23) binds a rack to its host with bind over every pair (Eq. 13 with
+   ĉ = [c]), and the host to its rack the same way. On each target particle p, from every source
+   particle u (never p itself), the acceleration of Eq. 12:
+
+     c·(u − p)·(1 − L0²/‖u − p‖²),   L0 = ‖u_o − p_o‖ (original positions)
+
+   Every pair couples a whole body, so ghosts cannot carry it. As fix rigid sums its bodies, the
+   smaller group (the six rack particles) is gathered on every rank with an MPI_Allreduce a step;
+   a host particle's term is then local, and a rack particle's sum over its host is each rank's
+   partial sum over the hosts it owns, added up by one more MPI_Allreduce. Both are fused with
+   every other style's reductions of the step (rs_common.h, Reduced): two collectives a step.
+------------------------------------------------------------------------- */
+
+#include "fix_rs_rack.h"
+
+#include "atom.h"
+#include "error.h"
+#include "group.h"
+#include "neighbor.h"
+#include "update.h"
+#include "utils.h"
+
+#include <algorithm>
+#include <cmath>
+
+using namespace LAMMPS_NS;
+using namespace FixConst;
+
+FixRSRack::FixRSRack(LAMMPS *lmp, int narg, char **arg) :
+    Fix(lmp, narg, arg), gather_source(true), ready(false), rows_built(false), overlap(true)
+{
+  if (narg != 5) error->all(FLERR, "Illegal fix rs/rack command: fix ID TARGET rs/rack SOURCE c");
+  sourcebit = RackStress::groupbit(group, error, "rs/rack", "source", arg[3]);
+  c = utils::numeric(FLERR, arg[4], false, lmp);
+  if (!std::isfinite(c)) error->all(FLERR, "Fix rs/rack: coefficient c must be finite, got {}", arg[4]);
+}
+
+FixRSRack::~FixRSRack()
+{
+  RackStress::leave(lmp, this);
+}
+
+int FixRSRack::setmask()
+{
+  return POST_FORCE;
+}
+
+void FixRSRack::init()
+{
+  RackStress::originals(atom, error, "rs/rack");
+}
+
+void FixRSRack::setup(int vflag)
+{
+  if (!ready) {
+    // gather whichever side is smaller: the rack (host <- rack: the sources; rack <- host: the
+    // targets, whose sums over the host are reduced)
+    int sgroup = -1;
+    for (int g = 0; g < group->ngroup; g++)
+      if (group->bitmask[g] == sourcebit) sgroup = g;
+    gather_source = group->count(sgroup) <= group->count(igroup);
+    few.collect(lmp, gather_source ? sourcebit : groupbit, nullptr);
+    sums.assign(3 * few.size(), 0.0);
+    int both = 0, any = 0;
+    for (int i = 0; i < atom->nlocal; i++)
+      if ((atom->mask[i] & groupbit) && (atom->mask[i] & sourcebit)) both = 1;
+    MPI_Allreduce(&both, &any, 1, MPI_INT, MPI_MAX, world);
+    overlap = any != 0;
+    RackStress::enroll(lmp, this);
+    ready = true;
+  }
+  rows_built = false;
+  RackStress::invalidate(lmp);
+  post_force(vflag);
+}
+
+const std::vector<int> &FixRSRack::owned_rows()
+{
+  if (!rows_built || neighbor->ago == 0) {
+    int bit = gather_source ? groupbit : sourcebit;
+    rows.clear();
+    for (int i = 0; i < atom->nlocal; i++)
+      if (atom->mask[i] & bit) rows.push_back(i);
+    rows_built = true;
+  }
+  return rows;
+}
+
+int FixRSRack::partial_size()
+{
+  return gather_source ? 0 : 3 * few.size();
+}
+
+/* the gathered targets (a rack) sum over every source u (the host): this rank's hosts */
+void FixRSRack::partial(double *sum)
+{
+  if (gather_source) return;
+  double **x = atom->x, **o = RackStress::originals(atom, error, "rs/rack");
+  tagint *tag = atom->tag;
+  int n = few.size();
+  const double *X = few.x.data(), *O = few.o.data();
+  for (int j : owned_rows()) {
+    for (int k = 0; k < n; k++) {
+      if (overlap && few.tag[k] == tag[j]) continue;
+      double d[3], q = 0.0, d2 = 0.0;
+      for (int e = 0; e < 3; e++) {
+        d[e] = x[j][e] - X[3 * k + e];
+        double l = o[j][e] - O[3 * k + e];
+        q += l * l;
+        d2 += d[e] * d[e];
+      }
+      double s = c * (1.0 - q / d2);
+      for (int e = 0; e < 3; e++) sum[3 * k + e] += s * d[e];
+    }
+  }
+}
+
+void FixRSRack::total(const double *sum)
+{
+  std::copy(sum, sum + sums.size(), sums.begin());
+}
+
+void FixRSRack::post_force(int /*vflag*/)
+{
+  double **x = atom->x, **f = atom->f;
+  tagint *tag = atom->tag;
+  int nlocal = atom->nlocal, n = few.size();
+
+  if (gather_source) {
+    // a target p gains the term of every gathered source u (Eq. 12), in atom-id order
+    RackStress::reduce_positions(lmp);
+    double **o = RackStress::originals(atom, error, "rs/rack");
+    const double *X = few.x.data(), *O = few.o.data();
+    for (int i : owned_rows()) {
+      double a[3] = {0.0, 0.0, 0.0};
+      for (int k = 0; k < n; k++) {
+        if (overlap && few.tag[k] == tag[i]) continue;
+        double d[3], q = 0.0, d2 = 0.0;
+        for (int e = 0; e < 3; e++) {
+          d[e] = X[3 * k + e] - x[i][e];
+          double l = O[3 * k + e] - o[i][e];
+          q += l * l;
+          d2 += d[e] * d[e];
+        }
+        double s = c * (1.0 - q / d2);
+        for (int e = 0; e < 3; e++) a[e] += s * d[e];
+      }
+      double m = RackStress::mass(atom, i);
+      for (int e = 0; e < 3; e++) f[i][e] += m * a[e];
+    }
+    return;
+  }
+  // each rank's partial sums over the hosts it owns, added over the ranks (fused with every
+  // other style's, rs_common.h); the target's owner adds the force
+  RackStress::reduce_sums(lmp);
+  for (int k = 0; k < n; k++) {
+    int i = atom->map(few.tag[k]);
+    if (i < 0 || i >= nlocal) continue;
+    double m = RackStress::mass(atom, i);
+    for (int e = 0; e < 3; e++) f[i][e] += m * sums[3 * k + e];
+  }
+}

@@ -1,0 +1,49 @@
+/* -*- c++ -*- ----------------------------------------------------------
+   rackstress plugin: the rack coupling, Eq. 23 (bind over every pair, Eqs. 12-13)
+------------------------------------------------------------------------- */
+
+#ifdef FIX_CLASS
+// clang-format off
+FixStyle(rs/rack,FixRSRack);
+// clang-format on
+#else
+
+#ifndef RS_FIX_RACK_H
+#define RS_FIX_RACK_H
+
+#include "fix.h"
+#include "rs_common.h"
+
+namespace LAMMPS_NS {
+
+class FixRSRack : public Fix, public RackStress::Reduced {
+ public:
+  FixRSRack(class LAMMPS *, int, char **);
+  ~FixRSRack() override;
+  RackStress::Gathered *gathered() override { return &few; }
+  int partial_size() override;
+  void partial(double *) override;
+  void total(const double *) override;
+  int setmask() override;
+  void init() override;
+  void setup(int) override;
+  void post_force(int) override;
+
+ private:
+  int sourcebit;
+  double c;
+  bool gather_source;     // gather the smaller of the two groups on every rank
+  bool ready;
+  RackStress::Gathered few;
+  std::vector<double> sums;
+  // the owned rows of the side summed over (kept from one reneighbouring to the next), and
+  // whether the two groups share atoms (a particle is never bound to itself)
+  std::vector<int> rows;
+  bool rows_built, overlap;
+  const std::vector<int> &owned_rows();
+};
+
+}    // namespace LAMMPS_NS
+
+#endif
+#endif

@@ -1,0 +1,296 @@
+/* rackstress plugin: shared helpers (rs_common.h). */
+
+#include "rs_common.h"
+
+#include "domain.h"
+#include "neighbor.h"
+#include "update.h"
+
+#include <map>
+
+#include <algorithm>
+#include <cmath>
+
+using namespace LAMMPS_NS;
+using namespace RackStress;
+
+double **RackStress::originals(Atom *atom, Error *error, const char *style)
+{
+  int flag, cols;
+  int idx = atom->find_custom("rso", flag, cols);
+  if (idx < 0 || flag != 1 || cols != 3)
+    error->all(FLERR, "Fix {}: needs the original positions as per-atom d2_rso 3 (fix "
+               "property/atom d2_rso 3 ghost yes, filled by read_data)", style);
+  return atom->darray[idx];
+}
+
+double *RackStress::radii(Atom *atom, Error *error, const char *style)
+{
+  int flag, cols;
+  int idx = atom->find_custom("rsr", flag, cols);
+  if (idx < 0 || flag != 1 || cols != 0)
+    error->all(FLERR, "Fix {}: needs the radii as per-atom d_rsr (fix property/atom d_rsr "
+               "ghost yes, filled by read_data)", style);
+  return atom->dvector[idx];
+}
+
+int *RackStress::ivector(Atom *atom, Error *error, const char *style, const std::string &name)
+{
+  int flag, cols;
+  int idx = atom->find_custom(name.c_str(), flag, cols);
+  if (idx < 0 || flag != 0 || cols != 0)
+    error->all(FLERR, "Fix {}: region index i_{} is not a per-atom integer property (fix "
+               "property/atom i_{} ghost yes)", style, name, name);
+  return atom->ivector[idx];
+}
+
+int RackStress::groupbit(Group *group, Error *error, const char *style, const char *what,
+                         const char *name)
+{
+  int g = group->find(name);
+  if (g < 0) error->all(FLERR, "Fix {}: {} group '{}' does not exist", style, what, name);
+  return group->bitmask[g];
+}
+
+/* ---------------------------------------------------------------------- */
+
+void Gathered::collect(LAMMPS *lmp, int bit, const int *keys)
+{
+  Atom *atom = lmp->atom;
+  MPI_Comm world = lmp->world;
+  std::vector<tagint> mine;
+  std::vector<int> mykeys;
+  for (int i = 0; i < atom->nlocal; i++)
+    if ((atom->mask[i] & bit) && (!keys || keys[i] != 0)) {
+      mine.push_back(atom->tag[i]);
+      mykeys.push_back(keys ? keys[i] : 0);
+    }
+  int nprocs;
+  MPI_Comm_size(world, &nprocs);
+  int n = (int) mine.size();
+  std::vector<int> counts(nprocs), displs(nprocs, 0);
+  MPI_Allgather(&n, 1, MPI_INT, counts.data(), 1, MPI_INT, world);
+  for (int p = 1; p < nprocs; p++) displs[p] = displs[p - 1] + counts[p - 1];
+  int total = displs[nprocs - 1] + counts[nprocs - 1];
+  std::vector<tagint> alltags(total);
+  std::vector<int> allkeys(total);
+  MPI_Allgatherv(mine.data(), n, MPI_LMP_TAGINT, alltags.data(), counts.data(), displs.data(),
+                 MPI_LMP_TAGINT, world);
+  MPI_Allgatherv(mykeys.data(), n, MPI_INT, allkeys.data(), counts.data(), displs.data(),
+                 MPI_INT, world);
+  std::vector<int> order(total);
+  for (int k = 0; k < total; k++) order[k] = k;
+  std::sort(order.begin(), order.end(), [&](int a, int b) { return alltags[a] < alltags[b]; });
+  tag.resize(total);
+  key.resize(total);
+  for (int k = 0; k < total; k++) {
+    tag[k] = alltags[order[k]];
+    key[k] = allkeys[order[k]];
+  }
+  // original positions, once
+  double **orig = originals(atom, lmp->error, "rs");
+  buf.assign(3 * total, 0.0);
+  for (int k = 0; k < total; k++) {
+    int m = atom->map(tag[k]);
+    if (m >= 0 && m < atom->nlocal)
+      for (int d = 0; d < 3; d++) buf[3 * k + d] = orig[m][d];
+  }
+  o.assign(3 * total, 0.0);
+  MPI_Allreduce(buf.data(), o.data(), 3 * total, MPI_DOUBLE, MPI_SUM, world);
+  x.assign(3 * total, 0.0);
+}
+
+void Gathered::fill(LAMMPS *lmp, double *into) const
+{
+  Atom *atom = lmp->atom;
+  double **xx = atom->x;
+  int n = size();
+  for (int k = 0; k < n; k++) {
+    int m = atom->map(tag[k]);
+    if (m >= 0 && m < atom->nlocal)
+      for (int d = 0; d < 3; d++) into[3 * k + d] = xx[m][d];
+  }
+}
+
+/* ---------------------------------------------------------------------- */
+
+namespace {
+struct Registry {
+  std::vector<Reduced *> members;
+  bigint pos_step = -1, sum_step = -1;
+  std::vector<double> send, recv;
+};
+std::map<LAMMPS *, Registry> registry;
+}    // namespace
+
+void RackStress::enroll(LAMMPS *lmp, Reduced *r)
+{
+  Registry &reg = registry[lmp];
+  if (std::find(reg.members.begin(), reg.members.end(), r) == reg.members.end())
+    reg.members.push_back(r);
+  reg.pos_step = reg.sum_step = -1;
+}
+
+void RackStress::leave(LAMMPS *lmp, Reduced *r)
+{
+  auto it = registry.find(lmp);
+  if (it == registry.end()) return;
+  auto &m = it->second.members;
+  m.erase(std::remove(m.begin(), m.end(), r), m.end());
+  it->second.pos_step = it->second.sum_step = -1;
+  if (m.empty()) registry.erase(it);
+}
+
+void RackStress::invalidate(LAMMPS *lmp)
+{
+  Registry &reg = registry[lmp];
+  reg.pos_step = reg.sum_step = -1;
+}
+
+void RackStress::reduce_positions(LAMMPS *lmp)
+{
+  Registry &reg = registry[lmp];
+  bigint now = lmp->update->ntimestep;
+  if (reg.pos_step == now) return;
+  size_t n = 0;
+  for (Reduced *r : reg.members)
+    if (Gathered *g = r->gathered()) n += 3 * g->size();
+  reg.send.assign(n, 0.0);
+  reg.recv.assign(n, 0.0);
+  size_t at = 0;
+  for (Reduced *r : reg.members)
+    if (Gathered *g = r->gathered()) {
+      g->fill(lmp, reg.send.data() + at);
+      at += 3 * g->size();
+    }
+  if (n) MPI_Allreduce(reg.send.data(), reg.recv.data(), (int) n, MPI_DOUBLE, MPI_SUM, lmp->world);
+  at = 0;
+  for (Reduced *r : reg.members)
+    if (Gathered *g = r->gathered()) {
+      std::copy(reg.recv.begin() + at, reg.recv.begin() + at + 3 * g->size(), g->x.begin());
+      at += 3 * g->size();
+    }
+  reg.pos_step = now;
+}
+
+void RackStress::reduce_sums(LAMMPS *lmp)
+{
+  reduce_positions(lmp);
+  Registry &reg = registry[lmp];
+  bigint now = lmp->update->ntimestep;
+  if (reg.sum_step == now) return;
+  size_t n = 0;
+  for (Reduced *r : reg.members) n += r->partial_size();
+  reg.send.assign(n, 0.0);
+  reg.recv.assign(n, 0.0);
+  size_t at = 0;
+  for (Reduced *r : reg.members) {
+    r->partial(reg.send.data() + at);
+    at += r->partial_size();
+  }
+  if (n) MPI_Allreduce(reg.send.data(), reg.recv.data(), (int) n, MPI_DOUBLE, MPI_SUM, lmp->world);
+  at = 0;
+  for (Reduced *r : reg.members) {
+    r->total(reg.recv.data() + at);
+    at += r->partial_size();
+  }
+  reg.sum_step = now;
+}
+
+void Contacts::build(LAMMPS *lmp, int tbit, int sbit, const double *radius)
+{
+  Atom *atom = lmp->atom;
+  double **x = atom->x;
+  int *mask = atom->mask;
+  int nlocal = atom->nlocal, nall = atom->nlocal + atom->nghost;
+  double skin = lmp->neighbor->skin;
+
+  // each side cut to the other's bounding box grown by the reach (a leg meets a few hundred of
+  // a sediment's particles, not all): a target left out is farther than r_max + skin from every
+  // source, so nothing reaches it before LAMMPS reneighbours
+  rows.clear();
+  std::vector<int> src;
+  double smax = 0.0, tmax = 0.0;
+  double tlo[3] = {INFINITY, INFINITY, INFINITY}, thi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  double slo[3] = {INFINITY, INFINITY, INFINITY}, shi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  for (int i = 0; i < nlocal; i++)
+    if (mask[i] & tbit) {
+      tmax = std::max(tmax, radius[i]);
+      for (int d = 0; d < 3; d++) {
+        tlo[d] = std::min(tlo[d], x[i][d]);
+        thi[d] = std::max(thi[d], x[i][d]);
+      }
+    }
+  for (int j = 0; j < nall; j++)
+    if (mask[j] & sbit) {
+      smax = std::max(smax, radius[j]);
+      for (int d = 0; d < 3; d++) {
+        slo[d] = std::min(slo[d], x[j][d]);
+        shi[d] = std::max(shi[d], x[j][d]);
+      }
+    }
+  double cut = tmax + smax + skin;
+  auto within = [&](const double *p, const double *lo, const double *hi) {
+    return p[0] > lo[0] - cut && p[0] < hi[0] + cut && p[1] > lo[1] - cut &&
+        p[1] < hi[1] + cut && p[2] > lo[2] - cut && p[2] < hi[2] + cut;
+  };
+  for (int j = 0; j < nall; j++)
+    if ((mask[j] & sbit) && within(x[j], tlo, thi)) src.push_back(j);
+  double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  for (int i = 0; i < nlocal; i++)
+    if ((mask[i] & tbit) && within(x[i], slo, shi)) {
+      rows.push_back(i);
+      for (int d = 0; d < 3; d++) {
+        lo[d] = std::min(lo[d], x[i][d]);
+        hi[d] = std::max(hi[d], x[i][d]);
+      }
+    }
+  first.assign(rows.size() + 1, 0);
+  partner.clear();
+  if (rows.empty() || src.empty()) return;
+
+  // a cell grid over the sources near the targets, cells one reach wide
+  // (cells at least one reach wide, so a target's partners are in its 27 cells; widened
+  // until there are not many more cells than sources)
+  int nb[3];
+  double w = cut;
+  for (int d = 0; d < 3; d++) lo[d] -= cut;
+  while (true) {
+    double cells = 1.0;
+    for (int d = 0; d < 3; d++) {
+      nb[d] = (int) ((hi[d] + cut - lo[d]) / w) + 1;
+      cells *= nb[d];
+    }
+    if (cells <= 8.0 * src.size() + 64.0) break;
+    w *= 1.5;
+  }
+  auto cell = [&](const double *p, int d) {
+    int c = (int) ((p[d] - lo[d]) / w);
+    return std::max(0, std::min(nb[d] - 1, c));
+  };
+  long ncell = (long) nb[0] * nb[1] * nb[2];
+  std::vector<int> head(ncell, -1), next(src.size(), -1);
+  for (int k = (int) src.size() - 1; k >= 0; k--) {
+    const double *p = x[src[k]];
+    long c = ((long) cell(p, 0) * nb[1] + cell(p, 1)) * nb[2] + cell(p, 2);
+    next[k] = head[c];
+    head[c] = k;
+  }
+  for (size_t r = 0; r < rows.size(); r++) {
+    int i = rows[r];
+    const double *p = x[i];
+    double reach = radius[i] + smax + skin, reach2 = reach * reach;
+    int c0[3];
+    for (int d = 0; d < 3; d++) c0[d] = cell(p, d);
+    for (int a = std::max(0, c0[0] - 1); a <= std::min(nb[0] - 1, c0[0] + 1); a++)
+      for (int b = std::max(0, c0[1] - 1); b <= std::min(nb[1] - 1, c0[1] + 1); b++)
+        for (int e = std::max(0, c0[2] - 1); e <= std::min(nb[2] - 1, c0[2] + 1); e++)
+          for (int k = head[((long) a * nb[1] + b) * nb[2] + e]; k >= 0; k = next[k]) {
+            int j = src[k];
+            if (atom->tag[j] == atom->tag[i]) continue;
+            double dx = x[j][0] - p[0], dy = x[j][1] - p[1], dz = x[j][2] - p[2];
+            if (dx * dx + dy * dy + dz * dz < reach2) partner.push_back(j);
+          }
+    first[r + 1] = (int) partner.size();
+  }
+}

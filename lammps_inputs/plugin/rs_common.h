@@ -1,0 +1,102 @@
+/* -*- c++ -*- ----------------------------------------------------------
+   rackstress plugin: what the operator styles share.
+
+   Every style adds the paper's *directed* acceleration (Rönkkö et al., Section 2.3) of the
+   atoms a rank owns, as a force f = m·a (LAMMPS integrates f/m), from partners that are owned
+   or ghost atoms there, or — for whole-body couplings (Eq. 23) and index-matched attraction
+   (Eqs. 27–28) — from a small set of atoms gathered on every rank with one MPI_Allreduce a step,
+   the way fix rigid sums its bodies. No reverse communication is needed, and the ghost cutoff
+   is the real interaction range (a collision's reach, a bound pair's length).
+
+   Per-atom data come from LAMMPS' own fix property/atom (ghost yes), filled by read_data:
+     d2_rso[3]  original position o (Eq. 1), for L0 = ‖u_o − p_o‖ (Eq. 12)
+     d_rsr      radius r (Eq. 1), for the collision reach R = r_p + r_u (Eq. 10)
+     i_NAME     attraction region indices (Eqs. 27–28)
+------------------------------------------------------------------------- */
+
+#ifndef RS_COMMON_H
+#define RS_COMMON_H
+
+#include "atom.h"
+#include "comm.h"
+#include "error.h"
+#include "group.h"
+#include "lammps.h"
+#include "pointers.h"
+
+#include <mpi.h>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+namespace LAMMPS_NS {
+namespace RackStress {
+
+  //! per-atom original positions o (fix property/atom d2_rso 3 ghost yes)
+  double **originals(Atom *atom, Error *error, const char *style);
+  //! per-atom radii r (fix property/atom d_rsr ghost yes)
+  double *radii(Atom *atom, Error *error, const char *style);
+  //! per-atom integer property i_NAME (attraction region indices)
+  int *ivector(Atom *atom, Error *error, const char *style, const std::string &name);
+  //! the group bit of a group named in a fix's arguments (error naming the keyword if missing)
+  int groupbit(Group *group, Error *error, const char *style, const char *what, const char *name);
+
+  inline double mass(Atom *atom, int i)
+  {
+    return atom->rmass ? atom->rmass[i] : atom->mass[atom->type[i]];
+  }
+
+  /* A small set of atoms (a rack, an attraction region) known on every rank: their ids, their
+     original positions (once) and their positions (each step, one MPI_Allreduce of a buffer
+     each owner fills: every other rank adds zeros, so each position arrives exactly). */
+  class Gathered {
+   public:
+    std::vector<tagint> tag;      // sorted atom ids
+    std::vector<int> key;         // an integer per member (region index), 0 if none
+    std::vector<double> o, x;     // 3 per member
+    //! collect the owned atoms with `bit` (and key != 0 when keys is given), on every rank
+    void collect(LAMMPS *lmp, int bit, const int *keys);
+    //! this rank's share of the positions (the owners' rows, zeros elsewhere) into `into`
+    void fill(LAMMPS *lmp, double *into) const;
+    int size() const { return (int) tag.size(); }
+
+   private:
+    std::vector<double> buf;
+  };
+  class Reduced;
+
+  /* What a style reduces over the ranks each step. Every style's reductions of one step are
+     fused (all gathered positions in one MPI_Allreduce, then all partial sums and contact flags
+     in one more), so a step costs two collectives however many racks, regions and contact
+     conditions a scene has: ranks meet twice a step, not once per operator. */
+  class Reduced {
+   public:
+    virtual ~Reduced() noexcept(false) = default;    // as LAMMPS' Fix
+    virtual Gathered *gathered() { return nullptr; }    // positions to gather, if any
+    virtual int partial_size() { return 0; }           // doubles of partial sums, if any
+    virtual void partial(double *) {}                  // this rank's partial sums (phase 2)
+    virtual void total(const double *) {}              // their sums over the ranks
+  };
+  void enroll(LAMMPS *, Reduced *);
+  void leave(LAMMPS *, Reduced *);
+  //! a fix's setup: the next request reduces again (same step, new state or new styles)
+  void invalidate(LAMMPS *);
+  //! this step's gathered positions of every enrolled style (one collective, once a step)
+  void reduce_positions(LAMMPS *);
+  //! this step's partial sums of every enrolled style (one collective, once a step)
+  void reduce_sums(LAMMPS *);
+
+  /* Candidate pairs (i owned with `tbit`, j owned or ghost with `sbit`) within the reach
+     r_i + r_max(source) + skin, searched on a cell grid whenever LAMMPS reneighbours: no atom
+     moves half a skin before the next, so no pair comes within r_i + r_j unseen (Eq. 11). */
+  class Contacts {
+   public:
+    std::vector<int> first, partner;    // CSR: partners of target i (owned rows)
+    std::vector<int> rows;              // the owned target rows
+    void build(LAMMPS *lmp, int tbit, int sbit, const double *radius);
+  };
+
+}    // namespace RackStress
+}    // namespace LAMMPS_NS
+
+#endif

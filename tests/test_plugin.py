@@ -1,0 +1,216 @@
+"""The compiled operator styles (lammps_inputs/plugin, docs/plugin.md) against the reference
+engine: whole trajectories, serial and under ``mpiexec -n 2``, and standalone decks in the venv's
+plain ``lmp``.
+
+Expected values come from the independent path, the reference engine (the paper's equations in
+NumPy); the plugin runs in real LAMMPS.
+"""
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rackstress import scenes
+from rackstress.engines.driver import drive
+from rackstress.engines.lammps import plugin
+from rackstress.engines.lammps.deck import compile_deck
+from rackstress.engines.lammps.runner import LammpsRun
+
+BIN = Path(sys.executable).parent
+pytestmark = pytest.mark.lammps
+
+
+def _reference_final(scene):
+    from conftest import reference_final   # computed once per scene (tests/conftest.py)
+
+    return reference_final(scene)
+
+
+def _gait_cycle():
+    """magpod-small's whole gait cycle (four phases of 300 iterations): every plugin style —
+    rack couplings, index-matched attraction following the phase, one-way and phase-conditioned
+    collisions, contact-conditioned damping."""
+    return scenes.build("magpod-small", phase_steps=300, cycles=1)
+
+
+def _plugin_final(scene):
+    deck = compile_deck(scene, "exact", plugin=True)
+    assert deck.plugin and not deck.python_ops        # nothing left in the Python callback
+    run = LammpsRun(deck, None)
+    try:
+        return drive(run).positions
+    finally:
+        run.close()
+
+
+def test_the_plugin_is_built_for_this_lammps():
+    lib, why = plugin.locate()
+    assert lib is not None, why
+    assert plugin.version_string("2025.7.22.4.0") == "22 Jul 2025"
+
+
+def test_plugin_realizes_every_python_operator():
+    deck = compile_deck(_gait_cycle(), "exact", plugin=True)
+    hows = {r.how for r in deck.realized}
+    assert {"rs/rack", "rs/attract", "rs/collide", "viscous+rs/dampen"} <= hows
+    assert "python" not in hows and not deck.passive
+    # the ghosts cover a collision's reach, not a body: 2 r_max (sediment 2) + skin 2 + 1
+    assert deck.ghost_cutoff == pytest.approx(2 * 2.0 + 2.0 + 1.0)
+
+
+@pytest.mark.parametrize("name,params", [("plane-rack", {"steps": 1200}),
+                                         ("plane-bound", {"steps": 1200, "d": 2.0})])
+def test_plugin_trajectory_parity_plane_scenes(name, params):
+    scene = scenes.build(name, **params)
+    ref = _reference_final(scene)
+    assert np.abs(ref - scene.original_positions()).max() > 1.0      # it really moved
+    assert np.abs(_plugin_final(scene) - ref).max() <= 1e-10
+
+
+@pytest.mark.parametrize("name", ["cantilever", "plate-hole", "l-bracket"])
+def test_plugin_trajectory_parity_validation_scenes(name):
+    """The validation scenes (rack coupling and within(1.5) binds, WithinInside's pairs as
+    bonds, held supports), 2000 steps: equal to the reference engine to 1e-10."""
+    scene = scenes.build(name, steps=2000)
+    ref = _reference_final(scene)
+    moved = np.abs(ref - scene.original_positions()).max()
+    assert moved > 1e-5
+    assert np.abs(_plugin_final(scene) - ref).max() <= 1e-10
+
+
+@pytest.mark.slow
+def test_plugin_trajectory_parity_gait_cycle():
+    """plugin = reference engine ≤ 1e-10 over magpod-small's whole gait cycle."""
+    sc = _gait_cycle()
+    ref = _reference_final(sc)
+    p = _plugin_final(sc)
+    sed = sc.slice("sediment")
+    assert np.abs(ref[sed] - sc.original_positions()[sed]).max() > 0.01   # the soles landed
+    assert np.abs(p - ref).max() <= 1e-10
+
+
+@pytest.mark.slow
+@pytest.mark.mpi
+def test_plugin_trajectory_parity_under_mpi(tmp_path):
+    """The same under ``mpiexec -n 2``: each rank its own atoms, racks and regions reduced."""
+    from conftest import lammps_under_mpi
+
+    runs = lammps_under_mpi(tmp_path, """
+from rackstress import scenes
+scenes_ = {"gait": scenes.build("magpod-small", phase_steps=300, cycles=1),
+           "rack": scenes.build("plane-rack", steps=1200),
+           "d2": scenes.build("plane-bound", steps=1200, d=2.0)}
+""", timeout=1200, plugin=True)
+    for key, scene in [("gait", _gait_cycle()), ("rack", scenes.build("plane-rack", steps=1200)),
+                       ("d2", scenes.build("plane-bound", steps=1200, d=2.0))]:
+        p, counts = runs[key]
+        assert len(counts) == 2 and counts.min() > 0      # atoms really are split over both ranks
+        assert np.abs(p - _reference_final(scene)).max() <= 1e-10
+
+
+# ------------------------------------------------------------------ standalone decks
+def _frames(path: Path) -> list:
+    """(timestep, ids, positions) of every frame of a ``id type mol x y z`` dump."""
+    lines, out, k = path.read_text().splitlines(), [], 0
+    while k < len(lines):
+        if lines[k] == "ITEM: TIMESTEP":
+            n = int(lines[k + 3])
+            rows = np.array([ln.split() for ln in lines[k + 9:k + 9 + n]], dtype=float)
+            out.append((int(lines[k + 1]), rows[:, 0].astype(int), rows[:, 3:6]))
+            k += 9 + n
+        else:
+            k += 1
+    return out
+
+
+def _same_to_dump_precision(ours: list, ref: list) -> None:
+    """Every frame equal to the dump's precision: ``%.10g``, so two values rounded from the same
+    number (to far better than that) differ by at most one unit of their 10th digit — of the
+    value, or of 1 where it is smaller (a coordinate that is round-off off zero, such as a flat
+    plane's z of 8e-6 after 120 steps, is compared at the precision of the scene's lengths)."""
+    assert len(ours) == len(ref) and len(ref) > 2
+    for (s1, i1, x1), (s2, i2, x2) in zip(ours, ref):
+        assert s1 == s2 and np.array_equal(i1, i2)
+        unit = 10.0 ** (np.floor(np.log10(np.maximum(np.abs(x2), 1.0))) - 9)
+        assert np.all(np.abs(x1 - x2) <= unit * 1.000001), f"step {s1}"
+
+
+def _cli(*args, cwd=None, timeout=900):
+    proc = subprocess.run([str(BIN / "rackstress"), *args], capture_output=True, text=True,
+                          timeout=timeout, cwd=cwd)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return proc
+
+
+def _lmp(deck: Path, ranks: int):
+    """The venv's plain ``lmp`` (it loads the plugin through the lammps.plugins entry point:
+    no flag, no rackstress code in the run), serial or under ``mpiexec -n 2``."""
+    cmd = [str(BIN / "lmp"), "-in", "in.lammps"]
+    if ranks > 1:
+        cmd = [str(BIN / "mpiexec"), "-n", str(ranks), *cmd]
+    proc = subprocess.run(cmd, cwd=deck, capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-2000:]
+    return _frames(deck / "trajectory.dump")
+
+
+@pytest.mark.slow
+@pytest.mark.mpi
+@pytest.mark.parametrize("scene,sets", [("plane-rack", []),
+                                        ("magpod-small", ["phase_steps=100", "cycles=1"])])
+def test_standalone_deck_runs_the_reference_trajectory(tmp_path, scene, sets):
+    """``rackstress deck SCENE`` run by plain ``lmp -in in.lammps`` and ``mpiexec -n 2 lmp``
+    writes the trajectory of ``rackstress run --engine reference``, frame by frame, to the
+    dump's precision."""
+    import shutil
+
+    opts = [x for s in sets for x in ("--set", s)]
+    _cli("run", scene, "--engine", "reference", "--out", str(tmp_path / "ref"), "--no-render",
+         "--no-progress", *opts)
+    ref = _frames(tmp_path / "ref" / "trajectory.dump")
+    _cli("deck", scene, "--out", str(tmp_path / "deck1"), *opts)
+    text = (tmp_path / "deck1" / "in.lammps").read_text()
+    assert "rs/" in text and "external" not in text          # the plugin, no Python callback
+    shutil.copytree(tmp_path / "deck1", tmp_path / "deck2")
+    _same_to_dump_precision(_lmp(tmp_path / "deck1", 1), ref)
+    _same_to_dump_precision(_lmp(tmp_path / "deck2", 2), ref)
+
+
+# ------------------------------------------------------------------ fallback
+def test_without_a_compiler_the_callback_runs_and_says_why(tmp_path, monkeypatch, capsys):
+    """No plugin built and no compiler: the deck is the Python callback's, and one line says
+    why; a plugin built for another LAMMPS is not used."""
+    from rackstress.engines.lammps import deck as deckmod
+
+    monkeypatch.setattr(plugin, "PACKAGED", tmp_path / "none")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    monkeypatch.setenv("CXX", str(tmp_path / "no-such-compiler"))
+    monkeypatch.setattr(plugin.shutil, "which", lambda name: None)
+    monkeypatch.delenv("RACKSTRESS_KERNELS", raising=False)
+    deckmod._WARNED.clear()
+    deck = compile_deck(scenes.build("plane-rack"), "exact", plugin=None)
+    assert not deck.plugin and deck.python_ops
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "Python callback" in err[0]
+    # a plugin whose build.json names another LAMMPS is stale
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / plugin.LIBRARY).write_bytes(b"")
+    (other / plugin.STAMP).write_text('{"lammps": "2024.8.29.0.0"}')
+    assert not plugin._usable(other, plugin.lammps_version())
+
+
+def test_switched_off_runs_the_callback(tmp_path, monkeypatch, capsys):
+    from rackstress.engines.lammps import deck as deckmod
+
+    monkeypatch.setenv("RACKSTRESS_PLUGIN", "0")
+    deckmod._WARNED.clear()
+    assert not compile_deck(scenes.build("plane-rack"), "exact", plugin=None).plugin
+    monkeypatch.setenv("RACKSTRESS_PLUGIN", "1")
+    monkeypatch.setenv("RACKSTRESS_KERNELS", "numba")       # the callback asked for
+    assert not compile_deck(scenes.build("plane-rack"), "exact", plugin=None).plugin
+    monkeypatch.delenv("RACKSTRESS_KERNELS")
+    assert compile_deck(scenes.build("plane-rack"), "exact", plugin=None).plugin

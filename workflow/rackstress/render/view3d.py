@@ -1,0 +1,494 @@
+"""``RUNDIR/view3d.html``: the peak frame as an interactive 3D view, offline (vtk.js).
+
+The page is trame-vtk's standalone vtk.js viewer (``trame_vtk/tools/static_viewer.html``, the
+one pyvista's HTML export writes; about 1 MB of JavaScript, no network) with the scene inlined:
+a VTK render window serialized by trame-vtk's own serializers (the format its ``OfflineLocalView``
+loads), zipped and base64-encoded. ``report.html`` embeds it in an ``<iframe>``.
+
+What it shows:
+
+* every particle of the coloured parts as a sphere of the part's radius (vtk.js
+  ``vtkGlyph3DMapper``: one sphere instanced per particle, so MagPod's robot costs 12 bytes a
+  particle, not a mesh), coloured by the pictures' measure with the pictures' colour map and
+  scale (0 to the peak; opaque: the translucency of the still pictures is left out so that the
+  view can be turned freely);
+* the context parts (a sediment) as light sand spheres, at most :data:`MAX_CONTEXT` of them:
+  beyond that only those nearest the coloured parts (the page says how many are shown);
+* the peak particle inside a black wire sphere three radii wide;
+* a slider over up to :data:`MAX_FRAMES` dumped frames (evenly spread, the peak frame
+  included; fewer if their positions and colours would exceed :data:`FRAME_BUDGET` bytes), which
+  moves the coloured parts and the marker to that frame and recolours them.
+
+Mouse: left drag rotates, wheel or right drag zooms, shift + left drag (or middle drag) pans.
+"""
+from __future__ import annotations
+
+import base64
+import io
+import json
+import os
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+VIEW = "view3d.html"
+#: Context particles shown at most (the rest of a large sediment is left out).
+MAX_CONTEXT = 20000
+#: Frames on the slider at most, and the raw bytes their positions and colours may take.
+MAX_FRAMES = 40
+FRAME_BUDGET = 1_500_000
+#: Sphere resolution of a drawn particle (vtkSphereSource theta, phi).
+SPHERE_RES = (10, 8)
+SAND = (0.85, 0.80, 0.70)
+MARKER_RGB = (0.0, 0.25, 1.0)
+
+
+def _viewer_html() -> Path:
+    from importlib.util import find_spec
+
+    spec = find_spec("trame_vtk")
+    return Path(spec.origin).parent / "tools" / "static_viewer.html"
+
+
+def _glyph_serializer(parent, mapper, mapper_id, context, depth):
+    """trame-vtk serializes plain mappers only (through a surface filter, which drops points
+    without cells); a ``vtkGlyph3DMapper`` is its points (input port 0) and its glyph (port 1),
+    which vtk.js's ``vtkGlyph3DMapper`` takes as they are."""
+    from trame_vtk.modules.vtk.serializers.serialize import serialize
+    from trame_vtk.modules.vtk.serializers.utils import reference_id, wrap_id
+
+    calls, deps = [], []
+    for port, suffix in ((0, "dataset"), (1, "glyph")):
+        data = mapper.GetInputDataObject(port, 0)
+        did = f"{mapper_id}-{suffix}"
+        inst = serialize(mapper, data, did, context, depth + 1)
+        if inst is None:
+            return None
+        deps.append(inst)
+        calls.append(["setInputData", [wrap_id(did), port]])
+    return {"parent": reference_id(parent), "id": mapper_id, "type": "vtkGlyph3DMapper",
+            "properties": {"scalarVisibility": mapper.GetScalarVisibility(), "colorMode": 0,
+                           "scalarMode": 0, "scaling": 0, "orient": 0, "scaleFactor": 1.0},
+            "calls": calls, "dependencies": deps}
+
+
+def _points(q: np.ndarray, rgb: np.ndarray | None = None):
+    from vtkmodules.util.numpy_support import numpy_to_vtk
+    from vtkmodules.vtkCommonCore import vtkPoints
+    from vtkmodules.vtkCommonDataModel import vtkPolyData
+
+    poly = vtkPolyData()
+    pts = vtkPoints()
+    pts.SetData(numpy_to_vtk(np.ascontiguousarray(q, dtype=np.float32), deep=True))
+    poly.SetPoints(pts)
+    if rgb is not None:
+        arr = numpy_to_vtk(np.ascontiguousarray(rgb, dtype=np.uint8), deep=True)
+        arr.SetName("rgb")
+        poly.GetPointData().SetScalars(arr)
+    return poly
+
+
+def _sphere(radius: float, res=SPHERE_RES):
+    from vtkmodules.vtkFiltersSources import vtkSphereSource
+
+    s = vtkSphereSource()
+    s.SetRadius(float(radius))
+    s.SetThetaResolution(res[0])
+    s.SetPhiResolution(res[1])
+    s.Update()
+    return s.GetOutput()
+
+
+def _marker(radius: float, height: float):
+    """The peak's marker round the origin: a wire sphere of ``radius`` and a pin rising
+    ``height`` above it (visible however the peak particle is hidden among the others)."""
+    from vtkmodules.vtkFiltersCore import vtkAppendPolyData
+    from vtkmodules.vtkFiltersSources import vtkLineSource
+
+    line = vtkLineSource()
+    line.SetPoint1(0.0, radius, 0.0)
+    line.SetPoint2(0.0, radius + height, 0.0)
+    line.Update()
+    app = vtkAppendPolyData()
+    app.AddInputData(_sphere(radius, (24, 16)))
+    app.AddInputData(line.GetOutput())
+    app.AddInputData(_sphere(0.3 * radius, (12, 8)))
+    app.Update()
+    out = app.GetOutput()
+    # the small ball on top of the pin
+    from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy
+
+    q = vtk_to_numpy(out.GetPoints().GetData()).copy()
+    n_top = _sphere(0.3 * radius, (12, 8)).GetNumberOfPoints()
+    q[-n_top:, 1] += radius + height
+    out.GetPoints().SetData(numpy_to_vtk(q, deep=True))
+    return out
+
+
+def _view_direction(centre, peak_position) -> np.ndarray:
+    """From the parts' centre towards the camera: from the side of the peak particle, raised
+    by 30° (the peak faces the viewer when it is on the parts' surface); iso without a peak."""
+    d = np.array([1.0, 0.0, 1.0]) if peak_position is None else \
+        np.asarray(peak_position, float) - np.asarray(centre, float)
+    h = np.array([d[0], 0.0, d[2]])
+    if np.linalg.norm(h) < 1e-9 * (1.0 + np.linalg.norm(d)):
+        h = np.array([1.0, 0.0, 1.0])
+    h /= np.linalg.norm(h)
+    out = h * np.cos(np.radians(30.0)) + np.array([0.0, np.sin(np.radians(30.0)), 0.0])
+    return out / np.linalg.norm(out)
+
+
+def _frame(run, k: int) -> np.ndarray:
+    """Positions (float64, atom-id order) of dumped frame ``k``."""
+    return run.trajectory[k].data["positions64"].copy()
+
+
+def _peak(rundir: Path, run, values, parts, measure: str) -> dict | None:
+    """The run's peak of ``measure`` over ``parts``: summary.json's record (the number every
+    other page shows), with ``row``, the particle's place in the run's arrays; straight from
+    ``values`` if the summary lacks it."""
+    best = None
+    try:
+        groups = json.loads((Path(rundir) / "summary.json").read_text()).get("groups") or {}
+    except (OSError, json.JSONDecodeError):
+        groups = {}
+    for part in parts:
+        rec = ((groups.get(part.name) or {}).get("peak") or {}).get(measure)
+        if rec and (best is None or rec["value"] > best["value"]):
+            best = {**rec, "group": part.name, "row": int(part.index[rec["index"]])}
+    if best is not None:
+        return best
+    idx = np.concatenate([q.index for q in parts])
+    sub = np.where(np.isfinite(values[:, idx]), values[:, idx], -np.inf)
+    if not np.isfinite(sub).any():
+        return None
+    k, j = np.unravel_index(int(np.argmax(sub)), sub.shape)
+    row = int(idx[j])
+    part = next(q for q in parts if row in set(q.index.tolist()))
+    return {"value": float(sub[k, j]), "frame": int(k), "iteration": int(run.steps[k]),
+            "group": part.name, "row": row, "particle": int(run.data.ids[row])}
+
+
+def _frames(run, peak_frame: int, per_frame: int) -> list[int]:
+    """Frame indices for the slider: evenly spread, the peak frame and the last included."""
+    n = len(run.steps)
+    k = int(max(1, min(MAX_FRAMES, n, FRAME_BUDGET // max(per_frame, 1))))
+    ks = {int(round(x)) for x in np.linspace(0, n - 1, k)} if k > 1 else set()
+    ks.add(int(peak_frame))
+    while len(ks) > k:                       # the peak replaced one of the spread frames
+        ks.remove(min((x for x in ks if x != peak_frame and x != n - 1),
+                      key=lambda x: abs(x - peak_frame)))
+    return sorted(ks)
+
+
+def _rgb(values, vmax: float, cmap: str) -> np.ndarray:
+    from rackstress.render.draw import colour_table
+
+    s = np.clip(np.nan_to_num(np.asarray(values, float), nan=0.0) / vmax, 0.0, 1.0)
+    table = colour_table(cmap)
+    return np.round(table[np.round(s * 255).astype(int)] * 255).astype(np.uint8)
+
+
+def _context_subset(q: np.ndarray, box_lo, box_hi) -> np.ndarray:
+    """Indices of at most MAX_CONTEXT context particles, nearest the coloured parts' box."""
+    if len(q) <= MAX_CONTEXT:
+        return np.arange(len(q))
+    d = np.linalg.norm(np.maximum(0.0, np.maximum(box_lo - q, q - box_hi)), axis=1)
+    return np.sort(np.argsort(d, kind="stable")[:MAX_CONTEXT])
+
+
+def build_view(rundir, measure: str | None = None, cmap: str | None = None) -> dict:
+    """Write ``RUNDIR/view3d.html`` (the peak frame in 3D, offline); return what it shows.
+
+    The measure, colour map and colour scale are those of the default pictures
+    (``figures/render.json``) when they exist, else the paper measure from 0 to its peak.
+
+    Parameters
+    ----------
+    rundir : path
+        A run directory with a trajectory (``rackstress run``).
+    measure, cmap : str, optional
+        Override the pictures' measure and colour map.
+
+    Returns
+    -------
+    dict
+        ``file``, ``bytes``, ``measure``, ``label``, ``vmax``, ``peak`` (value, iteration,
+        particle, group), ``shown`` (coloured particles), ``context`` (shown, of), ``frames``
+        (the slider's iterations), ``cmap``.
+
+    Example
+    -------
+    >>> rec = build_view("runs/magpod-small")                     # doctest: +SKIP
+    >>> rec["shown"], rec["context"], len(rec["frames"])          # doctest: +SKIP
+    (3671, (2016, 2016), 40)
+    """
+    from rackstress.render.draw import offscreen, part_radius
+    from rackstress.stress import load_run
+    from rackstress.stress.post import compute_fields
+
+    rundir = Path(rundir)
+    manifest = {}
+    try:
+        manifest = json.loads((rundir / "figures" / "render.json").read_text())
+    except (OSError, json.JSONDecodeError):
+        pass
+    measure = measure or manifest.get("measure") or "paper"
+    cmap = cmap or manifest.get("cmap") or "paper"
+    run = load_run(rundir)
+    fields = compute_fields(run, cache=True)
+    values = fields.values[measure]
+    coloured, context = run.displayed(), run.context()      # the pictures' default parts
+    if not coloured:
+        raise ValueError(f"{rundir}: no part to colour (every group is a rack or sediment)")
+    peak = _peak(rundir, run, values, coloured, measure)
+    vmax = float(manifest.get("vmax") or 0.0) if manifest.get("measure") == measure else 0.0
+    if not vmax > 0:
+        vmax = peak["value"] if peak and peak["value"] > 0 else 1.0
+    kpk = run.nearest_frames([peak["iteration"]])[0][1] if peak else len(run.steps) - 1
+    p = _frame(run, kpk)
+
+    offscreen()
+    import vtkmodules.vtkRenderingOpenGL2  # noqa: F401 - registers the OpenGL classes
+    from trame_vtk.modules.vtk.serializers import (SynchronizationContext, extract_array_hash,
+                                                   initialize_serializers, reference_id,
+                                                   serialize)
+    from trame_vtk.modules.vtk.serializers.registry import register_instance_serializer
+    from vtkmodules.vtkRenderingCore import (vtkActor, vtkGlyph3DMapper, vtkPolyDataMapper,
+                                             vtkRenderer, vtkRenderWindow)
+
+    ren = vtkRenderer()
+    ren.SetBackground(1.0, 1.0, 1.0)
+    rw = vtkRenderWindow()
+    rw.SetOffScreenRendering(1)
+    rw.AddRenderer(ren)
+    keep = []                               # the VTK objects live until serialized
+
+    def glyphs(q, radius, rgb=None, colour=None):
+        mapper = vtkGlyph3DMapper()
+        poly = _points(q, rgb)
+        mapper.SetInputData(poly)
+        mapper.SetSourceData(_sphere(radius))
+        mapper.ScalingOff()
+        mapper.OrientOff()
+        if rgb is None:
+            mapper.ScalarVisibilityOff()
+        else:
+            mapper.ScalarVisibilityOn()
+            mapper.SetColorModeToDefault()
+            mapper.SetScalarModeToUsePointData()
+        actor = vtkActor()
+        actor.SetMapper(mapper)
+        if colour is not None:
+            actor.GetProperty().SetColor(*colour)
+        ren.AddActor(actor)
+        keep.extend([mapper, poly, actor])
+        return actor
+
+    parts = []
+    for part in coloured:
+        glyphs(p[part.index], part_radius(run, part), _rgb(values[kpk, part.index], vmax, cmap))
+        parts.append(part)
+    allq = np.concatenate([p[q.index] for q in coloured])
+    lo, hi = allq.min(axis=0), allq.max(axis=0)
+    ctx_total = ctx_shown = 0
+    for part in context:
+        q = p[part.index]
+        sub = _context_subset(q, lo, hi)
+        ctx_total += len(q)
+        ctx_shown += len(sub)
+        glyphs(q[sub], part_radius(run, part), colour=SAND)
+    marker_r = 3.0 * max(part_radius(run, q) for q in coloured)
+    pin = 0.6 * float(np.max(hi - lo)) + marker_r
+    if peak:
+        m = vtkPolyDataMapper()
+        m.SetInputData(_marker(marker_r, pin))
+        m.ScalarVisibilityOff()
+        marker = vtkActor()
+        marker.SetMapper(m)
+        pr = marker.GetProperty()
+        pr.SetRepresentationToWireframe()
+        pr.SetColor(*MARKER_RGB)
+        pr.SetLighting(False)
+        marker.SetPosition(*map(float, p[peak["row"]]))
+        ren.AddActor(marker)
+        keep.extend([m, marker])
+    cam = ren.GetActiveCamera()
+    centre = 0.5 * (lo + hi)
+    size = float(np.linalg.norm(hi - lo)) or 1.0
+    cam.SetFocalPoint(*map(float, centre))
+    cam.SetPosition(*map(float, centre + _view_direction(centre, p[peak["row"]] if peak else None)
+                         * 2.0 * size))
+    cam.SetViewUp(0.0, 1.0, 0.0)
+    ren.ResetCameraClippingRange()
+
+    initialize_serializers()
+    register_instance_serializer("vtkGlyph3DMapper", _glyph_serializer)
+    register_instance_serializer("vtkOpenGLGlyph3DMapper", _glyph_serializer)
+    ctx = SynchronizationContext()
+    scene = serialize(None, rw, "rackstress-view", ctx, 1)
+    scene["extra"] = {"vtkRefId": reference_id(rw), "centerOfRotation": cam.GetFocalPoint(),
+                      "camera": reference_id(cam)}
+    hashes = {e["hash"]: {**e, "content": ctx.get_cached_data_array(e["hash"], False)}
+              for e in extract_array_hash(scene)}
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w") as zf:
+        zf.writestr("index.json", json.dumps({"hashes": hashes, "scene": scene}),
+                    compress_type=zipfile.ZIP_DEFLATED)
+    rw.Finalize()
+
+    # the slider's frames: positions (float32) and colours (uint8) of the coloured parts
+    n_col = sum(q.n for q in parts)
+    ks = _frames(run, kpk, n_col * 15)
+    frames = []
+    for k in ks:
+        pk = _frame(run, k)
+        pos = np.concatenate([pk[q.index] for q in parts]).astype(np.float32)
+        rgb = np.concatenate([_rgb(values[k, q.index], vmax, cmap) for q in parts])
+        frames.append({"iteration": int(run.steps[k]), "peak": k == kpk,
+                       "pos": base64.b64encode(pos.tobytes()).decode(),
+                       "rgb": base64.b64encode(rgb.tobytes()).decode(),
+                       "marker": [float(x) for x in pk[peak["row"]]] if peak else None})
+    label = fields.label(measure)
+    stops = _rgb(np.linspace(0.0, vmax, 9), vmax, cmap)
+    info = {"parts": [q.n for q in parts], "frames": frames,
+            "peak_frame": ks.index(kpk), "label": label, "vmax": f"{vmax:.4g}",
+            "gradient": ", ".join("#%02x%02x%02x" % tuple(int(c) for c in rgb) for rgb in stops),
+            "note": f"{label}; blue: the peak particle"}
+    rec = {"file": VIEW, "measure": measure, "label": label, "vmax": vmax, "cmap": cmap,
+           "peak": {k: peak[k] for k in ("value", "iteration", "particle", "group")}
+           if peak else None,
+           "shown": n_col, "context": (ctx_shown, ctx_total),
+           "frames": [f["iteration"] for f in frames], "marker_radius": marker_r}
+    _write(rundir / VIEW, buf.getvalue(), info, rec)
+    rec["bytes"] = (rundir / VIEW).stat().st_size
+    return rec
+
+
+CONTROLS = r"""
+<div id="rs-controls" style="position:fixed;left:0;right:0;bottom:0;z-index:10;background:
+rgba(255,255,255,.9);font:13px DejaVu Sans,Helvetica,Arial,sans-serif;padding:6px 10px;
+border-top:1px solid #ccc">
+<label for="rs-frame">iteration <b id="rs-iteration"></b></label>
+<input id="rs-frame" type="range" min="0" step="1" style="width:40%;vertical-align:middle">
+<span id="rs-scale" style="white-space:nowrap">0 <span id="rs-bar" style="display:inline-block;
+width:120px;height:10px;vertical-align:middle;border:1px solid #999"></span>
+<span id="rs-vmax"></span></span> <span id="rs-note"></span></div>
+<script>
+(function () {
+  const info = JSON.parse(document.getElementById("rs-frames").textContent);
+  const slider = document.getElementById("rs-frame");
+  slider.max = info.frames.length - 1;
+  slider.value = info.peak_frame;
+  function bytes(b64) {
+    const s = atob(b64), out = new Uint8Array(s.length);
+    for (let i = 0; i < s.length; i++) out[i] = s.charCodeAt(i);
+    return out;
+  }
+  function show(i) {
+    const f = info.frames[i];
+    document.getElementById("rs-iteration").textContent = f.iteration + (f.peak ? " (peak)" : "");
+    const rw = window.global && window.global.renderWindow;
+    if (!rw) return false;
+    // the synchronized window has a renderer of its own besides the scene's
+    const actors = rw.getRenderers().map(function (r) { return r.getActors(); })
+      .reduce(function (a, b) { return b.length > a.length ? b : a; }, []);
+    if (actors.length < info.parts.length + 1) return false;
+    for (let j = 0; j < info.parts.length; j++) {      // the scene's arrays arrive after it
+      const pd = actors[j].getMapper() && actors[j].getMapper().getInputData(0);
+      if (!pd || !pd.getPoints() || pd.getPoints().getNumberOfPoints() !== info.parts[j]
+          || !pd.getPointData().getScalars()) return false;
+    }
+    const pos = new Float32Array(bytes(f.pos).buffer), rgb = bytes(f.rgb);
+    let off = 0;
+    info.parts.forEach(function (n, j) {
+      const pd = actors[j].getMapper().getInputData(0);
+      pd.getPoints().setData(pos.slice(3 * off, 3 * (off + n)), 3);
+      pd.getPointData().getScalars().setData(rgb.slice(3 * off, 3 * (off + n)), 3);
+      pd.getPoints().modified(); pd.getPointData().getScalars().modified(); pd.modified();
+      off += n;
+    });
+    if (f.marker) actors[actors.length - 1].setPosition(f.marker[0], f.marker[1], f.marker[2]);
+    rw.render();
+    return true;
+  }
+  slider.addEventListener("input", function () { show(+slider.value); });
+  const m = /frame=(\d+)/.exec(location.hash);
+  if (m) {                      // view3d.html#frame=K opens on the slider's frame K
+    slider.value = Math.min(+m[1], info.frames.length - 1);
+    (function retry() { if (!show(+slider.value)) setTimeout(retry, 100); })();
+  }
+  document.getElementById("rs-iteration").textContent =
+    info.frames[info.peak_frame].iteration + " (peak)";
+  document.getElementById("rs-note").textContent = info.note;
+  document.getElementById("rs-vmax").textContent = info.vmax;
+  document.getElementById("rs-bar").style.background =
+    "linear-gradient(to right, " + info.gradient + ")";
+})();
+</script>
+"""
+
+
+def _write(path: Path, data: bytes, info: dict, rec: dict) -> None:
+    """The viewer page with the scene and the slider's frames inlined; written atomically."""
+    b64 = base64.b64encode(data).decode()
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    with open(_viewer_html(), encoding="utf-8") as src, open(tmp, "w", encoding="utf-8") as out:
+        for line in src:
+            if "<title>" in line:
+                line = f"    <title>rackstress 3D view: {rec['label']}</title>\n"
+            if "</body>" in line:
+                out.write('<div class="content" style="position:absolute;left:0;right:0;'
+                          'top:0;bottom:34px"></div>\n')
+                out.write('<script type="application/json" id="rs-frames">')
+                out.write(json.dumps(info).replace("</", "<\\/"))
+                out.write("</script>\n")
+                out.write(CONTROLS)
+                out.write("<script>\nfunction loadDataSet() {\n"
+                          "  const container = document.querySelector('.content') || "
+                          "document.querySelector('body');\n"
+                          f'  const base64Str = "{b64}";\n'
+                          "  OfflineLocalView.load(container, { base64Str });\n}\n</script>\n")
+            out.write(line)
+    os.replace(tmp, path)
+
+
+def section(rundir) -> str:
+    """``report.html``'s 3D section: the view in an ``<iframe>`` and what it shows (or why
+    there is none). Builds ``view3d.html`` first."""
+    import html
+
+    def e(x):
+        return html.escape(str(x), quote=True)
+
+    out = ['<h2 id="view3d">The peak frame in 3D</h2>']
+    try:
+        rec = build_view(rundir)
+    except Exception as exc:  # noqa: BLE001 - the report shows everything else
+        out.append(f'<p class="note" id="view3d-missing">No 3D view: {e(type(exc).__name__)}: '
+                   f"{e(exc)}</p>")
+        return "\n".join(out)
+    pk = rec["peak"]
+    shown, total = rec["context"]
+    ctx = (f"; context (sediment): {shown:,} of its {total:,} particles, plain sand spheres"
+           + (" — those nearest the coloured parts" if shown < total else "")
+           + ", at the peak frame") if total else ""
+    out.append(
+        f'<iframe id="view3d-frame" src="{e(rec["file"])}" title="3D view of the peak frame" '
+        'style="width:100%;height:620px;border:1px solid #ddd"></iframe>')
+    out.append(
+        f'<p class="note" id="view3d-what" data-shown="{rec["shown"]}" '
+        f'data-context="{shown}" data-context-total="{total}" '
+        f'data-frames="{len(rec["frames"])}" data-bytes="{rec["bytes"]}">'
+        f"Shown: every particle of the coloured parts ({rec['shown']:,}) as a sphere coloured by "
+        f"{e(rec['label'])} from 0 to {rec['vmax']:.4g} (the pictures' scale, opaque){e(ctx)}. "
+        + (f"The blue wire sphere and pin mark the peak particle {pk['particle']} "
+           f"({e(pk['group'])}, {pk['value']:.4g} at iteration {pk['iteration']}). "
+           if pk else "")
+        + f"The slider moves the coloured parts through {len(rec['frames'])} of the dumped frames "
+        f"(iterations {rec['frames'][0]}–{rec['frames'][-1]}, the peak's included). Drag to "
+        "rotate, wheel to zoom, shift-drag to pan. "
+        f'<a href="{e(rec["file"])}">Open it alone</a> ({rec["bytes"] / 1e6:.1f} MB, vtk.js, '
+        "works offline).</p>")
+    return "\n".join(out)
