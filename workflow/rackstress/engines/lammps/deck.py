@@ -826,6 +826,10 @@ def _plugin_realize(scene: Scene, realized: list) -> tuple | None:
             r.plugin = "rs/attract"
         elif isinstance(op, Bind) and type(op.coeff) is Const:
             r.plugin = "rs/rack"
+        elif isinstance(op, Bind) and getattr(op.coeff, "weights", None) is not None:
+            # a material solid's per-pair c (its face compensation, model/solid.py): rs/bind
+            # takes one c per bond type, so the callback keeps it
+            return None, f"{r.target} <- {op.label()} has a coefficient per pair"
         elif isinstance(op, Bind):
             rev = reverse_of(scene.operators, r.target, r.site[1])
             key = frozenset({r.site, rev}) if rev is not None else frozenset({r.site})
