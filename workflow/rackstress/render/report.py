@@ -266,6 +266,15 @@ def write_report(rundir, stability: bool = True, view: bool = True) -> Path:
              ("run wall time [s]", _num(summary.get("wall_s"), 3)),
              ("stress post-processing [s]", _num(timings.get("total_s"), 3)),
              ("pictures [s]", _num(rtime, 3))]
+    if summary.get("analysis") == "static":      # the equilibrium and how well it holds
+        facts += [("analysis", "static"), ("settled", "yes" if summary.get("settled") else
+                                           "NO: not an equilibrium"),
+                  ("Newton iterations", summary.get("iterations")),
+                  ("residual (largest unbalanced force / applied load)",
+                   _num(summary.get("residual"), 3)),
+                  ("settled below", summary.get("tolerance"))]
+    if summary.get("units"):
+        facts.append(("units", summary["units"]))
     if summary.get("error"):
         facts.append(("error", summary["error"].get("message")))
     for k, v in facts:
