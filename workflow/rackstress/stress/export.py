@@ -10,8 +10,11 @@
     ``original`` (o),
     ``displacement`` (p − o) and its magnitude ``displacement_magnitude``, ``velocity`` where the
     dump holds vx vy vz (geometry in float32), and every measure by its name (``paper``,
-    ``accumulated``, ``strain``, ``d2min``, ``virial`` if recorded) in float64 — the very numbers
-    of ``summary.json``'s peaks. No field data (OVITO does not read it): the iteration is the
+    ``accumulated``, ``strain``, ``d2min``, ``virial`` if recorded; for a scene with a material
+    ``von_mises`` in its stress unit, ``stress`` (6 components xx yy zz xy yz xz, ParaView's
+    symmetric-tensor order), ``principal`` (3, largest first), ``safety`` and ``bind_strain``)
+    in float64 — the very numbers of ``summary.json``'s peaks. ``displacement`` is in the
+    scene's length unit. No field data (OVITO does not read it): the iteration is the
     PVD's time value. Inline binary, uncompressed: OVITO reads neither VTK's appended data nor
     compressed arrays.
 ``RUNDIR/stress.dump``
@@ -193,6 +196,8 @@ def write_vtk(run, fields, outdir, progress: bool = False) -> Path:
                 if v is not None:
                     pd.AddArray(arr(v.astype(f32), "velocity"))
                 for m, vals in fields.values.items():
+                    pd.AddArray(arr(vals[k], m))
+                for m, vals in getattr(fields, "extras", {}).items():   # stress tensor, ...
                     pd.AddArray(arr(vals[k], m))
                 name = frame_name(step)
                 writer.SetFileName(str(tmp / name))

@@ -32,8 +32,9 @@ import numpy as np
 from rackstress.lib.jsonio import write_json
 from rackstress.lib.runfiles import CACHE, STRESS_DUMP, STRESS_JSON, VTK_DIR
 from rackstress.stress.dump import StressInputError
-from rackstress.stress.measures import (AccumulatedDistance, VirialStress, VonMisesStrain,
-                                        positions, stress_columns)
+from rackstress.stress.measures import (AccumulatedDistance, ParticleStress, VirialStress,
+                                        VonMisesStrain, length_unit, material_parts, positions,
+                                        read_bindings, stress_columns)
 
 #: The measures every run gets, in this order (``virial`` too when the dump recorded it).
 MEASURES = ("paper", "accumulated", "strain", "d2min")
@@ -43,7 +44,14 @@ LABELS = {
     "strain": ("von Mises shear strain", "dimensionless"),
     "d2min": ("non-affine displacement D²min", "length² units"),
     "virial": ("per-atom von Mises stress × volume", "energy units"),
+    "von_mises": ("von Mises stress", "stress units"),
 }
+#: Per-particle fields kept beside the ranked measures (not ranked by their maximum: a tensor,
+#: a vector, a factor of safety whose *smallest* value matters): written into the VTK files.
+EXTRAS = ("stress", "principal", "safety", "bind_strain")
+#: Small-strain validity: a binding stretched or shortened by more than this fraction
+#: (|d/L0 − 1|) makes the linear-elastic reading of the stress doubtful (warning).
+STRAIN_LIMIT = 0.05
 #: Largest n_atoms × n_frames post-processed (each measure keeps n_frames × n_atoms float64,
 #: five such arrays while computing): about 1 GB at this size.
 MAX_VALUES = 25_000_000
@@ -55,7 +63,7 @@ class TooLargeError(StressInputError):
 
 #: The fit of the desired position (one for summary, pictures, report and files).
 FIT = "robust"
-CACHE_VERSION = 1
+CACHE_VERSION = 2
 
 
 @dataclass
@@ -66,14 +74,26 @@ class Fields:
     values: dict                            # measure → (n_frames, n_atoms) float64
     fit: str = FIT
     timings: dict = field(default_factory=dict)
+    #: measure → its unit where it is not the generic one of :data:`LABELS` (the scene's units)
+    units: dict = field(default_factory=dict)
+    #: name → (n_frames, n_atoms[, k]) per-particle fields of :data:`EXTRAS`
+    extras: dict = field(default_factory=dict)
 
     @property
     def measures(self) -> list:
         return list(self.values)
 
+    def unit(self, measure: str) -> str:
+        return self.units.get(measure) or LABELS[measure][1]
+
     def label(self, measure: str) -> str:
-        name, units = LABELS[measure]
-        return f"{name} [{units}]"
+        return f"{LABELS[measure][0]} [{self.unit(measure)}]"
+
+    @property
+    def default(self) -> str:
+        """The measure pictures, headline and peaks lead with: von Mises stress for a scene
+        with a material, else the paper's distance from the desired position."""
+        return "von_mises" if "von_mises" in self.values else "paper"
 
 
 # ----------------------------------------------------------------------------- computing
@@ -92,19 +112,23 @@ def _load_cache(run, path: Path) -> Fields | None:
             if json.loads(str(z["stamp"])) != _stamp(run):
                 return None
             values = {m: z[m] for m in json.loads(str(z["measures"]))}
+            extras = {m: z["x_" + m] for m in json.loads(str(z["extras"]))}
+            units = json.loads(str(z["units"]))
             steps = z["steps"]
     except (OSError, KeyError, ValueError):
         return None
     if not np.array_equal(steps, run.steps):
         return None
-    return Fields(steps, values)
+    return Fields(steps, values, units=units, extras=extras)
 
 
 def _save_cache(run, fields: Fields, path: Path) -> None:
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}.npz")
     try:
         np.savez(tmp, stamp=json.dumps(_stamp(run)), measures=json.dumps(fields.measures),
-                 steps=fields.steps, **fields.values)
+                 extras=json.dumps(list(fields.extras)), units=json.dumps(fields.units),
+                 steps=fields.steps, **fields.values,
+                 **{"x_" + m: v for m, v in fields.extras.items()})
         os.replace(tmp, path)
     except OSError:
         tmp.unlink(missing_ok=True)       # a cache that cannot be written is only a cache
@@ -154,6 +178,10 @@ def compute_fields(run, cache: bool = True, progress: bool = False) -> Fields:
     analyses = [AccumulatedDistance(run, fit=FIT), VonMisesStrain(run)]
     if virial:
         analyses.append(VirialStress(run))
+    stress = None
+    if material_parts(run) and read_bindings(run) is not None:
+        stress = ParticleStress(run)
+        analyses.append(stress)
     tty = bool(progress) and sys.stderr.isatty()
     for a in analyses:
         a.run(verbose=tty, progressbar_kwargs={"desc": f"measure {a.NAME}", "leave": False}
@@ -163,7 +191,16 @@ def compute_fields(run, cache: bool = True, progress: bool = False) -> Fields:
               "strain": strain.von_mises, "d2min": strain.d2min}
     if virial:
         values["virial"] = analyses[2].results.per_particle
-    fields = Fields(np.asarray(acc.steps, dtype=np.int64), values)
+    units = {}
+    extras = {}
+    if stress is not None:
+        r = stress.results
+        values["von_mises"] = r.von_mises
+        units["von_mises"] = stress.UNITS
+        extras = {m: r[m] for m in EXTRAS}
+    if (run.scene or {}).get("units", {}).get("name") not in (None, "paper"):
+        units["paper"] = length_unit(run)
+    fields = Fields(np.asarray(acc.steps, dtype=np.int64), values, units=units, extras=extras)
     fields.timings["compute_s"] = time.perf_counter() - t0
     fields.timings["cached"] = False
     if cache and not run.truncation:
@@ -200,7 +237,7 @@ def peaks(run, fields: Fields) -> dict:
                             "frame": int(k), "time": float(fields.steps[k] * run.dt),
                             "particle": int(ids[row]), "index": int(j),
                             "original": [float(x) for x in run.o[row]],
-                            "units": LABELS[m][1]}
+                            "units": fields.unit(m)}
             need.setdefault(k, []).append((name, m, row))
     for k, todo in sorted(need.items()):
         p = positions(run.trajectory[k])
@@ -217,6 +254,81 @@ def overall_peak(run, group_peaks: dict, measure: str = "paper") -> dict | None:
         if rec is not None and (best is None or rec["value"] > best["value"]):
             best = {"group": part.name, "measure": measure, **rec}
     return best
+
+
+# ----------------------------------------------------------------------------- warnings
+#: the warnings post-processing adds to ``summary.json`` (replaced, not repeated, when run again)
+STRESS_WARNINGS = ({"kind": "large_strain"}, {"kind": "yield_exceeded"})
+
+
+def _argmax(v: np.ndarray):
+    """(frame, column) of the largest finite value of a (frames × n) array, or None."""
+    fin = np.isfinite(v)
+    if not fin.any():
+        return None
+    return divmod(int(np.argmax(np.where(fin, v, -np.inf))), v.shape[1])
+
+
+def stress_warnings(run, fields: Fields) -> list:
+    """The parts strained beyond small-strain validity and the parts stressed beyond yield.
+
+    ``large_strain``: some binding of the part stretched or shortened by more than
+    :data:`STRAIN_LIMIT` (|d/L0 − 1|, the bindings' own engineering strain). ``yield_exceeded``:
+    the part's von Mises stress above its material's yield strength. Each names the part, the
+    particle (LAMMPS atom id), the iteration and the value.
+    """
+    out = []
+    mats = material_parts(run)
+    bs, vm = fields.extras.get("bind_strain"), fields.values.get("von_mises")
+    for name, rec in mats.items():
+        part = run.parts[name]
+        if bs is not None and (hit := _argmax(bs[:, part.index])) is not None:
+            k, j = hit
+            value = float(bs[k, part.index[j]])
+            if value > STRAIN_LIMIT:
+                pid, it = int(run.data.ids[part.index[j]]), int(fields.steps[k])
+                out.append({"kind": "large_strain", "group": name, "particle": pid,
+                            "iteration": it, "value": value, "limit": STRAIN_LIMIT,
+                            "message": f"part '{name}': a binding of particle {pid} is strained "
+                            f"{100 * value:.3g} % (|d/L0 - 1|) at iteration {it}, beyond the "
+                            f"~{100 * STRAIN_LIMIT:g} % of small-strain validity: the stress, "
+                            "a linear-elastic reading, is doubtful there"})
+        y = (rec.get("material") or {}).get("yield")
+        if vm is not None and y and (hit := _argmax(vm[:, part.index])) is not None:
+            k, j = hit
+            value = float(vm[k, part.index[j]])
+            if value > y:
+                pid, it = int(run.data.ids[part.index[j]]), int(fields.steps[k])
+                over = int(np.sum(vm[k, part.index] > y))
+                unit = fields.unit("von_mises")
+                mat = rec["material"].get("name", "its material")
+                out.append({"kind": "yield_exceeded", "group": name, "particle": pid,
+                            "iteration": it, "value": value, "yield": float(y), "units": unit,
+                            "particles_above": over,
+                            "message": f"part '{name}': von Mises stress {value:.4g} {unit} at "
+                            f"particle {pid}, iteration {it}, exceeds the yield strength "
+                            f"{y:.4g} {unit} of {mat} ({over} particle(s) above yield then); "
+                            "the part would yield: a linear-elastic answer beyond it is not "
+                            "the real part's"})
+    return out
+
+
+def safety(run, fields: Fields) -> dict:
+    """Per part with a yield strength: the smallest factor of safety (yield / von Mises) over
+    the run, where and when."""
+    out = {}
+    sf = fields.extras.get("safety")
+    if sf is None:
+        return out
+    for name in material_parts(run):
+        part = run.parts[name]
+        hit = _argmax(-sf[:, part.index])
+        if hit is None:
+            continue
+        k, j = hit
+        out[name] = {"min": float(sf[k, part.index[j]]), "iteration": int(fields.steps[k]),
+                     "particle": int(run.data.ids[part.index[j]]), "frame": int(k)}
+    return out
 
 
 # ----------------------------------------------------------------------------- the step
@@ -256,11 +368,14 @@ def postprocess(rundir, vtk: bool = True, dump: bool = False, progress: bool = F
     out.mkdir(parents=True, exist_ok=True)
     fields = compute_fields(run, progress=progress)
     group_peaks = peaks(run, fields)
-    info = {"fit": FIT, "measures": {m: {"label": LABELS[m][0], "units": LABELS[m][1]}
+    info = {"fit": FIT, "measures": {m: {"label": LABELS[m][0], "units": fields.unit(m)}
                                      for m in fields.measures},
+            "default_measure": fields.default,
             "frames": len(fields.steps), "first_iteration": int(fields.steps[0]),
             "last_iteration": int(fields.steps[-1]),
-            "peak": overall_peak(run, group_peaks), "groups": group_peaks, "files": {},
+            "peak": overall_peak(run, group_peaks, fields.default), "groups": group_peaks,
+            "warnings": stress_warnings(run, fields), "safety": safety(run, fields),
+            "files": {},
             "timings": {"measures_s": fields.timings.get("compute_s", 0.0)}}
     from rackstress.stress import export
 
@@ -296,7 +411,13 @@ def add_to_summary(summary_path: Path, info: dict) -> dict:
     for name, rec in info["groups"].items():
         groups.setdefault(name, {})["peak"] = rec
     summary["stress"] = {"fit": info["fit"], "peak": info["peak"], "files": info["files"],
-                         "measures": info["measures"]}
+                         "measures": info["measures"],
+                         "default_measure": info.get("default_measure", "paper")}
+    if info.get("safety"):
+        summary["stress"]["safety"] = info["safety"]
+    kinds = {w["kind"] for w in STRESS_WARNINGS}
+    kept = [w for w in summary.get("warnings") or [] if w.get("kind") not in kinds]
+    summary["warnings"] = kept + list(info.get("warnings") or [])
     write_json(summary_path, summary)
     return summary
 
@@ -312,10 +433,16 @@ def describe(info: dict) -> list:
                      f"at iteration {pk['iteration']}, particle {pk['particle']} at "
                      f"({', '.join(f'{x:.3g}' for x in pk['position'])})")
     for name, rec in info["groups"].items():
-        shown = [f"{m}={p['value']:.4g} (iteration {p['iteration']}, particle {p['particle']})"
-                 for m in ("paper", "strain") if (p := rec.get(m)) is not None]
+        shown = [f"{m}={p['value']:.4g}{' ' + p['units'] if m == 'von_mises' else ''} "
+                 f"(iteration {p['iteration']}, particle {p['particle']})"
+                 for m in ("von_mises", "paper", "strain") if (p := rec.get(m)) is not None]
         if shown:
             lines.append(f"  {name:12s} peak " + "; ".join(shown))
+    for name, sf in (info.get("safety") or {}).items():
+        lines.append(f"  {name:12s} smallest factor of safety {sf['min']:.3g} (iteration "
+                     f"{sf['iteration']}, particle {sf['particle']})")
+    for w in info.get("warnings") or []:
+        lines.append(f"  warning: {w['message']}")
     for key, path in info["files"].items():
         lines.append(f"  {key}: {path}")
     return lines
