@@ -545,6 +545,18 @@ def bench_perf(out, steps, quick, profile_steps, scene_name, no_mpi):
     click.echo(md_table(*mod.breakdown_rows(data)))
 
 
+@bench.command("stress")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
+              help="Output directory (default: docs/benchmarks/ of the repository).")
+@click.option("--quick", is_flag=True, help="One small bar per case (for tests).")
+def bench_stress(out, quick):
+    """Stress from particles (virial, completed, Hooke) against tension and bending."""
+    from rackstress.bench import stress as mod
+
+    data = mod.run_bench(out, quick=quick, echo=click.echo)
+    _bench_report(data, mod)
+
+
 @bench.command("validity")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path),
               help="Output directory (default: docs/benchmarks/ of the repository).")

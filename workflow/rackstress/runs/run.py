@@ -107,6 +107,18 @@ def write_bindings(scene: Scene, path: Path) -> int:
     binding's force per length, Eq. 12 times the mass) and ``L0sq`` — so that post-processing
     finds the stress from the bindings' forces (:mod:`rackstress.stress.tensor`) without the
     scene. Returns the number of bindings (0: no file written)."""
+    b = bindings_of(scene)
+    if b is None:
+        return 0
+    idx = np.int32 if scene.n_particles < 2 ** 31 else np.int64
+    tmp = path.with_name(f".{path.name}.tmp.npz")
+    np.savez(tmp, i=b[0].astype(idx), j=b[1].astype(idx), k=b[2], L0sq=b[3])
+    tmp.replace(path)
+    return len(b[0])
+
+
+def bindings_of(scene: Scene):
+    """(i, j, k, L0²) of :func:`write_bindings` as arrays, or None when there are none."""
     from rackstress.model.operators import Bind
 
     I, J, K, Q = [], [], [], []
@@ -125,13 +137,9 @@ def write_bindings(scene: Scene, path: Path) -> int:
             K.append(m * pl.c)
             Q.append(pl.q)
     if not I:
-        return 0
-    idx = np.int32 if scene.n_particles < 2 ** 31 else np.int64
-    tmp = path.with_name(f".{path.name}.tmp.npz")
-    np.savez(tmp, i=np.concatenate(I).astype(idx), j=np.concatenate(J).astype(idx),
-             k=np.concatenate(K), L0sq=np.concatenate(Q))
-    tmp.replace(path)
-    return int(sum(len(x) for x in I))
+        return None
+    return (np.concatenate(I).astype(np.int64), np.concatenate(J).astype(np.int64),
+            np.concatenate(K), np.concatenate(Q))
 
 
 def scene_source(scene: Scene) -> str | None:
