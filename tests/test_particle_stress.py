@@ -212,3 +212,22 @@ def test_paper_scene_keeps_paper(tmp_path):
     assert "von_mises" not in info["measures"]
     assert info["default_measure"] == "paper" and info["peak"]["measure"] == "paper"
     assert info["measures"]["paper"]["units"] == "length units"
+
+
+def test_bench_stress_quick(tmp_path):
+    """``rackstress bench stress --quick``: the virial route's section sums are the load's force
+    and moment (equilibrium), and the files are written."""
+    from click.testing import CliRunner
+
+    from rackstress.cli import main
+
+    res = CliRunner().invoke(main, ["bench", "stress", "--quick", "--out", str(tmp_path)],
+                             catch_exceptions=False)
+    assert res.exit_code == 0, res.output
+    data = json.loads((tmp_path / "stress.json").read_text())
+    (t,), (b,) = data["tension"], data["bending"]
+    assert t["at_rest"] and b["at_rest"]
+    assert t["routes"]["virial"]["mean_sxx"] == pytest.approx(1.0, rel=1e-3)
+    assert b["routes"]["virial"]["moment"] == pytest.approx(1.0, rel=2e-3)
+    assert 0.2 < t["nu_lattice"] < 0.33                  # a central-force lattice: 1/4 in bulk
+    assert "hooke(ν=0.33)" in (tmp_path / "stress.md").read_text()
