@@ -437,9 +437,12 @@ class ParticleStress(_RunAnalysis):
         for part in mine:
             self._mask[part.index] = True
         b = self.bindings
-        if b is not None:                    # only the bindings on the analysed particles
-            keep = self._mask[b[0]]
-            b = tuple(x[keep] for x in b)
+        if b is not None:                    # only the bindings on the analysed particles,
+            keep = self._mask[b[0]]          # grouped by particle (np.maximum.reduceat below)
+            order = np.argsort(b[0][keep], kind="stable")
+            b = tuple(x[keep][order] for x in b)
+            i = b[0]
+            self._starts = np.flatnonzero(np.r_[True, i[1:] != i[:-1]]) if len(i) else i
         self._b = b
         if b is None or not len(b[0]):
             self._W2S = None
@@ -469,9 +472,9 @@ class ParticleStress(_RunAnalysis):
         self.results.safety[k][~np.isfinite(self._yield) | ~self._mask] = np.nan
         d = p[b[1]] - p[b[0]]
         strain = np.abs(np.sqrt(np.einsum("ij,ij->i", d, d) / b[3]) - 1.0)
-        bs = np.full(len(p), -np.inf)
-        np.maximum.at(bs, b[0], strain)
-        bs[~np.isfinite(bs) | ~self._mask] = np.nan
+        bs = np.full(len(p), np.nan)
+        bs[b[0][self._starts]] = np.maximum.reduceat(strain, self._starts)
+        bs[~self._mask] = np.nan
         self.results.bind_strain[k] = bs
         return vm
 

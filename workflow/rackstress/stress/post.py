@@ -47,7 +47,8 @@ LABELS = {
     "von_mises": ("von Mises stress", "stress units"),
 }
 #: Per-particle fields kept beside the ranked measures (not ranked by their maximum: a tensor,
-#: a vector, a factor of safety whose *smallest* value matters): written into the VTK files.
+#: a vector, a factor of safety whose *smallest* value matters): written into the VTK files,
+#: kept in float32 (11 values a particle and frame; ``von_mises`` itself stays float64).
 EXTRAS = ("stress", "principal", "safety", "bind_strain")
 #: Small-strain validity: a binding stretched or shortened by more than this fraction
 #: (|d/L0 − 1|) makes the linear-elastic reading of the stress doubtful (warning).
@@ -197,7 +198,7 @@ def compute_fields(run, cache: bool = True, progress: bool = False) -> Fields:
         r = stress.results
         values["von_mises"] = r.von_mises
         units["von_mises"] = stress.UNITS
-        extras = {m: r[m] for m in EXTRAS}
+        extras = {m: r[m].astype(np.float32) for m in EXTRAS}    # pictures' precision: half
     if (run.scene or {}).get("units", {}).get("name") not in (None, "paper"):
         units["paper"] = length_unit(run)
     fields = Fields(np.asarray(acc.steps, dtype=np.int64), values, units=units, extras=extras)
