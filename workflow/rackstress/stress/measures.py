@@ -449,6 +449,7 @@ class ParticleStress(_RunAnalysis):
             self._mask[:] = False
             return
         self._V = V
+        self._gather = T.incidence(b[0], n)
         if self.method == "completed":
             A = T.binding_moment(run.o, b[0], b[1], b[2], n)
             self._W2S = T.completion(A, V, [p.index for p in mine])
@@ -462,7 +463,9 @@ class ParticleStress(_RunAnalysis):
         if not self._mask.any():
             return out
         b = self._b
-        s = T.stress(p, b, self._W2S, self._V)
+        d = p[b[1]] - p[b[0]]
+        d2 = np.einsum("ij,ij->i", d, d)
+        s = T.stress(p, b, self._W2S, self._V, W=T.virial_of(d, d2, b[2], b[3], self._gather))
         s[~self._mask] = np.nan
         vm = T.von_mises(s)
         self.results.stress[k] = T.to_output(s)
@@ -470,8 +473,7 @@ class ParticleStress(_RunAnalysis):
         with np.errstate(divide="ignore", invalid="ignore"):
             self.results.safety[k] = np.where(vm > 0, self._yield / vm, np.inf)
         self.results.safety[k][~np.isfinite(self._yield) | ~self._mask] = np.nan
-        d = p[b[1]] - p[b[0]]
-        strain = np.abs(np.sqrt(np.einsum("ij,ij->i", d, d) / b[3]) - 1.0)
+        strain = np.abs(np.sqrt(d2 / b[3]) - 1.0)
         bs = np.full(len(p), np.nan)
         bs[b[0][self._starts]] = np.maximum.reduceat(strain, self._starts)
         bs[~self._mask] = np.nan

@@ -59,18 +59,35 @@ def _components(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def virial(p: np.ndarray, i: np.ndarray, j: np.ndarray, k: np.ndarray, L0sq: np.ndarray,
-           n: int | None = None) -> np.ndarray:
+           n: int | None = None, gather=None) -> np.ndarray:
     """W_i = ½ Σ_j d ⊗ f of bindings (i on j) at positions ``p``: (n, 6), internal Voigt order.
 
     ``k`` is each binding's force coefficient m_i·c (force per length), ``L0sq`` its rest length
-    squared; f = k·(1 − L0²/d²)·d (Eq. 12 times the mass), d = p_j − p_i.
+    squared; f = k·(1 − L0²/d²)·d (Eq. 12 times the mass), d = p_j − p_i, so d ⊗ f is
+    k·(1 − L0²/d²)·d ⊗ d. ``gather``: :func:`incidence` of ``i`` (built once, reused per frame).
     """
     n = len(p) if n is None else n
     d = p[j] - p[i]
-    d2 = np.einsum("ij,ij->i", d, d)
-    f = (k * (1.0 - L0sq / d2))[:, None] * d
-    w = 0.5 * _components(d, f)
-    return np.stack([np.bincount(i, weights=w[:, c], minlength=n) for c in range(6)], axis=1)
+    return virial_of(d, np.einsum("ij,ij->i", d, d), k, L0sq,
+                     incidence(i, n) if gather is None else gather)
+
+
+def virial_of(d, d2, k, L0sq, gather) -> np.ndarray:
+    """:func:`virial` from the bindings' vectors d and squared lengths d2."""
+    s = 0.5 * k * (1.0 - L0sq / d2)
+    dd = np.empty((len(d), 6))
+    for c, (r, q) in enumerate(VOIGT):
+        np.multiply(d[:, r], d[:, q], out=dd[:, c])
+    dd *= s[:, None]
+    return np.asarray(gather @ dd)
+
+
+def incidence(i: np.ndarray, n: int):
+    """The sparse n × m matrix summing per-binding rows onto their particle i (one C pass)."""
+    from scipy.sparse import csr_matrix
+
+    m = len(i)
+    return csr_matrix((np.ones(m), (np.asarray(i), np.arange(m))), shape=(n, m))
 
 
 def binding_moment(o: np.ndarray, i: np.ndarray, j: np.ndarray, k: np.ndarray,
@@ -154,14 +171,15 @@ def hooke(E_gl: np.ndarray, E: float, nu: float) -> np.ndarray:
     return np.stack([s[..., r, c] for r, c in VOIGT], axis=-1)
 
 
-def stress(p, bindings, W2S=None, volume=None) -> np.ndarray:
+def stress(p, bindings, W2S=None, volume=None, W=None) -> np.ndarray:
     """Stress (n, 6, internal Voigt) of every particle at positions ``p``.
 
     ``bindings`` = (i, j, k, L0sq); ``W2S`` the completion maps (:func:`completion`), else the
-    plain virial stress W_i / ``volume``.
+    plain virial stress W_i / ``volume``; ``W``: the virial, if computed already.
     """
-    i, j, k, L0sq = bindings
-    W = virial(p, i, j, k, L0sq, len(p))
+    if W is None:
+        i, j, k, L0sq = bindings
+        W = virial(p, i, j, k, L0sq, len(p))
     if W2S is None:
         return W / np.asarray(volume, float)[:, None]
     return np.einsum("nij,nj->ni", W2S, W)
