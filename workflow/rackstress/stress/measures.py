@@ -373,11 +373,6 @@ def stress_unit(run) -> str:
     return u.get("stress") if u.get("name") not in (None, "paper") else "stress units"
 
 
-def length_unit(run) -> str:
-    u = (run.scene or {}).get("units") or {}
-    return u.get("length") if u.get("name") not in (None, "paper") else "length units"
-
-
 class ParticleStress(_RunAnalysis):
     """Stress per particle from the bindings' forces, in the scene's stress unit.
 

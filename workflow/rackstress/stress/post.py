@@ -3,13 +3,18 @@
 :func:`compute_fields` runs the measures of :mod:`rackstress.stress.measures` over every dumped
 frame once — the paper's distance from the desired position (robust fit, Section 5.2), its time
 integral, von Mises shear strain and D²min (Falk & Langer), and the virial stress if the dump
-holds it — and keeps them as a :class:`Fields` (n_frames × n_atoms per measure, float64), cached
-in ``RUNDIR/measures.npz`` so that pictures, report and files reuse them instead of recomputing.
+holds it, and for parts with a material the von Mises stress from the bindings' forces in the
+scene's stress unit, with the stress tensor, principal stresses, factor of safety and binding
+strain as :data:`EXTRAS` (docs/stress.md) — and keeps them as a :class:`Fields` (n_frames ×
+n_atoms per measure, float64), cached in ``RUNDIR/measures.npz`` so that pictures, report and
+files reuse them instead of recomputing. :attr:`Fields.default` is the measure that leads:
+``von_mises`` for a scene with a material, else ``paper``.
 
 :func:`peaks` finds, for every group and measure, the largest value over the whole run: value,
 iteration, frame, particle (LAMMPS atom id and index in its group) and its position at that
-iteration. :func:`postprocess` writes them into ``summary.json`` (``groups.<name>.peak.<measure>``,
-atomically) and writes the VTK time series (``RUNDIR/vtk/run.pvd``) and, on request, a LAMMPS dump
+iteration. :func:`stress_warnings` names the parts strained beyond small-strain validity or
+stressed beyond yield. :func:`postprocess` writes them into ``summary.json``
+(``groups.<name>.peak.<measure>``, ``warnings``, atomically) and writes the VTK time series (``RUNDIR/vtk/run.pvd``) and, on request, a LAMMPS dump
 with the measures as named columns (``RUNDIR/stress.dump``; see :mod:`rackstress.stress.export`).
 
 Example
@@ -33,7 +38,7 @@ from rackstress.lib.jsonio import write_json
 from rackstress.lib.runfiles import CACHE, STRESS_DUMP, STRESS_JSON, VTK_DIR
 from rackstress.stress.dump import StressInputError
 from rackstress.stress.measures import (AccumulatedDistance, ParticleStress, VirialStress,
-                                        VonMisesStrain, length_unit, material_parts, positions,
+                                        VonMisesStrain, material_parts, positions,
                                         read_bindings, stress_columns)
 
 #: The measures every run gets, in this order (``virial`` too when the dump recorded it).
@@ -199,8 +204,10 @@ def compute_fields(run, cache: bool = True, progress: bool = False) -> Fields:
         values["von_mises"] = r.von_mises
         units["von_mises"] = stress.UNITS
         extras = {m: r[m].astype(np.float32) for m in EXTRAS}    # pictures' precision: half
-    if (run.scene or {}).get("units", {}).get("name") not in (None, "paper"):
-        units["paper"] = length_unit(run)
+    u = (run.scene or {}).get("units") or {}
+    if u.get("name") not in (None, "paper"):          # the scene's own units, not generic ones
+        units.update({"paper": u["length"], "accumulated": f"{u['length']}·{u['time']}",
+                      "d2min": f"{u['length']}²"})
     fields = Fields(np.asarray(acc.steps, dtype=np.int64), values, units=units, extras=extras)
     fields.timings["compute_s"] = time.perf_counter() - t0
     fields.timings["cached"] = False
