@@ -617,6 +617,8 @@ def render(rundir, frames=None, measure: str | None = None, views=DEFAULT_VIEWS,
     label = fields.label(measure)
     report.timings["load+measures_s"] = time.perf_counter() - t0
     peak = find_peak(run, values, coloured)
+    if peak and measure in fields.units:          # the scene's own unit (MPa, mm) on the picture
+        peak["units"] = fields.unit(measure)
     report.peak = peak
     if frames:
         asked = list(frames)
@@ -814,7 +816,8 @@ def _legend(run, coloured, context, hidden, cmap):
 def _peak_line(peak) -> str:
     if not peak:
         return ""
-    return (f"peak {peak['value']:.4g} at iteration {peak['iteration']}, "
+    unit = f" {peak['units']}" if peak.get("units") else ""
+    return (f"peak {peak['value']:.4g}{unit} at iteration {peak['iteration']}, "
             f"particle {peak['particle']} ({peak['group']})")
 
 
