@@ -58,6 +58,7 @@ import numpy as np
 from MDAnalysis.analysis.base import AnalysisBase
 from scipy.spatial import cKDTree
 
+from rackstress.stress import tensor as T
 from rackstress.stress.dump import DumpColumnsError, StressInputError
 from rackstress.stress.fit import FITS
 
@@ -410,8 +411,6 @@ class ParticleStress(_RunAnalysis):
 
     def _prepare(self):
         super()._prepare()
-        from rackstress.stress import tensor as T
-
         run, n = self.run_data, self.run_data.n_atoms
         shape = (self.n_frames, n)
         self.results.von_mises = self.results.per_particle
@@ -452,8 +451,6 @@ class ParticleStress(_RunAnalysis):
             self._W2S = None
 
     def _measure(self, p):
-        from rackstress.stress import tensor as T
-
         k, out = self._frame_index, np.full(len(p), np.nan)
         if not self._mask.any():
             return out
