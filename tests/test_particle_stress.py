@@ -231,3 +231,51 @@ def test_bench_stress_quick(tmp_path):
     assert b["routes"]["virial"]["moment"] == pytest.approx(1.0, rel=2e-3)
     assert 0.2 < t["nu_lattice"] < 0.33                  # a central-force lattice: 1/4 in bulk
     assert "hooke(ν=0.33)" in (tmp_path / "stress.md").read_text()
+
+
+_MPI = """
+import sys
+sys.path.insert(0, sys.argv[2])
+from test_particle_stress import _tension_scene
+from rackstress.lib.mpi import world
+from rackstress.runs.run import run
+from rackstress.stress.post import postprocess
+run(_tension_scene(), sys.argv[1], engine="lammps", progress=False, dump_every=500)
+if world().Get_rank() == 0:
+    postprocess(sys.argv[1])
+"""
+
+
+def _tension_scene():
+    nx, ny, nz, F = 8, 3, 3, 90.0
+    o = _bar(nx, ny, nz)
+    omega = np.pi / (2 * nx) * np.sqrt(70000.0 / RHO)
+    return _scene("bar", o, [(o[:, 0] == nx - 1, (F / 9, 0, 0)), (o[:, 0] == 0, (-F / 9, 0, 0))],
+                  _c(), 2 * omega, 1500)
+
+
+@pytest.mark.mpi
+def test_lammps_on_two_ranks_matches_the_reference_engine(tmp_path):
+    """``mpiexec -n 2``: the run writes its bindings once, and the stress field of its run
+    directory equals the reference engine's (an independent engine) to round-off."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from conftest import MPIEXEC
+
+    script = tmp_path / "mpi_stress.py"
+    script.write_text(_MPI)
+    out = tmp_path / "mpi"
+    proc = subprocess.run([MPIEXEC, "-n", "2", sys.executable, str(script), str(out),
+                           str(Path(__file__).parent)], capture_output=True, text=True,
+                          timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert json.loads((out / "summary.json").read_text())["ranks"] == 2
+    ref = tmp_path / "ref"
+    run(_tension_scene(), ref, engine="reference", progress=False, dump_every=500)
+    a = ParticleStress(load_run(out)).run().results.von_mises
+    b = ParticleStress(load_run(ref)).run().results.von_mises
+    assert a.shape == b.shape
+    np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9 * np.nanmax(b))
+    assert np.nanmax(a[-1]) > 0
