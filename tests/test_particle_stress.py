@@ -212,6 +212,12 @@ def test_paper_scene_keeps_paper(tmp_path):
     assert "von_mises" not in info["measures"]
     assert info["default_measure"] == "paper" and info["peak"]["measure"] == "paper"
     assert info["measures"]["paper"]["units"] == "length units"
+    from rackstress.render.pictures import render
+    from rackstress.stress import StressInputError
+
+    with pytest.raises(StressInputError, match="material"):
+        render(out, measure="von_mises")
+    assert not (out / "figures").exists()           # nothing half-written
 
 
 def test_bench_stress_quick(tmp_path):
