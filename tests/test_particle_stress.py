@@ -231,11 +231,12 @@ def test_bench_stress_quick(tmp_path):
                              catch_exceptions=False)
     assert res.exit_code == 0, res.output
     data = json.loads((tmp_path / "stress.json").read_text())
-    (t,), (b,) = data["tension"], data["bending"]
-    assert t["at_rest"] and b["at_rest"]
-    assert t["routes"]["virial"]["mean_sxx"] == pytest.approx(1.0, rel=1e-3)
-    assert b["routes"]["virial"]["moment"] == pytest.approx(1.0, rel=2e-3)
-    assert 0.2 < t["nu_lattice"] < 0.33                  # a central-force lattice: 1/4 in bulk
+    assert {t["lattice"] for t in data["tension"]} == set(data["lattices"]) >= {"plain"}
+    for t, b in zip(data["tension"], data["bending"]):   # every lattice: equilibrium holds
+        assert t["at_rest"] and b["at_rest"]
+        assert t["routes"]["virial"]["mean_sxx"] == pytest.approx(1.0, rel=1e-3)
+        assert b["routes"]["virial"]["moment"] == pytest.approx(1.0, rel=2e-3)
+        assert 0.2 < t["nu_lattice"] < 0.33              # a central-force lattice: 1/4 in bulk
     assert "hooke(ν=0.33)" in (tmp_path / "stress.md").read_text()
 
 

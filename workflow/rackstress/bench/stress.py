@@ -21,7 +21,10 @@ Routes compared at the same positions:
 ``hooke(ν=1/4)``
     the same with the lattice's own Poisson's ratio.
 
-It also measures the lattice's Poisson's ratio (lateral over axial strain at mid-length of the
+Each on the plain within(1.5) lattice and, where this rackstress has material solids
+(``rackstress.model.solid.Solid``), on their face-compensated lattice (the missing outer
+second-neighbour bindings' share given to the face-parallel ones). It also measures the
+lattice's Poisson's ratio (lateral over axial strain at mid-length of the
 tension bar) and its effective Young's modulus (F/A over the axial strain between two sections),
 which set what a ν = 0.33 material costs (docs/stress.md). Writes ``stress.json`` and
 ``stress.md`` into docs/benchmarks/.
@@ -43,9 +46,24 @@ QUICK = {"tension": [(10, 4)], "bending": [(16, 6)]}
 ROUTES = ("virial", "completed", "hooke(ν=0.33)", "hooke(ν=1/4)")
 
 
-def _bar(nx, n, loads_of, steps=200000):
+def lattices() -> dict:
+    """The bind coefficients measured: the plain within(1.5) lattice, and the material solid's
+    face-compensated lattice (``rackstress.model.solid.Solid``) where this rackstress has it."""
+    from rackstress.model.operators import Within
+
+    out = {"plain": lambda c: Within(1.5, c)}
+    try:
+        from rackstress.model.solid import Solid
+    except ImportError:                  # a rackstress without material solids
+        return out
+    out["face-compensated"] = lambda c: Solid(d=1.5, c=c, region=None, spacing=1.0,
+                                              material="aluminium")
+    return out
+
+
+def _bar(nx, n, loads_of, steps=200000, lattice="plain"):
     from rackstress.model.materials import material
-    from rackstress.model.operators import Bind, Dampen, Force, Within
+    from rackstress.model.operators import Bind, Dampen, Force
     from rackstress.model.particles import Group
     from rackstress.model.scene import Phase, Scene
     from rackstress.model.stability import predict
@@ -59,7 +77,7 @@ def _bar(nx, n, loads_of, steps=200000):
     ops = [Force(tuple(float(x) / m for x in f), where=tuple(bool(b) for b in mask))
            for mask, f in loads_of(o)]
     omega = np.pi / (2 * nx) * np.sqrt(E / RHO)
-    ops += [Bind("bar", Within(1.5, c)), Dampen(2 * omega)]
+    ops += [Bind("bar", lattices()[lattice](c)), Dampen(2 * omega)]
     units = SYSTEMS["mm-N-s"]
     sc = Scene("bar", {"bar": g}, {"bar": ops}, [Phase("load", steps)], dt=1.0, units=units)
     dt = 0.5 * predict(sc)["t_max"]
@@ -82,13 +100,13 @@ def routes(scene, o, p) -> dict:
             "hooke(ν=0.33)": T.hooke(Egl, E, NU), "hooke(ν=1/4)": T.hooke(Egl, E, 0.25)}
 
 
-def tension(nx, n, F=100.0, echo=print) -> dict:
+def tension(nx, n, F=100.0, echo=print, lattice="plain") -> dict:
     from rackstress.stress import tensor as T
     from rackstress.validity.compare import equilibrate
 
     face = n * n
     sc, o = _bar(nx, n, lambda o: [(o[:, 0] == nx - 1, (F / face, 0, 0)),
-                                   (o[:, 0] == 0, (-F / face, 0, 0))])
+                                   (o[:, 0] == 0, (-F / face, 0, 0))], lattice=lattice)
     t0 = time.perf_counter()
     p, info = equilibrate(sc, tol=1e-8, check_every=1000)
     R = routes(sc, o, p)
@@ -99,7 +117,7 @@ def tension(nx, n, F=100.0, echo=print) -> dict:
     ex = (L - (x2 - x1)) / (x2 - x1)
     top, bot = mid & (o[:, 1] == o[:, 1].max()), mid & (o[:, 1] == o[:, 1].min())
     ey = (p[top, 1].mean() - p[bot, 1].mean() - (n - 1)) / (n - 1)
-    out = {"nx": nx, "n": n, "F": F, "sigma": ref, "steps": info["steps"],
+    out = {"lattice": lattice, "nx": nx, "n": n, "F": F, "sigma": ref, "steps": info["steps"],
            "at_rest": info["at_rest"], "wall_s": time.perf_counter() - t0,
            "E_eff": ref / ex, "nu_lattice": -ey / ex, "routes": {}}
     for name, s in R.items():
@@ -108,13 +126,13 @@ def tension(nx, n, F=100.0, echo=print) -> dict:
                                "min_sxx": float(s[mid, 0].min() / ref),
                                "max_sxx": float(s[mid, 0].max() / ref),
                                "peak_vm": float(vm.max() / ref)}
-    echo(f"  tension {nx}x{n}x{n}: E_eff {out['E_eff']:.0f} MPa, ν {out['nu_lattice']:.3f}, "
+    echo(f"  {lattice} tension {nx}x{n}x{n}: E_eff {out['E_eff']:.0f} MPa, ν {out['nu_lattice']:.3f}, "
          + ", ".join(f"{k} mean {v['mean_sxx']:.3f} peak {v['peak_vm']:.3f}"
                      for k, v in out["routes"].items()))
     return out
 
 
-def bending(nx, n, s0=1.0, echo=print) -> dict:
+def bending(nx, n, s0=1.0, echo=print, lattice="plain") -> dict:
     from rackstress.stress import tensor as T
     from rackstress.validity.compare import equilibrate
 
@@ -125,7 +143,7 @@ def bending(nx, n, s0=1.0, echo=print) -> dict:
             out.append(((o[:, 0] == 0) & (o[:, 2] == zk), (-s0 * zk, 0, 0)))
         return out
 
-    sc, o = _bar(nx, n, loads)
+    sc, o = _bar(nx, n, loads, lattice=lattice)
     zs = np.unique(o[:, 2])
     M = s0 * n * float((zs ** 2).sum())
     I = n * n ** 3 / 12.0
@@ -135,7 +153,7 @@ def bending(nx, n, s0=1.0, echo=print) -> dict:
     mid = o[:, 0] == nx // 2
     top = mid & (o[:, 2] == zs.max())
     ref = M * zs.max() / I
-    out = {"nx": nx, "n": n, "M": M, "I": I, "sigma_top": ref, "steps": info["steps"],
+    out = {"lattice": lattice, "nx": nx, "n": n, "M": M, "I": I, "sigma_top": ref, "steps": info["steps"],
            "at_rest": info["at_rest"], "wall_s": time.perf_counter() - t0, "routes": {}}
     for name, s in R.items():
         out["routes"][name] = {
@@ -144,7 +162,7 @@ def bending(nx, n, s0=1.0, echo=print) -> dict:
             "moment": float((s[mid, 0] * o[mid, 2]).sum() / M),
             "layers": {f"{z:g}": float(s[mid & (o[:, 2] == z), 0].mean() / (M * z / I))
                        for z in zs if z > 0}}
-    echo(f"  bending {nx}x{n}x{n}: " + ", ".join(
+    echo(f"  {lattice} bending {nx}x{n}x{n}: " + ", ".join(
         f"{k} top {v['top_sxx']:.3f} peak {v['peak_vm']:.3f} moment {v['moment']:.3f}"
         for k, v in out["routes"].items()))
     return out
@@ -155,8 +173,11 @@ def run_bench(out: Path | None = None, quick: bool = False, echo=print) -> dict:
     t0 = time.perf_counter()
     sizes = QUICK if quick else FULL
     data = {"quick": quick, "machine": machine(),
-            "tension": [tension(nx, n, echo=echo) for nx, n in sizes["tension"]],
-            "bending": [bending(nx, n, echo=echo) for nx, n in sizes["bending"]]}
+            "lattices": list(lattices()),
+            "tension": [tension(nx, n, echo=echo, lattice=lat) for lat in lattices()
+                        for nx, n in sizes["tension"]],
+            "bending": [bending(nx, n, echo=echo, lattice=lat) for lat in lattices()
+                        for nx, n in sizes["bending"]]}
     data["wall_s"] = time.perf_counter() - t0
     write_json(out / "stress.json", data)
     (out / "stress.md").write_text(report(data))
@@ -168,17 +189,17 @@ def table_rows(data) -> list:
     rows = []
     for t in data["tension"]:
         for name, r in t["routes"].items():
-            rows.append([f"tension {t['nx']}×{t['n']}×{t['n']}", name, fmt(r["mean_sxx"], 3),
+            rows.append([t.get("lattice", "plain"), f"tension {t['nx']}×{t['n']}×{t['n']}", name, fmt(r["mean_sxx"], 3),
                          f"{fmt(r['min_sxx'], 3)} … {fmt(r['max_sxx'], 3)}",
                          fmt(r["peak_vm"], 3)])
     for b in data["bending"]:
         for name, r in b["routes"].items():
-            rows.append([f"bending {b['nx']}×{b['n']}×{b['n']}", name, fmt(r["moment"], 3),
+            rows.append([b.get("lattice", "plain"), f"bending {b['nx']}×{b['n']}×{b['n']}", name, fmt(r["moment"], 3),
                          f"top {fmt(r['top_sxx'], 3)}", fmt(r["peak_vm"], 3)])
     return rows
 
 
-HEADER = ["case", "route", "section mean σ_xx / (F/A) or moment / M", "σ_xx / analytical",
+HEADER = ["lattice", "case", "route", "section mean σ_xx / (F/A) or moment / M", "σ_xx / analytical",
           "peak von Mises / analytical"]
 
 
@@ -193,12 +214,14 @@ def report(data) -> str:
     lines.append(md_table(HEADER, table_rows(data)))
     lines.append("")
     for t in data["tension"]:
-        lines.append(f"Tension bar {t['nx']}×{t['n']}×{t['n']}: the lattice's Poisson's ratio "
+        lines.append(f"Tension bar {t['nx']}×{t['n']}×{t['n']} ({t.get('lattice', 'plain')} "
+                     "lattice): the lattice's Poisson's ratio "
                      f"{fmt(t['nu_lattice'], 3)} (continuum limit 1/4), effective Young's "
                      f"modulus {fmt(t['E_eff'], 4)} MPa (interior 2.5·k/a = {E:g} MPa; the "
                      "surface particles, missing their outer bindings, are softer).")
     for b in data["bending"]:
-        lines.append(f"Bending {b['nx']}×{b['n']}×{b['n']}, virial σ_xx by layer over M·z/I: "
+        lines.append(f"Bending {b['nx']}×{b['n']}×{b['n']} ({b.get('lattice', 'plain')} "
+                     "lattice), virial σ_xx by layer over M·z/I: "
                      + ", ".join(f"z = {z}: {fmt(v, 3)}"
                                  for z, v in b["routes"]["virial"]["layers"].items()) + ".")
     lines.append("")
