@@ -426,18 +426,19 @@ def _csv(text):
                    "1320,2600,4720,17480 if the run reaches them, else 4 spread over the run, "
                    "and the iteration of the peak.")
 @click.option("--measure", type=Choice(["paper", "accumulated", "strain", "d2min",
-                                              "virial"]),
-              default="paper", show_default=True,
-              help="paper: distance from desired position (Sec. 5.2); accumulated: its time "
+                                        "virial", "von_mises"]),
+              help="Default: von_mises for a scene with a material, else paper. "
+                   "paper: distance from desired position (Sec. 5.2); accumulated: its time "
                    "integral; strain: von Mises shear strain; d2min: non-affine D2min; "
-                   "virial: LAMMPS per-atom stress (if the dump has it).")
+                   "virial: LAMMPS per-atom stress (if the dump has it); von_mises: von Mises "
+                   "stress from the bindings' forces, in the scene's stress unit (MPa).")
 @click.option("--views", default="right,front,left", show_default=True,
               help="Comma-separated: right, front, left, back, top, iso.")
 @click.option("--groups", metavar="PART,...",
               help="Parts to show, e.g. body,leftleg (coloured whatever their kind); or parts to "
                    "hide from the default set with a leading '-', e.g. -sediment.")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path),
-              help="Output folder (default: RUNDIR/figures for the paper measure, "
+              help="Output folder (default: RUNDIR/figures for the default measure, "
                    "RUNDIR/figures/MEASURE otherwise). Files of other names there are kept.")
 @click.option("--movie", is_flag=True, help="Also write movie.mp4 of every frame.")
 @click.option("--movie-view", help="The view of the movie (default: the first of --views).")
@@ -806,6 +807,18 @@ def bench_inside(out, quick):
 def bench_validity3d(out, quick):
     """The bracket STL's particle strain against tetrahedral FEA (the 'fem' extra)."""
     from rackstress.bench import validity3d as mod
+
+    data = mod.run_bench(out, quick=quick, echo=click.echo)
+    _bench_report(data, mod)
+
+
+@bench.command("stress")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
+              help="Output directory (default: docs/benchmarks/ of the repository).")
+@click.option("--quick", is_flag=True, help="One small bar per case (for tests).")
+def bench_stress(out, quick):
+    """Stress from particles (virial, completed, Hooke) against tension and bending."""
+    from rackstress.bench import stress as mod
 
     data = mod.run_bench(out, quick=quick, echo=click.echo)
     _bench_report(data, mod)

@@ -83,8 +83,68 @@ def scene_record(scene: Scene) -> dict:
             "cycles": scene.cycles,
             "groups": [{"name": name, "kind": g.kind, "host": g.host, "n": g.n,
                         "type": types[name], "mol": mols[name],
-                        "first_id": scene.offset(name) + 1}
-                       for name, g in scene.groups.items()]}
+                        "first_id": scene.offset(name) + 1, **material_record(scene, g)}
+                       for name, g in scene.groups.items()],
+            "units": units_record(scene.units)}
+
+
+def units_record(u) -> dict:
+    """The scene's unit system as ``scene.json`` keeps it (what the stress is reported in)."""
+    return {"name": u.name, "length": u.length, "time": u.time, "mass": u.mass,
+            "force": u.force, "stress": u.stress, "density": u.density}
+
+
+def material_record(scene: Scene, g) -> dict:
+    """A group's material in the scene's units, its volume and mass per particle (post-processing
+    turns the bindings' forces into stress with them); nothing for a group without one."""
+    if g.material is None:
+        return {}
+    rec = {"material": {"name": g.material.name, **g.material.in_units(scene.units)},
+           "mass": g.mass(scene.units)}
+    if g.volume is not None:
+        rec["volume"] = float(g.volume)
+    return rec
+
+
+def write_bindings(scene: Scene, path: Path) -> int:
+    """``bindings.npz``: every unconditional bind on a group with a material and a volume, in
+    global particle order — ``i`` (the bound particle), ``j`` (its partner), ``k`` = m_i·c (the
+    binding's force per length, Eq. 12 times the mass) and ``L0sq`` — so that post-processing
+    finds the stress from the bindings' forces (:mod:`rackstress.stress.tensor`) without the
+    scene. Returns the number of bindings (0: no file written)."""
+    b = bindings_of(scene)
+    if b is None:
+        return 0
+    idx = np.int32 if scene.n_particles < 2 ** 31 else np.int64
+    tmp = path.with_name(f".{path.name}.tmp.npz")
+    np.savez(tmp, i=b[0].astype(idx), j=b[1].astype(idx), k=b[2], L0sq=b[3])
+    tmp.replace(path)
+    return len(b[0])
+
+
+def bindings_of(scene: Scene):
+    """(i, j, k, L0²) of :func:`write_bindings` as arrays, or None when there are none."""
+    from rackstress.model.operators import Bind
+
+    I, J, K, Q = [], [], [], []
+    for target, seq in scene.operators.items():
+        g = scene.groups[target]
+        if g.material is None or g.volume is None:
+            continue
+        m = g.mass(scene.units)
+        for op in seq:
+            if not isinstance(op, Bind) or op.when:
+                continue
+            pl = op.pairs(g, scene.groups[op.source]).shifted(scene.offset(target),
+                                                             scene.offset(op.source))
+            I.append(pl.i)
+            J.append(pl.j)
+            K.append(m * pl.c)
+            Q.append(pl.q)
+    if not I:
+        return None
+    return (np.concatenate(I).astype(np.int64), np.concatenate(J).astype(np.int64),
+            np.concatenate(K), np.concatenate(Q))
 
 
 def scene_source(scene: Scene) -> str | None:
@@ -510,6 +570,7 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
 
     def start():
         from rackstress.errors import storage_error
+        from rackstress.lib.runfiles import BINDINGS
 
         claim(out, overwrite)
         dump = "moving" if (deck is not None and deck.dump_moving) else "all"
@@ -526,6 +587,7 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
                                          "scene": scene.name, "params": scene.params})
         try:
             (out / "particles.data").write_text(deck.data_text())
+            write_bindings(scene, out / BINDINGS)
             if engine == "lammps":
                 (out / "in.lammps").write_text(deck.input_text(dump_every))
         except OSError as exc:
