@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rackstress.engines.dumpio import DumpWriter
+from rackstress.engines.dumpio import DumpWriter, frame_text
 from rackstress.engines.guards import dump_frames, force_on_racks, pass_through
 from rackstress.model.operators import Bind, Collide, Const, Force
 from rackstress.model.particles import Group, lattice, rack
@@ -89,14 +89,24 @@ def test_dump_frames_reads_back_what_was_written(tmp_path):
             p = rng.normal(size=(n, 3))
             w.write(step, p)
             written.append((step, p))
-    got = list(dump_frames(tmp_path / "t.dump", n, max_frames=3))
+    got = list(dump_frames(tmp_path / "t.dump", np.zeros((n, 3)), max_frames=3))
     assert [s for s, _ in got] == [0, 20, 40]          # first, middle, last
     for s, p in got:
         np.testing.assert_allclose(p, dict(written)[s], rtol=1e-9)
     # a frame cut short (a killed run) is skipped
     text = (tmp_path / "t.dump").read_text().splitlines()
     (tmp_path / "cut.dump").write_text("\n".join(text[:-3]) + "\n")
-    assert [s for s, _ in dump_frames(tmp_path / "cut.dump", n)] == [0, 10, 20, 30]
+    assert [s for s, _ in dump_frames(tmp_path / "cut.dump", np.zeros((n, 3)))] == [0, 10, 20, 30]
+    # a frame that holds some particles: the others sit at their original positions
+    o = rng.normal(size=(n, 3))
+    part = "".join(frame_text(s, p[[1, 4]], ("id", "type", "mol", "x", "y", "z"),
+                              np.column_stack([[2, 5], [1, 1], [1, 1], p[[1, 4]]]),
+                              ["%d", "%d", "%d"] + ["%.17g"] * 3) for s, p in written)
+    (tmp_path / "part.dump").write_text(part)
+    for (s, p), (s2, q) in zip(written, dump_frames(tmp_path / "part.dump", o)):
+        expect = o.copy()
+        expect[[1, 4]] = p[[1, 4]]
+        assert s == s2 and np.array_equal(q, expect)
 
 
 SCENE = """

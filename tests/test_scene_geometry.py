@@ -383,8 +383,8 @@ def test_example_runs_and_sweeps_from_the_command_line(tmp_path):
 
 
 def test_rackstress_scenes_lists_a_files_own_parameters():
-    proc = subprocess.run([str(RACKSTRESS), "scenes", str(EXAMPLE / "scene.toml")],
+    proc = subprocess.run([str(RACKSTRESS), "scenes", "--json", str(EXAMPLE / "scene.toml")],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
-    listed = json.loads(proc.stdout.splitlines()[1])
+    listed = json.loads(proc.stdout)[str(EXAMPLE / "scene.toml")]["parameters"]
     assert listed["speed"] == 4.0 and listed["duration"] == 3.0 and "steps" not in listed

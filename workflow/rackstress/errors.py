@@ -15,7 +15,9 @@ status  meaning
         (:class:`DivergenceError`)
 4       the run finished, but its pictures could not be rendered (retry ``rackstress render``)
 5       the operating system refused a write: disk full, no permission, read-only file system
-        (:class:`StorageError`); no temporary file is left, earlier checkpoints stay intact
+        (:class:`StorageError`); no temporary file is left, earlier checkpoints stay intact;
+        also when the run finished but its stress files or pictures could not be written (the
+        run is kept: ``rackstress stress`` / ``render`` once there is space)
 6       a static analysis did not settle: its residual force stayed above the tolerance
         (``summary.json`` says ``"status": "not settled"`` with the residual)
 1       anything else: a bug (please report the traceback)

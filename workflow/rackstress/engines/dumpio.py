@@ -3,6 +3,11 @@
 Both engines write this one format, so everything downstream (MDAnalysis, stress, pictures)
 reads every run the same way. Frames are appended whole and flushed, so a run stopped by the
 watchdog keeps every complete frame written before it.
+
+A frame may hold only some particles: a LAMMPS deck with a resting (passive) group dumps the
+particles of the moving group, which holds every particle displaced (:meth:`Deck.dump_commands
+<rackstress.engines.lammps.deck.Deck.dump_commands>`); a particle a frame does not hold sits at
+its original position, the data file's. :func:`read_frames` reads either kind into whole frames.
 """
 from __future__ import annotations
 
@@ -78,3 +83,85 @@ class DumpWriter:
 
     def __exit__(self, *exc):
         self.close()
+
+
+def trim_nonfinite(path) -> int | None:
+    """Cut a dump before its first frame holding a non-finite value (``nan``, ``inf``); return
+    that frame's iteration, or None if every frame is finite (or there is no dump).
+
+    After a divergence: a check that noticed it only some steps later (the watchdog runs every
+    few steps; LAMMPS writes its dump itself) must not leave NaN frames kept as if whole. One
+    C-speed pass over the file (mmap and regular expressions)."""
+    import mmap
+    import re
+
+    path = Path(path)
+    try:
+        size = path.stat().st_size
+    except OSError:
+        return None
+    if size == 0:
+        return None
+    head = re.compile(rb"ITEM: TIMESTEP\n(\d+)\n")
+    bad = re.compile(rb"(?i)(?<![a-z])(nan|inf)")
+    with open(path, "r+b") as fh:
+        with mmap.mmap(fh.fileno(), 0) as mm:
+            starts = [(m.start(), int(m.group(1))) for m in head.finditer(mm)]
+            for k, (start, step) in enumerate(starts):
+                end = starts[k + 1][0] if k + 1 < len(starts) else size
+                atoms = mm.find(b"ITEM: ATOMS", start, end)
+                body = mm.find(b"\n", atoms, end) if atoms >= 0 else start
+                if bad.search(mm, body, end):
+                    cut = start
+                    break
+            else:
+                return None
+        try:
+            fh.truncate(cut)
+        except OSError as exc:
+            raise storage_error(exc, "trim the non-finite frames of", path) from None
+    return step
+
+
+def read_frames(path, o: np.ndarray, want=None):
+    """(step, positions of every particle in id order) of each complete frame of a rackstress
+    dump (``id ... x y z`` columns, ids 1..n); a particle a frame does not hold is at its
+    original position ``o`` (n, 3). ``want``: the frame numbers to read (default all); a frame cut
+    short at the end of the file (a killed run) is left out."""
+    import mmap
+
+    path = Path(path)
+    o = np.asarray(o, dtype=np.float64)
+    if not path.exists() or path.stat().st_size == 0:
+        return
+    with open(path, "rb") as fh, mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as mm:
+        pos, frame = 0, 0
+        while True:
+            at = mm.find(b"ITEM: TIMESTEP\n", pos)
+            if at < 0:
+                return
+            lines = []
+            q = at
+            for _ in range(9):
+                e = mm.find(b"\n", q)
+                if e < 0:
+                    return
+                lines.append(mm[q:e])
+                q = e + 1
+            step, n = int(lines[1]), int(lines[3])
+            cols = lines[8].decode().split()[2:]
+            end = q
+            for _ in range(n):
+                e = mm.find(b"\n", end)
+                if e < 0:
+                    return                       # cut short: not a complete frame
+                end = e + 1
+            pos = end
+            if want is None or frame in want:
+                p = o.copy()
+                if n:
+                    t = np.fromstring(mm[q:end].decode("ascii"), sep=" ").reshape(n, len(cols))
+                    ids = t[:, cols.index("id")].astype(np.int64) - 1
+                    p[ids] = t[:, [cols.index(c) for c in ("x", "y", "z")]]
+                yield step, p
+            frame += 1

@@ -25,7 +25,6 @@ Both are warnings, not errors: the run is kept, each finding is printed and reco
 from __future__ import annotations
 
 import sys
-from itertools import islice
 from pathlib import Path
 
 import numpy as np
@@ -156,31 +155,20 @@ def pass_through(scene, frames) -> list[dict]:
     return list(found.values())
 
 
-def dump_frames(path, n_atoms: int, max_frames: int = MAX_FRAMES):
+def dump_frames(path, o: np.ndarray, max_frames: int = MAX_FRAMES):
     """(step, positions sorted by atom id) of up to ``max_frames`` frames of a rackstress dump
-    (``id type mol x y z``), evenly spread, the first and the last always; a frame cut short
+    (:func:`rackstress.engines.dumpio.read_frames`: a particle a frame does not hold is at its
+    original position ``o``), evenly spread, the first and the last always; a frame cut short
     at the end of the file (a killed run) is skipped."""
+    from rackstress.engines.dumpio import read_frames
+
     path = Path(path)
-    per_frame = 9 + n_atoms
-    lines = 0
     with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 22), b""):
-            lines += chunk.count(b"\n")
-    k = lines // per_frame                      # complete frames (a cut-short last one is not)
+        k = sum(chunk.count(b"ITEM: TIMESTEP") for chunk in iter(lambda: fh.read(1 << 22), b""))
     if not k:
         return
     want = set(np.unique(np.linspace(0, k - 1, min(k, max_frames)).round().astype(int)).tolist())
-    with open(path, "rb") as fh:
-        for idx in range(k):
-            if idx not in want:
-                for _ in islice(fh, per_frame):
-                    pass
-                continue
-            head = list(islice(fh, 9))
-            rows = np.loadtxt(list(islice(fh, n_atoms)), dtype=float, usecols=(0, 3, 4, 5),
-                              ndmin=2)
-            order = np.argsort(rows[:, 0], kind="stable")
-            yield int(head[1]), rows[order, 1:4]
+    yield from read_frames(path, o, want)
 
 
 def verlet_lag(scene, engine: str) -> list[dict]:
@@ -232,7 +220,7 @@ def check_run(scene, out, echo: bool = True, engine: str | None = None) -> list[
     found = force_on_racks(scene) + verlet_lag(scene, engine or "")
     dump = Path(out) / "trajectory.dump"
     if colliding_pairs(scene) and dump.exists():
-        found += pass_through(scene, dump_frames(dump, scene.n_particles))
+        found += pass_through(scene, dump_frames(dump, scene.original_positions()))
     if echo:
         for w in found:
             print(f"rackstress: warning: {scene.name}: {w['message']}", file=sys.stderr)

@@ -20,7 +20,7 @@ from rackstress.model.operators import (Attract, Bind, Collide, Dampen, Force, c
                                         contact_groups, integrate, phase_active)
 from rackstress.model.scene import Scene
 from rackstress.model.verlet import integrate_verlet
-from rackstress.engines.watchdog import check
+from rackstress.engines.watchdog import check, first_nonfinite, force_error
 
 __all__ = ["Reference", "integrate", "KERNELS"]
 
@@ -163,7 +163,7 @@ class Reference:
         if self.scene.integrator == "verlet":
             t = self.scene.dt
             g = self.damping(phase)
-            a = self.accelerations(phase)
+            a = self._finite(phase)
             if self._held is not None:
                 a[self._held] = 0.0
             if self.step_count == 0:
@@ -174,12 +174,22 @@ class Reference:
             self.step_count += 1
             check(self.scene, self.p, self.v, self.o, self.step_count)
             return
-        a = self.accelerations(phase)
+        a = self._finite(phase)
         if self._held is not None:
             a[self._held] = 0.0
         self.p, self.v = integrate(self.p, self.v, a, self.scene.dt)
         self.step_count += 1
         check(self.scene, self.p, self.v, self.o, self.step_count)
+
+    def _finite(self, phase: Mapping) -> np.ndarray:
+        """The accelerations, or a divergence at this step if one is not finite (a bound pair
+        that coincides): found where it arises, so no non-finite position is ever dumped."""
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            a = self.accelerations(phase)
+        k = first_nonfinite(a)
+        if k >= 0:
+            raise force_error(self.scene, self.step_count, k)
+        return a
 
     # ------------------------------------------------------------------ the engine interface
     #: Steps between the driver's watchdog checks: every step (:meth:`step` checks itself).

@@ -61,3 +61,25 @@ def check(scene: Scene, p: np.ndarray, v: np.ndarray, o: np.ndarray, step: int) 
     found = find_divergence(scene, p, v, o)
     if found is not None:
         raise divergence_error(scene, step, found)
+
+
+def force_error(scene: Scene, step: int, index: int) -> DivergenceError:
+    """The error for a non-finite force on particle ``index`` at ``step`` (both engines find it
+    in the step it arises, before any position becomes non-finite: the frames kept are finite).
+    """
+    group, local = scene.group_of(int(index))
+    return DivergenceError(
+        f"run diverged at step {step}: the force on '{group}' particle {local} (atom id "
+        f"{int(index) + 1}) is not finite: two particles bound or attracted to each other "
+        "coincide there (Eq. 12's direction is undefined at d = 0), or a force overflowed. A "
+        f"smaller time step (dt = {scene.dt:g} now) or weaker coefficients keep Eq. 5 stable; the "
+        "output written up to here is kept.", step=int(step), index=int(index), group=group,
+        local=local)
+
+
+def first_nonfinite(a: np.ndarray) -> int:
+    """The first row of ``a`` holding a NaN or an infinity, or −1 (one pass when all is well)."""
+    if math.isfinite(float(a.sum())):
+        return -1
+    bad = np.flatnonzero(~finite_rows(a))
+    return int(bad[0]) if len(bad) else -1

@@ -66,6 +66,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rackstress.errors import EXIT_STORAGE, StorageError, storage_error
 from rackstress.lib.jsonio import write_json
 from rackstress.render.draw import colour_table, stress_rgba
 from rackstress.render.draw import offscreen as _offscreen
@@ -370,7 +371,10 @@ def header_strip(width: int, title: str, label: str, vmax: float, cmap: str, leg
 
 def annotate(img: np.ndarray, step: int, view: str, labels: list, ring=None,
              ring_text: str = "") -> np.ndarray:
-    """The iteration at the bottom (Fig. 12), the view, part names, a ring round the peak."""
+    """The iteration at the bottom (Fig. 12), the view, part names, a ring round the peak.
+
+    The ring and its text come first; each part name is then placed where it covers neither
+    (:func:`place_labels`): a name under its part's anchor used to land on the ring."""
     from PIL import Image, ImageDraw
 
     im = Image.fromarray(img)
@@ -380,10 +384,7 @@ def annotate(img: np.ndarray, step: int, view: str, labels: list, ring=None,
     text = f"{step} iterations"
     dr.text(((w - dr.textlength(text, font=f16)) / 2, h - 30), text, fill="black", font=f16)
     dr.text((8, h - 24), f"{view} view", fill=(80, 80, 80), font=f13)
-    for name, (x, y) in labels:
-        if 0 <= x < w and 0 <= y < h:
-            dr.text((_inside(x - dr.textlength(name, font=f13) / 2, dr.textlength(name, font=f13),
-                             w), min(h - 48, y + 14)), name, fill=(40, 40, 160), font=f13)
+    taken = []
     if ring is not None:
         x, y, r = ring
         if -r <= x < w + r and -r <= y < h + r:
@@ -391,11 +392,59 @@ def annotate(img: np.ndarray, step: int, view: str, labels: list, ring=None,
             dr.ellipse([x - r - 3, y - r - 3, x + r + 3, y + r + 3], outline=(255, 255, 255),
                        width=2)
             tw = dr.textlength(ring_text, font=f13)
-            # right of the ring, or left of it where the panel ends: never cut at an edge
-            tx = x + r + 6 if x + r + 6 + tw <= w - 2 else x - r - 6 - tw
-            dr.text((_inside(tx, tw, w), min(max(y - 8, 2), h - 48)), ring_text, fill="black",
-                    font=f13)
+            box = ring_text_box(x, y, r, tw, LABEL_H, w, h)
+            dr.text(box[:2], ring_text, fill="black", font=f13)
+            taken += [(x - r - 5, y - r - 5, x + r + 5, y + r + 5), box]
+    shown = [(name, (x, y)) for name, (x, y) in labels if 0 <= x < w and 0 <= y < h]
+    widths = [dr.textlength(name, font=f13) for name, _ in shown]
+    for (name, _), box in zip(shown, place_labels([a for _, a in shown], widths, taken, w, h)):
+        dr.text(box[:2], name, fill=(40, 40, 160), font=f13)
     return np.asarray(im)
+
+
+#: Height of a 13-pixel label's box, in pixels.
+LABEL_H = 16
+
+
+def _overlaps(a, b) -> bool:
+    return a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]
+
+
+def ring_text_box(x, y, r, tw, th, w, h) -> tuple:
+    """The box (x0, y0, x1, y1) of the peak ring's text: right of the ring, else left of it,
+    else under it — never over the ring, never cut at the picture's edge."""
+    cy = min(max(y - 8, 2), h - 48)
+    for tx in (x + r + 6, x - r - 6 - tw):
+        if 2 <= tx and tx + tw <= w - 2:
+            return (tx, cy, tx + tw, cy + th)
+    tx = _inside(x - tw / 2, tw, w)
+    ty = y + r + 6 if y + r + 6 + th <= h - 48 else max(2, y - r - 6 - th)
+    return (tx, ty, tx + tw, ty + th)
+
+
+def place_labels(anchors, widths, taken, w, h, th: int = LABEL_H) -> list:
+    """Boxes (x0, y0, x1, y1) for part names: under each anchor (a part's projected point),
+    or, where that would cover a box in ``taken`` (the peak ring, its text, a name placed
+    before), the nearest of below, above, left or right of what it would cover."""
+    boxes = []
+    for (x, y), tw in zip(anchors, widths):
+        x0, y0 = _inside(x - tw / 2, tw, w), min(h - 48, y + 14)
+        candidates = [(x0, y0)]
+        for t in taken:
+            candidates += [(x0, t[3] + 3), (x0, t[1] - 3 - th), (t[0] - 4 - tw, y0),
+                           (t[2] + 4, y0)]
+        best = None
+        for cx, cy in candidates:
+            cx, cy = _inside(cx, tw, w), min(max(cy, 2), h - 48)
+            box = (cx, cy, cx + tw, cy + th)
+            if not any(_overlaps(box, t) for t in taken):
+                dist = abs(cx - x0) + abs(cy - y0)
+                if best is None or dist < best[0]:
+                    best = (dist, box)
+        box = best[1] if best is not None else (x0, y0, x0 + tw, y0 + th)
+        boxes.append(box)
+        taken = [*taken, box]
+    return boxes
 
 
 def _inside(x: float, width: float, w: int, margin: float = 2.0) -> float:
@@ -632,10 +681,12 @@ def render(rundir, frames=None, measure: str = "paper", views=DEFAULT_VIEWS, mov
         write_json(tmp / "render.json", manifest)
         report.files.append("render.json")
         _move_in(tmp, outdir)
-    except BaseException:
+    except BaseException as exc:
         if plots and "plotter" in locals() and plotter is not None:
             plotter.kill()
         shutil.rmtree(tmp, ignore_errors=True)
+        if isinstance(exc, OSError) and not isinstance(exc, StorageError) and exc.errno:
+            raise storage_error(exc, "write the pictures into", outdir) from None
         raise
     return report
 
@@ -668,8 +719,12 @@ class _Background:
             rec = {"files": report.files, "notes": report.notes,
                    "wall_s": time.perf_counter() - t}
         except BaseException as exc:  # noqa: BLE001 - handed to the parent
-            rec = {"error": f"{type(exc).__name__}: {exc}"}
-        self.result.write_text(json.dumps(rec))
+            rec = {"error": f"{type(exc).__name__}: {exc}",
+                   "errno": getattr(exc, "errno", None)}
+        try:
+            self.result.write_text(json.dumps(rec))
+        except OSError:      # a full disk: the parent learns it from the exit status
+            os._exit(EXIT_STORAGE)
         os._exit(0)
 
     def join(self):
@@ -685,8 +740,13 @@ class _Background:
         try:
             rec = json.loads(self.result.read_text())
         except (OSError, json.JSONDecodeError):
+            if self.proc.exitcode == EXIT_STORAGE:
+                raise StorageError(f"could not write the plots into {self.args[-1]}: the file "
+                                   "system refused the write (full?); free space on it") from None
             raise RuntimeError(f"drawing the plots failed (exit code {self.proc.exitcode})")
         self.result.unlink()
+        if rec.get("errno"):
+            raise StorageError(f"could not draw the plots into {self.args[-1]}: {rec['error']}")
         if "error" in rec:
             raise RuntimeError(f"drawing the plots failed: {rec['error']}")
         return rec["files"], rec["notes"], rec["wall_s"]
@@ -885,6 +945,63 @@ def _movie(run, painter, values, report, view, label, cmap, coloured, context, h
     return len(ks)
 
 
+#: The footprints panel's plot height and least width (its two-line title's), in inches.
+PANEL_H, PANEL_MIN_W = 3.3, 3.4
+
+
+def footprints_figure(run, motion, coloured, context):
+    """The footprints plot: each context part's deepest vertical displacement over the walk,
+    seen from above, with the coloured parts' centre-of-mass paths.
+
+    The figure takes the shape of what it frames (an equal-aspect panel of a tall patch in a
+    wide figure left half of it empty), and the title is two short lines over the panel: it
+    was one line longer than the panel, cut at the figure's edge."""
+    from matplotlib.figure import Figure
+
+    steps = run.steps
+    names = motion.results.names
+    panels = []
+    for part in context:
+        dy = motion.results.footprints[part.name]["min_dy"]
+        o = run.o[part.index]
+        lim = float(np.abs(dy).max()) or 1.0
+        com = motion.results.com[:, [names.index(p.name) for p in coloured]]
+        # frame the walk, not the whole sediment: the displaced particles and the path, padded
+        moved = np.abs(dy) > 0.01 * lim
+        pts = np.concatenate([o[moved][:, [0, 2]], com[:, :, [0, 2]].reshape(-1, 2)])
+        pts = pts[np.isfinite(pts).all(axis=1)]
+        if not len(pts):
+            pts = o[:, [0, 2]]
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        pad = 0.15 * float((hi - lo).max()) + 4.0
+        box = [lo[0] - pad, hi[0] + pad, lo[1] - pad, hi[1] + pad]
+        # a frame narrower than the title is widened (about its centre) to the title's width
+        grow = (PANEL_MIN_W / PANEL_H) * (box[3] - box[2]) - (box[1] - box[0])
+        if grow > 0:
+            box[0], box[1] = box[0] - grow / 2, box[1] + grow / 2
+        panels.append((part, dy, o, lim, com, box))
+    # each panel as wide as its frame is at the plot's height (3.3 of the figure's 4.6 inches:
+    # the rest is the two-line title and the x label), at least the title's 3.4 inches, plus
+    # the z label (0.5) and the colour bar with its label (1.3)
+    widths = [min(9.0, PANEL_H * (b[1] - b[0]) / max(b[3] - b[2], 1e-9)) + 1.8
+              for *_, b in panels]
+    fig = Figure(figsize=(sum(widths), 4.6), layout="constrained")
+    axes = fig.subplots(1, len(panels), squeeze=False, width_ratios=widths)
+    for ax, (part, dy, o, lim, com, box) in zip(axes[0], panels):
+        sc = ax.scatter(o[:, 0], o[:, 2], c=dy, cmap="RdBu", vmin=-lim, vmax=lim, s=6,
+                        marker="s")
+        for j in range(com.shape[1]):
+            ax.plot(com[:, j, 0], com[:, j, 2], lw=0.8, color="k", alpha=0.5)
+        ax.set_xlim(box[0], box[1])
+        ax.set_ylim(box[2], box[3])
+        ax.set_aspect("equal")
+        ax.set(xlabel="x", ylabel="z")
+        ax.set_title(f"footprints in {part.name}\ndeepest vertical displacement, "
+                     f"iterations {steps[0]}–{steps[-1]}", fontsize=10)
+        fig.colorbar(sc, ax=ax, label="vertical displacement\n[length units]", shrink=0.9)
+    return fig
+
+
 def _plots(run, values, label, coloured, context, report, out: Path) -> None:
     from matplotlib.figure import Figure     # no pyplot: no GUI backend, faster to import
 
@@ -936,31 +1053,6 @@ def _plots(run, values, label, coloured, context, report, out: Path) -> None:
     if not context:
         report.notes.append("no sediment group shown: footprints plot skipped")
         return
-    fig = Figure(figsize=(8 * len(context), 4))
-    axes = fig.subplots(1, len(context), squeeze=False)
-    for ax, part in zip(axes[0], context):
-        dy = motion.results.footprints[part.name]["min_dy"]
-        o = run.o[part.index]
-        lim = float(np.abs(dy).max()) or 1.0
-        sc = ax.scatter(o[:, 0], o[:, 2], c=dy, cmap="RdBu", vmin=-lim, vmax=lim, s=6,
-                        marker="s")
-        com = motion.results.com[:, [names.index(p.name) for p in coloured]]
-        for j in range(com.shape[1]):
-            ax.plot(com[:, j, 0], com[:, j, 2], lw=0.8, color="k", alpha=0.5)
-        # frame the walk, not the whole sediment: the displaced particles and the path, padded
-        moved = np.abs(dy) > 0.01 * lim
-        pts = np.concatenate([o[moved][:, [0, 2]], com[:, :, [0, 2]].reshape(-1, 2)])
-        pts = pts[np.isfinite(pts).all(axis=1)]
-        if len(pts):
-            lo, hi = pts.min(axis=0), pts.max(axis=0)
-            pad = 0.15 * float((hi - lo).max()) + 4.0
-            ax.set_xlim(lo[0] - pad, hi[0] + pad)
-            ax.set_ylim(lo[1] - pad, hi[1] + pad)
-        ax.set_aspect("equal")
-        ax.set(xlabel="x", ylabel="z",
-               title=f"footprints in {part.name}: deepest vertical displacement "
-                     f"(iterations {steps[0]}–{steps[-1]})")
-        fig.colorbar(sc, ax=ax, label="vertical displacement [length units]")
-    fig.tight_layout()
+    fig = footprints_figure(run, motion, coloured, context)
     fig.savefig(out / "footprints.png", dpi=110)
     report.files.append("footprints.png")

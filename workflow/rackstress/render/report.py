@@ -22,6 +22,7 @@ import os
 import time
 from pathlib import Path
 
+from rackstress.errors import storage_error
 from rackstress.lib.runfiles import REPORT, STABILITY, STRESS_JSON
 
 FIGURES = "figures"
@@ -121,6 +122,39 @@ def _phase_runs(phases, steps) -> list:
     return out
 
 
+def fea_section(fea: dict) -> str:
+    """The report's "Finite-element check" (``fea.json`` of ``rackstress fea``): the
+    agreement of the particle measure with linear-elastic FEA of the same part."""
+    ag = fea.get("agreement") or {}
+    tg = fea.get("target") or {}
+    ratio = ag.get("peak_ratio")
+    rows = [("Spearman ρ", _num(ag.get("spearman")), f"≥ {tg.get('spearman', 0.8)}"),
+            ("top-5 % overlap", _num(ag.get("top5_overlap")), f"≥ {tg.get('top5_overlap', 0.5)}"),
+            ("peak ratio (away from singular points)",
+             "pending (no stress measure)" if ratio is None else _num(ratio),
+             f"1 ± {tg.get('peak_ratio_error', 0.15)}")]
+    out = ['<h2 id="fea">Finite-element check</h2>',
+           f"<p>Linear-elastic FEA of part <b>{_e(fea.get('group'))}</b> "
+           f"({_e(fea.get('mesh'))}; {_e((fea.get('fe') or {}).get('tetrahedra'))} quadratic "
+           f"tetrahedra; E = {_num((fea.get('material') or {}).get('E'))}, ν = "
+           f"{_num((fea.get('material') or {}).get('nu'))}; supports and loads from "
+           f"{_e(fea.get('boundary'))}) against the particle measure "
+           f"<code>{_e(fea.get('measure'))}</code>.</p>",
+           '<table id="fea-agreement"><thead><tr><th>figure</th><th>value</th><th>target</th>'
+           "</tr></thead><tbody>"]
+    out += [f'<tr><td>{_e(a)}</td><td class="num">{_e(b)}</td><td>{_e(c)}</td></tr>'
+            for a, b, c in rows]
+    out.append("</tbody></table>")
+    if fea.get("note"):
+        out.append(f"<p>{_e(fea['note'])}</p>")
+    out.append(f'<figure><img src="{FIGURES}/fea.png" alt="particles and FEA side by side">'
+               "<figcaption>The particle measure (left) and FEA's von Mises stress (right) "
+               "at the particles; <code>vtk/fea.vtp</code> holds both as point arrays "
+               "(<code>fea_von_mises</code>, <code>fea_displacement</code>)</figcaption>"
+               "</figure>")
+    return "\n".join(out)
+
+
 def write_report(rundir, stability: bool = True, view: bool = True) -> Path:
     """Write ``RUNDIR/report.html`` from what the run directory holds; return its path.
 
@@ -215,6 +249,11 @@ def write_report(rundir, stability: bool = True, view: bool = True) -> Path:
         w(f'<p><a href="{FIGURES}/movie.mp4">movie.mp4</a> (every frame, '
           f"{_e(render.get('movie_view') or '')} view)</p>")
 
+    # ---- the finite-element check (rackstress fea RUNDIR)
+    fea = _load(rundir / "fea.json")
+    if fea:
+        w(fea_section(fea))
+
     # ---- run facts
     w('<h2 id="facts">The run</h2><table id="run-facts"><tbody>')
     timings = post.get("timings") or {}
@@ -276,13 +315,16 @@ def write_report(rundir, stability: bool = True, view: bool = True) -> Path:
 
     # ---- files
     w('<h2 id="files">Files to open elsewhere</h2><ul>')
-    links = [("vtk/run.pvd", "VTK time series: open in ParaView, OVITO or pyvista (point data: "
+    links = [("vtk/run.pvd", "VTK time series: open in ParaView or pyvista (point data: "
                              "group_id and group_NAME, type, radius, displacement, every "
-                             "measure; time = iteration)"),
+                             "measure; time = iteration; for OVITO: rackstress stress RUNDIR "
+                             "--vtk-format ovito)"),
              ("stress.dump", "LAMMPS dump with the measures as named columns (OVITO)"),
              ("summary.json", "the run's summary, peaks included"),
              ("stress.json", "the post-processing record"),
-             ("trajectory.dump", "the trajectory (dump custom id type mol x y z)"),
+             ("trajectory.dump", "the trajectory (dump custom id type mol x y z; with a resting "
+                                 "sediment the particles that moved, the others as in "
+                                 "particles.data)"),
              ("particles.data", "LAMMPS data file (original positions)"),
              ("in.lammps", "the LAMMPS input deck"),
              (f"{FIGURES}/render.json", "what the pictures show")]
@@ -292,6 +334,10 @@ def write_report(rundir, stability: bool = True, view: bool = True) -> Path:
     w("</ul></body></html>")
     path = rundir / REPORT
     tmp = rundir / f".{REPORT}.tmp{os.getpid()}"
-    tmp.write_text("\n".join(out) + "\n", encoding="utf-8")
-    os.replace(tmp, path)
+    try:
+        tmp.write_text("\n".join(out) + "\n", encoding="utf-8")
+        os.replace(tmp, path)
+    except OSError as exc:          # a full disk: no half report left
+        tmp.unlink(missing_ok=True)
+        raise storage_error(exc, "write", path) from None
     return path

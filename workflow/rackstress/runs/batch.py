@@ -285,6 +285,8 @@ class Manager:
                 rec["attempts"] += 1
                 rec["group"] = group
                 self.write()
+                # no silent minutes: a long job is seen starting, not only ending
+                self.log(f"  {rec['name']}: started (group {group})")
                 return idx
             self.retired.add(group)
             if len(self.retired) == self.groups:

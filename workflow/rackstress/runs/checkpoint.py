@@ -37,6 +37,8 @@ class Checkpoint:
     v: np.ndarray
     f: np.ndarray
     meta: dict = field(default_factory=dict)
+    #: which particles were in LAMMPS' moving group (a deck with a passive group), else None
+    moving: np.ndarray | None = None
 
 
 def _save_npz(path: Path, **arrays) -> None:
@@ -119,6 +121,7 @@ class Checkpointer:
         step = runner.step
         x, v = runner.state()       # a deck with a passive group: only the moving rows gathered
         f = runner.gather_forces()
+        moving = runner.moving_mask() if hasattr(runner, "moving_mask") else None
         stem = f"state-{step:09d}"
         restart = self.dir / f"{stem}.restart"
         part = self.dir / f".{stem}.restart.tmp"
@@ -140,7 +143,8 @@ class Checkpointer:
                     written=time.strftime("%Y-%m-%dT%H:%M:%S"))
         def commit():
             try:
-                _save_npz(self.out / meta["state"], x=x, v=v, f=f)
+                extra = {} if moving is None else {"moving": moving}
+                _save_npz(self.out / meta["state"], x=x, v=v, f=f, **extra)
                 write_json(self.out / PROGRESS, meta)          # the commit point
             except OSError as exc:
                 # not committed: this checkpoint's files go, the previous one stays whole

@@ -65,8 +65,9 @@ def load_checkpoint(rundir: Path, meta: dict | None = None) -> Checkpoint:
     meta = meta or read_progress(rundir)
     with np.load(rundir / meta["state"]) as z:
         x, v, f = z["x"], z["v"], z["f"]
+        moving = z["moving"] if "moving" in z.files else None
     return Checkpoint(int(meta["step"]), int(meta["phase_index"]), int(meta["phase_done"]),
-                      int(meta["cycle"]), x, v, f, meta)
+                      int(meta["cycle"]), x, v, f, meta, moving)
 
 
 def load_phase_ends(rundir: Path, meta: dict) -> list[PhaseEnd]:
@@ -234,6 +235,10 @@ def resume_run(rundir: Path, spec: str | None = None, progress: bool = True, com
         if ck.x.shape != (scene.n_particles, 3):
             raise ResumeError(f"{rundir}: checkpoint holds {len(ck.x)} particles, the scene "
                               f"{scene.n_particles}")
+        try:       # the trajectory goes on as it was begun: every particle, or the moving ones
+            deck.dump_all = json.loads((rundir / "scene.json").read_text()).get("dump") == "all"
+        except (OSError, json.JSONDecodeError):
+            pass
         on_root(lambda: (truncate_dump(rundir / "trajectory.dump", ck.step),
                          remove_derived(rundir)), comm)
         records = None

@@ -28,9 +28,14 @@ from rackstress.model.scene import PhaseEnd, Scene
 ENGINES = ("lammps", "reference")
 
 
+#: LAMMPS reads the intervals of ``dump`` and ``thermo`` as a C int.
+LAMMPS_MAX_INT = 2**31 - 1
+
+
 def default_dump_every(scene: Scene) -> int:
-    """About 100 frames a run, never fewer than every step."""
-    return max(1, scene.total_steps // 100)
+    """About 100 frames a run, never fewer than every step, nor more steps apart than LAMMPS
+    can count in a ``dump`` interval (a run of 10¹² steps gets more frames)."""
+    return min(max(1, scene.total_steps // 100), LAMMPS_MAX_INT)
 
 
 #: Bytes a particle costs, measured (peak RSS over particles, ``scripts/bench_large.py``:
@@ -207,6 +212,18 @@ def execute(scene: Scene, out: Path, engine: str, mode: str, dump_every: int, *,
                           "masses": eng.deck.masses})
     finally:
         eng.close()
+    if error is not None and root and engine == "lammps":
+        from rackstress.engines.dumpio import trim_nonfinite
+
+        # LAMMPS writes the dump itself: frames of non-finite positions written before the
+        # check that noticed them are cut, and the step named is the first bad one seen
+        bad = trim_nonfinite(Path(out) / "trajectory.dump")
+        if bad is not None:
+            extra["trimmed_from_step"] = bad
+            if bad < error.step:
+                error.args = (f"{error} (its positions were non-finite at step {bad} already: "
+                              f"the frames from step {bad} on were removed from the dump)",)
+                error.step, steps = bad, min(steps, bad)
     wall = wall_before + time.perf_counter() - t0
     if scene.report is not None and root:
         extra["report"] = scene.report(scene, records)
@@ -232,22 +249,26 @@ def plan(scene: Scene, engine: str = "lammps", mode: str = "exact",
     from rackstress.model.stability import check_dt
     from rackstress.runs.fingerprint import fingerprint
 
-    pred = check_dt(scene, allow=allow_unstable)
     if engine not in ENGINES:
         raise RunDirError(f"unknown engine '{engine}'; choose one of {', '.join(ENGINES)}")
     dump_every = dump_every or default_dump_every(scene)
     if dump_every < 1:
         raise RunDirError(f"--dump-every must be >= 1, got {dump_every}")
+    if engine == "lammps" and dump_every > LAMMPS_MAX_INT:
+        raise RunDirError(f"--dump-every {dump_every} is more than LAMMPS can take in a dump "
+                          f"interval ({LAMMPS_MAX_INT}); give a smaller one")
     comm = comm or world()
     if engine == "reference":
         mode = "exact"
         if comm.Get_size() > 1:
             raise RunDirError("the reference engine runs on one rank; run it without mpiexec")
+    fp = fingerprint(scene, engine=engine, mode=mode, dump_every=dump_every)
+    pred = check_dt(scene, allow=allow_unstable, pred=_cached_prediction(fp))
+    _cache_prediction(fp, pred)
     check_memory(scene, engine, comm.Get_size())
     # LAMMPS runs the exact operators in the compiled plugin when it is there for this LAMMPS
     # (docs/plugin.md), else in the Python callback (one line says why); a resumed run keeps it
     deck = compile_deck(scene, mode, plugin=None if engine == "lammps" else False)
-    fp = fingerprint(scene, engine=engine, mode=mode, dump_every=dump_every)
     if engine == "lammps":
         fp["operators"] = operators_path(deck)
     return {"engine": engine, "mode": mode, "dump_every": int(dump_every),
@@ -258,6 +279,47 @@ def operators_path(deck) -> str:
     """Where a LAMMPS deck evaluates the operators LAMMPS has no style for: 'plugin' (the
     compiled styles) or 'callback' (Python); a run's fingerprint records it for its resumption."""
     return "plugin" if deck.plugin else "callback"
+
+
+def _prediction_path(fp: dict) -> Path:
+    """Where Eq. 5's predicted limit of a scene is kept between runs: the user's cache, by a
+    hash of everything the prediction depends on (the scene's parts, operators, schedule, dt)."""
+    import hashlib
+    import json
+    import os
+
+    key = {k: v for k, v in fp.items() if k not in ("engine", "mode", "dump_every")}
+    digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:32]
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "rackstress" / "stability" / f"{digest}.json"
+
+
+def _cached_prediction(fp: dict) -> dict | None:
+    """The prediction of an earlier run of the same scene (the dense eigenproblem of
+    :func:`rackstress.model.stability.predict` is a second of every start), or None."""
+    import json
+
+    try:
+        pred = json.loads(_prediction_path(fp).read_text())
+    except (OSError, ValueError):
+        return None
+    return pred if isinstance(pred, dict) and "t_max" in pred else None
+
+
+def _cache_prediction(fp: dict, pred: dict) -> None:
+    import json
+    import os
+
+    path = _prediction_path(fp)
+    if path.exists():
+        return
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.name}.{os.getpid()}")
+        tmp.write_text(json.dumps(pred))
+        os.replace(tmp, path)
+    except (OSError, TypeError, ValueError):
+        pass                    # a cache that cannot be written is only a cache
 
 
 def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
@@ -319,8 +381,10 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
         from rackstress.errors import storage_error
 
         claim(out, overwrite)
+        dump = "moving" if (deck is not None and deck.dump_moving) else "all"
         write_json(out / "scene.json", {**scene_record(scene), "engine": engine, "mode": mode,
-                                        "dump_every": dump_every, "fingerprint": fp})
+                                        "dump_every": dump_every, "dump": dump,
+                                        "fingerprint": fp})
         if p.get("stability") is not None:      # the report's stability margin, predicted once
             from rackstress.lib.runfiles import STABILITY
             from rackstress.model.stability import describe_limit

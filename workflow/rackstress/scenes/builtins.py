@@ -4,6 +4,7 @@ from __future__ import annotations
 import inspect
 
 from rackstress.errors import SceneError
+from rackstress.lib.suggest import did_you_mean
 from rackstress.scenes.magpod import magpod, magpod_small
 from rackstress.scenes.plane import plane_bound, plane_rack
 from rackstress.scenes.large import sediment_large
@@ -71,13 +72,16 @@ def build(name: str, **overrides):
     (400, 2)
     """
     if name not in BUILDERS:
-        raise SceneError(f"unknown scene '{name}'; built-in scenes: {', '.join(BUILDERS)} "
-                         "(or give the path of a .toml scene file)")
+        hint = did_you_mean(name, BUILDERS)
+        raise SceneError(f"unknown scene '{name}'{' (' + hint + ')' if hint else ''}; built-in scenes: "
+                         f"{', '.join(BUILDERS)} (or give the path of a .toml scene file)")
     known = parameters(name)
     unknown = sorted(set(overrides) - set(known))
     if unknown:
-        raise SceneError(f"scene '{name}' has no parameter {', '.join(map(repr, unknown))}; "
-                         f"its parameters are: {', '.join(f'{k}={v!r}' for k, v in known.items())}")
+        hint = did_you_mean(unknown[0], known)
+        raise SceneError(f"scene '{name}' has no parameter {', '.join(map(repr, unknown))}"
+                         f"{' (' + hint + ')' if hint else ''}; its parameters are: "
+                         f"{', '.join(f'{k}={v!r}' for k, v in known.items())}")
     for key, value in overrides.items():
         default = known[key]
         if isinstance(default, (int, float)) and not isinstance(default, bool):

@@ -81,6 +81,7 @@ import numpy as np
 from rackstress.model import operators as ops_mod
 from rackstress.lib.toml import tomllib
 from rackstress.errors import SceneError
+from rackstress.lib.suggest import did_you_mean
 from rackstress.model.operators import (Attract, Bind, Collide, Const, Contact, Dampen, Force, Matched, PhaseIn,
                         Within)
 from rackstress.model import regions as rg
@@ -152,8 +153,15 @@ def _is_number(x) -> bool:
 def _check_keys(ctx: _Ctx, table: dict, allowed, what: str = "key") -> None:
     unknown = [k for k in table if k not in allowed]
     if unknown:
-        raise ctx.error(f"unknown {what} {', '.join(map(repr, unknown))}; allowed: "
-                        f"{', '.join(allowed)}")
+        hint = did_you_mean(unknown[0], allowed)
+        raise ctx.error(f"unknown {what} {', '.join(map(repr, unknown))}"
+                        f"{' (' + hint + ')' if hint else ''}; allowed: {', '.join(allowed)}")
+
+
+def _hint(word, names) -> str:
+    """``" (did you mean 'X'?)"`` for the closest of ``names``, or ``""``."""
+    hint = did_you_mean(str(word), list(names))
+    return f" ({hint})" if hint else ""
 
 
 def _table(ctx: _Ctx, value, field: str) -> dict:
@@ -276,8 +284,9 @@ def _load_builtin(ctx: _Ctx, data: dict, overrides: dict) -> Scene:
                 "key (a file naming a built-in scene takes only 'scene' and [params])")
     name = _string(ctx, data["scene"], "scene")
     if name not in scenes.BUILDERS:
-        raise ctx.error(f"unknown built-in scene '{name}'; built-in scenes: "
-                        f"{', '.join(scenes.BUILDERS)} (or describe the scene explicitly with "
+        raise ctx.error(f"unknown built-in scene '{name}'{_hint(name, scenes.BUILDERS)}; "
+                        f"built-in scenes: {', '.join(scenes.BUILDERS)} (or describe the scene "
+                        "explicitly with "
                         "[[group]] and [[operator]] tables)", "scene")
     params = dict(_table(ctx, data.get("params", {}), "[params]"))
     known = scenes.parameters(name)
@@ -298,8 +307,32 @@ def _load_builtin(ctx: _Ctx, data: dict, overrides: dict) -> Scene:
 #: Names a scene's [params] may not take: they are the scene's top-level settings.
 _RESERVED = OVERRIDABLE
 _PARAM_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+#: Bounds on a parameter expression (a scene file is input from anyone: no expression may take
+#: unbounded time or memory): its length, and the integers it makes (beyond, floats, which
+#: overflow with a message instead of growing without end: "$(9**9**9**9)").
+MAX_EXPRESSION, MAX_INT = 1000, 2**63
+
+
+def _pow(a, b):
+    """``a ** b`` in bounded time: integers only while the result stays below ``MAX_INT``."""
+    if isinstance(a, int) and isinstance(b, int) and 0 <= b <= 64 and (
+            a in (0, 1, -1) or abs(a).bit_length() * b <= 64):
+        return a ** b
+    out = float(a) ** float(b)          # OverflowError past 1e308, never a long computation
+    if isinstance(out, complex):
+        raise ValueError(f"{a!r} ** {b!r} is not a real number")
+    return out
+
+
+def _bounded(value):
+    """An integer past ``MAX_INT`` becomes a float (OverflowError past 1e308)."""
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) >= MAX_INT:
+        return float(value)
+    return value
+
+
 _BINOPS = {ast.Add: _op.add, ast.Sub: _op.sub, ast.Mult: _op.mul, ast.Div: _op.truediv,
-           ast.Pow: _op.pow, ast.Mod: _op.mod}
+           ast.Pow: _pow, ast.Mod: _op.mod}
 _UNOPS = {ast.USub: _op.neg, ast.UAdd: _op.pos}
 _FUNCS = {"sqrt": math.sqrt, "sin": math.sin, "cos": math.cos, "tan": math.tan,
           "radians": math.radians, "abs": abs, "min": min, "max": max}
@@ -321,6 +354,7 @@ def _scene_params(ctx: _Ctx, data: dict, overrides: dict) -> tuple[dict, dict]:
                 _is_number(value) and not math.isfinite(value)):
             raise ctx.error(f"a parameter must be a finite number, a string or a boolean, got "
                             f"{_describe(value)}", f"[params] {key}")
+        _plain_param(ctx, key, value, f"[params] {key}")
     settings = {}
     for key, value in overrides.items():
         if key in OVERRIDABLE:
@@ -328,7 +362,9 @@ def _scene_params(ctx: _Ctx, data: dict, overrides: dict) -> tuple[dict, dict]:
             continue
         if key not in table:
             listing = ", ".join(f"{k}={v!r}" for k, v in table.items()) or "none"
-            raise ctx.error(f"the scene has no parameter '{key}'; --set takes "
+            hint = did_you_mean(key, [*OVERRIDABLE, *table])
+            raise ctx.error(f"the scene has no parameter '{key}'"
+                            f"{' (' + hint + ')' if hint else ''}; --set takes "
                             f"{', '.join(OVERRIDABLE)} and the scene's [params]: {listing}",
                             "--set")
         default = table[key]
@@ -338,8 +374,19 @@ def _scene_params(ctx: _Ctx, data: dict, overrides: dict) -> tuple[dict, dict]:
         if isinstance(default, bool) and not isinstance(value, bool):
             raise ctx.error(f"parameter {key} must be true or false, got {_describe(value)}",
                             f"--set {key}")
+        _plain_param(ctx, key, value, f"--set {key}")
         table[key] = value
     return table, settings
+
+
+def _plain_param(ctx: _Ctx, key: str, value, where: str) -> None:
+    """A parameter's value is a plain value: an expression or reference there (``"$(1/0)"``,
+    ``"$nosuch"``, ``"$other"``: a cycle) would be evaluated nowhere, so it is refused here."""
+    if isinstance(value, str) and value.lstrip().startswith("$"):
+        raise ctx.error(f"parameter '{key}' is {value!r}, an expression or a reference; a "
+                        "parameter's value must be a plain number, string or boolean (e.g. "
+                        f"{key} = 2.5). Expressions belong in the fields that use parameters: "
+                        f"write e.g. \"$({key} * 2)\" there, or compute the value here", where)
 
 
 def _names_particles(region) -> bool:
@@ -353,6 +400,9 @@ def _names_particles(region) -> bool:
 def _evaluate(text: str, params: dict, where: str, ctx: _Ctx):
     """The value of a parameter reference: ``$name`` or ``$(expression)`` over [params]."""
     body = text[1:].strip()
+    if len(body) > MAX_EXPRESSION:
+        raise ctx.error(f"'{text[:40]}…' is {len(body)} characters long; a parameter expression "
+                        f"may have at most {MAX_EXPRESSION}", where)
     if body.startswith("(") and body.endswith(")"):
         body = body[1:-1]
     elif not _PARAM_NAME.match(body):
@@ -360,6 +410,8 @@ def _evaluate(text: str, params: dict, where: str, ctx: _Ctx):
                         "\"$(expression)\", e.g. \"$(2 * height + 1)\"", where)
     try:
         tree = ast.parse(body, mode="eval")
+    except (RecursionError, MemoryError):
+        raise ctx.error(f"'{text[:40]}': the expression is nested too deeply", where) from None
     except SyntaxError:
         raise ctx.error(f"'{text}': the expression is not valid (use numbers, [params] names, "
                         "+ - * / ** %, parentheses and sqrt sin cos tan radians abs min max)",
@@ -372,19 +424,24 @@ def _evaluate(text: str, params: dict, where: str, ctx: _Ctx):
             return node.value
         if isinstance(node, ast.Name):
             if node.id in params:
-                return params[node.id]
+                value = params[node.id]
+                if node is not tree.body and not _is_number(value):
+                    raise ctx.error(f"'{text}' computes with parameter '{node.id}', which is "
+                                    f"{_describe(value)}, not a number", where)
+                return value
             if node.id == "pi":
                 return math.pi
             listing = ", ".join(params) or "none"
+            hint = did_you_mean(node.id, params)
             raise ctx.error(f"'{text}' refers to '{node.id}', which is not in [params] "
-                            f"(defined: {listing})", where)
+                            f"({hint + ' ' if hint else ''}defined: {listing})", where)
         if isinstance(node, ast.BinOp) and type(node.op) in _BINOPS:
-            return _BINOPS[type(node.op)](ev(node.left), ev(node.right))
+            return _bounded(_BINOPS[type(node.op)](ev(node.left), ev(node.right)))
         if isinstance(node, ast.UnaryOp) and type(node.op) in _UNOPS:
             return _UNOPS[type(node.op)](ev(node.operand))
         if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
                 and node.func.id in _FUNCS and not node.keywords):
-            return _FUNCS[node.func.id](*(ev(a) for a in node.args))
+            return _bounded(_FUNCS[node.func.id](*(ev(a) for a in node.args)))
         raise ctx.error(f"'{text}': {ast.unparse(node)!r} is not allowed in a parameter "
                         "expression (numbers, [params] names, + - * / ** %, parentheses, "
                         "sqrt sin cos tan radians abs min max)", where)
@@ -393,8 +450,13 @@ def _evaluate(text: str, params: dict, where: str, ctx: _Ctx):
         value = ev(tree)
     except SceneError:
         raise                           # already names the file, field and reference
+    except OverflowError:
+        raise ctx.error(f"'{text}' cannot be evaluated: its value (or a step of it) is beyond "
+                        "the largest number, about 1.8e308", where) from None
     except (ArithmeticError, TypeError, ValueError) as exc:
         raise ctx.error(f"'{text}' cannot be evaluated: {exc}", where) from None
+    except (RecursionError, MemoryError):
+        raise ctx.error(f"'{text[:40]}': the expression is nested too deeply", where) from None
     if isinstance(value, float) and not math.isfinite(value):
         raise ctx.error(f"'{text}' evaluates to {value!r}", where)
     return value
@@ -534,7 +596,8 @@ def _kind(c: _Ctx, t: dict, default: str) -> str:
         return default
     kind = _string(c, t["kind"], "kind")
     if kind not in KINDS:
-        raise c.error(f"unknown kind '{kind}'; kinds: {', '.join(KINDS)} (rack: not drawn, "
+        raise c.error(f"unknown kind '{kind}'{_hint(kind, KINDS)}; kinds: {', '.join(KINDS)} "
+                      "(rack: not drawn, "
                       "no stress; sediment: drawn grey, footprints; the others: a part "
                       "coloured by its stress)", "kind")
     return kind
@@ -872,10 +935,12 @@ def _operators(ctx: _Ctx, value, groups: dict, phases: list, base: Path) -> dict
         on = _string(c, _require(c, t, "on"), "on")
         c = ctx.at(f"[[operator]] #{k} (on '{on}')")
         if on not in groups:
-            raise c.error(f"unknown group '{on}' (groups: {', '.join(groups)})", "on")
+            raise c.error(f"unknown group '{on}'{_hint(on, groups)} (groups: "
+                          f"{', '.join(groups)})", "on")
         kind = _string(c, _require(c, t, "op"), "op")
         if kind not in _OP_KEYS:
-            raise c.error(f"unknown operator '{kind}'; known operators: {kinds}")
+            raise c.error(f"unknown operator '{kind}'{_hint(kind, _OP_KEYS)}; known operators: "
+                          f"{kinds}")
         _check_keys(c, t, _COMMON_OP_KEYS + _OP_KEYS[kind], f"key for {kind}")
         when = _conditions(c, t, groups, phases)
         op = _operator(c, kind, t, on, groups, when, phases, base)
@@ -911,7 +976,8 @@ def _conditions(c: _Ctx, t: dict, groups: dict, phases: list) -> tuple:
     if "contact" in t:
         group = _string(c, t["contact"], "contact")
         if group not in groups:
-            raise c.error(f"unknown group '{group}' (groups: {', '.join(groups)})", "contact")
+            raise c.error(f"unknown group '{group}'{_hint(group, groups)} (groups: "
+                          f"{', '.join(groups)})", "contact")
         conds.append(Contact(group))
     return tuple(conds)
 
@@ -919,7 +985,8 @@ def _conditions(c: _Ctx, t: dict, groups: dict, phases: list) -> tuple:
 def _source(c: _Ctx, t: dict, groups: dict) -> str:
     src = _string(c, _require(c, t, "from"), "from")
     if src not in groups:
-        raise c.error(f"unknown source group '{src}' (groups: {', '.join(groups)})", "from")
+        raise c.error(f"unknown source group '{src}'{_hint(src, groups)} (groups: "
+                      f"{', '.join(groups)})", "from")
     return src
 
 

@@ -79,6 +79,8 @@ class FrameIndex:
     box: np.ndarray                   # (n_frames, 3, 2) box bounds as written
     truncation: str | None = None     # message when the file ends mid-frame
     truncated: dict = field(default_factory=dict)
+    counts: np.ndarray | None = None  # atoms in each frame (partial: fewer than n_atoms)
+    partial: bool = False             # frames hold only the moving particles (the rest rest)
 
     @property
     def n_frames(self) -> int:
@@ -105,12 +107,16 @@ def coordinate_columns(columns, path) -> tuple:
     return coords
 
 
-def index_dump(path, allow_truncated: bool = False) -> FrameIndex:
-    """One pass over a dump file: offsets and steps of its frames, checked for consistency."""
+def index_dump(path, allow_truncated: bool = False, partial: bool = False) -> FrameIndex:
+    """One pass over a dump file: offsets and steps of its frames, checked for consistency.
+
+    ``partial``: frames may hold different numbers of atoms, a rackstress dump that follows what
+    moves (:mod:`rackstress.engines.dumpio`); ``n_atoms`` is then the largest frame's count
+    and the reader puts the atoms a frame does not hold at their original positions."""
     path = Path(path)
     if not path.is_file():
         raise StressInputError(f"{path}: no such dump file")
-    steps, starts, ends, boxes = [], [], [], []
+    steps, starts, ends, boxes, counts = [], [], [], [], []
     n_atoms, columns = None, None
     pos, lineno = 0, 0
     line_len = 64.0
@@ -129,7 +135,7 @@ def index_dump(path, allow_truncated: bool = False) -> FrameIndex:
                 break  # clean end of file
             if len(header) < 9 or not header[-1].endswith(b"\n"):
                 step = _header_step(header)
-                trunc = (step, frame, 0)
+                trunc = (step, frame, 0, n_atoms)
                 break
             _expect(header[0], b"ITEM: TIMESTEP", path, lineno + 1)
             try:
@@ -148,6 +154,8 @@ def index_dump(path, allow_truncated: bool = False) -> FrameIndex:
             if n_atoms is None:
                 n_atoms, columns = n, cols
                 coordinate_columns(columns, path)
+            elif partial and cols == columns:
+                n_atoms = max(n_atoms, n)
             elif n != n_atoms:
                 raise DumpError(f"{path}: frame {frame} (step {step}) has {n} atoms, frame 0 has "
                                 f"{n_atoms}; rackstress runs keep every particle in every frame")
@@ -163,9 +171,10 @@ def index_dump(path, allow_truncated: bool = False) -> FrameIndex:
             pos += nbytes
             lineno += got
             if got < n:
-                trunc = (step, frame, got)
+                trunc = (step, frame, got, n)     # n: the count this frame's header promised
                 break
             steps.append(step)
+            counts.append(n)
             starts.append(start)
             ends.append(pos)
             boxes.append(box)
@@ -173,20 +182,21 @@ def index_dump(path, allow_truncated: bool = False) -> FrameIndex:
         raise DumpError(f"{path}: the dump file is empty (no frame)")
     index = FrameIndex(path, n_atoms or 0, columns or (), np.asarray(steps, dtype=np.int64),
                        np.asarray(starts, dtype=np.int64), np.asarray(ends, dtype=np.int64),
-                       np.asarray(boxes).reshape(-1, 3, 2))
+                       np.asarray(boxes).reshape(-1, 3, 2),
+                       counts=np.asarray(counts, dtype=np.int64), partial=bool(partial))
     if trunc is not None:
-        step, frame, got = trunc
+        step, frame, got, promised = trunc
         at = f"step {step}" if step is not None else "an unreadable step"
-        of = f"{got} of {n_atoms}" if n_atoms is not None else f"{got} of ?"
+        of = f"{got} of {promised}" if promised is not None else f"{got} of ?"
         msg = (f"{path} ends mid-frame at {at} (frame {frame}): {of} atoms"
                f"; {len(steps)} complete frame(s) before it")
         index.truncation = msg
-        index.truncated = {"step": step, "frame": frame, "atoms_read": got, "n_atoms": n_atoms}
+        index.truncated = {"step": step, "frame": frame, "atoms_read": got, "n_atoms": promised}
         if not allow_truncated or not steps:
             hint = ("; pass --allow-truncated (allow_truncated=True) to analyse the complete frames"
                     if steps else "")
             raise TruncatedDumpError(msg + hint, path=path, step=step, frame=frame,
-                                     atoms_read=got, n_atoms=n_atoms)
+                                     atoms_read=got, n_atoms=promised)
     return index
 
 
@@ -233,18 +243,21 @@ class RackDumpReader(base.ReaderBase):
 
     @store_init_arguments
     def __init__(self, filename, allow_truncated: bool = False, index: FrameIndex | None = None,
-                 **kwargs):
+                 rest: "DataFile | None" = None, **kwargs):
         for key in ("atom_style", "topology_format", "in_memory"):
             kwargs.pop(key, None)
         kwargs["convert_units"] = False
         super().__init__(filename, **kwargs)
-        self.index = index if index is not None else index_dump(filename, allow_truncated)
+        self.index = index if index is not None else index_dump(filename, allow_truncated,
+                                                                partial=rest is not None)
+        #: the data file: where a particle a (partial) frame does not hold sits
+        self.rest = rest
         self._coords = coordinate_columns(self.index.columns, self.filename)
         cols = self.index.columns
         self._col = {c: k for k, c in enumerate(cols)}
         skip = {"id", "type", "mol", *self._coords}
         self.extra_columns = tuple(c for c in cols if c not in skip)
-        self.n_atoms = self.index.n_atoms
+        self.n_atoms = self.index.n_atoms if rest is None else len(rest.ids)
         self.ts = self._Timestep(self.n_atoms, **self._ts_kwargs)
         self._frame = -1
         self._read_frame(0)
@@ -287,14 +300,39 @@ class RackDumpReader(base.ReaderBase):
         ts = self.ts
         idx = self.index
         table = self._table(frame)
-        pos = np.ascontiguousarray(table[:, [self._col[c] for c in self._coords]])
+        ids = table[:, self._col["id"]].astype(np.int64)
+        pos = table[:, [self._col[c] for c in self._coords]]
         ts.frame = frame
+        rest = self.rest
+        if rest is not None and (len(ids) != len(rest.ids) or not np.array_equal(ids, rest.ids)):
+            rows = np.searchsorted(rest.ids, ids)
+            bad = (rows >= len(rest.ids)) | (rest.ids[np.minimum(rows, len(rest.ids) - 1)] != ids)
+            if bad.any():
+                raise DataMismatchError(
+                    f"{self.filename}: frame {frame} (step {self.index.steps[frame]}) holds atom "
+                    f"id {ids[bad][0]}, which {rest.path} does not have: the files are not of "
+                    "the same run")
+            full = rest.positions.copy()
+            full[rows] = pos
+            pos = full
+            types = rest.types.copy()
+            types[rows] = table[:, self._col["type"]].astype(np.int64)
+            ts.data["types"] = types
+            ts.data["ids"] = rest.ids
+            for c in self.extra_columns:
+                # a resting particle: velocity 0; any other column undefined there
+                col = np.zeros(len(rest.ids)) if c in ("vx", "vy", "vz") else \
+                    np.full(len(rest.ids), np.nan)
+                col[rows] = table[:, self._col[c]]
+                ts.data[c] = col
+        else:
+            ts.data["ids"] = ids
+            ts.data["types"] = table[:, self._col["type"]].astype(np.int64)
+            for c in self.extra_columns:
+                ts.data[c] = table[:, self._col[c]].copy()
+        pos = np.ascontiguousarray(pos)
         ts.data["positions64"] = pos
         ts.positions = pos
-        ts.data["ids"] = table[:, self._col["id"]].astype(np.int64)
-        ts.data["types"] = table[:, self._col["type"]].astype(np.int64)
-        for c in self.extra_columns:
-            ts.data[c] = table[:, self._col[c]].copy()
         step = int(idx.steps[frame])
         ts.data["step"] = step
         ts.data["time"] = step * ts.dt
@@ -311,6 +349,9 @@ def read_table(idx: FrameIndex, frame: int) -> np.ndarray:
         fh.seek(start)
         text = fh.read(end - start).decode("ascii", errors="replace")
     ncol = len(idx.columns)
+    n = idx.n_atoms if idx.counts is None else int(idx.counts[frame])
+    if n == 0:
+        return np.zeros((0, ncol))
     try:
         import warnings
 
@@ -319,11 +360,11 @@ def read_table(idx: FrameIndex, frame: int) -> np.ndarray:
             flat = np.fromstring(text, sep=" ")
     except (ValueError, DeprecationWarning):
         flat = np.array([])
-    if flat.size != idx.n_atoms * ncol:
+    if flat.size != n * ncol:
         bad = _first_bad_line(text, ncol)
         raise DumpError(f"{idx.path}: frame {frame} (step {idx.steps[frame]}): expected "
-                        f"{idx.n_atoms} lines of {ncol} numbers ({' '.join(idx.columns)}); {bad}")
-    return flat.reshape(idx.n_atoms, ncol)
+                        f"{n} lines of {ncol} numbers ({' '.join(idx.columns)}); {bad}")
+    return flat.reshape(n, ncol)
 
 
 def _first_bad_line(text: str, ncol: int) -> str:

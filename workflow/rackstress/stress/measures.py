@@ -207,6 +207,65 @@ def _bincount3(i: np.ndarray, a: np.ndarray, b: np.ndarray, n: int) -> np.ndarra
     return out
 
 
+class Neighbourhoods:
+    """Each particle's strain neighbourhood in the original configuration (Falk–Langer): the
+    pairs (I, J) within the cutoff of each part, d₀ = o_J − o_I, the pseudo-inverse of
+    V = Σ d₀ d₀ᵀ, its rank and, for a planar neighbourhood, the plane's basis t1, t2 and normal
+    n0; ``valid`` where the fit is defined (rank ≥ 2, in an analysed part)."""
+
+    def __init__(self, run, parts, cutoff=None, cutoff_factor: float = CUTOFF_FACTOR):
+        o, n = run.o, run.n_atoms
+        I, J = [], []
+        self.cutoffs = {}
+        for part in parts:
+            if part.n < 2:
+                continue
+            po = o[part.index]
+            tree = cKDTree(po)
+            spacing = float(np.median(tree.query(po, k=2)[0][:, 1]))
+            rc = cutoff if cutoff is not None else cutoff_factor * spacing
+            self.cutoffs[part.name] = rc
+            pairs = tree.query_pairs(rc * (1 + 1e-9), output_type="ndarray")
+            if len(pairs):
+                gi, gj = part.index[pairs[:, 0]], part.index[pairs[:, 1]]
+                I += [gi, gj]
+                J += [gj, gi]
+        self.I = np.concatenate(I) if I else np.zeros(0, dtype=np.int64)
+        self.J = np.concatenate(J) if J else np.zeros(0, dtype=np.int64)
+        self.d0 = o[self.J] - o[self.I]
+        V = _bincount3(self.I, self.d0, self.d0, n)
+        lam, vec = np.linalg.eigh(V)                      # ascending eigenvalues
+        top = lam[:, 2:3]
+        nonzero = lam > RANK_TOL * np.maximum(top, np.finfo(float).tiny)
+        self.rank = nonzero.sum(axis=1)
+        inv = np.where(nonzero, 1.0 / np.where(nonzero, lam, 1.0), 0.0)
+        self.Vpinv = np.einsum("nik,nk,njk->nij", vec, inv, vec)
+        # planar neighbourhoods: in-plane basis t1, t2 and normal n0 = t1 × t2
+        self.t1, self.t2 = vec[:, :, 1], vec[:, :, 2]
+        self.n0 = np.cross(self.t1, self.t2)
+        in_parts = np.zeros(n, dtype=bool)
+        for part in parts:
+            in_parts[part.index] = True
+        self.in_parts = in_parts
+        self.valid = (self.rank >= 2) & in_parts
+        self._csr = None
+
+    def csr(self):
+        """(indptr, neighbours): each particle's J in the order of the pairs (CSR), the order
+        in which the NumPy path sums them."""
+        if self._csr is None:
+            order = np.argsort(self.I, kind="stable")
+            indptr = np.zeros(len(self.in_parts) + 1, dtype=np.int64)
+            np.cumsum(np.bincount(self.I, minlength=len(self.in_parts)), out=indptr[1:])
+            self._csr = (indptr, np.ascontiguousarray(self.J[order], dtype=np.int64))
+        return self._csr
+
+
+def neighbourhoods(run, parts, cutoff=None, cutoff_factor: float = CUTOFF_FACTOR):
+    """The :class:`Neighbourhoods` of ``parts`` (one search, shared by η and D²min)."""
+    return Neighbourhoods(run, parts, cutoff, cutoff_factor)
+
+
 class _AffineStrain(_RunAnalysis):
     """Falk–Langer affine fit of each particle's neighbourhood; results: both η and D²min."""
 
@@ -219,42 +278,13 @@ class _AffineStrain(_RunAnalysis):
 
     def _prepare(self):
         super()._prepare()
-        o, n = self.run_data.o, self.run_data.n_atoms
-        I, J = [], []
-        self.results.cutoffs = {}
-        for part in self.parts:
-            if part.n < 2:
-                continue
-            po = o[part.index]
-            tree = cKDTree(po)
-            spacing = float(np.median(tree.query(po, k=2)[0][:, 1]))
-            rc = self.cutoff if self.cutoff is not None else self.cutoff_factor * spacing
-            self.results.cutoffs[part.name] = rc
-            pairs = tree.query_pairs(rc * (1 + 1e-9), output_type="ndarray")
-            if len(pairs):
-                gi, gj = part.index[pairs[:, 0]], part.index[pairs[:, 1]]
-                I += [gi, gj]
-                J += [gj, gi]
-        self._I = np.concatenate(I) if I else np.zeros(0, dtype=np.int64)
-        self._J = np.concatenate(J) if J else np.zeros(0, dtype=np.int64)
-        self._d0 = o[self._J] - o[self._I]
-        V = _bincount3(self._I, self._d0, self._d0, n)
-        lam, vec = np.linalg.eigh(V)                      # ascending eigenvalues
-        top = lam[:, 2:3]
-        nonzero = lam > RANK_TOL * np.maximum(top, np.finfo(float).tiny)
-        rank = nonzero.sum(axis=1)
-        inv = np.where(nonzero, 1.0 / np.where(nonzero, lam, 1.0), 0.0)
-        self._Vpinv = np.einsum("nik,nk,njk->nij", vec, inv, vec)
-        self._rank = rank
-        # planar neighbourhoods: in-plane basis t1, t2 and normal n0 = t1 × t2
-        t1, t2 = vec[:, :, 1], vec[:, :, 2]
-        self._t1, self._t2, self._n0 = t1, t2, np.cross(t1, t2)
-        self._valid = rank >= 2
-        in_parts = np.zeros(n, dtype=bool)
-        for part in self.parts:
-            in_parts[part.index] = True
-        self._valid &= in_parts
-        self._in_parts = in_parts
+        hood = neighbourhoods(self.run_data, self.parts, self.cutoff, self.cutoff_factor)
+        self.results.cutoffs = hood.cutoffs
+        self._I, self._J, self._d0 = hood.I, hood.J, hood.d0
+        self._Vpinv, self._rank = hood.Vpinv, hood.rank
+        self._t1, self._t2, self._n0 = hood.t1, hood.t2, hood.n0
+        self._valid, self._in_parts = hood.valid, hood.in_parts
+        n = self.run_data.n_atoms
         self.results.von_mises = np.full((self.n_frames, n), np.nan)
         self.results.d2min = np.full((self.n_frames, n), np.nan)
 
@@ -303,6 +333,143 @@ class NonAffineD2min(_AffineStrain):
     NAME = "d2min"
     LABEL = "non-affine displacement D²min"
     UNITS = "length² units"
+
+
+# ----------------------------------------------------------------------------- all at once
+#: Bytes of temporaries one chunk of frames may take in :func:`measure_frames`.
+CHUNK_BYTES = 128 * 2 ** 20
+
+
+def _mm(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """Stacks of 3 × 3 products A @ B, written out (np.matmul loops over tiny matrices)."""
+    return (A[..., :, 0, None] * B[..., None, 0, :] + A[..., :, 1, None] * B[..., None, 1, :]
+            + A[..., :, 2, None] * B[..., None, 2, :])
+
+
+def _mv(A: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Stacks of 3 × 3 matrix-vector products A @ v, written out."""
+    return A[..., 0] * v[..., 0, None] + A[..., 1] * v[..., 1, None] + A[..., 2] * v[..., 2, None]
+
+
+def strain_frames(hood: Neighbourhoods, o: np.ndarray, P: np.ndarray):
+    """η and D²min of :class:`VonMisesStrain` for frames ``P`` (f, n, 3) at once: (f, n) each.
+
+    Only neighbourhoods where something moved are fitted. A particle whose neighbours and itself
+    are all at their original positions in a frame has d = d₀ for every pair, so W = V, F = I
+    (full rank: V V⁻¹; planar: the in-plane projector V V⁺ plus n₀ n₀ᵀ) and η = D²min = 0
+    exactly; they are set so rather than fitted (the resting sediment of a MagPod run).
+    Σ over pairs is one sparse product for all frames of the chunk."""
+    from scipy.sparse import csr_matrix
+
+    nf, n = P.shape[:2]
+    eta = np.zeros((nf, n))
+    d2 = np.zeros((nf, n))
+    I, J, d0 = hood.I, hood.J, hood.d0
+    off = (P != o[None]).any(axis=2)                              # (f, n) moved rows
+    if off.any() and len(I):
+        touched = off.any(axis=0)
+        tp = np.zeros(n, dtype=bool)                              # fits needed: I or a J moved
+        np.logical_or.at(tp, I, touched[J])
+        tp |= touched & hood.valid
+        sel = tp[I]
+        Is, Js, d0s = I[sel], J[sel], d0[sel]
+        rows = np.flatnonzero(tp)
+        local = np.full(n, -1, dtype=np.int64)
+        local[rows] = np.arange(len(rows))
+        A = csr_matrix((np.ones(len(Is)), (local[Is], np.arange(len(Is)))),
+                       shape=(len(rows), len(Is)))
+        Q = np.ascontiguousarray(P.transpose(1, 0, 2))             # (n, f, 3): rows gather whole
+        d = Q[Js] - Q[Is]                                         # (m, f, 3)
+        X = (d[:, :, :, None] * d0s[:, None, None, :]).reshape(len(Is), nf * 9)
+        W = (A @ X).reshape(len(rows), nf, 3, 3)
+        F = _mm(W, hood.Vpinv[rows][:, None])                     # (r, f, 3, 3)
+        planar = hood.rank[rows] == 2
+        if planar.any():
+            t1, t2, n0 = hood.t1[rows][planar], hood.t2[rows][planar], hood.n0[rows][planar]
+            Fp = F[planar]
+            a = _mv(Fp, t1[:, None])
+            b = _mv(Fp, t2[:, None])
+            nd = np.cross(a, b)
+            norm = np.sqrt((nd * nd).sum(axis=2, keepdims=True))
+            nd = nd / np.where(norm > 0, norm, 1.0)
+            F[planar] = Fp + nd[:, :, :, None] * n0[:, None, None, :]
+        E = 0.5 * (_mm(F.transpose(0, 1, 3, 2), F) - np.eye(3))
+        eta[:, rows] = von_mises_strain(E).T
+        r = d - _mv(F[local[Is]], d0s[:, None])
+        rr = (r * r).sum(axis=2)                                  # (m, f)
+        d2[:, rows] = (A @ rr).T
+    eta[:, ~hood.valid] = np.nan
+    d2[:, ~hood.valid] = np.nan
+    return eta, d2
+
+
+def paper_frames(run, P: np.ndarray, parts, fit: str = "robust") -> np.ndarray:
+    """The paper's distance (:class:`DesiredPositionDistance`) for frames ``P`` at once: each
+    part's fits of every frame batched (:func:`rackstress.lib.rigid.robust_fit_frames`). A
+    sediment has no rest shape (module docstring of :mod:`.rundata`): its desired position is
+    its original position, so its distance is |p − o| (zero where it rests)."""
+    from rackstress.lib.rigid import robust_fit_frames
+
+    o = run.o
+    out = np.full(P.shape[:2], np.nan)
+    for part in parts:
+        idx = part.index
+        if part.kind == "sediment":
+            out[:, idx] = np.linalg.norm(P[:, idx] - o[idx][None], axis=2)
+        elif fit == "robust":
+            out[:, idx] = robust_fit_frames(o[idx], P[:, idx])
+        else:
+            out[:, idx] = np.stack([FITS[fit](o[idx], p[idx])[2] for p in P])
+    return out
+
+
+def frame_positions(run, ks) -> np.ndarray:
+    """Positions of frames ``ks`` stacked (len(ks), n, 3), float64."""
+    return np.stack([positions(run.trajectory[k]) for k in ks])
+
+
+def strain(hood: Neighbourhoods, o: np.ndarray, P: np.ndarray):
+    """(η, D²min) of frames ``P``: the compiled loop (:mod:`rackstress.stress.kernels`) where
+    numba is present, else :func:`strain_frames`; the two agree to round-off (tests)."""
+    from rackstress.stress import kernels
+
+    if kernels.available():
+        kernels.wait_warm()
+        return kernels.strain(hood, o, P)
+    return strain_frames(hood, o, P)
+
+
+def measure_frames(run, progress=None) -> dict:
+    """Every default measure of every frame, computed together in chunks of frames: ``steps``,
+    ``paper``, ``accumulated``, ``strain``, ``d2min`` ((frames, n_atoms) each): the values of
+    :class:`AccumulatedDistance` and :class:`VonMisesStrain` (robust fit, default cutoff) to
+    round-off, without their per-frame overhead. ``progress``: called with the frames done."""
+    parts = list(run.parts.values())
+    nf, n = run.index.n_frames, run.n_atoms
+    hood = neighbourhoods(run, parts)
+    steps = np.asarray(run.steps, dtype=np.int64)
+    out = {m: np.empty((nf, n)) for m in ("paper", "strain", "d2min")}
+    per_frame = max(n * 24 * 4, len(hood.I) * 8 * 30, 1)
+    chunk = int(max(1, min(nf, CHUNK_BYTES // per_frame)))
+    for a in range(0, nf, chunk):
+        ks = range(a, min(nf, a + chunk))
+        P = frame_positions(run, ks)
+        out["paper"][a:a + len(ks)] = paper_frames(run, P, parts)
+        out["strain"][a:a + len(ks)], out["d2min"][a:a + len(ks)] = strain(hood, run.o, P)
+        if progress is not None:
+            progress(len(ks))
+    # ∫ d dt by the trapezoid rule, summed frame after frame as AccumulatedDistance does
+    d = out["paper"]
+    dn = np.nan_to_num(d)
+    t = steps * run.dt
+    acc = np.zeros((nf, n))
+    if nf > 1:
+        inc = 0.5 * (dn[1:] + dn[:-1]) * np.diff(t)[:, None]
+        acc[1:] = np.cumsum(inc, axis=0)
+    acc[~np.isfinite(d)] = np.nan
+    out["accumulated"] = acc
+    out["steps"] = steps
+    return out
 
 
 # ----------------------------------------------------------------------------- virial

@@ -83,13 +83,16 @@ import numpy as np
 from rackstress.model import topology
 from rackstress.errors import SceneError
 from rackstress.model.operators import (Attract, Bind, Collide, Const, Dampen, Force, Matched,
-                                        Within, contact_groups, phase_active, reverse_of)
-from rackstress.model.scene import Scene
+                                        contact_groups, phase_active, reverse_of)
+from rackstress.model.scene import Phase, Scene
 from rackstress.model.verlet import scaled_scene
 
 MODES = ("exact", "fast")
 #: The fix external that carries every Python-realized operator.
 PY_FIX = "rs_py"
+#: A schedule of more phases than this is written with a LAMMPS loop over its identical cycles
+#: (:meth:`Deck.schedule_commands`); ``LOOP_VAR`` is the loop's variable and label.
+LOOP_AFTER, LOOP_VAR = 10_000, "rs_cycle"
 #: fix external's Napply: how often its own pass adds its force array to every owned atom of
 #: its group. Never after step 0 (LAMMPS' largest int): the callback adds its forces into
 #: LAMMPS' force array itself, on the rows it computed; at step 0 the pass adds zeros.
@@ -161,6 +164,14 @@ class Deck:
     #: the operators LAMMPS has no style for run as the compiled plugin's fixes (fix rs/...,
     #: module doc "Plugin"), not in the Python callback
     plugin: bool = False
+    #: every particle in every frame of the trajectory, as a plain LAMMPS dump (``rackstress run
+    #: --dump-all``), instead of the ones that moved (:meth:`dump_commands`)
+    dump_all: bool = False
+
+    @property
+    def dump_moving(self) -> bool:
+        """Whether the trajectory's frames hold only the displaced particles."""
+        return bool(self.passive) and not self.dump_all
 
     @property
     def lammps_skin(self) -> float:
@@ -265,9 +276,37 @@ class Deck:
         L.append("thermo_style custom step")
         L.append(f"thermo {max(1, dump_every)}")
         if dump_file:
-            L.append(f"dump rs_dump all custom {dump_every} {dump_file} id type mol x y z")
-            L.append("dump_modify rs_dump sort id format float %.10g")
+            L += self.dump_commands(dump_file, dump_every)
         return L
+
+    def dump_commands(self, dump_file: str, dump_every: int) -> list[str]:
+        """The trajectory's ``dump``. In a deck with passive groups it follows what moves: each
+        frame holds the atoms of the moving group ``rs_move`` (module doc, "Active particles":
+        an atom outside it has never moved, so it sits exactly at its original position, the
+        data file's, with v = 0; it joins for good one reneighbouring before anything can
+        touch it, and a resumed run restores the group as the checkpoint recorded it). The
+        readers (:func:`rackstress.engines.dumpio.read_frames`, the stress reader) put every
+        other atom there. MagPod's resting sediment is then written once, in the data file,
+        and a frame costs what the moving atoms cost (the dump skips the others by their group
+        bit; no pass computes anything over them)."""
+        L = []
+        if self.dump_moving:
+            L.append(f"# the dump follows what moves ({MOVE_GROUP}): a particle a frame does not "
+                     "hold sits at its position in the data file")
+        L.append(f"dump rs_dump {self.dump_group} custom {dump_every} {dump_file} "
+                 "id type mol x y z")
+        L.append("dump_modify rs_dump sort id format float %.10g")
+        return L
+
+    @property
+    def dump_group(self) -> str:
+        """The group the trajectory's frames hold (:meth:`dump_commands`)."""
+        return MOVE_GROUP if self.dump_moving else "all"
+
+    def write_dump_command(self, dump_file: str) -> str:
+        """One frame of the current step in the trajectory's own format (:meth:`dump_commands`)."""
+        return (f"write_dump {self.dump_group} custom {dump_file} id type mol x y z modify "
+                "sort id format float %.10g append yes")
 
     @property
     def callback_natives(self) -> bool:
@@ -433,8 +472,17 @@ class Deck:
         return [f"variable rs_vh{c} atom v{c}+{h}*f{c}/mass" for c in "xyz"] + \
                [f"variable rs_vp{c} atom v{c}-{h}*f{c}/mass" for c in "xyz"]
 
-    def schedule_commands(self) -> list[str]:
-        """The whole schedule as plain LAMMPS commands (what the runner does, in one text)."""
+    def schedule_commands(self, loop_after: int = LOOP_AFTER) -> list[str]:
+        """The whole schedule as plain LAMMPS commands (what the runner does, in one text).
+
+        A schedule of more than ``loop_after`` phases (``--steps 1000000000000``: 8·10⁸ of them)
+        is written as its first cycle, one cycle in a LAMMPS ``loop``/``jump SELF`` over the
+        identical cycles after it, and the cut last cycle: the deck stays a few lines long."""
+        sc = self.scene
+        spc = sc.steps_per_cycle
+        full = (sc.total_steps // spc) if spc else 0
+        if full * len(sc.phases) > loop_after and full >= 3:
+            return self._looped_schedule(full)
         L = self.velocity_variables()
         previous = None
         for first, phase, cycle in self.scene.schedule():
@@ -443,6 +491,33 @@ class Deck:
             L += self.switch_commands(phase.vars, previous)
             L.append(f"run {phase.steps} pre no post no")
             previous = phase.vars
+        return L
+
+    def _looped_schedule(self, full: int) -> list[str]:
+        sc = self.scene
+        spc = sc.steps_per_cycle
+        L = self.velocity_variables()
+
+        def cycle(phases, previous, note):
+            for phase in phases:
+                L.append(f"# phase '{phase.name}' {dict(phase.vars)} ({note}), {phase.steps} steps")
+                L.extend(self.switch_commands(phase.vars, previous))
+                L.append(f"run {phase.steps} pre no post no")
+                previous = phase.vars
+            return previous
+
+        previous = cycle(sc.phases, None, f"cycle 1, steps 0..{spc}")
+        L += [f"# cycles 2..{full} are alike: a LAMMPS loop (steps {spc}..{full * spc})",
+              f"variable {LOOP_VAR} loop {full - 1}", f"label {LOOP_VAR}"]
+        previous = cycle(sc.phases, previous, f"cycles 2..{full}")
+        L += [f"next {LOOP_VAR}", f"jump SELF {LOOP_VAR}"]
+        rest, tail = sc.total_steps - full * spc, []
+        for phase in sc.phases:
+            take = min(phase.steps, rest)
+            if take > 0:
+                tail.append(Phase(phase.name, take, phase.vars))
+                rest -= take
+        cycle(tail, previous, f"cycle {full + 1}, cut short")
         return L
 
     def switch_commands(self, phase_vars, previous) -> list[str]:
@@ -463,12 +538,12 @@ class Deck:
         L.append(f"velocity {self.moving} set v_rs_vhx v_rs_vhy v_rs_vhz units box")
         return L
 
-    def input_text(self, dump_every: int = 100) -> str:
+    def input_text(self, dump_every: int = 100, loop_after: int = LOOP_AFTER) -> str:
         py = self.python_ops
         L = self.setup_commands(dump_every=dump_every)
         if py:
             L.append(f"fix {PY_FIX} {self.moving} external pf/callback 1 {PY_NAPPLY}")
-        L += self.schedule_commands()
+        L += self.schedule_commands(loop_after)
         return "\n".join(L) + "\n"
 
 

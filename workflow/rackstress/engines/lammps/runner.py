@@ -31,7 +31,7 @@ from rackstress.engines.lammps.deck import MOVE_GROUP, PY_FIX, PY_NAPPLY, Deck
 from rackstress.engines.lammps.plugin import locate as _locate_plugin
 from rackstress.errors import DivergenceError, RackstressError, StorageError
 from rackstress.lib.vec import fresh_zeros
-from rackstress.engines.watchdog import divergence_error, find_divergence
+from rackstress.engines.watchdog import divergence_error, find_divergence, force_error
 
 #: Steps between watchdog checks (and progress updates) on LAMMPS.
 CHECK_EVERY = 10
@@ -123,7 +123,7 @@ class LammpsRun:
             self.command(f"plugin load {plugin_library()}")
         for cmd in deck.setup_commands(str(data), dump, dump_every):
             self.command(cmd)
-            if dump is not None and cmd.startswith("dump ") and " all custom " in cmd:
+            if dump is not None and cmd.startswith("dump ") and " custom " in cmd:
                 self._dump_id = cmd.split()[1]
                 if append:
                     self.command(f"dump_modify {self._dump_id} append yes")
@@ -372,6 +372,8 @@ class LammpsRun:
         mine = None if err is None else (int(err[0]), type(err[1]).__name__, str(err[1]),
                                          getattr(err[1], "index", None))
         step, kind, text, index = next(e for e in self.comm.allgather(mine) if e is not None)
+        if kind == "NonFiniteForce":        # found in the step it arose in (before the finder,
+            raise force_error(self.scene, step, index)   # which sees its NaN velocities)
         # particles that flew apart (a partner out of ghost reach) are a divergence: the
         # watchdog names the particle first, else the callback's own account does
         found = self._finder()
@@ -507,6 +509,23 @@ class LammpsRun:
         fast = self._moved_only(x=True, v=True)
         return fast if fast is not None else (self.gather_positions(), self.gather_velocities())
 
+    def moving_mask(self) -> np.ndarray | None:
+        """Which particles (global order) are in LAMMPS' moving group, on every rank; None in
+        a deck without a passive group. A checkpoint keeps it, so that a resumed run's group,
+        and with it its trajectory's frames, are the uninterrupted run's."""
+        if self._move_bit is None:
+            return None
+        lmp = self.lmp
+        nlocal = lmp.extract_global("nlocal")
+        mask = lmp.numpy.extract_atom("mask")[:nlocal]
+        ids = lmp.numpy.extract_atom("id")[:nlocal].astype(np.int64) - 1
+        mine = ids[(mask & self._move_bit) != 0]
+        parts = [mine] if self.comm.Get_size() == 1 else self.comm.allgather(mine)
+        out = np.zeros(self.scene.n_particles, dtype=bool)
+        for part in parts:
+            out[part] = True
+        return out
+
     def _moved_only(self, x: bool = False, v: bool = False):
         """Positions and/or velocities in global order without gathering every atom (a deck
         with a passive group, every atom present; else None): an atom outside LAMMPS' moving
@@ -555,8 +574,7 @@ class LammpsRun:
         format), unless the dump interval already wrote it."""
         if self._dump_id is None or self.step % self.dump_every == 0:
             return
-        self.command(f"write_dump all custom {self._dump_file} id type mol x y z modify sort id "
-                     "format float %.10g append yes")
+        self.command(self.deck.write_dump_command(self._dump_file))
 
     def close(self):
         try:
@@ -622,6 +640,9 @@ class LammpsRun:
             # callback runs in this phase (it tells the resting bed at its first call)
             o = self.scene.original_positions()
             off = (ck.x != o).any(axis=1) | (ck.v != 0).any(axis=1)
+            moving = getattr(ck, "moving", None)
+            if moving is not None:        # the group as it was (joined, moving or not yet)
+                off = off | moving
             nlocal = self.lmp.extract_global("nlocal")
             mask = self.lmp.numpy.extract_atom("mask")[:nlocal]
             ids = self.lmp.numpy.extract_atom("id")[:nlocal].astype(np.int64) - 1

@@ -1,0 +1,158 @@
+"""``rackstress fea``'s solver (validity/solid.py) against analytical solutions: a bar in
+tension (σ = F/A), a 3D cantilever (tip deflection P·L³/3EI + shear, bending stress M·c/I), the
+loads' total force and moment, the supports' fixed directions, and a mesh part by gmsh."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rackstress.validity.solid import (boundary_from_scene, cell_mesh, concave_edges,
+                                       fixed_nodes, nodal_forces, solve, von_mises)
+
+
+def _bar(nx, ny, nz):
+    return np.array([[x, y, z] for z in range(nz) for y in range(ny) for x in range(nx)], float)
+
+
+def test_cells_make_a_closed_conforming_volume():
+    o = _bar(3, 2, 2)
+    p, t = cell_mesh(o, 1.0)
+    P = p.T
+    vol = np.einsum("ij,ij->i", np.cross(P[t[1]] - P[t[0]], P[t[2]] - P[t[0]]),
+                    P[t[3]] - P[t[0]]) / 6
+    assert (vol > 0).all() and vol.sum() == pytest.approx(12.0)      # 12 unit cubes
+    assert p.shape[1] == 4 * 3 * 3                                     # the corner grid
+    assert len(concave_edges(p, t)) == 0                               # a box: none re-entrant
+
+
+def test_loads_keep_total_force_and_moment():
+    o = _bar(6, 3, 3)
+    p, t = cell_mesh(o, 1.0)
+    rng = np.random.default_rng(0)
+    x = o[rng.choice(len(o), 7, replace=False)]
+    F = rng.normal(size=(7, 3))
+    nf = nodal_forces(p, t, x, F, 1.0)
+    assert np.allclose(nf.sum(axis=0), F.sum(axis=0))
+    assert np.allclose(np.cross(p.T, nf).sum(axis=0), np.cross(x, F).sum(axis=0))
+
+
+def test_supports_fix_only_the_held_cells_directions():
+    o = _bar(4, 1, 1)
+    p, _ = cell_mesh(o, 1.0)
+    fx = fixed_nodes(p, o[:1], np.array([[True, False, True]]), 1.0)
+    # the 8 corners of the first cell, x and z only
+    assert fx.any(axis=1).sum() == 8 and not fx[:, 1].any() and fx[:, 0].sum() == 8
+
+
+def test_bar_in_tension_is_F_over_A():
+    o = _bar(20, 4, 4)                      # cells: x −0.5 … 19.5, a 4 × 4 section
+    p, t = cell_mesh(o, 1.0)
+    P = p.T
+    fixed = np.zeros((len(P), 3), bool)
+    fixed[np.isclose(P[:, 0], -0.5), 0] = True                      # a roller face in x
+    corner = np.isclose(P, [-0.5, -0.5, -0.5]).all(axis=1)
+    fixed[corner] = True                                            # no rigid motion left
+    fixed[np.isclose(P, [-0.5, 3.5, -0.5]).all(axis=1), 2] = True
+    fixed[np.isclose(P, [-0.5, -0.5, 3.5]).all(axis=1), 1] = True
+    end = o[:, 0] == 19
+    F = np.zeros((end.sum(), 3))
+    F[:, 0] = 2.0                                                   # 32 on A = 16: σ = 2
+    sol = solve(p, t, 500.0, 0.3, fixed, nodal_forces(p, t, o[end], F, 1.0))
+    mid = o[(o[:, 0] > 4) & (o[:, 0] < 15)]
+    r = sol.at(mid)
+    assert r["von_mises"] == pytest.approx(np.full(len(mid), 2.0), rel=0.01)
+    assert r["stress"][:, 0] == pytest.approx(np.full(len(mid), 2.0), rel=0.01)
+    # ε = σ/E: the 10-long middle stretches by 10·2/500
+    a, b = sol.at(np.array([[4.5, 1.5, 1.5], [14.5, 1.5, 1.5]]))["displacement"][:, 0]
+    assert b - a == pytest.approx(10 * 2.0 / 500.0, rel=0.01)
+
+
+@pytest.mark.slow
+def test_cantilever_tip_deflection_and_bending_stress():
+    """A bar of 48 × 4 × 4 cells clamped over its x = −0.5 face, P = 1 down (−z) on the free
+    end: the tip's deflection past mid-span's tangent P·a³/3EI + P·a/(κGA) (κ = 5/6), and
+    σ_xx = M·z/I at mid-span."""
+    nx, h = 48, 4
+    o = _bar(nx, h, h)
+    p, t = cell_mesh(o, 1.0)
+    P = p.T
+    fixed = np.isclose(P[:, 0], -0.5)
+    end = o[:, 0] == nx - 1
+    F = np.zeros((end.sum(), 3))
+    F[:, 2] = -1.0 / end.sum()
+    E, nu = 1000.0, 0.3
+    sol = solve(p, t, E, nu, fixed, nodal_forces(p, t, o[end], F, 1.0))
+    # the tip against the tangent at mid-span x1 = 23.5 (moment-area theorem: the clamp's own
+    # compliance, a 3D effect of order h/L outside beam theory, drops out):
+    # δ = P·a³/3EI + P·a/(κGA), a = 47 − 23.5 (the load acts at the end cells' centres)
+    x1, a, I, A = 23.5, nx - 1 - 23.5, h ** 4 / 12, h * h
+    G = E / (2 * (1 + nu))
+    delta = a ** 3 / (3 * E * I) + a / (5 / 6 * G * A)
+    w = sol.at(np.array([[x1 - 0.5, 1.5, 1.5], [x1, 1.5, 1.5], [x1 + 0.5, 1.5, 1.5],
+                         [nx - 1, 1.5, 1.5]]))["displacement"][:, 2]
+    slope = w[2] - w[0]
+    assert -(w[3] - w[1] - slope * a) == pytest.approx(delta, rel=0.03)
+    # mid-span x = 23.5 (23.5 from the load), top-fibre particle centre z = 3, 1.5 above
+    # the axis at z = 1.5: σ = M·z/I
+    r = sol.at(np.array([[23.5, 1.5, 3.0]]))
+    sigma = float(r["stress"][0, 0])
+    want = 1.0 * (nx - 1 - 23.5) * 1.5 / I
+    assert sigma == pytest.approx(want, rel=0.05)
+
+
+def test_von_mises_of_pure_shear_and_uniaxial():
+    s = np.array([[1.0, 0, 0, 0, 0, 0], [0, 0, 0, 1.0, 0, 0]])
+    assert von_mises(s).tolist() == pytest.approx([1.0, np.sqrt(3)])
+
+
+def test_boundary_from_a_scene():
+    from rackstress.scenes import validation as cases
+
+    sc = cases.cantilever(body="bind", nx=6, ny=2)
+    b = boundary_from_scene(sc)
+    # particles column by column (x outer): the first two columns are held
+    assert b["held_ids"].tolist() == [1, 2, 3, 4] and b["held_mask"].all()
+    # the tip's two particles share the load, unit mass: force = acceleration
+    assert b["load_ids"].tolist() == [11, 12]
+    assert b["load_force"].sum(axis=0) == pytest.approx([0.0, -0.05, 0.0])
+
+
+@pytest.mark.slow
+def test_a_mesh_part_by_gmsh_is_its_volume():
+    from pathlib import Path
+
+    from rackstress.scenes.mesh import read_surface
+    from rackstress.validity.solid import surface_mesh
+
+    surf = read_surface(Path(__file__).resolve().parents[1] / "examples/bracket/bracket.stl")
+    p, t = surface_mesh(np.asarray(surf.polydata.points),
+                        np.asarray(surf.polydata.regular_faces), 2.0)
+    P = p.T
+    vol = np.abs(np.einsum("ij,ij->i", np.cross(P[t[1]] - P[t[0]], P[t[2]] - P[t[0]]),
+                           P[t[3]] - P[t[0]])).sum() / 6
+    # gmsh remeshes each patch from its own parametrization: the volume is the STL's to 0.5 %
+    assert vol == pytest.approx(surf.volume, rel=5e-3)
+    # its re-entrant edge x = 3, y = 27 (and the holes' rims, concave towards the bolts)
+    ce = concave_edges(p, t)
+    assert np.any(np.hypot(ce[:, 0] - 3, ce[:, 1] - 27) < 1e-6)
+
+
+def test_a_sliver_is_removed_and_the_surface_stays_closed():
+    import trimesh
+
+    from rackstress.validity.solid import drop_slivers
+
+    # a tetrahedron whose edge 0–1 carries a middle vertex 4: one face is split at 4 into a
+    # sliver-free pair, the other face across 0–1 holds the zero-area triangle (0, 4, 1)'s
+    # partner: a closed surface with one sliver
+    v = np.array([[0, 0, 0], [2, 0, 0], [0, 2, 0], [0, 0, 2], [1, 0, 0]], float)
+    f = np.array([[0, 2, 1], [0, 4, 3], [4, 1, 3], [1, 2, 3], [0, 3, 2]])
+    tm = trimesh.Trimesh(v, f, process=False)
+    assert not tm.is_watertight               # 0–1 is one edge on one side, two on the other
+    f2 = np.vstack([f, [[0, 1, 4]]])          # close it with the sliver (0, 1, 4)
+    out = drop_slivers(v, f2)
+    t2 = trimesh.Trimesh(v, out, process=False)
+    assert t2.is_watertight and t2.is_winding_consistent
+    assert t2.volume == pytest.approx(8 / 6)
+    area = np.linalg.norm(np.cross(v[out[:, 1]] - v[out[:, 0]], v[out[:, 2]] - v[out[:, 0]]), axis=1)
+    assert (area > 1e-9).all() and len(out) == len(f2)

@@ -1,0 +1,228 @@
+"""Output that follows what moves (issue 24): the trajectory of a deck with a resting sediment
+holds the displaced particles only, every reader puts the others at their original positions,
+the measures of every frame at once equal the per-frame AnalysisBase classes, and the VTK files
+open in their readers (pyvista, VTK's XML reader) in both variants.
+
+Expected values come from independent paths: the same run dumped whole (``--dump-all``), the
+per-frame MDAnalysis classes of :mod:`rackstress.stress.measures`, the NumPy strain path.
+"""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rackstress.stress import AccumulatedDistance, VonMisesStrain, load_run
+from rackstress.stress.measures import (frame_positions, measure_frames, neighbourhoods,
+                                        strain_frames)
+from test_stress import BLOCK, SHEET, lattice, rigid, write_run
+
+BIN = Path(sys.executable).parent
+RACKSTRESS = str(BIN / "rackstress")
+BED = lattice(8, 1, 8, origin=(20, 0, 0))      # a sediment: 64 particles, one layer
+
+
+def _frames():
+    """BLOCK turns and bends, SHEET rests then stretches, BED rests but for a dent."""
+    out = []
+    for k, step in enumerate((0, 10, 20, 30)):
+        pb = rigid(BLOCK, [0.0, 0.05 * k, 0.0], [0.3 * k, 0.0, 0.0])
+        pb[:6] += [0.0, 0.1 * k, 0.0]                       # a bent corner
+        ps = SHEET.copy()
+        if step == 30:
+            ps[:, 0] = 10 + (SHEET[:, 0] - 10) * 1.1
+        pe = BED.copy()
+        if step >= 20:
+            pe[9, 1] -= 0.25                                 # a dent, one particle
+        out.append((step, np.concatenate([pb, ps, pe])))
+    return out
+
+
+PARTS = [("block", "part", BLOCK), ("sheet", "part", SHEET), ("bed", "sediment", BED)]
+
+
+def test_measures_of_all_frames_equal_the_per_frame_classes(tmp_path):
+    frames = _frames()
+    write_run(tmp_path, PARTS, frames)
+    run = load_run(tmp_path)
+    got = measure_frames(run)
+    acc = AccumulatedDistance(run).run().results
+    st = VonMisesStrain(run).run().results
+    bed = run.parts["bed"].index
+    rest = np.setdiff1d(np.arange(run.n_atoms), bed)
+    for name, ref in (("paper", acc.distance), ("accumulated", acc.per_particle),
+                      ("strain", st.von_mises), ("d2min", st.d2min)):
+        a, b = got[name][:, rest], ref[:, rest]
+        assert np.array_equal(np.isnan(a), np.isnan(b)), name
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-12, err_msg=name)
+    # a sediment has no rest shape: its desired position is its original one
+    o = run.o[bed]
+    for k, (_, p) in enumerate(frames):
+        np.testing.assert_array_equal(got["paper"][k, bed], np.linalg.norm(p[bed] - o, axis=1))
+    assert got["paper"][3, bed[9]] == 0.25
+    # resting neighbourhoods: exactly zero, not round-off (frame 0 everything, SHEET till 30)
+    sheet = run.parts["sheet"].index
+    assert (got["strain"][0][np.isfinite(got["strain"][0])] == 0).all()
+    assert (got["strain"][1:3, sheet] == 0).all() and (got["d2min"][1:3, sheet] == 0).all()
+    np.testing.assert_allclose(got["strain"][3, sheet], 0.5 * (1.1 ** 2 - 1) / np.sqrt(3),
+                               atol=1e-12)                   # a uniform stretch (OVITO's η)
+
+
+def test_compiled_strain_equals_the_numpy_path(tmp_path):
+    write_run(tmp_path, PARTS, _frames())
+    run = load_run(tmp_path)
+    hood = neighbourhoods(run, list(run.parts.values()))
+    P = frame_positions(run, range(run.index.n_frames))
+    from rackstress.stress import kernels
+
+    assert kernels.available()
+    a = kernels.strain(hood, run.o, P)
+    b = strain_frames(hood, run.o, P)
+    for x, y in zip(a, b):
+        assert np.array_equal(np.isnan(x), np.isnan(y))
+        np.testing.assert_allclose(x, y, rtol=0, atol=1e-13)
+
+
+def test_partial_frames_read_through_mdanalysis(tmp_path):
+    """A dump whose frames hold only some particles, as LAMMPS writes it for a deck with a
+    resting sediment: load_run's Universe gives every particle, the others at rest."""
+    frames = _frames()
+    write_run(tmp_path / "whole", PARTS, frames)
+    d = tmp_path / "part"
+    write_run(d, PARTS, frames)
+    o = np.concatenate([q for _, _, q in PARTS])
+    types = np.concatenate([np.full(len(q), k + 1) for k, (_, _, q) in enumerate(PARTS)])
+    lines = []
+    for step, p in frames:
+        moved = np.flatnonzero((p != o).any(axis=1))
+        lines.append(f"ITEM: TIMESTEP\n{step}\nITEM: NUMBER OF ATOMS\n{len(moved)}\n"
+                     "ITEM: BOX BOUNDS mm mm mm\n0 1\n0 1\n0 1\nITEM: ATOMS id type mol x y z\n")
+        for i in moved:
+            x, y, z = (repr(float(v)) for v in p[i])
+            lines.append(f"{i + 1} {types[i]} {types[i]} {x} {y} {z}\n")
+    (d / "trajectory.dump").write_text("".join(lines))
+    whole, part = load_run(tmp_path / "whole"), load_run(d)
+    assert part.index.partial and list(part.index.counts)[0] == 0
+    for a, b in zip(whole.trajectory, part.trajectory):
+        assert np.array_equal(a.data["positions64"], b.data["positions64"])
+    for name, v in measure_frames(whole).items():
+        np.testing.assert_array_equal(v, measure_frames(part)[name])
+
+
+@pytest.fixture(scope="module")
+def two_runs(tmp_path_factory):
+    """magpod-small's first 600 iterations twice: the trajectory as it follows what moves, and
+    every particle every frame (--dump-all)."""
+    base = tmp_path_factory.mktemp("magpod")
+    out = {}
+    for name, extra in (("moving", []), ("all", ["--dump-all"])):
+        r = subprocess.run([RACKSTRESS, "run", "magpod-small", "--steps", "600", "--dump-every",
+                            "50", "--no-render", "--no-progress", "--out", str(base / name),
+                            *extra], capture_output=True, text=True, timeout=900)
+        assert r.returncode == 0, r.stderr[-2000:]
+        out[name] = base / name
+    return out
+
+
+@pytest.mark.lammps
+def test_moving_dump_holds_what_moved_and_reads_as_the_whole(two_runs):
+    moving, whole = two_runs["moving"], two_runs["all"]
+    assert json.loads((moving / "scene.json").read_text())["dump"] == "moving"
+    assert json.loads((whole / "scene.json").read_text())["dump"] == "all"
+    assert "dump rs_dump rs_move custom" in (moving / "in.lammps").read_text()
+    a, b = load_run(whole), load_run(moving)
+    assert list(a.steps) == list(b.steps) == list(range(0, 601, 50))
+    n = a.n_atoms
+    counts = b.index.counts
+    sed = a.parts["sediment"].index
+    assert counts[0] >= n - len(sed) and (counts < n).all()    # the robot and what it can reach
+    assert counts[-1] > counts[0]
+    assert (np.diff(counts) >= 0).all()          # a particle once moving stays in the frames
+    for k, (ta, tb) in enumerate(zip(a.trajectory, b.trajectory)):
+        pa, pb = ta.data["positions64"], tb.data["positions64"]
+        assert np.array_equal(pa, pb)
+        # the whole dump proves it: a particle a frame leaves out sits at its original position
+        held = np.zeros(n, bool)
+        held[counts_ids(moving, k) - 1] = True
+        assert np.array_equal(pa[~held], a.o[~held])
+        assert (~held[sed]).sum() > 0.5 * len(sed)          # most of the sediment rests
+    size = {k: (d / "trajectory.dump").stat().st_size for k, d in two_runs.items()}
+    assert size["moving"] < 0.9 * size["all"]
+    # the measures: the same numbers either way
+    for name, v in measure_frames(a).items():
+        np.testing.assert_array_equal(v, measure_frames(b)[name])
+
+
+def counts_ids(rundir: Path, frame: int) -> np.ndarray:
+    """The ids frame ``frame`` of a dump holds, by a plain parser."""
+    text = (rundir / "trajectory.dump").read_text().split("ITEM: TIMESTEP\n")[1 + frame]
+    rows = text.split("ITEM: ATOMS id type mol x y z\n")[1].splitlines()
+    return np.array([int(r.split()[0]) for r in rows], dtype=np.int64)
+
+
+@pytest.mark.lammps
+def test_vtk_variants_open_in_their_readers(two_runs, tmp_path):
+    import pyvista as pv
+    from vtkmodules.vtkIOXML import vtkXMLPolyDataReader
+
+    rundir = two_runs["moving"]
+    for fmt in ("paraview", "ovito"):
+        out = tmp_path / fmt
+        r = subprocess.run([RACKSTRESS, "stress", str(rundir), "--out", str(out), "--no-dump",
+                            "--no-progress", "--vtk-format", fmt], capture_output=True, text=True,
+                           timeout=600)
+        assert r.returncode == 0, r.stderr[-2000:]
+    summary = json.loads((tmp_path / "paraview" / "stress.json").read_text())
+    pk = summary["peak"]
+    run = load_run(rundir)
+    for fmt in ("paraview", "ovito"):
+        vtk = tmp_path / fmt / "vtk"
+        head = (vtk / "frame_0000050.vtp").read_bytes()[:2000]
+        if fmt == "paraview":
+            assert b'compressor="vtkZLibDataCompressor"' in head and b'format="appended"' in head
+        else:
+            assert b"compressor" not in head and b'format="binary"' in head
+        reader = pv.get_reader(str(vtk / "run.pvd"))
+        assert list(reader.time_values) == list(run.steps)
+        reader.set_active_time_value(pk["iteration"])
+        mesh = reader.read()[0]
+        k = int(np.flatnonzero(run.steps == pk["iteration"])[0])
+        p = run.trajectory[k].data["positions64"]
+        assert mesh.n_points == run.n_atoms
+        np.testing.assert_array_equal(mesh.points, p.astype(np.float32))
+        np.testing.assert_array_equal(mesh.point_data["displacement"],
+                                      (p - run.o).astype(np.float32))
+        paper = mesh.point_data["paper"]
+        assert paper.dtype == np.float64 and paper[pk["particle"] - 1] == pk["value"]
+        # VTK's own XML reader, as ParaView opens a frame
+        x = vtkXMLPolyDataReader()
+        x.SetFileName(str(vtk / "frame_0000050.vtp"))
+        x.Update()
+        assert x.GetOutput().GetNumberOfPoints() == run.n_atoms
+        assert x.GetOutput().GetPointData().GetArray("d2min") is not None
+    size = {f: sum(q.stat().st_size for q in (tmp_path / f / "vtk").iterdir())
+            for f in ("paraview", "ovito")}
+    assert size["paraview"] < 0.4 * size["ovito"]
+
+
+@pytest.mark.lammps
+def test_bench_e2e_dump_cost_and_table():
+    """The benchmark's own parts: a frame of the moving particles holds fewer atoms and bytes
+    than one of every particle, and the table shows each run's phases and the ratio."""
+    from rackstress.bench import e2e
+
+    d = e2e.dump_cost("magpod-small", 300, reps=2)
+    assert 0 < d["moving"]["atoms_per_frame"] < d["all"]["atoms_per_frame"] == d["n_particles"]
+    assert d["moving"]["bytes_per_frame"] < d["all"]["bytes_per_frame"]
+    run = {"scene": "magpod-small", "steps": None, "cold": False, "repeat": 0, "wall_s": 10.0,
+           "exit": 0, "size_total": 30e6, "sizes": {"vtk/": 20e6, "trajectory.dump": 10e6},
+           "phases": {"simulation": 4.0, "measures": 1.0, "pictures": 2.0,
+                      "start-up and the rest": 3.0, "vtk (beside the pictures)": 1.5}}
+    md = e2e.markdown({"runs": [run], "dumps": [d]}, {"cores": 2, "load_avg_at_start": [1, 1, 1]})
+    assert "| magpod-small | the scene's | warm | 4.00 s | 1.00 s | 2.00 s (1.50 s) | 3.00 s | " \
+           "10.00 s | 2.50× | 30.0 MB |" in md
+    assert "`vtk/` 20.00 MB" in md and "| magpod-small | 5,705 | 300 |" in md

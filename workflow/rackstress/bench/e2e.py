@@ -1,0 +1,207 @@
+"""``rackstress bench e2e``: README's first command end to end, warm and cold, and what it leaves.
+
+For each scene, ``rackstress run SCENE --out DIR --overwrite`` runs as a user runs it (a new
+process), once with the user's cache (warm) and once with an empty one (cold:
+``XDG_CACHE_HOME`` pointed at a new directory, so every compiled loop is compiled and Eq. 5's
+limit predicted again),
+interleaved ``repeat`` times. Its phases come from the run's own records: the simulation
+(``summary.json`` ``wall_s``), the measures (``stress.json``), the pictures (``summary.json``
+``render``; the VTK files are written by a second process meanwhile, their time shown apart),
+and the rest of the wall time (start-up, the deck, the data file, the guards, the report).
+The run directory's size is listed by file.
+
+The dump's cost per frame is measured apart, in one process: each scene is run for
+``dump_steps`` iterations (the robot standing on the sediment), then the trajectory's frame of
+each is written ``reps`` times, in turn, as the run writes it (the moving particles) and as
+``--dump-all`` does.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+SCENES = ("magpod-small", "magpod", "sediment-large")
+
+
+def _size(path: Path) -> int:
+    if path.is_file():
+        return path.stat().st_size
+    return sum(p.stat().st_size for p in path.rglob("*") if p.is_file())
+
+
+def _cli_run(scene: str, out: Path, cold: bool, args) -> dict:
+    exe = str(Path(sys.executable).parent / "rackstress")
+    env = dict(os.environ)
+    cache = None
+    if cold:
+        cache = tempfile.mkdtemp(prefix="rackstress-cold-")
+        env["XDG_CACHE_HOME"] = cache               # compiled loops, Eq. 5's prediction
+        env.pop("NUMBA_CACHE_DIR", None)
+    t = time.perf_counter()
+    r = subprocess.run([exe, "run", scene, "--out", str(out), "--overwrite", "--no-progress",
+                        *args], capture_output=True, text=True, env=env)
+    wall = time.perf_counter() - t
+    if cache:
+        shutil.rmtree(cache, ignore_errors=True)
+    rec = {"wall_s": wall, "exit": r.returncode, "cold": cold}
+    if r.returncode not in (0, 4):
+        rec["stderr"] = r.stderr[-1500:]
+        return rec
+    summary = json.loads((out / "summary.json").read_text())
+    try:
+        stress = json.loads((out / "stress.json").read_text())["timings"]
+    except (OSError, json.JSONDecodeError, KeyError):
+        stress = {}
+    render = (summary.get("render") or {}).get("wall_s", 0.0)
+    phases = {"simulation": summary["wall_s"], "measures": stress.get("measures_s", 0.0),
+              "pictures": render}
+    phases["start-up and the rest"] = wall - sum(phases.values())
+    phases["vtk (beside the pictures)"] = stress.get("vtk_s", 0.0)
+    rec["phases"] = phases
+    rec["sizes"] = {p.name + ("/" if p.is_dir() else ""): _size(p)
+                    for p in sorted(out.iterdir()) if not p.name.startswith(".")}
+    rec["size_total"] = sum(rec["sizes"].values())
+    rec["note"] = r.stdout.strip().splitlines()[-1] if r.stdout.strip() else ""
+    return rec
+
+
+def dump_cost(scene: str, steps: int, reps: int = 5) -> dict:
+    """Seconds and bytes per trajectory frame, moving particles against every particle."""
+    return dump_costs([scene], steps, reps)[0]
+
+
+def dump_costs(names, steps: int, reps: int = 5) -> list:
+    """:func:`dump_cost` of several scenes, their frames written in turn (scene after scene,
+    moving and every particle, ``reps`` rounds) so that the machine's load weighs on each
+    alike; the best of the rounds."""
+    from rackstress import scenes
+    from rackstress.engines.lammps.deck import compile_deck
+    from rackstress.engines.lammps.runner import LammpsRun
+
+    with tempfile.TemporaryDirectory() as tmp:
+        runs = []
+        try:
+            for name in names:
+                sc = scenes.build(name).with_steps(steps)
+                deck = compile_deck(sc, "exact")
+                d = Path(tmp) / name
+                d.mkdir()
+                (d / "particles.data").write_text(deck.data_text())
+                eng = LammpsRun(deck, d, dump_every=10 ** 8)
+                runs.append((name, sc, deck, d, eng))
+                eng.run_schedule()
+            times = {(name, m): [] for name in names for m in ("moving", "all")}
+            for _ in range(reps):
+                for name, sc, deck, d, eng in runs:
+                    for mode in ("moving", "all"):
+                        deck.dump_all = mode == "all"
+                        t = time.perf_counter()
+                        eng.command(deck.write_dump_command(str(d / f"{mode}.dump")))
+                        times[(name, mode)].append(time.perf_counter() - t)
+                    deck.dump_all = False
+            out = []
+            for name, sc, deck, d, eng in runs:
+                rec = {"scene": name, "n_particles": sc.n_particles, "after_iterations": steps}
+                for mode in ("moving", "all"):
+                    text = (d / f"{mode}.dump").read_bytes()
+                    rec[mode] = {"s_per_frame": min(times[(name, mode)]),
+                                 "bytes_per_frame": len(text) // reps,
+                                 "atoms_per_frame": int(text.split(b"ITEM: NUMBER OF ATOMS\n")[1]
+                                                        .split(b"\n")[0])}
+                out.append(rec)
+            return out
+        finally:
+            for *_, eng in runs:
+                eng.close()
+
+
+def run(out: Path, scene_names=SCENES, repeat: int = 1, steps: dict | None = None,
+        dump_steps: int = 600, log=print) -> dict:
+    """Measure every scene (module docstring); ``steps``: iterations per scene where not the
+    scene's own (the long ones, to keep the benchmark short)."""
+    steps = steps or {}
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="rackstress-e2e-") as tmp:
+        for name in scene_names:
+            args = ["--steps", str(steps[name])] if name in steps else []
+            for k in range(repeat):
+                for cold in (True, False):
+                    rundir = Path(tmp) / f"{name}"
+                    log(f"e2e: {name} {'cold' if cold else 'warm'} ({k + 1}/{repeat}) ...")
+                    rec = _cli_run(name, rundir, cold, args)
+                    rec.update(scene=name, steps=steps.get(name), repeat=k)
+                    rows.append(rec)
+    names = [n for n in ("magpod", "sediment-large") if n in scene_names]
+    log(f"e2e: the trajectory's cost per frame ({', '.join(names)}) ...")
+    dumps = dump_costs(names, dump_steps) if names else []
+    return {"runs": rows, "dumps": dumps}
+
+
+def markdown(data: dict, machine: dict) -> str:
+    """docs/benchmarks/e2e.md."""
+    load = machine.get("load_avg_at_start")
+    load = ", ".join(f"{x:.1f}" for x in load) if load else "?"
+    L = ["# README's first command, end to end",
+         "",
+         "`rackstress bench e2e` (`workflow/rackstress/bench/e2e.py`): `rackstress run SCENE "
+         "--out DIR --overwrite` as a user runs it, cold (an empty cache: kernels compiled, "
+         "Eq. 5's limit predicted) and warm, with the engine path of this branch (numba "
+         "callback kernels), "
+         "interleaved; the phases from the run's own records, the run directory by file. "
+         f"Machine: {machine.get('cores', '?')} cores, load average at the start {load} "
+         "(shared with other jobs: compare within a row, not across runs).",
+         "",
+         "| scene | iterations | cache | simulation | measures | pictures (VTK beside) | "
+         "start-up and the rest | total | total / simulation | run directory |",
+         "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in data["runs"]:
+        if "phases" not in r:
+            L.append(f"| {r['scene']} | | {'cold' if r['cold'] else 'warm'} | failed "
+                     f"(exit {r['exit']}) | | | | {r['wall_s']:.1f} s | | |")
+            continue
+        p = r["phases"]
+        its = r["steps"] or "the scene's"
+        L.append(f"| {r['scene']} | {its} | "
+                 f"{'cold' if r['cold'] else 'warm'} | {p['simulation']:.2f} s | "
+                 f"{p['measures']:.2f} s | {p['pictures']:.2f} s "
+                 f"({p['vtk (beside the pictures)']:.2f} s) | {p['start-up and the rest']:.2f} s"
+                 f" | {r['wall_s']:.2f} s | {r['wall_s'] / max(p['simulation'], 1e-9):.2f}× | "
+                 f"{r['size_total'] / 1e6:.1f} MB |")
+    notes = {(r["scene"], r["note"]) for r in data["runs"] if r.get("exit") and r.get("note")}
+    for scene, note in sorted(notes):
+        L += ["", f"{scene}: exit 4 — {note}"]
+    L += ["", "## The run directory, by file (warm runs)", ""]
+    for r in data["runs"]:
+        if r.get("cold") or "sizes" not in r or r.get("repeat"):
+            continue
+        L.append(f"**{r['scene']}** ({r['size_total'] / 1e6:.1f} MB): "
+                 + ", ".join(f"`{k}` {v / 1e6:.2f} MB" for k, v in
+                             sorted(r["sizes"].items(), key=lambda kv: -kv[1]) if v > 1e4))
+        L.append("")
+    if data["dumps"]:
+        L += ["## The trajectory's cost per frame", "",
+              "One frame written as the run writes it (the moving group: the robot and the "
+              "sediment it reached) and as `--dump-all` writes it, after the scene's first "
+              "iterations (the robot on the sediment); best of 5, the scenes' frames written "
+              "in turn in one process.", "",
+              "| scene | particles | after | moving: atoms, bytes, time | every particle: "
+              "atoms, bytes, time |", "|---|---|---|---|---|"]
+        for d in data["dumps"]:
+            m, a = d["moving"], d["all"]
+            L.append(f"| {d['scene']} | {d['n_particles']:,} | {d['after_iterations']} | "
+                     f"{m['atoms_per_frame']:,}, {m['bytes_per_frame'] / 1e6:.2f} MB, "
+                     f"{m['s_per_frame'] * 1e3:.1f} ms | {a['atoms_per_frame']:,}, "
+                     f"{a['bytes_per_frame'] / 1e6:.2f} MB, {a['s_per_frame'] * 1e3:.1f} ms |")
+        if len(data["dumps"]) == 2:
+            mag, large = data["dumps"]
+            r = large["moving"]["s_per_frame"] / mag["moving"]["s_per_frame"]
+            r_all = large["all"]["s_per_frame"] / mag["all"]["s_per_frame"]
+            L += ["", f"sediment-large's frame costs {r:.2f}× magpod's (every particle: "
+                  f"{r_all:.1f}×)."]
+    return "\n".join(L) + "\n"

@@ -1,0 +1,166 @@
+"""The strain measures' one loop, compiled: η and D²min of every particle and frame in one pass.
+
+:class:`rackstress.stress.measures.VonMisesStrain` states the fit (Falk & Langer: F = W V⁺ with
+W = Σ d d₀ᵀ over the neighbourhood, η of E = ½(FᵀF − I), D²min = Σ ‖d − F d₀‖²) in NumPy, a
+dozen temporary arrays over every pair and frame; here the same arithmetic runs pair by pair
+without them (``numba.njit``, cached on disk where :mod:`rackstress.model.kernels` keeps its
+kernels, so only the first run on a machine compiles it: :func:`warm`). A particle that rests
+with all its neighbours in a frame gets η = D²min = 0 without a fit: d = d₀ for each of its
+pairs, so W = V and F = I exactly. Without numba, :func:`available` is False and the NumPy
+path (:func:`rackstress.stress.measures.strain_frames`) serves.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+try:
+    from rackstress.model import kernels as _model_kernels   # sets NUMBA_CACHE_DIR first
+    import numba as nb
+except ImportError:  # pragma: no cover - numba is a dependency; the NumPy path stays
+    nb = None
+
+
+def available() -> bool:
+    """Whether the compiled loop can be used (numba importable)."""
+    return nb is not None
+
+
+if nb is not None:
+    @nb.njit(cache=True, error_model="numpy", nogil=True)
+    def _strain(P, o, indptr, nbr, Vp, rank, t1, t2, n0, valid, eta, d2):  # pragma: no cover
+        nf, n = P.shape[0], P.shape[1]
+        W = np.empty((3, 3))
+        F = np.empty((3, 3))
+        for f in range(nf):
+            for i in range(n):
+                if not valid[i]:
+                    eta[f, i] = np.nan
+                    d2[f, i] = np.nan
+                    continue
+                still = True
+                for c in range(3):
+                    if P[f, i, c] != o[i, c]:
+                        still = False
+                for k in range(indptr[i], indptr[i + 1]):
+                    j = nbr[k]
+                    for c in range(3):
+                        if P[f, j, c] != o[j, c]:
+                            still = False
+                if still:
+                    eta[f, i] = 0.0
+                    d2[f, i] = 0.0
+                    continue
+                W[:, :] = 0.0
+                for k in range(indptr[i], indptr[i + 1]):
+                    j = nbr[k]
+                    for a in range(3):
+                        da = P[f, j, a] - P[f, i, a]
+                        for b in range(3):
+                            W[a, b] += da * (o[j, b] - o[i, b])
+                for a in range(3):
+                    for b in range(3):
+                        F[a, b] = W[a, 0] * Vp[i, 0, b] + W[a, 1] * Vp[i, 1, b] \
+                            + W[a, 2] * Vp[i, 2, b]
+                if rank[i] == 2:
+                    # planar neighbourhood: carry the normal n0 to the deformed plane's normal
+                    av = np.zeros(3)
+                    bv = np.zeros(3)
+                    for a in range(3):
+                        for b in range(3):
+                            av[a] += F[a, b] * t1[i, b]
+                            bv[a] += F[a, b] * t2[i, b]
+                    nx = av[1] * bv[2] - av[2] * bv[1]
+                    ny = av[2] * bv[0] - av[0] * bv[2]
+                    nz = av[0] * bv[1] - av[1] * bv[0]
+                    nn = np.sqrt(nx * nx + ny * ny + nz * nz)
+                    if nn > 0:
+                        nx, ny, nz = nx / nn, ny / nn, nz / nn
+                    for b in range(3):
+                        F[0, b] += nx * n0[i, b]
+                        F[1, b] += ny * n0[i, b]
+                        F[2, b] += nz * n0[i, b]
+                # E = ½(FᵀF − I), η as OVITO defines it
+                E00 = 0.5 * (F[0, 0] * F[0, 0] + F[1, 0] * F[1, 0] + F[2, 0] * F[2, 0] - 1.0)
+                E11 = 0.5 * (F[0, 1] * F[0, 1] + F[1, 1] * F[1, 1] + F[2, 1] * F[2, 1] - 1.0)
+                E22 = 0.5 * (F[0, 2] * F[0, 2] + F[1, 2] * F[1, 2] + F[2, 2] * F[2, 2] - 1.0)
+                E01 = 0.5 * (F[0, 0] * F[0, 1] + F[1, 0] * F[1, 1] + F[2, 0] * F[2, 1])
+                E12 = 0.5 * (F[0, 1] * F[0, 2] + F[1, 1] * F[1, 2] + F[2, 1] * F[2, 2])
+                E02 = 0.5 * (F[0, 0] * F[0, 2] + F[1, 0] * F[1, 2] + F[2, 0] * F[2, 2])
+                eta[f, i] = np.sqrt(E01 ** 2 + E12 ** 2 + E02 ** 2
+                                    + ((E00 - E11) ** 2 + (E11 - E22) ** 2
+                                       + (E22 - E00) ** 2) / 6.0)
+                s = 0.0
+                for k in range(indptr[i], indptr[i + 1]):
+                    j = nbr[k]
+                    for a in range(3):
+                        r = (P[f, j, a] - P[f, i, a]) - (F[a, 0] * (o[j, 0] - o[i, 0])
+                                                         + F[a, 1] * (o[j, 1] - o[i, 1])
+                                                         + F[a, 2] * (o[j, 2] - o[i, 2]))
+                        s += r * r
+                d2[f, i] = s
+
+
+def strain(hood, o: np.ndarray, P: np.ndarray):
+    """(η, D²min), each (frames, n), of frames ``P`` (frames, n, 3) over ``hood``'s
+    neighbourhoods (:class:`rackstress.stress.measures.Neighbourhoods`)."""
+    indptr, nbr = hood.csr()
+    P = np.ascontiguousarray(P, dtype=np.float64)
+    eta = np.empty(P.shape[:2])
+    d2 = np.empty(P.shape[:2])
+    _strain(P, np.ascontiguousarray(o), indptr, nbr, hood.Vpinv, hood.rank.astype(np.int64),
+            np.ascontiguousarray(hood.t1), np.ascontiguousarray(hood.t2), hood.n0,
+            hood.valid, eta, d2)
+    return eta, d2
+
+
+def warm() -> float:
+    """Compile (first run on a machine) or load the loop; return the seconds it took."""
+    t = time.perf_counter()
+    if nb is not None:
+        from types import SimpleNamespace
+
+        z = np.zeros((1, 3))
+        hood = SimpleNamespace(csr=lambda: (np.zeros(2, np.int64), np.zeros(0, np.int64)),
+                               Vpinv=np.zeros((1, 3, 3)), rank=np.zeros(1, np.int64), t1=z,
+                               t2=z, n0=z, valid=np.zeros(1, bool))
+        strain(hood, z, z[None])
+    return time.perf_counter() - t
+
+
+def compiled() -> bool:
+    """Whether this machine's kernel cache already holds the loop (a first run has not)."""
+    if nb is None:
+        return True
+    return any(_model_kernels.cache_dir().glob("stress_*/kernels._strain-*.nbi"))
+
+
+_WARMING: dict = {}
+
+
+def warm_in_background() -> None:
+    """On a machine whose cache lacks the loop, compile it in a separate process now (while
+    the simulation runs on the other core), so that the measures later only load it;
+    :func:`wait_warm` waits for that process. Nothing to do where it is cached already."""
+    import subprocess
+    import sys
+
+    if compiled() or "proc" in _WARMING:
+        return
+    try:
+        _WARMING["proc"] = subprocess.Popen(
+            [sys.executable, "-c", "from rackstress.stress.kernels import warm; warm()"],
+            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    except OSError:
+        pass                            # the measures compile it themselves
+
+
+def wait_warm() -> None:
+    """Wait for :func:`warm_in_background`'s process, if one runs."""
+    proc = _WARMING.pop("proc", None)
+    if proc is not None:
+        try:
+            proc.wait(timeout=120)
+        except Exception:  # noqa: BLE001 - a stuck compile: the measures compile it themselves
+            proc.kill()
