@@ -131,3 +131,11 @@ def test_bench_validity_cli_quick(tmp_path):
     assert all(s["converged"] for s in data["fea"].values())
     assert (tmp_path / "validity.png").stat().st_size > 10000
     assert "Spearman" in (tmp_path / "validity.md").read_text()
+    # the planar cases in absolute terms: FEA's peak is the largest σ_vm at the particles
+    for r in data["results"]:
+        if r["body"] == "bind-inside" and r["case"] != "l-bracket":
+            fea_vm = data["fea"][r["case"]]["fields"]["von_mises_stress"]
+            assert r["absolute"]["fea"] == pytest.approx(max(fea_vm), rel=1e-12)
+            assert r["absolute"]["ratio"] == pytest.approx(
+                r["absolute"]["particles"] / r["absolute"]["fea"], rel=1e-12)
+    assert "Peak von Mises stress in absolute terms" in (tmp_path / "validity.md").read_text()

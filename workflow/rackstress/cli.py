@@ -148,7 +148,8 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
 
     Exit status (errors.py): 0 done, 2 bad input or a run directory in use or holding another
     run, 3 diverged (frames and summary kept), 4 the run is done but its pictures could not be
-    rendered, 5 the disk refused a write (full, read-only, no permission).
+    rendered, 5 the disk refused a write (full, read-only, no permission), 6 a static analysis
+    did not settle (its state and summary kept).
     """
     from rackstress.lib.mpi import rank
     from rackstress.runs import run as run_mod
@@ -207,6 +208,16 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
                                       overwrite=overwrite, restart_every=restart_every or None,
                                       allow_unstable=allow_unstable, planned=planned)
             _finish(summary, out, do_render, progress)
+        if summary.get("settled") is False:
+            from rackstress.errors import EXIT_UNSETTLED
+
+            if rank() == 0:
+                click.echo(f"rackstress: error: {summary['scene']}: the static analysis did not "
+                           f"settle: the largest unbalanced force is {summary['residual']:.3g} of "
+                           f"the applied load after {summary['iterations']} iterations (settled "
+                           f"means at most {summary['tolerance']:g}); the state written to {out} "
+                           "is not an equilibrium", err=True)
+            sys.exit(EXIT_UNSETTLED)
     except Exception as err:  # noqa: BLE001 - each kind has its exit status (_fail_any)
         _fail_any(err, out)
 
@@ -218,8 +229,13 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True) ->
 
     if rank() != 0:
         return
-    click.echo(f"{summary['scene']}: {summary['steps']} steps on {summary['engine']} "
-               f"({summary['mode']}) in {summary['wall_s']:.2f} s -> {out}")
+    if summary.get("analysis") == "static":
+        click.echo(f"{summary['scene']}: static, {summary['status']} in {summary['iterations']} "
+                   f"iterations (residual {summary['residual']:.2g} of the applied load) on "
+                   f"{summary['engine']} in {summary['wall_s']:.2f} s -> {out}")
+    else:
+        click.echo(f"{summary['scene']}: {summary['steps']} steps on {summary['engine']} "
+                   f"({summary['mode']}) in {summary['wall_s']:.2f} s -> {out}")
     for name, g in summary["groups"].items():
         md = g["max_deformation"]
         click.echo(f"  {name:12s} n={g['n']:6d}  max_deformation="
@@ -410,18 +426,19 @@ def _csv(text):
                    "1320,2600,4720,17480 if the run reaches them, else 4 spread over the run, "
                    "and the iteration of the peak.")
 @click.option("--measure", type=Choice(["paper", "accumulated", "strain", "d2min",
-                                              "virial"]),
-              default="paper", show_default=True,
-              help="paper: distance from desired position (Sec. 5.2); accumulated: its time "
+                                        "virial", "von_mises"]),
+              help="Default: von_mises for a scene with a material, else paper. "
+                   "paper: distance from desired position (Sec. 5.2); accumulated: its time "
                    "integral; strain: von Mises shear strain; d2min: non-affine D2min; "
-                   "virial: LAMMPS per-atom stress (if the dump has it).")
+                   "virial: LAMMPS per-atom stress (if the dump has it); von_mises: von Mises "
+                   "stress from the bindings' forces, in the scene's stress unit (MPa).")
 @click.option("--views", default="right,front,left", show_default=True,
               help="Comma-separated: right, front, left, back, top, iso.")
 @click.option("--groups", metavar="PART,...",
               help="Parts to show, e.g. body,leftleg (coloured whatever their kind); or parts to "
                    "hide from the default set with a leading '-', e.g. -sediment.")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path),
-              help="Output folder (default: RUNDIR/figures for the paper measure, "
+              help="Output folder (default: RUNDIR/figures for the default measure, "
                    "RUNDIR/figures/MEASURE otherwise). Files of other names there are kept.")
 @click.option("--movie", is_flag=True, help="Also write movie.mp4 of every frame.")
 @click.option("--movie-view", help="The view of the movie (default: the first of --views).")
@@ -795,6 +812,18 @@ def bench_validity3d(out, quick):
     _bench_report(data, mod)
 
 
+@bench.command("stress")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
+              help="Output directory (default: docs/benchmarks/ of the repository).")
+@click.option("--quick", is_flag=True, help="One small bar per case (for tests).")
+def bench_stress(out, quick):
+    """Stress from particles (virial, completed, Hooke) against tension and bending."""
+    from rackstress.bench import stress as mod
+
+    data = mod.run_bench(out, quick=quick, echo=click.echo)
+    _bench_report(data, mod)
+
+
 @bench.command("validity")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path),
               help="Output directory (default: docs/benchmarks/ of the repository).")
@@ -805,6 +834,24 @@ def bench_validity(out, quick):
 
     data = mod.run_bench(out, quick=quick, echo=click.echo)
     _bench_report(data, mod)
+    # the material solid in physical units: the cantilever at spacings 2, 1, 0.5 mm
+    from rackstress.bench import cantilever
+
+    cantilever.run_bench(out, quick=quick, echo=click.echo)
+
+
+@bench.command("cantilever")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
+              help="Output directory (default: docs/benchmarks/ of the repository).")
+@click.option("--quick", is_flag=True, help="Spacings 2 and 1 only, no 100,000-particle run.")
+def bench_cantilever(out, quick):
+    """The aluminium cantilever against beam theory (spacings 2, 1, 0.5 mm), the lattice's
+    calibration (E_eff, ν), what ν = 1/4 costs, and 100,000 particles to equilibrium beside
+    scikit-fem (docs/benchmarks/cantilever.md)."""
+    from rackstress.bench import cantilever
+
+    data = cantilever.run_bench(out, quick=quick, echo=click.echo)
+    click.echo(cantilever.report(data))
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -128,6 +128,8 @@ def run_case(case: str, model: str, quick: bool = False, fea_ref=None, echo=prin
     out = {"case": case, "body": model, "n_particles": int(len(idx)), "dt": dt, "t_max": t_max,
            "equilibrium": info, "agreement": rows, "agreement_fit": fit_rows,
            "fields": {k: v[free].tolist() for k, v in m.items()}, "o": o[:, :2].tolist()}
+    out["absolute"] = absolute_peak(scene, p, o, free, fea_ref["fields"]["von_mises_stress"],
+                                    fea_ref["fields"]["cell_von_mises_stress"])
     if case == "l-bracket":
         out["corner_over_band"] = {"strain": corner_over_band(scene, o, m["strain"][free]),
                                    "fea": corner_over_band(scene, o, ref)}
@@ -139,6 +141,79 @@ def run_case(case: str, model: str, quick: bool = False, fea_ref=None, echo=prin
          + " ".join(f"{k}: ρ={r['spearman']:.2f} top5={r['top5_overlap']:.2f} "
                     f"d={r['max_distance']:.1f}" for k, r in rows.items()))
     return out, fea_ref
+
+
+#: Particles nearer than this (spacings) to the L-bracket's re-entrant corner are left out of
+#: the absolute peak: the corner is singular (σ ~ r^−0.456), its FEA peak has no limit.
+CORNER_EXCLUDE = 1.5
+#: Target of the absolute peak (issue 22: the 3D case's peak von Mises within 15 % of FEA).
+PEAK_TARGET = 0.15
+
+
+def absolute_peak(scene, p: np.ndarray, o: np.ndarray, free: np.ndarray,
+                  fea_vm: np.ndarray, fea_cell: np.ndarray | None = None) -> dict:
+    """Peak von Mises stress of the body's particles in absolute terms against FEA's.
+
+    The particle stress is the ``von_mises`` measure's route (:mod:`rackstress.stress.tensor`):
+    the virial of the body's own bindings per particle volume, with the validation scenes'
+    unit mass and unit cell (spacing 1, unit thickness: V = 1), so it is in the FEA's units
+    (force per length², the load P the same). FEA: σ_vm at the same (free) particles' original
+    positions, and (``fea_cell``) averaged over each particle's cell (:func:`cell_mean`). The
+    L-bracket leaves out the particles within :data:`CORNER_EXCLUDE` spacings of its singular
+    corner.
+    """
+    from rackstress.model.operators import Bind
+    from rackstress.stress import tensor as T
+
+    idx = cases.body_index(scene)
+    I, J, K, Q = [], [], [], []
+    for op in scene.operators["body"]:
+        if isinstance(op, Bind) and op.source == "body":
+            pl = op.pairs(scene.groups["body"], scene.groups["body"]).shifted(
+                scene.offset("body"), scene.offset("body"))
+            I.append(pl.i), J.append(pl.j), K.append(pl.c), Q.append(pl.q)
+    if not I:
+        return {}
+    b = tuple(np.concatenate(x) for x in (I, J, K, Q))
+    vm = T.von_mises(T.stress(p, b, volume=np.ones(len(p))))[idx][free]
+    keep = np.ones(len(o), dtype=bool)
+    if scene.groups["body"].meta["validation"]["case"] == "l-bracket":
+        g = scene.params
+        corner = np.array([g["w"] - 0.5, g["H"] - g["w"] - 0.5])
+        keep = np.linalg.norm(o[:, :2] - corner, axis=1) > CORNER_EXCLUDE
+    fea_vm = np.asarray(fea_vm, float)
+    kp, kf = int(np.nanargmax(np.where(keep, vm, -np.inf))), \
+        int(np.nanargmax(np.where(keep, fea_vm, -np.inf)))
+    cell = {}
+    if fea_cell is not None:
+        fea_cell = np.asarray(fea_cell, float)
+        kc = int(np.nanargmax(np.where(keep, fea_cell, -np.inf)))
+        cell = {"fea_cell": float(fea_cell[kc]), "ratio_cell": float(vm[kp] / fea_cell[kc])}
+    return {**cell, "particles": float(vm[kp]), "fea": float(fea_vm[kf]),
+            "ratio": float(vm[kp] / fea_vm[kf]), "at": o[kp, :2].tolist(),
+            "fea_at": o[kf, :2].tolist(),
+            "distance": float(np.linalg.norm(o[kp, :2] - o[kf, :2])),
+            "excluded_near_corner": int((~keep).sum())}
+
+
+#: Samples per lattice cell side for the cell means of the FEA field (4 × 4 a cell)
+CELL_SAMPLES = 4
+
+
+def cell_mean(res, points, skw) -> np.ndarray:
+    """FEA's von Mises stress averaged over each particle's lattice cell (unit square centred on
+    it) where the cell lies in the FEA body: the particle's resolution (its stress is its cell's
+    mean). Only the plate's cells straddle the body's edge (the hole); the others lie inside."""
+    t = (np.arange(CELL_SAMPLES) + 0.5) / CELL_SAMPLES - 0.5
+    offs = np.stack(np.meshgrid(t, t, indexing="ij"), axis=-1).reshape(-1, 2)
+    pts = (np.asarray(points, float)[:, None, :2] + offs[None]).reshape(-1, 2)
+    owner = np.repeat(np.arange(len(points)), len(offs))
+    keep = np.ones(len(pts), dtype=bool)
+    if "a" in skw:                                          # the plate: not in the hole
+        keep = np.hypot(pts[:, 0], pts[:, 1]) >= skw["a"]
+    vm = res.at(pts[keep])["von_mises_stress"]
+    return np.bincount(owner[keep], weights=vm, minlength=len(points)) \
+        / np.maximum(np.bincount(owner[keep], minlength=len(points)), 1)
 
 
 def corner_over_band(scene, o: np.ndarray, values: np.ndarray) -> float:
@@ -198,6 +273,7 @@ def fea_reference(solver, skw, points, quick: bool, densities=None) -> dict:
     study["wall_s"] = time.perf_counter() - t0
     study["fields"] = {k: np.asarray(fields[k])
                        for k in ("von_mises_strain", "von_mises_stress", "ux", "uy")}
+    study["fields"]["cell_von_mises_stress"] = cell_mean(res, points, skw)
     if solver is fea.cantilever:
         # the FEA body's own modulus from its tip deflection: Euler–Bernoulli + shear
         tip = res.at(np.array([[skw["x0"] + skw["L"], skw["y0"] + skw["h"] / 2]]))
@@ -289,6 +365,32 @@ def report(data) -> str:
               + ", ".join(f"`{b}`: {', '.join(m) or 'none'}"
                           for b, m in data.get("measures_meeting_target_on_all_cases",
                                                {}).items()), ""]
+    ab = [r for r in data["results"] + data.get("fine", [])
+          if r["body"] in FINE_MODELS and r.get("absolute")]
+    if ab:
+        lines.append("## Peak von Mises stress in absolute terms\n")
+        lines.append("The `von_mises` measure's route (the bindings' virial per particle "
+                     "volume, `rackstress.stress.tensor`) with the scenes' unit mass and unit "
+                     "cell, so in the FEA's units (force per length², the same load), against "
+                     "FEA's von Mises stress at the same particles' positions (plane stress, "
+                     f"ν = 0.3). L-bracket: particles within {CORNER_EXCLUDE:g} spacings of the "
+                     "singular re-entrant corner left out. Target (the issue's, for the 3D "
+                     f"case): within {100 * PEAK_TARGET:.0f} %.\n")
+        lines.append(md_table(
+            ["case", "spacing", "body", "particles' peak σ_vm", "FEA peak σ_vm", "ratio",
+             "within " + f"{100 * PEAK_TARGET:.0f} %", "FEA peak of the cell means",
+             "ratio to it", "distance of the peaks (spacings)"],
+            [[r["case"], "½" if r in data.get("fine", []) else "1", r["body"],
+              fmt(r["absolute"]["particles"], 4), fmt(r["absolute"]["fea"], 4),
+              fmt(r["absolute"]["ratio"], 3),
+              "yes" if abs(r["absolute"]["ratio"] - 1) <= PEAK_TARGET else "no",
+              fmt(r["absolute"].get("fea_cell"), 4), fmt(r["absolute"].get("ratio_cell"), 3),
+              fmt(r["absolute"]["distance"], 2)] for r in ab]))
+        lines.append("\nFEA's cell means: its σ_vm averaged over each particle's unit cell "
+                     "(4 × 4 samples, the part of the cell inside the FEA body), the particle's "
+                     "own resolution. The plate's peak sits on the hole's edge, where FEA's σ_vm "
+                     "falls steeply (Kirsch) and the lattice's staircase edge cuts the cells; "
+                     "docs/stress.md says why the route is the virial.\n")
     lines.append("## Against FEA seen through the same measure\n")
     lines.append("The FEA displacement at the particles' positions (held particles: zero), put "
                  "through the particle strain measure itself (the same 1.5-spacing affine fit): "

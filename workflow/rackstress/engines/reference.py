@@ -45,8 +45,9 @@ class Reference:
         self.v = scene.initial_velocities()   # v at step 0: zero unless a group sets v0
         # supports: held particles get zero acceleration (and start at rest), so Eq. 5 keeps
         # them at o exactly, like LAMMPS' fix setforce 0 0 0 with zero velocity
-        held = scene.held()
-        self._held = held if held.any() else None
+        # rollers and symmetry planes: only some directions of a particle are fixed
+        fixed = scene.fixed()
+        self._held = fixed if fixed.any() else None
         self.step_count = 0
         #: (group, index in its sequence) [+ phase] → the operator's PairList in global indices
         self._pairs = {}

@@ -21,3 +21,6 @@ STABILITY = "stability.json"
 
 #: what ``--resume`` removes before the trajectory grows (written again at the run's end)
 DERIVED = (STRESS_DUMP, STRESS_JSON, CACHE, REPORT, VTK_DIR)
+#: the bindings of the parts with a material, for their stress (:mod:`rackstress.stress.tensor`):
+#: written when the run starts, from the scene (i, j, force coefficient m·c, L0²)
+BINDINGS = "bindings.npz"

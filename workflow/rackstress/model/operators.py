@@ -548,7 +548,11 @@ class Bind(PairOperator):
                     i, j = i[keep], j[keep]
         i, j = _sorted(i, j)
         diff = source.o[j] - target.o[i]
-        return PairList(i, j, np.full(len(i), float(coeff.c)), rowdot(diff, diff))
+        c = np.full(len(i), float(coeff.c))
+        weights = getattr(coeff, "weights", None)      # a material solid's face compensation
+        if weights is not None and target is source:
+            c = c * weights(target.o, i, j)
+        return PairList(i, j, c, rowdot(diff, diff))
 
 
 @dataclass(frozen=True)

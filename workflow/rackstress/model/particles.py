@@ -58,6 +58,11 @@ class Group:
     #: volume each particle stands for, in the scene's length unit cubed (a filled lattice:
     #: spacing³ cubic, spacing³/√2 hcp); None where the scene has no material
     volume: float | None = None
+    #: n×3 booleans: the directions in which a particle is held at its original position (a
+    #: roller or a symmetry plane fixes one or two; ``held`` is all three); None: as ``held``
+    fixed: np.ndarray | None = None
+    #: n×3 prescribed displacements of the fixed directions (static analysis), None: zero
+    u0: np.ndarray | None = None
 
     def __post_init__(self):
         self.o = np.ascontiguousarray(self.o, dtype=np.float64).reshape(-1, 3)
@@ -82,7 +87,19 @@ class Group:
         if held.dtype != bool or held.shape != (n,):
             raise SceneError(f"group '{self.name}': held must be {n} booleans (one per "
                              f"particle), got shape {held.shape} of {held.dtype}")
+        fixed = np.zeros((n, 3), bool) if self.fixed is None else np.asarray(self.fixed)
+        if fixed.dtype != bool or fixed.shape != (n, 3):
+            raise SceneError(f"group '{self.name}': fixed must be n×3 booleans (the held "
+                             f"directions of each particle), got shape {fixed.shape}")
+        fixed = fixed | held[:, None]
+        held = fixed.all(axis=1)          # held: every direction fixed
         self.held = np.ascontiguousarray(held)
+        self.fixed = np.ascontiguousarray(fixed)
+        if self.u0 is not None:
+            u0 = np.asarray(self.u0, dtype=np.float64)
+            if u0.shape != (n, 3) or not np.all(np.isfinite(u0)):
+                raise SceneError(f"group '{self.name}': u0 must be n×3 finite displacements")
+            self.u0 = np.ascontiguousarray(np.where(fixed, u0, 0.0))
         v0 = np.zeros((n, 3)) if self.v0 is None else np.asarray(self.v0, dtype=np.float64)
         if v0.shape == (3,):
             v0 = np.tile(v0, (n, 1))
@@ -90,7 +107,7 @@ class Group:
             raise SceneError(f"group '{self.name}': v0 must be three finite numbers or one "
                              f"[vx, vy, vz] per particle, got shape {v0.shape}")
         # a held particle never moves: its velocity is zero from the start
-        v0 = np.where(held[:, None], 0.0, v0)
+        v0 = np.where(fixed, 0.0, v0)
         self.v0 = np.ascontiguousarray(v0)
 
     @property

@@ -127,6 +127,19 @@ class Scene:
             self._held.flags.writeable = False
         return self._held
 
+    def fixed(self) -> np.ndarray:
+        """n×3: the directions each particle is held in (supports, rollers), global order."""
+        return np.concatenate([g.fixed for g in self.groups.values()])
+
+    def prescribed(self) -> np.ndarray:
+        """n×3 prescribed displacements of the fixed directions (zero unless a load gives one)."""
+        return np.concatenate([g.u0 if g.u0 is not None else np.zeros((g.n, 3))
+                               for g in self.groups.values()])
+
+    def masses(self) -> np.ndarray:
+        """Mass of every particle in the scene's units (:meth:`Group.mass`), global order."""
+        return np.concatenate([np.full(g.n, g.mass(self.units)) for g in self.groups.values()])
+
     def initial_velocities(self) -> np.ndarray:
         """v at step 0 of every particle in global order (zero unless a group sets ``v0``)."""
         return np.concatenate([g.v0 for g in self.groups.values()])
@@ -185,7 +198,8 @@ class Scene:
         cycles = max(1, -(-int(steps) // spc)) if spc else 1
         return Scene(self.name, self.groups, self.operators, self.phases, self.dt, cycles,
                      self.bound, {**self.params, "steps": int(steps)}, self.report,
-                     duration=self.duration, limit=int(steps), integrator=self.integrator)
+                     duration=self.duration, limit=int(steps), integrator=self.integrator,
+                     units=self.units, analysis=self.analysis)
 
     def with_dt(self, dt: float) -> "Scene":
         """The same scene with time step ``dt``; what was given as a physical time stays one.
@@ -210,7 +224,7 @@ class Scene:
                         p.duration) if p.duration is not None else p for p in self.phases]
         sc = Scene(self.name, self.groups, self.operators, phases, dt, self.cycles, self.bound,
                    {**self.params, "dt": dt}, self.report, self.duration, self.limit,
-                   self.integrator)
+                   self.integrator, self.units, self.analysis)
         if self.duration is not None:
             sc = sc.with_steps(steps_for(self.duration, dt, "duration"))
             sc.duration = self.duration
@@ -237,6 +251,14 @@ class Scene:
                     raise SceneError(f"scene '{self.name}': '{op!r}' on '{target}' is not an "
                                      f"operator (known: {', '.join(ops_mod.OPERATOR_KINDS)})")
                 ops_mod.check_operator(op, target, self.groups)
+        if self.analysis not in ("dynamic", "static"):
+            raise SceneError(f"scene '{self.name}': analysis must be 'dynamic' (time stepping) "
+                             f"or 'static' (the equilibrium), got {self.analysis!r}")
+        if self.analysis == "dynamic" and any(g.u0 is not None and np.any(g.u0)
+                                              for g in self.groups.values()):
+            raise SceneError(f"scene '{self.name}': a prescribed displacement is a static "
+                             "analysis' load; set analysis = \"static\" (a dynamic run holds "
+                             "supports at their original positions)")
         if self.integrator not in ("euler", "verlet"):
             raise SceneError(f"scene '{self.name}': integrator must be 'euler' (Eq. 5) or "
                              f"'verlet', got {self.integrator!r}")

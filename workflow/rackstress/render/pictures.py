@@ -509,11 +509,12 @@ def find_peak(run, values: np.ndarray, parts) -> dict | None:
     return best
 
 
-def output_dir(rundir: Path, measure: str, out=None) -> Path:
-    """``out``, else ``RUNDIR/figures`` (paper measure) or ``RUNDIR/figures/MEASURE``."""
+def output_dir(rundir: Path, measure: str, out=None, default: str = "paper") -> Path:
+    """``out``, else ``RUNDIR/figures`` (the run's default measure: von Mises stress for a scene
+    with a material, else the paper's) or ``RUNDIR/figures/MEASURE``."""
     if out is not None:
         return Path(out)
-    return rundir / FIGURES if measure == "paper" else rundir / FIGURES / measure
+    return rundir / FIGURES if measure == default else rundir / FIGURES / measure
 
 
 # ----------------------------------------------------------------------------- render
@@ -525,7 +526,7 @@ def _first_nonfinite(run) -> int | None:
     return None
 
 
-def render(rundir, frames=None, measure: str = "paper", views=DEFAULT_VIEWS, movie: bool = False,
+def render(rundir, frames=None, measure: str | None = None, views=DEFAULT_VIEWS, movie: bool = False,
            vmax: float | None = None, allow_truncated: bool = False, window_size=WINDOW,
            movie_max_frames: int = 400, fps: int = 10, plots: bool = True, groups=None,
            out=None, cmap: str = "paper", movie_view: str | None = None,
@@ -538,8 +539,9 @@ def render(rundir, frames=None, measure: str = "paper", views=DEFAULT_VIEWS, mov
         A run directory.
     frames : list of int, optional
         Iterations to picture (nearest dumped frame); default: spread over the run + the peak.
-    measure : str
-        ``paper``, ``accumulated``, ``strain``, ``d2min`` or ``virial``.
+    measure : str, optional
+        ``paper``, ``accumulated``, ``strain``, ``d2min``, ``virial`` or ``von_mises``; default:
+        ``von_mises`` (in the scene's stress unit) for a scene with a material, else ``paper``.
     views : list of str
         Any of ``right, left, front, back, top, iso``.
     movie, movie_view : bool, str
@@ -568,7 +570,7 @@ def render(rundir, frames=None, measure: str = "paper", views=DEFAULT_VIEWS, mov
 
     t0, c0 = time.perf_counter(), time.process_time()
     rundir = Path(rundir)
-    if measure not in LABELS:
+    if measure is not None and measure not in LABELS:
         raise StressInputError(f"unknown measure '{measure}'; measures: {', '.join(LABELS)}")
     views = list(views)
     if not views:
@@ -581,8 +583,7 @@ def render(rundir, frames=None, measure: str = "paper", views=DEFAULT_VIEWS, mov
         raise StressInputError(f"--vmax must be positive, got {vmax}")
     colour_table(cmap)                                         # fail early on a bad name
     run = load_run(rundir, allow_truncated=allow_truncated)
-    outdir = output_dir(rundir, measure, out)
-    report = RenderReport(outdir)
+    report = RenderReport(None)
     if run.truncation:
         report.notes.append(f"{run.truncation}; rendering the complete frames only")
     coloured, context, hidden = select_parts(run, groups)
@@ -598,6 +599,13 @@ def render(rundir, frames=None, measure: str = "paper", views=DEFAULT_VIEWS, mov
             f"{rundir}: the frame of iteration {bad} in trajectory.dump holds non-finite "
             "positions (the run diverged there: see its summary.json), so no stress can be "
             "measured over the run; nothing was rendered") from None
+    measure = measure or fields.default
+    report.outdir = outdir = output_dir(rundir, measure, out, fields.default)
+    if measure == "von_mises" and measure not in fields.values:
+        raise StressInputError(
+            f"{rundir}: no von Mises stress: it needs a part with a material and a volume "
+            "(scene.json) and the run's bindings.npz, which runs of scenes with a material "
+            "write; use --measure paper, accumulated, strain or d2min for this run")
     if measure not in fields.values:
         from rackstress.stress.measures import VirialStress
 
@@ -606,6 +614,8 @@ def render(rundir, frames=None, measure: str = "paper", views=DEFAULT_VIEWS, mov
     label = fields.label(measure)
     report.timings["load+measures_s"] = time.perf_counter() - t0
     peak = find_peak(run, values, coloured)
+    if peak and measure in fields.units:          # the scene's own unit (MPa, mm) on the picture
+        peak["units"] = fields.unit(measure)
     report.peak = peak
     if frames:
         asked = list(frames)
@@ -758,7 +768,8 @@ class _Background:
 
 
 def render_default(rundir, progress: bool = False) -> RenderReport:
-    """What ``rackstress run`` renders at the end: the paper measure, default frames and views,
+    """What ``rackstress run`` renders at the end: the default measure (von Mises stress for a
+    scene with a material, else the paper's), default frames and views,
     sheet and plots (no movie); the render's wall time goes into ``summary.json``, and
     ``RUNDIR/report.html`` is written."""
     from rackstress.render.report import write_report
@@ -813,7 +824,8 @@ def _legend(run, coloured, context, hidden, cmap):
 def _peak_line(peak) -> str:
     if not peak:
         return ""
-    return (f"peak {peak['value']:.4g} at iteration {peak['iteration']}, "
+    unit = f" {peak['units']}" if peak.get("units") else ""
+    return (f"peak {peak['value']:.4g}{unit} at iteration {peak['iteration']}, "
             f"particle {peak['particle']} ({peak['group']})")
 
 

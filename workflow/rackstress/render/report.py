@@ -186,13 +186,27 @@ def write_report(rundir, stability: bool = True, view: bool = True) -> Path:
     w('<h2 id="peak">Where and when it was most stressed</h2>')
     if peak:
         pos = ", ".join(f"{x:.4g}" for x in peak.get("position", []))
-        w(f'<p class="headline" id="headline">The largest distance from the desired position '
-          f"(the paper's measure, robust fit) is <b>{_num(peak['value'])}</b> {_e(peak['units'])}"
-          f" in <b>{_e(peak['group'])}</b> at <b>iteration {peak['iteration']}</b>, particle "
-          f"{peak['particle']} (atom id) at ({_e(pos)}).</p>")
+        what = ("The largest von Mises stress (from the bindings' forces, docs/stress.md)"
+                if peak.get("measure") == "von_mises" else
+                "The largest distance from the desired position (the paper's measure, robust "
+                "fit)")
+        w(f'<p class="headline" id="headline">{what} is <b>{_num(peak["value"])}</b> '
+          f"{_e(peak['units'])} in <b>{_e(peak['group'])}</b> at <b>iteration "
+          f"{peak['iteration']}</b>, particle {peak['particle']} (atom id) at ({_e(pos)}).</p>")
     else:
         w('<p class="headline">No peaks yet: run <code>rackstress stress '
           f"{_e(rundir)}</code>.</p>")
+    for gname, sf in ((summary.get("stress") or {}).get("safety") or {}).items():
+        w(f'<p class="safety" data-group="{_e(gname)}">Smallest factor of safety of '
+          f"<b>{_e(gname)}</b> (yield / von Mises): <b>{_num(sf['min'])}</b> at iteration "
+          f"{sf['iteration']}, particle {sf['particle']}.</p>")
+    warns = summary.get("warnings") or []
+    if warns:
+        w('<ul id="warnings">')
+        for wr in warns:
+            w(f'<li class="warning" data-kind="{_e(wr.get("kind", ""))}">Warning: '
+              f"{_e(wr.get('message', ''))}</li>")
+        w("</ul>")
     groups = summary.get("groups") or {}
     rows = [(g, m, rec) for g, grec in groups.items()
             for m, rec in ((grec or {}).get("peak") or {}).items()]
@@ -215,7 +229,8 @@ def write_report(rundir, stability: bool = True, view: bool = True) -> Path:
         w('<p class="note">The same numbers as <code>summary.json</code> '
           "(<code>groups.NAME.peak.MEASURE</code>), the pictures' colour scale and the VTK files' "
           "point data. paper: distance from the desired position; accumulated: its time "
-          "integral; strain: von Mises shear strain; d2min: non-affine D²min.</p>")
+          "integral; strain: von Mises shear strain; d2min: non-affine D²min; von_mises: von "
+          "Mises stress from the bindings' forces per particle volume.</p>")
 
     # ---- the peak frame in 3D
     if view:
@@ -266,6 +281,15 @@ def write_report(rundir, stability: bool = True, view: bool = True) -> Path:
              ("run wall time [s]", _num(summary.get("wall_s"), 3)),
              ("stress post-processing [s]", _num(timings.get("total_s"), 3)),
              ("pictures [s]", _num(rtime, 3))]
+    if summary.get("analysis") == "static":      # the equilibrium and how well it holds
+        facts += [("analysis", "static"), ("settled", "yes" if summary.get("settled") else
+                                           "NO: not an equilibrium"),
+                  ("Newton iterations", summary.get("iterations")),
+                  ("residual (largest unbalanced force / applied load)",
+                   _num(summary.get("residual"), 3)),
+                  ("settled below", summary.get("tolerance"))]
+    if summary.get("units"):
+        facts.append(("units", summary["units"]))
     if summary.get("error"):
         facts.append(("error", summary["error"].get("message")))
     for k, v in facts:

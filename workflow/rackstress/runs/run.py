@@ -83,8 +83,68 @@ def scene_record(scene: Scene) -> dict:
             "cycles": scene.cycles,
             "groups": [{"name": name, "kind": g.kind, "host": g.host, "n": g.n,
                         "type": types[name], "mol": mols[name],
-                        "first_id": scene.offset(name) + 1}
-                       for name, g in scene.groups.items()]}
+                        "first_id": scene.offset(name) + 1, **material_record(scene, g)}
+                       for name, g in scene.groups.items()],
+            "units": units_record(scene.units)}
+
+
+def units_record(u) -> dict:
+    """The scene's unit system as ``scene.json`` keeps it (what the stress is reported in)."""
+    return {"name": u.name, "length": u.length, "time": u.time, "mass": u.mass,
+            "force": u.force, "stress": u.stress, "density": u.density}
+
+
+def material_record(scene: Scene, g) -> dict:
+    """A group's material in the scene's units, its volume and mass per particle (post-processing
+    turns the bindings' forces into stress with them); nothing for a group without one."""
+    if g.material is None:
+        return {}
+    rec = {"material": {"name": g.material.name, **g.material.in_units(scene.units)},
+           "mass": g.mass(scene.units)}
+    if g.volume is not None:
+        rec["volume"] = float(g.volume)
+    return rec
+
+
+def write_bindings(scene: Scene, path: Path) -> int:
+    """``bindings.npz``: every unconditional bind on a group with a material and a volume, in
+    global particle order — ``i`` (the bound particle), ``j`` (its partner), ``k`` = m_i·c (the
+    binding's force per length, Eq. 12 times the mass) and ``L0sq`` — so that post-processing
+    finds the stress from the bindings' forces (:mod:`rackstress.stress.tensor`) without the
+    scene. Returns the number of bindings (0: no file written)."""
+    b = bindings_of(scene)
+    if b is None:
+        return 0
+    idx = np.int32 if scene.n_particles < 2 ** 31 else np.int64
+    tmp = path.with_name(f".{path.name}.tmp.npz")
+    np.savez(tmp, i=b[0].astype(idx), j=b[1].astype(idx), k=b[2], L0sq=b[3])
+    tmp.replace(path)
+    return len(b[0])
+
+
+def bindings_of(scene: Scene):
+    """(i, j, k, L0²) of :func:`write_bindings` as arrays, or None when there are none."""
+    from rackstress.model.operators import Bind
+
+    I, J, K, Q = [], [], [], []
+    for target, seq in scene.operators.items():
+        g = scene.groups[target]
+        if g.material is None or g.volume is None:
+            continue
+        m = g.mass(scene.units)
+        for op in seq:
+            if not isinstance(op, Bind) or op.when:
+                continue
+            pl = op.pairs(g, scene.groups[op.source]).shifted(scene.offset(target),
+                                                             scene.offset(op.source))
+            I.append(pl.i)
+            J.append(pl.j)
+            K.append(m * pl.c)
+            Q.append(pl.q)
+    if not I:
+        return None
+    return (np.concatenate(I).astype(np.int64), np.concatenate(J).astype(np.int64),
+            np.concatenate(K), np.concatenate(Q))
 
 
 def scene_source(scene: Scene) -> str | None:
@@ -130,9 +190,129 @@ def summarize(scene: Scene, engine: str, mode: str, p_end: np.ndarray, steps_don
         s["error"] = {"message": str(error), "step": error.step, "group": error.group,
                       "particle": error.local, "index": error.index,
                       "atom_id": None if error.index is None else error.index + 1}
+    s["units"] = scene.units.name
+    if scene.units.physical:
+        for name, g in scene.groups.items():
+            if g.material is not None:
+                s["groups"][name]["material"] = {"name": g.material.name,
+                                                 **g.material.in_units(scene.units)}
     if extra:
         s.update(extra)
     return s
+
+
+def write_boundary(scene: Scene, out) -> None:
+    """``boundary.npz`` (CONTRACT.md): the supports (held atom ids and their fixed directions)
+    and the loads (atom ids and the external force on each at full load, gravity included,
+    in the scene's force unit)."""
+    from rackstress.engines.static import external_forces
+    from rackstress.errors import storage_error
+
+    fixed = scene.fixed()
+    held = np.flatnonzero(fixed.any(axis=1))
+    F = external_forces(scene)
+    loaded = np.flatnonzero(np.any(F != 0.0, axis=1))
+    path = Path(out) / "boundary.npz"
+    tmp = Path(out) / ".boundary.tmp.npz"
+    try:
+        np.savez(tmp, held_ids=(held + 1).astype(np.int64), held_mask=fixed[held],
+                 load_ids=(loaded + 1).astype(np.int64), load_force=F[loaded].astype(np.float64),
+                 units=np.str_(scene.units.name))
+        tmp.replace(path)
+    except OSError as exc:
+        raise storage_error(exc, "write", path) from None
+
+
+def load_path_warnings(scene: Scene) -> list[dict]:
+    """A load that never reaches a support: loaded particles with no chain of bindings to a
+    fixed particle (issue 22). One warning per group so affected, naming a particle."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    from rackstress.engines.static import _bind_pairs, external_forces
+
+    fixed = scene.fixed().any(axis=1)
+    F = external_forces(scene)
+    loaded = np.any(F != 0.0, axis=1)
+    if not loaded.any():
+        return []
+    I, J, _, _ = _bind_pairs(scene)
+    n = scene.n_particles
+    graph = sp.coo_matrix((np.ones(len(I)), (I, J)), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    supported = np.zeros(label.max() + 1, dtype=bool)
+    supported[label[fixed]] = True
+    lost = loaded & ~supported[label] & ~fixed
+    out = []
+    for name in scene.groups:
+        sl = scene.slice(name)
+        k = np.flatnonzero(lost[sl])
+        if len(k):
+            out.append({"kind": "load_path", "groups": [name],
+                        "message": f"{len(k)} loaded particle(s) of '{name}' (particle "
+                                   f"{int(k[0])} first) are bound to no support: their load "
+                                   "never reaches one (no chain of bindings to a held or "
+                                   "fixed particle)"})
+    return out
+
+
+def execute_static(scene: Scene, out: Path, engine: str, mode: str, *, progress: bool = True,
+                   comm=None, deck=None, extra: dict | None = None) -> dict:
+    """A static analysis into the prepared run directory ``out``: the equilibrium
+    (:func:`rackstress.engines.static.solve`), proven on the run's engine (its own forces at
+    that state), written as two frames (the original state at step 0 and the equilibrium at
+    step = Newton iterations), then ``summary.json`` with ``analysis``, ``settled``,
+    ``iterations``, ``residual`` and ``status`` ("settled" or "not settled")."""
+    import sys
+
+    from rackstress.engines.static import TOLERANCE, engine_residual, solve
+
+    comm = comm or world()
+    root = comm.Get_rank() == 0
+    t0 = time.perf_counter()
+    show = bool(progress and root and sys.stderr.isatty())
+    res = solve(scene, progress=show) if root else None
+    if comm.Get_size() > 1:
+        res = comm.bcast(res, root=0)
+    eng = open_engine(scene, out, engine, mode, 1, comm, deck)
+    try:
+        eng.enter_phase({})                     # frame 0: the original state
+        if engine == "reference":
+            engine_rel = engine_residual(scene, eng, res.p)
+            eng.step_count = res.iterations
+            if eng._dump is not None:
+                eng._dump.write(res.iterations, res.p)
+        else:
+            if eng._dump_id is not None:      # LAMMPS resets no timestep under a dump
+                eng.command(f"undump {eng._dump_id}")
+            eng.command(f"reset_timestep {max(1, res.iterations)}")
+            eng.step = max(1, res.iterations)
+            engine_rel = engine_residual(scene, eng, res.p)
+            if eng._dump_id is not None:
+                eng.command(f"write_dump all custom {eng._dump_file} id type mol x y z modify "
+                            "sort id format float %.10g append yes")
+        extra = dict(extra or {}, dump_every=1)
+        if engine == "lammps":
+            extra.update({"ranks": eng.comm.Get_size(), "lammps_version": eng.lmp.version(),
+                          "masses": eng.deck.masses})
+    finally:
+        eng.close()
+    settled = bool(res.settled and engine_rel <= TOLERANCE)
+    wall = time.perf_counter() - t0
+    extra.update({"analysis": "static", "settled": settled, "iterations": res.iterations,
+                  "residual": max(res.residual, engine_rel), "residual_solver": res.residual,
+                  "residual_engine": engine_rel, "tolerance": TOLERANCE,
+                  "applied_load": res.load, "solve_s": res.wall_s,
+                  "residual_history": res.history})
+    if root:
+        warnings = load_path_warnings(scene)
+        for w in warnings:
+            print(f"rackstress: warning: {scene.name}: {w['message']}", file=sys.stderr)
+        extra["warnings"] = warnings
+    status = "settled" if settled else "not settled"
+    summary = summarize(scene, engine, mode, res.p, res.iterations, wall, status, None, extra)
+    on_root(lambda: write_json(Path(out) / "summary.json", summary), comm)
+    return summary
 
 
 def open_engine(scene: Scene, out: Path | None, engine: str, mode: str, dump_every: int,
@@ -177,6 +357,11 @@ def execute(scene: Scene, out: Path, engine: str, mode: str, dump_every: int, *,
 
     comm = comm or world()
     root = comm.Get_rank() == 0
+    if root:
+        write_boundary(scene, out)
+    if scene.analysis == "static":
+        return execute_static(scene, out, engine, mode, progress=progress, comm=comm, deck=deck,
+                              extra=extra)
     extra = dict(extra or {}, dump_every=dump_every)
     if records is None:
         records = [PhaseEnd(0, None, {}, 0, scene.original_positions())]
@@ -249,9 +434,13 @@ def plan(scene: Scene, engine: str = "lammps", mode: str = "exact",
     from rackstress.model.stability import check_dt
     from rackstress.runs.fingerprint import fingerprint
 
+    if scene.analysis == "static" and mode == "fast" and engine == "lammps":
+        raise RunDirError(f"scene '{scene.name}' is a static analysis: its equilibrium is that "
+                          "of Eq. 12 exactly, which --mode fast replaces by harmonic bonds "
+                          "(equal only to first order); run it in --mode exact")
     if engine not in ENGINES:
         raise RunDirError(f"unknown engine '{engine}'; choose one of {', '.join(ENGINES)}")
-    dump_every = dump_every or default_dump_every(scene)
+    dump_every = 1 if scene.analysis == "static" else (dump_every or default_dump_every(scene))
     if dump_every < 1:
         raise RunDirError(f"--dump-every must be >= 1, got {dump_every}")
     if engine == "lammps" and dump_every > LAMMPS_MAX_INT:
@@ -263,8 +452,10 @@ def plan(scene: Scene, engine: str = "lammps", mode: str = "exact",
         if comm.Get_size() > 1:
             raise RunDirError("the reference engine runs on one rank; run it without mpiexec")
     fp = fingerprint(scene, engine=engine, mode=mode, dump_every=dump_every)
-    pred = check_dt(scene, allow=allow_unstable, pred=_cached_prediction(fp))
-    _cache_prediction(fp, pred)
+    pred = None
+    if scene.analysis != "static":      # a static run has no time step to check (Eq. 5)
+        pred = check_dt(scene, allow=allow_unstable, pred=_cached_prediction(fp))
+        _cache_prediction(fp, pred)
     check_memory(scene, engine, comm.Get_size())
     # LAMMPS runs the exact operators in the compiled plugin when it is there for this LAMMPS
     # (docs/plugin.md), else in the Python callback (one line says why); a resumed run keeps it
@@ -379,6 +570,7 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
 
     def start():
         from rackstress.errors import storage_error
+        from rackstress.lib.runfiles import BINDINGS
 
         claim(out, overwrite)
         dump = "moving" if (deck is not None and deck.dump_moving) else "all"
@@ -395,6 +587,7 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
                                          "scene": scene.name, "params": scene.params})
         try:
             (out / "particles.data").write_text(deck.data_text())
+            write_bindings(scene, out / BINDINGS)
             if engine == "lammps":
                 (out / "in.lammps").write_text(deck.input_text(dump_every))
         except OSError as exc:

@@ -95,13 +95,13 @@ DEFAULTS = {"dt": 0.01, "cycles": 1, "bound": 1.0e4, "steps": 1200}
 OVERRIDABLE = ("dt", "steps", "duration", "cycles", "bound")
 
 _TOP_KEYS = ("name", "dt", "cycles", "bound", "steps", "duration", "params", "group",
-             "operator", "phase")
+             "operator", "phase", "units", "analysis", "load", "support")
 _BUILTIN_KEYS = ("scene", "params")
 #: How a plain group's particles are made: exactly one of these (or ``rack``).
 _SOURCES = ("positions", "lattice", "mesh", "fill", "parts")
 _GROUP_KEYS = ("name", "kind", "rack", "offset") + _SOURCES + (
     "spacing", "packing", "origin", "translate", "rotate", "scale", "radius", "regions", "held",
-    "velocity")
+    "velocity", "material", "solid")
 _LATTICE_KEYS = ("shape", "spacing", "origin")
 _PHASE_KEYS = ("name", "steps", "duration", "vars")
 #: Region shapes (docs/scenes.md "Regions"): the one key a region table names.
@@ -119,90 +119,9 @@ _OP_KEYS = {
 
 
 # --------------------------------------------------------------------------- field checks
-class _Ctx:
-    """Where we are in the file, for messages: ``file: [[group]] 'a' (#2): radius: ...``."""
-
-    def __init__(self, file: str, where: str = ""):
-        self.file, self.where = file, where
-
-    def at(self, where: str) -> "_Ctx":
-        return _Ctx(self.file, where)
-
-    def error(self, msg: str, field: str | None = None) -> SceneError:
-        parts = [self.file]
-        if self.where:
-            parts.append(self.where)
-        if field:
-            parts.append(field)
-        return SceneError(": ".join(parts) + ": " + msg)
-
-
-def _describe(value) -> str:
-    return f"{value!r} ({_type_name(value)})"
-
-
-def _type_name(value) -> str:
-    return {bool: "a boolean", int: "an integer", float: "a number", str: "a string",
-            list: "an array", dict: "a table"}.get(type(value), type(value).__name__)
-
-
-def _is_number(x) -> bool:
-    return isinstance(x, (int, float)) and not isinstance(x, bool)
-
-
-def _check_keys(ctx: _Ctx, table: dict, allowed, what: str = "key") -> None:
-    unknown = [k for k in table if k not in allowed]
-    if unknown:
-        hint = did_you_mean(unknown[0], allowed)
-        raise ctx.error(f"unknown {what} {', '.join(map(repr, unknown))}"
-                        f"{' (' + hint + ')' if hint else ''}; allowed: {', '.join(allowed)}")
-
-
-def _hint(word, names) -> str:
-    """``" (did you mean 'X'?)"`` for the closest of ``names``, or ``""``."""
-    hint = did_you_mean(str(word), list(names))
-    return f" ({hint})" if hint else ""
-
-
-def _table(ctx: _Ctx, value, field: str) -> dict:
-    if not isinstance(value, dict):
-        raise ctx.error(f"must be a table, got {_describe(value)}", field)
-    return value
-
-
-def _string(ctx: _Ctx, value, field: str) -> str:
-    if not isinstance(value, str) or not value:
-        raise ctx.error(f"must be a non-empty string, got {_describe(value)}", field)
-    return value
-
-
-def _number(ctx: _Ctx, value, field: str, positive: bool = False) -> float:
-    if not _is_number(value) or not math.isfinite(value):
-        raise ctx.error(f"must be a finite number, got {_describe(value)}", field)
-    if positive and not value > 0:
-        raise ctx.error(f"must be positive, got {value!r}", field)
-    return float(value)
-
-
-def _integer(ctx: _Ctx, value, field: str, minimum: int = 0) -> int:
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise ctx.error(f"must be an integer, got {_describe(value)}", field)
-    if value < minimum:
-        raise ctx.error(f"must be >= {minimum}, got {value!r}", field)
-    return int(value)
-
-
-def _vec3(ctx: _Ctx, value, field: str) -> tuple:
-    if (not isinstance(value, list) or len(value) != 3
-            or not all(_is_number(x) and math.isfinite(x) for x in value)):
-        raise ctx.error(f"must be three finite numbers [x, y, z], got {value!r}", field)
-    return tuple(float(x) for x in value)
-
-
-def _require(ctx: _Ctx, table: dict, field: str):
-    if field not in table:
-        raise ctx.error(f"missing required field '{field}'")
-    return table[field]
+from rackstress.scenes.fields import (_Ctx, _array_of_tables, _check_keys, _describe, _hint,  # noqa: E402,F401
+                                      _integer, _is_number, _number, _require, _string, _table,
+                                      _type_name, _vec3)
 
 
 # --------------------------------------------------------------------------- entry point
@@ -523,15 +442,37 @@ def _build_explicit(ctx: _Ctx, data: dict, overrides: dict, user: dict) -> Scene
     dt = settings["dt"]
 
     base = Path(ctx.file).resolve().parent
+    from rackstress.scenes import physical
+
+    unit_system = physical.scene_units(ctx, data)
     groups = _groups(ctx, data["group"], base)
+    physical.check_materials(ctx, groups, unit_system)
+    select = lambda c, value, field, o: _mask(c, _region(c, value, field, base), o, field)  # noqa: E731
+    physical.supports(ctx, data.get("support", []), groups, select)
+    ramp = physical.ramp_of(ctx, data.get("load", []))
+    if ramp is not None:
+        settings["ramp"] = physical.ramp_phases(ctx, data, ramp, length, dt)
     phases = _phases(ctx, data, settings, length)
     operators = _operators(ctx, data.get("operator", []), groups, phases, base)
+    operators = physical.solids(ctx, groups, operators, unit_system)
+    operators = physical.loads(ctx, data.get("load", []), groups, operators, unit_system,
+                               select, ramp)
+    analysis = physical.analysis_of(ctx, data, groups, operators, ramp)
 
     params = {"file": ctx.file, "dt": dt, "cycles": settings["cycles"],
               "bound": settings["bound"], **user}
     try:
         scene = Scene(name, groups, operators, phases, dt=dt, cycles=settings["cycles"],
-                      bound=settings["bound"], params=params)
+                      bound=settings["bound"], params=params, units=unit_system,
+                      analysis=analysis)
+        if analysis == "static":
+            scene.params["analysis"] = "static"
+        elif unit_system.physical and "dt" not in data and "dt" not in overrides:
+            # physical time: a solid's bindings are stiff (ω ~ 10⁶/s for aluminium at 1 mm);
+            # half the predicted stability limit of Eq. 5, durations kept
+            from rackstress.model.stability import predict
+
+            scene = scene.with_dt(0.5 * predict(scene)["t_max"])
         if "phase" not in data:
             if length and length[0] == "duration":
                 scene.params["duration"] = length[1]
@@ -549,13 +490,6 @@ def _build_explicit(ctx: _Ctx, data: dict, overrides: dict, user: dict) -> Scene
     except SceneError as exc:
         raise SceneError(f"{ctx.file}: {exc}") from None
     return scene
-
-
-def _array_of_tables(ctx: _Ctx, value, table: str) -> list:
-    if not isinstance(value, list) or not all(isinstance(t, dict) for t in value):
-        raise ctx.error(f"must be an array of tables ([[{table}]] sections), got "
-                        f"{_describe(value)}", f"[[{table}]]")
-    return value
 
 
 def _groups(ctx: _Ctx, value, base: Path) -> dict:
@@ -651,6 +585,7 @@ def _plain_group(c: _Ctx, t: dict, base: Path) -> Group:
         o = np.array([_vec3(c, p, f"positions[{i}]") for i, p in enumerate(pos)], dtype=float)
     elif source == "lattice":
         o, spacing = _lattice(c, t["lattice"], "lattice")
+        packing, shape = "cubic", None
     else:
         spacing = _number(c, _require(c, t, "spacing"), "spacing", positive=True)
         packing = t.get("packing", "cubic")
@@ -697,6 +632,8 @@ def _plain_group(c: _Ctx, t: dict, base: Path) -> Group:
             except SceneError as exc:
                 raise SceneError(str(exc)) from None
         o = union_positions(*filled_o, *blocks)
+        shape = None if blocks or not solids else (solids[0] if len(solids) == 1
+                                                    else rg.Union(solids))
     if "radius" in t:
         r = _radii(c, t["radius"], len(o))
     elif spacing is not None:
@@ -708,6 +645,28 @@ def _plain_group(c: _Ctx, t: dict, base: Path) -> Group:
     v0 = _vec3(c, t["velocity"], "velocity") if "velocity" in t else None
     g = _wrap(c, lambda: Group(t["name"], o, r, kind=_kind(c, t, "part"), held=held, v0=v0))
     _regions(c, t, g, base)
+    if "material" in t or "solid" in t:
+        if source == "positions":
+            raise c.error("a material part is a filled lattice (mesh, fill, parts or lattice), "
+                          "whose spacing sets each particle's volume; positions have none",
+                          "material" if "material" in t else "solid")
+        if "material" not in t:
+            raise c.error("'solid' says whether a material part is bound as the elastic "
+                          "lattice; give the part a material", "solid")
+        from rackstress.model.materials import material
+
+        try:
+            g.material = material(t["material"])
+        except SceneError as exc:
+            raise c.error(str(exc), "material") from None
+        if packing != "cubic":
+            raise c.error("a material part is calibrated on the simple-cubic lattice "
+                          "(docs/calibration.md): leave packing at \"cubic\"", "packing")
+        g.volume = float(spacing) ** 3
+        solid = t.get("solid", True)
+        if not isinstance(solid, bool):
+            raise c.error(f"must be true or false, got {_describe(solid)}", "solid")
+        g.meta["solid"] = {"spacing": float(spacing), "shape": shape, "bind": solid}
     return g
 
 
@@ -887,6 +846,8 @@ def _wrap(c: _Ctx, make):
 
 def _phases(ctx: _Ctx, data: dict, settings: dict, length) -> list:
     dt = settings["dt"]
+    if "ramp" in settings:
+        return settings["ramp"]
     if "phase" not in data:
         if length is not None and length[0] == "duration":
             return [Phase("run", steps_for(length[1], dt), {}, length[1])]

@@ -10,9 +10,12 @@
     ``original`` (o),
     ``displacement`` (p − o) and its magnitude ``displacement_magnitude``, ``velocity`` where the
     dump holds vx vy vz (geometry in float32), and every measure by its name (``paper``,
-    ``accumulated``, ``strain``, ``d2min``, ``virial`` if recorded, and any measure
-    :func:`rackstress.stress.post.compute_fields` adds) in float64 — the very numbers of
-    ``summary.json``'s peaks. No field data: the iteration is the PVD's time value.
+    ``accumulated``, ``strain``, ``d2min``, ``virial`` if recorded, any measure
+    :func:`rackstress.stress.post.compute_fields` adds; for a scene with a material
+    ``von_mises`` in its stress unit, ``stress`` (6 components xx yy zz xy yz xz, ParaView's
+    symmetric-tensor order), ``principal`` (3, largest first), ``safety`` and ``bind_strain``)
+    in float64 — the very numbers of ``summary.json``'s peaks. ``displacement`` is in the
+    scene's length unit. No field data: the iteration is the PVD's time value.
     Two variants (``fmt``): ``"paraview"`` (the default) stores each array raw in the file's
     appended section, zlib-compressed, which ParaView and pyvista (VTK's XML readers) read: the
     arrays that do not change (ids, groups, radii, original positions) and the resting particles
@@ -215,6 +218,8 @@ def write_vtk(run, fields, outdir, progress: bool = False, fmt: str = "paraview"
                 if v is not None:
                     pd.AddArray(arr(v.astype(f32), "velocity"))
                 for m, vals in fields.values.items():
+                    pd.AddArray(arr(vals[k], m))
+                for m, vals in getattr(fields, "extras", {}).items():   # stress tensor, ...
                     pd.AddArray(arr(vals[k], m))
                 name = frame_name(step)
                 writer.SetInputData(poly)

@@ -52,11 +52,13 @@ frame, and for a sediment the vertical displacement of its particles (footprints
 from __future__ import annotations
 
 import re
+from pathlib import Path
 
 import numpy as np
 from MDAnalysis.analysis.base import AnalysisBase
 from scipy.spatial import cKDTree
 
+from rackstress.stress import tensor as T
 from rackstress.stress.dump import DumpColumnsError, StressInputError
 from rackstress.stress.fit import FITS
 
@@ -526,6 +528,139 @@ class VirialStress(_RunAnalysis):
         return vm
 
 
+# ----------------------------------------------------------------------------- stress
+def material_parts(run) -> dict:
+    """Part name → its ``scene.json`` record, for the parts with a material and a volume."""
+    return {g["name"]: g for g in (run.scene or {}).get("groups", [])
+            if g.get("material") and g.get("volume") and g["name"] in run.parts}
+
+
+def stress_unit(run) -> str:
+    """The scene's stress unit (``scene.json`` ``units.stress``; "stress units" if none)."""
+    u = (run.scene or {}).get("units") or {}
+    return u.get("stress") if u.get("name") not in (None, "paper") else "stress units"
+
+
+class ParticleStress(_RunAnalysis):
+    """Stress per particle from the bindings' forces, in the scene's stress unit.
+
+    For the parts with a material (``scene.json``: ``material``, ``volume``) and the run's
+    ``bindings.npz`` (written when the run starts): the bindings' virial per particle volume
+    W_i/V_i (:mod:`rackstress.stress.tensor`; ``method="completed"``: surface-completed, measured
+    and not the default — docs/stress.md).
+    ``results``: ``per_particle`` and ``von_mises`` (n_frames × n_atoms), ``stress`` (n_frames ×
+    n_atoms × 6, xx yy zz xy yz xz), ``principal`` (× 3, largest first), ``safety`` (yield / von
+    Mises where the material gives a yield) and ``bind_strain`` (each particle's largest binding
+    strain |d/L0 − 1|, the small-strain check). NaN on the other parts.
+
+    Examples
+    --------
+    >>> s = ParticleStress(load_run("runs/bar")).run()                     # doctest: +SKIP
+    >>> s.results.von_mises[-1].max(), s.results.units                     # doctest: +SKIP
+    (27.1, 'MPa')
+    """
+
+    NAME = "von_mises"
+    LABEL = "von Mises stress"
+    UNITS = "stress units"
+    METHODS = ("virial", "completed")
+
+    def __init__(self, run, parts=None, method: str = "virial", **kwargs):
+        mats = material_parts(run)
+        super().__init__(run, list(mats) if parts is None else parts, **kwargs)
+        if method not in self.METHODS:
+            raise StressInputError(f"unknown stress method '{method}'; choose one of "
+                                   f"{', '.join(self.METHODS)}")
+        self.method = method
+        self.UNITS = stress_unit(run)
+        self.bindings = read_bindings(run)
+        self._mat = mats
+
+    def _prepare(self):
+        super()._prepare()
+        run, n = self.run_data, self.run_data.n_atoms
+        shape = (self.n_frames, n)
+        self.results.von_mises = self.results.per_particle
+        self.results.stress = np.full(shape + (6,), np.nan)
+        self.results.principal = np.full(shape + (3,), np.nan)
+        self.results.safety = np.full(shape, np.nan)
+        self.results.bind_strain = np.full(shape, np.nan)
+        V = np.full(n, np.nan)
+        self._yield = np.full(n, np.nan)
+        mine = [p for p in self.parts if p.name in self._mat]
+        for part in mine:
+            rec = self._mat[part.name]
+            V[part.index] = float(rec["volume"])
+            y = rec["material"].get("yield")
+            if y:
+                self._yield[part.index] = float(y)
+        self._mask = np.zeros(n, dtype=bool)
+        for part in mine:
+            self._mask[part.index] = True
+        b = self.bindings
+        if b is not None:                    # only the bindings on the analysed particles,
+            keep = self._mask[b[0]]          # grouped by particle (np.maximum.reduceat below)
+            order = np.argsort(b[0][keep], kind="stable")
+            b = tuple(x[keep][order] for x in b)
+            i = b[0]
+            self._starts = np.flatnonzero(np.r_[True, i[1:] != i[:-1]]) if len(i) else i
+        self._b = b
+        if b is None or not len(b[0]):
+            self._W2S = None
+            self._mask[:] = False
+            return
+        self._V = V
+        self._gather = T.incidence(b[0], n)
+        if self.method == "completed":
+            A = T.binding_moment(run.o, b[0], b[1], b[2], n)
+            self._W2S = T.completion(A, V, [p.index for p in mine])
+        else:
+            self._W2S = None
+
+    def _measure(self, p):
+        k, out = self._frame_index, np.full(len(p), np.nan)
+        if not self._mask.any():
+            return out
+        b = self._b
+        d = p[b[1]] - p[b[0]]
+        d2 = np.einsum("ij,ij->i", d, d)
+        s = T.stress(p, b, self._W2S, self._V, W=T.virial_of(d, d2, b[2], b[3], self._gather))
+        s[~self._mask] = np.nan
+        vm = T.von_mises(s)
+        self.results.stress[k] = T.to_output(s)
+        self.results.principal[k] = T.principal(s)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            self.results.safety[k] = np.where(vm > 0, self._yield / vm, np.inf)
+        self.results.safety[k][~np.isfinite(self._yield) | ~self._mask] = np.nan
+        strain = np.abs(np.sqrt(d2 / b[3]) - 1.0)
+        bs = np.full(len(p), np.nan)
+        bs[b[0][self._starts]] = np.maximum.reduceat(strain, self._starts)
+        bs[~self._mask] = np.nan
+        self.results.bind_strain[k] = bs
+        return vm
+
+
+def read_bindings(run):
+    """(i, j, k, L0²) of the run's ``bindings.npz`` (ids → id-order rows), or None."""
+    from rackstress.lib.runfiles import BINDINGS
+
+    path = Path(run.rundir) / BINDINGS
+    if not path.is_file():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            i, j, k, q = (z[x] for x in ("i", "j", "k", "L0sq"))
+    except (OSError, KeyError, ValueError) as exc:
+        raise StressInputError(f"{path}: not a bindings file rackstress wrote ({exc}); run the "
+                               "scene again to write it") from None
+    n = run.n_atoms
+    if len(i) and (min(i.min(), j.min()) < 0 or max(i.max(), j.max()) >= n):
+        raise StressInputError(f"{path}: a binding names particle "
+                               f"{int(max(i.max(), j.max()))} but the run has {n}: the file is "
+                               "not of this run")
+    return i.astype(np.int64), j.astype(np.int64), k.astype(np.float64), q.astype(np.float64)
+
+
 # ----------------------------------------------------------------------------- motion
 class PartMotion(AnalysisBase):
     """Per part and frame: centre of mass and bounding box; per sediment: footprints.
@@ -572,4 +707,5 @@ class PartMotion(AnalysisBase):
 
 #: measure name → analysis class (what ``rackstress render --measure`` offers).
 MEASURES = {cls.NAME: cls for cls in (DesiredPositionDistance, AccumulatedDistance,
-                                      VonMisesStrain, NonAffineD2min, VirialStress)}
+                                      VonMisesStrain, NonAffineD2min, VirialStress,
+                                      ParticleStress)}

@@ -3,13 +3,18 @@
 :func:`compute_fields` runs the measures of :mod:`rackstress.stress.measures` over every dumped
 frame once — the paper's distance from the desired position (robust fit, Section 5.2), its time
 integral, von Mises shear strain and D²min (Falk & Langer), and the virial stress if the dump
-holds it — and keeps them as a :class:`Fields` (n_frames × n_atoms per measure, float64), cached
-in ``RUNDIR/measures.npz`` so that pictures, report and files reuse them instead of recomputing.
+holds it, and for parts with a material the von Mises stress from the bindings' forces in the
+scene's stress unit, with the stress tensor, principal stresses, factor of safety and binding
+strain as :data:`EXTRAS` (docs/stress.md) — and keeps them as a :class:`Fields` (n_frames ×
+n_atoms per measure, float64), cached in ``RUNDIR/measures.npz`` so that pictures, report and
+files reuse them instead of recomputing. :attr:`Fields.default` is the measure that leads:
+``von_mises`` for a scene with a material, else ``paper``.
 
 :func:`peaks` finds, for every group and measure, the largest value over the whole run: value,
 iteration, frame, particle (LAMMPS atom id and index in its group) and its position at that
-iteration. :func:`postprocess` writes them into ``summary.json`` (``groups.<name>.peak.<measure>``,
-atomically) and writes the VTK time series (``RUNDIR/vtk/run.pvd``) and, on request, a LAMMPS dump
+iteration. :func:`stress_warnings` names the parts strained beyond small-strain validity or
+stressed beyond yield. :func:`postprocess` writes them into ``summary.json``
+(``groups.<name>.peak.<measure>``, ``warnings``, atomically) and writes the VTK time series (``RUNDIR/vtk/run.pvd``) and, on request, a LAMMPS dump
 with the measures as named columns (``RUNDIR/stress.dump``; see :mod:`rackstress.stress.export`).
 
 Example
@@ -32,7 +37,8 @@ import numpy as np
 from rackstress.lib.jsonio import write_json
 from rackstress.lib.runfiles import CACHE, STRESS_DUMP, STRESS_JSON, VTK_DIR
 from rackstress.stress.dump import StressInputError
-from rackstress.stress.measures import (VirialStress, measure_frames, positions,
+from rackstress.stress.measures import (ParticleStress, VirialStress, material_parts,
+                                        measure_frames, positions, read_bindings,
                                         stress_columns)
 
 #: The measures every run gets, in this order (``virial`` too when the dump recorded it).
@@ -43,6 +49,7 @@ LABELS = {
     "strain": ("von Mises shear strain", "dimensionless"),
     "d2min": ("non-affine displacement D²min", "length² units"),
     "virial": ("per-atom von Mises stress × volume", "energy units"),
+    "von_mises": ("von Mises stress", "stress units"),
 }
 #: Further measures, computed after the built-in ones by :func:`compute_fields` and carried
 #: everywhere the built-in ones go (peaks, VTK point arrays, pictures, report) with no special
@@ -63,6 +70,13 @@ def register_measure(name: str, label: str, units: str, fn) -> None:
     EXTRA_MEASURES[name] = fn
 
 
+#: Per-particle fields kept beside the ranked measures (not ranked by their maximum: a tensor,
+#: a vector, a factor of safety whose *smallest* value matters): written into the VTK files,
+#: kept in float32 (11 values a particle and frame; ``von_mises`` itself stays float64).
+EXTRAS = ("stress", "principal", "safety", "bind_strain")
+#: Small-strain validity: a binding stretched or shortened by more than this fraction
+#: (|d/L0 − 1|) makes the linear-elastic reading of the stress doubtful (warning).
+STRAIN_LIMIT = 0.05
 #: Largest n_atoms × n_frames post-processed (each measure keeps n_frames × n_atoms float64,
 #: five such arrays while computing): about 1 GB at this size.
 MAX_VALUES = 25_000_000
@@ -74,8 +88,9 @@ class TooLargeError(StressInputError):
 
 #: The fit of the desired position (one for summary, pictures, report and files).
 FIT = "robust"
-#: 2: a sediment's paper measure is |p − o| (no rest shape, measures.paper_frames)
-CACHE_VERSION = 2
+#: 2: a sediment's paper measure is |p − o| (no rest shape, measures.paper_frames);
+#: 3: the stress fields (extras) and the scene's units kept beside the measures
+CACHE_VERSION = 3
 
 
 @dataclass
@@ -86,14 +101,26 @@ class Fields:
     values: dict                            # measure → (n_frames, n_atoms) float64
     fit: str = FIT
     timings: dict = field(default_factory=dict)
+    #: measure → its unit where it is not the generic one of :data:`LABELS` (the scene's units)
+    units: dict = field(default_factory=dict)
+    #: name → (n_frames, n_atoms[, k]) per-particle fields of :data:`EXTRAS`
+    extras: dict = field(default_factory=dict)
 
     @property
     def measures(self) -> list:
         return list(self.values)
 
+    def unit(self, measure: str) -> str:
+        return self.units.get(measure) or LABELS[measure][1]
+
     def label(self, measure: str) -> str:
-        name, units = LABELS[measure]
-        return f"{name} [{units}]"
+        return f"{LABELS[measure][0]} [{self.unit(measure)}]"
+
+    @property
+    def default(self) -> str:
+        """The measure pictures, headline and peaks lead with: von Mises stress for a scene
+        with a material, else the paper's distance from the desired position."""
+        return "von_mises" if "von_mises" in self.values else "paper"
 
 
 # ----------------------------------------------------------------------------- computing
@@ -113,19 +140,23 @@ def _load_cache(run, path: Path) -> Fields | None:
             if json.loads(str(z["stamp"])) != _stamp(run):
                 return None
             values = {m: z[m] for m in json.loads(str(z["measures"]))}
+            extras = {m: z["x_" + m] for m in json.loads(str(z["extras"]))}
+            units = json.loads(str(z["units"]))
             steps = z["steps"]
     except (OSError, KeyError, ValueError):
         return None
     if not np.array_equal(steps, run.steps):
         return None
-    return Fields(steps, values)
+    return Fields(steps, values, units=units, extras=extras)
 
 
 def _save_cache(run, fields: Fields, path: Path) -> None:
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}.npz")
     try:
         np.savez(tmp, stamp=json.dumps(_stamp(run)), measures=json.dumps(fields.measures),
-                 steps=fields.steps, **fields.values)
+                 extras=json.dumps(list(fields.extras)), units=json.dumps(fields.units),
+                 steps=fields.steps, **fields.values,
+                 **{"x_" + m: v for m, v in fields.extras.items()})
         os.replace(tmp, path)
     except OSError:
         tmp.unlink(missing_ok=True)       # a cache that cannot be written is only a cache
@@ -198,6 +229,8 @@ def compute_fields(run, cache: bool = True, progress: bool = False,
     from rackstress.lib.progress import progress_bar
 
     virial = stress_columns(run.index.columns) is not None
+    stress = (ParticleStress(run) if material_parts(run) and read_bindings(run) is not None
+              else None)
     tty = bool(progress) and sys.stderr.isatty()
     with progress_bar(run.index.n_frames, tty, "measures") as bar:
         bar.unit = "frame"
@@ -205,9 +238,19 @@ def compute_fields(run, cache: bool = True, progress: bool = False,
     values = {m: got[m] for m in MEASURES}
     if virial:
         values["virial"] = VirialStress(run).run().results.per_particle
+    units, extras = {}, {}
+    if stress is not None:
+        r = stress.run().results
+        values["von_mises"] = r.von_mises
+        units["von_mises"] = stress.UNITS
+        extras = {m: r[m].astype(np.float32) for m in EXTRAS}    # pictures' precision: half
+    u = (run.scene or {}).get("units") or {}
+    if u.get("name") not in (None, "paper"):          # the scene's own units, not generic ones
+        units.update({"paper": u["length"], "accumulated": f"{u['length']}·{u['time']}",
+                      "d2min": f"{u['length']}²"})
     for name, fn in EXTRA_MEASURES.items():
         values[name] = fn(run, values)
-    fields = Fields(got["steps"], values)
+    fields = Fields(got["steps"], values, units=units, extras=extras)
     fields.timings["compute_s"] = time.perf_counter() - t0
     fields.timings["cached"] = False
     if save and not run.truncation:
@@ -247,7 +290,7 @@ def peaks(run, fields: Fields) -> dict:
                             "frame": int(k), "time": float(fields.steps[k] * run.dt),
                             "particle": int(ids[row]), "index": int(j),
                             "original": [float(x) for x in run.o[row]],
-                            "units": LABELS[m][1]}
+                            "units": fields.unit(m)}
             need.setdefault(k, []).append((name, m, row))
     for k, todo in sorted(need.items()):
         p = positions(run.trajectory[k])
@@ -264,6 +307,81 @@ def overall_peak(run, group_peaks: dict, measure: str = "paper") -> dict | None:
         if rec is not None and (best is None or rec["value"] > best["value"]):
             best = {"group": part.name, "measure": measure, **rec}
     return best
+
+
+# ----------------------------------------------------------------------------- warnings
+#: the warnings post-processing adds to ``summary.json`` (replaced, not repeated, when run again)
+STRESS_WARNINGS = ({"kind": "large_strain"}, {"kind": "yield_exceeded"})
+
+
+def _argmax(v: np.ndarray):
+    """(frame, column) of the largest finite value of a (frames × n) array, or None."""
+    fin = np.isfinite(v)
+    if not fin.any():
+        return None
+    return divmod(int(np.argmax(np.where(fin, v, -np.inf))), v.shape[1])
+
+
+def stress_warnings(run, fields: Fields) -> list:
+    """The parts strained beyond small-strain validity and the parts stressed beyond yield.
+
+    ``large_strain``: some binding of the part stretched or shortened by more than
+    :data:`STRAIN_LIMIT` (|d/L0 − 1|, the bindings' own engineering strain). ``yield_exceeded``:
+    the part's von Mises stress above its material's yield strength. Each names the part, the
+    particle (LAMMPS atom id), the iteration and the value.
+    """
+    out = []
+    mats = material_parts(run)
+    bs, vm = fields.extras.get("bind_strain"), fields.values.get("von_mises")
+    for name, rec in mats.items():
+        part = run.parts[name]
+        if bs is not None and (hit := _argmax(bs[:, part.index])) is not None:
+            k, j = hit
+            value = float(bs[k, part.index[j]])
+            if value > STRAIN_LIMIT:
+                pid, it = int(run.data.ids[part.index[j]]), int(fields.steps[k])
+                out.append({"kind": "large_strain", "group": name, "particle": pid,
+                            "iteration": it, "value": value, "limit": STRAIN_LIMIT,
+                            "message": f"part '{name}': a binding of particle {pid} is strained "
+                            f"{100 * value:.3g} % (|d/L0 - 1|) at iteration {it}, beyond the "
+                            f"~{100 * STRAIN_LIMIT:g} % of small-strain validity: the stress, "
+                            "a linear-elastic reading, is doubtful there"})
+        y = (rec.get("material") or {}).get("yield")
+        if vm is not None and y and (hit := _argmax(vm[:, part.index])) is not None:
+            k, j = hit
+            value = float(vm[k, part.index[j]])
+            if value > y:
+                pid, it = int(run.data.ids[part.index[j]]), int(fields.steps[k])
+                over = int(np.sum(vm[k, part.index] > y))
+                unit = fields.unit("von_mises")
+                mat = rec["material"].get("name", "its material")
+                out.append({"kind": "yield_exceeded", "group": name, "particle": pid,
+                            "iteration": it, "value": value, "yield": float(y), "units": unit,
+                            "particles_above": over,
+                            "message": f"part '{name}': von Mises stress {value:.4g} {unit} at "
+                            f"particle {pid}, iteration {it}, exceeds the yield strength "
+                            f"{y:.4g} {unit} of {mat} ({over} particle(s) above yield then); "
+                            "the part would yield: a linear-elastic answer beyond it is not "
+                            "the real part's"})
+    return out
+
+
+def safety(run, fields: Fields) -> dict:
+    """Per part with a yield strength: the smallest factor of safety (yield / von Mises) over
+    the run, where and when."""
+    out = {}
+    sf = fields.extras.get("safety")
+    if sf is None:
+        return out
+    for name in material_parts(run):
+        part = run.parts[name]
+        hit = _argmax(-sf[:, part.index])
+        if hit is None:
+            continue
+        k, j = hit
+        out[name] = {"min": float(sf[k, part.index[j]]), "iteration": int(fields.steps[k]),
+                     "particle": int(run.data.ids[part.index[j]]), "frame": int(k)}
+    return out
 
 
 # ----------------------------------------------------------------------------- the step
@@ -313,11 +431,14 @@ def postprocess(rundir, vtk: bool = True, dump: bool = False, progress: bool = F
     out.mkdir(parents=True, exist_ok=True)
     fields = compute_fields(run, progress=progress)
     group_peaks = peaks(run, fields)
-    info = {"fit": FIT, "measures": {m: {"label": LABELS[m][0], "units": LABELS[m][1]}
+    info = {"fit": FIT, "measures": {m: {"label": LABELS[m][0], "units": fields.unit(m)}
                                      for m in fields.measures},
+            "default_measure": fields.default,
             "frames": len(fields.steps), "first_iteration": int(fields.steps[0]),
             "last_iteration": int(fields.steps[-1]),
-            "peak": overall_peak(run, group_peaks), "groups": group_peaks, "files": {},
+            "peak": overall_peak(run, group_peaks, fields.default), "groups": group_peaks,
+            "warnings": stress_warnings(run, fields), "safety": safety(run, fields),
+            "files": {},
             "timings": {"measures_s": fields.timings.get("compute_s", 0.0)}}
     from rackstress.stress import export
 
@@ -382,7 +503,13 @@ def add_to_summary(summary_path: Path, info: dict) -> dict:
     for name, rec in info["groups"].items():
         groups.setdefault(name, {})["peak"] = rec
     summary["stress"] = {"fit": info["fit"], "peak": info["peak"], "files": info["files"],
-                         "measures": info["measures"]}
+                         "measures": info["measures"],
+                         "default_measure": info.get("default_measure", "paper")}
+    if info.get("safety"):
+        summary["stress"]["safety"] = info["safety"]
+    kinds = {w["kind"] for w in STRESS_WARNINGS}
+    kept = [w for w in summary.get("warnings") or [] if w.get("kind") not in kinds]
+    summary["warnings"] = kept + list(info.get("warnings") or [])
     write_json(summary_path, summary)
     return summary
 
@@ -398,10 +525,16 @@ def describe(info: dict) -> list:
                      f"at iteration {pk['iteration']}, particle {pk['particle']} at "
                      f"({', '.join(f'{x:.3g}' for x in pk['position'])})")
     for name, rec in info["groups"].items():
-        shown = [f"{m}={p['value']:.4g} (iteration {p['iteration']}, particle {p['particle']})"
-                 for m in ("paper", "strain") if (p := rec.get(m)) is not None]
+        shown = [f"{m}={p['value']:.4g}{' ' + p['units'] if m == 'von_mises' else ''} "
+                 f"(iteration {p['iteration']}, particle {p['particle']})"
+                 for m in ("von_mises", "paper", "strain") if (p := rec.get(m)) is not None]
         if shown:
             lines.append(f"  {name:12s} peak " + "; ".join(shown))
+    for name, sf in (info.get("safety") or {}).items():
+        lines.append(f"  {name:12s} smallest factor of safety {sf['min']:.3g} (iteration "
+                     f"{sf['iteration']}, particle {sf['particle']})")
+    for w in info.get("warnings") or []:
+        lines.append(f"  warning: {w['message']}")
     for key, path in info["files"].items():
         lines.append(f"  {key}: {path}")
     return lines

@@ -128,6 +128,26 @@ def affine_fit(o: np.ndarray, p: np.ndarray, cutoff: float | None = None):
     ``cutoff`` defaults to 1.5 × the median nearest-neighbour spacing, as the ``strain``
     measure's. NaN where the neighbourhood is collinear or empty.
     """
+    F, (I, d, d0, rank) = _affine(o, p, cutoff)
+    n = len(o)
+    E = 0.5 * (np.transpose(F, (0, 2, 1)) @ F - np.eye(3))
+    eta = von_mises_strain(E)
+    r = d - np.einsum("nij,nj->ni", F[I], d0)
+    d2 = np.bincount(I, weights=(r * r).sum(axis=1), minlength=n)
+    bad = rank < 2
+    eta[bad], d2[bad] = np.nan, np.nan
+    return eta, d2
+
+
+def affine_fit_gradient(o: np.ndarray, p: np.ndarray, cutoff: float | None = None):
+    """The deformation gradient F (n, 3, 3) of :func:`affine_fit`'s fit; NaN where the
+    neighbourhood is collinear or empty."""
+    F, (_, _, _, rank) = _affine(o, p, cutoff)
+    F[rank < 2] = np.nan
+    return F
+
+
+def _affine(o, p, cutoff):
     n = len(o)
     tree = cKDTree(o)
     spacing = float(np.median(tree.query(o, k=2)[0][:, 1]))
@@ -152,13 +172,7 @@ def affine_fit(o: np.ndarray, p: np.ndarray, cutoff: float | None = None):
         nd = np.cross(a, b)
         nd /= np.where((nn := np.linalg.norm(nd, axis=1, keepdims=True)) > 0, nn, 1.0)
         F[planar] += nd[:, :, None] * np.cross(t1, t2)[:, None, :]
-    E = 0.5 * (np.transpose(F, (0, 2, 1)) @ F - np.eye(3))
-    eta = von_mises_strain(E)
-    r = d - np.einsum("nij,nj->ni", F[I], d0)
-    d2 = np.bincount(I, weights=(r * r).sum(axis=1), minlength=n)
-    bad = rank < 2
-    eta[bad], d2[bad] = np.nan, np.nan
-    return eta, d2
+    return F, (I, d, d0, rank)
 
 
 def bind_virial(scene, p: np.ndarray) -> np.ndarray:

@@ -465,10 +465,17 @@ class Deck:
     def velocity_variables(self) -> list[str]:
         """Atom variables for v + dt/2·f/m (into fix nve) and v − dt/2·f/m (back to Eq. 5's v)."""
         h = _f(0.5 * self.scene.dt)
-        if self.scene.held().any():
-            # held atoms keep v = 0 whatever force the callback leaves on them (× 1 is exact)
-            return [f"variable rs_vh{c} atom (v{c}+{h}*f{c}/mass)*gmask({FREE})" for c in "xyz"] + \
-                   [f"variable rs_vp{c} atom (v{c}-{h}*f{c}/mass)*gmask({FREE})" for c in "xyz"]
+        partial = partial_groups(self.scene)
+        if self.scene.held().any() or partial:
+            # held atoms keep v = 0 whatever force the callback leaves on them (× 1 is exact);
+            # an atom fixed in one direction keeps that component 0
+            def mask(c):
+                m = [f"gmask({FREE})"] if self.scene.held().any() else []
+                if c in partial:
+                    m.append(f"(1-gmask(rs_fix{c}))")
+                return "*".join(m) or "1"
+            return [f"variable rs_vh{c} atom (v{c}+{h}*f{c}/mass)*{mask(c)}" for c in "xyz"] + \
+                   [f"variable rs_vp{c} atom (v{c}-{h}*f{c}/mass)*{mask(c)}" for c in "xyz"]
         return [f"variable rs_vh{c} atom v{c}+{h}*f{c}/mass" for c in "xyz"] + \
                [f"variable rs_vp{c} atom v{c}-{h}*f{c}/mass" for c in "xyz"]
 
@@ -543,6 +550,7 @@ class Deck:
         L = self.setup_commands(dump_every=dump_every)
         if py:
             L.append(f"fix {PY_FIX} {self.moving} external pf/callback 1 {PY_NAPPLY}")
+            L += partial_support_commands(self.scene, redefine=True)
         L += self.schedule_commands(loop_after)
         return "\n".join(L) + "\n"
 
@@ -578,6 +586,7 @@ def support_commands(scene: Scene) -> tuple[list[str], str]:
         L.append(f"group {HELD} id {id_ranges(np.flatnonzero(held) + 1)}")
         L.append(f"group {FREE} subtract all {HELD}")
         L.append(f"fix rs_hold {HELD} setforce 0.0 0.0 0.0")
+    L += partial_support_commands(scene)
     v0 = scene.initial_velocities()
     moving = np.flatnonzero(np.any(v0 != 0.0, axis=1))
     if len(moving):
@@ -588,6 +597,32 @@ def support_commands(scene: Scene) -> tuple[list[str], str]:
             L.append(f"velocity rs_v0 set {_f(row[0])} {_f(row[1])} {_f(row[2])} units box")
             L.append("group rs_v0 delete")
     return L, (FREE if held.any() else "all")
+
+
+def partial_groups(scene: Scene) -> dict:
+    """{axis letter: atom ids (1-based)} of the particles fixed in that direction only (a roller
+    or symmetry plane: some directions fixed, not all three)."""
+    fixed = scene.fixed()
+    part = fixed & ~fixed.all(axis=1)[:, None]
+    return {c: np.flatnonzero(part[:, k]) + 1 for k, c in enumerate("xyz") if part[:, k].any()}
+
+
+def partial_support_commands(scene: Scene, redefine: bool = False) -> list[str]:
+    """``fix setforce`` with NULL in the free directions, one per fixed axis (rollers, symmetry
+    planes). These atoms stay in ``fix nve``: a zero force and a zero start velocity in the
+    fixed direction keep them at their original coordinate there (the velocity variables mask
+    that component, :meth:`Deck.velocity_variables`). ``redefine``: the fixes again (unfix, fix),
+    so that they come after a ``fix external`` defined since (LAMMPS runs post_force in fix
+    order, and the callback adds its forces in its own)."""
+    L = []
+    for c, ids in partial_groups(scene).items():
+        comp = " ".join("0.0" if c == d else "NULL" for d in "xyz")
+        if redefine:
+            L.append(f"unfix rs_fix{c}")
+        else:
+            L.append(f"group rs_fix{c} id {id_ranges(ids)}")
+        L.append(f"fix rs_fix{c} rs_fix{c} setforce {comp}")
+    return L
 
 
 # ---------------------------------------------------------------------------- compile
@@ -734,7 +769,7 @@ def passive_groups(scene: Scene, realized: list) -> tuple:
     evaluates (and damped): a particle of one that no collision partner can reach has zero
     velocity and zero force, so Eq. 5 leaves it where it is, and LAMMPS need not pass over it
     until the callback finds a partner within reach + skin (module doc, "Active particles")."""
-    if not any(r.python for r in realized) or scene.held().any():
+    if not any(r.python for r in realized) or scene.fixed().any():
         return ()     # nothing to activate, or supports (their own fix nve group)
     out = []
     for name, g in scene.groups.items():
@@ -827,6 +862,10 @@ def _plugin_realize(scene: Scene, realized: list) -> tuple | None:
             r.plugin = "rs/attract"
         elif isinstance(op, Bind) and type(op.coeff) is Const:
             r.plugin = "rs/rack"
+        elif isinstance(op, Bind) and getattr(op.coeff, "weights", None) is not None:
+            # a material solid's per-pair c (its face compensation, model/solid.py): rs/bind
+            # takes one c per bond type, so the callback keeps it
+            return None, f"{r.target} <- {op.label()} has a coefficient per pair"
         elif isinstance(op, Bind):
             rev = reverse_of(scene.operators, r.target, r.site[1])
             key = frozenset({r.site, rev}) if rev is not None else frozenset({r.site})
@@ -978,11 +1017,13 @@ def _bonds_of(scene: Scene, target: str, op: Bind, K: float):
     g_t, g_s = scene.groups[target], scene.groups[op.source]
     pl = op.pairs(g_t, g_s)
     I, J, L0sq = pl.i + scene.offset(target) + 1, pl.j + scene.offset(op.source) + 1, pl.q
+    # per-pair c (a material solid's face compensation) scales K pair by pair
+    scale = pl.c / float(op.coeff.c)
     if target == op.source:
         keep = I < J
-        I, J, L0sq = I[keep], J[keep], L0sq[keep]
+        I, J, L0sq, scale = I[keep], J[keep], L0sq[keep], scale[keep]
     lo, hi = np.minimum(I, J), np.maximum(I, J)
-    return lo, hi, np.full(len(lo), K), np.sqrt(L0sq)
+    return lo, hi, K * scale, np.sqrt(L0sq)
 
 
 def ghost_cutoff(scene: Scene, skin: float = SKIN) -> float:

@@ -285,7 +285,7 @@ class LammpsRun:
         if self._move_bit is None or not cmd.startswith(f"velocity {MOVE_GROUP} set v_rs_v"):
             return False
         sign = cmd.split()[3][len("v_rs_v"):-1]         # h: v + dt/2·f/m; p: v − dt/2·f/m
-        if sign not in ("h", "p") or self.scene.held().any():
+        if sign not in ("h", "p") or self.scene.fixed().any():
             return False                                 # (held atoms: the deck's gmask form)
         lmp = self.lmp
         nlocal = lmp.extract_global("nlocal")
@@ -341,6 +341,10 @@ class LammpsRun:
         if want and not self._py_on:
             self.command(f"fix {PY_FIX} {self.deck.moving} external pf/callback 1 {PY_NAPPLY}")
             attach_callback(self.lmp, PY_FIX, self.py, self)
+            # rollers' setforce after the callback's forces (LAMMPS' fix order)
+            from rackstress.engines.lammps.deck import partial_support_commands
+            for cmd in partial_support_commands(self.scene, redefine=True):
+                self.command(cmd)
         elif self._py_on and not want:
             self.command(f"unfix {PY_FIX}")
         self._py_on = want

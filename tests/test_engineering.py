@@ -1,0 +1,265 @@
+"""The engineer's language (issue 22): units, materials, loads in newtons, supports by
+direction, static analysis. Expected values come from beam theory and hand calculation."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rackstress.engines.static import external_forces, solve
+from rackstress.scenes.toml import load_toml
+
+ROOT = Path(__file__).resolve().parents[1]
+CANTILEVER = ROOT / "examples" / "cantilever" / "scene.toml"
+#: beam theory, DESIGN §6: P·L³/(3·E·I) = 0.5714 mm plus 0.8 % shear (Timoshenko, κ = 5/6)
+TIP = 100.0 * 100.0 ** 3 / (3 * 70000.0 * 10.0 ** 4 / 12) * 1.008
+
+
+def _tip(spacing: float) -> float:
+    sc = load_toml(CANTILEVER, {"spacing": spacing})
+    res = solve(sc)
+    assert res.settled and res.residual <= 1e-6
+    o = sc.original_positions()
+    end = o[:, 0] > 100 - 1e-9
+    return -float((res.p - o)[end, 2].mean()), sc, res
+
+
+def _virial_sxx(sc, p, rows):
+    """σ_xx of particles ``rows`` from their bindings' forces (virial, Σ r⊗f / 2V), MPa."""
+    from rackstress.engines.static import _bind_pairs
+    from rackstress.model.operators import Bind
+
+    I, J, C, Q = _bind_pairs(sc)
+    m = sc.masses()
+    keep = np.isin(I, rows)
+    I, J, C, Q = I[keep], J[keep], C[keep], Q[keep]
+    f = Bind.accel(p[I], p[J], C, Q) * m[I][:, None]
+    r = p[J] - p[I]
+    V = sc.groups["bar"].volume
+    s = np.bincount(I, weights=r[:, 0] * f[:, 0], minlength=len(p)) / (2 * V)
+    return s[rows]
+
+
+def test_cantilever_tip_deflection_and_convergence():
+    """Tip deflection within 5 % of beam theory at spacing 1; spacings 2 and 1 within 5 %."""
+    d1, sc, res = _tip(1.0)
+    d2, _, _ = _tip(2.0)
+    assert abs(d1 / TIP - 1) < 0.05, (d1, TIP)
+    assert abs(d2 / d1 - 1) < 0.05, (d2, d1)
+    # the top fibre at mid-span: M·z/I = 100·50·4.5/833.3 = 27.0 MPa (tension on top, z = +4.5)
+    o = sc.original_positions()
+    top = np.flatnonzero((np.abs(o[:, 0] - 50) < 1e-9) & (np.abs(o[:, 2] - 4.5) < 1e-9))
+    bottom = np.flatnonzero((np.abs(o[:, 0] - 50) < 1e-9) & (np.abs(o[:, 2] + 4.5) < 1e-9))
+    expected = 100.0 * 50.0 * 4.5 / (10.0 ** 4 / 12)
+    assert abs(_virial_sxx(sc, res.p, top).mean() / expected - 1) < 0.10
+    assert abs(-_virial_sxx(sc, res.p, bottom).mean() / expected - 1) < 0.10
+
+
+@pytest.mark.parametrize("spacing", [2.0, 1.0])
+def test_loads_do_not_change_with_spacing(spacing, tmp_path):
+    """A total force is shared by the selected particles; a pressure is p × the face's area."""
+    sc = load_toml(CANTILEVER, {"spacing": spacing})
+    F = external_forces(sc)
+    assert np.allclose(F.sum(axis=0), [0.0, 0.0, -100.0], rtol=1e-12, atol=1e-9)
+    text = CANTILEVER.read_text().replace(
+        'force = [0, 0, "$(-load)"]', "pressure = 2.0\nnormal = [1, 0, 0]")
+    f = tmp_path / "pressure.toml"
+    f.write_text(text)
+    F = external_forces(load_toml(f, {"spacing": spacing}))
+    # 2 MPa on the 10 × 10 mm end face pushes with 200 N in −x
+    assert np.allclose(F.sum(axis=0), [-200.0, 0.0, 0.0], rtol=1e-12, atol=1e-9)
+
+
+def test_material_and_units_in_summary_and_boundary(tmp_path):
+    """A static run on LAMMPS settles, says so, and writes boundary.npz (CONTRACT.md)."""
+    out = tmp_path / "run"
+    r = subprocess.run([sys.executable, "-m", "rackstress.cli", "run", str(CANTILEVER),
+                        "--set", "spacing=2", "--out", str(out), "--no-render"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    s = json.loads((out / "summary.json").read_text())
+    assert s["analysis"] == "static" and s["settled"] is True and s["status"] == "settled"
+    assert s["residual"] <= s["tolerance"] == 1e-6 and s["iterations"] >= 1
+    assert s["units"] == "mm-N-s"
+    assert s["groups"]["bar"]["material"]["E"] == 70000.0       # MPa
+    b = np.load(out / "boundary.npz")
+    assert str(b["units"]) == "mm-N-s"
+    assert len(b["held_ids"]) == 25 and b["held_mask"].all()    # the 5 × 5 end face
+    assert b["held_ids"].dtype == np.int64 and b["load_ids"].dtype == np.int64
+    assert np.allclose(b["load_force"].sum(axis=0), [0, 0, -100.0])
+
+
+ROLLER = """
+name = "roller"
+steps = 40
+dt = 0.01
+
+[[group]]
+name = "block"
+lattice = { shape = [3, 3, 3], spacing = 1.0 }
+radius = 0.5
+
+[[support]]           # a roller on the floor: z fixed, x and y free
+on = "block"
+where = { box = { min = [-1, -1, -0.1], max = [3, 3, 0.1] } }
+fix = ["z"]
+
+[[support]]           # one corner pinned in x and y as well
+on = "block"
+where = { ids = [0] }
+fix = ["x", "y"]
+
+[[operator]]
+on = "block"
+op = "bind"
+from = "block"
+c = 50.0
+within = 1.5
+
+[[operator]]
+on = "block"
+op = "force"
+accel = [3.0, 0.0, -2.0]
+"""
+
+
+def test_roller_support_on_both_engines(tmp_path):
+    """Fixed directions stay at the original coordinate on the reference engine and on LAMMPS
+    (fix setforce with NULL), the free ones move, and the two engines agree."""
+    f = tmp_path / "roller.toml"
+    f.write_text(ROLLER)
+    ends = {}
+    for engine in ("reference", "lammps"):
+        out = tmp_path / engine
+        r = subprocess.run([sys.executable, "-m", "rackstress.cli", "run", str(f), "--engine",
+                            engine, "--out", str(out), "--no-render"], capture_output=True,
+                           text=True)
+        assert r.returncode == 0, r.stderr
+        frames = (out / "trajectory.dump").read_text().split("ITEM: TIMESTEP")[-1]
+        rows = frames.split("ITEM: ATOMS")[1].strip().splitlines()[1:]
+        ends[engine] = np.array([[float(x) for x in row.split()[3:6]] for row in rows])
+        b = np.load(out / "boundary.npz")
+        assert len(b["held_ids"]) == 9 and b["held_mask"][:, 2].all()
+        assert b["held_mask"][0].all() and not b["held_mask"][1:, :2].any()
+    sc = load_toml(f)
+    o = sc.original_positions()
+    floor = o[:, 2] == 0
+    for p in ends.values():
+        assert np.array_equal(p[floor, 2], o[floor, 2])        # z fixed exactly
+        assert np.array_equal(p[0], o[0])                       # the pinned corner
+        assert (p[floor][1:, 0] - o[floor][1:, 0]).max() > 1e-3  # x free: pushed by the force
+    assert np.allclose(ends["reference"], ends["lammps"], atol=1e-9)
+
+
+UNSUPPORTED = """
+name = "drift"
+units = "mm-N-s"
+
+[[group]]
+name = "part"
+fill = { union = [ { box = { min = [0, 0, 0], max = [4, 4, 4] } },
+                   { box = { min = [10, 0, 0], max = [14, 4, 4] } } ] }
+spacing = 1.0
+material = "steel"
+
+[[support]]
+on = "part"
+where = { box = { min = [-1, -1, -1], max = [0.6, 5, 5] } }
+
+[[load]]
+on = "part"
+where = { box = { min = [13.4, -1, -1], max = [15, 5, 5] } }
+force = [10, 0, 0]
+"""
+
+
+def test_unsettled_static_run_exits_6_and_warns_of_the_load_path(tmp_path):
+    """A load on a piece bound to no support: no equilibrium. The run says so plainly, exits
+    6, and warns that the load never reaches a support."""
+    f = tmp_path / "drift.toml"
+    f.write_text(UNSUPPORTED)
+    out = tmp_path / "run"
+    r = subprocess.run([sys.executable, "-m", "rackstress.cli", "run", str(f), "--engine",
+                        "reference", "--out", str(out), "--no-render"], capture_output=True,
+                       text=True)
+    assert r.returncode == 6, (r.returncode, r.stderr)
+    assert "did not settle" in r.stderr
+    s = json.loads((out / "summary.json").read_text())
+    assert s["settled"] is False and s["status"] == "not settled"
+    assert [w["kind"] for w in s["warnings"]] == ["load_path"]
+
+
+def test_material_needs_units(tmp_path):
+    f = tmp_path / "bad.toml"
+    f.write_text(CANTILEVER.read_text().replace('units = "mm-N-s"', ""))
+    with pytest.raises(Exception, match="units"):
+        load_toml(f)
+
+
+RAMP = """
+name = "ramp"
+dt = 0.01
+duration = 0.5
+
+[[group]]
+name = "dot"
+positions = [[0, 0, 0], [5, 0, 0]]
+radius = 0.5
+
+[[load]]
+on = "dot"
+gravity = [0, 0, -10]
+ramp = 0.2
+"""
+
+
+def test_load_ramp_rises_in_ten_stairs(tmp_path):
+    """A ramp over 0.2 time units: ten phases of 0.02 (2 steps each at dt 0.01), the k-th
+    carrying k/10 of the load, then the full load to the end (0.3 more: 30 steps)."""
+    from rackstress.engines.reference import Reference
+
+    f = tmp_path / "ramp.toml"
+    f.write_text(RAMP)
+    sc = load_toml(f)
+    assert sc.analysis == "dynamic"
+    assert [p.name for p in sc.phases] == [f"ramp{k}" for k in range(1, 11)] + ["full"]
+    assert [p.steps for p in sc.phases] == [2] * 10 + [30]
+    eng = Reference(sc)
+    for k in (1, 3, 10):
+        a = eng.accelerations({"ramp": k})
+        assert np.allclose(a, [[0, 0, -k]] * 2, rtol=1e-12)
+    assert np.allclose(external_forces(sc), [[0, 0, -10]] * 2)      # full load, unit masses
+
+
+def test_static_run_under_mpi(tmp_path):
+    """mpiexec -n 2: the equilibrium is solved once, checked by LAMMPS on both ranks."""
+    out = tmp_path / "mpi"
+    mpiexec = Path(sys.executable).parent / "mpiexec"
+    r = subprocess.run([str(mpiexec), "-n", "2", sys.executable, "-m", "rackstress.cli", "run",
+                        str(CANTILEVER), "--set", "spacing=2", "--out", str(out), "--no-render"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    s = json.loads((out / "summary.json").read_text())
+    assert s["ranks"] == 2 and s["settled"] is True and s["residual_engine"] <= 1e-6
+
+
+def test_support_reactions_balance_the_load():
+    """Statics: the clamp's reactions (minus the bindings' pull on the held particles) carry
+    the 100 N and its moment about the clamp, P·L = 100 N × 100 mm = 10,000 N·mm."""
+    from rackstress.engines.static import _bind_pairs, forces
+
+    sc = load_toml(CANTILEVER, {"spacing": 2.0})
+    res = solve(sc)
+    f = forces(sc, res.p, _bind_pairs(sc), np.zeros((sc.n_particles, 3)), sc.masses())
+    held = sc.held()
+    reaction = -f[held]                       # what the support must push to hold them
+    assert np.allclose(reaction.sum(axis=0), [0, 0, 100.0], rtol=1e-5, atol=1e-3)
+    r = res.p[held]                           # moment about the y axis through the origin
+    My = float((r[:, 2] * reaction[:, 0] - r[:, 0] * reaction[:, 2]).sum())
+    # the load (0, 0, −100) acts at x ≈ 100 (+ its small deflection): its moment about y is
+    # z·Fx − x·Fz = 100·100; the reactions' is the opposite
+    assert abs(My + 100.0 * 100.0) < 0.01 * 100.0 * 100.0

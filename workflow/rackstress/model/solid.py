@@ -1,0 +1,159 @@
+"""The elastic solid: a part with a material becomes the validated bind lattice.
+
+A part filled on the simple-cubic lattice of spacing a is bound to its neighbours within 1.5·a
+(the 6 nearest and 12 second neighbours, Eq. 16), only where the binding does not cross free
+space (:class:`rackstress.model.operators.WithinInside`). Its coefficient comes from the
+material (docs/calibration.md):
+
+* Eq. 12's stiffness along a binding at rest is 2c (an acceleration per length, DESIGN §6), so
+  one binding is a spring of k = 2·c·m between particles of mass m = ρ·a³;
+* the lattice with equal first and second neighbour springs is isotropic in the continuum
+  limit: C11 = 3k/a, C12 = C44 = k/a, hence ν = 1/4 and E = 2.5·k/a;
+* so E = 5·c·ρ·a², and a material of Young's modulus E gets ``c = E / (5·ρ·a²)``
+  (:func:`bind_coefficient`). The lattice's ν is 1/4 whatever the material's.
+
+At a free face the second-neighbour bindings that would leave the part are missing, and the
+face layer is softer than the bulk (a bar of N particles across is 2/(3N) too soft in tension).
+:class:`Solid` gives every missing second-neighbour binding's half that lies inside the part
+(the half-spacing skin between the outer particle centres and the surface) to its mirror image
+about the face, so a bar of any N is as stiff as the continuum: measured in
+docs/calibration.md, the cantilever's tip deflection agrees at spacings 2, 1 and 0.5 mm.
+
+Example
+-------
+>>> from rackstress.model.materials import material
+>>> from rackstress.model.units import SYSTEMS
+>>> round(bind_coefficient(material("aluminium"), SYSTEMS["mm-N-s"], 1.0) / 1e12, 4)
+5.1852
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rackstress.errors import SceneError
+from rackstress.model.operators import WithinInside
+
+#: E = LATTICE_E · k / a for the simple-cubic lattice with equal 1st/2nd-neighbour springs
+LATTICE_E = 2.5
+#: the lattice's own Poisson's ratio (C12 / (C11 + C12))
+LATTICE_NU = 0.25
+#: what a missing second-neighbour binding at a face gives the face-parallel nearest binding
+#: along its projection: half of it lies inside the part (the half-spacing skin), and a
+#: nearest binding carries twice a diagonal's C11 (k·n_x⁴·ℓ²: 1 against 1/2), so ½·½ = ¼
+FACE_SHARE = 0.25
+#: the last inside test of each Solid (by id): its pairs are asked for several times per run
+_INSIDE: dict = {}
+#: bind reach of a solid, in spacings: the 18 neighbours of the cubic lattice (1 and √2)
+REACH = 1.5
+
+
+def bind_coefficient(material, units, spacing: float) -> float:
+    """c of Eq. 12 making the cubic lattice of ``spacing`` as stiff as ``material``:
+    c = E / (5·ρ·a²) in the scene's ``units`` (k = 2·c·m, m = ρ·a³, E = 2.5·k/a)."""
+    props = material.in_units(units)
+    a = float(spacing)
+    return props["E"] / (2.0 * LATTICE_E * props["density"] * a * a)
+
+
+@dataclass(frozen=True)
+class Solid(WithinInside):
+    """within(1.5·a) inside the part, with the face compensation of the module doc.
+
+    ``region`` None: the part is convex (a box, a lattice block), so no binding between two of
+    its particles crosses free space and none is tested. ``spacing``: the lattice's a.
+    """
+
+    spacing: float = 1.0
+    material: str = ""
+
+    def label(self) -> str:
+        return (f"solid {self.material} within({self.d:g}) inside the part magnitude "
+                f"{self.c:g}")
+
+    def inside(self, a, b):
+        """WithinInside's test, remembered: a run asks for the same pairs several times (the
+        memory estimate, the deck, the solver, the engine's check, the load-path warning)."""
+        a, b = np.asarray(a, float).reshape(-1, 3), np.asarray(b, float).reshape(-1, 3)
+        if self.region is None:
+            return np.ones(len(a), dtype=bool)
+        import hashlib
+
+        key = hashlib.sha1(a.tobytes() + b.tobytes()).hexdigest()
+        cache = _INSIDE.setdefault(id(self), {})
+        if key not in cache:
+            cache.clear()
+            cache[key] = super().inside(a, b)
+        return cache[key]
+
+    def weights(self, o: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+        """Per-binding factor on c: 1, plus ½ for each missing second-neighbour binding whose
+        mirror about a free face this binding is (module doc)."""
+        return face_weights(o, i, j, self.spacing)
+
+
+def face_weights(o: np.ndarray, i: np.ndarray, j: np.ndarray, spacing: float) -> np.ndarray:
+    """The face compensation of :class:`Solid` for the directed pairs (i, j) of one group on
+    a cubic lattice of ``spacing`` (positions ``o``). A binding present in both directions gets
+    the same factor both ways (the rule is symmetric in i and j)."""
+    a = float(spacing)
+    lo = o.min(axis=0)
+    g = np.rint((o - lo) / a).astype(np.int64)
+    if np.abs(g * a + lo - o).max() > 1e-6 * a:
+        raise SceneError("a solid's face compensation needs its particles on one cubic "
+                         "lattice (packing = \"cubic\")")
+    span = g.max(axis=0) + 3
+    key = lambda x: (x[..., 0] + 1) + span[0] * ((x[..., 1] + 1) + span[1] * (x[..., 2] + 1))
+    d = g[j] - g[i]
+    pair_key = key(g[i]) * 32 + _dir_index(d)
+    order = np.argsort(pair_key)
+    sorted_keys = pair_key[order]
+    w = np.ones(len(i))
+    n = len(o)
+    # the directions each particle has bindings in (a missing one: no partner, or crosses out)
+    dir_idx = _dir_index(d)
+    has = {}
+    for dd in _DIAGONALS + _AXES:
+        has[dd] = np.zeros(n, bool)
+        has[dd][i[dir_idx == _dir_index(dd)[0]]] = True
+
+    def lookup(src, dvec):
+        q = key(g[src]) * 32 + _dir_index(np.tile(dvec, (len(src), 1)))
+        pos = np.searchsorted(sorted_keys, q)
+        pos = np.minimum(pos, len(sorted_keys) - 1)
+        ok = sorted_keys[pos] == q
+        return order[pos], ok
+
+    for dd in _DIAGONALS:
+        missing = np.flatnonzero(~has[dd])
+        if not len(missing):
+            continue
+        dv = np.asarray(dd)
+        axes = np.flatnonzero(dv)
+        # project onto the face: zero the components along which the particle is on a face
+        # (no axial neighbour there); a face-parallel binding remains only across one face
+        keep = np.ones((len(missing), 3), dtype=np.int64)
+        for ax in axes:
+            e = tuple(int(dv[ax]) if k == ax else 0 for k in range(3))
+            keep[~has[e][missing], ax] = 0
+        proj = keep * dv
+        one = np.abs(proj).sum(axis=1) == 1
+        src, row_of = missing[one], proj[one]
+        for row in np.unique(row_of, axis=0):
+            s = src[np.all(row_of == row, axis=1)]
+            idx, ok = lookup(s, row)
+            np.add.at(w, idx[ok], FACE_SHARE)
+            back, ok2 = lookup(j[idx[ok]], -row)     # the same binding from its other end
+            np.add.at(w, back[ok2], FACE_SHARE)
+    return w
+
+
+_AXES = [tuple(int(k == ax) * s for k in range(3)) for ax in range(3) for s in (1, -1)]
+_DIAGONALS = [d for d in ((x, y, z) for x in (-1, 0, 1) for y in (-1, 0, 1) for z in (-1, 0, 1))
+              if sum(map(abs, d)) == 2]
+
+
+def _dir_index(d) -> np.ndarray:
+    d = np.asarray(d, dtype=np.int64).reshape(-1, 3)
+    return (d[:, 0] + 1) * 9 + (d[:, 1] + 1) * 3 + (d[:, 2] + 1)

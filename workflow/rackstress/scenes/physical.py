@@ -1,0 +1,270 @@
+"""The engineer's keys of a scene file: units, materials, loads in newtons, supports.
+
+Everything here becomes the paper's model (docs/scenes.md "Physical scenes", docs/units.md):
+
+* ``units = "mm-N-s"`` or ``"SI"`` (:mod:`rackstress.model.units`); the paper's dimensionless
+  units stay the default.
+* a part's ``material`` (a preset or a table in SI) makes it the elastic solid of
+  :mod:`rackstress.model.solid`: particle mass ρ·a³ and a bind within 1.5·a inside the part
+  with c = E/(5·ρ·a²) (``solid = false`` leaves the binding to the scene's own operators);
+* ``[[load]]`` tables become ``force`` operators (Eq. 8) whose acceleration is the particle's
+  share of the load divided by its mass: a total force F spread over the k selected particles
+  is F/(k·m) each, so it does not change with the spacing; a pressure p on the exposed face
+  of a region is p·a² per exposed particle; gravity is an acceleration; a prescribed
+  displacement fixes the particles' directions at o + u (static analysis); ``ramp`` raises a
+  load in ten equal stairs over the given time (dynamic runs, as phases);
+* ``[[support]]`` tables fix all or some directions of the selected particles (held, rollers,
+  symmetry planes).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from rackstress.errors import SceneError
+from rackstress.model.operators import Bind, Collide, Attract, Force, PhaseIn
+from rackstress.model.scene import Phase, steps_for
+from rackstress.model.units import PAPER, units as unit_named
+
+_LOAD_KINDS = ("force", "pressure", "gravity", "displacement")
+_LOAD_KEYS = ("on", "where", "normal", "ramp") + _LOAD_KINDS
+_SUPPORT_KEYS = ("on", "where", "fix")
+#: stairs of a load ramp (each 1/RAMP_STAIRS of the full load, one phase each)
+RAMP_STAIRS = 10
+
+
+def scene_units(ctx, data: dict):
+    """The scene's unit system from ``units`` (default: the paper's)."""
+    if "units" not in data:
+        return PAPER
+    name = data["units"]
+    if not isinstance(name, str):
+        raise ctx.error(f"must be a unit system's name (\"mm-N-s\", \"SI\"), got {name!r}",
+                        "units")
+    try:
+        return unit_named(name)
+    except SceneError as exc:
+        raise ctx.error(str(exc), "units") from None
+
+
+def check_materials(ctx, groups: dict, u) -> None:
+    """Materials need a physical unit system (E in GPa means nothing in the paper's units)."""
+    for name, g in groups.items():
+        if g.material is not None and not u.physical:
+            raise ctx.error(f"group '{name}' has material '{g.material.name}', given in SI; "
+                            "the scene's numbers must then have units too: declare units = "
+                            "\"mm-N-s\" (mm, N, MPa, t/mm³) or \"SI\" at the top level",
+                            "units")
+
+
+def _group_of(c, t: dict, groups: dict):
+    from rackstress.scenes.fields import _require, _string
+
+    on = _string(c, _require(c, t, "on"), "on")
+    if on not in groups:
+        raise c.error(f"unknown group '{on}' (groups: {', '.join(groups)})", "on")
+    return on, groups[on]
+
+
+def _selection(c, t: dict, g, select) -> np.ndarray:
+    """The particles ``where`` selects (default all); ``select(c, table, field, o)`` is the
+    scene reader's region → mask."""
+    if "where" not in t:
+        return np.ones(g.n, dtype=bool)
+    mask = select(c, t["where"], "where", g.o)
+    if not mask.any():
+        raise c.error("selects no particle of the group (check the region against the "
+                      "part's positions and the scene's length unit)", "where")
+    return mask
+
+
+def supports(ctx, tables, groups: dict, select) -> None:
+    """``[[support]]``: fix the listed directions (default all: held) of the selected particles."""
+    from rackstress.scenes.fields import _array_of_tables, _check_keys
+
+    for k, t in enumerate(_array_of_tables(ctx, tables, "support"), 1):
+        c = ctx.at(f"[[support]] #{k}")
+        _check_keys(c, t, _SUPPORT_KEYS)
+        name, g = _group_of(c, t, groups)
+        c = ctx.at(f"[[support]] #{k} (on '{name}')")
+        mask = _selection(c, t, g, select)
+        fix = t.get("fix", ["x", "y", "z"])
+        if (not isinstance(fix, list) or not fix
+                or not all(isinstance(a, str) and a in ("x", "y", "z") for a in fix)):
+            raise c.error(f"must be a non-empty array of directions among \"x\", \"y\", \"z\" "
+                          f"(a roller on a floor: [\"z\"]), got {fix!r}", "fix")
+        for a in fix:
+            g.fixed[mask, "xyz".index(a)] = True
+        _refix(g)
+
+
+def _refix(g) -> None:
+    g.held = np.ascontiguousarray(g.fixed.all(axis=1))
+    g.v0 = np.ascontiguousarray(np.where(g.fixed, 0.0, g.v0))
+
+
+def solids(ctx, groups: dict, operators: dict, u) -> dict:
+    """A material part's bind (the elastic lattice, :mod:`rackstress.model.solid`), put first
+    among the part's operators."""
+    from rackstress.model.regions import Box, Cylinder, Sphere
+    from rackstress.model.solid import REACH, Solid, bind_coefficient
+
+    out = {name: list(seq) for name, seq in operators.items()}
+    for name, g in groups.items():
+        info = g.meta.get("solid")
+        if not info or not info["bind"]:
+            continue
+        a = info["spacing"]
+        shape = info["shape"]
+        if isinstance(shape, (Box, Sphere, Cylinder)):
+            shape = None          # convex: no binding between two inside points leaves it
+        c = bind_coefficient(g.material, u, a)
+        out.setdefault(name, []).insert(0, Bind(name, Solid(REACH * a, c, shape, spacing=a,
+                                                            material=g.material.name)))
+        g.meta.pop("solid")
+        g.meta["spacing"] = a
+    return {name: out[name] for name in groups if name in out}
+
+
+def ramp_of(ctx, tables):
+    """The ramp time shared by the scene's loads (one ramp per scene), or None."""
+    ramps = {float(t["ramp"]) for t in tables if isinstance(t, dict) and "ramp" in t
+             and isinstance(t["ramp"], (int, float)) and not isinstance(t["ramp"], bool)}
+    bad = [t["ramp"] for t in tables if isinstance(t, dict) and "ramp" in t
+           and (isinstance(t["ramp"], bool) or not isinstance(t["ramp"], (int, float))
+                or not t["ramp"] > 0)]
+    if bad:
+        raise ctx.error(f"must be a positive time, got {bad[0]!r}", "[[load]] ramp")
+    if len(ramps) > 1:
+        raise ctx.error(f"the loads' ramps differ ({sorted(ramps)}); one ramp time per scene",
+                        "[[load]] ramp")
+    return ramps.pop() if ramps else None
+
+
+def ramp_phases(ctx, data: dict, ramp: float, length, dt: float) -> list:
+    """Ten stairs of ramp/10 each (phase variable ``ramp`` = 1 … 10), then the full load for
+    the rest of the run's duration."""
+    if "phase" in data:
+        raise ctx.error("a load ramp makes the run's phases itself; it cannot be combined with "
+                        "[[phase]] tables", "[[load]] ramp")
+    if data.get("analysis") == "static":
+        raise ctx.error("a ramp raises a load over time: it is for analysis = \"dynamic\"; a "
+                        "static analysis finds the equilibrium under the full load",
+                        "[[load]] ramp")
+    stair = ramp / RAMP_STAIRS
+    phases = [Phase(f"ramp{k}", steps_for(stair, dt), {"ramp": k}, stair)
+              for k in range(1, RAMP_STAIRS + 1)]
+    if length is not None and length[0] == "duration":
+        rest = max(0.0, length[1] - ramp)
+        phases.append(Phase("full", steps_for(rest, dt), {"ramp": RAMP_STAIRS}, rest))
+    elif length is not None:
+        done = sum(p.steps for p in phases)
+        phases.append(Phase("full", max(0, int(length[1]) - done), {"ramp": RAMP_STAIRS}))
+    return phases
+
+
+def _spacing(c, g) -> float:
+    a = g.meta.get("spacing")
+    if a is None:
+        raise c.error(f"group '{g.name}' has no material: a load in physical units needs the "
+                      "particles' mass (density × spacing³); give the part a material", "on")
+    return float(a)
+
+
+def loads(ctx, tables, groups: dict, operators: dict, u, select, ramp) -> dict:
+    """``[[load]]`` tables as force operators (module doc) and prescribed displacements."""
+    from rackstress.scenes.fields import _array_of_tables, _check_keys, _number, _vec3
+
+    out = {name: list(seq) for name, seq in operators.items()}
+    for k, t in enumerate(_array_of_tables(ctx, tables, "load"), 1):
+        c = ctx.at(f"[[load]] #{k}")
+        _check_keys(c, t, _LOAD_KEYS)
+        name, g = _group_of(c, t, groups)
+        c = ctx.at(f"[[load]] #{k} (on '{name}')")
+        kinds = [x for x in _LOAD_KINDS if x in t]
+        if len(kinds) != 1:
+            raise c.error(f"needs exactly one of {', '.join(_LOAD_KINDS)}"
+                          + (f" (got {' and '.join(kinds)})" if kinds else ""))
+        kind = kinds[0]
+        if not u.physical and kind != "gravity":
+            raise c.error(f"a {kind} in physical units needs the scene's units: declare units = "
+                          "\"mm-N-s\" or \"SI\" (the paper's own loads are force operators)",
+                          kind)
+        if "normal" in t and kind != "pressure":
+            raise c.error("'normal' belongs to a pressure", "normal")
+        mask = _selection(c, t, g, select)
+        m = g.mass(u)
+        if kind == "force":
+            F = np.asarray(_vec3(c, t["force"], "force"))
+            accel = F / (mask.sum() * m)
+            where = mask
+        elif kind == "gravity":
+            accel = np.asarray(_vec3(c, t["gravity"], "gravity"))
+            where = mask
+        elif kind == "pressure":
+            pr = _number(c, t["pressure"], "pressure")
+            if "normal" not in t:
+                raise c.error("a pressure needs 'normal': the outward normal of the loaded face "
+                              "(the pressure pushes against it)", "normal")
+            n = np.asarray(_vec3(c, t["normal"], "normal"))
+            if not np.linalg.norm(n) > 0:
+                raise c.error("must not be zero", "normal")
+            n = n / np.linalg.norm(n)
+            a = _spacing(c, g)
+            where = mask & exposed(g.o, n, a)
+            if not where.any():
+                raise c.error(f"no particle of the region is on a face looking along {n.tolist()}"
+                              " (the outward normal of the loaded face)", "normal")
+            area = a * a / float(np.abs(n).max())     # a particle's share of the face
+            accel = -pr * area * n / m
+        else:       # displacement
+            uvec = np.asarray(_vec3(c, t["displacement"], "displacement"))
+            if ramp is not None:
+                raise c.error("a prescribed displacement is for static analysis", "displacement")
+            if g.u0 is None:
+                g.u0 = np.zeros((g.n, 3))
+            g.fixed[mask] = True
+            g.u0[mask] = uvec
+            _refix(g)
+            continue
+        if kind != "gravity":
+            _spacing(c, g)
+        where_t = None if where.all() else tuple(bool(x) for x in where)
+        if ramp is None:
+            out.setdefault(name, []).append(Force(tuple(float(x) for x in accel), where=where_t))
+        else:
+            for s in range(1, RAMP_STAIRS + 1):     # stair s adds 1/10 from phase ramp{s} on
+                out.setdefault(name, []).append(Force(
+                    tuple(float(x) / RAMP_STAIRS for x in accel), where=where_t,
+                    when=(PhaseIn("ramp", tuple(range(s, RAMP_STAIRS + 1))),)))
+    return {name: out[name] for name in groups if name in out}
+
+
+def exposed(o: np.ndarray, n: np.ndarray, a: float) -> np.ndarray:
+    """Particles on a face looking along the unit vector ``n``: no particle within a/4 of
+    o + a·n̂ (n̂: n snapped to its largest axis, the lattice's own faces)."""
+    from scipy.spatial import cKDTree
+
+    axis = int(np.argmax(np.abs(n)))
+    step = np.zeros(3)
+    step[axis] = math.copysign(a, n[axis])
+    d, _ = cKDTree(o).query(o + step, distance_upper_bound=0.25 * a)
+    return ~np.isfinite(d)
+
+
+def analysis_of(ctx, data: dict, groups: dict, operators: dict, ramp) -> str:
+    """``analysis`` as given, else static for a scene with a material and no motion (no
+    initial velocity, no collisions or attractions, no phases, no ramp)."""
+    if "analysis" in data:
+        a = data["analysis"]
+        if a not in ("static", "dynamic"):
+            raise ctx.error(f"must be \"static\" (find the equilibrium) or \"dynamic\" (time "
+                            f"stepping), got {a!r}", "analysis")
+        return a
+    if not any(g.material is not None for g in groups.values()):
+        return "dynamic"
+    moving = any(np.any(g.v0) for g in groups.values())
+    contact = any(isinstance(op, (Collide, Attract)) or op.when
+                  for seq in operators.values() for op in seq)
+    return "dynamic" if (moving or contact or ramp is not None or "phase" in data) else "static"
