@@ -87,6 +87,13 @@ class Solid(WithinInside):
             cache[key] = super().inside(a, b)
         return cache[key]
 
+    def inside_pairs(self, points, i, j, name: str = "part") -> np.ndarray:
+        """:meth:`inside` for a group's own pairs (WithinInside's lattice test): every pair
+        of a convex part (``region`` None) is inside, none is tested."""
+        if self.region is None:
+            return np.ones(len(i), dtype=bool)
+        return super().inside_pairs(points, i, j, name=name)
+
     def weights(self, o: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
         """Per-binding factor on c: 1, plus ½ for each missing second-neighbour binding whose
         mirror about a free face this binding is (module doc)."""
