@@ -277,7 +277,7 @@ class Deck:
         the rows ``fix nve`` integrates. Only where nothing else adds to those forces before
         the callback (no pair style, no bonds, no phase-conditioned native fix), so each atom's
         force is summed in LAMMPS' own order and the trajectory is the same bit for bit."""
-        return (bool(self.passive) and not self.lepton and self.bonds is None
+        return (bool(self.passive) and not self.plugin and not self.lepton and self.bonds is None
                 and not any(r.op.when and not r.python and r.native in ("addforce", "viscous")
                             for r in self.realized))
 
@@ -390,6 +390,9 @@ class Deck:
                 s = _prop_name(op.coeff.source.format(**phase_vars))
                 return f"fix {fid} {r.target} rs/attract {op.source} {c} {t} {s}"
             return f"fix {fid} {r.target} rs/attract {op.source} {c} all all"
+        if r.plugin == "rs/collide" and r.target in self.passive:
+            # a resting target joins the moving group one reneighbouring before it is touched
+            return f"fix {fid} {r.target} rs/collide {op.source} {c} activate {MOVE_GROUP}"
         return f"fix {fid} {r.target} {r.plugin} {op.source} {c}"
 
     def phase_commands(self, phase_vars, previous=None) -> list[str]:
@@ -460,6 +463,10 @@ class Deck:
             L.append(f"velocity {self.moving} set v_rs_vpx v_rs_vpy v_rs_vpz units box")
         L += self.phase_commands(phase_vars, previous)
         L.append("run 0 post no")
+        if self.plugin and self.passive:
+            # rs/collide may have activated resting particles there that it touches already:
+            # LAMMPS puts them among its integrated rows at this second run 0 (same forces)
+            L.append("run 0 post no")
         L.append(f"velocity {self.moving} set v_rs_vhx v_rs_vhy v_rs_vhz units box")
         return L
 
@@ -659,14 +666,15 @@ def passive_groups(scene: Scene, realized: list) -> tuple:
     evaluates (and damped): a particle of one that no collision partner can reach has zero
     velocity and zero force, so Eq. 5 leaves it where it is, and LAMMPS need not pass over it
     until the callback finds a partner within reach + skin (module doc, "Active particles")."""
-    if not any(r.python for r in realized) or scene.held().any():
+    if not any(r.python or r.plugin for r in realized) or scene.held().any():
         return ()     # nothing to activate, or supports (their own fix nve group)
     out = []
     for name, g in scene.groups.items():
         rs = [r for r in realized if r.target == name]
         v0 = getattr(g, "v0", None)
         contact_only = all(
-            (r.op.pair and not r.op.fixed_pairs and r.python and not r.native)   # collide
+            (r.op.pair and not r.op.fixed_pairs and not r.native     # collide: the callback's,
+             and (r.python or r.plugin == "rs/collide"))             # or rs/collide ... activate
             or (r.native == "viscous" and not r.python and not r.op.when)        # dampen(c)
             for r in rs)
         if rs and contact_only and any(r.op.pair for r in rs) and (v0 is None or not np.any(v0)):
@@ -774,12 +782,13 @@ def _plugin_realize(scene: Scene, realized: list) -> tuple | None:
              np.concatenate([b[2] for b in bonds])), len(btypes)), ""
 
 
-def plugin_ghost_cutoff(scene: Scene, bonds, skin: float) -> float:
+def plugin_ghost_cutoff(scene: Scene, bonds, skin: float, activate: bool = False) -> float:
     """The ghost cutoff of a plugin deck: the real interaction range. A collision reaches
-    r_p + r_u; a bound pair of original length L0 is followed to 2·L0 (a body stretched that far
-    has flown apart: LAMMPS then stops with "Bond atoms missing", a divergence). Rack couplings
-    and attraction are reductions, not ghosts."""
-    reach = 2.0 * float(scene.radii().max())
+    r_p + r_u (+ one more skin where rs/collide activates resting particles, ``activate``: it
+    looks r_p + r_u + 2·skin far); a bound pair of original length L0 is followed to 2·L0 (a
+    body stretched that far has flown apart: LAMMPS then stops with "Bond atoms missing", a
+    divergence). Rack couplings and attraction are reductions, not ghosts."""
+    reach = 2.0 * float(scene.radii().max()) + (skin if activate else 0.0)
     if bonds is not None and len(bonds[1]):
         o = scene.original_positions()
         L0 = np.sqrt(((o[bonds[2] - 1] - o[bonds[1] - 1]) ** 2).sum(axis=1)).max()
@@ -865,9 +874,12 @@ def compile_deck(scene: Scene, mode: str = "exact", measure_fast: bool = False,
                 r.plugin, r.python = None, r.python or r.plugin is not None
         else:
             pbonds, n_btypes = got
-            return Deck(scene, mode, masses, realized, plugin_ghost_cutoff(scene, pbonds, SKIN),
+            # active-only: the resting groups are activated by rs/collide (module doc)
+            passive = passive_groups(scene, realized) if active_only else ()
+            return Deck(scene, mode, masses, realized,
+                        plugin_ghost_cutoff(scene, pbonds, SKIN, bool(passive)),
                         pbonds, [(0.0, 0.0)] * n_btypes, cx["lepton"], integrator=integrator,
-                        plugin=True)
+                        plugin=True, passive=passive)
     bond_list, lepton = cx["bonds"], cx["lepton"]
     bonds, bond_types = None, []
     if bond_list:
