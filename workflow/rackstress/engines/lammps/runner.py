@@ -442,9 +442,13 @@ class LammpsRun:
         if key != self._owned_key:
             self._owned_key = key
             self._owned_views = tuple(lmp.numpy.extract_atom(name)[:nlocal]
-                                      for name in ("x", "v", "id"))
+                                      for name in ("x", "v", "id", "mask"))
+        if rows == "moving":
+            # a plugin deck's moving group (rs/collide activates): its rows come first, but
+            # for the few activated since LAMMPS last reordered (resting still: harmless here)
+            rows = int(np.count_nonzero(self._owned_views[3] & self._move_bit))
         n = nlocal if rows is None else min(rows, nlocal)
-        return tuple(a[:n] for a in self._owned_views)
+        return tuple(a[:n] for a in self._owned_views[:3])
 
     def check(self) -> None:
         """The watchdog on every rank's atoms; all ranks raise the same DivergenceError. Under
@@ -452,7 +456,11 @@ class LammpsRun:
         # only LAMMPS' first rows move (atom_modify first, Deck.passive): a resting particle
         # after them is where the data file put it, with v = 0
         moving = self._py_on and self.py.move_bit is not None
-        x, v, tag = self._owned(self.py.nfirst if moving else None)
+        if moving:
+            rows = self.py.nfirst
+        else:
+            rows = "moving" if self.deck.plugin and self._move_bit is not None else None
+        x, v, tag = self._owned(rows)
         o = self.scene.original_positions()
         k = self.py.compiled if self.py is not None else None
         if k is not None and k.within_bound(x, v, o, tag, float(self.scene.bound) ** 2):
