@@ -783,17 +783,26 @@ def _plugin_realize(scene: Scene, realized: list) -> tuple | None:
 
 
 def plugin_ghost_cutoff(scene: Scene, bonds, skin: float, activate: bool = False) -> float:
-    """The ghost cutoff of a plugin deck: the real interaction range. A collision reaches
-    r_p + r_u (+ one more skin where rs/collide activates resting particles, ``activate``: it
-    looks r_p + r_u + 2·skin far); a bound pair of original length L0 is followed to 2·L0 (a
-    body stretched that far has flown apart: LAMMPS then stops with "Bond atoms missing", a
-    divergence). Rack couplings and attraction are reductions, not ghosts."""
-    reach = 2.0 * float(scene.radii().max()) + (skin if activate else 0.0)
+    """The ghost cutoff of a plugin deck: the real interaction range, no more.
+
+    - A collision's candidates reach r_p + r_max + skin (+ one more skin where rs/collide
+      activates resting particles, ``activate``: it looks r_p + r_u + 2·skin far), + 1 spare.
+    - A bound pair (rs/bind) needs its partner as a ghost only when LAMMPS reneighbours (it
+      builds the bond list then): the longest bond L0 plus half a skin, or plus a quarter of
+      itself if that is more (long binds of large-spacing scenes). A bond stretched beyond
+      that at a reneighbouring stops LAMMPS with "Bond atoms missing", which rackstress
+      reports as a divergence (exit 3); within(1.5) on a unit lattice: 2.41, not 2·L0 + 3.
+    - Rack couplings and attraction are reductions, not ghosts."""
+    contact = any((op.pair and not op.fixed_pairs) or contact_groups(op.when)   # collide, a
+                  for seq in scene.operators.values() for op in seq)           # contact
+    reach = 0.0
+    if contact:
+        reach = 2.0 * float(scene.radii().max()) + skin + 1.0 + (skin if activate else 0.0)
     if bonds is not None and len(bonds[1]):
         o = scene.original_positions()
-        L0 = np.sqrt(((o[bonds[2] - 1] - o[bonds[1] - 1]) ** 2).sum(axis=1)).max()
-        reach = max(reach, 2.0 * float(L0))
-    return reach + skin + 1.0
+        L0 = float(np.sqrt(((o[bonds[2] - 1] - o[bonds[1] - 1]) ** 2).sum(axis=1)).max())
+        reach = max(reach, L0 + max(0.5 * skin, 0.25 * L0))
+    return reach if reach > 0.0 else 2.0 * float(scene.radii().max()) + skin
 
 
 _WARNED = set()
