@@ -42,6 +42,9 @@ from rackstress.engines.driver import drive
 
 PAPER = {"config": "paper (Rönkkö et al.): one thread, 1.83 GHz", "s_per_1200": 142.0,
          "n_particles": 33689}
+#: sediment-large with a bed four times as long: 4400 x 910 = 4,004,000 sediment particles
+#: (a scene name with ``--set`` overrides after a colon, as the worker reads it)
+HUGE = "sediment-large:sediment_nx=4400"
 CONFIGS = (("reference", "exact", 1), ("lammps", "exact", 1, "numpy"),
            ("lammps", "exact", 1, "numba"), ("lammps", "fast", 1, "numba"),
            ("lammps", "exact", 2, "numba"), ("lammps", "fast", 2, "numba"),
@@ -56,7 +59,10 @@ CONFIGS = (("reference", "exact", 1), ("lammps", "exact", 1, "numpy"),
            ("lammps", "exact", 1, "plugin"), ("lammps", "exact", 2, "plugin"),
            ("lammps", "exact", 1, "plugin", "magpod-small", 4800),
            ("lammps", "exact", 1, "plugin", "sediment-large", 200),
-           ("lammps", "exact", 2, "plugin", "sediment-large", 200))
+           ("lammps", "exact", 2, "plugin", "sediment-large", 200),
+           # the larger sediment (issue 23: >= 4 M particles; a bed four times as long)
+           ("lammps", "exact", 1, "plugin", HUGE, 200),
+           ("lammps", "exact", 2, "plugin", HUGE, 200))
 
 
 def normalize(config, scene_name: str, steps: int) -> dict:
@@ -109,11 +115,18 @@ def parse_breakdown(log: str) -> dict:
 
 
 # ---------------------------------------------------------------------------- the worker
+def build_scene(name: str):
+    """A built-in scene, ``NAME`` or ``NAME:key=value,key=value`` (``--set`` overrides)."""
+    from rackstress import scenes
+    from rackstress.scenes.builtins import parse_overrides
+
+    base, _, sets = name.partition(":")
+    return scenes.build(base, **parse_overrides(sets.split(",") if sets else ()))
+
+
 def worker(engine: str, mode: str, steps: int, profile_steps: int, scene_name: str) -> dict:
     """One configuration, in this process (all ranks of COMM_WORLD); rank 0 returns the result."""
-    from rackstress import scenes
-
-    sc = scenes.build(scene_name).with_steps(steps)
+    sc = build_scene(scene_name).with_steps(steps)
     t0 = time.perf_counter()
     res = {"engine": engine, "mode": mode, "steps": steps, "n_particles": sc.n_particles}
     if engine == "reference":

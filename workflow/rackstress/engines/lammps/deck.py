@@ -67,8 +67,11 @@ within(d) ``rs/bind`` over the data file's bonds (one bond type per bind and its
 phase), the contact-conditioned extra of dampen ``rs/dampen``. A phase-conditioned one is defined
 while its phase holds (:meth:`Deck.phase_commands`). The styles read per-atom originals, radii
 and region indices from ``fix property/atom`` (set right after read_data). Such a deck has no
-Python operator and runs standalone; it integrates every particle (no passive group), and its
-ghost cutoff is the interaction range (:func:`plugin_ghost_cutoff`). A scene with an operator the
+Python operator and runs standalone; its ghost cutoff is the interaction range
+(:func:`plugin_ghost_cutoff`). Active particles work as above, with ``rs/collide ... activate
+rs_move`` in the callback's place (the same activation one reneighbouring early; each target's
+partners summed in atom-id order, so the reordering changes no bit), a second ``run 0`` at each
+setup for particles touched there, and the static forces and damping left to LAMMPS' fixes. A scene with an operator the
 plugin has no style for (a contact-conditioned force) keeps the callback, and one line says so.
 """
 from __future__ import annotations
