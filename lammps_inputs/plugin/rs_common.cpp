@@ -212,36 +212,41 @@ int Contacts::build(LAMMPS *lmp, int tbit, int sbit, const double *radius, int a
   // a sediment's particles, not all): a target left out is farther than r_max + skin from every
   // source, so nothing reaches it before LAMMPS reneighbours
   rows.clear();
-  std::vector<int> src;
+  // one pass over the atoms: each side's members and bounding box (then only those are read)
+  std::vector<int> src, tcand, scand;
   double smax = 0.0, tmax = 0.0;
   double tlo[3] = {INFINITY, INFINITY, INFINITY}, thi[3] = {-INFINITY, -INFINITY, -INFINITY};
   double slo[3] = {INFINITY, INFINITY, INFINITY}, shi[3] = {-INFINITY, -INFINITY, -INFINITY};
-  for (int i = 0; i < nlocal; i++)
-    if (mask[i] & tbit) {
-      tmax = std::max(tmax, radius[i]);
+  for (int j = 0; j < nall; j++) {
+    int m = mask[j];
+    if (!(m & (tbit | sbit))) continue;
+    if ((m & tbit) && j < nlocal) {
+      tcand.push_back(j);
+      tmax = std::max(tmax, radius[j]);
       for (int d = 0; d < 3; d++) {
-        tlo[d] = std::min(tlo[d], x[i][d]);
-        thi[d] = std::max(thi[d], x[i][d]);
+        tlo[d] = std::min(tlo[d], x[j][d]);
+        thi[d] = std::max(thi[d], x[j][d]);
       }
     }
-  for (int j = 0; j < nall; j++)
-    if (mask[j] & sbit) {
+    if (m & sbit) {
+      scand.push_back(j);
       smax = std::max(smax, radius[j]);
       for (int d = 0; d < 3; d++) {
         slo[d] = std::min(slo[d], x[j][d]);
         shi[d] = std::max(shi[d], x[j][d]);
       }
     }
+  }
   double cut = tmax + smax + wide;
   auto within = [&](const double *p, const double *lo, const double *hi) {
     return p[0] > lo[0] - cut && p[0] < hi[0] + cut && p[1] > lo[1] - cut &&
         p[1] < hi[1] + cut && p[2] > lo[2] - cut && p[2] < hi[2] + cut;
   };
-  for (int j = 0; j < nall; j++)
-    if ((mask[j] & sbit) && within(x[j], tlo, thi)) src.push_back(j);
+  for (int j : scand)
+    if (within(x[j], tlo, thi)) src.push_back(j);
   double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-  for (int i = 0; i < nlocal; i++)
-    if ((mask[i] & tbit) && within(x[i], slo, shi)) {
+  for (int i : tcand)
+    if (within(x[i], slo, shi)) {
       rows.push_back(i);
       for (int d = 0; d < 3; d++) {
         lo[d] = std::min(lo[d], x[i][d]);

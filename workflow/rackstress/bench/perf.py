@@ -57,6 +57,7 @@ CONFIGS = (("reference", "exact", 1), ("lammps", "exact", 1, "numpy"),
            ("lammps", "exact", 2, "numba", "sediment-large", 200),
            # the compiled plugin (docs/plugin.md), one and two ranks
            ("lammps", "exact", 1, "plugin"), ("lammps", "exact", 2, "plugin"),
+           ("lammps", "exact", 1, "plugin", "magpod", None, "all"),
            ("lammps", "exact", 1, "plugin", "magpod-small", 4800),
            ("lammps", "exact", 1, "plugin", "sediment-large", 200),
            ("lammps", "exact", 2, "plugin", "sediment-large", 200),
@@ -407,6 +408,24 @@ def verdict(data: dict) -> list[str]:
                    f"wall and CPU time): {cyc:.2f} s "
                    f"(target ≤ {t['magpod_small_cycle_s_max']:g} s: "
                    f"{'**met**' if cyc <= t['magpod_small_cycle_s_max'] else '**not met**'}).")
+    plug, numba = _row(data, data["scene"], "plugin"), _row(data, data["scene"])
+    if plug is not None:
+        cpu = plug["cpu_ms_per_it"] * 1.2 if plug.get("cpu_ms_per_it") else None
+        out.append(f"- `{data['scene']}`, the compiled plugin, one core: {plug['s_per_1200']:.2f} s "
+                   "per 1200 iterations in wall time" + (f", {cpu:.2f} s in CPU time" if cpu else "")
+                   + " (target ≤ 0.20 s)" + (
+                       f"; against the numba callback {numba['ms_per_it'] / plug['ms_per_it']:.2f}× "
+                       "(wall)" + (f", {numba['cpu_ms_per_it'] / plug['cpu_ms_per_it']:.2f}× (CPU)"
+                                   if cpu and numba.get("cpu_ms_per_it") else "")
+                       if numba is not None else "") + " (> 1: the plugin is faster).")
+    for scene in (data["scene"], "sediment-large", HUGE):
+        one, two = _row(data, scene, "plugin"), _row(data, scene, "plugin", 2)
+        if one is not None and two is not None:
+            out.append(f"- `{scene}` ({one['n_particles']:,} particles), the plugin on 2 ranks "
+                       f"against 1: {one['ms_per_it'] / two['ms_per_it']:.2f}× (wall; > 1: "
+                       f"faster), CPU time of the busiest rank {two['cpu_ms_per_it']:.3f} against "
+                       f"{one['cpu_ms_per_it']:.3f} ms/it (MPICH's ranks poll while they wait, "
+                       "so that counts waiting too).")
     for scene in (data["scene"], "sediment-large"):
         act, every = _row(data, scene), _row(data, scene, particles="all")
         if act is not None and every is not None:
