@@ -58,9 +58,10 @@ def test_plugin_realizes_every_python_operator():
     hows = {r.how for r in deck.realized}
     assert {"rs/rack", "rs/attract", "rs/collide", "viscous+rs/dampen"} <= hows
     assert "python" not in hows and deck.passive == ("sediment",)
-    # the ghosts cover a collision's reach, not a body: 2 r_max (sediment 2) + skin 2 + 1, and
-    # one more skin for activating resting sediment (r_p + r_u + 2 skins)
-    assert deck.ghost_cutoff == pytest.approx(2 * 2.0 + 2.0 + 1.0 + 2.0)
+    # the ghosts cover a collision's reach, not a body: 2 r_max (sediment 2) + skin + 1, and
+    # one more skin for activating resting sediment (r_p + r_u + 2 skins); skin 4 (passive)
+    assert deck.lammps_skin == 4.0
+    assert deck.ghost_cutoff == pytest.approx(2 * 2.0 + 4.0 + 1.0 + 4.0)
     text = deck.input_text()
     assert "atom_modify map array sort 0 0.0 first rs_move" in text
     assert "fix rs_nve rs_move nve" in text and " activate rs_move" in text
