@@ -277,7 +277,7 @@ def dump_parts(dump: Path) -> list[tuple[str, list[float], np.ndarray]]:
 # ---------------------------------------------------------------------------- full disk
 @pytest.mark.lammps
 @pytest.mark.parametrize("nranks", [1, 2])
-def test_full_disk_while_checkpointing_on_the_plugin_path(tmpfs, nranks):
+def test_full_disk_while_checkpointing_on_the_plugin_path(tmpfs, nranks):  # noqa: F811
     """The disk fills between two checkpoints of a plugin run: the next checkpoint's write
     (mostly LAMMPS' ``write_restart``) fails, every rank ends with exit 5 and one message, and the last committed checkpoint
     (``progress.json``) is whole: its state holds every particle, finite, and its restart
