@@ -190,7 +190,10 @@ def test_unsettled_static_run_exits_6_and_warns_of_the_load_path(tmp_path):
     assert "did not settle" in r.stderr
     s = json.loads((out / "summary.json").read_text())
     assert s["settled"] is False and s["status"] == "not settled"
-    assert [w["kind"] for w in s["warnings"]] == ["load_path"]
+    kinds = [w["kind"] for w in s["warnings"]]
+    # the stress warnings (large_strain, yield_exceeded) may describe the drifted state too
+    assert kinds.count("load_path") == 1 and set(kinds) <= {"load_path", "large_strain",
+                                                           "yield_exceeded"}, kinds
 
 
 def test_material_needs_units(tmp_path):

@@ -57,9 +57,24 @@ def test_plugin_realizes_every_python_operator():
     deck = compile_deck(_gait_cycle(), "exact", plugin=True)
     hows = {r.how for r in deck.realized}
     assert {"rs/rack", "rs/attract", "rs/collide", "viscous+rs/dampen"} <= hows
-    assert "python" not in hows and not deck.passive
-    # the ghosts cover a collision's reach, not a body: 2 r_max (sediment 2) + skin 2 + 1
-    assert deck.ghost_cutoff == pytest.approx(2 * 2.0 + 2.0 + 1.0)
+    assert "python" not in hows and deck.passive == ("sediment",)
+    # the ghosts cover a collision's reach, not a body: 2 r_max (sediment 2) + skin + 1, and
+    # one more skin for activating resting sediment (r_p + r_u + 2 skins); skin 4 (passive)
+    assert deck.lammps_skin == 4.0
+    assert deck.ghost_cutoff == pytest.approx(2 * 2.0 + 4.0 + 1.0 + 4.0)
+    text = deck.input_text()
+    assert "atom_modify map array sort 0 0.0 first rs_move" in text
+    assert "fix rs_nve rs_move nve" in text and " activate rs_move" in text
+
+
+def test_bind_ghost_cutoff_is_the_longest_bond_plus_half_a_skin():
+    """rs/bind needs a partner as a ghost only when LAMMPS builds its bond list: the longest
+    bond of a within(1.5) unit lattice is the face diagonal √2 (geometry), plus half the skin
+    (2), not 2·L0 + skin + 1 = 5.83."""
+    from rackstress.bench.scaling import block_scene
+
+    deck = compile_deck(block_scene(6, 4, 4, 10), "exact", plugin=True)
+    assert deck.ghost_cutoff == pytest.approx(np.sqrt(2.0) + 1.0)
 
 
 @pytest.mark.parametrize("name,params", [("plane-rack", {"steps": 1200}),
@@ -91,6 +106,65 @@ def test_plugin_trajectory_parity_gait_cycle():
     sed = sc.slice("sediment")
     assert np.abs(ref[sed] - sc.original_positions()[sed]).max() > 0.01   # the soles landed
     assert np.abs(p - ref).max() <= 1e-10
+
+
+# ------------------------------------------------------------------ active particles only
+def _plugin_state(scene, active_only):
+    deck = compile_deck(scene, "exact", plugin=True, active_only=active_only)
+    assert deck.plugin and (bool(deck.passive) == active_only)
+    run = LammpsRun(deck, None)
+    try:
+        run.run_schedule()
+        p, v = run.gather_positions(), run.gather_velocities()
+        n, lmp = scene.n_particles, run.lmp
+        mask = np.zeros(n, dtype=np.int64)    # by particle: LAMMPS keeps moving rows first
+        mask[lmp.numpy.extract_atom("id")[:n] - 1] = lmp.numpy.extract_atom("mask")[:n]
+        return p, v, (None if run._move_bit is None else (mask & run._move_bit) != 0)
+    finally:
+        run.close()
+
+
+@pytest.mark.slow
+def test_plugin_active_only_is_exact_over_a_gait_cycle():
+    """rs/collide activating the resting sediment (fix nve on the moving group only) changes
+    nothing: bit for bit against integrating every particle, and the reference engine to
+    1e-10, over magpod-small's whole gait cycle."""
+    sc = _gait_cycle()
+    p, v, active = _plugin_state(sc, True)
+    p_all, v_all, none = _plugin_state(sc, False)
+    assert none is None
+    np.testing.assert_array_equal(p, p_all)
+    np.testing.assert_array_equal(v, v_all)
+    sed = sc.slice("sediment")
+    moved = np.abs(p[sed] - sc.original_positions()[sed]).max(axis=1) > 0
+    assert moved.any() and active[sed].sum() < sc.groups["sediment"].n   # some, not all
+    assert np.all(active[sed][moved])           # every sediment particle that moved was active
+    assert np.all(active[:sed.start])           # the robot always is
+    assert np.abs(p - _reference_final(sc)).max() <= 1e-10
+
+
+def test_plugin_active_only_is_exact_when_touched_at_the_start():
+    """Resting particles touched at step 0 are put among LAMMPS' integrated rows by the deck's
+    second run 0, those reached later one reneighbouring early: bit for bit against
+    integrating every particle, and the reference engine to 1e-10."""
+    from test_lammps_backend import _bed_scene
+
+    from rackstress.engines.reference import Reference
+
+    sc = _bed_scene()
+    p, v, active = _plugin_state(sc, True)
+    p_all, v_all, _ = _plugin_state(sc, False)
+    np.testing.assert_array_equal(p, p_all)
+    np.testing.assert_array_equal(v, v_all)
+    o, bed = sc.original_positions(), sc.slice("bed")
+    moved = np.abs(p[bed] - o[bed]).max(axis=1) > 0
+    d0 = np.linalg.norm(o[bed][:, None] - o[sc.slice("block")][None], axis=2).min(axis=1)
+    touched0 = d0 < 1.0                         # overlapping at step 0 (R = 0.5 + 0.5)
+    assert touched0.sum() == 4 and moved[touched0].all()
+    assert moved.sum() > 3 * touched0.sum() and not active[bed].all()   # more later, not all
+    ref = Reference(sc)
+    drive(ref)
+    assert np.abs(p - ref.p).max() <= 1e-10
 
 
 @pytest.mark.slow

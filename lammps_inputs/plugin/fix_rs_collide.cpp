@@ -1,7 +1,7 @@
 /* ----------------------------------------------------------------------
    rackstress plugin: fix rs/collide — directed collide, Eqs. 10–11.
 
-     fix ID TARGET rs/collide SOURCE c
+     fix ID TARGET rs/collide SOURCE c [activate MOVING]
 
    On each target particle p, from every source particle u that overlaps it (Eq. 11), Eq. 10
    with the reach the paper's prose gives (R = r_p + r_u, docs/model.md erratum 1):
@@ -12,6 +12,14 @@
    one-way or phase-conditioned collision is exact where a pair style (Newton's third law) is not.
    Candidates within r_p + r_max + skin are searched among owned and ghost atoms when LAMMPS
    reneighbours (rs_common.h, Contacts); each step measures them. Radii: per-atom d_rsr.
+
+   activate MOVING (active-only integration, docs/model.md "Active particles"): MOVING is the
+   group `fix nve` integrates and `atom_modify first` keeps first in LAMMPS' arrays. A resting
+   target particle (not in MOVING) within r_p + r_u + 2·skin of a source particle in MOVING is
+   added to MOVING when LAMMPS reneighbours, so LAMMPS' next reneighbouring puts it among the
+   integrated rows before anything can reach it. A force on a row LAMMPS does not integrate yet
+   (only possible if an atom moved more than a skin between two reneighbourings) stops the run;
+   at a setup (run 0) it is allowed: the deck's second run 0 reorders such rows first.
 ------------------------------------------------------------------------- */
 
 #include "fix_rs_collide.h"
@@ -19,6 +27,7 @@
 #include "atom.h"
 #include "error.h"
 #include "neighbor.h"
+#include "update.h"
 #include "utils.h"
 
 #include <cmath>
@@ -28,9 +37,12 @@ using namespace LAMMPS_NS;
 using namespace FixConst;
 
 FixRSCollide::FixRSCollide(LAMMPS *lmp, int narg, char **arg) :
-    Fix(lmp, narg, arg), built(false), touching(0)
+    Fix(lmp, narg, arg), actbit(0), built(false), in_setup(false), touching(0)
 {
-  if (narg != 5) error->all(FLERR, "Illegal fix rs/collide command: fix ID TARGET rs/collide SOURCE c");
+  if (narg != 5 && !(narg == 7 && strcmp(arg[5], "activate") == 0))
+    error->all(FLERR, "Illegal fix rs/collide command: fix ID TARGET rs/collide SOURCE c "
+               "[activate MOVING]");
+  if (narg == 7) actbit = RackStress::groupbit(group, error, "rs/collide", "activate", arg[6]);
   sourcebit = RackStress::groupbit(group, error, "rs/collide", "source", arg[3]);
   c = utils::numeric(FLERR, arg[4], false, lmp);
   if (!std::isfinite(c)) error->all(FLERR, "Fix rs/collide: coefficient c must be finite, got {}", arg[4]);
@@ -49,14 +61,16 @@ void FixRSCollide::init()
 void FixRSCollide::setup(int vflag)
 {
   built = false;
+  in_setup = true;
   post_force(vflag);
+  in_setup = false;
 }
 
 void FixRSCollide::post_force(int /*vflag*/)
 {
   double *r = RackStress::radii(atom, error, "rs/collide");
   if (!built || neighbor->ago == 0) {
-    list.build(lmp, groupbit, sourcebit, r);
+    list.build(lmp, groupbit, sourcebit, r, actbit);
     built = true;
   }
   double **x = atom->x, **f = atom->f;
@@ -80,6 +94,12 @@ void FixRSCollide::post_force(int /*vflag*/)
     }
     if (!any) continue;
     touching = 1;
+    if (actbit && !in_setup && atom->firstgroupname && i >= atom->nfirst)
+      error->one(FLERR, "Fix rs/collide: resting particle (atom id {}) was touched at step {} before "
+                 "LAMMPS integrated it: a particle moved more than the neighbour skin ({}) between "
+                 "two reneighbourings, so the run could not stay exact; a smaller time step or "
+                 "weaker coefficients keep Eq. 5 stable", (bigint) atom->tag[i],
+                 (bigint) update->ntimestep, neighbor->skin);
     double m = RackStress::mass(atom, i);
     for (int e = 0; e < 3; e++) f[i][e] += m * a[e];
   }

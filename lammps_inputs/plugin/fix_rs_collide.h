@@ -28,8 +28,9 @@ class FixRSCollide : public Fix {
 
  private:
   int sourcebit;
+  int actbit;       // the moving group of active-only integration (keyword activate), or 0
   double c;
-  bool built;
+  bool built, in_setup;
   int touching;
   RackStress::Contacts list;
 };

@@ -86,6 +86,24 @@ const std::vector<int> &FixRSRack::owned_rows()
     rows.clear();
     for (int i = 0; i < atom->nlocal; i++)
       if (atom->mask[i] & bit) rows.push_back(i);
+    // L0² = ‖u_o − p_o‖² of every pair, once a layout (the same arithmetic as a step's would be)
+    double **o = RackStress::originals(atom, error, "rs/rack");
+    int n = few.size();
+    const double *O = few.o.data();
+    l0sq.assign(rows.size() * n, 0.0);
+    own.assign(rows.size() * n, 0);
+    for (size_t r = 0; r < rows.size(); r++) {
+      int i = rows[r];
+      for (int k = 0; k < n; k++) {
+        double q = 0.0;
+        for (int e = 0; e < 3; e++) {
+          double l = gather_source ? O[3 * k + e] - o[i][e] : o[i][e] - O[3 * k + e];
+          q += l * l;
+        }
+        l0sq[r * n + k] = q;
+        own[r * n + k] = overlap && few.tag[k] == atom->tag[i];
+      }
+    }
     rows_built = true;
   }
   return rows;
@@ -100,21 +118,22 @@ int FixRSRack::partial_size()
 void FixRSRack::partial(double *sum)
 {
   if (gather_source) return;
-  double **x = atom->x, **o = RackStress::originals(atom, error, "rs/rack");
-  tagint *tag = atom->tag;
+  double **x = atom->x;
   int n = few.size();
-  const double *X = few.x.data(), *O = few.o.data();
-  for (int j : owned_rows()) {
+  const double *X = few.x.data();
+  const std::vector<int> &R = owned_rows();
+  const double *Q = l0sq.data();
+  const char *skip = own.data();
+  for (size_t r = 0; r < R.size(); r++) {
+    const double *p = x[R[r]];
     for (int k = 0; k < n; k++) {
-      if (overlap && few.tag[k] == tag[j]) continue;
-      double d[3], q = 0.0, d2 = 0.0;
+      if (skip[r * n + k]) continue;
+      double d[3], d2 = 0.0;
       for (int e = 0; e < 3; e++) {
-        d[e] = x[j][e] - X[3 * k + e];
-        double l = o[j][e] - O[3 * k + e];
-        q += l * l;
+        d[e] = p[e] - X[3 * k + e];
         d2 += d[e] * d[e];
       }
-      double s = c * (1.0 - q / d2);
+      double s = c * (1.0 - Q[r * n + k] / d2);
       for (int e = 0; e < 3; e++) sum[3 * k + e] += s * d[e];
     }
   }
@@ -128,26 +147,26 @@ void FixRSRack::total(const double *sum)
 void FixRSRack::post_force(int /*vflag*/)
 {
   double **x = atom->x, **f = atom->f;
-  tagint *tag = atom->tag;
   int nlocal = atom->nlocal, n = few.size();
 
   if (gather_source) {
     // a target p gains the term of every gathered source u (Eq. 12), in atom-id order
     RackStress::reduce_positions(lmp);
-    double **o = RackStress::originals(atom, error, "rs/rack");
-    const double *X = few.x.data(), *O = few.o.data();
-    for (int i : owned_rows()) {
+    const double *X = few.x.data();
+    const std::vector<int> &R = owned_rows();
+    const double *Q = l0sq.data();
+    const char *skip = own.data();
+    for (size_t r = 0; r < R.size(); r++) {
+      int i = R[r];
       double a[3] = {0.0, 0.0, 0.0};
       for (int k = 0; k < n; k++) {
-        if (overlap && few.tag[k] == tag[i]) continue;
-        double d[3], q = 0.0, d2 = 0.0;
+        if (skip[r * n + k]) continue;
+        double d[3], d2 = 0.0;
         for (int e = 0; e < 3; e++) {
           d[e] = X[3 * k + e] - x[i][e];
-          double l = O[3 * k + e] - o[i][e];
-          q += l * l;
           d2 += d[e] * d[e];
         }
-        double s = c * (1.0 - q / d2);
+        double s = c * (1.0 - Q[r * n + k] / d2);
         for (int e = 0; e < 3; e++) a[e] += s * d[e];
       }
       double m = RackStress::mass(atom, i);

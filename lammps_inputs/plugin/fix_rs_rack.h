@@ -39,6 +39,10 @@ class FixRSRack : public Fix, public RackStress::Reduced {
   // the owned rows of the side summed over (kept from one reneighbouring to the next), and
   // whether the two groups share atoms (a particle is never bound to itself)
   std::vector<int> rows;
+  // L0² of each (owned row, gathered member) pair (constant: original positions), in the
+  // order the sums visit them, with the member's own pair skipped (own = 1)
+  std::vector<double> l0sq;
+  std::vector<char> own;
   bool rows_built, overlap;
   const std::vector<int> &owned_rows();
 };

@@ -197,48 +197,56 @@ void RackStress::reduce_sums(LAMMPS *lmp)
   reg.sum_step = now;
 }
 
-void Contacts::build(LAMMPS *lmp, int tbit, int sbit, const double *radius)
+int Contacts::build(LAMMPS *lmp, int tbit, int sbit, const double *radius, int actbit)
 {
   Atom *atom = lmp->atom;
   double **x = atom->x;
   int *mask = atom->mask;
   int nlocal = atom->nlocal, nall = atom->nlocal + atom->nghost;
   double skin = lmp->neighbor->skin;
+  // activation looks one skin further than the contact candidates
+  double wide = actbit ? 2.0 * skin : skin;
+  int activated = 0;
 
   // each side cut to the other's bounding box grown by the reach (a leg meets a few hundred of
   // a sediment's particles, not all): a target left out is farther than r_max + skin from every
   // source, so nothing reaches it before LAMMPS reneighbours
   rows.clear();
-  std::vector<int> src;
+  // one pass over the atoms: each side's members and bounding box (then only those are read)
+  std::vector<int> src, tcand, scand;
   double smax = 0.0, tmax = 0.0;
   double tlo[3] = {INFINITY, INFINITY, INFINITY}, thi[3] = {-INFINITY, -INFINITY, -INFINITY};
   double slo[3] = {INFINITY, INFINITY, INFINITY}, shi[3] = {-INFINITY, -INFINITY, -INFINITY};
-  for (int i = 0; i < nlocal; i++)
-    if (mask[i] & tbit) {
-      tmax = std::max(tmax, radius[i]);
+  for (int j = 0; j < nall; j++) {
+    int m = mask[j];
+    if (!(m & (tbit | sbit))) continue;
+    if ((m & tbit) && j < nlocal) {
+      tcand.push_back(j);
+      tmax = std::max(tmax, radius[j]);
       for (int d = 0; d < 3; d++) {
-        tlo[d] = std::min(tlo[d], x[i][d]);
-        thi[d] = std::max(thi[d], x[i][d]);
+        tlo[d] = std::min(tlo[d], x[j][d]);
+        thi[d] = std::max(thi[d], x[j][d]);
       }
     }
-  for (int j = 0; j < nall; j++)
-    if (mask[j] & sbit) {
+    if (m & sbit) {
+      scand.push_back(j);
       smax = std::max(smax, radius[j]);
       for (int d = 0; d < 3; d++) {
         slo[d] = std::min(slo[d], x[j][d]);
         shi[d] = std::max(shi[d], x[j][d]);
       }
     }
-  double cut = tmax + smax + skin;
+  }
+  double cut = tmax + smax + wide;
   auto within = [&](const double *p, const double *lo, const double *hi) {
     return p[0] > lo[0] - cut && p[0] < hi[0] + cut && p[1] > lo[1] - cut &&
         p[1] < hi[1] + cut && p[2] > lo[2] - cut && p[2] < hi[2] + cut;
   };
-  for (int j = 0; j < nall; j++)
-    if ((mask[j] & sbit) && within(x[j], tlo, thi)) src.push_back(j);
+  for (int j : scand)
+    if (within(x[j], tlo, thi)) src.push_back(j);
   double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-  for (int i = 0; i < nlocal; i++)
-    if ((mask[i] & tbit) && within(x[i], slo, shi)) {
+  for (int i : tcand)
+    if (within(x[i], slo, shi)) {
       rows.push_back(i);
       for (int d = 0; d < 3; d++) {
         lo[d] = std::min(lo[d], x[i][d]);
@@ -247,7 +255,7 @@ void Contacts::build(LAMMPS *lmp, int tbit, int sbit, const double *radius)
     }
   first.assign(rows.size() + 1, 0);
   partner.clear();
-  if (rows.empty() || src.empty()) return;
+  if (rows.empty() || src.empty()) return 0;
 
   // a cell grid over the sources near the targets, cells one reach wide
   // (cells at least one reach wide, so a target's partners are in its 27 cells; widened
@@ -280,6 +288,7 @@ void Contacts::build(LAMMPS *lmp, int tbit, int sbit, const double *radius)
     int i = rows[r];
     const double *p = x[i];
     double reach = radius[i] + smax + skin, reach2 = reach * reach;
+    bool resting = actbit && !(mask[i] & actbit);
     int c0[3];
     for (int d = 0; d < 3; d++) c0[d] = cell(p, d);
     for (int a = std::max(0, c0[0] - 1); a <= std::min(nb[0] - 1, c0[0] + 1); a++)
@@ -289,8 +298,21 @@ void Contacts::build(LAMMPS *lmp, int tbit, int sbit, const double *radius)
             int j = src[k];
             if (atom->tag[j] == atom->tag[i]) continue;
             double dx = x[j][0] - p[0], dy = x[j][1] - p[1], dz = x[j][2] - p[2];
-            if (dx * dx + dy * dy + dz * dz < reach2) partner.push_back(j);
+            double d2 = dx * dx + dy * dy + dz * dz;
+            if (d2 < reach2) partner.push_back(j);
+            if (resting && (mask[j] & actbit)) {
+              double act = radius[i] + radius[j] + 2.0 * skin;
+              if (d2 < act * act) {
+                mask[i] |= actbit;
+                resting = false;
+                activated++;
+              }
+            }
           }
     first[r + 1] = (int) partner.size();
+    tagint *tag = atom->tag;
+    std::sort(partner.begin() + first[r], partner.end(),
+              [tag](int a, int b) { return tag[a] < tag[b]; });
   }
+  return activated;
 }

@@ -88,12 +88,19 @@ namespace RackStress {
 
   /* Candidate pairs (i owned with `tbit`, j owned or ghost with `sbit`) within the reach
      r_i + r_max(source) + skin, searched on a cell grid whenever LAMMPS reneighbours: no atom
-     moves half a skin before the next, so no pair comes within r_i + r_j unseen (Eq. 11). */
+     moves half a skin before the next, so no pair comes within r_i + r_j unseen (Eq. 11).
+     Each target's partners are in atom-id order, so its sum does not depend on the rows LAMMPS
+     gives the atoms (atom_modify first reorders them; active-only integration stays bit for bit).
+
+     With `actbit` (the moving group of active-only integration, docs/model.md "Active
+     particles"): a resting target (without `actbit`) that has a source with `actbit` within
+     r_i + r_j + 2·skin is activated (`actbit` set in its mask), one reneighbouring before
+     anything can touch it. Returns how many were activated. */
   class Contacts {
    public:
     std::vector<int> first, partner;    // CSR: partners of target i (owned rows)
     std::vector<int> rows;              // the owned target rows
-    void build(LAMMPS *lmp, int tbit, int sbit, const double *radius);
+    int build(LAMMPS *lmp, int tbit, int sbit, const double *radius, int actbit = 0);
   };
 
 }    // namespace RackStress

@@ -3,7 +3,7 @@
 The sweep table (every job: its swept parameters, status, the overall peak of the stress
 measure with its part, iteration and particle, wall time, a link to the job's own
 ``report.html``), the peak plotted against each swept parameter (``report-peak-vs-NAME.png``,
-one line per combination of the other parameters, diverged or failed jobs dotted; drawn by
+one line per combination of the other parameters, diverged, not settled or failed jobs dotted; drawn by
 :func:`rackstress.runs.batch.report`), the jobs' errors and the batch's passes. The numbers are
 those of each job's ``summary.json`` (``stress.peak``). Self-contained as a folder (relative
 links), no script; written atomically.
@@ -134,7 +134,7 @@ def write_batch_report(batchdir) -> Path:
     for name, fname, figure in plots:
         w(f'<figure><img src="{_e(fname)}" alt="{_e(figure)} against {_e(name)}" '
           f'data-against="{_e(name)}"><figcaption>{_e(figure)} against {_e(name)} (dotted: '
-          "diverged or failed jobs)</figcaption></figure>")
+          "diverged, not settled or failed jobs)</figcaption></figure>")
     for note in notes:
         w(f'<p class="note">{_e(note)}</p>')
 

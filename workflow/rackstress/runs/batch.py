@@ -14,7 +14,8 @@ with a broadcast on the sub-communicator. Every wait on another rank polls and s
 ranks do not spin.
 
 **Atomic job directories.** A job runs into ``BATCHDIR/.tmp-NAME-PID``; once its
-``summary.json`` is written (``ok``, ``diverged`` by the watchdog, or ``failed`` with the error)
+``summary.json`` is written (``ok``, ``diverged`` by the watchdog, ``not settled`` (a static
+analysis whose residual stayed above its tolerance), or ``failed`` with the error)
 the directory is renamed to ``BATCHDIR/NAME`` (``os.replace``): a job directory is complete or
 absent. A job is finished iff ``BATCHDIR/NAME/summary.json`` exists.
 
@@ -25,7 +26,7 @@ leaves only complete job directories and temporary ones.
 
 **Index.** ``BATCHDIR/batch.json`` is written only by the manager, atomically (temp file +
 ``os.replace``), after every hand-out and completion: every job with its parameters, status
-(pending, running, ok, diverged, failed), attempts, group, wall time, error and summary figures,
+(pending, running, ok, diverged, not settled, failed), attempts, group, wall time, error and summary figures,
 and one entry per pass (ranks, groups, wall time). ``BATCHDIR/events.log`` gets one line when a
 job starts and one when it ends (appended by the group root that runs it), so how often each job
 ran is checkable from outside. ``BATCHDIR/.lock`` (``flock``) keeps two batches out of one
@@ -52,7 +53,7 @@ EVENTS = "events.log"
 TAG_REQ, TAG_REP = 7101, 7102
 #: Poll intervals (s) of the manager thread and of ranks waiting on another rank.
 MANAGER_POLL, WAIT_POLL = 0.01, 0.002
-FINISHED = ("ok", "diverged", "failed")
+FINISHED = ("ok", "diverged", "not settled", "failed")
 
 
 # ---------------------------------------------------------------------------- small helpers
@@ -165,6 +166,12 @@ def run_job(job, sweep: Sweep, batchdir: Path, comm, group: int, post=None) -> d
         if job.allow_unstable and "allow_unstable" in inspect.signature(run_mod.run).parameters:
             kw["allow_unstable"] = True
         summary = run_mod.run(scene, tmp, **kw)
+        if isinstance(summary, dict) and summary.get("settled") is False:
+            # the run is complete and its summary says so; `rackstress run` would exit 6
+            status = "not settled"
+            error = (f"the static analysis did not settle: the largest unbalanced force is "
+                     f"{summary.get('residual', float('nan')):.3g} of the applied load after "
+                     f"{summary.get('iterations')} iterations")
     except DivergenceError as exc:
         status, error = "diverged", str(exc)
     except Exception as exc:  # noqa: BLE001 - a failed job is recorded, the batch goes on
@@ -251,7 +258,8 @@ class Manager:
                                           "started", "ended", "figures") if k in j})
         except (FileNotFoundError, json.JSONDecodeError):
             s = json.loads((jobdir / "summary.json").read_text())
-            rec.update(status=s.get("status", "ok"), wall_s=s.get("wall_s"), figures=figures(s),
+            status = {"settled": "ok"}.get(s.get("status", "ok"), s.get("status", "ok"))
+            rec.update(status=status, wall_s=s.get("wall_s"), figures=figures(s),
                        error=(s.get("error") or {}).get("message"))
 
     def write(self) -> None:
@@ -548,7 +556,7 @@ def _plot(batchdir: Path, rows, figure: str, against: str, others) -> Path:
         ax.set_xscale("log")
     ax.set_xlabel(against)
     ax.set_ylabel(figure)
-    ax.set_title(f"{figure} against {against}\n(dotted: diverged or failed jobs)", fontsize=9)
+    ax.set_title(f"{figure} against {against}\n(dotted: diverged, not settled or failed jobs)", fontsize=9)
     if any(k for k in series if any(v is not None for _, v in k)):
         ax.legend(fontsize=7)
     fig.tight_layout()

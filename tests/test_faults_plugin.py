@@ -1,0 +1,313 @@
+"""Faults of the compiled plugin's path, played with real processes (issue 25, "Also in scope"):
+a plugin missing, cut short, corrupt or built for another LAMMPS (one line, then the Python
+callback); a rank killed with ``kill -9`` under ``mpiexec -n 2 lmp`` and under ``mpiexec -n 2
+rackstress run`` (every rank ends in bounded time; ``--resume`` writes the uninterrupted
+trajectory byte for byte); a disk that fills during ``write_restart`` (exit 5, the last
+checkpoint whole). README's fault table lists each case."""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from test_faults import (MPIEXEC, QUIET, RS, fill, leftovers, progress_step, rs,  # noqa: F401
+                         tmpfs, wait_for)
+
+BIN = Path(sys.executable).parent
+LMP = str(BIN / "lmp")
+CALLBACK_LINE = "rackstress: using the Python callback for the exact operators: "
+
+
+def operators(rundir: Path) -> str:
+    """The operator path a run recorded in its fingerprint (``plugin`` or ``callback``)."""
+    return json.loads((rundir / "scene.json").read_text())["fingerprint"]["operators"]
+
+
+def the_plugin() -> Path:
+    from rackstress.engines.lammps.plugin import locate
+
+    lib, why = locate()
+    assert lib is not None, why         # the install built it (setup.py)
+    return lib
+
+
+def broken(kind: str, d: Path) -> Path:
+    """A plugin library that cannot serve this LAMMPS: ``missing``, ``corrupt`` (random bytes),
+    ``cut`` (the real one cut in half, as a full disk or an interrupted copy leaves it) or
+    ``other`` (the real one with the version string it registers changed to another
+    release's, same length: what a build for another LAMMPS carries)."""
+    lib = d / f"{kind}-rackstressplugin.so"
+    real = the_plugin().read_bytes()
+    if kind == "corrupt":
+        lib.write_bytes(np.random.default_rng(1).bytes(4096))
+    elif kind == "cut":
+        lib.write_bytes(real[:len(real) // 2])
+    elif kind == "other":
+        assert real.count(b"22 Jul 2025") == 1
+        lib.write_bytes(real.replace(b"22 Jul 2025", b"29 Aug 2024"))
+    return lib
+
+
+@pytest.fixture(scope="module")
+def callback_run(tmp_path_factory):
+    """plane-rack on the callback path, asked for (RACKSTRESS_PLUGIN=0): what a fallback must
+    reproduce exactly."""
+    out = tmp_path_factory.mktemp("cb") / "run"
+    r = subprocess.run([RS, "run", "plane-rack", "--steps", "60", "--dump-every", "20", "--out",
+                        str(out), *QUIET], capture_output=True, text=True, timeout=600,
+                       env={**os.environ, "RACKSTRESS_PLUGIN": "0"})
+    assert r.returncode == 0, r.stderr
+    assert operators(out) == "callback"
+    return out
+
+
+# ---------------------------------------------------------------------------- broken plugin
+@pytest.mark.lammps
+@pytest.mark.parametrize("kind,says", [
+    ("missing", "which does not exist"),
+    ("corrupt", "is not a shared library (no ELF header)"),
+    ("cut", "is cut short"),
+    ("other", "was built for LAMMPS '29 Aug 2024', not for this one ('22 Jul 2025')")])
+def test_a_broken_plugin_is_one_line_and_the_callback(tmp_path, callback_run, kind, says):
+    """Without the check, a corrupt or cut library stopped the run at "Unrecognized fix style
+    'rs/rack'" (exit 2) and one built for another LAMMPS was loaded anyway."""
+    lib = broken(kind, tmp_path)
+    out = tmp_path / "run"
+    r = subprocess.run([RS, "run", "plane-rack", "--steps", "60", "--dump-every", "20", "--out",
+                        str(out), *QUIET], capture_output=True, text=True, timeout=600,
+                       env={**os.environ, "RACKSTRESS_PLUGIN": str(lib)})
+    assert r.returncode == 0, r.stderr
+    notes = [line for line in r.stderr.splitlines() if line.startswith("rackstress:")]
+    assert len(notes) == 1 and notes[0].startswith(CALLBACK_LINE), r.stderr
+    assert str(lib) in notes[0] and says in notes[0], notes[0]
+    assert "Traceback" not in r.stderr
+    assert operators(out) == "callback"
+    # the whole run, exactly the callback's
+    assert (out / "trajectory.dump").read_bytes() == \
+        (callback_run / "trajectory.dump").read_bytes()
+
+
+def _package_copy(root: Path, plugin_lib: str) -> dict:
+    """The rackstress package copied under ``root`` without the plugin's sources, its packaged
+    plugin ``gone`` or stamped for another LAMMPS (``stale``): an install whose plugin cannot
+    be used and cannot be rebuilt. Returns the environment that imports the copy."""
+    import rackstress
+
+    pkg = Path(rackstress.__file__).parent
+    dest = root / "site" / "workflow" / "rackstress"
+    shutil.copytree(pkg, dest, ignore=shutil.ignore_patterns("__pycache__"))
+    lib = dest / "engines" / "lammps" / "plugin_lib"
+    if plugin_lib == "gone":
+        shutil.rmtree(lib, ignore_errors=True)
+    else:
+        stamp = json.loads((lib / "build.json").read_text())
+        stamp["lammps"], stamp["version"] = "2024.8.29.1.0", "29 Aug 2024"
+        (lib / "build.json").write_text(json.dumps(stamp))
+    return {**os.environ, "PYTHONPATH": str(dest.parent), "XDG_CACHE_HOME": str(root / "cache")}
+
+
+@pytest.mark.lammps
+@pytest.mark.parametrize("plugin_lib,says", [
+    ("gone", "the plugin was not built at install"),
+    ("stale", "the packaged plugin was built for another LAMMPS than 2025.7.22.4.0")])
+def test_packaged_plugin_missing_or_stale_without_sources(tmp_path, plugin_lib, says):
+    """An install whose packaged plugin is missing or stamped for another LAMMPS, with no
+    sources to rebuild it: one line why, and the deck falls back to the callback."""
+    env = _package_copy(tmp_path, plugin_lib)
+    r = subprocess.run([RS, "deck", "plane-rack", "--out", str(tmp_path / "deck")],
+                       capture_output=True, text=True, timeout=300, env=env, cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    notes = [line for line in r.stderr.splitlines() if line.startswith("rackstress:")]
+    assert len(notes) == 1 and notes[0].startswith(CALLBACK_LINE), r.stderr
+    assert says in notes[0] and "sources are not here" in notes[0], notes[0]
+    deck = (tmp_path / "deck" / "in.lammps").read_text()
+    assert "fix external" in deck and "rs/rack" not in deck
+    assert not (tmp_path / "cache" / "rackstress" / "plugin").exists()    # nothing built
+
+
+# ---------------------------------------------------------------------------- kill -9 a rank
+def descendants(pid: int) -> list[int]:
+    """Every live process below ``pid`` (read from /proc)."""
+    kids: dict[int, list[int]] = {}
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                ppid = int((d / "stat").read_text().rsplit(")", 1)[1].split()[1])
+            except (OSError, IndexError, ValueError):
+                continue
+            kids.setdefault(ppid, []).append(int(d.name))
+    out, todo = [], [pid]
+    while todo:
+        for k in kids.get(todo.pop(), []):
+            out.append(k)
+            todo.append(k)
+    return out
+
+
+def ranks(mpiexec: subprocess.Popen, name: str) -> list[int]:
+    """The pids of the ranks mpiexec started: ``lmp``, the LAMMPS binary itself (the venv's
+    ``lmp`` is a Python script that starts it), or ``rackstress``, the script run by Python."""
+    found = []
+    for p in descendants(mpiexec.pid):
+        try:
+            cmd = Path(f"/proc/{p}/cmdline").read_bytes().split(b"\0")
+        except OSError:
+            continue
+        prog = cmd[0] if name == "lmp" else (cmd[1] if len(cmd) > 1 else b"")
+        if Path(prog.decode(errors="replace")).name == name:
+            found.append(p)
+    return found
+
+
+def kill_one_rank_and_time_the_end(p: subprocess.Popen, name: str, bound: float = 60.0):
+    """``kill -9`` one rank of ``p``; return mpiexec's (status, seconds to end, stderr)."""
+    assert wait_for(lambda: len(ranks(p, name)) == 2, 60, p), "two ranks never appeared"
+    os.kill(max(ranks(p, name)), signal.SIGKILL)
+    t0 = time.monotonic()
+    try:
+        err = p.communicate(timeout=bound)[1]
+    except subprocess.TimeoutExpired:
+        os.killpg(p.pid, signal.SIGKILL)
+        p.communicate()
+        raise AssertionError(f"mpiexec -n 2 {name} hung after one rank was killed")
+    return p.returncode, time.monotonic() - t0, err
+
+
+@pytest.mark.lammps
+@pytest.mark.mpi
+def test_rank_killed_under_mpiexec_lmp_on_a_plugin_deck_ends_every_rank(tmp_path):
+    """A standalone plugin deck (no Python in the ranks) under ``mpiexec -n 2 lmp``: one rank
+    killed, mpiexec ends the other and exits non-zero within seconds."""
+    deck = tmp_path / "deck"
+    r = rs("deck", "plane-rack", "--steps", "10000000", "--dump-every", "100", "--out", deck)
+    assert r.returncode == 0, r.stderr
+    assert "rs/rack" in (deck / "in.lammps").read_text()          # the plugin's deck
+    p = subprocess.Popen([MPIEXEC, "-n", "2", LMP, "-in", "in.lammps"], cwd=deck,
+                         start_new_session=True, stdout=subprocess.DEVNULL,
+                         stderr=subprocess.PIPE, text=True)
+    try:
+        dump = deck / "trajectory.dump"
+        assert wait_for(lambda: dump.exists() and dump.stat().st_size > 100_000, 120, p), \
+            p.stderr.read() if p.poll() is not None else "no frames"
+        code, took, err = kill_one_rank_and_time_the_end(p, "lmp")
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+    assert code != 0, err
+    assert took < 30, took
+    assert descendants(p.pid) == []
+
+
+@pytest.mark.lammps
+@pytest.mark.mpi
+@pytest.mark.parametrize("nranks", [1, 2])
+def test_rank_killed_under_rackstress_run_then_resume(tmp_path, nranks):
+    """``rackstress run`` on the plugin path (serial, and ``mpiexec -n 2``), one rank killed
+    with ``kill -9`` after a checkpoint: every rank ends within seconds, and ``--resume`` (as
+    many ranks) finishes the run. Serial: the uninterrupted run's trajectory byte for byte.
+    Two ranks: the frames up to the checkpoint byte for byte, the resumed ones equal to the
+    dump's last digit (the 1e-10 two-rank parity tolerance) — not bitwise: LAMMPS pads a shrink-wrapped box by
+    1e-4 of the box it had, which a resumed run does not have (README's fault table)."""
+    mpi = [MPIEXEC, "-n", "2"] if nranks == 2 else []
+    args = ["run", "plane-rack", "--steps", "20000", "--restart-every", "200", "--dump-every",
+            "100", *QUIET]
+    full, cut = tmp_path / "full", tmp_path / "cut"
+    r = subprocess.run([*mpi, RS, *args, "--out", str(full)], capture_output=True, text=True,
+                       timeout=600)
+    assert r.returncode == 0, r.stderr
+    assert operators(full) == "plugin"
+    p = subprocess.Popen([*mpi, RS, *args, "--out", str(cut)], start_new_session=True,
+                         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        assert wait_for(lambda: (progress_step(cut) or 0) >= 1000, 300, p), "no checkpoint"
+        if nranks == 2:
+            code, took, err = kill_one_rank_and_time_the_end(p, "rackstress")
+            assert code != 0 and took < 30, (code, took, err)
+            assert descendants(p.pid) == []
+        else:
+            p.kill()
+            p.communicate(timeout=30)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+    step = progress_step(cut)
+    assert step is not None and step < 20000 and not (cut / "summary.json").exists()
+    r = subprocess.run([*mpi, RS, "run", "--resume", str(cut), *QUIET], capture_output=True,
+                       text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    s = json.loads((cut / "summary.json").read_text())
+    assert s["resumed_from_step"] == step and s["steps"] == 20000
+    assert operators(cut) == "plugin"
+    if nranks == 1:
+        assert (cut / "trajectory.dump").read_bytes() == (full / "trajectory.dump").read_bytes()
+        return
+    a, b = dump_parts(full / "trajectory.dump"), dump_parts(cut / "trajectory.dump")
+    assert [t.split("\n", 1)[0] for t, _, _ in a] == [t.split("\n", 1)[0] for t, _, _ in b]
+    for (text_a, box_a, x_a), (text_b, box_b, x_b) in zip(a, b):
+        if int(text_a.split("\n", 1)[0]) <= step:
+            assert (text_a, box_a) == (text_b, box_b)        # kept as written
+        else:
+            # the dump keeps 10 significant digits (%.10g): a 1e-10 difference may flip the
+            # last one, so one unit of it is the resolution
+            unit = 10.0 ** (np.floor(np.log10(np.maximum(np.abs(x_a), 1e-300))) - 9)
+            assert (np.abs(x_a - x_b) <= 1.5 * unit).all()      # one flip, as printed
+            assert np.abs(np.array(box_a) - box_b).max() <= 1e-10
+
+
+def dump_parts(dump: Path) -> list[tuple[str, list[float], np.ndarray]]:
+    """Each frame of a LAMMPS dump: (its text, its box bounds, its positions)."""
+    out = []
+    for frame in dump.read_text().split("ITEM: TIMESTEP\n")[1:]:
+        lines = frame.rstrip("\n").split("\n")
+        k = next(i for i, line in enumerate(lines) if line.startswith("ITEM: BOX BOUNDS"))
+        rows = np.array([line.split() for line in lines[k + 5:]], dtype=float)
+        out.append((frame, [float(v) for line in lines[k + 1:k + 4] for v in line.split()],
+                    rows[:, 3:6]))
+    return out
+
+
+# ---------------------------------------------------------------------------- full disk
+@pytest.mark.lammps
+@pytest.mark.parametrize("nranks", [1, 2])
+def test_full_disk_while_checkpointing_on_the_plugin_path(tmpfs, nranks):  # noqa: F811
+    """The disk fills between two checkpoints of a plugin run: the next checkpoint's write
+    (mostly LAMMPS' ``write_restart``) fails, every rank ends with exit 5 and one message, and the last committed checkpoint
+    (``progress.json``) is whole: its state holds every particle, finite, and its restart
+    file is the size of the previous ones."""
+    disk = tmpfs("4m")
+    out = disk / "run"
+    mpi = [MPIEXEC, "-n", "2"] if nranks == 2 else []
+    p = subprocess.Popen([*mpi, RS, "run", "plane-rack", "--steps", "1000000",
+                          "--restart-every", "50", "--dump-every", "1000000", "--out", str(out),
+                          *QUIET], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    assert wait_for(lambda: (progress_step(out) or 0) >= 100, 120, p)
+    assert operators(out) == "plugin"
+    fill(disk / "filler")
+    try:
+        err = p.communicate(timeout=60)[1]
+    except subprocess.TimeoutExpired:
+        p.kill()
+        p.communicate()
+        raise AssertionError("the run hung after the disk filled")
+    assert p.returncode == 5, err
+    assert err.count("No space left") == 1 and "Traceback" not in err, err
+    # which write meets the full disk first is the race's: LAMMPS' write_restart (most of the
+    # bytes of a checkpoint), the state file or progress.json; each is named
+    assert ("write_restart" in err or str(out / "restart") in err
+            or str(out / "progress.json") in err), err
+    assert leftovers(out) == []
+    meta = json.loads((out / "progress.json").read_text())
+    assert meta["step"] >= 100 and meta["step"] % 50 == 0
+    with np.load(out / meta["state"]) as z:
+        assert z["x"].shape == (406, 3) and np.isfinite(z["x"]).all()
+    restarts = sorted((out / "restart").iterdir())
+    assert out / meta["restart"] in restarts
+    assert (out / meta["restart"]).stat().st_size > 0

@@ -1,0 +1,171 @@
+"""Faults of physical scenes, static analysis and batches over them, played with real processes
+(issue 25, "Also in scope"): a static run that cannot settle (a part that floats away, a
+mechanism) ends with ``not settled`` and exit 6 in bounded time; a load on a region that
+selects nothing, a mesh in other units than the scene's, a material without E are exit 2 with
+a message naming the place; a batch over mesh scenes refuses a missing STL before any job runs
+and records a job that does not settle as such. README's fault table lists each case."""
+from __future__ import annotations
+
+import json
+import shutil
+import time
+from pathlib import Path
+
+import pytest
+
+from test_faults import QUIET, rs
+
+ROOT = Path(__file__).resolve().parents[1]
+BRACKET = ROOT / "examples" / "bracket"
+
+#: a steel bar 20 × 4 × 4 mm (particles at 0.5, 1.5, … mm), held on a cylinder around the
+#: line x = y = 0.5 of radius `pin`, 10 N down on its far end. pin = 2.5 clamps a block of its
+#: end (it settles); pin = 0.1 holds one line of particles along z, about which the bar turns
+#: freely: a mechanism, no equilibrium.
+HINGE = """name = "hinge"
+units = "mm-N-s"
+analysis = "static"
+
+[params]
+pin = 2.5
+
+[[group]]
+name = "bar"
+fill = {{ box = {{ min = [0, 0, 0], max = [20, 4, 4] }} }}
+spacing = 1.0
+material = {material}
+
+[[support]]
+on = "bar"
+where = {{ cylinder = {{ start = [0.5, 0.5, -1], end = [0.5, 0.5, 5], radius = "$pin" }} }}
+
+[[load]]
+on = "{load_on}"
+where = {{ box = {{ min = {load_min}, max = {load_max} }} }}
+force = [0, -10, 0]
+{extra}"""
+
+LOOSE = """
+[[group]]
+name = "loose"
+fill = { box = { min = [30, 0, 0], max = [40, 4, 4] } }
+spacing = 1.0
+material = "steel"
+"""
+
+
+def hinge(tmp_path: Path, name="hinge.toml", material='"steel"', load_on="bar",
+          load_min="[19.5, -1, -1]", load_max="[21, 5, 5]", extra="") -> Path:
+    p = tmp_path / name
+    p.write_text(HINGE.format(material=material, load_on=load_on, load_min=load_min,
+                              load_max=load_max, extra=extra))
+    return p
+
+
+def summary(rundir: Path) -> dict:
+    return json.loads((rundir / "summary.json").read_text())
+
+
+# ---------------------------------------------------------------------------- not settled
+@pytest.mark.lammps
+@pytest.mark.parametrize("case", ["mechanism", "floats away"])
+def test_a_static_run_that_cannot_settle_is_exit_6_in_bounded_time(tmp_path, case):
+    """A mechanism (a bar held on one line of particles turns about it) and a part with no
+    support at all beside a held one (its load reaches no support): no equilibrium exists.
+    The run stops after its iterations, says ``not settled`` in one line and in summary.json,
+    and exits 6; the same bar clamped settles (exit 0)."""
+    if case == "mechanism":
+        scene, sets = hinge(tmp_path), ["--set", "pin=0.1"]
+    else:
+        scene = hinge(tmp_path, load_on="loose", load_min="[38.5, -1, -1]",
+                      load_max="[41, 5, 5]", extra=LOOSE)
+        sets = []
+    out = tmp_path / "run"
+    t0 = time.monotonic()
+    r = rs("run", scene, *sets, "--out", out, *QUIET, timeout=300)
+    took = time.monotonic() - t0
+    assert r.returncode == 6, r.stderr
+    assert took < 120, took
+    errors = [line for line in r.stderr.splitlines() if line.startswith("rackstress: error")]
+    assert len(errors) == 1 and "did not settle" in errors[0], r.stderr
+    assert "Traceback" not in r.stderr
+    s = summary(out)
+    assert s["analysis"] == "static" and s["settled"] is False
+    assert s["status"] == "not settled" and s["residual"] > 1e-6
+    if case == "floats away":            # the unsupported part is named before the solve
+        assert "'loose'" in r.stderr and "no support" in r.stderr
+    else:                                # the clamped bar: the same scene settles
+        ok = rs("run", scene, "--set", "pin=2.5", "--out", tmp_path / "ok", *QUIET, timeout=300)
+        assert ok.returncode == 0, ok.stderr
+        assert summary(tmp_path / "ok")["status"] == "settled"
+
+
+# ---------------------------------------------------------------------------- bad input
+@pytest.mark.parametrize("case", ["empty load", "no E", "mesh in metres", "mesh in mm in SI"])
+def test_physical_input_errors_name_the_place(tmp_path, case):
+    """Exit 2 and one paragraph naming the file and the field; nothing written."""
+    if case == "empty load":
+        scene = hinge(tmp_path, load_min="[100, 100, 100]", load_max="[101, 101, 101]")
+        says = ["hinge.toml", "[[load]] #1", "'bar'", "where", "selects no particle"]
+    elif case == "no E":
+        scene = hinge(tmp_path, material="{ nu = 0.3, density = 7850 }")
+        says = ["hinge.toml", "'bar'", "material", "lacks E"]
+    else:
+        shutil.copy(BRACKET / "bracket.stl", tmp_path / "bracket.stl")
+        text = (BRACKET / "static.toml").read_text()
+        if case == "mesh in metres":     # a mm part read as metres' thousandths: too small
+            text = text.replace('mesh = "bracket.stl"', 'mesh = "bracket.stl"\nscale = 0.001')
+            says = ["static.toml", "bracket.stl", "larger than the part", "scale"]
+        else:                            # a mm mesh in an SI scene: 30 m wide, too large
+            text = text.replace('units = "mm-N-s"', 'units = "SI"').replace(
+                "spacing = 1.0 ", "spacing = 0.001 ")
+            says = ["static.toml", "bracket.stl", "10,000,000", "scale"]
+        scene = tmp_path / "static.toml"
+        scene.write_text(text)
+    out = tmp_path / "run"
+    r = rs("run", scene, "--out", out, *QUIET, timeout=300)
+    assert r.returncode == 2, r.stderr
+    assert "Traceback" not in r.stderr
+    for word in says:
+        assert word in r.stderr, (word, r.stderr)
+    assert not out.exists()
+
+
+# ---------------------------------------------------------------------------- batches
+def test_a_batch_with_a_missing_stl_is_refused_before_any_job_runs(tmp_path):
+    shutil.copy(BRACKET / "bracket.stl", tmp_path / "bracket.stl")
+    text = (BRACKET / "static.toml").read_text()
+    text = text.replace('mesh = "bracket.stl"', 'mesh = "$part"').replace(
+        "[params]\n", '[params]\npart = "bracket.stl"\n', 1)
+    (tmp_path / "parts.toml").write_text(text)
+    sweep = tmp_path / "sweep.toml"
+    sweep.write_text('scene = "parts.toml"\nengine = "lammps"\n\n[grid]\n'
+                     'part = ["bracket.stl", "missing.stl"]\n')
+    out = tmp_path / "b"
+    r = rs("batch", sweep, "--out", out, timeout=300)
+    assert r.returncode == 2, r.stderr
+    assert "missing.stl" in r.stderr and "does not exist" in r.stderr
+    assert "g001" in r.stderr and "Traceback" not in r.stderr
+    assert not out.exists() or not list(out.glob("g0*"))        # no job ran
+
+
+@pytest.mark.lammps
+def test_a_batch_records_a_job_that_did_not_settle(tmp_path):
+    """Two jobs of the hinge: clamped (settles) and pinned on a line (a mechanism). The batch
+    goes on (exit 0, as with a diverged job) and batch.json, the job's summary and the batch
+    report say ``not settled`` (was: ``ok``)."""
+    hinge(tmp_path)
+    sweep = tmp_path / "sweep.toml"
+    sweep.write_text('scene = "hinge.toml"\nengine = "lammps"\n\n[grid]\npin = [2.5, 0.1]\n')
+    out = tmp_path / "b"
+    r = rs("batch", sweep, "--out", out, timeout=600)
+    assert r.returncode == 0, r.stderr
+    jobs = {j["params"]["pin"]: j for j in json.loads((out / "batch.json").read_text())["jobs"]}
+    assert jobs[2.5]["status"] == "ok", jobs[2.5]
+    assert jobs[0.1]["status"] == "not settled", jobs[0.1]
+    assert "did not settle" in jobs[0.1]["error"]
+    assert summary(out / jobs[0.1]["dir"])["status"] == "not settled"
+    counts = json.loads((out / "batch.json").read_text())["counts"]
+    assert counts == {"ok": 1, "not settled": 1}
+    page = (out / "report.html").read_text()
+    assert 'data-status="not settled"' in page
