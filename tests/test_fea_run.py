@@ -70,7 +70,9 @@ def test_fea_of_a_run_writes_its_check(run):
     assert data["fixed_fe_nodes"] == 32 and data["loaded_particles"] == 9
     assert data["total_force"] == pytest.approx([0, 0, -0.09])
     assert data["fe_total_force"] == pytest.approx([0, 0, -0.09])
-    assert data["boundary"] == "the scene (no boundary.npz)"
+    # every run writes boundary.npz (CONTRACT.md): its held ids and per-particle forces are
+    # the ones counted above (9 held, 9 × 0.01 loaded)
+    assert data["boundary"] == "boundary.npz"
     assert data["measure"] == "strain" and data["agreement"]["peak_ratio"] is None
     cloud = pv.read(run / "vtk" / "fea.vtp")
     assert cloud.n_points == 108
