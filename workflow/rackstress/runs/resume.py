@@ -152,9 +152,10 @@ def rebuild_scene(rundir: Path, spec: str | None = None):
         sc = scenes.build(name, **{k: v for k, v in params.items() if k in known})
     else:
         # the file's own [params] as the run had them (its --set overrides included); a
-        # duration-given scene gets its steps from the duration, not from a recorded count
+        # duration-given scene gets its steps from the duration, not from a recorded count;
+        # "analysis" is recorded from the file's own key (static), not a --set parameter
         given = {k: v for k, v in params.items()
-                 if k not in ("file", "integrator", "dt")
+                 if k not in ("file", "integrator", "dt", "analysis")
                  and not (k == "steps" and "duration" in params)}
         sc = scenes.load(spec, given)
         dt = params.get("dt")

@@ -518,15 +518,20 @@ def _boundary(rundir: Path, scene) -> tuple[dict, str]:
 
 
 def _particle_measure(rundir: Path, sl: slice, measure: str | None):
-    with np.load(rundir / "measures.npz") as z:
-        names = [m for m in ("von_mises", "strain") if m in z.files]
-        if measure is None:
-            if not names:
-                raise ValueError(f"{rundir}/measures.npz has neither von_mises nor strain")
-            measure = names[0]
-        if measure not in z.files:
-            raise ValueError(f"{rundir}/measures.npz has no measure '{measure}'")
-        return measure, np.asarray(z[measure][-1], float)[sl]
+    """The measure at the last frame, from the post-processing's fields: ``measures.npz`` is
+    only a cache (written on request), so the fields are computed when it is absent."""
+    from rackstress.stress.post import compute_fields
+    from rackstress.stress.rundata import load_run
+
+    values = compute_fields(load_run(rundir), cache=True).values
+    names = [m for m in ("von_mises", "strain") if m in values]
+    if measure is None:
+        if not names:
+            raise ValueError(f"{rundir}: the run's measures have neither von_mises nor strain")
+        measure = names[0]
+    if measure not in values:
+        raise ValueError(f"{rundir}: the run has no measure '{measure}'")
+    return measure, np.asarray(values[measure][-1], float)[sl]
 
 
 def _particle_displacement(rundir: Path, sl: slice):
