@@ -103,7 +103,9 @@ def _package_copy(root: Path, plugin_lib: str) -> dict:
 
     pkg = Path(rackstress.__file__).parent
     dest = root / "site" / "workflow" / "rackstress"
-    shutil.copytree(pkg, dest, ignore=shutil.ignore_patterns("__pycache__"))
+    # no sources either: neither a repository above the copy nor the copy packaged beside the
+    # module (a non-editable install carries them as plugin_src)
+    shutil.copytree(pkg, dest, ignore=shutil.ignore_patterns("__pycache__", "plugin_src"))
     lib = dest / "engines" / "lammps" / "plugin_lib"
     if plugin_lib == "gone":
         shutil.rmtree(lib, ignore_errors=True)

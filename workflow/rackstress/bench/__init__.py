@@ -20,6 +20,16 @@ from pathlib import Path
 DEFAULT_OUT = Path(__file__).resolve().parents[3] / "docs" / "benchmarks"
 
 
+def repository_file(*parts: str) -> Path:
+    """A file of the repository (``examples/``, ``scenes/``) a benchmark reads: beside the
+    source tree (an editable install), else in the working directory (a checkout, where the
+    tests and CI run); the path beside the source tree when neither has it (its reader names
+    it in its error)."""
+    here = Path(__file__).resolve().parents[3].joinpath(*parts)
+    there = Path.cwd().joinpath(*parts)
+    return there if not here.exists() and there.exists() else here
+
+
 def out_dir(out: Path | None) -> Path:
     out = Path(out) if out is not None else DEFAULT_OUT
     out.mkdir(parents=True, exist_ok=True)

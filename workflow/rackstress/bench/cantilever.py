@@ -24,8 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
+from rackstress.bench import repository_file
+
 ROOT = Path(__file__).resolve().parents[3]
-SCENE = ROOT / "examples" / "cantilever" / "scene.toml"
+SCENE = repository_file("examples", "cantilever", "scene.toml")
 E, NU, P, L, H = 70000.0, 0.33, 100.0, 100.0, 10.0
 I = H ** 4 / 12
 TIP = P * L ** 3 / (3 * E * I) * 1.008

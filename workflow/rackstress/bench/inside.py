@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rackstress.bench import fmt, machine, md_table, out_dir, write_json
+from rackstress.bench import fmt, machine, md_table, out_dir, repository_file, write_json
 
 SIZES = (17_600, 100_000, 1_000_000)
 QUICK_SIZES = (3_000, 17_600)
@@ -34,7 +34,7 @@ HEADER = ["particles", "spacing", "bindings", "dropped", "fill s", "bind s (new)
 
 
 def _stl() -> Path:
-    return Path(__file__).resolve().parents[3] / "examples" / "bracket" / "bracket.stl"
+    return repository_file("examples", "bracket", "bracket.stl")
 
 
 def one(surface, n: int, full_old: bool, rng) -> dict:

@@ -36,12 +36,12 @@ from rackstress.engines.driver import drive
 from rackstress.engines.reference import Reference
 from rackstress.model.scene import Scene
 from rackstress.model.stability import predict
-from rackstress.bench import fmt, machine, md_table, out_dir, write_json
+from rackstress.bench import fmt, machine, md_table, out_dir, repository_file, write_json
 
 STEPS = 300
 GROWTH = 1.0e3
 REL_TOL = 0.01
-TWO_BLOBS = Path(__file__).resolve().parents[3] / "scenes" / "two-blobs.toml"
+TWO_BLOBS = repository_file("scenes", "two-blobs.toml")
 
 
 # ---------------------------------------------------------------------------- one trial

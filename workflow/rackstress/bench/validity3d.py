@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rackstress.bench import fmt, machine, md_table, out_dir, write_json
+from rackstress.bench import fmt, machine, md_table, out_dir, repository_file, write_json
 
 SPACINGS = (1.0, 0.7)
 QUICK_SPACINGS = (1.0,)
@@ -39,7 +39,7 @@ HEADER = ["spacing", "particles", "FE ν", "tetrahedra", "Spearman ρ", "top-5 %
 
 
 def _stl() -> Path:
-    return Path(__file__).resolve().parents[3] / "examples" / "bracket" / "bracket.stl"
+    return repository_file("examples", "bracket", "bracket.stl")
 
 
 def lattice_equilibrium(o, pairs_i, pairs_j, c, held, F):
