@@ -161,9 +161,11 @@ def fem_cantilever(a: float, nu: float, length: float = L, solver: str = "direct
         import pyamg
         import scipy.sparse.linalg as spla
 
+        from rackstress.engines.static import rigid_modes
+
         A, b, x0, I_ = skfem.condense(K, f, D=D)
         ml = pyamg.smoothed_aggregation_solver(A.tocsr(), symmetry="symmetric",
-                                               B=_modes(mesh.p.T, I_), max_coarse=500)
+                                               B=rigid_modes(mesh.p.T, I_), max_coarse=500)
         x, _ = spla.cg(A, b, rtol=1e-8, M=ml.aspreconditioner())
         u = np.zeros(K.shape[0])
         u[I_] = x
@@ -185,18 +187,6 @@ def fem_cantilever(a: float, nu: float, length: float = L, solver: str = "direct
     return {"tip_mm": tip, "clamp_peak_vm_MPa": float(vm[c[0] < a].max()),
             "mid_top_sxx_MPa": float(s[0, 0][near].mean()), "seconds": secs,
             "dofs": int(K.shape[0])}
-
-
-def _modes(p, keep):
-    n = len(p)
-    c = p - p.mean(axis=0)
-    B = np.zeros((3 * n, 6))
-    for k in range(3):
-        B[k::3, k] = 1.0
-    B[1::3, 3], B[2::3, 3] = -c[:, 2], c[:, 1]
-    B[0::3, 4], B[2::3, 4] = c[:, 2], -c[:, 0]
-    B[0::3, 5], B[1::3, 5] = -c[:, 1], c[:, 0]
-    return B[keep]
 
 
 def speed(tmp: Path, echo=print, a: float = 0.5, length: float = 125.0) -> dict:

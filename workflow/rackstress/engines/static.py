@@ -143,7 +143,7 @@ def stiffness(p: np.ndarray, pairs, m: np.ndarray):
     return sp.csr_matrix((vals, (rows, cols)), shape=(3 * n, 3 * n))
 
 
-def _rigid_modes(p: np.ndarray, free: np.ndarray) -> np.ndarray:
+def rigid_modes(p: np.ndarray, free: np.ndarray) -> np.ndarray:
     """The six rigid-body modes (3 translations, 3 rotations) on the free unknowns: the
     near-null space smoothed aggregation needs for elasticity."""
     n = len(p)
@@ -168,7 +168,7 @@ def _linear_solve(K, b, p, free, rtol, cache: dict):
     import pyamg
 
     if "M" not in cache:
-        ml = pyamg.smoothed_aggregation_solver(K, B=_rigid_modes(p, free), symmetry="symmetric",
+        ml = pyamg.smoothed_aggregation_solver(K, B=rigid_modes(p, free), symmetry="symmetric",
                                                strength=("symmetric", {"theta": 0.0}),
                                                max_coarse=500)
         cache["M"] = ml.aspreconditioner(cycle="V")
