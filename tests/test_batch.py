@@ -160,7 +160,12 @@ def test_killed_batch_restarts_and_runs_each_job_once(reference, tmp_path):
     # only the jobs cut off by the kill started twice
     assert sum(len(v) for v in starts.values()) == 6 + len(cut)
     assert all(len(starts[n]) == (2 if n in cut else 1) for n in figs)
-    assert all(by[n]["attempts"] == (2 if n in running else 1) for n in figs)
+    # handed out again only if it did not finish: a kill can land after a job's directory is
+    # whole and before the index says so (it is in both ``running`` and ``finished``, and the
+    # assertion above already requires one attempt of it)
+    again = set(running) - set(finished)
+    assert all(by[n]["attempts"] == (2 if n in again else 1) for n in figs), (
+        {n: by[n]["attempts"] for n in figs}, running, sorted(finished))
     assert [q["jobs_run"] for q in index(d)["passes"]][-1] == 6 - len(finished)
     # a third pass finds nothing to do
     r = batch([str(sw), "--out", str(d)])
