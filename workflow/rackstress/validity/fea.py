@@ -80,40 +80,9 @@ class FEAResult:
         return int(self.basis.N)
 
     def _inside(self, x: np.ndarray) -> np.ndarray:
-        """Points on the boundary (or between a curved edge and its chord) moved just inside.
-
-        A point the element search misses is moved towards the centroid of its nearest element
-        by 1e-9, 1e-6, … of the way until it is found; it moves by less than the chord's sagitta.
-        """
-        find = self.mesh.element_finder()
-        try:
-            find(*x.T)
-            return x
-        except ValueError:
-            pass
-        from scipy.spatial import cKDTree
-
-        cent = self.mesh.p[:, self.mesh.t].mean(axis=1).T
-        tree = cKDTree(cent)
-        x = x.copy()
-        for k in range(len(x)):
-            try:
-                find(*x[k:k + 1].T)
-                continue
-            except ValueError:
-                pass
-            c = cent[tree.query(x[k])[1]]
-            for frac in (1e-9, 1e-6, 1e-3, 1e-2, 0.1, 0.5):
-                y = x[k] + frac * (c - x[k])
-                try:
-                    find(*y[None].T)
-                    x[k] = y
-                    break
-                except ValueError:
-                    continue
-            else:
-                raise ValueError(f"point {x[k]} is outside the {self.name} body")
-        return x
+        """Points on the boundary (or between a curved edge and its chord) moved just inside
+        (:func:`move_inside`); a point still outside is an error naming the body."""
+        return move_inside(self.mesh, x, body=self.name)
 
     def at(self, points) -> dict:
         """Fields at ``points`` (n × 2 or n × 3; z ignored), each an array of n values.
@@ -349,3 +318,45 @@ __all__ = ["FEAResult", "cantilever", "plate_with_hole", "l_bracket", "refinemen
            "square_lattice_stiffness",
            "von_mises_strain_2d", "rectangle_mesh", "l_mesh", "hole_quarter_mesh", "skfem",
            "CONVERGED", "E_DEFAULT", "NU_DEFAULT"]
+
+
+def move_inside(mesh, x: np.ndarray, fracs=(1e-9, 1e-6, 1e-3, 1e-2, 0.1, 0.5),
+                body: str | None = None) -> np.ndarray:
+    """``x`` with each point that scikit-fem's element search misses (on the boundary, or
+    between a curved edge and its chord) moved towards the centroid of its nearest element by
+    the first of ``fracs`` of the way at which it is found; it moves by less than the chord's
+    sagitta.
+
+    A point found at none of them is an error naming ``body``, or stays where it is when
+    ``body`` is None. Serves the planar FEA here and the tetrahedral one
+    (:mod:`rackstress.validity.solid`)."""
+    find = mesh.element_finder()
+    try:
+        find(*x.T)
+        return x
+    except ValueError:
+        pass
+    from scipy.spatial import cKDTree
+
+    cent = mesh.p[:, mesh.t].mean(axis=1).T
+    tree = cKDTree(cent)
+    x = x.copy()
+    for k in range(len(x)):
+        try:
+            find(*x[k:k + 1].T)
+            continue
+        except ValueError:
+            pass
+        c = cent[tree.query(x[k])[1]]
+        for frac in fracs:
+            y = x[k] + frac * (c - x[k])
+            try:
+                find(*y[None].T)
+                x[k] = y
+                break
+            except ValueError:
+                continue
+        else:
+            if body is not None:
+                raise ValueError(f"point {x[k]} is outside the {body} body")
+    return x

@@ -185,34 +185,11 @@ class Solution:
 
     def _inside(self, x: np.ndarray) -> np.ndarray:
         """Points the element search misses (on the boundary) moved a little towards the
-        nearest element's centroid."""
-        from scipy.spatial import cKDTree
+        nearest element's centroid (:func:`rackstress.validity.fea.move_inside`, up to the
+        centroid itself)."""
+        from rackstress.validity.fea import move_inside
 
-        find = self.mesh.element_finder()
-        x = x.copy()
-        try:
-            find(*x.T)
-            return x
-        except ValueError:
-            pass
-        cent = self.mesh.p[:, self.mesh.t].mean(axis=1).T
-        tree = cKDTree(cent)
-        for k in range(len(x)):
-            try:
-                find(*x[k:k + 1].T)
-                continue
-            except ValueError:
-                pass
-            c = cent[tree.query(x[k])[1]]
-            for frac in (1e-9, 1e-6, 1e-3, 1e-2, 0.1, 0.5, 1.0):
-                y = x[k] + frac * (c - x[k])
-                try:
-                    find(*y[None].T)
-                    x[k] = y
-                    break
-                except ValueError:
-                    continue
-        return x
+        return move_inside(self.mesh, x, fracs=(1e-9, 1e-6, 1e-3, 1e-2, 0.1, 0.5, 1.0))
 
     def at(self, points) -> dict:
         """``displacement`` (n×3), ``stress`` (n×6: xx yy zz xy xz yz) and ``von_mises`` (n) at
