@@ -11,11 +11,10 @@ passive: the active region (body, legs, racks, and the sediment under the feet) 
 hundred units across.
 
 ``balance`` names the load balancing the LAMMPS engine applies under MPI
-(:func:`rackstress.engines.lammps.runner.balance_commands`): ``"rcb"`` (default) — ``comm_style tiled`` and
-a recursive-bisection ``balance`` that weighs each robot particle ``robot_weight`` times a
-sediment particle (the robot's per-particle work is the Python operators: binds to the racks,
-attraction, one-way collisions), so the robot and an equal share of the work sit on one rank and
-the sediment is cut between the ranks; ``"shift"`` — ``balance shift xz`` on the particle counts;
+(:func:`rackstress.engines.lammps.deck.balance_commands`): ``"rcb"`` (default) — ``comm_style tiled`` and
+a recursive-bisection ``balance`` that weighs each moving particle (the robot, and sediment once
+touched) ``robot_weight`` times a resting sediment particle (a moving particle carries the
+operators: binds to the racks, attraction, collisions), so that the ranks' work is even; ``"shift"`` — ``balance shift xz`` on the particle counts;
 ``"none"`` — LAMMPS' default even split of the box. It changes nothing in serial.
 
 Run it with a sparse trajectory: a frame of a million particles is ~40 MB of text, e.g.

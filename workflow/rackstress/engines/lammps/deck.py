@@ -117,6 +117,12 @@ PASSIVE_SKIN = 8.0
 #: saves at each reneighbouring (every pass over all atoms). 4 measured: sediment-large 4.5 ->
 #: 2.8 ms per iteration (1 M particles), MagPod unchanged, against 2.
 PLUGIN_PASSIVE_SKIN = 4.0
+#: How many resting particles a moving one (MOVE_GROUP) weighs in the weighted ``balance rcb`` of a
+#: deck with passive groups (:func:`balance_commands`; a scene's ``robot_weight`` overrides it).
+#: Enough that the bisection cuts through the robot when it holds most of the work (MagPod:
+#: 4 still leaves the robot whole on one rank, 20 and 100 split it 2173 / 1888, measured), and
+#: small enough that a million resting particles still outweigh it (sediment-large).
+MOVE_WEIGHT = 20.0
 #: Relative tolerance under which two original lengths count as one bond type (fast mode).
 L0_DIGITS = 10
 
@@ -566,8 +572,45 @@ class Deck:
         if py:
             L.append(f"fix {PY_FIX} {self.moving} external pf/callback 1 {PY_NAPPLY}")
             L += partial_support_commands(self.scene, redefine=True)
+        bal = balance_commands(self)
+        if bal:
+            L.append("# under mpiexec: cut the domain by work, not by volume (one rank alone: "
+                     "no effect)")
+            L += bal
         L += self.schedule_commands(loop_after)
         return "\n".join(L) + "\n"
+
+
+def balance_commands(deck: Deck) -> list[str]:
+    """LAMMPS' load balancing of a deck under MPI (docs/benchmarks/scaling.md).
+
+    LAMMPS splits the box evenly by volume; where particles rest until touched (passive groups),
+    the work sits where the robot is, so one rank gets all of it (MagPod: 4061 moving particles
+    on one rank, 0 on the other). A deck with passive groups therefore balances by weight:
+    ``comm_style tiled`` and one recursive-coordinate-bisection ``balance`` in which a moving
+    particle (:data:`MOVE_GROUP`) weighs ``robot_weight`` (:data:`MOVE_WEIGHT`) resting ones.
+    A scene's ``balance`` parameter chooses otherwise: ``"shift"`` (``balance shift xz`` on
+    particle counts) or ``"none"`` (LAMMPS' even split). Where atoms sit changes no trajectory
+    beyond round-off in the order of the ranks' partial sums (plugin parity tests: 1e-10).
+
+    Examples
+    --------
+    >>> from rackstress import scenes
+    >>> balance_commands(compile_deck(scenes.build("magpod-small"), "exact"))[-1]
+    'balance 1.0 rcb weight group 1 rs_move 20.0'
+    """
+    params = deck.scene.params or {}
+    how = params.get("balance", "rcb" if deck.passive else "none")
+    if how in (None, "none"):
+        return []
+    if how == "shift":
+        return ["balance 1.05 shift xz 20 1.05"]
+    if how == "rcb":
+        if not deck.passive:
+            return ["comm_style tiled", "balance 1.0 rcb"]
+        w = float(params.get("robot_weight", MOVE_WEIGHT))
+        return ["comm_style tiled", f"balance 1.0 rcb weight group 1 {MOVE_GROUP} {w!r}"]
+    raise SceneError(f"scene '{deck.scene.name}': unknown balance '{how}' (rcb, shift or none)")
 
 
 # ---------------------------------------------------------------------------- supports, v0

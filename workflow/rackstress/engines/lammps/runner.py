@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from rackstress.engines.lammps.callback import PyForces, _global_int
-from rackstress.engines.lammps.deck import MOVE_GROUP, PY_FIX, PY_NAPPLY, Deck
+from rackstress.engines.lammps.deck import MOVE_GROUP, PY_FIX, PY_NAPPLY, Deck, balance_commands
 from rackstress.engines.lammps.plugin import locate as _locate_plugin
 from rackstress.errors import DivergenceError, RackstressError, StorageError
 from rackstress.lib.vec import fresh_zeros
@@ -43,31 +43,6 @@ DIVERGED_MARKERS = ("Lost atoms", "Too many neighbor bins", "Out of range atoms"
 #: LAMMPS errors of the file system.
 STORAGE_MARKERS = ("Cannot open", "No space", "Error writing", "Cannot write", "Disk quota",
                    "Read-only", "Could not write", "Cannot close", "I/O error")
-
-
-def balance_commands(scene, nranks: int) -> list[str]:
-    """Load balancing a scene asks for in ``params['balance']`` (``sediment-large``).
-
-    ``rcb``: ``comm_style tiled`` and one recursive-coordinate-bisection ``balance`` in which
-    every particle outside the passive ``sediment`` group weighs ``robot_weight`` (the robot's
-    particles carry the Python operators); ``shift``: ``balance shift xz`` on particle counts.
-    Nothing in serial, nor for scenes that ask for nothing (every scene but sediment-large).
-    """
-    how = (scene.params or {}).get("balance", "none")
-    if nranks < 2 or how in (None, "none"):
-        return []
-    if how == "shift":
-        return ["balance 1.05 shift xz 20 1.05"]
-    if how == "rcb":
-        w = float(scene.params.get("robot_weight", 20.0))
-        L = ["comm_style tiled"]
-        if "sediment" in scene.groups:
-            L += ["group rs_active subtract all sediment",
-                  f"balance 1.0 rcb weight group 1 rs_active {w!r}"]
-        else:
-            L += ["balance 1.0 rcb"]
-        return L
-    raise RackstressError(f"unknown balance '{how}' (rcb, shift or none)")
 
 
 class LammpsRun:
@@ -137,7 +112,7 @@ class LammpsRun:
             # only on rows it computed, never a resting one), so v + dt/2·f/m keeps it at rest.
             self.command(f"neigh_modify include {MOVE_GROUP}")
             self.scatter("f", np.zeros((self.scene.n_particles, 3)))
-        for cmd in balance_commands(self.scene, self.comm.Get_size()):
+        for cmd in (balance_commands(deck) if self.comm.Get_size() > 1 else []):
             self.command(cmd)
         #: LAMMPS' mask bit of the moving group (a deck with a passive group), else None: an
         #: atom without it has never moved, so it sits at its original position with v = 0

@@ -1,0 +1,61 @@
+"""Load balance of a deck with resting particles under ``mpiexec -n 2`` (deck.balance_commands,
+docs/benchmarks/scaling.md): counted, not timed, so it holds on a loaded machine.
+
+Expected values come from the scene's geometry: MagPod's robot (body, legs, racks) spans
+x ∈ [−24, 24], z ∈ [−44, 44] on a sediment spanning x ∈ [−75, 822], z ∈ [−148.5, 148.5]; LAMMPS'
+even split of the box cuts x in the middle (x ≈ 373), far from the robot, so one rank holds every
+moving particle; the weighted bisection must cut through the robot instead.
+"""
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from test_plugin import _cli
+
+BIN = Path(sys.executable).parent
+pytestmark = [pytest.mark.lammps, pytest.mark.mpi]
+
+
+def _moving_per_rank(deck: Path, name: str, text: str) -> tuple[np.ndarray, int, str]:
+    """Run ``text`` on 2 ranks; the moving particles (rs_move) each rank owns at the end, the
+    particles in all, and LAMMPS' log."""
+    k = text.index("\nrun ")          # the compute must exist before LAMMPS' first run
+    text = text[:k] + "\ncompute rs_proc all property/atom proc" + text[k:]
+    (deck / name).write_text(text + f"write_dump rs_move custom {name}.procs id c_rs_proc\n"
+                             f"write_dump all custom {name}.all id c_rs_proc\n")
+    proc = subprocess.run([str(BIN / "mpiexec"), "-n", "2", str(BIN / "lmp"), "-in", name,
+                           "-log", f"{name}.log"], cwd=deck, capture_output=True, text=True,
+                          timeout=600)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-2000:]
+    moving = np.loadtxt(deck / f"{name}.procs", skiprows=9, ndmin=2)
+    n_all = len(np.loadtxt(deck / f"{name}.all", skiprows=9, ndmin=2))
+    return (np.bincount(moving[:, 1].astype(int), minlength=2), n_all,
+            (deck / f"{name}.log").read_text())
+
+
+def test_magpod_deck_cuts_through_the_robot_on_two_ranks(tmp_path):
+    """The generated MagPod deck splits the moving particles between 2 ranks (each ≥ 40 %);
+    the same deck without its balance lines leaves them all on one (the problem it solves)."""
+    deck = tmp_path / "deck"
+    _cli("deck", "magpod", "--out", str(deck), "--set", "phase_steps=20", "--set", "cycles=1")
+    text = (deck / "in.lammps").read_text()
+    assert "comm_style tiled" in text and "balance 1.0 rcb weight group 1 rs_move" in text
+    text = text.replace("trajectory.dump", "t.dump")
+
+    counts, n_all, log = _moving_per_rank(deck, "in.balanced", text)
+    n_moving = counts.sum()
+    assert 3689 <= n_moving < n_all     # the robot (2907 + 2·382 + 3·6 particles), touched sediment
+    assert counts.min() >= 0.4 * n_moving, counts
+    # LAMMPS' own account of the weighted load after the bisection
+    final = float(log.split("initial/final imbalance factor")[1].split()[2])
+    assert final <= 1.05
+
+    plain = "\n".join(ln for ln in text.splitlines()
+                      if not ln.startswith(("balance ", "comm_style "))) + "\n"
+    counts0, _, _ = _moving_per_rank(deck, "in.even", plain)
+    assert sorted(counts0.tolist()) == [0, n_moving], counts0
