@@ -1,0 +1,53 @@
+"""The scaling model of ``rackstress bench scaling`` (bench/scaling.py) against hand calculation:
+the two one-rank costs recovered from two scenes, and the robot-and-rest model's step time."""
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from rackstress.bench import scaling
+
+
+def _runs(cpu_per_step: float, moving: int) -> list:
+    return [{"ranks": 1, "cpu_s": cpu_per_step * 100, "steps": 100, "moving": [moving]}]
+
+
+def test_moving_costs_solve_the_two_scenes():
+    """t = a·M + b·(N − M) on two scenes with the same robot: a and b back exactly."""
+    a, b = 25e-9, 7e-9
+    data = {"scenes": {
+        "magpod": {"n_particles": 33_689, "moving": 4_061,
+                   "runs": _runs(a * 4_061 + b * (33_689 - 4_061), 4_061)},
+        "sediment-large": {"n_particles": 1_004_689, "moving": 4_056,
+                           "runs": _runs(a * 4_056 + b * (1_004_689 - 4_056), 4_056)}}}
+    got = scaling._moving_costs(data)
+    assert got == pytest.approx((a, b), rel=1e-9)
+    data["scenes"].pop("magpod")
+    assert scaling._moving_costs(data) is None      # one scene: two unknowns stay unknown
+
+
+def test_model_moving_by_hand():
+    """1,000 moving particles at 10 ns, 100,000 resting at 1 ns: 0.11 ms on one rank. On two,
+    the rest of the work spreads (0.055 ms) and the robot's whole piece (0.01 ms) is smaller, so
+    a step is 0.055 ms + 3 collectives × 5 µs × log2 2 = 0.070 ms."""
+    rows = scaling.model_moving(101_000, 1_000, 10e-9, 1e-9, cutoff=13.0,
+                                robot_density=0.125, collectives=3)
+    one, two = rows[0], rows[1]
+    assert one["ranks"] == 1 and one["ms_per_step"] == pytest.approx(0.11)
+    assert two["ranks"] == 2 and two["ms_per_step"] == pytest.approx(0.055 + 0.015)
+    assert two["speed_up"] == pytest.approx(0.11 / 0.070)
+    # 1,024 ranks: the even share is 0.107 µs, below the robot's best piece, which sets the
+    # floor: a piece of M/p particles and its ghost shell (cube of side s, shell 13 thick)
+    last = rows[-1]
+    p = last["robot_pieces"]
+    n = 1_000 / p
+    s = (n / 0.125) ** (1 / 3)
+    ghosts = 0.0 if p == 1 else 0.125 * ((s + 26.0) ** 3 - s ** 3)
+    piece = 10e-9 * n + ghosts * 24.0 / 5e9
+    assert last["ms_per_step"] == pytest.approx(1e3 * (piece + 3 * 5e-6 * math.log2(1024)))
+    for q in range(1, 1025):            # and no other number of pieces makes a faster piece
+        nq = 1_000 / q
+        sq = (nq / 0.125) ** (1 / 3)
+        gq = 0.0 if q == 1 else 0.125 * ((sq + 26.0) ** 3 - sq ** 3)
+        assert 10e-9 * nq + gq * 24.0 / 5e9 >= piece - 1e-18
