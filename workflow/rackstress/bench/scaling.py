@@ -446,11 +446,19 @@ def markdown(data: dict) -> str:
               "across x and the robot stays whole on one rank with correspondingly less "
               "sediment. Their 2-rank gain is the sediment's share of the work (resting "
               "particles: each reneighbouring passes over all of them; the ghost exchange).",
-              "- What limits 2 ranks on magpod: a step has ~0.15 ms of work per rank and four "
-              "meetings of the ranks; the ghost shell (cutoff 13: 2 r_max + 2 skins + 1, for "
+              "- What limits 2 ranks on magpod: a step has half the one-rank step's work per "
+              "rank (0.1–0.2 ms) and four meetings of the ranks; the ghost shell (cutoff 13: 2 r_max + 2 skins + 1, for "
               "the activation reach) is as large as a rank's moving particles, but a ghost "
               "costs only its 24 bytes a step. Any scheduler delay at one of the four meetings "
-              "costs the whole step, which is what the loaded rows above show.", ""]
+              "costs the whole step, which is what the loaded rows above show.",
+              "- What a step communicates: each ghost's position (24 bytes; forward "
+              "communication), one int in LAMMPS' displacement check, and the plugin's two fused "
+              "reductions (positions of the racks and attraction regions, then the rack sums "
+              "and contact flags: the `reduced doubles/step` column). `neigh_modify every 1 "
+              "delay 0 check yes` stays: the plugin's contact lists are exact only if they are "
+              "rebuilt before any atom moves half a skin, and only a check every step knows "
+              "that. Folding that check into the plugin's second reduction (predicting each "
+              "atom's next position) would save one of the four meetings; not done.", ""]
         if data.get("a_s_per_moving"):
             L += [f"One-rank costs (loop CPU time; magpod and sediment-large carry the same "
                   f"robot on 33,689 and 1,004,689 particles, two equations, two unknowns): "
@@ -482,6 +490,17 @@ def markdown(data: dict) -> str:
                              f"{m['speed_up']:.1f}", f"{m['efficiency']:.2f}"]
                             for m in s["model_moving"]]), ""]
             top = max(s["model_moving"], key=lambda m: m["speed_up"])
+            if top["ranks"] == RANKS_MODEL[-1]:
+                L += [f"Where it stops scaling: not within {top['ranks']:,} ranks (speed-up "
+                      f"{top['speed_up']:.0f}x, efficiency {top['efficiency']:.2f}): the "
+                      "resting particles' share of the work still divides, while the robot's "
+                      f"pieces (~{top['moving_per_piece']:.0f} moving particles each) cost "
+                      "mostly their ghosts; the efficiency falls as those ghosts and the "
+                      "collectives' latency (log2 P stages, three a step) take over. The model "
+                      "charges a ghost only its forward communication, not its share of the "
+                      "contact "
+                      "search at each reneighbouring: past a few ranks it is an upper bound.", ""]
+                continue
             L += [f"Where it stops scaling: the robot's work cannot be cut finer than "
                   f"{top['robot_pieces']} piece(s) of ~{top['moving_per_piece']:.0f} moving "
                   f"particles before each piece's ghost shell (cutoff {s['ghost_cutoff']:.0f}) "
