@@ -45,6 +45,101 @@ LATENCY_S = 5e-6
 #: forward communication of a ghost each step (x, y, z) and an interconnect's bandwidth (assumed)
 BYTES_PER_GHOST, BANDWIDTH = 24.0, 5e9
 RANKS_MODEL = (1, 2, 8, 64, 128, 256, 512, 1024)
+#: scenes up to this size get the CPU split (:func:`_cpu_split`: six more runs, each with setup;
+#: the 4 M bed would add ~10 min)
+CPU_SPLIT_MAX = 1_100_000
+
+
+#: A PMPI shim (LD_PRELOAD into each rank): the CPU time a rank spends inside MPI calls, where
+#: MPICH polls while it waits. A rank's CPU time outside them is its own work, whatever the load:
+#: the balance measured in CPU time (:func:`compute_cpu`).
+SHIM_SOURCE = r"""
+#include <mpi.h>
+#include <stdio.h>
+#include <time.h>
+static double t_in = 0.0;
+static double cpu(void) { struct timespec t; clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+                          return t.tv_sec + 1e-9 * t.tv_nsec; }
+#define WRAP(name, params, args) int name params { double t0 = cpu(); int rv = P##name args; \
+                                                   t_in += cpu() - t0; return rv; }
+WRAP(MPI_Allreduce, (const void *a, void *b, int c, MPI_Datatype d, MPI_Op e, MPI_Comm f),
+     (a, b, c, d, e, f))
+WRAP(MPI_Wait, (MPI_Request *a, MPI_Status *b), (a, b))
+WRAP(MPI_Waitall, (int a, MPI_Request *b, MPI_Status *c), (a, b, c))
+WRAP(MPI_Waitany, (int a, MPI_Request *b, int *c, MPI_Status *d), (a, b, c, d))
+WRAP(MPI_Send, (const void *a, int b, MPI_Datatype c, int d, int e, MPI_Comm f),
+     (a, b, c, d, e, f))
+WRAP(MPI_Recv, (void *a, int b, MPI_Datatype c, int d, int e, MPI_Comm f, MPI_Status *g),
+     (a, b, c, d, e, f, g))
+WRAP(MPI_Sendrecv, (const void *a, int b, MPI_Datatype c, int d, int e, void *f, int g,
+     MPI_Datatype h, int i, int j, MPI_Comm k, MPI_Status *l), (a, b, c, d, e, f, g, h, i, j, k, l))
+WRAP(MPI_Barrier, (MPI_Comm a), (a))
+WRAP(MPI_Bcast, (void *a, int b, MPI_Datatype c, int d, MPI_Comm e), (a, b, c, d, e))
+WRAP(MPI_Scan, (const void *a, void *b, int c, MPI_Datatype d, MPI_Op e, MPI_Comm f),
+     (a, b, c, d, e, f))
+WRAP(MPI_Allgather, (const void *a, int b, MPI_Datatype c, void *d, int e, MPI_Datatype f,
+     MPI_Comm g), (a, b, c, d, e, f, g))
+WRAP(MPI_Reduce, (const void *a, void *b, int c, MPI_Datatype d, MPI_Op e, int f, MPI_Comm g),
+     (a, b, c, d, e, f, g))
+int MPI_Finalize(void) { int me; PMPI_Comm_rank(MPI_COMM_WORLD, &me);
+  fprintf(stderr, "RS_MPI_CPU %d %.9f %.9f\n", me, cpu(), t_in); return PMPI_Finalize(); }
+"""
+
+
+def _shim(work: Path) -> Path | None:
+    """:data:`SHIM_SOURCE` compiled against the mpich wheel (None without a C compiler)."""
+    cc = shutil.which("cc") or shutil.which("gcc")
+    prefix = Path(sys.prefix)
+    if cc is None or not (prefix / "include" / "mpi.h").is_file():
+        return None
+    src, lib = work / "rs_mpi_cpu.c", work / "librs_mpi_cpu.so"
+    src.write_text(SHIM_SOURCE)
+    made = subprocess.run([cc, "-O2", "-shared", "-fPIC", f"-I{prefix / 'include'}", str(src),
+                           "-o", str(lib), f"-L{prefix / 'lib'}", "-lmpi",
+                           f"-Wl,-rpath,{prefix / 'lib'}"], capture_output=True, text=True)
+    return lib if made.returncode == 0 else None
+
+
+def compute_cpu(deck_dir: Path, ranks: int, bindir: Path, shim: Path, extra: int = 1000,
+                text: str | None = None) -> list[float]:
+    """Each rank's CPU time outside MPI calls per step of the deck's last run: the deck run
+    as it is and with ``extra`` more steps in that run, the difference over ``extra`` (so the
+    setup cancels). Thread CPU time: a rank waiting for the scheduler or polling in MPI adds
+    nothing, so it measures the work each rank does, not the machine's load."""
+    text = text if text is not None else (deck_dir / "in.lammps").read_text()
+    runs = list(re.finditer(r"^run (\d+)", text, flags=re.M))
+    m = runs[-1]
+    out = []
+    for add in (0, extra):
+        name = f"in.cpu{add}"
+        (deck_dir / name).write_text(text[:m.start()] + f"run {int(m.group(1)) + add}"
+                                     + text[m.end():])
+        proc = subprocess.run([str(bindir / "mpiexec"), "-genv", "LD_PRELOAD", str(shim),
+                               "-genv", "OMP_NUM_THREADS", "1", "-n", str(ranks),
+                               str(bindir / "lmp"), "-in", name, "-log", "none", "-screen",
+                               "none"], cwd=deck_dir, capture_output=True, text=True)
+        if proc.returncode != 0:
+            raise RuntimeError(f"lmp failed: {(proc.stdout + proc.stderr)[-1500:]}")
+        rows = sorted((int(r), float(t) - float(i)) for r, t, i in
+                      re.findall(r"RS_MPI_CPU (\d+) ([\d.]+) ([\d.]+)", proc.stderr))
+        out.append([v for _, v in rows])
+    return [(b - a) / extra for a, b in zip(*out)]
+
+
+def _cpu_split(deck_dir: Path, deck, bindir: Path, shim: Path) -> dict:
+    """:func:`compute_cpu` on 1 and 2 ranks (the better of two each), and on 2 ranks without
+    the deck's balance lines (LAMMPS' even split) for a deck that has them."""
+    text = (deck_dir / "in.lammps").read_text()
+    res = {}
+    plain = "\n".join(ln for ln in text.splitlines()
+                      if not ln.startswith(("balance ", "comm_style "))) + "\n"
+    for key, ranks, t in (("1", 1, text), ("2", 2, text), ("2 even split", 2, plain)):
+        if key == "2 even split" and plain == text:
+            continue
+        best = min((compute_cpu(deck_dir, ranks, bindir, shim, text=t) for _ in range(2)),
+                   key=max)
+        res[key] = best
+    return res
 
 
 def block_scene(nx: int = 100, ny: int = 50, nz: int = 50, steps: int = 60):
@@ -309,6 +404,7 @@ def run_bench(out: Path | None = None, quick: bool = False, echo=print, large: b
         if old.is_file():
             data["scenes"] = json.loads(old.read_text()).get("scenes", {})
         todo = [(n, sc) for n, sc in todo if n in only]
+    shim = _shim(work)
     try:
         for name, build in todo:
             sc = build()
@@ -340,6 +436,12 @@ def run_bench(out: Path | None = None, quick: bool = False, echo=print, large: b
                 "density": density, "bond_reach": bond_reach}
             if deck.passive:
                 data["scenes"][name].update(_robot(sc, deck, one))
+            if shim is not None and n <= CPU_SPLIT_MAX:
+                split = _cpu_split(work / name, deck, bindir, shim)
+                data["scenes"][name]["cpu_split"] = split
+                echo(f"{name}: CPU outside MPI per step and rank (ms): " + ", ".join(
+                    f"{k}: " + " / ".join(f"{1e3 * v:.3f}" for v in vals)
+                    for k, vals in split.items()))
             shutil.rmtree(work / name, ignore_errors=True)      # the 4 M bed's data: ~0.3 GB
     finally:
         shutil.rmtree(work, ignore_errors=True)
@@ -416,6 +518,24 @@ def markdown(data: dict) -> str:
           "On a quiet machine, rerun: `rackstress bench scaling --large --out docs/benchmarks` "
           "(every scene, ~20 min, ~3 GB for the 4 M bed) or one scene with `--scene magpod`.",
           ""]
+    cpu = [(n, s["cpu_split"]) for n, s in data["scenes"].items() if s.get("cpu_split")]
+    if cpu:
+        L += ["## The work per rank, in CPU time", "",
+              "Each rank's CPU time outside MPI calls per step (`compute_cpu`: a PMPI shim, "
+              "`SHIM_SOURCE`, preloaded into every rank times what each rank spends inside MPI, "
+              "where MPICH polls while it waits; the deck run with 1,000 more steps, the "
+              "difference over 1,000, so the setup cancels). Thread CPU time does not grow "
+              "while a rank waits for the scheduler, so this is the work each rank does, "
+              "whatever the load. The bound is the one-rank time over the busiest rank's: what "
+              "2 ranks give on a quiet node when the four meetings a step cost nothing.", ""]
+        rows = []
+        for n, split in cpu:
+            t1 = split["1"][0]
+            for key, vals in split.items():
+                rows.append([n, key, " / ".join(f"{1e3 * v:.3f}" for v in vals),
+                             f"{t1 / max(vals):.2f}x"])
+        L += [md_table(["scene", "ranks", "CPU ms/step outside MPI (per rank)",
+                        "bound on the speed-up"], rows), ""]
     bal = [(n, s) for n, s in data["scenes"].items() if s.get("moving")]
     if bal:
         L += ["## Balance by weight, counted", "",
