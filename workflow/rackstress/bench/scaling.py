@@ -48,6 +48,8 @@ RANKS_MODEL = (1, 2, 8, 64, 128, 256, 512, 1024)
 #: scenes up to this size get the CPU split (:func:`_cpu_split`: six more runs, each with setup;
 #: the 4 M bed would add ~10 min)
 CPU_SPLIT_MAX = 1_100_000
+#: the decks' weight of a moving particle (engines.lammps.deck.MOVE_WEIGHT), as the page states it
+MOVE_WEIGHT_DOC = 20
 
 
 #: A PMPI shim (LD_PRELOAD into each rank): the CPU time a rank spends inside MPI calls, where
@@ -101,19 +103,30 @@ def _shim(work: Path) -> Path | None:
 
 
 def compute_cpu(deck_dir: Path, ranks: int, bindir: Path, shim: Path, extra: int = 1000,
-                text: str | None = None) -> list[float]:
+                text: str | None = None, counts: bool = False):
     """Each rank's CPU time outside MPI calls per step of the deck's last run: the deck run
     as it is and with ``extra`` more steps in that run, the difference over ``extra`` (so the
     setup cancels). Thread CPU time: a rank waiting for the scheduler or polling in MPI adds
-    nothing, so it measures the work each rank does, not the machine's load."""
+    nothing, so it measures the work each rank does, not the machine's load.
+
+    ``counts``: also each rank's (owned, moving) particles at the end of the short run, as
+    ``(cpu, owned, moving)``."""
+    from rackstress.engines.lammps.deck import MOVE_GROUP
+
     text = text if text is not None else (deck_dir / "in.lammps").read_text()
     runs = list(re.finditer(r"^run (\d+)", text, flags=re.M))
     m = runs[-1]
-    out = []
+    out, owned, moving = [], [0] * ranks, [0] * ranks
     for add in (0, extra):
         name = f"in.cpu{add}"
-        (deck_dir / name).write_text(text[:m.start()] + f"run {int(m.group(1)) + add}"
-                                     + text[m.end():])
+        body = text[:m.start()] + f"run {int(m.group(1)) + add}" + text[m.end():]
+        if counts and add == 0:
+            k = body.index("\nrun ")
+            grp = MOVE_GROUP if f"group {MOVE_GROUP} " in body else "all"
+            body = (body[:k] + f"\nvariable rs_mv atom gmask({grp})"
+                    "\ncompute rs_cpu_proc all property/atom proc" + body[k:]
+                    + "write_dump all custom counts.txt c_rs_cpu_proc v_rs_mv\n")
+        (deck_dir / name).write_text(body)
         proc = subprocess.run([str(bindir / "mpiexec"), "-genv", "LD_PRELOAD", str(shim),
                                "-genv", "OMP_NUM_THREADS", "1", "-n", str(ranks),
                                str(bindir / "lmp"), "-in", name, "-log", "none", "-screen",
@@ -123,12 +136,21 @@ def compute_cpu(deck_dir: Path, ranks: int, bindir: Path, shim: Path, extra: int
         rows = sorted((int(r), float(t) - float(i)) for r, t, i in
                       re.findall(r"RS_MPI_CPU (\d+) ([\d.]+) ([\d.]+)", proc.stderr))
         out.append([v for _, v in rows])
-    return [(b - a) / extra for a, b in zip(*out)]
+        if counts and add == 0:
+            import numpy as np
+
+            c = np.loadtxt(deck_dir / "counts.txt", skiprows=9, ndmin=2)
+            owned = np.bincount(c[:, 0].astype(int), minlength=ranks).tolist()
+            moving = np.bincount(c[:, 0].astype(int), weights=c[:, 1],
+                                 minlength=ranks).astype(int).tolist()
+    cpu = [(b - a) / extra for a, b in zip(*out)]
+    return (cpu, owned, moving) if counts else cpu
 
 
 def _cpu_split(deck_dir: Path, deck, bindir: Path, shim: Path) -> dict:
     """:func:`compute_cpu` on 1 and 2 ranks (the better of two each), and on 2 ranks without
-    the deck's balance lines (LAMMPS' even split) for a deck that has them."""
+    the deck's balance lines (LAMMPS' even split) for a deck that has them: per configuration
+    the CPU time per step of each rank and its owned and moving particles."""
     text = (deck_dir / "in.lammps").read_text()
     res = {}
     plain = "\n".join(ln for ln in text.splitlines()
@@ -136,10 +158,16 @@ def _cpu_split(deck_dir: Path, deck, bindir: Path, shim: Path) -> dict:
     for key, ranks, t in (("1", 1, text), ("2", 2, text), ("2 even split", 2, plain)):
         if key == "2 even split" and plain == text:
             continue
-        best = min((compute_cpu(deck_dir, ranks, bindir, shim, text=t) for _ in range(2)),
-                   key=max)
-        res[key] = best
+        got = [compute_cpu(deck_dir, ranks, bindir, shim, text=t, counts=True)
+               for _ in range(2)]
+        cpu, owned, moving = min(got, key=lambda g: max(g[0]))
+        res[key] = {"cpu": cpu, "owned": owned, "moving": moving}
     return res
+
+
+def _split_rows(split: dict) -> dict:
+    """``cpu_split`` of either layout (a list of CPU times, or cpu/owned/moving) as the latter."""
+    return {k: (v if isinstance(v, dict) else {"cpu": v}) for k, v in split.items()}
 
 
 def block_scene(nx: int = 100, ny: int = 50, nz: int = 50, steps: int = 60):
@@ -298,9 +326,26 @@ def model_moving(n_total: int, moving: int, a_s: float, b_s: float, cutoff: floa
 
 
 def _moving_costs(data: dict) -> tuple[float, float] | None:
-    """(a, b): seconds per moving and per resting particle and step, from the one-rank loop CPU
-    time of magpod and sediment-large (the same robot on 33,689 and 1,004,689 particles: two
-    equations, two unknowns); None without both."""
+    """(a, b): seconds of CPU per moving and per resting particle and step.
+
+    From the CPU split (:func:`_cpu_split`) where one has counts: every rank of every
+    configuration is one equation t = a·moving + b·resting (least squares; load-independent).
+    Else from the one-rank loop CPU time of magpod and sediment-large (the same robot on
+    33,689 and 1,004,689 particles: two equations, two unknowns). None without either."""
+    import numpy as np
+
+    A, t = [], []
+    for s in data["scenes"].values():
+        for v in _split_rows(s.get("cpu_split") or {}).values():
+            if v.get("owned") and v.get("moving"):
+                for c, o, m in zip(v["cpu"], v["owned"], v["moving"]):
+                    A.append([m, o - m])
+                    t.append(c)
+    if len(t) >= 3 and np.linalg.matrix_rank(np.array(A, float)) == 2:
+        a, b = np.linalg.lstsq(np.array(A, float), np.array(t), rcond=None)[0]
+        if a > 0 and b > 0:
+            data["costs_from"] = "the CPU split (each rank: t = a·moving + b·resting)"
+            return float(a), float(b)
     sc = data["scenes"]
     if "magpod" not in sc or "sediment-large" not in sc:
         return None
@@ -312,8 +357,10 @@ def _moving_costs(data: dict) -> tuple[float, float] | None:
         t.append(min(r["cpu_s"] / r["steps"] for r in runs))
         M.append(sc[name]["moving"])
         N.append(sc[name]["n_particles"])
-    b = (t[1] - t[0] - 0.0) / ((N[1] - M[1]) - (N[0] - M[0]))
+    b = (t[1] - t[0]) / ((N[1] - M[1]) - (N[0] - M[0]))
     a = (t[0] - b * (N[0] - M[0])) / M[0]
+    data["costs_from"] = ("the one-rank loop CPU time of magpod and sediment-large (the same "
+                          "robot on 33,689 and 1,004,689 particles: two equations)")
     return (a, b) if a > 0 and b > 0 else None
 
 
@@ -440,7 +487,7 @@ def run_bench(out: Path | None = None, quick: bool = False, echo=print, large: b
                 split = _cpu_split(work / name, deck, bindir, shim)
                 data["scenes"][name]["cpu_split"] = split
                 echo(f"{name}: CPU outside MPI per step and rank (ms): " + ", ".join(
-                    f"{k}: " + " / ".join(f"{1e3 * v:.3f}" for v in vals)
+                    f"{k}: " + " / ".join(f"{1e3 * v:.3f}" for v in vals["cpu"])
                     for k, vals in split.items()))
             shutil.rmtree(work / name, ignore_errors=True)      # the 4 M bed's data: ~0.3 GB
     finally:
@@ -530,12 +577,18 @@ def markdown(data: dict) -> str:
               "2 ranks give on a quiet node when the four meetings a step cost nothing.", ""]
         rows = []
         for n, split in cpu:
-            t1 = split["1"][0]
-            for key, vals in split.items():
-                rows.append([n, key, " / ".join(f"{1e3 * v:.3f}" for v in vals),
-                             f"{t1 / max(vals):.2f}x"])
+            split = _split_rows(split)
+            t1 = split["1"]["cpu"][0]
+            for key, v in split.items():
+                rows.append([n, key, " / ".join(f"{1e3 * c:.3f}" for c in v["cpu"]),
+                             " / ".join(f"{m:,}" for m in v["moving"]) if v.get("moving")
+                             else "—",
+                             " / ".join(f"{o:,}" for o in v["owned"]) if v.get("owned")
+                             else "—",
+                             f"{t1 / max(v['cpu']):.2f}x"])
         L += [md_table(["scene", "ranks", "CPU ms/step outside MPI (per rank)",
-                        "bound on the speed-up"], rows), ""]
+                        "moving per rank", "owned per rank", "bound on the speed-up"], rows),
+              ""]
     bal = [(n, s) for n, s in data["scenes"].items() if s.get("moving")]
     if bal:
         L += ["## Balance by weight, counted", "",
@@ -580,16 +633,15 @@ def markdown(data: dict) -> str:
               "that. Folding that check into the plugin's second reduction (predicting each "
               "atom's next position) would save one of the four meetings; not done.", ""]
         if data.get("a_s_per_moving"):
-            L += [f"One-rank costs (loop CPU time; magpod and sediment-large carry the same "
-                  f"robot on 33,689 and 1,004,689 particles, two equations, two unknowns): "
+            L += [f"Costs per particle and step, from {data.get('costs_from', 'the runs')}: "
                   f"a = {1e9 * data['a_s_per_moving']:.0f} ns per moving particle and step, "
-                  f"b = {1e9 * data['b_s_per_resting']:.1f} ns per resting one. Resting "
-                  "particles still cost about what moving ones do (fix viscous and addforce, "
+                  f"b = {1e9 * data['b_s_per_resting']:.1f} ns per resting one: a moving "
+                  f"particle costs {data['a_s_per_moving'] / data['b_s_per_resting']:.0f} "
+                  "resting ones, the weight the balance should give it (the decks use "
+                  f"{MOVE_WEIGHT_DOC}). A resting particle is not free: fix viscous and addforce, "
                   "force clearing and the displacement check pass over every owned atom, the "
-                  "contact search over every atom at each reneighbouring), so on these scenes "
-                  "any even split of the particles halves most of the work; moving-row-only "
-                  "styles would shrink b and make the weighted cut through the robot matter "
-                  "more. Measured under load: the coordinator's quiet rerun replaces them.", ""]
+                  "contact search over every atom at each reneighbouring; styles that pass over "
+                  "the moving rows only would shrink b and raise that weight.", ""]
     for name, s in data["scenes"].items():
         L += [f"## {name}: {s['n_particles']:,} particles, ghost cutoff {s['ghost_cutoff']:.2f}",
               "", f"- best 2-rank / 1-rank wall-time ratio measured here: {s['speed_up_2']:.2f}x",
