@@ -51,3 +51,22 @@ def test_model_moving_by_hand():
         sq = (nq / 0.125) ** (1 / 3)
         gq = 0.0 if q == 1 else 0.125 * ((sq + 26.0) ** 3 - sq ** 3)
         assert 10e-9 * nq + gq * 24.0 / 5e9 >= piece - 1e-18
+
+
+def test_moving_costs_from_the_cpu_split_by_least_squares():
+    """Each rank of each configuration is one equation t = a·moving + b·(owned − moving): with
+    times made from a and b, least squares gives them back (a CPU split takes precedence over
+    the two-scene solve)."""
+    a, b = 66e-9, 4.2e-9
+
+    def rank(owned, moving):
+        return a * moving + b * (owned - moving)
+
+    split = {"1": {"cpu": [rank(33_689, 4_055)], "owned": [33_689], "moving": [4_055]},
+             "2": {"cpu": [rank(16_908, 2_090), rank(16_781, 1_965)],
+                   "owned": [16_908, 16_781], "moving": [2_090, 1_965]},
+             "2 even split": {"cpu": [rank(18_689, 4_055), rank(15_000, 0)],
+                              "owned": [18_689, 15_000], "moving": [4_055, 0]}}
+    data = {"scenes": {"magpod": {"cpu_split": split, "runs": []}}}
+    assert scaling._moving_costs(data) == pytest.approx((a, b), rel=1e-9)
+    assert data["costs_from"].startswith("the CPU split")
