@@ -328,15 +328,18 @@ def model_moving(n_total: int, moving: int, a_s: float, b_s: float, cutoff: floa
 def _moving_costs(data: dict) -> tuple[float, float] | None:
     """(a, b): seconds of CPU per moving and per resting particle and step.
 
-    From the CPU split (:func:`_cpu_split`) where one has counts: every rank of every
-    configuration is one equation t = a·moving + b·resting (least squares; load-independent).
+    From the CPU split (:func:`_cpu_split`) of the scenes with resting particles: every rank
+    of every configuration is one equation t = a·moving + b·resting (least squares; load-independent).
     Else from the one-rank loop CPU time of magpod and sediment-large (the same robot on
     33,689 and 1,004,689 particles: two equations, two unknowns). None without either."""
     import numpy as np
 
     A, t = [], []
     for s in data["scenes"].values():
-        for v in _split_rows(s.get("cpu_split") or {}).values():
+        rows = _split_rows(s.get("cpu_split") or {}).values()
+        if not any(v.get("moving") and v["moving"] != v.get("owned") for v in rows):
+            continue        # nothing rests (the block): its work is another operator mix
+        for v in rows:
             if v.get("owned") and v.get("moving"):
                 for c, o, m in zip(v["cpu"], v["owned"], v["moving"]):
                     A.append([m, o - m])

@@ -119,9 +119,10 @@ PASSIVE_SKIN = 8.0
 PLUGIN_PASSIVE_SKIN = 4.0
 #: How many resting particles a moving one (MOVE_GROUP) weighs in the weighted ``balance rcb`` of a
 #: deck with passive groups (:func:`balance_commands`; a scene's ``robot_weight`` overrides it).
-#: Enough that the bisection cuts through the robot when it holds most of the work (MagPod:
-#: 4 still leaves the robot whole on one rank, 20 and 100 split it 2173 / 1888, measured), and
-#: small enough that a million resting particles still outweigh it (sediment-large).
+#: Measured (``rackstress bench scaling``, each rank's CPU time outside MPI): a moving particle
+#: costs ~74 ns a step, a resting one ~3.6 ns, a ratio of ~21. With it the bisection cuts MagPod
+#: through the robot (4 leaves it whole on one rank; 20 splits it 2173 / 1888) and a million
+#: resting particles still outweigh it (sediment-large).
 MOVE_WEIGHT = 20.0
 #: Relative tolerance under which two original lengths count as one bond type (fast mode).
 L0_DIGITS = 10
