@@ -379,10 +379,14 @@ def remodel(data: dict) -> dict:
     costs = _moving_costs(data)
     if costs:
         data["a_s_per_moving"], data["b_s_per_resting"] = costs
-    for s in data["scenes"].values():
-        if costs and s.get("moving"):
+    for name, s in data["scenes"].items():
+        # a scene's own CPU split, where it has one: resting particles cost more per particle
+        # on a million (each reneighbouring passes over them all, out of cache) than on 30,000
+        own = _moving_costs({"scenes": {name: s}}) if s.get("cpu_split") else None
+        s["costs"] = list(own) if own else (list(costs) if costs else None)
+        if s["costs"] and s.get("moving"):
             s["model_moving"] = model_moving(
-                s["n_particles"], s["moving"], *costs, cutoff=s["ghost_cutoff"],
+                s["n_particles"], s["moving"], *s["costs"], cutoff=s["ghost_cutoff"],
                 robot_density=s["robot_density"], collectives=s["collectives_per_step"])
         one = min((r for r in s["runs"] if r["ranks"] == 1), key=lambda r: r["s_per_step"])
         s["work_s_per_particle"] = one["s_per_step"] / s["n_particles"]
@@ -635,16 +639,18 @@ def markdown(data: dict) -> str:
               "rebuilt before any atom moves half a skin, and only a check every step knows "
               "that. Folding that check into the plugin's second reduction (predicting each "
               "atom's next position) would save one of the four meetings; not done.", ""]
-        if data.get("a_s_per_moving"):
-            L += [f"Costs per particle and step, from {data.get('costs_from', 'the runs')}: "
-                  f"a = {1e9 * data['a_s_per_moving']:.0f} ns per moving particle and step, "
-                  f"b = {1e9 * data['b_s_per_resting']:.1f} ns per resting one: a moving "
-                  f"particle costs {data['a_s_per_moving'] / data['b_s_per_resting']:.0f} "
-                  "resting ones, the weight the balance should give it (the decks use "
-                  f"{MOVE_WEIGHT_DOC}). A resting particle is not free: fix viscous and addforce, "
-                  "force clearing and the displacement check pass over every owned atom, the "
-                  "contact search over every atom at each reneighbouring; styles that pass over "
-                  "the moving rows only would shrink b and raise that weight.", ""]
+        own = [(n, s["costs"]) for n, s in bal if s.get("costs") and s.get("cpu_split")]
+        if own:
+            L += ["Costs per particle and step, fitted to each scene's CPU split (each rank: "
+                  "t = a·moving + b·resting; the model below uses them): " + "; ".join(
+                      f"{n}: a = {1e9 * c[0]:.0f} ns per moving particle, b = {1e9 * c[1]:.1f} "
+                      f"ns per resting one (a moving particle weighs {c[0] / c[1]:.0f})"
+                      for n, c in own) + f". The decks weigh a moving particle "
+                  f"{MOVE_WEIGHT_DOC}. A resting particle is not free: fix viscous and "
+                  "addforce, force clearing and the displacement check pass over every owned "
+                  "atom, the contact search over every atom at each reneighbouring (on a "
+                  "million, out of cache); styles that pass over the moving rows only would "
+                  "shrink b and raise that weight.", ""]
     for name, s in data["scenes"].items():
         L += [f"## {name}: {s['n_particles']:,} particles, ghost cutoff {s['ghost_cutoff']:.2f}",
               "", f"- best 2-rank / 1-rank wall-time ratio measured here: {s['speed_up_2']:.2f}x",
