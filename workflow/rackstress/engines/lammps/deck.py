@@ -350,7 +350,7 @@ class Deck:
                      else np.flatnonzero(np.asarray(r.op.where, bool)) + sl.start)
             F = tuple(self.masses[r.target] * float(a) for a in r.op.accel)
             if r.op.where is None and per_group[r.target] == 1:
-                same[cmds[-1].split(" addforce ")[1]].append((idx, cmds, parts, F))
+                same[cmds[-1].split(f" {self._force_style} ")[1]].append((idx, cmds, parts, F))
             else:
                 out.append((cmds, parts, F))
         for idx, r in enumerate(self.realized):
@@ -363,13 +363,22 @@ class Deck:
             sel = [cmds[-1].split()[2] for _, cmds, _, _ in fixes]
             idx = fixes[0][0]
             out.append(([f"group rs_fu{idx} union {' '.join(sel)}",
-                         f"fix rs_force{idx} rs_fu{idx} addforce {Fs}"],
+                         f"fix rs_force{idx} rs_fu{idx} {self._force_style} {Fs}"],
                         np.sort(np.concatenate([p for _, _, p, _ in fixes])), fixes[0][3]))
         return out, gamma
 
     def _damp_command(self, gamma: dict) -> str:
         # one fix for every group's constant damping: one pass over the atoms, not one per
         # group (gamma 1 times scale γ_type is γ_type exactly; an unnamed type would get 1)
+        if self.moving_rows:
+            # rs/dampen's c is Eq. 9's, per unit mass (γ = c·m per atom type, as below)
+            types = topology.group_types(self.scene)
+            c = dict.fromkeys(gamma, 0.0)
+            for r in self.realized:
+                if r.native == "viscous" and (r.python or r.plugin or not r.op.when):
+                    c[types[r.target]] += r.op.c
+            return (f"fix rs_damp {self.moving} rs/dampen 0 "
+                    + " ".join(f"type {t} {_f(v)}" for t, v in c.items()))
         scale = " ".join(f"scale {t} {_f(g)}" for t, g in gamma.items())
         return f"fix rs_damp {self.moving} viscous 1.0 {scale}"
 
@@ -416,10 +425,24 @@ class Deck:
             L = [f"group {gname} id {' '.join(str(int(i)) for i in ids)}"]
             sel = gname
         fx, fy, fz = (m * float(a) for a in r.op.accel)
-        L.append(f"fix rs_force{idx} {sel} addforce {_f(fx)} {_f(fy)} {_f(fz)}")
+        L.append(f"fix rs_force{idx} {sel} {self._force_style} {_f(fx)} {_f(fy)} {_f(fz)}")
         return L
 
+    @property
+    def moving_rows(self) -> bool:
+        """Whether constant forces and damping are the plugin's ``rs/force`` and ``rs/dampen``
+        rather than LAMMPS' ``fix addforce`` and ``fix viscous`` (the same arithmetic): a plugin
+        deck with passive groups, where those pass over the moving rows only, LAMMPS' over every
+        atom, resting or not (module doc, "Active particles")."""
+        return bool(self.plugin and self.passive)
+
+    @property
+    def _force_style(self) -> str:
+        return "rs/force" if self.moving_rows else "addforce"
+
     def _viscous(self, idx, r, extra) -> str:
+        if self.moving_rows:     # Eq. 9 per unit mass: the style multiplies by the mass
+            return f"fix rs_damp{idx} {r.target} rs/dampen {_f(r.op.c + extra)}"
         gamma = (r.op.c + extra) * self.masses[r.target]
         return f"fix rs_damp{idx} {r.target} viscous {_f(gamma)}"
 
