@@ -89,11 +89,13 @@ void FixRSDampen::partial(double *flag)
     list.build(lmp, groupbit, contactbit, r, 0, !built);
     built = true;
   }
+  // the candidates that can touch before any of them moves a skin/8 (rs_common.h, Contacts)
+  list.refresh(lmp, r, 0.25 * neighbor->skin);
   double **x = atom->x;
-  for (size_t k = 0; k < list.rows.size(); k++) {
-    int i = list.rows[k];
-    for (int n = list.first[k]; n < list.first[k + 1]; n++) {
-      int j = list.partner[n];
+  for (size_t q = 0; q < list.near_rows.size(); q++) {
+    int i = list.rows[list.near_rows[q]];
+    for (int n = list.near_first[q]; n < list.near_first[q + 1]; n++) {
+      int j = list.near_partner[n];
       double d2 = 0.0;
       for (int e = 0; e < 3; e++) {
         double d = x[j][e] - x[i][e];
