@@ -71,7 +71,9 @@ Python operator and runs standalone; its ghost cutoff is the interaction range
 (:func:`plugin_ghost_cutoff`). Active particles work as above, with ``rs/collide ... activate
 rs_move`` in the callback's place (the same activation one reneighbouring early; each target's
 partners summed in atom-id order, so the reordering changes no bit), a second ``run 0`` at each
-setup for particles touched there, and the static forces and damping left to LAMMPS' fixes. A scene with an operator the
+setup for particles touched there, and the constant forces and damping as the plugin's
+``rs/force`` and ``rs/dampen`` (the arithmetic of ``fix addforce`` and ``fix viscous``, over the
+moving rows only: :attr:`Deck.moving_rows`). A scene with an operator the
 plugin has no style for (a contact-conditioned force) keeps the callback, and one line says so.
 """
 from __future__ import annotations
