@@ -306,7 +306,7 @@ def run_bench(out: Path | None = None, steps: int = 1200, quick: bool = False,
                                         "exact_1core_aimed_s_per_1200": 0.25,
                                         "large_over_magpod_max": 2.0,
                                         "magpod_small_cycle_s_max": 2.0},
-            "wall_s": time.perf_counter() - t0}
+            "wall_s": time.perf_counter() - t0, "load_avg_at_end": machine()["load_avg_at_start"]}
     write_json(out / "perf.json", data)
     (out / "perf.md").write_text(markdown(data))
     data["files"] = [str(out / f) for f in ("perf.json", "perf.md")]
@@ -460,7 +460,12 @@ def markdown(data: dict) -> str:
              f"(measured over {data['steps']} iterations of `{data['scene']}`, scaled to 1200). "
              f"Machine: {m['cores']} cores ({m['cpu']}), shared with other work: compare rows "
              "as ratios (all measured in one invocation, one after another; CPU time drifts "
-             "less than wall time). Targets: LAMMPS exact, one core, ≤ 0.4 s per 1200 "
+             "less than wall time)" + (
+                 "; load average at the start {:.1f} / {:.1f} / {:.1f} (1 / 5 / 15 min)".format(
+                     *m["load_avg_at_start"]) + (
+                     ", at the end {:.1f} / {:.1f} / {:.1f}".format(*data["load_avg_at_end"])
+                     if data.get("load_avg_at_end") else "")
+                 if m.get("load_avg_at_start") else "") + ". Targets: LAMMPS exact, one core, ≤ 0.4 s per 1200 "
              "iterations of magpod required, ≤ 0.25 s aimed; sediment-large per iteration ≤ 2× "
              "magpod's; a magpod-small gait cycle ≤ 2 s.", "",
              md_table(HEADER, table_rows(data)), "",
