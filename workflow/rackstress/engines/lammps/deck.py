@@ -119,15 +119,16 @@ PASSIVE_SKIN = 8.0
 #: saves at each reneighbouring (every pass over all atoms). 4 measured: sediment-large 4.5 ->
 #: 2.8 ms per iteration (1 M particles), MagPod unchanged, against 2.
 PLUGIN_PASSIVE_SKIN = 4.0
-#: ... and where the resting particles outnumber the moving ones by ``LARGE_BED`` or more: each
+#: Relative tolerance under which two original lengths count as one bond type (fast mode).
+L0_DIGITS = 10
+#: LAMMPS' skin of a plugin deck with passive groups (after PLUGIN_PASSIVE_SKIN) where the resting
+#: particles outnumber the moving ones by ``LARGE_BED`` or more: each
 #: of LAMMPS' reneighbourings still passes over every atom (exchange, atom map, box), while a
 #: step's work follows the moving ones (the plugin's contact lists keep their own margin,
 #: Contacts::refresh), so a wider skin pays. Measured (CPU ms per iteration, one run): MagPod
 #: (8 resting per moving) 0.22 at 4 against 0.24 at 8; sediment-large (250) 0.68–0.75 at 4
 #: against 0.55–0.58 at 8.
 PLUGIN_LARGE_BED_SKIN, LARGE_BED = 8.0, 50
-#: Relative tolerance under which two original lengths count as one bond type (fast mode).
-L0_DIGITS = 10
 
 
 @dataclass

@@ -70,25 +70,6 @@ def balance_commands(scene, nranks: int) -> list[str]:
     raise RackstressError(f"unknown balance '{how}' (rcb, shift or none)")
 
 
-
-def moving_prefix(mask: np.ndarray, bit: int, hint: int = 0) -> int:
-    """The length of the leading rows of ``mask`` that carry ``bit`` (LAMMPS' ``atom_modify
-    first`` keeps the moving group's rows first), found from ``hint`` (the last answer) in
-    time proportional to the moving rows, not to every atom: a million resting particles cost
-    nothing at each watchdog check."""
-    n = len(mask)
-    h = min(int(hint), n)
-    if h and not np.all(mask[:h] & bit):
-        return int(np.argmin((mask[:h] & bit) != 0))
-    step = 256
-    while h < n:
-        seg = (mask[h:h + step] & bit) != 0
-        if not seg.all():
-            return h + int(np.argmin(seg))
-        h += len(seg)
-        step *= 2
-    return h
-
 class LammpsRun:
     """One LAMMPS instance running one deck (all ranks of ``comm`` take part): an engine
     (:class:`rackstress.engines.base.Engine`) for :func:`rackstress.engines.driver.drive`."""
@@ -772,3 +753,22 @@ def abort_all(comm, message: str, code: int) -> None:
     sys.stderr.write(f"rackstress: error: {message} (rank {comm.Get_rank()}; all ranks "
                      "ended)\n")
     abort(comm, code)
+
+
+def moving_prefix(mask: np.ndarray, bit: int, hint: int = 0) -> int:
+    """The length of the leading rows of ``mask`` that carry ``bit`` (LAMMPS' ``atom_modify
+    first`` keeps the moving group's rows first), found from ``hint`` (the last answer) in
+    time proportional to the moving rows, not to every atom: a million resting particles cost
+    nothing at each watchdog check."""
+    n = len(mask)
+    h = min(int(hint), n)
+    if h and not np.all(mask[:h] & bit):
+        return int(np.argmin((mask[:h] & bit) != 0))
+    step = 256
+    while h < n:
+        seg = (mask[h:h + step] & bit) != 0
+        if not seg.all():
+            return h + int(np.argmin(seg))
+        h += len(seg)
+        step *= 2
+    return h
