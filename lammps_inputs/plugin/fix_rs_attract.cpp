@@ -79,6 +79,7 @@ void FixRSAttract::setup(int vflag)
     RackStress::enroll(lmp, this);
     ready = true;
   }
+  first_rows = RackStress::in_first(lmp, groupbit);
   RackStress::invalidate(lmp);
   post_force(vflag);
 }
@@ -89,7 +90,7 @@ void FixRSAttract::post_force(int /*vflag*/)
   double **x = atom->x, **f = atom->f;
   int *mask = atom->mask;
   tagint *tag = atom->tag;
-  int nlocal = atom->nlocal;
+  int nlocal = RackStress::extent(atom, first_rows);    // the moving rows, where they hold all
   int maxkey = (int) by_key_first.size() - 2;
   RackStress::reduce_positions(lmp);    // fused with the step's other gathers
   const double *X = few.x.data();

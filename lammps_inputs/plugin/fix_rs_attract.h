@@ -31,6 +31,7 @@ class FixRSAttract : public Fix, public RackStress::Reduced {
   double c;
   std::string tname, sname;    // region index names, empty: every pair (a constant c)
   bool ready;
+  bool first_rows = false;    // the group lies in atom_modify's first group (rs_common.h)
   RackStress::Gathered few;
   std::vector<int> by_key_first, by_key;    // members grouped by region index
 };

@@ -1,7 +1,11 @@
 /* ----------------------------------------------------------------------
-   rackstress plugin: fix rs/dampen — conditional dampen, Eq. 28.
+   rackstress plugin: fix rs/dampen — dampen, Eq. 9, and conditional dampen, Eq. 28.
 
-     fix ID TARGET rs/dampen c contact GROUP
+     fix ID TARGET rs/dampen c [type T c_T ...] [contact GROUP]
+
+   Without contact: Eq. 9's −c·v on every target particle (the force −c·m·v), with c_T in place
+   of c on atoms of type T: what LAMMPS' fix viscous does with γ = c·m, over the rows a moving
+   group holds (rs_common.h, "Resting atoms") rather than over every owned atom.
 
    Eq. 28's dampen(10 + 85⟨the leg touches the sediment⟩): the base coefficient is LAMMPS' own
    fix viscous; this fix adds Eq. 9's −c·v on every target particle while the contact condition
@@ -26,13 +30,30 @@ using namespace LAMMPS_NS;
 using namespace FixConst;
 
 FixRSDampen::FixRSDampen(LAMMPS *lmp, int narg, char **arg) :
-    Fix(lmp, narg, arg), built(false), ready(false), holds(false)
+    Fix(lmp, narg, arg), contactbit(0), built(false), ready(false), holds(true)
 {
-  if (narg != 6 || strcmp(arg[4], "contact") != 0)
-    error->all(FLERR, "Illegal fix rs/dampen command: fix ID TARGET rs/dampen c contact GROUP");
+  const char *usage = "Illegal fix rs/dampen command: fix ID TARGET rs/dampen c [type T c_T ...] "
+                      "[contact GROUP]";
+  if (narg < 4) error->all(FLERR, usage);
   c = utils::numeric(FLERR, arg[3], false, lmp);
   if (!std::isfinite(c)) error->all(FLERR, "Fix rs/dampen: coefficient c must be finite, got {}", arg[3]);
-  contactbit = RackStress::groupbit(group, error, "rs/dampen", "contact", arg[5]);
+  ctype.assign(atom->ntypes + 1, c);
+  for (int k = 4; k < narg;) {
+    if (strcmp(arg[k], "type") == 0 && k + 2 < narg) {
+      int t = utils::inumeric(FLERR, arg[k + 1], false, lmp);
+      if (t < 1 || t > atom->ntypes)
+        error->all(FLERR, "Fix rs/dampen: type {} is not an atom type (1..{})", t, atom->ntypes);
+      ctype[t] = utils::numeric(FLERR, arg[k + 2], false, lmp);
+      if (!std::isfinite(ctype[t]))
+        error->all(FLERR, "Fix rs/dampen: coefficient of type {} must be finite, got {}", t, arg[k + 2]);
+      k += 3;
+    } else if (strcmp(arg[k], "contact") == 0 && k + 2 == narg) {
+      contactbit = RackStress::groupbit(group, error, "rs/dampen", "contact", arg[k + 1]);
+      holds = false;
+      k += 2;
+    } else
+      error->all(FLERR, usage);
+  }
 }
 
 FixRSDampen::~FixRSDampen()
@@ -47,13 +68,14 @@ int FixRSDampen::setmask()
 
 void FixRSDampen::init()
 {
-  RackStress::radii(atom, error, "rs/dampen");
+  if (contactbit) RackStress::radii(atom, error, "rs/dampen");
 }
 
 void FixRSDampen::setup(int vflag)
 {
   built = false;
-  if (!ready) RackStress::enroll(lmp, this);
+  first_rows = RackStress::in_first(lmp, groupbit);
+  if (!ready && contactbit) RackStress::enroll(lmp, this);
   ready = true;
   RackStress::invalidate(lmp);
   post_force(vflag);
@@ -64,14 +86,16 @@ void FixRSDampen::partial(double *flag)
 {
   double *r = RackStress::radii(atom, error, "rs/dampen");
   if (!built || neighbor->ago == 0) {
-    list.build(lmp, groupbit, contactbit, r);
+    list.build(lmp, groupbit, contactbit, r, 0, !built);
     built = true;
   }
+  // the candidates that can touch before any of them moves a skin/8 (rs_common.h, Contacts)
+  list.refresh(lmp, r, 0.25 * neighbor->skin);
   double **x = atom->x;
-  for (size_t k = 0; k < list.rows.size(); k++) {
-    int i = list.rows[k];
-    for (int n = list.first[k]; n < list.first[k + 1]; n++) {
-      int j = list.partner[n];
+  for (size_t q = 0; q < list.near_rows.size(); q++) {
+    int i = list.rows[list.near_rows[q]];
+    for (int n = list.near_first[q]; n < list.near_first[q + 1]; n++) {
+      int j = list.near_partner[n];
       double d2 = 0.0;
       for (int e = 0; e < 3; e++) {
         double d = x[j][e] - x[i][e];
@@ -93,13 +117,14 @@ void FixRSDampen::total(const double *flag)
 
 void FixRSDampen::post_force(int /*vflag*/)
 {
-  RackStress::reduce_sums(lmp);     // the condition, fused with the step's other sums
+  if (contactbit) RackStress::reduce_sums(lmp);    // the condition, fused with the step's other sums
   if (!holds) return;
   double **v = atom->v, **f = atom->f;
-  int *mask = atom->mask;
-  for (int i = 0; i < atom->nlocal; i++)
+  int *mask = atom->mask, *type = atom->type;
+  const int n = RackStress::extent(atom, first_rows);    // the moving rows, where they hold all
+  for (int i = 0; i < n; i++)
     if (mask[i] & groupbit) {
-      double g = c * RackStress::mass(atom, i);
+      double g = ctype[type[i]] * RackStress::mass(atom, i);
       for (int e = 0; e < 3; e++) f[i][e] -= g * v[i][e];
     }
 }

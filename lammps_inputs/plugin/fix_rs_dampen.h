@@ -31,7 +31,9 @@ class FixRSDampen : public Fix, public RackStress::Reduced {
  private:
   int contactbit;
   double c;
+  std::vector<double> ctype;    // c per atom type (c unless a type keyword gives its own)
   bool built, ready, holds;
+  bool first_rows = false;    // the group lies in atom_modify's first group (rs_common.h)
   RackStress::Contacts list;
 };
 

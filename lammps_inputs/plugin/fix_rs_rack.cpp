@@ -21,6 +21,7 @@
 #include "atom.h"
 #include "error.h"
 #include "group.h"
+#include "modify.h"
 #include "neighbor.h"
 #include "update.h"
 #include "utils.h"
@@ -75,6 +76,9 @@ void FixRSRack::setup(int vflag)
     ready = true;
   }
   rows_built = false;
+  reverse = nullptr;
+  acc_step = -1;
+  first_rows = RackStress::in_first(lmp, gather_source ? groupbit : sourcebit);
   RackStress::invalidate(lmp);
   post_force(vflag);
 }
@@ -84,7 +88,8 @@ const std::vector<int> &FixRSRack::owned_rows()
   if (!rows_built || neighbor->ago == 0) {
     int bit = gather_source ? groupbit : sourcebit;
     rows.clear();
-    for (int i = 0; i < atom->nlocal; i++)
+    const int nrows = RackStress::extent(atom, first_rows);    // the moving rows, where they hold all
+    for (int i = 0; i < nrows; i++)
       if (atom->mask[i] & bit) rows.push_back(i);
     // L0² = ‖u_o − p_o‖² of every pair, once a layout (the same arithmetic as a step's would be)
     double **o = RackStress::originals(atom, error, "rs/rack");
@@ -114,10 +119,58 @@ int FixRSRack::partial_size()
   return gather_source ? 0 : 3 * few.size();
 }
 
+/* the rs/rack fix of the reverse coupling (host <- rack, gathering its sources: this one's
+   targets), when the two can share a pass: the same rack members and host rows, no atom in both */
+FixRSRack *FixRSRack::find_reverse()
+{
+  if (gather_source || overlap) return nullptr;
+  for (int m = 0; m < modify->nfix; m++) {
+    auto *other = dynamic_cast<FixRSRack *>(modify->fix[m]);
+    if (other && other != this && other->ready && other->gather_source && !other->overlap &&
+        other->groupbit == sourcebit && other->sourcebit == groupbit && other->few.tag == few.tag)
+      return other;
+  }
+  return nullptr;
+}
+
 /* the gathered targets (a rack) sum over every source u (the host): this rank's hosts */
 void FixRSRack::partial(double *sum)
 {
   if (gather_source) return;
+  if (!reverse) reverse = find_reverse();
+  if (reverse) {
+    // one pass for both couplings over the reverse fix's host rows (the same rows, in the same
+    // order, as this one's): t = 1 − L0²/‖u − p‖² once per pair, c·t·(p − u) summed into the
+    // rack member's partial sum, c'·t·(u − p) into the host row's acceleration (Eq. 12 each)
+    double **x = atom->x;
+    int n = few.size();
+    const double *X = few.x.data();
+    const std::vector<int> &R = reverse->owned_rows();
+    const double *Q = reverse->l0sq.data();
+    const double cr = reverse->c;
+    std::vector<double> &A = reverse->acc;
+    A.assign(3 * R.size(), 0.0);
+    for (size_t r = 0; r < R.size(); r++) {
+      const double *p = x[R[r]];
+      double a[3] = {0.0, 0.0, 0.0};
+      for (int k = 0; k < n; k++) {
+        double d[3], d2 = 0.0;
+        for (int e = 0; e < 3; e++) {
+          d[e] = p[e] - X[3 * k + e];
+          d2 += d[e] * d[e];
+        }
+        double t = 1.0 - Q[r * n + k] / d2;
+        double s = c * t, sr = cr * t;
+        for (int e = 0; e < 3; e++) {
+          sum[3 * k + e] += s * d[e];
+          a[e] += sr * -d[e];
+        }
+      }
+      for (int e = 0; e < 3; e++) A[3 * r + e] = a[e];
+    }
+    reverse->acc_step = update->ntimestep;
+    return;
+  }
   double **x = atom->x;
   int n = few.size();
   const double *X = few.x.data();
@@ -152,8 +205,17 @@ void FixRSRack::post_force(int /*vflag*/)
   if (gather_source) {
     // a target p gains the term of every gathered source u (Eq. 12), in atom-id order
     RackStress::reduce_positions(lmp);
-    const double *X = few.x.data();
+    RackStress::reduce_sums(lmp);    // a reverse coupling fused with this one fills acc there
     const std::vector<int> &R = owned_rows();
+    if (acc_step == update->ntimestep && acc.size() == 3 * R.size()) {
+      for (size_t r = 0; r < R.size(); r++) {
+        int i = R[r];
+        double m = RackStress::mass(atom, i);
+        for (int e = 0; e < 3; e++) f[i][e] += m * acc[3 * r + e];
+      }
+      return;
+    }
+    const double *X = few.x.data();
     const double *Q = l0sq.data();
     const char *skip = own.data();
     for (size_t r = 0; r < R.size(); r++) {

@@ -44,6 +44,14 @@ class FixRSRack : public Fix, public RackStress::Reduced {
   std::vector<double> l0sq;
   std::vector<char> own;
   bool rows_built, overlap;
+  // fused with the reverse coupling (rack <- host with host <- rack: Eq. 12's factor of a pair
+  // is the same both ways but c): the fix that gathers its targets (the rack) computes both in
+  // one pass, the other's accelerations per row into its `acc`, valid at step `acc_step`
+  FixRSRack *reverse = nullptr;
+  std::vector<double> acc;
+  bigint acc_step = -1;
+  FixRSRack *find_reverse();
+  bool first_rows = false;    // the summed side lies in atom_modify's first group (rs_common.h)
   const std::vector<int> &owned_rows();
 };
 

@@ -12,7 +12,8 @@
      fix rs/bind     directed bind with a per-pair L0, Eqs. 12–13, 16
      fix rs/collide  directed collide, Eqs. 10–11
      fix rs/attract  attract with index-matched regions, Eqs. 14, 27–28
-     fix rs/dampen   conditional dampen, Eq. 28
+     fix rs/dampen   dampen, Eq. 9, and conditional dampen, Eq. 28
+     fix rs/force    a constant force, Eq. 8
    Phase conditions (Eq. 4's ⟨P⟩ on the gait phase) are the deck's: a phase-conditioned operator
    is a fix defined in the phases where its condition holds and removed at the switch.
 ------------------------------------------------------------------------- */
@@ -21,6 +22,7 @@
 #include "fix_rs_bind.h"
 #include "fix_rs_collide.h"
 #include "fix_rs_dampen.h"
+#include "fix_rs_force.h"
 #include "fix_rs_rack.h"
 
 #ifndef RS_LAMMPS_VERSION
@@ -81,4 +83,6 @@ extern "C" void lammpsplugin_init(void *lmp, void *handle, void *regfunc)
       (lammpsplugin_factory2 *) &make<FixRSAttract>);
   add(lmp, handle, reg, "rs/dampen", "rackstress: contact-conditioned dampen (Eq. 28)",
       (lammpsplugin_factory2 *) &make<FixRSDampen>);
+  add(lmp, handle, reg, "rs/force", "rackstress: constant force over the moving rows (Eq. 8)",
+      (lammpsplugin_factory2 *) &make<FixRSForce>);
 }

@@ -3,6 +3,7 @@
 #include "rs_common.h"
 
 #include "domain.h"
+#include "group.h"
 #include "neighbor.h"
 #include "update.h"
 
@@ -115,10 +116,20 @@ void Gathered::fill(LAMMPS *lmp, double *into) const
 /* ---------------------------------------------------------------------- */
 
 namespace {
+/* the resting atoms (owned rows past atom->nfirst, serial) binned once after a setup by their
+   positions then, which they keep until LAMMPS reorders them among the first rows */
+struct RestGrid {
+  bool valid = false;
+  double lo[3] = {0.0, 0.0, 0.0}, w = 1.0;
+  int nb[3] = {1, 1, 1};
+  std::vector<int> start;         // CSR over the cells
+  std::vector<tagint> tags;
+};
 struct Registry {
   std::vector<Reduced *> members;
   bigint pos_step = -1, sum_step = -1;
   std::vector<double> send, recv;
+  RestGrid rest;
 };
 std::map<LAMMPS *, Registry> registry;
 }    // namespace
@@ -197,12 +208,153 @@ void RackStress::reduce_sums(LAMMPS *lmp)
   reg.sum_step = now;
 }
 
-int Contacts::build(LAMMPS *lmp, int tbit, int sbit, const double *radius, int actbit)
+bool RackStress::in_first(LAMMPS *lmp, int bit)
+{
+  Atom *atom = lmp->atom;
+  if (!atom->firstgroupname) return false;
+  int firstbit = lmp->group->bitmask[atom->firstgroup];
+  int mine = 1, all = 0;
+  for (int i = 0; i < atom->nlocal; i++)
+    if ((atom->mask[i] & bit) && !(atom->mask[i] & firstbit)) {
+      mine = 0;
+      break;
+    }
+  MPI_Allreduce(&mine, &all, 1, MPI_INT, MPI_MIN, lmp->world);
+  return all != 0;
+}
+
+/* every owned target with `tbit` and every owned or ghost source with `sbit`, and the largest
+   radius of each side; whether later builds may pass over the moving rows only: serially, with
+   no ghosts, when one side lies wholly in the first group (atoms outside it rest, and two
+   resting atoms never form a pair anything needs: neither is integrated, a resting target is
+   activated only by a moving source) */
+void Contacts::collect_full(LAMMPS *lmp, int tbit, int sbit, const double *radius, int actbit,
+                            std::vector<int> &tcand, std::vector<int> &scand)
+{
+  Atom *atom = lmp->atom;
+  int *mask = atom->mask;
+  int nlocal = atom->nlocal, nall = atom->nlocal + atom->nghost;
+  int firstbit = atom->firstgroupname ? lmp->group->bitmask[atom->firstgroup] : 0;
+  bool t_first = true, s_first = true;
+  tmax_all = smax_all = 0.0;
+  for (int j = 0; j < nall; j++) {
+    int m = mask[j];
+    if (!(m & (tbit | sbit))) continue;
+    if ((m & tbit) && j < nlocal) {
+      tcand.push_back(j);
+      tmax_all = std::max(tmax_all, radius[j]);
+      if (!(m & firstbit)) t_first = false;
+    }
+    if (m & sbit) {
+      scand.push_back(j);
+      smax_all = std::max(smax_all, radius[j]);
+      if (!(m & firstbit)) s_first = false;
+    }
+  }
+  fast = firstbit && lmp->comm->nprocs == 1 && atom->nghost == 0 &&
+      (actbit == 0 || actbit == firstbit) && (t_first || s_first);
+  registry[lmp].rest.valid = false;    // a setup: the resting atoms are binned again when asked
+}
+
+/* the moving rows [0, nfirst) of each side, and the resting atoms of a side within `cut` of
+   the other side's moving rows (from the grid of resting atoms) */
+void Contacts::collect_moving(LAMMPS *lmp, int tbit, int sbit, std::vector<int> &tcand,
+                              std::vector<int> &scand, double cut)
 {
   Atom *atom = lmp->atom;
   double **x = atom->x;
   int *mask = atom->mask;
-  int nlocal = atom->nlocal, nall = atom->nlocal + atom->nghost;
+  int nfirst = atom->nfirst, nlocal = atom->nlocal;
+  double tlo[3] = {INFINITY, INFINITY, INFINITY}, thi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  double slo[3] = {INFINITY, INFINITY, INFINITY}, shi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  for (int j = 0; j < nfirst; j++) {
+    int m = mask[j];
+    if (m & tbit) {
+      tcand.push_back(j);
+      for (int d = 0; d < 3; d++) {
+        tlo[d] = std::min(tlo[d], x[j][d]);
+        thi[d] = std::max(thi[d], x[j][d]);
+      }
+    }
+    if (m & sbit) {
+      scand.push_back(j);
+      for (int d = 0; d < 3; d++) {
+        slo[d] = std::min(slo[d], x[j][d]);
+        shi[d] = std::max(shi[d], x[j][d]);
+      }
+    }
+  }
+  RestGrid &g = registry[lmp].rest;
+  if (!g.valid) {
+    // bin every resting row by its position (cells about one reach wide, not many more cells
+    // than atoms)
+    int n = nlocal - nfirst;
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (int j = nfirst; j < nlocal; j++)
+      for (int d = 0; d < 3; d++) {
+        lo[d] = std::min(lo[d], x[j][d]);
+        hi[d] = std::max(hi[d], x[j][d]);
+      }
+    g.w = cut > 0.0 ? cut : 1.0;
+    if (n == 0)
+      for (int d = 0; d < 3; d++) lo[d] = hi[d] = 0.0;
+    while (true) {
+      double cells = 1.0;
+      for (int d = 0; d < 3; d++) {
+        g.nb[d] = (int) ((hi[d] - lo[d]) / g.w) + 1;
+        cells *= g.nb[d];
+      }
+      if (cells <= 2.0 * n + 64.0) break;
+      g.w *= 1.5;
+    }
+    for (int d = 0; d < 3; d++) g.lo[d] = lo[d];
+    long ncell = (long) g.nb[0] * g.nb[1] * g.nb[2];
+    std::vector<long> cellof(n);
+    g.start.assign(ncell + 1, 0);
+    for (int j = nfirst; j < nlocal; j++) {
+      long c = 0;
+      for (int d = 0; d < 3; d++) {
+        int k = std::max(0, std::min(g.nb[d] - 1, (int) ((x[j][d] - g.lo[d]) / g.w)));
+        c = c * g.nb[d] + k;
+      }
+      cellof[j - nfirst] = c;
+      g.start[c + 1]++;
+    }
+    for (long c = 0; c < ncell; c++) g.start[c + 1] += g.start[c];
+    std::vector<int> fill(g.start.begin(), g.start.end() - 1);
+    g.tags.assign(n, 0);
+    for (int j = nfirst; j < nlocal; j++) g.tags[fill[cellof[j - nfirst]]++] = atom->tag[j];
+    g.valid = true;
+  }
+  // the resting atoms of `bit` in the cells that meet the box [lo - cut, hi + cut]
+  auto near = [&](const double *lo, const double *hi, int bit, std::vector<int> &out) {
+    if (!(lo[0] <= hi[0])) return;    // no moving atom on the other side
+    int a[3], b[3];
+    for (int d = 0; d < 3; d++) {
+      a[d] = std::max(0, (int) std::floor((lo[d] - cut - g.lo[d]) / g.w));
+      b[d] = std::min(g.nb[d] - 1, (int) std::floor((hi[d] + cut - g.lo[d]) / g.w));
+      if (a[d] > b[d]) return;
+    }
+    for (int i = a[0]; i <= b[0]; i++)
+      for (int j = a[1]; j <= b[1]; j++)
+        for (int k = a[2]; k <= b[2]; k++) {
+          long c = ((long) i * g.nb[1] + j) * g.nb[2] + k;
+          for (int n = g.start[c]; n < g.start[c + 1]; n++) {
+            int m = atom->map(g.tags[n]);
+            // a row before nfirst was put among the moving ones: the pass above has it
+            if (m >= nfirst && m < nlocal && (mask[m] & bit)) out.push_back(m);
+          }
+        }
+  };
+  near(slo, shi, tbit, tcand);
+  near(tlo, thi, sbit, scand);
+}
+
+int Contacts::build(LAMMPS *lmp, int tbit, int sbit, const double *radius, int actbit, bool full)
+{
+  Atom *atom = lmp->atom;
+  double **x = atom->x;
+  int *mask = atom->mask;
   double skin = lmp->neighbor->skin;
   // activation looks one skin further than the contact candidates
   double wide = actbit ? 2.0 * skin : skin;
@@ -212,31 +364,25 @@ int Contacts::build(LAMMPS *lmp, int tbit, int sbit, const double *radius, int a
   // a sediment's particles, not all): a target left out is farther than r_max + skin from every
   // source, so nothing reaches it before LAMMPS reneighbours
   rows.clear();
-  // one pass over the atoms: each side's members and bounding box (then only those are read)
+  near_valid = false;
   std::vector<int> src, tcand, scand;
-  double smax = 0.0, tmax = 0.0;
+  if (full || !fast || atom->nghost != 0 || !atom->firstgroupname)
+    collect_full(lmp, tbit, sbit, radius, actbit, tcand, scand);
+  else
+    collect_moving(lmp, tbit, sbit, tcand, scand, tmax_all + smax_all + wide);
+  double smax = smax_all, tmax = tmax_all;
   double tlo[3] = {INFINITY, INFINITY, INFINITY}, thi[3] = {-INFINITY, -INFINITY, -INFINITY};
   double slo[3] = {INFINITY, INFINITY, INFINITY}, shi[3] = {-INFINITY, -INFINITY, -INFINITY};
-  for (int j = 0; j < nall; j++) {
-    int m = mask[j];
-    if (!(m & (tbit | sbit))) continue;
-    if ((m & tbit) && j < nlocal) {
-      tcand.push_back(j);
-      tmax = std::max(tmax, radius[j]);
-      for (int d = 0; d < 3; d++) {
-        tlo[d] = std::min(tlo[d], x[j][d]);
-        thi[d] = std::max(thi[d], x[j][d]);
-      }
+  for (int j : tcand)
+    for (int d = 0; d < 3; d++) {
+      tlo[d] = std::min(tlo[d], x[j][d]);
+      thi[d] = std::max(thi[d], x[j][d]);
     }
-    if (m & sbit) {
-      scand.push_back(j);
-      smax = std::max(smax, radius[j]);
-      for (int d = 0; d < 3; d++) {
-        slo[d] = std::min(slo[d], x[j][d]);
-        shi[d] = std::max(shi[d], x[j][d]);
-      }
+  for (int j : scand)
+    for (int d = 0; d < 3; d++) {
+      slo[d] = std::min(slo[d], x[j][d]);
+      shi[d] = std::max(shi[d], x[j][d]);
     }
-  }
   double cut = tmax + smax + wide;
   auto within = [&](const double *p, const double *lo, const double *hi) {
     return p[0] > lo[0] - cut && p[0] < hi[0] + cut && p[1] > lo[1] - cut &&
@@ -255,6 +401,8 @@ int Contacts::build(LAMMPS *lmp, int tbit, int sbit, const double *radius, int a
     }
   first.assign(rows.size() + 1, 0);
   partner.clear();
+  watch = rows;
+  watch.insert(watch.end(), src.begin(), src.end());
   if (rows.empty() || src.empty()) return 0;
 
   // a cell grid over the sources near the targets, cells one reach wide
@@ -315,4 +463,41 @@ int Contacts::build(LAMMPS *lmp, int tbit, int sbit, const double *radius, int a
               [tag](int a, int b) { return tag[a] < tag[b]; });
   }
   return activated;
+}
+
+void Contacts::refresh(LAMMPS *lmp, const double *radius, double s)
+{
+  double **x = lmp->atom->x;
+  const size_t n = watch.size();
+  if (near_valid) {
+    const double lim2 = 0.25 * s * s;
+    bool moved = false;
+    for (size_t k = 0; k < n && !moved; k++) {
+      const double *p = x[watch[k]], *q = &x0[3 * k];
+      double dx = p[0] - q[0], dy = p[1] - q[1], dz = p[2] - q[2];
+      moved = dx * dx + dy * dy + dz * dz > lim2;
+    }
+    if (!moved) return;
+  }
+  x0.resize(3 * n);
+  for (size_t k = 0; k < n; k++)
+    for (int d = 0; d < 3; d++) x0[3 * k + d] = x[watch[k]][d];
+  near_rows.clear();
+  near_first.assign(1, 0);
+  near_partner.clear();
+  for (size_t k = 0; k < rows.size(); k++) {
+    int i = rows[k];
+    const double *p = x[i];
+    for (int m = first[k]; m < first[k + 1]; m++) {
+      int j = partner[m];
+      double dx = x[j][0] - p[0], dy = x[j][1] - p[1], dz = x[j][2] - p[2];
+      double reach = radius[i] + radius[j] + s;
+      if (dx * dx + dy * dy + dz * dz < reach * reach) near_partner.push_back(j);
+    }
+    if ((int) near_partner.size() > near_first.back()) {
+      near_rows.push_back((int) k);
+      near_first.push_back((int) near_partner.size());
+    }
+  }
+  near_valid = true;
 }

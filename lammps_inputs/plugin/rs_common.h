@@ -100,8 +100,40 @@ namespace RackStress {
    public:
     std::vector<int> first, partner;    // CSR: partners of target i (owned rows)
     std::vector<int> rows;              // the owned target rows
-    int build(LAMMPS *lmp, int tbit, int sbit, const double *radius, int actbit = 0);
+    //! `full` (a fix's setup): pass over every owned and ghost atom; otherwise, where
+    //! :func:`resting_ok` allows, over the moving rows and the resting atoms near them only
+    int build(LAMMPS *lmp, int tbit, int sbit, const double *radius, int actbit = 0,
+              bool full = true);
+
+    /* The candidates within r_i + r_j + s, in the candidates' order (so each target's sum is
+       the same, bit for bit): kept from step to step while no atom of the candidates moves more
+       than s/2 from where it was when they were taken, and taken again from the candidates
+       (not searched) when one does. Between two of LAMMPS' reneighbourings a step then passes
+       over the pairs that can touch soon rather than over every candidate within a skin. */
+    std::vector<int> near_rows, near_first, near_partner;    // CSR: index into rows, partners
+    void refresh(LAMMPS *lmp, const double *radius, double s);
+
+   private:
+    std::vector<int> watch;        // the candidates' atoms (targets and sources)
+    std::vector<double> x0;        // their positions when the near pairs were taken
+    bool near_valid = false;
+    double tmax_all = 0.0, smax_all = 0.0;    // largest radius of each side (the last full pass)
+    bool fast = false;                         // whether a later build may leave the rest out
+    void collect_full(LAMMPS *lmp, int tbit, int sbit, const double *radius, int actbit,
+                      std::vector<int> &tcand, std::vector<int> &scand);
+    void collect_moving(LAMMPS *lmp, int tbit, int sbit, std::vector<int> &tcand,
+                        std::vector<int> &scand, double cut);
   };
+
+  /* Resting atoms (docs/model.md "Active particles"): with `atom_modify first MOVING`, the deck
+     integrates MOVING only (fix nve on it), so an owned row at or past atom->nfirst has not
+     moved since LAMMPS last put the first group first; it joins MOVING for good and is
+     reordered among the first rows at the next reneighbouring. A fix whose group lies in
+     MOVING passes over rows [0, nfirst) only, not over every owned atom. */
+  //! whether every atom of `bit` (on every rank) is in atom_modify's first group (a setup's pass)
+  bool in_first(LAMMPS *lmp, int bit);
+  //! the owned rows a fix whose group is `in_first` passes over: [0, nfirst), else [0, nlocal)
+  inline int extent(Atom *atom, bool first) { return first ? atom->nfirst : atom->nlocal; }
 
 }    // namespace RackStress
 }    // namespace LAMMPS_NS

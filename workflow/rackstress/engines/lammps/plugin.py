@@ -33,7 +33,7 @@ STAMP = "build.json"
 #: the packaged plugin (setup.py puts it here)
 PACKAGED = Path(__file__).resolve().parent / "plugin_lib"
 #: the styles the plugin registers
-STYLES = ("rs/rack", "rs/bind", "rs/collide", "rs/attract", "rs/dampen")
+STYLES = ("rs/rack", "rs/bind", "rs/collide", "rs/attract", "rs/dampen", "rs/force")
 _MONTHS = ("Jan", "Feb", "Mar", "Apr", "May", "Jun", "Jul", "Aug", "Sep", "Oct", "Nov", "Dec")
 
 
@@ -176,8 +176,11 @@ def check(lib: Path) -> str:
     # string literals: "...fix_rs_collide.c" directly before "rs/dampen"), so only its end is sure
     elif missing := [s for s in STYLES if s.encode() + b"\0" not in data]:
         why = f"registers no {', '.join(missing)} style"
-    elif want is not None and b"\0" + want + b"\0" not in data:
-        other = re.search(rb"\0(\d{1,2} (?:%s) \d{4})\0" % "|".join(_MONTHS).encode(), data)
+    # the version string ends in a NUL; what comes before it may be any other constant's last
+    # byte (0x80 of a double, seen), so only "not a printable character" is sure
+    elif want is not None and not re.search(rb"(?<![ -~])" + re.escape(want) + rb"\0", data):
+        other = re.search(rb"(?<![ -~])(\d{1,2} (?:%s) \d{4})\0" % "|".join(_MONTHS).encode(),
+                          data)
         why = (f"was built for LAMMPS '{other[1].decode()}'" if other else
                "was built for another LAMMPS") + f", not for this one ('{want.decode()}')"
     else:
