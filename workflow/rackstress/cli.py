@@ -192,6 +192,7 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
             warm_in_background()        # a first run compiles the measures' loop meanwhile
         if out is None:
             out = Path("runs") / f"{sc.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+        keep_checkpoints = restart_every is not None   # asked for: kept after the run
         if restart_every is None and engine == "lammps":
             from rackstress.runs.checkpoint import default_restart_every
 
@@ -206,7 +207,8 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
                 summary = run_mod.run(sc, out, engine=engine, mode=mode,
                                       dump_every=dump_every, progress=shown,
                                       overwrite=overwrite, restart_every=restart_every or None,
-                                      allow_unstable=allow_unstable, planned=planned)
+                                      allow_unstable=allow_unstable, planned=planned,
+                                      keep_checkpoints=keep_checkpoints)
             _finish(summary, out, do_render, progress)
         if summary.get("settled") is False:
             from rackstress.errors import EXIT_UNSETTLED
@@ -229,6 +231,9 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True) ->
 
     if rank() != 0:
         return
+    from rackstress.runs.checkpoint import discard_finished
+
+    discard_finished(out)       # a kill-only checkpoint of a finished run: never resumed
     if summary.get("analysis") == "static":
         click.echo(f"{summary['scene']}: static, {summary['status']} in {summary['iterations']} "
                    f"iterations (residual {summary['residual']:.2g} of the applied load) on "

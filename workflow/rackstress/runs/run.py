@@ -337,7 +337,7 @@ def open_engine(scene: Scene, out: Path | None, engine: str, mode: str, dump_eve
 def execute(scene: Scene, out: Path, engine: str, mode: str, dump_every: int, *,
             progress: bool = True, comm=None, restart_every: int | None = None, deck=None,
             resume=None, records=None, wall_before: float = 0.0, extra: dict | None = None,
-            fingerprint: dict | None = None) -> dict:
+            fingerprint: dict | None = None, keep_checkpoints: bool = True) -> dict:
     """Drive ``scene`` on ``engine`` into the prepared run directory ``out``, then write
     ``summary.json`` — the one ending of a run and of its resumption.
 
@@ -374,7 +374,7 @@ def execute(scene: Scene, out: Path, engine: str, mode: str, dump_every: int, *,
             from rackstress.runs.checkpoint import Checkpointer
 
             ckpt = Checkpointer(out, eng.comm, restart_every, mode=mode, dump_every=dump_every,
-                                resumed=resume, fingerprint=fingerprint)
+                                resumed=resume, fingerprint=fingerprint, keep=keep_checkpoints)
             on_phase_end = ckpt.wrap_phase_end(on_phase_end)
         status, error = "ok", None
         try:
@@ -516,7 +516,7 @@ def _cache_prediction(fp: dict, pred: dict) -> None:
 def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
         dump_every: int | None = None, progress: bool = True, overwrite: bool = False,
         comm=None, restart_every: int | None = None, allow_unstable: bool = False,
-        planned: dict | None = None) -> dict:
+        planned: dict | None = None, keep_checkpoints: bool = True) -> dict:
     """Run ``scene`` on ``engine`` into the run directory ``out``; return the summary.
 
     Parameters
@@ -536,6 +536,9 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
     restart_every : int, optional
         Write a checkpoint (LAMMPS restart + exact state, :mod:`rackstress.runs.resume`) every so
         many steps; None: none.
+    keep_checkpoints : bool
+        False: the checkpoints are only for surviving a kill, and the caller removes them once
+        the run has finished (:func:`rackstress.runs.checkpoint.discard_finished`).
     planned : dict, optional
         The result of :func:`plan` for these arguments (checked already).
 
@@ -597,4 +600,5 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
         on_root(start, comm)
         return execute(scene, out, engine, mode, dump_every, progress=progress, comm=comm,
                        restart_every=restart_every,
-                       deck=deck if engine == "lammps" else None, fingerprint=fp)
+                       deck=deck if engine == "lammps" else None, fingerprint=fp,
+                       keep_checkpoints=keep_checkpoints)
