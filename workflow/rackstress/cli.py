@@ -201,6 +201,10 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
         with phase(f"preparing the run ({sc.n_particles:,} particles on {engine})", shown):
             planned = run_mod.plan(sc, engine, mode, dump_every, allow_unstable=allow_unstable)
         planned["deck"].dump_all = bool(dump_all)
+        if rank() == 0:
+            from rackstress.render.prepare import prepare_in_background
+
+            prepare_in_background()     # post-processing's imports while LAMMPS runs
         # the lock is held from before anything is written until the pictures are done
         with locked(out) as held:   # noqa: F841
             with phase(f"running {sc.total_steps:,} steps into {out}", shown, ticker=False):
@@ -231,8 +235,10 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True) ->
 
     if rank() != 0:
         return
+    from rackstress.render.prepare import wait_prepared
     from rackstress.runs.checkpoint import discard_finished
 
+    wait_prepared()             # its imports done before post-processing forks
     discard_finished(out)       # a kill-only checkpoint of a finished run: never resumed
     if summary.get("analysis") == "static":
         click.echo(f"{summary['scene']}: static, {summary['status']} in {summary['iterations']} "

@@ -530,7 +530,7 @@ def render(rundir, frames=None, measure: str | None = None, views=DEFAULT_VIEWS,
            vmax: float | None = None, allow_truncated: bool = False, window_size=WINDOW,
            movie_max_frames: int = 400, fps: int = 10, plots: bool = True, groups=None,
            out=None, cmap: str = "paper", movie_view: str | None = None,
-           progress: bool = False, sheet_only: bool = False) -> RenderReport:
+           progress: bool = False, sheet_only: bool = False, meanwhile=None) -> RenderReport:
     """Render the pictures, sheet, optional movie and plots of a run (module docstring).
 
     Parameters
@@ -560,6 +560,9 @@ def render(rundir, frames=None, measure: str | None = None, views=DEFAULT_VIEWS,
         Paint only ``sheet.png``, each cell at half the window's size (what the report shows;
         ``rackstress run``'s default), and no ``{view}_{step}.png``: a third of the painting
         time and a seventh of the bytes.
+    meanwhile : callable, optional
+        ``meanwhile(report, measure, cmap)``, called once the pictures are painted, while the
+        plots' process is still drawing (``rackstress run`` builds the 3D view then).
 
     Returns
     -------
@@ -665,8 +668,10 @@ def render(rundir, frames=None, measure: str | None = None, views=DEFAULT_VIEWS,
                 report.timings["pictures_s"] = time.perf_counter() - t
                 report.timings["pictures_cpu_s"] = time.process_time() - c0
                 t = time.perf_counter()
+                # encoded by a thread (zlib lets go of the GIL) while the plots are awaited
+                sheet_saver = _Saver()
                 _sheet(pictures, run, report, views, label, cmap, coloured, context, hidden,
-                       tmp / "sheet.png", reduce=not sheet_only)
+                       tmp / "sheet.png", reduce=not sheet_only, save=sheet_saver.save)
                 report.files.append("sheet.png")
                 report.timings["sheet_s"] = time.perf_counter() - t
                 if movie:
@@ -678,13 +683,22 @@ def render(rundir, frames=None, measure: str | None = None, views=DEFAULT_VIEWS,
                     report.timings["movie_frames"] = len(movie_ks)
             finally:
                 painter.close()
+        if meanwhile is not None:
+            t = time.perf_counter()
+            meanwhile(report, measure, cmap)
+            report.timings["meanwhile_s"] = time.perf_counter() - t
         if plotter is not None:
             t = time.perf_counter()
-            files, notes, wall = plotter.join()
+            try:
+                files, notes, wall = plotter.join()
+            finally:
+                sheet_saver.wait()
             report.files += files
             report.notes += notes
             report.timings["plots_s"] = wall
             report.timings["plots_wait_s"] = time.perf_counter() - t
+        else:
+            sheet_saver.wait()
         report.timings["total_s"] = time.perf_counter() - t0
         report.timings["cpu_s"] = time.process_time() - c0
         manifest = {"rundir": str(rundir), "measure": measure, "label": label,
@@ -701,6 +715,8 @@ def render(rundir, frames=None, measure: str | None = None, views=DEFAULT_VIEWS,
     except BaseException as exc:
         if plots and "plotter" in locals() and plotter is not None:
             plotter.kill()
+        if "sheet_saver" in locals():
+            sheet_saver.pool.shutdown(wait=True)     # no write into tmp after it is gone
         shutil.rmtree(tmp, ignore_errors=True)
         if isinstance(exc, OSError) and not isinstance(exc, StorageError) and exc.errno:
             raise storage_error(exc, "write the pictures into", outdir) from None
@@ -782,12 +798,22 @@ def render_default(rundir, progress: bool = False) -> RenderReport:
     ``summary.json``, and ``RUNDIR/report.html`` is written."""
     from rackstress.render.report import write_report
 
+    built = {}
+
+    def view3d(report, measure, cmap):          # while the plots are drawn
+        from rackstress.render.view3d import build_view
+
+        try:
+            built["rec"] = build_view(rundir, measure=measure, cmap=cmap, vmax=report.vmax)
+        except Exception as exc:  # noqa: BLE001 - the report says why there is no 3D view
+            built["error"] = exc
+
     t0 = time.perf_counter()
-    rep = render(rundir, progress=progress, sheet_only=True)
+    rep = render(rundir, progress=progress, sheet_only=True, meanwhile=view3d)
     wall = time.perf_counter() - t0
     record_render(Path(rundir), rep, wall)          # first, so that the report shows it
     t = time.perf_counter()
-    rep.report = write_report(rundir)
+    rep.report = write_report(rundir, built_view=built)
     rep.timings["report_s"] = time.perf_counter() - t
     record_render(Path(rundir), rep, wall)
     return rep
@@ -895,7 +921,7 @@ def _pictures(run, painter, values, report, views, label, cmap, coloured, contex
 
 
 def _sheet(images, run, report, views, label, cmap, coloured, context, hidden,
-           path: Path, reduce: bool = True) -> None:
+           path: Path, reduce: bool = True, save=_save_png) -> None:
     """Fig. 12-like sheet: rows = views, columns = frames (half size), one header on top.
 
     ``reduce``: the images are full-size pictures (header strip included), halved here; else
@@ -934,7 +960,7 @@ def _sheet(images, run, report, views, label, cmap, coloured, context, hidden,
         im.paste(Image.fromarray(cells_rot), (0, top + r * ch))
     header = _header(run, report, label, cmap, coloured, context, hidden, W)
     sheet = np.concatenate([header, np.asarray(im)], axis=0)
-    _save_png(path, sheet)
+    save(path, sheet)
 
 
 def _movie_frames(run, max_frames: int) -> list:
