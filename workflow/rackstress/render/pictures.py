@@ -588,6 +588,8 @@ def render(rundir, frames=None, measure: str | None = None, views=DEFAULT_VIEWS,
             raise StressInputError(f"unknown view '{v}'; views: {', '.join(VIEWS)}")
     if vmax is not None and not vmax > 0:
         raise StressInputError(f"--vmax must be positive, got {vmax}")
+    if sheet_only and movie:
+        raise StressInputError("a movie needs the full-size pictures: not with sheet_only")
     colour_table(cmap)                                         # fail early on a bad name
     run = load_run(rundir, allow_truncated=allow_truncated)
     report = RenderReport(None)
@@ -650,8 +652,6 @@ def render(rundir, frames=None, measure: str | None = None, views=DEFAULT_VIEWS,
         shutil.rmtree(tmp)
     tmp.mkdir()
     try:
-        if sheet_only and movie:
-            raise StressInputError("a movie needs the full-size pictures: not with sheet_only")
         n_pics = len({k for _, k, _ in report.frames}) * len(views)
         movie_ks = _movie_frames(run, movie_max_frames) if movie else []
         # the plots (matplotlib) are drawn by a forked process while this one paints
