@@ -98,3 +98,26 @@ def test_prepare_imports_in_a_thread_and_restores_the_switch_interval():
         "print('ok')\n")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0 and r.stdout.strip() == "ok", r.stderr
+
+
+@pytest.mark.lammps
+def test_sheet_only_paints_the_cells_at_half_size_and_nothing_else(tmp_path):
+    """``render(sheet_only=True)`` (what ``rackstress run`` paints): the sheet's geometry is that
+    of the full render's (cells of half the 1024 × 768 window, a 28-pixel label column, a
+    24-pixel row of titles, the 112-pixel header), and no per-view picture is written."""
+    from PIL import Image
+
+    from rackstress.render.pictures import HEADER_H, render
+
+    out = tmp_path / "pr"
+    r = _run(["run", "plane-rack", "--steps", "150", "--dump-every", "3", "--no-render",
+              "--no-progress", "--out", str(out)])
+    assert r.returncode == 0, r.stderr
+    rep = render(out, sheet_only=True, plots=False)
+    cols = len({k for _, k, _ in rep.frames})
+    with Image.open(out / "figures" / "sheet.png") as im:
+        assert im.size == (28 + 512 * cols, HEADER_H + 24 + 3 * 384)
+    assert sorted(rep.files) == ["render.json", "sheet.png"]
+    assert sorted(p.name for p in (out / "figures").iterdir()) == ["render.json", "sheet.png"]
+    with pytest.raises(Exception, match="movie"):
+        render(out, sheet_only=True, movie=True)
