@@ -201,10 +201,14 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
         with phase(f"preparing the run ({sc.n_particles:,} particles on {engine})", shown):
             planned = run_mod.plan(sc, engine, mode, dump_every, allow_unstable=allow_unstable)
         planned["deck"].dump_all = bool(dump_all)
-        if rank() == 0:
+        head_start = None
+        if rank() == 0 and engine == "lammps" and planned["deck"].plugin:
             from rackstress.render.prepare import prepare_in_background
 
-            prepare_in_background()     # post-processing's imports while LAMMPS runs
+            # post-processing's imports while LAMMPS runs the plugin (no GIL held), from a
+            # quarter of the steps on; not beside a simulation that runs Python each step
+            # (the reference engine, the callback path)
+            head_start = prepare_in_background
         # the lock is held from before anything is written until the pictures are done
         with locked(out) as held:   # noqa: F841
             with phase(f"running {sc.total_steps:,} steps into {out}", shown, ticker=False):
@@ -212,7 +216,7 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
                                       dump_every=dump_every, progress=shown,
                                       overwrite=overwrite, restart_every=restart_every or None,
                                       allow_unstable=allow_unstable, planned=planned,
-                                      keep_checkpoints=keep_checkpoints)
+                                      keep_checkpoints=keep_checkpoints, at_quarter=head_start)
             _finish(summary, out, do_render, progress)
         if summary.get("settled") is False:
             from rackstress.errors import EXIT_UNSETTLED

@@ -18,7 +18,8 @@ _PREPARE = ("rackstress.stress.post", "rackstress.stress.export", "vtkmodules.vt
 def prepare_in_background():
     """Import what the measures, the VTK writer, the pictures and the plots need, load the
     measures' compiled loop and the fonts, in a thread, while the simulation runs on the
-    other core (LAMMPS runs without the GIL). About a second of a short run's start-up to
+    other core (LAMMPS runs the plugin without the GIL; ``rackstress run`` starts it once a
+    quarter of the steps are done). About a second of a short run's start-up to
     results moves off the path; the forked VTK and plot processes inherit it all. The GIL is
     handed over every 0.5 ms meanwhile (not 5), so the driver's Python between chunks of
     steps never waits long for it. :func:`wait_prepared` joins it: call it before forking (a
