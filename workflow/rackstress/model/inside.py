@@ -60,11 +60,9 @@ REPORT_AT = 200_000
 
 _DIAG = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
 
-try:
-    from rackstress.model import kernels as _kernels   # noqa: F401 - sets numba's cache dir
-    import numba as nb
-except ImportError:  # pragma: no cover - numba is a dependency; the NumPy paths stay
-    nb = None
+from rackstress.lib.jit import numba_or_none
+
+nb = numba_or_none()      # None: the NumPy paths serve (numba is a dependency)
 
 if nb is not None:
     @nb.njit(cache=True, parallel=True, nogil=True)
