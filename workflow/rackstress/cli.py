@@ -825,7 +825,7 @@ def bench_inside(out, quick):
               help="Output directory (default: docs/benchmarks/ of the repository).")
 @click.option("--quick", is_flag=True, help="Spacing 1 only.")
 def bench_validity3d(out, quick):
-    """The bracket STL's particle strain against tetrahedral FEA (the 'fem' extra)."""
+    """The bracket STL's particle von Mises stress against tetrahedral FEA (the 'fem' extra)."""
     from rackstress.bench import validity3d as mod
 
     data = mod.run_bench(out, quick=quick, echo=click.echo)
@@ -952,7 +952,7 @@ TEACH = {
         "rackstress bench inside --quick --out /tmp/bench",
         "rackstress bench inside --out docs/benchmarks",
     ]),
-    "bench validity3d": ("The bracket STL's particle strain against tetrahedral FEA.", [
+    "bench validity3d": ("The bracket STL's particle von Mises stress [MPa] against tetrahedral FEA.", [
         "rackstress bench validity3d --quick --out /tmp/bench",
         "rackstress bench validity3d --out docs/benchmarks",
     ]),

@@ -60,6 +60,156 @@ REPORT_AT = 200_000
 
 _DIAG = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
 
+from rackstress.lib.jit import numba_or_none
+
+nb = numba_or_none()      # None: the NumPy paths serve (numba is a dependency)
+
+if nb is not None:
+    @nb.njit(cache=True, parallel=True, nogil=True)
+    def _certain_nb(ijk, i, j, m, w, ptr, offs, strides, solid):  # pragma: no cover
+        """Step 2 per pair, on both cores: every touched cell's site is solid."""
+        n = len(i)
+        out = np.ones(n, dtype=np.bool_)
+        for k in nb.prange(n):
+            a, b = i[k], j[k]
+            code = ((ijk[b, 0] - ijk[a, 0] + m) * w + ijk[b, 1] - ijk[a, 1] + m) * w \
+                + ijk[b, 2] - ijk[a, 2] + m
+            base = (ijk[a, 0] + 1) * strides[0] + (ijk[a, 1] + 1) * strides[1] \
+                + (ijk[a, 2] + 1) * strides[2]
+            for t in range(ptr[code], ptr[code + 1]):
+                if not solid[base + offs[t]]:
+                    out[k] = False
+                    break
+        return out
+
+    @nb.njit(cache=True, parallel=True, nogil=True)
+    def _max_offset_nb(ijk, i, j):  # pragma: no cover
+        """The largest |Δijk| component over the pairs."""
+        m = 0
+        for k in nb.prange(len(i)):
+            for c in range(3):
+                v = abs(ijk[j[k], c] - ijk[i[k], c])
+                m = max(m, v)
+        return m
+
+    @nb.njit(cache=True, parallel=True, nogil=True)
+    def _length_sq_nb(a, b, i, j):  # pragma: no cover
+        out = np.empty(len(i))
+        for k in nb.prange(len(i)):
+            x = b[j[k], 0] - a[i[k], 0]
+            y = b[j[k], 1] - a[i[k], 1]
+            z = b[j[k], 2] - a[i[k], 2]
+            out[k] = x * x + y * y + z * z
+        return out
+
+    @nb.njit(cache=True, nogil=True)
+    def _sort_pairs_nb(i, j, n):  # pragma: no cover
+        """(i, j) in (i, j) order: a counting sort on i, then each particle's few partners
+        sorted in place (insertion sort: ≤ 18 on a lattice) — O(m), where a sort of the
+        combined keys is O(m log m)."""
+        m = len(i)
+        start = np.zeros(n + 1, dtype=np.int64)
+        for k in range(m):
+            start[i[k] + 1] += 1
+        for r in range(n):
+            start[r + 1] += start[r]
+        pos = start[:-1].copy()
+        oi = np.empty(m, dtype=np.int64)
+        oj = np.empty(m, dtype=np.int64)
+        for k in range(m):
+            r = i[k]
+            oj[pos[r]] = j[k]
+            pos[r] += 1
+        for r in range(n):
+            lo, hi = start[r], start[r + 1]
+            for a in range(lo, hi):
+                oi[a] = r
+            for a in range(lo + 1, hi):
+                v = oj[a]
+                b = a - 1
+                while b >= lo and oj[b] > v:
+                    oj[b + 1] = oj[b]
+                    b -= 1
+                oj[b + 1] = v
+        return oi, oj
+
+
+def length_sq(a: np.ndarray, b: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """‖b[j] − a[i]‖² per pair (compiled, no n × 3 temporaries, when numba is there); the
+    same arithmetic as the NumPy expression, so the same bits."""
+    if nb is not None and len(i) >= 10_000:
+        return _length_sq_nb(np.ascontiguousarray(a, float), np.ascontiguousarray(b, float),
+                             np.asarray(i, np.int64), np.asarray(j, np.int64))
+    d = b[j] - a[i]
+    return d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2]
+
+
+def sort_pairs(i: np.ndarray, j: np.ndarray):
+    """The pairs (i, j) in (i, j) order, as int64 (compiled counting sort when numba is
+    there; else one sort of the combined key)."""
+    i, j = np.asarray(i, np.int64), np.asarray(j, np.int64)
+    if not len(i):
+        return i, j
+    n = int(max(i.max(), j.max())) + 1
+    if nb is not None and len(i) >= 10_000:
+        return _sort_pairs_nb(i, j, n)
+    key = np.sort(i * n + j)
+    return key // n, key % n
+
+
+def lattice_pairs(o: np.ndarray, d: float):
+    """(i, j), i < j, int64: every pair of ``o`` closer than ``d`` (strictly, Eq. 16), when
+    ``o`` lies on one cubic lattice; else None (the caller's k-d tree serves). The same set
+    as :meth:`scipy.spatial.cKDTree.query_pairs` with the strict filter, without a tree: a
+    pair of lattice sites is one of the few integer offsets shorter than d, looked up in a
+    dense grid of the sites (a pair within 10⁻⁶·d of d is tested on its coordinates)."""
+    o = np.asarray(o, float).reshape(-1, 3)
+    n = len(o)
+    if n < 2:
+        return None
+    # the spacing: the smallest non-zero coordinate step between successive particles (a
+    # fill lists its sites row by row; a guess that is not the grid's fails the check below)
+    step = np.abs(np.diff(o, axis=0))
+    step = step[step > 1e-9 * max(float(np.abs(o).max()), 1e-300)]
+    if not len(step):
+        return None
+    s = float(step.min())
+    del step
+    lo = o.min(axis=0)
+    ijk = np.rint((o - lo) / s).astype(np.int64)
+    if np.abs(lo + ijk * s - o).max() > 1e-6 * s:
+        return None
+    r = int(np.floor(d / s * (1 + 1e-6)))
+    dims = ijk.max(axis=0) + 1 + 2 * r
+    if float(np.prod(dims.astype(float))) > GRID_PER_POINT * n + 1000:
+        return None
+    strides = np.array([1, dims[0], dims[0] * dims[1]], dtype=np.int64)
+    grid = np.full(int(np.prod(dims)), -1, dtype=np.int64)
+    flat = (ijk + r) @ strides
+    grid[flat] = np.arange(n)
+    if not np.array_equal(grid[flat], np.arange(n)):
+        return None                              # two particles on one site
+    I, J = [], []
+    for off in np.ndindex(2 * r + 1, 2 * r + 1, 2 * r + 1):
+        D = np.array(off) - r
+        if tuple(D) <= (0, 0, 0):                # each unordered offset once
+            continue
+        L = float(np.sqrt((D * D).sum())) * s
+        if L >= d * (1 + 1e-6):
+            continue
+        q = grid[flat + int(D @ strides)]
+        p = np.flatnonzero(q >= 0)
+        q = q[p]
+        if abs(L - d) <= 1e-6 * d:               # on the edge of d: its coordinates decide
+            diff = o[q] - o[p]
+            keep = np.einsum("ij,ij->i", diff, diff) < d * d
+            p, q = p[keep], q[keep]
+        I.append(np.minimum(p, q))
+        J.append(np.maximum(p, q))
+    if not I:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    return np.concatenate(I), np.concatenate(J)
+
 
 def sampled(region, a: np.ndarray, b: np.ndarray, d: float) -> np.ndarray:
     """Whether each segment a[k]–b[k] lies inside ``region`` by sampling: its points at
@@ -235,17 +385,7 @@ def _decide(region, o, i, j, d, lo, s, ijk, bar):
     strides = np.array([1, dims[0], dims[0] * dims[1]], dtype=np.int64)
     flat = (ijk + 1) @ strides
     fa, fb = flat[i], flat[j]
-    D = ijk[j] - ijk[i]
-    m = int(np.abs(D).max())
-    w = 2 * m + 1
-    code = ((D[:, 0] + m) * w + D[:, 1] + m) * w + D[:, 2] + m
-    del D
-    certain = np.ones(n, dtype=bool)
-    for k in np.flatnonzero(np.bincount(code)):
-        rows = np.flatnonzero(code == k)
-        key = (k // w ** 2 - m, k // w % w - m, k % w - m)
-        for c in touched_cells(key):
-            certain[rows] &= solid[fa[rows] + int(c @ strides)]
+    certain = _certain(ijk, i, j, fa, strides, solid)
     out[certain] = True
     doubt = np.flatnonzero(~certain)
     ends_solid = solid[fa[doubt]] & solid[fb[doubt]]
@@ -263,6 +403,39 @@ def _decide(region, o, i, j, d, lo, s, ijk, bar):
         out[rest] = sampled(region, o[i[rest]], o[j[rest]], d)
     _tick(bar)
     return out, len(doubt), len(rayed)
+
+
+def _certain(ijk, i, j, fa, strides, solid) -> np.ndarray:
+    """Step 2: whether every cell a segment touches has a solid site (numba on both cores;
+    else NumPy by offset class)."""
+    n = len(i)
+    if nb is not None and n >= 10_000:
+        m = int(_max_offset_nb(ijk, i, j))
+        w = 2 * m + 1
+        ptr, offs = [0], []
+        for code in range(w ** 3):
+            key = (code // w ** 2 - m, code // w % w - m, code % w - m)
+            cells = touched_cells(key) if max(map(abs, key)) <= 3 else None
+            if cells is None:
+                ptr.append(ptr[-1])
+                continue
+            offs.extend(int(x) for x in cells @ strides)
+            ptr.append(len(offs))
+        if m <= 3:
+            return _certain_nb(ijk, i, j, m, w, np.array(ptr, np.int64),
+                               np.array(offs, np.int64), strides, solid)
+    D = ijk[j] - ijk[i]
+    m = int(np.abs(D).max())
+    w = 2 * m + 1
+    code = ((D[:, 0] + m) * w + D[:, 1] + m) * w + D[:, 2] + m
+    del D
+    certain = np.ones(n, dtype=bool)
+    for k in np.flatnonzero(np.bincount(code)):
+        rows = np.flatnonzero(code == k)
+        key = (k // w ** 2 - m, k // w % w - m, k % w - m)
+        for c in touched_cells(key):
+            certain[rows] &= solid[fa[rows] + int(c @ strides)]
+    return certain
 
 
 def _say(loud: bool, name: str, n: int, doubt: int, rayed: int, dropped: int, secs: float):

@@ -31,12 +31,7 @@ from rackstress.model.operators import Attract, Bind, Collide
 KERNEL_CHOICES = ("numba", "numpy")
 
 
-def cache_dir() -> Path:
-    """Where compiled kernels are kept (``NUMBA_CACHE_DIR`` if set)."""
-    if os.environ.get("NUMBA_CACHE_DIR"):
-        return Path(os.environ["NUMBA_CACHE_DIR"])
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "rackstress" / "numba"
+from rackstress.lib.jit import cache_dir  # noqa: E402,F401 - one place (lib/jit.py)
 
 
 def available() -> bool:

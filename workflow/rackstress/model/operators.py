@@ -235,12 +235,11 @@ def _all_pairs(target, source) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _sorted(i, j):
-    """The pairs in (i, j) order (one sort of the combined key: fast for millions)."""
-    if not len(i):
-        return i, j
-    n = int(max(i.max(), j.max())) + 1
-    key = np.sort(i.astype(np.int64) * n + j)
-    return key // n, key % n
+    """The pairs in (i, j) order (:func:`rackstress.model.inside.sort_pairs`: a compiled
+    counting sort, fast for millions)."""
+    from rackstress.model.inside import sort_pairs
+
+    return sort_pairs(i, j)
 
 
 def region_index(group, name: str, phase: Mapping) -> np.ndarray:
@@ -529,11 +528,17 @@ class Bind(PairOperator):
             from scipy.spatial import cKDTree
             # within(d) is a strict '<' (Eq. 16): query to d, then filter exactly.
             if target is source:        # each pair once (i < j), then both directions
-                ij = cKDTree(target.o).query_pairs(coeff.d, output_type="ndarray")
-                i, j = ij[:, 0].astype(np.int64), ij[:, 1].astype(np.int64)
-                diff = target.o[j] - target.o[i]
-                keep = rowdot(diff, diff) < coeff.d * coeff.d
-                i, j = i[keep], j[keep]
+                from rackstress.model.inside import lattice_pairs
+
+                ij = lattice_pairs(target.o, coeff.d)   # a filled lattice: no tree needed
+                if ij is not None:
+                    i, j = ij
+                else:
+                    ij = cKDTree(target.o).query_pairs(coeff.d, output_type="ndarray")
+                    i, j = ij[:, 0].astype(np.int64), ij[:, 1].astype(np.int64)
+                    diff = target.o[j] - target.o[i]
+                    keep = rowdot(diff, diff) < coeff.d * coeff.d
+                    i, j = i[keep], j[keep]
                 if isinstance(coeff, WithinInside):     # no binding across free space
                     keep = coeff.inside_pairs(target.o, i, j, name=target.name)
                     i, j = i[keep], j[keep]
@@ -547,12 +552,13 @@ class Bind(PairOperator):
                     keep = coeff.inside(target.o[i], source.o[j], name=target.name)
                     i, j = i[keep], j[keep]
         i, j = _sorted(i, j)
-        diff = source.o[j] - target.o[i]
+        from rackstress.model.inside import length_sq
+
         c = np.full(len(i), float(coeff.c))
         weights = getattr(coeff, "weights", None)      # a material solid's face compensation
         if weights is not None and target is source:
             c = c * weights(target.o, i, j)
-        return PairList(i, j, c, rowdot(diff, diff))
+        return PairList(i, j, c, length_sq(target.o, source.o, i, j))
 
 
 @dataclass(frozen=True)

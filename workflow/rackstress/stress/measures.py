@@ -546,8 +546,10 @@ class ParticleStress(_RunAnalysis):
 
     For the parts with a material (``scene.json``: ``material``, ``volume``) and the run's
     ``bindings.npz`` (written when the run starts): the bindings' virial per particle volume
-    W_i/V_i (:mod:`rackstress.stress.tensor`; ``method="completed"``: surface-completed, measured
-    and not the default — docs/stress.md).
+    W_i/V_i with each free face's cell moment restored (``method="continuum"``, the default;
+    ``"virial"``: the plain W_i/V_i, exact in every section sum; ``"completed"``:
+    surface-completed, measured and not the default — :mod:`rackstress.stress.tensor`,
+    docs/stress.md).
     ``results``: ``per_particle`` and ``von_mises`` (n_frames × n_atoms), ``stress`` (n_frames ×
     n_atoms × 6, xx yy zz xy yz xz), ``principal`` (× 3, largest first), ``safety`` (yield / von
     Mises where the material gives a yield) and ``bind_strain`` (each particle's largest binding
@@ -563,9 +565,9 @@ class ParticleStress(_RunAnalysis):
     NAME = "von_mises"
     LABEL = "von Mises stress"
     UNITS = "stress units"
-    METHODS = ("virial", "completed")
+    METHODS = ("continuum", "virial", "completed")
 
-    def __init__(self, run, parts=None, method: str = "virial", **kwargs):
+    def __init__(self, run, parts=None, method: str = "continuum", **kwargs):
         mats = material_parts(run)
         super().__init__(run, list(mats) if parts is None else parts, **kwargs)
         if method not in self.METHODS:
@@ -611,11 +613,14 @@ class ParticleStress(_RunAnalysis):
             return
         self._V = V
         self._gather = T.incidence(b[0], n)
+        self._wm = None
         if self.method == "completed":
             A = T.binding_moment(run.o, b[0], b[1], b[2], n)
             self._W2S = T.completion(A, V, [p.index for p in mine])
         else:
             self._W2S = None
+            if self.method == "continuum":
+                self._wm = T.surface_moment(run.o, b[0], b[1], b[3], n)
 
     def _measure(self, p):
         k, out = self._frame_index, np.full(len(p), np.nan)
@@ -625,6 +630,8 @@ class ParticleStress(_RunAnalysis):
         d = p[b[1]] - p[b[0]]
         d2 = np.einsum("ij,ij->i", d, d)
         s = T.stress(p, b, self._W2S, self._V, W=T.virial_of(d, d2, b[2], b[3], self._gather))
+        if self._wm is not None:
+            s = T.moment_corrected(s, b[0], b[1], self._wm, self._gather)
         s[~self._mask] = np.nan
         vm = T.von_mises(s)
         self.results.stress[k] = T.to_output(s)

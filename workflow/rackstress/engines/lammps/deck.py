@@ -126,6 +126,9 @@ PLUGIN_PASSIVE_SKIN = 4.0
 #: through the robot (4 leaves it whole on one rank; 20 splits it 2173 / 1888) and a million
 #: resting particles still outweigh it (sediment-large).
 MOVE_WEIGHT = 20.0
+#: Distinct per-pair coefficients of one bind the plugin takes (a bond type and fix each); a
+#: material solid's face compensation gives c·(1 + ¼k), k = 0 … 4: a handful
+MAX_PAIR_TYPES = 16
 #: Relative tolerance under which two original lengths count as one bond type (fast mode).
 L0_DIGITS = 10
 #: LAMMPS' skin of a plugin deck with passive groups (after PLUGIN_PASSIVE_SKIN) where the resting
@@ -154,7 +157,8 @@ class Realized:
     partner: object = None   # the reverse operator folded into the same pair style / bond
     site: tuple = None       # (group, index in its operator sequence): where it sits in the scene
     plugin: str | None = None  # the compiled style carrying it (``rs/collide``, ...; plugin.py)
-    btype: int = 0           # rs/bind: the bond type of its pairs
+    #: rs/bind: the bond types of its pairs, each with its c (None: the operator's own c)
+    btypes: list = field(default_factory=list)
 
     @property
     def how(self) -> str:
@@ -292,8 +296,8 @@ class Deck:
             L += [c for cmds, _, _ in forces for c in cmds]
             if any(gamma.values()):
                 L.append(self._damp_command(gamma))
-        L += [self.plugin_command(idx, r, {}) for idx, r in enumerate(self.realized)
-              if r.plugin and not r.op.when]
+        L += [line for idx, r in enumerate(self.realized) if r.plugin and not r.op.when
+              for line in self.plugin_command(idx, r, {}).split("\n")]
         held_cmds, nve_group = support_commands(sc)   # supports and v0 (scene-level)
         L += held_cmds
         # a scene with supports has no passive group (passive_groups), so the two never meet
@@ -469,8 +473,11 @@ class Deck:
         if r.plugin == "rs/dampen":
             return f"fix {fid} {r.target} rs/dampen {_f(op.extra)} contact {contact_groups(op.when)[0]}"
         c = _f(op.coeff.c)
-        if r.plugin == "rs/bind":
-            return f"fix {fid} {r.target} rs/bind {op.source} {c} btype {r.btype}"
+        if r.plugin == "rs/bind":          # one fix per bond type: rs_pN, rs_pN_2, …
+            return "\n".join(
+                f"fix {fid}{'' if k == 0 else f'_{k + 1}'} {r.target} rs/bind {op.source} "
+                f"{c if cv is None else _f(cv)} btype {bt}"
+                for k, (bt, cv) in enumerate(r.btypes))
         if r.plugin == "rs/attract":
             if isinstance(op.coeff, Matched):
                 t = _prop_name(op.coeff.target.format(**phase_vars))
@@ -946,7 +953,7 @@ def _plugin_realize(scene: Scene, realized: list) -> tuple | None:
     """Hand every Python-realized operator to a plugin style (module doc, "Plugin"); the bonds
     of the rs/bind pairs (types, i, j: one bond per unordered pair, a type per bind and its
     reverse). None, with the reason, if one has no style (a contact-conditioned force)."""
-    btypes, bonds = {}, []
+    btypes, bonds, n_types = {}, [], 0
     for r in realized:
         if not r.python:
             continue
@@ -963,30 +970,41 @@ def _plugin_realize(scene: Scene, realized: list) -> tuple | None:
             r.plugin = "rs/attract"
         elif isinstance(op, Bind) and type(op.coeff) is Const:
             r.plugin = "rs/rack"
-        elif isinstance(op, Bind) and getattr(op.coeff, "weights", None) is not None:
-            # a material solid's per-pair c (its face compensation, model/solid.py): rs/bind
-            # takes one c per bond type, so the callback keeps it
-            return None, f"{r.target} <- {op.label()} has a coefficient per pair"
         elif isinstance(op, Bind):
+            # a material solid's c differs per pair (its face compensation, model/solid.py:
+            # c·(1 + ¼k), a few values): a bond type and an rs/bind fix per distinct value
+            weighted = getattr(op.coeff, "weights", None) is not None
+            if weighted and op.when:
+                return None, (f"{r.target} <- {op.label()}: a phase-conditioned bind with a "
+                              "coefficient per pair has no plugin style")
             rev = reverse_of(scene.operators, r.target, r.site[1])
             key = frozenset({r.site, rev}) if rev is not None else frozenset({r.site})
             if key not in btypes:
-                btypes[key] = len(btypes) + 1
                 pl = op.pairs(scene.groups[r.target], scene.groups[op.source])
                 I = pl.i + scene.offset(r.target) + 1
                 J = pl.j + scene.offset(op.source) + 1
+                c = np.asarray(pl.c, float) if weighted else np.zeros(len(I))
                 if r.target == op.source:
                     keep = I < J
-                    I, J = I[keep], J[keep]
-                bonds.append((np.full(len(I), btypes[key]), I, J))
-            r.plugin, r.btype = "rs/bind", btypes[key]
+                    I, J, c = I[keep], J[keep], c[keep]
+                values, which = np.unique(c, return_inverse=True)
+                if len(values) > MAX_PAIR_TYPES:
+                    return None, (f"{r.target} <- {op.label()} has {len(values)} distinct "
+                                  f"coefficients (the plugin takes up to {MAX_PAIR_TYPES}, one "
+                                  "bond type each)")
+                first = n_types + 1
+                n_types += len(values)
+                btypes[key] = [(first + k, float(v) if weighted else None)
+                               for k, v in enumerate(values)]
+                bonds.append((first + which.reshape(-1), I, J))
+            r.plugin, r.btypes = "rs/bind", btypes[key]
         else:
             return None, f"{r.target} <- {op.label()} has no plugin style"
         r.python = False
     if not bonds:
         return (None, 0), ""
     return ((np.concatenate([b[0] for b in bonds]), np.concatenate([b[1] for b in bonds]),
-             np.concatenate([b[2] for b in bonds])), len(btypes)), ""
+             np.concatenate([b[2] for b in bonds])), n_types), ""
 
 
 def plugin_ghost_cutoff(scene: Scene, bonds, skin: float, activate: bool = False) -> float:
