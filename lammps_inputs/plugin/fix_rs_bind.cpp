@@ -23,8 +23,10 @@
 #include "neighbor.h"
 #include "utils.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <utility>
 
 using namespace LAMMPS_NS;
 using namespace FixConst;
@@ -88,6 +90,35 @@ void FixRSBind::collect()
     p2.push_back(i2);
     ends.push_back(e);
     q.push_back(l2);
+  }
+  // in atom-id order (by the pair's smaller id, then its larger): each atom then adds its
+  // terms in an order that does not depend on the rows LAMMPS gave the atoms, which an
+  // exchange, a resumed run or the rank layout change (LAMMPS lists a bond from its end with
+  // the lower row). Both ends' terms are exact negations, so which end is i1 does not matter.
+  tagint *tag = atom->tag;
+  const int n = (int) p1.size();
+  std::vector<std::pair<std::pair<tagint, tagint>, int>> key(n);
+  bool sorted = true;
+  for (int k = 0; k < n; k++) {
+    tagint a = tag[p1[k]], b = tag[p2[k]];
+    key[k] = {{std::min(a, b), std::max(a, b)}, k};
+    if (k && key[k].first < key[k - 1].first) sorted = false;
+  }
+  if (!sorted) {
+    std::sort(key.begin(), key.end());
+    std::vector<int> a1(n), a2(n), ae(n);
+    std::vector<double> aq(n);
+    for (int k = 0; k < n; k++) {
+      int m = key[k].second;
+      a1[k] = p1[m];
+      a2[k] = p2[m];
+      ae[k] = ends[m];
+      aq[k] = q[m];
+    }
+    p1.swap(a1);
+    p2.swap(a2);
+    ends.swap(ae);
+    q.swap(aq);
   }
   built = true;
 }

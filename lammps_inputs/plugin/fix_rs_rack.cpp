@@ -86,6 +86,10 @@ const std::vector<int> &FixRSRack::owned_rows()
     rows.clear();
     for (int i = 0; i < atom->nlocal; i++)
       if (atom->mask[i] & bit) rows.push_back(i);
+    // in atom-id order: a rank's partial sum over its hosts must not depend on the rows LAMMPS
+    // gave the atoms (exchanges, a resumed run's data file order), only on which it owns
+    tagint *tag = atom->tag;
+    std::sort(rows.begin(), rows.end(), [tag](int a, int b) { return tag[a] < tag[b]; });
     // L0² = ‖u_o − p_o‖² of every pair, once a layout (the same arithmetic as a step's would be)
     double **o = RackStress::originals(atom, error, "rs/rack");
     int n = few.size();
