@@ -137,6 +137,14 @@ void FixRSBind::post_force(int /*vflag*/)
     const double d2 = dx * dx + dy * dy + dz * dz;
     const double s = c * (1.0 - q[k] / d2);
     const double ax = s * dx, ay = s * dy, az = s * dz;
+    if (!(std::isfinite(ax) && std::isfinite(ay) && std::isfinite(az))) {
+      // a pair that coincides (d = 0): neither end gains it (rs_common.h, nonfinite)
+      tagint *tag = atom->tag;
+      tagint t = (ends[k] & 1) ? tag[i1] : tag[i2];
+      if (ends[k] == 3) t = std::min(tag[i1], tag[i2]);
+      RackStress::nonfinite(lmp, "rs/bind", t);
+      continue;
+    }
     if (ends[k] & 1) {
       const double m = rmass ? rmass[i1] : mass[type[i1]];
       f[i1][0] += m * ax;

@@ -173,6 +173,10 @@ void FixRSRack::post_force(int /*vflag*/)
         double s = c * (1.0 - Q[r * n + k] / d2);
         for (int e = 0; e < 3; e++) a[e] += s * d[e];
       }
+      if (!RackStress::finite3(a)) {    // coincides with a rack particle: rs_common.h
+        RackStress::nonfinite(lmp, "rs/rack", atom->tag[i]);
+        continue;
+      }
       double m = RackStress::mass(atom, i);
       for (int e = 0; e < 3; e++) f[i][e] += m * a[e];
     }
@@ -184,6 +188,10 @@ void FixRSRack::post_force(int /*vflag*/)
   for (int k = 0; k < n; k++) {
     int i = atom->map(few.tag[k]);
     if (i < 0 || i >= nlocal) continue;
+    if (!RackStress::finite3(&sums[3 * k])) {    // a host particle coincides with it
+      RackStress::nonfinite(lmp, "rs/rack", few.tag[k]);
+      continue;
+    }
     double m = RackStress::mass(atom, i);
     for (int e = 0; e < 3; e++) f[i][e] += m * sums[3 * k + e];
   }

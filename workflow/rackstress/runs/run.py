@@ -398,10 +398,16 @@ def execute(scene: Scene, out: Path, engine: str, mode: str, dump_every: int, *,
     finally:
         eng.close()
     if error is not None and root and engine == "lammps":
-        from rackstress.engines.dumpio import trim_nonfinite
+        from rackstress.engines.dumpio import trim_after, trim_nonfinite
 
         # LAMMPS writes the dump itself: frames of non-finite positions written before the
         # check that noticed them are cut, and the step named is the first bad one seen
+        after = getattr(error, "trim_after", None)
+        if after is not None:       # the plugin left a non-finite term out: later frames are wrong
+            cut = trim_after(Path(out) / "trajectory.dump", after)
+            if cut is not None:
+                extra["trimmed_from_step"] = cut
+            steps = min(steps, after)
         bad = trim_nonfinite(Path(out) / "trajectory.dump")
         if bad is not None:
             extra["trimmed_from_step"] = bad
