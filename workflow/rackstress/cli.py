@@ -636,6 +636,35 @@ def _batch_page(batchdir):
     return write_batch_report(batchdir)
 
 
+def _fea_inputs(rundir: Path) -> str | None:
+    """What ``rackstress fea`` cannot read in a run directory, in a sentence (else None):
+    ``scene.json`` missing or not JSON, ``boundary.npz`` not a readable NumPy archive (a copy cut
+    short, a file overwritten)."""
+    import json
+    import zipfile
+
+    import numpy as np
+
+    scene = rundir / "scene.json"
+    try:
+        json.loads(scene.read_text())
+    except FileNotFoundError:
+        return (f"{scene} is missing: the run directory is incomplete (was it copied in part?); "
+                "run the scene again")
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        return f"{scene} cannot be read ({exc}): the run directory is damaged; run the scene again"
+    bnd = rundir / "boundary.npz"
+    if bnd.exists():
+        try:
+            with np.load(bnd) as z:
+                for k in z.files:
+                    z[k]
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+            return (f"{bnd} cannot be read ({exc or type(exc).__name__}): remove it to take the "
+                    "supports and loads from the scene, or run the scene again")
+    return None
+
+
 @main.command("fea")
 @click.argument("rundir", type=click.Path(file_okay=False, path_type=Path))
 @click.option("--E", "E", type=float, help="Young's modulus (default: the part's material in "
@@ -660,6 +689,9 @@ def fea(rundir, E, nu, size, group, measure):
     if not (Path(rundir) / "summary.json").is_file():
         _fail(RackstressError(f"{rundir}: no summary.json; is this a finished run directory "
                               "(made by 'rackstress run')?"), 2)
+    damaged = _fea_inputs(Path(rundir))
+    if damaged:
+        _fail(RackstressError(f"rackstress fea {rundir}: {damaged}"), 2)
     try:
         data = solid.check_run(rundir, E=E, nu=nu, size=size, group=group, measure=measure,
                                echo=click.echo)

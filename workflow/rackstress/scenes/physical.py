@@ -28,6 +28,8 @@ from rackstress.model.scene import Phase, steps_for
 from rackstress.model.units import PAPER, units as unit_named
 
 _LOAD_KINDS = ("force", "pressure", "gravity", "displacement")
+#: The largest load component accepted (force, pressure, gravity): beyond, squares overflow.
+HUGE_LOAD = 1e150
 _LOAD_KEYS = ("on", "where", "normal", "ramp") + _LOAD_KINDS
 _SUPPORT_KEYS = ("on", "where", "fix")
 #: stairs of a load ramp (each 1/RAMP_STAIRS of the full load, one phase each)
@@ -195,6 +197,12 @@ def loads(ctx, tables, groups: dict, operators: dict, u, select, ramp) -> dict:
             raise c.error("'normal' belongs to a pressure", "normal")
         mask = _selection(c, t, g, select)
         m = g.mass(u)
+        value = np.asarray(t[kind], dtype=object).ravel() if kind != "pressure" else [t[kind]]
+        if kind != "displacement" and any(isinstance(x, (int, float)) and abs(x) > HUGE_LOAD
+                                          for x in value):
+            # the static solver and the stress measures square forces: 1e300² overflows
+            raise c.error(f"{t[kind]!r} has a value beyond {HUGE_LOAD:g} in the scene's units: its square "
+                          "overflows a double; check the units (docs/units.md)", kind)
         if kind == "force":
             F = np.asarray(_vec3(c, t["force"], "force"))
             accel = F / (mask.sum() * m)
