@@ -103,7 +103,8 @@ def test_a_static_run_that_cannot_settle_is_exit_6_in_bounded_time(tmp_path, cas
 # ---------------------------------------------------------------------------- bad input
 @pytest.mark.parametrize("case", ["empty load", "no E", "mesh in metres", "mesh in mm in SI",
                                   "E 1e-300", "E 1e300", "density 1e9", "force 1e300",
-                                  "gravity 1e308", "displacement 1e300", "displacement 1e6"])
+                                  "gravity 1e308", "displacement 1e300", "displacement 1e6",
+                                  "displacement on a support"])
 def test_physical_input_errors_name_the_place(tmp_path, case):
     """Exit 2 and one paragraph naming the file and the field; nothing written.
 
@@ -126,11 +127,19 @@ def test_physical_input_errors_name_the_place(tmp_path, case):
                                    "watchdog bound 10000"]),
            "displacement 1e6": ("load", "displacement = [0, -1e6, 0]",
                                 ["'bar' particle", "prescribed displacement",
-                                 "watchdog bound 10000"])}
+                                 "watchdog bound 10000"]),
+           # the support's own cylinder displaced: held at o and at o + u (was: "not settled",
+           # exit 6, a residual of 0.09 of the reactions)
+           "displacement on a support": ("support", "displacement = [0, 0, 1]",
+                                         ["[[load]] #1", "displacement", "already held in z",
+                                          "[[support]]"])}
     if case in bad:
         where, value, says = bad[case]
         if where == "material":
             scene = hinge(tmp_path, material=value)
+        elif where == "support":
+            scene = hinge(tmp_path, load_min="[-1, -1, -1]", load_max="[1.5, 1.5, 5]")
+            scene.write_text(scene.read_text().replace("force = [0, -10, 0]", value))
         else:
             scene = hinge(tmp_path)
             scene.write_text(scene.read_text().replace("force = [0, -10, 0]", value))

@@ -232,6 +232,14 @@ def loads(ctx, tables, groups: dict, operators: dict, u, select, ramp) -> dict:
                 raise c.error("a prescribed displacement is for static analysis", "displacement")
             if g.u0 is None:
                 g.u0 = np.zeros((g.n, 3))
+            clash = g.fixed[mask] & (g.u0[mask] != uvec[None, :])
+            if clash.any():
+                dirs = ", ".join(a for a, c_ in zip("xyz", clash.any(axis=0)) if c_)
+                raise c.error(f"{int(clash.any(axis=1).sum())} particle(s) of its region are "
+                              f"already held in {dirs} by a [[support]] (or another "
+                              "displacement) at another position: a particle cannot be held "
+                              "at o and at o + u; narrow 'where' or leave the support out there",
+                              "displacement")
             g.fixed[mask] = True
             g.u0[mask] = uvec
             _refix(g)
