@@ -92,12 +92,33 @@ def test_a_static_run_that_cannot_settle_is_exit_6_in_bounded_time(tmp_path, cas
     s = summary(out)
     assert s["analysis"] == "static" and s["settled"] is False
     assert s["status"] == "not settled" and s["residual"] > 1e-6
+    assert "rounding" not in r.stderr    # a mechanism, not a load too small to resolve
     if case == "floats away":            # the unsupported part is named before the solve
         assert "'loose'" in r.stderr and "no support" in r.stderr
     else:                                # the clamped bar: the same scene settles
         ok = rs("run", scene, "--set", "pin=2.5", "--out", tmp_path / "ok", *QUIET, timeout=300)
         assert ok.returncode == 0, ok.stderr
         assert summary(tmp_path / "ok")["status"] == "settled"
+
+
+@pytest.mark.lammps
+def test_a_load_too_small_to_resolve_says_why_it_cannot_settle(tmp_path):
+    """The clamped steel bar under 1e-9 N instead of 10 N: its deformation is below what
+    rounding the positions resolves (ε·|p| ≈ 4e-15 mm, times the bar's stiffness, is more than
+    1e-6 of so small a load), so Newton's method stalls and the run is ``not settled`` (exit 6)
+    — with the reason and the remedy in the message and the estimate in summary.json (was: the
+    bare "did not settle", as for a mechanism)."""
+    scene = hinge(tmp_path)
+    scene.write_text(scene.read_text().replace("force = [0, -10, 0]", "force = [0, -1e-9, 0]"))
+    out = tmp_path / "run"
+    r = rs("run", scene, "--out", out, *QUIET, timeout=300)
+    assert r.returncode == 6, r.stderr
+    assert "Traceback" not in r.stderr
+    assert "did not settle" in r.stderr and "rounding of its positions" in r.stderr
+    assert "A larger load settles it" in r.stderr
+    s = summary(out)
+    assert s["status"] == "not settled" and s["rounding_floor"] > s["tolerance"]
+    # the same bar under its 10 N settles (the first test's clamped case)
 
 
 # ---------------------------------------------------------------------------- bad input

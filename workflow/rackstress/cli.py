@@ -216,7 +216,7 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
                            f"settle: the largest unbalanced force is {summary['residual']:.3g} of "
                            f"the applied load after {summary['iterations']} iterations (settled "
                            f"means at most {summary['tolerance']:g}); the state written to {out} "
-                           "is not an equilibrium", err=True)
+                           "is not an equilibrium" + _rounding_hint(summary), err=True)
             sys.exit(EXIT_UNSETTLED)
     except Exception as err:  # noqa: BLE001 - each kind has its exit status (_fail_any)
         _fail_any(err, out)
@@ -634,6 +634,19 @@ def _batch_page(batchdir):
     from rackstress.render.batch_report import write_batch_report
 
     return write_batch_report(batchdir)
+
+
+def _rounding_hint(summary: dict) -> str:
+    """For a static run stopped near the rounding of its own forces (engines.static.
+    rounding_floor): why no number of iterations would settle it, and what would."""
+    floor = summary.get("rounding_floor")
+    if floor is None or floor < 0.1 * summary.get("tolerance", 1e-6):
+        return ""
+    return (f". The rounding of its positions in double precision alone can leave up to about "
+            f"{floor:.2g} of the applied load unbalanced (its stiffness × the size of its "
+            "coordinates × 2.2e-16): the load deforms the part too little for the tolerance to be "
+            "reachable, and the state is an equilibrium only as far as that rounding resolves it. "
+            "A larger load settles it")
 
 
 def _fea_inputs(rundir: Path) -> str | None:

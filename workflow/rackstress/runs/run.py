@@ -265,7 +265,7 @@ def execute_static(scene: Scene, out: Path, engine: str, mode: str, *, progress:
     ``iterations``, ``residual`` and ``status`` ("settled" or "not settled")."""
     import sys
 
-    from rackstress.engines.static import TOLERANCE, engine_residual, solve
+    from rackstress.engines.static import TOLERANCE, engine_residual, rounding_floor, solve
 
     comm = comm or world()
     root = comm.Get_rank() == 0
@@ -304,6 +304,9 @@ def execute_static(scene: Scene, out: Path, engine: str, mode: str, *, progress:
                   "residual_engine": engine_rel, "tolerance": TOLERANCE,
                   "applied_load": res.load, "solve_s": res.wall_s,
                   "residual_history": res.history})
+    if not settled and res.load > 0:
+        # relative to the load: the unbalanced force rounding alone leaves (the hint of exit 6)
+        extra["rounding_floor"] = rounding_floor(scene, scene.original_positions()) / res.load
     if root:
         warnings = load_path_warnings(scene)
         for w in warnings:
