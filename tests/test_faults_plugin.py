@@ -2,7 +2,7 @@
 a plugin missing, cut short, corrupt or built for another LAMMPS (one line, then the Python
 callback); a rank killed with ``kill -9`` under ``mpiexec -n 2 lmp`` and under ``mpiexec -n 2
 rackstress run`` (every rank ends in bounded time; ``--resume`` writes the uninterrupted
-trajectory byte for byte); a disk that fills during ``write_restart`` (exit 5, the last
+trajectory byte for byte, serial and under two ranks); a disk that fills during ``write_restart`` (exit 5, the last
 checkpoint whole). README's fault table lists each case."""
 from __future__ import annotations
 
@@ -210,16 +210,22 @@ def test_rank_killed_under_mpiexec_lmp_on_a_plugin_deck_ends_every_rank(tmp_path
 
 @pytest.mark.lammps
 @pytest.mark.mpi
-@pytest.mark.parametrize("nranks", [1, 2])
-def test_rank_killed_under_rackstress_run_then_resume(tmp_path, nranks):
+@pytest.mark.parametrize("nranks,scene", [(1, "plane-rack"), (2, "plane-rack"),
+                                          (2, "plane-bound")])
+def test_rank_killed_under_rackstress_run_then_resume(tmp_path, nranks, scene):
     """``rackstress run`` on the plugin path (serial, and ``mpiexec -n 2``), one rank killed
     with ``kill -9`` after a checkpoint: every rank ends within seconds, and ``--resume`` (as
-    many ranks) finishes the run. Serial: the uninterrupted run's trajectory byte for byte.
-    Two ranks: the frames up to the checkpoint byte for byte, the resumed ones equal to the
-    dump's last digit (the 1e-10 two-rank parity tolerance) — not bitwise: LAMMPS pads a shrink-wrapped box by
-    1e-4 of the box it had, which a resumed run does not have (README's fault table)."""
+    many ranks) writes the uninterrupted run's trajectory byte for byte.
+
+    Under two ranks this failed (frames after the checkpoint differed in the last bits, then the
+    box line): ``rs/rack``'s partial sum over a rank's hosts (plane-rack) and ``rs/bind``'s
+    per-atom sum over its bonds (plane-bound) were added in LAMMPS' row order, which an exchange
+    and a resumed run's data file order change; they are now in atom-id order. The kill comes
+    after step 2400: by then plane-rack's rack has moved the shrink-wrapped box's upper x bound,
+    which the resumed run reproduces too (LAMMPS pads it by 1e-4 of the data file's box in
+    both)."""
     mpi = [MPIEXEC, "-n", "2"] if nranks == 2 else []
-    args = ["run", "plane-rack", "--steps", "20000", "--restart-every", "200", "--dump-every",
+    args = ["run", scene, "--steps", "8000", "--restart-every", "200", "--dump-every",
             "100", *QUIET]
     full, cut = tmp_path / "full", tmp_path / "cut"
     r = subprocess.run([*mpi, RS, *args, "--out", str(full)], capture_output=True, text=True,
@@ -229,7 +235,7 @@ def test_rank_killed_under_rackstress_run_then_resume(tmp_path, nranks):
     p = subprocess.Popen([*mpi, RS, *args, "--out", str(cut)], start_new_session=True,
                          stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
-        assert wait_for(lambda: (progress_step(cut) or 0) >= 1000, 300, p), "no checkpoint"
+        assert wait_for(lambda: (progress_step(cut) or 0) >= 2400, 300, p), "no checkpoint"
         if nranks == 2:
             code, took, err = kill_one_rank_and_time_the_end(p, "rackstress")
             assert code != 0 and took < 30, (code, took, err)
@@ -241,39 +247,26 @@ def test_rank_killed_under_rackstress_run_then_resume(tmp_path, nranks):
         if p.poll() is None:
             os.killpg(p.pid, signal.SIGKILL)
     step = progress_step(cut)
-    assert step is not None and step < 20000 and not (cut / "summary.json").exists()
+    assert step is not None and step < 8000 and not (cut / "summary.json").exists()
     r = subprocess.run([*mpi, RS, "run", "--resume", str(cut), *QUIET], capture_output=True,
                        text=True, timeout=600)
     assert r.returncode == 0, r.stderr
     s = json.loads((cut / "summary.json").read_text())
-    assert s["resumed_from_step"] == step and s["steps"] == 20000
+    assert s["resumed_from_step"] == step and s["steps"] == 8000
     assert operators(cut) == "plugin"
-    if nranks == 1:
-        assert (cut / "trajectory.dump").read_bytes() == (full / "trajectory.dump").read_bytes()
-        return
-    a, b = dump_parts(full / "trajectory.dump"), dump_parts(cut / "trajectory.dump")
-    assert [t.split("\n", 1)[0] for t, _, _ in a] == [t.split("\n", 1)[0] for t, _, _ in b]
-    for (text_a, box_a, x_a), (text_b, box_b, x_b) in zip(a, b):
-        if int(text_a.split("\n", 1)[0]) <= step:
-            assert (text_a, box_a) == (text_b, box_b)        # kept as written
-        else:
-            # the dump keeps 10 significant digits (%.10g): a 1e-10 difference may flip the
-            # last one, so one unit of it is the resolution
-            unit = 10.0 ** (np.floor(np.log10(np.maximum(np.abs(x_a), 1e-300))) - 9)
-            assert (np.abs(x_a - x_b) <= 1.5 * unit).all()      # one flip, as printed
-            assert np.abs(np.array(box_a) - box_b).max() <= 1e-10
+    a, b = (cut / "trajectory.dump").read_bytes(), (full / "trajectory.dump").read_bytes()
+    assert a == b, first_difference(full / "trajectory.dump", cut / "trajectory.dump")
 
 
-def dump_parts(dump: Path) -> list[tuple[str, list[float], np.ndarray]]:
-    """Each frame of a LAMMPS dump: (its text, its box bounds, its positions)."""
-    out = []
-    for frame in dump.read_text().split("ITEM: TIMESTEP\n")[1:]:
-        lines = frame.rstrip("\n").split("\n")
-        k = next(i for i, line in enumerate(lines) if line.startswith("ITEM: BOX BOUNDS"))
-        rows = np.array([line.split() for line in lines[k + 5:]], dtype=float)
-        out.append((frame, [float(v) for line in lines[k + 1:k + 4] for v in line.split()],
-                    rows[:, 3:6]))
-    return out
+def first_difference(dump_a: Path, dump_b: Path) -> str:
+    """The first frame two LAMMPS dumps differ in, and its first differing line (a message)."""
+    fa = dump_a.read_text().split("ITEM: TIMESTEP\n")[1:]
+    fb = dump_b.read_text().split("ITEM: TIMESTEP\n")[1:]
+    for x, y in zip(fa, fb):
+        if x != y:
+            line = next((p, q) for p, q in zip(x.split("\n"), y.split("\n")) if p != q)
+            return f"step {x.split(chr(10), 1)[0]}: {line[0]!r} != {line[1]!r}"
+    return f"{len(fa)} frames != {len(fb)}"
 
 
 # ---------------------------------------------------------------------------- full disk

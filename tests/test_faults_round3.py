@@ -220,46 +220,163 @@ where = { ids = [1] }
 """
 
 
-@pytest.mark.lammps
-@pytest.mark.parametrize("how", ["callback", "reference", "mpi", "default"])
-def test_a_bound_pair_that_coincides_keeps_finite_frames_and_names_its_step(tmp_path, how):
-    """Particles 0 and 1 (2 apart, bound at rest length 2) are pushed together with
-    acceleration 1 at dt = 1: Eq. 5 puts both exactly at x = 0 at step 1 (v₁ = 1, p₁ = −1 + 1),
-    where Eq. 12's direction is 0/0. The force of step 1 is the first bad value: the Python
-    callback (pinned with RACKSTRESS_KERNELS=numba; serial and mpiexec -n 2) and the reference
-    engine name it; whatever path LAMMPS takes by default (the compiled plugin, once merged),
-    no frame of non-finite positions is kept and the step named is at most the first frame
-    that would have been non-finite (was: LAMMPS wrote 22 `nan` lines and named step 10, its
-    next watchdog check)."""
-    import os
+#: The same push made coincident by each operator that divides by a distance (Eq. 12's bind over
+#: all pairs: rs/rack; bind within(d): rs/bind; attract, Eq. 14: rs/attract; collide, Eq. 10:
+#: rs/collide). Two particles 2 apart, each accelerated by 1 towards the other (for attract the
+#: push is 0.5 and the attraction c(u − p)/‖u − p‖ = 0.5 at d = 2; bind at its rest length and
+#: collide beyond R = 0.8 add nothing at step 0): Eq. 5 puts both at x = 0 at step 1, where the
+#: operator's direction is 0/0.
+PAIR = """name = "co"
+dt = 1.0
+steps = 20
 
+[[group]]
+name = "a"
+kind = "part"
+positions = [[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]{third}]
+radius = 0.4
+
+[[operator]]
+on = "a"
+{op}
+
+[[operator]]
+on = "a"
+op = "force"
+accel = [{push}, 0.0, 0.0]
+where = {{ ids = [0] }}
+
+[[operator]]
+on = "a"
+op = "force"
+accel = [-{push}, 0.0, 0.0]
+where = {{ ids = [1] }}
+"""
+OPS = {
+    "bind": ('op = "bind"\nfrom = "a"\nc = 1.0', 1.0, ", [0.0, 5.0, 0.0]", "rs/rack"),
+    "bind-within": ('op = "bind"\nfrom = "a"\nc = 1.0\nwithin = 3.0', 1.0,
+                    ", [0.0, 5.0, 0.0]", "rs/bind"),
+    "attract": ('op = "attract"\nfrom = "a"\nc = 0.5', 0.5, "", "rs/attract"),
+    "collide": (None, 1.0, "", "rs/collide"),
+}
+#: collide directed (a from b, b feels nothing): rs/collide. A group colliding with itself both
+#: ways is LAMMPS' own pair style (lepton), whose non-finite force is seen a step later.
+COLLIDE = """name = "co"
+dt = 1.0
+steps = 20
+
+[[group]]
+name = "a"
+kind = "part"
+positions = [[-1.0, 0.0, 0.0]]
+radius = 0.4
+
+[[group]]
+name = "b"
+kind = "part"
+positions = [[1.0, 0.0, 0.0]]
+radius = 0.4
+
+[[operator]]
+on = "a"
+op = "collide"
+from = "b"
+c = 1.0
+
+[[operator]]
+on = "a"
+op = "force"
+accel = [1.0, 0.0, 0.0]
+
+[[operator]]
+on = "b"
+op = "force"
+accel = [-1.0, 0.0, 0.0]
+"""
+COINCIDE = PAIR.format(op=OPS["bind"][0], push=1.0, third=OPS["bind"][2])
+
+
+def coincide_run(tmp_path, op: str, how: str):
+    """Run the pair scene of ``op`` on path ``how``: (exit status, stderr, summary, dump text,
+    the operator path recorded)."""
     from test_faults import MPIEXEC
 
-    scene = tmp_path / "co.toml"
-    scene.write_text(COINCIDE)
-    out = tmp_path / "r"
+    text, push, third, _ = OPS[op]
+    scene = tmp_path / f"co-{op}.toml"
+    scene.write_text(COLLIDE if text is None else PAIR.format(op=text, push=push, third=third))
+    out = tmp_path / f"r-{op}-{how}"
     args = ["run", scene, "--allow-unstable", "--dump-every", "1", "--out", out, *QUIET]
     if how == "reference":
         args += ["--engine", "reference"]
-    cmd = ([MPIEXEC, "-n", "2"] if how == "mpi" else []) + [RS, *map(str, args)]
+    cmd = ([MPIEXEC, "-n", "2"] if how.endswith("mpi") else []) + [RS, *map(str, args)]
     env = dict(os.environ)
-    if how in ("callback", "mpi"):
-        env["RACKSTRESS_KERNELS"] = "numba"
-    r = subprocess.run(cmd, capture_output=True, text=True, timeout=120, env=env)
-    assert r.returncode == 3, r.stderr
-    assert r.stderr.count("run diverged") == 1 and "Warning" not in r.stderr
+    if how.startswith("callback"):
+        env["RACKSTRESS_KERNELS"] = "numba"       # the Python callback, not the plugin
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=180, env=env)
     s = json.loads((out / "summary.json").read_text())
-    step = s["error"]["step"]
-    text = (out / "trajectory.dump").read_text()
-    assert "nan" not in text.lower() and "inf" not in text.lower()
-    assert s["status"] == "diverged" and frames(out / "trajectory.dump") == list(
-        range(0, min(step, 1) + 1))
-    if how == "default":
-        assert step <= 2 and f"step {step}" in r.stderr
-        return
-    assert step == 1
-    assert "run diverged at step 1: the force on 'a' particle 0 (atom id 1) is not finite" \
-        in r.stderr
+    path = (json.loads((out / "scene.json").read_text())["fingerprint"].get("operators")
+            if how != "reference" else None)
+    return r.returncode, r.stderr, s, (out / "trajectory.dump").read_text(), path, out
+
+
+@pytest.mark.lammps
+@pytest.mark.parametrize("op", list(OPS))
+def test_a_pair_that_coincides_is_named_at_its_first_step_on_every_path(tmp_path, op):
+    """Issue 25: a bound (attracted, colliding) pair that coincides. The reference engine names
+    step 1 (hand calculation above); the compiled plugin (serial and ``mpiexec -n 2``) and the
+    Python callback (serial and ``mpiexec -n 2``) name the same step and particle, exit 3
+    ``diverged``, and keep frames 0 and 1 only, all finite. Was, on the plugin: step 2 (its
+    positions were already NaN; the watchdog saw them at step 10 and the dump was cut there),
+    because rs/bind, rs/rack, rs/attract and rs/collide added the NaN term. (collide, all
+    paths: a traceback in the stability prediction, which paired each particle of a group
+    colliding with itself with itself as its nearest "virtual contact".)"""
+    expect = "run diverged at step 1: the force on 'a' particle 0 (atom id 1) is not finite"
+    named = {}
+    for how in ("reference", "plugin", "plugin-mpi", "callback", "callback-mpi"):
+        code, err, s, dump, path, out = coincide_run(tmp_path, op, how)
+        assert code == 3, (how, err)
+        assert "Traceback" not in err and "Warning" not in err, (how, err)
+        if op == "collide" and not how.startswith("plugin"):   # their own account of it
+            assert {"reference": "step 1: 'a' particle 0 and 'b' particle 0 coincide",
+                    "callback": "run diverged at step 1: collide on a: atom ids 1 and 2 "
+                                "coincide"}[how.split("-")[0]] in err, (how, err)
+        else:
+            assert err.count("run diverged") == 1 and expect in err, (how, err)
+        assert s["status"] == "diverged", how
+        named[how] = (s["error"]["step"], s["error"]["atom_id"])
+        assert "nan" not in dump.lower() and "inf" not in dump.lower(), how
+        assert frames(out / "trajectory.dump") == [0, 1], how
+        if how.startswith("plugin"):
+            assert path == "plugin", how
+            deck = (out / "in.lammps").read_text()
+            assert OPS[op][3] in deck, (how, deck)
+        elif how.startswith("callback"):
+            assert path == "callback", how
+    assert set(named.values()) == {(1, 1)}, named
+
+
+@pytest.mark.lammps
+def test_a_plain_lmp_run_of_a_coinciding_pair_stops_there(tmp_path):
+    """A standalone plugin deck (``rackstress deck``) under plain ``lmp`` and ``mpiexec -n 2
+    lmp``: the style that meets the non-finite term stops LAMMPS at that step with one message
+    naming the atom (no NaN positions written, no rank left waiting)."""
+    from test_faults import MPIEXEC
+    from test_faults_plugin import LMP
+
+    scene = tmp_path / "co.toml"
+    scene.write_text(COINCIDE)
+    deck = tmp_path / "deck"
+    r = rs("deck", scene, "--dump-every", "1", "--out", deck)
+    assert r.returncode == 0, r.stderr
+    for mpi in ([], [MPIEXEC, "-n", "2"]):
+        (deck / "trajectory.dump").unlink(missing_ok=True)
+        r = subprocess.run([*mpi, LMP, "-in", "in.lammps"], cwd=deck, capture_output=True,
+                           text=True, timeout=60)
+        assert r.returncode != 0
+        assert ("Fix rs/rack: the force on atom id 1 is not finite at step 1: two particles "
+                "bound or attracted to each other coincide there") in r.stdout + r.stderr
+        text = (deck / "trajectory.dump").read_text()
+        assert "nan" not in text.lower() and frames(deck / "trajectory.dump") == [0]
 
 
 def test_trim_nonfinite_cuts_the_dump_before_the_first_bad_frame(tmp_path):

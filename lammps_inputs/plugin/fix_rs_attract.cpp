@@ -110,6 +110,10 @@ void FixRSAttract::post_force(int /*vflag*/)
       double s = c * (1.0 / std::sqrt(d2));
       for (int e = 0; e < 3; e++) a[e] += s * d[e];
     }
+    if (!RackStress::finite3(a)) {    // coincides with a member (d = 0): rs_common.h
+      RackStress::nonfinite(lmp, "rs/attract", tag[i]);
+      continue;
+    }
     double m = RackStress::mass(atom, i);
     for (int e = 0; e < 3; e++) f[i][e] += m * a[e];
   }

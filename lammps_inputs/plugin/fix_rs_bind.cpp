@@ -5,8 +5,7 @@
 
    bind(u, ĉ) (Eq. 13) over the pairs of a coefficient matrix such as within(d) (Eq. 16): the
    pairs are the data file's bonds of type N (one bond per unordered pair, carried by LAMMPS
-   with their atoms: bond_style zero, newton_bond off, so each rank lists every bond of the atoms
-   it owns). On each target particle p of a pair, from its source partner u, Eq. 12:
+   with their atoms: bond_style zero, newton_bond off, so every atom stores each of its bonds). On each target particle p of a pair, from its source partner u, Eq. 12:
 
      c·(u − p)·(1 − L0²/‖u − p‖²),   L0 = ‖u_o − p_o‖ per pair (original positions d2_rso)
 
@@ -18,11 +17,13 @@
 #include "fix_rs_bind.h"
 
 #include "atom.h"
+#include "domain.h"
 #include "error.h"
 #include "force.h"
 #include "neighbor.h"
 #include "utils.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 
@@ -60,34 +61,63 @@ void FixRSBind::setup(int vflag)
   post_force(vflag);
 }
 
-/* this rank's pairs from LAMMPS' bond list (rebuilt when it reneighbours): L0² per pair from
-   the original positions, and the ends this fix acts on (an owned target with a source partner) */
+/* this rank's pairs of bond type btype, listed again whenever LAMMPS reneighbours: L0² per pair
+   from the original positions, and the ends this fix acts on (an owned target with a source
+   partner). Each pair is listed once, by its owned end with the smaller atom id (or by its
+   owned end when the other is a ghost), the listing atoms taken in atom-id order and each
+   one's bonds in its own order (the data file's, which an atom keeps through exchanges and a
+   restart). An atom then adds its terms in an order that depends only on which atoms this
+   rank owns, not on the rows LAMMPS gave them (exchanges, active-only reordering, a resumed
+   run's data file order): a resumed run under MPI is bit for bit the uninterrupted one.
+   (LAMMPS' own bond list follows the rows.) */
 void FixRSBind::collect()
 {
   double **o = RackStress::originals(atom, error, "rs/bind");
   int *mask = atom->mask;
   int nlocal = atom->nlocal;
-  int **bondlist = neighbor->bondlist;
+  tagint *tag = atom->tag;
+  int *num_bond = atom->num_bond;
+  int **bond_type = atom->bond_type;
+  tagint **bond_atom = atom->bond_atom;
+  int either = groupbit | sourcebit;
+  // the listing atoms in atom-id order: sorted, or (many of them) read off the atom map
+  listers.clear();
+  for (int i = 0; i < nlocal; i++)
+    if (num_bond[i] && (mask[i] & either)) listers.push_back(i);
+  if ((bigint) listers.size() * 16 < (bigint) atom->map_tag_max) {
+    std::sort(listers.begin(), listers.end(), [tag](int a, int b) { return tag[a] < tag[b]; });
+  } else {
+    listers.clear();
+    for (tagint t = 1; t <= atom->map_tag_max; t++) {
+      int i = atom->map(t);
+      if (i >= 0 && i < nlocal && num_bond[i] && (mask[i] & either)) listers.push_back(i);
+    }
+  }
   p1.clear();
   p2.clear();
   ends.clear();
   q.clear();
-  for (int n = 0; n < neighbor->nbondlist; n++) {
-    if (bondlist[n][2] != btype) continue;
-    int i1 = bondlist[n][0], i2 = bondlist[n][1];
-    int e = 0;
-    if (i1 < nlocal && (mask[i1] & groupbit) && (mask[i2] & sourcebit)) e |= 1;
-    if (i2 < nlocal && (mask[i2] & groupbit) && (mask[i1] & sourcebit)) e |= 2;
-    if (!e) continue;
-    double l2 = 0.0;
-    for (int k = 0; k < 3; k++) {
-      double l = o[i2][k] - o[i1][k];
-      l2 += l * l;
+  for (int i1 : listers) {
+    for (int m = 0; m < num_bond[i1]; m++) {
+      if (bond_type[i1][m] != btype) continue;
+      int i2 = atom->map(bond_atom[i1][m]);
+      if (i2 < 0) continue;    // not present: LAMMPS' own bond list stops the run ("missing")
+      i2 = domain->closest_image(i1, i2);
+      if (i2 < nlocal && tag[i2] < tag[i1]) continue;    // listed by its other owned end
+      int e = 0;
+      if ((mask[i1] & groupbit) && (mask[i2] & sourcebit)) e |= 1;
+      if (i2 < nlocal && (mask[i2] & groupbit) && (mask[i1] & sourcebit)) e |= 2;
+      if (!e) continue;
+      double l2 = 0.0;
+      for (int k = 0; k < 3; k++) {
+        double l = o[i2][k] - o[i1][k];
+        l2 += l * l;
+      }
+      p1.push_back(i1);
+      p2.push_back(i2);
+      ends.push_back(e);
+      q.push_back(l2);
     }
-    p1.push_back(i1);
-    p2.push_back(i2);
-    ends.push_back(e);
-    q.push_back(l2);
   }
   built = true;
 }
@@ -106,6 +136,14 @@ void FixRSBind::post_force(int /*vflag*/)
     const double d2 = dx * dx + dy * dy + dz * dz;
     const double s = c * (1.0 - q[k] / d2);
     const double ax = s * dx, ay = s * dy, az = s * dz;
+    if (!(std::isfinite(ax) && std::isfinite(ay) && std::isfinite(az))) {
+      // a pair that coincides (d = 0): neither end gains it (rs_common.h, nonfinite)
+      tagint *tag = atom->tag;
+      tagint t = (ends[k] & 1) ? tag[i1] : tag[i2];
+      if (ends[k] == 3) t = std::min(tag[i1], tag[i2]);
+      RackStress::nonfinite(lmp, "rs/bind", t);
+      continue;
+    }
     if (ends[k] & 1) {
       const double m = rmass ? rmass[i1] : mass[type[i1]];
       f[i1][0] += m * ax;

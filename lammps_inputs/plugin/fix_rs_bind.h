@@ -33,6 +33,7 @@ class FixRSBind : public Fix {
   // this rank's pairs of bond type btype, kept from one reneighbouring to the next: the rows,
   // L0² (from the original positions, once) and which end(s) gain the term (1: i1, 2: i2)
   std::vector<int> p1, p2, ends;
+  std::vector<int> listers;    // owned atoms with bonds, in atom-id order (collect)
   std::vector<double> q;
   void collect();
 };

@@ -101,6 +101,10 @@ void FixRSCollide::post_force(int /*vflag*/)
       any = true;
     }
     if (!any) continue;
+    if (!RackStress::finite3(a)) {    // coincides with a partner (d = 0): rs_common.h
+      RackStress::nonfinite(lmp, "rs/collide", atom->tag[i]);
+      continue;
+    }
     touching = 1;
     if (actbit && !in_setup && atom->firstgroupname && i >= atom->nfirst)
       error->one(FLERR, "Fix rs/collide: resting particle (atom id {}) was touched at step {} before "

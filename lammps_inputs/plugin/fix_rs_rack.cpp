@@ -91,6 +91,19 @@ const std::vector<int> &FixRSRack::owned_rows()
     const int nrows = RackStress::extent(atom, first_rows);    // the moving rows, where they hold all
     for (int i = 0; i < nrows; i++)
       if (atom->mask[i] & bit) rows.push_back(i);
+    // in atom-id order: a rank's partial sum over its hosts must not depend on the rows LAMMPS
+    // gave the atoms (exchanges, a resumed run's data file order), only on which it owns
+    // (sorted if few, else read off the atom map: no n log n sort of a large host)
+    tagint *tag = atom->tag;
+    if ((bigint) rows.size() * 16 < (bigint) atom->map_tag_max) {
+      std::sort(rows.begin(), rows.end(), [tag](int a, int b) { return tag[a] < tag[b]; });
+    } else {
+      rows.clear();
+      for (tagint t = 1; t <= atom->map_tag_max; t++) {
+        int i = atom->map(t);
+        if (i >= 0 && i < nrows && (atom->mask[i] & bit)) rows.push_back(i);
+      }
+    }
     // L0² = ‖u_o − p_o‖² of every pair, once a layout (the same arithmetic as a step's would be)
     double **o = RackStress::originals(atom, error, "rs/rack");
     int n = few.size();
@@ -210,6 +223,10 @@ void FixRSRack::post_force(int /*vflag*/)
     if (acc_step == update->ntimestep && acc.size() == 3 * R.size()) {
       for (size_t r = 0; r < R.size(); r++) {
         int i = R[r];
+        if (!RackStress::finite3(&acc[3 * r])) {    // coincides with a rack particle
+          RackStress::nonfinite(lmp, "rs/rack", atom->tag[i]);
+          continue;
+        }
         double m = RackStress::mass(atom, i);
         for (int e = 0; e < 3; e++) f[i][e] += m * acc[3 * r + e];
       }
@@ -231,6 +248,10 @@ void FixRSRack::post_force(int /*vflag*/)
         double s = c * (1.0 - Q[r * n + k] / d2);
         for (int e = 0; e < 3; e++) a[e] += s * d[e];
       }
+      if (!RackStress::finite3(a)) {    // coincides with a rack particle: rs_common.h
+        RackStress::nonfinite(lmp, "rs/rack", atom->tag[i]);
+        continue;
+      }
       double m = RackStress::mass(atom, i);
       for (int e = 0; e < 3; e++) f[i][e] += m * a[e];
     }
@@ -242,6 +263,10 @@ void FixRSRack::post_force(int /*vflag*/)
   for (int k = 0; k < n; k++) {
     int i = atom->map(few.tag[k]);
     if (i < 0 || i >= nlocal) continue;
+    if (!RackStress::finite3(&sums[3 * k])) {    // a host particle coincides with it
+      RackStress::nonfinite(lmp, "rs/rack", few.tag[k]);
+      continue;
+    }
     double m = RackStress::mass(atom, i);
     for (int e = 0; e < 3; e++) f[i][e] += m * sums[3 * k + e];
   }

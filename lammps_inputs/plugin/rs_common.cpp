@@ -7,6 +7,7 @@
 #include "neighbor.h"
 #include "update.h"
 
+#include <climits>
 #include <map>
 
 #include <algorithm>
@@ -348,6 +349,61 @@ void Contacts::collect_moving(LAMMPS *lmp, int tbit, int sbit, std::vector<int> 
   };
   near(slo, shi, tbit, tcand);
   near(tlo, thi, sbit, scand);
+}
+
+
+/* ---------------------------------------------------------------------- */
+
+namespace {
+struct FirstBad {
+  bool watched = false;     // a rackstress run: record; else (plain lmp) stop LAMMPS
+  bigint step = -1;
+  tagint tag = 0;
+};
+std::map<LAMMPS *, FirstBad> first_bad;
+}    // namespace
+
+void RackStress::nonfinite(LAMMPS *lmp, const char *style, tagint tag)
+{
+  FirstBad &b = first_bad[lmp];
+  bigint now = lmp->update->ntimestep;
+  if (!b.watched)
+    lmp->error->one(FLERR, "Fix {}: the force on atom id {} is not finite at step {}: two "
+                    "particles bound or attracted to each other coincide there (Eq. 12's "
+                    "direction is undefined at d = 0), or a force overflowed; a smaller time "
+                    "step or weaker coefficients keep Eq. 5 stable", style, (bigint) tag, now);
+  if (b.step < 0 || (now == b.step && tag < b.tag)) {
+    b.step = now;
+    b.tag = tag;
+  }
+}
+
+/* The runner's side (called through ctypes on the loaded plugin, with the `lammps` module's
+   handle, which is the LAMMPS instance). rackstress_watch: this instance records non-finite
+   terms instead of stopping (and forgets an earlier instance's record at the same address).
+   rackstress_first_nonfinite: collective; the first step any rank recorded and, of that step,
+   the smallest atom id; returns 0 if none. */
+extern "C" __attribute__((visibility("default"))) void rackstress_watch(void *handle)
+{
+  FirstBad &b = first_bad[(LAMMPS *) handle];
+  b = FirstBad();
+  b.watched = true;
+}
+
+extern "C" __attribute__((visibility("default"))) int
+rackstress_first_nonfinite(void *handle, long long *step, long long *tag)
+{
+  LAMMPS *lmp = (LAMMPS *) handle;
+  auto it = first_bad.find(lmp);
+  bool mine = it != first_bad.end() && it->second.step >= 0;
+  long long s = mine ? (long long) it->second.step : LLONG_MAX, all_s, t, all_t;
+  MPI_Allreduce(&s, &all_s, 1, MPI_LONG_LONG, MPI_MIN, lmp->world);
+  if (all_s == LLONG_MAX) return 0;
+  t = (mine && s == all_s) ? (long long) it->second.tag : LLONG_MAX;
+  MPI_Allreduce(&t, &all_t, 1, MPI_LONG_LONG, MPI_MIN, lmp->world);
+  *step = all_s;
+  *tag = all_t;
+  return 1;
 }
 
 int Contacts::build(LAMMPS *lmp, int tbit, int sbit, const double *radius, int actbit, bool full)

@@ -24,6 +24,7 @@
 #include "lammps.h"
 #include "pointers.h"
 
+#include <cmath>
 #include <mpi.h>
 #include <string>
 #include <unordered_map>
@@ -45,6 +46,19 @@ namespace RackStress {
   {
     return atom->rmass ? atom->rmass[i] : atom->mass[atom->type[i]];
   }
+
+  /* A term that is not finite — Eq. 12's direction is 0/0 where a bound or attracted pair
+     coincides (d = 0), or a force overflowed — is never added: LAMMPS' positions stay finite, and
+     the step it arises in is the first bad one. In a run rackstress drives (rackstress_watch
+     below), the first such (step, atom id) is kept for the runner's next watchdog check, which
+     names it (exit 3, 'diverged', as the Python callback and the reference engine do); in a
+     plain `lmp` run the style stops LAMMPS there with that message (error->one ends every
+     rank). */
+  inline bool finite3(const double *a)
+  {
+    return std::isfinite(a[0]) && std::isfinite(a[1]) && std::isfinite(a[2]);
+  }
+  void nonfinite(LAMMPS *, const char *style, tagint tag);
 
   /* A small set of atoms (a rack, an attraction region) known on every rank: their ids, their
      original positions (once) and their positions (each step, one MPI_Allreduce of a buffer

@@ -226,7 +226,7 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
                            f"settle: the largest unbalanced force is {summary['residual']:.3g} of "
                            f"the applied load after {summary['iterations']} iterations (settled "
                            f"means at most {summary['tolerance']:g}); the state written to {out} "
-                           "is not an equilibrium", err=True)
+                           "is not an equilibrium" + _rounding_hint(summary), err=True)
             sys.exit(EXIT_UNSETTLED)
     except Exception as err:  # noqa: BLE001 - each kind has its exit status (_fail_any)
         _fail_any(err, out)
@@ -651,6 +651,48 @@ def _batch_page(batchdir):
     return write_batch_report(batchdir)
 
 
+def _rounding_hint(summary: dict) -> str:
+    """For a static run stopped near the rounding of its own forces (engines.static.
+    rounding_floor): why no number of iterations would settle it, and what would."""
+    floor = summary.get("rounding_floor")
+    if floor is None or floor < 0.1 * summary.get("tolerance", 1e-6):
+        return ""
+    return (f". The rounding of its positions in double precision alone can leave up to about "
+            f"{floor:.2g} of the applied load unbalanced (its stiffness × the size of its "
+            "coordinates × 2.2e-16): the load deforms the part too little for the tolerance to be "
+            "reachable, and the state is an equilibrium only as far as that rounding resolves it. "
+            "A larger load settles it")
+
+
+def _fea_inputs(rundir: Path) -> str | None:
+    """What ``rackstress fea`` cannot read in a run directory, in a sentence (else None):
+    ``scene.json`` missing or not JSON, ``boundary.npz`` not a readable NumPy archive (a copy cut
+    short, a file overwritten)."""
+    import json
+    import zipfile
+
+    import numpy as np
+
+    scene = rundir / "scene.json"
+    try:
+        json.loads(scene.read_text())
+    except FileNotFoundError:
+        return (f"{scene} is missing: the run directory is incomplete (was it copied in part?); "
+                "run the scene again")
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        return f"{scene} cannot be read ({exc}): the run directory is damaged; run the scene again"
+    bnd = rundir / "boundary.npz"
+    if bnd.exists():
+        try:
+            with np.load(bnd) as z:
+                for k in z.files:
+                    z[k]
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+            return (f"{bnd} cannot be read ({exc or type(exc).__name__}): remove it to take the "
+                    "supports and loads from the scene, or run the scene again")
+    return None
+
+
 @main.command("fea")
 @click.argument("rundir", type=click.Path(file_okay=False, path_type=Path))
 @click.option("--E", "E", type=float, help="Young's modulus (default: the part's material in "
@@ -675,6 +717,9 @@ def fea(rundir, E, nu, size, group, measure):
     if not (Path(rundir) / "summary.json").is_file():
         _fail(RackstressError(f"{rundir}: no summary.json; is this a finished run directory "
                               "(made by 'rackstress run')?"), 2)
+    damaged = _fea_inputs(Path(rundir))
+    if damaged:
+        _fail(RackstressError(f"rackstress fea {rundir}: {damaged}"), 2)
     try:
         data = solid.check_run(rundir, E=E, nu=nu, size=size, group=group, measure=measure,
                                echo=click.echo)

@@ -123,6 +123,36 @@ def trim_nonfinite(path) -> int | None:
     return step
 
 
+def trim_after(path, step: int) -> int | None:
+    """Cut a dump before its first frame of an iteration after ``step``; return that frame's
+    iteration, or None if there is none (or no dump).
+
+    After the plugin left a non-finite term out (a bound pair that coincides): the positions
+    LAMMPS wrote after that step are finite but lack it, so they are not the run's."""
+    import mmap
+    import re
+
+    path = Path(path)
+    try:
+        size = path.stat().st_size
+    except OSError:
+        return None
+    if size == 0:
+        return None
+    head = re.compile(rb"ITEM: TIMESTEP\n(\d+)\n")
+    with open(path, "r+b") as fh:
+        with mmap.mmap(fh.fileno(), 0) as mm:
+            later = next(((m.start(), int(m.group(1))) for m in head.finditer(mm)
+                          if int(m.group(1)) > step), None)
+        if later is None:
+            return None
+        try:
+            fh.truncate(later[0])
+        except OSError as exc:
+            raise storage_error(exc, "trim the frames after the divergence of", path) from None
+    return later[1]
+
+
 def read_frames(path, o: np.ndarray, want=None):
     """(step, positions of every particle in id order) of each complete frame of a rackstress
     dump (``id ... x y z`` columns, ids 1..n); a particle a frame does not hold is at its

@@ -252,6 +252,21 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
     return StaticResult(p, settled, it, rel, load, history, time.perf_counter() - t0)
 
 
+def rounding_floor(scene, p: np.ndarray) -> float:
+    """The unbalanced force below which no solver of positions near ``p`` can go (an estimate;
+    given the original positions, as a settled state is near them, whatever a failed solve did):
+    each position is rounded to ~ε·|p|, and each binding turns that into a force error of about
+    its stiffness (∂/∂d of Eq. 12 near L0 is 2c, times m); a particle sums them over its
+    bindings. Relative to the applied load, it says whether the tolerance is reachable at all
+    (a 40 m steel bar under 100 N: ~1e-5 of the load, above the 1e-6 asked)."""
+    I, J, C, _ = _bind_pairs(scene)
+    if len(I) == 0:
+        return 0.0
+    m = scene.masses()
+    per = np.bincount(I, weights=2.0 * np.abs(C) * m[I], minlength=len(p))
+    return float(np.finfo(float).eps * np.abs(p).max() * per.max())
+
+
 def engine_residual(scene, engine, p: np.ndarray) -> float:
     """The largest unbalanced particle force at ``p`` as the run's engine computes it,
     relative to the applied load: the reference engine's accelerations, or LAMMPS' forces

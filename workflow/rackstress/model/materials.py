@@ -20,6 +20,12 @@ from rackstress.errors import SceneError
 from rackstress.model.units import Units
 
 
+#: What a material's E and density may be (SI): a decade or more beyond any solid's, so a
+#: value outside is a slip of units or a typo, not a material.
+RANGE = {"E": (1.0, 1e13, "Pa", "a soft gel is ~1e3 Pa, diamond 1.2e12 Pa"),
+         "density": (1e-2, 1e5, "kg/m³", "an aerogel is ~1 kg/m³, osmium 22,590 kg/m³")}
+
+
 @dataclass(frozen=True)
 class Material:
     """A linear-elastic isotropic material, in SI: E [Pa], ν, density [kg/m³], yield [Pa]."""
@@ -37,6 +43,13 @@ class Material:
             v = getattr(self, key)
             if not (isinstance(v, (int, float)) and v > 0 and v < float("inf")):
                 raise SceneError(f"{where}: {key} must be a positive number, got {v!r}")
+            lo, hi, unit, known = RANGE[key]
+            if not lo <= v <= hi:
+                # 1e-300 or 1e300 would reach the solvers as subnormal or overflowing
+                # coefficients (a NaN step, a static solve that cannot settle)
+                raise SceneError(f"{where}: {key} = {v:g} {unit} is outside what any solid has "
+                                 f"({lo:g} to {hi:g} {unit}; {known}); the material table is "
+                                 "always SI, whatever the scene's units")
         if not (isinstance(self.nu, (int, float)) and -1.0 < self.nu < 0.5):
             raise SceneError(f"{where}: nu (Poisson's ratio) must lie in (-1, 0.5), got {self.nu!r}")
         y = self.yield_strength

@@ -287,6 +287,16 @@ class Scene:
                                  f"{float(r[k])!r}; a radius must be positive, finite and at most the "
                                  f"watchdog bound {self.bound:g} (the collision test squares "
                                  "the sum of two radii)")
+            u0 = getattr(g, "u0", None)
+            if u0 is not None:
+                far = np.linalg.norm(np.asarray(u0, dtype=float), axis=1) > self.bound
+                if far.any():
+                    k = int(np.flatnonzero(far)[0])
+                    raise SceneError(
+                        f"scene '{self.name}': '{name}' particle {k} has a prescribed "
+                        f"displacement {np.asarray(u0[k]).tolist()}, farther than the watchdog "
+                        f"bound {self.bound:g}: the run would be stopped as diverged at once "
+                        "(check the displacement's length unit, or raise 'bound')")
         for target, seq in self.operators.items():
             for op in seq:
                 where = getattr(op, "where", None)

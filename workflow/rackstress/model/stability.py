@@ -123,11 +123,14 @@ def _collide_pairs(scene: Scene, p: np.ndarray, target: str, op) -> tuple:
     # source particles it would meet first coming straight at them: those within 5 % of R of
     # its nearest source particle's distance (one for aligned lattices, a few for staggered).
     src = p[sl_s]
-    k = min(8, len(src))
+    same = target == op.source
+    k = min(8 + same, len(src))
     dd, jj = cKDTree(src).query(p[sl_t], k=k)
     dd, jj = np.asarray(dd).reshape(len(p[sl_t]), k), np.asarray(jj).reshape(len(p[sl_t]), k)
+    if same:        # a group colliding with itself: a particle never meets itself (d = 0)
+        dd = np.where(jj == np.arange(len(src))[:, None], np.inf, dd)
     R = rt[:, None] + rs.max()
-    tie = dd <= dd[:, :1] + (CONTACT_MARGIN - 1.0) * R
+    tie = np.isfinite(dd) & (dd <= dd.min(axis=1, keepdims=True) + (CONTACT_MARGIN - 1.0) * R)
     I = np.repeat(np.arange(sl_t.start, sl_t.stop), k).reshape(-1, k)[tie]
     J = jj[tie] + sl_s.start
     diff = p[J] - p[I]

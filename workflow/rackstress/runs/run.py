@@ -265,7 +265,7 @@ def execute_static(scene: Scene, out: Path, engine: str, mode: str, *, progress:
     ``iterations``, ``residual`` and ``status`` ("settled" or "not settled")."""
     import sys
 
-    from rackstress.engines.static import TOLERANCE, engine_residual, solve
+    from rackstress.engines.static import TOLERANCE, engine_residual, rounding_floor, solve
 
     comm = comm or world()
     root = comm.Get_rank() == 0
@@ -304,6 +304,9 @@ def execute_static(scene: Scene, out: Path, engine: str, mode: str, *, progress:
                   "residual_engine": engine_rel, "tolerance": TOLERANCE,
                   "applied_load": res.load, "solve_s": res.wall_s,
                   "residual_history": res.history})
+    if not settled and res.load > 0:
+        # relative to the load: the unbalanced force rounding alone leaves (the hint of exit 6)
+        extra["rounding_floor"] = rounding_floor(scene, scene.original_positions()) / res.load
     if root:
         warnings = load_path_warnings(scene)
         for w in warnings:
@@ -404,10 +407,16 @@ def execute(scene: Scene, out: Path, engine: str, mode: str, dump_every: int, *,
     finally:
         eng.close()
     if error is not None and root and engine == "lammps":
-        from rackstress.engines.dumpio import trim_nonfinite
+        from rackstress.engines.dumpio import trim_after, trim_nonfinite
 
         # LAMMPS writes the dump itself: frames of non-finite positions written before the
         # check that noticed them are cut, and the step named is the first bad one seen
+        after = getattr(error, "trim_after", None)
+        if after is not None:       # the plugin left a non-finite term out: later frames are wrong
+            cut = trim_after(Path(out) / "trajectory.dump", after)
+            if cut is not None:
+                extra["trimmed_from_step"] = cut
+            steps = min(steps, after)
         bad = trim_nonfinite(Path(out) / "trajectory.dump")
         if bad is not None:
             extra["trimmed_from_step"] = bad

@@ -28,6 +28,8 @@ from rackstress.model.scene import Phase, steps_for
 from rackstress.model.units import PAPER, units as unit_named
 
 _LOAD_KINDS = ("force", "pressure", "gravity", "displacement")
+#: The largest load component accepted (force, pressure, gravity): beyond, squares overflow.
+HUGE_LOAD = 1e150
 _LOAD_KEYS = ("on", "where", "normal", "ramp") + _LOAD_KINDS
 _SUPPORT_KEYS = ("on", "where", "fix")
 #: stairs of a load ramp (each 1/RAMP_STAIRS of the full load, one phase each)
@@ -195,6 +197,12 @@ def loads(ctx, tables, groups: dict, operators: dict, u, select, ramp) -> dict:
             raise c.error("'normal' belongs to a pressure", "normal")
         mask = _selection(c, t, g, select)
         m = g.mass(u)
+        value = np.asarray(t[kind], dtype=object).ravel() if kind != "pressure" else [t[kind]]
+        if kind != "displacement" and any(isinstance(x, (int, float)) and abs(x) > HUGE_LOAD
+                                          for x in value):
+            # the static solver and the stress measures square forces: 1e300² overflows
+            raise c.error(f"{t[kind]!r} has a value beyond {HUGE_LOAD:g} in the scene's units: its square "
+                          "overflows a double; check the units (docs/units.md)", kind)
         if kind == "force":
             F = np.asarray(_vec3(c, t["force"], "force"))
             accel = F / (mask.sum() * m)
@@ -224,6 +232,14 @@ def loads(ctx, tables, groups: dict, operators: dict, u, select, ramp) -> dict:
                 raise c.error("a prescribed displacement is for static analysis", "displacement")
             if g.u0 is None:
                 g.u0 = np.zeros((g.n, 3))
+            clash = g.fixed[mask] & (g.u0[mask] != uvec[None, :])
+            if clash.any():
+                dirs = ", ".join(a for a, c_ in zip("xyz", clash.any(axis=0)) if c_)
+                raise c.error(f"{int(clash.any(axis=1).sum())} particle(s) of its region are "
+                              f"already held in {dirs} by a [[support]] (or another "
+                              "displacement) at another position: a particle cannot be held "
+                              "at o and at o + u; narrow 'where' or leave the support out there",
+                              "displacement")
             g.fixed[mask] = True
             g.u0[mask] = uvec
             _refix(g)

@@ -12,7 +12,9 @@ atoms (``Lost atoms``, ``Too many neighbor bins``, ``Out of range atoms``), and 
 callback losing sight of a bind partner. An exception inside the callback stops LAMMPS after the
 step it happened in (the callback forces LAMMPS' timeout, which is checked before every step;
 under MPI the ranks agree on it inside the callback, so all stop at the same step): positions in
-the trajectory never come from a step with missing forces. Under MPI the ghost cutoff grows with
+the trajectory never come from a step with missing forces. The plugin's styles never add a
+non-finite term (a bound pair that coincides) and record its step instead; the next watchdog
+check names that step, and the frames after it are cut from the dump (``trim_after``). Under MPI the ghost cutoff grows with
 the scene: at every check the reach of every bind and attraction (the bounding box of its two
 groups) is measured and, when it has used half of its margin, the cutoff is raised
 (``comm_modify cutoff``) and the neighbour lists rebuilt, so a scene that runs in serial runs
@@ -95,8 +97,11 @@ class LammpsRun:
             data = Path(self.comm.bcast(str(data), root=0))
             self.comm.Barrier()
         dump = str(out / "trajectory.dump") if out is not None else None
+        self._plugin = None
         if deck.plugin:
-            self.command(f"plugin load {plugin_library()}")
+            lib = plugin_library()
+            self.command(f"plugin load {lib}")
+            self._plugin = _watch_plugin(lib, self.lmp)
         for cmd in deck.setup_commands(str(data), dump, dump_every):
             self.command(cmd)
             if dump is not None and cmd.startswith("dump ") and " custom " in cmd:
@@ -442,6 +447,7 @@ class LammpsRun:
             rows = self.py.nfirst
         else:
             rows = "moving" if self.deck.plugin and self._move_bit is not None else None
+        self._check_plugin()
         x, v, tag = self._owned(rows)
         o = self.scene.original_positions()
         k = self.py.compiled if self.py is not None else None
@@ -461,6 +467,23 @@ class LammpsRun:
             raise divergence_error(self.scene, self.step, worst)
         if self.comm.Get_size() > 1 and self._reach:
             self._grow_cutoff(x, tag.astype(np.int64))
+
+    def _check_plugin(self) -> None:
+        """The first step at which one of the plugin's styles met a non-finite term (rs_common.h,
+        ``nonfinite``: it left the term out, so the positions since are finite but wrong), named
+        as the callback names it; collective. The frames after that step are cut from the dump
+        (``trim_after``)."""
+        if self._plugin is None:
+            return
+        import ctypes
+
+        step, tag = ctypes.c_longlong(), ctypes.c_longlong()
+        if not self._plugin.rackstress_first_nonfinite(self.lmp.lmp, ctypes.byref(step),
+                                                      ctypes.byref(tag)):
+            return
+        err = force_error(self.scene, int(step.value), int(tag.value) - 1)
+        err.trim_after = int(step.value)
+        raise err
 
     def _grow_cutoff(self, x, tag) -> None:
         """Raise the ghost cutoff once a bind's or attraction's reach (the diagonal of its two
@@ -698,6 +721,21 @@ def attach_callback(lmp, fix_id: str, fn, caller) -> None:
     with ExceptionCheck(lmp):          # a bad fix id raises, as lmp.set_fix_external_callback's
         lmp.lib.lammps_set_fix_external_callback(
             lmp.lmp, fix_id.encode(), ctypes.cast(cfunc, lmp.FIX_EXTERNAL_CALLBACK_FUNC), caller)
+
+
+def _watch_plugin(lib: str, lmp):
+    """The loaded plugin (the same library LAMMPS loaded: ``dlopen`` of one file returns it
+    again), told that this LAMMPS instance is driven by rackstress: its styles record a
+    non-finite term for :meth:`LammpsRun._check_plugin` instead of stopping LAMMPS."""
+    import ctypes
+
+    so = ctypes.CDLL(lib)
+    so.rackstress_watch.argtypes = [ctypes.c_void_p]
+    so.rackstress_watch.restype = None
+    so.rackstress_first_nonfinite.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
+    so.rackstress_first_nonfinite.restype = ctypes.c_int
+    so.rackstress_watch(lmp.lmp)
+    return so
 
 
 def plugin_library() -> str:
