@@ -997,7 +997,7 @@ TEACH = {
         "rackstress bench inside --quick --out /tmp/bench",
         "rackstress bench inside --out docs/benchmarks",
     ]),
-    "bench validity3d": ("The bracket STL's particle von Mises stress [MPa] against tetrahedral FEA.", [
+    "bench validity3d": ("The bracket STL's von Mises stress [MPa] against tetrahedral FEA.", [
         "rackstress bench validity3d --quick --out /tmp/bench",
         "rackstress bench validity3d --out docs/benchmarks",
     ]),

@@ -637,11 +637,14 @@ def balance_commands(deck: Deck) -> list[str]:
     Examples
     --------
     >>> from rackstress import scenes
-    >>> balance_commands(compile_deck(scenes.build("magpod-small"), "exact"))[-1]
+    >>> balance_commands(compile_deck(scenes.build("magpod-small"), "exact", plugin=True))[-1]
     'balance 1.0 rcb weight group 1 rs_move 20.0'
     """
     params = deck.scene.params or {}
-    how = params.get("balance", "rcb" if deck.passive else "none")
+    # by default only on the plugin's decks, whose ghost cutoff is the real interaction range:
+    # the callback's (rack couplings, fast mode's bonds) spans a body, beyond what a tiled
+    # decomposition's ghost exchange reaches (LAMMPS aborted with a corrupted heap, fast mode)
+    how = params.get("balance", "rcb" if deck.passive and deck.plugin else "none")
     if how in (None, "none"):
         return []
     if how == "shift":
