@@ -63,6 +63,10 @@ _DIAG = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)],
 from rackstress.lib.jit import numba_or_none
 
 nb = numba_or_none()      # None: the NumPy paths serve (numba is a dependency)
+#: Pairs from which :func:`length_sq` and :func:`sort_pairs` take their compiled kernels: below
+#: it NumPy takes well under a second, less than compiling them on a fresh cache (~8 s, which
+#: README's first command would wait before its first step: magpod-small's binds have ~10⁵ pairs)
+COMPILED_FROM = 2_000_000
 
 if nb is not None:
     @nb.njit(cache=True, parallel=True, nogil=True)
@@ -137,7 +141,7 @@ if nb is not None:
 def length_sq(a: np.ndarray, b: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
     """‖b[j] − a[i]‖² per pair (compiled, no n × 3 temporaries, when numba is there); the
     same arithmetic as the NumPy expression, so the same bits."""
-    if nb is not None and len(i) >= 10_000:
+    if nb is not None and len(i) >= COMPILED_FROM:
         return _length_sq_nb(np.ascontiguousarray(a, float), np.ascontiguousarray(b, float),
                              np.asarray(i, np.int64), np.asarray(j, np.int64))
     d = b[j] - a[i]
@@ -151,7 +155,7 @@ def sort_pairs(i: np.ndarray, j: np.ndarray):
     if not len(i):
         return i, j
     n = int(max(i.max(), j.max())) + 1
-    if nb is not None and len(i) >= 10_000:
+    if nb is not None and len(i) >= COMPILED_FROM:
         return _sort_pairs_nb(i, j, n)
     key = np.sort(i * n + j)
     return key // n, key % n
