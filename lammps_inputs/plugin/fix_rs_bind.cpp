@@ -80,19 +80,12 @@ void FixRSBind::collect()
   int **bond_type = atom->bond_type;
   tagint **bond_atom = atom->bond_atom;
   int either = groupbit | sourcebit;
-  // the listing atoms in atom-id order: sorted, or (many of them) read off the atom map
+  // the listing atoms in atom-id order (rs_common.h)
+  auto lists = [&](int i) { return num_bond[i] && (mask[i] & either); };
   listers.clear();
   for (int i = 0; i < nlocal; i++)
-    if (num_bond[i] && (mask[i] & either)) listers.push_back(i);
-  if ((bigint) listers.size() * 16 < (bigint) atom->map_tag_max) {
-    std::sort(listers.begin(), listers.end(), [tag](int a, int b) { return tag[a] < tag[b]; });
-  } else {
-    listers.clear();
-    for (tagint t = 1; t <= atom->map_tag_max; t++) {
-      int i = atom->map(t);
-      if (i >= 0 && i < nlocal && num_bond[i] && (mask[i] & either)) listers.push_back(i);
-    }
-  }
+    if (lists(i)) listers.push_back(i);
+  RackStress::in_id_order(atom, nlocal, listers, lists);
   p1.clear();
   p2.clear();
   ends.clear();

@@ -91,19 +91,9 @@ const std::vector<int> &FixRSRack::owned_rows()
     const int nrows = RackStress::extent(atom, first_rows);    // the moving rows, where they hold all
     for (int i = 0; i < nrows; i++)
       if (atom->mask[i] & bit) rows.push_back(i);
-    // in atom-id order: a rank's partial sum over its hosts must not depend on the rows LAMMPS
-    // gave the atoms (exchanges, a resumed run's data file order), only on which it owns
-    // (sorted if few, else read off the atom map: no n log n sort of a large host)
-    tagint *tag = atom->tag;
-    if ((bigint) rows.size() * 16 < (bigint) atom->map_tag_max) {
-      std::sort(rows.begin(), rows.end(), [tag](int a, int b) { return tag[a] < tag[b]; });
-    } else {
-      rows.clear();
-      for (tagint t = 1; t <= atom->map_tag_max; t++) {
-        int i = atom->map(t);
-        if (i >= 0 && i < nrows && (atom->mask[i] & bit)) rows.push_back(i);
-      }
-    }
+    // in atom-id order: a rank's partial sum over its hosts depends only on which it owns
+    int *mask = atom->mask;
+    RackStress::in_id_order(atom, nrows, rows, [mask, bit](int i) { return (mask[i] & bit) != 0; });
     // L0² = ‖u_o − p_o‖² of every pair, once a layout (the same arithmetic as a step's would be)
     double **o = RackStress::originals(atom, error, "rs/rack");
     int n = few.size();

@@ -26,6 +26,7 @@
 
 #include <cmath>
 #include <mpi.h>
+#include <algorithm>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -148,6 +149,24 @@ namespace RackStress {
   bool in_first(LAMMPS *lmp, int bit);
   //! the owned rows a fix whose group is `in_first` passes over: [0, nfirst), else [0, nlocal)
   inline int extent(Atom *atom, bool first) { return first ? atom->nfirst : atom->nlocal; }
+
+  /* `rows` (owned rows below `limit`, each passing `keep`) put in atom-id order, so that a sum
+     over them does not depend on the rows LAMMPS gave the atoms (exchanges, a resumed run's data
+     file order): sorted if they are few, else read off the atom map (no n log n sort of a large
+     host at each reneighbouring) */
+  template <class Keep> void in_id_order(Atom *atom, int limit, std::vector<int> &rows, Keep keep)
+  {
+    tagint *tag = atom->tag;
+    if ((bigint) rows.size() * 16 < (bigint) atom->map_tag_max) {
+      std::sort(rows.begin(), rows.end(), [tag](int a, int b) { return tag[a] < tag[b]; });
+      return;
+    }
+    rows.clear();
+    for (tagint t = 1; t <= atom->map_tag_max; t++) {
+      int i = atom->map(t);
+      if (i >= 0 && i < limit && keep(i)) rows.push_back(i);
+    }
+  }
 
 }    // namespace RackStress
 }    // namespace LAMMPS_NS

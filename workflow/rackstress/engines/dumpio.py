@@ -85,13 +85,10 @@ class DumpWriter:
         self.close()
 
 
-def trim_nonfinite(path) -> int | None:
-    """Cut a dump before its first frame holding a non-finite value (``nan``, ``inf``); return
-    that frame's iteration, or None if every frame is finite (or there is no dump).
-
-    After a divergence: a check that noticed it only some steps later (the watchdog runs every
-    few steps; LAMMPS writes its dump itself) must not leave NaN frames kept as if whole. One
-    C-speed pass over the file (mmap and regular expressions)."""
+def _cut_at(path, first_cut, what: str):
+    """Truncate the dump at the frame ``first_cut(mm, heads)`` picks, ``(offset, iteration)``
+    or None (``heads``: each frame's offset and iteration, in file order); return that
+    iteration, or None if nothing is cut (or there is no dump). One C-speed pass (mmap)."""
     import mmap
     import re
 
@@ -103,24 +100,39 @@ def trim_nonfinite(path) -> int | None:
     if size == 0:
         return None
     head = re.compile(rb"ITEM: TIMESTEP\n(\d+)\n")
-    bad = re.compile(rb"(?i)(?<![a-z])(nan|inf)")
     with open(path, "r+b") as fh:
         with mmap.mmap(fh.fileno(), 0) as mm:
-            starts = [(m.start(), int(m.group(1))) for m in head.finditer(mm)]
-            for k, (start, step) in enumerate(starts):
-                end = starts[k + 1][0] if k + 1 < len(starts) else size
-                atoms = mm.find(b"ITEM: ATOMS", start, end)
-                body = mm.find(b"\n", atoms, end) if atoms >= 0 else start
-                if bad.search(mm, body, end):
-                    cut = start
-                    break
-            else:
-                return None
+            heads = [(m.start(), int(m.group(1))) for m in head.finditer(mm)]
+            cut = first_cut(mm, heads, size)
+        if cut is None:
+            return None
         try:
-            fh.truncate(cut)
+            fh.truncate(cut[0])
         except OSError as exc:
-            raise storage_error(exc, "trim the non-finite frames of", path) from None
-    return step
+            raise storage_error(exc, what, path) from None
+    return cut[1]
+
+
+def trim_nonfinite(path) -> int | None:
+    """Cut a dump before its first frame holding a non-finite value (``nan``, ``inf``); return
+    that frame's iteration, or None if every frame is finite (or there is no dump).
+
+    After a divergence: a check that noticed it only some steps later (the watchdog runs every
+    few steps; LAMMPS writes its dump itself) must not leave NaN frames kept as if whole."""
+    import re
+
+    bad = re.compile(rb"(?i)(?<![a-z])(nan|inf)")
+
+    def first_bad(mm, heads, size):
+        for k, (start, step) in enumerate(heads):
+            end = heads[k + 1][0] if k + 1 < len(heads) else size
+            atoms = mm.find(b"ITEM: ATOMS", start, end)
+            body = mm.find(b"\n", atoms, end) if atoms >= 0 else start
+            if bad.search(mm, body, end):
+                return start, step
+        return None
+
+    return _cut_at(path, first_bad, "trim the non-finite frames of")
 
 
 def trim_after(path, step: int) -> int | None:
@@ -129,28 +141,8 @@ def trim_after(path, step: int) -> int | None:
 
     After the plugin left a non-finite term out (a bound pair that coincides): the positions
     LAMMPS wrote after that step are finite but lack it, so they are not the run's."""
-    import mmap
-    import re
-
-    path = Path(path)
-    try:
-        size = path.stat().st_size
-    except OSError:
-        return None
-    if size == 0:
-        return None
-    head = re.compile(rb"ITEM: TIMESTEP\n(\d+)\n")
-    with open(path, "r+b") as fh:
-        with mmap.mmap(fh.fileno(), 0) as mm:
-            later = next(((m.start(), int(m.group(1))) for m in head.finditer(mm)
-                          if int(m.group(1)) > step), None)
-        if later is None:
-            return None
-        try:
-            fh.truncate(later[0])
-        except OSError as exc:
-            raise storage_error(exc, "trim the frames after the divergence of", path) from None
-    return later[1]
+    return _cut_at(path, lambda mm, heads, size: next((h for h in heads if h[1] > step), None),
+                   "trim the frames after the divergence of")
 
 
 def read_frames(path, o: np.ndarray, want=None):
