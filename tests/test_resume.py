@@ -28,10 +28,11 @@ def _state(rundir: Path):
         return meta, {k: z[k].copy() for k in "xvf"}
 
 
-def _killed_at(rundir: Path, at: int):
-    """Start the run, SIGKILL its process group once a checkpoint at >= ``at`` is committed;
-    return the committed step (None if the run finished before the kill landed)."""
-    p = subprocess.Popen([RACKSTRESS, *RUN, "--out", str(rundir)], start_new_session=True,
+def _killed_at(rundir: Path, at: int, run=RUN):
+    """Start the run (``run``'s arguments), SIGKILL its process group once a checkpoint at >=
+    ``at`` is committed; return the committed step (None if the run finished before the kill
+    landed)."""
+    p = subprocess.Popen([RACKSTRESS, *run, "--out", str(rundir)], start_new_session=True,
                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     step = None
     deadline = time.monotonic() + 120

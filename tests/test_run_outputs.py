@@ -5,11 +5,8 @@ in a thread while LAMMPS runs. Real LAMMPS, real processes, a real SIGKILL."""
 from __future__ import annotations
 
 import json
-import os
-import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -26,23 +23,10 @@ def _run(args):
 
 
 def _killed_after(rundir: Path, at: int):
-    """Start the run, SIGKILL its process group once a checkpoint at >= ``at`` is committed;
-    return the committed step (None if the run finished first)."""
-    p = subprocess.Popen([RACKSTRESS, *RUN, "--out", str(rundir)], start_new_session=True,
-                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and p.poll() is None:
-        try:
-            if json.loads((rundir / "progress.json").read_text())["step"] >= at:
-                break
-        except (FileNotFoundError, json.JSONDecodeError, KeyError):
-            pass
-        time.sleep(0.001)
-    os.killpg(p.pid, signal.SIGKILL)
-    p.wait()
-    if (rundir / "summary.json").exists():
-        return None
-    return json.loads((rundir / "progress.json").read_text())["step"]
+    """test_resume's kill, on this file's run (its default checkpoint interval)."""
+    from test_resume import _killed_at
+
+    return _killed_at(rundir, at, RUN)
 
 
 @pytest.mark.lammps

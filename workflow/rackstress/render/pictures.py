@@ -725,69 +725,45 @@ def render(rundir, frames=None, measure: str | None = None, views=DEFAULT_VIEWS,
 
 
 class _Background:
-    """``fn(run, values, label, coloured, context, report, out)`` in a forked child process,
-    concurrently with the pictures (this machine's second core); ``join`` → (files, notes,
-    wall time) it added to the report, or re-raises its error. Where fork is not available it
-    runs in this process at ``join``."""
+    """``fn(run, values, label, coloured, context, report, out)`` in a forked child process
+    (:class:`~rackstress.runs.forked.ForkedJob`), concurrently with the pictures (this
+    machine's second core); ``join`` → (files, notes, wall time) it added to the report, or
+    re-raises its error. Where fork is not available it runs in this process at ``join``."""
 
     def __init__(self, fn, run, values, label, coloured, context, report, out: Path):
-        import multiprocessing as mp
+        from rackstress.runs.forked import ForkedJob
 
-        self.args = (fn, run, values, label, coloured, context, report, out)
-        self.result = out / ".plots.json"
-        self.proc, self.parent = None, os.getpid()
-        if "fork" in mp.get_all_start_methods():
-            self.proc = mp.get_context("fork").Process(target=self._child, daemon=True)
-            self.proc.start()
-
-    def _child(self):
-        from rackstress.runs.rundir import in_forked_child
-
-        in_forked_child(self.parent)     # the run directory's lock stays the parent's alone
-        fn, run, values, label, coloured, context, report, out = self.args
-        t = time.perf_counter()
-        report.files, report.notes = [], []
-        try:
-            fn(run, values, label, coloured, context, report, out)
-            rec = {"files": report.files, "notes": report.notes,
-                   "wall_s": time.perf_counter() - t}
-        except BaseException as exc:  # noqa: BLE001 - handed to the parent
-            rec = {"error": f"{type(exc).__name__}: {exc}",
-                   "errno": getattr(exc, "errno", None)}
-        try:
-            self.result.write_text(json.dumps(rec))
-        except OSError:      # a full disk: the parent learns it from the exit status
-            os._exit(EXIT_STORAGE)
-        os._exit(0)
-
-    def join(self):
-        if self.proc is None:
-            fn, run, values, label, coloured, context, report, out = self.args
+        def work():
             t = time.perf_counter()
             n_files, n_notes = len(report.files), len(report.notes)
             fn(run, values, label, coloured, context, report, out)
             files, notes = report.files[n_files:], report.notes[n_notes:]
             del report.files[n_files:], report.notes[n_notes:]
             return files, notes, time.perf_counter() - t
-        self.proc.join()
+
+        self.out = out
+        self.job = ForkedJob(work, out / ".plots.json")
+
+    def join(self):
+        from rackstress.runs.forked import ForkedError
+
         try:
-            rec = json.loads(self.result.read_text())
-        except (OSError, json.JSONDecodeError):
-            if self.proc.exitcode == EXIT_STORAGE:
-                raise StorageError(f"could not write the plots into {self.args[-1]}: the file "
+            files, notes, wall = self.job.join()
+        except ForkedError as exc:
+            if exc.exitcode == EXIT_STORAGE:
+                raise StorageError(f"could not write the plots into {self.out}: the file "
                                    "system refused the write (full?); free space on it") from None
-            raise RuntimeError(f"drawing the plots failed (exit code {self.proc.exitcode})")
-        self.result.unlink()
-        if rec.get("errno"):
-            raise StorageError(f"could not draw the plots into {self.args[-1]}: {rec['error']}")
-        if "error" in rec:
-            raise RuntimeError(f"drawing the plots failed: {rec['error']}")
-        return rec["files"], rec["notes"], rec["wall_s"]
+            if exc.exitcode is not None:
+                raise RuntimeError(f"drawing the plots failed (exit code {exc.exitcode})") \
+                    from None
+            if exc.errno:
+                raise StorageError(f"could not draw the plots into {self.out}: {exc.message}") \
+                    from None
+            raise RuntimeError(f"drawing the plots failed: {exc.message}") from None
+        return files, notes, wall
 
     def kill(self):
-        if self.proc is not None and self.proc.is_alive():
-            self.proc.kill()
-            self.proc.join()
+        self.job.kill()
 
 
 def render_default(rundir, progress: bool = False) -> RenderReport:

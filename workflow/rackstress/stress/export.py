@@ -252,66 +252,41 @@ def _write_bytes(path: Path, data) -> None:
 
 
 class VtkJob:
-    """:func:`write_vtk` in a forked process, while this one goes on (the pictures: the
-    machine's other core); :meth:`join` returns the ``.pvd`` path and the wall time, or raises
-    the child's error. Without fork it writes at :meth:`join`."""
+    """:func:`write_vtk` in a forked process (:class:`~rackstress.runs.forked.ForkedJob`), while
+    this one goes on (the pictures: the machine's other core); :meth:`join` returns the
+    ``.pvd`` path and the wall time, or raises the child's error. Without fork it writes at
+    :meth:`join`."""
 
     def __init__(self, run, fields, outdir, fmt: str = "paraview"):
-        import multiprocessing as mp
         import tempfile
         import time
 
-        self.args = (run, fields, Path(outdir), fmt)
+        from rackstress.runs.forked import ForkedJob
+
         self.t0 = time.perf_counter()
         fd, name = tempfile.mkstemp(prefix=".vtk-job-", suffix=".json",
                                     dir=Path(outdir).parent)
         os.close(fd)
-        self.result = Path(name)
-        self.proc, self.parent = None, os.getpid()
-        if "fork" in mp.get_all_start_methods():
-            self.proc = mp.get_context("fork").Process(target=self._child, daemon=True)
-            self.proc.start()
-
-    def _child(self):
-        import json
-
-        from rackstress.runs.rundir import in_forked_child
-
-        in_forked_child(self.parent)     # the run directory's lock stays the parent's alone
-        run, fields, outdir, fmt = self.args
-        try:
-            rec = {"pvd": str(write_vtk(run, fields, outdir, fmt=fmt))}
-        except BaseException as exc:  # noqa: BLE001 - handed to the parent
-            rec = {"error": f"{type(exc).__name__}: {exc}",
-                   "storage": isinstance(exc, StorageError)}
-        self.result.write_text(json.dumps(rec))
-        os._exit(0)
+        self.job = ForkedJob(lambda: str(write_vtk(run, fields, Path(outdir), fmt=fmt)), name)
 
     def join(self) -> tuple[Path, float]:
-        import json
         import time
 
-        if self.proc is None:
-            run, fields, outdir, fmt = self.args
-            self.result.unlink(missing_ok=True)
-            return write_vtk(run, fields, outdir, fmt=fmt), time.perf_counter() - self.t0
-        self.proc.join()
+        from rackstress.runs.forked import ForkedError
+
         try:
-            rec = json.loads(self.result.read_text())
-        except (OSError, json.JSONDecodeError):
-            rec = {"error": f"the VTK writer ended with exit code {self.proc.exitcode}"}
-        self.result.unlink(missing_ok=True)
-        if rec.get("storage"):          # a full disk stays a storage error (exit 5)
-            raise StorageError(rec["error"].split(": ", 1)[-1])
-        if "error" in rec:
-            raise OSError(f"writing the VTK files failed: {rec['error']}")
-        return Path(rec["pvd"]), time.perf_counter() - self.t0
+            pvd = self.job.join()
+        except ForkedError as exc:
+            if exc.storage:          # a full disk stays a storage error (exit 5)
+                raise StorageError(exc.message.split(": ", 1)[-1]) from None
+            if exc.exitcode is not None:
+                raise OSError("writing the VTK files failed: the VTK writer ended with exit "
+                              f"code {exc.exitcode}") from None
+            raise OSError(f"writing the VTK files failed: {exc.message}") from None
+        return Path(pvd), time.perf_counter() - self.t0
 
     def kill(self):
-        if self.proc is not None and self.proc.is_alive():
-            self.proc.kill()
-            self.proc.join()
-        self.result.unlink(missing_ok=True)
+        self.job.kill()
 
 
 # ----------------------------------------------------------------------------- LAMMPS dump
