@@ -739,6 +739,11 @@ def bench():
     """Benchmarks of stability, work-precision and speed (outputs in docs/benchmarks/)."""
 
 
+#: every benchmark's ``--out``
+_bench_out = click.option("--out", type=click.Path(file_okay=False, path_type=Path),
+                          help="Output directory (default: docs/benchmarks/ of the repository).")
+
+
 def _bench_report(data, mod):
     from rackstress.bench import md_table
 
@@ -749,8 +754,7 @@ def _bench_report(data, mod):
 
 
 @bench.command("stability")
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
-              help="Output directory (default: docs/benchmarks/ of the repository).")
+@_bench_out
 @click.option("--quick", is_flag=True, help="A few cases only.")
 @click.option("--magpod", is_flag=True, help="Also the 17,480-iteration MagPod run on LAMMPS.")
 @click.option("--magpod-steps", type=click.IntRange(min=1), default=17480, show_default=True)
@@ -769,8 +773,7 @@ def bench_stability(out, quick, magpod, magpod_steps, only):
 
 
 @bench.command("accuracy")
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
-              help="Output directory (default: docs/benchmarks/ of the repository).")
+@_bench_out
 @click.option("--quick", is_flag=True, help="Shorter physical times (under 5 minutes).")
 @click.option("--scene", "scene_names", multiple=True,
               type=Choice(["plane-bound", "plane-rack", "magpod-small"]),
@@ -784,8 +787,7 @@ def bench_accuracy(out, quick, scene_names):
 
 
 @bench.command("e2e")
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
-              help="Output directory (default: docs/benchmarks/ of the repository).")
+@_bench_out
 @click.option("--scene", "scene_names", multiple=True,
               type=click.Choice(["magpod-small", "magpod", "sediment-large"]),
               help="Scenes (default: all three).")
@@ -811,8 +813,7 @@ def bench_e2e(out, scene_names, repeat, long_steps):
 
 
 @bench.command("perf")
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
-              help="Output directory (default: docs/benchmarks/ of the repository).")
+@_bench_out
 @click.option("--steps", type=click.IntRange(min=1), default=1200, show_default=True)
 @click.option("--quick", is_flag=True, help="300 iterations.")
 @click.option("--profile-steps", type=click.IntRange(min=0), default=100, show_default=True,
@@ -834,8 +835,7 @@ def bench_perf(out, steps, quick, profile_steps, scene_name, no_mpi):
 
 
 @bench.command("scaling")
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
-              help="Output directory (default: docs/benchmarks/ of the repository).")
+@_bench_out
 @click.option("--quick", is_flag=True, help="A 40 x 20 x 20 block and 60 MagPod steps.")
 @click.option("--remodel", is_flag=True, help="Recompute the model from scaling.json, no runs.")
 @click.option("--large", is_flag=True,
@@ -854,8 +854,7 @@ def bench_scaling(out, quick, remodel, large, only):
 
 
 @bench.command("inside")
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
-              help="Output directory (default: docs/benchmarks/ of the repository).")
+@_bench_out
 @click.option("--quick", is_flag=True, help="3,000 and 17,600 particles only.")
 def bench_inside(out, quick):
     """Binding a mesh part inside its shape: 17,600 / 100,000 / 1,000,000 particles."""
@@ -866,8 +865,7 @@ def bench_inside(out, quick):
 
 
 @bench.command("validity3d")
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
-              help="Output directory (default: docs/benchmarks/ of the repository).")
+@_bench_out
 @click.option("--quick", is_flag=True, help="Spacing 1 only.")
 def bench_validity3d(out, quick):
     """The bracket STL's particle von Mises stress against tetrahedral FEA (the 'fem' extra)."""
@@ -878,8 +876,7 @@ def bench_validity3d(out, quick):
 
 
 @bench.command("stress")
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
-              help="Output directory (default: docs/benchmarks/ of the repository).")
+@_bench_out
 @click.option("--quick", is_flag=True, help="One small bar per case (for tests).")
 def bench_stress(out, quick):
     """Stress from particles (virial, completed, Hooke) against tension and bending."""
@@ -890,8 +887,7 @@ def bench_stress(out, quick):
 
 
 @bench.command("validity")
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
-              help="Output directory (default: docs/benchmarks/ of the repository).")
+@_bench_out
 @click.option("--quick", is_flag=True, help="Small bodies and coarse meshes (seconds).")
 def bench_validity(out, quick):
     """Stress measures of three body models against linear-elastic FEA (three cases)."""
@@ -906,8 +902,7 @@ def bench_validity(out, quick):
 
 
 @bench.command("cantilever")
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
-              help="Output directory (default: docs/benchmarks/ of the repository).")
+@_bench_out
 @click.option("--quick", is_flag=True, help="Spacings 2 and 1 only, no 100,000-particle run.")
 def bench_cantilever(out, quick):
     """The aluminium cantilever against beam theory (spacings 2, 1, 0.5 mm), the lattice's
