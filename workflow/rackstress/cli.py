@@ -126,6 +126,10 @@ def main():
               help="Every particle in every frame of trajectory.dump (a plain LAMMPS dump for "
                    "other tools); default: a scene with a resting sediment dumps the particles "
                    "that moved, the others being where particles.data puts them.")
+@click.option("--dump-text", is_flag=True,
+              help="Keep trajectory.dump as plain text once the run has finished (default: "
+                   "trajectory.dump.gz, a gzip member a frame, which rackstress, OVITO and "
+                   "MDAnalysis read).")
 @click.option("--overwrite", is_flag=True, help="Replace a finished run in --out.")
 @click.option("--progress/--no-progress", default=True, show_default=True)
 @click.option("--render/--no-render", "do_render", default=True, show_default=True,
@@ -143,7 +147,7 @@ def main():
               "(leapfrog with trapezoidal damping).")
 def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progress, do_render,
         restart_every=None, resume_dir=None, allow_unstable=False, integrator="euler",
-        dump_all=False):
+        dump_all=False, dump_text=False):
     """Run SCENE (a built-in name or a .toml file) and write a run directory.
 
     Exit status (errors.py): 0 done, 2 bad input or a run directory in use or holding another
@@ -181,7 +185,7 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
                 with phase(f"resuming the run in {out}", progress and rank() == 0,
                            ticker=False):
                     summary = resume_run(resume_dir, scene, progress=progress and rank() == 0)
-                _finish(summary, out, do_render, progress)
+                _finish(summary, out, do_render, progress, dump_text)
             return
         shown = progress and rank() == 0
         with phase(f"building the scene {scene}", shown):
@@ -217,7 +221,7 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
                                       overwrite=overwrite, restart_every=restart_every or None,
                                       allow_unstable=allow_unstable, planned=planned,
                                       keep_checkpoints=keep_checkpoints, at_quarter=head_start)
-            _finish(summary, out, do_render, progress)
+            _finish(summary, out, do_render, progress, dump_text)
         if summary.get("settled") is False:
             from rackstress.errors import EXIT_UNSETTLED
 
@@ -232,9 +236,11 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
         _fail_any(err, out)
 
 
-def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True) -> None:
+def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True,
+            dump_text: bool = False) -> None:
     """Report a finished run, post-process it and render its pictures (rank 0, the run
-    directory still held)."""
+    directory still held); unless ``dump_text``, ``trajectory.dump`` becomes
+    ``trajectory.dump.gz`` (compressed meanwhile, in a thread; docs/output.md)."""
     from rackstress.lib.mpi import rank
 
     if rank() != 0:
@@ -258,6 +264,11 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True) ->
     from rackstress.stress.post import cancel_files, wait_files
 
     _post_run(out, progress, background=do_render)
+    squeeze = None
+    if not dump_text and (Path(out) / "trajectory.dump").is_file():
+        from rackstress.engines.dumpio import CompressJob
+
+        squeeze = CompressJob(Path(out) / "trajectory.dump")   # read meanwhile; renamed at the end
     try:
         if do_render:
             from rackstress.render.pictures import render_default
@@ -284,6 +295,15 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True) ->
         sys.exit(EXIT_STORAGE if isinstance(err, StorageError) else EXIT_RENDER)
     finally:
         cancel_files(out)
+        if squeeze is not None and sys.exc_info()[0] is not None:
+            squeeze.cancel()          # an error above: the text dump stays as it is
+    if squeeze is not None:
+        try:
+            squeeze.finish()
+        except StorageError as err:  # the run and its files are complete; the text is kept
+            click.echo(f"rackstress: error: the run finished, but its trajectory could not be "
+                       f"compressed: {err} (trajectory.dump is kept as text)", err=True)
+            sys.exit(EXIT_STORAGE)
 
 
 @main.command()
@@ -400,7 +420,7 @@ def _post_run(out, progress, background: bool = False):
     try:
         with phase("computing the stress measures and the VTK series", progress, ticker=False):
             info = postprocess(out, vtk=True, dump=False, progress=progress,
-                               background=background)
+                               background=background, vtk_measures="default")
     except TooLargeError as err:
         click.echo(f"  note: no stress peaks or VTK files: {err}")
         return
