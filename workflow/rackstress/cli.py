@@ -123,9 +123,9 @@ def main():
               help="Run directory (default: runs/SCENE-TIMESTAMP).")
 @click.option("--dump-every", type=click.IntRange(min=1), help="Steps between trajectory frames.")
 @click.option("--dump-all", is_flag=True,
-              help="Every particle in every frame of trajectory.dump (a plain LAMMPS dump for "
-                   "other tools); default: a scene with a resting sediment dumps the particles "
-                   "that moved, the others being where particles.data puts them.")
+              help="Every particle in every frame of the trajectory (with --dump-text a plain "
+                   "LAMMPS dump for other tools); default: a scene with a resting sediment dumps "
+                   "the particles that moved, the others being where particles.data puts them.")
 @click.option("--dump-text", is_flag=True,
               help="Keep trajectory.dump as plain text once the run has finished (default: "
                    "trajectory.dump.gz, a gzip member a frame, which rackstress, OVITO and "
