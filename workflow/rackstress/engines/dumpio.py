@@ -8,6 +8,11 @@ A frame may hold only some particles: a LAMMPS deck with a resting (passive) gro
 particles of the moving group, which holds every particle displaced (:meth:`Deck.dump_commands
 <rackstress.engines.lammps.deck.Deck.dump_commands>`); a particle a frame does not hold sits at
 its original position, the data file's. :func:`read_frames` reads either kind into whole frames.
+
+A run that has finished keeps its dump as ``trajectory.dump.gz``, one gzip member a frame
+(:func:`compress_dump`, :class:`CompressJob`; docs/output.md): the text stays while the run can
+still be resumed or cut (:func:`trim_after`, :func:`trim_nonfinite`, ``runs.resume``), and every
+reader here takes either file (:func:`dump_path`).
 """
 from __future__ import annotations
 
