@@ -30,7 +30,10 @@ def test_full_disk_during_post_processing_is_a_storage_error(tmpfs):  # noqa: F8
     assert "No space left on device" in r.stderr and "Traceback" not in r.stderr
     assert f"rackstress stress {out}" in r.stderr          # what to do once there is space
     assert str(out / "vtk") in r.stderr                     # what could not be written
-    # the run is whole; nothing of the VTK series is left, half or as if whole
+    # the run is whole; nothing of the VTK series is left, half or as if whole; the finished
+    # trajectory is compressed all the same (5.4 MB of text in less)
+    assert trajectory(out).name == "trajectory.dump.gz" and not (out / "trajectory.dump").exists(), \
+        r.stderr
     assert len(frames(trajectory(out))) == 301
     assert not (out / "vtk").exists() and leftovers(out) == []
     assert not [p for p in out.iterdir() if p.name.startswith(".vtk")]

@@ -263,13 +263,13 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True,
                    + (f"{md:.4g}" if md is not None else "-"))
     from rackstress.stress.post import cancel_files, wait_files
 
-    _post_run(out, progress, background=do_render)
     squeeze = None
     if not dump_text and (Path(out) / "trajectory.dump").is_file():
         from rackstress.engines.dumpio import CompressJob
 
         squeeze = CompressJob(Path(out) / "trajectory.dump")   # read meanwhile; renamed at the end
     try:
+        _post_run(out, progress, background=do_render)
         if do_render:
             from rackstress.render.pictures import render_default
 
@@ -295,14 +295,21 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True,
         sys.exit(EXIT_STORAGE if isinstance(err, StorageError) else EXIT_RENDER)
     finally:
         cancel_files(out)
-        if squeeze is not None and sys.exc_info()[0] is not None:
-            squeeze.cancel()          # an error above: the text dump stays as it is
-    if squeeze is not None:
-        try:
-            squeeze.finish()
-        except StorageError as err:  # the run and its files are complete; the text is kept
-            click.echo(f"rackstress: error: the run finished, but its trajectory could not be "
-                       f"compressed: {err} (trajectory.dump is kept as text)", err=True)
+        if squeeze is not None:   # the run has finished, whatever its derived files did
+            _compressed(squeeze, failed=sys.exc_info()[0] is not None)
+
+
+def _compressed(job, failed: bool) -> None:
+    """Put the finished run's ``trajectory.dump.gz`` in place (``job``: a
+    :class:`~rackstress.engines.dumpio.CompressJob`). If that fails (a full disk) the text is
+    kept, and the command ends with exit 5 unless an error (``failed``) already ends it."""
+    try:
+        job.finish()
+    except StorageError as err:
+        click.echo(f"rackstress: {'note' if failed else 'error'}: the run finished, but its "
+                   f"trajectory could not be compressed: {err} (trajectory.dump is kept as "
+                   "text)", err=True)
+        if not failed:
             sys.exit(EXIT_STORAGE)
 
 
