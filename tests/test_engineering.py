@@ -59,6 +59,50 @@ def test_cantilever_tip_deflection_and_convergence():
     assert abs(-_virial_sxx(sc, res.p, bottom).mean() / expected - 1) < 0.10
 
 
+def _box_cells(o: np.ndarray, a: float, lo=(0.0, -5.0, -5.0), hi=(100.0, 5.0, 5.0)):
+    """Each particle's share of the bar, by geometry: along each axis ±a/2 where the next
+    lattice site is in the bar, else up to the bar's face."""
+    lo, hi = np.asarray(lo), np.asarray(hi)
+    up = np.where(o + a <= hi + 1e-9, a / 2, hi - o)
+    down = np.where(o - a >= lo - 1e-9, a / 2, o - lo)
+    return np.prod(up + down, axis=1)
+
+
+def _bent(spacing: float):
+    """The cantilever at ``spacing``, solved: (tip / beam theory, top and bottom fibre σ_xx /
+    M·z/I at mid-span), beam theory taken at the last layer x_e, where the load acts."""
+    sc = load_toml(CANTILEVER, {"spacing": spacing})
+    res = solve(sc)
+    assert res.settled and res.residual <= 1e-6
+    o = sc.original_positions()
+    xe = o[:, 0].max()
+    end = o[:, 0] > xe - 1e-9
+    tip = -float((res.p - o)[end, 2].mean())
+    I = 10.0 ** 4 / 12                          # the bar's own 10 × 10 mm section
+    theory = 100.0 * xe ** 3 / (3 * 70000.0 * I) * 1.008
+    xm = o[np.argmin(np.abs(o[:, 0] - 50)), 0]
+    V = _box_cells(o, spacing)
+    fibres = []
+    for z in (o[:, 2].max(), o[:, 2].min()):
+        rows = np.flatnonzero((np.abs(o[:, 0] - xm) < 1e-9) & (np.abs(o[:, 2] - z) < 1e-9))
+        sxx = _virial_sxx(sc, res.p, rows) * sc.groups["bar"].volume / V[rows]
+        fibres.append(sxx.mean() / (100.0 * (xe - xm) * z / I))
+    return tip / theory, fibres
+
+
+@pytest.mark.parametrize("spacing", [1.5, 0.7])
+def test_cantilever_does_not_depend_on_spacing(spacing):
+    """10 mm is 6.7 layers of 1.5 mm and 14.3 of 0.7 mm: the bar is still 10 mm thick, not n·h
+    (docs/calibration.md "Walls of any thickness"). Tip within 5 % of beam theory, top and bottom
+    fibre within 10 % of M·z/I at the particle centres, and within 5 % of spacings 2 and 1."""
+    tip, fibres = _bent(spacing)
+    assert abs(tip - 1) < 0.05, tip
+    for f in fibres:
+        assert abs(f - 1) < 0.10, fibres
+    for other in (2.0, 1.0):
+        assert abs(tip / _bent(other)[0] - 1) < 0.05, (spacing, other)
+
+
 @pytest.mark.parametrize("spacing", [2.0, 1.0])
 def test_loads_do_not_change_with_spacing(spacing, tmp_path):
     """A total force is shared by the selected particles; a pressure is p × the face's area."""

@@ -611,6 +611,9 @@ class ParticleStress(_RunAnalysis):
             self._W2S = None
             self._mask[:] = False
             return
+        Vi = read_volumes(run)               # each cell's own share of the part, if written
+        if Vi is not None:
+            V = np.where(np.isfinite(Vi) & self._mask, Vi, V)
         self._V = V
         self._gather = T.incidence(b[0], n)
         self._wm = None
@@ -645,6 +648,21 @@ class ParticleStress(_RunAnalysis):
         bs[~self._mask] = np.nan
         self.results.bind_strain[k] = bs
         return vm
+
+
+def read_volumes(run):
+    """Each particle's volume from the run's ``bindings.npz`` (``V``: the boundary cells' own
+    share of the part, docs/calibration.md), or None for a file without it."""
+    from rackstress.lib.runfiles import BINDINGS
+
+    path = Path(run.rundir) / BINDINGS
+    if not path.is_file():
+        return None
+    with np.load(path, allow_pickle=False) as z:
+        if "V" not in z.files:
+            return None
+        V = z["V"].astype(np.float64)
+    return V if len(V) == run.n_atoms else None
 
 
 def read_bindings(run):
