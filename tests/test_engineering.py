@@ -103,6 +103,44 @@ def test_cantilever_does_not_depend_on_spacing(spacing):
         assert abs(tip / _bent(other)[0] - 1) < 0.05, (spacing, other)
 
 
+PLATE = """
+name = "plate"
+units = "mm-N-s"
+analysis = "static"
+[[group]]
+name = "p"
+fill = {{ box = {{ min = [0, 0, 0], max = [14, 20, 3] }} }}
+spacing = 0.7
+origin = [0, 0.35, {oz}]
+material = "aluminium"
+[[support]]
+on = "p"
+where = {{ box = {{ min = [-0.01, -1, -1], max = [0.01, 21, 4] }} }}
+"""
+
+
+@pytest.mark.parametrize("oz", [0.35, 0.2])
+def test_a_plate_is_as_stiff_as_its_own_thickness(oz, tmp_path):
+    """A 3 mm plate at spacing 0.7 is 4 layers (2.8 mm) or 5 (3.5 mm), as the lattice falls.
+    Its bindings' stiffness in tension along x, Σ k·ℓ²·n_x⁴ over the bindings, is C11·V = 3k/a
+    × 14 × 20 × 3 mm³ (DESIGN §6: C11 = 3k/a) — the plate's own volume, not n·a's."""
+    from rackstress.model.operators import Bind
+
+    f = tmp_path / "plate.toml"
+    f.write_text(PLATE.format(oz=oz))
+    sc = load_toml(f)
+    g = sc.groups["p"]
+    (op,) = [x for x in sc.operators["p"] if isinstance(x, Bind)]
+    pl = op.pairs(g, g)
+    keep = pl.i < pl.j
+    d = g.o[pl.j[keep]] - g.o[pl.i[keep]]
+    w = pl.c[keep] / op.coeff.c                     # k in units of the bulk binding's
+    layers = len(np.unique(g.o[:, 2]))
+    assert layers == {0.35: 4, 0.2: 5}[oz]
+    S = float(np.sum(w * d[:, 0] ** 4 / np.einsum("ij,ij->i", d, d)))
+    assert abs(S / (3 / 0.7 * 14 * 20 * 3.0) - 1) < 0.002, S
+
+
 @pytest.mark.parametrize("spacing", [2.0, 1.0])
 def test_loads_do_not_change_with_spacing(spacing, tmp_path):
     """A total force is shared by the selected particles; a pressure is p × the face's area."""

@@ -19,6 +19,12 @@ face layer is softer than the bulk (a bar of N particles across is 2/(3N) too so
 about the face, so a bar of any N is as stiff as the continuum: measured in
 docs/calibration.md, the cantilever's tip deflection agrees at spacings 2, 1 and 0.5 mm.
 
+A wall is rarely a whole number of spacings thick: each boundary particle's cell is its own
+share of the part (:func:`axis_fractions`, from the part's shape), and the bindings in a face
+layer are weighted so the layer is as stiff as that share (:func:`fraction_weights`, derived
+in docs/calibration.md "Walls of any thickness"): the cantilever's 10 mm at spacing 0.7
+(14.3 layers) or 1.5 (6.7) bends as 10 mm, not as n·a.
+
 Example
 -------
 >>> from rackstress.model.materials import material
@@ -49,6 +55,9 @@ _INSIDE: dict = {}
 _FRACTIONS: dict = {}
 #: bisection steps finding a free face's distance along an axis (precision a / 2**steps)
 FACE_STEPS = 8
+#: distinct binding weights of a solid at most: the plugin gives each its own bond type and
+#: fix (engines/lammps/deck.py MAX_PAIR_TYPES)
+WEIGHT_LEVELS = 16
 #: bind reach of a solid, in spacings: the 18 neighbours of the cubic lattice (1 and √2)
 REACH = 1.5
 
@@ -107,7 +116,7 @@ class Solid(WithinInside):
         thickness factor (:func:`fraction_weights`) when the part's shape is known."""
         w = face_weights(o, i, j, self.spacing)
         if self.part is not None:
-            w = w * fraction_weights(o, i, j, self.fractions(o), self.spacing)
+            w = levels(w * fraction_weights(o, i, j, self.fractions(o), self.spacing))
         return w
 
     def fractions(self, o: np.ndarray) -> np.ndarray:
@@ -255,3 +264,25 @@ def fraction_weights(o: np.ndarray, i: np.ndarray, j: np.ndarray, phi: np.ndarra
         nearest = np.maximum((4.0 * f - 1.0) / 3.0, 0.25 * f)
         w = np.where(along, w * np.where(ones == 1, nearest, f), w)
     return w
+
+
+def levels(w: np.ndarray, k: int = WEIGHT_LEVELS, iters: int = 60) -> np.ndarray:
+    """``w`` with at most ``k`` distinct values: each replaced by the mean of its cluster (1D
+    k-means over the distinct values weighted by their counts, from the weighted quantiles), so
+    each cluster's summed stiffness is kept. Unchanged when it has ``k`` values or fewer."""
+    vals, inv, cnt = np.unique(w, return_inverse=True, return_counts=True)
+    if len(vals) <= k:
+        return w
+    cum = np.cumsum(cnt) / cnt.sum()
+    centre = np.unique(vals[np.searchsorted(cum, (np.arange(k) + 0.5) / k)])
+    for _ in range(iters):
+        edges = 0.5 * (centre[1:] + centre[:-1])
+        lab = np.searchsorted(edges, vals)
+        tot = np.bincount(lab, weights=cnt, minlength=len(centre))
+        new = np.bincount(lab, weights=cnt * vals, minlength=len(centre))
+        new = np.where(tot > 0, new / np.where(tot > 0, tot, 1), centre)
+        if np.allclose(new, centre, rtol=0, atol=1e-15):
+            break
+        centre = new
+    lab = np.searchsorted(0.5 * (centre[1:] + centre[:-1]), vals)
+    return centre[lab][inv.reshape(-1)]
