@@ -266,23 +266,44 @@ def fraction_weights(o: np.ndarray, i: np.ndarray, j: np.ndarray, phi: np.ndarra
     return w
 
 
-def levels(w: np.ndarray, k: int = WEIGHT_LEVELS, iters: int = 60) -> np.ndarray:
-    """``w`` with at most ``k`` distinct values: each replaced by the mean of its cluster (1D
-    k-means over the distinct values weighted by their counts, from the weighted quantiles), so
-    each cluster's summed stiffness is kept. Unchanged when it has ``k`` values or fewer."""
+def levels(w: np.ndarray, k: int = WEIGHT_LEVELS) -> np.ndarray:
+    """``w`` with at most ``k`` distinct values: the most common value (the interior's 1) kept
+    exact, the others (first rounded to 4 significant digits) split into k − 1 clusters by
+    optimal 1D k-means (dynamic programming over the sorted values, weighted by their counts),
+    each replaced by its cluster's weighted mean so each cluster's summed stiffness is kept.
+    Unchanged when it has ``k`` values or fewer."""
     vals, inv, cnt = np.unique(w, return_inverse=True, return_counts=True)
     if len(vals) <= k:
         return w
-    cum = np.cumsum(cnt) / cnt.sum()
-    centre = np.unique(vals[np.searchsorted(cum, (np.arange(k) + 0.5) / k)])
-    for _ in range(iters):
-        edges = 0.5 * (centre[1:] + centre[:-1])
-        lab = np.searchsorted(edges, vals)
-        tot = np.bincount(lab, weights=cnt, minlength=len(centre))
-        new = np.bincount(lab, weights=cnt * vals, minlength=len(centre))
-        new = np.where(tot > 0, new / np.where(tot > 0, tot, 1), centre)
-        if np.allclose(new, centre, rtol=0, atol=1e-15):
-            break
-        centre = new
-    lab = np.searchsorted(0.5 * (centre[1:] + centre[:-1]), vals)
-    return centre[lab][inv.reshape(-1)]
+    mode = int(np.argmax(cnt))
+    rest = np.flatnonzero(np.arange(len(vals)) != mode)
+    r = np.asarray([float(f"{x:.4g}") for x in vals[rest]])
+    rv, rinv = np.unique(r, return_inverse=True)
+    rc = np.bincount(rinv, weights=cnt[rest])
+    n, m = len(rv), min(k - 1, len(rv))
+    S1 = np.r_[0.0, np.cumsum(rc * rv)]
+    S2 = np.r_[0.0, np.cumsum(rc * rv * rv)]
+    C = np.r_[0.0, np.cumsum(rc)]
+
+    def cost(a, b):        # clusters rv[a:b] (arrays a, scalar b): weighted sum of squares
+        s1, s2, c = S1[b] - S1[a], S2[b] - S2[a], C[b] - C[a]
+        return s2 - s1 * s1 / c
+
+    D = np.full((m + 1, n + 1), np.inf)
+    arg = np.zeros((m + 1, n + 1), dtype=np.int64)
+    D[0, 0] = 0.0
+    for q in range(1, m + 1):
+        for b in range(q, n + 1):
+            a = np.arange(q - 1, b)
+            tot = D[q - 1, a] + cost(a, b)
+            t = int(np.argmin(tot))
+            D[q, b], arg[q, b] = tot[t], a[t]
+    label, b = np.empty(n, dtype=np.int64), n
+    for q in range(m, 0, -1):
+        a = arg[q, b]
+        label[a:b] = q - 1
+        b = a
+    centre = np.bincount(label, weights=rc * rv) / np.bincount(label, weights=rc)
+    out = vals.copy()
+    out[rest] = centre[label[rinv]]
+    return out[inv.reshape(-1)]

@@ -612,13 +612,12 @@ class ParticleStress(_RunAnalysis):
             self._mask[:] = False
             return
         Vi = read_volumes(run)               # each cell's own share of the part, if written
-        if Vi is not None:
-            V = np.where(np.isfinite(Vi) & self._mask, Vi, V)
-        self._V = V
+        self._V = V if Vi is None else np.where(np.isfinite(Vi) & self._mask, Vi, V)
         self._gather = T.incidence(b[0], n)
         self._wm = None
         if self.method == "completed":
             A = T.binding_moment(run.o, b[0], b[1], b[2], n)
+            # the interior's stiffness per whole cell (a boundary cell's own share is not it)
             self._W2S = T.completion(A, V, [p.index for p in mine])
         else:
             self._W2S = None
