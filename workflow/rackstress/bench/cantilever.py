@@ -212,8 +212,11 @@ def speed(tmp: Path, echo=print, a: float = 0.5, length: float = 125.0) -> dict:
     from rackstress.scenes.toml import load_toml
 
     text = SCENE.read_text().replace("max = [100, 5, 5]", f"max = [{length:g}, 5, 5]").replace(
-        "min = [99.99, -6, -6], max = [100.01, 6, 6]",
-        f"min = [{length - 0.01:g}, -6, -6], max = [{length + 0.01:g}, 6, 6]")
+        'min = ["$(100 - 0.99 * spacing)", -6, -6], max = [100.01, 6, 6]',
+        f'min = ["$({length:g} - 0.99 * spacing)", -6, -6], max = [{length + 0.01:g}, 6, 6]')
+    if f"{length:g} - 0.99" not in text:
+        raise RuntimeError(f"{SCENE}: its load region changed; the speed bar's load would "
+                           "stay at x = 100")
     f = tmp / "bar100k.toml"
     f.write_text(text)
     t0, c0 = time.perf_counter(), time.process_time()
