@@ -60,6 +60,88 @@ def test_cantilever_tip_deflection_and_convergence():
     assert abs(-_virial_sxx(sc, res.p, bottom).mean() / expected - 1) < 0.10
 
 
+def _box_cells(o: np.ndarray, a: float, lo=(0.0, -5.0, -5.0), hi=(100.0, 5.0, 5.0)):
+    """Each particle's share of the bar, by geometry: along each axis ±a/2 where the next
+    lattice site is in the bar, else up to the bar's face."""
+    lo, hi = np.asarray(lo), np.asarray(hi)
+    up = np.where(o + a <= hi + 1e-9, a / 2, hi - o)
+    down = np.where(o - a >= lo - 1e-9, a / 2, o - lo)
+    return np.prod(up + down, axis=1)
+
+
+def _bent(spacing: float):
+    """The cantilever at ``spacing``, solved: (tip / beam theory, top and bottom fibre σ_xx /
+    M·z/I at mid-span), beam theory taken at the last layer x_e, where the load acts."""
+    sc = load_toml(CANTILEVER, {"spacing": spacing})
+    res = solve(sc)
+    assert res.settled and res.residual <= 1e-6
+    o = sc.original_positions()
+    xe = o[:, 0].max()
+    end = o[:, 0] > xe - 1e-9
+    tip = -float((res.p - o)[end, 2].mean())
+    I = 10.0 ** 4 / 12                          # the bar's own 10 × 10 mm section
+    theory = 100.0 * xe ** 3 / (3 * 70000.0 * I) * 1.008
+    xm = o[np.argmin(np.abs(o[:, 0] - 50)), 0]
+    V = _box_cells(o, spacing)
+    fibres = []
+    for z in (o[:, 2].max(), o[:, 2].min()):
+        rows = np.flatnonzero((np.abs(o[:, 0] - xm) < 1e-9) & (np.abs(o[:, 2] - z) < 1e-9))
+        sxx = _virial_sxx(sc, res.p, rows) * sc.groups["bar"].volume / V[rows]
+        fibres.append(sxx.mean() / (100.0 * (xe - xm) * z / I))
+    return tip / theory, fibres
+
+
+@pytest.mark.parametrize("spacing", [1.5, 0.7])
+def test_cantilever_does_not_depend_on_spacing(spacing):
+    """10 mm is 6.7 layers of 1.5 mm and 14.3 of 0.7 mm: the bar is still 10 mm thick, not n·h
+    (docs/calibration.md "Walls of any thickness"). Tip within 5 % of beam theory, top and bottom
+    fibre within 10 % of M·z/I at the particle centres, and within 5 % of spacings 2 and 1."""
+    tip, fibres = _bent(spacing)
+    assert abs(tip - 1) < 0.05, tip
+    for f in fibres:
+        assert abs(f - 1) < 0.10, fibres
+    for other in (2.0, 1.0):
+        assert abs(tip / _bent(other)[0] - 1) < 0.05, (spacing, other)
+
+
+PLATE = """
+name = "plate"
+units = "mm-N-s"
+analysis = "static"
+[[group]]
+name = "p"
+fill = {{ box = {{ min = [0, 0, 0], max = [14, 20, 3] }} }}
+spacing = 0.7
+origin = [0, 0.35, {oz}]
+material = "aluminium"
+[[support]]
+on = "p"
+where = {{ box = {{ min = [-0.01, -1, -1], max = [0.01, 21, 4] }} }}
+"""
+
+
+@pytest.mark.parametrize("oz", [0.35, 0.2])
+def test_a_plate_is_as_stiff_as_its_own_thickness(oz, tmp_path):
+    """A 3 mm plate at spacing 0.7 is 4 layers (2.8 mm) or 5 (3.5 mm), as the lattice falls.
+    Its bindings' stiffness in tension along x, Σ k·ℓ²·n_x⁴ over the bindings, is C11·V = 3k/a
+    × 14 × 20 × 3 mm³ (DESIGN §6: C11 = 3k/a) — the plate's own volume, not n·a's."""
+    from rackstress.model.operators import Bind
+
+    f = tmp_path / "plate.toml"
+    f.write_text(PLATE.format(oz=oz))
+    sc = load_toml(f)
+    g = sc.groups["p"]
+    (op,) = [x for x in sc.operators["p"] if isinstance(x, Bind)]
+    pl = op.pairs(g, g)
+    keep = pl.i < pl.j
+    d = g.o[pl.j[keep]] - g.o[pl.i[keep]]
+    w = pl.c[keep] / op.coeff.c                     # k in units of the bulk binding's
+    layers = len(np.unique(g.o[:, 2]))
+    assert layers == {0.35: 4, 0.2: 5}[oz]
+    S = float(np.sum(w * d[:, 0] ** 4 / np.einsum("ij,ij->i", d, d)))
+    assert abs(S / (3 / 0.7 * 14 * 20 * 3.0) - 1) < 0.002, S
+
+
 @pytest.mark.parametrize("spacing", [2.0, 1.0])
 def test_loads_do_not_change_with_spacing(spacing, tmp_path):
     """A total force is shared by the selected particles; a pressure is p × the face's area."""

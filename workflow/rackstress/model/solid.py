@@ -19,6 +19,12 @@ face layer is softer than the bulk (a bar of N particles across is 2/(3N) too so
 about the face, so a bar of any N is as stiff as the continuum: measured in
 docs/calibration.md, the cantilever's tip deflection agrees at spacings 2, 1 and 0.5 mm.
 
+A wall is rarely a whole number of spacings thick: each boundary particle's cell is its own
+share of the part (:func:`axis_fractions`, from the part's shape), and the bindings in a face
+layer are weighted so the layer is as stiff as that share (:func:`fraction_weights`, derived
+in docs/calibration.md "Walls of any thickness"): the cantilever's 10 mm at spacing 0.7
+(14.3 layers) or 1.5 (6.7) bends as 10 mm, not as n·a.
+
 Example
 -------
 >>> from rackstress.model.materials import material
@@ -28,7 +34,7 @@ Example
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -45,6 +51,13 @@ LATTICE_NU = 0.25
 FACE_SHARE = 0.25
 #: the last inside test of each Solid (by id): its pairs are asked for several times per run
 _INSIDE: dict = {}
+#: the last boundary fractions of each Solid (by id)
+_FRACTIONS: dict = {}
+#: bisection steps finding a free face's distance along an axis (precision a / 2**steps)
+FACE_STEPS = 8
+#: distinct binding weights of a solid at most: the plugin gives each its own bond type and
+#: fix (engines/lammps/deck.py MAX_PAIR_TYPES)
+WEIGHT_LEVELS = 16
 #: bind reach of a solid, in spacings: the 18 neighbours of the cubic lattice (1 and √2)
 REACH = 1.5
 
@@ -67,6 +80,9 @@ class Solid(WithinInside):
 
     spacing: float = 1.0
     material: str = ""
+    #: the part's own shape (also for a convex one, whose ``region`` is None): the boundary
+    #: cells' fractions (:func:`axis_fractions`) come from it; None: every cell is whole
+    part: object = field(default=None, compare=False, repr=False)
 
     def label(self) -> str:
         return (f"solid {self.material} within({self.d:g}) inside the part magnitude "
@@ -96,8 +112,24 @@ class Solid(WithinInside):
 
     def weights(self, o: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
         """Per-binding factor on c: 1, plus ½ for each missing second-neighbour binding whose
-        mirror about a free face this binding is (module doc)."""
-        return face_weights(o, i, j, self.spacing)
+        mirror about a free face this binding is (module doc), times the boundary cells'
+        thickness factor (:func:`fraction_weights`) when the part's shape is known."""
+        w = face_weights(o, i, j, self.spacing)
+        if self.part is not None:
+            w = levels(w * fraction_weights(o, i, j, self.fractions(o), self.spacing))
+        return w
+
+    def fractions(self, o: np.ndarray) -> np.ndarray:
+        """:func:`axis_fractions` of the particles ``o`` in ``part`` (remembered per positions)."""
+        import hashlib
+
+        o = np.ascontiguousarray(o, dtype=float)
+        key = ("fractions", hashlib.sha1(o.tobytes()).hexdigest())
+        cache = _FRACTIONS.setdefault(id(self), {})
+        if key not in cache:
+            cache.clear()
+            cache[key] = axis_fractions(o, self.spacing, self.part)
+        return cache[key]
 
 
 def face_weights(o: np.ndarray, i: np.ndarray, j: np.ndarray, spacing: float) -> np.ndarray:
@@ -164,3 +196,114 @@ _DIAGONALS = [d for d in ((x, y, z) for x in (-1, 0, 1) for y in (-1, 0, 1) for 
 def _dir_index(d) -> np.ndarray:
     d = np.asarray(d, dtype=np.int64).reshape(-1, 3)
     return (d[:, 0] + 1) * 9 + (d[:, 1] + 1) * 3 + (d[:, 2] + 1)
+
+
+def axis_fractions(o: np.ndarray, spacing: float, part) -> np.ndarray:
+    """Each particle's cell extent along x, y and z in spacings (n, 3): what its cell of the
+    part really is (docs/calibration.md "Walls of any thickness").
+
+    A particle owns the part's points nearer to it than to any other particle. Along an axis
+    on which both lattice neighbours are particles that is ±a/2: φ = 1. Where a neighbour is
+    missing (its site is outside the part) the cell reaches the part's surface, at the distance
+    t ∈ [0, a) along that axis found by bisection on ``part.mask``; so φ = (e⁻ + e⁺)/a with
+    e = a/2 or t on each side. A wall of thickness t_w filled with n layers then adds up to
+    Σ φ·a = t_w whatever t_w/a is, where the lattice alone represents n·a.
+    """
+    a = float(spacing)
+    o = np.asarray(o, dtype=float)
+    lo = o.min(axis=0)
+    g = np.rint((o - lo) / a).astype(np.int64)
+    if np.abs(g * a + lo - o).max() > 1e-6 * a:
+        raise SceneError("a solid's boundary cells need its particles on one cubic lattice "
+                         "(packing = \"cubic\")")
+    dims = g.max(axis=0) + 3
+    occ = np.zeros(tuple(dims), dtype=bool)
+    occ[g[:, 0] + 1, g[:, 1] + 1, g[:, 2] + 1] = True
+    ext = np.full((len(o), 3), a)
+    for ax in range(3):
+        for sgn in (1, -1):
+            e = np.zeros(3, dtype=np.int64)
+            e[ax] = sgn
+            nb = g + 1 + e
+            free = np.flatnonzero(~occ[nb[:, 0], nb[:, 1], nb[:, 2]])
+            if not len(free):
+                continue
+            step = np.zeros(3)
+            step[ax] = sgn * a
+            lo_t, hi_t = np.zeros(len(free)), np.ones(len(free))
+            for _ in range(FACE_STEPS):        # inside at lo_t, outside at hi_t (in spacings)
+                mid = 0.5 * (lo_t + hi_t)
+                ins = np.asarray(part.mask(o[free] + mid[:, None] * step), dtype=bool)
+                lo_t = np.where(ins, mid, lo_t)
+                hi_t = np.where(ins, hi_t, mid)
+            ext[free, ax] += (0.5 * (lo_t + hi_t) - 0.5) * a
+    return ext / a
+
+
+def fraction_weights(o: np.ndarray, i: np.ndarray, j: np.ndarray, phi: np.ndarray,
+                     spacing: float) -> np.ndarray:
+    """The factor on each binding (i, j) that makes a boundary layer as stiff as the slab of
+    the part it stands for (docs/calibration.md "Walls of any thickness").
+
+    For a free face normal to axis n, with the face compensation, the face layer of a cubic
+    lattice carries 1.5 k·a² of membrane stiffness per particle (energy/ε²): 0.75 from its
+    nearest bindings in the face, 0.5 from its diagonals in the face and 0.25 from its half
+    of the diagonals to the layer below. Those to the layer below span a gap that is all
+    material: they keep their weight. The layer's cell is φ_n·a thick, so the bindings in it
+    carry 1.5·φ_n − 0.25: its diagonals take φ_n (then its in-face shear, all theirs, is
+    exact too) and its nearest bindings h = (4·φ_n − 1)/3. A binding lying in the face of
+    several axes (an edge) takes the product; φ_n of a pair is its ends' mean.
+    """
+    a = float(spacing)
+    d = np.rint((o[j] - o[i]) / a).astype(np.int64)
+    ones = (d != 0).sum(axis=1)
+    w = np.ones(len(i))
+    for ax in range(3):
+        f = 0.5 * (phi[i, ax] + phi[j, ax])
+        along = d[:, ax] == 0
+        nearest = np.maximum((4.0 * f - 1.0) / 3.0, 0.25 * f)
+        w = np.where(along, w * np.where(ones == 1, nearest, f), w)
+    return w
+
+
+def levels(w: np.ndarray, k: int = WEIGHT_LEVELS) -> np.ndarray:
+    """``w`` with at most ``k`` distinct values: the most common value (the interior's 1) kept
+    exact, the others (first rounded to 4 significant digits) split into k − 1 clusters by
+    optimal 1D k-means (dynamic programming over the sorted values, weighted by their counts),
+    each replaced by its cluster's weighted mean so each cluster's summed stiffness is kept.
+    Unchanged when it has ``k`` values or fewer."""
+    vals, inv, cnt = np.unique(w, return_inverse=True, return_counts=True)
+    if len(vals) <= k:
+        return w
+    mode = int(np.argmax(cnt))
+    rest = np.flatnonzero(np.arange(len(vals)) != mode)
+    r = np.asarray([float(f"{x:.4g}") for x in vals[rest]])
+    rv, rinv = np.unique(r, return_inverse=True)
+    rc = np.bincount(rinv, weights=cnt[rest])
+    n, m = len(rv), min(k - 1, len(rv))
+    S1 = np.r_[0.0, np.cumsum(rc * rv)]
+    S2 = np.r_[0.0, np.cumsum(rc * rv * rv)]
+    C = np.r_[0.0, np.cumsum(rc)]
+
+    def cost(a, b):        # clusters rv[a:b] (arrays a, scalar b): weighted sum of squares
+        s1, s2, c = S1[b] - S1[a], S2[b] - S2[a], C[b] - C[a]
+        return s2 - s1 * s1 / c
+
+    D = np.full((m + 1, n + 1), np.inf)
+    arg = np.zeros((m + 1, n + 1), dtype=np.int64)
+    D[0, 0] = 0.0
+    for q in range(1, m + 1):
+        for b in range(q, n + 1):
+            a = np.arange(q - 1, b)
+            tot = D[q - 1, a] + cost(a, b)
+            t = int(np.argmin(tot))
+            D[q, b], arg[q, b] = tot[t], a[t]
+    label, b = np.empty(n, dtype=np.int64), n
+    for q in range(m, 0, -1):
+        a = arg[q, b]
+        label[a:b] = q - 1
+        b = a
+    centre = np.bincount(label, weights=rc * rv) / np.bincount(label, weights=rc)
+    out = vals.copy()
+    out[rest] = centre[label[rinv]]
+    return out[inv.reshape(-1)]

@@ -117,9 +117,23 @@ def write_bindings(scene: Scene, path: Path) -> int:
         return 0
     idx = np.int32 if scene.n_particles < 2 ** 31 else np.int64
     tmp = path.with_name(f".{path.name}.tmp.npz")
-    np.savez(tmp, i=b[0].astype(idx), j=b[1].astype(idx), k=b[2], L0sq=b[3])
+    np.savez(tmp, i=b[0].astype(idx), j=b[1].astype(idx), k=b[2], L0sq=b[3],
+             V=volumes_of(scene))
     tmp.replace(path)
     return len(b[0])
+
+
+def volumes_of(scene: Scene) -> np.ndarray:
+    """Each particle's volume in global order: a material part's cell share of the part
+    (``Group.volume`` × its boundary fraction, docs/calibration.md), NaN elsewhere."""
+    V = np.full(scene.n_particles, np.nan)
+    for name, g in scene.groups.items():
+        if g.material is None or g.volume is None:
+            continue
+        f = g.meta.get("fraction") if isinstance(g.meta, dict) else None
+        k = scene.offset(name)
+        V[k:k + g.n] = g.volume * (1.0 if f is None else np.asarray(f))
+    return V
 
 
 def bindings_of(scene: Scene):

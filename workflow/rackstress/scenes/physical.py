@@ -122,8 +122,11 @@ def solids(ctx, groups: dict, operators: dict, u) -> dict:
         if isinstance(shape, (Box, Sphere, Cylinder)):
             shape = None          # convex: no binding between two inside points leaves it
         c = bind_coefficient(g.material, u, a)
-        out.setdefault(name, []).insert(0, Bind(name, Solid(REACH * a, c, shape, spacing=a,
-                                                            material=g.material.name)))
+        solid = Solid(REACH * a, c, shape, spacing=a, material=g.material.name,
+                      part=info["shape"])
+        out.setdefault(name, []).insert(0, Bind(name, solid))
+        if info["shape"] is not None:       # each cell's share of the part (stress volume)
+            g.meta["fraction"] = solid.fractions(g.o).prod(axis=1)
         g.meta.pop("solid")
         g.meta["spacing"] = a
     return {name: out[name] for name in groups if name in out}

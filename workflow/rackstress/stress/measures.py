@@ -611,11 +611,13 @@ class ParticleStress(_RunAnalysis):
             self._W2S = None
             self._mask[:] = False
             return
-        self._V = V
+        Vi = read_volumes(run)               # each cell's own share of the part, if written
+        self._V = V if Vi is None else np.where(np.isfinite(Vi) & self._mask, Vi, V)
         self._gather = T.incidence(b[0], n)
         self._wm = None
         if self.method == "completed":
             A = T.binding_moment(run.o, b[0], b[1], b[2], n)
+            # the interior's stiffness per whole cell (a boundary cell's own share is not it)
             self._W2S = T.completion(A, V, [p.index for p in mine])
         else:
             self._W2S = None
@@ -645,6 +647,21 @@ class ParticleStress(_RunAnalysis):
         bs[~self._mask] = np.nan
         self.results.bind_strain[k] = bs
         return vm
+
+
+def read_volumes(run):
+    """Each particle's volume from the run's ``bindings.npz`` (``V``: the boundary cells' own
+    share of the part, docs/calibration.md), or None for a file without it."""
+    from rackstress.lib.runfiles import BINDINGS
+
+    path = Path(run.rundir) / BINDINGS
+    if not path.is_file():
+        return None
+    with np.load(path, allow_pickle=False) as z:
+        if "V" not in z.files:
+            return None
+        V = z["V"].astype(np.float64)
+    return V if len(V) == run.n_atoms else None
 
 
 def read_bindings(run):

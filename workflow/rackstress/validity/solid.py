@@ -21,9 +21,14 @@ part?" with an independent solution of the same problem:
 
 Agreement (:func:`agreement`): Spearman ρ and top-5 % overlap of the particle measure against
 FEA's σ_vm at the particles' original positions (:func:`rackstress.validity.compare.agreement`),
-and the peak ratio *away from singular points*: particles within two spacings of a re-entrant
-(concave) edge of the FE boundary, of a held or of a loaded particle are left out of the peaks
-(σ is unbounded there in the continuum, so a peak ratio means nothing). A ``strain`` measure
+and the peak ratio *away from singular points*: particles within one wall thickness t of a
+re-entrant (concave) edge of the FE boundary, of a held or of a loaded particle are left out of
+the peaks. σ is unbounded at a sharp re-entrant edge and under a concentrated load or support
+in the continuum, so a peak there measures the mesh, not the part; by Saint-Venant's principle
+such a local disturbance has decayed about one thickness of the member away, where both
+models converge. t is the part's own (:func:`wall_thickness`: the median over the particles of
+the shortest chord through the part along x, y or z), so the same points are compared at every
+spacing. A ``strain`` measure
 (von Mises shear strain η) is turned into stress by σ_vm = 2√3·G·η (exact for isotropic linear
 elasticity: both are √J₂ of the deviator), G = E / 2(1 + ν).
 
@@ -44,9 +49,10 @@ from pathlib import Path
 
 import numpy as np
 
-#: Singular points: particles this many spacings from a re-entrant edge, a support or a load
-#: are left out of the peak ratio.
-SINGULAR_SPACINGS = 2.0
+#: Singular points: particles nearer than this many of the part's wall thickness
+#: (:func:`wall_thickness`) to a re-entrant edge, a support or a load are left out of the peak
+#: ratio — Saint-Venant's distance, a length of the part's own, the same at every spacing.
+SINGULAR_WALLS = 1.0
 #: An FE boundary edge is re-entrant when its dihedral angle is concave by more than this.
 CONCAVE_DEG = 20.0
 #: Targets of issue 22 (3D part against tetrahedral FEA).
@@ -416,10 +422,45 @@ def concave_edges(p: np.ndarray, t: np.ndarray) -> np.ndarray:
     return tm.vertices[e].mean(axis=1) if len(adj) else np.zeros((0, 3))
 
 
-def agreement(values: np.ndarray, fea_vm: np.ndarray, points: np.ndarray, spacing: float,
+def wall_thickness(o: np.ndarray, spacing: float, shape=None) -> float:
+    """The part's wall thickness: the median over its particles of the shortest chord through
+    the part along x, y or z. A chord is a run of lattice neighbours, each cell counted with its
+    share of the part along that axis (:func:`rackstress.model.solid.axis_fractions`, when the
+    ``shape`` is known), so it is the part's own length, not a whole number of spacings.
+
+    >>> o = np.array([[x, y, z] for x in range(20) for y in range(3) for z in range(8)], float)
+    >>> wall_thickness(o, 1.0)                  # a 20 × 3 × 8 plate of cells: 3 thick
+    3.0
+    """
+    a = float(spacing)
+    o = np.asarray(o, float)
+    g = np.rint((o - o.min(axis=0)) / a).astype(np.int64)
+    if shape is not None:
+        from rackstress.model.solid import axis_fractions
+
+        phi = axis_fractions(o, a, shape)
+    else:
+        phi = np.ones((len(o), 3))
+    chord = np.full(len(o), np.inf)
+    for ax in range(3):
+        other = [k for k in range(3) if k != ax]
+        order = np.lexsort((g[:, ax], g[:, other[1]], g[:, other[0]]))
+        gs = g[order]
+        new = np.r_[True, np.any(gs[1:, other] != gs[:-1, other], axis=1)
+                    | (gs[1:, ax] != gs[:-1, ax] + 1)]
+        run = np.cumsum(new) - 1
+        length = np.bincount(run, weights=phi[order, ax]) * a
+        c = np.empty(len(o))
+        c[order] = length[run]
+        chord = np.minimum(chord, c)
+    return float(np.median(chord))
+
+
+def agreement(values: np.ndarray, fea_vm: np.ndarray, points: np.ndarray, zone: float,
               singular: np.ndarray, to_stress: float | None = None) -> dict:
     """ρ, top-5 % overlap (:func:`rackstress.validity.compare.agreement`) and the peak ratio
-    away from ``singular`` points (k×3): particle peak × ``to_stress`` / FEA peak."""
+    away from ``singular`` points (k×3), those within ``zone`` (a length: SINGULAR_WALLS ×
+    :func:`wall_thickness`) left out: particle peak × ``to_stress`` / FEA peak."""
     from scipy.spatial import cKDTree
 
     from rackstress.validity.compare import agreement as ranks
@@ -428,8 +469,9 @@ def agreement(values: np.ndarray, fea_vm: np.ndarray, points: np.ndarray, spacin
     away = np.ones(len(points), dtype=bool)
     if len(singular):
         d, _ = cKDTree(singular).query(points)
-        away = d > SINGULAR_SPACINGS * spacing
+        away = d > zone
     out["n_away"] = int(away.sum())
+    out["zone"] = float(zone)
     if to_stress is not None and away.any():
         pv, fv = float(np.nanmax(values[away])) * to_stress, float(np.nanmax(fea_vm[away]))
         out.update(peak_particle=pv, peak_fea=fv, peak_ratio=pv / fv)
@@ -637,7 +679,8 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
     to_stress = 1.0 if mname == "von_mises" else (2 * math.sqrt(3) * G if mat or E else None)
     singular = np.concatenate([concave_edges(sol.mesh.p, sol.mesh.t), g.o[hk[hin]],
                                g.o[lk[lin]]])
-    agree = agreement(values, res["von_mises"], g.o, spacing, singular, to_stress)
+    zone = SINGULAR_WALLS * wall_thickness(g.o, spacing, shape)
+    agree = agreement(values, res["von_mises"], g.o, zone, singular, to_stress)
     F_tot = np.asarray(bnd["load_force"], float)[lin].sum(axis=0)
     data = {
         "group": name, "particles": int(g.n), "spacing": spacing, "measure": mname,
@@ -659,7 +702,7 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
     _write_outputs(rundir, g.o, values, mname, res, disp, sol, data)
     if keep:          # for a benchmark's other stress routes: the same points and FEA field
         data.update(_o=g.o, _fea_vm=res["von_mises"], _singular=singular, _values=values,
-                    _slice=sl)
+                    _slice=sl, _zone=zone)
     return data
 
 
