@@ -625,8 +625,8 @@ def runner_markdown(data: dict) -> list[str]:
           "the Python callback). Each chunk is a `run N pre no post no` (LAMMPS: two barriers "
           "and a reduction of its loop time) and the runner's checks (the plugin's first "
           "non-finite step, a reduction; the watchdog's gather; two agreements on the "
-          "callback's state). 120 chunks cost 0.02–0.03 s of 0.25 s on one rank and "
-          "0.04 s of 0.32 s on two; 12 cost what one `run 1200` costs, within noise. The "
+          "callback's state). 120 chunks cost 0.01–0.03 s of 0.23–0.25 s on one rank "
+          "and 0.03–0.04 s of 0.28–0.32 s on two; 12 cost what one `run 1200` costs, within noise. The "
           "plugin's styles name a non-finite term's step themselves, so the watchdog's bound "
           "is what the checks still look for.",
           "- **`newton off` on plugin decks without a pair style** (`deck.plugin_setup_commands`)."
@@ -644,26 +644,31 @@ def runner_markdown(data: dict) -> list[str]:
           "MPI, 2 ranks: 2.81 / 2.75 ms → 2.24 / 1.97 ms (one rank: 3.2–3.5 ms; load 8–13).",
           "- **The weight of a moving particle** (20) was re-measured after round 8's speed "
           "work: 10, 20, 40 and 80 give the same split of CPU time (rank 0 0.16–0.17 s, rank 1 "
-          "0.12–0.13 s per 1,200 iterations). The cut is through the robot either way; what is "
+          "0.11–0.13 s per 1,200 iterations). The cut is through the robot either way; what is "
           "uneven is the legs' contact with the sediment, which a particle count does not see. "
           "It stays 20.",
           "",
-          "**What limits it, measured** (2 ranks, all three changes; CPU seconds per 1,200 "
-          "iterations): the busiest rank works 0.16–0.17 s outside MPI, the other 0.12–0.13 s, "
-          "against 0.21–0.23 s on one rank: two ranks do 0.27–0.30 s of work between them, "
-          "+30 % (their ghost and rack gathers, forward communication's packing). Inside MPI "
-          "the busiest rank still spends 0.045 s a run: per step one forward exchange of the "
-          "ghosts' positions and three reductions (LAMMPS' displacement check and the plugin's "
-          "two fused ones), ~37 µs a step on this machine, against a step of ~0.18 ms on one "
-          "rank. So the best two ranks can do on MagPod is ~1.1–1.2x: the work split is "
-          "0.21/0.17, and a fifth of what is saved goes to the meetings. Folding LAMMPS' "
-          "displacement check into the plugin's first reduction (predicting each atom's next "
-          "position) and the rack's reverse sums into the positions' reduction (each rank "
-          "integrating the six rack particles itself) would leave one meeting a step; neither "
-          "is done. Under load a 2-rank run loses far more than that: MPICH's ranks poll while "
-          "they wait, and with the load above 2 cores each meeting waits for the scheduler "
-          "(2-rank wall times of 0.9–5 s for 1,200 MagPod iterations were seen at load 3–7, "
-          "against 0.25–0.5 s on one rank). MPICH's yield settings (`MPIR_CVAR_ENABLE_HEAVY_YIELD`,"
+          "**What limits it, measured** (2 ranks, all of the above; CPU seconds per 1,200 "
+          "MagPod iterations, from the table above and the shim runs): the busiest rank works "
+          "0.17–0.18 s outside MPI, the other 0.12–0.13 s, against 0.23 s on one rank at low "
+          "load (more under load: caches and the cores are shared). Two ranks do ~0.30 s of "
+          "work between them, +30 % (ghosts, the racks' gathers, packing the forward "
+          "exchange). The busiest rank also spends ~0.045 s inside MPI (load ~2): per step one "
+          "forward exchange of the ghosts' positions and three reductions (LAMMPS' "
+          "displacement check and the plugin's two fused ones), ~37 µs, against a step of "
+          "~0.18 ms on one rank. So two ranks can do ~1.1x on MagPod, and did at load ~2 "
+          "(0.216 s against 0.242 s, and 0.203 against 0.231 in one `run`, interleaved). "
+          "sediment-large's bound is larger (~1.4–1.7x: 3.0 ms of work a step on one rank, "
+          "1.7–2.2 ms on the busier of two), since its work is the million resting particles' "
+          "share of each reneighbouring, which divides. Folding LAMMPS' displacement check "
+          "into the plugin's first reduction (predicting each atom's next position) and the "
+          "rack's reverse sums into the positions' reduction (each rank integrating the six "
+          "rack particles itself) would leave one meeting a step; neither is done. Under load "
+          "a 2-rank run loses far more than that: MPICH's ranks poll while they wait, and with "
+          "the load above the 2 cores each meeting waits for the scheduler (the wall times in "
+          "the table above at load 10–15; 2-rank wall times of 0.9–5 s for 1,200 MagPod "
+          "iterations were seen at load 3–7, against 0.25–0.5 s on one rank). MPICH's yield "
+          "settings (`MPIR_CVAR_ENABLE_HEAVY_YIELD`,"
           " `MPIR_CVAR_POLLS_BEFORE_YIELD=100`) made that worse (2.4–3.5 s against 1.0–1.4 s).",
           ""]
     return L
@@ -773,9 +778,9 @@ def markdown(data: dict) -> str:
                       for n, c in own) + f". The decks weigh a moving particle "
                   f"{MOVE_WEIGHT_DOC}. A resting particle is not free: fix viscous and "
                   "addforce, force clearing and the displacement check pass over every owned "
-                  "atom, the contact search over every atom at each reneighbouring (on a "
-                  "million, out of cache); styles that pass over the moving rows only would "
-                  "shrink b and raise that weight.", ""]
+                  "atom in a standalone deck (`rackstress run` adds `neigh_modify include "
+                  "rs_move`), and LAMMPS' own reneighbouring (exchange, atom map, box) over "
+                  "every atom, on a million out of cache.", ""]
     for name, s in data["scenes"].items():
         L += [f"## {name}: {s['n_particles']:,} particles, ghost cutoff {s['ghost_cutoff']:.2f}",
               "", f"- best 2-rank / 1-rank wall-time ratio measured here: {s['speed_up_2']:.2f}x",
