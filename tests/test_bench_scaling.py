@@ -70,3 +70,19 @@ def test_moving_costs_from_the_cpu_split_by_least_squares():
     data = {"scenes": {"magpod": {"cpu_split": split, "runs": []}}}
     assert scaling._moving_costs(data) == pytest.approx((a, b), rel=1e-9)
     assert data["costs_from"].startswith("the CPU split")
+
+
+def test_runner_rows_report_each_rank_outside_mpi(tmp_path):
+    """``rackstress run``'s path on 2 ranks (bench.perf's worker, the plugin) with the PMPI shim
+    preloaded: each rank reports its CPU time outside MPI, read from the shim; without the shim
+    the worker says that its figure is thread CPU time."""
+    from rackstress.bench.scaling import _runner, _shim
+
+    shim = _shim(tmp_path)
+    assert shim is not None          # cc and the mpich wheel's mpi.h are part of the test set-up
+    r = _runner("magpod-small", 20, 2, shim)
+    assert r["ranks"] == 2 and r["plugin"] and r["outside_mpi"]
+    assert len(r["work_s_per_rank"]) == 2 and all(w > 0 for w in r["work_s_per_rank"])
+    assert r["s_per_step"] > 0
+    plain = _runner("magpod-small", 20, 1, None)
+    assert plain["outside_mpi"] is False and len(plain["work_s_per_rank"]) == 1

@@ -225,10 +225,11 @@ bool RackStress::in_first(LAMMPS *lmp, int bit)
 }
 
 /* every owned target with `tbit` and every owned or ghost source with `sbit`, and the largest
-   radius of each side; whether later builds may pass over the moving rows only: serially, with
-   no ghosts, when one side lies wholly in the first group (atoms outside it rest, and two
-   resting atoms never form a pair anything needs: neither is integrated, a resting target is
-   activated only by a moving source) */
+   radius of each side; whether later builds may pass over the moving rows only: when one side
+   lies wholly in the first group (atoms outside it rest, and two resting atoms never form a pair
+   anything needs: neither is integrated, a resting target is activated only by a moving source).
+   Under MPI the ghosts are few (a shell one cutoff thick): later builds take every ghost source
+   and the owned resting atoms near the moving owned and ghost rows (collect_moving). */
 void Contacts::collect_full(LAMMPS *lmp, int tbit, int sbit, const double *radius, int actbit,
                             std::vector<int> &tcand, std::vector<int> &scand)
 {
@@ -252,20 +253,23 @@ void Contacts::collect_full(LAMMPS *lmp, int tbit, int sbit, const double *radiu
       if (!(m & firstbit)) s_first = false;
     }
   }
-  fast = firstbit && lmp->comm->nprocs == 1 && atom->nghost == 0 &&
-      (actbit == 0 || actbit == firstbit) && (t_first || s_first);
+  fast = firstbit && (actbit == 0 || actbit == firstbit) && (t_first || s_first);
   registry[lmp].rest.valid = false;    // a setup: the resting atoms are binned again when asked
 }
 
-/* the moving rows [0, nfirst) of each side, and the resting atoms of a side within `cut` of
-   the other side's moving rows (from the grid of resting atoms) */
+/* the moving rows [0, nfirst) of each side, every ghost source, and the owned resting atoms of
+   a side within `cut` of the other side's moving rows, owned or ghost (from the grid of owned
+   resting atoms: they never move, so they stay on this rank and in their cells until a setup;
+   a ghost's mask is its owner's at the last reneighbouring, and an atom activated since cannot
+   move before the next one) */
 void Contacts::collect_moving(LAMMPS *lmp, int tbit, int sbit, std::vector<int> &tcand,
                               std::vector<int> &scand, double cut)
 {
   Atom *atom = lmp->atom;
   double **x = atom->x;
   int *mask = atom->mask;
-  int nfirst = atom->nfirst, nlocal = atom->nlocal;
+  int nfirst = atom->nfirst, nlocal = atom->nlocal, nall = nlocal + atom->nghost;
+  int firstbit = lmp->group->bitmask[atom->firstgroup];
   double tlo[3] = {INFINITY, INFINITY, INFINITY}, thi[3] = {-INFINITY, -INFINITY, -INFINITY};
   double slo[3] = {INFINITY, INFINITY, INFINITY}, shi[3] = {-INFINITY, -INFINITY, -INFINITY};
   for (int j = 0; j < nfirst; j++) {
@@ -284,6 +288,19 @@ void Contacts::collect_moving(LAMMPS *lmp, int tbit, int sbit, std::vector<int> 
         shi[d] = std::max(shi[d], x[j][d]);
       }
     }
+  }
+  // ghosts (none serially): every source is a candidate; a moving one also widens the box
+  // around which the owned resting targets are taken (a ghost is never a target: targets are
+  // owned)
+  for (int j = nlocal; j < nall; j++) {
+    int m = mask[j];
+    if (!(m & sbit)) continue;
+    scand.push_back(j);
+    if (m & firstbit)
+      for (int d = 0; d < 3; d++) {
+        slo[d] = std::min(slo[d], x[j][d]);
+        shi[d] = std::max(shi[d], x[j][d]);
+      }
   }
   RestGrid &g = registry[lmp].rest;
   if (!g.valid) {
@@ -422,7 +439,7 @@ int Contacts::build(LAMMPS *lmp, int tbit, int sbit, const double *radius, int a
   rows.clear();
   near_valid = false;
   std::vector<int> src, tcand, scand;
-  if (full || !fast || atom->nghost != 0 || !atom->firstgroupname)
+  if (full || !fast || !atom->firstgroupname)
     collect_full(lmp, tbit, sbit, radius, actbit, tcand, scand);
   else
     collect_moving(lmp, tbit, sbit, tcand, scand, tmax_all + smax_all + wide);

@@ -116,7 +116,8 @@ namespace RackStress {
     std::vector<int> first, partner;    // CSR: partners of target i (owned rows)
     std::vector<int> rows;              // the owned target rows
     //! `full` (a fix's setup): pass over every owned and ghost atom; otherwise, where
-    //! :func:`resting_ok` allows, over the moving rows and the resting atoms near them only
+    //! one side lies in the first group, over the moving rows, the ghosts and the owned
+    //! resting atoms near the moving ones only (collect_moving; serial or MPI)
     int build(LAMMPS *lmp, int tbit, int sbit, const double *radius, int actbit = 0,
               bool full = true);
 

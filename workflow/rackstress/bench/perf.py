@@ -127,6 +127,24 @@ def build_scene(name: str):
     return scenes.build(base, **parse_overrides(sets.split(",") if sets else ()))
 
 
+def _no_shim() -> float:
+    return 0.0
+
+
+def _mpi_inside():
+    """The thread CPU seconds spent inside MPI calls so far, read from bench.scaling's PMPI shim
+    (``rs_mpi_cpu_inside``) when it is preloaded (LD_PRELOAD); else a function returning 0."""
+    import ctypes
+
+    try:
+        fn = ctypes.CDLL(None).rs_mpi_cpu_inside
+    except (AttributeError, OSError):
+        return _no_shim
+    fn.restype = ctypes.c_double
+    fn.argtypes = []
+    return fn
+
+
 def worker(engine: str, mode: str, steps: int, profile_steps: int, scene_name: str) -> dict:
     """One configuration, in this process (all ranks of COMM_WORLD); rank 0 returns the result."""
     sc = build_scene(scene_name).with_steps(steps)
@@ -160,13 +178,17 @@ def worker(engine: str, mode: str, steps: int, profile_steps: int, scene_name: s
         res["kernels"], res["kernel_warm"] = runner.py.kernels, runner.py.warm
         runner.py = TimedCallback(runner.py)
     res["setup_s"] = time.perf_counter() - t0
+    inside = _mpi_inside()
     comm.Barrier()
     t0, c0 = time.perf_counter(), time.process_time()
+    w0, in0 = time.thread_time(), inside()
     drive(runner)
     cpu = time.process_time() - c0
+    work = time.thread_time() - w0 - (inside() - in0)
     comm.Barrier()
     res["wall_s"] = time.perf_counter() - t0
     all_cpu = comm.gather(cpu, root=0)
+    all_work = comm.gather(work, root=0)
     cb = runner.py.seconds if runner.py is not None else 0.0
     calls = runner.py.calls if runner.py is not None else 0
     # LAMMPS' own breakdown of one more chunk, logged to a temporary file
@@ -196,7 +218,10 @@ def worker(engine: str, mode: str, steps: int, profile_steps: int, scene_name: s
     if comm.Get_rank() != 0:
         return {}
     res.update(ranks=comm.Get_size(), maxrss_mb=max(all_rss), maxrss_sum_mb=sum(all_rss),
-               cpu_s=max(all_cpu),
+               cpu_s=max(all_cpu), cpu_s_per_rank=all_cpu,
+               # with bench.scaling's PMPI shim preloaded: each rank's thread CPU time outside
+               # MPI calls (its own work, whatever the load); else its thread CPU time
+               work_s_per_rank=all_work, work_outside_mpi=inside is not _no_shim,
                callback_s_per_rank=all_cb, callback_calls=all_calls[0],
                callback_share=max(all_cb) / res["wall_s"] if res["wall_s"] else None,
                breakdown=breakdown, python_operators=[f"{r.target} <- {r.op.kind}"

@@ -29,7 +29,9 @@ class Engine(Protocol):
     step_count : int
         Steps done so far (the iteration counter of Eq. 5).
     check_every : int
-        Steps between watchdog checks: 1 on the reference engine, 10 on LAMMPS.
+        Steps between watchdog checks: 1 on the reference engine, 10 on LAMMPS with the
+        Python callback, 100 with the plugin alone (its styles name a non-finite term's step
+        themselves).
     root : bool
         Whether this process is rank 0 of the engine's ranks (writes records and files).
     """

@@ -2,10 +2,11 @@
 
 ``rackstress run``, ``--resume``, ``batch``, the benchmarks, the scripts and the tests all call
 :func:`drive`: every phase of every cycle (the schedule is generated lazily, so any number of
-steps costs nothing up front), each phase's steps in chunks of ``engine.check_every`` with the
-watchdog after each chunk, the progress bar, a :class:`~rackstress.model.scene.PhaseEnd` record
-at each phase end (what a scene's ``report`` reads), checkpoints, and the frame of the last step
-(written even when the number of steps is not a multiple of the dump interval).
+steps costs nothing up front), each phase's steps in chunks of ``engine.check_every`` (cut at
+each checkpoint's step) with the watchdog after each chunk, the progress bar, a
+:class:`~rackstress.model.scene.PhaseEnd` record at each phase end (what a scene's ``report``
+reads), checkpoints, and the frame of the last step (written even when the number of steps is
+not a multiple of the dump interval).
 """
 from __future__ import annotations
 
@@ -71,6 +72,7 @@ def drive(engine, *, progress=None, on_phase_end=None, checkpoint=None, resume=N
     """
     scene = engine.scene
     every = int(check_every or engine.check_every)
+    ck_every = int(getattr(checkpoint, "every", 0) or 0)
     last = None
     try:
         for k, (_, phase, cycle) in enumerate(scene.schedule()):
@@ -87,6 +89,8 @@ def drive(engine, *, progress=None, on_phase_end=None, checkpoint=None, resume=N
                 engine.enter_phase(phase.vars)
             while left > 0:
                 n = min(every, left)
+                if ck_every:        # a chunk ends at each checkpoint's step, however long
+                    n = min(n, ck_every - engine.step_count % ck_every)
                 engine.advance(n)
                 engine.check()
                 left -= n

@@ -913,10 +913,20 @@ def _region_names(scene: Scene) -> list[str]:
 
 
 def plugin_setup_commands(deck: Deck) -> list[str]:
-    """Before read_data: newton_bond off for rs/bind (each rank lists every bond of its atoms)
-    and the per-atom properties the styles read: original position (Eq. 12's L0), radius
-    (Eq. 10's R), attraction region indices (Eqs. 27–28); ghosts carry them."""
-    L = ["newton on off"] if deck.bonds is not None else []
+    """Before read_data: ``newton`` and the per-atom properties the styles read: original
+    position (Eq. 12's L0), radius (Eq. 10's R), attraction region indices (Eqs. 27–28); ghosts
+    carry them.
+
+    newton_bond is off for rs/bind (each rank lists every bond of its atoms). newton_pair is off
+    too unless a collide folds into ``pair_style lepton``: the plugin's styles add forces to
+    owned atoms only (whole-body sums are reductions), so a ghost never holds a force and
+    LAMMPS' reverse communication after every step's forces (``newton on``) sent zeros — one
+    exchange between ranks a step (docs/benchmarks/scaling.md).
+    """
+    if not deck.lepton:
+        L = ["newton off off"]
+    else:
+        L = ["newton on off"] if deck.bonds is not None else []
     regions = " ".join(f"i_{_prop_name(n)}" for n in _region_names(deck.scene))
     L.append(f"fix {PROP_FIX} all property/atom d2_rso 3 d_rsr {regions} ghost yes".replace("  ", " "))
     return L

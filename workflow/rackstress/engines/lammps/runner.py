@@ -7,7 +7,8 @@ watchdog and the progress bar see the state between chunks. ``run k pre no post 
 run without recomputing forces, so chunking changes nothing (docs/model.md, "On LAMMPS").
 
 **Failures.** Whatever stops a run that flew apart is a :class:`DivergenceError` naming the step
-and a particle: the watchdog (every :data:`CHECK_EVERY` steps), LAMMPS' own errors of flown-apart
+and a particle: the watchdog (every :data:`CHECK_EVERY` steps, :data:`PLUGIN_CHECK_EVERY` on the
+plugin alone), LAMMPS' own errors of flown-apart
 atoms (``Lost atoms``, ``Too many neighbor bins``, ``Out of range atoms``), and the operator
 callback losing sight of a bind partner. An exception inside the callback stops LAMMPS after the
 step it happened in (the callback forces LAMMPS' timeout, which is checked before every step;
@@ -37,6 +38,13 @@ from rackstress.engines.watchdog import divergence_error, find_divergence, force
 
 #: Steps between watchdog checks (and progress updates) on LAMMPS.
 CHECK_EVERY = 10
+#: The same with the plugin's styles alone (no Python callback): they record a non-finite term's
+#: step themselves (``rackstress_first_nonfinite``), LAMMPS stops atoms that fly apart (Lost
+#: atoms …), and no ghost cutoff is grown, so the checks between chunks are the bound of the
+#: watchdog and the progress bar. Each chunk's ``run`` and checks cost ~0.2 ms (one rank) to
+#: ~0.3 ms (two: barriers, a reduction and gathers); 100 steps make that ~1 % of magpod's steps
+#: (docs/benchmarks/scaling.md, "Under rackstress run").
+PLUGIN_CHECK_EVERY = 100
 #: LAMMPS errors that mean the atoms flew apart (a divergence, not bad input).
 DIVERGED_MARKERS = ("Lost atoms", "Too many neighbor bins", "Out of range atoms", "Bond atoms",
                     "Non-numeric atom coords", "Too many atoms", "Domain too large",
@@ -60,6 +68,8 @@ class LammpsRun:
         from rackstress.lib.mpi import lammps_module, world
 
         self.deck, self.scene = deck, deck.scene
+        self.check_every = (PLUGIN_CHECK_EVERY if deck.plugin and not deck.python_ops
+                            else CHECK_EVERY)
         self.comm = comm or world()
         out = Path(out).resolve() if out is not None else None
         self.out = out
@@ -110,11 +120,13 @@ class LammpsRun:
                     self.command(f"dump_modify {self._dump_id} append yes")
         for cmd in deck.velocity_variables():
             self.command(cmd)
-        if deck.passive and self.comm.Get_size() == 1:
-            # serial: LAMMPS clears forces, checks displacements and bins only its first rows
-            # (the moving group, atom_modify first). A resting row's force then stays what it
-            # is, so it is zeroed once here; nothing writes it later (the callback adds forces
-            # only on rows it computed, never a resting one), so v + dt/2·f/m keeps it at rest.
+        if deck.passive and (self.comm.Get_size() == 1 or deck.plugin):
+            # serial, or the plugin's styles on any number of ranks: LAMMPS clears forces,
+            # checks displacements and bins only its first rows (the moving group, atom_modify
+            # first). A resting row's force then stays what it is, so it is zeroed once here;
+            # nothing writes it later (the callback and the plugin's styles add forces only to
+            # moving rows), so v + dt/2·f/m keeps it at rest. (The callback under MPI passes
+            # over its own rows and keeps the full clearing.)
             self.command(f"neigh_modify include {MOVE_GROUP}")
             self.scatter("f", np.zeros((self.scene.n_particles, 3)))
         for cmd in (balance_commands(deck) if self.comm.Get_size() > 1 else []):
@@ -615,7 +627,7 @@ class LammpsRun:
             pass
 
     # ------------------------------------------------------------------ the whole schedule
-    def run_schedule(self, progress=None, check_every: int = CHECK_EVERY,
+    def run_schedule(self, progress=None, check_every: int | None = None,
                      on_phase_end=None, checkpoint=None, resume=None) -> None:
         """Every phase of every cycle: :func:`rackstress.engines.driver.drive` on this engine."""
         from rackstress.engines.driver import drive
