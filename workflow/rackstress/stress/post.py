@@ -37,9 +37,9 @@ import numpy as np
 from rackstress.lib.jsonio import write_json
 from rackstress.lib.runfiles import CACHE, STRESS_DUMP, STRESS_JSON, VTK_DIR
 from rackstress.stress.dump import StressInputError
-from rackstress.stress.measures import (ParticleStress, VirialStress, material_parts,
-                                        measure_frames, positions, read_bindings,
-                                        stress_columns)
+from rackstress.stress.measures import (Columns, ParticleStress, VirialStress,
+                                        material_parts, measure_columns, measure_frames,
+                                        positions, read_bindings, stress_columns)
 
 #: The measures every run gets, in this order (``virial`` too when the dump recorded it).
 MEASURES = ("paper", "accumulated", "strain", "d2min")
@@ -220,7 +220,11 @@ def compute_fields(run, cache: bool = True, progress: bool = False,
 
     t0 = time.perf_counter()
     size = run.n_atoms * run.index.n_frames
-    if size > MAX_VALUES:
+    virial = stress_columns(run.index.columns) is not None
+    stress = (ParticleStress(run) if material_parts(run) and read_bindings(run) is not None
+              else None)
+    compact = size > MAX_VALUES and _compactable(run, virial, stress)
+    if size > MAX_VALUES and not compact:
         raise TooLargeError(
             f"{run.index.path}: {run.n_atoms} particles × {run.index.n_frames} frames = "
             f"{size:.3g} values per measure, more than the {MAX_VALUES:.3g} the stress "
@@ -228,14 +232,24 @@ def compute_fields(run, cache: bool = True, progress: bool = False,
             "a part of the run")
     from rackstress.lib.progress import progress_bar
 
-    virial = stress_columns(run.index.columns) is not None
-    stress = (ParticleStress(run) if material_parts(run) and read_bindings(run) is not None
-              else None)
     tty = bool(progress) and sys.stderr.isatty()
     with progress_bar(run.index.n_frames, tty, "measures") as bar:
         bar.unit = "frame"
-        got = measure_frames(run, progress=bar.update)
-    values = {m: got[m] for m in MEASURES}
+        if compact:
+            got = measure_columns(run, progress=bar.update)
+        else:
+            got = measure_frames(run, progress=bar.update)
+    if compact:
+        size = len(got["cols"]) * run.index.n_frames
+        if size > MAX_VALUES:
+            raise TooLargeError(
+                f"{run.index.path}: {len(got['cols'])} particles that moved or whose "
+                f"neighbours moved × {run.index.n_frames} frames = {size:.3g} values per "
+                f"measure, more than the {MAX_VALUES:.3g} the stress post-processing holds in "
+                "memory; dump fewer frames (--dump-every) or analyse a part of the run")
+        values = {m: Columns(got["cols"], got[m], got["rest"][m]) for m in MEASURES}
+    else:
+        values = {m: got[m] for m in MEASURES}
     if virial:
         values["virial"] = VirialStress(run).run().results.per_particle
     units, extras = {}, {}
@@ -253,12 +267,21 @@ def compute_fields(run, cache: bool = True, progress: bool = False,
     fields = Fields(got["steps"], values, units=units, extras=extras)
     fields.timings["compute_s"] = time.perf_counter() - t0
     fields.timings["cached"] = False
-    if save and not run.truncation:
+    if save and not run.truncation and not compact:
         _save_cache(run, fields, path)
     if key is not None:
         _MEMO.clear()                 # one run's fields at a time
         _MEMO[key] = fields
     return fields
+
+
+def _compactable(run, virial: bool, stress) -> bool:
+    """Whether the measures can be kept over the moving particles only
+    (:func:`~rackstress.stress.measures.measure_columns`): a dump that follows what moves (the
+    others rest where particles.data puts them), the built-in measures only (no virial, no
+    bindings' stress, no registered measure, which take every column)."""
+    return bool(run.index.partial and not virial and stress is None and not EXTRA_MEASURES
+                and any(p.kind == "sediment" for p in run.parts.values()))
 
 
 # ----------------------------------------------------------------------------- peaks

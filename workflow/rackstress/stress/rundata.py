@@ -114,8 +114,6 @@ def load_run(rundir, allow_truncated: bool = False) -> RunData:
     ``docs/api.md`` (run as a test) opens a plane-rack run: ``sorted(load_run(out).parts)`` is
     ``['plane', 'planerack']``.
     """
-    import MDAnalysis as mda
-
     rundir = Path(rundir)
     if not rundir.is_dir():
         raise StressInputError(f"{rundir}: no such run directory")
@@ -123,6 +121,36 @@ def load_run(rundir, allow_truncated: bool = False) -> RunData:
         if not (rundir / name).is_file():
             raise StressInputError(f"{rundir}: no {name}; is this a run directory "
                                    "(made by 'rackstress run')?")
+    key = _files_key(rundir, allow_truncated)
+    if key is not None and key in _OPENED:
+        return _OPENED[key]
+    run = _open_run(rundir, allow_truncated)
+    _OPENED.clear()                   # one run directory kept open at a time
+    if key is not None:
+        _OPENED[key] = run
+    return run
+
+
+#: the run this process opened last (its files unchanged: :func:`_files_key`) → RunData:
+#: ``rackstress run``'s post-processing and pictures read particles.data and index the dump once
+_OPENED: dict = {}
+
+
+def _files_key(rundir: Path, allow_truncated: bool):
+    """What an opened run depends on: its three files' inode, size and modification time."""
+    import os
+
+    try:
+        stats = [os.stat(rundir / name) for name in (SCENE, DATA, DUMP)]
+    except OSError:
+        return None
+    return (str(rundir.resolve()), bool(allow_truncated),
+            tuple((st.st_ino, st.st_size, st.st_mtime_ns) for st in stats))
+
+
+def _open_run(rundir: Path, allow_truncated: bool) -> RunData:
+    import MDAnalysis as mda
+
     try:
         scene = json.loads((rundir / SCENE).read_text())
     except json.JSONDecodeError as exc:
