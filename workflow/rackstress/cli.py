@@ -255,6 +255,14 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True) ->
         md = g["max_deformation"]
         click.echo(f"  {name:12s} n={g['n']:6d}  max_deformation="
                    + (f"{md:.4g}" if md is not None else "-"))
+    from rackstress.stress.rundata import kept_open
+
+    with kept_open():           # particles.data read and the dump indexed once
+        _post_and_render(out, do_render, progress)
+
+
+def _post_and_render(out: Path, do_render: bool, progress: bool) -> None:
+    """Post-process the run in ``out`` and render its pictures (:func:`_finish`)."""
     from rackstress.stress.post import cancel_files, wait_files
 
     _post_run(out, progress, background=do_render)

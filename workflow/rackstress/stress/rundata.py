@@ -16,6 +16,7 @@ particles), so it is drawn as grey context and studied in the footprints plot in
 from __future__ import annotations
 
 import json
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -121,6 +122,8 @@ def load_run(rundir, allow_truncated: bool = False) -> RunData:
         if not (rundir / name).is_file():
             raise StressInputError(f"{rundir}: no {name}; is this a run directory "
                                    "(made by 'rackstress run')?")
+    if not _KEEP:
+        return _open_run(rundir, allow_truncated)
     key = _files_key(rundir, allow_truncated)
     if key is not None and key in _OPENED:
         return _OPENED[key]
@@ -131,9 +134,24 @@ def load_run(rundir, allow_truncated: bool = False) -> RunData:
     return run
 
 
-#: the run this process opened last (its files unchanged: :func:`_files_key`) → RunData:
-#: ``rackstress run``'s post-processing and pictures read particles.data and index the dump once
+#: within :func:`kept_open`: the run opened last (its files unchanged: :func:`_files_key`)
 _OPENED: dict = {}
+_KEEP: list = []
+
+
+@contextmanager
+def kept_open():
+    """Within this block :func:`load_run` opens a run directory once and hands the same
+    RunData to every caller while its files are unchanged: ``rackstress run``'s
+    post-processing and pictures (the run directory locked meanwhile) read particles.data,
+    index the dump and parse the topology once (sediment-large: seconds)."""
+    _KEEP.append(True)
+    try:
+        yield
+    finally:
+        _KEEP.pop()
+        if not _KEEP:
+            _OPENED.clear()
 
 
 def _files_key(rundir: Path, allow_truncated: bool):

@@ -1,0 +1,126 @@
+"""Measures kept over the particles that moved (issue 24: sediment-large's stress).
+
+Past the in-memory limit, a run whose sediment rests keeps its measures over the particles that
+moved and their strain neighbours only (:func:`rackstress.stress.measures.measure_columns`);
+every other particle's values are implied. Expected values come from the dense path
+(:func:`measure_frames`, itself tested against the per-frame AnalysisBase classes in
+test_output.py) and from hand: a resting particle has p = o, so |p − o| = 0, its integral 0, and
+η = D²min = 0 where its neighbourhood fit is defined (F = I), NaN where it is not (a particle
+with no neighbour).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rackstress.stress import load_run
+from rackstress.stress import post
+from rackstress.stress.dump import read_data_file
+from rackstress.stress.measures import Columns, measure_columns, measure_frames
+from test_output import BED, _frames
+from test_stress import BLOCK, SHEET, write_run
+
+LONE = np.array([[40.0, 0.0, 40.0]])          # a sediment particle with no neighbour
+PARTS = [("block", "part", BLOCK), ("sheet", "part", SHEET),
+         ("bed", "sediment", np.concatenate([BED, LONE]))]
+MEASURES = ("paper", "accumulated", "strain", "d2min")
+
+
+def _run(tmp_path):
+    frames = [(s, np.concatenate([p, LONE])) for s, p in _frames()]
+    write_run(tmp_path, PARTS, frames)
+    return load_run(tmp_path)
+
+
+def test_resting_columns_are_implied_exactly_and_the_moving_ones_equal_the_dense(tmp_path):
+    run = _run(tmp_path)
+    dense = measure_frames(run)
+    got = measure_columns(run)
+    bed = run.parts["bed"].index
+    cols = got["cols"]
+    # kept: the two parts with a rest shape whole, of the bed the dented particle (9, at
+    # (20, 0, 1) + (1, 0, 1)·…: row 9 of an 8 × 8 layer) and its neighbours within 1.5 spacings
+    kept_bed = np.intersect1d(cols, bed) - bed[0]
+    o9 = BED[9]
+    near9 = np.flatnonzero(np.linalg.norm(BED - o9, axis=1) <= 1.5 * (1 + 1e-9))
+    assert np.array_equal(kept_bed, near9)
+    assert np.isin(run.parts["block"].index, cols).all()
+    assert np.isin(run.parts["sheet"].index, cols).all()
+    rest = np.setdiff1d(np.arange(run.n_atoms), cols)
+    assert len(rest) == len(BED) + 1 - len(near9)
+    for m in MEASURES:
+        v = Columns(cols, got[m], got["rest"][m])
+        full = np.asarray(v)
+        # the resting particles: exactly the dense path's values, and by hand
+        assert np.array_equal(full[:, rest], dense[m][:, rest], equal_nan=True), m
+        by_hand = np.zeros((len(dense["steps"]), len(rest)))
+        if m in ("strain", "d2min"):
+            by_hand[:, rest == bed[-1]] = np.nan             # the lone particle: no fit
+        assert np.array_equal(full[:, rest], by_hand, equal_nan=True), m
+        # the moving ones: the dense path's to the order of summation
+        assert np.array_equal(np.isnan(full), np.isnan(dense[m])), m
+        np.testing.assert_allclose(full, dense[m], rtol=0, atol=1e-12, err_msg=m)
+        # indexed as the dense array is
+        idx = np.array([0, bed[9], bed[0], bed[-1], run.n_atoms - 2])
+        for k in range(len(dense["steps"])):
+            np.testing.assert_array_equal(v[k], full[k])
+            np.testing.assert_array_equal(v[k, idx], full[k, idx])
+        np.testing.assert_array_equal(v[:, idx], full[:, idx])
+        np.testing.assert_array_equal(v[1:3][:, bed], full[1:3][:, bed])
+        assert v.shape == dense[m].shape
+    assert got["paper"][3, np.searchsorted(cols, bed[9])] == 0.25
+
+
+def test_past_the_limit_a_resting_sediment_gets_its_peaks_and_vtk(tmp_path, monkeypatch):
+    """postprocess past MAX_VALUES (here lowered to this small run's size) keeps the moving
+    columns and finds the same peaks as the dense path below the limit; the VTK frames carry
+    every particle's values."""
+    import pyvista as pv
+
+    dense_dir, cols_dir = tmp_path / "dense", tmp_path / "cols"
+    _run(dense_dir)
+    _run(cols_dir)
+    want = post.postprocess(dense_dir, vtk=True)
+    post._MEMO.clear()
+    n_values = load_run(cols_dir).n_atoms * 4
+    monkeypatch.setattr(post, "MAX_VALUES", n_values - 1)
+    fields = post.compute_fields(load_run(cols_dir), cache=False)
+    assert all(isinstance(v, Columns) for v in fields.values.values())
+    got = post.postprocess(cols_dir, vtk=True)
+    for name, rec in want["groups"].items():
+        for m, pk in rec.items():
+            q = got["groups"][name][m]
+            assert (q["iteration"], q["particle"], q["position"]) == \
+                (pk["iteration"], pk["particle"], pk["position"]), (name, m)
+            assert q["value"] == pytest.approx(pk["value"], rel=0, abs=1e-12)
+    for k in range(4):
+        a = pv.read(sorted((dense_dir / "vtk").glob("*.vtp"))[k])
+        b = pv.read(sorted((cols_dir / "vtk").glob("*.vtp"))[k])
+        for m in MEASURES:
+            x, y = np.asarray(a.point_data[m]), np.asarray(b.point_data[m])
+            assert np.array_equal(np.isnan(x), np.isnan(y))
+            np.testing.assert_allclose(y, x, rtol=0, atol=1e-12)
+
+
+def test_past_the_limit_even_the_moving_columns_is_a_clear_error(tmp_path, monkeypatch):
+    run = _run(tmp_path)
+    monkeypatch.setattr(post, "MAX_VALUES", 10)
+    with pytest.raises(post.TooLargeError, match="particles that moved or whose neighbours "
+                                                 "moved × 4 frames"):
+        post.compute_fields(run, cache=False)
+
+
+def test_data_file_with_comments_and_image_flags_reads_as_written(tmp_path):
+    """The Atoms section read by NumPy: comments and LAMMPS' image flags ignored, rows sorted
+    by id, every digit kept."""
+    path = tmp_path / "particles.data"
+    path.write_text("LAMMPS data file\n\n3 atoms\n1 atom types\n\n0 1 xlo xhi\n0 1 ylo yhi\n"
+                    "0 1 zlo zhi\n\nMasses\n\n1 2.5  # part\n\nAtoms  # bond\n\n"
+                    "2 1 1 0.1 0.2 0.30000000000000004 0 0 1  # moved\n"
+                    "1 1 1 -1e-300 5 6\n"
+                    "3 2 1 7 8 9\n")
+    d = read_data_file(path)
+    assert d.ids.tolist() == [1, 2, 3] and d.mols.tolist() == [1, 1, 2]
+    assert d.masses == {1: 2.5}
+    assert d.positions.tolist() == [[-1e-300, 5.0, 6.0], [0.1, 0.2, 0.30000000000000004],
+                                    [7.0, 8.0, 9.0]]
