@@ -124,3 +124,80 @@ def test_data_file_with_comments_and_image_flags_reads_as_written(tmp_path):
     assert d.masses == {1: 2.5}
     assert d.positions.tolist() == [[-1e-300, 5.0, 6.0], [0.1, 0.2, 0.30000000000000004],
                                     [7.0, 8.0, 9.0]]
+
+
+# ----------------------------------------------------------------------------- while it runs
+def _grow(path, frames, upto):
+    """The dump as LAMMPS leaves it mid-run: frames 0..upto-1 whole, the next one cut."""
+    from test_stress import frame_text
+
+    o = np.concatenate([q for _, _, q in PARTS])
+    types = np.concatenate([np.full(len(q), k + 1) for k, (_, _, q) in enumerate(PARTS)])
+    text = "".join(frame_text(s, p, types, types) for s, p in frames[:upto])
+    if upto < len(frames):
+        text += frame_text(*frames[upto], types, types)[:700]       # a torn frame
+    path.write_text(text)
+    return o
+
+
+def _follow_until(tmp_path, frames, upto, chunks):
+    """post.follow in its thread over a dump of ``upto`` whole frames, stopped once it has
+    measured ``chunks`` chunks."""
+    import threading
+    import time
+
+    _grow(tmp_path / "trajectory.dump", frames, upto)
+    stop = threading.Event()
+    t = threading.Thread(target=post.follow, args=(tmp_path, stop, len(frames), 0.01))
+    t.start()
+    key = str(tmp_path.resolve())
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        head = post._HEADS.get(key)
+        if head is not None and len(head.done) >= chunks:
+            break
+        time.sleep(0.01)
+    stop.set()
+    t.join()
+    return post._HEADS[key]
+
+
+def test_frames_measured_while_the_dump_grows_are_the_measures_of_the_whole(tmp_path,
+                                                                          monkeypatch):
+    """follow measures whole chunks of the frames written so far (not the torn one); the
+    finished run's measures take them and equal, bit for bit, those computed after the run."""
+    from rackstress.stress import measures
+
+    frames = [(s, np.concatenate([p, LONE])) for s, p in _frames()]
+    frames = frames + [(40 + s, p) for s, p in frames]            # 8 frames
+    monkeypatch.setattr(measures, "CHUNK_BYTES", 1)                 # a chunk a frame
+    write_run(tmp_path, PARTS, frames)
+    want = measure_frames(load_run(tmp_path))
+    head = _follow_until(tmp_path, frames, 5, 5)
+    assert sorted(head.done) == [(k, 1) for k in range(5)]          # not frame 5, torn
+    write_run(tmp_path, PARTS, frames)                              # the run goes on and ends
+    post._MEMO.clear()
+    fields = post.compute_fields(load_run(tmp_path), cache=False)
+    assert fields.timings["frames_measured_while_running"] == 5
+    for m in MEASURES:
+        assert np.array_equal(fields.values[m], want[m], equal_nan=True), m
+
+
+def test_a_frame_changed_after_it_was_measured_is_measured_again(tmp_path, monkeypatch):
+    """A run cut after divergence, or written again, differs from what follow read: its chunk
+    is measured anew from the finished dump."""
+    from rackstress.stress import measures
+
+    frames = [(s, np.concatenate([p, LONE])) for s, p in _frames()]
+    monkeypatch.setattr(measures, "CHUNK_BYTES", 1)
+    write_run(tmp_path, PARTS, frames)
+    _follow_until(tmp_path, frames, 4, 4)
+    moved = [(s, p.copy()) for s, p in frames]
+    moved[2][1][0, 0] += 0.5                                        # frame 2 is not as read
+    write_run(tmp_path, PARTS, moved)
+    want = measure_frames(load_run(tmp_path))
+    post._MEMO.clear()
+    fields = post.compute_fields(load_run(tmp_path), cache=False)
+    assert fields.timings["frames_measured_while_running"] == 3
+    for m in MEASURES:
+        assert np.array_equal(fields.values[m], want[m], equal_nan=True), m

@@ -208,7 +208,10 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
             # post-processing's imports while LAMMPS runs the plugin (no GIL held), from a
             # quarter of the steps on; not beside a simulation that runs Python each step
             # (the reference engine, the callback path)
-            head_start = prepare_in_background
+            every = planned["dump_every"]
+            frames = sc.total_steps // every + 1 + (1 if sc.total_steps % every else 0)
+            out_ = out
+            head_start = lambda: prepare_in_background(out_, frames)  # noqa: E731
         # the lock is held from before anything is written until the pictures are done
         with locked(out) as held:   # noqa: F841
             with phase(f"running {sc.total_steps:,} steps into {out}", shown, ticker=False):

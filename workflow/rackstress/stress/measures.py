@@ -445,28 +445,45 @@ def strain(hood: Neighbourhoods, o: np.ndarray, P: np.ndarray):
     return strain_frames(hood, o, P)
 
 
-def measure_frames(run, progress=None) -> dict:
+def measure_frames(run, progress=None, head=None) -> dict:
     """Every default measure of every frame, computed together in chunks of frames: ``steps``,
     ``paper``, ``accumulated``, ``strain``, ``d2min`` ((frames, n_atoms) each): the values of
     :class:`AccumulatedDistance` and :class:`VonMisesStrain` (robust fit, default cutoff) to
-    round-off, without their per-frame overhead. ``progress``: called with the frames done."""
+    round-off, without their per-frame overhead. ``progress``: called with the frames done.
+    ``head``: chunks already measured while the run was written
+    (:func:`rackstress.stress.post.follow`): ``head.hood`` and ``head.chunk(run, ks)`` → the
+    (paper, strain, d2min) of frames ``ks`` or None; those are the values this function
+    computes for the same frames (the same calls on the same positions)."""
     parts = list(run.parts.values())
     nf, n = run.index.n_frames, run.n_atoms
-    hood = neighbourhoods(run, parts)
+    hood = getattr(head, "hood", None) or neighbourhoods(run, parts)
     steps = np.asarray(run.steps, dtype=np.int64)
     out = {m: np.empty((nf, n)) for m in ("paper", "strain", "d2min")}
-    per_frame = max(n * 24 * 4, len(hood.I) * 8 * 30, 1)
-    chunk = int(max(1, min(nf, CHUNK_BYTES // per_frame)))
+    chunk = frame_chunk(n, hood, nf)
     for a in range(0, nf, chunk):
         ks = range(a, min(nf, a + chunk))
-        P = frame_positions(run, ks)
-        out["paper"][a:a + len(ks)] = paper_frames(run, P, parts)
-        out["strain"][a:a + len(ks)], out["d2min"][a:a + len(ks)] = strain(hood, run.o, P)
+        got = head.chunk(run, ks) if head is not None else None
+        if got is None:
+            got = measure_chunk(run, hood, parts, ks)
+        out["paper"][a:a + len(ks)], out["strain"][a:a + len(ks)], \
+            out["d2min"][a:a + len(ks)] = got
         if progress is not None:
             progress(len(ks))
     out["accumulated"] = _accumulate(out["paper"], steps, run.dt)
     out["steps"] = steps
     return out
+
+
+def frame_chunk(n: int, hood: Neighbourhoods, nf: int) -> int:
+    """Frames measured together by :func:`measure_frames` (temporaries within CHUNK_BYTES)."""
+    per_frame = max(n * 24 * 4, len(hood.I) * 8 * 30, 1)
+    return int(max(1, min(nf, CHUNK_BYTES // per_frame)))
+
+
+def measure_chunk(run, hood: Neighbourhoods, parts, ks) -> tuple:
+    """(paper, strain, d2min) of frames ``ks``, (len(ks), n_atoms) each."""
+    P = frame_positions(run, ks)
+    return (paper_frames(run, P, parts), *strain(hood, run.o, P))
 
 
 def _accumulate(d: np.ndarray, steps: np.ndarray, dt: float) -> np.ndarray:
@@ -616,8 +633,7 @@ def measure_columns(run, progress=None) -> dict:
     keep = local[np.flatnonzero(cols)]
     steps = np.asarray(run.steps, dtype=np.int64)
     out = {m: np.empty((nf, len(keep))) for m in ("paper", "strain", "d2min")}
-    per_frame = max(len(U) * 24 * 4, len(hood.I) * 8 * 30, 1)
-    chunk = int(max(1, min(nf, CHUNK_BYTES // per_frame)))
+    chunk = frame_chunk(len(U), hood, nf)
     for a in range(0, nf, chunk):
         ks = range(a, min(nf, a + chunk))
         P = np.stack([positions(run.trajectory[k])[U] for k in ks])
