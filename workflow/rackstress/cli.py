@@ -806,7 +806,10 @@ def bench_accuracy(out, quick, scene_names):
               help="Cold and warm runs of each scene, interleaved.")
 @click.option("--long-steps", type=click.IntRange(min=1), default=1200, show_default=True,
               help="Iterations of magpod and sediment-large (magpod-small runs its own 4800).")
-def bench_e2e(out, scene_names, repeat, long_steps):
+@click.option("--append", is_flag=True,
+              help="Add these runs to those of OUT/e2e.json (e.g. magpod-small repeated, "
+                   "the long scenes once).")
+def bench_e2e(out, scene_names, repeat, long_steps, append):
     """README's first command end to end, warm and cold: phases, run directory by file, the
     trajectory's cost per frame -> docs/benchmarks/e2e.{json,md}."""
     from rackstress import bench as b
@@ -817,6 +820,11 @@ def bench_e2e(out, scene_names, repeat, long_steps):
     machine = b.machine()
     data = e2e.run(d, names, repeat,
                    steps={n: long_steps for n in ("magpod", "sediment-large")}, log=click.echo)
+    if append and (d / "e2e.json").is_file():
+        old = json.loads((d / "e2e.json").read_text())
+        data["runs"] = old.get("runs", []) + data["runs"]
+        data["dumps"] = data["dumps"] or old.get("dumps", [])
+        machine = old.get("machine") or machine
     data["machine"] = machine
     b.write_json(d / "e2e.json", data)
     (d / "e2e.md").write_text(e2e.markdown(data, machine))
