@@ -340,7 +340,7 @@ def follow(rundir, stop, frames: int, poll: float = 0.2) -> None:
     key = str(Path(rundir).resolve())
     head = _HEADS[key] = Head()
     dump = Path(rundir) / "trajectory.dump"
-    seen, chunk, parts, a = -1, None, None, 0
+    seen, chunk, parts, a, failed = -1, None, None, 0, 0
     main = threading.main_thread()
     # ends when stopped, or when the command ends without stopping it (an error: the
     # interpreter's exit marks the main thread stopped before it waits for this one)
@@ -360,8 +360,11 @@ def follow(rundir, stop, frames: int, poll: float = 0.2) -> None:
                 got = measure_chunk(run, head.hood, parts, ks)
                 head.done[(a, chunk)] = (Head.stamp(run, ks), got)
                 a += chunk
+            failed = 0
         except Exception:  # noqa: BLE001 - a head start only: post-processing measures the rest
-            return
+            failed += 1                 # a frame caught mid-write reads as a bad one: retry
+            if failed > 5:
+                return
 
 
 def _head(run):
