@@ -269,6 +269,8 @@ def compute_fields(run, cache: bool = True, progress: bool = False,
     fields.timings["compute_s"] = time.perf_counter() - t0
     fields.timings["cached"] = False
     fields.timings["frames_measured_while_running"] = head.used if head is not None else 0
+    if head is not None and head.error:
+        fields.timings["follow_error"] = head.error
     if save and not run.truncation and not compact:
         _save_cache(run, fields, path)
     if key is not None:
@@ -297,6 +299,7 @@ class Head:
         self.hood = None
         self.done: dict = {}          # (first frame, count) → ((steps, crc), (paper, strain, d2min))
         self.used = 0                 # frames handed to measure_frames
+        self.error = None             # why follow stopped early, if it did
 
     @staticmethod
     def stamp(run, ks) -> tuple | None:
@@ -361,8 +364,9 @@ def follow(rundir, stop, frames: int, poll: float = 0.2) -> None:
                 head.done[(a, chunk)] = (Head.stamp(run, ks), got)
                 a += chunk
             failed = 0
-        except Exception:  # noqa: BLE001 - a head start only: post-processing measures the rest
+        except Exception as exc:  # noqa: BLE001 - a head start only: post-processing measures the rest
             failed += 1                 # a frame caught mid-write reads as a bad one: retry
+            head.error = f"{type(exc).__name__}: {exc}"[:300]
             if failed > 5:
                 return
 
@@ -552,6 +556,8 @@ def postprocess(rundir, vtk: bool = True, dump: bool = False, progress: bool = F
             "timings": {"measures_s": fields.timings.get("compute_s", 0.0),
                         "frames_measured_while_running":
                             fields.timings.get("frames_measured_while_running", 0)}}
+    if fields.timings.get("follow_error"):
+        info["timings"]["follow_error"] = fields.timings["follow_error"]
     from rackstress.stress import export
 
     if vtk and background:
