@@ -96,14 +96,14 @@ def _separation(pa, pb):
     return best
 
 
-def _went_through(p_moving, p_obstacle, r_moving, n, across, proj=None) -> bool:
+def _went_through(p_moving, p_obstacle, r_moving, n, across, proj=None, q_moving=None) -> bool:
     """Whether the moving group, on the +n side of the obstacle at step 0, has its centre
     beyond the obstacle's far side (along −n) of the part in its way: the obstacle particles
     inside the moving group's extent across n (radii included); none there means it went
     around, not through. ``proj``: the obstacle's projections (p_obstacle @ across,
     p_obstacle @ n) kept up to date by :class:`_Projected` (a resting sediment of a million
-    particles is not projected again every frame)."""
-    qm = p_moving @ across
+    particles is not projected again every frame); ``q_moving``: p_moving @ across, so kept."""
+    qm = p_moving @ across if q_moving is None else q_moving
     qo, along = proj if proj is not None else (p_obstacle @ across, None)
     lo, hi = qm.min(axis=0) - r_moving, qm.max(axis=0) + r_moving
     in_way = np.all((qo >= lo) & (qo <= hi), axis=1)
@@ -166,9 +166,9 @@ def pass_through(scene, frames) -> list[dict]:
             # b (on a's +n side) through a, or a (on b's −n side) through b
             qa, sa = proj_a.at(pa)
             qb, sb = proj_b.at(pb)
-            if _went_through(pb, pa, rb, n, across, (qa, -sa)):
+            if _went_through(pb, pa, rb, n, across, (qa, -sa), qb):
                 mover, obstacle = b, a
-            elif _went_through(pa, pb, ra, -n, across, (qb, sb)):
+            elif _went_through(pa, pb, ra, -n, across, (qb, sb), qa):
                 mover, obstacle = a, b
             else:
                 continue
