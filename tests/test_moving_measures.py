@@ -102,6 +102,18 @@ def test_past_the_limit_a_resting_sediment_gets_its_peaks_and_vtk(tmp_path, monk
             np.testing.assert_allclose(y, x, rtol=0, atol=1e-12)
 
 
+def test_past_the_limit_rackstress_run_leaves_the_vtk_files_one_command_away(tmp_path,
+                                                                           monkeypatch):
+    """rackstress run's post-processing (background VTK) of a run past the limit writes the
+    peaks but no VTK series (every particle of every frame); it says where they come from."""
+    run = _run(tmp_path)
+    monkeypatch.setattr(post, "MAX_VALUES", run.n_atoms * 4 - 1)
+    info = post.postprocess(tmp_path, vtk=True, background=True)
+    assert post.wait_files(tmp_path) is None and not (tmp_path / "vtk").exists()
+    assert "vtk" not in info["files"] and info["groups"]["block"]["paper"]["value"] > 0
+    assert any("rackstress stress" in line for line in post.describe(info))
+
+
 def test_past_the_limit_even_the_moving_columns_is_a_clear_error(tmp_path, monkeypatch):
     run = _run(tmp_path)
     monkeypatch.setattr(post, "MAX_VALUES", 10)
