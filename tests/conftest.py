@@ -1,6 +1,9 @@
 """Shared pieces of the test suite.
 
 * the venv's executables (``RACKSTRESS``, ``MPIEXEC``), for tests that run real processes;
+* :func:`trajectory` and :func:`dump_text`: a run's trajectory file (``trajectory.dump``, or
+  ``trajectory.dump.gz`` once ``rackstress run`` has finished) and its text, read with the
+  standard library's ``gzip`` (not rackstress' reader, which is under test);
 * :func:`reference_final`: a scene's final positions on the reference engine (the independent
   path every parity test compares against), computed once per test process and scene — keyed
   by the scene's fingerprint, so two tests that build the same scene share one trajectory.
@@ -20,6 +23,24 @@ BIN = Path(sys.executable).parent
 RACKSTRESS, MPIEXEC = str(BIN / "rackstress"), str(BIN / "mpiexec")
 
 _FINAL: dict = {}
+
+
+def trajectory(rundir) -> Path:
+    """The run's trajectory: ``trajectory.dump.gz`` if the run finished (``rackstress run``
+    compresses it), else ``trajectory.dump``."""
+    gz = Path(rundir) / "trajectory.dump.gz"
+    return gz if gz.is_file() else Path(rundir) / "trajectory.dump"
+
+
+def dump_text(path) -> str:
+    """A dump file's text as LAMMPS wrote it (a ``.gz`` read through ``gzip``)."""
+    import gzip
+
+    path = Path(path)
+    if path.name.endswith(".gz"):
+        with gzip.open(path, "rt") as fh:
+            return fh.read()
+    return path.read_text()
 
 
 def reference_final(scene) -> np.ndarray:

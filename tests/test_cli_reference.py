@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import dump_text, trajectory
 from click.testing import CliRunner
 
 from rackstress import scenes
@@ -21,7 +22,7 @@ def invoke(*args):
 
 def read_frames(path: Path):
     """Parse a LAMMPS dump into [(timestep, array n×6)], insisting every frame is complete."""
-    lines = path.read_text().splitlines()
+    lines = dump_text(path).splitlines()
     frames, k = [], 0
     while k < len(lines):
         assert lines[k] == "ITEM: TIMESTEP", (k, lines[k])
@@ -65,7 +66,7 @@ def test_run_plane_rack_writes_summary(tmp_path):
         assert 0.0 <= g[name]["max_deformation"] < 5.0
 
     # the run directory agrees with itself and with a direct 50-step reference run
-    frames = read_frames(out / "trajectory.dump")
+    frames = read_frames(trajectory(out))
     assert frames[0][0] == 0 and frames[-1][0] == 50
     last = frames[-1][1]
     np.testing.assert_allclose(last[:400, 3:].mean(axis=0), g["plane"]["com_end"], atol=1e-8)
@@ -100,7 +101,7 @@ def test_divergence_exit_code_and_summary(tmp_path):
     assert err["group"] == "plane"
     assert 0 <= err["particle"] < 400
     assert s["steps"] == err["step"]
-    frames = read_frames(out / "trajectory.dump")        # every frame complete
+    frames = read_frames(trajectory(out))        # every frame complete
     steps = [f[0] for f in frames]
     # frames every 5 steps from 0 up to the last multiple of 5 before the failing step
     assert steps == list(range(0, (err["step"] - 1) // 5 * 5 + 1, 5))

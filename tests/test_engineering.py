@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import dump_text, trajectory
 
 from rackstress.engines.static import external_forces, solve
 from rackstress.scenes.toml import load_toml
@@ -139,7 +140,7 @@ def test_roller_support_on_both_engines(tmp_path):
                             engine, "--out", str(out), "--no-render"], capture_output=True,
                            text=True)
         assert r.returncode == 0, r.stderr
-        frames = (out / "trajectory.dump").read_text().split("ITEM: TIMESTEP")[-1]
+        frames = dump_text(trajectory(out)).split("ITEM: TIMESTEP")[-1]
         rows = frames.split("ITEM: ATOMS")[1].strip().splitlines()[1:]
         ends[engine] = np.array([[float(x) for x in row.split()[3:6]] for row in rows])
         b = np.load(out / "boundary.npz")

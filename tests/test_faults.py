@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import dump_text, trajectory
 
 BIN = Path(sys.executable).parent
 RS = str(BIN / "rackstress")
@@ -52,7 +53,7 @@ def progress_step(rundir: Path):
 
 
 def frames(dump: Path) -> list[int]:
-    text = dump.read_text()
+    text = dump_text(dump)
     return [int(m) for m in re.findall(r"ITEM: TIMESTEP\n(\d+)\n", text)]
 
 
@@ -165,7 +166,7 @@ def test_second_run_render_and_resume_refused_while_a_run_holds_the_directory(tm
     assert e.returncode == 0, e.stderr
     s = json.loads((out / "summary.json").read_text())
     assert s["steps"] == 40 and s["params"]["plane_bind"] == 50
-    assert frames(out / "trajectory.dump") == [0, 10, 20, 30, 40]
+    assert frames(trajectory(out)) == [0, 10, 20, 30, 40]
     assert not (out / "restart").exists() and not (out / "progress.json").exists()
     assert not list(tmp_path.glob(".X.old-*"))
 
@@ -426,7 +427,7 @@ def test_final_step_is_always_dumped(tmp_path):
     r = rs("run", "plane-rack", "--engine", "reference", "--steps", "25", "--dump-every",
            "1000", "--out", out, *QUIET)
     assert r.returncode == 0, r.stderr
-    assert frames(out / "trajectory.dump") == [0, 25]
+    assert frames(trajectory(out)) == [0, 25]
 
 
 @pytest.mark.lammps
@@ -434,7 +435,7 @@ def test_final_step_is_always_dumped_on_lammps(tmp_path):
     out = tmp_path / "r"
     r = rs("run", "plane-rack", "--steps", "25", "--dump-every", "10", "--out", out, *QUIET)
     assert r.returncode == 0, r.stderr
-    assert frames(out / "trajectory.dump") == [0, 10, 20, 25]
+    assert frames(trajectory(out)) == [0, 10, 20, 25]
 
 
 def test_any_number_of_steps_costs_no_memory_up_front(tmp_path):
@@ -496,8 +497,8 @@ def test_input_edges_give_clear_errors(tmp_path):
 def test_render_of_a_run_with_non_finite_frames_is_refused_clearly(tmp_path):
     out = tmp_path / "r"
     assert rs("run", "plane-rack", "--engine", "reference", "--steps", "20", "--dump-every",
-              "10", "--out", out, *QUIET).returncode == 0
-    dump = out / "trajectory.dump"
+              "10", "--dump-text", "--out", out, *QUIET).returncode == 0
+    dump = out / "trajectory.dump"             # kept as text (--dump-text), to be edited
     text = dump.read_text()
     last = text.rindex("ITEM: ATOMS")
     head, body = text[:last], text[last:].split("\n")

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import dump_text, trajectory
 
 from test_faults import (MPIEXEC, QUIET, RS, fill, leftovers, progress_step, rs,  # noqa: F401
                          tmpfs, wait_for)
@@ -91,8 +92,8 @@ def test_a_broken_plugin_is_one_line_and_the_callback(tmp_path, callback_run, ki
     assert "Traceback" not in r.stderr
     assert operators(out) == "callback"
     # the whole run, exactly the callback's
-    assert (out / "trajectory.dump").read_bytes() == \
-        (callback_run / "trajectory.dump").read_bytes()
+    assert trajectory(out).read_bytes() == trajectory(callback_run).read_bytes()
+    assert dump_text(trajectory(out)) == dump_text(trajectory(callback_run))
 
 
 def _package_copy(root: Path, plugin_lib: str) -> dict:
@@ -254,14 +255,15 @@ def test_rank_killed_under_rackstress_run_then_resume(tmp_path, nranks, scene):
     s = json.loads((cut / "summary.json").read_text())
     assert s["resumed_from_step"] == step and s["steps"] == 8000
     assert operators(cut) == "plugin"
-    a, b = (cut / "trajectory.dump").read_bytes(), (full / "trajectory.dump").read_bytes()
-    assert a == b, first_difference(full / "trajectory.dump", cut / "trajectory.dump")
+    assert trajectory(cut).name == "trajectory.dump.gz"
+    a, b = trajectory(cut).read_bytes(), trajectory(full).read_bytes()
+    assert a == b, first_difference(trajectory(full), trajectory(cut))
 
 
 def first_difference(dump_a: Path, dump_b: Path) -> str:
     """The first frame two LAMMPS dumps differ in, and its first differing line (a message)."""
-    fa = dump_a.read_text().split("ITEM: TIMESTEP\n")[1:]
-    fb = dump_b.read_text().split("ITEM: TIMESTEP\n")[1:]
+    fa = dump_text(dump_a).split("ITEM: TIMESTEP\n")[1:]
+    fb = dump_text(dump_b).split("ITEM: TIMESTEP\n")[1:]
     for x, y in zip(fa, fb):
         if x != y:
             line = next((p, q) for p, q in zip(x.split("\n"), y.split("\n")) if p != q)

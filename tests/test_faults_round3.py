@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
+from conftest import dump_text, trajectory
 
 from test_faults import QUIET, RS, fill, frames, leftovers, rs, tmpfs, wait_for  # noqa: F401
 
@@ -29,8 +30,11 @@ def test_full_disk_during_post_processing_is_a_storage_error(tmpfs):  # noqa: F8
     assert "No space left on device" in r.stderr and "Traceback" not in r.stderr
     assert f"rackstress stress {out}" in r.stderr          # what to do once there is space
     assert str(out / "vtk") in r.stderr                     # what could not be written
-    # the run is whole; nothing of the VTK series is left, half or as if whole
-    assert len(frames(out / "trajectory.dump")) == 301
+    # the run is whole; nothing of the VTK series is left, half or as if whole; the finished
+    # trajectory is compressed all the same (5.4 MB of text in less)
+    assert trajectory(out).name == "trajectory.dump.gz" and not (out / "trajectory.dump").exists(), \
+        r.stderr
+    assert len(frames(trajectory(out))) == 301
     assert not (out / "vtk").exists() and leftovers(out) == []
     assert not [p for p in out.iterdir() if p.name.startswith(".vtk")]
     summary = json.loads((out / "summary.json").read_text())
@@ -316,7 +320,7 @@ def coincide_run(tmp_path, op: str, how: str):
     s = json.loads((out / "summary.json").read_text())
     path = (json.loads((out / "scene.json").read_text())["fingerprint"].get("operators")
             if how != "reference" else None)
-    return r.returncode, r.stderr, s, (out / "trajectory.dump").read_text(), path, out
+    return r.returncode, r.stderr, s, dump_text(trajectory(out)), path, out
 
 
 @pytest.mark.lammps

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import dump_text, trajectory
 
 from rackstress import (Attract, Bind, Collide, Const, Contact, Dampen, DivergenceError, Force,
                         Group, Matched, Phase, PhaseIn, Scene, Within, lattice, rack, scenes)
@@ -229,7 +230,7 @@ def test_cli_run_under_mpiexec(tmp_path):
     scene = scenes.build("plane-rack")
     com = ref[scene.slice("plane")].mean(axis=0)
     np.testing.assert_allclose(summary["groups"]["plane"]["com_end"], com, rtol=0, atol=1e-9)
-    for name in ("particles.data", "in.lammps", "log.lammps", "trajectory.dump"):
+    for name in ("particles.data", "in.lammps", "log.lammps", trajectory(out).name):
         assert (out / name).stat().st_size > 0
 
 
@@ -281,7 +282,7 @@ def test_phase_conditioned_self_collision_parity():
 def _frames(path: Path) -> list:
     """(timestep, atom lines) of every frame of a dump (box bounds left out: LAMMPS updates a
     shrink-wrapped box only when it reneighbours)."""
-    lines, out, k = path.read_text().splitlines(), [], 0
+    lines, out, k = dump_text(path).splitlines(), [], 0
     while k < len(lines):
         if lines[k] == "ITEM: TIMESTEP":
             n = int(lines[k + 3])
@@ -327,7 +328,7 @@ def test_what_runs_standalone_with_plain_lmp(tmp_path):
                            "--no-render", "--no-progress"], capture_output=True, text=True,
                           timeout=600)
     assert proc.returncode == 0, proc.stderr[-2000:]
-    ours = _frames(out / "trajectory.dump")
+    ours = _frames(trajectory(out))
     theirs = _frames(tmp_path / "plane-rack-fast" / "trajectory.dump")
     assert len(ours) == len(theirs) == 101 and ours == theirs
 
@@ -709,7 +710,9 @@ def test_active_only_run_killed_and_resumed_equals_uninterrupted(tmp_path):
     r = subprocess.run([exe, "run", "--resume", str(cut), "--no-render", "--no-progress"],
                        capture_output=True, text=True, timeout=900)
     assert r.returncode == 0, r.stderr[-2000:]
-    assert (cut / "trajectory.dump").read_bytes() == (full / "trajectory.dump").read_bytes()
+    assert trajectory(cut).name == "trajectory.dump.gz"
+    assert trajectory(cut).read_bytes() == trajectory(full).read_bytes()
+    assert dump_text(trajectory(cut)) == dump_text(trajectory(full))
 
 
 @pytest.mark.lammps

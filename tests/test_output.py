@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import dump_text, trajectory
 
 from rackstress.stress import AccumulatedDistance, VonMisesStrain, load_run
 from rackstress.stress.measures import (frame_positions, measure_frames, neighbourhoods,
@@ -150,7 +151,7 @@ def test_moving_dump_holds_what_moved_and_reads_as_the_whole(two_runs):
         held[counts_ids(moving, k) - 1] = True
         assert np.array_equal(pa[~held], a.o[~held])
         assert (~held[sed]).sum() > 0.5 * len(sed)          # most of the sediment rests
-    size = {k: (d / "trajectory.dump").stat().st_size for k, d in two_runs.items()}
+    size = {k: len(dump_text(trajectory(d))) for k, d in two_runs.items()}
     assert size["moving"] < 0.9 * size["all"]
     # the measures: the same numbers either way
     for name, v in measure_frames(a).items():
@@ -159,7 +160,7 @@ def test_moving_dump_holds_what_moved_and_reads_as_the_whole(two_runs):
 
 def counts_ids(rundir: Path, frame: int) -> np.ndarray:
     """The ids frame ``frame`` of a dump holds, by a plain parser."""
-    text = (rundir / "trajectory.dump").read_text().split("ITEM: TIMESTEP\n")[1 + frame]
+    text = dump_text(trajectory(rundir)).split("ITEM: TIMESTEP\n")[1 + frame]
     rows = text.split("ITEM: ATOMS id type mol x y z\n")[1].splitlines()
     return np.array([int(r.split()[0]) for r in rows], dtype=np.int64)
 
@@ -189,24 +190,105 @@ def test_vtk_variants_open_in_their_readers(two_runs, tmp_path):
         reader = pv.get_reader(str(vtk / "run.pvd"))
         assert list(reader.time_values) == list(run.steps)
         reader.set_active_time_value(pk["iteration"])
-        mesh = reader.read()[0]
+        blocks = reader.read()
+        # paraview: the frame and the sediment's resting particles (rest.vtp, written once);
+        # ovito: every particle in the frame
+        assert len(blocks) == (2 if fmt == "paraview" else 1)
+        mesh = whole(blocks)
         k = int(np.flatnonzero(run.steps == pk["iteration"])[0])
         p = run.trajectory[k].data["positions64"]
-        assert mesh.n_points == run.n_atoms
-        np.testing.assert_array_equal(mesh.points, p.astype(np.float32))
-        np.testing.assert_array_equal(mesh.point_data["displacement"],
-                                      (p - run.o).astype(np.float32))
-        paper = mesh.point_data["paper"]
+        assert len(mesh["id"]) == run.n_atoms
+        np.testing.assert_array_equal(mesh["id"], run.data.ids)
+        np.testing.assert_array_equal(mesh["points"], p.astype(np.float32))
+        np.testing.assert_array_equal(mesh["displacement"], (p - run.o).astype(np.float32))
+        paper = mesh["paper"]
         assert paper.dtype == np.float64 and paper[pk["particle"] - 1] == pk["value"]
-        # VTK's own XML reader, as ParaView opens a frame
-        x = vtkXMLPolyDataReader()
-        x.SetFileName(str(vtk / "frame_0000050.vtp"))
-        x.Update()
-        assert x.GetOutput().GetNumberOfPoints() == run.n_atoms
-        assert x.GetOutput().GetPointData().GetArray("d2min") is not None
+        # VTK's own XML reader, as ParaView opens a frame (and the resting part)
+        files = ["frame_0000050.vtp"] + (["rest.vtp"] if fmt == "paraview" else [])
+        n = 0
+        for f in files:
+            x = vtkXMLPolyDataReader()
+            x.SetFileName(str(vtk / f))
+            x.Update()
+            n += x.GetOutput().GetNumberOfPoints()
+            assert x.GetOutput().GetPointData().GetArray("d2min") is not None
+        assert n == run.n_atoms
     size = {f: sum(q.stat().st_size for q in (tmp_path / f / "vtk").iterdir())
             for f in ("paraview", "ovito")}
     assert size["paraview"] < 0.4 * size["ovito"]
+
+
+def whole(blocks) -> dict:
+    """Every particle of a time of a PVD series (its parts joined), by id: points and arrays."""
+    parts = [blocks[i] for i in range(len(blocks))]
+    ids = np.concatenate([b.point_data["id"] for b in parts])
+    order = np.argsort(ids, kind="stable")
+    out = {"points": np.concatenate([b.points for b in parts])[order]}
+    for name in parts[0].point_data.keys():
+        out[name] = np.concatenate([b.point_data[name] for b in parts])[order]
+    return out
+
+
+@pytest.mark.lammps
+def test_a_run_writes_the_leading_measure_once_a_frame_and_a_gzip_trajectory(two_runs, tmp_path):
+    """What 'rackstress run' leaves (issue 24): trajectory.dump.gz, a gzip member a frame, which
+    gzip, MDAnalysis' own LAMMPSDUMP reader and load_run open as the text LAMMPS wrote; and the
+    VTK series with the leading measure and displacement, its resting sediment written once,
+    equal array for array to the full series 'rackstress stress RUNDIR' writes."""
+    import gzip
+    import zlib
+
+    import MDAnalysis as mda
+    import pyvista as pv
+
+    for d in two_runs.values():
+        gz = d / "trajectory.dump.gz"
+        assert gz.is_file() and not (d / "trajectory.dump").exists()
+        raw, members, text = gz.read_bytes(), 0, b""
+        while raw:                                  # member by member, by zlib alone
+            z = zlib.decompressobj(wbits=31)
+            text += z.decompress(raw)
+            assert z.eof
+            raw, members = z.unused_data, members + 1
+        assert text == gzip.decompress(gz.read_bytes())
+        run = load_run(d)
+        assert members == text.count(b"ITEM: TIMESTEP\n") == len(run.steps) == 13
+    # MDAnalysis' stock reader opens the .gz (every particle every frame: --dump-all); it
+    # shifts each frame by its box's lower corner and keeps float32
+    d = two_runs["all"]
+    run = load_run(d)
+    u = mda.Universe(str(d / "particles.data"), str(d / "trajectory.dump.gz"),
+                     topology_format="DATA", atom_style="id resid type x y z",
+                     format="LAMMPSDUMP")
+    assert len(u.trajectory) == len(run.steps)
+    for k, ts in enumerate(u.trajectory):
+        p = run.trajectory[k].data["positions64"] - run.index.box[k, :, 0]
+        np.testing.assert_allclose(ts.positions, p, rtol=0, atol=4 * np.spacing(np.float32(200)))
+    # the run's VTK series against the full one
+    d = two_runs["moving"]
+    run = load_run(d)
+    full = tmp_path / "full"
+    r = subprocess.run([RACKSTRESS, "stress", str(d), "--out", str(full), "--no-dump",
+                        "--no-progress"], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    lean, every = (pv.get_reader(str(x / "vtk" / "run.pvd")) for x in (d, full))
+    assert list(lean.time_values) == list(every.time_values) == list(run.steps)
+    sed = run.parts["sediment"].index
+    for t in lean.time_values:
+        lean.set_active_time_value(t)
+        every.set_active_time_value(t)
+        a, b = whole(lean.read()), whole(every.read())
+        assert set(b) - set(a) == {"displacement_magnitude", "accumulated", "strain", "d2min"}
+        assert set(a) <= set(b) and "paper" in a
+        for name in a:
+            np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+        rest = lean.read()[1]
+        assert 0 < rest.n_points < len(sed)          # resting sediment, the same at every time
+        np.testing.assert_array_equal(rest.points, run.o[rest.point_data["id"] - 1]
+                                      .astype(np.float32))
+        assert (rest.point_data["paper"] == 0).all()
+    files = sorted(q.name for q in (d / "vtk").iterdir())
+    assert files.count("rest.vtp") == 1 and len(files) == len(run.steps) + 2
 
 
 @pytest.mark.lammps

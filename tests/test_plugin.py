@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import dump_text, trajectory
 
 from rackstress import scenes
 from rackstress.engines.driver import drive
@@ -189,7 +190,7 @@ scenes_ = {"gait": scenes.build("magpod-small", phase_steps=300, cycles=1),
 # ------------------------------------------------------------------ standalone decks
 def _frames(path: Path) -> list:
     """(timestep, ids, positions) of every frame of a ``id type mol x y z`` dump."""
-    lines, out, k = path.read_text().splitlines(), [], 0
+    lines, out, k = dump_text(path).splitlines(), [], 0
     while k < len(lines):
         if lines[k] == "ITEM: TIMESTEP":
             n = int(lines[k + 3])
@@ -252,7 +253,7 @@ def test_standalone_deck_runs_the_reference_trajectory(tmp_path, scene, sets):
     opts = [x for s in sets for x in ("--set", s)]
     _cli("run", scene, "--engine", "reference", "--out", str(tmp_path / "ref"), "--no-render",
          "--no-progress", *opts)
-    ref = _frames(tmp_path / "ref" / "trajectory.dump")
+    ref = _frames(trajectory(tmp_path / "ref"))
     _cli("deck", scene, "--out", str(tmp_path / "deck1"), *opts)
     text = (tmp_path / "deck1" / "in.lammps").read_text()
     assert "rs/" in text and "external" not in text          # the plugin, no Python callback

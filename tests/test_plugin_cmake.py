@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from conftest import trajectory
 
 from test_plugin import _cli, _frames, _same_to_dump_precision
 
@@ -73,7 +74,7 @@ def test_cmake_builds_the_plugin_against_the_wheel_and_lmp_runs_it(tmp_path):
 
     _cli("run", "plane-rack", "--engine", "reference", "--out", str(tmp_path / "ref"),
          "--no-render", "--no-progress")
-    ref = _frames(tmp_path / "ref" / "trajectory.dump")
+    ref = _frames(trajectory(tmp_path / "ref"))
     _cli("deck", "plane-rack", "--out", str(tmp_path / "deck1"))
     shutil.copytree(tmp_path / "deck1", tmp_path / "deck2")
     _same_to_dump_precision(_lmp_with(tmp_path / "deck1", tmp_path / "b1", 1), ref)

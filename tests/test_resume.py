@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from conftest import dump_text, trajectory
 
 BIN = Path(sys.executable).parent
 RACKSTRESS = str(BIN / "rackstress")
@@ -85,8 +86,11 @@ def test_killed_and_resumed_equals_uninterrupted(tmp_path):
     for k in "xvf":
         assert np.array_equal(sa[k], sb[k]), k
     # the trajectory: frames after the checkpoint cut and written again, none lost or doubled
-    ta, tb = (full / "trajectory.dump").read_bytes(), (cut / "trajectory.dump").read_bytes()
-    assert tb.count(b"ITEM: TIMESTEP") == 1200 // 4 + 1
+    # (both finished: trajectory.dump.gz, the same bytes, and the same text inside)
+    assert trajectory(full).name == trajectory(cut).name == "trajectory.dump.gz"
+    assert trajectory(full).read_bytes() == trajectory(cut).read_bytes()
+    ta, tb = dump_text(trajectory(full)), dump_text(trajectory(cut))
+    assert tb.count("ITEM: TIMESTEP") == 1200 // 4 + 1
     assert ta == tb
     # the LAMMPS restart file of the last checkpoint is there too
     assert (cut / mb["restart"]).stat().st_size > 0

@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from conftest import dump_text, trajectory
 
 BIN = Path(sys.executable).parent
 RACKSTRESS = str(BIN / "rackstress")
@@ -48,8 +49,10 @@ def test_default_checkpoints_survive_a_kill_and_go_when_the_run_is_done(tmp_path
     r = _run(["run", "--resume", str(cut), "--no-render", "--no-progress"])
     assert r.returncode == 0, r.stderr
     assert json.loads((cut / "summary.json").read_text())["resumed_from_step"] == step
-    ta, tb = (full / "trajectory.dump").read_bytes(), (cut / "trajectory.dump").read_bytes()
-    assert tb.count(b"ITEM: TIMESTEP") == 1200 // 4 + 1 and ta == tb
+    assert trajectory(full).name == trajectory(cut).name == "trajectory.dump.gz"
+    assert trajectory(full).read_bytes() == trajectory(cut).read_bytes()
+    ta, tb = dump_text(trajectory(full)), dump_text(trajectory(cut))
+    assert tb.count("ITEM: TIMESTEP") == 1200 // 4 + 1 and ta == tb
     assert not (cut / "restart").exists() and not (cut / "progress.json").exists()
 
 

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import dump_text, trajectory
 from click.testing import CliRunner
 
 from rackstress.cli import main
@@ -53,7 +54,7 @@ def parse(path: Path) -> Page:
 
 def dump_frames(path: Path) -> dict:
     """{iteration: positions (n×3) in atom-id order} of a LAMMPS dump, read by hand."""
-    lines = path.read_text().splitlines()
+    lines = dump_text(path).splitlines()
     out, k = {}, 0
     while k < len(lines):
         step, n = int(lines[k + 1]), int(lines[k + 3])
@@ -103,7 +104,7 @@ def test_report_embeds_the_view_offline(rundir):
 def test_view_holds_the_peak_frame_and_marks_the_peak(rundir):
     summary = json.loads((rundir / "summary.json").read_text())
     peak = summary["stress"]["peak"]
-    dumped = dump_frames(rundir / "trajectory.dump")
+    dumped = dump_frames(trajectory(rundir))
     page = parse(rundir / "view3d.html")
     text = (rundir / "view3d.html").read_text()
     no_network(page, text)

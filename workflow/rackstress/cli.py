@@ -123,9 +123,13 @@ def main():
               help="Run directory (default: runs/SCENE-TIMESTAMP).")
 @click.option("--dump-every", type=click.IntRange(min=1), help="Steps between trajectory frames.")
 @click.option("--dump-all", is_flag=True,
-              help="Every particle in every frame of trajectory.dump (a plain LAMMPS dump for "
-                   "other tools); default: a scene with a resting sediment dumps the particles "
-                   "that moved, the others being where particles.data puts them.")
+              help="Every particle in every frame of the trajectory (with --dump-text a plain "
+                   "LAMMPS dump for other tools); default: a scene with a resting sediment dumps "
+                   "the particles that moved, the others being where particles.data puts them.")
+@click.option("--dump-text", is_flag=True,
+              help="Keep trajectory.dump as plain text once the run has finished (default: "
+                   "trajectory.dump.gz, a gzip member a frame, which rackstress, OVITO and "
+                   "MDAnalysis read).")
 @click.option("--overwrite", is_flag=True, help="Replace a finished run in --out.")
 @click.option("--progress/--no-progress", default=True, show_default=True)
 @click.option("--render/--no-render", "do_render", default=True, show_default=True,
@@ -143,7 +147,7 @@ def main():
               "(leapfrog with trapezoidal damping).")
 def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progress, do_render,
         restart_every=None, resume_dir=None, allow_unstable=False, integrator="euler",
-        dump_all=False):
+        dump_all=False, dump_text=False):
     """Run SCENE (a built-in name or a .toml file) and write a run directory.
 
     Exit status (errors.py): 0 done, 2 bad input or a run directory in use or holding another
@@ -181,7 +185,7 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
                 with phase(f"resuming the run in {out}", progress and rank() == 0,
                            ticker=False):
                     summary = resume_run(resume_dir, scene, progress=progress and rank() == 0)
-                _finish(summary, out, do_render, progress)
+                _finish(summary, out, do_render, progress, dump_text)
             return
         shown = progress and rank() == 0
         with phase(f"building the scene {scene}", shown):
@@ -220,7 +224,7 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
                                       overwrite=overwrite, restart_every=restart_every or None,
                                       allow_unstable=allow_unstable, planned=planned,
                                       keep_checkpoints=keep_checkpoints, at_quarter=head_start)
-            _finish(summary, out, do_render, progress)
+            _finish(summary, out, do_render, progress, dump_text)
         if summary.get("settled") is False:
             from rackstress.errors import EXIT_UNSETTLED
 
@@ -235,9 +239,11 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
         _fail_any(err, out)
 
 
-def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True) -> None:
+def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True,
+            dump_text: bool = False) -> None:
     """Report a finished run, post-process it and render its pictures (rank 0, the run
-    directory still held)."""
+    directory still held); unless ``dump_text``, ``trajectory.dump`` becomes
+    ``trajectory.dump.gz`` (compressed meanwhile, in a thread; docs/output.md)."""
     from rackstress.lib.mpi import rank
 
     if rank() != 0:
@@ -268,8 +274,13 @@ def _post_and_render(out: Path, do_render: bool, progress: bool) -> None:
     """Post-process the run in ``out`` and render its pictures (:func:`_finish`)."""
     from rackstress.stress.post import cancel_files, wait_files
 
-    _post_run(out, progress, background=do_render)
+    squeeze = None
+    if not dump_text and (Path(out) / "trajectory.dump").is_file():
+        from rackstress.engines.dumpio import CompressJob
+
+        squeeze = CompressJob(Path(out) / "trajectory.dump")   # read meanwhile; renamed at the end
     try:
+        _post_run(out, progress, background=do_render)
         if do_render:
             from rackstress.render.pictures import render_default
 
@@ -295,6 +306,22 @@ def _post_and_render(out: Path, do_render: bool, progress: bool) -> None:
         sys.exit(EXIT_STORAGE if isinstance(err, StorageError) else EXIT_RENDER)
     finally:
         cancel_files(out)
+        if squeeze is not None:   # the run has finished, whatever its derived files did
+            _compressed(squeeze, failed=sys.exc_info()[0] is not None)
+
+
+def _compressed(job, failed: bool) -> None:
+    """Put the finished run's ``trajectory.dump.gz`` in place (``job``: a
+    :class:`~rackstress.engines.dumpio.CompressJob`). If that fails (a full disk) the text is
+    kept, and the command ends with exit 5 unless an error (``failed``) already ends it."""
+    try:
+        job.finish()
+    except StorageError as err:
+        click.echo(f"rackstress: {'note' if failed else 'error'}: the run finished, but its "
+                   f"trajectory could not be compressed: {err} (trajectory.dump is kept as "
+                   "text)", err=True)
+        if not failed:
+            sys.exit(EXIT_STORAGE)
 
 
 @main.command()
@@ -411,7 +438,7 @@ def _post_run(out, progress, background: bool = False):
     try:
         with phase("computing the stress measures and the VTK series", progress, ticker=False):
             info = postprocess(out, vtk=True, dump=False, progress=progress,
-                               background=background)
+                               background=background, vtk_measures="default")
     except TooLargeError as err:
         click.echo(f"  note: no stress peaks or VTK files: {err}")
         return

@@ -8,7 +8,8 @@ interleaved ``repeat`` times. Its phases come from the run's own records: the si
 (``summary.json`` ``wall_s``), the measures (``stress.json``), the pictures (``summary.json``
 ``render``; the VTK files are written by a second process meanwhile, their time shown apart),
 and the rest of the wall time (start-up, the deck, the data file, the guards, the report).
-The run directory's size is listed by file.
+The run directory's size is listed by file, and on magpod-small each way to write the VTK
+series and the trajectory is measured (:func:`variants`).
 
 The dump's cost per frame is measured apart, in one process: each scene is run for
 ``dump_steps`` iterations (the robot standing on the sediment), then the trajectory's frame of
@@ -124,12 +125,55 @@ def dump_costs(names, steps: int, reps: int = 5) -> list:
                 eng.close()
 
 
+def variants(rundir: Path) -> dict:
+    """The size of each way to write a finished run's VTK series and trajectory (issue 24), on
+    ``rundir`` (a warm ``rackstress run``), in one process and in turn: the VTK series with every
+    measure (``rackstress stress``) and with the leading one (``rackstress run``), under each
+    of VTK's XML compressors, and the OVITO variant; the trajectory as text and gzip-compressed
+    at levels 1 (what a run writes) and 6. Seconds are this process's wall time."""
+    import gzip
+
+    from rackstress.engines.dumpio import dump_path
+    from rackstress.stress import export
+    from rackstress.stress.post import compute_fields
+    from rackstress.stress.rundata import load_run
+
+    run_ = load_run(rundir)
+    fields = compute_fields(run_)
+    vtk = []
+    with tempfile.TemporaryDirectory(prefix="rackstress-variants-") as tmp:
+        for measures, fmt, comp, level in (("all", "paraview", "zlib", 1),
+                                           ("default", "paraview", "zlib", 1),
+                                           ("default", "paraview", "zlib", 6),
+                                           ("default", "paraview", "lz4", 1),
+                                           ("default", "paraview", "lzma", 1),
+                                           ("all", "ovito", "zlib", 1)):
+            d = Path(tmp) / f"{measures}-{fmt}-{comp}{level}"
+            t = time.perf_counter()
+            export.write_vtk(run_, fields, d, fmt=fmt, measures=measures, compressor=comp,
+                             level=level)
+            vtk.append({"measures": measures, "format": fmt,
+                        "compressor": f"{comp} {level}" if fmt == "paraview" else "none",
+                        "bytes": _size(d), "s": time.perf_counter() - t})
+    path = dump_path(rundir)
+    text = gzip.decompress(path.read_bytes()) if path.name.endswith(".gz") else path.read_bytes()
+    frames = [b"ITEM: TIMESTEP\n" + f for f in text.split(b"ITEM: TIMESTEP\n")[1:]]
+    dump = [{"kind": "text", "bytes": len(text), "s": 0.0}]
+    for level in (1, 6):
+        t = time.perf_counter()
+        n = sum(len(gzip.compress(f, level, mtime=0)) for f in frames)
+        dump.append({"kind": f"gzip {level}, a member a frame", "bytes": n,
+                     "s": time.perf_counter() - t})
+    return {"scene": json.loads((rundir / "scene.json").read_text()).get("scene"),
+            "frames": len(frames), "vtk": vtk, "dump": dump}
+
+
 def run(out: Path, scene_names=SCENES, repeat: int = 1, steps: dict | None = None,
         dump_steps: int = 600, log=print) -> dict:
     """Measure every scene (module docstring); ``steps``: iterations per scene where not the
     scene's own (the long ones, to keep the benchmark short)."""
     steps = steps or {}
-    rows = []
+    rows, sizes = [], []
     with tempfile.TemporaryDirectory(prefix="rackstress-e2e-") as tmp:
         for name in scene_names:
             args = ["--steps", str(steps[name])] if name in steps else []
@@ -140,10 +184,14 @@ def run(out: Path, scene_names=SCENES, repeat: int = 1, steps: dict | None = Non
                     rec = _cli_run(name, rundir, cold, args)
                     rec.update(scene=name, steps=steps.get(name), repeat=k)
                     rows.append(rec)
+                    if (name == "magpod-small" and not cold and k == 0 and not sizes
+                            and rec.get("exit") == 0):
+                        log("e2e: magpod-small's formats, each size ...")
+                        sizes.append(variants(rundir))
     names = [n for n in ("magpod", "sediment-large") if n in scene_names]
     log(f"e2e: the trajectory's cost per frame ({', '.join(names)}) ...")
     dumps = dump_costs(names, dump_steps) if names else []
-    return {"runs": rows, "dumps": dumps}
+    return {"runs": rows, "dumps": dumps, "variants": sizes}
 
 
 def targets(data: dict) -> list:
@@ -183,6 +231,9 @@ def markdown(data: dict, machine: dict) -> str:
          "then the frames LAMMPS has written are measured beside it (*measured while "
          "running*: frames of the run's; the measures column is what is left after it); the "
          "3D view is built by a child process beside the pictures and plots. "
+         "Its VTK frames carry the leading measure and displacement, the resting sediment "
+         "once (`vtk/rest.vtp`), and its trajectory is `trajectory.dump.gz` once finished "
+         "(docs/output.md). "
          f"Machine: {machine.get('cores', '?')} cores, load average at the start {load}; "
          "each row gives the 1-minute load when it started "
          "(shared with other jobs: compare within a row, not across runs).",
@@ -220,6 +271,23 @@ def markdown(data: dict, machine: dict) -> str:
         L.append(f"**{r['scene']}** ({r['size_total'] / 1e6:.1f} MB): "
                  + ", ".join(f"`{k}` {v / 1e6:.2f} MB" for k, v in
                              sorted(r["sizes"].items(), key=lambda kv: -kv[1]) if v > 1e4))
+        L.append("")
+    for v in data.get("variants") or []:
+        L += [f"## What each format costs ({v['scene']}, {v['frames']} frames)", "",
+              "The warm run's directory written again each way, in one process and in turn "
+              "(`bench.e2e.variants`); the first row of each table is what `rackstress run` "
+              "writes.", "",
+              "| VTK series | measures | arrays | size | time |", "|---|---|---|---|---|"]
+        order = sorted(v["vtk"], key=lambda x: (x["measures"] != "default"
+                                                 or x["compressor"] != "zlib 1"))
+        for x in order:
+            what = ("the leading one and displacement" if x["measures"] == "default"
+                    else "every one")
+            L.append(f"| {x['format']} | {what} | {x['compressor']} | "
+                     f"{x['bytes'] / 1e6:.2f} MB | {x['s']:.2f} s |")
+        L += ["", "| trajectory | size | time |", "|---|---|---|"]
+        for x in sorted(v["dump"], key=lambda x: x["kind"] != "gzip 1, a member a frame"):
+            L.append(f"| {x['kind']} | {x['bytes'] / 1e6:.2f} MB | {x['s']:.2f} s |")
         L.append("")
     if data["dumps"]:
         L += ["## The trajectory's cost per frame", "",

@@ -610,7 +610,7 @@ def render(rundir, frames=None, measure: str | None = None, views=DEFAULT_VIEWS,
         if bad is None:
             raise
         raise StressInputError(
-            f"{rundir}: the frame of iteration {bad} in trajectory.dump holds non-finite "
+            f"{rundir}: the frame of iteration {bad} in {run.index.path.name} holds non-finite "
             "positions (the run diverged there: see its summary.json), so no stress can be "
             "measured over the run; nothing was rendered") from None
     measure = measure or fields.default

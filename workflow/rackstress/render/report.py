@@ -22,6 +22,7 @@ import os
 import time
 from pathlib import Path
 
+from rackstress.engines.dumpio import dump_path, final_name
 from rackstress.errors import storage_error
 from rackstress.lib.runfiles import REPORT, STABILITY, STRESS_JSON
 
@@ -348,14 +349,14 @@ def write_report(rundir, stability: bool = True, view: bool = True,
              ("stress.dump", "LAMMPS dump with the measures as named columns (OVITO)"),
              ("summary.json", "the run's summary, peaks included"),
              ("stress.json", "the post-processing record"),
-             ("trajectory.dump", "the trajectory (dump custom id type mol x y z; with a resting "
-                                 "sediment the particles that moved, the others as in "
-                                 "particles.data)"),
+             (final_name(rundir), "the trajectory (dump custom id type mol x y z, gzip once "
+                                  "the run has finished; with a resting sediment the "
+                                  "particles that moved, the others as in particles.data)"),
              ("particles.data", "LAMMPS data file (original positions)"),
              ("in.lammps", "the LAMMPS input deck"),
              (f"{FIGURES}/render.json", "what the pictures show")]
     for rel, what in links:
-        if (rundir / rel).is_file():
+        if (rundir / rel).is_file() or rel == final_name(rundir) != dump_path(rundir).name:
             w(f'<li><a href="{_e(rel)}">{_e(rel)}</a> — {_e(what)}</li>')
     w("</ul></body></html>")
     path = rundir / REPORT

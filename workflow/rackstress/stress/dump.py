@@ -1,5 +1,9 @@
 """Reading a run's ``trajectory.dump`` and ``particles.data`` for MDAnalysis, at full precision.
 
+A finished run's dump is ``trajectory.dump.gz``, a gzip member a frame
+(:func:`rackstress.engines.dumpio.compress_dump`): the index records each frame's member, and a
+frame is read by decompressing its member alone.
+
 Why a reader of our own: MDAnalysis' stock ``LAMMPSDUMP`` reader (2.11) keeps positions in
 float32 (about 1e-7 relative: 1e-5 length units at x = 100) and shifts every frame by its box's
 lower corner (``boundary m m m`` shrink-wraps the box, so the shift changes from frame to frame).
@@ -30,6 +34,7 @@ import numpy as np
 from MDAnalysis.coordinates import base
 from MDAnalysis.lib.util import store_init_arguments
 
+from rackstress.engines.dumpio import GZ, gzip_member, gzip_members
 from rackstress.errors import RackstressError
 
 #: Coordinate columns accepted, in order of preference (runs use ``boundary m m m``: x = xu).
@@ -82,6 +87,9 @@ class FrameIndex:
     truncated: dict = field(default_factory=dict)
     counts: np.ndarray | None = None  # atoms in each frame (partial: fewer than n_atoms)
     partial: bool = False             # frames hold only the moving particles (the rest rest)
+    #: gzip (``trajectory.dump.gz``): each frame's member offset; ``atoms_start``/``atoms_end``
+    #: are then offsets in that member's text
+    members: np.ndarray | None = None
 
     @property
     def n_frames(self) -> int:
@@ -117,74 +125,83 @@ def index_dump(path, allow_truncated: bool = False, partial: bool = False) -> Fr
     path = Path(path)
     if not path.is_file():
         raise StressInputError(f"{path}: no such dump file")
-    steps, starts, ends, boxes, counts = [], [], [], [], []
+    steps, starts, ends, boxes, counts, members = [], [], [], [], [], []
     n_atoms, columns = None, None
     pos, lineno = 0, 0
     line_len = 64.0
     trunc = None
-    with open(path, "rb") as fh:
-        while True:
-            frame = len(steps)
-            step = None
-            header = []
-            for _ in range(9):
-                line = fh.readline()
-                if not line:
+    for member, fh in _sources(path):
+        pos = 0
+        with fh:
+            while True:
+                frame = len(steps)
+                step = None
+                header = []
+                for _ in range(9):
+                    line = fh.readline()
+                    if not line:
+                        break
+                    header.append(line)
+                if not header:
+                    break  # clean end of file
+                if len(header) < 9 or not header[-1].endswith(b"\n"):
+                    step = _header_step(header)
+                    trunc = (step, frame, 0, n_atoms)
                     break
-                header.append(line)
-            if not header:
-                break  # clean end of file
-            if len(header) < 9 or not header[-1].endswith(b"\n"):
-                step = _header_step(header)
-                trunc = (step, frame, 0, n_atoms)
-                break
-            _expect(header[0], b"ITEM: TIMESTEP", path, lineno + 1)
-            try:
-                step = int(header[1])
-            except ValueError:
-                raise DumpError(f"{path}: line {lineno + 2}: bad step '{header[1].decode().strip()}'")
-            _expect(header[2], b"ITEM: NUMBER OF ATOMS", path, lineno + 3)
-            n = int(header[3])
-            _expect(header[4], b"ITEM: BOX BOUNDS", path, lineno + 5)
-            try:
-                box = np.array([[float(v) for v in header[5 + k].split()[:2]] for k in range(3)])
-            except ValueError:
-                raise DumpError(f"{path}: frame {frame} (step {step}): malformed box bounds")
-            _expect(header[8], b"ITEM: ATOMS", path, lineno + 9)
-            cols = tuple(header[8].decode().split()[2:])
-            if n_atoms is None:
-                n_atoms, columns = n, cols
-                coordinate_columns(columns, path)
-            elif partial and cols == columns:
-                n_atoms = max(n_atoms, n)
-            elif n != n_atoms:
-                raise DumpError(f"{path}: frame {frame} (step {step}) has {n} atoms, frame 0 has "
-                                f"{n_atoms}; rackstress runs keep every particle in every frame")
-            elif cols != columns:
-                raise DumpError(f"{path}: frame {frame} (step {step}) has columns "
-                                f"'{' '.join(cols)}', frame 0 has '{' '.join(columns)}'")
-            pos += sum(len(h) for h in header)
-            lineno += 9
-            start = pos
-            nbytes, got = _skip_lines(fh, n, int(1.02 * n * line_len) + 4096)
-            if got:
-                line_len = nbytes / got     # the next frame's lines are alike
-            pos += nbytes
-            lineno += got
-            if got < n:
-                trunc = (step, frame, got, n)     # n: the count this frame's header promised
-                break
-            steps.append(step)
-            counts.append(n)
-            starts.append(start)
-            ends.append(pos)
-            boxes.append(box)
+                _expect(header[0], b"ITEM: TIMESTEP", path, lineno + 1)
+                try:
+                    step = int(header[1])
+                except ValueError:
+                    raise DumpError(f"{path}: line {lineno + 2}: bad step "
+                                    f"'{header[1].decode().strip()}'")
+                _expect(header[2], b"ITEM: NUMBER OF ATOMS", path, lineno + 3)
+                n = int(header[3])
+                _expect(header[4], b"ITEM: BOX BOUNDS", path, lineno + 5)
+                try:
+                    box = np.array([[float(v) for v in header[5 + k].split()[:2]] for k in range(3)])
+                except ValueError:
+                    raise DumpError(f"{path}: frame {frame} (step {step}): malformed box bounds")
+                _expect(header[8], b"ITEM: ATOMS", path, lineno + 9)
+                cols = tuple(header[8].decode().split()[2:])
+                if n_atoms is None:
+                    n_atoms, columns = n, cols
+                    coordinate_columns(columns, path)
+                elif partial and cols == columns:
+                    n_atoms = max(n_atoms, n)
+                elif n != n_atoms:
+                    raise DumpError(f"{path}: frame {frame} (step {step}) has {n} atoms, frame 0 "
+                                    f"has {n_atoms}; rackstress runs keep every particle in every "
+                                    "frame")
+                elif cols != columns:
+                    raise DumpError(f"{path}: frame {frame} (step {step}) has columns "
+                                    f"'{' '.join(cols)}', frame 0 has '{' '.join(columns)}'")
+                pos += sum(len(h) for h in header)
+                lineno += 9
+                start = pos
+                nbytes, got = _skip_lines(fh, n, int(1.02 * n * line_len) + 4096)
+                if got:
+                    line_len = nbytes / got     # the next frame's lines are alike
+                pos += nbytes
+                lineno += got
+                if got < n:
+                    trunc = (step, frame, got, n)     # n: the count this frame's header promised
+                    break
+                steps.append(step)
+                counts.append(n)
+                starts.append(start)
+                ends.append(pos)
+                boxes.append(box)
+            members += [member] * (len(steps) - len(members))
+        if trunc is not None:
+            break
     if n_atoms is None and trunc is None:
         raise DumpError(f"{path}: the dump file is empty (no frame)")
     index = FrameIndex(path, n_atoms or 0, columns or (), np.asarray(steps, dtype=np.int64),
                        np.asarray(starts, dtype=np.int64), np.asarray(ends, dtype=np.int64),
                        np.asarray(boxes).reshape(-1, 3, 2),
-                       counts=np.asarray(counts, dtype=np.int64), partial=bool(partial))
+                       counts=np.asarray(counts, dtype=np.int64), partial=bool(partial),
+                       members=np.asarray(members, dtype=np.int64) if path.name.endswith(GZ)
+                       else None)
     if trunc is not None:
         step, frame, got, promised = trunc
         at = f"step {step}" if step is not None else "an unreadable step"
@@ -199,6 +216,18 @@ def index_dump(path, allow_truncated: bool = False, partial: bool = False) -> Fr
             raise TruncatedDumpError(msg + hint, path=path, step=step, frame=frame,
                                      atoms_read=got, n_atoms=promised)
     return index
+
+
+def _sources(path: Path):
+    """(gzip member offset or None, binary file) of the text a dump holds: the file itself, or
+    each member of a gzip file (:func:`rackstress.engines.dumpio.compress_dump`) in turn."""
+    if not path.name.endswith(GZ):
+        yield None, open(path, "rb")
+        return
+    import io
+
+    for offset, text in gzip_members(path):
+        yield offset, io.BytesIO(text)
 
 
 def _skip_lines(fh, n: int, chunk: int) -> tuple[int, int]:
@@ -346,9 +375,13 @@ class RackDumpReader(base.ReaderBase):
 def read_table(idx: FrameIndex, frame: int) -> np.ndarray:
     """The atom lines of one frame as an (n_atoms, n_columns) float64 array, checked."""
     start, end = int(idx.atoms_start[frame]), int(idx.atoms_end[frame])
-    with open(idx.path, "rb") as fh:
-        fh.seek(start)
-        text = fh.read(end - start).decode("ascii", errors="replace")
+    if idx.members is not None:
+        text = gzip_member(idx.path, int(idx.members[frame]))[start:end].decode(
+            "ascii", errors="replace")
+    else:
+        with open(idx.path, "rb") as fh:
+            fh.seek(start)
+            text = fh.read(end - start).decode("ascii", errors="replace")
     ncol = len(idx.columns)
     n = idx.n_atoms if idx.counts is None else int(idx.counts[frame])
     if n == 0:

@@ -16,6 +16,14 @@
     symmetric-tensor order), ``principal`` (3, largest first), ``safety`` and ``bind_strain``)
     in float64 — the very numbers of ``summary.json``'s peaks. ``displacement`` is in the
     scene's length unit. No field data: the iteration is the PVD's time value.
+    ``rackstress run`` writes the leading measure only (``paper``; ``von_mises`` for a scene
+    with a material) beside ``displacement`` (``measures="default"``); ``rackstress stress
+    RUNDIR`` writes every one (magpod-small: 14.8 MB against 25.5 MB).
+    The particles of a sediment that never move and whose every array is the same in every
+    frame are written once, ``vtk/rest.vtp``, listed as the PVD's ``part="1"`` at every
+    time beside the frame (``part="0"``), which then holds the others: ParaView and pyvista read
+    each time as a two-block dataset (:func:`resting`; the ``ovito`` variant keeps every
+    particle in every frame).
     Two variants (``fmt``): ``"paraview"`` (the default) stores each array raw in the file's
     appended section, zlib-compressed, which ParaView and pyvista (VTK's XML readers) read: the
     arrays that do not change (ids, groups, radii, original positions) and the resting particles
@@ -137,11 +145,61 @@ def frame_name(step: int) -> str:
 
 #: the VTK variants (module docstring)
 VTK_FORMATS = ("paraview", "ovito")
+#: which measures a frame carries: every one (``rackstress stress``), or the leading one
+#: (:attr:`~rackstress.stress.post.Fields.default`: ``paper``, ``von_mises`` with a material)
+#: beside ``displacement`` (``rackstress run``: magpod-small's series 16 MB, not 27 MB)
+MEASURES = ("all", "default")
 
 
-def write_vtk(run, fields, outdir, progress: bool = False, fmt: str = "paraview") -> Path:
+#: the particles that never move nor change in any array, written once (module docstring)
+REST = "rest.vtp"
+
+
+def resting(run, fields, chosen: dict) -> np.ndarray:
+    """Which particles (id order) of a resting group (kind ``sediment``: what the dump leaves
+    out) sit at their original position in every frame, with every array of ``chosen``
+    (measure → (frames, particles[, k])) the same in every frame: their frame-0 values are then
+    theirs at every time, exactly (NaN equal to NaN). A scene without one keeps one dataset a
+    frame."""
+    still = np.zeros(run.n_atoms, bool)
+    for part in run.parts.values():
+        if part.kind == "sediment":
+            still[part.index] = True
+    if not still.any():
+        return still
+    o = run.o
+    for k in range(len(fields.steps)):
+        ts = run.trajectory[k]
+        still &= (positions(ts) == o).all(axis=1)
+        v = _velocity(ts)
+        if v is not None:
+            still &= (v == 0).all(axis=1)
+    for vals in chosen.values():
+        a = vals.reshape(len(vals), run.n_atoms, -1)
+        same = (a == a[:1]) | (np.isnan(a) & np.isnan(a[:1]))
+        still &= same.all(axis=(0, 2))
+    return still
+
+
+def _int32(a):
+    """A ``vtkTypeInt32Array`` of ``a`` (a vertex cell array's offsets or connectivity)."""
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+    from vtkmodules.vtkCommonCore import vtkTypeInt32Array
+
+    v = vtkTypeInt32Array()
+    v.SetNumberOfTuples(len(a))
+    vtk_to_numpy(v)[:] = a
+    return v
+
+
+def write_vtk(run, fields, outdir, progress: bool = False, fmt: str = "paraview",
+              measures: str = "all", compressor: str = "zlib", level: int = 1) -> Path:
     """Write ``outdir/run.pvd`` and one ``.vtp`` per frame; return the ``.pvd`` path.
     ``fmt``: ``"paraview"`` (compressed, appended) or ``"ovito"`` (module docstring).
+    ``measures``: ``"all"`` (every measure, ``rackstress stress``) or ``"default"`` (the leading
+    measure only and no ``displacement_magnitude``, ``rackstress run``: :data:`MEASURES`).
+    ``compressor`` (``zlib``, ``lz4``, ``lzma``) and ``level``: VTK's XML compressors, for
+    ``bench`` comparisons; zlib level 1 is what :data:`MEASURES`' sizes were measured with.
 
     Example
     -------
@@ -149,7 +207,7 @@ def write_vtk(run, fields, outdir, progress: bool = False, fmt: str = "paraview"
     >>> r = pv.get_reader("runs/plane-rack/vtk/run.pvd"); r.set_active_time_value(36)
     >>> r.read()[0].point_data["paper"].max()                             # doctest: +SKIP
     """
-    from vtkmodules.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray
+    from vtkmodules.util.numpy_support import numpy_to_vtk
     from vtkmodules.vtkCommonCore import vtkPoints
     from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData
     from vtkmodules.vtkIOXML import vtkXMLPolyDataWriter
@@ -161,9 +219,16 @@ def write_vtk(run, fields, outdir, progress: bool = False, fmt: str = "paraview"
     if tmp.exists():
         shutil.rmtree(tmp)
     tmp.mkdir(parents=True)
+    if measures not in MEASURES:
+        raise ValueError(f"unknown measures '{measures}'; choose one of {', '.join(MEASURES)}")
+    every = measures == "all"
+    chosen = dict(fields.values) if every else {fields.default: fields.values[fields.default]}
+    if every:
+        chosen.update(getattr(fields, "extras", {}))           # stress tensor, principal, ...
     gid, names = group_ids(run)
     o = run.o
     r = radii(run)
+    f32 = np.float32
 
     def arr(a, name, deep=True):
         a = np.ascontiguousarray(a)
@@ -171,21 +236,42 @@ def write_vtk(run, fields, outdir, progress: bool = False, fmt: str = "paraview"
         v.SetName(name)
         return v
 
-    poly = vtkPolyData()
-    n = run.n_atoms
-    verts = vtkCellArray()
-    verts.SetData(numpy_to_vtkIdTypeArray(np.arange(n + 1, dtype=np.int64), deep=True),
-                  numpy_to_vtkIdTypeArray(np.arange(n, dtype=np.int64), deep=True))
-    poly.SetVerts(verts)
-    pd = poly.GetPointData()
-    f32 = np.float32
-    for a in (arr(run.data.ids.astype(np.int32), "id"), arr(gid, "group_id"),
-              arr(run.data.types.astype(np.int32), "type"),
-              arr(run.data.mols.astype(np.int32), "mol"), arr(r.astype(f32), "radius"),
-              arr(o.astype(f32), "original")):
-        pd.AddArray(a)
-    for k, name in enumerate(names):                 # the names, as OVITO can read them
-        pd.AddArray(arr((gid == k).astype(np.int32), f"group_{name}"))
+    def frame_arrays(k, ts):
+        """(points, [per-frame arrays]) of frame ``k``, every particle."""
+        p = positions(ts)
+        disp = p - o
+        out = [("displacement", disp.astype(f32))]
+        if every:
+            out.append(("displacement_magnitude", np.linalg.norm(disp, axis=1).astype(f32)))
+        v = _velocity(ts)
+        if v is not None:
+            out.append(("velocity", v.astype(f32)))
+        out += [(m, vals[k]) for m, vals in chosen.items()]
+        return p.astype(f32), out
+
+    def dataset(rows):
+        """A vertex cloud of the particles ``rows`` with the arrays that do not change."""
+        poly = vtkPolyData()
+        verts = vtkCellArray()                # Int32 ids: half the bytes of 64-bit ones
+        verts.SetData(_int32(np.arange(len(rows) + 1)), _int32(np.arange(len(rows))))
+        poly.SetVerts(verts)
+        pd = poly.GetPointData()
+        for a in (arr(run.data.ids[rows].astype(np.int32), "id"), arr(gid[rows], "group_id"),
+                  arr(run.data.types[rows].astype(np.int32), "type"),
+                  arr(run.data.mols[rows].astype(np.int32), "mol"),
+                  arr(r[rows].astype(f32), "radius"), arr(o[rows].astype(f32), "original")):
+            pd.AddArray(a)
+        for j, name in enumerate(names):              # the names, as OVITO can read them
+            pd.AddArray(arr((gid[rows] == j).astype(np.int32), f"group_{name}"))
+        return poly
+
+    def fill(poly, rows, p, per_frame):
+        pts = vtkPoints()
+        pts.SetData(arr(p[rows], "points"))
+        poly.SetPoints(pts)
+        for name, a in per_frame:
+            poly.GetPointData().AddArray(arr(a[rows], name))
+
     writer = vtkXMLPolyDataWriter()
     if fmt == "ovito":
         writer.SetDataModeToBinary()      # inline base64: OVITO reads neither appended data
@@ -194,45 +280,48 @@ def write_vtk(run, fields, outdir, progress: bool = False, fmt: str = "paraview"
     elif fmt == "paraview":
         writer.SetDataModeToAppended()    # raw bytes, not base64
         writer.EncodeAppendedDataOff()
-        writer.SetCompressorTypeToZLib()  # what every VTK XML reader decompresses
-        writer.SetCompressionLevel(1)     # level 1: within 3 % of the default's size, 30 % faster
+        {"zlib": writer.SetCompressorTypeToZLib, "lz4": writer.SetCompressorTypeToLZ4,
+         "lzma": writer.SetCompressorTypeToLZMA}[compressor]()
+        writer.SetCompressionLevel(level)
     else:
         raise ValueError(f"unknown VTK format '{fmt}'; choose one of {', '.join(VTK_FORMATS)}")
     writer.WriteToOutputStringOn()        # VTK's own file output crashes (SIGSEGV) when the
     #                                       disk fills: it writes to memory, Python to the disk
+
+    def write(poly, name):
+        writer.SetInputData(poly)
+        if not writer.Write():
+            raise OSError(f"{tmp / name}: VTK could not write the frame")
+        _write_bytes(tmp / name, writer.GetOutputString())
+
+    rest = resting(run, fields, chosen) if fmt == "paraview" else np.zeros(run.n_atoms, bool)
+    rows = np.flatnonzero(~rest)
     entries = []
     try:
+        if rest.any():                    # written once, listed at every time (module docstring)
+            p0, per0 = frame_arrays(0, run.trajectory[0])
+            still = np.flatnonzero(rest)
+            poly = dataset(still)
+            fill(poly, still, p0, per0)
+            write(poly, REST)
+        poly = dataset(rows)
         with progress_bar(len(fields.steps), progress, "VTK frames") as bar:
             bar.unit = "frame"
             for k, step in enumerate(fields.steps):
-                ts = run.trajectory[k]
-                p = positions(ts)
-                pts = vtkPoints()
-                pts.SetData(arr(p.astype(f32), "points"))
-                poly.SetPoints(pts)
-                disp = p - o
-                pd.AddArray(arr(disp.astype(f32), "displacement"))
-                pd.AddArray(arr(np.linalg.norm(disp, axis=1).astype(f32),
-                                "displacement_magnitude"))
-                v = _velocity(ts)
-                if v is not None:
-                    pd.AddArray(arr(v.astype(f32), "velocity"))
-                for m, vals in fields.values.items():
-                    pd.AddArray(arr(vals[k], m))
-                for m, vals in getattr(fields, "extras", {}).items():   # stress tensor, ...
-                    pd.AddArray(arr(vals[k], m))
+                p, per_frame = frame_arrays(k, run.trajectory[k])
+                fill(poly, rows, p, per_frame)
                 name = frame_name(step)
-                writer.SetInputData(poly)
-                if not writer.Write():
-                    raise OSError(f"{tmp / name}: VTK could not write the frame")
-                _write_bytes(tmp / name, writer.GetOutputString())
+                write(poly, name)
                 entries.append((int(step), name))
                 bar.update(1)
         lines = ['<?xml version="1.0"?>',
                  '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">',
                  "  <Collection>"]
-        lines += [f'    <DataSet timestep="{s}" group="" part="0" file={quoteattr(f)}/>'
-                  for s, f in entries]
+        for s, f in entries:
+            lines.append(f'    <DataSet timestep="{s}" group="" part="0" file={quoteattr(f)}/>')
+            if rest.any():
+                lines.append(f'    <DataSet timestep="{s}" group="" part="1" '
+                             f'file={quoteattr(REST)}/>')
         lines += ["  </Collection>", "</VTKFile>", ""]
         _write_bytes(tmp / PVD, "\n".join(lines).encode())
         _swap_in(tmp, outdir)
@@ -257,7 +346,7 @@ class VtkJob:
     ``.pvd`` path and the wall time, or raises the child's error. Without fork it writes at
     :meth:`join`."""
 
-    def __init__(self, run, fields, outdir, fmt: str = "paraview"):
+    def __init__(self, run, fields, outdir, fmt: str = "paraview", measures: str = "all"):
         import tempfile
         import time
 
@@ -267,7 +356,8 @@ class VtkJob:
         fd, name = tempfile.mkstemp(prefix=".vtk-job-", suffix=".json",
                                     dir=Path(outdir).parent)
         os.close(fd)
-        self.job = ForkedJob(lambda: str(write_vtk(run, fields, Path(outdir), fmt=fmt)), name)
+        self.job = ForkedJob(lambda: str(write_vtk(run, fields, Path(outdir), fmt=fmt,
+                                                    measures=measures)), name)
 
     def join(self) -> tuple[Path, float]:
         import time

@@ -2,7 +2,8 @@
 
 :func:`load_run` reads ``scene.json`` (groups → atom types and id ranges), ``particles.data``
 (the topology, through MDAnalysis' DATA parser with ``atom_style="id resid type x y z"``, and the
-original positions o at full precision) and indexes ``trajectory.dump`` (read frame by frame by
+original positions o at full precision) and indexes ``trajectory.dump`` or a finished run's
+``trajectory.dump.gz`` (read frame by frame by
 :class:`~rackstress.stress.dump.RackDumpReader`). It checks that the three agree — atom count,
 ids, the type of every atom, the groups' id ranges — and raises a
 :class:`~rackstress.stress.dump.StressInputError` naming the file when they do not.
@@ -118,16 +119,19 @@ def load_run(rundir, allow_truncated: bool = False) -> RunData:
     rundir = Path(rundir)
     if not rundir.is_dir():
         raise StressInputError(f"{rundir}: no such run directory")
-    for name in (SCENE, DATA, DUMP):
+    from rackstress.engines.dumpio import dump_path
+
+    dump = dump_path(rundir, DUMP)         # trajectory.dump, or a finished run's .gz
+    for name in (SCENE, DATA, dump.name):
         if not (rundir / name).is_file():
             raise StressInputError(f"{rundir}: no {name}; is this a run directory "
                                    "(made by 'rackstress run')?")
     if not _KEEP:
-        return _open_run(rundir, allow_truncated)
-    key = _files_key(rundir, allow_truncated)
+        return _open_run(rundir, dump, allow_truncated)
+    key = _files_key(rundir, dump, allow_truncated)
     if key is not None and key in _OPENED:
         return _OPENED[key]
-    run = _open_run(rundir, allow_truncated)
+    run = _open_run(rundir, dump, allow_truncated)
     _OPENED.clear()                   # one run directory kept open at a time
     if key is not None:
         _OPENED[key] = run
@@ -154,19 +158,19 @@ def kept_open():
             _OPENED.clear()
 
 
-def _files_key(rundir: Path, allow_truncated: bool):
+def _files_key(rundir: Path, dump: Path, allow_truncated: bool):
     """What an opened run depends on: its three files' inode, size and modification time."""
     import os
 
     try:
-        stats = [os.stat(rundir / name) for name in (SCENE, DATA, DUMP)]
+        stats = [os.stat(path) for path in (rundir / SCENE, rundir / DATA, dump)]
     except OSError:
         return None
     return (str(rundir.resolve()), bool(allow_truncated),
             tuple((st.st_ino, st.st_size, st.st_mtime_ns) for st in stats))
 
 
-def _open_run(rundir: Path, allow_truncated: bool) -> RunData:
+def _open_run(rundir: Path, dump: Path, allow_truncated: bool) -> RunData:
     import MDAnalysis as mda
 
     try:
@@ -176,15 +180,15 @@ def _open_run(rundir: Path, allow_truncated: bool) -> RunData:
     data = read_data_file(rundir / DATA)
     # a rackstress dump may follow what moves: a particle a frame does not hold rests at its
     # original position (engines/dumpio.py), which the data file gives
-    index = index_dump(rundir / DUMP, allow_truncated, partial=True)
+    index = index_dump(dump, allow_truncated, partial=True)
     n = len(data.ids)
     if index.n_atoms > n or (index.n_atoms < n and not index.partial):
-        raise DataMismatchError(f"{rundir / DUMP} has {index.n_atoms} atoms per frame but "
+        raise DataMismatchError(f"{dump} has {index.n_atoms} atoms per frame but "
                                 f"{rundir / DATA} has {n}: the dump and the data file are not of "
                                 "the same run")
     parts = _parts(scene, data, rundir)
     dt = float(scene.get("dt") or 1.0)
-    u = mda.Universe(str(rundir / DATA), str(rundir / DUMP), topology_format="DATA",
+    u = mda.Universe(str(rundir / DATA), str(dump), topology_format="DATA",
                      atom_style="id resid type x y z", format=RackDumpReader, index=index,
                      rest=data, dt=dt)
     if not np.array_equal(u.atoms.ids, data.ids):
@@ -193,13 +197,13 @@ def _open_run(rundir: Path, allow_truncated: bool) -> RunData:
     ts = u.trajectory[0]
     if not np.array_equal(ts.data["ids"], data.ids):
         bad = np.flatnonzero(ts.data["ids"] != data.ids)[0]
-        raise DataMismatchError(f"{rundir / DUMP} (step {index.steps[0]}) has atom id "
+        raise DataMismatchError(f"{dump} (step {index.steps[0]}) has atom id "
                                 f"{ts.data['ids'][bad]} where {rundir / DATA} has "
                                 f"{data.ids[bad]}: the files are not of the same run")
     if not np.array_equal(ts.data["types"], data.types):
         bad = int(np.flatnonzero(ts.data["types"] != data.types)[0])
         raise DataMismatchError(f"atom {data.ids[bad]} has type {ts.data['types'][bad]} in "
-                                f"{rundir / DUMP} but type {data.types[bad]} in {rundir / DATA}: "
+                                f"{dump} but type {data.types[bad]} in {rundir / DATA}: "
                                 "the files are not of the same run")
     return RunData(rundir, scene, data, index, parts, u)
 
