@@ -267,10 +267,10 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True,
     from rackstress.stress.rundata import kept_open
 
     with kept_open():           # particles.data read and the dump indexed once
-        _post_and_render(out, do_render, progress)
+        _post_and_render(out, do_render, progress, dump_text)
 
 
-def _post_and_render(out: Path, do_render: bool, progress: bool) -> None:
+def _post_and_render(out: Path, do_render: bool, progress: bool, dump_text: bool) -> None:
     """Post-process the run in ``out`` and render its pictures (:func:`_finish`)."""
     from rackstress.stress.post import cancel_files, wait_files
 
