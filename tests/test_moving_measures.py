@@ -102,16 +102,32 @@ def test_past_the_limit_a_resting_sediment_gets_its_peaks_and_vtk(tmp_path, monk
             np.testing.assert_allclose(y, x, rtol=0, atol=1e-12)
 
 
-def test_past_the_limit_rackstress_run_leaves_the_vtk_files_one_command_away(tmp_path,
-                                                                           monkeypatch):
-    """rackstress run's post-processing (background VTK) of a run past the limit writes the
-    peaks but no VTK series (every particle of every frame); it says where they come from."""
-    run = _run(tmp_path)
+def test_past_the_limit_rackstress_run_writes_the_resting_bed_once(tmp_path, monkeypatch):
+    """rackstress run's VTK series (background, the leading measure) of a run past the limit:
+    the bed's resting particles go once into rest.vtp, the frames hold the others, and every
+    particle's value there is the dense path's."""
+    import pyvista as pv
+
+    dense_dir, cols_dir = tmp_path / "dense", tmp_path / "cols"
+    _run(dense_dir)
+    run = _run(cols_dir)
+    post.postprocess(dense_dir, vtk=True, vtk_measures="default", background=True)
+    post.wait_files(dense_dir)
+    post._MEMO.clear()
     monkeypatch.setattr(post, "MAX_VALUES", run.n_atoms * 4 - 1)
-    info = post.postprocess(tmp_path, vtk=True, background=True)
-    assert post.wait_files(tmp_path) is None and not (tmp_path / "vtk").exists()
-    assert "vtk" not in info["files"] and info["groups"]["block"]["paper"]["value"] > 0
-    assert any("rackstress stress" in line for line in post.describe(info))
+    post.postprocess(cols_dir, vtk=True, vtk_measures="default", background=True)
+    assert post.wait_files(cols_dir) is not None
+    names = sorted(p.name for p in (cols_dir / "vtk").iterdir())
+    assert names == sorted(p.name for p in (dense_dir / "vtk").iterdir())
+    assert "rest.vtp" in names
+    for name in names:
+        if not name.endswith(".vtp"):
+            continue
+        a, b = pv.read(dense_dir / "vtk" / name), pv.read(cols_dir / "vtk" / name)
+        assert a.n_points == b.n_points < run.n_atoms or name == "rest.vtp"
+        x, y = np.asarray(a.point_data["paper"]), np.asarray(b.point_data["paper"])
+        assert np.array_equal(np.isnan(x), np.isnan(y))
+        np.testing.assert_allclose(y, x, rtol=0, atol=1e-12)
 
 
 def test_past_the_limit_even_the_moving_columns_is_a_clear_error(tmp_path, monkeypatch):

@@ -568,14 +568,6 @@ def postprocess(rundir, vtk: bool = True, dump: bool = False, progress: bool = F
         info["timings"]["follow_error"] = fields.timings["follow_error"]
     from rackstress.stress import export
 
-    compact = any(isinstance(v, Columns) for v in fields.values.values())
-    if vtk and background and compact:
-        # every particle of every frame (sediment-large: 1.1 GB, minutes beside the pictures)
-        # for a run whose measures are kept over its moving particles: asked for, not by default
-        vtk = False
-        info["notes"] = [f"no VTK files: {run.n_atoms:,} particles × {len(fields.steps)} "
-                         "frames, every particle in every frame; 'rackstress stress "
-                         f"{run.rundir}' writes them"]
     if vtk and background:
         from rackstress.lib.runfiles import PVD
 
