@@ -302,11 +302,12 @@ def test_bench_e2e_dump_cost_and_table():
     assert d["moving"]["bytes_per_frame"] < d["all"]["bytes_per_frame"]
     run = {"scene": "magpod-small", "steps": None, "cold": False, "repeat": 0, "wall_s": 10.0,
            "exit": 0, "size_total": 30e6, "sizes": {"vtk/": 20e6, "trajectory.dump": 10e6},
+           "load_at_start": 1.25, "frames": 101, "frames_measured_while_running": 96,
            "phases": {"simulation": 4.0, "measures": 1.0, "pictures": 2.0,
                       "start-up and the rest": 3.0, "vtk (beside the pictures)": 1.5}}
     md = e2e.markdown({"runs": [run], "dumps": [d]}, {"cores": 2, "load_avg_at_start": [1, 1, 1]})
-    assert "| magpod-small | the scene's | warm | 4.00 s | 1.00 s | 2.00 s (1.50 s) | 3.00 s | " \
-           "10.00 s | 2.50× | 30.0 MB |" in md
+    assert "| magpod-small | the scene's | warm | 1.2 | 4.00 s | 96 of 101 | 1.00 s | " \
+           "2.00 s (1.50 s) | 3.00 s | 10.00 s | 2.50× | 30.0 MB |" in md
     assert "`vtk/` 20.00 MB" in md and "| magpod-small | 5,705 | 300 |" in md
     # issue 24's targets, from the same run: 10 s over its 4 s simulation; 30 MB
     assert "| warm total / its simulation | ≤ 2× | 2.50× |" in md

@@ -212,7 +212,10 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
             # post-processing's imports while LAMMPS runs the plugin (no GIL held), from a
             # quarter of the steps on; not beside a simulation that runs Python each step
             # (the reference engine, the callback path)
-            head_start = prepare_in_background
+            every = planned["dump_every"]
+            frames = sc.total_steps // every + 1 + (1 if sc.total_steps % every else 0)
+            out_ = out
+            head_start = lambda: prepare_in_background(out_, frames)  # noqa: E731
         # the lock is held from before anything is written until the pictures are done
         with locked(out) as held:   # noqa: F841
             with phase(f"running {sc.total_steps:,} steps into {out}", shown, ticker=False):
@@ -261,6 +264,14 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True,
         md = g["max_deformation"]
         click.echo(f"  {name:12s} n={g['n']:6d}  max_deformation="
                    + (f"{md:.4g}" if md is not None else "-"))
+    from rackstress.stress.rundata import kept_open
+
+    with kept_open():           # particles.data read and the dump indexed once
+        _post_and_render(out, do_render, progress, dump_text)
+
+
+def _post_and_render(out: Path, do_render: bool, progress: bool, dump_text: bool) -> None:
+    """Post-process the run in ``out`` and render its pictures (:func:`_finish`)."""
     from rackstress.stress.post import cancel_files, wait_files
 
     squeeze = None
@@ -822,7 +833,10 @@ def bench_accuracy(out, quick, scene_names):
               help="Cold and warm runs of each scene, interleaved.")
 @click.option("--long-steps", type=click.IntRange(min=1), default=1200, show_default=True,
               help="Iterations of magpod and sediment-large (magpod-small runs its own 4800).")
-def bench_e2e(out, scene_names, repeat, long_steps):
+@click.option("--append", is_flag=True,
+              help="Add these runs to those of OUT/e2e.json (e.g. magpod-small repeated, "
+                   "the long scenes once).")
+def bench_e2e(out, scene_names, repeat, long_steps, append):
     """README's first command end to end, warm and cold: phases, run directory by file, the
     trajectory's cost per frame -> docs/benchmarks/e2e.{json,md}."""
     from rackstress import bench as b
@@ -833,6 +847,11 @@ def bench_e2e(out, scene_names, repeat, long_steps):
     machine = b.machine()
     data = e2e.run(d, names, repeat,
                    steps={n: long_steps for n in ("magpod", "sediment-large")}, log=click.echo)
+    if append and (d / "e2e.json").is_file():
+        old = json.loads((d / "e2e.json").read_text())
+        data["runs"] = old.get("runs", []) + data["runs"]
+        data["dumps"] = data["dumps"] or old.get("dumps", [])
+        machine = old.get("machine") or machine
     data["machine"] = machine
     b.write_json(d / "e2e.json", data)
     (d / "e2e.md").write_text(e2e.markdown(data, machine))

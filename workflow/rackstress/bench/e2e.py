@@ -44,13 +44,14 @@ def _cli_run(scene: str, out: Path, cold: bool, args) -> dict:
         cache = tempfile.mkdtemp(prefix="rackstress-cold-")
         env["XDG_CACHE_HOME"] = cache               # compiled loops, Eq. 5's prediction
         env.pop("NUMBA_CACHE_DIR", None)
+    load = os.getloadavg()[0]
     t = time.perf_counter()
     r = subprocess.run([exe, "run", scene, "--out", str(out), "--overwrite", "--no-progress",
                         *args], capture_output=True, text=True, env=env)
     wall = time.perf_counter() - t
     if cache:
         shutil.rmtree(cache, ignore_errors=True)
-    rec = {"wall_s": wall, "exit": r.returncode, "cold": cold}
+    rec = {"wall_s": wall, "exit": r.returncode, "cold": cold, "load_at_start": load}
     if r.returncode not in (0, 4):
         rec["stderr"] = r.stderr[-1500:]
         return rec
@@ -64,6 +65,8 @@ def _cli_run(scene: str, out: Path, cold: bool, args) -> dict:
               "pictures": render}
     phases["start-up and the rest"] = wall - sum(phases.values())
     phases["vtk (beside the pictures)"] = stress.get("vtk_s", 0.0)
+    rec["frames_measured_while_running"] = stress.get("frames_measured_while_running", 0)
+    rec["frames"] = summary.get("steps", 0) // max(summary.get("dump_every") or 1, 1) + 1
     rec["phases"] = phases
     rec["sizes"] = {p.name + ("/" if p.is_dir() else ""): _size(p)
                     for p in sorted(out.iterdir()) if not p.name.startswith(".")}
@@ -224,33 +227,43 @@ def markdown(data: dict, machine: dict) -> str:
          "interleaved; the phases from the run's own records, the run directory by file. "
          "The run paints what its report shows (the sheet, the plots, the 3D view; the "
          "full-size pictures are `rackstress render RUNDIR` away) and drops its default "
-         "checkpoints once finished; post-processing's imports load while LAMMPS runs. "
+         "checkpoints once finished; post-processing's imports load while LAMMPS runs, and "
+         "then the frames LAMMPS has written are measured beside it (*measured while "
+         "running*: frames of the run's; the measures column is what is left after it); the "
+         "3D view is built by a child process beside the pictures and plots. "
          "Its VTK frames carry the leading measure and displacement, the resting sediment "
          "once (`vtk/rest.vtp`), and its trajectory is `trajectory.dump.gz` once finished "
          "(docs/output.md). "
-         f"Machine: {machine.get('cores', '?')} cores, load average at the start {load} "
+         f"Machine: {machine.get('cores', '?')} cores, load average at the start {load}; "
+         "each row gives the 1-minute load when it started "
          "(shared with other jobs: compare within a row, not across runs).",
          "",
-         "| scene | iterations | cache | simulation | measures | pictures (VTK beside) | "
-         "start-up and the rest | total | total / simulation | run directory |",
-         "|---|---|---|---|---|---|---|---|---|---|"]
+         "| scene | iterations | cache | load | simulation | measured while running | "
+         "measures | pictures (VTK beside) | start-up and the rest | total | "
+         "total / simulation | run directory |",
+         "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in data["runs"]:
         if "phases" not in r:
-            L.append(f"| {r['scene']} | | {'cold' if r['cold'] else 'warm'} | failed "
-                     f"(exit {r['exit']}) | | | | {r['wall_s']:.1f} s | | |")
+            L.append(f"| {r['scene']} | | {'cold' if r['cold'] else 'warm'} | "
+                     f"{r.get('load_at_start', float('nan')):.1f} | failed "
+                     f"(exit {r['exit']}) | | | | | {r['wall_s']:.1f} s | | |")
             continue
         p = r["phases"]
         its = r["steps"] or "the scene's"
+        ahead = (f"{r['frames_measured_while_running']} of {r['frames']}"
+                 if "frames" in r else "")
         L.append(f"| {r['scene']} | {its} | "
-                 f"{'cold' if r['cold'] else 'warm'} | {p['simulation']:.2f} s | "
-                 f"{p['measures']:.2f} s | {p['pictures']:.2f} s "
+                 f"{'cold' if r['cold'] else 'warm'} | "
+                 f"{r.get('load_at_start', float('nan')):.1f} | {p['simulation']:.2f} s | "
+                 f"{ahead} | {p['measures']:.2f} s | {p['pictures']:.2f} s "
                  f"({p['vtk (beside the pictures)']:.2f} s) | {p['start-up and the rest']:.2f} s"
                  f" | {r['wall_s']:.2f} s | {r['wall_s'] / max(p['simulation'], 1e-9):.2f}× | "
                  f"{r['size_total'] / 1e6:.1f} MB |")
     L += [""] + targets(data)
-    notes = {(r["scene"], r["note"]) for r in data["runs"] if r.get("exit") and r.get("note")}
-    for scene, note in sorted(notes):
-        L += ["", f"{scene}: exit 4 — {note}"]
+    notes = {(r["scene"], r["exit"], r["note"]) for r in data["runs"]
+             if r.get("exit") and r.get("note")}
+    for scene, code, note in sorted(notes):
+        L += ["", f"{scene}: exit {code} — {note}"]
     L += ["", "## The run directory, by file (warm runs)", ""]
     for r in data["runs"]:
         if r.get("cold") or "sizes" not in r or r.get("repeat"):

@@ -96,17 +96,40 @@ def _separation(pa, pb):
     return best
 
 
-def _went_through(p_moving, p_obstacle, r_moving, n, across) -> bool:
+def _went_through(p_moving, p_obstacle, r_moving, n, across, proj=None, q_moving=None) -> bool:
     """Whether the moving group, on the +n side of the obstacle at step 0, has its centre
     beyond the obstacle's far side (along −n) of the part in its way: the obstacle particles
     inside the moving group's extent across n (radii included); none there means it went
-    around, not through."""
-    qm, qo = p_moving @ across, p_obstacle @ across
+    around, not through. ``proj``: the obstacle's projections (p_obstacle @ across,
+    p_obstacle @ n) kept up to date by :class:`_Projected` (a resting sediment of a million
+    particles is not projected again every frame); ``q_moving``: p_moving @ across, so kept."""
+    qm = p_moving @ across if q_moving is None else q_moving
+    qo, along = proj if proj is not None else (p_obstacle @ across, None)
     lo, hi = qm.min(axis=0) - r_moving, qm.max(axis=0) + r_moving
     in_way = np.all((qo >= lo) & (qo <= hi), axis=1)
     if not in_way.any():
         return False
-    return float(p_moving.mean(axis=0) @ n) < float((p_obstacle[in_way] @ n).min())
+    far = along[in_way] if along is not None else p_obstacle[in_way] @ n
+    return float(p_moving.mean(axis=0) @ n) < float(far.min())
+
+
+class _Projected:
+    """A group's projections on (across, n) over the frames, re-projecting only the rows that
+    moved since the frame before (a row's projection is a function of that row alone, so the
+    values are those of projecting the whole group)."""
+
+    def __init__(self, p0: np.ndarray, n: np.ndarray, across: np.ndarray):
+        self.n, self.across = n, across
+        self.p = p0.copy()
+        self.q, self.s = p0 @ across, p0 @ n
+
+    def at(self, p: np.ndarray) -> tuple:
+        moved = np.flatnonzero((p != self.p).any(axis=1))
+        if len(moved):
+            pm = p[moved]
+            self.p[moved] = pm
+            self.q[moved], self.s[moved] = pm @ self.across, pm @ self.n
+        return self.q, self.s
 
 
 def pass_through(scene, frames) -> list[dict]:
@@ -128,10 +151,12 @@ def pass_through(scene, frames) -> list[dict]:
         n = sep[0]
         u = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
         u /= np.linalg.norm(u)
-        setup[(a, b)] = (n, np.column_stack([u, np.cross(n, u)]))
+        across = np.column_stack([u, np.cross(n, u)])
+        setup[(a, b)] = (n, across, _Projected(p0[scene.slice(a)], -n, across),
+                         _Projected(p0[scene.slice(b)], -n, across))
     found = {}
     for step, p in frames:
-        for (a, b), (n, across) in setup.items():
+        for (a, b), (n, across, proj_a, proj_b) in setup.items():
             if (a, b) in found:
                 continue
             pa, pb = p[scene.slice(a)], p[scene.slice(b)]
@@ -139,9 +164,11 @@ def pass_through(scene, frames) -> list[dict]:
                 continue
             ra, rb = scene.groups[a].r.max(), scene.groups[b].r.max()
             # b (on a's +n side) through a, or a (on b's −n side) through b
-            if _went_through(pb, pa, rb, n, across):
+            qa, sa = proj_a.at(pa)
+            qb, sb = proj_b.at(pb)
+            if _went_through(pb, pa, rb, n, across, (qa, -sa), qb):
                 mover, obstacle = b, a
-            elif _went_through(pa, pb, ra, -n, across):
+            elif _went_through(pa, pb, ra, -n, across, (qb, sb), qa):
                 mover, obstacle = a, b
             else:
                 continue

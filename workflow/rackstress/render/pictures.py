@@ -530,7 +530,8 @@ def render(rundir, frames=None, measure: str | None = None, views=DEFAULT_VIEWS,
            vmax: float | None = None, allow_truncated: bool = False, window_size=WINDOW,
            movie_max_frames: int = 400, fps: int = 10, plots: bool = True, groups=None,
            out=None, cmap: str = "paper", movie_view: str | None = None,
-           progress: bool = False, sheet_only: bool = False, meanwhile=None) -> RenderReport:
+           progress: bool = False, sheet_only: bool = False, meanwhile=None,
+           beside=None) -> RenderReport:
     """Render the pictures, sheet, optional movie and plots of a run (module docstring).
 
     Parameters
@@ -562,7 +563,11 @@ def render(rundir, frames=None, measure: str | None = None, views=DEFAULT_VIEWS,
         time and a seventh of the bytes.
     meanwhile : callable, optional
         ``meanwhile(report, measure, cmap)``, called once the pictures are painted, while the
-        plots' process is still drawing (``rackstress run`` builds the 3D view then).
+        plots' process is still drawing.
+    beside : (work, done), optional
+        ``work(report, measure, cmap)`` in a forked child from before the pictures are
+        painted (:class:`~rackstress.runs.forked.ForkedJob`, the other core), its JSON-able
+        result handed to ``done`` once they are (``rackstress run`` builds the 3D view so).
 
     Returns
     -------
@@ -657,6 +662,11 @@ def render(rundir, frames=None, measure: str | None = None, views=DEFAULT_VIEWS,
         # the plots (matplotlib) are drawn by a forked process while this one paints
         plotter = _Background(_plots, run, values, label, coloured, context, report, tmp) \
             if plots else None
+        side = None
+        if beside is not None:
+            from rackstress.runs.forked import ForkedJob
+
+            side = ForkedJob(lambda: beside[0](report, measure, cmap), tmp / ".beside.json")
         with progress_bar(n_pics + len(movie_ks), progress, "pictures") as bar:
             bar.unit = "picture"
             t = time.perf_counter()
@@ -687,6 +697,17 @@ def render(rundir, frames=None, measure: str | None = None, views=DEFAULT_VIEWS,
             t = time.perf_counter()
             meanwhile(report, measure, cmap)
             report.timings["meanwhile_s"] = time.perf_counter() - t
+        if side is not None:
+            from rackstress.runs.forked import ForkedError
+
+            t = time.perf_counter()
+            try:
+                got = side.join()
+            except ForkedError as exc:
+                got = {"error": ["RuntimeError", exc.message]}
+            side = None
+            beside[1](got)
+            report.timings["beside_wait_s"] = time.perf_counter() - t
         if plotter is not None:
             t = time.perf_counter()
             try:
@@ -715,6 +736,8 @@ def render(rundir, frames=None, measure: str | None = None, views=DEFAULT_VIEWS,
     except BaseException as exc:
         if plots and "plotter" in locals() and plotter is not None:
             plotter.kill()
+        if "side" in locals() and side is not None:
+            side.kill()
         if "sheet_saver" in locals():
             sheet_saver.pool.shutdown(wait=True)     # no write into tmp after it is gone
         shutil.rmtree(tmp, ignore_errors=True)
@@ -774,18 +797,28 @@ def render_default(rundir, progress: bool = False) -> RenderReport:
     ``summary.json``, and ``RUNDIR/report.html`` is written."""
     from rackstress.render.report import write_report
 
+    import json
+
     built = {}
 
-    def view3d(report, measure, cmap):          # while the plots are drawn
+    def view3d(report, measure, cmap):          # in a child, beside the pictures and plots
         from rackstress.render.view3d import build_view
 
         try:
-            built["rec"] = build_view(rundir, measure=measure, cmap=cmap, vmax=report.vmax)
+            rec = build_view(rundir, measure=measure, cmap=cmap, vmax=report.vmax)
+            return {"rec": json.loads(json.dumps(rec, default=lambda x: x.tolist()))}
         except Exception as exc:  # noqa: BLE001 - the report says why there is no 3D view
-            built["error"] = exc
+            return {"error": [type(exc).__name__, str(exc)]}
+
+    def done(got):
+        if "rec" in got:
+            built["rec"] = got["rec"]
+        else:                                   # the report names the child's error as it was
+            name, message = got["error"]
+            built["error"] = type(name, (Exception,), {})(message)
 
     t0 = time.perf_counter()
-    rep = render(rundir, progress=progress, sheet_only=True, meanwhile=view3d)
+    rep = render(rundir, progress=progress, sheet_only=True, beside=(view3d, done))
     wall = time.perf_counter() - t0
     record_render(Path(rundir), rep, wall)          # first, so that the report shows it
     t = time.perf_counter()
@@ -1016,8 +1049,13 @@ def footprints_figure(run, motion, coloured, context):
     fig = Figure(figsize=(sum(widths), 4.6), layout="constrained")
     axes = fig.subplots(1, len(panels), squeeze=False, width_ratios=widths)
     for ax, (part, dy, o, lim, com, box) in zip(axes[0], panels):
-        sc = ax.scatter(o[:, 0], o[:, 2], c=dy, cmap="RdBu", vmin=-lim, vmax=lim, s=6,
-                        marker="s")
+        # the particles the frame shows (a tenth of it around, for the markers at its edge):
+        # a million-particle bed's others drew nothing, at a minute's cost
+        mx, mz = 0.1 * (box[1] - box[0]), 0.1 * (box[3] - box[2])
+        seen = ((o[:, 0] >= box[0] - mx) & (o[:, 0] <= box[1] + mx)
+                & (o[:, 2] >= box[2] - mz) & (o[:, 2] <= box[3] + mz))
+        sc = ax.scatter(o[seen, 0], o[seen, 2], c=dy[seen], cmap="RdBu", vmin=-lim, vmax=lim,
+                        s=6, marker="s")
         for j in range(com.shape[1]):
             ax.plot(com[:, j, 0], com[:, j, 2], lw=0.8, color="k", alpha=0.5)
         ax.set_xlim(box[0], box[1])

@@ -15,19 +15,25 @@ _PREPARE = ("rackstress.stress.post", "rackstress.stress.export", "vtkmodules.vt
             "vtkmodules.vtkFiltersSources", "vtkmodules.vtkFiltersCore")
 
 
-def prepare_in_background():
+def prepare_in_background(rundir=None, frames: int | None = None):
     """Import what the measures, the VTK writer, the pictures and the plots need, load the
     measures' compiled loop and the fonts, in a thread, while the simulation runs on the
     other core (LAMMPS runs the plugin without the GIL; ``rackstress run`` starts it once a
     quarter of the steps are done). About a second of a short run's start-up to
-    results moves off the path; the forked VTK and plot processes inherit it all. The GIL is
+    results moves off the path; the forked VTK and plot processes inherit it all. Then, given
+    the run directory ``rundir`` and the ``frames`` it will hold, the thread measures the
+    frames LAMMPS has written so far (:func:`rackstress.stress.post.follow`) until
+    :func:`wait_prepared`: post-processing measures only the last ones. The GIL is
     handed over every 0.5 ms meanwhile (not 5), so the driver's Python between chunks of
-    steps never waits long for it. :func:`wait_prepared` joins it: call it before forking (a
-    child forked while the thread holds an import lock would wait on it forever). The thread is
-    not a daemon: an interpreter that ends early waits for it rather than cut an import."""
+    steps never waits long for it. :func:`wait_prepared` stops and joins it: call it before
+    forking (a child forked while the thread holds an import lock would wait on it forever).
+    The thread is not a daemon: an interpreter that ends early waits for it rather than cut
+    an import."""
     import importlib
     import sys
     import threading
+
+    stop = threading.Event()
 
     def work():
         old = sys.getswitchinterval()
@@ -49,6 +55,10 @@ def prepare_in_background():
             from matplotlib import font_manager
 
             font_manager.findfont("DejaVu Sans")
+            if rundir is not None and frames:
+                from rackstress.stress.post import follow
+
+                follow(rundir, stop, frames)
         except Exception:  # noqa: BLE001, S110 - only a head start
             pass
         finally:
@@ -56,7 +66,7 @@ def prepare_in_background():
 
     t = threading.Thread(target=work, name="rackstress-prepare")
     t.start()
-    _THREAD.append(t)
+    _THREAD.append((t, stop))
     return t
 
 
@@ -64,6 +74,9 @@ _THREAD: list = []
 
 
 def wait_prepared() -> None:
-    """Wait for :func:`prepare_in_background`'s thread, if one runs."""
+    """Stop :func:`prepare_in_background`'s thread (its measuring, not an import) and wait
+    for it, if one runs."""
     while _THREAD:
-        _THREAD.pop().join()
+        t, stop = _THREAD.pop()
+        stop.set()
+        t.join()

@@ -15,16 +15,33 @@
   as named columns (``stress.dump``) for ParaView, OVITO and pyvista;
 * :mod:`.foreign` — a plain LAMMPS data file and dump (not written by rackstress) as a run.
 """
-from rackstress.stress.dump import (DataMismatchError, DumpColumnsError, DumpError, RackDumpReader,
-                   StressInputError, TruncatedDumpError, index_dump, read_data_file)
-from rackstress.stress.fit import robust_fit, rigid_fit
-from rackstress.stress.measures import (MEASURES, AccumulatedDistance, DesiredPositionDistance, NonAffineD2min,
-                       ParticleStress, PartMotion, VirialStress, VonMisesStrain, von_mises_strain)
-from rackstress.stress.rundata import Part, RunData, load_run
+# The names below load on first use (PEP 562): ``rackstress run`` imports
+# ``rackstress.stress.kernels`` before its simulation, and MDAnalysis (a few tenths of a second)
+# then loads beside the simulation instead of before it (render.prepare).
+_FROM = {
+    "dump": ("DataMismatchError", "DumpColumnsError", "DumpError", "RackDumpReader",
+             "StressInputError", "TruncatedDumpError", "index_dump", "read_data_file"),
+    "fit": ("robust_fit", "rigid_fit"),
+    "measures": ("MEASURES", "AccumulatedDistance", "DesiredPositionDistance", "NonAffineD2min",
+                 "ParticleStress", "PartMotion", "VirialStress", "VonMisesStrain",
+                 "von_mises_strain"),
+    "rundata": ("Part", "RunData", "load_run"),
+}
+_WHERE = {name: mod for mod, names in _FROM.items() for name in names}
 
-__all__ = [
-    "AccumulatedDistance", "DataMismatchError", "DesiredPositionDistance", "DumpColumnsError",
-    "DumpError", "MEASURES", "NonAffineD2min", "Part", "ParticleStress", "PartMotion", "RackDumpReader",
-    "RunData", "StressInputError", "TruncatedDumpError", "VirialStress", "VonMisesStrain",
-    "index_dump", "load_run", "read_data_file", "rigid_fit", "robust_fit", "von_mises_strain",
-]
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name):
+    mod = _WHERE.get(name)
+    if mod is None:
+        raise AttributeError(f"module 'rackstress.stress' has no attribute {name!r}")
+    import importlib
+
+    value = getattr(importlib.import_module(f"rackstress.stress.{mod}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_WHERE))

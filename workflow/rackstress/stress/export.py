@@ -175,9 +175,17 @@ def resting(run, fields, chosen: dict) -> np.ndarray:
         if v is not None:
             still &= (v == 0).all(axis=1)
     for vals in chosen.values():
-        a = vals.reshape(len(vals), run.n_atoms, -1)
-        same = (a == a[:1]) | (np.isnan(a) & np.isnan(a[:1]))
-        still &= same.all(axis=(0, 2))
+        cols = getattr(vals, "cols", None)      # measures.Columns: only ``cols`` vary
+        if cols is None:
+            a = vals.reshape(len(vals), run.n_atoms, -1)
+        else:
+            a = vals.data.reshape(len(vals), len(cols), 1)
+        same = ((a == a[:1]) | (np.isnan(a) & np.isnan(a[:1]))).all(axis=(0, 2))
+        if cols is not None:
+            whole = np.ones(run.n_atoms, bool)
+            whole[cols] = same
+            same = whole
+        still &= same
     return still
 
 

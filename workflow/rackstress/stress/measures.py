@@ -215,7 +215,8 @@ class Neighbourhoods:
     V = Σ d₀ d₀ᵀ, its rank and, for a planar neighbourhood, the plane's basis t1, t2 and normal
     n0; ``valid`` where the fit is defined (rank ≥ 2, in an analysed part)."""
 
-    def __init__(self, run, parts, cutoff=None, cutoff_factor: float = CUTOFF_FACTOR):
+    def __init__(self, run, parts, cutoff=None, cutoff_factor: float = CUTOFF_FACTOR,
+                 cutoffs: dict | None = None):
         o, n = run.o, run.n_atoms
         I, J = [], []
         self.cutoffs = {}
@@ -224,8 +225,11 @@ class Neighbourhoods:
                 continue
             po = o[part.index]
             tree = cKDTree(po)
-            spacing = float(np.median(tree.query(po, k=2)[0][:, 1]))
-            rc = cutoff if cutoff is not None else cutoff_factor * spacing
+            if cutoffs and part.name in cutoffs:    # a part's cutoff from all its particles
+                rc = cutoffs[part.name]
+            else:
+                spacing = float(np.median(tree.query(po, k=2)[0][:, 1]))
+                rc = cutoff if cutoff is not None else cutoff_factor * spacing
             self.cutoffs[part.name] = rc
             pairs = tree.query_pairs(rc * (1 + 1e-9), output_type="ndarray")
             if len(pairs):
@@ -441,36 +445,208 @@ def strain(hood: Neighbourhoods, o: np.ndarray, P: np.ndarray):
     return strain_frames(hood, o, P)
 
 
-def measure_frames(run, progress=None) -> dict:
+def measure_frames(run, progress=None, head=None) -> dict:
     """Every default measure of every frame, computed together in chunks of frames: ``steps``,
     ``paper``, ``accumulated``, ``strain``, ``d2min`` ((frames, n_atoms) each): the values of
     :class:`AccumulatedDistance` and :class:`VonMisesStrain` (robust fit, default cutoff) to
-    round-off, without their per-frame overhead. ``progress``: called with the frames done."""
+    round-off, without their per-frame overhead. ``progress``: called with the frames done.
+    ``head``: chunks already measured while the run was written
+    (:func:`rackstress.stress.post.follow`): ``head.hood`` and ``head.chunk(run, ks)`` → the
+    (paper, strain, d2min) of frames ``ks`` or None; those are the values this function
+    computes for the same frames (the same calls on the same positions)."""
     parts = list(run.parts.values())
     nf, n = run.index.n_frames, run.n_atoms
-    hood = neighbourhoods(run, parts)
+    hood = getattr(head, "hood", None) or neighbourhoods(run, parts)
     steps = np.asarray(run.steps, dtype=np.int64)
     out = {m: np.empty((nf, n)) for m in ("paper", "strain", "d2min")}
-    per_frame = max(n * 24 * 4, len(hood.I) * 8 * 30, 1)
-    chunk = int(max(1, min(nf, CHUNK_BYTES // per_frame)))
+    chunk = frame_chunk(n, hood, nf)
     for a in range(0, nf, chunk):
         ks = range(a, min(nf, a + chunk))
-        P = frame_positions(run, ks)
-        out["paper"][a:a + len(ks)] = paper_frames(run, P, parts)
-        out["strain"][a:a + len(ks)], out["d2min"][a:a + len(ks)] = strain(hood, run.o, P)
+        got = head.chunk(run, ks) if head is not None else None
+        if got is None:
+            got = measure_chunk(run, hood, parts, ks)
+        out["paper"][a:a + len(ks)], out["strain"][a:a + len(ks)], \
+            out["d2min"][a:a + len(ks)] = got
         if progress is not None:
             progress(len(ks))
-    # ∫ d dt by the trapezoid rule, summed frame after frame as AccumulatedDistance does
-    d = out["paper"]
+    out["accumulated"] = _accumulate(out["paper"], steps, run.dt)
+    out["steps"] = steps
+    return out
+
+
+def frame_chunk(n: int, hood: Neighbourhoods, nf: int) -> int:
+    """Frames measured together by :func:`measure_frames` (temporaries within CHUNK_BYTES)."""
+    per_frame = max(n * 24 * 4, len(hood.I) * 8 * 30, 1)
+    return int(max(1, min(nf, CHUNK_BYTES // per_frame)))
+
+
+def measure_chunk(run, hood: Neighbourhoods, parts, ks) -> tuple:
+    """(paper, strain, d2min) of frames ``ks``, (len(ks), n_atoms) each."""
+    P = frame_positions(run, ks)
+    return (paper_frames(run, P, parts), *strain(hood, run.o, P))
+
+
+def _accumulate(d: np.ndarray, steps: np.ndarray, dt: float) -> np.ndarray:
+    """∫ d dt by the trapezoid rule, summed frame after frame as AccumulatedDistance does."""
     dn = np.nan_to_num(d)
-    t = steps * run.dt
-    acc = np.zeros((nf, n))
-    if nf > 1:
+    t = steps * dt
+    acc = np.zeros(d.shape)
+    if len(d) > 1:
         inc = 0.5 * (dn[1:] + dn[:-1]) * np.diff(t)[:, None]
         acc[1:] = np.cumsum(inc, axis=0)
     acc[~np.isfinite(d)] = np.nan
-    out["accumulated"] = acc
-    out["steps"] = steps
+    return acc
+
+
+# ----------------------------------------------------------------------------- moving columns
+class Columns:
+    """(n_frames, n_atoms) values of which only the columns ``cols`` (sorted atom rows) vary
+    from frame to frame; every other column holds ``rest`` in every frame. A resting sediment
+    of a million particles costs its moving few thousand columns, not n_frames × a million.
+    Indexing as the dense array would: ``v[k]`` (a frame), ``v[:, idx]``, ``v[k, idx]``."""
+
+    ndim = 2
+    dtype = np.dtype(np.float64)
+
+    def __init__(self, cols: np.ndarray, data: np.ndarray, rest: np.ndarray):
+        self.cols, self.data, self.rest = np.asarray(cols, dtype=np.int64), data, rest
+
+    @property
+    def shape(self) -> tuple:
+        return (self.data.shape[0], len(self.rest))
+
+    def __len__(self) -> int:
+        return self.data.shape[0]
+
+    def _where(self, idx: np.ndarray):
+        pos = np.searchsorted(self.cols, idx)
+        pos = np.minimum(pos, max(len(self.cols) - 1, 0))
+        hit = (self.cols[pos] == idx) if len(self.cols) else np.zeros(len(idx), dtype=bool)
+        return pos[hit], hit
+
+    def __getitem__(self, key):
+        if isinstance(key, (int, np.integer)):
+            out = self.rest.copy()
+            out[self.cols] = self.data[key]
+            return out
+        if isinstance(key, slice):
+            return Columns(self.cols, self.data[key], self.rest)
+        if isinstance(key, tuple) and len(key) == 2:
+            frames, idx = key
+            idx = np.arange(len(self.rest))[idx] if isinstance(idx, slice) else \
+                np.asarray(idx, dtype=np.int64)
+            pos, hit = self._where(idx)
+            got = self.data[frames]
+            if got.ndim == 1:
+                out = self.rest[idx].copy()
+                out[hit] = got[pos]
+            else:
+                out = np.repeat(self.rest[idx][None], got.shape[0], axis=0)
+                out[:, hit] = got[:, pos]
+            return out
+        raise TypeError(f"Columns cannot be indexed by {key!r}")
+
+    def __array__(self, dtype=None, copy=None):
+        out = np.repeat(self.rest[None], self.data.shape[0], axis=0)
+        out[:, self.cols] = self.data
+        return out if dtype is None else out.astype(dtype)
+
+
+def moved_rows(run) -> np.ndarray:
+    """Which particles are away from their original position in some frame (n_atoms bool)."""
+    o = run.o
+    moved = np.zeros(run.n_atoms, dtype=bool)
+    for k in range(run.index.n_frames):
+        moved |= (positions(run.trajectory[k]) != o).any(axis=1)
+    return moved
+
+
+def _near(tree, points: np.ndarray, r: float) -> np.ndarray:
+    """Rows of ``tree`` within ``r`` of any of ``points`` (as the pairs within r are found)."""
+    if not len(points):
+        return np.zeros(0, dtype=np.int64)
+    hits = tree.query_ball_point(points, r * (1 + 1e-9), return_sorted=False)
+    return np.unique(np.fromiter((j for h in hits for j in h), dtype=np.int64))
+
+
+def _valid_everywhere(po: np.ndarray, tree, rc: float) -> np.ndarray:
+    """Where a part's strain fit is defined (rank of Σ d₀ d₀ᵀ ≥ 2, as :class:`Neighbourhoods`
+    finds it), for every particle of the part: from its pairs within rc, the six distinct
+    terms of Σ d₀ d₀ᵀ summed from both ends."""
+    pairs = tree.query_pairs(rc * (1 + 1e-9), output_type="ndarray")
+    n = len(po)
+    V = np.zeros((n, 3, 3))
+    if len(pairs):
+        d = po[pairs[:, 1]] - po[pairs[:, 0]]
+        for r in range(3):
+            for c in range(r, 3):
+                w = d[:, r] * d[:, c]
+                V[:, r, c] = (np.bincount(pairs[:, 0], weights=w, minlength=n)
+                              + np.bincount(pairs[:, 1], weights=w, minlength=n))
+                V[:, c, r] = V[:, r, c]
+    lam = np.linalg.eigvalsh(V)
+    top = lam[:, 2:3]
+    return (lam > RANK_TOL * np.maximum(top, np.finfo(float).tiny)).sum(axis=1) >= 2
+
+
+def measure_columns(run, progress=None) -> dict:
+    """:func:`measure_frames` over the particles whose measures can differ from their resting
+    value: every particle of a part with a rest shape, and of a sediment the particles that
+    moved in some frame and their strain neighbours (within the part's cutoff). A sediment
+    particle that never moved, nor any neighbour of it, has p = o in every frame, so its
+    distance |p − o| and its integral are 0 and its η and D²min are 0 (F = I exactly,
+    :func:`strain_frames`) or NaN where its fit is undefined. Only those neighbours' original
+    positions enter the fits, so the values of the moving columns are the dense path's (to the
+    order of summation). Returns ``cols`` (sorted rows), ``steps``, per measure
+    (frames, len(cols)) values and ``rest`` (n_atoms,) resting values per measure."""
+    from types import SimpleNamespace
+
+    o, n, nf = run.o, run.n_atoms, run.index.n_frames
+    moved = moved_rows(run)
+    cols = np.zeros(n, dtype=bool)           # computed and kept
+    need = np.zeros(n, dtype=bool)           # computed as neighbours of what is kept
+    valid_rest = np.ones(n, dtype=bool)
+    cutoffs = {}
+    for part in run.parts.values():
+        idx = part.index
+        if part.kind != "sediment" or part.n < 2:
+            cols[idx] = True
+            continue
+        po = o[idx]
+        tree = cKDTree(po)
+        rc = CUTOFF_FACTOR * float(np.median(tree.query(po, k=2)[0][:, 1]))
+        cutoffs[part.name] = rc
+        m = np.flatnonzero(moved[idx])
+        c = np.union1d(m, _near(tree, po[m], rc))
+        u = np.union1d(c, _near(tree, po[c], rc))
+        cols[idx[c]] = True
+        need[idx[u]] = True
+        valid_rest[idx] = _valid_everywhere(po, tree, rc)
+    need |= cols
+    U = np.flatnonzero(need)
+    local = np.full(n, -1, dtype=np.int64)
+    local[U] = np.arange(len(U))
+    parts = [SimpleNamespace(name=p.name, kind=p.kind, index=local[p.index[need[p.index]]],
+                             n=int(need[p.index].sum())) for p in run.parts.values()]
+    sub = SimpleNamespace(o=o[U], n_atoms=len(U))
+    hood = Neighbourhoods(sub, parts, cutoffs=cutoffs)
+    keep = local[np.flatnonzero(cols)]
+    steps = np.asarray(run.steps, dtype=np.int64)
+    out = {m: np.empty((nf, len(keep))) for m in ("paper", "strain", "d2min")}
+    chunk = frame_chunk(len(U), hood, nf)
+    for a in range(0, nf, chunk):
+        ks = range(a, min(nf, a + chunk))
+        P = np.stack([positions(run.trajectory[k])[U] for k in ks])
+        out["paper"][a:a + len(ks)] = paper_frames(sub, P, parts)[:, keep]
+        eta, d2 = strain(hood, sub.o, P)
+        out["strain"][a:a + len(ks)], out["d2min"][a:a + len(ks)] = eta[:, keep], d2[:, keep]
+        if progress is not None:
+            progress(len(ks))
+    out["accumulated"] = _accumulate(out["paper"], steps, run.dt)
+    out["steps"], out["cols"] = steps, np.flatnonzero(cols)
+    undefined = np.where(valid_rest, 0.0, np.nan)
+    out["rest"] = {"paper": np.zeros(n), "accumulated": np.zeros(n), "strain": undefined,
+                   "d2min": undefined.copy()}
     return out
 
 

@@ -37,9 +37,9 @@ import numpy as np
 from rackstress.lib.jsonio import write_json
 from rackstress.lib.runfiles import CACHE, STRESS_DUMP, STRESS_JSON, VTK_DIR
 from rackstress.stress.dump import StressInputError
-from rackstress.stress.measures import (ParticleStress, VirialStress, material_parts,
-                                        measure_frames, positions, read_bindings,
-                                        stress_columns)
+from rackstress.stress.measures import (Columns, ParticleStress, VirialStress,
+                                        material_parts, measure_columns, measure_frames,
+                                        positions, read_bindings, stress_columns)
 
 #: The measures every run gets, in this order (``virial`` too when the dump recorded it).
 MEASURES = ("paper", "accumulated", "strain", "d2min")
@@ -220,7 +220,11 @@ def compute_fields(run, cache: bool = True, progress: bool = False,
 
     t0 = time.perf_counter()
     size = run.n_atoms * run.index.n_frames
-    if size > MAX_VALUES:
+    virial = stress_columns(run.index.columns) is not None
+    stress = (ParticleStress(run) if material_parts(run) and read_bindings(run) is not None
+              else None)
+    compact = size > MAX_VALUES and _compactable(run, virial, stress)
+    if size > MAX_VALUES and not compact:
         raise TooLargeError(
             f"{run.index.path}: {run.n_atoms} particles × {run.index.n_frames} frames = "
             f"{size:.3g} values per measure, more than the {MAX_VALUES:.3g} the stress "
@@ -228,14 +232,25 @@ def compute_fields(run, cache: bool = True, progress: bool = False,
             "a part of the run")
     from rackstress.lib.progress import progress_bar
 
-    virial = stress_columns(run.index.columns) is not None
-    stress = (ParticleStress(run) if material_parts(run) and read_bindings(run) is not None
-              else None)
     tty = bool(progress) and sys.stderr.isatty()
+    head = _head(run)                   # the chunks measured while the run was written
     with progress_bar(run.index.n_frames, tty, "measures") as bar:
         bar.unit = "frame"
-        got = measure_frames(run, progress=bar.update)
-    values = {m: got[m] for m in MEASURES}
+        if compact:
+            got = measure_columns(run, progress=bar.update)
+        else:
+            got = measure_frames(run, progress=bar.update, head=head)
+    if compact:
+        size = len(got["cols"]) * run.index.n_frames
+        if size > MAX_VALUES:
+            raise TooLargeError(
+                f"{run.index.path}: {len(got['cols'])} particles that moved or whose "
+                f"neighbours moved × {run.index.n_frames} frames = {size:.3g} values per "
+                f"measure, more than the {MAX_VALUES:.3g} the stress post-processing holds in "
+                "memory; dump fewer frames (--dump-every) or analyse a part of the run")
+        values = {m: Columns(got["cols"], got[m], got["rest"][m]) for m in MEASURES}
+    else:
+        values = {m: got[m] for m in MEASURES}
     if virial:
         values["virial"] = VirialStress(run).run().results.per_particle
     units, extras = {}, {}
@@ -253,12 +268,115 @@ def compute_fields(run, cache: bool = True, progress: bool = False,
     fields = Fields(got["steps"], values, units=units, extras=extras)
     fields.timings["compute_s"] = time.perf_counter() - t0
     fields.timings["cached"] = False
-    if save and not run.truncation:
+    fields.timings["frames_measured_while_running"] = head.used if head is not None else 0
+    if head is not None and head.error:
+        fields.timings["follow_error"] = head.error
+    if save and not run.truncation and not compact:
         _save_cache(run, fields, path)
     if key is not None:
         _MEMO.clear()                 # one run's fields at a time
         _MEMO[key] = fields
     return fields
+
+
+def _compactable(run, virial: bool, stress) -> bool:
+    """Whether the measures can be kept over the moving particles only
+    (:func:`~rackstress.stress.measures.measure_columns`): a dump that follows what moves (the
+    others rest where particles.data puts them), the built-in measures only (no virial, no
+    bindings' stress, no registered measure, which take every column)."""
+    return bool(run.index.partial and not virial and stress is None and not EXTRA_MEASURES
+                and any(p.kind == "sediment" for p in run.parts.values()))
+
+
+# ----------------------------------------------------------------------------- while it runs
+class Head:
+    """Chunks of frames measured while the run was written (:func:`follow`), each with what it
+    was measured from: the frames' steps and a CRC of their bytes in the dump. A chunk is
+    handed to :func:`~rackstress.stress.measures.measure_frames` only if the finished dump holds
+    the same bytes there (a run cut after divergence, or resumed, measures the rest anew)."""
+
+    def __init__(self):
+        self.hood = None
+        self.done: dict = {}          # (first frame, count) → ((steps, crc), (paper, strain, d2min))
+        self.used = 0                 # frames handed to measure_frames
+        self.error = None             # why follow stopped early, if it did
+
+    @staticmethod
+    def stamp(run, ks) -> tuple | None:
+        """(steps, CRC of the frames' bytes) of frames ``ks`` of ``run``'s dump, or None."""
+        import zlib
+
+        idx = run.index
+        start, end = getattr(idx, "atoms_start", None), getattr(idx, "atoms_end", None)
+        if start is None or end is None:
+            return None
+        a, b = int(start[ks[0]]), int(end[ks[-1]])
+        with open(idx.path, "rb") as fh:
+            fh.seek(a)
+            crc = zlib.crc32(fh.read(b - a))
+        return tuple(int(s) for s in idx.steps[ks[0]:ks[-1] + 1]), crc
+
+    def chunk(self, run, ks):
+        got = self.done.get((ks[0], len(ks)))
+        try:            # the dump follow read, or the finished (compressed) one: compare bytes
+            same = got is not None and self.stamp(run, ks) == got[0]
+        except (OSError, ValueError, IndexError, TypeError):
+            same = False
+        if not same:
+            return None
+        self.used += len(ks)
+        return got[1]
+
+
+#: run directory → its :class:`Head` (filled by :func:`follow`, used by :func:`compute_fields`)
+_HEADS: dict = {}
+
+
+def follow(rundir, stop, frames: int, poll: float = 0.2) -> None:
+    """Measure the run's frames while LAMMPS writes them (``rackstress run``, in the thread of
+    :func:`rackstress.render.prepare.prepare_in_background`, on the core the simulation
+    leaves idle): every whole chunk of :func:`~rackstress.stress.measures.measure_frames` that
+    the dump holds, until ``stop`` (a ``threading.Event``) is set. ``frames``: how many the
+    run will write (the chunks are those of the finished run). Nothing is written; a failure
+    only leaves the rest to post-processing."""
+    from rackstress.stress.measures import frame_chunk, measure_chunk, neighbourhoods
+    from rackstress.stress.rundata import load_run
+
+    import threading
+
+    key = str(Path(rundir).resolve())
+    head = _HEADS[key] = Head()
+    dump = Path(rundir) / "trajectory.dump"
+    seen, chunk, parts, a, failed = -1, None, None, 0, 0
+    main = threading.main_thread()
+    # ends when stopped, or when the command ends without stopping it (an error: the
+    # interpreter's exit marks the main thread stopped before it waits for this one)
+    while not stop.wait(poll) and main.is_alive():
+        try:
+            size = dump.stat().st_size
+            if size == seen:
+                continue
+            seen = size
+            run = load_run(rundir, allow_truncated=True)
+            if head.hood is None:
+                parts = list(run.parts.values())
+                head.hood = neighbourhoods(run, parts)
+                chunk = frame_chunk(run.n_atoms, head.hood, frames)
+            while a + chunk <= run.index.n_frames and not stop.is_set() and main.is_alive():
+                ks = range(a, a + chunk)
+                got = measure_chunk(run, head.hood, parts, ks)
+                head.done[(a, chunk)] = (Head.stamp(run, ks), got)
+                a += chunk
+            failed = 0
+        except Exception as exc:  # noqa: BLE001 - a head start only: post-processing measures the rest
+            failed += 1                 # a frame caught mid-write reads as a bad one: retry
+            head.error = f"{type(exc).__name__}: {exc}"[:300]
+            if failed > 5:
+                return
+
+
+def _head(run):
+    return _HEADS.pop(str(Path(run.rundir).resolve()), None)
 
 
 # ----------------------------------------------------------------------------- peaks
@@ -443,7 +561,11 @@ def postprocess(rundir, vtk: bool = True, dump: bool = False, progress: bool = F
             "peak": overall_peak(run, group_peaks, fields.default), "groups": group_peaks,
             "warnings": stress_warnings(run, fields), "safety": safety(run, fields),
             "files": {},
-            "timings": {"measures_s": fields.timings.get("compute_s", 0.0)}}
+            "timings": {"measures_s": fields.timings.get("compute_s", 0.0),
+                        "frames_measured_while_running":
+                            fields.timings.get("frames_measured_while_running", 0)}}
+    if fields.timings.get("follow_error"):
+        info["timings"]["follow_error"] = fields.timings["follow_error"]
     from rackstress.stress import export
 
     if vtk and background:
@@ -543,4 +665,6 @@ def describe(info: dict) -> list:
         lines.append(f"  warning: {w['message']}")
     for key, path in info["files"].items():
         lines.append(f"  {key}: {path}")
+    for note in info.get("notes") or []:
+        lines.append(f"  note: {note}")
     return lines

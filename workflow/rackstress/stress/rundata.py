@@ -17,6 +17,7 @@ particles), so it is drawn as grey context and studied in the footprints plot in
 from __future__ import annotations
 
 import json
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -115,8 +116,6 @@ def load_run(rundir, allow_truncated: bool = False) -> RunData:
     ``docs/api.md`` (run as a test) opens a plane-rack run: ``sorted(load_run(out).parts)`` is
     ``['plane', 'planerack']``.
     """
-    import MDAnalysis as mda
-
     rundir = Path(rundir)
     if not rundir.is_dir():
         raise StressInputError(f"{rundir}: no such run directory")
@@ -127,6 +126,53 @@ def load_run(rundir, allow_truncated: bool = False) -> RunData:
         if not (rundir / name).is_file():
             raise StressInputError(f"{rundir}: no {name}; is this a run directory "
                                    "(made by 'rackstress run')?")
+    if not _KEEP:
+        return _open_run(rundir, dump, allow_truncated)
+    key = _files_key(rundir, dump, allow_truncated)
+    if key is not None and key in _OPENED:
+        return _OPENED[key]
+    run = _open_run(rundir, dump, allow_truncated)
+    _OPENED.clear()                   # one run directory kept open at a time
+    if key is not None:
+        _OPENED[key] = run
+    return run
+
+
+#: within :func:`kept_open`: the run opened last (its files unchanged: :func:`_files_key`)
+_OPENED: dict = {}
+_KEEP: list = []
+
+
+@contextmanager
+def kept_open():
+    """Within this block :func:`load_run` opens a run directory once and hands the same
+    RunData to every caller while its files are unchanged: ``rackstress run``'s
+    post-processing and pictures (the run directory locked meanwhile) read particles.data,
+    index the dump and parse the topology once (sediment-large: seconds)."""
+    _KEEP.append(True)
+    try:
+        yield
+    finally:
+        _KEEP.pop()
+        if not _KEEP:
+            _OPENED.clear()
+
+
+def _files_key(rundir: Path, dump: Path, allow_truncated: bool):
+    """What an opened run depends on: its three files' inode, size and modification time."""
+    import os
+
+    try:
+        stats = [os.stat(path) for path in (rundir / SCENE, rundir / DATA, dump)]
+    except OSError:
+        return None
+    return (str(rundir.resolve()), bool(allow_truncated),
+            tuple((st.st_ino, st.st_size, st.st_mtime_ns) for st in stats))
+
+
+def _open_run(rundir: Path, dump: Path, allow_truncated: bool) -> RunData:
+    import MDAnalysis as mda
+
     try:
         scene = json.loads((rundir / SCENE).read_text())
     except json.JSONDecodeError as exc:

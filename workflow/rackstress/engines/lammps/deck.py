@@ -1209,9 +1209,10 @@ def data_text(scene: Scene, masses: dict, bonds=None, n_bond_types: int = 0) -> 
         out.append(f"{k} {_f(masses.get(name, 1.0))}  # {name}")
     out += ["", "Atoms  # bond", ""]
     text = "\n".join(out) + "\n"
-    ids = np.arange(1, len(o) + 1)
-    rows = "\n".join(f"{i} {m} {t} {_f(x)} {_f(y)} {_f(z)}"
-                     for i, m, t, (x, y, z) in zip(ids, mols, types, o.tolist()))
+    # one str.format a row, floats by repr (as _f): a million rows in a few seconds, not 16
+    x, y, z = np.asarray(o, dtype=np.float64).T.tolist()
+    rows = "\n".join(map("{} {} {} {!r} {!r} {!r}".format, range(1, len(o) + 1),
+                         np.asarray(mols).tolist(), np.asarray(types).tolist(), x, y, z))
     text += rows + "\n"
     if bonds is not None:
         btype, bi, bj = bonds
