@@ -157,6 +157,26 @@ def test_loads_do_not_change_with_spacing(spacing, tmp_path):
     assert np.allclose(F.sum(axis=0), [-200.0, 0.0, 0.0], rtol=1e-12, atol=1e-9)
 
 
+@pytest.mark.parametrize("spacing", [0.7, 1.5])
+def test_weight_and_pressure_are_the_parts_own_where_spacing_does_not_divide_it(spacing,
+                                                                                 tmp_path):
+    """At 0.7 and 1.5 mm the 100 × 10 × 10 mm bar is 143 × 15 × 15 / 67 × 7 × 7 sites, whose
+    cubes hold 1,051 / 1,034 mm³ of the bar's 1,000: its weight is still ρ·g·V of the bar's
+    own volume (2.7e-9 t/mm³ × 9,810 mm/s² × 10,000 mm³), and 2 MPa on its 10 × 10 mm end face
+    still pushes with 200 N (geometry, not the lattice's n·a)."""
+    text = CANTILEVER.read_text()
+    grav = text[:text.rindex("[[load]]")] + "[[load]]\non = \"bar\"\ngravity = [0, 0, -9810.0]\n"
+    f = tmp_path / "gravity.toml"
+    f.write_text(grav)
+    F = external_forces(load_toml(f, {"spacing": spacing}))
+    weight = 2.7e-9 * 9810.0 * 100 * 10 * 10
+    assert abs(F.sum(axis=0)[2] / -weight - 1) < 1e-3, F.sum(axis=0)
+    f = tmp_path / "pressure.toml"
+    f.write_text(text.replace('force = [0, 0, "$(-load)"]', "pressure = 2.0\nnormal = [1, 0, 0]"))
+    F = external_forces(load_toml(f, {"spacing": spacing}))
+    assert abs(F.sum(axis=0)[0] / -200.0 - 1) < 1e-3, F.sum(axis=0)
+
+
 def test_material_and_units_in_summary_and_boundary(tmp_path):
     """A static run on LAMMPS settles, says so, and writes boundary.npz (CONTRACT.md)."""
     out = tmp_path / "run"

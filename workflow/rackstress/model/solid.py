@@ -53,8 +53,11 @@ FACE_SHARE = 0.25
 _INSIDE: dict = {}
 #: the last boundary fractions of each Solid (by id)
 _FRACTIONS: dict = {}
-#: bisection steps finding a free face's distance along an axis (precision a / 2**steps)
-FACE_STEPS = 8
+#: bisection steps finding a free face's distance along an axis (precision a / 2**steps:
+#: 1e-12 spacings, so a face on the lattice's own half-cell reads ½ to a double's digits)
+FACE_STEPS = 40
+#: within this many spacings of 0 or ½ a free face is there (regions' closing tolerance)
+FACE_SNAP = 1e-6
 #: distinct binding weights of a solid at most: the plugin gives each its own bond type and
 #: fix (engines/lammps/deck.py MAX_PAIR_TYPES)
 WEIGHT_LEVELS = 16
@@ -236,7 +239,11 @@ def axis_fractions(o: np.ndarray, spacing: float, part) -> np.ndarray:
                 ins = np.asarray(part.mask(o[free] + mid[:, None] * step), dtype=bool)
                 lo_t = np.where(ins, mid, lo_t)
                 hi_t = np.where(ins, hi_t, mid)
-            ext[free, ax] += (0.5 * (lo_t + hi_t) - 0.5) * a
+            t = 0.5 * (lo_t + hi_t)
+            # a face on the particle or on its half cell reads there exactly: the shapes'
+            # masks are closed up to regions.TOL × their size, which bisection finds too
+            t = np.where(np.abs(t - 0.5) < FACE_SNAP, 0.5, np.where(t < FACE_SNAP, 0.0, t))
+            ext[free, ax] += (t - 0.5) * a
     return ext / a
 
 

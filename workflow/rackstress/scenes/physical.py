@@ -126,7 +126,8 @@ def solids(ctx, groups: dict, operators: dict, u) -> dict:
                       part=info["shape"])
         out.setdefault(name, []).insert(0, Bind(name, solid))
         if info["shape"] is not None:       # each cell's share of the part (stress volume)
-            g.meta["fraction"] = solid.fractions(g.o).prod(axis=1)
+            g.meta["fractions"] = solid.fractions(g.o)
+            g.meta["fraction"] = g.meta["fractions"].prod(axis=1)
         g.meta.pop("solid")
         g.meta["spacing"] = a
     return {name: out[name] for name in groups if name in out}
@@ -213,6 +214,8 @@ def loads(ctx, tables, groups: dict, operators: dict, u, select, ramp) -> dict:
         elif kind == "gravity":
             accel = np.asarray(_vec3(c, t["gravity"], "gravity"))
             where = mask
+            if "fraction" in g.meta:    # the part's own weight ρ·g·ΣV: its cells' shares
+                accel = accel * float(g.meta["fraction"][mask].mean())
         elif kind == "pressure":
             pr = _number(c, t["pressure"], "pressure")
             if "normal" not in t:
@@ -228,6 +231,9 @@ def loads(ctx, tables, groups: dict, operators: dict, u, select, ramp) -> dict:
                 raise c.error(f"no particle of the region is on a face looking along {n.tolist()}"
                               " (the outward normal of the loaded face)", "normal")
             area = a * a / float(np.abs(n).max())     # a particle's share of the face
+            if "fractions" in g.meta:   # the face's own area: its cells' in-face extents
+                phi = np.delete(g.meta["fractions"][where], int(np.argmax(np.abs(n))), axis=1)
+                area *= float(phi.prod(axis=1).mean())
             accel = -pr * area * n / m
         else:       # displacement
             uvec = np.asarray(_vec3(c, t["displacement"], "displacement"))
