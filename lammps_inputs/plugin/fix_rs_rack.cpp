@@ -54,14 +54,48 @@ struct FusedPass {
   double *sums;              // out: the members' sums over the rows, [x|y|z][n4]
 };
 
-inline v4d load4(const double *p)
+typedef double v2d __attribute__((vector_size(16)));
+
+inline v2d load2(const double *p)
 {
-  v4d v;
-  std::memcpy(&v, p, sizeof(v4d));
+  v2d v;
+  std::memcpy(&v, p, sizeof(v2d));
   return v;
 }
 
-template <int NB> inline __attribute__((always_inline)) void fused_blocks(const FusedPass &P, int nb)
+/* one block of W members (W = 4 or 2) of row p: its terms into the block's sums S[0..2], and,
+   member by member (m of them are real), into the row's acceleration a */
+template <class V, int W>
+inline __attribute__((always_inline)) void fused_block(const V &px, const V &py, const V &pz,
+                                                       const double *mx, const double *my,
+                                                       const double *mz, const double *q,
+                                                       const V &c, const V &cr, V *S, int m,
+                                                       double *a)
+{
+  V ux, uy, uz, l0;
+  std::memcpy(&ux, mx, sizeof(V));
+  std::memcpy(&uy, my, sizeof(V));
+  std::memcpy(&uz, mz, sizeof(V));
+  std::memcpy(&l0, q, sizeof(V));
+  const V dx = px - ux, dy = py - uy, dz = pz - uz;
+  const V d2 = dx * dx + dy * dy + dz * dz;
+  const V t = 1.0 - l0 / d2;
+  const V s = c * t, sr = cr * t;
+  S[0] += s * dx;
+  S[1] += s * dy;
+  S[2] += s * dz;
+  const V tx = sr * -dx, ty = sr * -dy, tz = sr * -dz;
+  for (int l = 0; l < (m < W ? m : W); l++) {
+    a[0] += tx[l];
+    a[1] += ty[l];
+    a[2] += tz[l];
+  }
+}
+
+/* NB blocks of four members (NB = 0: as many as the rack needs, nb), then, with TAIL = 2, one
+   block of two (a rack of 4·NB + 1 or 4·NB + 2 members: half the divisions of a padded four) */
+template <int NB, int TAIL>
+inline __attribute__((always_inline)) void fused_blocks(const FusedPass &P, int nb)
 {
   const int n = P.n, n4 = P.n4;
   const int B = NB > 0 ? NB : nb;
@@ -70,44 +104,41 @@ template <int NB> inline __attribute__((always_inline)) void fused_blocks(const 
   std::vector<v4d> Sdyn(NB > 0 ? 0 : 3 * nb);
   v4d *S = NB > 0 ? Sfix : Sdyn.data();
   for (int k = 0; k < 3 * B; k++) S[k] = v4d{0.0, 0.0, 0.0, 0.0};
-  const v4d c = {P.c, P.c, P.c, P.c}, cr = {P.cr, P.cr, P.cr, P.cr}, one = {1.0, 1.0, 1.0, 1.0};
+  v2d St[3] = {{0.0, 0.0}, {0.0, 0.0}, {0.0, 0.0}};
+  const v4d c = {P.c, P.c, P.c, P.c}, cr = {P.cr, P.cr, P.cr, P.cr};
+  const v2d c2 = {P.c, P.c}, cr2 = {P.cr, P.cr};
   for (size_t r = 0; r < P.nrows; r++) {
     const double *p = P.x[P.rows[r]];
     const v4d px = {p[0], p[0], p[0], p[0]}, py = {p[1], p[1], p[1], p[1]},
               pz = {p[2], p[2], p[2], p[2]};
-    double a0 = 0.0, a1 = 0.0, a2 = 0.0;
+    double a[3] = {0.0, 0.0, 0.0};
     const double *q = P.l0sq + r * n4;
-    for (int b = 0; b < B; b++) {
-      const v4d dx = px - load4(MX + 4 * b), dy = py - load4(MY + 4 * b),
-                dz = pz - load4(MZ + 4 * b);
-      const v4d d2 = dx * dx + dy * dy + dz * dz;
-      const v4d t = one - load4(q + 4 * b) / d2;
-      const v4d s = c * t, sr = cr * t;
-      S[3 * b] += s * dx;
-      S[3 * b + 1] += s * dy;
-      S[3 * b + 2] += s * dz;
-      const v4d tx = sr * -dx, ty = sr * -dy, tz = sr * -dz;
-      const int m = n - 4 * b < 4 ? n - 4 * b : 4;
-      for (int l = 0; l < m; l++) {
-        a0 += tx[l];
-        a1 += ty[l];
-        a2 += tz[l];
-      }
+    for (int b = 0; b < B; b++)
+      fused_block<v4d, 4>(px, py, pz, MX + 4 * b, MY + 4 * b, MZ + 4 * b, q + 4 * b, c, cr,
+                          S + 3 * b, n - 4 * b, a);
+    if (TAIL == 2) {
+      const v2d qx = {p[0], p[0]}, qy = {p[1], p[1]}, qz = {p[2], p[2]};
+      fused_block<v2d, 2>(qx, qy, qz, MX + 4 * B, MY + 4 * B, MZ + 4 * B, q + 4 * B, c2, cr2,
+                          St, n - 4 * B, a);
     }
-    P.acc[3 * r] = a0;
-    P.acc[3 * r + 1] = a1;
-    P.acc[3 * r + 2] = a2;
+    P.acc[3 * r] = a[0];
+    P.acc[3 * r + 1] = a[1];
+    P.acc[3 * r + 2] = a[2];
   }
   for (int b = 0; b < B; b++)
     for (int e = 0; e < 3; e++) std::memcpy(P.sums + e * n4 + 4 * b, &S[3 * b + e], sizeof(v4d));
+  if (TAIL == 2)
+    for (int e = 0; e < 3; e++) std::memcpy(P.sums + e * n4 + 4 * B, &St[e], sizeof(v2d));
 }
 
 inline __attribute__((always_inline)) void fused_any(const FusedPass &P)
 {
-  const int nb = P.n4 / 4;
-  if (nb == 1) fused_blocks<1>(P, nb);
-  else if (nb == 2) fused_blocks<2>(P, nb);    // the six-particle racks of the scenes
-  else fused_blocks<0>(P, nb);
+  const int nb = P.n4 / 4, rest = P.n % 4;
+  if (nb == 1 && rest == 0) fused_blocks<1, 0>(P, nb);
+  else if (nb == 1 && rest <= 2) fused_blocks<0, 2>(P, 0);
+  else if (nb == 2 && rest == 0) fused_blocks<2, 0>(P, nb);
+  else if (nb == 2 && rest <= 2) fused_blocks<1, 2>(P, 1);    // the six-particle racks of the scenes
+  else fused_blocks<0, 0>(P, nb);
 }
 
 __attribute__((target("avx2"))) void fused_avx2(const FusedPass &P)
