@@ -64,7 +64,7 @@ def test_plugin_realizes_every_python_operator():
     assert deck.ghost_cutoff == pytest.approx(2 * 2.0 + 4.0 + 1.0 + 4.0)
     text = deck.input_text()
     assert "atom_modify map array sort 0 0.0 first rs_move" in text
-    assert "fix rs_nve rs_move nve" in text and " activate rs_move" in text
+    assert "fix rs_nve rs_move rs/nve" in text and " activate rs_move" in text
 
 
 def test_bind_ghost_cutoff_is_the_longest_bond_plus_half_a_skin():
