@@ -34,128 +34,114 @@ using namespace LAMMPS_NS;
 using namespace FixConst;
 
 /* The fused pass of FixRSRack::partial (both directions of a rack coupling, Eq. 12 each) over
-   the host rows, four rack members at a time in vector lanes (gcc/clang vector extension),
-   compiled twice: for AVX2 where the processor has it, else for the baseline. Every sum is added
-   in the scalar loop's order (a member's over the rows in id order, a row's over the members in
-   id order) and nothing is contracted into a fused multiply-add, so either build gives the same
-   bits as the plain loop. */
+   the host rows, four host rows at a time in vector lanes (gcc/clang vector extension),
+   compiled twice: for AVX2 where the processor has it, else for the baseline (the same bits
+   either way: the same operations in the same order, none contracted into a fused
+   multiply-add). A row's acceleration is summed over the members in id order, in its lane; a
+   member's sum over the rows is four lane sums (rows r ≡ l mod 4 of the full blocks of four,
+   the last rows in lane 0) added at the end: a fixed order, so a run and its resumed run stay
+   bit for bit equal. l0sq is transposed for it ([member][row]). */
 namespace {
 typedef double v4d __attribute__((vector_size(32)));
 
-struct FusedPass {
+struct RowsPass {
   double **x;
   const int *rows;
   size_t nrows;
-  const double *l0sq;        // [row][n4], zero past n
-  int n, n4;
-  const double *members;     // x, y, z of each member, n4 each, zero past n
-  double c, cr;              // this coupling's c (rack <- host), the reverse's (host <- rack)
-  double *acc;               // out: the host rows' accelerations, 3 per row
-  double *sums;              // out: the members' sums over the rows, [x|y|z][n4]
+  const double *l0t;         // [member][nrows]
+  int n;
+  const double *X;           // the members' positions, 3 per member
+  double c, cr;
+  double *acc;               // out: 3 per row
+  double *sums;              // out: 3 per member
 };
 
-typedef double v2d __attribute__((vector_size(16)));
-
-inline v2d load2(const double *p)
+inline __attribute__((always_inline)) void rows_pass_any(const RowsPass &P)
 {
-  v2d v;
-  std::memcpy(&v, p, sizeof(v2d));
-  return v;
-}
-
-/* one block of W members (W = 4 or 2) of row p: its terms into the block's sums S[0..2], and,
-   member by member (m of them are real), into the row's acceleration a */
-template <class V, int W>
-inline __attribute__((always_inline)) void fused_block(const V &px, const V &py, const V &pz,
-                                                       const double *mx, const double *my,
-                                                       const double *mz, const double *q,
-                                                       const V &c, const V &cr, V *S, int m,
-                                                       double *a)
-{
-  V ux, uy, uz, l0;
-  std::memcpy(&ux, mx, sizeof(V));
-  std::memcpy(&uy, my, sizeof(V));
-  std::memcpy(&uz, mz, sizeof(V));
-  std::memcpy(&l0, q, sizeof(V));
-  const V dx = px - ux, dy = py - uy, dz = pz - uz;
-  const V d2 = dx * dx + dy * dy + dz * dz;
-  const V t = 1.0 - l0 / d2;
-  const V s = c * t, sr = cr * t;
-  S[0] += s * dx;
-  S[1] += s * dy;
-  S[2] += s * dz;
-  const V tx = sr * -dx, ty = sr * -dy, tz = sr * -dz;
-  for (int l = 0; l < (m < W ? m : W); l++) {
-    a[0] += tx[l];
-    a[1] += ty[l];
-    a[2] += tz[l];
-  }
-}
-
-/* NB blocks of four members (NB = 0: as many as the rack needs, nb), then, with TAIL = 2, one
-   block of two (a rack of 4·NB + 1 or 4·NB + 2 members: half the divisions of a padded four) */
-template <int NB, int TAIL>
-inline __attribute__((always_inline)) void fused_blocks(const FusedPass &P, int nb)
-{
-  const int n = P.n, n4 = P.n4;
-  const int B = NB > 0 ? NB : nb;
-  const double *MX = P.members, *MY = MX + n4, *MZ = MY + n4;
-  v4d Sfix[3 * (NB > 0 ? NB : 1)];
-  std::vector<v4d> Sdyn(NB > 0 ? 0 : 3 * nb);
-  v4d *S = NB > 0 ? Sfix : Sdyn.data();
-  for (int k = 0; k < 3 * B; k++) S[k] = v4d{0.0, 0.0, 0.0, 0.0};
-  v2d St[3] = {{0.0, 0.0}, {0.0, 0.0}, {0.0, 0.0}};
+  const int n = P.n;
+  const size_t nr = P.nrows, full = nr / 4 * 4;
+  // the lane sums as plain doubles (a heap vector of v4d need not be 32-byte aligned)
+  std::vector<double> S(12 * n, 0.0);
+  auto add4 = [&S](int at, const v4d &v) {
+    v4d w;
+    std::memcpy(&w, &S[4 * at], sizeof(v4d));
+    w += v;
+    std::memcpy(&S[4 * at], &w, sizeof(v4d));
+  };
   const v4d c = {P.c, P.c, P.c, P.c}, cr = {P.cr, P.cr, P.cr, P.cr};
-  const v2d c2 = {P.c, P.c}, cr2 = {P.cr, P.cr};
-  for (size_t r = 0; r < P.nrows; r++) {
-    const double *p = P.x[P.rows[r]];
-    const v4d px = {p[0], p[0], p[0], p[0]}, py = {p[1], p[1], p[1], p[1]},
-              pz = {p[2], p[2], p[2], p[2]};
-    double a[3] = {0.0, 0.0, 0.0};
-    const double *q = P.l0sq + r * n4;
-    for (int b = 0; b < B; b++)
-      fused_block<v4d, 4>(px, py, pz, MX + 4 * b, MY + 4 * b, MZ + 4 * b, q + 4 * b, c, cr,
-                          S + 3 * b, n - 4 * b, a);
-    if (TAIL == 2) {
-      const v2d qx = {p[0], p[0]}, qy = {p[1], p[1]}, qz = {p[2], p[2]};
-      fused_block<v2d, 2>(qx, qy, qz, MX + 4 * B, MY + 4 * B, MZ + 4 * B, q + 4 * B, c2, cr2,
-                          St, n - 4 * B, a);
+  for (size_t r = 0; r < full; r += 4) {
+    const double *p0 = P.x[P.rows[r]], *p1 = P.x[P.rows[r + 1]], *p2 = P.x[P.rows[r + 2]],
+                 *p3 = P.x[P.rows[r + 3]];
+    const v4d px = {p0[0], p1[0], p2[0], p3[0]}, py = {p0[1], p1[1], p2[1], p3[1]},
+              pz = {p0[2], p1[2], p2[2], p3[2]};
+    v4d ax = {0.0, 0.0, 0.0, 0.0}, ay = ax, az = ax;
+    for (int k = 0; k < n; k++) {
+      const double *u = P.X + 3 * k;
+      const v4d dx = px - u[0], dy = py - u[1], dz = pz - u[2];
+      const v4d d2 = dx * dx + dy * dy + dz * dz;
+      v4d q;
+      std::memcpy(&q, P.l0t + k * nr + r, sizeof(v4d));
+      const v4d t = 1.0 - q / d2;
+      const v4d s = c * t, sr = cr * t;
+      add4(3 * k, s * dx);
+      add4(3 * k + 1, s * dy);
+      add4(3 * k + 2, s * dz);
+      ax += sr * -dx;
+      ay += sr * -dy;
+      az += sr * -dz;
     }
-    P.acc[3 * r] = a[0];
-    P.acc[3 * r + 1] = a[1];
-    P.acc[3 * r + 2] = a[2];
+    for (int l = 0; l < 4; l++) {
+      P.acc[3 * (r + l)] = ax[l];
+      P.acc[3 * (r + l) + 1] = ay[l];
+      P.acc[3 * (r + l) + 2] = az[l];
+    }
   }
-  for (int b = 0; b < B; b++)
-    for (int e = 0; e < 3; e++) std::memcpy(P.sums + e * n4 + 4 * b, &S[3 * b + e], sizeof(v4d));
-  if (TAIL == 2)
-    for (int e = 0; e < 3; e++) std::memcpy(P.sums + e * n4 + 4 * B, &St[e], sizeof(v2d));
+  double tail[3 * 64];
+  std::vector<double> big;
+  double *T = tail;
+  if (3 * n > 3 * 64) {
+    big.assign(3 * n, 0.0);
+    T = big.data();
+  } else
+    std::fill(T, T + 3 * n, 0.0);
+  for (size_t r = full; r < nr; r++) {
+    const double *p = P.x[P.rows[r]];
+    double a[3] = {0.0, 0.0, 0.0};
+    for (int k = 0; k < n; k++) {
+      const double *u = P.X + 3 * k;
+      double d[3] = {p[0] - u[0], p[1] - u[1], p[2] - u[2]};
+      double d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+      double t = 1.0 - P.l0t[k * nr + r] / d2;
+      double s = P.c * t, sr = P.cr * t;
+      for (int e = 0; e < 3; e++) {
+        T[3 * k + e] += s * d[e];
+        a[e] += sr * -d[e];
+      }
+    }
+    for (int e = 0; e < 3; e++) P.acc[3 * r + e] = a[e];
+  }
+  for (int k = 0; k < n; k++)
+    for (int e = 0; e < 3; e++) {
+      const double *v = &S[4 * (3 * k + e)];
+      P.sums[3 * k + e] = (((v[0] + T[3 * k + e]) + v[1]) + v[2]) + v[3];
+    }
 }
 
-inline __attribute__((always_inline)) void fused_any(const FusedPass &P)
+__attribute__((target("avx2"))) void rows_avx2(const RowsPass &P)
 {
-  const int nb = P.n4 / 4, rest = P.n % 4;
-  if (nb == 1 && rest == 0) fused_blocks<1, 0>(P, nb);
-  else if (nb == 1 && rest <= 2) fused_blocks<0, 2>(P, 0);
-  else if (nb == 2 && rest == 0) fused_blocks<2, 0>(P, nb);
-  else if (nb == 2 && rest <= 2) fused_blocks<1, 2>(P, 1);    // the six-particle racks of the scenes
-  else fused_blocks<0, 0>(P, nb);
+  rows_pass_any(P);
 }
 
-__attribute__((target("avx2"))) void fused_avx2(const FusedPass &P)
+void rows_base(const RowsPass &P)
 {
-  fused_any(P);
+  rows_pass_any(P);
 }
 
-void fused_base(const FusedPass &P)
-{
-  fused_any(P);
-}
-
-void fused_pass(const FusedPass &P)
+void rows_pass(const RowsPass &P)
 {
   static const bool avx2 = __builtin_cpu_supports("avx2");
-  if (avx2) fused_avx2(P);
-  else fused_base(P);
+  if (avx2) rows_avx2(P);
+  else rows_base(P);
 }
 }    // namespace
 
@@ -239,11 +225,10 @@ const std::vector<int> &FixRSRack::owned_rows()
         own[r * n + k] = overlap && few.tag[k] == atom->tag[i];
       }
     }
-    // the same, four members to a vector lane block (the fused pass, partial)
-    const int n4 = (n + 3) / 4 * 4;
-    l0sq4.assign(rows.size() * n4, 0.0);
+    // transposed for the fused pass (rows_pass)
+    l0t.assign(rows.size() * n, 0.0);
     for (size_t r = 0; r < rows.size(); r++)
-      std::copy(l0sq.begin() + r * n, l0sq.begin() + (r + 1) * n, l0sq4.begin() + r * n4);
+      for (int k = 0; k < n; k++) l0t[k * rows.size() + r] = l0sq[r * n + k];
     rows_built = true;
   }
   return rows;
@@ -277,23 +262,15 @@ void FixRSRack::partial(double *sum)
     // one pass for both couplings over the reverse fix's host rows (the same rows, in the same
     // order, as this one's): t = 1 − L0²/‖u − p‖² once per pair, c·t·(p − u) summed into the
     // rack member's partial sum, c'·t·(u − p) into the host row's acceleration (Eq. 12 each).
-    // Four rack members at a time in vector lanes (gcc/clang vector extension); every sum is
-    // still added in the scalar loop's order (a member's over the rows in id order, a row's
-    // over the members in id order), so the result is the same to the bit.
-    const int n = few.size(), n4 = (n + 3) / 4 * 4;
+    // Four host rows at a time in vector lanes (rows_pass above).
+    const int n = few.size();
     const std::vector<int> &R = reverse->owned_rows();
-    // the members' positions, a coordinate at a time, zero past n (a padded lane's terms are
-    // finite, d = p, and never added: its sum is not read, a row's sum stops at n)
-    lanes.assign(3 * n4, 0.0);
-    for (int k = 0; k < n; k++)
-      for (int e = 0; e < 3; e++) lanes[e * n4 + k] = few.x[3 * k + e];
-    lanesum.assign(3 * n4, 0.0);
+    lanesum.assign(3 * n, 0.0);
     reverse->acc.resize(3 * R.size());
-    FusedPass P{atom->x, R.data(), R.size(), reverse->l0sq4.data(), n, n4, lanes.data(),
-                c, reverse->c, reverse->acc.data(), lanesum.data()};
-    fused_pass(P);
-    for (int k = 0; k < n; k++)
-      for (int e = 0; e < 3; e++) sum[3 * k + e] += lanesum[e * n4 + k];
+    RowsPass P{atom->x, R.data(), R.size(), reverse->l0t.data(), n, few.x.data(), c,
+               reverse->c, reverse->acc.data(), lanesum.data()};
+    rows_pass(P);
+    for (int k = 0; k < 3 * n; k++) sum[k] += lanesum[k];
     reverse->acc_step = update->ntimestep;
     return;
   }

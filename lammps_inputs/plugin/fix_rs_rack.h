@@ -43,9 +43,9 @@ class FixRSRack : public Fix, public RackStress::Reduced {
   // order the sums visit them, with the member's own pair skipped (own = 1)
   std::vector<double> l0sq;
   std::vector<char> own;
-  std::vector<double> l0sq4;    // l0sq with each row padded to a multiple of 4 members (zeros)
-  // the fused pass's members and its per-member sums, a coordinate at a time (padded as l0sq4)
-  std::vector<double> lanes, lanesum;
+  std::vector<double> l0t;      // l0sq transposed: [member][row]
+  // the fused pass's per-member sums (3 per member)
+  std::vector<double> lanesum;
   bool rows_built, overlap;
   // fused with the reverse coupling (rack <- host with host <- rack: Eq. 12's factor of a pair
   // is the same both ways but c): the fix that gathers its targets (the rack) computes both in
