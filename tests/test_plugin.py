@@ -78,8 +78,13 @@ def test_bind_ghost_cutoff_is_the_longest_bond_plus_half_a_skin():
 
 
 @pytest.mark.parametrize("name,params", [("plane-rack", {"steps": 1200}),
+                                         # 21 x 21 = 441 hosts, 4·110 + 1: the rack pass's
+                                         # blocks of four rows and its last row alone
+                                         ("plane-rack", {"steps": 600, "n": 21}),
                                          ("plane-bound", {"steps": 1200, "d": 2.0})])
 def test_plugin_trajectory_parity_plane_scenes(name, params):
+    """Rack coupling (Eq. 23) and within(d) binds on the plugin: the reference engine's
+    trajectory to 1e-10."""
     scene = scenes.build(name, **params)
     ref = _reference_final(scene)
     assert np.abs(ref - scene.original_positions()).max() > 1.0      # it really moved
