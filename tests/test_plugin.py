@@ -65,7 +65,7 @@ def test_plugin_realizes_every_python_operator():
     assert deck.ghost_cutoff == pytest.approx(2 * 2.0 + 4.0 + 1.0 + 4.0)
     text = deck.input_text()
     assert "atom_modify map array sort 0 0.0 first rs_move" in text
-    assert "fix rs_nve rs_move nve" in text and " activate rs_move" in text
+    assert "fix rs_nve rs_move rs/nve" in text and " activate rs_move" in text
 
 
 def test_bind_ghost_cutoff_is_the_longest_bond_plus_half_a_skin():
@@ -79,8 +79,13 @@ def test_bind_ghost_cutoff_is_the_longest_bond_plus_half_a_skin():
 
 
 @pytest.mark.parametrize("name,params", [("plane-rack", {"steps": 1200}),
+                                         # 21 x 21 = 441 hosts, 4·110 + 1: the rack pass's
+                                         # blocks of four rows and its last row alone
+                                         ("plane-rack", {"steps": 600, "n": 21}),
                                          ("plane-bound", {"steps": 1200, "d": 2.0})])
 def test_plugin_trajectory_parity_plane_scenes(name, params):
+    """Rack coupling (Eq. 23) and within(d) binds on the plugin: the reference engine's
+    trajectory to 1e-10."""
     scene = scenes.build(name, **params)
     ref = _reference_final(scene)
     assert np.abs(ref - scene.original_positions()).max() > 1.0      # it really moved

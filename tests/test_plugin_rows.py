@@ -1,6 +1,6 @@
 """The plugin's per-step work over the moving rows only (issue 23; rs_common.h, "Resting
-atoms"): ``rs/force`` and ``rs/dampen`` (no contact) against LAMMPS' own ``fix addforce`` and
-``fix viscous`` (the independent path: LAMMPS' implementation of the same arithmetic, Eqs. 8–9)
+atoms"): ``rs/force``, ``rs/dampen`` (no contact) and ``rs/nve`` against LAMMPS' own ``fix
+addforce``, ``fix viscous`` and ``fix nve`` (the independent path: LAMMPS' implementation of the same arithmetic, Eqs. 8–9)
 in a deck whose resting atoms sit after ``atom_modify first``'s rows; the watchdog's prefix of
 moving rows; the plugin check's version string.
 
@@ -40,12 +40,12 @@ velocity moving set 0.3 -0.2 0.1 units box
 set atom 4 vx -0.5 vy 0.25 vz 0.75
 timestep 0.01
 {fixes}
-fix integrate moving nve
+fix integrate moving {integrate}
 run 50
 """
 
 
-def _run(fixes: str, load: bool) -> tuple[np.ndarray, np.ndarray]:
+def _run(fixes: str, load: bool, integrate: str = "nve") -> tuple[np.ndarray, np.ndarray]:
     """Positions and velocities by atom id after the deck's 50 steps."""
     from rackstress.lib.mpi import lammps_module
 
@@ -53,7 +53,7 @@ def _run(fixes: str, load: bool) -> tuple[np.ndarray, np.ndarray]:
     try:
         if load:
             lmp.command(f"plugin load {plugin_library()}")
-        lmp.commands_string(DECK.format(fixes=fixes))
+        lmp.commands_string(DECK.format(fixes=fixes, integrate=integrate))
         ids = lmp.numpy.extract_atom("id")[:5].copy()
         order = np.argsort(ids)
         x = lmp.numpy.extract_atom("x")[:5][order].copy()
@@ -83,6 +83,21 @@ def test_rs_force_and_dampen_equal_lammps_addforce_and_viscous_over_the_moving_r
     assert np.array_equal(ours[0][[0, 2]], [[0.0, 0.0, 0.0], [0.0, 3.0, 0.0]])
     assert not ours[1][[0, 2]].any()
     # and the moving ones did (the forces acted)
+    assert np.abs(ours[0][[1, 3, 4]] - [[1, 0, 0], [2, 0, 1], [3, 1, 0]]).min() > 0
+
+
+def test_rs_nve_equals_lammps_nve_over_the_moving_rows():
+    """Eq. 5 as fix rs/nve integrates it (dt/2m once per type) gives LAMMPS' own fix nve's
+    trajectory bit for bit, with constant forces and damping acting (the same fixes both
+    times), and leaves the resting atoms where they were."""
+    fixes = ("fix f1 moving rs/force 0.25 -1.0 0.5\n"
+             "fix f2 two rs/force 0.0 0.125 0.0\n"
+             "fix d moving rs/dampen 0 type 1 0.7 type 2 1.5")
+    ours = _run(fixes, load=True, integrate="rs/nve")
+    lammps = _run(fixes, load=True, integrate="nve")
+    assert np.array_equal(ours[0], lammps[0]) and np.array_equal(ours[1], lammps[1])
+    assert np.array_equal(ours[0][[0, 2]], [[0.0, 0.0, 0.0], [0.0, 3.0, 0.0]])
+    assert not ours[1][[0, 2]].any()
     assert np.abs(ours[0][[1, 3, 4]] - [[1, 0, 0], [2, 0, 1], [3, 1, 0]]).min() > 0
 
 

@@ -119,12 +119,26 @@ void FixRSDampen::post_force(int /*vflag*/)
 {
   if (contactbit) RackStress::reduce_sums(lmp);    // the condition, fused with the step's other sums
   if (!holds) return;
-  double **v = atom->v, **f = atom->f;
-  int *mask = atom->mask, *type = atom->type;
   const int n = RackStress::extent(atom, first_rows);    // the moving rows, where they hold all
+  if (n == 0) return;
+  const double *__restrict v = atom->v[0];
+  double *__restrict f = atom->f[0];
+  const int *__restrict mask = atom->mask, *__restrict type = atom->type;
+  if (atom->rmass) {
+    for (int i = 0; i < n; i++)
+      if (mask[i] & groupbit) {
+        double g = ctype[type[i]] * atom->rmass[i];
+        for (int e = 0; e < 3; e++) f[3 * i + e] -= g * v[3 * i + e];
+      }
+    return;
+  }
+  // γ = c_T·m_T of each type (the same product the per-atom one was)
+  gtype.resize(ctype.size());
+  for (size_t t = 1; t < ctype.size(); t++) gtype[t] = ctype[t] * atom->mass[t];
+  const double *__restrict G = gtype.data();
   for (int i = 0; i < n; i++)
     if (mask[i] & groupbit) {
-      double g = ctype[type[i]] * RackStress::mass(atom, i);
-      for (int e = 0; e < 3; e++) f[i][e] -= g * v[i][e];
+      const double g = G[type[i]];
+      for (int e = 0; e < 3; e++) f[3 * i + e] -= g * v[3 * i + e];
     }
 }

@@ -32,6 +32,7 @@ class FixRSDampen : public Fix, public RackStress::Reduced {
   int contactbit;
   double c;
   std::vector<double> ctype;    // c per atom type (c unless a type keyword gives its own)
+  std::vector<double> gtype;    // c_T·m_T per type (post_force, per-type masses)
   bool built, ready, holds;
   bool first_rows = false;    // the group lies in atom_modify's first group (rs_common.h)
   RackStress::Contacts list;

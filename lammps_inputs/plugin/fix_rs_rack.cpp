@@ -28,9 +28,122 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 using namespace LAMMPS_NS;
 using namespace FixConst;
+
+/* The fused pass of FixRSRack::partial (both directions of a rack coupling, Eq. 12 each) over
+   the host rows, four host rows at a time in vector lanes (gcc/clang vector extension),
+   compiled twice: for AVX2 where the processor has it, else for the baseline (the same bits
+   either way: the same operations in the same order, none contracted into a fused
+   multiply-add). A row's acceleration is summed over the members in id order, in its lane; a
+   member's sum over the rows is four lane sums (rows r ≡ l mod 4 of the full blocks of four,
+   the last rows in lane 0) added at the end: a fixed order, so a run and its resumed run stay
+   bit for bit equal. l0sq is transposed for it ([member][row]). */
+namespace {
+typedef double v4d __attribute__((vector_size(32)));
+
+struct RowsPass {
+  double **x;
+  const int *rows;
+  size_t nrows;
+  const double *l0t;         // [member][nrows]
+  int n;
+  const double *X;           // the members' positions, 3 per member
+  double c, cr;
+  double *acc;               // out: 3 per row
+  double *sums;              // out: 3 per member
+};
+
+inline __attribute__((always_inline)) void rows_pass_any(const RowsPass &P)
+{
+  const int n = P.n;
+  const size_t nr = P.nrows, full = nr / 4 * 4;
+  // the lane sums as plain doubles (a heap vector of v4d need not be 32-byte aligned)
+  std::vector<double> S(12 * n, 0.0);
+  auto add4 = [&S](int at, const v4d &v) {
+    v4d w;
+    std::memcpy(&w, &S[4 * at], sizeof(v4d));
+    w += v;
+    std::memcpy(&S[4 * at], &w, sizeof(v4d));
+  };
+  const v4d c = {P.c, P.c, P.c, P.c}, cr = {P.cr, P.cr, P.cr, P.cr};
+  for (size_t r = 0; r < full; r += 4) {
+    const double *p0 = P.x[P.rows[r]], *p1 = P.x[P.rows[r + 1]], *p2 = P.x[P.rows[r + 2]],
+                 *p3 = P.x[P.rows[r + 3]];
+    const v4d px = {p0[0], p1[0], p2[0], p3[0]}, py = {p0[1], p1[1], p2[1], p3[1]},
+              pz = {p0[2], p1[2], p2[2], p3[2]};
+    v4d ax = {0.0, 0.0, 0.0, 0.0}, ay = ax, az = ax;
+    for (int k = 0; k < n; k++) {
+      const double *u = P.X + 3 * k;
+      const v4d dx = px - u[0], dy = py - u[1], dz = pz - u[2];
+      const v4d d2 = dx * dx + dy * dy + dz * dz;
+      v4d q;
+      std::memcpy(&q, P.l0t + k * nr + r, sizeof(v4d));
+      const v4d t = 1.0 - q / d2;
+      const v4d s = c * t, sr = cr * t;
+      add4(3 * k, s * dx);
+      add4(3 * k + 1, s * dy);
+      add4(3 * k + 2, s * dz);
+      ax += sr * -dx;
+      ay += sr * -dy;
+      az += sr * -dz;
+    }
+    for (int l = 0; l < 4; l++) {
+      P.acc[3 * (r + l)] = ax[l];
+      P.acc[3 * (r + l) + 1] = ay[l];
+      P.acc[3 * (r + l) + 2] = az[l];
+    }
+  }
+  double tail[3 * 64];
+  std::vector<double> big;
+  double *T = tail;
+  if (3 * n > 3 * 64) {
+    big.assign(3 * n, 0.0);
+    T = big.data();
+  } else
+    std::fill(T, T + 3 * n, 0.0);
+  for (size_t r = full; r < nr; r++) {
+    const double *p = P.x[P.rows[r]];
+    double a[3] = {0.0, 0.0, 0.0};
+    for (int k = 0; k < n; k++) {
+      const double *u = P.X + 3 * k;
+      double d[3] = {p[0] - u[0], p[1] - u[1], p[2] - u[2]};
+      double d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+      double t = 1.0 - P.l0t[k * nr + r] / d2;
+      double s = P.c * t, sr = P.cr * t;
+      for (int e = 0; e < 3; e++) {
+        T[3 * k + e] += s * d[e];
+        a[e] += sr * -d[e];
+      }
+    }
+    for (int e = 0; e < 3; e++) P.acc[3 * r + e] = a[e];
+  }
+  for (int k = 0; k < n; k++)
+    for (int e = 0; e < 3; e++) {
+      const double *v = &S[4 * (3 * k + e)];
+      P.sums[3 * k + e] = (((v[0] + T[3 * k + e]) + v[1]) + v[2]) + v[3];
+    }
+}
+
+__attribute__((target("avx2"))) void rows_avx2(const RowsPass &P)
+{
+  rows_pass_any(P);
+}
+
+void rows_base(const RowsPass &P)
+{
+  rows_pass_any(P);
+}
+
+void rows_pass(const RowsPass &P)
+{
+  static const bool avx2 = __builtin_cpu_supports("avx2");
+  if (avx2) rows_avx2(P);
+  else rows_base(P);
+}
+}    // namespace
 
 FixRSRack::FixRSRack(LAMMPS *lmp, int narg, char **arg) :
     Fix(lmp, narg, arg), gather_source(true), ready(false), rows_built(false), overlap(true)
@@ -112,6 +225,10 @@ const std::vector<int> &FixRSRack::owned_rows()
         own[r * n + k] = overlap && few.tag[k] == atom->tag[i];
       }
     }
+    // transposed for the fused pass (rows_pass)
+    l0t.assign(rows.size() * n, 0.0);
+    for (size_t r = 0; r < rows.size(); r++)
+      for (int k = 0; k < n; k++) l0t[k * rows.size() + r] = l0sq[r * n + k];
     rows_built = true;
   }
   return rows;
@@ -144,33 +261,16 @@ void FixRSRack::partial(double *sum)
   if (reverse) {
     // one pass for both couplings over the reverse fix's host rows (the same rows, in the same
     // order, as this one's): t = 1 − L0²/‖u − p‖² once per pair, c·t·(p − u) summed into the
-    // rack member's partial sum, c'·t·(u − p) into the host row's acceleration (Eq. 12 each)
-    double **x = atom->x;
-    int n = few.size();
-    const double *X = few.x.data();
+    // rack member's partial sum, c'·t·(u − p) into the host row's acceleration (Eq. 12 each).
+    // Four host rows at a time in vector lanes (rows_pass above).
+    const int n = few.size();
     const std::vector<int> &R = reverse->owned_rows();
-    const double *Q = reverse->l0sq.data();
-    const double cr = reverse->c;
-    std::vector<double> &A = reverse->acc;
-    A.assign(3 * R.size(), 0.0);
-    for (size_t r = 0; r < R.size(); r++) {
-      const double *p = x[R[r]];
-      double a[3] = {0.0, 0.0, 0.0};
-      for (int k = 0; k < n; k++) {
-        double d[3], d2 = 0.0;
-        for (int e = 0; e < 3; e++) {
-          d[e] = p[e] - X[3 * k + e];
-          d2 += d[e] * d[e];
-        }
-        double t = 1.0 - Q[r * n + k] / d2;
-        double s = c * t, sr = cr * t;
-        for (int e = 0; e < 3; e++) {
-          sum[3 * k + e] += s * d[e];
-          a[e] += sr * -d[e];
-        }
-      }
-      for (int e = 0; e < 3; e++) A[3 * r + e] = a[e];
-    }
+    lanesum.assign(3 * n, 0.0);
+    reverse->acc.resize(3 * R.size());
+    RowsPass P{atom->x, R.data(), R.size(), reverse->l0t.data(), n, few.x.data(), c,
+               reverse->c, reverse->acc.data(), lanesum.data()};
+    rows_pass(P);
+    for (int k = 0; k < 3 * n; k++) sum[k] += lanesum[k];
     reverse->acc_step = update->ntimestep;
     return;
   }

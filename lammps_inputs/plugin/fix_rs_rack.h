@@ -43,6 +43,9 @@ class FixRSRack : public Fix, public RackStress::Reduced {
   // order the sums visit them, with the member's own pair skipped (own = 1)
   std::vector<double> l0sq;
   std::vector<char> own;
+  std::vector<double> l0t;      // l0sq transposed: [member][row]
+  // the fused pass's per-member sums (3 per member)
+  std::vector<double> lanesum;
   bool rows_built, overlap;
   // fused with the reverse coupling (rack <- host with host <- rack: Eq. 12's factor of a pair
   // is the same both ways but c): the fix that gathers its targets (the rack) computes both in

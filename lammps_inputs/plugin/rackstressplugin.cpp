@@ -14,6 +14,7 @@
      fix rs/attract  attract with index-matched regions, Eqs. 14, 27–28
      fix rs/dampen   dampen, Eq. 9, and conditional dampen, Eq. 28
      fix rs/force    a constant force, Eq. 8
+     fix rs/nve      integrate, Eq. 5 (fix nve's arithmetic over the moving rows)
    Phase conditions (Eq. 4's ⟨P⟩ on the gait phase) are the deck's: a phase-conditioned operator
    is a fix defined in the phases where its condition holds and removed at the switch.
 ------------------------------------------------------------------------- */
@@ -23,6 +24,7 @@
 #include "fix_rs_collide.h"
 #include "fix_rs_dampen.h"
 #include "fix_rs_force.h"
+#include "fix_rs_nve.h"
 #include "fix_rs_rack.h"
 
 #ifndef RS_LAMMPS_VERSION
@@ -85,4 +87,6 @@ extern "C" void lammpsplugin_init(void *lmp, void *handle, void *regfunc)
       (lammpsplugin_factory2 *) &make<FixRSDampen>);
   add(lmp, handle, reg, "rs/force", "rackstress: constant force over the moving rows (Eq. 8)",
       (lammpsplugin_factory2 *) &make<FixRSForce>);
+  add(lmp, handle, reg, "rs/nve", "rackstress: velocity Verlet over the moving rows (Eq. 5)",
+      (lammpsplugin_factory2 *) &make<FixRSNVE>);
 }

@@ -474,8 +474,15 @@ int Contacts::build(LAMMPS *lmp, int tbit, int sbit, const double *radius, int a
     }
   first.assign(rows.size() + 1, 0);
   partner.clear();
-  watch = rows;
-  watch.insert(watch.end(), src.begin(), src.end());
+  // the atoms whose moves can bring a candidate pair closer: every one but the owned resting
+  // rows (at or past nfirst: not integrated before LAMMPS reneighbours and this list is built
+  // again, rs_common.h "Resting atoms"), which on a bed are most of the sources
+  watch.clear();
+  const int nfirst = atom->firstgroupname ? atom->nfirst : atom->nlocal, nlocal = atom->nlocal;
+  for (int j : rows)
+    if (j < nfirst || j >= nlocal) watch.push_back(j);
+  for (int j : src)
+    if (j < nfirst || j >= nlocal) watch.push_back(j);
   if (rows.empty() || src.empty()) return 0;
 
   // a cell grid over the sources near the targets, cells one reach wide

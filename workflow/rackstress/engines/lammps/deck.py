@@ -20,7 +20,8 @@ bind                        Python callback, exact per-pair L0 (Eq. 12)
 bind, ``mode='fast'``       ``bond_style harmonic`` K = c·m, r0 = L0 (one bond type per
                             distinct L0): equal to Eq. 12 to first order in the strain
 attract                     Python callback (Eq. 14), only in phases where it is active
-integrate                   ``fix nve``, started with v = v0 + dt/2·a0 after ``run 0`` so its
+integrate                   ``fix nve`` (the plugin's ``rs/nve`` in plugin decks: the same
+                            bits), started with v = v0 + dt/2·a0 after ``run 0`` so its
                             positions are Eq. 5's exactly; the same restart at every phase switch;
                             only on the particles that can move (Active particles, below)
 ==========================  ================================================================
@@ -301,7 +302,10 @@ class Deck:
         held_cmds, nve_group = support_commands(sc)   # supports and v0 (scene-level)
         L += held_cmds
         # a scene with supports has no passive group (passive_groups), so the two never meet
-        L.append(f"fix rs_nve {self.moving if self.passive else nve_group} nve")
+        # the plugin's rs/nve is fix nve's arithmetic (the same bits) without its per-atom
+        # division by the mass, over the moving rows
+        integrate = "rs/nve" if self.plugin else "nve"
+        L.append(f"fix rs_nve {self.moving if self.passive else nve_group} {integrate}")
         L.append("thermo_style custom step")
         L.append(f"thermo {max(1, dump_every)}")
         if dump_file:
