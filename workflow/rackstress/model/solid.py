@@ -140,11 +140,7 @@ def face_weights(o: np.ndarray, i: np.ndarray, j: np.ndarray, spacing: float) ->
     a cubic lattice of ``spacing`` (positions ``o``). A binding present in both directions gets
     the same factor both ways (the rule is symmetric in i and j)."""
     a = float(spacing)
-    lo = o.min(axis=0)
-    g = np.rint((o - lo) / a).astype(np.int64)
-    if np.abs(g * a + lo - o).max() > 1e-6 * a:
-        raise SceneError("a solid's face compensation needs its particles on one cubic "
-                         "lattice (packing = \"cubic\")")
+    g = _sites(o, a, "face compensation")
     span = g.max(axis=0) + 3
     key = lambda x: (x[..., 0] + 1) + span[0] * ((x[..., 1] + 1) + span[1] * (x[..., 2] + 1))
     d = g[j] - g[i]
@@ -196,6 +192,17 @@ _DIAGONALS = [d for d in ((x, y, z) for x in (-1, 0, 1) for y in (-1, 0, 1) for 
               if sum(map(abs, d)) == 2]
 
 
+def _sites(o: np.ndarray, a: float, what: str) -> np.ndarray:
+    """Integer lattice sites of the particles ``o`` (n, 3) on the cubic lattice of spacing
+    ``a`` from their lowest corner; a SceneError naming ``what`` needs it if they are not."""
+    lo = o.min(axis=0)
+    g = np.rint((o - lo) / a).astype(np.int64)
+    if np.abs(g * a + lo - o).max() > 1e-6 * a:
+        raise SceneError(f"a solid's {what}: its particles must sit on one cubic lattice "
+                         "(packing = \"cubic\")")
+    return g
+
+
 def _dir_index(d) -> np.ndarray:
     d = np.asarray(d, dtype=np.int64).reshape(-1, 3)
     return (d[:, 0] + 1) * 9 + (d[:, 1] + 1) * 3 + (d[:, 2] + 1)
@@ -214,11 +221,7 @@ def axis_fractions(o: np.ndarray, spacing: float, part) -> np.ndarray:
     """
     a = float(spacing)
     o = np.asarray(o, dtype=float)
-    lo = o.min(axis=0)
-    g = np.rint((o - lo) / a).astype(np.int64)
-    if np.abs(g * a + lo - o).max() > 1e-6 * a:
-        raise SceneError("a solid's boundary cells need its particles on one cubic lattice "
-                         "(packing = \"cubic\")")
+    g = _sites(o, a, "boundary cells")
     dims = g.max(axis=0) + 3
     occ = np.zeros(tuple(dims), dtype=bool)
     occ[g[:, 0] + 1, g[:, 1] + 1, g[:, 2] + 1] = True
