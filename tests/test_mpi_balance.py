@@ -59,3 +59,20 @@ def test_magpod_deck_cuts_through_the_robot_on_two_ranks(tmp_path):
                       if not ln.startswith(("balance ", "comm_style "))) + "\n"
     counts0, _, _ = _moving_per_rank(deck, "in.even", plain)
     assert sorted(counts0.tolist()) == [0, n_moving], counts0
+
+
+def test_sediment_large_deck_cuts_through_the_robot_on_two_ranks(tmp_path):
+    """sediment-large (scenes.large.ROBOT_WEIGHT): the bed is longer (x) than wide, so a cut by
+    particle count runs across x, ~500 units from the robot (x ∈ [−24, 24] near the bed's rear
+    edge, 25 columns of 3 in): its million resting particles must not outweigh the robot, or one
+    rank holds every moving particle and the other waits (2 ranks slower than 1). The weighted
+    bisection cuts through the robot: each rank holds at least a quarter of the moving ones."""
+    deck = tmp_path / "deck"
+    _cli("deck", "sediment-large", "--out", str(deck), "--set", "phase_steps=10")
+    text = (deck / "in.lammps").read_text()
+    assert "balance 1.0 rcb weight group 1 rs_move 150.0" in text
+    text = text.replace("trajectory.dump", "t.dump")
+    counts, n_all, _ = _moving_per_rank(deck, "in.balanced", text)
+    n_moving = counts.sum()
+    assert n_all == 1_004_689 and 3689 <= n_moving < 10_000
+    assert counts.min() >= 0.25 * n_moving, counts

@@ -4,8 +4,8 @@ work, "millions of particles").
 The robot is :func:`~rackstress.scenes.magpod.magpod`'s, unchanged; the sediment is
 ``sediment_nx × sediment_nz`` = 1100 × 910 = 1,001,000 particles by default (3300 × 2730 units at
 spacing 3), with the robot ``sediment_back`` columns in from its rear edge and centred across
-it. The track is longer (x, the walking direction) than wide, so that a bisection of the domain
-cuts across x and leaves the robot whole on one rank. Sediment
+it. The track is longer (x, the walking direction) than wide, so that a bisection by particle
+count cuts across x and leaves the robot whole on one rank. Sediment
 particles only feel the legs (Eq. 31) and their own damping, so nearly all of the domain is
 passive: the active region (body, legs, racks, and the sediment under the feet) is a few
 hundred units across.
@@ -17,6 +17,13 @@ touched) ``robot_weight`` times a resting sediment particle (a moving particle c
 operators: binds to the racks, attraction, collisions), so that the ranks' work is even; ``"shift"`` — ``balance shift xz`` on the particle counts;
 ``"none"`` — LAMMPS' default even split of the box. It changes nothing in serial.
 
+``robot_weight`` is :data:`ROBOT_WEIGHT` here, not the decks' 20 (MagPod's): a resting particle of
+this bed costs almost nothing per step (LAMMPS passes over it only at its ~9 reneighbourings of
+1200 steps, ~20 ns each: ~0.15 ns a step), a moving one ~24 ns a step (1 rank, measured), a ratio
+of ~160. At 20 a million resting particles outweigh the robot, the cut misses it and one rank
+holds all 4,346 moving particles while the other idles at every step's exchange: 2 ranks were
+slower than 1. From 80 up the cut runs through the robot (2,805 / 1,541).
+
 Run it with a sparse trajectory: a frame of a million particles is ~40 MB of text, e.g.
 ``mpiexec -n 2 rackstress run sediment-large --dump-every 1200 --no-render``.
 """
@@ -25,11 +32,14 @@ from __future__ import annotations
 from rackstress.model.scene import Scene
 from rackstress.scenes.magpod import magpod
 
+#: How many resting sediment particles a moving one weighs in ``balance rcb`` (module doc).
+ROBOT_WEIGHT = 150.0
+
 
 def sediment_large(sediment_nx: int = 1100, sediment_nz: int = 910, sediment_back: int = 25,
                    phase_steps: int = 1200, cycles: int = 1, dt: float = 0.01,
                    sediment_radius: float = 2.0, sediment_spacing: float = 3.0,
-                   balance: str = "rcb", robot_weight: float = 20.0) -> Scene:
+                   balance: str = "rcb", robot_weight: float = ROBOT_WEIGHT) -> Scene:
     """MagPod on a ``sediment_nx × sediment_nz`` sediment (default 1,001,000 particles), one cycle."""
     kw = {k: v for k, v in locals().items()}
     if balance not in ("rcb", "shift", "none"):

@@ -124,8 +124,9 @@ PLUGIN_PASSIVE_SKIN = 4.0
 #: deck with passive groups (:func:`balance_commands`; a scene's ``robot_weight`` overrides it).
 #: Measured (``rackstress bench scaling``, each rank's CPU time outside MPI): a moving particle
 #: costs ~74 ns a step, a resting one ~3.6 ns, a ratio of ~21. With it the bisection cuts MagPod
-#: through the robot (4 leaves it whole on one rank; 20 splits it 2173 / 1888) and a million
-#: resting particles still outweigh it (sediment-large).
+#: through the robot (4 leaves it whole on one rank; 20 splits it 2173 / 1888). sediment-large
+#: weighs its robot more (scenes.large.ROBOT_WEIGHT): at 20 its million resting particles
+#: outweighed the robot, which stayed whole on one rank.
 MOVE_WEIGHT = 20.0
 #: Distinct per-pair coefficients of one bind the plugin takes (a bond type and fix each); a
 #: material solid's face compensation gives c·(1 + ¼k), k = 0 … 4: a handful
