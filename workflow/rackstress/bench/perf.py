@@ -71,7 +71,12 @@ CONFIGS = (("reference", "exact", 1), ("lammps", "exact", 1, "numpy"),
            # the larger sediment (issue 23: >= 4 M particles; a bed four times as long)
            ("lammps", "exact", 1, "plugin", HUGE, 200),
            ("lammps", "exact", 2, "plugin", HUGE, 200),
-           ("lammps", "exact", 2, "plugin", HUGE_WHOLE, 200))
+           ("lammps", "exact", 2, "plugin", HUGE_WHOLE, 200),
+           # issue 23's block (bench.scaling.block_scene: 250,000 particles bound within(1.5)):
+           # the plugin against the numba callback on one rank, and on two ranks
+           ("lammps", "exact", 1, "numba", "block", 200),
+           ("lammps", "exact", 1, "plugin", "block", 200),
+           ("lammps", "exact", 2, "plugin", "block", 200))
 
 
 def normalize(config, scene_name: str, steps: int) -> dict:
@@ -125,10 +130,15 @@ def parse_breakdown(log: str) -> dict:
 
 # ---------------------------------------------------------------------------- the worker
 def build_scene(name: str):
-    """A built-in scene, ``NAME`` or ``NAME:key=value,key=value`` (``--set`` overrides)."""
+    """A built-in scene, ``NAME`` or ``NAME:key=value,key=value`` (``--set`` overrides), or
+    ``block``: bench.scaling's block of issue 23."""
     from rackstress import scenes
     from rackstress.scenes.builtins import parse_overrides
 
+    if name == "block":
+        from rackstress.bench.scaling import block_scene
+
+        return block_scene()
     base, _, sets = name.partition(":")
     return scenes.build(base, **parse_overrides(sets.split(",") if sets else ()))
 
@@ -297,15 +307,17 @@ INTERLEAVE = 2
 
 def _pairs(cs: list[dict]) -> dict:
     """{index of a plugin row: indices of its interleaved group} for the plugin's 1- and 2-rank
-    rows of one scene over the same steps (exact mode, active particles)."""
+    rows of one scene over the same steps (exact mode, active particles), with the numba
+    callback's one-rank row of that scene and steps if there is one."""
     groups: dict = {}
     for i, c in enumerate(cs):
-        if c["engine"] == "lammps" and c["kernels"] == "plugin" and c["mode"] == "exact" \
-                and c["particles"] == "active":
+        if c["engine"] == "lammps" and c["mode"] == "exact" and c["particles"] == "active" \
+                and (c["kernels"] == "plugin" or (c["kernels"] == "numba" and c["ranks"] == 1)):
             # a scene with another balance weight joins its scene's group
             scene = re.sub(r"[:,]robot_weight=[^,]*", "", c["scene"])
             groups.setdefault((scene, c["steps"]), []).append(i)
-    return {i: g for g in groups.values() if len({cs[k]["ranks"] for k in g}) > 1 for i in g}
+    return {i: g for g in groups.values() if len({(cs[k]["ranks"], cs[k]["kernels"]) for k in g}) > 1
+            and any(cs[k]["kernels"] == "plugin" for k in g) for i in g}
 
 
 def run_bench(out: Path | None = None, steps: int = 1200, quick: bool = False,
@@ -520,7 +532,7 @@ def _verdict_plugin(data: dict) -> list[str]:
                        "(wall)" + (f", {numba['cpu_ms_per_it'] / plug['cpu_ms_per_it']:.2f}× (CPU)"
                                    if cpu and numba.get("cpu_ms_per_it") else "")
                        if numba is not None else "") + " (> 1: the plugin is faster).")
-    for scene in ("magpod-small", "sediment-large"):
+    for scene in ("magpod-small", "sediment-large", "block"):
         plug, numba = _row(data, scene, "plugin"), _row(data, scene)
         if plug is not None and numba is not None and scene != data["scene"]:
             same = "" if plug["steps"] == numba["steps"] else (
@@ -530,7 +542,7 @@ def _verdict_plugin(data: dict) -> list[str]:
                        + (f", {numba['cpu_ms_per_it'] / plug['cpu_ms_per_it']:.2f}× (CPU)"
                           if plug.get("cpu_ms_per_it") and numba.get("cpu_ms_per_it") else "")
                        + " (> 1: the plugin is faster).")
-    for scene in (data["scene"], "sediment-large", HUGE, HUGE_WHOLE):
+    for scene in (data["scene"], "sediment-large", HUGE, HUGE_WHOLE, "block"):
         two = _row(data, scene, "plugin", 2)
         # the one-rank row over the same iterations, if there is one
         base = HUGE if scene == HUGE_WHOLE else scene
