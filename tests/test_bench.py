@@ -66,6 +66,27 @@ def test_bench_accuracy_smoke(tmp_path):
     assert c["t_star"] >= 0.01
 
 
+@pytest.mark.lammps
+@pytest.mark.mpi
+def test_bench_perf_interleaves_the_plugin_on_one_and_two_ranks(tmp_path):
+    """The plugin's 1- and 2-rank rows of a scene run as an interleaved pair (1, 2, 1, 2) with
+    the PMPI shim in every rank: each row keeps its best wall time, every run's, and each rank's
+    CPU time outside MPI calls; the verdict compares the two."""
+    cfg = (("lammps", "exact", 1, "plugin", "magpod-small", 8),
+           ("lammps", "exact", 2, "plugin", "magpod-small", 8))
+    data = perf.run_bench(tmp_path, steps=8, profile_steps=0, scene_name="magpod-small",
+                          configs=cfg, echo=lambda s: None, kernel_times=False, interleave=2)
+    one, two = data["rows"]
+    assert (one["status"], two["status"]) == ("ok", "ok"), (one.get("error"), two.get("error"))
+    assert one["plugin"] and two["plugin"] and two["ranks"] == 2
+    assert len(one["repeats"]) == len(two["repeats"]) == 2
+    assert one["wall_s"] == min(g["wall_s"] for g in one["repeats"])
+    assert one["work_outside_mpi"] and two["work_outside_mpi"]
+    assert len(one["work_ms_per_it"]) == 1 and len(two["work_ms_per_it"]) == 2
+    assert all(w > 0 for w in one["work_ms_per_it"] + two["work_ms_per_it"])
+    assert "the plugin on 2 ranks against 1" in (tmp_path / "perf.md").read_text()
+
+
 def test_error_constants_of_first_and_second_order_errors_by_hand():
     A, B = 4.0, 100.0
     rows = [{"engine": "reference", "mode": "exact", "integrator": integ, "t": t, "t_pred": 0.05,

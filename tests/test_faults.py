@@ -136,7 +136,7 @@ c = 1.0
 @pytest.mark.lammps
 def test_second_run_render_and_resume_refused_while_a_run_holds_the_directory(tmp_path):
     out = tmp_path / "X"
-    a = subprocess.Popen([RS, "run", "plane-rack", "--steps", "200000", "--restart-every", "0",
+    a = subprocess.Popen([RS, "run", "plane-rack", "--steps", "5000000", "--restart-every", "0",
                           "--out", str(out), *QUIET], stdout=subprocess.DEVNULL,
                          stderr=subprocess.PIPE, text=True)
     try:

@@ -62,17 +62,38 @@ def test_magpod_deck_cuts_through_the_robot_on_two_ranks(tmp_path):
 
 
 def test_sediment_large_deck_cuts_through_the_robot_on_two_ranks(tmp_path):
-    """sediment-large (scenes.large.ROBOT_WEIGHT): the bed is longer (x) than wide, so a cut by
-    particle count runs across x, ~500 units from the robot (x ∈ [−24, 24] near the bed's rear
-    edge, 25 columns of 3 in): its million resting particles must not outweigh the robot, or one
-    rank holds every moving particle and the other waits (2 ranks slower than 1). The weighted
-    bisection cuts through the robot: each rank holds at least a quarter of the moving ones."""
+    """sediment-large (scenes/large.py): the bed is longer (x) than wide, so a cut by particle
+    count runs across x, ~500 units from the robot (x ∈ [−24, 24] near the bed's rear edge, 25
+    columns of 3 in): its million resting particles must not outweigh the robot, or one rank
+    holds every moving particle and the other waits (2 ranks slower than 1). The robot weighs as
+    much as the bed: 1100 × 910 resting particles over the robot's 2907 + 2·382 + 3·6 = 3689 is
+    271.3, rounded 271. The weighted bisection cuts through the robot: each rank holds at least a
+    quarter of the moving ones."""
     deck = tmp_path / "deck"
     _cli("deck", "sediment-large", "--out", str(deck), "--set", "phase_steps=10")
     text = (deck / "in.lammps").read_text()
-    assert "balance 1.0 rcb weight group 1 rs_move 150.0" in text
+    assert "balance 1.0 rcb weight group 1 rs_move 271.0" in text
     text = text.replace("trajectory.dump", "t.dump")
     counts, n_all, _ = _moving_per_rank(deck, "in.balanced", text)
     n_moving = counts.sum()
     assert n_all == 1_004_689 and 3689 <= n_moving < 10_000
     assert counts.min() >= 0.25 * n_moving, counts
+
+
+def test_a_longer_bed_weighs_its_robot_as_much_as_the_bed():
+    """The 4 M-particle bed (sediment_nx=4400): 4400 × 910 = 4,004,000 resting particles over
+    the robot's 3689 is 1085.4, so a moving particle weighs 1085 resting ones (at sediment-large's
+    former fixed 150 the bisection cut across x, 5,600 units from the robot, and one rank held
+    all 4,055 moving particles); a short bed keeps the floor of 150; a weight given is kept."""
+    from rackstress import scenes
+    from rackstress.engines.lammps.deck import balance_commands, compile_deck
+
+    def weight(**kw):
+        deck = compile_deck(scenes.build("sediment-large", **kw), "exact", plugin=True)
+        return balance_commands(deck)[-1]
+
+    assert weight(sediment_nx=4400) == "balance 1.0 rcb weight group 1 rs_move 1085.0"
+    assert weight(sediment_nx=100, sediment_nz=100) == \
+        "balance 1.0 rcb weight group 1 rs_move 150.0"        # 10,000 / 3689 = 2.7 < 150
+    assert weight(sediment_nx=100, sediment_nz=100, robot_weight=40) == \
+        "balance 1.0 rcb weight group 1 rs_move 40.0"

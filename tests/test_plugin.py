@@ -7,6 +7,7 @@ NumPy); the plugin runs in real LAMMPS.
 """
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -265,6 +266,45 @@ def test_standalone_deck_runs_the_reference_trajectory(tmp_path, scene, sets):
     shutil.copytree(tmp_path / "deck1", tmp_path / "deck2")
     _same_to_dump_precision(_lmp(tmp_path / "deck1", 1), ref)
     _same_to_dump_precision(_lmp(tmp_path / "deck2", 2), ref)
+
+
+@pytest.mark.mpi
+def test_rs_nve_checks_displacements_as_lammps_does(tmp_path):
+    """A plugin deck hands LAMMPS' displacement check to fix rs/nve (``neigh_modify ... check
+    no once yes``; the check rides the plugin's reduction of the gathered positions). Against
+    the same deck with LAMMPS' own check (``check yes``), serial and on 2 ranks: the same
+    number of neighbour-list builds and the same positions to the bit (magpod-small, 1200
+    steps: its legs move half a skin many times)."""
+    _cli("deck", "magpod-small", "--out", str(tmp_path / "d"), "--set", "phase_steps=300",
+         "--set", "cycles=1")
+    text = (tmp_path / "d" / "in.lammps").read_text()
+    assert "neigh_modify delay 0 every 1 check no once yes" in text
+    text = text.replace(" pre no post no", " pre no post yes")       # LAMMPS' build counts
+    text = "\n".join("#" + ln if ln.startswith(("dump", "undump")) else ln
+                      for ln in text.splitlines())
+    text += ("\nwrite_dump all custom final.dump id x y z modify sort id "
+             "format float %.17g\n")
+    variants = {"rs_nve": text,
+                "lammps": text.replace("check no once yes", "check yes")}
+    got = {}
+    for name, body in variants.items():
+        for ranks in (1, 2):
+            d = tmp_path / f"{name}{ranks}"
+            d.mkdir()
+            (d / "in.lammps").write_text(body)
+            (d / "particles.data").symlink_to(tmp_path / "d" / "particles.data")
+            cmd = [str(BIN / "lmp"), "-in", "in.lammps", "-log", "log.lammps", "-screen", "none"]
+            if ranks > 1:
+                cmd = [str(BIN / "mpiexec"), "-n", str(ranks), *cmd]
+            proc = subprocess.run(cmd, cwd=d, capture_output=True, text=True, timeout=600)
+            assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+            log = (d / "log.lammps").read_text()
+            builds = sum(int(n) for n in
+                         re.findall(r"Neighbor list builds = (\d+)", log))
+            got[name, ranks] = (builds, (d / "final.dump").read_bytes())
+    for ranks in (1, 2):
+        assert got["rs_nve", ranks][0] == got["lammps", ranks][0] > 10, got
+        assert got["rs_nve", ranks][1] == got["lammps", ranks][1]
 
 
 # ------------------------------------------------------------------ fallback

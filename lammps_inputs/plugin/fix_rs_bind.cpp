@@ -118,36 +118,45 @@ void FixRSBind::collect()
 void FixRSBind::post_force(int /*vflag*/)
 {
   if (!built || neighbor->ago == 0) collect();
-  double **x = atom->x, **f = atom->f;
+  // LAMMPS' x and f are contiguous (3 doubles per row): read them without the row pointers
+  const double *__restrict x = atom->x[0];
+  double *__restrict f = atom->f[0];
   const double *mass = atom->mass;
   const double *rmass = atom->rmass;
   const int *type = atom->type;
+  // unit masses (the paper's, and every generated deck's): f = a, the same bits as 1·a
+  bool unit = !rmass;
+  for (int t = 1; unit && t <= atom->ntypes; t++) unit = mass[t] == 1.0;
   const int n = (int) p1.size();
+  const int *__restrict P1 = p1.data(), *__restrict P2 = p2.data();
+  const int *__restrict E = ends.data();
+  const double *__restrict Q = q.data();
   for (int k = 0; k < n; k++) {
-    const int i1 = p1[k], i2 = p2[k];
-    const double dx = x[i2][0] - x[i1][0], dy = x[i2][1] - x[i1][1], dz = x[i2][2] - x[i1][2];
+    const int i1 = P1[k], i2 = P2[k];
+    const double *a = x + 3 * i1, *b = x + 3 * i2;
+    const double dx = b[0] - a[0], dy = b[1] - a[1], dz = b[2] - a[2];
     const double d2 = dx * dx + dy * dy + dz * dz;
-    const double s = c * (1.0 - q[k] / d2);
+    const double s = c * (1.0 - Q[k] / d2);
     const double ax = s * dx, ay = s * dy, az = s * dz;
     if (!(std::isfinite(ax) && std::isfinite(ay) && std::isfinite(az))) {
       // a pair that coincides (d = 0): neither end gains it (rs_common.h, nonfinite)
       tagint *tag = atom->tag;
-      tagint t = (ends[k] & 1) ? tag[i1] : tag[i2];
-      if (ends[k] == 3) t = std::min(tag[i1], tag[i2]);
+      tagint t = (E[k] & 1) ? tag[i1] : tag[i2];
+      if (E[k] == 3) t = std::min(tag[i1], tag[i2]);
       RackStress::nonfinite(lmp, "rs/bind", t);
       continue;
     }
-    if (ends[k] & 1) {
-      const double m = rmass ? rmass[i1] : mass[type[i1]];
-      f[i1][0] += m * ax;
-      f[i1][1] += m * ay;
-      f[i1][2] += m * az;
+    if (E[k] & 1) {
+      const double m = unit ? 1.0 : rmass ? rmass[i1] : mass[type[i1]];
+      f[3 * i1] += m * ax;
+      f[3 * i1 + 1] += m * ay;
+      f[3 * i1 + 2] += m * az;
     }
-    if (ends[k] & 2) {
-      const double m = rmass ? rmass[i2] : mass[type[i2]];
-      f[i2][0] -= m * ax;
-      f[i2][1] -= m * ay;
-      f[i2][2] -= m * az;
+    if (E[k] & 2) {
+      const double m = unit ? 1.0 : rmass ? rmass[i2] : mass[type[i2]];
+      f[3 * i2] -= m * ax;
+      f[3 * i2 + 1] -= m * ay;
+      f[3 * i2 + 2] -= m * az;
     }
   }
 }

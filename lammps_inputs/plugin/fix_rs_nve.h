@@ -24,7 +24,10 @@ class FixRSNVE : public Fix {
   int setmask() override;
   void init() override;
   void setup(int) override;
+  void setup_pre_neighbor() override;
+  void pre_neighbor() override;
   void initial_integrate(int) override;
+  void post_integrate() override;
   void final_integrate() override;
   void reset_dt() override;
 
@@ -32,6 +35,11 @@ class FixRSNVE : public Fix {
   double dtv, dtf;
   std::vector<double> dtfm;    // dtf / m of each atom type (per-type masses)
   bool first_rows = false;     // the group lies in atom_modify's first group (rs_common.h)
+  // the displacement check (neigh_modify ... check no once yes hands it to this fix): the
+  // positions of the rows it integrates when LAMMPS last reneighboured
+  bool check = false;
+  std::vector<double> xhold;
+  void hold(int n);
 };
 
 }    // namespace LAMMPS_NS

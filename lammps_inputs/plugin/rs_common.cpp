@@ -129,6 +129,7 @@ struct RestGrid {
 struct Registry {
   std::vector<Reduced *> members;
   bigint pos_step = -1, sum_step = -1;
+  bool moved = false;    // the displacement flag reduce_positions carried at pos_step
   std::vector<double> send, recv;
   RestGrid rest;
 };
@@ -159,30 +160,37 @@ void RackStress::invalidate(LAMMPS *lmp)
   reg.pos_step = reg.sum_step = -1;
 }
 
-void RackStress::reduce_positions(LAMMPS *lmp)
+bool RackStress::reduce_positions(LAMMPS *lmp, int moved)
 {
   Registry &reg = registry[lmp];
   bigint now = lmp->update->ntimestep;
-  if (reg.pos_step == now) return;
+  if (reg.pos_step == now) return reg.moved;
   size_t n = 0;
   for (Reduced *r : reg.members)
     if (Gathered *g = r->gathered()) n += 3 * g->size();
-  reg.send.assign(n, 0.0);
-  reg.recv.assign(n, 0.0);
+  // the displacement flag rides as one more double (0 or 1 per rank: summed, exact)
+  reg.send.assign(n + 1, 0.0);
+  reg.recv.assign(n + 1, 0.0);
   size_t at = 0;
   for (Reduced *r : reg.members)
     if (Gathered *g = r->gathered()) {
       g->fill(lmp, reg.send.data() + at);
       at += 3 * g->size();
     }
-  if (n) MPI_Allreduce(reg.send.data(), reg.recv.data(), (int) n, MPI_DOUBLE, MPI_SUM, lmp->world);
+  reg.send[n] = moved ? 1.0 : 0.0;
+  if (lmp->comm->nprocs > 1)
+    MPI_Allreduce(reg.send.data(), reg.recv.data(), (int) n + 1, MPI_DOUBLE, MPI_SUM, lmp->world);
+  else
+    reg.recv = reg.send;
   at = 0;
   for (Reduced *r : reg.members)
     if (Gathered *g = r->gathered()) {
       std::copy(reg.recv.begin() + at, reg.recv.begin() + at + 3 * g->size(), g->x.begin());
       at += 3 * g->size();
     }
+  reg.moved = reg.recv[n] > 0.0;
   reg.pos_step = now;
+  return reg.moved;
 }
 
 void RackStress::reduce_sums(LAMMPS *lmp)

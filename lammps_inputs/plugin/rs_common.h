@@ -96,8 +96,12 @@ namespace RackStress {
   void leave(LAMMPS *, Reduced *);
   //! a fix's setup: the next request reduces again (same step, new state or new styles)
   void invalidate(LAMMPS *);
-  //! this step's gathered positions of every enrolled style (one collective, once a step)
-  void reduce_positions(LAMMPS *);
+  /* this step's gathered positions of every enrolled style (one collective, once a step), with
+     `moved` — whether an atom this rank integrates has moved half a skin since LAMMPS last
+     reneighboured (fix rs/nve's displacement check, done in post_integrate before LAMMPS
+     decides) — in the same collective: returns whether any rank's has. The first call of a step
+     reduces; later calls of that step return the flag it carried. */
+  bool reduce_positions(LAMMPS *, int moved = 0);
   //! this step's partial sums of every enrolled style (one collective, once a step)
   void reduce_sums(LAMMPS *);
 

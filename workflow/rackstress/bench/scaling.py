@@ -17,8 +17,8 @@ holds on a loaded machine), LAMMPS' final imbalance factor of the weighted ``bal
 (deck.balance_commands), and the plugin's reductions (two fused ``MPI_Allreduce`` a step, and
 the doubles they carry). The model then takes cubic subdomains of N/P particles with a ghost shell
 as thick as the deck's ghost cutoff, and per-rank time = work per owned particle × owned +
-work per ghost × ghosts + a latency per collective stage (2 fused reductions + LAMMPS' own
-displacement check, each log2 P stages); the per-particle and per-ghost costs come from the
+work per ghost × ghosts + a latency per collective stage (the plugin's 2 fused reductions, the
+first carrying the displacement check fix rs/nve does in LAMMPS' stead, each log2 P stages); the per-particle and per-ghost costs come from the
 measurements, the latency is an assumption the table names. It states where the model stops
 scaling: once ghosts outnumber owned particles.
 """
@@ -529,7 +529,9 @@ def run_bench(out: Path | None = None, quick: bool = False, echo=print, large: b
                 "n_particles": n, "ghost_cutoff": deck.ghost_cutoff, "runs": rows,
                 "speed_up_2": one["s_per_step"] / two["s_per_step"],
                 "reduced_doubles_per_step": _reduced_doubles(sc),
-                "collectives_per_step": 3 if _reduced_doubles(sc) else 1,
+                # the positions' reduction (with rs/nve's displacement check) and the sums'
+                # (rack sums, contact flags); without gathered atoms the check's alone
+                "collectives_per_step": 2 if _reduced_doubles(sc) else 1,
                 "density": density, "bond_reach": bond_reach}
             if deck.passive:
                 data["scenes"][name].update(_robot(sc, deck, one))
@@ -648,28 +650,20 @@ def runner_markdown(data: dict) -> list[str]:
           "uneven is the legs' contact with the sediment, which a particle count does not see. "
           "It stays 20.",
           "",
-          "**What limits it, measured** (2 ranks, all of the above; CPU seconds per 1,200 "
-          "MagPod iterations, from the table above and the shim runs): the busiest rank works "
-          "0.17–0.18 s outside MPI, the other 0.12–0.13 s, against 0.23 s on one rank at low "
-          "load (more under load: caches and the cores are shared). Two ranks do ~0.30 s of "
-          "work between them, +30 % (ghosts, the racks' gathers, packing the forward "
-          "exchange). The busiest rank also spends ~0.045 s inside MPI (load ~2): per step one "
-          "forward exchange of the ghosts' positions and three reductions (LAMMPS' "
-          "displacement check and the plugin's two fused ones), ~37 µs, against a step of "
-          "~0.18 ms on one rank. So two ranks can do ~1.1x on MagPod, and did at load ~2 "
-          "(0.216 s against 0.242 s, and 0.203 against 0.231 in one `run`, interleaved). "
-          "sediment-large's bound is larger (~1.4–1.7x: 3.0 ms of work a step on one rank, "
-          "1.7–2.2 ms on the busier of two), since its work is the million resting particles' "
-          "share of each reneighbouring, which divides. Folding LAMMPS' displacement check "
-          "into the plugin's first reduction (predicting each atom's next position) and the "
-          "rack's reverse sums into the positions' reduction (each rank integrating the six "
-          "rack particles itself) would leave one meeting a step; neither is done. Under load "
-          "a 2-rank run loses far more than that: MPICH's ranks poll while they wait, and with "
-          "the load above the 2 cores each meeting waits for the scheduler (the wall times in "
-          "the table above at load 10–15; 2-rank wall times of 0.9–5 s for 1,200 MagPod "
-          "iterations were seen at load 3–7, against 0.25–0.5 s on one rank). MPICH's yield "
-          "settings (`MPIR_CVAR_ENABLE_HEAVY_YIELD`,"
-          " `MPIR_CVAR_POLLS_BEFORE_YIELD=100`) made that worse (2.4–3.5 s against 1.0–1.4 s).",
+          "**What limits it** (the rows above: `CPU outside MPI` is each rank's work, whatever "
+          "the load): two ranks do more work between them than one (ghosts, the racks' gathers, "
+          "packing the forward exchange), and each step they meet three times: the forward "
+          "exchange of the ghosts' positions, the plugin's reduction of the gathered positions "
+          "(which carries the displacement check fix rs/nve does in LAMMPS' stead: "
+          "`neigh_modify ... check no once yes`, one meeting where LAMMPS' check and that "
+          "reduction were two), and the reduction of the rack sums and contact flags. The bound "
+          "on the speed-up is the one-rank work over the busiest rank's; each meeting adds the "
+          "ranks' imbalance up to it and the collective's latency. Under load a 2-rank run "
+          "loses far more than that: MPICH's ranks poll while they wait, and with the load "
+          "above the 2 cores each meeting waits for the scheduler. Folding the rack's reverse "
+          "sums into the positions' reduction (each rank integrating the six rack particles "
+          "itself) would leave two meetings a step; not done (the contact flags of Eq. 28's "
+          "damping need the step's ghost positions, after the exchange).",
           ""]
     return L
 
@@ -689,9 +683,10 @@ def markdown(data: dict) -> str:
                                           [x for s in data["scenes"].values()
                                            for x in s["runs"]])]), ""]
     L += ["The 2-rank wall times above were measured with the machine's load far above its 2 "
-          "cores: each rank waits for the scheduler at every exchange and collective (four a "
-          "step: the ghost exchange, LAMMPS' displacement check and the plugin's two fused "
-          "reductions), so a 2-rank wall time there bounds nothing about an idle node. What "
+          "cores: each rank waits for the scheduler at every exchange and collective (three a "
+          "step: the ghost exchange and the plugin's two fused reductions, the first carrying "
+          "the displacement check), so a 2-rank wall time there bounds nothing about an idle "
+          "node. What "
           "does not depend on the load is counted: particles, moving particles and ghosts per "
           "rank, the doubles reduced, the imbalance factor. The model below takes those, the "
           "one-rank costs (loop CPU time) and an interconnect it names: "
@@ -711,7 +706,7 @@ def markdown(data: dict) -> str:
               "difference over 1,000, so the setup cancels). Thread CPU time does not grow "
               "while a rank waits for the scheduler, so this is the work each rank does, "
               "whatever the load. The bound is the one-rank time over the busiest rank's: what "
-              "2 ranks give on a quiet node when the four meetings a step cost nothing.", ""]
+              "2 ranks give on a quiet node when the three meetings a step cost nothing.", ""]
         rows = []
         for n, split in cpu:
             split = _split_rows(split)
@@ -751,31 +746,32 @@ def markdown(data: dict) -> str:
               "Before (LAMMPS' even split, x = 373) every moving particle was on one rank "
               "(4,061 / 0) and 2 ranks could only be slower than one "
               "(`tests/test_mpi_balance.py` counts both).",
-              "- **sediment-large** and the 4 M bed: the resting sediment outweighs the robot "
-              "(1 M × 1 against 4,000 × 20), and the track is longer than wide, so the cut runs "
-              "across x and the robot stays whole on one rank with correspondingly less "
-              "sediment. Their 2-rank gain is the sediment's share of the work (resting "
-              "particles: each reneighbouring passes over all of them; the ghost exchange).",
+              "- **sediment-large** and the 4 M bed: the robot weighs as much as the bed "
+              "(`scenes/large.py`: a moving particle weighs resting / moving particles, 271 and "
+              "1085). The weighted median along the track then lies inside the robot near the "
+              "bed's rear edge, and LAMMPS' bisection (which keeps the squarest halves) cuts "
+              "across the track at z = 0 instead: each rank holds half the robot and half the "
+              "bed. At a weight of 20 (sediment-large) or 150 (the 4 M bed) the cut ran across "
+              "x and the robot stayed whole on one rank (4,346 / 0 and 4,055 / 0 moving).",
               "- What limits 2 ranks on magpod: a step has half the one-rank step's work per "
-              "rank (0.1–0.2 ms) and four meetings of the ranks; the ghost shell (cutoff 13: 2 r_max + 2 skins + 1, for "
-              "the activation reach) is as large as a rank's moving particles, but a ghost "
-              "costs only its 24 bytes a step. Any scheduler delay at one of the four meetings "
-              "costs the whole step, which is what the loaded rows above show.",
+              "rank (0.1 ms) and three meetings of the ranks; the ghost shell (cutoff 13: 2 r_max "
+              "+ 2 skins + 1, for the activation reach) is as large as a rank's moving particles, "
+              "but a ghost costs only its 24 bytes a step. Any scheduler delay at one of the "
+              "meetings costs the whole step, which is what loaded rows show.",
               "- What a step communicates: each ghost's position (24 bytes; forward "
-              "communication), one int in LAMMPS' displacement check, and the plugin's two fused "
-              "reductions (positions of the racks and attraction regions, then the rack sums "
-              "and contact flags: the `reduced doubles/step` column). `neigh_modify every 1 "
-              "delay 0 check yes` stays: the plugin's contact lists are exact only if they are "
-              "rebuilt before any atom moves half a skin, and only a check every step knows "
-              "that. Folding that check into the plugin's second reduction (predicting each "
-              "atom's next position) would save one of the four meetings; not done.", ""]
+              "communication) and the plugin's two fused reductions: the positions of the racks "
+              "and attraction regions with one more double, the displacement check's flag (fix "
+              "rs/nve: has an atom it integrates moved half a skin since the last "
+              "reneighbouring? LAMMPS' own test, done in post_integrate before LAMMPS decides, "
+              "and the reneighbouring forced through next_reneighbor), then the rack sums and "
+              "contact flags (the `reduced doubles/step` column).", ""]
         own = [(n, s["costs"]) for n, s in bal if s.get("costs") and s.get("cpu_split")]
         if own:
             L += ["Costs per particle and step, fitted to each scene's CPU split (each rank: "
                   "t = a·moving + b·resting; the model below uses them): " + "; ".join(
                       f"{n}: a = {1e9 * c[0]:.0f} ns per moving particle, b = {1e9 * c[1]:.1f} "
                       f"ns per resting one (a moving particle weighs {c[0] / c[1]:.0f})"
-                      for n, c in own) + f". The decks weigh a moving particle "
+                      for n, c in own) + f". MagPod's deck weighs a moving particle "
                   f"{MOVE_WEIGHT_DOC}. A resting particle is not free: fix viscous and "
                   "addforce, force clearing and the displacement check pass over every owned "
                   "atom in a standalone deck (`rackstress run` adds `neigh_modify include "
@@ -786,7 +782,7 @@ def markdown(data: dict) -> str:
               "", f"- best 2-rank / 1-rank wall-time ratio measured here: {s['speed_up_2']:.2f}x",
               f"- per step the plugin reduces {s['reduced_doubles_per_step']} doubles; "
               f"{s['collectives_per_step']} collective(s) a step (the plugin's two fused "
-              "reductions, when it has any, and LAMMPS' displacement check)",
+              "reductions, when it has any, the first carrying the displacement check)",
               f"- one rank: {1e9 * s['work_s_per_particle']:.1f} ns per particle per step "
               f"(wall, best run); longest bond {s['bond_reach']:.2f}", ""]
         if s.get("model_moving"):
@@ -807,7 +803,7 @@ def markdown(data: dict) -> str:
                       "resting particles' share of the work still divides, while the robot's "
                       f"pieces (~{top['moving_per_piece']:.0f} moving particles each) cost "
                       "mostly their ghosts; the efficiency falls as those ghosts and the "
-                      "collectives' latency (log2 P stages, three a step) take over. The model "
+                      "collectives' latency (log2 P stages, two a step) take over. The model "
                       "charges a ghost only its forward communication, not its share of the "
                       "contact "
                       "search at each reneighbouring: past a few ranks it is an upper bound.", ""]
@@ -817,7 +813,7 @@ def markdown(data: dict) -> str:
                   f"particles before each piece's ghost shell (cutoff {s['ghost_cutoff']:.0f}) "
                   f"costs more than it saves; the speed-up levels at ~{top['speed_up']:.1f}x "
                   f"(from {top['ranks']} ranks), after which ranks hold only resting sediment "
-                  "and the collectives' latency (log2 P stages, three a step) grows. The model "
+                  "and the collectives' latency (log2 P stages, two a step) grows. The model "
                   "charges a ghost only its forward communication, not its share of the contact "
                   "search at each reneighbouring: past a few ranks it is an upper bound.", ""]
             continue

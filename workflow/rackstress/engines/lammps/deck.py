@@ -125,8 +125,8 @@ PLUGIN_PASSIVE_SKIN = 4.0
 #: Measured (``rackstress bench scaling``, each rank's CPU time outside MPI): a moving particle
 #: costs ~74 ns a step, a resting one ~3.6 ns, a ratio of ~21. With it the bisection cuts MagPod
 #: through the robot (4 leaves it whole on one rank; 20 splits it 2173 / 1888). sediment-large
-#: weighs its robot more (scenes.large.ROBOT_WEIGHT): at 20 its million resting particles
-#: outweighed the robot, which stayed whole on one rank.
+#: weighs its robot as much as its whole bed (scenes/large.py, at least ROBOT_WEIGHT): at 20 its
+#: million resting particles outweighed the robot, which stayed whole on one rank.
 MOVE_WEIGHT = 20.0
 #: Distinct per-pair coefficients of one bind the plugin takes (a bond type and fix each); a
 #: material solid's face compensation gives c·(1 + ¼k), k = 0 … 4: a handful
@@ -266,7 +266,11 @@ class Deck:
             # of near-empty bins that every rebuild sweeps (measured: 3x faster rebuilds)
             cut = max(R for _, R in self.lepton.values()) + self.lammps_skin
             binsize = f" binsize {_f(cut)}"
-        L.append(f"neigh_modify delay 0 every 1 check yes{binsize}")
+        # plugin decks: fix rs/nve checks the displacements itself, in the plugin's reduction of
+        # the step's gathered positions (one collective a step instead of two: once yes turns
+        # LAMMPS' own check off, rs/nve forces the reneighbouring when an atom moved half a skin)
+        check = "check no once yes" if self.plugin else "check yes"
+        L.append(f"neigh_modify delay 0 every 1 {check}{binsize}")
         L.append(f"timestep {_f(sc.dt)}")
         for name in sc.groups:
             L.append(f"group {name} type {types[name]}")
