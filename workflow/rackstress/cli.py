@@ -191,7 +191,7 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
         with phase(f"building the scene {scene}", shown):
             sc = _load_scene(scene, steps, dt, sets, integrator)
         if rank() == 0:
-            from rackstress.stress.kernels import warm_in_background
+            from rackstress.stress.warming import warm_in_background
 
             warm_in_background()        # a first run compiles the measures' loop meanwhile
         if out is None:
@@ -209,8 +209,8 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
         if rank() == 0 and engine == "lammps" and planned["deck"].plugin:
             from rackstress.render.prepare import prepare_in_background
 
-            # post-processing's imports while LAMMPS runs the plugin (no GIL held), from a
-            # quarter of the steps on; not beside a simulation that runs Python each step
+            # post-processing's imports and measures while LAMMPS runs the plugin (no GIL
+            # held), from its first step; not beside a simulation that runs Python each step
             # (the reference engine, the callback path)
             every = planned["dump_every"]
             frames = sc.total_steps // every + 1 + (1 if sc.total_steps % every else 0)
@@ -223,7 +223,7 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
                                       dump_every=dump_every, progress=shown,
                                       overwrite=overwrite, restart_every=restart_every or None,
                                       allow_unstable=allow_unstable, planned=planned,
-                                      keep_checkpoints=keep_checkpoints, at_quarter=head_start)
+                                      keep_checkpoints=keep_checkpoints, at_start=head_start)
             _finish(summary, out, do_render, progress, dump_text)
         if summary.get("settled") is False:
             from rackstress.errors import EXIT_UNSETTLED
