@@ -5,30 +5,58 @@ simulation without paying for it there.
 """
 from __future__ import annotations
 
-#: What post-processing and the default render import, kernels and fonts they load: done by
-#: :func:`prepare_in_background` while the simulation runs.
-_PREPARE = ("rackstress.stress.post", "rackstress.stress.export", "vtkmodules.vtkIOXML",
+#: What the measures need first (:func:`rackstress.stress.post.follow`, and the run's summary
+#: after its last step: the rigid fit), then what the VTK writer, the pictures, the plots and
+#: the 3D view import: done by :func:`prepare_in_background` while the simulation runs.
+_FIRST = ("scipy.spatial.transform", "rackstress.stress.post")
+_PREPARE = ("rackstress.stress.export", "vtkmodules.vtkIOXML",
             "vtkmodules.vtkRenderingOpenGL2", "vtkmodules.vtkRenderingCore",
             "vtkmodules.util.numpy_support", "PIL.Image", "PIL.ImageDraw", "PIL.PngImagePlugin",
-            "matplotlib.figure", "matplotlib.backends.backend_agg", "rackstress.render.pictures",
-            "rackstress.render.report", "rackstress.render.view3d", "trame_vtk.modules.vtk.serializers",
-            "vtkmodules.vtkFiltersSources", "vtkmodules.vtkFiltersCore")
+            "rackstress.render.pictures", "matplotlib.figure", "matplotlib.backends.backend_agg",
+            "rackstress.render.report", "rackstress.render.view3d",
+            "trame_vtk.modules.vtk.serializers", "vtkmodules.vtkFiltersSources",
+            "vtkmodules.vtkFiltersCore")
+
+
+def _later():
+    """:data:`_PREPARE`'s imports and the fonts, one step a call (what :func:`follow` does
+    while no new chunk of frames is written)."""
+    import importlib
+
+    for name in _PREPARE:
+        try:
+            importlib.import_module(name)
+        except Exception:  # noqa: BLE001, S112 - only a head start: the user imports it
+            pass
+        yield
+    try:
+        from rackstress.render.pictures import _font
+
+        for size in (13, 14, 17, 18):
+            _font(size)
+        from matplotlib import font_manager
+
+        font_manager.findfont("DejaVu Sans")
+    except Exception:  # noqa: BLE001, S110 - only a head start
+        pass
+    yield
 
 
 def prepare_in_background(rundir=None, frames: int | None = None):
-    """Import what the measures, the VTK writer, the pictures and the plots need, load the
-    measures' compiled loop and the fonts, in a thread, while the simulation runs on the
-    other core (LAMMPS runs the plugin without the GIL; ``rackstress run`` starts it once a
-    quarter of the steps are done). About a second of a short run's start-up to
-    results moves off the path; the forked VTK and plot processes inherit it all. Then, given
-    the run directory ``rundir`` and the ``frames`` it will hold, the thread measures the
-    frames LAMMPS has written so far (:func:`rackstress.stress.post.follow`) until
-    :func:`wait_prepared`: post-processing measures only the last ones. The GIL is
-    handed over every 0.5 ms meanwhile (not 5), so the driver's Python between chunks of
-    steps never waits long for it. :func:`wait_prepared` stops and joins it: call it before
-    forking (a child forked while the thread holds an import lock would wait on it forever).
-    The thread is not a daemon: an interpreter that ends early waits for it rather than cut
-    an import."""
+    """Load the measures' modules and compiled loop, then measure the frames LAMMPS writes, in
+    a thread, while the simulation runs on the other core (LAMMPS runs the plugin without the
+    GIL; ``rackstress run`` starts it just before the first step). Given the run directory
+    ``rundir`` and the ``frames`` it will hold, the thread measures each whole chunk of frames
+    as soon as the dump holds it (:func:`rackstress.stress.post.follow`) until
+    :func:`wait_prepared`, so that post-processing measures only the last ones; while it waits
+    for frames it imports what the VTK writer, the pictures, the plots and the 3D view need,
+    one module at a time (:data:`_PREPARE`; the forked VTK and plot processes inherit them).
+    Whatever is not imported when the run ends is left to whoever needs it (a forked child
+    imports its own, beside the pictures); without ``rundir`` every import is done. The GIL is handed over every 0.5 ms meanwhile (not
+    5), so the driver's Python between chunks of steps never waits long for it.
+    :func:`wait_prepared` stops and joins it: call it before forking (a child forked while
+    the thread holds an import lock would wait on it forever). The thread is not a daemon: an
+    interpreter that ends early waits for it rather than cut an import."""
     import importlib
     import sys
     import threading
@@ -39,26 +67,20 @@ def prepare_in_background(rundir=None, frames: int | None = None):
         old = sys.getswitchinterval()
         sys.setswitchinterval(5e-4)
         try:
-            for name in _PREPARE:
-                try:
-                    importlib.import_module(name)
-                except Exception:  # noqa: BLE001, S112 - only a head start: the user imports it
-                    continue
+            for name in _FIRST:
+                importlib.import_module(name)
             from rackstress.stress import kernels
 
             if kernels.available() and kernels.compiled():
                 kernels.warm()          # load the cached loop (a first run compiles it apart)
-            from rackstress.render.pictures import _font
-
-            for size in (13, 14, 17, 18):
-                _font(size)
-            from matplotlib import font_manager
-
-            font_manager.findfont("DejaVu Sans")
+            later = _later()
             if rundir is not None and frames:
                 from rackstress.stress.post import follow
 
-                follow(rundir, stop, frames)
+                follow(rundir, stop, frames, idle=lambda: next(later, None) is not None)
+            else:
+                for _ in later:
+                    pass
         except Exception:  # noqa: BLE001, S110 - only a head start
             pass
         finally:

@@ -332,13 +332,15 @@ class Head:
 _HEADS: dict = {}
 
 
-def follow(rundir, stop, frames: int, poll: float = 0.2) -> None:
+def follow(rundir, stop, frames: int, poll: float = 0.2, idle=None) -> None:
     """Measure the run's frames while LAMMPS writes them (``rackstress run``, in the thread of
     :func:`rackstress.render.prepare.prepare_in_background`, on the core the simulation
     leaves idle): every whole chunk of :func:`~rackstress.stress.measures.measure_frames` that
     the dump holds, until ``stop`` (a ``threading.Event``) is set. ``frames``: how many the
-    run will write (the chunks are those of the finished run). Nothing is written; a failure
-    only leaves the rest to post-processing."""
+    run will write (the chunks are those of the finished run); ``idle()``, if given, is called
+    instead of waiting while no whole chunk is new, until it returns False (one import of
+    :func:`rackstress.render.prepare.prepare_in_background`'s at a time). Nothing is written;
+    a failure only leaves the rest to post-processing."""
     from rackstress.stress.measures import frame_chunk, measure_chunk, neighbourhoods
     from rackstress.stress.rundata import load_run
 
@@ -347,16 +349,18 @@ def follow(rundir, stop, frames: int, poll: float = 0.2) -> None:
     key = str(Path(rundir).resolve())
     head = _HEADS[key] = Head()
     dump = Path(rundir) / "trajectory.dump"
-    seen, chunk, parts, a, failed = -1, None, None, 0, 0
+    need, chunk, parts, a, failed = 1, None, None, 0, 0
     main = threading.main_thread()
     # ends when stopped, or when the command ends without stopping it (an error: the
     # interpreter's exit marks the main thread stopped before it waits for this one)
-    while not stop.wait(poll) and main.is_alive():
+    busy = idle is not None
+    while not stop.wait(0 if busy else poll) and main.is_alive():
         try:
             size = dump.stat().st_size
-            if size == seen:
+            if size < need:             # not yet the bytes of a new whole chunk: no reading
+                if busy:
+                    busy = bool(idle())
                 continue
-            seen = size
             run = load_run(rundir, allow_truncated=True)
             if head.hood is None:
                 parts = list(run.parts.values())
@@ -367,6 +371,8 @@ def follow(rundir, stop, frames: int, poll: float = 0.2) -> None:
                 got = measure_chunk(run, head.hood, parts, ks)
                 head.done[(a, chunk)] = (Head.stamp(run, ks), got)
                 a += chunk
+            # the next chunk's frames, at the bytes a frame has taken so far
+            need = size + 1 + (a + chunk - run.index.n_frames) * size // max(run.index.n_frames, 1)
             failed = 0
         except Exception as exc:  # noqa: BLE001 - a head start only: post-processing measures the rest
             failed += 1                 # a frame caught mid-write reads as a bad one: retry
