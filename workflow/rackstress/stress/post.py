@@ -342,14 +342,14 @@ def follow(rundir, stop, frames: int, poll: float = 0.2, idle=None) -> None:
     :func:`rackstress.render.prepare.prepare_in_background`'s at a time). Nothing is written;
     a failure only leaves the rest to post-processing."""
     from rackstress.stress.measures import frame_chunk, measure_chunk, neighbourhoods
-    from rackstress.stress.rundata import load_run
+    from rackstress.stress.rundata import grown, load_run
 
     import threading
 
     key = str(Path(rundir).resolve())
     head = _HEADS[key] = Head()
     dump = Path(rundir) / "trajectory.dump"
-    need, chunk, parts, a, failed = 1, None, None, 0, 0
+    need, chunk, parts, a, failed, run = 1, None, None, 0, 0, None
     main = threading.main_thread()
     # ends when stopped, or when the command ends without stopping it (an error: the
     # interpreter's exit marks the main thread stopped before it waits for this one)
@@ -361,7 +361,7 @@ def follow(rundir, stop, frames: int, poll: float = 0.2, idle=None) -> None:
                 if busy:
                     busy = bool(idle())
                 continue
-            run = load_run(rundir, allow_truncated=True)
+            run = load_run(rundir, allow_truncated=True) if run is None else grown(run)
             if head.hood is None:
                 parts = list(run.parts.values())
                 head.hood = neighbourhoods(run, parts)
@@ -376,6 +376,7 @@ def follow(rundir, stop, frames: int, poll: float = 0.2, idle=None) -> None:
             failed = 0
         except Exception as exc:  # noqa: BLE001 - a head start only: post-processing measures the rest
             failed += 1                 # a frame caught mid-write reads as a bad one: retry
+            run = None                  # from a new load_run
             head.error = f"{type(exc).__name__}: {exc}"[:300]
             if failed > 5:
                 return
