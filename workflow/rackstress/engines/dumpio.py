@@ -189,12 +189,18 @@ def _frames_in(mm, o, want, frame):
             q = e + 1
         step, n = int(lines[1]), int(lines[3])
         cols = lines[8].decode().split()[2:]
-        end = q
-        for _ in range(n):
-            e = mm.find(b"\n", end)
-            if e < 0:
-                return                       # cut short: not a complete frame
-            end = e + 1
+        # the frame's n lines end where the next frame starts (counted in C, not line by line)
+        nxt = mm.find(b"ITEM: TIMESTEP\n", q)
+        stop = len(mm) if nxt < 0 else nxt
+        if mm[q:stop].count(b"\n") == n and (nxt >= 0 or stop == q or mm[stop - 1] in (10, b"\n")):
+            end = stop
+        else:
+            end = q
+            for _ in range(n):
+                e = mm.find(b"\n", end)
+                if e < 0:
+                    return                   # cut short: not a complete frame
+                end = e + 1
         pos = end
         if want is None or frame in want:
             p = o.copy()
