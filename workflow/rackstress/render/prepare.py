@@ -7,15 +7,16 @@ from __future__ import annotations
 
 #: What the measures need first (:func:`rackstress.stress.post.follow`, and the run's summary
 #: after its last step: the rigid fit), then what the VTK writer, the pictures, the plots and
-#: the 3D view import: done by :func:`prepare_in_background` while the simulation runs.
+#: the 3D view import, first what most of them share and what the longest of them (the
+#: plots' process) needs: done by :func:`prepare_in_background` while the simulation runs.
 _FIRST = ("scipy.spatial.transform", "rackstress.stress.post")
-_PREPARE = ("rackstress.stress.export", "vtkmodules.vtkIOXML",
-            "vtkmodules.vtkRenderingOpenGL2", "vtkmodules.vtkRenderingCore",
-            "vtkmodules.util.numpy_support", "PIL.Image", "PIL.ImageDraw", "PIL.PngImagePlugin",
-            "rackstress.render.pictures", "matplotlib.figure", "matplotlib.backends.backend_agg",
-            "rackstress.render.report", "rackstress.render.view3d",
-            "trame_vtk.modules.vtk.serializers", "vtkmodules.vtkFiltersSources",
-            "vtkmodules.vtkFiltersCore")
+_PREPARE = ("vtkmodules.vtkCommonDataModel", "vtkmodules.util.numpy_support",
+            "matplotlib.figure", "matplotlib.backends.backend_agg",
+            "vtkmodules.vtkRenderingOpenGL2", "vtkmodules.vtkRenderingCore", "PIL.Image",
+            "PIL.ImageDraw", "PIL.PngImagePlugin", "vtkmodules.vtkIOXML",
+            "rackstress.stress.export", "rackstress.render.pictures", "rackstress.render.report",
+            "rackstress.render.view3d", "trame_vtk.modules.vtk.serializers",
+            "vtkmodules.vtkFiltersSources", "vtkmodules.vtkFiltersCore")
 
 
 def _later():
