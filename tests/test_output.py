@@ -218,6 +218,40 @@ def test_vtk_variants_open_in_their_readers(two_runs, tmp_path):
     assert size["paraview"] < 0.4 * size["ovito"]
 
 
+@pytest.mark.lammps
+def test_the_numpy_vtk_writer_writes_what_vtks_own_writer_writes(two_runs, tmp_path):
+    """The ``paraview`` variant written with zlib by rackstress (export._Vtp, what 'rackstress
+    run' and 'rackstress stress' write) and by ``vtkXMLPolyDataWriter`` (the independent
+    path): the same files, the same arrays through VTK's reader, and the same compressed
+    bytes in each file's appended data (only VTK's optional range hints differ)."""
+    import pyvista as pv
+
+    from rackstress.stress import export
+    from rackstress.stress.post import compute_fields
+
+    run = load_run(two_runs["moving"])
+    fields = compute_fields(run, cache=False)
+    for measures in ("default", "all"):
+        ours, vtks = tmp_path / f"ours-{measures}", tmp_path / f"vtk-{measures}"
+        export.write_vtk(run, fields, ours, measures=measures)
+        export.write_vtk(run, fields, vtks, measures=measures, writer="vtk")
+        names = sorted(p.name for p in ours.iterdir())
+        assert names == sorted(p.name for p in vtks.iterdir()) and "rest.vtp" in names
+        for name in names:
+            a, b = (ours / name).read_bytes(), (vtks / name).read_bytes()
+            if not name.endswith(".vtp"):
+                assert a == b
+                continue
+            assert a[a.index(b"   _"):] == b[b.index(b"   _"):], name
+            x, y = pv.read(ours / name), pv.read(vtks / name)
+            assert x.n_points == y.n_points and np.array_equal(x.verts, y.verts)
+            np.testing.assert_array_equal(x.points, y.points)
+            assert list(x.point_data) == list(y.point_data)
+            for k in x.point_data:
+                assert x.point_data[k].dtype == y.point_data[k].dtype, k
+                np.testing.assert_array_equal(x.point_data[k], y.point_data[k])
+
+
 def whole(blocks) -> dict:
     """Every particle of a time of a PVD series (its parts joined), by id: points and arrays."""
     parts = [blocks[i] for i in range(len(blocks))]
