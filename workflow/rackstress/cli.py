@@ -207,15 +207,18 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
         planned["deck"].dump_all = bool(dump_all)
         head_start = None
         if rank() == 0 and engine == "lammps" and planned["deck"].plugin:
-            from rackstress.render.prepare import prepare_in_background
+            from rackstress.render.prepare import prepare_in_background, stop_prepared
 
             # post-processing's imports and measures while LAMMPS runs the plugin (no GIL
-            # held), from its first step; not beside a simulation that runs Python each step
-            # (the reference engine, the callback path)
+            # held), from its first steps if it is short (run.execute); not beside a
+            # simulation that runs Python each step (the reference engine, the callback path)
             every = planned["dump_every"]
             frames = sc.total_steps // every + 1 + (1 if sc.total_steps % every else 0)
             out_ = out
-            head_start = lambda: prepare_in_background(out_, frames)  # noqa: E731
+
+            def head_start():
+                prepare_in_background(out_, frames, compress=not dump_text)
+                return stop_prepared        # once the last step is done
         # the lock is held from before anything is written until the pictures are done
         with locked(out) as held:   # noqa: F841
             with phase(f"running {sc.total_steps:,} steps into {out}", shown, ticker=False):
@@ -223,7 +226,7 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
                                       dump_every=dump_every, progress=shown,
                                       overwrite=overwrite, restart_every=restart_every or None,
                                       allow_unstable=allow_unstable, planned=planned,
-                                      keep_checkpoints=keep_checkpoints, at_start=head_start)
+                                      keep_checkpoints=keep_checkpoints, head_start=head_start)
             _finish(summary, out, do_render, progress, dump_text)
         if summary.get("settled") is False:
             from rackstress.errors import EXIT_UNSETTLED
@@ -248,10 +251,10 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True,
 
     if rank() != 0:
         return
-    from rackstress.render.prepare import wait_prepared
+    from rackstress.render.prepare import stop_prepared
     from rackstress.runs.checkpoint import discard_finished
 
-    wait_prepared()             # its imports done before post-processing forks
+    stop_prepared()             # joined before post-processing forks (prepare.py)
     discard_finished(out)       # a kill-only checkpoint of a finished run: never resumed
     if summary.get("analysis") == "static":
         click.echo(f"{summary['scene']}: static, {summary['status']} in {summary['iterations']} "

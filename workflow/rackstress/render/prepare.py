@@ -19,9 +19,11 @@ _PREPARE = ("vtkmodules.vtkCommonDataModel", "vtkmodules.util.numpy_support",
             "vtkmodules.vtkFiltersSources", "vtkmodules.vtkFiltersCore")
 
 
-def _later():
+def _later(squeeze=None):
     """:data:`_PREPARE`'s imports and the fonts, one step a call (what :func:`follow` does
-    while no new chunk of frames is written)."""
+    while no new chunk of frames is written), each yielding True; then, given ``squeeze`` (a
+    :class:`~rackstress.engines.dumpio.GzAhead`), the trajectory's frames compressed as they
+    are written, yielding whether one was."""
     import importlib
 
     for name in _PREPARE:
@@ -29,7 +31,7 @@ def _later():
             importlib.import_module(name)
         except Exception:  # noqa: BLE001, S112 - only a head start: the user imports it
             pass
-        yield
+        yield True
     try:
         from rackstress.render.pictures import _font
 
@@ -40,10 +42,12 @@ def _later():
         font_manager.findfont("DejaVu Sans")
     except Exception:  # noqa: BLE001, S110 - only a head start
         pass
-    yield
+    yield True
+    while squeeze is not None:
+        yield squeeze.step()
 
 
-def prepare_in_background(rundir=None, frames: int | None = None):
+def prepare_in_background(rundir=None, frames: int | None = None, compress: bool = False):
     """Load the measures' modules and compiled loop, then measure the frames LAMMPS writes, in
     a thread, while the simulation runs on the other core (LAMMPS runs the plugin without the
     GIL; ``rackstress run`` starts it just before the first step). Given the run directory
@@ -53,11 +57,16 @@ def prepare_in_background(rundir=None, frames: int | None = None):
     for frames it imports what the VTK writer, the pictures, the plots and the 3D view need,
     one module at a time (:data:`_PREPARE`; the forked VTK and plot processes inherit them).
     Whatever is not imported when the run ends is left to whoever needs it (a forked child
-    imports its own, beside the pictures); without ``rundir`` every import is done. The GIL is handed over every 0.5 ms meanwhile (not
+    imports its own, beside the pictures); without ``rundir`` every import is done. Then,
+    with ``compress`` (the run's trajectory becomes ``trajectory.dump.gz`` once finished),
+    the frames written are compressed as :class:`~rackstress.engines.dumpio.CompressJob`
+    would compress them (:class:`~rackstress.engines.dumpio.GzAhead`). The GIL is handed over every 0.5 ms meanwhile (not
     5), so the driver's Python between chunks of steps never waits long for it.
-    :func:`wait_prepared` stops and joins it: call it before forking (a child forked while
-    the thread holds an import lock would wait on it forever). The thread is not a daemon: an
-    interpreter that ends early waits for it rather than cut an import."""
+    :func:`stop_prepared` stops it (at once: it ends after the chunk or import under way),
+    :func:`wait_prepared` stops and joins it, and a fork joins it first (``os.register_at_fork``:
+    a child forked while the thread holds an import lock would wait on it forever), so that
+    the last step's post-processing does not wait for an import it does not need. The thread
+    is not a daemon: an interpreter that ends early waits for it rather than cut an import."""
     import importlib
     import sys
     import threading
@@ -74,19 +83,32 @@ def prepare_in_background(rundir=None, frames: int | None = None):
 
             if kernels.available() and kernels.compiled():
                 kernels.warm()          # load the cached loop (a first run compiles it apart)
-            later = _later()
+            squeeze = None
+            if rundir is not None and compress:
+                from pathlib import Path
+
+                from rackstress.engines.dumpio import GzAhead
+
+                squeeze = GzAhead(Path(rundir) / "trajectory.dump")
+            later = _later(squeeze)
             if rundir is not None and frames:
                 from rackstress.stress.post import follow
 
-                follow(rundir, stop, frames, idle=lambda: next(later, None) is not None)
+                follow(rundir, stop, frames, idle=lambda: next(later, False))
             else:
-                for _ in later:
-                    pass
+                for done in later:
+                    if not done:
+                        break
         except Exception:  # noqa: BLE001, S110 - only a head start
             pass
         finally:
             sys.setswitchinterval(old)
 
+    if not _THREAD and not _HOOKED:
+        import os
+
+        os.register_at_fork(before=wait_prepared)
+        _HOOKED.append(True)
     t = threading.Thread(target=work, name="rackstress-prepare")
     t.start()
     _THREAD.append((t, stop))
@@ -94,6 +116,13 @@ def prepare_in_background(rundir=None, frames: int | None = None):
 
 
 _THREAD: list = []
+_HOOKED: list = []
+
+
+def stop_prepared() -> None:
+    """Tell :func:`prepare_in_background`'s thread to stop (without waiting for it)."""
+    for _, stop in _THREAD:
+        stop.set()
 
 
 def wait_prepared() -> None:

@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 try:
-    from rackstress.model import kernels as _model_kernels   # sets NUMBA_CACHE_DIR first
+    from rackstress.model import kernels as _model_kernels  # noqa: F401 - sets NUMBA_CACHE_DIR
     import numba as nb
 except ImportError:  # pragma: no cover - numba is a dependency; the NumPy path stays
     nb = None

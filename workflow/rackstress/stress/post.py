@@ -338,9 +338,10 @@ def follow(rundir, stop, frames: int, poll: float = 0.2, idle=None) -> None:
     leaves idle): every whole chunk of :func:`~rackstress.stress.measures.measure_frames` that
     the dump holds, until ``stop`` (a ``threading.Event``) is set. ``frames``: how many the
     run will write (the chunks are those of the finished run); ``idle()``, if given, is called
-    instead of waiting while no whole chunk is new, until it returns False (one import of
-    :func:`rackstress.render.prepare.prepare_in_background`'s at a time). Nothing is written;
-    a failure only leaves the rest to post-processing."""
+    while no whole chunk is new, and ``poll`` seconds waited only when it returns False (it
+    did nothing: :func:`rackstress.render.prepare.prepare_in_background`'s imports and
+    compression, a step a call). Nothing is written; a failure only leaves the rest to
+    post-processing."""
     from rackstress.stress.measures import frame_chunk, measure_chunk, neighbourhoods
     from rackstress.stress.rundata import grown, load_run
 
@@ -353,14 +354,14 @@ def follow(rundir, stop, frames: int, poll: float = 0.2, idle=None) -> None:
     main = threading.main_thread()
     # ends when stopped, or when the command ends without stopping it (an error: the
     # interpreter's exit marks the main thread stopped before it waits for this one)
-    busy = idle is not None
-    while not stop.wait(0 if busy else poll) and main.is_alive():
+    wait = 0
+    while not stop.wait(wait) and main.is_alive():
         try:
             size = dump.stat().st_size
             if size < need:             # not yet the bytes of a new whole chunk: no reading
-                if busy:
-                    busy = bool(idle())
+                wait = 0 if idle is not None and idle() else poll
                 continue
+            wait = 0
             run = load_run(rundir, allow_truncated=True) if run is None else grown(run)
             if head.hood is None:
                 parts = list(run.parts.values())
