@@ -227,7 +227,7 @@ def markdown(data: dict, machine: dict) -> str:
          "interleaved; the phases from the run's own records, the run directory by file. "
          "The run paints what its report shows (the sheet, the plots, the 3D view; the "
          "full-size pictures are `rackstress render RUNDIR` away) and drops its default "
-         "checkpoints once finished; from its first step on, the frames LAMMPS has written "
+         "checkpoints once finished; from its first steps on (a run under 10 s), the frames LAMMPS has written "
          "are measured beside it (*measured while running*: frames of the run's; the "
          "measures column is what is left after it), and between them the modules of the "
          "VTK writer, pictures, plots and 3D view are imported and the frames compressed; the "
