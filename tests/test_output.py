@@ -346,3 +346,12 @@ def test_bench_e2e_dump_cost_and_table():
     # issue 24's targets, from the same run: 10 s over its 4 s simulation; 30 MB
     assert "| warm total / its simulation | ≤ 2× | 2.50× |" in md
     assert "| run directory | ≤ 30 MB | 30.0 MB |" in md and "cold − warm" not in md
+    # a run without the head start (RACKSTRESS_HEAD_START=0) beside it: its simulation time
+    # is shown against the other's, and it takes no part in the ratio
+    alone = dict(run, head_start=False, wall_s=8.0,
+                 phases=dict(run["phases"], simulation=3.5))
+    md = e2e.markdown({"runs": [run, alone], "dumps": [d]},
+                      {"cores": 2, "load_avg_at_start": [1, 1, 1]})
+    assert "| magpod-small | the scene's | warm, no head start | 1.2 | 3.50 s |" in md
+    assert "| warm total / its simulation | ≤ 2× | 2.50× |" in md
+    assert "| not slower | 4.00 / 3.50 s |" in md

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import functools
 import json
+import os
 import re
 import sys
 import time
@@ -207,12 +208,14 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
             planned = run_mod.plan(sc, engine, mode, dump_every, allow_unstable=allow_unstable)
         planned["deck"].dump_all = bool(dump_all)
         head_start = None
-        if rank() == 0 and engine == "lammps" and planned["deck"].plugin:
+        if (rank() == 0 and engine == "lammps" and planned["deck"].plugin
+                and os.environ.get("RACKSTRESS_HEAD_START", "1") not in ("0", "no", "off")):
             from rackstress.render.prepare import prepare_in_background, stop_prepared
 
             # post-processing's imports and measures while LAMMPS runs the plugin (no GIL
             # held), from its first steps if it is short (run.execute); not beside a
-            # simulation that runs Python each step (the reference engine, the callback path)
+            # simulation that runs Python each step (the reference engine, the callback path);
+            # RACKSTRESS_HEAD_START=0: none (a machine with no idle core: bench e2e compares)
             every = planned["dump_every"]
             frames = sc.total_steps // every + 1 + (1 if sc.total_steps % every else 0)
             out_ = out
@@ -266,8 +269,6 @@ def entry():
         main()
     except SystemExit as exc:
         if _EXIT_NOW and exc.code in (0, None):
-            import os
-
             sys.stdout.flush()
             sys.stderr.flush()
             os._exit(0)
