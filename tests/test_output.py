@@ -218,6 +218,40 @@ def test_vtk_variants_open_in_their_readers(two_runs, tmp_path):
     assert size["paraview"] < 0.4 * size["ovito"]
 
 
+@pytest.mark.lammps
+def test_the_numpy_vtk_writer_writes_what_vtks_own_writer_writes(two_runs, tmp_path):
+    """The ``paraview`` variant written with zlib by rackstress (export._Vtp, what 'rackstress
+    run' and 'rackstress stress' write) and by ``vtkXMLPolyDataWriter`` (the independent
+    path): the same files, the same arrays through VTK's reader, and the same compressed
+    bytes in each file's appended data (only VTK's optional range hints differ)."""
+    import pyvista as pv
+
+    from rackstress.stress import export
+    from rackstress.stress.post import compute_fields
+
+    run = load_run(two_runs["moving"])
+    fields = compute_fields(run, cache=False)
+    for measures in ("default", "all"):
+        ours, vtks = tmp_path / f"ours-{measures}", tmp_path / f"vtk-{measures}"
+        export.write_vtk(run, fields, ours, measures=measures)
+        export.write_vtk(run, fields, vtks, measures=measures, writer="vtk")
+        names = sorted(p.name for p in ours.iterdir())
+        assert names == sorted(p.name for p in vtks.iterdir()) and "rest.vtp" in names
+        for name in names:
+            a, b = (ours / name).read_bytes(), (vtks / name).read_bytes()
+            if not name.endswith(".vtp"):
+                assert a == b
+                continue
+            assert a[a.index(b"   _"):] == b[b.index(b"   _"):], name
+            x, y = pv.read(ours / name), pv.read(vtks / name)
+            assert x.n_points == y.n_points and np.array_equal(x.verts, y.verts)
+            np.testing.assert_array_equal(x.points, y.points)
+            assert list(x.point_data) == list(y.point_data)
+            for k in x.point_data:
+                assert x.point_data[k].dtype == y.point_data[k].dtype, k
+                np.testing.assert_array_equal(x.point_data[k], y.point_data[k])
+
+
 def whole(blocks) -> dict:
     """Every particle of a time of a PVD series (its parts joined), by id: points and arrays."""
     parts = [blocks[i] for i in range(len(blocks))]
@@ -312,3 +346,12 @@ def test_bench_e2e_dump_cost_and_table():
     # issue 24's targets, from the same run: 10 s over its 4 s simulation; 30 MB
     assert "| warm total / its simulation | ≤ 2× | 2.50× |" in md
     assert "| run directory | ≤ 30 MB | 30.0 MB |" in md and "cold − warm" not in md
+    # a run without the head start (RACKSTRESS_HEAD_START=0) beside it: its simulation time
+    # is shown against the other's, and it takes no part in the ratio
+    alone = dict(run, head_start=False, wall_s=8.0,
+                 phases=dict(run["phases"], simulation=3.5))
+    md = e2e.markdown({"runs": [run, alone], "dumps": [d]},
+                      {"cores": 2, "load_avg_at_start": [1, 1, 1]})
+    assert "| magpod-small | the scene's | warm, no head start | 1.2 | 3.50 s |" in md
+    assert "| warm total / its simulation | ≤ 2× | 2.50× |" in md
+    assert "| not slower | 4.00 / 3.50 s |" in md

@@ -108,3 +108,21 @@ def test_sheet_only_paints_the_cells_at_half_size_and_nothing_else(tmp_path):
     assert sorted(p.name for p in (out / "figures").iterdir()) == ["render.json", "sheet.png"]
     with pytest.raises(Exception, match="movie"):
         render(out, sheet_only=True, movie=True)
+
+
+def test_the_head_start_needs_an_idle_core(monkeypatch):
+    """``rackstress run`` starts post-processing beside the simulation only where the 1-minute
+    load average is below the number of cores, and never under RACKSTRESS_HEAD_START=0."""
+    import os
+
+    from rackstress import cli
+
+    cores = os.cpu_count() or 1
+    monkeypatch.delenv("RACKSTRESS_HEAD_START", raising=False)
+    monkeypatch.setattr(os, "getloadavg", lambda: (cores - 0.5, 0.0, 0.0))
+    assert cli._idle_core()
+    monkeypatch.setattr(os, "getloadavg", lambda: (float(cores), 0.0, 0.0))
+    assert not cli._idle_core()
+    monkeypatch.setattr(os, "getloadavg", lambda: (0.0, 0.0, 0.0))
+    monkeypatch.setenv("RACKSTRESS_HEAD_START", "0")
+    assert not cli._idle_core()

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import functools
 import json
+import os
 import re
 import sys
 import time
@@ -186,12 +187,13 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
                            ticker=False):
                     summary = resume_run(resume_dir, scene, progress=progress and rank() == 0)
                 _finish(summary, out, do_render, progress, dump_text)
+            _may_exit_now()
             return
         shown = progress and rank() == 0
         with phase(f"building the scene {scene}", shown):
             sc = _load_scene(scene, steps, dt, sets, integrator)
         if rank() == 0:
-            from rackstress.stress.kernels import warm_in_background
+            from rackstress.stress.warming import warm_in_background
 
             warm_in_background()        # a first run compiles the measures' loop meanwhile
         if out is None:
@@ -206,16 +208,20 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
             planned = run_mod.plan(sc, engine, mode, dump_every, allow_unstable=allow_unstable)
         planned["deck"].dump_all = bool(dump_all)
         head_start = None
-        if rank() == 0 and engine == "lammps" and planned["deck"].plugin:
-            from rackstress.render.prepare import prepare_in_background
+        if rank() == 0 and engine == "lammps" and planned["deck"].plugin and _idle_core():
+            from rackstress.render.prepare import prepare_in_background, stop_prepared
 
-            # post-processing's imports while LAMMPS runs the plugin (no GIL held), from a
-            # quarter of the steps on; not beside a simulation that runs Python each step
-            # (the reference engine, the callback path)
+            # post-processing's imports and measures while LAMMPS runs the plugin (no GIL
+            # held), from its first steps if it is short (run.execute); not beside a
+            # simulation that runs Python each step (the reference engine, the callback path),
+            # nor where no core is idle (_idle_core)
             every = planned["dump_every"]
             frames = sc.total_steps // every + 1 + (1 if sc.total_steps % every else 0)
             out_ = out
-            head_start = lambda: prepare_in_background(out_, frames)  # noqa: E731
+
+            def head_start():
+                prepare_in_background(out_, frames, compress=not dump_text)
+                return stop_prepared        # once the last step is done
         # the lock is held from before anything is written until the pictures are done
         with locked(out) as held:   # noqa: F841
             with phase(f"running {sc.total_steps:,} steps into {out}", shown, ticker=False):
@@ -223,7 +229,7 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
                                       dump_every=dump_every, progress=shown,
                                       overwrite=overwrite, restart_every=restart_every or None,
                                       allow_unstable=allow_unstable, planned=planned,
-                                      keep_checkpoints=keep_checkpoints, at_quarter=head_start)
+                                      keep_checkpoints=keep_checkpoints, head_start=head_start)
             _finish(summary, out, do_render, progress, dump_text)
         if summary.get("settled") is False:
             from rackstress.errors import EXIT_UNSETTLED
@@ -235,8 +241,52 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
                            f"means at most {summary['tolerance']:g}); the state written to {out} "
                            "is not an equilibrium" + _rounding_hint(summary), err=True)
             sys.exit(EXIT_UNSETTLED)
+        _may_exit_now()
     except Exception as err:  # noqa: BLE001 - each kind has its exit status (_fail_any)
         _fail_any(err, out)
+
+
+#: set once a ``rackstress run`` on one process has written and closed everything: the
+#: process may then end without the interpreter's teardown (:func:`entry`)
+_EXIT_NOW: list = []
+
+
+def _may_exit_now() -> None:
+    from rackstress.lib.mpi import world
+
+    if world().Get_size() == 1:     # under MPI every rank ends as usual (MPI_Finalize)
+        _EXIT_NOW.append(True)
+
+
+def entry():
+    """The ``rackstress`` command (``[project.scripts]``): :data:`main`, and after a
+    ``rackstress run`` on one process that has written and closed every file, ``os._exit(0)``
+    once the output is flushed: the interpreter's teardown (a full collection over LAMMPS',
+    numba's, VTK's and matplotlib's objects, their modules' finalizers) took 0.3-1 s of
+    README's first command's wall time, and nothing needs it. Anything else ends as usual."""
+    try:
+        main()
+    except SystemExit as exc:
+        if _EXIT_NOW and exc.code in (0, None):
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(0)
+        raise
+
+
+def _idle_core() -> bool:
+    """Whether post-processing may start beside the simulation (``rackstress run``'s head
+    start, render/prepare.py): not under ``RACKSTRESS_HEAD_START=0``, and only where the
+    1-minute load average leaves a core idle (below the number of cores). On a machine whose
+    cores are all busy the thread takes CPU and the GIL from the simulation and gets nothing
+    done (magpod-small at load 5: its simulation 1.97-2.10 s beside it against 1.52-1.57 s
+    without, no frame measured meanwhile; bench e2e)."""
+    if os.environ.get("RACKSTRESS_HEAD_START", "1").strip().lower() in ("0", "no", "off"):
+        return False
+    try:
+        return os.getloadavg()[0] < (os.cpu_count() or 1)
+    except OSError:
+        return True
 
 
 def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True,
@@ -248,10 +298,10 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True,
 
     if rank() != 0:
         return
-    from rackstress.render.prepare import wait_prepared
+    from rackstress.render.prepare import stop_prepared
     from rackstress.runs.checkpoint import discard_finished
 
-    wait_prepared()             # its imports done before post-processing forks
+    stop_prepared()             # joined before post-processing forks (prepare.py)
     discard_finished(out)       # a kill-only checkpoint of a finished run: never resumed
     if summary.get("analysis") == "static":
         click.echo(f"{summary['scene']}: static, {summary['status']} in {summary['iterations']} "
@@ -961,7 +1011,7 @@ def bench_cantilever(out, quick):
 
 
 if __name__ == "__main__":  # pragma: no cover
-    main()
+    entry()
 
 
 # ---------------------------------------------------------------------------- help that teaches

@@ -36,9 +36,11 @@ def _size(path: Path) -> int:
     return sum(p.stat().st_size for p in path.rglob("*") if p.is_file())
 
 
-def _cli_run(scene: str, out: Path, cold: bool, args) -> dict:
+def _cli_run(scene: str, out: Path, cold: bool, args, head_start: bool = True) -> dict:
     exe = str(Path(sys.executable).parent / "rackstress")
     env = dict(os.environ)
+    if not head_start:
+        env["RACKSTRESS_HEAD_START"] = "0"
     cache = None
     if cold:
         cache = tempfile.mkdtemp(prefix="rackstress-cold-")
@@ -51,7 +53,8 @@ def _cli_run(scene: str, out: Path, cold: bool, args) -> dict:
     wall = time.perf_counter() - t
     if cache:
         shutil.rmtree(cache, ignore_errors=True)
-    rec = {"wall_s": wall, "exit": r.returncode, "cold": cold, "load_at_start": load}
+    rec = {"wall_s": wall, "exit": r.returncode, "cold": cold, "load_at_start": load,
+           "head_start": head_start}
     if r.returncode not in (0, 4):
         rec["stderr"] = r.stderr[-1500:]
         return rec
@@ -178,13 +181,14 @@ def run(out: Path, scene_names=SCENES, repeat: int = 1, steps: dict | None = Non
         for name in scene_names:
             args = ["--steps", str(steps[name])] if name in steps else []
             for k in range(repeat):
-                for cold in (True, False):
+                for cold, head in ((True, True), (False, True), (False, False)):
                     rundir = Path(tmp) / f"{name}"
-                    log(f"e2e: {name} {'cold' if cold else 'warm'} ({k + 1}/{repeat}) ...")
-                    rec = _cli_run(name, rundir, cold, args)
+                    log(f"e2e: {name} {'cold' if cold else 'warm'}"
+                        f"{'' if head else ', no head start'} ({k + 1}/{repeat}) ...")
+                    rec = _cli_run(name, rundir, cold, args, head)
                     rec.update(scene=name, steps=steps.get(name), repeat=k)
                     rows.append(rec)
-                    if (name == "magpod-small" and not cold and k == 0 and not sizes
+                    if (name == "magpod-small" and not cold and head and k == 0 and not sizes
                             and rec.get("exit") == 0):
                         log("e2e: magpod-small's formats, each size ...")
                         sizes.append(variants(rundir))
@@ -199,6 +203,8 @@ def targets(data: dict) -> list:
     warm run's total over its own simulation, cold over warm (paired by repeat), the run
     directory's size."""
     runs = [r for r in data["runs"] if r["scene"] == "magpod-small" and "phases" in r]
+    alone = [r for r in runs if not r.get("head_start", True)]
+    runs = [r for r in runs if r.get("head_start", True)]
     warm = [r for r in runs if not r["cold"]]
     cold = {r["repeat"]: r for r in runs if r["cold"]}
     if not warm:
@@ -211,6 +217,11 @@ def targets(data: dict) -> list:
     if extra:
         L.append(f"| cold − warm | ≤ 3 s | {', '.join(f'{x:+.2f} s' for x in extra)} |")
     L.append(f"| run directory | ≤ 30 MB | {size:.1f} MB |")
+    if alone:
+        L.append("| the simulation, warm: beside the head start / without it (`RACKSTRESS_HEAD_"
+                 "START=0`) | not slower | "
+                 + ", ".join(f"{r['phases']['simulation']:.2f} / {a['phases']['simulation']:.2f} s"
+                             for r in warm for a in alone if a["repeat"] == r["repeat"]) + " |")
     return L
 
 
@@ -227,10 +238,13 @@ def markdown(data: dict, machine: dict) -> str:
          "interleaved; the phases from the run's own records, the run directory by file. "
          "The run paints what its report shows (the sheet, the plots, the 3D view; the "
          "full-size pictures are `rackstress render RUNDIR` away) and drops its default "
-         "checkpoints once finished; post-processing's imports load while LAMMPS runs, and "
-         "then the frames LAMMPS has written are measured beside it (*measured while "
-         "running*: frames of the run's; the measures column is what is left after it); the "
-         "3D view is built by a child process beside the pictures and plots. "
+         "checkpoints once finished; from its first steps on (a run under 10 s), the frames LAMMPS has written "
+         "are measured beside it (*measured while running*: frames of the run's; the "
+         "measures column is what is left after it), and between them the modules of the "
+         "VTK writer, pictures, plots and 3D view are imported and the frames compressed; the "
+         "3D view is built by a child process beside the pictures and plots. The rows *no "
+         "head start* run with `RACKSTRESS_HEAD_START=0` (nothing beside the simulation), "
+         "interleaved with the others: their simulation time is the simulation's alone. "
          "Its VTK frames carry the leading measure and displacement, the resting sediment "
          "once (`vtk/rest.vtp`), and its trajectory is `trajectory.dump.gz` once finished "
          "(docs/output.md). "
@@ -253,7 +267,8 @@ def markdown(data: dict, machine: dict) -> str:
         ahead = (f"{r['frames_measured_while_running']} of {r['frames']}"
                  if "frames" in r else "")
         L.append(f"| {r['scene']} | {its} | "
-                 f"{'cold' if r['cold'] else 'warm'} | "
+                 f"{'cold' if r['cold'] else 'warm'}"
+                 f"{'' if r.get('head_start', True) else ', no head start'} | "
                  f"{r.get('load_at_start', float('nan')):.1f} | {p['simulation']:.2f} s | "
                  f"{ahead} | {p['measures']:.2f} s | {p['pictures']:.2f} s "
                  f"({p['vtk (beside the pictures)']:.2f} s) | {p['start-up and the rest']:.2f} s"
@@ -266,7 +281,7 @@ def markdown(data: dict, machine: dict) -> str:
         L += ["", f"{scene}: exit {code} — {note}"]
     L += ["", "## The run directory, by file (warm runs)", ""]
     for r in data["runs"]:
-        if r.get("cold") or "sizes" not in r or r.get("repeat"):
+        if r.get("cold") or "sizes" not in r or r.get("repeat") or not r.get("head_start", True):
             continue
         L.append(f"**{r['scene']}** ({r['size_total'] / 1e6:.1f} MB): "
                  + ", ".join(f"`{k}` {v / 1e6:.2f} MB" for k, v in

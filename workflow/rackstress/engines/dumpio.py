@@ -189,12 +189,18 @@ def _frames_in(mm, o, want, frame):
             q = e + 1
         step, n = int(lines[1]), int(lines[3])
         cols = lines[8].decode().split()[2:]
-        end = q
-        for _ in range(n):
-            e = mm.find(b"\n", end)
-            if e < 0:
-                return                       # cut short: not a complete frame
-            end = e + 1
+        # the frame's n lines end where the next frame starts (counted in C, not line by line)
+        nxt = mm.find(b"ITEM: TIMESTEP\n", q)
+        stop = len(mm) if nxt < 0 else nxt
+        if mm[q:stop].count(b"\n") == n and (nxt >= 0 or stop == q or mm[stop - 1] in (10, b"\n")):
+            end = stop
+        else:
+            end = q
+            for _ in range(n):
+                e = mm.find(b"\n", end)
+                if e < 0:
+                    return                   # cut short: not a complete frame
+                end = e + 1
         pos = end
         if want is None or frame in want:
             p = o.copy()
@@ -263,8 +269,11 @@ class CompressJob:
         import gzip
         import mmap
         import re
+        import zlib
 
         head = re.compile(rb"ITEM: TIMESTEP\n")
+        ahead = AHEAD.pop(str(self.path.resolve()), None)
+        done = ahead.members if ahead is not None and ahead.level == self.level else {}
         try:
             with open(self.path, "rb") as fh, open(self.tmp, "wb") as dst:
                 size = os.fstat(fh.fileno()).st_size
@@ -273,7 +282,11 @@ class CompressJob:
                         starts = [m.start() for m in head.finditer(mm)] or [0]
                         starts[0] = 0
                         for a, b in zip(starts, starts[1:] + [size]):
-                            dst.write(gzip.compress(mm[a:b], self.level, mtime=0))
+                            got = done.get(a)         # compressed while the run ran: the
+                            if got is not None and got[0] == b and got[1] == zlib.crc32(mm[a:b]):
+                                dst.write(got[2])     # same bytes there, the same member
+                            else:
+                                dst.write(gzip.compress(mm[a:b], self.level, mtime=0))
         except OSError as exc:
             self.error = exc
 
@@ -304,6 +317,55 @@ class CompressJob:
 #: text dumps a :class:`CompressJob` of this process is turning into ``.gz`` (the report, written
 #: meanwhile, links the file the run directory will hold: :func:`final_name`)
 PENDING: set = set()
+
+#: dump path → its :class:`GzAhead` (filled while the run runs, taken by :class:`CompressJob`)
+AHEAD: dict = {}
+
+
+class GzAhead:
+    """The gzip members of a dump's frames compressed while LAMMPS still writes it (``rackstress
+    run``, on the core the simulation leaves idle): :meth:`step` compresses the next frame
+    the file holds whole (the next one has begun), as :class:`CompressJob` would, and keeps it
+    with its end and the CRC of its bytes; :class:`CompressJob` takes a member only where the
+    finished dump holds the same bytes (a run cut after divergence or resumed compresses the
+    changed frames anew). It holds at most :attr:`LIMIT` bytes of members (the rest is
+    compressed at the end)."""
+
+    LIMIT = 64 * 2 ** 20
+
+    def __init__(self, path, level: int = GZ_LEVEL):
+        self.path, self.level = Path(path), level
+        self.members: dict = {}          # frame start → (end, crc32, gzip member)
+        self.at = 0                      # where the next frame starts
+        self.held = 0                    # bytes of members
+        AHEAD[str(self.path.resolve())] = self
+
+    def step(self) -> bool:
+        """Compress the next whole frame; False if the file holds none yet (or
+        :attr:`LIMIT` is reached)."""
+        import gzip
+        import zlib
+
+        if self.held >= self.LIMIT:
+            return False
+        text, nxt = b"", -1
+        try:
+            with open(self.path, "rb") as fh:
+                fh.seek(self.at)
+                while nxt < 0:
+                    more = fh.read(1 << 20)
+                    if not more:
+                        return False
+                    nxt = (text + more).find(b"ITEM: TIMESTEP\n", max(1, len(text) - 16))
+                    text += more
+        except OSError:
+            return False
+        frame = text[:nxt]
+        member = gzip.compress(frame, self.level, mtime=0)
+        self.members[self.at] = (self.at + nxt, zlib.crc32(frame), member)
+        self.held += len(member)
+        self.at += nxt
+        return True
 
 
 def final_name(rundir, name: str = "trajectory.dump") -> str:

@@ -27,7 +27,6 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 #: Distances above ``ROBUST_C`` × median leave a particle out of the next robust fit.
 ROBUST_C = 3.0
@@ -41,6 +40,8 @@ def best_fit(o: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     co, cp = o.mean(axis=0), p.mean(axis=0)
     if len(o) < 2:
         return np.eye(3), cp - co
+    from scipy.spatial.transform import Rotation   # 0.2 s to import: not at a run's start
+
     with warnings.catch_warnings():  # collinear sets: any rotation about the line is optimal
         warnings.simplefilter("ignore", UserWarning)
         rot, _ = Rotation.align_vectors(p - cp, o - co)

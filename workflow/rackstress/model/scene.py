@@ -308,11 +308,11 @@ class Scene:
         self._check_coincident()
 
     def _check_coincident(self) -> None:
-        from scipy.spatial import cKDTree
-
         o = np.concatenate([g.o for g in self.groups.values()])
         ulp = 8 * np.finfo(float).eps * float(np.abs(o).max()) if len(o) else 0.0
-        pairs = cKDTree(o).query_pairs(max(COINCIDENT_TOL, ulp), output_type="ndarray")
+        from rackstress.lib.cells import close_pairs
+
+        pairs = close_pairs(o, max(COINCIDENT_TOL, ulp))
         if len(pairs):
             a, b = (int(x) for x in pairs[0])
             starts = np.cumsum([0] + [g.n for g in self.groups.values()])

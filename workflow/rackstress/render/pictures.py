@@ -663,15 +663,15 @@ def render(rundir, frames=None, measure: str | None = None, views=DEFAULT_VIEWS,
         plotter = _Background(_plots, run, values, label, coloured, context, report, tmp) \
             if plots else None
         side = None
-        if beside is not None:
-            from rackstress.runs.forked import ForkedJob
-
-            side = ForkedJob(lambda: beside[0](report, measure, cmap), tmp / ".beside.json")
         with progress_bar(n_pics + len(movie_ks), progress, "pictures") as bar:
             bar.unit = "picture"
             t = time.perf_counter()
             cell = (window_size[0] // 2, window_size[1] // 2) if sheet_only else window_size
             painter = Painter(run, coloured, context, report.vmax, cmap, cell)
+            if beside is not None:      # forked once VTK's rendering classes are loaded,
+                from rackstress.runs.forked import ForkedJob   # which the child uses too
+
+                side = ForkedJob(lambda: beside[0](report, measure, cmap), tmp / ".beside.json")
             try:
                 pictures = _pictures(run, painter, values, report, views, label, cmap, coloured,
                                      context, hidden, tmp, bar, save=not sheet_only)

@@ -46,11 +46,20 @@ class ForkedJob:
         self.work, self.result = work, Path(result)
         self.proc, self.parent = None, os.getpid()
         if "fork" in mp.get_all_start_methods():
+            import gc
+
             self.proc = mp.get_context("fork").Process(target=self._child, daemon=True)
-            self.proc.start()
+            gc.freeze()                  # the objects so far: no collection walks them in the
+            try:                         # child, whose pages then stay shared (copy on write)
+                self.proc.start()
+            finally:
+                gc.unfreeze()
 
     def _child(self):
-        in_forked_child(self.parent)     # the run directory's lock stays the parent's alone
+        import gc
+
+        gc.disable()                     # a short life: no collection touches the parent's
+        in_forked_child(self.parent)     # pages; the run directory's lock stays the parent's
         try:
             rec = {"value": self.work()}
         except BaseException as exc:  # noqa: BLE001 - handed to the parent

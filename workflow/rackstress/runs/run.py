@@ -49,10 +49,10 @@ def check_memory(scene: Scene, engine: str, ranks: int = 1) -> int:
     """Refuse a run whose estimated memory exceeds what the machine has; return the estimate.
 
     The estimate: particles × :data:`BYTES_PER_PARTICLE` plus bind pairs × :data:`BYTES_PER_PAIR`
-    (counted without building them: within(d) pairs by a tree count), on every rank.
+    (counted without building them: within(d) pairs by cells, :mod:`rackstress.lib.cells`), on
+    every rank.
     """
-    from scipy.spatial import cKDTree
-
+    from rackstress.lib.cells import count_within
     from rackstress.model.operators import Bind, Within
 
     pairs = 0
@@ -62,7 +62,7 @@ def check_memory(scene: Scene, engine: str, ranks: int = 1) -> int:
                 continue
             t, u = scene.groups[target], scene.groups[op.source]
             if isinstance(op.coeff, Within):      # only pairs closer than d (Eq. 16): count them
-                pairs += int(cKDTree(t.o).count_neighbors(cKDTree(u.o), float(op.coeff.d)))
+                pairs += count_within(t.o, u.o, float(op.coeff.d))
             else:
                 pairs += t.n * u.n
     need = (scene.n_particles * BYTES_PER_PARTICLE.get(engine, 900) + pairs * BYTES_PER_PAIR) \
@@ -355,7 +355,7 @@ def execute(scene: Scene, out: Path, engine: str, mode: str, dump_every: int, *,
             progress: bool = True, comm=None, restart_every: int | None = None, deck=None,
             resume=None, records=None, wall_before: float = 0.0, extra: dict | None = None,
             fingerprint: dict | None = None, keep_checkpoints: bool = True,
-            at_quarter=None) -> dict:
+            head_start=None) -> dict:
     """Drive ``scene`` on ``engine`` into the prepared run directory ``out``, then write
     ``summary.json`` — the one ending of a run and of its resumption.
 
@@ -365,9 +365,12 @@ def execute(scene: Scene, out: Path, engine: str, mode: str, dump_every: int, *,
         Continue from this checkpoint (LAMMPS); ``records`` are the phase ends before it.
     wall_before : float
         Wall time of the earlier part(s) of a resumed run.
-    at_quarter : callable, optional
-        Called once, when a quarter of the steps are done (``rackstress run`` starts loading
-        post-processing's modules then: a long run does not hold them from its start).
+    head_start : callable, optional
+        Called once, as soon as the steps left look to take under :data:`HEAD_START_S` seconds
+        at the pace so far, or a quarter of the steps are done (``rackstress run`` then loads
+        post-processing's modules and measures the frames written on the other core: a short
+        run from its first steps, a long one not holding them from its start); a callable it
+        returns is called once the steps are done, before the guard rails.
 
     Returns
     -------
@@ -397,13 +400,16 @@ def execute(scene: Scene, out: Path, engine: str, mode: str, dump_every: int, *,
             ckpt = Checkpointer(out, eng.comm, restart_every, mode=mode, dump_every=dump_every,
                                 resumed=resume, fingerprint=fingerprint, keep=keep_checkpoints)
             on_phase_end = ckpt.wrap_phase_end(on_phase_end)
-        status, error = "ok", None
+        status, error, ended = "ok", None, None
         try:
             with progress_bar(scene.total_steps, progress,
                               f"{scene.name} ({engine})") as bar:
                 bar.update(resume.step if resume is not None else 0)
-                if at_quarter is not None:
-                    bar = _Trigger(bar, scene.total_steps // 4, at_quarter)
+                if head_start is not None:
+                    def begin():
+                        nonlocal ended
+                        ended = head_start()
+                    bar = _Trigger(bar, scene.total_steps, begin)
                 outcome = drive(eng, progress=bar, on_phase_end=on_phase_end,
                                 checkpoint=ckpt, resume=resume)
             p_end, steps = outcome.positions, outcome.steps
@@ -420,6 +426,8 @@ def execute(scene: Scene, out: Path, engine: str, mode: str, dump_every: int, *,
                           "masses": eng.deck.masses})
     finally:
         eng.close()
+        if callable(ended):
+            ended()
     if error is not None and root and engine == "lammps":
         from rackstress.engines.dumpio import trim_after, trim_nonfinite
 
@@ -452,16 +460,27 @@ def execute(scene: Scene, out: Path, engine: str, mode: str, dump_every: int, *,
     return summary
 
 
-class _Trigger:
-    """A progress bar's ``update`` that also calls ``fn`` once ``at`` steps are done."""
+#: :func:`execute`'s ``head_start`` is called once the steps left look to take under this
+#: many seconds (or a quarter of the steps are done)
+HEAD_START_S = 10.0
 
-    def __init__(self, bar, at: int, fn):
-        self.bar, self.at, self.fn, self.done = bar, at, fn, 0
+
+class _Trigger:
+    """A progress bar's ``update`` that also calls ``fn`` once, when the ``total`` steps'
+    remainder looks to take under :data:`HEAD_START_S` at the pace of the steps so far, or a
+    quarter of them are done."""
+
+    def __init__(self, bar, total: int, fn):
+        self.bar, self.total, self.fn, self.done = bar, total, fn, 0
+        self.t0 = time.perf_counter()
 
     def update(self, n: int) -> None:
         self.bar.update(n)
         self.done += n
-        if self.fn is not None and self.done >= self.at:
+        if self.fn is None or self.done <= 0:
+            return
+        pace = (time.perf_counter() - self.t0) / self.done
+        if self.done >= self.total // 4 or pace * (self.total - self.done) < HEAD_START_S:
             fn, self.fn = self.fn, None
             fn()
 
@@ -559,7 +578,7 @@ def _cache_prediction(fp: dict, pred: dict) -> None:
 def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
         dump_every: int | None = None, progress: bool = True, overwrite: bool = False,
         comm=None, restart_every: int | None = None, allow_unstable: bool = False,
-        planned: dict | None = None, keep_checkpoints: bool = True, at_quarter=None) -> dict:
+        planned: dict | None = None, keep_checkpoints: bool = True, head_start=None) -> dict:
     """Run ``scene`` on ``engine`` into the run directory ``out``; return the summary.
 
     Parameters
@@ -582,8 +601,9 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
     keep_checkpoints : bool
         False: the checkpoints are only for surviving a kill, and the caller removes them once
         the run has finished (:func:`rackstress.runs.checkpoint.discard_finished`).
-    at_quarter : callable, optional
-        Called once a quarter of the steps are done (:func:`execute`).
+    head_start : callable, optional
+        Called once the steps left look short, or a quarter are done; what it returns, if
+        callable, once the steps are done (:func:`execute`).
     planned : dict, optional
         The result of :func:`plan` for these arguments (checked already).
 
@@ -646,4 +666,4 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
         return execute(scene, out, engine, mode, dump_every, progress=progress, comm=comm,
                        restart_every=restart_every,
                        deck=deck if engine == "lammps" else None, fingerprint=fp,
-                       keep_checkpoints=keep_checkpoints, at_quarter=at_quarter)
+                       keep_checkpoints=keep_checkpoints, head_start=head_start)

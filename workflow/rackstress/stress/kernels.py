@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 try:
-    from rackstress.model import kernels as _model_kernels   # sets NUMBA_CACHE_DIR first
+    from rackstress.model import kernels as _model_kernels  # noqa: F401 - sets NUMBA_CACHE_DIR
     import numba as nb
 except ImportError:  # pragma: no cover - numba is a dependency; the NumPy path stays
     nb = None
@@ -129,38 +129,5 @@ def warm() -> float:
     return time.perf_counter() - t
 
 
-def compiled() -> bool:
-    """Whether this machine's kernel cache already holds the loop (a first run has not)."""
-    if nb is None:
-        return True
-    return any(_model_kernels.cache_dir().glob("stress_*/kernels._strain-*.nbi"))
-
-
-_WARMING: dict = {}
-
-
-def warm_in_background() -> None:
-    """On a machine whose cache lacks the loop, compile it in a separate process now (while
-    the simulation runs on the other core), so that the measures later only load it;
-    :func:`wait_warm` waits for that process. Nothing to do where it is cached already."""
-    import subprocess
-    import sys
-
-    if compiled() or "proc" in _WARMING:
-        return
-    try:
-        _WARMING["proc"] = subprocess.Popen(
-            [sys.executable, "-c", "from rackstress.stress.kernels import warm; warm()"],
-            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    except OSError:
-        pass                            # the measures compile it themselves
-
-
-def wait_warm() -> None:
-    """Wait for :func:`warm_in_background`'s process, if one runs."""
-    proc = _WARMING.pop("proc", None)
-    if proc is not None:
-        try:
-            proc.wait(timeout=120)
-        except Exception:  # noqa: BLE001 - a stuck compile: the measures compile it themselves
-            proc.kill()
+# whether the loop is cached, and compiling it apart: numba-free, for ``rackstress run``'s start
+from rackstress.stress.warming import compiled, wait_warm, warm_in_background  # noqa: E402,F401

@@ -332,32 +332,37 @@ class Head:
 _HEADS: dict = {}
 
 
-def follow(rundir, stop, frames: int, poll: float = 0.2) -> None:
+def follow(rundir, stop, frames: int, poll: float = 0.2, idle=None) -> None:
     """Measure the run's frames while LAMMPS writes them (``rackstress run``, in the thread of
     :func:`rackstress.render.prepare.prepare_in_background`, on the core the simulation
     leaves idle): every whole chunk of :func:`~rackstress.stress.measures.measure_frames` that
     the dump holds, until ``stop`` (a ``threading.Event``) is set. ``frames``: how many the
-    run will write (the chunks are those of the finished run). Nothing is written; a failure
-    only leaves the rest to post-processing."""
+    run will write (the chunks are those of the finished run); ``idle()``, if given, is called
+    while no whole chunk is new, and ``poll`` seconds waited only when it returns False (it
+    did nothing: :func:`rackstress.render.prepare.prepare_in_background`'s imports and
+    compression, a step a call). Nothing is written; a failure only leaves the rest to
+    post-processing."""
     from rackstress.stress.measures import frame_chunk, measure_chunk, neighbourhoods
-    from rackstress.stress.rundata import load_run
+    from rackstress.stress.rundata import grown, load_run
 
     import threading
 
     key = str(Path(rundir).resolve())
     head = _HEADS[key] = Head()
     dump = Path(rundir) / "trajectory.dump"
-    seen, chunk, parts, a, failed = -1, None, None, 0, 0
+    need, chunk, parts, a, failed, run = 1, None, None, 0, 0, None
     main = threading.main_thread()
     # ends when stopped, or when the command ends without stopping it (an error: the
     # interpreter's exit marks the main thread stopped before it waits for this one)
-    while not stop.wait(poll) and main.is_alive():
+    wait = 0
+    while not stop.wait(wait) and main.is_alive():
         try:
             size = dump.stat().st_size
-            if size == seen:
+            if size < need:             # not yet the bytes of a new whole chunk: no reading
+                wait = 0 if idle is not None and idle() else poll
                 continue
-            seen = size
-            run = load_run(rundir, allow_truncated=True)
+            wait = 0
+            run = load_run(rundir, allow_truncated=True) if run is None else grown(run)
             if head.hood is None:
                 parts = list(run.parts.values())
                 head.hood = neighbourhoods(run, parts)
@@ -367,9 +372,12 @@ def follow(rundir, stop, frames: int, poll: float = 0.2) -> None:
                 got = measure_chunk(run, head.hood, parts, ks)
                 head.done[(a, chunk)] = (Head.stamp(run, ks), got)
                 a += chunk
+            # the next chunk's frames, at the bytes a frame has taken so far
+            need = size + 1 + (a + chunk - run.index.n_frames) * size // max(run.index.n_frames, 1)
             failed = 0
         except Exception as exc:  # noqa: BLE001 - a head start only: post-processing measures the rest
             failed += 1                 # a frame caught mid-write reads as a bad one: retry
+            run = None                  # from a new load_run
             head.error = f"{type(exc).__name__}: {exc}"[:300]
             if failed > 5:
                 return

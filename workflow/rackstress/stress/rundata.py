@@ -208,6 +208,20 @@ def _open_run(rundir: Path, dump: Path, allow_truncated: bool) -> RunData:
     return RunData(rundir, scene, data, index, parts, u)
 
 
+def grown(run: RunData, allow_truncated: bool = True) -> RunData:
+    """``run`` (from :func:`load_run`) with the frames its dump holds now: the dump indexed
+    again and a new reader on it, the data file and the topology as they were read (a run
+    still being written: :func:`rackstress.stress.post.follow`, a third of a new
+    :func:`load_run`'s time)."""
+    from dataclasses import replace
+
+    dump = run.index.path
+    index = index_dump(dump, allow_truncated, partial=True)
+    run.universe.load_new(str(dump), format=RackDumpReader, index=index, rest=run.data,
+                          dt=run.dt)
+    return replace(run, index=index)
+
+
 def _parts(scene: dict, data: DataFile, rundir: Path) -> dict:
     groups = scene.get("groups")
     if not groups:

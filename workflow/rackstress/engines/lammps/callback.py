@@ -30,6 +30,7 @@ import numpy as np
 
 from rackstress.lib.vec import fresh_zeros, rowdot
 from rackstress.engines.watchdog import first_nonfinite
+from rackstress.engines.lammps.deck import _global_int
 from rackstress.model import kernels
 from rackstress.model.kernels import choice as kernel_choice
 from rackstress.model.kernels import compiled as compiled_kernels
@@ -912,19 +913,6 @@ class AttractTerm(Term):
             self._by_phase[key] = PairTerm(f"attract on {self.target}", Attract.factor,
                                            pl.i, pl.j, pl.c, compiled=self.forces.compiled)
         return self._by_phase[key]
-
-
-def _global_int(lmp, name: str):
-    """A pointer to one of LAMMPS' global ints (``lammps_extract_global``): read each step
-    in a fraction of a microsecond, where ``lmp.extract_global`` takes a few."""
-    import ctypes
-
-    fn = lmp.lib.lammps_extract_global
-    fn.restype = ctypes.POINTER(ctypes.c_int32)   # lmp.extract_global sets it on each call
-    ptr = fn(lmp.lmp, name.encode())
-    if not ptr:
-        raise RuntimeError(f"LAMMPS has no global '{name}'")
-    return ptr
 
 
 def _leading(mask: np.ndarray, bit: int, n: int) -> int:

@@ -1242,3 +1242,16 @@ def write_deck(scene: Scene, out: Path, mode: str = "exact", dump_every: int = 1
     (out / "particles.data").write_text(deck.data_text())
     (out / "in.lammps").write_text(deck.input_text(dump_every))
     return deck
+
+
+def _global_int(lmp, name: str):
+    """A pointer to one of LAMMPS' global ints (``lammps_extract_global``): read each step
+    in a fraction of a microsecond, where ``lmp.extract_global`` takes a few."""
+    import ctypes
+
+    fn = lmp.lib.lammps_extract_global
+    fn.restype = ctypes.POINTER(ctypes.c_int32)   # lmp.extract_global sets it on each call
+    ptr = fn(lmp.lmp, name.encode())
+    if not ptr:
+        raise RuntimeError(f"LAMMPS has no global '{name}'")
+    return ptr

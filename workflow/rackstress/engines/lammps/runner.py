@@ -29,8 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-from rackstress.engines.lammps.callback import PyForces, _global_int
-from rackstress.engines.lammps.deck import MOVE_GROUP, PY_FIX, PY_NAPPLY, Deck, balance_commands
+from rackstress.engines.lammps.deck import (MOVE_GROUP, PY_FIX, PY_NAPPLY, Deck, _global_int,
+                                           balance_commands)
 from rackstress.engines.lammps.plugin import locate as _locate_plugin
 from rackstress.errors import DivergenceError, RackstressError, StorageError
 from rackstress.lib.vec import fresh_zeros
@@ -136,6 +136,10 @@ class LammpsRun:
         self._move_bit = (1 << list(self.lmp.available_ids("group")).index(MOVE_GROUP)
                           if deck.passive else None)
         if deck.python_ops:
+            # imported here: its compiled kernels (numba, 0.2-0.5 s to import) are not
+            # needed where the plugin runs every operator
+            from rackstress.engines.lammps.callback import PyForces
+
             self.py = PyForces(self.lmp, deck, self.comm)
 
     @property

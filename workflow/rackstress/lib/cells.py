@@ -1,0 +1,70 @@
+"""Points near each other, by cells: which pairs of points are at most r apart, and how many.
+
+Two points at most r apart lie in the same or neighbouring cells of side r, so each point is
+compared with those of its own cell and of the 26 around it. This is what ``rackstress run``
+needs before its simulation (the scene's coincident particles, the memory estimate's binding
+pairs), without scipy.spatial, whose import (0.2 s) is a tenth of a small run's simulation.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def _candidates(a: np.ndarray, b: np.ndarray, r: float, half: bool):
+    """Batches of index pairs (i into ``a``, j into ``b``) of points in the same or
+    neighbouring cells of side ``r``; with ``half`` (``a`` is ``b``), each unordered pair once,
+    no point with itself."""
+    lo = np.minimum(a.min(axis=0), b.min(axis=0))
+    ca = np.floor((a - lo) / r).astype(np.uint64) + np.uint64(1)
+    cb = np.floor((b - lo) / r).astype(np.uint64) + np.uint64(1)
+    s1, s2 = (int(x) + 3 for x in np.maximum(ca.max(axis=0), cb.max(axis=0))[1:])
+    # a cell's key, wrapping modulo 2**64 where the cells are many: a neighbour's key is still
+    # the key plus the offset's, and a key shared by far cells only adds candidates
+    ka = (ca[:, 0] * np.uint64(s1) + ca[:, 1]) * np.uint64(s2) + ca[:, 2]
+    kb = (cb[:, 0] * np.uint64(s1) + cb[:, 1]) * np.uint64(s2) + cb[:, 2]
+    order = np.argsort(kb, kind="stable")
+    ks = kb[order]
+    for d in np.ndindex(3, 3, 3):
+        dx, dy, dz = (x - 1 for x in d)
+        if half and (dx, dy, dz) < (0, 0, 0):
+            continue
+        off = np.uint64(((dx * s1 + dy) * s2 + dz) % 2 ** 64)
+        first = np.searchsorted(ks, ka + off, "left")
+        n = np.searchsorted(ks, ka + off, "right") - first
+        if not n.any():
+            continue
+        i = np.repeat(np.arange(len(ka)), n)
+        j = np.repeat(first, n) + np.arange(len(i)) - np.repeat(np.cumsum(n) - n, n)
+        j = order[j]
+        if half and off == 0:
+            keep = j > i
+            i, j = i[keep], j[keep]
+        yield i, j
+
+
+def close_pairs(o: np.ndarray, r: float) -> np.ndarray:
+    """Every pair (i < j) of the points ``o`` (n, 3) at most ``r`` apart, as an (m, 2) array
+    sorted by i then j: what ``cKDTree(o).query_pairs(r)`` finds."""
+    o = np.asarray(o, dtype=np.float64)
+    if len(o) < 2 or not r > 0 or not np.isfinite(o).all():
+        return np.zeros((0, 2), np.int64)
+    found = []
+    for i, j in _candidates(o, o, r, half=True):
+        near = np.sum((o[i] - o[j]) ** 2, axis=1) <= r * r
+        found.append(np.stack([i[near], j[near]], axis=1))
+    if not found:
+        return np.zeros((0, 2), np.int64)
+    pairs = np.sort(np.concatenate(found), axis=1)
+    return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
+
+
+def count_within(a: np.ndarray, b: np.ndarray, r: float) -> int:
+    """How many ordered pairs (i of ``a``, j of ``b``) are at most ``r`` apart, a point with
+    itself included when ``a`` and ``b`` share it: what
+    ``cKDTree(a).count_neighbors(cKDTree(b), r)`` counts."""
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    if not len(a) or not len(b) or not r >= 0:
+        return 0
+    r = max(float(r), 1e-300)
+    return int(sum(np.count_nonzero(np.sum((a[i] - b[j]) ** 2, axis=1) <= r * r)
+                   for i, j in _candidates(a, b, r, half=False)))
