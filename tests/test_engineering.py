@@ -369,3 +369,47 @@ def test_support_reactions_balance_the_load():
     # the load (0, 0, −100) acts at x ≈ 100 (+ its small deflection): its moment about y is
     # z·Fx − x·Fz = 100·100; the reactions' is the opposite
     assert abs(My + 100.0 * 100.0) < 0.01 * 100.0 * 100.0
+
+
+@pytest.mark.lammps
+def test_a_prescribed_displacement_settles_with_beam_theorys_reaction(tmp_path):
+    """The cantilever bar with its free end face held at o + (0, 0, −δ) instead of loaded
+    (`displacement`, every direction held: a clamped–guided beam), on both engines.
+
+    It settles (exit 0; was exit 6 on both: the solver measured the load as the reactions of
+    the first state — the displaced face pulled against an undeformed bar, 1.7e6 N against
+    1.2e4 N at equilibrium — and the engines, which zero a held particle's force, measured none
+    and compared an absolute residual in newtons with 1e-6). Beam theory for a guided end
+    (Timoshenko): δ = P·L³/(12·E·I) + P·L/(κ·G·A), κ = 5/6, G = E/(2(1 + ν)): P = 386 N for
+    δ = 0.5692 mm; the lattice (E_eff 1.5 % stiff, ν = 1/4) within 5 %. By antisymmetry the
+    mid-span deflects by δ/2 exactly in the continuum; within 1 %."""
+    from rackstress.engines.static import _bind_pairs, forces
+
+    delta = 0.5692
+    text = CANTILEVER.read_text()
+    text = text.replace('where = { box = { min = ["$(100 - 0.99 * spacing)", -6, -6], '
+                        'max = [100.01, 6, 6] } }\nforce = [0, 0, "$(-load)"]',
+                        'where = { box = { min = [99.99, -6, -6], max = [100.01, 6, 6] } }\n'
+                        f'displacement = [0, 0, {-delta}]')
+    assert "displacement" in text
+    f = tmp_path / "guided.toml"
+    f.write_text(text)
+    for engine in ("reference", "lammps"):
+        out = tmp_path / engine
+        r = subprocess.run([sys.executable, "-m", "rackstress.cli", "run", str(f), "--engine",
+                            engine, "--out", str(out), "--no-render"], capture_output=True,
+                           text=True)
+        assert r.returncode == 0, r.stderr
+        s = json.loads((out / "summary.json").read_text())
+        assert s["settled"] and s["residual_engine"] <= 1e-6 and s["residual_solver"] <= 1e-6
+    sc = load_toml(f)
+    res = solve(sc)
+    o = sc.original_positions()
+    f_ = forces(sc, res.p, _bind_pairs(sc), np.zeros((sc.n_particles, 3)), sc.masses())
+    tip = np.abs(o[:, 0] - 100) < 1e-9
+    P = float(f_[tip, 2].sum())                 # the bar pulls the lowered face back up
+    E, nu, L, I, A = 70000.0, 0.33, 100.0, 10.0 ** 4 / 12, 100.0
+    beam = delta / (L ** 3 / (12 * E * I) + L / (5 / 6 * E / (2 * (1 + nu)) * A))
+    assert abs(P / beam - 1) < 0.05, (P, beam)
+    mid = np.abs(o[:, 0] - 50) < 1e-9
+    assert abs(-(res.p - o)[mid, 2].mean() / (delta / 2) - 1) < 0.01

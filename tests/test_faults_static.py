@@ -125,7 +125,8 @@ def test_a_load_too_small_to_resolve_says_why_it_cannot_settle(tmp_path):
 @pytest.mark.parametrize("case", ["empty load", "no E", "mesh in metres", "mesh in mm in SI",
                                   "E 1e-300", "E 1e300", "density 1e9", "force 1e300",
                                   "gravity 1e308", "displacement 1e300", "displacement 1e6",
-                                  "displacement on a support"])
+                                  "displacement on a support", "fix x twice",
+                                  "spacing 1e-300"])
 def test_physical_input_errors_name_the_place(tmp_path, case):
     """Exit 2 and one paragraph naming the file and the field; nothing written.
 
@@ -154,7 +155,22 @@ def test_physical_input_errors_name_the_place(tmp_path, case):
            "displacement on a support": ("support", "displacement = [0, 0, 1]",
                                          ["[[load]] #1", "displacement", "already held in z",
                                           "[[support]]"])}
-    if case in bad:
+    if case == "fix x twice":
+        # ["x", "x"] for ["x", "y"]: was accepted, the bar a mechanism, "not settled" (exit 6)
+        scene = hinge(tmp_path)
+        text = scene.read_text()
+        scene.write_text(text.replace('radius = "$pin" } }\n',
+                                      'radius = "$pin" } }\nfix = ["x", "x"]\n', 1))
+        assert scene.read_text() != text
+        says = ["hinge.toml", "[[support]] #1", "'bar'", "fix", "'x' more than once"]
+    elif case == "spacing 1e-300":
+        # 20 × 4 × 4 mm at 1e-300 mm: 320 mm³ / 1e-900 mm³ = 3.2e902 particles (hand count;
+        # was "about inf particles" after a NumPy overflow warning)
+        scene = hinge(tmp_path)
+        scene.write_text(scene.read_text().replace("spacing = 1.0", "spacing = 1e-300"))
+        says = ["hinge.toml", "'bar'", "spacing 1e-300", "about 3.2e+902 particles",
+                "10,000,000"]
+    elif case in bad:
         where, value, says = bad[case]
         if where == "material":
             scene = hinge(tmp_path, material=value)
@@ -186,7 +202,7 @@ def test_physical_input_errors_name_the_place(tmp_path, case):
     out = tmp_path / "run"
     r = rs("run", scene, "--out", out, *QUIET, timeout=300)
     assert r.returncode == 2, r.stderr
-    assert "Traceback" not in r.stderr
+    assert "Traceback" not in r.stderr and "inf " not in r.stderr and "Warning" not in r.stderr
     for word in says:
         assert word in r.stderr, (word, r.stderr)
     assert not out.exists()
@@ -266,3 +282,33 @@ def test_fea_on_a_damaged_run_directory_names_the_file(tmp_path, static_run, dam
     assert r.stderr.count("rackstress: error") == 1 and says in r.stderr, r.stderr
     assert str(d / name) in r.stderr
     assert not (d / "fea.json").exists()
+
+
+@pytest.mark.lammps
+def test_fea_without_boundary_npz_rebuilds_a_scene_file_named_like_a_built_in(tmp_path):
+    """A run of a scene file whose name is a built-in scene's (examples/cantilever/scene.toml
+    is "cantilever", like the planar built-in) with its boundary.npz gone: ``rackstress fea``
+    rebuilds the scene from its file (was: the built-in's phases differed, "could not be
+    rebuilt", exit 2) and takes the supports and loads from it: the same FE field as from the
+    run's own boundary.npz, 32 held particles (the cylinder r = 2.5 about x = y = 0.5 holds the
+    8 columns with dx² + dy² ≤ 6.25, 4 high) and the 10 N on the 16 particles at x = 19.5."""
+    scene = hinge(tmp_path)
+    scene.write_text(scene.read_text().replace('name = "hinge"', 'name = "cantilever"'))
+    out = tmp_path / "run"
+    r = rs("run", scene, "--out", out, *QUIET, timeout=300)
+    assert r.returncode == 0, r.stderr
+    bare = tmp_path / "bare"
+    shutil.copytree(out, bare)
+    (bare / "boundary.npz").unlink()
+    for d in (out, bare):
+        r = rs("fea", d, timeout=300)
+        assert r.returncode == 0, r.stderr
+    import numpy as np
+
+    data = json.loads((bare / "fea.json").read_text())
+    assert data["boundary"] == "the scene (no boundary.npz)"
+    assert not data["note"] or "could not be rebuilt" not in data["note"]
+    assert data["held_particles"] == 32 and data["loaded_particles"] == 16
+    assert data["total_force"] == pytest.approx([0, -10, 0])
+    assert np.load(bare / "fea.npz")["fea_von_mises"] == pytest.approx(
+        np.load(out / "fea.npz")["fea_von_mises"], rel=1e-9)

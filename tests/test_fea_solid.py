@@ -156,3 +156,67 @@ def test_a_sliver_is_removed_and_the_surface_stays_closed():
     assert t2.volume == pytest.approx(8 / 6)
     area = np.linalg.norm(np.cross(v[out[:, 1]] - v[out[:, 0]], v[out[:, 2]] - v[out[:, 0]]), axis=1)
     assert (area > 1e-9).all() and len(out) == len(f2)
+
+
+def test_points_are_probed_a_bounded_chunk_at_a_time():
+    """``_probes`` asks scikit-fem's element search a chunk of points at a time and returns the
+    same matrix as one ``probes`` call over all of them (scikit-fem's own answer, the
+    independent path): the P2 vector field's values at points inside a 4 × 2 × 2 cell mesh."""
+    from skfem import Basis, ElementTetP2, ElementVector, MeshTet
+
+    import rackstress.validity.fea as fea
+
+    p, t = cell_mesh(_bar(4, 2, 2), 1.0)
+    mesh = MeshTet(p, t)
+    basis = Basis(mesh, ElementVector(ElementTetP2()))
+    x = np.random.default_rng(3).uniform([-0.45, -0.45, -0.45], [3.45, 1.45, 1.45], (200, 3))
+    u = np.random.default_rng(4).normal(size=basis.N)
+    n_el = mesh.t.shape[1]                      # 16 cubes × 6 tetrahedra
+    assert n_el == 96 and len(fea.probe_chunks(200, n_el)) == 1
+    # never fewer than 16 points a chunk, whatever the mesh
+    chunks = fea.probe_chunks(200, 96 * 10 ** 6)
+    assert [c.stop - c.start for c in chunks] == [16] * 12 + [8]
+    whole = basis.probes(x.T) @ u
+    old = fea.PROBE_BYTES
+    try:            # a budget of 40 points × 96 elements: five chunks, the same values
+        fea.PROBE_BYTES = 24 * 96 * 40
+        assert len(fea.probe_chunks(200, 96)) == 5
+        assert np.abs(fea._probes(basis, x) @ u - whole).max() < 1e-12
+    finally:
+        fea.PROBE_BYTES = old
+
+
+def test_points_outside_the_mesh_do_not_ask_every_element_at_once():
+    """The cantilever's 10,100 particles on its 60,600 tetrahedra were killed out of memory
+    at 24 GB: a point just outside the mesh (on a face, rounded outwards) is in none of its 10
+    nearest elements, and scikit-fem then tried every element for every point asked at once
+    (points × elements × 3 doubles). 3,000 points 1e-9 outside a 30 × 10 × 10 cell mesh
+    (18,000 tetrahedra; 1.3 GB in one array the old way) in a process whose address space is
+    capped at its size after the imports + 1 GB: each point is moved inside by less than
+    1e-6 of the spacing."""
+    import subprocess
+    import sys
+    import textwrap
+
+    code = textwrap.dedent("""
+        import resource, numpy as np
+        from skfem import MeshTet
+        from rackstress.validity.solid import cell_mesh
+        from rackstress.validity.fea import move_inside
+        o = np.array([[x, y, z] for z in range(10) for y in range(10) for x in range(30)], float)
+        p, t = cell_mesh(o, 1.0)
+        mesh = MeshTet(p, t)
+        assert mesh.t.shape[1] == 18000
+        rng = np.random.default_rng(5)
+        x = np.c_[np.full(3000, -0.5 - 1e-9), rng.uniform(0, 9, 3000), rng.uniform(0, 9, 3000)]
+        size = int(open("/proc/self/statm").read().split()[0]) * resource.getpagesize()
+        resource.setrlimit(resource.RLIMIT_AS, (size + 2 ** 30, resource.RLIM_INFINITY))
+        y = move_inside(mesh, x, fracs=(1e-9, 1e-6, 1e-3))
+        d = np.linalg.norm(y - x, axis=1)
+        print(float(d.max()), int((y[:, 0] >= -0.5).sum()))
+    """)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    dmax, inside = r.stdout.split()
+    assert float(dmax) < 1e-5 and int(inside) == 3000

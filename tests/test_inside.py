@@ -135,3 +135,54 @@ def test_bench_inside_writes_its_table(tmp_path):
     assert row["old_tested"] == row["bindings"] and row["differ"] == 0
     assert (tmp_path / "inside.md").read_text().count("|") > 20
     assert (tmp_path / "inside.json").is_file()
+
+
+def test_a_binding_on_the_parts_own_face_is_inside():
+    """A lattice layer on the part's face (the bracket's 3 mm leg at spacing 0.4: sites at
+    x = 0.2 … 3.0) is bound along the face: a segment on the closed part crosses no free space
+    (was dropped: 20,377 of the bracket's 361,620 bindings at 0.4, the whole face layer held by
+    the interior alone). By the bracket's geometry (leg x 0..3, arm y 27..30, holes r = 2
+    about (y, z) = (6, 8) and (16, 8)): on the leg's face x = 3 and on the arm's face y = 27
+    inside; across the re-entrant edge x = 3, y = 27 (its midpoint at x 3.2, y 26.8 in free
+    space) and through a hole not; on the L of two boxes, the face x = −0.5 inside and the
+    diagonal through its re-entrant corner not."""
+    surf = read_surface(STL)
+    a = np.array([[3.0, 1.0, 0.6], [3.0, 1.0, 0.6], [10.0, 27.0, 0.6], [2.6, 1.0, 0.6],
+                  [3.0, 26.6, 0.6], [2.2, 6.2, 8.2], [3.0, 12.0, 8.0]])
+    b = np.array([[3.0, 1.4, 0.6], [3.0, 1.4, 1.0], [10.4, 27.0, 1.0], [2.6, 1.4, 0.6],
+                  [3.4, 27.0, 0.6], [2.2, 6.2, 8.6], [3.0, 12.4, 8.0]])
+    want = [True, True, True, True, False, False, True]
+    assert sampled(surf, a, b, 0.6).tolist() == want
+    assert segments_inside(surf, a, b, 0.6).tolist() == want
+    L = Box((-.5, -.5, -.5), (.5, 1.5, .5)) | Box((-.5, .5, -.5), (1.5, 1.5, .5))
+    a2 = np.array([[-0.5, 0, 0], [0, 0, 0], [0.5, 0, 0]])
+    b2 = np.array([[-0.5, 1, 0], [1, 1, 0], [1.5, 1, 0]])
+    assert sampled(L, a2, b2, 1.5).tolist() == [True, False, False]
+
+
+def test_a_solids_own_pairs_are_tested_once_per_run(tmp_path):
+    """The scene's memory estimate, the deck and the static solver each ask a solid for its
+    own pairs' inside test (at spacing 0.4 the bracket's run printed 'bind inside' 4 times,
+    11–18 s each): the answer is remembered for the same positions and pairs, asked again for
+    others. A real run of the bracket with the test's report forced prints it once."""
+    import subprocess
+    import sys
+
+    from rackstress.scenes import load
+
+    sc = load(str(STL.parent / "static.toml"), {"spacing": 1.0})
+    sol = next(op for op in sc.operators["bracket"] if isinstance(op, Bind)).coeff
+    o = sc.groups["bracket"].o
+    ij = _pairs(o, 1.5)
+    first = sol.inside_pairs(o, ij[:, 0], ij[:, 1])
+    assert sol.inside_pairs(o, ij[:, 0], ij[:, 1]) is first
+    again = sol.inside_pairs(o, ij[:-1, 0], ij[:-1, 1])
+    assert again is not first and np.array_equal(again, first[:-1])
+    code = ("import sys, rackstress.model.inside as m; m.REPORT_AT = 0; "
+            "from rackstress.cli import main; sys.argv = ['rackstress', 'run', "
+            f"'{STL.parent / 'static.toml'}', '--out', '{tmp_path / 'run'}', '--no-render']; "
+            "main()")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert r.stderr.count("bind inside bracket") == 1, r.stderr

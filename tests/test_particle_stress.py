@@ -326,3 +326,22 @@ def test_lammps_on_two_ranks_matches_the_reference_engine(tmp_path):
     assert a.shape == b.shape
     np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9 * np.nanmax(b))
     assert np.nanmax(a[-1]) > 0
+
+
+def test_coinciding_bound_particles_give_no_numpy_warning():
+    """A part that did not settle can collapse two bound particles onto one point (the
+    'loose' part of tests/test_faults_static.py): their binding's virial is undefined; the
+    stress there is non-finite, and the terminal gets no NumPy "divide by zero" warning.
+    A pair 2 apart with rest length 1 (k = 1): W = ½·k·(1 − 1/4)·d⊗d = 1.5 in xx (hand)."""
+    import warnings
+
+    from rackstress.stress import tensor as T
+
+    p = np.array([[0.0, 0, 0], [0.0, 0, 0], [2.0, 0, 0]])
+    i, j = np.array([0, 2]), np.array([1, 0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        W = T.virial(p, i, j, np.ones(2), np.ones(2), n=3)
+    assert not np.isfinite(W[0]).all()
+    assert W[2][0] == pytest.approx(0.5 * (1 - 1 / 4) * 4) and np.all(W[2][1:] == 0)
+    assert np.all(W[1] == 0)

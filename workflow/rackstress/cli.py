@@ -224,7 +224,9 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
                 return stop_prepared        # once the last step is done
         # the lock is held from before anything is written until the pictures are done
         with locked(out) as held:   # noqa: F841
-            with phase(f"running {sc.total_steps:,} steps into {out}", shown, ticker=False):
+            doing = ("solving for the static equilibrium (Newton's method)"
+                     if sc.analysis == "static" else f"running {sc.total_steps:,} steps")
+            with phase(f"{doing} into {out}", shown, ticker=False):
                 summary = run_mod.run(sc, out, engine=engine, mode=mode,
                                       dump_every=dump_every, progress=shown,
                                       overwrite=overwrite, restart_every=restart_every or None,

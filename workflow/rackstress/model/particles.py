@@ -265,14 +265,19 @@ def fill(region, spacing: float, packing: str = "cubic", origin=None, name: str 
             f"{ext.min() / 2:.6g}, or check the mesh's units (scale)")
     density = 1.0 if packing == "cubic" else math.sqrt(2.0)
     volume = getattr(region, "volume", None)
-    box_count = float(np.prod(ext / s)) * density
-    estimate = (volume / s ** 3) * density if volume else box_count
-    if estimate > max_particles or box_count > 20 * max_particles:
+    # counted as logarithms: at a spacing of 1e-300 the count itself overflows a double
+    log_box = float(np.sum(np.log10(ext) - math.log10(s))) + math.log10(density)
+    log_est = (math.log10(volume) - 3 * math.log10(s) + math.log10(density)
+               if volume and volume > 0 else log_box)
+    if log_est > math.log10(max_particles) or log_box > math.log10(20 * max_particles):
+        e = math.floor(log_est)
+        about = f"{10 ** log_est:.3g}" if log_est < 300 else f"{10 ** (log_est - e):.3g}e+{e}"
         raise SceneError(
-            f"{name}: filling it at spacing {s:g} would make about {estimate:.3g} particles "
+            f"{name}: filling it at spacing {s:g} would make about {about} particles "
             f"(bounding box {np.round(ext, 6).tolist()}), more than the {max_particles:,} a "
-            "part may have; the mesh is probably in other units than intended: give scale "
-            "(e.g. 0.001 for millimetres to metres) or a larger spacing")
+            "part may have: the spacing is too small for the part, or the mesh is in other "
+            "units than intended: give a larger spacing, or scale (e.g. 0.001 for millimetres "
+            "to metres)")
     _, shape = lattice_points(lo, hi, s, packing, origin, z_slice=slice(0, 0))
     nx, ny, nz = shape
     per_slab = 2 * max(1, int(1_000_000 // max(1, nx * ny)))   # even: hcp parities line up

@@ -289,7 +289,12 @@ class Scene:
                                  "the sum of two radii)")
             u0 = getattr(g, "u0", None)
             if u0 is not None:
-                far = np.linalg.norm(np.asarray(u0, dtype=float), axis=1) > self.bound
+                u = np.asarray(u0, dtype=float)     # the norm scaled: 1e300 squared overflows
+                big = np.abs(u).max(axis=1)
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    far = ~(np.nan_to_num(big * np.linalg.norm(
+                        u / np.where(big > 0, big, 1.0)[:, None], axis=1), nan=np.inf)
+                        <= self.bound)
                 if far.any():
                     k = int(np.flatnonzero(far)[0])
                     raise SceneError(

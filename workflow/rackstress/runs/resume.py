@@ -139,11 +139,13 @@ def rebuild_scene(rundir: Path, spec: str | None = None):
         raise RunDirError(f"{rundir} is not a run directory (no scene.json)") from None
     params = dict(rec.get("params") or {})
     steps = params.pop("steps", None)
-    if spec is None and rec["scene"] not in scenes.BUILDERS:
-        src = rec.get("source")
+    src = rec.get("source")
+    # a scene file's run is rebuilt from its file even when it shares a built-in scene's name
+    # (examples/cantilever/scene.toml is named "cantilever", like the planar built-in)
+    if spec is None and (src or rec["scene"] not in scenes.BUILDERS):
         if not src or not Path(src).is_file():
-            raise ResumeError(f"scene '{rec['scene']}' of {rundir} is not a built-in scene and its "
-                              f"file {src or '(unknown)'} is gone: give its scene file again, "
+            raise ResumeError(f"scene '{rec['scene']}' of {rundir} was read from a scene file, "
+                              f"{src or '(unknown)'}, which is gone: give its scene file again, "
                               f"e.g. 'rackstress run SCENE.toml --resume {rundir}'")
         spec = src
     name = spec or rec["scene"]

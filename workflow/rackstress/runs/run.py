@@ -292,7 +292,7 @@ def execute_static(scene: Scene, out: Path, engine: str, mode: str, *, progress:
     try:
         eng.enter_phase({})                     # frame 0: the original state
         if engine == "reference":
-            engine_rel = engine_residual(scene, eng, res.p)
+            engine_rel = engine_residual(scene, eng, res.p, res.load)
             eng.step_count = res.iterations
             if eng._dump is not None:
                 eng._dump.write(res.iterations, res.p)
@@ -301,7 +301,7 @@ def execute_static(scene: Scene, out: Path, engine: str, mode: str, *, progress:
                 eng.command(f"undump {eng._dump_id}")
             eng.command(f"reset_timestep {max(1, res.iterations)}")
             eng.step = max(1, res.iterations)
-            engine_rel = engine_residual(scene, eng, res.p)
+            engine_rel = engine_residual(scene, eng, res.p, res.load)
             if eng._dump_id is not None:
                 eng.command(f"write_dump all custom {eng._dump_file} id type mol x y z modify "
                             "sort id format float %.10g append yes")

@@ -96,6 +96,12 @@ def supports(ctx, tables, groups: dict, select) -> None:
                 or not all(isinstance(a, str) and a in ("x", "y", "z") for a in fix)):
             raise c.error(f"must be a non-empty array of directions among \"x\", \"y\", \"z\" "
                           f"(a roller on a floor: [\"z\"]), got {fix!r}", "fix")
+        twice = sorted({a for a in fix if fix.count(a) > 1})
+        if twice:      # ["x", "x"] for ["x", "y"]: the part would be a mechanism (exit 6)
+            raise c.error(f"lists {', '.join(repr(a) for a in twice)} more than once "
+                          f"({fix!r}); name each direction to fix once: [\"x\", \"y\", "
+                          "\"z\"] (the default) holds, one or two directions make a roller or "
+                          "a symmetry plane", "fix")
         for a in fix:
             g.fixed[mask, "xyz".index(a)] = True
         _refix(g)

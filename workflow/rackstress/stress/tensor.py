@@ -85,12 +85,15 @@ def virial(p: np.ndarray, i: np.ndarray, j: np.ndarray, k: np.ndarray, L0sq: np.
 
 
 def virial_of(d, d2, k, L0sq, gather) -> np.ndarray:
-    """:func:`virial` from the bindings' vectors d and squared lengths d2."""
-    s = 0.5 * k * (1.0 - L0sq / d2)
-    dd = np.empty((len(d), 6))
-    for c, (r, q) in enumerate(VOIGT):
-        np.multiply(d[:, r], d[:, q], out=dd[:, c])
-    dd *= s[:, None]
+    """:func:`virial` from the bindings' vectors d and squared lengths d2 (two bound particles
+    that coincide — a part that did not settle, collapsed — give a non-finite stress, not a
+    NumPy warning on the terminal)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = 0.5 * k * (1.0 - L0sq / d2)
+        dd = np.empty((len(d), 6))
+        for c, (r, q) in enumerate(VOIGT):
+            np.multiply(d[:, r], d[:, q], out=dd[:, c])
+        dd *= s[:, None]
     return np.asarray(gather @ dd)
 
 
