@@ -230,6 +230,14 @@ accel = [3.0, 0.0, -2.0]
 """
 
 
+def _run(scene: Path, engine: str, out: Path) -> Path:
+    """``rackstress run SCENE --engine ENGINE --out OUT --no-render``, which must succeed."""
+    r = subprocess.run([sys.executable, "-m", "rackstress.cli", "run", str(scene), "--engine",
+                        engine, "--out", str(out), "--no-render"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    return out
+
+
 def test_roller_support_on_both_engines(tmp_path):
     """Fixed directions stay at the original coordinate on the reference engine and on LAMMPS
     (fix setforce with NULL), the free ones move, and the two engines agree."""
@@ -237,11 +245,7 @@ def test_roller_support_on_both_engines(tmp_path):
     f.write_text(ROLLER)
     ends = {}
     for engine in ("reference", "lammps"):
-        out = tmp_path / engine
-        r = subprocess.run([sys.executable, "-m", "rackstress.cli", "run", str(f), "--engine",
-                            engine, "--out", str(out), "--no-render"], capture_output=True,
-                           text=True)
-        assert r.returncode == 0, r.stderr
+        out = _run(f, engine, tmp_path / engine)
         frames = dump_text(trajectory(out)).split("ITEM: TIMESTEP")[-1]
         rows = frames.split("ITEM: ATOMS")[1].strip().splitlines()[1:]
         ends[engine] = np.array([[float(x) for x in row.split()[3:6]] for row in rows])
@@ -395,11 +399,7 @@ def test_a_prescribed_displacement_settles_with_beam_theorys_reaction(tmp_path):
     f = tmp_path / "guided.toml"
     f.write_text(text)
     for engine in ("reference", "lammps"):
-        out = tmp_path / engine
-        r = subprocess.run([sys.executable, "-m", "rackstress.cli", "run", str(f), "--engine",
-                            engine, "--out", str(out), "--no-render"], capture_output=True,
-                           text=True)
-        assert r.returncode == 0, r.stderr
+        out = _run(f, engine, tmp_path / engine)
         s = json.loads((out / "summary.json").read_text())
         assert s["settled"] and s["residual_engine"] <= 1e-6 and s["residual_solver"] <= 1e-6
     sc = load_toml(f)
