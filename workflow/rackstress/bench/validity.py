@@ -314,8 +314,14 @@ def run_bench(out: Path | None = None, quick: bool = False, echo=print) -> dict:
             "lattice_material": lattice_material, "quick": quick, "machine": machine(), "target": TARGET, "fea": fea_studies,
             "results": results, "strain_meets_target_on_all_cases": best,
             "wall_s": time.perf_counter() - t0}
+    if not quick:       # the planar cases as aluminium scenes in MPa (rackstress.bench.planar)
+        from rackstress.bench import planar
+
+        data["planar"] = planar.run_planar(echo=echo)
     write_json(out / "validity.json", data)
     (out / "validity.md").write_text(report(data))
+    if data.get("planar"):
+        planar.write_section(out / "validity.md", planar.section(data["planar"]))
     try:
         plot(data, out / "validity.png")
     except Exception as exc:  # pragma: no cover - a plot failure keeps the figures
