@@ -988,7 +988,7 @@ def bench_stress(out, quick):
 @_bench_out
 @click.option("--quick", is_flag=True, help="Small bodies and coarse meshes (seconds).")
 @click.option("--planar", is_flag=True,
-              help="Only the planar cases as aluminium scenes in MPa (~1 min); rewrites their "
+              help="Only the planar cases as aluminium scenes in MPa (~2 min); rewrites their "
                    "section of validity.md.")
 def bench_validity(out, quick, planar):
     """Stress measures of three body models against linear-elastic FEA (three cases)."""

@@ -26,7 +26,7 @@ every face):
   total force σ·2W·t on each end column); symmetry planes x = 0 (``fix = ["x"]``) and y = 0
   (``fix = ["y"]``) as in the FEA's quarter model. Kirsch (infinite plate): σ_max = 3σ at the
   hole's edge (0, ±4); Heywood's finite-width strip: K_t = (2 + (1 − d/D)³)·D/(D − d).
-  Run at spacings 1, ½, ¼ mm (the hole 4, 8, 16 spacings) for the ratio's convergence.
+  Run at spacings 1, ½, ¼, ⅛ mm (the hole 4, 8, 16, 32 spacings) for the ratio's convergence.
 * ``l-bracket`` — leg 6 × 26, arm 24 × 6 (the arm's top at y = 26), held over y < 2, 20 N in −y
   on the arm's last column; FEA: the L shifted down by 2, fixed along its bottom edge. Particles
   within 1.5 spacings of the re-entrant corner (6, 20) are left out (singular, σ ~ r^−0.456).
@@ -50,7 +50,7 @@ P_BRACKET = 20.0                          # N
 SIGMA = 10.0                              # MPa, the plate's far-field tension
 HOLE = 4.0                                # mm
 HALF_WIDTH = 12.5                         # mm, at spacing 1 (n = 12)
-PLATE_SPACINGS = (1.0, 0.5, 0.25)
+PLATE_SPACINGS = (1.0, 0.5, 0.25, 0.125)
 QUICK_PLATE_SPACINGS = (1.0,)
 DENSITIES = (4, 8)                        # FEA mesh per mm
 CORNER_EXCLUDE = 1.5                      # spacings
@@ -163,6 +163,31 @@ def cell_mean(field, points: np.ndarray, a: float, hole: float | None) -> np.nda
         / np.maximum(np.bincount(owner[keep], minlength=len(points)), 1)
 
 
+def staircase(o: np.ndarray, vm: np.ndarray, fvm: np.ndarray, a: float) -> dict:
+    """The hole's staircase edge: particles within 1.5 spacings of the hole where FEA's σ_vm
+    is at least half its peak, grouped by their in-plane neighbours within 1.5 spacings in
+    their own layer (8: a full ring; 7: the inner corner of a step; ≤ 6: a step's outer
+    corners): particles / FEA at centres, mean and largest, and where the peak particle is."""
+    from scipy.spatial import cKDTree
+
+    nb = np.zeros(len(o), dtype=int)
+    for z in np.unique(np.round(o[:, 2] / a)):
+        m = np.flatnonzero(np.round(o[:, 2] / a) == z)
+        t = cKDTree(o[m, :2])
+        nb[m] = [len(x) - 1 for x in t.query_ball_point(o[m, :2], 1.5 * a)]
+    r = np.hypot(o[:, 0], o[:, 1])
+    band = (r - HOLE < 1.5 * a) & (fvm >= 0.5 * fvm.max())
+    out = {}
+    for name, sel in (("8", nb == 8), ("7", nb == 7), ("<=6", nb <= 6)):
+        q = (vm / fvm)[band & sel]
+        out[name] = {"n": int(len(q)), "mean": float(q.mean()) if len(q) else None,
+                     "max": float(q.max()) if len(q) else None}
+    k = int(np.argmax(vm))
+    out["peak_neighbours"] = int(nb[k])
+    out["peak_r_minus_hole"] = float(r[k] - HOLE)
+    return out
+
+
 def run_case(case: str, a: float, work: Path, echo=print, half_width: float = HALF_WIDTH) -> dict:
     """Write, run (``rackstress run``) and measure one case; its FEA at centres and cells."""
     from rackstress.runs.run import run
@@ -217,6 +242,7 @@ def run_case(case: str, a: float, work: Path, echo=print, half_width: float = HA
                     "kirsch_centres_MPa": float(kv.max()), "kirsch_cells_MPa": float(kc.max()),
                     "fea_edge_MPa": float(res.at(np.array([[0.0, HOLE]]))["von_mises_stress"][0]),
                     "nearest_r": float(np.hypot(*xy.T).min())})
+        row["staircase"] = staircase(o[keep], v, fvm, a)
         row["ratio_kirsch_centres"] = row["particles_peak_MPa"] / row["kirsch_centres_MPa"]
         row["ratio_kirsch_cells"] = row["particles_peak_MPa"] / row["kirsch_cells_MPa"]
     echo(f"  planar {case} a = {a:g} mm: {len(o):,} particles, peak σ_vm "
@@ -227,13 +253,14 @@ def run_case(case: str, a: float, work: Path, echo=print, half_width: float = HA
 
 
 CASES = ("cantilever", "plate-hole", "l-bracket")
-#: the wide plate for Kirsch's infinite-plate check: W = 40.5 mm (d/D = 0.1) at spacing 1 mm
+#: the wide plate for Kirsch's infinite-plate check: W ≈ 40.5 mm (d/D ≈ 0.1), spacing 1, ½ mm
 KIRSCH_HALF_WIDTH = 40.5
+KIRSCH_SPACINGS = (1.0, 0.5)
 TITLE = "## Peak von Mises in MPa: the planar cases as material scenes"
 
 
 def run_planar(quick: bool = False, echo=print) -> dict:
-    """Every case at spacing 1 mm, the plate also at ½ and ¼ mm and, for Kirsch, 81 mm wide
+    """Every case at spacing 1 mm, the plate also at ½, ¼ and ⅛ mm and, for Kirsch, 81 mm wide at 1 and ½ mm
     (``quick``: spacing 1 mm, no wide plate)."""
     from rackstress.bench import machine
 
@@ -245,9 +272,8 @@ def run_planar(quick: bool = False, echo=print) -> dict:
             for a in ((1.0,) if case != "plate-hole" else
                       (QUICK_PLATE_SPACINGS if quick else PLATE_SPACINGS)):
                 rows.append(run_case(case, a, Path(tmp), echo=echo))
-        if not quick:
-            r = run_case("plate-hole", 1.0, Path(tmp), echo=echo,
-                         half_width=KIRSCH_HALF_WIDTH)
+        for a in (() if quick else KIRSCH_SPACINGS):
+            r = run_case("plate-hole", a, Path(tmp), echo=echo, half_width=KIRSCH_HALF_WIDTH)
             r["case"] = "plate-hole (wide)"
             rows.append(r)
     return {"rows": rows, "material": {"E_MPa": E, "nu": NU}, "layers": LAYERS,
@@ -305,9 +331,47 @@ def section(data: dict) -> str:
               fmt(r["kirsch_centres_MPa"], 4), fmt(r["ratio_kirsch_centres"], 3),
               fmt(r["kirsch_cells_MPa"], 4), fmt(r["ratio_kirsch_cells"], 3),
               fmt(r["nearest_r"], 4)] for r in plates]))
+    if plates:
+        lines += ["", "**The staircase edge.** The lattice's hole is a staircase. Particles "
+                  "within 1.5 spacings of the hole where FEA's σ_vm is at least half its peak, "
+                  "by their in-plane neighbours within 1.5 spacings (8: a full ring; 7: the "
+                  "inner corner of a step; ≤ 6: a step's outer corners); particles / FEA at the "
+                  "centres, mean (largest):", ""]
+        lines.append(md_table(
+            ["plate", "spacing [mm]", "8 neighbours", "7", "≤ 6",
+             "peak particle: neighbours, r − 4 mm"],
+            [[r["case"], fmt(r["spacing"], 3)]
+             + [f"{fmt(r['staircase'][k]['mean'], 3)} ({fmt(r['staircase'][k]['max'], 3)}), "
+                f"n = {r['staircase'][k]['n']}" if r["staircase"][k]["n"] else "none"
+                for k in ("8", "7", "<=6")]
+             + [f"{r['staircase']['peak_neighbours']}, "
+                f"{r['staircase']['peak_r_minus_hole']:.3f} mm"] for r in plates]))
+    if plates and not data.get("quick"):
+        lines += ["", "**What it shows** (static solves: the figures reproduce exactly). Where "
+                  "the part's edges are lattice faces (the cantilever, the L-bracket away from "
+                  "its singular corner) the peak is within 4 % of FEA at the centres and 3 % of "
+                  "its cell means at spacing 1 mm. The plate's peak sits on the hole, which the "
+                  "lattice draws as a staircase, and it does not converge to FEA's: at 4 "
+                  "spacings the particles at the hole's sides, (0, ±4), lie on the cylinder and "
+                  "are not filled, so the peak is a spacing out and 12 % low; with 8, 16 and "
+                  "32 spacings the ratio runs 0.92, 1.01, 1.17. Against Kirsch (the 81 mm "
+                  "plate, 4 and 8 spacings) the particles' peak is 0.887 and 0.945 of his "
+                  "field's peak at the centres, 0.988 and 1.03 of its cell means. The staircase table "
+                  "says why: particles with a full ring of neighbours beside the hole converge "
+                  "to FEA (mean 1.11, 1.06, 1.03, 1.00), but those at a step's inner corner "
+                  "read about 1.1 × FEA on average and up to 1.2–1.4 × at every spacing — the "
+                  "staircase's own notch, which has no length scale and so does not shrink — "
+                  "and at ⅛ mm the peak is a single particle whose centre lies 0.002 mm from "
+                  "the circle with 4 of its 8 in-plane neighbours (1.28 × FEA at its centre). "
+                  "On a curved edge the particles' peak therefore carries the staircase's "
+                  "−12 % … +17 % whatever the spacing; the peak of the full-ring particles is "
+                  "the converging figure. Nothing was tuned: the scenes are the built-ins' "
+                  "geometry in mm.", ""]
     m = data.get("machine", {})
-    lines += ["", f"Wall {data['wall_s']:.0f} s, CPU {data['cpu_s']:.0f} s (load average "
-              f"{m.get('load_avg_at_start', '?')} at the start).", ""]
+    la = m.get("load_avg_at_start")
+    la = " / ".join(f"{x:.2f}" for x in la) if isinstance(la, (list, tuple)) else "?"
+    lines += ["", f"Wall {data['wall_s']:.0f} s, CPU {data['cpu_s']:.0f} s on one core (load "
+              f"average {la} at the start).", ""]
     return "\n".join(lines)
 
 

@@ -22,7 +22,9 @@ L-bracket) and each body model of :data:`MODELS` (``rack``, the paper's; ``rack+
 Outputs ``validity.json``, ``validity.md`` (the correlation table, FEA convergence, moduli) and
 ``validity.png`` (per case: FEA's η and each model's strain and paper measure side by side, a
 blue cross on each panel's largest particle).
-``--quick`` uses smaller bodies and coarser meshes (a test runs it).
+``--quick`` uses smaller bodies and coarser meshes (a test runs it). Without it, the three
+cases are also run as aluminium scenes in mm-N-s, peak von Mises in MPa against FEA and Kirsch
+(:mod:`rackstress.bench.planar`; ``--planar`` runs those rows alone and rewrites their section).
 """
 from __future__ import annotations
 
