@@ -22,7 +22,9 @@ L-bracket) and each body model of :data:`MODELS` (``rack``, the paper's; ``rack+
 Outputs ``validity.json``, ``validity.md`` (the correlation table, FEA convergence, moduli) and
 ``validity.png`` (per case: FEA's η and each model's strain and paper measure side by side, a
 blue cross on each panel's largest particle).
-``--quick`` uses smaller bodies and coarser meshes (a test runs it).
+``--quick`` uses smaller bodies and coarser meshes (a test runs it). Without it, the three
+cases are also run as aluminium scenes in mm-N-s, peak von Mises in MPa against FEA and Kirsch
+(:mod:`rackstress.bench.planar`; ``--planar`` runs those rows alone and rewrites their section).
 """
 from __future__ import annotations
 
@@ -314,8 +316,14 @@ def run_bench(out: Path | None = None, quick: bool = False, echo=print) -> dict:
             "lattice_material": lattice_material, "quick": quick, "machine": machine(), "target": TARGET, "fea": fea_studies,
             "results": results, "strain_meets_target_on_all_cases": best,
             "wall_s": time.perf_counter() - t0}
+    if not quick:       # the planar cases as aluminium scenes in MPa (rackstress.bench.planar)
+        from rackstress.bench import planar
+
+        data["planar"] = planar.run_planar(echo=echo)
     write_json(out / "validity.json", data)
     (out / "validity.md").write_text(report(data))
+    if data.get("planar"):
+        planar.write_section(out / "validity.md", planar.section(data["planar"]))
     try:
         plot(data, out / "validity.png")
     except Exception as exc:  # pragma: no cover - a plot failure keeps the figures

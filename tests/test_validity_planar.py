@@ -1,0 +1,67 @@
+"""The planar validity cases as material scenes (issue 22, item 7): peak von Mises in MPa of a
+user's aluminium scene against scikit-fem's plane-stress FEA and beam theory."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rackstress.bench import planar
+from rackstress.runs.run import run
+from rackstress.scenes import load
+from rackstress.stress.measures import ParticleStress
+from rackstress.stress.rundata import load_run
+from rackstress.validity import fea
+
+#: Tolerance on the peak in MPa: the issue's own for the beam's von Mises (10 % of beam theory
+#: at the particle centres). Measured 0.964 of FEA (docs/benchmarks/validity.md). It fails on
+#: the errors the route has had or the lattice has: a particle volume off by the plate's layer
+#: count (×3) or a half cell at a face (×2), the paper-unit virial's plate peak (0.594), the
+#: plate's 4-spacing staircase (0.884), E from c without the calibration's 5 (×1.25 and more).
+TOL = 0.10
+
+
+def test_cantilever_peak_von_mises_in_mpa_against_fea_and_beam_theory(tmp_path):
+    txt, g = planar.scene_text("cantilever", 1.0)
+    (tmp_path / "c.toml").write_text(txt)
+    sc = load(str(tmp_path / "c.toml"))
+    summary = run(sc, tmp_path / "run", progress=False, overwrite=True)
+    assert summary["settled"] is True
+    with np.load(tmp_path / "run" / "boundary.npz") as z:      # 20 N down, in N
+        assert z["load_force"].sum(axis=0) == pytest.approx([0.0, -20.0, 0.0], abs=1e-9)
+    vm = np.asarray(ParticleStress(load_run(tmp_path / "run")).run().results.von_mises[-1])
+    grp = sc.groups["part"]
+    o, vm = grp.o, vm[sc.slice("part")]
+    free = ~np.asarray(grp.held, dtype=bool)
+    assert np.ptp(o[:, 2]) == pytest.approx(2.0) and not free[o[:, 0] < 2].any()
+    # FEA: the beam [2, 40] × [0, 6] clamped at x = 2, 20 N over t = 3 mm → 20/3 N per mm
+    res = fea.cantilever(38.0, 6.0, 20.0 / 3.0, x0=2.0, y0=0.0, density=4, E=70000.0,
+                         nu=0.33)
+    fvm = res.at(o[free, :2])["von_mises_stress"]
+    assert vm[free].max() == pytest.approx(fvm.max(), rel=TOL)
+    # beam theory at mid-span's top particles (centres 2.5 mm above the neutral axis), the
+    # load on the last column at x = 39.5: σ = P·(39.5 − x)·2.5 / (t·h³/12)
+    top = free & (np.abs(o[:, 0] - 20.5) < 1e-9) & (np.abs(o[:, 1] - 5.5) < 1e-9)
+    expect = 20.0 * (39.5 - 20.5) * 2.5 / (3.0 * 6.0 ** 3 / 12)
+    assert expect == pytest.approx(17.59, abs=0.01)
+    assert vm[top].mean() == pytest.approx(expect, rel=TOL)
+
+
+def test_kirsch_field_by_hand():
+    # at the hole's edge across the load: σ_θθ = 3σ alone; along the load: −σ; far: σ
+    v = planar.kirsch_von_mises(np.array([0.0, 4.0, 400.0]), np.array([4.0, 0.0, 0.0]), 4.0,
+                                10.0)
+    assert v == pytest.approx([30.0, 10.0, 10.0], rel=1e-3)
+    # Heywood: a hole of no size concentrates 3×; d/D = ½: (2 + 1/8)·2 = 4.25
+    assert planar.heywood(1e-9, 1.0) == pytest.approx(3.0)
+    assert planar.heywood(0.5, 1.0) == pytest.approx(4.25)
+
+
+def test_write_section_replaces_only_its_own(tmp_path):
+    md = tmp_path / "v.md"
+    md.write_text("# V\n\n## A\n\na\n\n## Against FEA seen through x\n\nb\n")
+    planar.write_section(md, planar.TITLE + "\n\nfirst\n")
+    planar.write_section(md, planar.TITLE + "\n\nsecond\n")
+    t = md.read_text()
+    assert t.count(planar.TITLE) == 1 and "first" not in t and "second" in t
+    assert t.index("## A") < t.index(planar.TITLE) < t.index("## Against FEA seen through")
+    assert t.rstrip().endswith("b")
