@@ -606,7 +606,7 @@ def postprocess(rundir, vtk: bool = True, dump: bool = False, progress: bool = F
 
 def wait_files(out) -> float | None:
     """Join the VTK writer :func:`postprocess` left running for ``out`` (if any); record its
-    wall time in ``stress.json``; return it. Raises what the writer raised."""
+    wall and CPU time in ``stress.json``; return the wall time. Raises what the writer raised."""
     job = _PENDING.pop(str(Path(out).resolve()), None)
     if job is None:
         return None
@@ -615,6 +615,8 @@ def wait_files(out) -> float | None:
     try:
         info = json.loads(path.read_text())
         info.setdefault("timings", {})["vtk_s"] = wall
+        if job.job.cpu_s is not None:
+            info["timings"]["vtk_cpu_s"] = job.job.cpu_s
         write_json(path, info)
     except (OSError, json.JSONDecodeError):
         pass
