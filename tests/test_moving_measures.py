@@ -223,6 +223,22 @@ def test_frames_measured_while_the_dump_grows_are_the_measures_of_the_whole(tmp_
                               fresh.trajectory[k].data["positions64"]), k
 
 
+def test_follow_keeps_no_table_the_finished_reader_would_not_hold(tmp_path, monkeypatch):
+    """A run whose frames will not all fit the reader's cache (dump.CACHE_BYTES): follow's
+    tables are not kept for it (the finished run's reader would not hold them either)."""
+    from rackstress.stress import dump, measures
+
+    frames = [(s, np.concatenate([p, LONE])) for s, p in _frames()]
+    monkeypatch.setattr(measures, "CHUNK_BYTES", 1)
+    write_run(tmp_path, PARTS, frames)
+    table = load_run(tmp_path).trajectory._table(0).nbytes        # a frame's atom lines
+    # the 2 frames written so far fit (follow's reader holds them), not the 4 the run writes
+    monkeypatch.setattr(dump, "CACHE_BYTES", int(2.5 * table))
+    post._HEADS.clear()
+    head = _follow_until(tmp_path, frames, 2, 2)
+    assert sorted(head.done) == [(0, 1), (1, 1)] and head.tables == {}
+
+
 def test_a_frame_changed_after_it_was_measured_is_measured_again(tmp_path, monkeypatch):
     """A run cut after divergence, or written again, differs from what follow read: its chunk
     is measured anew from the finished dump."""

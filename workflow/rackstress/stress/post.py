@@ -306,12 +306,15 @@ class Head:
         self.used = 0                 # frames handed to measure_frames
         self.error = None             # why follow stopped early, if it did
 
-    def keep_tables(self, run, ks) -> None:
+    def keep_tables(self, run, ks, frames: int) -> None:
         """Keep the atom tables of frames ``ks`` that ``run``'s reader holds (its cache,
-        :meth:`rackstress.stress.dump.RackDumpReader._table`)."""
+        :meth:`rackstress.stress.dump.RackDumpReader._table`) where the finished run's reader
+        would hold them: its ``frames`` within :data:`~rackstress.stress.dump.CACHE_BYTES`."""
+        from rackstress.stress.dump import CACHE_BYTES
+
         held = run.trajectory.__dict__.get("_tables") or {}
         for k in ks:
-            if k in held:
+            if k in held and held[k].nbytes * frames <= CACHE_BYTES:
                 self.tables[k] = held[k]
 
     @staticmethod
@@ -399,7 +402,7 @@ def follow(rundir, stop, frames: int, poll: float = 0.2, idle=None) -> None:
             while a + chunk <= run.index.n_frames and not stop.is_set() and main.is_alive():
                 ks = range(a, a + chunk)
                 got = measure_chunk(run, head.hood, parts, ks)
-                head.keep_tables(run, ks)
+                head.keep_tables(run, ks, frames)
                 head.done[(a, chunk)] = (Head.stamp(run, ks), got)
                 a += chunk
             # the next chunk's frames, at the bytes a frame has taken so far
