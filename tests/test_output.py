@@ -357,9 +357,11 @@ def test_bench_e2e_dump_cost_and_table():
     assert "| not slower | 4.00 / 3.50 s |" in md
     # CPU by process after the simulation, as the run recorded it
     busy = dict(run, cpu_s=7.25, cpu_after={"pictures": 0.61, "vtk": 0.32, "plots": 0.58,
-                                            "view3d": 0.1})
+                                            "view3d": 0.1},
+                driver={"steps_s": 3.5, "checks_s": 0.2, "between_s": 0.3})
     md = e2e.markdown({"runs": [busy], "dumps": [d]}, {"cores": 2, "load_avg_at_start": [1, 1, 1]})
-    assert "| magpod-small | warm | 0.61 s | 0.32 s | 0.58 s | 0.10 s | 3.00 s | 7.25 s |" in md
+    assert ("| magpod-small | warm | 3.50 / 0.20 / 0.30 s | 0.61 s | 0.32 s | 0.58 s | 0.10 s "
+            "| 3.00 s | 7.25 s |") in md
 
 
 def test_forked_job_reports_the_childs_cpu(tmp_path):

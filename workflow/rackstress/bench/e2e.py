@@ -75,6 +75,7 @@ def _cli_run(scene: str, out: Path, cold: bool, args, head_start: bool = True) -
     phases["start-up and the rest"] = wall - sum(phases.values())
     phases["vtk (beside the pictures)"] = stress.get("vtk_s", 0.0)
     rec["frames_measured_while_running"] = stress.get("frames_measured_while_running", 0)
+    rec["driver"] = summary.get("driver_s") or {}
     # after the simulation, CPU by process: the main one's render (its sheet), and the forked
     # VTK writer, plots and 3D view (each child's own clock, runs/forked.py)
     timings = (summary.get("render") or {}).get("timings") or {}
@@ -289,14 +290,21 @@ def markdown(data: dict, machine: dict) -> str:
     if cpu:
         def c(x):
             return "" if x is None else f"{x:.2f} s"
-        L += ["", "After the simulation four processes share the cores: CPU seconds by process "
-              "(each one's own clock), and the whole command's (its children's included).", "",
-              "| scene | cache | pictures (this process) | VTK writer | plots | 3D view | "
-              "post-processing, wall | the command's CPU |", "|---|---|---|---|---|---|---|---|"]
+        L += ["", "The simulation's wall time by the driver's loop (`summary.json`'s `driver_s`: "
+              "in LAMMPS' chunks of steps, in the watchdog after each, and between them: "
+              "checkpoints, progress), then after the simulation, where four processes share "
+              "the cores, CPU seconds by process (each one's own clock), and the whole "
+              "command's (its children's included).", "",
+              "| scene | cache | simulation: chunks / watchdog / between | "
+              "pictures (this process) | VTK writer | plots | 3D view | "
+              "post-processing, wall | the command's CPU |",
+              "|---|---|---|---|---|---|---|---|---|"]
         for r in cpu:
-            a, p = r["cpu_after"], r["phases"]
+            a, p, d = r["cpu_after"], r["phases"], r.get("driver") or {}
+            split = (" / ".join(f"{d[k]:.2f}" for k in ("steps_s", "checks_s", "between_s"))
+                     + " s") if d else ""
             L.append(f"| {r['scene']} | {'cold' if r['cold'] else 'warm'}"
-                     f"{'' if r.get('head_start', True) else ', no head start'} | "
+                     f"{'' if r.get('head_start', True) else ', no head start'} | {split} | "
                      f"{c(a.get('pictures'))} | {c(a.get('vtk'))} | {c(a.get('plots'))} | "
                      f"{c(a.get('view3d'))} | {p['measures'] + p['pictures']:.2f} s | "
                      f"{c(r.get('cpu_s'))} |")
