@@ -203,12 +203,40 @@ def test_frames_measured_while_the_dump_grows_are_the_measures_of_the_whole(tmp_
     want = measure_frames(load_run(tmp_path))
     head = _follow_until(tmp_path, frames, 5, 5)
     assert sorted(head.done) == [(k, 1) for k in range(5)]          # not frame 5, torn
+    kept = dict(head.tables)                    # the atom tables follow parsed
+    assert sorted(kept) == list(range(5))
     write_run(tmp_path, PARTS, frames)                              # the run goes on and ends
     post._MEMO.clear()
-    fields = post.compute_fields(load_run(tmp_path), cache=False)
+    run = load_run(tmp_path)
+    fields = post.compute_fields(run, cache=False)
     assert fields.timings["frames_measured_while_running"] == 5
     for m in MEASURES:
         assert np.array_equal(fields.values[m], want[m], equal_nan=True), m
+    # the finished run's reader holds those tables (its forked writers read no text again;
+    # frame 0 it read itself when the run was opened), and every frame reads as a run opened
+    # anew parses it from the finished dump
+    held = run.trajectory._tables
+    assert all(held[k] is kept[k] for k in range(1, 5))
+    fresh = load_run(tmp_path)
+    for k in range(len(frames)):
+        assert np.array_equal(run.trajectory[k].data["positions64"],
+                              fresh.trajectory[k].data["positions64"]), k
+
+
+def test_follow_keeps_no_table_the_finished_reader_would_not_hold(tmp_path, monkeypatch):
+    """A run whose frames will not all fit the reader's cache (dump.CACHE_BYTES): follow's
+    tables are not kept for it (the finished run's reader would not hold them either)."""
+    from rackstress.stress import dump, measures
+
+    frames = [(s, np.concatenate([p, LONE])) for s, p in _frames()]
+    monkeypatch.setattr(measures, "CHUNK_BYTES", 1)
+    write_run(tmp_path, PARTS, frames)
+    table = load_run(tmp_path).trajectory._table(0).nbytes        # a frame's atom lines
+    # the 2 frames written so far fit (follow's reader holds them), not the 4 the run writes
+    monkeypatch.setattr(dump, "CACHE_BYTES", int(2.5 * table))
+    post._HEADS.clear()
+    head = _follow_until(tmp_path, frames, 2, 2)
+    assert sorted(head.done) == [(0, 1), (1, 1)] and head.tables == {}
 
 
 def test_a_frame_changed_after_it_was_measured_is_measured_again(tmp_path, monkeypatch):
@@ -219,13 +247,18 @@ def test_a_frame_changed_after_it_was_measured_is_measured_again(tmp_path, monke
     frames = [(s, np.concatenate([p, LONE])) for s, p in _frames()]
     monkeypatch.setattr(measures, "CHUNK_BYTES", 1)
     write_run(tmp_path, PARTS, frames)
-    _follow_until(tmp_path, frames, 4, 4)
+    head = _follow_until(tmp_path, frames, 4, 4)
+    kept = dict(head.tables)
     moved = [(s, p.copy()) for s, p in frames]
     moved[2][1][0, 0] += 0.5                                        # frame 2 is not as read
     write_run(tmp_path, PARTS, moved)
     want = measure_frames(load_run(tmp_path))
     post._MEMO.clear()
-    fields = post.compute_fields(load_run(tmp_path), cache=False)
+    run = load_run(tmp_path)
+    fields = post.compute_fields(run, cache=False)
     assert fields.timings["frames_measured_while_running"] == 3
     for m in MEASURES:
         assert np.array_equal(fields.values[m], want[m], equal_nan=True), m
+    # frame 2's table as follow read it is not the finished run's: that frame is read anew
+    assert run.trajectory._tables[2] is not kept[2]
+    assert run.trajectory[2].data["positions64"][0, 0] == moved[2][1][0, 0]

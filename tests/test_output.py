@@ -355,3 +355,38 @@ def test_bench_e2e_dump_cost_and_table():
     assert "| magpod-small | the scene's | warm, no head start | 1.2 | 3.50 s |" in md
     assert "| warm total / its simulation | ≤ 2× | 2.50× |" in md
     assert "| not slower | 4.00 / 3.50 s |" in md
+    # CPU by process after the simulation, as the run recorded it
+    busy = dict(run, cpu_s=7.25, cpu_after={"pictures": 0.61, "vtk": 0.32, "plots": 0.58,
+                                            "view3d": 0.1},
+                driver={"steps_s": 3.5, "checks_s": 0.2, "between_s": 0.3})
+    md = e2e.markdown({"runs": [busy], "dumps": [d]}, {"cores": 2, "load_avg_at_start": [1, 1, 1]})
+    assert ("| magpod-small | warm | 3.50 / 0.20 / 0.30 s | 0.61 s | 0.32 s | 0.58 s | 0.10 s "
+            "| 3.00 s | 7.25 s |") in md
+
+
+def test_forked_job_reports_the_childs_cpu(tmp_path):
+    """A forked child's CPU time (its own clock, which starts at zero at the fork) is what the
+    kernel charges the parent for its waited children (getrusage), within a clock tick or two,
+    and none of the parent's CPU before the fork."""
+    import resource
+    import time
+
+    from rackstress.runs.forked import ForkedJob
+
+    t = time.process_time()
+    while time.process_time() - t < 0.3:        # the parent's CPU before the fork: not counted
+        pass
+
+    def work():
+        t = time.process_time()
+        while time.process_time() - t < 0.2:
+            pass
+        return 1
+
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    job = ForkedJob(work, tmp_path / "job.json")
+    assert job.join() == 1
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    kernel = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    assert 0.2 <= job.cpu_s < 0.3
+    assert abs(job.cpu_s - kernel) < 0.03

@@ -65,6 +65,14 @@ def test_an_asked_for_checkpoint_interval_is_kept(tmp_path):
     meta = json.loads((out / "progress.json").read_text())
     assert meta["step"] == 300 and meta["keep"] is True
     assert (out / meta["restart"]).stat().st_size > 0      # LAMMPS can go on from it
+    # the simulation's wall time split by the driver's loop: three parts, none negative, each
+    # within the run's wall time, the chunks of steps and the watchdog within their sum
+    summary = json.loads((out / "summary.json").read_text())
+    d = summary["driver_s"]
+    assert sorted(d) == ["between_s", "checks_s", "steps_s"]
+    assert all(0 <= d[k] <= summary["wall_s"] for k in d) and d["steps_s"] > 0
+    assert d["steps_s"] + d["checks_s"] <= sum(d.values()) + 1e-12
+    assert sum(d.values()) <= summary["wall_s"]
 
 
 def test_prepare_imports_in_a_thread_and_restores_the_switch_interval():

@@ -47,14 +47,20 @@ def _cli_run(scene: str, out: Path, cold: bool, args, head_start: bool = True) -
         env["XDG_CACHE_HOME"] = cache               # compiled loops, Eq. 5's prediction
         env.pop("NUMBA_CACHE_DIR", None)
     load = os.getloadavg()[0]
+    import resource
+
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t = time.perf_counter()
     r = subprocess.run([exe, "run", scene, "--out", str(out), "--overwrite", "--no-progress",
                         *args], capture_output=True, text=True, env=env)
     wall = time.perf_counter() - t
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if cache:
         shutil.rmtree(cache, ignore_errors=True)
     rec = {"wall_s": wall, "exit": r.returncode, "cold": cold, "load_at_start": load,
-           "head_start": head_start}
+           "head_start": head_start,
+           # the command's CPU, its forked children's included (each is waited for)
+           "cpu_s": (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)}
     if r.returncode not in (0, 4):
         rec["stderr"] = r.stderr[-1500:]
         return rec
@@ -69,6 +75,12 @@ def _cli_run(scene: str, out: Path, cold: bool, args, head_start: bool = True) -
     phases["start-up and the rest"] = wall - sum(phases.values())
     phases["vtk (beside the pictures)"] = stress.get("vtk_s", 0.0)
     rec["frames_measured_while_running"] = stress.get("frames_measured_while_running", 0)
+    rec["driver"] = summary.get("driver_s") or {}
+    # after the simulation, CPU by process: the main one's render (its sheet), and the forked
+    # VTK writer, plots and 3D view (each child's own clock, runs/forked.py)
+    timings = (summary.get("render") or {}).get("timings") or {}
+    rec["cpu_after"] = {"pictures": timings.get("cpu_s"), "vtk": stress.get("vtk_cpu_s"),
+                        "plots": timings.get("plots_cpu_s"), "view3d": timings.get("beside_cpu_s")}
     rec["frames"] = summary.get("steps", 0) // max(summary.get("dump_every") or 1, 1) + 1
     rec["phases"] = phases
     rec["sizes"] = {p.name + ("/" if p.is_dir() else ""): _size(p)
@@ -274,6 +286,28 @@ def markdown(data: dict, machine: dict) -> str:
                  f"({p['vtk (beside the pictures)']:.2f} s) | {p['start-up and the rest']:.2f} s"
                  f" | {r['wall_s']:.2f} s | {r['wall_s'] / max(p['simulation'], 1e-9):.2f}× | "
                  f"{r['size_total'] / 1e6:.1f} MB |")
+    cpu = [r for r in data["runs"] if r.get("cpu_after")]
+    if cpu:
+        def c(x):
+            return "" if x is None else f"{x:.2f} s"
+        L += ["", "The simulation's wall time by the driver's loop (`summary.json`'s `driver_s`: "
+              "in LAMMPS' chunks of steps, in the watchdog after each, and between them: "
+              "checkpoints, progress), then after the simulation, where four processes share "
+              "the cores, CPU seconds by process (each one's own clock), and the whole "
+              "command's (its children's included).", "",
+              "| scene | cache | simulation: chunks / watchdog / between | "
+              "pictures (this process) | VTK writer | plots | 3D view | "
+              "post-processing, wall | the command's CPU |",
+              "|---|---|---|---|---|---|---|---|---|"]
+        for r in cpu:
+            a, p, d = r["cpu_after"], r["phases"], r.get("driver") or {}
+            split = (" / ".join(f"{d[k]:.2f}" for k in ("steps_s", "checks_s", "between_s"))
+                     + " s") if d else ""
+            L.append(f"| {r['scene']} | {'cold' if r['cold'] else 'warm'}"
+                     f"{'' if r.get('head_start', True) else ', no head start'} | {split} | "
+                     f"{c(a.get('pictures'))} | {c(a.get('vtk'))} | {c(a.get('plots'))} | "
+                     f"{c(a.get('view3d'))} | {p['measures'] + p['pictures']:.2f} s | "
+                     f"{c(r.get('cpu_s'))} |")
     L += [""] + targets(data)
     notes = {(r["scene"], r["exit"], r["note"]) for r in data["runs"]
              if r.get("exit") and r.get("note")}

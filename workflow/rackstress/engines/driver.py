@@ -10,7 +10,7 @@ not a multiple of the dump interval).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -20,10 +20,14 @@ from rackstress.model.scene import PhaseEnd
 
 @dataclass
 class Outcome:
-    """How a driven run ended: the steps done and the final positions (global order)."""
+    """How a driven run ended: the steps done and the final positions (global order); and
+    where the driver's wall time went (``timings``: ``steps_s`` in the engine's chunks,
+    ``checks_s`` in the watchdog after them, ``between_s`` the rest of the loop — progress,
+    checkpoints, phase ends): what a thread beside it (``rackstress run``'s head start) slows."""
 
     steps: int
     positions: np.ndarray
+    timings: dict = field(default_factory=dict)
 
 
 def drive(engine, *, progress=None, on_phase_end=None, checkpoint=None, resume=None,
@@ -70,8 +74,11 @@ def drive(engine, *, progress=None, on_phase_end=None, checkpoint=None, resume=N
     >>> drive(Reference(sc)).steps
     5
     """
+    import time
+
     scene = engine.scene
     every = int(check_every or engine.check_every)
+    t_all, t_steps, t_checks = time.perf_counter(), 0.0, 0.0
     ck_every = int(getattr(checkpoint, "every", 0) or 0)
     last = None
     try:
@@ -91,8 +98,11 @@ def drive(engine, *, progress=None, on_phase_end=None, checkpoint=None, resume=N
                 n = min(every, left)
                 if ck_every:        # a chunk ends at each checkpoint's step, however long
                     n = min(n, ck_every - engine.step_count % ck_every)
+                t = time.perf_counter()
                 engine.advance(n)
+                t1 = time.perf_counter()
                 engine.check()
+                t_steps, t_checks = t_steps + (t1 - t), t_checks + (time.perf_counter() - t1)
                 left -= n
                 if on_chunk is not None:
                     on_chunk(engine)
@@ -116,4 +126,7 @@ def drive(engine, *, progress=None, on_phase_end=None, checkpoint=None, resume=N
             err.p_end = engine.positions()
         err.steps_done = engine.step_count
         raise
-    return Outcome(engine.step_count, engine.positions())
+    wall = time.perf_counter() - t_all
+    return Outcome(engine.step_count, engine.positions(),
+                   {"steps_s": t_steps, "checks_s": t_checks,
+                    "between_s": wall - t_steps - t_checks})

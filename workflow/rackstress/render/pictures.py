@@ -705,9 +705,11 @@ def render(rundir, frames=None, measure: str | None = None, views=DEFAULT_VIEWS,
                 got = side.join()
             except ForkedError as exc:
                 got = {"error": ["RuntimeError", exc.message]}
+            report.timings["beside_wait_s"] = time.perf_counter() - t
+            if side.cpu_s is not None:
+                report.timings["beside_cpu_s"] = side.cpu_s
             side = None
             beside[1](got)
-            report.timings["beside_wait_s"] = time.perf_counter() - t
         if plotter is not None:
             t = time.perf_counter()
             try:
@@ -718,6 +720,8 @@ def render(rundir, frames=None, measure: str | None = None, views=DEFAULT_VIEWS,
             report.notes += notes
             report.timings["plots_s"] = wall
             report.timings["plots_wait_s"] = time.perf_counter() - t
+            if plotter.job.cpu_s is not None:
+                report.timings["plots_cpu_s"] = plotter.job.cpu_s
         else:
             sheet_saver.wait()
         report.timings["total_s"] = time.perf_counter() - t0

@@ -30,7 +30,9 @@ class ForkedError(Exception):
 class ForkedJob:
     """``work()`` (returning something JSON can hold) in a forked child; :meth:`join` returns
     it, or raises :class:`ForkedError`. Without fork, :meth:`join` runs ``work`` here (its
-    errors as they are).
+    errors as they are). After :meth:`join`, :attr:`cpu_s` is the CPU time the child took
+    (a forked child's CPU clock starts at zero; None without fork), so that a run's timings
+    say what each process cost, not only how long it was awaited.
 
     Example
     -------
@@ -44,7 +46,7 @@ class ForkedJob:
         import multiprocessing as mp
 
         self.work, self.result = work, Path(result)
-        self.proc, self.parent = None, os.getpid()
+        self.proc, self.parent, self.cpu_s = None, os.getpid(), None
         if "fork" in mp.get_all_start_methods():
             import gc
 
@@ -66,6 +68,9 @@ class ForkedJob:
             rec = {"error": f"{type(exc).__name__}: {exc}",
                    "storage": isinstance(exc, StorageError),
                    "errno": getattr(exc, "errno", None)}
+        import time
+
+        rec["cpu_s"] = time.process_time()
         try:
             self.result.write_text(json.dumps(rec))
         except OSError:      # a full disk: the parent learns it from the exit status
@@ -84,6 +89,7 @@ class ForkedJob:
             raise ForkedError(f"ended with exit code {self.proc.exitcode}",
                               exitcode=self.proc.exitcode) from None
         self.result.unlink(missing_ok=True)
+        self.cpu_s = rec.get("cpu_s")
         if "error" in rec:
             raise ForkedError(rec["error"], rec["storage"], rec["errno"])
         return rec["value"]

@@ -413,6 +413,7 @@ def execute(scene: Scene, out: Path, engine: str, mode: str, dump_every: int, *,
                 outcome = drive(eng, progress=bar, on_phase_end=on_phase_end,
                                 checkpoint=ckpt, resume=resume)
             p_end, steps = outcome.positions, outcome.steps
+            extra["driver_s"] = outcome.timings
         except DivergenceError as err:
             status, error = "diverged", err
             p_end = getattr(err, "p_end", None)
