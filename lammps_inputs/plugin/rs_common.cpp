@@ -8,6 +8,7 @@
 #include "update.h"
 
 #include <climits>
+#include <cstdio>
 #include <map>
 
 #include <algorithm>
@@ -392,11 +393,22 @@ void RackStress::nonfinite(LAMMPS *lmp, const char *style, tagint tag)
 {
   FirstBad &b = first_bad[lmp];
   bigint now = lmp->update->ntimestep;
-  if (!b.watched)
-    lmp->error->one(FLERR, "Fix {}: the force on atom id {} is not finite at step {}: two "
-                    "particles bound or attracted to each other coincide there (Eq. 12's "
-                    "direction is undefined at d = 0), or a force overflowed; a smaller time "
-                    "step or weaker coefficients keep Eq. 5 stable", style, (bigint) tag, now);
+  if (!b.watched) {
+    const std::string mesg = fmt::format(
+        "Fix {}: the force on atom id {} is not finite at step {}: two particles bound or "
+        "attracted to each other coincide there (Eq. 12's direction is undefined at d = 0), or "
+        "a force overflowed; a smaller time step or weaker coefficients keep Eq. 5 stable",
+        style, (bigint) tag, now);
+    // error->one writes on rank 0's buffered screen only, then MPI_Abort: a rank other than 0
+    // (its screen is null) that gets there first ends every rank with nothing said, rank 0's
+    // buffer lost too. Each rank says it on stderr first, unbuffered and flushed.
+    if (lmp->comm->nprocs > 1) {
+      fprintf(stderr, "ERROR on proc %d: %s\n", lmp->comm->me, mesg.c_str());
+      fflush(stderr);
+    }
+    if (lmp->screen) fflush(lmp->screen);
+    lmp->error->one(FLERR, mesg);
+  }
   if (b.step < 0 || (now == b.step && tag < b.tag)) {
     b.step = now;
     b.tag = tag;
