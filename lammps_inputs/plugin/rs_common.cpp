@@ -7,12 +7,14 @@
 #include "neighbor.h"
 #include "update.h"
 
+#include <chrono>
 #include <climits>
 #include <cstdio>
 #include <map>
 
 #include <algorithm>
 #include <cmath>
+#include <thread>
 
 using namespace LAMMPS_NS;
 using namespace RackStress;
@@ -399,14 +401,17 @@ void RackStress::nonfinite(LAMMPS *lmp, const char *style, tagint tag)
         "attracted to each other coincide there (Eq. 12's direction is undefined at d = 0), or "
         "a force overflowed; a smaller time step or weaker coefficients keep Eq. 5 stable",
         style, (bigint) tag, now);
-    // error->one writes on rank 0's buffered screen only, then MPI_Abort: a rank other than 0
-    // (its screen is null) that gets there first ends every rank with nothing said, rank 0's
-    // buffer lost too. Each rank says it on stderr first, unbuffered and flushed.
+    // error->one writes on rank 0's buffered screen only (a null screen elsewhere), then
+    // MPI_Abort, and mpiexec's proxies stop forwarding the ranks' output as they tear the job
+    // down: on a busy machine nothing reached the terminal (stdout cut at its last flush, no
+    // stderr). Each rank says it on stderr, flushes, and under MPI gives mpiexec a second to
+    // forward it before the abort (only a run that is ending pays it).
+    if (lmp->screen) fflush(lmp->screen);
     if (lmp->comm->nprocs > 1) {
       fprintf(stderr, "ERROR on proc %d: %s\n", lmp->comm->me, mesg.c_str());
       fflush(stderr);
+      std::this_thread::sleep_for(std::chrono::seconds(1));
     }
-    if (lmp->screen) fflush(lmp->screen);
     lmp->error->one(FLERR, mesg);
   }
   if (b.step < 0 || (now == b.step && tag < b.tag)) {
