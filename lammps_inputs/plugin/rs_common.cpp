@@ -451,7 +451,7 @@ rackstress_first_nonfinite(void *handle, long long *step, long long *tag)
 int Contacts::build(LAMMPS *lmp, int tbit, int sbit, const double *radius, int actbit, bool full)
 {
   Atom *atom = lmp->atom;
-  double **x = atom->x;
+  double **x = atom->x, **f = atom->f;
   int *mask = atom->mask;
   double skin = lmp->neighbor->skin;
   // activation looks one skin further than the contact candidates
@@ -557,6 +557,13 @@ int Contacts::build(LAMMPS *lmp, int tbit, int sbit, const double *radius, int a
               double act = radius[i] + radius[j] + 2.0 * skin;
               if (d2 < act * act) {
                 mask[i] |= actbit;
+                // a resting row's force is whatever its row last held (LAMMPS moves positions
+                // and velocities with an atom, not forces, and with neigh_modify include clears
+                // only the first rows): zero it, so that until LAMMPS puts the atom among the
+                // first rows (whose forces it clears each step) the phase switch's velocity
+                // shift (v - dt/2 f/m over the moving group) leaves it at rest; a setup's
+                // contact force is added to it below
+                f[i][0] = f[i][1] = f[i][2] = 0.0;
                 resting = false;
                 activated++;
               }
