@@ -437,7 +437,9 @@ def run_bench(out: Path | None = None, steps: int = 1200, quick: bool = False,
         data.update(machine=earlier.get("machine", data["machine"]),
                     load_avg_at_end=earlier.get("load_avg_at_end"),
                     quick=earlier.get("quick", quick),
-                    remeasured=earlier.get("remeasured", []) + [{
+                    # an earlier note on the same scenes: those rows are measured again now
+                    remeasured=[m for m in earlier.get("remeasured", [])
+                                if not set(m["scenes"]) <= set(only)] + [{
                         "scenes": sorted(only), "date": time.strftime("%Y-%m-%d %H:%M UTC",
                                                                       time.gmtime()),
                         "load_avg_at_start": load0,
