@@ -97,3 +97,38 @@ def test_a_longer_bed_weighs_its_robot_as_much_as_the_bed():
         "balance 1.0 rcb weight group 1 rs_move 150.0"        # 10,000 / 3689 = 2.7 < 150
     assert weight(sediment_nx=100, sediment_nz=100, robot_weight=40) == \
         "balance 1.0 rcb weight group 1 rs_move 40.0"
+
+
+def _bed_scene(probe_reverse: bool):
+    """A ball falling on a resting bed (passive: only the ball collides it), and a probe that
+    feels the bed (probe <- collide bed) with or without the bed feeling the probe."""
+    from rackstress import Collide, Dampen, Force, Group, Phase, Scene, lattice
+    from rackstress.model.operators import Const
+
+    o = lattice((12, 1, 12), 2.0) - np.array([11.0, 0.0, 11.0])
+    # two radii: no single R per type pair, so the collisions stay the plugin's rs/collide
+    # (a uniform one would fold into LAMMPS' pair_style lepton, and the bed not rest)
+    bed = Group("bed", o, np.where(np.arange(len(o)) % 2 == 0, 1.0, 0.9))
+    ball = Group("ball", lattice((2, 2, 2), 2.0) + np.array([-1.0, 3.0, -1.0]), 1.0)
+    probe = Group("probe", lattice((2, 2, 2), 2.0) + np.array([6.0, 3.0, 6.0]), 1.0)
+    ops = {"bed": [Collide("ball", Const(1.0)), Dampen(1.0)] + ([Collide("probe", Const(1.0))]
+                                                           if probe_reverse else []),
+           "ball": [Collide("bed", Const(50.0)), Force((0, -1.0, 0))],
+           "probe": [Collide("bed", Const(50.0)), Force((0, -1.0, 0))]}
+    return Scene("bed", {"bed": bed, "ball": ball, "probe": probe}, ops, [Phase("fall", 10)],
+                 dt=0.01)
+
+
+def test_resting_particles_are_ghosts_only_where_a_contact_would_miss_them():
+    """``comm_modify group rs_move`` (no resting ghosts) only where every operator reading the
+    passive bed across ranks is a contact whose source activates the bed: the probe, which the
+    bed does not feel, would touch resting bed particles no rank sends it."""
+    from rackstress.engines.lammps.deck import (balance_commands, compile_deck,
+                                                moving_ghosts_suffice)
+
+    both = compile_deck(_bed_scene(True), "exact", plugin=True)
+    one_way = compile_deck(_bed_scene(False), "exact", plugin=True)
+    assert both.passive == ("bed",) and one_way.passive == ("bed",)
+    assert moving_ghosts_suffice(both) and "comm_modify group rs_move" in balance_commands(both)
+    assert not moving_ghosts_suffice(one_way)
+    assert not any(c.startswith("comm_modify group") for c in balance_commands(one_way))

@@ -9,6 +9,7 @@
 
 #include <chrono>
 #include <climits>
+#include <cstdint>
 #include <cstdio>
 #include <map>
 
@@ -128,6 +129,18 @@ struct RestGrid {
   int nb[3] = {1, 1, 1};
   std::vector<int> start;         // CSR over the cells
   std::vector<tagint> tags;
+  std::vector<int> cellof;        // scratch of a build, kept (no fresh pages at the next one)
+  std::vector<uint64_t> member;   // one bit per atom id: binned here
+  // the layout the last check found the grid holding every resting row in (a setup's fixes
+  // check once: the step, owned and first rows)
+  bigint checked_step = -1;
+  int checked_nlocal = -1, checked_nfirst = -1;
+};
+/* what a full pass over every atom found for a pair of sides (Contacts::collect_full), over all
+   ranks: kept for the setups after it, which then pass over the moving rows and the grid */
+struct Known {
+  bool fast = false;
+  double tmax = 0.0, smax = 0.0;
 };
 struct Registry {
   std::vector<Reduced *> members;
@@ -135,6 +148,7 @@ struct Registry {
   bool moved = false;    // the displacement flag reduce_positions carried at pos_step
   std::vector<double> send, recv;
   RestGrid rest;
+  std::map<std::vector<int>, Known> known;    // (tbit, sbit, actbit, firstbit)
 };
 std::map<LAMMPS *, Registry> registry;
 }    // namespace
@@ -264,8 +278,44 @@ void Contacts::collect_full(LAMMPS *lmp, int tbit, int sbit, const double *radiu
       if (!(m & firstbit)) s_first = false;
     }
   }
-  fast = firstbit && (actbit == 0 || actbit == firstbit) && (t_first || s_first);
-  registry[lmp].rest.valid = false;    // a setup: the resting atoms are binned again when asked
+  // over all ranks: a side lies in the first group if it does on every rank, and the reach of
+  // a later build must cover an atom that arrives from a rank where the side's largest is
+  double mx[2] = {tmax_all, smax_all}, gmx[2];
+  MPI_Allreduce(mx, gmx, 2, MPI_DOUBLE, MPI_MAX, lmp->world);
+  tmax_all = gmx[0];
+  smax_all = gmx[1];
+  int firsts[2] = {t_first ? 1 : 0, s_first ? 1 : 0}, gfirsts[2];
+  MPI_Allreduce(firsts, gfirsts, 2, MPI_INT, MPI_MIN, lmp->world);
+  fast = firstbit && (actbit == 0 || actbit == firstbit) && (gfirsts[0] || gfirsts[1]);
+  Known &k = registry[lmp].known[{tbit, sbit, actbit, firstbit}];
+  k.fast = fast;
+  k.tmax = tmax_all;
+  k.smax = smax_all;
+}
+
+/* whether the grid of resting atoms holds every owned resting row (at or past nfirst) of this
+   rank: a resting atom does not move, but under MPI one may arrive by exchange (a subdomain's
+   bounds follow a shrink-wrapped box); checked at each setup, once for all its fixes (a pass
+   over the resting rows' ids, no positions); if one is missing the grid is binned again */
+static bool rest_grid_holds(LAMMPS *lmp, RestGrid &g)
+{
+  Atom *atom = lmp->atom;
+  if (!g.valid) return false;
+  bigint now = lmp->update->ntimestep;
+  if (g.checked_step == now && g.checked_nlocal == atom->nlocal && g.checked_nfirst == atom->nfirst)
+    return true;
+  const tagint *tag = atom->tag;
+  const size_t nbits = 64 * g.member.size();
+  bool ok = true;
+  for (int j = atom->nfirst; j < atom->nlocal && ok; j++) {
+    size_t t = (size_t) tag[j];
+    ok = t < nbits && ((g.member[t >> 6] >> (t & 63)) & 1);
+  }
+  if (!ok) return false;
+  g.checked_step = now;
+  g.checked_nlocal = atom->nlocal;
+  g.checked_nfirst = atom->nfirst;
+  return true;
 }
 
 /* the moving rows [0, nfirst) of each side, every ghost source, and the owned resting atoms of
@@ -337,23 +387,35 @@ void Contacts::collect_moving(LAMMPS *lmp, int tbit, int sbit, std::vector<int> 
       g.w *= 1.5;
     }
     for (int d = 0; d < 3; d++) g.lo[d] = lo[d];
-    long ncell = (long) g.nb[0] * g.nb[1] * g.nb[2];
-    std::vector<long> cellof(n);
+    long ncell = (long) g.nb[0] * g.nb[1] * g.nb[2];    // at most 2 n + 64: an int
+    const double inv = 1.0 / g.w;
+    g.cellof.resize(n);
     g.start.assign(ncell + 1, 0);
     for (int j = nfirst; j < nlocal; j++) {
-      long c = 0;
+      int c = 0;
       for (int d = 0; d < 3; d++) {
-        int k = std::max(0, std::min(g.nb[d] - 1, (int) ((x[j][d] - g.lo[d]) / g.w)));
+        int k = std::max(0, std::min(g.nb[d] - 1, (int) ((x[j][d] - g.lo[d]) * inv)));
         c = c * g.nb[d] + k;
       }
-      cellof[j - nfirst] = c;
+      g.cellof[j - nfirst] = c;
       g.start[c + 1]++;
     }
     for (long c = 0; c < ncell; c++) g.start[c + 1] += g.start[c];
-    std::vector<int> fill(g.start.begin(), g.start.end() - 1);
-    g.tags.assign(n, 0);
-    for (int j = nfirst; j < nlocal; j++) g.tags[fill[cellof[j - nfirst]]++] = atom->tag[j];
+    // placed from the back of each cell (counts down to its start), so no copy of the starts
+    g.tags.resize(n);
+    g.member.assign((size_t) (atom->map_tag_max >> 6) + 1, 0);
+    for (int j = nlocal - 1; j >= nfirst; j--) {
+      const tagint t = atom->tag[j];
+      g.tags[--g.start[g.cellof[j - nfirst] + 1]] = t;
+      g.member[(size_t) t >> 6] |= (uint64_t) 1 << (t & 63);
+    }
+    // (each cell's end counted down to its start: shift back to starts)
+    for (long c = 0; c < ncell; c++) g.start[c] = g.start[c + 1];
+    g.start[ncell] = n;
     g.valid = true;
+    g.checked_step = lmp->update->ntimestep;
+    g.checked_nlocal = nlocal;
+    g.checked_nfirst = nfirst;
   }
   // the resting atoms of `bit` in the cells that meet the box [lo - cut, hi + cut]
   auto near = [&](const double *lo, const double *hi, int bit, std::vector<int> &out) {
@@ -451,7 +513,7 @@ rackstress_first_nonfinite(void *handle, long long *step, long long *tag)
 int Contacts::build(LAMMPS *lmp, int tbit, int sbit, const double *radius, int actbit, bool full)
 {
   Atom *atom = lmp->atom;
-  double **x = atom->x;
+  double **x = atom->x, **f = atom->f;
   int *mask = atom->mask;
   double skin = lmp->neighbor->skin;
   // activation looks one skin further than the contact candidates
@@ -464,6 +526,23 @@ int Contacts::build(LAMMPS *lmp, int tbit, int sbit, const double *radius, int a
   rows.clear();
   near_valid = false;
   std::vector<int> src, tcand, scand;
+  if (full && atom->firstgroupname) {
+    // a setup: what an earlier full pass found for these sides still holds (a side in the
+    // first group stays there: an atom never leaves it; radii do not change), so it passes
+    // over the moving rows and the grid of resting atoms, if the grid still holds every
+    // resting row (each setup's fixes agree: the check is collective)
+    Registry &reg = registry[lmp];
+    auto it = reg.known.find({tbit, sbit, actbit, lmp->group->bitmask[atom->firstgroup]});
+    if (it != reg.known.end() && it->second.fast) {
+      int mine = rest_grid_holds(lmp, reg.rest) ? 1 : 0, all = 0;
+      MPI_Allreduce(&mine, &all, 1, MPI_INT, MPI_MIN, lmp->world);
+      if (!all) reg.rest.valid = false;    // binned again by collect_moving
+      fast = true;
+      tmax_all = it->second.tmax;
+      smax_all = it->second.smax;
+      full = false;
+    }
+  }
   if (full || !fast || !atom->firstgroupname)
     collect_full(lmp, tbit, sbit, radius, actbit, tcand, scand);
   else
@@ -557,6 +636,13 @@ int Contacts::build(LAMMPS *lmp, int tbit, int sbit, const double *radius, int a
               double act = radius[i] + radius[j] + 2.0 * skin;
               if (d2 < act * act) {
                 mask[i] |= actbit;
+                // a resting row's force is whatever its row last held (LAMMPS moves positions
+                // and velocities with an atom, not forces, and with neigh_modify include clears
+                // only the first rows): zero it, so that until LAMMPS puts the atom among the
+                // first rows (whose forces it clears each step) the phase switch's velocity
+                // shift (v - dt/2 f/m over the moving group) leaves it at rest; a setup's
+                // contact force is added to it below
+                f[i][0] = f[i][1] = f[i][2] = 0.0;
                 resting = false;
                 activated++;
               }

@@ -919,13 +919,16 @@ def bench_e2e(out, scene_names, repeat, long_steps, append):
 @click.option("--scene", "scene_name", default="magpod", show_default=True,
               type=Choice(["magpod", "magpod-small"]))
 @click.option("--no-mpi", is_flag=True, help="Skip the mpiexec -n 2 configurations.")
-def bench_perf(out, steps, quick, profile_steps, scene_name, no_mpi):
+@click.option("--only", multiple=True,
+              help="Measure only the rows of this scene (e.g. sediment-large:sediment_nx=4400; "
+                   "repeatable); the other rows of perf.json in --out stay.")
+def bench_perf(out, steps, quick, profile_steps, scene_name, no_mpi, only):
     """Wall time per 1200 MagPod iterations: reference, LAMMPS modes, serial and 2 ranks."""
     from rackstress.bench import perf as mod
 
     configs = [c for c in mod.CONFIGS if not (no_mpi and c[2] > 1)]
     data = mod.run_bench(out, steps=steps, quick=quick, profile_steps=profile_steps,
-                         scene_name=scene_name, configs=configs, echo=click.echo)
+                         scene_name=scene_name, configs=configs, echo=click.echo, only=only)
     _bench_report(data, mod)
     from rackstress.bench import md_table
 

@@ -456,8 +456,10 @@ def cases(quick: bool = False, large: bool = False) -> list:
     out = [("block", block_scene), ("magpod", lambda: scenes.build("magpod").with_steps(1200)),
            ("sediment-large", lambda: scenes.build("sediment-large").with_steps(120))]
     if large:
+        # its first phase (1,200 steps), as MagPod's: 60 steps held one or two of LAMMPS'
+        # reneighbourings (~30 ms each over 4 M atoms) and little else, a poor measure of a step
         out.append(("sediment-large:sediment_nx=4400",
-                    lambda: scenes.build("sediment-large", sediment_nx=4400).with_steps(60)))
+                    lambda: scenes.build("sediment-large", sediment_nx=4400).with_steps(1200)))
     return out
 
 
@@ -653,10 +655,34 @@ def runner_markdown(data: dict) -> list[str]:
           "moving particle; there the robot now weighs as much as the bed (resting / moving, at "
           "least 150: 271 on sediment-large, 1,085 on the 4 M bed), and the cut runs along the "
           "track through the robot.",
+          "- **Resting particles are never ghosts** (`deck.moving_ghosts_suffice`: `comm_modify "
+          "group rs_move` in `balance_commands`, where only contacts read a passive group and "
+          "the passive group is activated by those contacts' sources). The 4 M bed's cut along "
+          "the track made 32,488 ghosts a rank that never move, each sent every step and "
+          "passed over at each reneighbouring's borders; now the ghosts are the moving "
+          "particles near the cut. Exact: a resting particle within a contact's reach was "
+          "activated (put into rs_move) one reneighbouring before, so it is a ghost by then "
+          "(plugin parity tests, serial and 2 ranks, unchanged; magpod-small's 2-rank deck "
+          "writes the same bits with and without it).",
+          "- **A setup after the first passes over the moving rows** (`Contacts::build`): each "
+          "contact fix's setup passed over every owned and ghost atom (the 4 M bed: six fixes "
+          "× 4 M, twice a phase switch), and the grid of resting atoms was binned again after "
+          "each. What the first full pass found (which side lies in the moving group, the "
+          "largest radii, over all ranks) is kept per pair of sides, and the grid is kept "
+          "across setups (checked at each: every resting row's id is binned). The 4 M bed, "
+          "1,300 iterations (one phase switch), 1 rank: a phase switch 0.63 → 0.18 s, the "
+          "run 1.86 → 1.07 s; 2 ranks 1.09 → 0.78 s.",
+          "- **The originals on every rank before the run** (`LammpsRun`): the watchdog's "
+          "reference array (96 MB on the 4 M bed) was built on rank 1 at the first check, "
+          "inside the run, while rank 0, which had built it writing the data file, waited: "
+          "0.2 s of a 200-iteration run.",
           "",
           "**What limits it** (the rows above: `CPU outside MPI` is each rank's work, whatever "
           "the load): two ranks do more work between them than one (ghosts, the racks' gathers, "
-          "packing the forward exchange), and each step they meet three times: the forward "
+          "packing the forward exchange), LAMMPS' own work at each reneighbouring passes "
+          "over every owned atom on each rank (exchange, box, atom map, reordering: ~30 ms on "
+          "the 4 M bed on one rank, 20–27 ms on each of two, which share the memory bus), and "
+          "each step they meet three times: the forward "
           "exchange of the ghosts' positions, the plugin's reduction of the gathered positions "
           "(which carries the displacement check fix rs/nve does in LAMMPS' stead: "
           "`neigh_modify ... check no once yes`, one meeting where LAMMPS' check and that "
@@ -765,9 +791,10 @@ def markdown(data: dict) -> str:
               "x and the robot stayed whole on one rank (4,346 / 0 and 4,055 / 0 moving).",
               "- What limits 2 ranks on magpod: a step has half the one-rank step's work per "
               "rank (0.1 ms) and three meetings of the ranks; the ghost shell (cutoff 13: 2 r_max "
-              "+ 2 skins + 1, for the activation reach) is as large as a rank's moving particles, "
-              "but a ghost costs only its 24 bytes a step. Any scheduler delay at one of the "
-              "meetings costs the whole step, which is what loaded rows show.",
+              "+ 2 skins + 1, for the activation reach) holds only moving particles (resting "
+              "ones are never ghosts: `comm_modify group rs_move`), 24 bytes each a step. Any "
+              "scheduler delay at one of the meetings costs the whole step, which is what "
+              "loaded rows show.",
               "- What a step communicates: each ghost's position (24 bytes; forward "
               "communication) and the plugin's two fused reductions: the positions of the racks "
               "and attraction regions with one more double, the displacement check's flag (fix "
@@ -782,11 +809,11 @@ def markdown(data: dict) -> str:
                       f"{n}: a = {1e9 * c[0]:.0f} ns per moving particle, b = {1e9 * c[1]:.1f} "
                       f"ns per resting one (a moving particle weighs {c[0] / c[1]:.0f})"
                       for n, c in own) + f". MagPod's deck weighs a moving particle "
-                  f"{MOVE_WEIGHT_DOC}. A resting particle is not free: fix viscous and "
-                  "addforce, force clearing and the displacement check pass over every owned "
-                  "atom in a standalone deck (`rackstress run` adds `neigh_modify include "
-                  "rs_move`), and LAMMPS' own reneighbouring (exchange, atom map, box) over "
-                  "every atom, on a million out of cache.", ""]
+                  f"{MOVE_WEIGHT_DOC}. A resting particle is not free: LAMMPS' own "
+                  "reneighbouring (exchange, atom map, box, reordering) passes over every "
+                  "owned atom, on a million out of cache. (Forces are cleared over the moving "
+                  "rows only: `neigh_modify include rs_move`, which standalone decks now have "
+                  "after their first `run 0`, as `rackstress run` had.)", ""]
     for name, s in data["scenes"].items():
         L += [f"## {name}: {s['n_particles']:,} particles, ghost cutoff {s['ghost_cutoff']:.2f}",
               "", f"- best 2-rank / 1-rank wall-time ratio measured here: {s['speed_up_2']:.2f}x",

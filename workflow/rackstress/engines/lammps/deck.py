@@ -565,7 +565,7 @@ class Deck:
             L += self.switch_commands(phase.vars, previous)
             L.append(f"run {phase.steps} pre no post no")
             previous = phase.vars
-        return L
+        return self._include_moving(L)
 
     def _looped_schedule(self, full: int) -> list[str]:
         sc = self.scene
@@ -592,7 +592,29 @@ class Deck:
                 tail.append(Phase(phase.name, take, phase.vars))
                 rest -= take
         cycle(tail, previous, f"cycle {full + 1}, cut short")
-        return L
+        return self._include_moving(L)
+
+    def _include_moving(self, L: list[str]) -> list[str]:
+        """A standalone plugin deck with passive groups does what the runner does before its
+        first run (runner.LammpsRun): ``neigh_modify include rs_move``, so that LAMMPS clears
+        forces (and would bin and check displacements) over the moving rows only
+        (``atom_modify first``), not over every owned atom a step. It comes right after the first
+        ``run 0``: that setup, with include still off, cleared every owned row's force (the
+        runner zeroes them itself), and nothing writes a resting row's force later (the styles
+        add forces to moving rows only; a resting particle touched at a setup has joined
+        rs_move and is reordered among the first rows by the second ``run 0``, whose setup
+        clears those). A resting row's force can still be stale under MPI (LAMMPS moves
+        positions and velocities with an atom, not forces: a row that receives an atom by
+        exchange, or that a departing moving atom left, keeps the force it held); nothing reads
+        it while the atom rests, and rs/collide zeroes it when it activates the atom, so that a
+        phase switch's velocity shift (v − dt/2·f/m over rs_move) before LAMMPS has put the
+        atom among the first rows leaves it at rest (without that zeroing, magpod-small's
+        standalone deck on 2 ranks left the reference trajectory at step 204). Among the first
+        rows, its force is cleared each step before the styles add theirs."""
+        if not (self.plugin and self.passive):
+            return L
+        k = L.index("run 0 post no")
+        return L[:k + 1] + [f"neigh_modify include {MOVE_GROUP}"] + L[k + 1:]
 
     def switch_commands(self, phase_vars, previous) -> list[str]:
         """Enter a phase exactly: back to the paper's v_n, new coefficients, forces, v + dt/2·a.
@@ -656,14 +678,53 @@ def balance_commands(deck: Deck) -> list[str]:
     how = params.get("balance", "rcb" if deck.passive and deck.plugin else "none")
     if how in (None, "none"):
         return []
+    ghosts = [f"comm_modify group {MOVE_GROUP}"] if moving_ghosts_suffice(deck) else []
     if how == "shift":
-        return ["balance 1.05 shift xz 20 1.05"]
+        return ghosts + ["balance 1.05 shift xz 20 1.05"]
     if how == "rcb":
         if not deck.passive:
             return ["comm_style tiled", "balance 1.0 rcb"]
         w = float(params.get("robot_weight", MOVE_WEIGHT))
-        return ["comm_style tiled", f"balance 1.0 rcb weight group 1 {MOVE_GROUP} {w!r}"]
+        return ["comm_style tiled"] + ghosts + [
+            f"balance 1.0 rcb weight group 1 {MOVE_GROUP} {w!r}"]
     raise SceneError(f"scene '{deck.scene.name}': unknown balance '{how}' (rcb, shift or none)")
+
+
+def moving_ghosts_suffice(deck: Deck) -> bool:
+    """Whether a plugin deck with passive groups may send only the moving group's atoms as
+    ghosts (``comm_modify group rs_move``; LAMMPS requires it to be ``atom_modify first``'s
+    group): a resting particle is then never a ghost, and neither LAMMPS' forward communication
+    of every step nor its borders at each reneighbouring pass over the resting ones (the 4 M
+    bed: 32,488 ghosts a rank, ~1,300 left). Exact when every operator that reads a passive
+    group's particle across ranks is a contact (``rs/collide`` from it, ``rs/dampen``'s contact
+    condition on it; reach r_p + r_u) on a group T for which the passive group has an
+    unconditional ``rs/collide ... activate`` from T. A particle u of it within a contact's
+    reach of a T particle p at some step was within r_p + r_u + skin of p at LAMMPS' last
+    reneighbouring before it, and within r_p + r_u + 3/2 skin at the one before that (p
+    moves less than half a skin between two, u not at all), where the activating fix on u's
+    rank (p is a moving ghost there) put u into rs_move: from the last reneighbouring on, u is
+    a ghost wherever p's rank needs it. A setup's contact (step 0, a phase switch) activates u
+    there and is recomputed by the second ``run 0`` (runner._plugin_reorder), whose borders
+    send u. A contact found later than that stops the run on u's rank ("... before LAMMPS
+    integrated it"), as without this. Everything else a passive group can be a source of
+    (racks, attraction) is gathered by reductions over owned atoms, not from ghosts; a bind
+    over bonds is not (its partner is a ghost), nor is a passive target's passive source."""
+    if not (deck.plugin and deck.passive) or deck.python_ops:
+        return False
+    passive = set(deck.passive)
+    activating = {(r.target, r.op.source) for r in deck.realized
+                  if r.plugin == "rs/collide" and r.target in passive and not r.op.when}
+    for r in deck.realized:
+        sources = set(contact_groups(r.op.when or ()))
+        source = getattr(r.op, "source", None)
+        if source is not None:
+            sources.add(source)
+        for s in sources & passive:
+            if r.target in passive or r.plugin not in ("rs/collide", "rs/dampen"):
+                return False
+            if (s, r.target) not in activating:
+                return False
+    return True
 
 
 # ---------------------------------------------------------------------------- supports, v0
