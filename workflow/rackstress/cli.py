@@ -156,7 +156,7 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
     rendered, 5 the disk refused a write (full, read-only, no permission), 6 a static analysis
     did not settle (its state and summary kept).
     """
-    from rackstress.lib.mpi import rank
+    from rackstress.lib.mpi import rank, world
     from rackstress.runs import run as run_mod
     from rackstress.runs.rundir import check_out, locked
 
@@ -208,20 +208,32 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
             planned = run_mod.plan(sc, engine, mode, dump_every, allow_unstable=allow_unstable)
         planned["deck"].dump_all = bool(dump_all)
         head_start = None
-        if rank() == 0 and engine == "lammps" and planned["deck"].plugin and _idle_core():
-            from rackstress.render.prepare import prepare_in_background, stop_prepared
-
-            # post-processing's imports and measures while LAMMPS runs the plugin (no GIL
-            # held), from its first steps if it is short (run.execute); not beside a
-            # simulation that runs Python each step (the reference engine, the callback path),
-            # nor where no core is idle (_idle_core)
+        ranks = world().Get_size()
+        if rank() == 0 and engine == "lammps" and planned["deck"].plugin and _idle_core(ranks):
+            # post-processing's imports and measures while LAMMPS runs the plugin, from its
+            # first steps if it is short (run.execute); not beside a simulation that runs
+            # Python each step (the reference engine, the callback path), nor where no core
+            # is idle (_idle_core)
             every = planned["dump_every"]
             frames = sc.total_steps // every + 1 + (1 if sc.total_steps % every else 0)
             out_ = out
+            if ranks == 1:
+                # in a process of its own, forked now: its imports meanwhile (render/prepare.py)
+                from rackstress.render.prepare import Ahead
 
-            def head_start():
-                prepare_in_background(out_, frames, compress=not dump_text)
-                return stop_prepared        # once the last step is done
+                ahead = Ahead(out_, frames, not dump_text,
+                              lambda: _post_in_child(out_, do_render, progress, dump_text))
+                _AHEAD.append(ahead)
+
+                def head_start():
+                    ahead.follow()
+                    return ahead.ended          # once LAMMPS has closed the dump
+            else:
+                from rackstress.render.prepare import prepare_in_background, stop_prepared
+
+                def head_start():       # rank 0's thread (LAMMPS runs the plugin without the GIL)
+                    prepare_in_background(out_, frames, compress=not dump_text)
+                    return stop_prepared        # once the last step is done
         # the lock is held from before anything is written until the pictures are done
         with locked(out) as held:   # noqa: F841
             doing = ("solving for the static equilibrium (Newton's method)"
@@ -245,7 +257,34 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
             sys.exit(EXIT_UNSETTLED)
         _may_exit_now()
     except Exception as err:  # noqa: BLE001 - each kind has its exit status (_fail_any)
+        _quit_ahead()
         _fail_any(err, out)
+    finally:
+        _quit_ahead()
+
+
+#: the post-processing process of this ``rackstress run`` (render/prepare.py's Ahead), if any
+_AHEAD: list = []
+
+
+def _quit_ahead() -> None:
+    """End :data:`_AHEAD`'s process if it is still there (the run failed before it was told
+    to post-process)."""
+    while _AHEAD:
+        _AHEAD.pop().quit()
+
+
+def _post_in_child(out: Path, do_render: bool, progress: bool, dump_text: bool) -> int:
+    """What :data:`_AHEAD`'s process does once told: :func:`_post_and_render`, as this process
+    would do it; its exit status."""
+    from rackstress.stress.rundata import kept_open
+
+    try:
+        with kept_open():
+            _post_and_render(out, do_render, progress, dump_text)
+    except SystemExit as exc:
+        return exc.code if isinstance(exc.code, int) else 1
+    return 0
 
 
 #: set once a ``rackstress run`` on one process has written and closed everything: the
@@ -276,17 +315,24 @@ def entry():
         raise
 
 
-def _idle_core() -> bool:
+def _idle_core(ranks: int = 1) -> bool:
     """Whether post-processing may start beside the simulation (``rackstress run``'s head
-    start, render/prepare.py): not under ``RACKSTRESS_HEAD_START=0``, and only where the
-    1-minute load average leaves a core idle (below the number of cores). On a machine whose
-    cores are all busy the thread takes CPU and the GIL from the simulation and gets nothing
-    done (magpod-small at load 5: its simulation 1.97-2.10 s beside it against 1.52-1.57 s
-    without, no frame measured meanwhile; bench e2e)."""
-    if os.environ.get("RACKSTRESS_HEAD_START", "1").strip().lower() in ("0", "no", "off"):
+    start, render/prepare.py): not under ``RACKSTRESS_HEAD_START=0``, only where the machine
+    has a core beyond the simulation's ``ranks``, and only where the 1-minute load average
+    leaves a core idle (below the number of cores; ``RACKSTRESS_HEAD_START=always`` skips
+    this last check). On a machine whose cores are all busy the head start takes CPU from
+    the simulation and gets nothing done (magpod-small at load 5: its simulation 1.97-2.10 s
+    beside it against 1.52-1.57 s without, no frame measured meanwhile; bench e2e)."""
+    how = os.environ.get("RACKSTRESS_HEAD_START", "1").strip().lower()
+    if how in ("0", "no", "off"):
         return False
+    cores = os.cpu_count() or 1
+    if ranks >= cores:
+        return False
+    if how == "always":
+        return True
     try:
-        return os.getloadavg()[0] < (os.cpu_count() or 1)
+        return os.getloadavg()[0] < cores
     except OSError:
         return True
 
@@ -316,10 +362,32 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True,
         md = g["max_deformation"]
         click.echo(f"  {name:12s} n={g['n']:6d}  max_deformation="
                    + (f"{md:.4g}" if md is not None else "-"))
+    while _AHEAD:               # post-processing in the process that prepared it
+        ahead = _AHEAD.pop()
+        code = ahead.go()
+        if code is not None:
+            if code:
+                sys.exit(code)
+            return
+        _forget(out)            # it died: this process does it all
     from rackstress.stress.rundata import kept_open
 
     with kept_open():           # particles.data read and the dump indexed once
         _post_and_render(out, do_render, progress, dump_text)
+
+
+def _forget(out: Path) -> None:
+    """What a post-processing process that died may have left half-written in ``out``: its
+    pictures', VTK files' and compressed trajectory's temporary files (the VTK and plot processes it
+    forked died with it: PR_SET_PDEATHSIG)."""
+    import shutil
+
+    for p in [p for pattern in (".render.tmp*", ".vtk.tmp*", ".*.gz.tmp*")
+              for p in Path(out).glob(pattern)]:
+        if p.is_dir():
+            shutil.rmtree(p, ignore_errors=True)
+        else:
+            p.unlink(missing_ok=True)
 
 
 def _post_and_render(out: Path, do_render: bool, progress: bool, dump_text: bool) -> None:
