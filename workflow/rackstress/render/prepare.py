@@ -218,9 +218,10 @@ class Ahead:
       writes (:func:`rackstress.stress.post.follow`), and in between compress them
       (``compress``) and prepare the pictures' painter
       (:func:`rackstress.render.pictures.prepare_painter`);
-    * ``E`` (:meth:`ended`, LAMMPS has closed the dump): check the guard rails (``guards()``:
-      the parent, told ``guards=False``, leaves them out of ``summary.json``, and takes
-      scipy's import off its own path) and measure the frames left, in memory;
+    * ``E`` (:meth:`ended`, LAMMPS has closed the dump): check the guard rails (``guards()``,
+      in a forked process, on the core the simulation leaves: the parent, told
+      ``guards=False``, leaves them out of ``summary.json``, and scipy's import off its own
+      path) and measure the frames left, in memory;
     * ``G`` (:meth:`go`, ``summary.json`` written): ``finish(guards())`` — the guard rails'
       warnings into ``summary.json``, then the run's post-processing, the same code as
       without a head start, its output after the parent's — and end with its exit status,
@@ -381,7 +382,7 @@ def _ahead_child(r: int, parent: int, rundir, frames: int, compress: bool, finis
             break
     gc.freeze()                     # what is imported: in no collection from now on
     gc.enable()
-    kept = found = None
+    kept = checking = None
     while True:
         what = os.read(r, 1)
         if what == b"F" and frames:
@@ -392,10 +393,9 @@ def _ahead_child(r: int, parent: int, rundir, frames: int, compress: bool, finis
             from rackstress.stress.post import compute_fields
             from rackstress.stress.rundata import kept_open, load_run
 
-            try:        # while the parent summarizes: the guard rails, the frames left
-                found = guards()
-            except Exception:  # noqa: BLE001, S110 - checked again after G, and said then
-                pass
+            # while the parent summarizes: the guard rails in a process of their own (the
+            # core the simulation used is idle now), the frames left here
+            checking = _guards_beside(guards)
             kept = kept_open()
             kept.__enter__()
             try:
@@ -403,6 +403,32 @@ def _ahead_child(r: int, parent: int, rundir, frames: int, compress: bool, finis
             except Exception:  # noqa: BLE001, S110 - post-processing says it again after G
                 pass
         elif what == b"G":
+            found = None
+            if checking is not None:
+                try:
+                    found = tuple(checking.join())
+                except Exception:  # noqa: BLE001, S110 - checked again here, and said then
+                    pass
             return finish(found if found is not None else guards())
         elif what in (b"Q", b""):
+            if checking is not None:
+                checking.kill()
             return 0
+
+
+def _guards_beside(guards):
+    """``guards()`` in a forked process (:class:`~rackstress.runs.forked.ForkedJob`, its result
+    in a temporary file outside the run directory), or None where it cannot start."""
+    import tempfile
+    from pathlib import Path
+
+    from rackstress.runs.forked import ForkedJob
+
+    try:
+        fd, name = tempfile.mkstemp(prefix="rackstress-guards-", suffix=".json")
+        import os
+
+        os.close(fd)
+        return ForkedJob(guards, Path(name))
+    except Exception:  # noqa: BLE001 - checked after G instead
+        return None
