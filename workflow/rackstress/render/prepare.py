@@ -1,7 +1,10 @@
-"""A head start for post-processing: its imports, loaded while the simulation runs.
+"""A head start for post-processing: its imports, measures and painter, ready while the
+simulation runs.
 
-This module imports nothing heavy itself, so that ``rackstress run`` can start it before the
-simulation without paying for it there.
+``rackstress run`` on one process forks :class:`Ahead`, the process that post-processes the
+run, before the first step; under ``mpiexec`` (with a core beyond the ranks) rank 0 runs
+:func:`prepare_in_background`, a thread. This module imports nothing heavy itself, so that
+the run can start either without paying for it there.
 """
 from __future__ import annotations
 
