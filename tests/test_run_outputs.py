@@ -294,3 +294,21 @@ def test_a_head_start_told_to_quit_writes_nothing(tmp_path):
     assert r.returncode == 0 and r.stdout.strip() == "0", r.stderr
     time.sleep(0.2)
     assert {p: p.stat().st_mtime_ns for p in out.rglob("*")} == before
+
+
+@pytest.mark.lammps
+def test_a_run_whose_output_is_a_python_stream_says_everything(tmp_path, monkeypatch):
+    """Under click's test runner (stdout a Python object, no file descriptor a forked process
+    could write to) ``rackstress run`` keeps its post-processing in its own process: every
+    line is in the output, the peak and the pictures' included."""
+    from click.testing import CliRunner
+
+    from rackstress.cli import main
+
+    monkeypatch.setenv("RACKSTRESS_HEAD_START", "always")
+    out = tmp_path / "pr"
+    res = CliRunner().invoke(main, ["run", "plane-rack", "--steps", "150", "--dump-every", "3",
+                                    "--out", str(out), "--no-progress"])
+    assert res.exit_code == 0, res.output
+    assert "peak paper = " in res.output and "pictures: " in res.output
+    assert (out / "figures" / "sheet.png").is_file() and (out / "vtk" / "run.pvd").is_file()

@@ -224,7 +224,7 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
             every = planned["dump_every"]
             frames = sc.total_steps // every + 1 + (1 if sc.total_steps % every else 0)
             out_ = out
-            if ranks == 1:
+            if ranks == 1 and _own_streams():
                 # in a process of its own, forked now: its imports meanwhile (render/prepare.py)
                 from rackstress.render.prepare import Ahead
 
@@ -278,6 +278,18 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
     finally:
         gc.enable()
         _quit_ahead()
+
+
+def _own_streams() -> bool:
+    """Whether this process writes its output to file descriptors (a terminal, a file, a
+    pipe), which a forked process shares, and not into a stream of Python objects (click's
+    test runner, pytest's capsys), which it would fill in its own memory only."""
+    try:
+        sys.stdout.fileno()
+        sys.stderr.fileno()
+        return True
+    except (AttributeError, OSError, ValueError):
+        return False
 
 
 #: the post-processing process of this ``rackstress run`` (render/prepare.py's Ahead), if any

@@ -289,24 +289,31 @@ class Ahead:
         self._tell(b"F")
 
     def ended(self) -> None:
-        """LAMMPS has closed the dump: measure the frames left (nothing written yet)."""
+        """LAMMPS has closed the dump: measure the frames left (nothing written yet), at the
+        usual niceness where this process may set it (the simulation is over)."""
+        self._renice()
         self._tell(b"E")
+
+    def _renice(self) -> None:
+        import os
+
+        if self.pid is not None:
+            try:
+                os.setpriority(os.PRIO_PROCESS, self.pid, os.getpriority(os.PRIO_PROCESS, 0))
+            except OSError:
+                pass
 
     def go(self) -> int | None:
         """Post-process the finished run in the child (``summary.json`` is written, the
         parent's lines printed) and wait for it: its exit status, or None if it could not do
         it (it died, or was never forked): then the caller does it."""
-        import os
         import sys
 
         if self.fd is None:
             return None
         sys.stdout.flush()
         sys.stderr.flush()
-        try:        # the simulation is over: at the usual niceness where this process may
-            os.setpriority(os.PRIO_PROCESS, self.pid, os.getpriority(os.PRIO_PROCESS, 0))
-        except OSError:
-            pass
+        self._renice()              # the simulation is over (if ended() was not told)
         told = self._tell(b"G")
         status = self._wait()
         if not told or status is None or status < 0 or status in (70, 130):
