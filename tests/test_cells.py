@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from rackstress.lib.cells import close_pairs, count_within
+from rackstress.lib.cells import any_closer, close_pairs, count_within
 
 
 def _tree_pairs(o, r):
@@ -37,3 +37,20 @@ def test_hand_placed_points():
     # every point with itself, the pairs both ways
     assert count_within(o, o, 1.0) == len(o) + 2 * len(pairs)
     assert count_within(o[:1], o, 0.49) == 1 and len(close_pairs(o[:1], 5.0)) == 0
+
+
+def test_any_closer_is_what_a_kd_tree_query_with_an_upper_bound_finds():
+    """``any_closer(a, b, r)`` (MagPod's gait report: does a sole touch the sediment?) against
+    ``cKDTree(b).query(a, distance_upper_bound=r)``, strict as it is: a point at exactly r is
+    not closer; random sets near and far, and hand-placed ones."""
+    rng = np.random.default_rng(11)
+    b = rng.random((5000, 3)) * 10.0
+    for shift in (0.0, 0.3, 1.0, 10.2, 10.5, 30.0):
+        for r in (0.05, 0.2, 0.6):
+            a = rng.random((60, 3)) * 2.0 + shift
+            tree = np.isfinite(cKDTree(b).query(a, distance_upper_bound=r)[0]).any()
+            assert any_closer(a, b, r) == tree, (shift, r)
+    one = np.array([[0.0, 0.0, 0.0]])
+    assert not any_closer(np.array([[1.0, 0.0, 0.0]]), one, 1.0)         # exactly r: not closer
+    assert any_closer(np.array([[1.0, 0.0, 0.0], [0.0, 0.999, 0.0]]), one, 1.0)
+    assert not any_closer(one[:0], one, 1.0) and not any_closer(one, one, 0.0)

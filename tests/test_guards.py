@@ -207,3 +207,26 @@ def test_run_records_force_on_rack_in_summary(tmp_path):
     s = json.loads((out / "summary.json").read_text())
     assert [w["kind"] for w in s["warnings"]] == ["force_on_rack"]
     assert s["warnings"][0]["group"] == "blockrack" and "blockrack" in proc.stderr
+
+
+@pytest.mark.lammps
+def test_the_head_start_checks_the_guard_rails_as_the_run_would(tmp_path):
+    """On LAMMPS, ``rackstress run``'s head start checks the guard rails beside the run
+    (render/prepare.py's Ahead; the run leaves ``warnings`` to it): the summary records the
+    same pass-through, and stderr says it, as a run without a head start."""
+    import os
+
+    path = tmp_path / "scene.toml"
+    path.write_text(textwrap.dedent(SCENE))
+    got = {}
+    for how in ("always", "0"):
+        out = tmp_path / f"run-{how}"
+        proc = subprocess.run([str(RACKSTRESS), "run", str(path), "--out", str(out),
+                               "--no-render", "--no-progress"], capture_output=True, text=True,
+                              timeout=300, env=dict(os.environ, RACKSTRESS_HEAD_START=how))
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        s = json.loads((out / "summary.json").read_text())
+        assert s["engine"] == "lammps" and "passed through" in proc.stderr
+        got[how] = s["warnings"]
+    assert [w["kind"] for w in got["0"]] == ["pass_through"]
+    assert got["always"] == got["0"]

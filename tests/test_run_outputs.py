@@ -120,7 +120,9 @@ def test_sheet_only_paints_the_cells_at_half_size_and_nothing_else(tmp_path):
 
 def test_the_head_start_needs_an_idle_core(monkeypatch):
     """``rackstress run`` starts post-processing beside the simulation only where the 1-minute
-    load average is below the number of cores, and never under RACKSTRESS_HEAD_START=0."""
+    load average is below the number of cores (not checked under RACKSTRESS_HEAD_START=always)
+    and the machine has a core beyond the simulation's ranks, and never under
+    RACKSTRESS_HEAD_START=0."""
     import os
 
     from rackstress import cli
@@ -131,6 +133,182 @@ def test_the_head_start_needs_an_idle_core(monkeypatch):
     assert cli._idle_core()
     monkeypatch.setattr(os, "getloadavg", lambda: (float(cores), 0.0, 0.0))
     assert not cli._idle_core()
+    # a core beyond the simulation's ranks, whatever the load
+    monkeypatch.setattr(os, "getloadavg", lambda: (0.0, 0.0, 0.0))
+    assert cli._idle_core(cores - 1) and not cli._idle_core(cores)
+    monkeypatch.setenv("RACKSTRESS_HEAD_START", "always")
+    monkeypatch.setattr(os, "getloadavg", lambda: (float(cores), 0.0, 0.0))
+    assert cli._idle_core() and not cli._idle_core(cores)
     monkeypatch.setattr(os, "getloadavg", lambda: (0.0, 0.0, 0.0))
     monkeypatch.setenv("RACKSTRESS_HEAD_START", "0")
     assert not cli._idle_core()
+
+
+# ----------------------------------------------------------------------------- the head start's process
+#: magpod-small's first 1200 iterations, a frame every 12: 101 frames, the scene's own count
+HEAD = ["run", "magpod-small", "--steps", "1200", "--dump-every", "12", "--no-progress"]
+
+
+def _derived(rundir: Path) -> dict:
+    """What post-processing writes that must not depend on where it ran: every VTK file,
+    the compressed trajectory, the pictures and plots, byte for byte; the peaks."""
+    files = {str(p.relative_to(rundir)): p.read_bytes()
+             for pattern in ("vtk/*", "trajectory.dump.gz", "figures/*.png")
+             for p in sorted(rundir.glob(pattern))}
+    stress = json.loads((rundir / "stress.json").read_text())
+    summary = json.loads((rundir / "summary.json").read_text())
+    return {"files": files, "peak": stress["peak"], "groups": stress["groups"],
+            "summary_groups": summary["groups"], "warnings": summary.get("warnings")}
+
+
+def _same(a: dict, b: dict) -> None:
+    assert sorted(a["files"]) == sorted(b["files"]) and len(a["files"]) > 100
+    assert [k for k in a["files"] if a["files"][k] != b["files"][k]] == []
+    for k in ("peak", "groups", "summary_groups", "warnings"):
+        assert a[k] == b[k], k
+
+
+def _children(pid: int) -> list:
+    try:
+        return [int(x) for x in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()]
+    except OSError:
+        return []
+
+
+@pytest.fixture(scope="module")
+def alone(tmp_path_factory):
+    """magpod-small's head without the head start (nothing beside the simulation)."""
+    import os
+
+    out = tmp_path_factory.mktemp("alone") / "run"
+    r = subprocess.run([RACKSTRESS, *HEAD, "--out", str(out)], capture_output=True, text=True,
+                       timeout=600, env=dict(os.environ, RACKSTRESS_HEAD_START="0"))
+    assert r.returncode == 0, r.stderr
+    return out
+
+
+@pytest.mark.lammps
+def test_a_killed_head_start_loses_nothing(tmp_path, alone):
+    """The head start's process SIGKILLed as soon as it is forked (before the simulation's
+    first step): the run post-processes itself and leaves what a run without a head start
+    leaves, byte for byte, and no temporary file."""
+    import os
+    import signal
+    import time
+
+    out = tmp_path / "run"
+    p = subprocess.Popen([RACKSTRESS, *HEAD, "--out", str(out)], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True,
+                         env=dict(os.environ, RACKSTRESS_HEAD_START="always"))
+    killed = None
+    t0 = time.monotonic()
+    while killed is None and p.poll() is None and time.monotonic() - t0 < 120:
+        kids = _children(p.pid)
+        if kids:
+            killed = kids[0]
+            os.kill(killed, signal.SIGKILL)
+        time.sleep(0.005)
+    stdout, stderr = p.communicate(timeout=600)
+    assert killed is not None, "no head start process was forked"
+    assert p.returncode == 0, stderr
+    assert "pictures:" in stdout and "peak paper" in stdout
+    _same(_derived(out), _derived(alone))
+    assert [q.name for q in out.iterdir() if ".tmp" in q.name] == []
+    assert json.loads((out / "stress.json").read_text())["timings"][
+        "frames_measured_while_running"] == 0
+
+
+@pytest.mark.lammps
+def test_the_head_start_process_hands_over_what_it_measured(tmp_path, alone):
+    """The head start's process (render/prepare.py's Ahead) on a run whose dump is complete:
+    told to follow, it measures every whole chunk of frames, compresses them and prepares the
+    painter; told the run ended and to go on, it post-processes the run. What it leaves equals
+    a run without a head start, byte for byte, and stress.json counts the frames it measured
+    before it was told the run had ended: the whole chunks of the 101 frames."""
+    import shutil
+
+    from rackstress.stress.measures import frame_chunk, neighbourhoods
+    from rackstress.stress.rundata import load_run
+
+    out = tmp_path / "run"
+    r = _run([*HEAD, "--out", str(out), "--no-render", "--dump-text"])
+    assert r.returncode == 0, r.stderr
+    for name in ("vtk", "stress.json"):         # back to the state the simulation left
+        (shutil.rmtree if (out / name).is_dir() else Path.unlink)(out / name)
+    summary = json.loads((out / "summary.json").read_text())
+    summary["warnings"] = []                    # as the parent leaves them to the head start
+    (out / "summary.json").write_text(json.dumps(summary))
+    run = load_run(out)
+    chunk = frame_chunk(run.n_atoms, neighbourhoods(run, list(run.parts.values())), 101)
+    assert run.index.n_frames == 101 and 1 <= chunk < 101
+    code = (
+        "import sys, time\n"
+        "from pathlib import Path\n"
+        "from rackstress import cli\n"
+        "from rackstress.render.prepare import Ahead\n"
+        f"out = Path({str(out)!r})\n"
+        "from rackstress import scenes\n"
+        "from rackstress.engines.guards import check_run\n"
+        "sc = scenes.build('magpod-small').with_steps(1200)\n"
+        "a = Ahead(out, 101, True, lambda found: cli._post_in_child(out, True, False, False,\n"
+        "          found), lambda: (sc.name, check_run(sc, out, echo=False, engine='lammps')))\n"
+        "a.follow()\n"
+        "def cpu():\n"
+        "    f = Path(f'/proc/{a.pid}/stat').read_text().rsplit(')', 1)[1].split()\n"
+        "    return int(f[11]) + int(f[12])\n"
+        "last, still, t0 = -1, 0, time.monotonic()\n"
+        "while still < 10 and time.monotonic() - t0 < 240:   # idle for a second: all done\n"
+        "    time.sleep(0.1)\n"
+        "    now = cpu()\n"
+        "    still, last = (still + 1 if now == last else 0), now\n"
+        "a.ended()\n"
+        "print(a.go())\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0 and r.stdout.strip().splitlines()[-1] == "0", r.stderr
+    assert "peak paper" in r.stdout
+    _same(_derived(out), _derived(alone))
+    assert not (out / "trajectory.dump").exists()
+    timings = json.loads((out / "stress.json").read_text())["timings"]
+    assert timings["frames_measured_while_running"] == 101 // chunk * chunk
+
+
+@pytest.mark.lammps
+def test_a_head_start_told_to_quit_writes_nothing(tmp_path):
+    """Told to quit (the run diverged or failed), the head start's process ends having
+    written nothing into the run directory, even after measuring its frames."""
+    import time
+
+    out = tmp_path / "run"
+    r = _run(["run", "plane-rack", "--steps", "300", "--dump-every", "3", "--no-render",
+              "--dump-text", "--no-progress", "--out", str(out)])
+    assert r.returncode == 0, r.stderr
+    before = {p: p.stat().st_mtime_ns for p in out.rglob("*")}
+    code = (
+        "import time\n"
+        "from pathlib import Path\n"
+        "from rackstress.render.prepare import Ahead\n"
+        f"a = Ahead(Path({str(out)!r}), 101, True, lambda found: 9, lambda: ('x', []))\n"
+        "a.follow(); time.sleep(3); a.ended(); time.sleep(1)\n"
+        "a.quit(); print(a.status)\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0 and r.stdout.strip() == "0", r.stderr
+    time.sleep(0.2)
+    assert {p: p.stat().st_mtime_ns for p in out.rglob("*")} == before
+
+
+@pytest.mark.lammps
+def test_a_run_whose_output_is_a_python_stream_says_everything(tmp_path, monkeypatch):
+    """Under click's test runner (stdout a Python object, no file descriptor a forked process
+    could write to) ``rackstress run`` keeps its post-processing in its own process: every
+    line is in the output, the peak and the pictures' included."""
+    from click.testing import CliRunner
+
+    from rackstress.cli import main
+
+    monkeypatch.setenv("RACKSTRESS_HEAD_START", "always")
+    out = tmp_path / "pr"
+    res = CliRunner().invoke(main, ["run", "plane-rack", "--steps", "150", "--dump-every", "3",
+                                    "--out", str(out), "--no-progress"])
+    assert res.exit_code == 0, res.output
+    assert "peak paper = " in res.output and "pictures: " in res.output
+    assert (out / "figures" / "sheet.png").is_file() and (out / "vtk" / "run.pvd").is_file()

@@ -156,7 +156,12 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
     rendered, 5 the disk refused a write (full, read-only, no permission), 6 a static analysis
     did not settle (its state and summary kept).
     """
-    from rackstress.lib.mpi import rank
+    import gc
+
+    # no collection while the run's modules load (numpy, mpi4py, LAMMPS, the scene: a tenth
+    # less CPU before the first step); from the first step on, as usual, over the new objects
+    gc.disable()
+    from rackstress.lib.mpi import rank, world
     from rackstress.runs import run as run_mod
     from rackstress.runs.rundir import check_out, locked
 
@@ -180,6 +185,7 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
         elif out is not None:
             check_out(out)
         if resume_dir is not None:
+            gc.enable()
             from rackstress.runs.resume import resume_run
 
             with locked(out, create=False) as held:
@@ -208,20 +214,41 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
             planned = run_mod.plan(sc, engine, mode, dump_every, allow_unstable=allow_unstable)
         planned["deck"].dump_all = bool(dump_all)
         head_start = None
-        if rank() == 0 and engine == "lammps" and planned["deck"].plugin and _idle_core():
-            from rackstress.render.prepare import prepare_in_background, stop_prepared
-
-            # post-processing's imports and measures while LAMMPS runs the plugin (no GIL
-            # held), from its first steps if it is short (run.execute); not beside a
-            # simulation that runs Python each step (the reference engine, the callback path),
-            # nor where no core is idle (_idle_core)
+        ranks = world().Get_size()
+        if (rank() == 0 and engine == "lammps" and planned["deck"].plugin
+                and sc.analysis != "static" and _idle_core(ranks)):
+            # post-processing's imports and measures while LAMMPS runs the plugin, from its
+            # first steps if it is short (run.execute); not beside a simulation that runs
+            # Python each step (the reference engine, the callback path), nor where no core
+            # is idle (_idle_core)
             every = planned["dump_every"]
             frames = sc.total_steps // every + 1 + (1 if sc.total_steps % every else 0)
             out_ = out
+            if ranks == 1 and _own_streams():
+                # in a process of its own, forked now: its imports meanwhile (render/prepare.py)
+                from rackstress.render.prepare import Ahead
 
-            def head_start():
-                prepare_in_background(out_, frames, compress=not dump_text)
-                return stop_prepared        # once the last step is done
+                def guards():       # the guard rails, checked beside this process
+                    from rackstress.engines.guards import check_run
+
+                    return sc.name, check_run(sc, out_, echo=False, engine=engine)
+
+                ahead = Ahead(out_, frames, not dump_text,
+                              lambda found: _post_in_child(out_, do_render, progress,
+                                                           dump_text, found), guards)
+                _AHEAD.append(ahead)
+
+                def head_start():
+                    ahead.follow()
+                    return ahead.ended          # once LAMMPS has closed the dump
+            else:
+                from rackstress.render.prepare import prepare_in_background, stop_prepared
+
+                def head_start():       # rank 0's thread (LAMMPS runs the plugin without the GIL)
+                    prepare_in_background(out_, frames, compress=not dump_text)
+                    return stop_prepared        # once the last step is done
+        gc.freeze()
+        gc.enable()
         # the lock is held from before anything is written until the pictures are done
         with locked(out) as held:   # noqa: F841
             doing = ("solving for the static equilibrium (Newton's method)"
@@ -231,7 +258,8 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
                                       dump_every=dump_every, progress=shown,
                                       overwrite=overwrite, restart_every=restart_every or None,
                                       allow_unstable=allow_unstable, planned=planned,
-                                      keep_checkpoints=keep_checkpoints, head_start=head_start)
+                                      keep_checkpoints=keep_checkpoints, head_start=head_start,
+                                      guards=not _AHEAD)
             _finish(summary, out, do_render, progress, dump_text)
         if summary.get("settled") is False:
             from rackstress.errors import EXIT_UNSETTLED
@@ -245,7 +273,64 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
             sys.exit(EXIT_UNSETTLED)
         _may_exit_now()
     except Exception as err:  # noqa: BLE001 - each kind has its exit status (_fail_any)
+        _quit_ahead()
         _fail_any(err, out)
+    finally:
+        gc.enable()
+        _quit_ahead()
+
+
+def _own_streams() -> bool:
+    """Whether this process writes its output to file descriptors (a terminal, a file, a
+    pipe), which a forked process shares, and not into a stream of Python objects (click's
+    test runner, pytest's capsys), which it would fill in its own memory only."""
+    try:
+        sys.stdout.fileno()
+        sys.stderr.fileno()
+        return True
+    except (AttributeError, OSError, ValueError):
+        return False
+
+
+#: the post-processing process of this ``rackstress run`` (render/prepare.py's Ahead), if any
+_AHEAD: list = []
+
+
+def _quit_ahead() -> None:
+    """End :data:`_AHEAD`'s process if it is still there (the run failed before it was told
+    to post-process)."""
+    while _AHEAD:
+        _AHEAD.pop().quit()
+
+
+def _post_in_child(out: Path, do_render: bool, progress: bool, dump_text: bool,
+                   found: tuple) -> int:
+    """What :data:`_AHEAD`'s process does once told: the guard rails it checked (``found``)
+    into ``summary.json`` (:func:`_add_guards`), then :func:`_post_and_render`, as this process
+    would do it; its exit status."""
+    from rackstress.stress.rundata import kept_open
+
+    try:
+        _add_guards(out, *found)
+        with kept_open():
+            _post_and_render(out, do_render, progress, dump_text)
+    except SystemExit as exc:
+        return exc.code if isinstance(exc.code, int) else 1
+    return 0
+
+
+def _add_guards(out: Path, name: str, found: list) -> None:
+    """The guard rails' warnings of a run that ended well, checked beside it (``rackstress
+    run``'s head start: :func:`rackstress.runs.run.execute` with ``guards=False``), into its
+    ``summary.json`` and on stderr, as :func:`rackstress.engines.guards.check_run` says them."""
+    from rackstress.lib.jsonio import write_json
+
+    for w in found:
+        print(f"rackstress: warning: {name}: {w['message']}", file=sys.stderr)
+    path = Path(out) / "summary.json"
+    summary = json.loads(path.read_text())
+    summary["warnings"] = list(found) + list(summary.get("warnings") or [])
+    write_json(path, summary)
 
 
 #: set once a ``rackstress run`` on one process has written and closed everything: the
@@ -276,17 +361,24 @@ def entry():
         raise
 
 
-def _idle_core() -> bool:
+def _idle_core(ranks: int = 1) -> bool:
     """Whether post-processing may start beside the simulation (``rackstress run``'s head
-    start, render/prepare.py): not under ``RACKSTRESS_HEAD_START=0``, and only where the
-    1-minute load average leaves a core idle (below the number of cores). On a machine whose
-    cores are all busy the thread takes CPU and the GIL from the simulation and gets nothing
-    done (magpod-small at load 5: its simulation 1.97-2.10 s beside it against 1.52-1.57 s
-    without, no frame measured meanwhile; bench e2e)."""
-    if os.environ.get("RACKSTRESS_HEAD_START", "1").strip().lower() in ("0", "no", "off"):
+    start, render/prepare.py): not under ``RACKSTRESS_HEAD_START=0``, only where the machine
+    has a core beyond the simulation's ``ranks``, and only where the 1-minute load average
+    leaves a core idle (below the number of cores; ``RACKSTRESS_HEAD_START=always`` skips
+    this last check). On a machine whose cores are all busy the head start takes CPU from
+    the simulation and gets nothing done (magpod-small at load 5: its simulation 1.97-2.10 s
+    beside it against 1.52-1.57 s without, no frame measured meanwhile; bench e2e)."""
+    how = os.environ.get("RACKSTRESS_HEAD_START", "1").strip().lower()
+    if how in ("0", "no", "off"):
         return False
+    cores = os.cpu_count() or 1
+    if ranks >= cores:
+        return False
+    if how == "always":
+        return True
     try:
-        return os.getloadavg()[0] < (os.cpu_count() or 1)
+        return os.getloadavg()[0] < cores
     except OSError:
         return True
 
@@ -316,10 +408,33 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True,
         md = g["max_deformation"]
         click.echo(f"  {name:12s} n={g['n']:6d}  max_deformation="
                    + (f"{md:.4g}" if md is not None else "-"))
+    while _AHEAD:               # post-processing in the process that prepared it
+        ahead = _AHEAD.pop()
+        code = ahead.go()
+        if code is not None:
+            if code:
+                sys.exit(code)
+            return
+        _forget(out)            # it died: this process does it all
+        _add_guards(out, *ahead.guards())
     from rackstress.stress.rundata import kept_open
 
     with kept_open():           # particles.data read and the dump indexed once
         _post_and_render(out, do_render, progress, dump_text)
+
+
+def _forget(out: Path) -> None:
+    """What a post-processing process that died may have left half-written in ``out``: its
+    pictures', VTK files' and compressed trajectory's temporary files (the VTK and plot processes it
+    forked died with it: PR_SET_PDEATHSIG)."""
+    import shutil
+
+    for p in [p for pattern in (".render.tmp*", ".vtk.tmp*", ".*.gz.tmp*")
+              for p in Path(out).glob(pattern)]:
+        if p.is_dir():
+            shutil.rmtree(p, ignore_errors=True)
+        else:
+            p.unlink(missing_ok=True)
 
 
 def _post_and_render(out: Path, do_render: bool, progress: bool, dump_text: bool) -> None:

@@ -205,7 +205,12 @@ def _frames_in(mm, o, want, frame):
         if want is None or frame in want:
             p = o.copy()
             if n:
-                t = np.fromstring(mm[q:end].decode("ascii"), sep=" ").reshape(n, len(cols))
+                from rackstress.lib.numtext import loaded_numbers
+
+                t = loaded_numbers(mm[q:end])     # NumPy's values, compiled, if loaded
+                if t is None or t.size != n * len(cols):
+                    t = np.fromstring(mm[q:end].decode("ascii"), sep=" ")
+                t = t.reshape(n, len(cols))
                 ids = t[:, cols.index("id")].astype(np.int64) - 1
                 p[ids] = t[:, [cols.index(c) for c in ("x", "y", "z")]]
             yield step, p

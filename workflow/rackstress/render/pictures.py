@@ -312,8 +312,48 @@ class Painter:
         self.rw.GetPixelData(0, 0, w - 1, h - 1, 0, buf, 0)
         return vtk_to_numpy(buf).reshape(h, w, 3)[::-1].copy()
 
+    def warm(self) -> None:
+        """Paint the rest shape once, unseen: the render window and its GL programs are made
+        (a first picture's cost) before the pictures are asked for."""
+        o = self.run.o
+        lo, hi = o.min(axis=0), o.max(axis=0)
+        self.paint(o, np.zeros(len(o)), DEFAULT_VIEWS[0], 0.5 * (lo + hi),
+                   max(float(np.max(hi - lo)), 1e-6))
+
     def close(self):
         self.rw.Finalize()
+
+
+#: painters made before their render (:func:`prepare_painter`), by :func:`_painter_key`
+_READY: dict = {}
+
+
+def _painter_key(run, coloured, context, cmap, size) -> tuple:
+    return (str(Path(run.rundir).resolve()), tuple(p.name for p in coloured),
+            tuple(p.name for p in context), cmap, tuple(int(x) for x in size))
+
+
+def prepare_painter(run, cmap: str = "paper", sheet_only: bool = True) -> None:
+    """Make, and paint once unseen (:meth:`Painter.warm`), the painter :func:`render` will ask
+    for with the default parts of ``run`` (a run still being written will do: the painter
+    holds its particles' rest positions and radii only), so that ``rackstress run``'s render
+    starts painting at once (its head start, render/prepare.py); the colour scale is set
+    when the render takes it."""
+    coloured, context, _ = select_parts(run)
+    size = (WINDOW[0] // 2, WINDOW[1] // 2) if sheet_only else WINDOW
+    painter = Painter(run, coloured, context, 1.0, cmap, size)
+    painter.warm()
+    _READY[_painter_key(run, coloured, context, cmap, size)] = painter
+
+
+def _take_painter(run, coloured, context, vmax: float, cmap: str, size):
+    """The prepared painter of these parts and size, its colour scale set to ``vmax``, or a
+    new one."""
+    painter = _READY.pop(_painter_key(run, coloured, context, cmap, size), None)
+    if painter is None:
+        return Painter(run, coloured, context, vmax, cmap, size)
+    painter.vmax = vmax
+    return painter
 
 
 def _points_poly(q: np.ndarray):
@@ -667,7 +707,7 @@ def render(rundir, frames=None, measure: str | None = None, views=DEFAULT_VIEWS,
             bar.unit = "picture"
             t = time.perf_counter()
             cell = (window_size[0] // 2, window_size[1] // 2) if sheet_only else window_size
-            painter = Painter(run, coloured, context, report.vmax, cmap, cell)
+            painter = _take_painter(run, coloured, context, report.vmax, cmap, cell)
             if beside is not None:      # forked once VTK's rendering classes are loaded,
                 from rackstress.runs.forked import ForkedJob   # which the child uses too
 

@@ -1,7 +1,10 @@
-"""A head start for post-processing: its imports, loaded while the simulation runs.
+"""A head start for post-processing: its imports, measures and painter, ready while the
+simulation runs.
 
-This module imports nothing heavy itself, so that ``rackstress run`` can start it before the
-simulation without paying for it there.
+``rackstress run`` on one process forks :class:`Ahead`, the process that post-processes the
+run, before the first step; under ``mpiexec`` (with a core beyond the ranks) rank 0 runs
+:func:`prepare_in_background`, a thread. This module imports nothing heavy itself, so that
+the run can start either without paying for it there.
 """
 from __future__ import annotations
 
@@ -19,9 +22,12 @@ _PREPARE = ("vtkmodules.vtkCommonDataModel", "vtkmodules.util.numpy_support",
             "vtkmodules.vtkFiltersSources", "vtkmodules.vtkFiltersCore")
 
 
-def _later(squeeze=None):
+def _later(squeeze=None, rundir=None):
     """:data:`_PREPARE`'s imports and the fonts, one step a call (what :func:`follow` does
-    while no new chunk of frames is written), each yielding True; then, given ``squeeze`` (a
+    while no new chunk of frames is written), each yielding True; given ``rundir`` (a run
+    :func:`~rackstress.stress.post.follow` measures), its pictures' painter
+    (:func:`rackstress.render.pictures.prepare_painter`, once follow has opened the run:
+    False until then); then, given ``squeeze`` (a
     :class:`~rackstress.engines.dumpio.GzAhead`), the trajectory's frames compressed as they
     are written, yielding whether one was."""
     import gc
@@ -45,6 +51,21 @@ def _later(squeeze=None):
     except Exception:  # noqa: BLE001, S110 - only a head start
         pass
     yield True
+    if rundir is not None:
+        from pathlib import Path
+
+        from rackstress.stress.post import _HEADS
+
+        key = str(Path(rundir).resolve())
+        while getattr(_HEADS.get(key), "run", None) is None:
+            yield False                     # follow has not opened the run yet
+        try:
+            from rackstress.render.pictures import prepare_painter
+
+            prepare_painter(_HEADS[key].run)
+        except Exception:  # noqa: BLE001, S110 - only a head start: render makes its own
+            pass
+        yield True
     while squeeze is not None:
         yield squeeze.step()
 
@@ -166,3 +187,258 @@ def wait_prepared() -> None:
         t, stop = _THREAD.pop()
         stop.set()
         t.join()
+
+
+# ----------------------------------------------------------------------------- in a process
+class _Told:
+    """``follow``'s ``stop`` in :class:`Ahead`'s process: set once the parent has written to
+    (or closed) the pipe; nothing is read from it here."""
+
+    def __init__(self, fd: int):
+        self.fd = fd
+
+    def is_set(self) -> bool:
+        return self.wait(0)
+
+    def wait(self, timeout) -> bool:
+        import select
+
+        return bool(select.select([self.fd], [], [], timeout)[0])
+
+
+class Ahead:
+    """Post-processing in a process of its own, forked before the simulation starts
+    (``rackstress run`` on one process): the head start of :func:`prepare_in_background`
+    without a thread in the simulation's process, whose Python between LAMMPS' chunks of
+    steps then never waits for the GIL (magpod-small: the simulation 0.98-1.0 s alone, 1.20 s
+    beside the thread, between its chunks 0.11 -> 0.20 s).
+
+    The child, niced (:data:`NICE`), imports what the measures need and loads their compiled
+    loop, then :data:`_PREPARE`'s modules, and waits for the parent, which tells it over a
+    pipe, one byte a message:
+
+    * ``F`` (:meth:`follow`, the run's steps left look short): measure the frames LAMMPS
+      writes (:func:`rackstress.stress.post.follow`), and in between compress them
+      (``compress``) and prepare the pictures' painter
+      (:func:`rackstress.render.pictures.prepare_painter`);
+    * ``E`` (:meth:`ended`, LAMMPS has closed the dump): check the guard rails (``guards()``,
+      in a forked process, on the core the simulation leaves: the parent, told
+      ``guards=False``, leaves them out of ``summary.json``, and scipy's import off its own
+      path) and measure the frames left, in memory;
+    * ``G`` (:meth:`go`, ``summary.json`` written): ``finish(guards())`` — the guard rails'
+      warnings into ``summary.json``, then the run's post-processing, the same code as
+      without a head start, its output after the parent's — and end with its exit status,
+      which :meth:`go` returns;
+    * ``Q`` or the pipe closed (the run diverged, failed, or the parent died): end, having
+      written nothing.
+
+    The child writes nothing into the run directory before ``G``. It dies with the parent
+    (``PR_SET_PDEATHSIG``) and holds no copy of the run directory's lock. Where it cannot be
+    forked, or dies before it is done, :meth:`go` returns None and the parent checks the
+    guard rails (``guards()``) and post-processes the run itself."""
+
+    def __init__(self, rundir, frames: int, compress: bool, finish, guards):
+        import os
+        import sys
+
+        self.rundir, self.pid, self.fd, self.status = rundir, None, None, None
+        self.guards = guards
+        parent = os.getpid()
+        sys.stdout.flush()
+        sys.stderr.flush()
+        r, w = os.pipe()
+        try:
+            pid = os.fork()
+        except OSError:
+            os.close(r)
+            os.close(w)
+            return
+        if pid == 0:                                            # the child
+            code = 70
+            try:
+                os.close(w)
+                code = _ahead_child(r, parent, rundir, frames, compress, finish, guards)
+            except KeyboardInterrupt:
+                code = 130
+            except BaseException:  # noqa: BLE001 - said, and the parent post-processes instead
+                import traceback
+
+                traceback.print_exc()
+            finally:
+                try:
+                    sys.stdout.flush()
+                    sys.stderr.flush()
+                finally:
+                    os._exit(code)
+        os.close(r)
+        self.pid, self.fd = pid, w
+
+    def _tell(self, what: bytes) -> bool:
+        import os
+
+        if self.fd is None:
+            return False
+        try:
+            os.write(self.fd, what)
+            return True
+        except OSError:             # the child is gone (killed): the parent does its work
+            return False
+
+    def follow(self) -> None:
+        """Measure the frames as they are written (and compress them, prepare the painter)."""
+        self._tell(b"F")
+
+    def ended(self) -> None:
+        """LAMMPS has closed the dump: measure the frames left (nothing written yet), at the
+        usual niceness where this process may set it (the simulation is over)."""
+        self._renice()
+        self._tell(b"E")
+
+    def _renice(self) -> None:
+        import os
+
+        if self.pid is not None:
+            try:
+                os.setpriority(os.PRIO_PROCESS, self.pid, os.getpriority(os.PRIO_PROCESS, 0))
+            except OSError:
+                pass
+
+    def go(self) -> int | None:
+        """Post-process the finished run in the child (``summary.json`` is written, the
+        parent's lines printed) and wait for it: its exit status, or None if it could not do
+        it (it died, or was never forked): then the caller does it."""
+        import sys
+
+        if self.fd is None:
+            return None
+        sys.stdout.flush()
+        sys.stderr.flush()
+        self._renice()              # the simulation is over (if ended() was not told)
+        told = self._tell(b"G")
+        status = self._wait()
+        if not told or status is None or status < 0 or status in (70, 130):
+            return None
+        return status
+
+    def quit(self) -> None:
+        """End the child without post-processing (the run failed, or was post-processed)."""
+        import os
+        import signal
+
+        if self.pid is None:
+            return
+        if not self._tell(b"Q"):
+            try:
+                os.kill(self.pid, signal.SIGKILL)
+            except OSError:
+                pass
+        self._wait()
+
+    def _wait(self) -> int | None:
+        """Close the pipe and wait for the child: its exit status (negative: the signal that
+        ended it)."""
+        import os
+
+        if self.fd is not None:
+            try:
+                os.close(self.fd)
+            except OSError:
+                pass
+            self.fd = None
+        if self.pid is not None:
+            try:
+                _, st = os.waitpid(self.pid, 0)
+                self.status = os.waitstatus_to_exitcode(st)
+            except ChildProcessError:
+                self.status = None
+            self.pid = None
+        return self.status
+
+
+def _ahead_child(r: int, parent: int, rundir, frames: int, compress: bool, finish,
+                 guards) -> int:
+    """:class:`Ahead`'s process: its exit status."""
+    import gc
+    import importlib
+    import os
+
+    from rackstress.runs.rundir import in_forked_child
+
+    in_forked_child(parent)         # no copy of the lock; dies with the parent
+    try:
+        os.nice(NICE)               # on a busy machine the simulation goes first
+    except OSError:
+        pass
+    told = _Told(r)
+    gc.disable()                    # imports: no collection walks their objects (a third less)
+    for name in _FIRST:
+        if told.is_set():
+            break
+        importlib.import_module(name)
+    from rackstress.stress import kernels
+
+    if not told.is_set() and kernels.available() and kernels.compiled():
+        kernels.warm()              # load the cached loop (a first run compiles it apart)
+    squeeze = None
+    if compress:
+        from pathlib import Path
+
+        from rackstress.engines.dumpio import GzAhead
+
+        squeeze = GzAhead(Path(rundir) / "trajectory.dump")
+    later = _later(squeeze, rundir)
+    while not told.is_set():        # the rest of the imports, until told something
+        if not next(later, False):
+            break
+    gc.freeze()                     # what is imported: in no collection from now on
+    gc.enable()
+    kept = checking = None
+    while True:
+        what = os.read(r, 1)
+        if what == b"F" and frames:
+            from rackstress.stress.post import follow
+
+            follow(rundir, told, frames, idle=lambda: next(later, False))
+        elif what == b"E" and kept is None:
+            from rackstress.stress.post import compute_fields
+            from rackstress.stress.rundata import kept_open, load_run
+
+            # while the parent summarizes: the guard rails in a process of their own (the
+            # core the simulation used is idle now), the frames left here
+            checking = _guards_beside(guards)
+            kept = kept_open()
+            kept.__enter__()
+            try:
+                compute_fields(load_run(rundir))
+            except Exception:  # noqa: BLE001, S110 - post-processing says it again after G
+                pass
+        elif what == b"G":
+            found = None
+            if checking is not None:
+                try:
+                    found = tuple(checking.join())
+                except Exception:  # noqa: BLE001, S110 - checked again here, and said then
+                    pass
+            return finish(found if found is not None else guards())
+        elif what in (b"Q", b""):
+            if checking is not None:
+                checking.kill()
+            return 0
+
+
+def _guards_beside(guards):
+    """``guards()`` in a forked process (:class:`~rackstress.runs.forked.ForkedJob`, its result
+    in a temporary file outside the run directory), or None where it cannot start."""
+    import tempfile
+    from pathlib import Path
+
+    from rackstress.runs.forked import ForkedJob
+
+    try:
+        fd, name = tempfile.mkstemp(prefix="rackstress-guards-", suffix=".json")
+        import os
+
+        os.close(fd)
+        return ForkedJob(guards, Path(name))
+    except Exception:  # noqa: BLE001 - checked after G instead
+        return None

@@ -355,7 +355,7 @@ def execute(scene: Scene, out: Path, engine: str, mode: str, dump_every: int, *,
             progress: bool = True, comm=None, restart_every: int | None = None, deck=None,
             resume=None, records=None, wall_before: float = 0.0, extra: dict | None = None,
             fingerprint: dict | None = None, keep_checkpoints: bool = True,
-            head_start=None) -> dict:
+            head_start=None, guards: bool = True) -> dict:
     """Drive ``scene`` on ``engine`` into the prepared run directory ``out``, then write
     ``summary.json`` — the one ending of a run and of its resumption.
 
@@ -371,6 +371,11 @@ def execute(scene: Scene, out: Path, engine: str, mode: str, dump_every: int, *,
         post-processing's modules and measures the frames written on the other core: a short
         run from its first steps, a long one not holding them from its start); a callable it
         returns is called once the steps are done, before the guard rails.
+    guards : bool
+        Check the guard rails of a run that ended well (:func:`rackstress.engines.guards.
+        check_run`) into ``summary.json``'s ``warnings``; False: ``warnings`` is left empty
+        for the caller to fill (``rackstress run``'s head start checks them beside this
+        process). A run that diverged is always checked here.
 
     Returns
     -------
@@ -453,7 +458,8 @@ def execute(scene: Scene, out: Path, engine: str, mode: str, dump_every: int, *,
     if root:   # guard rails: pass-through, force on racks (engines/guards.py)
         from rackstress.engines.guards import check_run
 
-        extra["warnings"] = check_run(scene, out, engine=engine)
+        extra["warnings"] = (check_run(scene, out, engine=engine)
+                             if guards or error is not None else [])
     summary = summarize(scene, engine, mode, p_end, steps, wall, status, error, extra)
     on_root(lambda: write_json(Path(out) / "summary.json", summary), comm)
     if error is not None:
@@ -579,7 +585,8 @@ def _cache_prediction(fp: dict, pred: dict) -> None:
 def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
         dump_every: int | None = None, progress: bool = True, overwrite: bool = False,
         comm=None, restart_every: int | None = None, allow_unstable: bool = False,
-        planned: dict | None = None, keep_checkpoints: bool = True, head_start=None) -> dict:
+        planned: dict | None = None, keep_checkpoints: bool = True, head_start=None,
+        guards: bool = True) -> dict:
     """Run ``scene`` on ``engine`` into the run directory ``out``; return the summary.
 
     Parameters
@@ -605,6 +612,8 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
     head_start : callable, optional
         Called once the steps left look short, or a quarter are done; what it returns, if
         callable, once the steps are done (:func:`execute`).
+    guards : bool
+        False: the guard rails of a run that ended well are left to the caller (:func:`execute`).
     planned : dict, optional
         The result of :func:`plan` for these arguments (checked already).
 
@@ -667,4 +676,5 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
         return execute(scene, out, engine, mode, dump_every, progress=progress, comm=comm,
                        restart_every=restart_every,
                        deck=deck if engine == "lammps" else None, fingerprint=fp,
-                       keep_checkpoints=keep_checkpoints, head_start=head_start)
+                       keep_checkpoints=keep_checkpoints, head_start=head_start,
+                       guards=guards)

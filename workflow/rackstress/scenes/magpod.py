@@ -298,8 +298,7 @@ def gait_report(scene: Scene, records) -> dict:
     the initial state. The footprint depth is the largest downward displacement of a sediment
     particle from its original height.
     """
-    from scipy.spatial import cKDTree
-
+    from rackstress.lib.cells import any_closer
     from rackstress.lib.rigid import best_fit
 
     body, sed = scene.slice("body"), scene.slice("sediment")
@@ -315,12 +314,12 @@ def gait_report(scene: Scene, records) -> dict:
                        "pitch_deg": float(np.degrees(np.arctan2(R[1, 0], R[0, 0]))),
                        # y-component of the body's up axis: 1 upright, <= 0 capsized
                        "up_y": float(R[1, 1])})
-        sed_tree = cKDTree(rec.p[sed])
         reach = float(scene.groups["sediment"].r.max() + scene.groups["rightleg"].r.max())
         for leg, (var, values) in STANCE.items():
             s = sole(scene, leg, rec.p)
-            # a stance: the sole touches the sediment (pulling, or just landed from a swing)
-            if np.isfinite(sed_tree.query(s, distance_upper_bound=reach)[0]).any():
+            # a stance: the sole touches the sediment (pulling, or just landed from a swing);
+            # by cells (lib/cells.py): scipy.spatial's import is not on the run's path
+            if any_closer(s, rec.p[sed], reach):
                 stances.append({"leg": leg, "cycle": rec.cycle, "phase": rec.phase,
                                 "step": rec.step, "pulling": rec.vars.get(var) in values,
                                 "x": float(s[:, 0].mean()), "z": float(s[:, 2].mean()),

@@ -374,18 +374,23 @@ class RackDumpReader(base.ReaderBase):
 
 def read_table(idx: FrameIndex, frame: int) -> np.ndarray:
     """The atom lines of one frame as an (n_atoms, n_columns) float64 array, checked."""
+    from rackstress.lib.numtext import loaded_numbers
+
     start, end = int(idx.atoms_start[frame]), int(idx.atoms_end[frame])
     if idx.members is not None:
-        text = gzip_member(idx.path, int(idx.members[frame]))[start:end].decode(
-            "ascii", errors="replace")
+        raw = gzip_member(idx.path, int(idx.members[frame]))[start:end]
     else:
         with open(idx.path, "rb") as fh:
             fh.seek(start)
-            text = fh.read(end - start).decode("ascii", errors="replace")
+            raw = fh.read(end - start)
     ncol = len(idx.columns)
     n = idx.n_atoms if idx.counts is None else int(idx.counts[frame])
     if n == 0:
         return np.zeros((0, ncol))
+    flat = loaded_numbers(raw)          # NumPy's values, compiled (lib/numtext.py), if loaded
+    if flat is not None and flat.size == n * ncol:
+        return flat.reshape(n, ncol)
+    text = raw.decode("ascii", errors="replace")
     try:
         import warnings
 

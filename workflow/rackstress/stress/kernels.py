@@ -116,7 +116,8 @@ def strain(hood, o: np.ndarray, P: np.ndarray):
 
 
 def warm() -> float:
-    """Compile (first run on a machine) or load the loop; return the seconds it took."""
+    """Compile (first run on a machine) or load the loop and the dump's number parser
+    (:mod:`rackstress.lib.numtext`); return the seconds it took."""
     t = time.perf_counter()
     if nb is not None:
         from types import SimpleNamespace
@@ -126,6 +127,9 @@ def warm() -> float:
                                Vpinv=np.zeros((1, 3, 3)), rank=np.zeros(1, np.int64), t1=z,
                                t2=z, n0=z, valid=np.zeros(1, bool))
         strain(hood, z, z[None])
+        from rackstress.lib import numtext
+
+        numtext.warm()              # the dump's number parser, loaded with it
     return time.perf_counter() - t
 
 

@@ -305,6 +305,7 @@ class Head:
         self.tables: dict = {}        # frame → its atom table as follow's reader parsed it
         self.used = 0                 # frames handed to measure_frames
         self.error = None             # why follow stopped early, if it did
+        self.run = None               # the run as follow last opened it (still being written)
 
     def keep_tables(self, run, ks, frames: int) -> None:
         """Keep the atom tables of frames ``ks`` that ``run``'s reader holds (its cache,
@@ -395,6 +396,7 @@ def follow(rundir, stop, frames: int, poll: float = 0.2, idle=None) -> None:
                 continue
             wait = 0
             run = load_run(rundir, allow_truncated=True) if run is None else grown(run)
+            head.run = run
             if head.hood is None:
                 parts = list(run.parts.values())
                 head.hood = neighbourhoods(run, parts)

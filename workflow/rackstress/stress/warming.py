@@ -13,15 +13,17 @@ _WARMING: dict = {}
 
 
 def compiled() -> bool:
-    """Whether this machine's kernel cache already holds the loop (a first run has not); True
-    without numba (the NumPy path compiles nothing)."""
+    """Whether this machine's kernel cache already holds the loop and the dump's number parser
+    (lib/numtext.py; a first run has not); True without numba (the NumPy path compiles
+    nothing)."""
     if find_spec("numba") is None:
         return True
     import tempfile
 
     # numba_or_none's fallback for an unwritable cache (lib/jit.py) is looked in too
     places = [cache_dir(), Path(tempfile.gettempdir()) / f"rackstress-numba-{os.getuid()}"]
-    return any(any(d.glob("stress_*/kernels._strain-*.nbi")) for d in places)
+    return any(any(d.glob("stress_*/kernels._strain-*.nbi"))
+               and any(d.glob("lib_*/numtext._numbers-*.nbi")) for d in places)
 
 
 def warm_in_background() -> None:
