@@ -42,7 +42,8 @@ CHECK_EVERY = 10
 #: step themselves (``rackstress_first_nonfinite``), LAMMPS stops atoms that fly apart (Lost
 #: atoms …), and no ghost cutoff is grown, so the checks between chunks are the bound of the
 #: watchdog and the progress bar. Each chunk's ``run`` and checks cost ~0.2 ms (one rank) to
-#: ~0.3 ms (two: barriers, a reduction and gathers); 100 steps make that ~1 % of magpod's steps
+#: ~0.3 ms (two: LAMMPS' barriers and reductions, the check's one reduction); 100 steps make that
+#: ~3 % of magpod's steps, and a bound crossed is reported within 100 steps
 #: (docs/benchmarks/scaling.md, "Under rackstress run").
 PLUGIN_CHECK_EVERY = 100
 #: LAMMPS errors that mean the atoms flew apart (a divergence, not bad input).
@@ -464,6 +465,8 @@ class LammpsRun:
 
     def check(self) -> None:
         """The watchdog on every rank's atoms; all ranks raise the same DivergenceError. Under
+        MPI one reduction decides (the plugin's non-finite record and the watchdog's finding on
+        each rank); the collectives naming what was found follow only when a rank found it. Under
         MPI it also keeps the ghost cutoff ahead of the scene's reach (:meth:`_grow_cutoff`)."""
         # only LAMMPS' first rows move (atom_modify first, Deck.passive): a resting particle
         # after them is where the data file put it, with v = 0
