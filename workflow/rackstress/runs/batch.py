@@ -7,7 +7,8 @@ on its sub-communicator. Without ``mpiexec`` the jobs run one after another.
 **Hand-out.** World rank 0 is the manager. It hands out job indices on request, in order, so a
 slow job holds up only its own group. By default the manager is a thread on rank 0 that polls for
 requests (``Iprobe``, then sleeps 10 ms: it costs no core) while rank 0's own group runs jobs
-too; this needs ``MPI_THREAD_MULTIPLE`` (mpi4py asks for it, MPICH gives it). ``--manager rank``
+too; this needs ``MPI_THREAD_MULTIPLE`` (``rackstress batch`` asks for it before MPI starts, where
+the rest of rackstress asks for ``funneled``: lib/mpi.py; MPICH gives it). ``--manager rank``
 (or a library without it) makes rank 0 a manager only, and the other K−1 ranks form the groups.
 A group's root asks the manager (reporting the job it finished), then tells its members the job
 with a broadcast on the sub-communicator. Every wait on another rank polls and sleeps, so idle

@@ -42,7 +42,8 @@ CHECK_EVERY = 10
 #: step themselves (``rackstress_first_nonfinite``), LAMMPS stops atoms that fly apart (Lost
 #: atoms …), and no ghost cutoff is grown, so the checks between chunks are the bound of the
 #: watchdog and the progress bar. Each chunk's ``run`` and checks cost ~0.2 ms (one rank) to
-#: ~0.3 ms (two: barriers, a reduction and gathers); 100 steps make that ~1 % of magpod's steps
+#: ~0.3 ms (two: LAMMPS' barriers and reductions, the check's one reduction); 100 steps make that
+#: ~3 % of magpod's steps, and a bound crossed is reported within 100 steps
 #: (docs/benchmarks/scaling.md, "Under rackstress run").
 PLUGIN_CHECK_EVERY = 100
 #: LAMMPS errors that mean the atoms flew apart (a divergence, not bad input).
@@ -341,7 +342,9 @@ class LammpsRun:
         """Stop if a force reached a resting particle LAMMPS did not yet integrate (Deck.passive):
         it would have moved. Activation one reneighbouring early (within reach + 2 skins) rules
         this out unless a particle moves more than a skin between two reneighbourings."""
-        late = self.py.late if self.py is not None else None
+        if self.py is None:     # the plugin alone: no callback, nothing touched late
+            return
+        late = self.py.late
         if not self.comm.allreduce(late is not None):
             return
         step, k = next(x for x in self.comm.allgather(late) if x is not None)
@@ -388,7 +391,9 @@ class LammpsRun:
         self._check_late()
 
     def _check_callback(self):
-        err = self.py.error if self.py is not None else None
+        if self.py is None:     # the plugin alone (the same deck on every rank): nothing to ask
+            return
+        err = self.py.error
         if not self.comm.allreduce(err is not None):
             return
         # the callback stopped LAMMPS after the step it failed in: that is where the run is
@@ -460,6 +465,8 @@ class LammpsRun:
 
     def check(self) -> None:
         """The watchdog on every rank's atoms; all ranks raise the same DivergenceError. Under
+        MPI one reduction decides (the plugin's non-finite record and the watchdog's finding on
+        each rank); the collectives naming what was found follow only when a rank found it. Under
         MPI it also keeps the ghost cutoff ahead of the scene's reach (:meth:`_grow_cutoff`)."""
         # only LAMMPS' first rows move (atom_modify first, Deck.passive): a resting particle
         # after them is where the data file put it, with v = 0
@@ -468,7 +475,6 @@ class LammpsRun:
             rows = self.py.nfirst
         else:
             rows = "moving" if self.deck.plugin and self._move_bit is not None else None
-        self._check_plugin()
         x, v, tag = self._owned(rows)
         o = self.scene.original_positions()
         k = self.py.compiled if self.py is not None else None
@@ -480,8 +486,25 @@ class LammpsRun:
         else:
             tag = tag.astype(np.int64)
             found = find_divergence(self.scene, x, v, o[tag - 1], tag - 1)
-        everything = ([found] if self.comm.Get_size() == 1 else self.comm.allgather(found))
-        everything = [f for f in everything if f is not None]
+        if self.comm.Get_size() == 1:
+            self._check_plugin()
+            everything = [found] if found is not None else []
+        else:
+            # one reduction a check, whatever it finds: (the first step this rank's plugin styles
+            # met a non-finite term, or none; 0 if the watchdog found a particle here, else 1),
+            # both by their minimum; the collectives that name the step, the atom and the worst
+            # particle follow only when a rank has something (every rank then takes them)
+            from mpi4py import MPI
+
+            none = np.iinfo(np.int64).max
+            here = self._plugin.rackstress_nonfinite_here(self.lmp.lmp) if self._plugin else -1
+            flags = np.array([here if here >= 0 else none, 0 if found is not None else 1],
+                             dtype=np.int64)
+            self.comm.Allreduce(MPI.IN_PLACE, flags, op=MPI.MIN)
+            if flags[0] != none:
+                self._check_plugin()
+            everything = ([f for f in self.comm.allgather(found) if f is not None]
+                          if flags[1] == 0 else [])
         if everything:
             worst = max(everything, key=lambda f: (not f["finite"], f["disp"]))
             worst["count"] = sum(f["count"] for f in everything)
@@ -755,6 +778,8 @@ def _watch_plugin(lib: str, lmp):
     so.rackstress_watch.restype = None
     so.rackstress_first_nonfinite.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
     so.rackstress_first_nonfinite.restype = ctypes.c_int
+    so.rackstress_nonfinite_here.argtypes = [ctypes.c_void_p]
+    so.rackstress_nonfinite_here.restype = ctypes.c_longlong
     so.rackstress_watch(lmp.lmp)
     return so
 
