@@ -266,7 +266,9 @@ def markdown(data: dict, machine: dict) -> str:
     L = ["# README's first command, end to end",
          "",
          "`rackstress bench e2e` (`workflow/rackstress/bench/e2e.py`): `rackstress run SCENE "
-         "--out DIR --overwrite` as a user runs it, cold (an empty cache: kernels compiled, "
+         "--out DIR --overwrite` as a user runs it (the package's bytecode written first, as "
+         "an install does: `PYTHONDONTWRITEBYTECODE` would otherwise have each run compile "
+         "its modules again), cold (an empty cache: kernels compiled, "
          "Eq. 5's limit predicted) and warm, with the engine path of this branch (numba "
          "callback kernels or the compiled plugin, whichever the run found), "
          "interleaved; the phases from the run's own records, the run directory by file. "
