@@ -134,3 +134,27 @@ def test_bench_perf_smoke(tmp_path):
     assert np.isclose(data["paper"]["particle_steps_per_s"], 33689 * 1200 / 142)
     md = (tmp_path / "perf.md").read_text()
     assert "paper" in md and "MPI" not in md.split("\n")[0]
+
+
+def test_bench_e2e_writes_the_package_bytecode_its_runs_read(monkeypatch):
+    """``bench e2e`` writes the package's bytecode before its runs (as pip's install does),
+    also under ``PYTHONDONTWRITEBYTECODE``: a module's cached file is there afterwards and
+    stamped with its source's modification time and size (PEP 552's header: flags 0, then
+    mtime and size, little-endian)."""
+    import importlib.util
+    import struct
+    from pathlib import Path
+
+    from rackstress.bench import e2e
+
+    monkeypatch.setenv("PYTHONDONTWRITEBYTECODE", "1")
+    monkeypatch.setattr("sys.dont_write_bytecode", True)
+    src = Path(e2e.__file__).parent.parent / "lib" / "vec.py"
+    pyc = Path(importlib.util.cache_from_source(str(src)))
+    pyc.unlink(missing_ok=True)
+    assert e2e.bytecode() == src.parent.parent
+    head = pyc.read_bytes()[:16]
+    st = src.stat()
+    assert head[:4] == importlib.util.MAGIC_NUMBER
+    assert struct.unpack("<III", head[4:16]) == (0, int(st.st_mtime) & 0xFFFFFFFF,
+                                                 st.st_size & 0xFFFFFFFF)

@@ -175,6 +175,43 @@ def _children(pid: int) -> list:
         return []
 
 
+def _zlib_levels(png: Path) -> set:
+    """The FLEVEL field (RFC 1950: 0 fastest .. 3 maximum compression) of the zlib stream in
+    a PNG's IDAT chunks, read from the file's bytes."""
+    import struct
+
+    data, at, idat = png.read_bytes(), 8, b""
+    while at < len(data):
+        size, kind = struct.unpack(">I4s", data[at:at + 8])
+        if kind == b"IDAT":
+            idat += data[at + 8:at + 8 + size]
+        at += 12 + size
+    return {idat[1] >> 6}
+
+
+@pytest.mark.lammps
+def test_the_plots_are_written_at_the_fastest_zlib_level(tmp_path):
+    """The plots' PNG files are compressed as the sheet is (zlib level 1, FLEVEL 0 in the
+    stream's header; matplotlib's default, 6, writes FLEVEL 2): the same pixels, at each
+    figure's size (figsize × 110 dpi: 7 × 4 and 10 × 4 inches)."""
+    from PIL import Image
+
+    from rackstress.render.pictures import render
+
+    out = tmp_path / "pl"
+    r = _run(["run", "plane-rack", "--steps", "150", "--dump-every", "3", "--no-render",
+              "--no-progress", "--out", str(out)])
+    assert r.returncode == 0, r.stderr
+    render(out, sheet_only=True, plots=True)
+    sizes = {"stress_over_time.png": (770, 440), "com_path.png": (1100, 440)}
+    for name, size in sizes.items():
+        png = out / "figures" / name
+        assert _zlib_levels(png) == {0}, name
+        with Image.open(png) as im:
+            assert im.size == size, name
+    assert _zlib_levels(out / "figures" / "sheet.png") == {0}
+
+
 @pytest.fixture(scope="module")
 def alone(tmp_path_factory):
     """magpod-small's head without the head start (nothing beside the simulation)."""

@@ -96,6 +96,9 @@ HEADER_H = 112
 #: 1–99 % box likewise.
 FLOWN = 2.0
 PNG_COMPRESS = 1
+#: the plots' PNG files likewise (matplotlib's default is zlib 6): the same pixels, magpod-small's
+#: three 0.18 MB against 0.16 MB, encoded in 22 ms of CPU against 31
+PLOT_PNG = {"compress_level": PNG_COMPRESS}
 
 
 @dataclass
@@ -1137,7 +1140,7 @@ def _plots(run, values, label, coloured, context, report, out: Path) -> None:
     ax.set_title(f"{run.scene.get('scene', '')}: stress per part over time")
     ax.legend(fontsize=7, ncol=2)
     fig.subplots_adjust(left=0.14, right=0.98, bottom=0.12, top=0.92)
-    fig.savefig(out / "stress_over_time.png", dpi=110)
+    fig.savefig(out / "stress_over_time.png", dpi=110, pil_kwargs=PLOT_PNG)
     report.files.append("stress_over_time.png")
 
     motion = PartMotion(run).run()
@@ -1157,12 +1160,12 @@ def _plots(run, values, label, coloured, context, report, out: Path) -> None:
         ax.grid(alpha=0.3)
     top.legend(fontsize=7)
     fig.subplots_adjust(left=0.07, right=0.98, bottom=0.13, top=0.92, wspace=0.25)
-    fig.savefig(out / "com_path.png", dpi=110)
+    fig.savefig(out / "com_path.png", dpi=110, pil_kwargs=PLOT_PNG)
     report.files.append("com_path.png")
 
     if not context:
         report.notes.append("no sediment group shown: footprints plot skipped")
         return
     fig = footprints_figure(run, motion, coloured, context)
-    fig.savefig(out / "footprints.png", dpi=110)
+    fig.savefig(out / "footprints.png", dpi=110, pil_kwargs=PLOT_PNG)
     report.files.append("footprints.png")

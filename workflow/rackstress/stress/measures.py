@@ -886,20 +886,26 @@ class PartMotion(AnalysisBase):
         self._sed = [p for p in run.parts.values() if p.kind == "sediment"]
         self.results.footprints = {p.name: {"final_dy": np.zeros(p.n), "min_dy": np.zeros(p.n)}
                                    for p in self._sed}
+        # what each frame reuses, taken once: each part's weights (a column) and their sum,
+        # each sediment's rest heights
+        self._parts = [(part.index, self._w[part.index][:, None], self._w[part.index].sum())
+                       for part in run.parts.values()]
+        o = run.o
+        self._rest = [(part.index, o[part.index, UP], self.results.footprints[part.name])
+                      for part in self._sed]
 
     def _single_frame(self):
         k, p = self._frame_index, positions(self._ts)
         self.results.steps[k] = int(self._ts.data.get("step", self._ts.frame))
-        for j, part in enumerate(self.run_data.parts.values()):
-            q, w = p[part.index], self._w[part.index]
-            self.results.com[k, j] = (q * w[:, None]).sum(axis=0) / w.sum()
-            self.results.lo[k, j], self.results.hi[k, j] = q.min(axis=0), q.max(axis=0)
-        o = self.run_data.o
-        for part in self._sed:
-            dy = p[part.index, UP] - o[part.index, UP]
-            fp = self.results.footprints[part.name]
+        com, lo, hi = self.results.com[k], self.results.lo[k], self.results.hi[k]
+        for j, (index, w, total) in enumerate(self._parts):
+            q = p[index]
+            com[j] = (q * w).sum(axis=0) / total
+            lo[j], hi[j] = q.min(axis=0), q.max(axis=0)
+        for index, o_up, fp in self._rest:
+            dy = p[index, UP] - o_up
             fp["final_dy"] = dy
-            fp["min_dy"] = np.minimum(fp["min_dy"], dy)
+            np.minimum(fp["min_dy"], dy, out=fp["min_dy"])
 
     def _conclude(self):
         pass
