@@ -787,6 +787,30 @@ def runner_markdown(data: dict) -> list[str]:
     return L
 
 
+def cpu_split_rows(cpu: list) -> list:
+    """The page's rows of the CPU split: (scene, split) pairs, an unresolved figure (None) as
+    ``unresolved`` and its bound as a dash."""
+    rows = []
+    for n, split in cpu:
+        split = _split_rows(split)
+        t1 = split["1"]["cpu"][0]
+        for key, v in split.items():
+            ok = t1 is not None and t1 > 0 and all(c is not None and c > 0 for c in v["cpu"])
+            reps = v.get("repeats") or []
+            spread = [abs(a - b) / max(a, b) for r1, r2 in zip(reps, reps[1:])
+                      for a, b in zip(r1, r2) if a and b]
+            rows.append([n, key, " / ".join("unresolved" if c is None or c <= 0
+                                            else f"{1e3 * c:.3f}" for c in v["cpu"]),
+                         f"{100 * max(spread):.1f} %" if spread else "—",
+                         " / ".join(f"{m:,}" for m in v["moving"]) if v.get("moving")
+                         else "—",
+                         " / ".join(f"{o:,}" for o in v["owned"]) if v.get("owned")
+                         else "—",
+                         f"{t1 / max(v['cpu']):.2f}x" if ok else "—",
+                         f"{v['load']:.1f}" if v.get("load") is not None else "—"])
+    return rows
+
+
 def markdown(data: dict) -> str:
     L = ["# The plugin under MPI: measured on 1 and 2 ranks, modelled to 1,024",
          "", "Written by `rackstress bench scaling` (module doc: "
@@ -846,24 +870,7 @@ def markdown(data: dict) -> str:
               "came out negative.) The bound is the one-rank time over the busiest rank's: "
               "what 2 ranks give on a quiet node when the three meetings a step cost nothing.",
               ""]
-        rows = []
-        for n, split in cpu:
-            split = _split_rows(split)
-            t1 = split["1"]["cpu"][0]
-            for key, v in split.items():
-                ok = t1 is not None and t1 > 0 and all(c is not None and c > 0 for c in v["cpu"])
-                reps = v.get("repeats") or []
-                spread = [abs(a - b) / max(a, b) for r1, r2 in zip(reps, reps[1:])
-                          for a, b in zip(r1, r2) if a and b]
-                rows.append([n, key, " / ".join("unresolved" if c is None or c <= 0
-                                                else f"{1e3 * c:.3f}" for c in v["cpu"]),
-                             f"{100 * max(spread):.1f} %" if spread else "—",
-                             " / ".join(f"{m:,}" for m in v["moving"]) if v.get("moving")
-                             else "—",
-                             " / ".join(f"{o:,}" for o in v["owned"]) if v.get("owned")
-                             else "—",
-                             f"{t1 / max(v['cpu']):.2f}x" if ok else "—",
-                             f"{v['load']:.1f}" if v.get("load") is not None else "—"])
+        rows = cpu_split_rows(cpu)
         L += [md_table(["scene", "ranks", "CPU ms/step outside MPI (per rank)",
                         "repeat spread", "moving per rank", "owned per rank",
                         "bound on the speed-up", "load"], rows), ""]
