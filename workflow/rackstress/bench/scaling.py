@@ -596,8 +596,11 @@ def run_bench(out: Path | None = None, quick: bool = False, echo=print, large: b
                 split = _cpu_split(work / name, deck, bindir, shim)
                 data["scenes"][name]["cpu_split"] = split
                 echo(f"{name}: CPU outside MPI per step and rank (ms): " + ", ".join(
-                    f"{k}: " + " / ".join(f"{1e3 * v:.3f}" for v in vals["cpu"])
-                    for k, vals in split.items()))
+                    f"{k}: " + " / ".join("unresolved" if v is None else f"{1e3 * v:.3f}"
+                                          for v in vals["cpu"])
+                    + " (repeats " + "; ".join(" / ".join("—" if v is None else f"{1e3 * v:.3f}"
+                                                          for v in r) for r in vals["repeats"])
+                    + ")" for k, vals in split.items()))
             shutil.rmtree(work / name, ignore_errors=True)      # the 4 M bed's data: ~0.3 GB
     finally:
         shutil.rmtree(work, ignore_errors=True)
