@@ -120,17 +120,33 @@ def _shim(work: Path) -> Path | None:
     return lib if made.returncode == 0 else None
 
 
-#: the two timed loops of :func:`compute_cpu` (E and 2E steps) may differ per step by the
-#: work's own drift along the run (sediment-large: ~0.13 and ~0.10 ms a step, the first holding
-#: more of LAMMPS' reneighbourings of the million), not by more than this factor: beyond it the
-#: barriers were misread and the figure is unresolved
-LOOPS_FACTOR = 2.0
 #: a figure is resolved when its two repeats (:func:`_cpu_split`, two processes) differ by at
 #: most this fraction: noise at most a tenth of the signal
 SPREAD_MAX = 0.10
 #: the shim's marker (:data:`SHIM_SOURCE`): LAMMPS' ``info`` writes on rank 0 only, and not at
 #: all to ``-screen none``, hence the file
 MARK = "info communication out overwrite info.txt\n"
+
+
+def _per_step(halves: list) -> float | None:
+    """A rank's CPU per step from its E- and 2E-step loops' per-step CPU: their 3E steps' CPU
+    over 3E (the two loops may differ: the work drifts along the run, e.g. a rank holding only
+    resting sediment does LAMMPS' reneighbourings and little else)."""
+    one, two = halves
+    return (one + 2 * two) / 3 if one > 0 and two > 0 else None
+
+
+def _resolve(v: dict) -> dict:
+    """A configuration of the CPU split with its figures from its repeats' ``halves``: per rank
+    the repeats' mean, None (unresolved) where a repeat has none or the repeats differ by more
+    than :data:`SPREAD_MAX`."""
+    if not v.get("halves"):
+        return v
+    reps = [[_per_step(h) for h in rep] for rep in v["halves"]]
+    v["repeats"] = reps
+    v["cpu"] = [None if None in c or max(c) - min(c) > SPREAD_MAX * max(c)
+                else sum(c) / len(c) for c in zip(*reps)]
+    return v
 
 
 def compute_cpu(deck_dir: Path, ranks: int, bindir: Path, shim: Path, extra: int = 1000,
@@ -143,8 +159,7 @@ def compute_cpu(deck_dir: Path, ranks: int, bindir: Path, shim: Path, extra: int
     Thread CPU time: a rank waiting for the scheduler or polling in MPI adds nothing, so it
     measures the work each rank does, not the machine's load.
 
-    Returns ``cpu`` (s per step per rank, None where unresolved: a loop without CPU, or the
-    2E loop's per-step CPU not within :data:`LOOPS_FACTOR` of the E loop's) and ``halves`` (per rank
+    Returns ``cpu`` (s per step per rank, None where a loop shows no CPU) and ``halves`` (per rank
     the E and the 2E loop's CPU per step); with ``counts`` also each rank's ``owned`` and
     ``moving`` particles at the end of the deck's own run."""
     from rackstress.engines.lammps.deck import MOVE_GROUP
@@ -178,8 +193,7 @@ def compute_cpu(deck_dir: Path, ranks: int, bindir: Path, shim: Path, extra: int
         m = marks[r][-4:]
         one, two = (m[1] - m[0]) / extra, (m[3] - m[2]) / (2 * extra)
         halves.append([one, two])
-        ok = one > 0 and two > 0 and 1 / LOOPS_FACTOR <= two / one <= LOOPS_FACTOR
-        cpu.append((m[1] - m[0] + m[3] - m[2]) / (3 * extra) if ok else None)
+        cpu.append(_per_step([one, two]))
     if counts:
         import numpy as np
 
@@ -205,11 +219,9 @@ def _cpu_split(deck_dir: Path, deck, bindir: Path, shim: Path) -> dict:
             continue
         got = [compute_cpu(deck_dir, ranks, bindir, shim, text=t, counts=True)
                for _ in range(2)]
-        cpu = [None if None in c or max(c) - min(c) > SPREAD_MAX * max(c)
-               else sum(c) / len(c) for c in zip(*(g["cpu"] for g in got))]
-        res[key] = {"cpu": cpu, "owned": got[0]["owned"], "moving": got[0]["moving"],
-                    "repeats": [g["cpu"] for g in got], "halves": [g["halves"] for g in got],
-                    "load": os.getloadavg()[0]}
+        res[key] = _resolve({"owned": got[0]["owned"], "moving": got[0]["moving"],
+                             "halves": [g["halves"] for g in got],
+                             "load": os.getloadavg()[0]})
     return res
 
 
@@ -426,12 +438,16 @@ def remodel(data: dict) -> dict:
 
             sc = dict(cases(large=True))[name]()
             s.update(_robot(sc, compile_deck(sc, "exact", plugin=True), one[0]))
+    for s in data["scenes"].values():
+        for v in (s.get("cpu_split") or {}).values():
+            if isinstance(v, dict):
+                _resolve(v)             # the figures from the loops' CPU, as _cpu_split does
     costs = _moving_costs(data)
     if costs:
         data["a_s_per_moving"], data["b_s_per_resting"] = costs
     for name, s in data["scenes"].items():
-        # a scene's own CPU split, where it has one: resting particles cost more per particle
-        # on a million (each reneighbouring passes over them all, out of cache) than on 30,000
+        # a scene's own CPU split, where it has one (the robot's contacts with the bed differ
+        # from MagPod's, and a resting particle's share of a reneighbouring with the bed's size)
         own = _moving_costs({"scenes": {name: s}}) if s.get("cpu_split") else None
         s["costs"] = list(own) if own else (list(costs) if costs else None)
         if s["costs"] and s.get("moving"):
@@ -860,13 +876,16 @@ def markdown(data: dict) -> str:
               "process runs 1,000 and then 2,000 more steps (`run N pre no post no`), an `info` "
               "command before, between and after them marks which barriers are theirs, and the "
               "figure is the two loops' CPU over their 3,000 steps: only steps, no setup "
-              "(read_data, balance, the first neighbour build are outside both loops). Thread "
+              "(read_data, balance, the first neighbour build are outside both loops). The two "
+              "loops need not cost the same a step: the work drifts along the run (the robot "
+              "walks on; a rank holding only resting sediment does LAMMPS' reneighbourings and "
+              "little else, as many in the first 1,000 steps as in the next 2,000). Thread "
               "CPU time does not grow while a rank waits for the scheduler or another rank, so "
               "this is the work each rank does, whatever the load. Each configuration is measured "
               "twice (two processes); `repeat spread` is the largest difference of a rank's two figures over the larger, the figure "
               "their mean, and a figure whose repeats differ by more than "
-              f"{100 * SPREAD_MAX:.0f} %, or whose two loops differ per step by more than a "
-              f"factor {LOOPS_FACTOR:.0f} (the barriers misread), prints as unresolved. "
+              f"{100 * SPREAD_MAX:.0f} %, or with a loop that shows no CPU, prints as "
+              "unresolved. "
               "(The deck was once run to its end in two processes, with and without 1,000 "
               "more steps, and the difference taken: on sediment-large the setup of a million "
               "particles varied between processes more than 1,000 steps cost, and the figures "
@@ -926,12 +945,16 @@ def markdown(data: dict) -> str:
         if own:
             L += ["Costs per particle and step, fitted to each scene's CPU split (each rank: "
                   "t = a·moving + b·resting; the model below uses them): " + "; ".join(
-                      f"{n}: a = {1e9 * c[0]:.0f} ns per moving particle, b = {1e9 * c[1]:.1f} "
-                      f"ns per resting one (a moving particle weighs {c[0] / c[1]:.0f})"
+                      f"{n}: a = {1e9 * c[0]:.0f} ns per moving particle, b = {1e9 * c[1]:.3f} "
+                      f"ns per resting one (a moving particle weighs {c[0] / c[1]:.0f}; the "
+                      f"{dict(bal)[n]['n_particles'] - dict(bal)[n]['moving']:,} resting "
+                      f"particles {100 * c[1] * (dict(bal)[n]['n_particles'] - dict(bal)[n]['moving']) / (c[0] * dict(bal)[n]['moving'] + c[1] * (dict(bal)[n]['n_particles'] - dict(bal)[n]['moving'])):.0f} % of a one-rank step)"
                       for n, c in own) + f". MagPod's deck weighs a moving particle "
-                  f"{MOVE_WEIGHT_DOC}. A resting particle is not free: LAMMPS' own "
-                  "reneighbouring (exchange, atom map, box, reordering) passes over every "
-                  "owned atom, on a million out of cache. (Forces are cleared over the moving "
+                  f"{MOVE_WEIGHT_DOC}. A resting particle costs only LAMMPS' own "
+                  "reneighbouring (exchange, atom map, box, reordering pass over every owned "
+                  "atom), spread over the steps between reneighbourings: the step's work is the "
+                  "robot's, and the model below cannot divide it past the robot's pieces. "
+                  "(Forces are cleared over the moving "
                   "rows only: `neigh_modify include rs_move`, which standalone decks now have "
                   "after their first `run 0`, as `rackstress run` had.)", ""]
     for name, s in data["scenes"].items():
