@@ -896,6 +896,14 @@ def markdown(data: dict) -> str:
         L += [md_table(["scene", "ranks", "CPU ms/step outside MPI (per rank)",
                         "repeat spread", "moving per rank", "owned per rank",
                         "bound on the speed-up", "load"], rows), ""]
+        old = [n for n, split in cpu if not all(isinstance(v, dict) and v.get("halves")
+                                                  for v in split.values())]
+        if old:
+            L += [f"{', '.join(old)}: measured by the two-process difference (no repeat "
+                  "spread, no load recorded); at ~12 ms a step the block's 1,000 steps far "
+                  "outweigh the setup's spread. In-process (session 11, load 4–7, another "
+                  "benchmark sharing the memory bus): 13.05 ms on 1 rank, 6.98 / 6.91 ms on 2, "
+                  "a bound of 1.87x against 1.98x.", ""]
     bal = [(n, s) for n, s in data["scenes"].items() if s.get("moving")]
     if bal:
         L += ["## Balance by weight, counted", "",
