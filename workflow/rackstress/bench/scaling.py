@@ -189,7 +189,7 @@ def compute_cpu(deck_dir: Path, ranks: int, bindir: Path, shim: Path, extra: int
     cpu, halves = [], []
     for r in range(ranks):
         # per stretch between the markers: its first and last barrier (the E loop's start and
-        # stop, the 2E loop's); a misread shows as two loops that disagree
+        # stop, the 2E loop's; the n-th barrier is the same on every rank)
         m = marks[r][-4:]
         one, two = (m[1] - m[0]) / extra, (m[3] - m[2]) / (2 * extra)
         halves.append([one, two])
