@@ -70,6 +70,21 @@ def test_moving_costs_from_the_cpu_split_by_least_squares():
     data = {"scenes": {"magpod": {"cpu_split": split, "runs": []}}}
     assert scaling._moving_costs(data) == pytest.approx((a, b), rel=1e-9)
     assert data["costs_from"].startswith("the CPU split")
+    # an unresolved rank (None) is no equation: the other four still give a and b back
+    split["2"]["cpu"][1] = None
+    assert scaling._moving_costs(data) == pytest.approx((a, b), rel=1e-9)
+
+
+def test_the_page_prints_an_unresolved_figure_as_such():
+    """A CPU figure compute_cpu could not resolve prints as ``unresolved`` and its bound as a
+    dash, never as a number."""
+    split = {"1": {"cpu": [None], "owned": [100], "moving": [10]},
+             "2": {"cpu": [2e-5, None], "owned": [50, 50], "moving": [5, 5],
+                   "repeats": [[2e-5, None], [2.1e-5, None]]}}
+    rows = scaling.cpu_split_rows([("x", split)])
+    assert rows[0][2] == "unresolved" and rows[0][6] == "—"
+    assert rows[1][2] == "0.020 / unresolved" and rows[1][6] == "—"
+    assert rows[1][3] == "4.8 %"            # |2.0 - 2.1| / 2.1 of the resolved rank
 
 
 def test_runner_rows_report_each_rank_outside_mpi(tmp_path):
@@ -86,3 +101,63 @@ def test_runner_rows_report_each_rank_outside_mpi(tmp_path):
     assert r["s_per_step"] > 0
     plain = _runner("magpod-small", 20, 1, None)
     assert plain["outside_mpi"] is False and len(plain["work_s_per_rank"]) == 1
+
+
+def test_compute_cpu_times_the_steps_in_one_process(tmp_path):
+    """``compute_cpu`` on a 10 × 10 × 10 bound block (1,000 particles, every one bound within
+    1.5: the same work each step), 1 rank: the CPU per step is positive and the 2E-step loop costs
+    twice the E-step loop, and a run asked for twice the steps gives the same figure per step.
+    Tolerance 15 %: five times the spread measured on this deck (E vs 2E loop, and repeats,
+    within 3 % at load 2 on the 2 cores); the setup (read_data, the first neighbour build) is
+    outside both loops, so it cannot enter the figure at any load."""
+    import sys
+    from pathlib import Path
+
+    from rackstress.bench.scaling import _deck, _shim, block_scene, compute_cpu
+
+    shim = _shim(tmp_path)
+    assert shim is not None          # cc and the mpich wheel's mpi.h are part of the test set-up
+    _deck(block_scene(10, 10, 10), tmp_path / "d")
+    bindir = Path(sys.executable).parent
+    a = compute_cpu(tmp_path / "d", 1, bindir, shim, extra=150, counts=True)
+    b = compute_cpu(tmp_path / "d", 1, bindir, shim, extra=300)
+    assert a["owned"] == [1000] and a["moving"] == [1000]
+    for r in (a, b):
+        one, two = r["halves"][0]
+        assert one > 0 and two > 0
+        assert two == pytest.approx(one, rel=0.15)       # 2E steps cost 2x E steps
+        assert r["cpu"][0] == pytest.approx((one + 2 * two) / 3, rel=1e-12)
+    # the total CPU of the timed loops: 3 x 300 steps against 3 x 150
+    assert 900 * b["cpu"][0] == pytest.approx(2 * 450 * a["cpu"][0], rel=0.15)
+
+
+def test_compute_cpu_two_ranks_each_rank_its_own_steps(tmp_path):
+    """2 ranks on the same block, split evenly by LAMMPS (500 particles each): each rank's loops
+    are found by the barriers' count sent from rank 0 (the marker is rank 0's), and each rank's
+    figure is positive, its two loops agreeing within the 15 % above."""
+    import sys
+    from pathlib import Path
+
+    from rackstress.bench.scaling import _deck, _shim, block_scene, compute_cpu
+
+    shim = _shim(tmp_path)
+    assert shim is not None
+    _deck(block_scene(10, 10, 10), tmp_path / "d")
+    r = compute_cpu(tmp_path / "d", 2, Path(sys.executable).parent, shim, extra=150,
+                    counts=True)
+    assert r["owned"] == [500, 500]
+    assert all(c is not None and c > 0 for c in r["cpu"])
+    for one, two in r["halves"]:
+        assert two == pytest.approx(one, rel=0.15)
+
+
+def test_resolve_takes_the_loops_and_the_repeats():
+    """A rank's figure is its loops' CPU over their 3E steps, (E·h1 + 2E·h2) / 3E, averaged over
+    the repeats; repeats more than SPREAD_MAX (10 %) apart, or a loop without CPU, leave it
+    unresolved (None), never a number."""
+    v = scaling._resolve({"halves": [[[3e-5, 6e-5], [1e-5, 1e-5], [2e-5, 0.0]],
+                                     [[3e-5, 6e-5], [1.2e-5, 1.2e-5], [2e-5, 1e-5]]]})
+    assert v["cpu"][0] == pytest.approx(5e-5, rel=1e-12)          # (3 + 12) / 3
+    assert v["cpu"][1] is None                                     # 1.0 vs 1.2: 17 % apart
+    assert v["cpu"][2] is None                                     # a loop without CPU
+    assert v["repeats"][1][1] == pytest.approx(1.2e-5, rel=1e-12)

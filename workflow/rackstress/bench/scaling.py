@@ -75,17 +75,34 @@ WRAP(MPI_Recv, (void *a, int b, MPI_Datatype c, int d, int e, MPI_Comm f, MPI_St
      (a, b, c, d, e, f, g))
 WRAP(MPI_Sendrecv, (const void *a, int b, MPI_Datatype c, int d, int e, void *f, int g,
      MPI_Datatype h, int i, int j, MPI_Comm k, MPI_Status *l), (a, b, c, d, e, f, g, h, i, j, k, l))
-WRAP(MPI_Barrier, (MPI_Comm a), (a))
-WRAP(MPI_Bcast, (void *a, int b, MPI_Datatype c, int d, MPI_Comm e), (a, b, c, d, e))
-WRAP(MPI_Scan, (const void *a, void *b, int c, MPI_Datatype d, MPI_Op e, MPI_Comm f),
-     (a, b, c, d, e, f))
-WRAP(MPI_Allgather, (const void *a, int b, MPI_Datatype c, void *d, int e, MPI_Datatype f,
-     MPI_Comm g), (a, b, c, d, e, f, g))
-WRAP(MPI_Reduce, (const void *a, void *b, int c, MPI_Datatype d, MPI_Op e, int f, MPI_Comm g),
-     (a, b, c, d, e, f, g))
+/* LAMMPS' Timer::barrier_start / barrier_stop bracket each run's loop with an MPI_Barrier;
+   a deck's `info communication out ...` asks MPI_Get_library_version on rank 0, a marker.
+   Each rank notes its CPU time outside MPI at every barrier; at MPI_Finalize rank 0 sends the
+   markers (as barrier counts: the barriers are collective, the n-th is the same on every
+   rank), and per stretch between two markers each rank prints its CPU at the stretch's first
+   and last barrier: a run's own loop, timed inside the process (compute_cpu) */
+#include <stdlib.h>
+#define RS_MARKS 64
+static double *bl = NULL;
+static long nb = 0, cap = 0, mk[RS_MARKS];
+static int n_marks = 0;
+int MPI_Barrier(MPI_Comm a) { double t0 = cpu();
+  if (nb == cap) { cap = cap ? 2 * cap : 4096; bl = realloc(bl, cap * sizeof(double)); }
+  if (bl) bl[nb++] = t0 - t_in;
+  int rv = PMPI_Barrier(a); t_in += cpu() - t0; return rv; }
+int MPI_Get_library_version(char *a, int *b) {
+  if (n_marks < RS_MARKS) mk[n_marks++] = nb;
+  return PMPI_Get_library_version(a, b); }
 double rs_mpi_cpu_inside(void) { return t_in; }
 int MPI_Finalize(void) { int me; PMPI_Comm_rank(MPI_COMM_WORLD, &me);
-  fprintf(stderr, "RS_MPI_CPU %d %.9f %.9f\n", me, cpu(), t_in); return PMPI_Finalize(); }
+  fprintf(stderr, "RS_MPI_CPU %d %.9f %.9f\n", me, cpu(), t_in);
+  PMPI_Bcast(&n_marks, 1, MPI_INT, 0, MPI_COMM_WORLD);
+  PMPI_Bcast(mk, RS_MARKS, MPI_LONG, 0, MPI_COMM_WORLD);
+  char line[4096]; int w = snprintf(line, 64, "RS_MPI_MARKS %d", me);   /* one write: the */
+  for (int k = 0; k + 1 < n_marks && w < 4000; k++)                 /* ranks' lines interleave */
+    if (mk[k + 1] > mk[k] && mk[k + 1] <= nb)
+      w += snprintf(line + w, 64, " %.9f %.9f", bl[mk[k]], bl[mk[k + 1] - 1]);
+  fprintf(stderr, "%s\n", line); return PMPI_Finalize(); }
 """
 
 
@@ -103,55 +120,96 @@ def _shim(work: Path) -> Path | None:
     return lib if made.returncode == 0 else None
 
 
-def compute_cpu(deck_dir: Path, ranks: int, bindir: Path, shim: Path, extra: int = 1000,
-                text: str | None = None, counts: bool = False):
-    """Each rank's CPU time outside MPI calls per step of the deck's last run: the deck run
-    as it is and with ``extra`` more steps in that run, the difference over ``extra`` (so the
-    setup cancels). Thread CPU time: a rank waiting for the scheduler or polling in MPI adds
-    nothing, so it measures the work each rank does, not the machine's load.
+#: a figure is resolved when its two repeats (:func:`_cpu_split`, two processes) differ by at
+#: most this fraction: noise at most a tenth of the signal
+SPREAD_MAX = 0.10
+#: the shim's marker (:data:`SHIM_SOURCE`): LAMMPS' ``info`` writes on rank 0 only, and not at
+#: all to ``-screen none``, hence the file
+MARK = "info communication out overwrite info.txt\n"
 
-    ``counts``: also each rank's (owned, moving) particles at the end of the short run, as
-    ``(cpu, owned, moving)``."""
+
+def _per_step(halves: list) -> float | None:
+    """A rank's CPU per step from its E- and 2E-step loops' per-step CPU: their 3E steps' CPU
+    over 3E (the two loops may differ: the work drifts along the run, e.g. a rank holding only
+    resting sediment does LAMMPS' reneighbourings and little else)."""
+    one, two = halves
+    return (one + 2 * two) / 3 if one > 0 and two > 0 else None
+
+
+def _resolve(v: dict) -> dict:
+    """A configuration of the CPU split with its figures from its repeats' ``halves``: per rank
+    the repeats' mean, None (unresolved) where a repeat has none or the repeats differ by more
+    than :data:`SPREAD_MAX`."""
+    if not v.get("halves"):
+        return v
+    reps = [[_per_step(h) for h in rep] for rep in v["halves"]]
+    v["repeats"] = reps
+    v["cpu"] = [None if None in c or max(c) - min(c) > SPREAD_MAX * max(c)
+                else sum(c) / len(c) for c in zip(*reps)]
+    return v
+
+
+def compute_cpu(deck_dir: Path, ranks: int, bindir: Path, shim: Path, extra: int = 1000,
+                text: str | None = None, counts: bool = False) -> dict:
+    """Each rank's CPU time outside MPI calls per step, timed inside one process: the deck runs
+    as it is, then ``run E pre no post no`` and ``run 2E`` (E = ``extra``). LAMMPS brackets
+    each run's loop with an ``MPI_Barrier`` (Timer::barrier_start / barrier_stop), where the
+    shim notes the rank's CPU time outside MPI; the two loops' CPU over their 3E steps is the
+    figure. No setup (read_data, balance, the first neighbour build) is inside either loop.
+    Thread CPU time: a rank waiting for the scheduler or polling in MPI adds nothing, so it
+    measures the work each rank does, not the machine's load.
+
+    Returns ``cpu`` (s per step per rank, None where a loop shows no CPU) and ``halves`` (per rank
+    the E and the 2E loop's CPU per step); with ``counts`` also each rank's ``owned`` and
+    ``moving`` particles at the end of the deck's own run."""
     from rackstress.engines.lammps.deck import MOVE_GROUP
 
     text = text if text is not None else (deck_dir / "in.lammps").read_text()
-    runs = list(re.finditer(r"^run (\d+)", text, flags=re.M))
-    m = runs[-1]
-    out, owned, moving = [], [0] * ranks, [0] * ranks
-    for add in (0, extra):
-        name = f"in.cpu{add}"
-        body = text[:m.start()] + f"run {int(m.group(1)) + add}" + text[m.end():]
-        if counts and add == 0:
-            k = body.index("\nrun ")
-            grp = MOVE_GROUP if f"group {MOVE_GROUP} " in body else "all"
-            body = (body[:k] + f"\nvariable rs_mv atom gmask({grp})"
-                    "\ncompute rs_cpu_proc all property/atom proc" + body[k:]
-                    + "write_dump all custom counts.txt c_rs_cpu_proc v_rs_mv\n")
-        (deck_dir / name).write_text(body)
-        proc = subprocess.run([str(bindir / "mpiexec"), "-genv", "LD_PRELOAD", str(shim),
-                               "-genv", "OMP_NUM_THREADS", "1", "-n", str(ranks),
-                               str(bindir / "lmp"), "-in", name, "-log", "none", "-screen",
-                               "none"], cwd=deck_dir, capture_output=True, text=True)
-        if proc.returncode != 0:
-            raise RuntimeError(f"lmp failed: {(proc.stdout + proc.stderr)[-1500:]}")
-        rows = sorted((int(r), float(t) - float(i)) for r, t, i in
-                      re.findall(r"RS_MPI_CPU (\d+) ([\d.]+) ([\d.]+)", proc.stderr))
-        out.append([v for _, v in rows])
-        if counts and add == 0:
-            import numpy as np
+    body = text.rstrip("\n") + "\n"
+    owned, moving = [0] * ranks, [0] * ranks
+    if counts:
+        k = body.index("\nrun ")
+        grp = MOVE_GROUP if f"group {MOVE_GROUP} " in body else "all"
+        body = (body[:k] + f"\nvariable rs_mv atom gmask({grp})"
+                "\ncompute rs_cpu_proc all property/atom proc" + body[k:]
+                + "write_dump all custom counts.txt c_rs_cpu_proc v_rs_mv\n")
+    body += (f"{MARK}run {extra} pre no post no\n{MARK}"
+             f"run {2 * extra} pre no post no\n{MARK}")
+    (deck_dir / "in.cpu").write_text(body)
+    proc = subprocess.run([str(bindir / "mpiexec"), "-genv", "LD_PRELOAD", str(shim),
+                           "-genv", "OMP_NUM_THREADS", "1", "-n", str(ranks),
+                           str(bindir / "lmp"), "-in", "in.cpu", "-log", "none", "-screen",
+                           "none"], cwd=deck_dir, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise RuntimeError(f"lmp failed: {(proc.stdout + proc.stderr)[-1500:]}")
+    marks = dict((int(m.group(1)), [float(x) for x in m.group(2).split()]) for m in
+                 re.finditer(r"RS_MPI_MARKS (\d+)((?: [\d.]+)*)", proc.stderr))
+    if sorted(marks) != list(range(ranks)) or any(len(v) < 4 for v in marks.values()):
+        raise RuntimeError(f"the shim's barrier marks are missing: {proc.stderr[-1500:]}")
+    cpu, halves = [], []
+    for r in range(ranks):
+        # per stretch between the markers: its first and last barrier (the E loop's start and
+        # stop, the 2E loop's; the n-th barrier is the same on every rank)
+        m = marks[r][-4:]
+        one, two = (m[1] - m[0]) / extra, (m[3] - m[2]) / (2 * extra)
+        halves.append([one, two])
+        cpu.append(_per_step([one, two]))
+    if counts:
+        import numpy as np
 
-            c = np.loadtxt(deck_dir / "counts.txt", skiprows=9, ndmin=2)
-            owned = np.bincount(c[:, 0].astype(int), minlength=ranks).tolist()
-            moving = np.bincount(c[:, 0].astype(int), weights=c[:, 1],
-                                 minlength=ranks).astype(int).tolist()
-    cpu = [(b - a) / extra for a, b in zip(*out)]
-    return (cpu, owned, moving) if counts else cpu
+        c = np.loadtxt(deck_dir / "counts.txt", skiprows=9, ndmin=2)
+        owned = np.bincount(c[:, 0].astype(int), minlength=ranks).tolist()
+        moving = np.bincount(c[:, 0].astype(int), weights=c[:, 1],
+                             minlength=ranks).astype(int).tolist()
+    return {"cpu": cpu, "halves": halves, "owned": owned, "moving": moving}
 
 
 def _cpu_split(deck_dir: Path, deck, bindir: Path, shim: Path) -> dict:
-    """:func:`compute_cpu` on 1 and 2 ranks (the better of two each), and on 2 ranks without
-    the deck's balance lines (LAMMPS' even split) for a deck that has them: per configuration
-    the CPU time per step of each rank and its owned and moving particles."""
+    """:func:`compute_cpu` on 1 and 2 ranks (twice each: the mean, and both as ``repeats``),
+    and on 2 ranks without the deck's balance lines (LAMMPS' even split) for a deck that has
+    them: per configuration the CPU time per step of each rank (None: unresolved, in either
+    repeat or the repeats more than :data:`SPREAD_MAX` apart) and its owned and moving
+    particles."""
     text = (deck_dir / "in.lammps").read_text()
     res = {}
     plain = "\n".join(ln for ln in text.splitlines()
@@ -161,8 +219,9 @@ def _cpu_split(deck_dir: Path, deck, bindir: Path, shim: Path) -> dict:
             continue
         got = [compute_cpu(deck_dir, ranks, bindir, shim, text=t, counts=True)
                for _ in range(2)]
-        cpu, owned, moving = min(got, key=lambda g: max(g[0]))
-        res[key] = {"cpu": cpu, "owned": owned, "moving": moving}
+        res[key] = _resolve({"owned": got[0]["owned"], "moving": got[0]["moving"],
+                             "halves": [g["halves"] for g in got],
+                             "load": os.getloadavg()[0]})
     return res
 
 
@@ -343,6 +402,8 @@ def _moving_costs(data: dict) -> tuple[float, float] | None:
         for v in rows:
             if v.get("owned") and v.get("moving"):
                 for c, o, m in zip(v["cpu"], v["owned"], v["moving"]):
+                    if c is None or c <= 0:
+                        continue        # unresolved (compute_cpu): no equation
                     A.append([m, o - m])
                     t.append(c)
     if len(t) >= 3 and np.linalg.matrix_rank(np.array(A, float)) == 2:
@@ -377,12 +438,16 @@ def remodel(data: dict) -> dict:
 
             sc = dict(cases(large=True))[name]()
             s.update(_robot(sc, compile_deck(sc, "exact", plugin=True), one[0]))
+    for s in data["scenes"].values():
+        for v in (s.get("cpu_split") or {}).values():
+            if isinstance(v, dict):
+                _resolve(v)             # the figures from the loops' CPU, as _cpu_split does
     costs = _moving_costs(data)
     if costs:
         data["a_s_per_moving"], data["b_s_per_resting"] = costs
     for name, s in data["scenes"].items():
-        # a scene's own CPU split, where it has one: resting particles cost more per particle
-        # on a million (each reneighbouring passes over them all, out of cache) than on 30,000
+        # a scene's own CPU split, where it has one (the robot's contacts with the bed differ
+        # from MagPod's, and a resting particle's share of a reneighbouring with the bed's size)
         own = _moving_costs({"scenes": {name: s}}) if s.get("cpu_split") else None
         s["costs"] = list(own) if own else (list(costs) if costs else None)
         if s["costs"] and s.get("moving"):
@@ -547,8 +612,11 @@ def run_bench(out: Path | None = None, quick: bool = False, echo=print, large: b
                 split = _cpu_split(work / name, deck, bindir, shim)
                 data["scenes"][name]["cpu_split"] = split
                 echo(f"{name}: CPU outside MPI per step and rank (ms): " + ", ".join(
-                    f"{k}: " + " / ".join(f"{1e3 * v:.3f}" for v in vals["cpu"])
-                    for k, vals in split.items()))
+                    f"{k}: " + " / ".join("unresolved" if v is None else f"{1e3 * v:.3f}"
+                                          for v in vals["cpu"])
+                    + " (repeats " + "; ".join(" / ".join("—" if v is None else f"{1e3 * v:.3f}"
+                                                          for v in r) for r in vals["repeats"])
+                    + ")" for k, vals in split.items()))
             shutil.rmtree(work / name, ignore_errors=True)      # the 4 M bed's data: ~0.3 GB
     finally:
         shutil.rmtree(work, ignore_errors=True)
@@ -738,6 +806,30 @@ def runner_markdown(data: dict) -> list[str]:
     return L
 
 
+def cpu_split_rows(cpu: list) -> list:
+    """The page's rows of the CPU split: (scene, split) pairs, an unresolved figure (None) as
+    ``unresolved`` and its bound as a dash."""
+    rows = []
+    for n, split in cpu:
+        split = _split_rows(split)
+        t1 = split["1"]["cpu"][0]
+        for key, v in split.items():
+            ok = t1 is not None and t1 > 0 and all(c is not None and c > 0 for c in v["cpu"])
+            reps = v.get("repeats") or []
+            spread = [abs(a - b) / max(a, b) for r1, r2 in zip(reps, reps[1:])
+                      for a, b in zip(r1, r2) if a and b]
+            rows.append([n, key, " / ".join("unresolved" if c is None or c <= 0
+                                            else f"{1e3 * c:.3f}" for c in v["cpu"]),
+                         f"{100 * max(spread):.1f} %" if spread else "—",
+                         " / ".join(f"{m:,}" for m in v["moving"]) if v.get("moving")
+                         else "—",
+                         " / ".join(f"{o:,}" for o in v["owned"]) if v.get("owned")
+                         else "—",
+                         f"{t1 / max(v['cpu']):.2f}x" if ok else "—",
+                         f"{v['load']:.1f}" if v.get("load") is not None else "—"])
+    return rows
+
+
 def markdown(data: dict) -> str:
     L = ["# The plugin under MPI: measured on 1 and 2 ranks, modelled to 1,024",
          "", "Written by `rackstress bench scaling` (module doc: "
@@ -776,27 +868,42 @@ def markdown(data: dict) -> str:
     cpu = [(n, s["cpu_split"]) for n, s in data["scenes"].items() if s.get("cpu_split")]
     if cpu:
         L += ["## The work per rank, in CPU time", "",
-              "Each rank's CPU time outside MPI calls per step (`compute_cpu`: a PMPI shim, "
-              "`SHIM_SOURCE`, preloaded into every rank times what each rank spends inside MPI, "
-              "where MPICH polls while it waits; the deck run with 1,000 more steps, the "
-              "difference over 1,000, so the setup cancels). Thread CPU time does not grow "
-              "while a rank waits for the scheduler, so this is the work each rank does, "
-              "whatever the load. The bound is the one-rank time over the busiest rank's: what "
-              "2 ranks give on a quiet node when the three meetings a step cost nothing.", ""]
-        rows = []
-        for n, split in cpu:
-            split = _split_rows(split)
-            t1 = split["1"]["cpu"][0]
-            for key, v in split.items():
-                rows.append([n, key, " / ".join(f"{1e3 * c:.3f}" for c in v["cpu"]),
-                             " / ".join(f"{m:,}" for m in v["moving"]) if v.get("moving")
-                             else "—",
-                             " / ".join(f"{o:,}" for o in v["owned"]) if v.get("owned")
-                             else "—",
-                             f"{t1 / max(v['cpu']):.2f}x"])
-        L += [md_table(["scene", "ranks", "CPU ms/step outside MPI (per rank)",
-                        "moving per rank", "owned per rank", "bound on the speed-up"], rows),
+              "Each rank's CPU time outside MPI calls per step (`compute_cpu`). A PMPI shim, "
+              "`SHIM_SOURCE`, preloaded into every rank, times what each rank spends inside MPI "
+              "(where MPICH polls while it waits) and notes the rank's CPU time outside MPI at "
+              "every `MPI_Barrier`; LAMMPS brackets each run's loop with one "
+              "(`Timer::barrier_start` / `barrier_stop`). After the deck's own run the same "
+              "process runs 1,000 and then 2,000 more steps (`run N pre no post no`), an `info` "
+              "command before, between and after them marks which barriers are theirs, and the "
+              "figure is the two loops' CPU over their 3,000 steps: only steps, no setup "
+              "(read_data, balance, the first neighbour build are outside both loops). The two "
+              "loops need not cost the same a step: the work drifts along the run (the robot "
+              "walks on; a rank holding only resting sediment does LAMMPS' reneighbourings and "
+              "little else, as many in the first 1,000 steps as in the next 2,000). Thread "
+              "CPU time does not grow while a rank waits for the scheduler or another rank, so "
+              "this is the work each rank does, whatever the load. Each configuration is measured "
+              "twice (two processes); `repeat spread` is the largest difference of a rank's two figures over the larger, the figure "
+              "their mean, and a figure whose repeats differ by more than "
+              f"{100 * SPREAD_MAX:.0f} %, or with a loop that shows no CPU, prints as "
+              "unresolved. "
+              "(The deck was once run to its end in two processes, with and without 1,000 "
+              "more steps, and the difference taken: on sediment-large the setup of a million "
+              "particles varied between processes more than 1,000 steps cost, and the figures "
+              "came out negative.) The bound is the one-rank time over the busiest rank's: "
+              "what 2 ranks give on a quiet node when the three meetings a step cost nothing.",
               ""]
+        rows = cpu_split_rows(cpu)
+        L += [md_table(["scene", "ranks", "CPU ms/step outside MPI (per rank)",
+                        "repeat spread", "moving per rank", "owned per rank",
+                        "bound on the speed-up", "load"], rows), ""]
+        old = [n for n, split in cpu if not all(isinstance(v, dict) and v.get("halves")
+                                                  for v in split.values())]
+        if old:
+            L += [f"{', '.join(old)}: measured by the two-process difference (no repeat "
+                  "spread, no load recorded); at ~12 ms a step the block's 1,000 steps far "
+                  "outweigh the setup's spread. In-process (session 11, load 4–7, another "
+                  "benchmark sharing the memory bus): 13.05 ms on 1 rank, 6.98 / 6.91 ms on 2, "
+                  "a bound of 1.87x against 1.98x.", ""]
     bal = [(n, s) for n, s in data["scenes"].items() if s.get("moving")]
     if bal:
         L += ["## Balance by weight, counted", "",
@@ -846,12 +953,16 @@ def markdown(data: dict) -> str:
         if own:
             L += ["Costs per particle and step, fitted to each scene's CPU split (each rank: "
                   "t = a·moving + b·resting; the model below uses them): " + "; ".join(
-                      f"{n}: a = {1e9 * c[0]:.0f} ns per moving particle, b = {1e9 * c[1]:.1f} "
-                      f"ns per resting one (a moving particle weighs {c[0] / c[1]:.0f})"
+                      f"{n}: a = {1e9 * c[0]:.0f} ns per moving particle, b = {1e9 * c[1]:.3f} "
+                      f"ns per resting one (a moving particle weighs {c[0] / c[1]:.0f}; the "
+                      f"{dict(bal)[n]['n_particles'] - dict(bal)[n]['moving']:,} resting "
+                      f"particles {100 * c[1] * (dict(bal)[n]['n_particles'] - dict(bal)[n]['moving']) / (c[0] * dict(bal)[n]['moving'] + c[1] * (dict(bal)[n]['n_particles'] - dict(bal)[n]['moving'])):.0f} % of a one-rank step)"
                       for n, c in own) + f". MagPod's deck weighs a moving particle "
-                  f"{MOVE_WEIGHT_DOC}. A resting particle is not free: LAMMPS' own "
-                  "reneighbouring (exchange, atom map, box, reordering) passes over every "
-                  "owned atom, on a million out of cache. (Forces are cleared over the moving "
+                  f"{MOVE_WEIGHT_DOC}. A resting particle costs only LAMMPS' own "
+                  "reneighbouring (exchange, atom map, box, reordering pass over every owned "
+                  "atom), spread over the steps between reneighbourings: the step's work is the "
+                  "robot's, and the model below cannot divide it past the robot's pieces. "
+                  "(Forces are cleared over the moving "
                   "rows only: `neigh_modify include rs_move`, which standalone decks now have "
                   "after their first `run 0`, as `rackstress run` had.)", ""]
     for name, s in data["scenes"].items():
