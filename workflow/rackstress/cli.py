@@ -323,10 +323,10 @@ def _add_guards(out: Path, name: str, found: list) -> None:
     """The guard rails' warnings of a run that ended well, checked beside it (``rackstress
     run``'s head start: :func:`rackstress.runs.run.execute` with ``guards=False``), into its
     ``summary.json`` and on stderr, as :func:`rackstress.engines.guards.check_run` says them."""
+    from rackstress.engines.guards import say
     from rackstress.lib.jsonio import write_json
 
-    for w in found:
-        print(f"rackstress: warning: {name}: {w['message']}", file=sys.stderr)
+    say(name, found)
     path = Path(out) / "summary.json"
     summary = json.loads(path.read_text())
     summary["warnings"] = list(found) + list(summary.get("warnings") or [])

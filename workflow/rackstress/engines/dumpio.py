@@ -205,9 +205,9 @@ def _frames_in(mm, o, want, frame):
         if want is None or frame in want:
             p = o.copy()
             if n:
-                from rackstress.lib.numtext import loaded_numbers
+                from rackstress.lib.numtext import numbers
 
-                t = loaded_numbers(mm[q:end])     # NumPy's values, compiled, if loaded
+                t = numbers(mm[q:end])     # NumPy's values, compiled, if loaded
                 if t is None or t.size != n * len(cols):
                     t = np.fromstring(mm[q:end].decode("ascii"), sep=" ")
                 t = t.reshape(n, len(cols))

@@ -249,6 +249,12 @@ def check_run(scene, out, echo: bool = True, engine: str | None = None) -> list[
     if colliding_pairs(scene) and dump.exists():
         found += pass_through(scene, dump_frames(dump, scene.original_positions()))
     if echo:
-        for w in found:
-            print(f"rackstress: warning: {scene.name}: {w['message']}", file=sys.stderr)
+        say(scene.name, found)
     return found
+
+
+def say(name: str, found: list[dict]) -> None:
+    """Print each guard-rail warning of scene ``name`` to stderr, one line each (what
+    :func:`check_run` says, and ``rackstress run`` for warnings checked beside it)."""
+    for w in found:
+        print(f"rackstress: warning: {name}: {w['message']}", file=sys.stderr)

@@ -374,7 +374,7 @@ class RackDumpReader(base.ReaderBase):
 
 def read_table(idx: FrameIndex, frame: int) -> np.ndarray:
     """The atom lines of one frame as an (n_atoms, n_columns) float64 array, checked."""
-    from rackstress.lib.numtext import loaded_numbers
+    from rackstress.lib.numtext import numbers
 
     start, end = int(idx.atoms_start[frame]), int(idx.atoms_end[frame])
     if idx.members is not None:
@@ -387,7 +387,7 @@ def read_table(idx: FrameIndex, frame: int) -> np.ndarray:
     n = idx.n_atoms if idx.counts is None else int(idx.counts[frame])
     if n == 0:
         return np.zeros((0, ncol))
-    flat = loaded_numbers(raw)          # NumPy's values, compiled (lib/numtext.py), if loaded
+    flat = numbers(raw)          # NumPy's values, compiled (lib/numtext.py), if loaded
     if flat is not None and flat.size == n * ncol:
         return flat.reshape(n, ncol)
     text = raw.decode("ascii", errors="replace")
