@@ -9,48 +9,44 @@ the run can start either without paying for it there.
 from __future__ import annotations
 
 #: What the measures need first (:func:`rackstress.stress.post.follow`, and the run's summary
-#: after its last step: the rigid fit), then what the VTK writer, the pictures, the plots and
-#: the 3D view import, first what most of them share and what the longest of them (the
-#: plots' process) needs: done by :func:`prepare_in_background` while the simulation runs.
+#: after its last step: the rigid fit), then what the pictures' painter needs (it is made
+#: before the other imports where the run is followed: painting is the longest part of
+#: post-processing, and a painter made after the last step adds its making and first
+#: picture to it), then what the VTK writer, the plots and the 3D view import, first what
+#: the longest of them (the plots' process) needs: done by :func:`prepare_in_background`
+#: while the simulation runs.
 _FIRST = ("scipy.spatial.transform", "rackstress.stress.post")
-_PREPARE = ("vtkmodules.vtkCommonDataModel", "vtkmodules.util.numpy_support",
-            "matplotlib.figure", "matplotlib.backends.backend_agg",
-            "vtkmodules.vtkRenderingOpenGL2", "vtkmodules.vtkRenderingCore", "PIL.Image",
-            "PIL.ImageDraw", "PIL.PngImagePlugin", "vtkmodules.vtkIOXML",
-            "rackstress.stress.export", "rackstress.render.pictures", "rackstress.render.report",
-            "rackstress.render.view3d", "trame_vtk.modules.vtk.serializers",
-            "vtkmodules.vtkFiltersSources", "vtkmodules.vtkFiltersCore")
+_PAINT = ("vtkmodules.vtkCommonDataModel", "vtkmodules.util.numpy_support",
+          "vtkmodules.vtkRenderingOpenGL2", "vtkmodules.vtkRenderingCore",
+          "rackstress.render.pictures")
+_PREPARE = _PAINT + ("matplotlib.figure", "matplotlib.backends.backend_agg", "PIL.Image",
+                     "PIL.ImageDraw", "PIL.PngImagePlugin", "vtkmodules.vtkIOXML",
+                     "rackstress.stress.export", "rackstress.render.report",
+                     "rackstress.render.view3d", "trame_vtk.modules.vtk.serializers",
+                     "vtkmodules.vtkFiltersSources", "vtkmodules.vtkFiltersCore")
 
 
 def _later(squeeze=None, rundir=None):
     """:data:`_PREPARE`'s imports and the fonts, one step a call (what :func:`follow` does
     while no new chunk of frames is written), each yielding True; given ``rundir`` (a run
-    :func:`~rackstress.stress.post.follow` measures), its pictures' painter
-    (:func:`rackstress.render.pictures.prepare_painter`, once follow has opened the run:
-    False until then); then, given ``squeeze`` (a
+    :func:`~rackstress.stress.post.follow` measures), after :data:`_PAINT`'s, its pictures'
+    painter (:func:`rackstress.render.pictures.prepare_painter`, once follow has opened the
+    run: False until then); then, given ``squeeze`` (a
     :class:`~rackstress.engines.dumpio.GzAhead`), the trajectory's frames compressed as they
     are written, yielding whether one was."""
     import gc
     import importlib
 
-    for name in _PREPARE:
-        try:
-            importlib.import_module(name)
-        except Exception:  # noqa: BLE001, S112 - only a head start: the user imports it
-            pass
-        gc.freeze()             # what it made: in no collection while the thread runs
-        yield True
-    try:
-        from rackstress.render.pictures import _font
+    def load(names):
+        for name in names:
+            try:
+                importlib.import_module(name)
+            except Exception:  # noqa: BLE001, S112 - only a head start: the user imports it
+                pass
+            gc.freeze()         # what it made: in no collection while the thread runs
+            yield True
 
-        for size in (13, 14, 17, 18):
-            _font(size)
-        from matplotlib import font_manager
-
-        font_manager.findfont("DejaVu Sans")
-    except Exception:  # noqa: BLE001, S110 - only a head start
-        pass
-    yield True
+    yield from load(_PAINT)
     if rundir is not None:
         from pathlib import Path
 
@@ -66,6 +62,18 @@ def _later(squeeze=None, rundir=None):
         except Exception:  # noqa: BLE001, S110 - only a head start: render makes its own
             pass
         yield True
+    yield from load(_PREPARE[len(_PAINT):])
+    try:
+        from rackstress.render.pictures import _font
+
+        for size in (13, 14, 17, 18):
+            _font(size)
+        from matplotlib import font_manager
+
+        font_manager.findfont("DejaVu Sans")
+    except Exception:  # noqa: BLE001, S110 - only a head start
+        pass
+    yield True
     while squeeze is not None:
         yield squeeze.step()
 
@@ -191,11 +199,16 @@ def wait_prepared() -> None:
 
 # ----------------------------------------------------------------------------- in a process
 class _Told:
-    """``follow``'s ``stop`` in :class:`Ahead`'s process: set once the parent has written to
-    (or closed) the pipe; nothing is read from it here."""
+    """The parent's messages in :class:`Ahead`'s process (one byte each), read as they come.
+
+    ``is_set()`` (``follow``'s ``stop``): a message is waiting. ``urgent()``: one other than
+    ``F`` is: ``F`` arrives with the simulation's first steps, while the measures' modules
+    are still loading, and only says "measure as frames come", so it must not cut short
+    what the measures need (their compiled loop and the dump's number parser, which a
+    follow without them would do without: NumPy's reader, 7x slower)."""
 
     def __init__(self, fd: int):
-        self.fd = fd
+        self.fd, self.queue = fd, []
 
     def is_set(self) -> bool:
         return self.wait(0)
@@ -203,7 +216,23 @@ class _Told:
     def wait(self, timeout) -> bool:
         import select
 
-        return bool(select.select([self.fd], [], [], timeout)[0])
+        return bool(self.queue) or bool(select.select([self.fd], [], [], timeout)[0])
+
+    def urgent(self) -> bool:
+        """Whether a message other than ``F`` is waiting (those waiting are read now)."""
+        import os
+        import select
+
+        while not (self.queue and self.queue[-1] == b"") \
+                and select.select([self.fd], [], [], 0)[0]:
+            self.queue.append(os.read(self.fd, 1))
+        return any(m != b"F" for m in self.queue)
+
+    def read(self) -> bytes:
+        """The next message (waiting for it); ``b""`` once the pipe is closed."""
+        import os
+
+        return self.queue.pop(0) if self.queue else os.read(self.fd, 1)
 
 
 class Ahead:
@@ -372,12 +401,12 @@ def _ahead_child(r: int, parent: int, rundir, frames: int, compress: bool, finis
     told = _Told(r)
     gc.disable()                    # imports: no collection walks their objects (a third less)
     for name in _FIRST:
-        if told.is_set():
+        if told.urgent():
             break
         importlib.import_module(name)
     from rackstress.stress import kernels
 
-    if not told.is_set() and kernels.available() and kernels.compiled():
+    if not told.urgent() and kernels.available() and kernels.compiled():
         kernels.warm()              # load the cached loop (a first run compiles it apart)
     squeeze = None
     if compress:
@@ -394,7 +423,7 @@ def _ahead_child(r: int, parent: int, rundir, frames: int, compress: bool, finis
     gc.enable()
     kept = checking = None
     while True:
-        what = os.read(r, 1)
+        what = told.read()
         if what == b"F" and frames:
             from rackstress.stress.post import follow
 
