@@ -16,6 +16,8 @@ from __future__ import annotations
 #: the longest of them (the plots' process) needs: done by :func:`prepare_in_background`
 #: while the simulation runs.
 _FIRST = ("scipy.spatial.transform", "rackstress.stress.post")
+#: seconds: a followed run expected to end sooner starts no more of _PREPARE's imports
+LAST_IMPORTS_S = 0.3
 _PAINT = ("vtkmodules.vtkCommonDataModel", "vtkmodules.util.numpy_support",
           "vtkmodules.vtkRenderingOpenGL2", "vtkmodules.vtkRenderingCore",
           "rackstress.render.pictures")
@@ -37,8 +39,13 @@ def _later(squeeze=None, rundir=None):
     import gc
     import importlib
 
-    def load(names):
+    def load(names, head=None):
         for name in names:
+            # near the run's end an import is left to whoever needs it (a forked child, beside
+            # the pictures): one under way when the last step is done delays post-processing
+            # (matplotlib's: 0.14 s), and none of these is needed to measure the frames left
+            if head is not None and head.seconds_left() < LAST_IMPORTS_S:
+                return
             try:
                 importlib.import_module(name)
             except Exception:  # noqa: BLE001, S112 - only a head start: the user imports it
@@ -62,18 +69,20 @@ def _later(squeeze=None, rundir=None):
         except Exception:  # noqa: BLE001, S110 - only a head start: render makes its own
             pass
         yield True
-    yield from load(_PREPARE[len(_PAINT):])
-    try:
-        from rackstress.render.pictures import _font
+    head = _HEADS.get(key) if rundir is not None else None
+    yield from load(_PREPARE[len(_PAINT):], head)
+    if head is None or head.seconds_left() >= LAST_IMPORTS_S:   # the fonts likewise
+        try:
+            from rackstress.render.pictures import _font
 
-        for size in (13, 14, 17, 18):
-            _font(size)
-        from matplotlib import font_manager
+            for size in (13, 14, 17, 18):
+                _font(size)
+            from matplotlib import font_manager
 
-        font_manager.findfont("DejaVu Sans")
-    except Exception:  # noqa: BLE001, S110 - only a head start
-        pass
-    yield True
+            font_manager.findfont("DejaVu Sans")
+        except Exception:  # noqa: BLE001, S110 - only a head start
+            pass
+        yield True
     while squeeze is not None:
         yield squeeze.step()
 

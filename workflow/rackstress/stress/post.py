@@ -306,6 +306,26 @@ class Head:
         self.used = 0                 # frames handed to measure_frames
         self.error = None             # why follow stopped early, if it did
         self.run = None               # the run as follow last opened it (still being written)
+        self.seen: list = []          # (time, frames written) when follow first and last looked
+        self.frames = 0               # the frames the finished run will hold
+
+    def saw(self, written: int) -> None:
+        """Note that the dump holds ``written`` frames now (:meth:`seconds_left`)."""
+        import time
+
+        now = (time.perf_counter(), written)
+        self.seen = [self.seen[0], now] if self.seen else [now]
+
+    def seconds_left(self) -> float:
+        """The run's time left until its last frame, at the pace of the frames written so far
+        (infinite until that pace is known)."""
+        import time
+
+        if len(self.seen) < 2 or self.seen[1][1] <= self.seen[0][1]:
+            return float("inf")
+        (t0, n0), (t1, n1) = self.seen
+        pace = (t1 - t0) / (n1 - n0)
+        return max(0.0, (self.frames - n1) * pace - (time.perf_counter() - t1))
 
     def keep_tables(self, run, ks, frames: int) -> None:
         """Keep the atom tables of frames ``ks`` that ``run``'s reader holds (its cache,
@@ -382,6 +402,7 @@ def follow(rundir, stop, frames: int, poll: float = 0.2, idle=None) -> None:
 
     key = str(Path(rundir).resolve())
     head = _HEADS[key] = Head()
+    head.frames = frames
     dump = Path(rundir) / "trajectory.dump"
     need, chunk, parts, a, failed, run = 1, None, None, 0, 0, None
     main = threading.main_thread()
@@ -397,6 +418,7 @@ def follow(rundir, stop, frames: int, poll: float = 0.2, idle=None) -> None:
             wait = 0
             run = load_run(rundir, allow_truncated=True) if run is None else grown(run)
             head.run = run
+            head.saw(run.index.n_frames)
             if head.hood is None:
                 parts = list(run.parts.values())
                 head.hood = neighbourhoods(run, parts)
