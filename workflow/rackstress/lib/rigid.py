@@ -122,6 +122,19 @@ def max_deformation(o: np.ndarray, p: np.ndarray) -> float:
     return float(robust_deformation(o, p).max())
 
 
+def kabsch_frames(H: np.ndarray, co: np.ndarray, cp: np.ndarray) -> tuple:
+    """(R, t), (f, 3, 3) and (f, 3), of :func:`kabsch` for many fits at once, from each fit's
+    cross-covariance H = Σ (o − co)(p − cp)ᵀ (f, 3, 3) and centroids co, cp (f, 3): one
+    batched SVD (reflection excluded)."""
+    U, _, Vt = np.linalg.svd(H)
+    V, Ut = Vt.transpose(0, 2, 1), U.transpose(0, 2, 1)
+    det = np.sign(np.linalg.det(np.matmul(V, Ut)))
+    D = np.ones((len(H), 3))
+    D[:, 2] = np.where(det == 0, 1.0, det)
+    R = np.matmul(V * D[:, None, :], Ut)                              # V diag(1,1,d) Uᵀ
+    return R, cp - np.einsum("fk,fjk->fj", co, R)
+
+
 def robust_fit_frames(o: np.ndarray, P: np.ndarray, c: float = ROBUST_C,
                       floor: float = ROBUST_FLOOR, max_iter: int = ROBUST_MAX_ITER) -> np.ndarray:
     """Distances of :func:`robust_fit` for many frames at once: ``P`` is (frames, n, 3), the
@@ -147,7 +160,6 @@ def robust_fit_frames(o: np.ndarray, P: np.ndarray, c: float = ROBUST_C,
     inl = np.ones((nf, n), dtype=bool)
     d = np.empty((nf, n))
     todo = np.arange(nf)
-    diag = np.ones((nf, 3))
     for _ in range(max_iter):
         if not len(todo):
             break
@@ -158,13 +170,7 @@ def robust_fit_frames(o: np.ndarray, P: np.ndarray, c: float = ROBUST_C,
         cp = np.einsum("fn,fnk->fk", w, Pt) / cnt
         X = (o[None] - co[:, None]) * w[:, :, None]
         H = np.matmul(X.transpose(0, 2, 1), Pt - cp[:, None])         # (f, 3, 3)
-        U, _, Vt = np.linalg.svd(H)
-        V, Ut = Vt.transpose(0, 2, 1), U.transpose(0, 2, 1)
-        det = np.sign(np.linalg.det(np.matmul(V, Ut)))
-        D = diag[:len(todo)].copy()
-        D[:, 2] = np.where(det == 0, 1.0, det)
-        R = np.matmul(V * D[:, None, :], Ut)                          # V diag(1,1,d) Uᵀ
-        t = cp - np.einsum("fk,fjk->fj", co, R)
+        R, t = kabsch_frames(H, co, cp)
         dd = np.linalg.norm(Pt - (np.einsum("nk,fjk->fnj", o, R) + t[:, None]), axis=2)
         d[todo] = dd
         new = dd <= np.maximum(c * np.median(dd, axis=1), tol)[:, None]

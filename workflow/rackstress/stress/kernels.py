@@ -102,6 +102,105 @@ if nb is not None:
                 d2[f, i] = s
 
 
+if nb is not None:
+    @nb.njit(cache=True, error_model="numpy", nogil=True)
+    def _robust_cross(o, P, inl, todo, H, co, cp):  # pragma: no cover - compiled
+        """Each fit's centroids and cross-covariance over its inliers (frames ``todo``)."""
+        n = o.shape[0]
+        for m in range(len(todo)):
+            f = todo[m]
+            cnt = 0.0
+            for a in range(3):
+                co[m, a] = 0.0
+                cp[m, a] = 0.0
+            for i in range(n):
+                if inl[f, i]:
+                    cnt += 1.0
+                    for a in range(3):
+                        co[m, a] += o[i, a]
+                        cp[m, a] += P[f, i, a]
+            for a in range(3):
+                co[m, a] /= cnt
+                cp[m, a] /= cnt
+            for a in range(3):
+                for b in range(3):
+                    H[m, a, b] = 0.0
+            for i in range(n):
+                if inl[f, i]:
+                    for a in range(3):
+                        x = o[i, a] - co[m, a]
+                        for b in range(3):
+                            H[m, a, b] += x * (P[f, i, b] - cp[m, b])
+
+    @nb.njit(cache=True, error_model="numpy", nogil=True)
+    def _robust_dist(o, P, R, t, todo, d):  # pragma: no cover - compiled
+        """|p − (R o + t)| of every particle of frames ``todo``."""
+        n = o.shape[0]
+        for m in range(len(todo)):
+            f = todo[m]
+            for i in range(n):
+                ss = 0.0
+                for a in range(3):
+                    r = P[f, i, a] - ((o[i, 0] * R[m, a, 0] + o[i, 1] * R[m, a, 1]
+                                       + o[i, 2] * R[m, a, 2]) + t[m, a])
+                    ss += r * r
+                d[f, i] = np.sqrt(ss)
+
+    @nb.njit(cache=True, error_model="numpy", nogil=True)
+    def _robust_keep(d, limit, todo, inl, done):  # pragma: no cover - compiled
+        """The next inliers (d ≤ limit) of frames ``todo``; ``done`` where they are the same
+        set, or fewer than 3 (then the set is kept)."""
+        n = d.shape[1]
+        for m in range(len(todo)):
+            f = todo[m]
+            same, kept = True, 0
+            for i in range(n):
+                k = d[f, i] <= limit[m]
+                kept += k
+                if k != inl[f, i]:
+                    same = False
+            done[m] = same or kept < 3
+            if not done[m]:
+                for i in range(n):
+                    inl[f, i] = d[f, i] <= limit[m]
+
+
+def robust_fit_frames(o: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """:func:`rackstress.lib.rigid.robust_fit_frames` (the paper measure's robust fit, the
+    definition) with its passes over the particles compiled: each iteration's centroids and
+    cross-covariances, distances and next inliers are plain loops (no temporary array over
+    frames × particles), the fits themselves the same batched SVD
+    (:func:`rackstress.lib.rigid.kabsch_frames`) and the medians NumPy's (magpod-small's 101
+    frames: 0.26 s of CPU → 0.04 s). The same arithmetic up to summation order: the two agree
+    to round-off (tests). Parts of fewer than 4 particles, and a machine without numba, take
+    the NumPy path."""
+    from rackstress.lib import rigid
+
+    P = np.asarray(P, dtype=np.float64)
+    nf, n = P.shape[:2]
+    if nb is None or n < 4:
+        return rigid.robust_fit_frames(o, P)
+    o = np.ascontiguousarray(o, dtype=np.float64)
+    P = np.ascontiguousarray(P)
+    size = float(np.sqrt(((o - o.mean(axis=0)) ** 2).sum(axis=1).mean())) or 1.0
+    tol = rigid.ROBUST_FLOOR * size
+    inl = np.ones((nf, n), dtype=bool)
+    d = np.empty((nf, n))
+    todo = np.arange(nf)
+    for _ in range(rigid.ROBUST_MAX_ITER):
+        if not len(todo):
+            break
+        H, co, cp = np.empty((len(todo), 3, 3)), np.empty((len(todo), 3)), np.empty((len(todo), 3))
+        _robust_cross(o, P, inl, todo, H, co, cp)
+        R, t = rigid.kabsch_frames(H, co, cp)
+        _robust_dist(o, P, np.ascontiguousarray(R), np.ascontiguousarray(t), todo, d)
+        limit = np.maximum(rigid.ROBUST_C * np.median(d[todo], axis=1), tol)
+        done = np.empty(len(todo), dtype=bool)
+        _robust_keep(d, limit, todo, inl, done)
+        todo = todo[~done]
+    return d
+
+
 def strain(hood, o: np.ndarray, P: np.ndarray):
     """(η, D²min), each (frames, n), of frames ``P`` (frames, n, 3) over ``hood``'s
     neighbourhoods (:class:`rackstress.stress.measures.Neighbourhoods`)."""
@@ -116,8 +215,8 @@ def strain(hood, o: np.ndarray, P: np.ndarray):
 
 
 def warm() -> float:
-    """Compile (first run on a machine) or load the loop and the dump's number parser
-    (:mod:`rackstress.lib.numtext`); return the seconds it took."""
+    """Compile (first run on a machine) or load the loops (strain, the robust fit) and the
+    dump's number parser (:mod:`rackstress.lib.numtext`); return the seconds it took."""
     t = time.perf_counter()
     if nb is not None:
         from types import SimpleNamespace
@@ -127,6 +226,8 @@ def warm() -> float:
                                Vpinv=np.zeros((1, 3, 3)), rank=np.zeros(1, np.int64), t1=z,
                                t2=z, n0=z, valid=np.zeros(1, bool))
         strain(hood, z, z[None])
+        o = np.eye(4, 3)
+        robust_fit_frames(o, o[None])
         from rackstress.lib import numtext
 
         numtext.warm()              # the dump's number parser, loaded with it

@@ -411,10 +411,11 @@ def strain_frames(hood: Neighbourhoods, o: np.ndarray, P: np.ndarray):
 
 def paper_frames(run, P: np.ndarray, parts, fit: str = "robust") -> np.ndarray:
     """The paper's distance (:class:`DesiredPositionDistance`) for frames ``P`` at once: each
-    part's fits of every frame batched (:func:`rackstress.lib.rigid.robust_fit_frames`). A
+    part's fits of every frame (:func:`rackstress.lib.rigid.robust_fit_frames`, compiled:
+    :func:`rackstress.stress.kernels.robust_fit_frames`). A
     sediment has no rest shape (module docstring of :mod:`.rundata`): its desired position is
     its original position, so its distance is |p − o| (zero where it rests)."""
-    from rackstress.lib.rigid import robust_fit_frames
+    from rackstress.stress.kernels import robust_fit_frames
 
     o = run.o
     out = np.full(P.shape[:2], np.nan)

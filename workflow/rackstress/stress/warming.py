@@ -23,6 +23,7 @@ def compiled() -> bool:
     # numba_or_none's fallback for an unwritable cache (lib/jit.py) is looked in too
     places = [cache_dir(), Path(tempfile.gettempdir()) / f"rackstress-numba-{os.getuid()}"]
     return any(any(d.glob("stress_*/kernels._strain-*.nbi"))
+               and any(d.glob("stress_*/kernels._robust_keep-*.nbi"))
                and any(d.glob("lib_*/numtext._numbers-*.nbi")) for d in places)
 
 
