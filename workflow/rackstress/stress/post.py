@@ -309,23 +309,23 @@ class Head:
         self.seen: list = []          # (time, frames written) when follow first and last looked
         self.frames = 0               # the frames the finished run will hold
 
-    def saw(self, written: int) -> None:
-        """Note that the dump holds ``written`` frames now (:meth:`seconds_left`)."""
+    def saw(self, written: int, now: float | None = None) -> None:
+        """Note that the dump holds ``written`` frames at ``now`` (``time.perf_counter()``)."""
         import time
 
-        now = (time.perf_counter(), written)
-        self.seen = [self.seen[0], now] if self.seen else [now]
+        seen = (time.perf_counter() if now is None else now, written)
+        self.seen = [self.seen[0], seen] if self.seen else [seen]
 
-    def seconds_left(self) -> float:
-        """The run's time left until its last frame, at the pace of the frames written so far
-        (infinite until that pace is known)."""
+    def seconds_left(self, now: float | None = None) -> float:
+        """The run's time left until its last frame, at the pace of the frames written since
+        follow first looked (infinite until that pace is known)."""
         import time
 
         if len(self.seen) < 2 or self.seen[1][1] <= self.seen[0][1]:
             return float("inf")
         (t0, n0), (t1, n1) = self.seen
-        pace = (t1 - t0) / (n1 - n0)
-        return max(0.0, (self.frames - n1) * pace - (time.perf_counter() - t1))
+        now = time.perf_counter() if now is None else now
+        return max(0.0, (self.frames - n1) * (t1 - t0) / (n1 - n0) - (now - t1))
 
     def keep_tables(self, run, ks, frames: int) -> None:
         """Keep the atom tables of frames ``ks`` that ``run``'s reader holds (its cache,
