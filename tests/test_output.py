@@ -430,3 +430,25 @@ def test_forked_job_reports_the_childs_cpu(tmp_path):
     kernel = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     assert 0.2 <= job.cpu_s < 0.3
     assert abs(job.cpu_s - kernel) < 0.03
+
+
+def test_bench_e2e_variants_table_shows_the_runs_formats_first():
+    """bench e2e's formats table (bench.e2e.variants' record): the first row of each table is
+    what 'rackstress run' writes, ISA-L's zlib streams and ISA-L's gzip members."""
+    from rackstress.bench import e2e
+
+    vtk = [{"measures": m, "format": "paraview", "compressor": c, "bytes": b, "s": 0.1}
+           for m, c, b in (("all", "zlib streams by ISA-L 1", 25e6), ("default", "zlib 1", 14.6e6),
+                           ("default", "zlib streams by ISA-L 1", 14.4e6))]
+    dump = [{"kind": "text", "bytes": 18.2e6, "s": 0.0},
+            {"kind": "gzip by ISA-L 3, a member a frame", "bytes": 8.3e6, "s": 0.05},
+            {"kind": "gzip by zlib 1, a member a frame", "bytes": 8.6e6, "s": 0.15}]
+    md = e2e.markdown({"runs": [], "dumps": [], "variants": [
+        {"scene": "magpod-small", "frames": 102, "vtk": vtk, "dump": dump}]},
+        {"cores": 2, "load_avg_at_start": [1, 1, 1]})
+    rows = [line for line in md.splitlines() if line.startswith("| paraview")
+            or line.startswith("| gzip") or line.startswith("| text")]
+    assert rows[0] == ("| paraview | the leading one and displacement | zlib streams by ISA-L 1 "
+                       "| 14.40 MB | 0.10 s |")
+    assert rows[3] == "| gzip by ISA-L 3, a member a frame | 8.30 MB | 0.05 s |"
+    assert rows[4] == "| text | 18.20 MB | 0.00 s |" and len(rows) == 6

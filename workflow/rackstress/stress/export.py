@@ -28,8 +28,8 @@
     appended section, zlib-compressed, which ParaView and pyvista (VTK's XML readers) read: the
     arrays that do not change (ids, groups, radii, original positions) and the resting particles
     cost next to nothing, a quarter of the uncompressed size on magpod-small (written by
-    :class:`_Vtp` with zlib, byte for byte the appended data VTK's writer makes, the arrays
-    that do not change compressed once for every frame). ``"ovito"`` writes
+    :class:`_Vtp` as VTK's writer lays out its appended data, each block's zlib stream deflated
+    by ISA-L, the arrays that do not change compressed once for every frame). ``"ovito"`` writes
     them inline, base64, uncompressed: OVITO 3.17 reads neither VTK's appended data nor
     compressed arrays (checked with the ``ovito`` Python module: "The parser does not support
     compressed data arrays"); ``rackstress stress RUNDIR --vtk-format ovito``.
