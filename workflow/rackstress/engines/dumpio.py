@@ -224,9 +224,9 @@ GZ = ".gz"
 #: ``isal_zlib`` (Intel's ISA-L deflate: standard gzip members that zlib, gzip and every reader
 #: open). magpod-small's 18.2 MB of text, a member a frame, CPU seconds (``time.process_time``,
 #: 15 passes interleaved, load 1.2, AVX-512 x86-64): ISA-L 3 0.045 s, 8.31 MB; ISA-L 2 0.048 s,
-#: 8.39 MB; ISA-L 1 0.049 s, 8.42 MB; zlib 1 (what it was) 0.146 s, 8.63 MB; zlib 6 1.3 s,
-#: 8.1 MB. Level 3 is both the smallest and the fastest here (ISA-L's level 3 has AVX2 and
-#: AVX-512 code); its state costs more to set up, which a 180 kB frame repays.
+#: 8.39 MB; ISA-L 1 0.049 s, 8.42 MB; zlib 1 (what it was) 0.146 s, 8.63 MB; zlib 6 0.8 s,
+#: 8.1 MB. Level 3 is both the smallest and the fastest here; on 32 KiB blocks it takes 1.6
+#: times level 1's time (the VTK frames', ``stress.export._Vtp``), which a 180 kB frame repays.
 GZ_LEVEL = 3
 
 
