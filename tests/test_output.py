@@ -245,12 +245,38 @@ def test_vtk_variants_open_in_their_readers(two_runs, tmp_path):
     assert size["paraview"] < 0.4 * size["ovito"]
 
 
+def _appended_arrays(data: bytes) -> list:
+    """Each array of a ``.vtp`` file's appended data (UInt32 headers, vtkZLibDataCompressor:
+    block count, block size, last block's size, each block's compressed size, then the
+    blocks), inflated by Python's zlib: (block size, last block's size, the raw bytes)."""
+    import re
+    import zlib
+
+    start = data.index(b"   _") + 4
+    out = []
+    for m in re.finditer(rb'<DataArray [^>]*offset="(\d+)"', data[:start]):
+        at = start + int(m.group(1))
+        nb, bs, last = np.frombuffer(data, "<u4", 3, at)
+        sizes = np.frombuffer(data, "<u4", int(nb), at + 12)
+        at += 12 + 4 * int(nb)
+        raw = []
+        for k, n in enumerate(sizes):
+            z = zlib.decompressobj()
+            raw.append(z.decompress(data[at:at + int(n)]))
+            assert z.eof and not z.unused_data      # one whole zlib stream a block
+            assert len(raw[-1]) == (last if k == nb - 1 else bs)
+            at += int(n)
+        out.append((int(bs), int(last), b"".join(raw)))
+    return out
+
+
 @pytest.mark.lammps
 def test_the_numpy_vtk_writer_writes_what_vtks_own_writer_writes(two_runs, tmp_path):
-    """The ``paraview`` variant written with zlib by rackstress (export._Vtp, what 'rackstress
-    run' and 'rackstress stress' write) and by ``vtkXMLPolyDataWriter`` (the independent
-    path): the same files, the same arrays through VTK's reader, and the same compressed
-    bytes in each file's appended data (only VTK's optional range hints differ)."""
+    """The ``paraview`` variant written by rackstress (export._Vtp, what 'rackstress run' and
+    'rackstress stress' write) and by ``vtkXMLPolyDataWriter`` (the independent path): the
+    same files, the same arrays through VTK's reader. With Python's zlib (``deflate="zlib"``)
+    the same compressed bytes in each file's appended data (only VTK's optional range hints
+    differ); with ISA-L (the default) the same blocks once inflated by Python's zlib."""
     import pyvista as pv
 
     from rackstress.stress import export
@@ -259,24 +285,32 @@ def test_the_numpy_vtk_writer_writes_what_vtks_own_writer_writes(two_runs, tmp_p
     run = load_run(two_runs["moving"])
     fields = compute_fields(run, cache=False)
     for measures in ("default", "all"):
-        ours, vtks = tmp_path / f"ours-{measures}", tmp_path / f"vtk-{measures}"
-        export.write_vtk(run, fields, ours, measures=measures)
+        vtks = tmp_path / f"vtk-{measures}"
         export.write_vtk(run, fields, vtks, measures=measures, writer="vtk")
-        names = sorted(p.name for p in ours.iterdir())
-        assert names == sorted(p.name for p in vtks.iterdir()) and "rest.vtp" in names
-        for name in names:
-            a, b = (ours / name).read_bytes(), (vtks / name).read_bytes()
-            if not name.endswith(".vtp"):
-                assert a == b
-                continue
-            assert a[a.index(b"   _"):] == b[b.index(b"   _"):], name
-            x, y = pv.read(ours / name), pv.read(vtks / name)
-            assert x.n_points == y.n_points and np.array_equal(x.verts, y.verts)
-            np.testing.assert_array_equal(x.points, y.points)
-            assert list(x.point_data) == list(y.point_data)
-            for k in x.point_data:
-                assert x.point_data[k].dtype == y.point_data[k].dtype, k
-                np.testing.assert_array_equal(x.point_data[k], y.point_data[k])
+        for deflate in ("zlib", "isal"):
+            ours = tmp_path / f"ours-{measures}-{deflate}"
+            kw = {"deflate": deflate} if deflate == "zlib" else {}     # isal: the default
+            export.write_vtk(run, fields, ours, measures=measures, **kw)
+            names = sorted(p.name for p in ours.iterdir())
+            assert names == sorted(p.name for p in vtks.iterdir()) and "rest.vtp" in names
+            for name in names:
+                a, b = (ours / name).read_bytes(), (vtks / name).read_bytes()
+                if not name.endswith(".vtp"):
+                    assert a == b
+                    continue
+                if deflate == "zlib":
+                    assert a[a.index(b"   _"):] == b[b.index(b"   _"):], name
+                else:
+                    x, y = _appended_arrays(a), _appended_arrays(b)
+                    assert len(x) == len(y) > 10 and x == y, name
+                    assert a[a.index(b"   _"):] != b[b.index(b"   _"):], name   # not zlib's
+                x, y = pv.read(ours / name), pv.read(vtks / name)
+                assert x.n_points == y.n_points and np.array_equal(x.verts, y.verts)
+                np.testing.assert_array_equal(x.points, y.points)
+                assert list(x.point_data) == list(y.point_data)
+                for k in x.point_data:
+                    assert x.point_data[k].dtype == y.point_data[k].dtype, k
+                    np.testing.assert_array_equal(x.point_data[k], y.point_data[k])
 
 
 def whole(blocks) -> dict:
@@ -423,3 +457,25 @@ def test_forked_job_reports_the_childs_cpu(tmp_path):
     kernel = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     assert 0.2 <= job.cpu_s < 0.3
     assert abs(job.cpu_s - kernel) < 0.03
+
+
+def test_bench_e2e_variants_table_shows_the_runs_formats_first():
+    """bench e2e's formats table (bench.e2e.variants' record): the first row of each table is
+    what 'rackstress run' writes, ISA-L's zlib streams and ISA-L's gzip members."""
+    from rackstress.bench import e2e
+
+    vtk = [{"measures": m, "format": "paraview", "compressor": c, "bytes": b, "s": 0.1}
+           for m, c, b in (("all", "zlib streams by ISA-L 1", 25e6), ("default", "zlib 1", 14.6e6),
+                           ("default", "zlib streams by ISA-L 1", 14.4e6))]
+    dump = [{"kind": "text", "bytes": 18.2e6, "s": 0.0},
+            {"kind": "gzip by ISA-L 3, a member a frame", "bytes": 8.3e6, "s": 0.05},
+            {"kind": "gzip by zlib 1, a member a frame", "bytes": 8.6e6, "s": 0.15}]
+    md = e2e.markdown({"runs": [], "dumps": [], "variants": [
+        {"scene": "magpod-small", "frames": 102, "vtk": vtk, "dump": dump}]},
+        {"cores": 2, "load_avg_at_start": [1, 1, 1]})
+    rows = [line for line in md.splitlines() if line.startswith("| paraview")
+            or line.startswith("| gzip") or line.startswith("| text")]
+    assert rows[0] == ("| paraview | the leading one and displacement | zlib streams by ISA-L 1 "
+                       "| 14.40 MB | 0.10 s |")
+    assert rows[3] == "| gzip by ISA-L 3, a member a frame | 8.30 MB | 0.05 s |"
+    assert rows[4] == "| text | 18.20 MB | 0.00 s |" and len(rows) == 6

@@ -143,12 +143,14 @@ def dump_costs(names, steps: int, reps: int = 5) -> list:
 def variants(rundir: Path) -> dict:
     """The size of each way to write a finished run's VTK series and trajectory (issue 24), on
     ``rundir`` (a warm ``rackstress run``), in one process and in turn: the VTK series with every
-    measure (``rackstress stress``) and with the leading one (``rackstress run``), under each
-    of VTK's XML compressors, and the OVITO variant; the trajectory as text and gzip-compressed
-    at levels 1 (what a run writes) and 6. Seconds are this process's wall time."""
+    measure (``rackstress stress``) and with the leading one (``rackstress run``), its zlib
+    streams made by ISA-L (what a run writes) or by zlib, under each of VTK's XML compressors,
+    and the OVITO variant; the trajectory as text and gzip-compressed, a member a frame, by
+    ISA-L (level :data:`~rackstress.engines.dumpio.GZ_LEVEL`: what a run writes, and 1) and by
+    zlib (levels 1 and 6). Seconds are this process's CPU time."""
     import gzip
 
-    from rackstress.engines.dumpio import dump_path
+    from rackstress.engines.dumpio import GZ_LEVEL, dump_path, gz_member
     from rackstress.stress import export
     from rackstress.stress.post import compute_fields
     from rackstress.stress.rundata import load_run
@@ -157,28 +159,35 @@ def variants(rundir: Path) -> dict:
     fields = compute_fields(run_)
     vtk = []
     with tempfile.TemporaryDirectory(prefix="rackstress-variants-") as tmp:
-        for measures, fmt, comp, level in (("all", "paraview", "zlib", 1),
-                                           ("default", "paraview", "zlib", 1),
-                                           ("default", "paraview", "zlib", 6),
-                                           ("default", "paraview", "lz4", 1),
-                                           ("default", "paraview", "lzma", 1),
-                                           ("all", "ovito", "zlib", 1)):
-            d = Path(tmp) / f"{measures}-{fmt}-{comp}{level}"
-            t = time.perf_counter()
+        for measures, fmt, comp, level, deflate in (("default", "paraview", "zlib", 1, "isal"),
+                                                    ("all", "paraview", "zlib", 1, "isal"),
+                                                    ("default", "paraview", "zlib", 1, "zlib"),
+                                                    ("default", "paraview", "zlib", 6, "zlib"),
+                                                    ("default", "paraview", "lz4", 1, "zlib"),
+                                                    ("default", "paraview", "lzma", 1, "zlib"),
+                                                    ("all", "ovito", "zlib", 1, "zlib")):
+            d = Path(tmp) / f"{measures}-{fmt}-{comp}{level}-{deflate}"
+            t = time.process_time()
             export.write_vtk(run_, fields, d, fmt=fmt, measures=measures, compressor=comp,
-                             level=level)
+                             level=level, deflate=deflate)
+            what = (f"zlib streams by ISA-L {level}" if deflate == "isal" and comp == "zlib"
+                    else f"{comp} {level}")
             vtk.append({"measures": measures, "format": fmt,
-                        "compressor": f"{comp} {level}" if fmt == "paraview" else "none",
-                        "bytes": _size(d), "s": time.perf_counter() - t})
+                        "compressor": what if fmt == "paraview" else "none",
+                        "bytes": _size(d), "s": time.process_time() - t})
     path = dump_path(rundir)
     text = gzip.decompress(path.read_bytes()) if path.name.endswith(".gz") else path.read_bytes()
     frames = [b"ITEM: TIMESTEP\n" + f for f in text.split(b"ITEM: TIMESTEP\n")[1:]]
     dump = [{"kind": "text", "bytes": len(text), "s": 0.0}]
-    for level in (1, 6):
-        t = time.perf_counter()
-        n = sum(len(gzip.compress(f, level, mtime=0)) for f in frames)
-        dump.append({"kind": f"gzip {level}, a member a frame", "bytes": n,
-                     "s": time.perf_counter() - t})
+    for kind, level, member in (("ISA-L", GZ_LEVEL, gz_member), ("ISA-L", 1, gz_member),
+                                ("zlib", 1, None), ("zlib", 6, None)):
+        t = time.process_time()
+        if member is not None:
+            n = sum(len(member(f, level)) for f in frames)
+        else:
+            n = sum(len(gzip.compress(f, level, mtime=0)) for f in frames)
+        dump.append({"kind": f"gzip by {kind} {level}, a member a frame", "bytes": n,
+                     "s": time.process_time() - t})
     return {"scene": json.loads((rundir / "scene.json").read_text()).get("scene"),
             "frames": len(frames), "vtk": vtk, "dump": dump}
 
@@ -356,18 +365,18 @@ def markdown(data: dict, machine: dict) -> str:
     for v in data.get("variants") or []:
         L += [f"## What each format costs ({v['scene']}, {v['frames']} frames)", "",
               "The warm run's directory written again each way, in one process and in turn "
-              "(`bench.e2e.variants`); the first row of each table is what `rackstress run` "
-              "writes.", "",
+              "(`bench.e2e.variants`, CPU seconds); the first row of each table is what "
+              "`rackstress run` writes.", "",
               "| VTK series | measures | arrays | size | time |", "|---|---|---|---|---|"]
         order = sorted(v["vtk"], key=lambda x: (x["measures"] != "default"
-                                                 or x["compressor"] != "zlib 1"))
+                                                 or "ISA-L" not in x["compressor"]))
         for x in order:
             what = ("the leading one and displacement" if x["measures"] == "default"
                     else "every one")
             L.append(f"| {x['format']} | {what} | {x['compressor']} | "
                      f"{x['bytes'] / 1e6:.2f} MB | {x['s']:.2f} s |")
         L += ["", "| trajectory | size | time |", "|---|---|---|"]
-        for x in sorted(v["dump"], key=lambda x: x["kind"] != "gzip 1, a member a frame"):
+        for x in v["dump"][1:2] + v["dump"][:1] + v["dump"][2:]:    # the run's first
             L.append(f"| {x['kind']} | {x['bytes'] / 1e6:.2f} MB | {x['s']:.2f} s |")
         L.append("")
     if data["dumps"]:

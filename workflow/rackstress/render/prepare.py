@@ -23,7 +23,7 @@ _PAINT = ("vtkmodules.vtkCommonDataModel", "vtkmodules.util.numpy_support",
           "rackstress.render.pictures")
 _PREPARE = _PAINT + ("matplotlib.figure", "matplotlib.backends.backend_agg", "PIL.Image",
                      "PIL.ImageDraw", "PIL.PngImagePlugin", "vtkmodules.vtkIOXML",
-                     "rackstress.stress.export", "rackstress.render.report",
+                     "rackstress.stress.export", "isal.isal_zlib", "rackstress.render.report",
                      "rackstress.render.view3d", "trame_vtk.modules.vtk.serializers",
                      "vtkmodules.vtkFiltersSources", "vtkmodules.vtkFiltersCore")
 
