@@ -1169,7 +1169,8 @@ def footprints_figure(run, motion, coloured, context):
     return fig
 
 
-def _plots(run, values, label, coloured, context, report, out: Path) -> None:
+def stress_figure(run, values, label, coloured, peak):
+    """The stress-over-time plot: max and mean of the measure per coloured part, the peak."""
     from matplotlib.figure import Figure     # no pyplot: no GUI backend, faster to import
 
     steps = run.steps
@@ -1185,7 +1186,7 @@ def _plots(run, values, label, coloured, context, report, out: Path) -> None:
                                                                                  1), np.nan)
         ax.plot(steps, vmax, color=colour, label=f"{part.name} max")
         ax.plot(steps, vmean, color=colour, ls="--", label=f"{part.name} mean")
-    pk = report.peak
+    pk = peak
     if pk:
         ax.plot([pk["iteration"]], [pk["value"]], "k*", ms=12,
                 label=f"peak {pk['value']:.3g} ({pk['group']}, it. {pk['iteration']})")
@@ -1194,10 +1195,13 @@ def _plots(run, values, label, coloured, context, report, out: Path) -> None:
     ax.set_title(f"{run.scene.get('scene', '')}: stress per part over time")
     ax.legend(fontsize=7, ncol=2)
     fig.subplots_adjust(left=0.14, right=0.98, bottom=0.12, top=0.92)
-    fig.savefig(out / "stress_over_time.png", dpi=110, pil_kwargs=PLOT_PNG)
-    report.files.append("stress_over_time.png")
+    return fig
 
-    motion = PartMotion(run).run()
+
+def com_figure(motion, coloured):
+    """The centre-of-mass plot: each coloured part's path, top view (x–z) and side view (x–y)."""
+    from matplotlib.figure import Figure
+
     names = motion.results.names
     fig = Figure(figsize=(10, 4))
     top, side = fig.subplots(1, 2)
@@ -1214,6 +1218,16 @@ def _plots(run, values, label, coloured, context, report, out: Path) -> None:
         ax.grid(alpha=0.3)
     top.legend(fontsize=7)
     fig.subplots_adjust(left=0.07, right=0.98, bottom=0.13, top=0.92, wspace=0.25)
+    return fig
+
+
+def _plots(run, values, label, coloured, context, report, out: Path) -> None:
+    fig = stress_figure(run, values, label, coloured, report.peak)
+    fig.savefig(out / "stress_over_time.png", dpi=110, pil_kwargs=PLOT_PNG)
+    report.files.append("stress_over_time.png")
+
+    motion = PartMotion(run).run()
+    fig = com_figure(motion, coloured)
     fig.savefig(out / "com_path.png", dpi=110, pil_kwargs=PLOT_PNG)
     report.files.append("com_path.png")
 
