@@ -24,6 +24,41 @@ def walk(tmp_path_factory):
     return out
 
 
+def _footprints_geometry(fig):
+    """The drawn footprints figure's extents, in pixels, as savefig draws them."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    canvas = FigureCanvasAgg(fig)          # what savefig draws a PNG with
+    canvas.draw()
+    return canvas.get_renderer(), fig.bbox.width, fig.bbox.height
+
+
+def _assert_footprints_fit(fig):
+    renderer, W, H = _footprints_geometry(fig)
+    ax, cax = fig.axes
+    title = ax.title.get_window_extent(renderer)
+    assert title.x0 >= 0 and title.x1 <= W and title.y1 <= H, (title, W, H)
+    box = ax.get_window_extent(renderer)
+    assert title.y0 >= box.y1, (title, box)                    # over the panel, not on it
+    # the panel and its colour bar, with every label, inside the figure and filling it: no
+    # empty half, no band above or below
+    used = [a.get_tightbbox(renderer) for a in fig.axes]
+    left, right = min(b.x0 for b in used), max(b.x1 for b in used)
+    bottom, top = min(b.y0 for b in used), max(b.y1 for b in used)
+    assert left >= 0 and right <= W + 1 and bottom >= 0 and top <= H + 1, (used, W, H)
+    assert (right - left) / W > 0.85, (left, right, W)
+    assert (top - bottom) / H > 0.85, (bottom, top, H)
+    # the colour bar right of the panel, as high as it, its labels clear of the panel's
+    bar = cax.get_window_extent(renderer)
+    assert bar.x0 > box.x1 and abs(bar.height - box.height) < 1.5, (bar, box)
+    labels = cax.yaxis.get_tightbbox(renderer)
+    assert labels.x0 > box.x1 and labels.x1 <= W, (labels, box, W)
+    # the panel shows the frame it was given at equal aspect (x and z in the same units)
+    (x0, x1), (z0, z1) = ax.get_xlim(), ax.get_ylim()
+    assert abs(box.width / box.height - (x1 - x0) / (z1 - z0)) < 0.02 * box.width / box.height
+    return title, box
+
+
 @pytest.mark.lammps
 def test_footprints_title_inside_and_panel_fills_the_figure(walk):
     from rackstress.render.pictures import footprints_figure, select_parts
@@ -32,25 +67,26 @@ def test_footprints_title_inside_and_panel_fills_the_figure(walk):
     run = load_run(walk)
     coloured, context, _ = select_parts(run, None)
     assert [p.name for p in context] == ["sediment"]
-    fig = footprints_figure(run, PartMotion(run).run(), coloured, context)
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    _assert_footprints_fit(footprints_figure(run, PartMotion(run).run(), coloured, context))
 
-    canvas = FigureCanvasAgg(fig)          # what savefig draws a PNG with
-    canvas.draw()                          # lays the figure out (constrained layout)
-    renderer = canvas.get_renderer()
-    W, H = fig.bbox.width, fig.bbox.height
-    ax = fig.axes[0]
-    title = ax.title.get_window_extent(renderer)
-    assert title.x0 >= 0 and title.x1 <= W and title.y1 <= H, (title, W, H)
-    # the panel and its colour bar, with their labels, span the figure: no empty half
-    used = [a.get_tightbbox(renderer) for a in fig.axes]
-    left, right = min(b.x0 for b in used), max(b.x1 for b in used)
-    assert left >= 0 and right <= W + 1
-    assert (right - left) / W > 0.85, (left, right, W)
-    # the panel shows the frame it was given at equal aspect (x and z in the same units)
-    box = ax.get_window_extent(renderer)
-    (x0, x1), (z0, z1) = ax.get_xlim(), ax.get_ylim()
-    assert abs(box.width / box.height - (x1 - x0) / (z1 - z0)) < 0.02 * box.width / box.height
+
+@pytest.mark.lammps
+def test_footprints_long_title_widens_the_figure(walk):
+    """A sediment whose name makes the title's first line wider than the panel: the figure
+    widens so that the title, centred over the panel, stays inside it."""
+    from rackstress.render.pictures import footprints_figure, select_parts
+    from rackstress.stress import PartMotion, load_run
+
+    run = load_run(walk)
+    coloured, context, _ = select_parts(run, None)
+    motion = PartMotion(run).run()
+    long = "the-sediment-under-both-feet-of-the-walker"
+    motion.results.footprints[long] = motion.results.footprints["sediment"]
+    context[0].name = long
+    fig = footprints_figure(run, motion, coloured, context)
+    title, box = _assert_footprints_fit(fig)
+    assert title.width > box.width                      # the case: a title wider than its panel
+    assert abs((title.x0 + title.x1) / 2 - (box.x0 + box.x1) / 2) < 1.0
 
 
 def test_a_part_name_never_covers_the_peak_ring():

@@ -269,6 +269,30 @@ def test_part_motion_centre_of_mass_and_footprints(tmp_path):
     assert np.abs(fp["final_dy"]).max() == 0
 
 
+def test_part_motion_of_parts_given_out_of_order(tmp_path):
+    """A part whose particles are not consecutive (its index read in another order) has the
+    same centre of mass, box and footprints as the part in order: hand values of a block
+    moved by (4, -1, 2) and a sediment with one particle pressed 1.5 down."""
+    sed = lattice(6, 1, 6, spacing=4.0, origin=(-10, -2, -10))
+    p_sed = sed.copy()
+    p_sed[7, 1] -= 1.5
+    write_run(tmp_path, [("body", "body", BLOCK), ("sediment", "sediment", sed)],
+              [(0, np.concatenate([BLOCK, sed])),
+               (5, np.concatenate([BLOCK + [4.0, -1.0, 2.0], p_sed]))])
+    run = load_run(tmp_path)
+    for part in run.parts.values():
+        part.index = part.index[::-1].copy()
+    res = PartMotion(run).run().results
+    centre = BLOCK.mean(axis=0)
+    assert np.allclose(res.com[:, 0], [centre, centre + [4.0, -1.0, 2.0]])
+    assert np.array_equal(res.lo[1, 0], BLOCK.min(axis=0) + [4.0, -1.0, 2.0])
+    assert np.array_equal(res.hi[1, 1], sed.max(axis=0))
+    assert res.lo[1, 1, 1] == -3.5                     # the pressed particle: y -2 - 1.5
+    fp = res.footprints["sediment"]                    # in the (reversed) index's order
+    k = len(sed) - 1 - 7
+    assert fp["min_dy"][k] == pytest.approx(-1.5) and np.abs(np.delete(fp["min_dy"], k)).max() == 0
+
+
 # ----------------------------------------------------------------------------- bad input
 def _good(tmp_path, n_frames=4):
     frames = [(10 * k, rigid(BLOCK, (0.0, 0.1 * k, 0.0), (k, 0, 0))) for k in range(n_frames)]

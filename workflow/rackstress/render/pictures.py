@@ -1145,8 +1145,29 @@ def _movie(run, painter, values, report, view, label, cmap, coloured, context, h
     return len(ks)
 
 
-#: The footprints panel's plot height and least width (its two-line title's), in inches.
+#: The footprints panel's plot height and least width (its two-line title's, if that is less),
+#: in inches.
 PANEL_H, PANEL_MIN_W = 3.3, 3.4
+
+
+def _text_w(strings, size: float = 10.0) -> float:
+    """The widest of ``strings`` in points at ``size`` (the default font's metrics: what Agg
+    draws them with, to a point)."""
+    from matplotlib.font_manager import FontProperties
+    from matplotlib.textpath import text_to_path
+
+    prop = FontProperties(size=size)
+    return max((text_to_path.get_text_width_height_descent(t, prop, ismath=False)[0]
+                for t in strings), default=0.0)
+
+
+def _tick_labels(axis) -> list:
+    """The labels ``axis`` will draw at its limits and size (its locator and formatter, no
+    ticks made)."""
+    lo, hi = sorted(axis.get_view_interval())
+    locs = [v for v in axis.get_major_locator()() if lo <= v <= hi]
+    fmt = axis.get_major_formatter()
+    return [*fmt.format_ticks(locs), fmt.get_offset()]
 
 
 def footprints_figure(run, motion, coloured, context):
@@ -1155,11 +1176,15 @@ def footprints_figure(run, motion, coloured, context):
 
     The figure takes the shape of what it frames (an equal-aspect panel of a tall patch in a
     wide figure left half of it empty), and the title is two short lines over the panel: it
-    was one line longer than the panel, cut at the figure's edge."""
+    was one line longer than the panel, cut at the figure's edge. The panels and their colour
+    bars are placed in inches, their margins from their labels' own widths (the fonts'
+    metrics): a constrained layout measured every tick label in a draw of its own, a third
+    of the plot's CPU."""
     from matplotlib.figure import Figure
 
     steps = run.steps
     names = motion.results.names
+    pt = 1 / 72
     panels = []
     for part in context:
         dy = motion.results.footprints[part.name]["min_dy"]
@@ -1175,19 +1200,28 @@ def footprints_figure(run, motion, coloured, context):
         lo, hi = pts.min(axis=0), pts.max(axis=0)
         pad = 0.15 * float((hi - lo).max()) + 4.0
         box = [lo[0] - pad, hi[0] + pad, lo[1] - pad, hi[1] + pad]
+        title = (f"footprints in {part.name}\ndeepest vertical displacement, "
+                 f"iterations {steps[0]}–{steps[-1]}")
         # a frame narrower than the title is widened (about its centre) to the title's width
-        grow = (PANEL_MIN_W / PANEL_H) * (box[3] - box[2]) - (box[1] - box[0])
+        least = min(PANEL_MIN_W, _text_w(title.split("\n")) * pt + 0.1)
+        grow = (least / PANEL_H) * (box[3] - box[2]) - (box[1] - box[0])
         if grow > 0:
             box[0], box[1] = box[0] - grow / 2, box[1] + grow / 2
-        panels.append((part, dy, o, lim, com, box))
-    # each panel as wide as its frame is at the plot's height (3.3 of the figure's 4.6 inches:
-    # the rest is the two-line title and the x label), at least the title's 3.4 inches, plus
-    # the z label (0.5) and the colour bar with its label (1.3)
-    widths = [min(9.0, PANEL_H * (b[1] - b[0]) / max(b[3] - b[2], 1e-9)) + 1.8
-              for *_, b in panels]
-    fig = Figure(figsize=(sum(widths), 4.6), layout="constrained")
-    axes = fig.subplots(1, len(panels), squeeze=False, width_ratios=widths)
-    for ax, (part, dy, o, lim, com, box) in zip(axes[0], panels):
+        # the plot as wide as its frame is at PANEL_H, at most 9 inches (then less high)
+        aspect = (box[1] - box[0]) / max(box[3] - box[2], 1e-9)
+        w = min(9.0, PANEL_H * aspect)
+        panels.append((part, dy, o, lim, com, box, title, w, w / aspect))
+    # margins in inches: above, the two-line title (2 × 1.2 lines of 10 pt, its pad 6 pt);
+    # below, ticks (3.5 + 3.5 pt), tick labels (10 pt), the x label (4 pt pad, 12 pt);
+    # 4 pt at the figure's edges
+    top, bottom, edge = 34 * pt, 37 * pt, 4 * pt
+    plot_h = max(p[-1] for p in panels)
+    fig = Figure(figsize=(1.0, plot_h + top + bottom))
+    H = plot_h + top + bottom
+    axes = []
+    for part, dy, o, lim, com, box, title, w, h in panels:
+        ax = fig.add_axes((0, 0, 1, 1))
+        cax = fig.add_axes((0, 0, 1, 1))
         # the particles the frame shows (a tenth of it around, for the markers at its edge):
         # a million-particle bed's others drew nothing, at a minute's cost
         mx, mz = 0.1 * (box[1] - box[0]), 0.1 * (box[3] - box[2])
@@ -1201,13 +1235,34 @@ def footprints_figure(run, motion, coloured, context):
         ax.set_ylim(box[2], box[3])
         ax.set_aspect("equal")
         ax.set(xlabel="x", ylabel="z")
-        ax.set_title(f"footprints in {part.name}\ndeepest vertical displacement, "
-                     f"iterations {steps[0]}–{steps[-1]}", fontsize=10)
-        fig.colorbar(sc, ax=ax, label="vertical displacement\n[length units]", shrink=0.9)
+        ax.set_title(title, fontsize=10)
+        fig.colorbar(sc, cax=cax, label="vertical displacement\n[length units]")
+        axes.append((ax, cax, w, h))
+    fig.set_size_inches(1.0, H)         # heights first: the locators see the plots' sizes
+    for ax, cax, w, h in axes:
+        ax.set_position((0, (bottom + (plot_h - h) / 2) / H, w, h / H))
+        cax.set_position((0, (bottom + (plot_h - h) / 2) / H, 0.155, h / H))
+    widths = []
+    for ax, cax, w, h in axes:
+        # left: the z tick labels, ticks and label; right of the bar, the same for its two-line
+        # label; the panel column at least as wide as the title
+        left = edge + (7 + _text_w(_tick_labels(ax.yaxis)) + 4 + 12) * pt
+        right = 0.18 + 0.155 + edge + (7 + _text_w(_tick_labels(cax.yaxis)) + 4 + 24) * pt
+        half = _text_w(ax.get_title().split("\n")) * pt / 2 + edge - w / 2   # title centred
+        widths.append((max(left, half), max(right, half)))
+    W = sum(w + a + b for (_, _, w, _), (a, b) in zip(axes, widths))
+    fig.set_size_inches(W, H)
+    x = 0.0
+    for (ax, cax, w, h), (a, b) in zip(axes, widths):
+        y = (bottom + (plot_h - h) / 2) / H
+        ax.set_position(((x + a) / W, y, w / W, h / H))
+        cax.set_position(((x + a + w + 0.18) / W, y, 0.155 / W, h / H))
+        x += a + w + b
     return fig
 
 
-def _plots(run, values, label, coloured, context, report, out: Path) -> None:
+def stress_figure(run, values, label, coloured, peak):
+    """The stress-over-time plot: max and mean of the measure per coloured part, the peak."""
     from matplotlib.figure import Figure     # no pyplot: no GUI backend, faster to import
 
     steps = run.steps
@@ -1223,7 +1278,7 @@ def _plots(run, values, label, coloured, context, report, out: Path) -> None:
                                                                                  1), np.nan)
         ax.plot(steps, vmax, color=colour, label=f"{part.name} max")
         ax.plot(steps, vmean, color=colour, ls="--", label=f"{part.name} mean")
-    pk = report.peak
+    pk = peak
     if pk:
         ax.plot([pk["iteration"]], [pk["value"]], "k*", ms=12,
                 label=f"peak {pk['value']:.3g} ({pk['group']}, it. {pk['iteration']})")
@@ -1232,10 +1287,13 @@ def _plots(run, values, label, coloured, context, report, out: Path) -> None:
     ax.set_title(f"{run.scene.get('scene', '')}: stress per part over time")
     ax.legend(fontsize=7, ncol=2)
     fig.subplots_adjust(left=0.14, right=0.98, bottom=0.12, top=0.92)
-    fig.savefig(out / "stress_over_time.png", dpi=110, pil_kwargs=PLOT_PNG)
-    report.files.append("stress_over_time.png")
+    return fig
 
-    motion = PartMotion(run).run()
+
+def com_figure(motion, coloured):
+    """The centre-of-mass plot: each coloured part's path, top view (x–z) and side view (x–y)."""
+    from matplotlib.figure import Figure
+
     names = motion.results.names
     fig = Figure(figsize=(10, 4))
     top, side = fig.subplots(1, 2)
@@ -1252,6 +1310,16 @@ def _plots(run, values, label, coloured, context, report, out: Path) -> None:
         ax.grid(alpha=0.3)
     top.legend(fontsize=7)
     fig.subplots_adjust(left=0.07, right=0.98, bottom=0.13, top=0.92, wspace=0.25)
+    return fig
+
+
+def _plots(run, values, label, coloured, context, report, out: Path) -> None:
+    fig = stress_figure(run, values, label, coloured, report.peak)
+    fig.savefig(out / "stress_over_time.png", dpi=110, pil_kwargs=PLOT_PNG)
+    report.files.append("stress_over_time.png")
+
+    motion = PartMotion(run).run()
+    fig = com_figure(motion, coloured)
     fig.savefig(out / "com_path.png", dpi=110, pil_kwargs=PLOT_PNG)
     report.files.append("com_path.png")
 

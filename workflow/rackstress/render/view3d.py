@@ -198,6 +198,21 @@ def _context_subset(q: np.ndarray, box_lo, box_hi) -> np.ndarray:
     return np.sort(np.argsort(d, kind="stable")[:MAX_CONTEXT])
 
 
+def _plain(cls):
+    """``cls()`` as VTK defines it, not its OpenGL override: the render window here is only
+    serialized (the viewer's own window draws it, whatever type it names), and the override's
+    (EGL's, off-screen) opens its device as it is made: 13-30 ms of CPU. (The renderer then
+    takes the camera's near-plane tolerance from no depth buffer: it is set.)"""
+    from vtkmodules.vtkCommonCore import vtkObjectFactory
+
+    name = cls.__name__
+    vtkObjectFactory.SetAllEnableFlags(False, name)
+    try:
+        return cls()
+    finally:
+        vtkObjectFactory.SetAllEnableFlags(True, name)
+
+
 def build_view(rundir, measure: str | None = None, cmap: str | None = None,
                vmax: float | None = None) -> dict:
     """Write ``RUNDIR/view3d.html`` (the peak frame in 3D, offline); return what it shows.
@@ -264,8 +279,7 @@ def build_view(rundir, measure: str | None = None, cmap: str | None = None,
 
     ren = vtkRenderer()
     ren.SetBackground(1.0, 1.0, 1.0)
-    rw = vtkRenderWindow()
-    rw.SetOffScreenRendering(1)
+    rw = _plain(vtkRenderWindow)
     rw.AddRenderer(ren)
     keep = []                               # the VTK objects live until serialized
 
@@ -325,6 +339,7 @@ def build_view(rundir, measure: str | None = None, cmap: str | None = None,
     cam.SetPosition(*map(float, centre + _view_direction(centre, p[peak["row"]] if peak else None)
                          * 2.0 * size))
     cam.SetViewUp(0.0, 1.0, 0.0)
+    ren.SetNearClippingPlaneTolerance(0.001)    # what VTK takes for a 24-bit depth buffer
     ren.ResetCameraClippingRange()
 
     initialize_serializers()

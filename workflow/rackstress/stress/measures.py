@@ -863,6 +863,16 @@ def read_bindings(run):
 
 
 # ----------------------------------------------------------------------------- motion
+def _columns(index: np.ndarray):
+    """``index`` as a slice where it is a run of consecutive numbers (a view, no copy), else
+    itself."""
+    index = np.asarray(index)
+    if len(index) and index[-1] - index[0] == len(index) - 1 \
+            and (len(index) == 1 or (np.diff(index) == 1).all()):
+        return slice(int(index[0]), int(index[-1]) + 1)
+    return index
+
+
 class PartMotion(AnalysisBase):
     """Per part and frame: centre of mass and bounding box; per sediment: footprints.
 
@@ -883,28 +893,35 @@ class PartMotion(AnalysisBase):
         self.results.lo, self.results.hi = np.zeros(shape), np.zeros(shape)
         self.results.steps = np.zeros(self.n_frames, dtype=np.int64)
         masses = run.data.masses
-        self._w = np.array([masses.get(int(t), 1.0) for t in run.data.types])
+        types = np.asarray(run.data.types, dtype=np.int64)    # LAMMPS types: 1, 2, …
+        top = int(types.max()) if len(types) else 0
+        by_type = np.array([float(masses.get(t, 1.0)) for t in range(top + 1)])
+        self._w = by_type[types]        # a table, not a dict look-up a particle (a million: 0.2 s)
         self._sed = [p for p in run.parts.values() if p.kind == "sediment"]
         self.results.footprints = {p.name: {"final_dy": np.zeros(p.n), "min_dy": np.zeros(p.n)}
                                    for p in self._sed}
-        # what each frame reuses, taken once: each part's weights (a column) and their sum,
-        # each sediment's rest heights
-        self._parts = [(part.index, self._w[part.index][:, None], self._w[part.index].sum())
+        # what each frame reuses, taken once: each part's columns of the frame's transpose (a
+        # slice where its particles are consecutive, as a data file numbers them), its weights
+        # and their sum, each sediment's rest heights. Per frame the positions are transposed
+        # once (3 × n): a part's reductions then run along contiguous rows, a tenth of the
+        # cost of reducing (n, 3) down its columns (magpod-small's 101 frames: 53 → 12 ms).
+        self._parts = [(_columns(part.index), self._w[part.index], self._w[part.index].sum())
                        for part in run.parts.values()]
         o = run.o
-        self._rest = [(part.index, o[part.index, UP], self.results.footprints[part.name])
-                      for part in self._sed]
+        self._rest = [(_columns(part.index), o[part.index, UP], self.results.footprints[part.name])
+                       for part in self._sed]
 
     def _single_frame(self):
         k, p = self._frame_index, positions(self._ts)
         self.results.steps[k] = int(self._ts.data.get("step", self._ts.frame))
         com, lo, hi = self.results.com[k], self.results.lo[k], self.results.hi[k]
-        for j, (index, w, total) in enumerate(self._parts):
-            q = p[index]
-            com[j] = (q * w).sum(axis=0) / total
-            lo[j], hi[j] = q.min(axis=0), q.max(axis=0)
-        for index, o_up, fp in self._rest:
-            dy = p[index, UP] - o_up
+        pt = np.ascontiguousarray(p.T)
+        for j, (cols, w, total) in enumerate(self._parts):
+            q = pt[:, cols]
+            com[j] = (q @ w) / total
+            lo[j], hi[j] = q.min(axis=1), q.max(axis=1)
+        for cols, o_up, fp in self._rest:
+            dy = pt[UP, cols] - o_up
             fp["final_dy"] = dy
             np.minimum(fp["min_dy"], dy, out=fp["min_dy"])
 
