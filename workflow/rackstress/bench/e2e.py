@@ -30,6 +30,28 @@ from pathlib import Path
 SCENES = ("magpod-small", "magpod", "sediment-large")
 
 
+def _subreaper() -> None:
+    """Make this process the reaper of the commands' orphans (Linux ``PR_SET_CHILD_SUBREAPER``):
+    ``rackstress run``'s post-processing process says its status and ends without the run
+    waiting for its exit (render/prepare.py), so it may outlive the command; it is then
+    reaped here, and its CPU time counts in the command's."""
+    import ctypes
+
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(36, 1, 0, 0, 0)    # PR_SET_CHILD_SUBREAPER
+    except (OSError, AttributeError):
+        pass
+
+
+def _reap_orphans() -> None:
+    """Wait for every process left by the command (:func:`_subreaper`)."""
+    while True:
+        try:
+            os.waitpid(-1, 0)
+        except ChildProcessError:
+            return
+
+
 def _size(path: Path) -> int:
     if path.is_file():
         return path.stat().st_size
@@ -49,11 +71,13 @@ def _cli_run(scene: str, out: Path, cold: bool, args, head_start: bool = True) -
     load = os.getloadavg()[0]
     import resource
 
+    _subreaper()
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t = time.perf_counter()
     r = subprocess.run([exe, "run", scene, "--out", str(out), "--overwrite", "--no-progress",
                         *args], capture_output=True, text=True, env=env)
     wall = time.perf_counter() - t
+    _reap_orphans()
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if cache:
         shutil.rmtree(cache, ignore_errors=True)

@@ -16,13 +16,14 @@ from __future__ import annotations
 #: the longest of them (the plots' process) needs: done by :func:`prepare_in_background`
 #: while the simulation runs.
 _FIRST = ("scipy.spatial.transform", "rackstress.stress.post")
-#: seconds: a followed run expected to end sooner starts no more of _PREPARE's imports
-LAST_IMPORTS_S = 0.3
+#: seconds: a followed run expected to end sooner starts no more of _PREPARE's imports (the
+#: longest, matplotlib's, takes 0.15 s)
+LAST_IMPORTS_S = 0.2
 _PAINT = ("vtkmodules.vtkCommonDataModel", "vtkmodules.util.numpy_support",
-          "vtkmodules.vtkRenderingOpenGL2", "vtkmodules.vtkRenderingCore",
-          "rackstress.render.pictures")
-_PREPARE = _PAINT + ("matplotlib.figure", "matplotlib.backends.backend_agg", "PIL.Image",
-                     "PIL.ImageDraw", "PIL.PngImagePlugin", "vtkmodules.vtkIOXML",
+          "vtkmodules.vtkRenderingOpenGL2", "vtkmodules.vtkRenderingCore", "PIL.Image",
+          "PIL.ImageDraw", "PIL.ImageFont", "rackstress.render.pictures")
+_PREPARE = _PAINT + ("matplotlib.figure", "matplotlib.backends.backend_agg",
+                     "PIL.PngImagePlugin", "vtkmodules.vtkIOXML",
                      "rackstress.stress.export", "isal.isal_zlib", "rackstress.render.report",
                      "rackstress.render.view3d", "trame_vtk.modules.vtk.serializers",
                      "vtkmodules.vtkFiltersSources", "vtkmodules.vtkFiltersCore")
@@ -54,6 +55,14 @@ def _later(squeeze=None, rundir=None):
             yield True
 
     yield from load(_PAINT)
+    try:                        # the pictures' fonts: their text is drawn with the first one
+        from rackstress.render.pictures import _font
+
+        for size in (13, 14, 17, 18):
+            _font(size)
+    except Exception:  # noqa: BLE001, S110 - only a head start
+        pass
+    yield True
     if rundir is not None:
         from pathlib import Path
 
@@ -71,12 +80,8 @@ def _later(squeeze=None, rundir=None):
         yield True
     head = _HEADS.get(key) if rundir is not None else None
     yield from load(_PREPARE[len(_PAINT):], head)
-    if head is None or head.seconds_left() >= LAST_IMPORTS_S:   # the fonts likewise
+    if head is None or head.seconds_left() >= LAST_IMPORTS_S:   # the plots' font likewise
         try:
-            from rackstress.render.pictures import _font
-
-            for size in (13, 14, 17, 18):
-                _font(size)
             from matplotlib import font_manager
 
             font_manager.findfont("DejaVu Sans")
@@ -266,7 +271,8 @@ class Ahead:
     * ``G`` (:meth:`go`, ``summary.json`` written): ``finish(guards())`` — the guard rails'
       warnings into ``summary.json``, then the run's post-processing, the same code as
       without a head start, its output after the parent's — and end with its exit status,
-      which :meth:`go` returns;
+      which it writes over a second pipe once its output is closed, and :meth:`go` returns
+      (without waiting for the process's exit: a thread reaps it);
     * ``Q`` or the pipe closed (the run diverged, failed, or the parent died): end, having
       written nothing.
 
@@ -280,21 +286,29 @@ class Ahead:
         import sys
 
         self.rundir, self.pid, self.fd, self.status = rundir, None, None, None
+        self.done = None            # the child's exit status comes over it (_said)
         self.guards = guards
         parent = os.getpid()
         sys.stdout.flush()
         sys.stderr.flush()
         r, w = os.pipe()
         try:
-            pid = os.fork()
+            dr, dw = os.pipe()
         except OSError:
             os.close(r)
             os.close(w)
+            return
+        try:
+            pid = os.fork()
+        except OSError:
+            for fd in (r, w, dr, dw):
+                os.close(fd)
             return
         if pid == 0:                                            # the child
             code = 70
             try:
                 os.close(w)
+                os.close(dr)
                 code = _ahead_child(r, parent, rundir, frames, compress, finish, guards)
             except KeyboardInterrupt:
                 code = 130
@@ -306,10 +320,16 @@ class Ahead:
                 try:
                     sys.stdout.flush()
                     sys.stderr.flush()
+                    # its output closed, then its status said: the run ends without waiting
+                    # for this process's memory to be given back (a few hundred MB: 20-30 ms)
+                    os.close(1)
+                    os.close(2)
+                    os.write(dw, bytes([code & 0xFF]))
                 finally:
                     os._exit(code)
         os.close(r)
-        self.pid, self.fd = pid, w
+        os.close(dw)
+        self.pid, self.fd, self.done = pid, w, dr
 
     def _tell(self, what: bytes) -> bool:
         import os
@@ -353,10 +373,39 @@ class Ahead:
         sys.stderr.flush()
         self._renice()              # the simulation is over (if ended() was not told)
         told = self._tell(b"G")
-        status = self._wait()
+        status = self._said() if told else None
+        if status is None:
+            status = self._wait()
         if not told or status is None or status < 0 or status in (70, 130):
             return None
         return status
+
+    def _said(self) -> int | None:
+        """The exit status the child wrote once its work and output were done, or None if it
+        ended without (killed). Its exit is then reaped by a thread, not waited for."""
+        import os
+        import threading
+
+        if self.done is None:
+            return None
+        try:
+            got = os.read(self.done, 1)
+        except OSError:
+            got = b""
+        os.close(self.done)
+        self.done = None
+        if not got:
+            return None
+        pid, self.pid = self.pid, None
+        if self.fd is not None:
+            try:
+                os.close(self.fd)
+            except OSError:
+                pass
+            self.fd = None
+        threading.Thread(target=_reap, args=(pid,), daemon=True).start()
+        self.status = got[0]
+        return self.status
 
     def quit(self) -> None:
         """End the child without post-processing (the run failed, or was post-processed)."""
@@ -373,10 +422,16 @@ class Ahead:
         self._wait()
 
     def _wait(self) -> int | None:
-        """Close the pipe and wait for the child: its exit status (negative: the signal that
+        """Close the pipes and wait for the child: its exit status (negative: the signal that
         ended it)."""
         import os
 
+        if self.done is not None:
+            try:
+                os.close(self.done)
+            except OSError:
+                pass
+            self.done = None
         if self.fd is not None:
             try:
                 os.close(self.fd)
@@ -391,6 +446,15 @@ class Ahead:
                 self.status = None
             self.pid = None
         return self.status
+
+
+def _reap(pid: int) -> None:
+    import os
+
+    try:
+        os.waitpid(pid, 0)
+    except ChildProcessError:
+        pass
 
 
 def _ahead_child(r: int, parent: int, rundir, frames: int, compress: bool, finish,
