@@ -1100,15 +1100,20 @@ class _PngRows:
                 raise RuntimeError(f"a PNG of {self.height} rows given {self.rows}")
             self._chunk(b"IDAT", self.z.flush())
             self._chunk(b"IEND", b"")
+            self.fh.close()             # its last bytes written, or the disk's refusal raised
         finally:
             self.abort()
 
     def abort(self) -> None:
-        """Stop (after the band under way) and close the file."""
+        """Stop (after the band under way) and close the file: after an error, what it still
+        held is dropped (a full disk refuses it again; the error said is the first one)."""
         for f in self.futures:
             f.cancel()
         self.pool.shutdown(wait=True)
-        self.fh.close()
+        try:
+            self.fh.close()
+        except OSError:
+            pass
 
 
 def _movie_frames(run, max_frames: int) -> list:
