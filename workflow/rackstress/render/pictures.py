@@ -608,9 +608,10 @@ def render(rundir, frames=None, measure: str | None = None, views=DEFAULT_VIEWS,
         ``meanwhile(report, measure, cmap)``, called once the pictures are painted, while the
         plots' process is still drawing.
     beside : (work, done), optional
-        ``work(report, measure, cmap)`` in a forked child from before the pictures are
-        painted (:class:`~rackstress.runs.forked.ForkedJob`, the other core), its JSON-able
-        result handed to ``done`` once they are (``rackstress run`` builds the 3D view so).
+        ``work(report, measure, cmap)`` in the plots' forked process once they are drawn
+        (without plots, in a forked child of its own: :class:`~rackstress.runs.forked.ForkedJob`,
+        the other core), its JSON-able result handed to ``done`` once the pictures are
+        painted (``rackstress run`` builds the 3D view so).
 
     Returns
     -------
@@ -702,17 +703,23 @@ def render(rundir, frames=None, measure: str | None = None, views=DEFAULT_VIEWS,
     try:
         n_pics = len({k for _, k, _ in report.frames}) * len(views)
         movie_ks = _movie_frames(run, movie_max_frames) if movie else []
-        # the plots (matplotlib) are drawn by a forked process while this one paints
-        plotter = _Background(_plots, run, values, label, coloured, context, report, tmp) \
-            if plots else None
-        side = None
+        # the plots (matplotlib) are drawn by a forked process while this one paints; with
+        # ``beside``, that process does its work after the plots (one fork fewer on the way to
+        # the first picture), forked once VTK's rendering classes are loaded (the painter's),
+        # which it uses too
+        plotter = side = None
+        if plots and beside is None:
+            plotter = _Background(_plots, run, values, label, coloured, context, report, tmp)
         with progress_bar(n_pics + len(movie_ks), progress, "pictures") as bar:
             bar.unit = "picture"
             t = time.perf_counter()
             cell = (window_size[0] // 2, window_size[1] // 2) if sheet_only else window_size
             painter = _take_painter(run, coloured, context, report.vmax, cmap, cell)
-            if beside is not None:      # forked once VTK's rendering classes are loaded,
-                from rackstress.runs.forked import ForkedJob   # which the child uses too
+            if beside is not None and plots:
+                plotter = _Background(_plots, run, values, label, coloured, context, report,
+                                      tmp, then=lambda: beside[0](report, measure, cmap))
+            elif beside is not None:
+                from rackstress.runs.forked import ForkedJob
 
                 side = ForkedJob(lambda: beside[0](report, measure, cmap), tmp / ".beside.json")
             try:
@@ -757,13 +764,16 @@ def render(rundir, frames=None, measure: str | None = None, views=DEFAULT_VIEWS,
             beside[1](got)
         if plotter is not None:
             t = time.perf_counter()
-            files, notes, wall = plotter.join()
+            files, notes, wall, then = plotter.join()
             report.files += files
             report.notes += notes
             report.timings["plots_s"] = wall
             report.timings["plots_wait_s"] = time.perf_counter() - t
             if plotter.job.cpu_s is not None:
-                report.timings["plots_cpu_s"] = plotter.job.cpu_s
+                report.timings["plots_cpu_s"] = plotter.job.cpu_s - then["cpu_s"]
+            if beside is not None:
+                report.timings["beside_cpu_s"] = then["cpu_s"]
+                beside[1](then["result"])
         report.timings["total_s"] = time.perf_counter() - t0
         report.timings["cpu_s"] = time.process_time() - c0
         manifest = {"rundir": str(rundir), "measure": measure, "label": label,
@@ -794,10 +804,13 @@ def render(rundir, frames=None, measure: str | None = None, views=DEFAULT_VIEWS,
 class _Background:
     """``fn(run, values, label, coloured, context, report, out)`` in a forked child process
     (:class:`~rackstress.runs.forked.ForkedJob`), concurrently with the pictures (this
-    machine's second core); ``join`` → (files, notes, wall time) it added to the report, or
-    re-raises its error. Where fork is not available it runs in this process at ``join``."""
+    machine's second core), then ``then()`` if given; ``join`` → (files, notes, wall time)
+    it added to the report and ``then``'s ``{"result", "cpu_s"}`` (its JSON-able result, or
+    ``{"error": [kind, message]}`` if it raised), or re-raises ``fn``'s error. Where fork is
+    not available it runs in this process at ``join``."""
 
-    def __init__(self, fn, run, values, label, coloured, context, report, out: Path):
+    def __init__(self, fn, run, values, label, coloured, context, report, out: Path,
+                 then=None):
         from rackstress.runs.forked import ForkedJob
 
         def work():
@@ -806,7 +819,16 @@ class _Background:
             fn(run, values, label, coloured, context, report, out)
             files, notes = report.files[n_files:], report.notes[n_notes:]
             del report.files[n_files:], report.notes[n_notes:]
-            return files, notes, time.perf_counter() - t
+            wall = time.perf_counter() - t
+            after = {"result": None, "cpu_s": 0.0}
+            if then is not None:
+                c = time.process_time()
+                try:
+                    after["result"] = then()
+                except Exception as exc:  # noqa: BLE001 - said by its caller, the plots kept
+                    after["result"] = {"error": [type(exc).__name__, str(exc)]}
+                after["cpu_s"] = time.process_time() - c
+            return files, notes, wall, after
 
         self.out = out
         self.job = ForkedJob(work, out / ".plots.json")
@@ -815,7 +837,7 @@ class _Background:
         from rackstress.runs.forked import ForkedError
 
         try:
-            files, notes, wall = self.job.join()
+            files, notes, wall, then = self.job.join()
         except ForkedError as exc:
             if exc.exitcode == EXIT_STORAGE:
                 raise StorageError(f"could not write the plots into {self.out}: the file "
@@ -827,7 +849,7 @@ class _Background:
                 raise StorageError(f"could not draw the plots into {self.out}: {exc.message}") \
                     from None
             raise RuntimeError(f"drawing the plots failed: {exc.message}") from None
-        return files, notes, wall
+        return files, notes, wall, then
 
     def kill(self):
         self.job.kill()
