@@ -392,17 +392,10 @@ class Ahead:
             got = os.read(self.done, 1)
         except OSError:
             got = b""
-        os.close(self.done)
-        self.done = None
+        self._close_pipes()
         if not got:
             return None
         pid, self.pid = self.pid, None
-        if self.fd is not None:
-            try:
-                os.close(self.fd)
-            except OSError:
-                pass
-            self.fd = None
         threading.Thread(target=_reap, args=(pid,), daemon=True).start()
         self.status = got[0]
         return self.status
@@ -421,23 +414,24 @@ class Ahead:
                 pass
         self._wait()
 
+    def _close_pipes(self) -> None:
+        import os
+
+        for name in ("done", "fd"):
+            fd = getattr(self, name)
+            if fd is not None:
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+                setattr(self, name, None)
+
     def _wait(self) -> int | None:
         """Close the pipes and wait for the child: its exit status (negative: the signal that
         ended it)."""
         import os
 
-        if self.done is not None:
-            try:
-                os.close(self.done)
-            except OSError:
-                pass
-            self.done = None
-        if self.fd is not None:
-            try:
-                os.close(self.fd)
-            except OSError:
-                pass
-            self.fd = None
+        self._close_pipes()
         if self.pid is not None:
             try:
                 _, st = os.waitpid(self.pid, 0)
