@@ -313,7 +313,7 @@ def markdown(data: dict, machine: dict) -> str:
          "written (*measured while running*: frames of the run's; the measures column is "
          "what is left after it), prepares the pictures' render window and compresses the "
          "frames, then checks the guard rails and post-processes the finished run; the "
-         "3D view is built by a child process beside the pictures and plots. The rows *no "
+         "3D view is built by the plots' process after the plots. The rows *no "
          "head start* run with `RACKSTRESS_HEAD_START=0` (nothing beside the simulation), "
          "interleaved with the others: their simulation time is the simulation's own, what "
          "the verdict divides the total by. "
