@@ -69,6 +69,13 @@ def rigid_fit(o: np.ndarray, p: np.ndarray):
     return R, t, np.linalg.norm(p - (o @ R.T + t), axis=1)
 
 
+def robust_floor(o: np.ndarray, floor: float = ROBUST_FLOOR) -> float:
+    """The distance below which the robust fit counts a particle's distance as zero when it
+    chooses the inliers: ``floor`` × the part's size (its particles' RMS distance from their
+    centre)."""
+    return floor * (float(np.sqrt(((o - o.mean(axis=0)) ** 2).sum(axis=1).mean())) or 1.0)
+
+
 def robust_fit(o: np.ndarray, p: np.ndarray, c: float = ROBUST_C, floor: float = ROBUST_FLOOR,
                max_iter: int = ROBUST_MAX_ITER):
     """(R, t, distances, inliers) of the robust fit described in the module docstring.
@@ -86,8 +93,7 @@ def robust_fit(o: np.ndarray, p: np.ndarray, c: float = ROBUST_C, floor: float =
     if n < 4:
         R, t, d = rigid_fit(o, p)
         return R, t, d, inl
-    size = float(np.sqrt(((o - o.mean(axis=0)) ** 2).sum(axis=1).mean())) or 1.0
-    tol = floor * size
+    tol = robust_floor(o, floor)
     for _ in range(max_iter):
         R, t = kabsch(o[inl], p[inl])
         d = np.linalg.norm(p - (o @ R.T + t), axis=1)
@@ -155,8 +161,7 @@ def robust_fit_frames(o: np.ndarray, P: np.ndarray, c: float = ROBUST_C,
     nf, n = P.shape[:2]
     if n < 4:
         return np.stack([rigid_fit(o, p)[2] for p in P]) if nf else np.zeros((0, n))
-    size = float(np.sqrt(((o - o.mean(axis=0)) ** 2).sum(axis=1).mean())) or 1.0
-    tol = floor * size
+    tol = robust_floor(o, floor)
     inl = np.ones((nf, n), dtype=bool)
     d = np.empty((nf, n))
     todo = np.arange(nf)

@@ -182,8 +182,7 @@ def robust_fit_frames(o: np.ndarray, P: np.ndarray) -> np.ndarray:
         return rigid.robust_fit_frames(o, P)
     o = np.ascontiguousarray(o, dtype=np.float64)
     P = np.ascontiguousarray(P)
-    size = float(np.sqrt(((o - o.mean(axis=0)) ** 2).sum(axis=1).mean())) or 1.0
-    tol = rigid.ROBUST_FLOOR * size
+    tol = rigid.robust_floor(o)
     inl = np.ones((nf, n), dtype=bool)
     d = np.empty((nf, n))
     todo = np.arange(nf)
