@@ -1243,8 +1243,8 @@ def footprints_figure(run, motion, coloured, context):
     # 4 pt at the figure's edges
     top, bottom, edge = 34 * pt, 37 * pt, 4 * pt
     plot_h = max(p[-1] for p in panels)
-    fig = Figure(figsize=(1.0, plot_h + top + bottom))
     H = plot_h + top + bottom
+    fig = Figure(figsize=(1.0, H))      # its height first: the locators see the plots' sizes
     axes = []
     for part, dy, o, lim, com, box, title, w, h in panels:
         ax = fig.add_axes((0, 0, 1, 1))
@@ -1265,7 +1265,6 @@ def footprints_figure(run, motion, coloured, context):
         ax.set_title(title, fontsize=10)
         fig.colorbar(sc, cax=cax, label="vertical displacement\n[length units]")
         axes.append((ax, cax, w, h))
-    fig.set_size_inches(1.0, H)         # heights first: the locators see the plots' sizes
     for ax, cax, w, h in axes:
         ax.set_position((0, (bottom + (plot_h - h) / 2) / H, w, h / H))
         cax.set_position((0, (bottom + (plot_h - h) / 2) / H, 0.155, h / H))
