@@ -185,7 +185,7 @@ def test_overwrite_removes_old_checkpoints_so_resume_cannot_pick_them_up(tmp_pat
     assert r.returncode == 2 and "nothing to resume" in r.stderr
 
 
-def test_empty_out_and_non_run_directory_refused(tmp_path):
+def test_empty_out_refused_and_a_users_file_beside_a_run_kept(tmp_path):
     r = rs("run", "plane-bound", "--engine", "reference", "--steps", "5", "--out", "", *QUIET,
            cwd=tmp_path)
     assert r.returncode == 2 and "--out" in r.stderr and "is empty" in r.stderr, r.stderr
@@ -195,8 +195,10 @@ def test_empty_out_and_non_run_directory_refused(tmp_path):
     (mine / "notes.txt").write_text("keep me")
     r = rs("run", "plane-bound", "--engine", "reference", "--steps", "5", "--out", mine,
            "--overwrite", *QUIET)
-    assert r.returncode == 2 and "holds no run" in r.stderr
+    assert r.returncode == 0, r.stderr
+    assert "notes.txt" in r.stderr and "left as they are" in r.stderr
     assert (mine / "notes.txt").read_text() == "keep me"
+    assert (mine / "summary.json").is_file()
 
 
 # ---------------------------------------------------------------------------- --resume checks

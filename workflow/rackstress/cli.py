@@ -505,7 +505,10 @@ def deck(scene, out, mode, steps, dt, sets, dump_every):
     from rackstress.runs.run import default_dump_every
 
     try:
+        from rackstress.runs.rundir import own
+
         sc = _load_scene(scene, steps, dt, sets)
+        own(out, ["particles.data", "in.lammps"], "the deck")   # never over the user's files
         d = write_deck(sc, out, mode, dump_every or default_dump_every(sc))
     except Exception as err:  # noqa: BLE001 - each kind has its exit status (_fail_any)
         _fail_any(err, out)
@@ -626,13 +629,15 @@ def _post_job(rundir, render: bool = True):
     """A batch job's post-processing: the stress peaks into its summary.json (no VTK: run
     'rackstress stress BATCHDIR/JOB' for the files), and unless ``render`` is False its
     default pictures, report.html and 3D view, as 'rackstress run' leaves them."""
+    from rackstress.runs.rundir import locked
     from rackstress.stress.post import postprocess
 
-    postprocess(rundir, vtk=False, dump=False)
-    if render:
-        from rackstress.render.pictures import render_default
+    with locked(rundir, create=False):      # its files recorded in the job's manifest
+        postprocess(rundir, vtk=False, dump=False)
+        if render:
+            from rackstress.render.pictures import render_default
 
-        render_default(rundir)
+            render_default(rundir)
 
 
 def _csv(text):
@@ -926,6 +931,13 @@ def fea(rundir, E, nu, size, group, measure):
     damaged = _fea_inputs(Path(rundir))
     if damaged:
         _fail(RackstressError(f"rackstress fea {rundir}: {damaged}"), 2)
+    try:                        # fea's files, recorded as the run's (runs/rundir.py)
+        from rackstress.runs.rundir import own
+
+        own(rundir, ["fea.json", "fea.npz", "vtk", "figures", "report.html", "view3d.html"],
+            "the FE check")
+    except RackstressError as exc:
+        _fail(exc, exc.exit_code)
     try:
         data = solid.check_run(rundir, E=E, nu=nu, size=size, group=group, measure=measure,
                                echo=click.echo)

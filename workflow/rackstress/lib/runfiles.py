@@ -24,3 +24,14 @@ DERIVED = (STRESS_DUMP, STRESS_JSON, CACHE, REPORT, VTK_DIR)
 #: the bindings of the parts with a material, for their stress (:mod:`rackstress.stress.tensor`):
 #: written when the run starts, from the scene (i, j, force coefficient m·c, L0²)
 BINDINGS = "bindings.npz"
+
+#: Every top-level name a rackstress command writes into a run directory (``run``, ``stress``,
+#: ``render``, ``fea``, a batch job). A new run refuses a directory holding one of these names
+#: that no run wrote (it would write over the user's file), and in a run directory written
+#: before runs kept a manifest (:mod:`rackstress.runs.rundir`) these, and only these, are the
+#: run's. A command that writes a new name adds it here; its files are recorded in the manifest
+#: either way (the lock's release adopts what the command wrote).
+RUN_FILES = ("scene.json", "summary.json", "progress.json", "particles.data", "in.lammps",
+             "log.lammps", "trajectory.dump", "trajectory.dump.gz", "boundary.npz", BINDINGS,
+             STABILITY, STRESS_JSON, STRESS_DUMP, CACHE, VTK_DIR, REPORT, "view3d.html",
+             "figures", "restart", "fea.json", "fea.npz", "job.json")

@@ -786,7 +786,7 @@ def render(rundir, frames=None, measure: str | None = None, views=DEFAULT_VIEWS,
                     "files": report.files, "notes": report.notes, "timings": report.timings}
         write_json(tmp / "render.json", manifest)
         report.files.append("render.json")
-        _move_in(tmp, outdir)
+        _move_in(tmp, outdir, check=out is not None)
     except BaseException as exc:
         if plots and "plotter" in locals() and plotter is not None:
             plotter.kill()
@@ -909,8 +909,16 @@ def record_render(rundir: Path, rep: RenderReport, wall_s: float) -> None:
     write_json(path, summary)
 
 
-def _move_in(tmp: Path, outdir: Path) -> None:
-    """Move every file of ``tmp`` into ``outdir`` (replacing same names only), then drop tmp."""
+def _move_in(tmp: Path, outdir: Path, check: bool = False) -> None:
+    """Move every file of ``tmp`` into ``outdir`` (replacing same names only), then drop tmp.
+
+    ``check`` (an ``--out`` of the user's choosing): first refuse if ``outdir`` holds a file of
+    one of those names that rackstress did not write, and record them in its manifest
+    (:func:`rackstress.runs.rundir.own`)."""
+    if check:
+        from rackstress.runs.rundir import own
+
+        own(outdir, sorted(f.name for f in tmp.iterdir()), "the pictures")
     outdir.mkdir(parents=True, exist_ok=True)
     for f in sorted(tmp.iterdir()):
         if f.name != "render.json":

@@ -209,6 +209,21 @@ def run_job(job, sweep: Sweep, batchdir: Path, comm, group: int, post=None) -> d
     return rec
 
 
+def _discard_job(jobdir: Path) -> None:
+    """Remove a failed job's directory to run it again, unless it holds files no rackstress
+    command wrote (then refused, naming them: the user's files are never removed)."""
+    from rackstress.lib.runfiles import RUN_FILES
+    from rackstress.runs.rundir import owned, present
+
+    # the directory was made by the batch (a renamed temporary one): a run's names are its own
+    theirs = sorted(present(jobdir) - owned(jobdir) - set(RUN_FILES))
+    if theirs:
+        raise RunDirError(f"{jobdir} holds {', '.join(theirs[:6])}, which rackstress did not "
+                          "write: --retry-failed would remove the job's directory with them; "
+                          "move them away first")
+    shutil.rmtree(jobdir)
+
+
 # ---------------------------------------------------------------------------- the manager
 class Manager:
     """World rank 0's job table: hands out jobs, records results, writes batch.json."""
@@ -239,7 +254,7 @@ class Manager:
             if done.exists():
                 self._adopt(name, batchdir / name, old.get(name))
             if rec["status"] == "failed" and retry_failed:
-                shutil.rmtree(batchdir / name)
+                _discard_job(batchdir / name)
                 rec.update(status="pending", error=None, figures={}, wall_s=None)
         self.queue = [j.index for j in sweep.jobs if self.jobs[j.name]["status"] == "pending"]
         self.by_index = {j.index: j for j in sweep.jobs}
@@ -337,6 +352,14 @@ def prepare_dir(sweep: Sweep, batchdir: Path) -> None:
         if copy.exists() and copy.read_text() != text:
             # same jobs, edited file (e.g. comments or steps): keep the first as sweep.toml
             (batchdir / f"sweep-{time.strftime('%Y%m%d-%H%M%S')}.toml").write_text(text)
+    # never over the user's files: a file or folder of the user's named like a job or the
+    # batch's own files is refused, naming it (runs/rundir.py's manifest)
+    from rackstress.runs.rundir import _adopt, manifest, own, present
+
+    names = [INDEX, EVENTS, "report.html"] + [j.name for j in sweep.jobs]
+    if index.exists() and manifest(batchdir) is None:   # a batch from before the manifest
+        _adopt(batchdir, set(names) & present(batchdir))
+    own(batchdir, names, "the batch")
     if not copy.exists():
         copy.write_text(text)
     for tmp in batchdir.glob(".tmp-*"):

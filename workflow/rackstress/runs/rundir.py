@@ -8,13 +8,27 @@ with status 2 naming it. The kernel releases an ``flock`` when its process dies,
 never blocks the next one; the lock file it leaves behind (a clean release removes it) is
 recognized as stale — its process no longer exists — and reported.
 
-**Reuse.** :func:`claim` decides what a new run may do with an existing directory: an empty or
-new directory is used; a finished run (``summary.json``) or a run that did not finish (killed:
-``scene.json`` without ``summary.json``) is refused unless ``--overwrite`` (or ``--resume`` for
-the latter); a non-empty directory holding no run is refused always (``--overwrite`` deletes
-only run directories). ``--overwrite`` starts clean: the old run directory is renamed aside in
-one step (``os.replace``) and then deleted, so a kill at any moment leaves the old run whole or
-nothing of it; leftovers of such a kill are removed by the next claim.
+**What a run owns.** A directory may hold the user's own files beside a run (the scene and its
+STL, notes): a run directory only ever loses what rackstress wrote there. The manifest
+``RUNDIR/.rackstress-files.json`` lists the top-level names rackstress wrote (a folder it made,
+``figures/``, ``vtk/``, ``restart/``, with what is in it). It is written atomically: a new run
+records the names it may write (:data:`rackstress.lib.runfiles.RUN_FILES`) before writing them,
+and every command that holds the lock adds, when it ends, the names that appeared meanwhile and
+drops the names that were not written; the lock record keeps the names present when the command
+began, so that the next command adopts what a killed one wrote. A run directory written before
+runs kept a manifest owns the names of :data:`~rackstress.lib.runfiles.RUN_FILES` it holds, and
+nothing else. Other folders rackstress writes into (``render --out``, ``stress --out``, ``deck
+--out``) keep the same manifest (:func:`own`).
+
+**Reuse.** :func:`claim` decides what a new run may do with an existing directory: a new
+directory, or one holding only the user's files, is used (they stay as they are); one holding a
+file of a name a run writes that no run wrote (the user's ``report.html``) is refused, naming
+it; a finished run (``summary.json``) or a run that did not finish (killed: ``scene.json``
+without ``summary.json``) is refused unless ``--overwrite`` (or ``--resume`` for the latter).
+``--overwrite`` removes what the manifest lists and nothing else: it first marks those names as
+being removed in the manifest (one atomic write), then removes the run's markers (so a kill
+midway never leaves something that looks like a run) and the rest; the next claim finishes a
+removal a kill interrupted.
 """
 from __future__ import annotations
 
@@ -29,13 +43,17 @@ import sys
 import time
 from pathlib import Path
 
-from rackstress.errors import RunDirError, storage_error
+from rackstress.errors import RackstressError, RunDirError, storage_error
+from rackstress.lib.runfiles import RUN_FILES
 
 LOCK = ".lock"
+#: The manifest: the top-level names rackstress wrote into a directory (module doc).
+MANIFEST = ".rackstress-files.json"
 #: Files whose presence makes a directory a run directory (written by ``rackstress run``).
 MARKERS = ("scene.json", "summary.json", "progress.json")
 
-_held: dict[str, list] = {}     # resolved path -> [fd, depth]: re-entrant within a process
+#: resolved path -> [fd, depth, names present when the command began]: re-entrant in a process
+_held: dict[str, list] = {}
 
 
 def _command_line() -> str:
@@ -84,7 +102,7 @@ def in_forked_child(parent: int) -> None:
     its copies of the lock files, so the lock ends with the process that took it — a copy would
     keep the ``flock`` alive after that process is killed — and die with the parent (Linux:
     ``PR_SET_PDEATHSIG``), so nothing goes on writing into a run directory nobody holds."""
-    for fd, _ in list(_held.values()):
+    for fd, *_ in list(_held.values()):
         try:
             os.close(fd)            # never LOCK_UN: that would release the parent's lock too
         except OSError:
@@ -154,15 +172,18 @@ def locked(rundir, command: str | None = None, comm=None, create: bool = True, n
                 notes.append(note)
             else:
                 sys.stderr.write(f"rackstress: note: {note}\n")
+            if isinstance(old.get("present"), list):    # what the killed command wrote
+                _adopt(rundir, present(rundir) - set(old["present"]))
+        before = present(rundir)
         rec = {"pid": os.getpid(), "host": socket.gethostname(),
                "command": command or _command_line(),
-               "started": time.strftime("%Y-%m-%dT%H:%M:%S")}
+               "started": time.strftime("%Y-%m-%dT%H:%M:%S"), "present": sorted(before)}
         try:
             os.ftruncate(fd, 0)
             os.pwrite(fd, (json.dumps(rec) + "\n").encode(), 0)
         except OSError:
             pass      # a full disk: the lock holds all the same, unnamed
-        _held[key] = [fd, 1]
+        _held[key] = [fd, 1, before]
 
     def release():
         ent = _held.get(key)
@@ -171,6 +192,8 @@ def locked(rundir, command: str | None = None, comm=None, create: bool = True, n
         ent[1] -= 1
         if ent[1] == 0:
             del _held[key]
+            with contextlib.suppress(OSError, RackstressError):
+                _adopt(rundir, present(rundir) - ent[2], prune=True)
             # a clean release leaves no lock file (a killed holder leaves its record behind);
             # unlinked while still held, so a waiter never locks a file that is gone (_take)
             with contextlib.suppress(OSError):
@@ -225,10 +248,108 @@ def is_run(rundir: Path) -> bool:
 
 
 def contents(rundir: Path) -> list[str]:
+    """The names in a directory, but for the lock and the manifest."""
     try:
-        return sorted(p.name for p in Path(rundir).iterdir() if p.name != LOCK)
-    except FileNotFoundError:
+        return sorted(p.name for p in Path(rundir).iterdir() if p.name not in (LOCK, MANIFEST))
+    except (FileNotFoundError, NotADirectoryError):
         return []
+
+
+def present(rundir: Path) -> set[str]:
+    """:func:`contents` without the temporaries of writers at work (``.NAME.tmp…``,
+    ``.tmp-…``): the names a command may leave behind."""
+    return {n for n in contents(rundir)
+            if not (n.startswith(".") and (".tmp" in n or n.startswith(".tmp-")))}
+
+
+def manifest(rundir: Path) -> dict | None:
+    """The manifest of ``rundir`` (``{"files": [...], "removing": [...]}``), or None if there is
+    none (or it cannot be read: then nothing is taken for rackstress's)."""
+    try:
+        data = json.loads((Path(rundir) / MANIFEST).read_text())
+    except (OSError, ValueError):
+        return None
+    return data if isinstance(data, dict) and isinstance(data.get("files"), list) else None
+
+
+def owned(rundir: Path) -> set[str]:
+    """The top-level names of ``rundir`` that rackstress wrote: the manifest's, or in a run
+    directory written before runs kept one, the names of :data:`RUN_FILES` it holds."""
+    m = manifest(rundir)
+    if m is not None:
+        return set(m["files"]) | set(m.get("removing") or [])
+    if is_run(rundir):
+        return set(RUN_FILES) & present(rundir)
+    return set()
+
+
+def _write_manifest(rundir: Path, files, removing=None) -> None:
+    from rackstress.lib.jsonio import write_json
+
+    rec = {"files": sorted(set(files))}
+    if removing:
+        rec["removing"] = list(removing)
+    write_json(Path(rundir) / MANIFEST, rec)
+
+
+def _adopt(rundir: Path, names, prune: bool = False) -> None:
+    """Add ``names`` (written by a command) to the manifest; ``prune``: drop the names that
+    are not there (recorded before a write that did not happen)."""
+    mine = owned(rundir)
+    files = (mine | set(names)) & present(rundir) if prune else mine | set(names)
+    m = manifest(rundir)
+    if m is not None and set(m["files"]) == files and not m.get("removing"):
+        return
+    if m is None and not names:
+        return
+    _write_manifest(rundir, files)
+
+
+def strangers(rundir: Path, names) -> list[str]:
+    """Those of ``names`` that ``rundir`` holds and rackstress did not write (the user's)."""
+    return sorted(set(names) & present(rundir) - owned(rundir))
+
+
+def own(directory, names, doing: str) -> Path:
+    """Before writing ``names`` into ``directory`` (created if missing): refuse if it holds a
+    file of one of those names that rackstress did not write, else record them in its
+    manifest (module doc). ``doing`` says what would be written, for the message.
+
+    Raises
+    ------
+    RunDirError
+        A file of the user's would be written over (exit 2); nothing is written.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> d = pathlib.Path(tempfile.mkdtemp())
+    >>> (d / "stress.json").write_text("mine")
+    4
+    >>> own(d, ["stress.json"], "the stress files")
+    Traceback (most recent call last):
+    ...
+    rackstress.errors.RunDirError: ...
+    """
+    directory = Path(directory)
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise storage_error(exc, "create the directory") from None
+    theirs = strangers(directory, names)
+    if theirs:
+        raise RunDirError(f"{directory} already holds {_names(theirs)}, which rackstress did "
+                          f"not write there: writing {doing} would replace "
+                          f"{'it' if len(theirs) == 1 else 'them'}; move "
+                          f"{'it' if len(theirs) == 1 else 'them'} away, or choose another "
+                          "--out")
+    _adopt(directory, names)
+    return directory
+
+
+def _names(names, at_most: int = 6) -> str:
+    shown = ", ".join(names[:at_most])
+    return shown + (f" and {len(names) - at_most} more" if len(names) > at_most else "")
 
 
 def unfinished_step(rundir: Path) -> str:
@@ -245,64 +366,77 @@ def unfinished_step(rundir: Path) -> str:
 def claim(rundir, overwrite: bool = False) -> Path:
     """Make ``rundir`` ready for a new run (the caller holds :func:`locked`); see the module.
 
+    The user's files in it stay as they are; what an earlier run wrote is removed with
+    ``overwrite``; the names the new run may write are recorded in the manifest first.
+
     Raises
     ------
     RunDirError
-        It holds a finished or an unfinished run and ``overwrite`` is not given, or it holds
-        files that are not a run.
+        It holds a finished or an unfinished run (or other rackstress output) and
+        ``overwrite`` is not given, or it holds a file of a name a run writes that no run
+        wrote (the user's); nothing is removed then.
     """
     rundir = check_out(rundir)
     if rundir.exists() and not rundir.is_dir():
         raise RunDirError(f"run directory {rundir} exists and is not a directory")
     _remove_leftovers(rundir)
-    names = contents(rundir)
-    if not names:
-        return rundir
-    if not is_run(rundir):
-        raise RunDirError(f"{rundir} is not empty ({', '.join(names[:5])}"
-                          f"{', ...' if len(names) > 5 else ''}) and holds no run: choose an "
-                          "empty or new --out (--overwrite replaces only run directories)")
-    if not overwrite:
-        if (rundir / "summary.json").exists():
+    m = manifest(rundir)
+    if m is not None and m.get("removing"):      # an --overwrite killed midway: finish it
+        _remove(rundir, m["removing"])
+    here = present(rundir)
+    mine = owned(rundir) & here
+    theirs = sorted(here - mine)
+    clash = [n for n in theirs if n in RUN_FILES]
+    if clash:
+        raise RunDirError(f"{rundir} holds {_names(clash)}, which no run wrote there, and a run "
+                          f"writes {'that name' if len(clash) == 1 else 'those names'}: move "
+                          f"{'it' if len(clash) == 1 else 'them'} away or choose another --out "
+                          "(a run never writes over or removes files it did not write)")
+    if mine and not overwrite:
+        if "summary.json" in mine:
             raise RunDirError(f"run directory {rundir} already holds a finished run "
                               "(summary.json); choose another --out or pass --overwrite to "
                               "replace it")
-        raise RunDirError(f"run directory {rundir} holds a run that did not finish (killed? "
-                          f"{unfinished_step(rundir)}): continue it with 'rackstress run "
-                          f"--resume {rundir}' or replace it with --overwrite")
-    _start_clean(rundir)
+        if is_run(rundir):
+            raise RunDirError(f"run directory {rundir} holds a run that did not finish (killed? "
+                              f"{unfinished_step(rundir)}): continue it with 'rackstress run "
+                              f"--resume {rundir}' or replace it with --overwrite")
+        raise RunDirError(f"{rundir} holds files rackstress wrote ({_names(sorted(mine))}); "
+                          "choose another --out or pass --overwrite to replace them")
+    if mine:
+        _remove(rundir, mine)
+    if theirs:
+        sys.stderr.write(f"rackstress: note: {rundir} also holds {_names(theirs)}, not the "
+                         "run's: left as they are (--overwrite never removes them)\n")
+    _write_manifest(rundir, RUN_FILES)      # before writing them; the lock's release prunes
+    ent = _held.get(str(rundir.resolve()))
+    if ent is not None:
+        ent[2] = present(rundir)
     return rundir
 
 
-def _trash_name(rundir: Path) -> Path:
-    return rundir.parent / f".{rundir.name}.old-{os.getpid()}"
-
-
-def _start_clean(rundir: Path) -> None:
-    """Everything of the earlier run goes: moved aside in one rename, then deleted.
-
-    The lock file moves with it (this process keeps holding the moved one), so a new lock file
-    is taken on the fresh directory at once."""
-    trash = _trash_name(rundir)
-    key = str(rundir.resolve())
+def _remove(rundir: Path, names) -> None:
+    """Remove ``names`` (the run's) from ``rundir``: first marked as being removed in the
+    manifest, then the run's markers, then the rest, then the manifest without them."""
+    names = set(names)
+    keep = owned(rundir) - names
+    order = [n for n in MARKERS if n in names] + sorted(names - set(MARKERS))
     try:
-        os.replace(rundir, trash)
-        rundir.mkdir()
+        _write_manifest(rundir, keep, removing=order)
+        for name in order:
+            path = rundir / name
+            if path.is_dir() and not path.is_symlink():
+                shutil.rmtree(path)
+            else:
+                path.unlink(missing_ok=True)
+        _write_manifest(rundir, keep)
     except OSError as exc:
-        raise storage_error(exc, "move aside the earlier run") from None
-    ent = _held.get(key)
-    if ent is not None:
-        fd = _take(rundir)
-        old_fd = ent[0]
-        with contextlib.suppress(OSError):
-            os.pwrite(fd, os.pread(old_fd, 4096, 0), 0)
-        ent[0] = fd
-        os.close(old_fd)
-    shutil.rmtree(trash, ignore_errors=True)
+        raise storage_error(exc, "remove the earlier run from", rundir) from None
 
 
 def _remove_leftovers(rundir: Path) -> None:
-    """Earlier runs moved aside by an --overwrite that was killed before deleting them."""
+    """Earlier runs moved aside whole (``.NAME.old-PID``, as ``--overwrite`` once did) by an
+    --overwrite that was killed before deleting them; temporaries of killed writers."""
     parent = rundir.parent if str(rundir.parent) else Path(".")
     if not parent.is_dir():
         return

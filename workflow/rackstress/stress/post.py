@@ -615,6 +615,11 @@ def postprocess(rundir, vtk: bool = True, dump: bool = False, progress: bool = F
     if run is None:
         run = load_run(rundir, allow_truncated=allow_truncated)
     out = Path(out) if out is not None else Path(run.rundir)
+    from rackstress.runs.rundir import is_run, own
+
+    if not is_run(out):         # a folder of the user's choosing: never over their own files
+        own(out, [STRESS_JSON] + [VTK_DIR] * bool(vtk) + [STRESS_DUMP] * bool(dump),
+            "the stress files")
     out.mkdir(parents=True, exist_ok=True)
     fields = compute_fields(run, progress=progress)
     group_peaks = peaks(run, fields)
