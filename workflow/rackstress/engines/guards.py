@@ -244,7 +244,9 @@ def check_run(scene, out, echo: bool = True, engine: str | None = None) -> list[
     >>> check_run(scene, "runs/bracket")       # doctest: +SKIP
     []
     """
-    found = force_on_racks(scene) + verlet_lag(scene, engine or "")
+    from rackstress.scenes.physical import held_load_warnings
+
+    found = force_on_racks(scene) + verlet_lag(scene, engine or "") + held_load_warnings(scene)
     dump = Path(out) / "trajectory.dump"
     if colliding_pairs(scene) and dump.exists():
         found += pass_through(scene, dump_frames(dump, scene.original_positions()))

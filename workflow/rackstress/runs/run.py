@@ -245,11 +245,13 @@ def load_path_warnings(scene: Scene) -> list[dict]:
 
     from rackstress.engines.static import _bind_pairs, external_forces
 
+    from rackstress.scenes.physical import held_load_warnings
+
     fixed = scene.fixed().any(axis=1)
     F = external_forces(scene)
     loaded = np.any(F != 0.0, axis=1)
     if not loaded.any():
-        return []
+        return held_load_warnings(scene)
     I, J, _, _ = _bind_pairs(scene)
     n = scene.n_particles
     graph = sp.coo_matrix((np.ones(len(I)), (I, J)), shape=(n, n))
@@ -267,7 +269,7 @@ def load_path_warnings(scene: Scene) -> list[dict]:
                                    f"{int(k[0])} first) are bound to no support: their load "
                                    "never reaches one (no chain of bindings to a held or "
                                    "fixed particle)"})
-    return out
+    return out + held_load_warnings(scene)
 
 
 def execute_static(scene: Scene, out: Path, engine: str, mode: str, *, progress: bool = True,

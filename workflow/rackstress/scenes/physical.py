@@ -105,6 +105,9 @@ def supports(ctx, tables, groups: dict, select) -> None:
         for a in fix:
             g.fixed[mask, "xyz".index(a)] = True
         _refix(g)
+        if "supported_by" not in g.meta:        # which [[support]] holds each particle (last)
+            g.meta["supported_by"] = np.zeros(g.n, dtype=np.int32)
+        g.meta["supported_by"][mask] = k
 
 
 def _refix(g) -> None:
@@ -261,6 +264,7 @@ def loads(ctx, tables, groups: dict, operators: dict, u, select, ramp) -> dict:
             continue
         if kind != "gravity":
             _spacing(c, g)
+            _held_share(c, k, name, g, where, accel * m, t[kind], kind)
         where_t = None if where.all() else tuple(bool(x) for x in where)
         if ramp is None:
             out.setdefault(name, []).append(Force(tuple(float(x) for x in accel), where=where_t))
@@ -270,6 +274,44 @@ def loads(ctx, tables, groups: dict, operators: dict, u, select, ramp) -> dict:
                     tuple(float(x) / RAMP_STAIRS for x in accel), where=where_t,
                     when=(PhaseIn("ramp", tuple(range(s, RAMP_STAIRS + 1))),)))
     return {name: out[name] for name in groups if name in out}
+
+
+def _held_share(c, k: int, name: str, g, where: np.ndarray, f: np.ndarray, given, kind):
+    """A force or pressure on particles a ``[[support]]`` holds goes straight into the
+    support: the engines zero a held direction's force, so it deforms nothing. All of it: the
+    load is refused (it would settle in 0 iterations at 0 MPa); part of it: a warning on the
+    part (``g.meta["held_load"]``, :func:`held_load_warnings`) naming the share, the force and
+    the support. ``f``: the force on each loaded particle (the same on each)."""
+    if not g.fixed[where].any() or not np.linalg.norm(f) > 0:
+        return
+    held = np.linalg.norm(g.fixed[where] * f[None, :], axis=1)   # each particle's lost part
+    share = float(held.sum() / (len(held) * np.linalg.norm(f)))
+    if share <= 0.0:
+        return
+    by = g.meta.get("supported_by")
+    nums = sorted({int(x) for x in by[where][held > 0]}) if by is not None else []
+    sup = ", ".join(f"[[support]] #{n}" for n in nums if n) or "a [[support]]"
+    n_held = int((held > 0).sum())
+    what = f"its {kind} {given!r}"
+    if share >= 1.0 - 1e-12:
+        raise c.error(f"every one of its {len(held)} particle(s) is held by {sup} in the "
+                      f"direction of {what}: the load goes straight into the support and "
+                      "deforms nothing (the part would settle at once, at 0 stress); move the "
+                      "load's region off the support, or the support off the load", "where")
+    total = float(np.linalg.norm(f)) * len(held)
+    g.meta.setdefault("held_load", []).append({
+        "kind": "load_on_support", "groups": [name], "load": k, "share": share,
+        "message": f"[[load]] #{k} (on '{name}'): {n_held} of its {len(held)} particles are "
+                   f"held by {sup}: {share:.0%} of {what} ({share * total:.4g} of "
+                   f"{total:.4g} in the scene's force unit) goes straight into the support "
+                   "and deforms nothing"})
+
+
+def held_load_warnings(scene) -> list[dict]:
+    """The warnings of loads partly on particles a support holds (:func:`_held_share`), as
+    ``summary.json`` records them (``kind``, ``groups``, ``share``, ``message``)."""
+    return [dict(w) for g in scene.groups.values()
+            for w in (g.meta.get("held_load", []) if isinstance(g.meta, dict) else [])]
 
 
 def exposed(o: np.ndarray, n: np.ndarray, a: float) -> np.ndarray:

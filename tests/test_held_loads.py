@@ -1,0 +1,63 @@
+"""A load on particles a support holds goes straight into the support (the engines zero a
+held direction's force): a load wholly on held particles is refused (exit 2), one partly on
+them warns with the share (scenes/physical.py). Real processes."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+RS = str(Path(sys.executable).parent / "rackstress")
+
+# a steel bar 10 × 3 × 3 mm at spacing 1: 10 layers of 3 × 3 particles at x = 0.5 … 9.5; the
+# support holds the layers x = 0.5 and 1.5 (18 particles)
+SCENE = """name = "held"
+units = "mm-N-s"
+analysis = "static"
+
+[params]
+x0 = 9.5
+x1 = 11
+
+[[group]]
+name = "bar"
+fill = { box = { min = [0, 0, 0], max = [10, 3, 3] } }
+spacing = 1.0
+material = "steel"
+
+[[support]]
+on = "bar"
+where = { box = { min = [-1, -1, -1], max = [1.8, 4, 4] } }
+
+[[load]]
+on = "bar"
+where = { box = { min = ["$x0", -1, -1], max = ["$x1", 4, 4] } }
+force = [0, -10, 0]
+"""
+
+
+def run(tmp_path: Path, out: str, *sets):
+    scene = tmp_path / "held.toml"
+    scene.write_text(SCENE)
+    args = [a for s in sets for a in ("--set", s)]
+    return subprocess.run([RS, "run", scene, *args, "--engine", "reference", "--out",
+                           tmp_path / out, "--no-render", "--no-progress"],
+                          capture_output=True, text=True, timeout=900)
+
+
+def test_a_load_on_held_particles_is_refused_or_its_share_named(tmp_path):
+    # wholly inside the support: it would settle in 0 iterations at 0 MPa, silently
+    r = run(tmp_path, "all", "x0=-1", "x1=1.2")
+    assert r.returncode == 2, r.stderr
+    assert "[[load]] #1 (on 'bar')" in r.stderr and "[[support]] #1" in r.stderr
+    assert "every one of its 9 particle(s) is held" in r.stderr
+    assert not (tmp_path / "all").exists()
+    # over the whole bar: 18 of its 90 particles held, so 18/90 = 20 % of the 10 N
+    r = run(tmp_path, "part", "x0=-1", "x1=11")
+    assert r.returncode == 0, r.stderr
+    assert "18 of its 90 particles are held by [[support]] #1: 20% of its force" in r.stderr
+    assert "(2 of 10 in the scene's force unit)" in r.stderr
+    s = json.loads((tmp_path / "part" / "summary.json").read_text())
+    (w,) = [w for w in s["warnings"] if w["kind"] == "load_on_support"]
+    assert w["share"] == 0.2 and w["groups"] == ["bar"]
