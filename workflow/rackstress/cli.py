@@ -78,8 +78,10 @@ def _fail_any(err: BaseException, out=None):
     elif isinstance(err, OSError):
         msg, code = os_error_message(err, "write"), EXIT_STORAGE
     elif isinstance(err, MemoryError):
-        msg, code = ("the machine ran out of memory; make the scene smaller or run it on a "
-                     "larger machine"), EXIT_INPUT
+        msg, code = _memory_message(err), EXIT_INPUT
+        if "mpi4py.MPI" not in sys.modules:     # one process: MPI not started, nor started
+            click.echo(f"rackstress: error: {msg}", err=True)   # now (its library may not
+            sys.exit(code)                                     # load without memory)
     else:
         comm = world()
         if comm.Get_size() > 1:       # a bug on one rank: the others must not wait forever
@@ -96,6 +98,20 @@ def _fail_any(err: BaseException, out=None):
     if comm.Get_size() > 1 and not isinstance(err, RackstressError):
         abort(comm, code)
     sys.exit(code)
+
+
+def _memory_message(err: MemoryError) -> str:
+    """One paragraph for a MemoryError met anywhere (exit 2, errors.py): what was asked for,
+    what the process may have, what to do."""
+    from rackstress.lib.resources import available_memory
+
+    asked = str(err).split(" for an array")[0].strip()
+    have = available_memory()
+    have = f"{have / 2**30:.1f} GiB" if have >= 2**30 else f"{have / 2**20:.0f} MiB"
+    return (f"the machine ran out of memory ({asked or 'an allocation failed'}; about "
+            f"{have} available to this process now): make the "
+            "scene smaller (a larger spacing, fewer steps or frames), run one command at a "
+            "time, or use a machine (or a job) with more memory")
 
 
 #: Options of ``run`` that ``--resume`` cannot honour: the run goes on as it was started.
@@ -357,6 +373,8 @@ def entry():
     README's first command's wall time, and nothing needs it. Anything else ends as usual."""
     try:
         main()
+    except MemoryError as exc:    # anywhere: a message and exit 2, never a traceback
+        _fail_any(exc)
     except SystemExit as exc:
         if _EXIT_NOW and exc.code in (0, None):
             sys.stdout.flush()

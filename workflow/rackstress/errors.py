@@ -9,7 +9,10 @@ status  meaning
 0       done
 2       bad input: a scene, sweep or option that cannot be used, a run directory that is in use
         (another command holds its lock), holds another run, or a checkpoint that belongs to a
-        different run (:class:`SceneError`, :class:`RunDirError`, :class:`ResumeError`)
+        different run (:class:`SceneError`, :class:`RunDirError`, :class:`ResumeError`); also
+        a scene too large for the memory the process may have (estimated up front against
+        the machine's free memory, ``ulimit -v`` and the job's limit, or a ``MemoryError``
+        met anywhere: one paragraph, never a traceback)
 3       the run diverged: the watchdog, LAMMPS (lost atoms, neighbour bins) or the operator
         callback stopped it; ``summary.json`` names the step and particle, frames are kept
         (:class:`DivergenceError`)
