@@ -488,6 +488,8 @@ def _post_and_render(out: Path, do_render: bool, progress: bool, dump_text: bool
                 sys.exit(EXIT_STORAGE if isinstance(err, StorageError) else EXIT_RENDER)
             click.echo(f"  pictures: {rep.outdir} ({len(rep.files)} files, "
                        f"{time.perf_counter() - t0:.1f} s)")
+            if getattr(rep, "report", None):    # a headless machine's browser says nothing
+                click.echo(f"  report: {rep.report}")
         wait_files(out)
     except Exception as err:  # noqa: BLE001 - the run itself is complete and kept
         click.echo(f"rackstress: error: the run finished, but writing its VTK files failed: "
