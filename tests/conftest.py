@@ -8,6 +8,13 @@
   path every parity test compares against), computed once per test process and scene — keyed
   by the scene's fingerprint, so two tests that build the same scene share one trajectory.
 
+* :data:`HANG_S` and :func:`child_cpu`: a test's time limits are for hangs, not for speed. A
+  limit on a process, or on waiting for something it writes, is :data:`HANG_S` — minutes more
+  than any command here takes on a 2-core machine that another process loads fully — so a
+  loaded machine never fails a test; a claim of bounded work ("refused before building",
+  "stops after its iterations") is the CPU time its processes used (:func:`child_cpu`), which
+  another process's load does not change, or a count of the work done (steps, frames).
+
 Markers (registered in pyproject.toml): ``lammps``, ``mpi``, ``slow``; the quick tier is
 ``pytest -m 'not slow'``. README's test command runs everything on both cores (pytest-xdist).
 """
@@ -23,6 +30,37 @@ BIN = Path(sys.executable).parent
 RACKSTRESS, MPIEXEC = str(BIN / "rackstress"), str(BIN / "mpiexec")
 
 _FINAL: dict = {}
+
+#: the limit on any one process a test starts, and on waiting for what it writes: a hang guard
+#: (pyproject.toml's pytest timeout is the whole test's)
+HANG_S = 900
+
+
+class child_cpu:
+    """The CPU time (user + system, seconds) of the child processes that ended and were waited
+    for inside the ``with`` block (``resource.RUSAGE_CHILDREN``: the kernel's account, the same
+    on a loaded machine and a quiet one).
+
+    >>> import subprocess, sys
+    >>> with child_cpu() as cpu:
+    ...     _ = subprocess.run([sys.executable, "-c", "pass"])
+    >>> 0 < cpu.s < 5
+    True
+    """
+
+    def __enter__(self):
+        import resource
+
+        self._t0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        self.s = None
+        return self
+
+    def __exit__(self, *exc):
+        import resource
+
+        t1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        self.s = (t1.ru_utime - self._t0.ru_utime) + (t1.ru_stime - self._t0.ru_stime)
+        return False
 
 
 def trajectory(rundir) -> Path:

@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from rackstress.runs.sweep import SweepError, load_sweep
+from conftest import HANG_S
 
 BIN = Path(sys.executable).parent
 RACKSTRESS, MPIEXEC = str(BIN / "rackstress"), str(BIN / "mpiexec")
@@ -42,7 +43,7 @@ def batch(args, mpi: int | None = None, **kw):
     cmd = ([MPIEXEC, "-n", str(mpi)] if mpi else []) + [RACKSTRESS, "batch", *args]
     if "--report" not in args:
         cmd.append("--no-render")
-    return subprocess.run(cmd, capture_output=True, text=True, timeout=170, **kw)
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=HANG_S, **kw)
 
 
 def index(d: Path) -> dict:
@@ -122,7 +123,7 @@ def test_killed_batch_restarts_and_runs_each_job_once(reference, tmp_path):
                           "--no-render"],
                          start_new_session=True, stdout=subprocess.DEVNULL,
                          stderr=subprocess.DEVNULL)
-    deadline = time.monotonic() + 120
+    deadline = time.monotonic() + HANG_S
     done = 0
     while time.monotonic() < deadline and p.poll() is None:
         try:
@@ -196,7 +197,7 @@ def test_report(reference, tmp_path):
     d = sw.parent / "b"
     r = subprocess.run([RACKSTRESS, "batch", "--report", str(d), "--figure",
                         "groups.plane.max_deformation", "--against", "plane_bind"],
-                       capture_output=True, text=True, timeout=60)
+                       capture_output=True, text=True, timeout=HANG_S)
     assert r.returncode == 0, r.stderr
     lines = r.stdout.splitlines()
     assert lines[0].split()[:4] == ["name", "plane_bind", "rack_bind", "status"]
@@ -206,7 +207,7 @@ def test_report(reference, tmp_path):
     png = d / "report-groups.plane.max_deformation-vs-plane_bind.png"
     assert png.exists() and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     r = subprocess.run([RACKSTRESS, "batch", "--report", str(d), "--against", "nope"],
-                       capture_output=True, text=True, timeout=60)
+                       capture_output=True, text=True, timeout=HANG_S)
     assert r.returncode == 2 and "not a swept parameter" in r.stderr
 
 

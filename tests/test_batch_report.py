@@ -13,6 +13,7 @@ from html.parser import HTMLParser
 from pathlib import Path
 
 import pytest
+from conftest import HANG_S
 
 BIN = Path(sys.executable).parent
 RACKSTRESS, MPIEXEC = str(BIN / "rackstress"), str(BIN / "mpiexec")
@@ -52,7 +53,7 @@ def run_batch(tmp_path: Path, *extra, mpi: int | None = None) -> Path:
     out = tmp_path / "b"
     cmd = ([MPIEXEC, "-n", str(mpi)] if mpi else []) + [RACKSTRESS, "batch", str(sw), "--out",
                                                          str(out), *extra]
-    r = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=HANG_S)
     assert r.returncode == 0, r.stderr
     assert f"page: {out / 'report.html'}" in r.stdout
     return out
@@ -104,7 +105,7 @@ def test_batch_renders_each_job_and_writes_its_own_report(tmp_path):
     check_batch_page(out, rendered=True)
     # --report refreshes the page (and still prints the table)
     r = subprocess.run([RACKSTRESS, "batch", "--report", str(out), "--figure",
-                        "stress.peak.value"], capture_output=True, text=True, timeout=120)
+                        "stress.peak.value"], capture_output=True, text=True, timeout=HANG_S)
     assert r.returncode == 0, r.stderr
     assert f"page: {out / 'report.html'}" in r.stdout
     check_batch_page(out, rendered=True)

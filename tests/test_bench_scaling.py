@@ -103,13 +103,27 @@ def test_runner_rows_report_each_rank_outside_mpi(tmp_path):
     assert plain["outside_mpi"] is False and len(plain["work_s_per_rank"]) == 1
 
 
+#: repeats of a CPU-time measurement in the tests below: each loop's least CPU per step over
+#: them. CPU time is the work's, but another process on the machine still changes it (the core's
+#: shared caches and its sibling hyperthread): a loaded machine adds to a loop's CPU and never
+#: takes from it, so the least of three is the loop's own cost.
+REPEATS = 3
+
+
+def _least(runs: list) -> list:
+    """Per rank, the least E-loop and 2E-loop CPU per step over the repeats ``runs``."""
+    return [[min(r["halves"][k][h] for r in runs) for h in (0, 1)]
+            for k in range(len(runs[0]["halves"]))]
+
+
 def test_compute_cpu_times_the_steps_in_one_process(tmp_path):
     """``compute_cpu`` on a 10 × 10 × 10 bound block (1,000 particles, every one bound within
     1.5: the same work each step), 1 rank: the CPU per step is positive and the 2E-step loop costs
     twice the E-step loop, and a run asked for twice the steps gives the same figure per step.
     Tolerance 15 %: five times the spread measured on this deck (E vs 2E loop, and repeats,
     within 3 % at load 2 on the 2 cores); the setup (read_data, the first neighbour build) is
-    outside both loops, so it cannot enter the figure at any load."""
+    outside both loops, so it cannot enter the figure at any load. Each loop's least of
+    :data:`REPEATS` measurements (was: one, which a loaded machine put 25 % apart)."""
     import sys
     from pathlib import Path
 
@@ -119,22 +133,27 @@ def test_compute_cpu_times_the_steps_in_one_process(tmp_path):
     assert shim is not None          # cc and the mpich wheel's mpi.h are part of the test set-up
     _deck(block_scene(10, 10, 10), tmp_path / "d")
     bindir = Path(sys.executable).parent
-    a = compute_cpu(tmp_path / "d", 1, bindir, shim, extra=150, counts=True)
-    b = compute_cpu(tmp_path / "d", 1, bindir, shim, extra=300)
-    assert a["owned"] == [1000] and a["moving"] == [1000]
-    for r in (a, b):
-        one, two = r["halves"][0]
-        assert one > 0 and two > 0
+    runs_a = [compute_cpu(tmp_path / "d", 1, bindir, shim, extra=150, counts=True)
+              for _ in range(REPEATS)]
+    runs_b = [compute_cpu(tmp_path / "d", 1, bindir, shim, extra=300) for _ in range(REPEATS)]
+    assert runs_a[0]["owned"] == [1000] and runs_a[0]["moving"] == [1000]
+    for runs in (runs_a, runs_b):
+        for r in runs:
+            one, two = r["halves"][0]
+            assert one > 0 and two > 0
+            assert r["cpu"][0] == pytest.approx((one + 2 * two) / 3, rel=1e-12)
+        ((one, two),) = _least(runs)
         assert two == pytest.approx(one, rel=0.15)       # 2E steps cost 2x E steps
-        assert r["cpu"][0] == pytest.approx((one + 2 * two) / 3, rel=1e-12)
     # the total CPU of the timed loops: 3 x 300 steps against 3 x 150
-    assert 900 * b["cpu"][0] == pytest.approx(2 * 450 * a["cpu"][0], rel=0.15)
+    ((a1, a2),), ((b1, b2),) = _least(runs_a), _least(runs_b)
+    assert 900 * (b1 + 2 * b2) / 3 == pytest.approx(2 * 450 * (a1 + 2 * a2) / 3, rel=0.15)
 
 
 def test_compute_cpu_two_ranks_each_rank_its_own_steps(tmp_path):
     """2 ranks on the same block, split evenly by LAMMPS (500 particles each): each rank's loops
     are found by the barriers' count sent from rank 0 (the marker is rank 0's), and each rank's
-    figure is positive, its two loops agreeing within the 15 % above."""
+    figure is positive, its two loops' least CPU over the repeats agreeing within the 15 %
+    above."""
     import sys
     from pathlib import Path
 
@@ -143,11 +162,11 @@ def test_compute_cpu_two_ranks_each_rank_its_own_steps(tmp_path):
     shim = _shim(tmp_path)
     assert shim is not None
     _deck(block_scene(10, 10, 10), tmp_path / "d")
-    r = compute_cpu(tmp_path / "d", 2, Path(sys.executable).parent, shim, extra=150,
-                    counts=True)
-    assert r["owned"] == [500, 500]
-    assert all(c is not None and c > 0 for c in r["cpu"])
-    for one, two in r["halves"]:
+    runs = [compute_cpu(tmp_path / "d", 2, Path(sys.executable).parent, shim, extra=150,
+                        counts=True) for _ in range(REPEATS)]
+    assert runs[0]["owned"] == [500, 500]
+    assert all(c is not None and c > 0 for r in runs for c in r["cpu"])
+    for one, two in _least(runs):
         assert two == pytest.approx(one, rel=0.15)
 
 

@@ -19,6 +19,7 @@ from rackstress.engines.driver import drive
 from rackstress.engines.lammps.deck import compile_deck
 from rackstress.engines.lammps.runner import LammpsRun
 from rackstress.engines.reference import Reference
+from conftest import HANG_S
 
 
 def _bed():
@@ -92,7 +93,7 @@ def test_a_list_first_asked_for_mid_layout_misses_no_contact_under_mpi(tmp_path)
     runs = lammps_under_mpi(tmp_path, """
 from test_contact_lists import gated_collide_scene, lazy_condition_scene
 scenes_ = {"gated": gated_collide_scene(), "lazy": lazy_condition_scene()}
-""", timeout=600)
+""", timeout=HANG_S)
     for key, build in (("gated", gated_collide_scene), ("lazy", lazy_condition_scene)):
         p, counts = runs[key]
         assert np.abs(p - _reference(build())).max() <= 1e-10, key

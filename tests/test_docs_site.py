@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from conftest import HANG_S
 
 REPO = Path(__file__).resolve().parents[1]
 DOCS = REPO / "docs"
@@ -21,7 +22,7 @@ def test_site_builds_strict(tmp_path):
     site = tmp_path / "site"
     env = {**os.environ, "NO_MKDOCS_2_WARNING": "1"}
     r = subprocess.run([str(BIN / "mkdocs"), "build", "--strict", "--site-dir", str(site)],
-                       cwd=REPO, capture_output=True, text=True, timeout=300, env=env)
+                       cwd=REPO, capture_output=True, text=True, timeout=HANG_S, env=env)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     assert "WARNING" not in r.stderr, r.stderr[-3000:]
     for page in ["index.html", "getting-started/index.html", "tutorials/own-part/index.html",

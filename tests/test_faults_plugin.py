@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import dump_text, trajectory
+from conftest import HANG_S, dump_text, trajectory
 
 from test_faults import (MPIEXEC, QUIET, RS, fill, leftovers, progress_step, rs,  # noqa: F401
                          tmpfs, wait_for)
@@ -63,7 +63,7 @@ def callback_run(tmp_path_factory):
     reproduce exactly."""
     out = tmp_path_factory.mktemp("cb") / "run"
     r = subprocess.run([RS, "run", "plane-rack", "--steps", "60", "--dump-every", "20", "--out",
-                        str(out), *QUIET], capture_output=True, text=True, timeout=600,
+                        str(out), *QUIET], capture_output=True, text=True, timeout=HANG_S,
                        env={**os.environ, "RACKSTRESS_PLUGIN": "0"})
     assert r.returncode == 0, r.stderr
     assert operators(out) == "callback"
@@ -83,7 +83,7 @@ def test_a_broken_plugin_is_one_line_and_the_callback(tmp_path, callback_run, ki
     lib = broken(kind, tmp_path)
     out = tmp_path / "run"
     r = subprocess.run([RS, "run", "plane-rack", "--steps", "60", "--dump-every", "20", "--out",
-                        str(out), *QUIET], capture_output=True, text=True, timeout=600,
+                        str(out), *QUIET], capture_output=True, text=True, timeout=HANG_S,
                        env={**os.environ, "RACKSTRESS_PLUGIN": str(lib)})
     assert r.returncode == 0, r.stderr
     notes = [line for line in r.stderr.splitlines() if line.startswith("rackstress:")]
@@ -126,7 +126,7 @@ def test_packaged_plugin_missing_or_stale_without_sources(tmp_path, plugin_lib, 
     sources to rebuild it: one line why, and the deck falls back to the callback."""
     env = _package_copy(tmp_path, plugin_lib)
     r = subprocess.run([RS, "deck", "plane-rack", "--out", str(tmp_path / "deck")],
-                       capture_output=True, text=True, timeout=300, env=env, cwd=tmp_path)
+                       capture_output=True, text=True, timeout=HANG_S, env=env, cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     notes = [line for line in r.stderr.splitlines() if line.startswith("rackstress:")]
     assert len(notes) == 1 and notes[0].startswith(CALLBACK_LINE), r.stderr
@@ -170,9 +170,9 @@ def ranks(mpiexec: subprocess.Popen, name: str) -> list[int]:
     return found
 
 
-def kill_one_rank_and_time_the_end(p: subprocess.Popen, name: str, bound: float = 60.0):
+def kill_one_rank_and_time_the_end(p: subprocess.Popen, name: str, bound: float = HANG_S):
     """``kill -9`` one rank of ``p``; return mpiexec's (status, seconds to end, stderr)."""
-    assert wait_for(lambda: len(ranks(p, name)) == 2, 60, p), "two ranks never appeared"
+    assert wait_for(lambda: len(ranks(p, name)) == 2, proc=p), "two ranks never appeared"
     os.kill(max(ranks(p, name)), signal.SIGKILL)
     t0 = time.monotonic()
     try:
@@ -198,14 +198,13 @@ def test_rank_killed_under_mpiexec_lmp_on_a_plugin_deck_ends_every_rank(tmp_path
                          stderr=subprocess.PIPE, text=True)
     try:
         dump = deck / "trajectory.dump"
-        assert wait_for(lambda: dump.exists() and dump.stat().st_size > 100_000, 120, p), \
+        assert wait_for(lambda: dump.exists() and dump.stat().st_size > 100_000, proc=p), \
             p.stderr.read() if p.poll() is not None else "no frames"
         code, took, err = kill_one_rank_and_time_the_end(p, "lmp")
     finally:
         if p.poll() is None:
             os.killpg(p.pid, signal.SIGKILL)
-    assert code != 0, err
-    assert took < 30, took
+    assert code != 0, err          # a hang: the bound (HANG_S) of the wait above
     assert descendants(p.pid) == []
 
 
@@ -230,27 +229,27 @@ def test_rank_killed_under_rackstress_run_then_resume(tmp_path, nranks, scene):
             "100", *QUIET]
     full, cut = tmp_path / "full", tmp_path / "cut"
     r = subprocess.run([*mpi, RS, *args, "--out", str(full)], capture_output=True, text=True,
-                       timeout=600)
+                       timeout=HANG_S)
     assert r.returncode == 0, r.stderr
     assert operators(full) == "plugin"
     p = subprocess.Popen([*mpi, RS, *args, "--out", str(cut)], start_new_session=True,
                          stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
-        assert wait_for(lambda: (progress_step(cut) or 0) >= 2400, 300, p), "no checkpoint"
+        assert wait_for(lambda: (progress_step(cut) or 0) >= 2400, proc=p), "no checkpoint"
         if nranks == 2:
             code, took, err = kill_one_rank_and_time_the_end(p, "rackstress")
-            assert code != 0 and took < 30, (code, took, err)
+            assert code != 0, (code, took, err)      # a hang: HANG_S above
             assert descendants(p.pid) == []
         else:
             p.kill()
-            p.communicate(timeout=30)
+            p.communicate(timeout=HANG_S)
     finally:
         if p.poll() is None:
             os.killpg(p.pid, signal.SIGKILL)
     step = progress_step(cut)
     assert step is not None and step < 8000 and not (cut / "summary.json").exists()
     r = subprocess.run([*mpi, RS, "run", "--resume", str(cut), *QUIET], capture_output=True,
-                       text=True, timeout=600)
+                       text=True, timeout=HANG_S)
     assert r.returncode == 0, r.stderr
     s = json.loads((cut / "summary.json").read_text())
     assert s["resumed_from_step"] == step and s["steps"] == 8000
@@ -285,11 +284,11 @@ def test_full_disk_while_checkpointing_on_the_plugin_path(tmpfs, nranks):  # noq
     p = subprocess.Popen([*mpi, RS, "run", "plane-rack", "--steps", "1000000",
                           "--restart-every", "50", "--dump-every", "1000000", "--out", str(out),
                           *QUIET], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    assert wait_for(lambda: (progress_step(out) or 0) >= 100, 120, p)
+    assert wait_for(lambda: (progress_step(out) or 0) >= 100, proc=p)
     assert operators(out) == "plugin"
     fill(disk / "filler")
     try:
-        err = p.communicate(timeout=60)[1]
+        err = p.communicate(timeout=HANG_S)[1]
     except subprocess.TimeoutExpired:
         p.kill()
         p.communicate()

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import HANG_S
 
 SCENE = """
 name = "beam3d"
@@ -44,7 +45,7 @@ c = 0.5
 
 def _cli(*args):
     exe = Path(sys.executable).with_name("rackstress")
-    return subprocess.run([str(exe), *args], capture_output=True, text=True, timeout=600)
+    return subprocess.run([str(exe), *args], capture_output=True, text=True, timeout=HANG_S)
 
 
 @pytest.fixture(scope="module")

@@ -8,6 +8,7 @@ import pytest
 
 from rackstress.validity.solid import (boundary_from_scene, cell_mesh, concave_edges,
                                        fixed_nodes, nodal_forces, solve, von_mises)
+from conftest import HANG_S
 
 
 def _bar(nx, ny, nz):
@@ -216,7 +217,7 @@ def test_points_outside_the_mesh_do_not_ask_every_element_at_once():
         print(float(d.max()), int((y[:, 0] >= -0.5).sum()))
     """)
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                       timeout=300)
+                       timeout=HANG_S)
     assert r.returncode == 0, r.stderr[-2000:]
     dmax, inside = r.stdout.split()
     assert float(dmax) < 1e-5 and int(inside) == 3000

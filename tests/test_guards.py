@@ -19,6 +19,7 @@ from rackstress.engines.guards import dump_frames, force_on_racks, pass_through
 from rackstress.model.operators import Bind, Collide, Const, Force
 from rackstress.model.particles import Group, lattice, rack
 from rackstress.model.scene import Phase, Scene
+from conftest import HANG_S
 
 RACKSTRESS = Path(sys.executable).with_name("rackstress")
 
@@ -150,7 +151,7 @@ def test_run_records_pass_through_in_summary(tmp_path, speed, c, passes):
     out = tmp_path / "run"
     proc = subprocess.run([str(RACKSTRESS), "run", str(path), "--engine", "reference", "--out",
                            str(out), "--no-render", "--set", f"speed={speed}", "--set", f"c={c}"],
-                          capture_output=True, text=True, timeout=300)
+                          capture_output=True, text=True, timeout=HANG_S)
     assert proc.returncode == 0, proc.stderr[-2000:]
     s = json.loads((out / "summary.json").read_text())
     kinds = [w["kind"] for w in s["warnings"]]
@@ -202,7 +203,7 @@ def test_run_records_force_on_rack_in_summary(tmp_path):
     """))
     out = tmp_path / "run"
     proc = subprocess.run([str(RACKSTRESS), "run", str(path), "--engine", "reference", "--out",
-                           str(out), "--no-render"], capture_output=True, text=True, timeout=300)
+                           str(out), "--no-render"], capture_output=True, text=True, timeout=HANG_S)
     assert proc.returncode == 0, proc.stderr[-2000:]
     s = json.loads((out / "summary.json").read_text())
     assert [w["kind"] for w in s["warnings"]] == ["force_on_rack"]
@@ -223,7 +224,7 @@ def test_the_head_start_checks_the_guard_rails_as_the_run_would(tmp_path):
         out = tmp_path / f"run-{how}"
         proc = subprocess.run([str(RACKSTRESS), "run", str(path), "--out", str(out),
                                "--no-render", "--no-progress"], capture_output=True, text=True,
-                              timeout=300, env=dict(os.environ, RACKSTRESS_HEAD_START=how))
+                              timeout=HANG_S, env=dict(os.environ, RACKSTRESS_HEAD_START=how))
         assert proc.returncode == 0, proc.stderr[-2000:]
         s = json.loads((out / "summary.json").read_text())
         assert s["engine"] == "lammps" and "passed through" in proc.stderr

@@ -14,11 +14,12 @@ import click
 import pytest
 
 from rackstress.cli import main
+from conftest import HANG_S
 
 RS = str(Path(sys.executable).parent / "rackstress")
 
 
-def rs(*args, timeout=120):
+def rs(*args, timeout=HANG_S):
     return subprocess.run([RS, *map(str, args)], capture_output=True, text=True,
                           timeout=timeout)
 

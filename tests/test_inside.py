@@ -15,6 +15,7 @@ from rackstress.model.particles import fill
 from rackstress.model.regions import Box, Sphere
 from rackstress.scenes import validation as cases
 from rackstress.scenes.mesh import read_surface
+from conftest import HANG_S
 
 STL = Path(__file__).resolve().parents[1] / "examples" / "bracket" / "bracket.stl"
 
@@ -183,6 +184,6 @@ def test_a_solids_own_pairs_are_tested_once_per_run(tmp_path):
             f"'{STL.parent / 'static.toml'}', '--out', '{tmp_path / 'run'}', '--no-render']; "
             "main()")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                       timeout=300)
+                       timeout=HANG_S)
     assert r.returncode == 0, r.stderr
     assert r.stderr.count("bind inside bracket") == 1, r.stderr

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import dump_text, trajectory
+from conftest import HANG_S, dump_text, trajectory
 
 from rackstress import (Attract, Bind, Collide, Const, Contact, Dampen, DivergenceError, Force,
                         Group, Matched, Phase, PhaseIn, Scene, Within, lattice, rack, scenes)
@@ -171,7 +171,7 @@ from rackstress import scenes
 scenes_ = {key: scenes.build(name, steps=1200, **params) for key, name, params in
            [("d2", "plane-bound", {"d": 2.0}), ("d10", "plane-bound", {"d": 10.0}),
             ("rack", "plane-rack", {})]}
-""", timeout=600)
+""", timeout=HANG_S)
     for key, name, params in [("d2", "plane-bound", {"d": 2.0}), ("d10", "plane-bound", {"d": 10.0}),
                               ("rack", "plane-rack", {})]:
         p, counts = runs[key]
@@ -202,7 +202,7 @@ def test_watchdog_catches_divergence_on_lammps(tmp_path):
 @pytest.mark.lammps
 def test_committed_decks_regenerate_byte_identically(tmp_path):
     proc = subprocess.run([sys.executable, str(ROOT / "scripts" / "make_decks.py"), str(tmp_path)],
-                          capture_output=True, text=True, timeout=300)
+                          capture_output=True, text=True, timeout=HANG_S)
     assert proc.returncode == 0, proc.stderr
     committed = sorted(p.relative_to(ROOT / "lammps_inputs")
                        for p in (ROOT / "lammps_inputs").rglob("*") if p.is_file()
@@ -222,7 +222,7 @@ def test_cli_run_under_mpiexec(tmp_path):
     out = tmp_path / "mpi"
     proc = subprocess.run([str(MPIEXEC), "-n", "2", str(exe), "run", "plane-rack", "--steps", "300",
                            "--out", str(out), "--no-progress"],
-                          capture_output=True, text=True, timeout=600)
+                          capture_output=True, text=True, timeout=HANG_S)
     assert proc.returncode == 0, proc.stderr[-3000:]
     summary = json.loads((out / "summary.json").read_text())
     assert summary["ranks"] == 2 and summary["engine"] == "lammps" and summary["steps"] == 300
@@ -308,17 +308,17 @@ def test_what_runs_standalone_with_plain_lmp(tmp_path):
     for name in ("plane-rack-fast", "plane-rack"):
         shutil.copytree(ROOT / "lammps_inputs" / name, tmp_path / name)
     fast = subprocess.run([str(lmp), "-in", "in.lammps"], cwd=tmp_path / "plane-rack-fast",
-                          capture_output=True, text=True, timeout=300)
+                          capture_output=True, text=True, timeout=HANG_S)
     assert fast.returncode == 0, fast.stdout[-2000:]
     assert "runs this deck standalone" in (tmp_path / "plane-rack-fast" / "in.lammps").read_text()
     exact = subprocess.run([str(lmp), "-in", "in.lammps"], cwd=tmp_path / "plane-rack",
-                           capture_output=True, text=True, timeout=300)
+                           capture_output=True, text=True, timeout=HANG_S)
     assert exact.returncode == 0, exact.stdout[-2000:]
     assert "rackstress plugin's fixes" in (tmp_path / "plane-rack" / "in.lammps").read_text()
     sc = scenes.build("plane-rack")
     write_deck(sc, tmp_path / "callback", "exact", 100, plugin=False)
     py = subprocess.run([str(lmp), "-in", "in.lammps"], cwd=tmp_path / "callback",
-                        capture_output=True, text=True, timeout=300)
+                        capture_output=True, text=True, timeout=HANG_S)
     assert py.returncode != 0
     assert "Fix external callback function not set" in py.stdout + py.stderr
     assert "stops at the first 'run 0'" in (tmp_path / "callback" / "in.lammps").read_text()
@@ -326,7 +326,7 @@ def test_what_runs_standalone_with_plain_lmp(tmp_path):
     out = tmp_path / "rs"
     proc = subprocess.run([str(exe), "run", "plane-rack", "--mode", "fast", "--out", str(out),
                            "--no-render", "--no-progress"], capture_output=True, text=True,
-                          timeout=600)
+                          timeout=HANG_S)
     assert proc.returncode == 0, proc.stderr[-2000:]
     ours = _frames(trajectory(out))
     theirs = _frames(tmp_path / "plane-rack-fast" / "trajectory.dump")
@@ -593,7 +593,7 @@ if every is not None:
     from conftest import MPIEXEC
 
     r = subprocess.run([MPIEXEC, "-n", "2", sys.executable, str(script)], capture_output=True,
-                       text=True, timeout=300)
+                       text=True, timeout=HANG_S)
     assert r.returncode == 0, r.stderr[-3000:]
     lines = [ln.split() for ln in r.stdout.splitlines() if ln.startswith("SEEN")]
     assert len(lines) == 2                                       # both ranks compared

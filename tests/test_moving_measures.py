@@ -17,6 +17,7 @@ from rackstress.stress import load_run
 from rackstress.stress import post
 from rackstress.stress.dump import read_data_file
 from rackstress.stress.measures import Columns, measure_columns, measure_frames
+from conftest import HANG_S
 from test_output import BED, _frames
 from test_stress import BLOCK, SHEET, write_run
 
@@ -179,7 +180,7 @@ def _follow_until(tmp_path, frames, upto, chunks):
     t = threading.Thread(target=post.follow, args=(tmp_path, stop, len(frames), 0.01))
     t.start()
     key = str(tmp_path.resolve())
-    deadline = time.monotonic() + 60
+    deadline = time.monotonic() + HANG_S
     while time.monotonic() < deadline:
         head = post._HEADS.get(key)
         if head is not None and len(head.done) >= chunks:

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from test_plugin import _cli
+from conftest import HANG_S
 
 BIN = Path(sys.executable).parent
 pytestmark = [pytest.mark.lammps, pytest.mark.mpi]
@@ -30,7 +31,7 @@ def _moving_per_rank(deck: Path, name: str, text: str) -> tuple[np.ndarray, int,
                              f"write_dump all custom {name}.all id c_rs_proc\n")
     proc = subprocess.run([str(BIN / "mpiexec"), "-n", "2", str(BIN / "lmp"), "-in", name,
                            "-log", f"{name}.log"], cwd=deck, capture_output=True, text=True,
-                          timeout=600)
+                          timeout=HANG_S)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-2000:]
     moving = np.loadtxt(deck / f"{name}.procs", skiprows=9, ndmin=2)
     n_all = len(np.loadtxt(deck / f"{name}.all", skiprows=9, ndmin=2))

@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from conftest import HANG_S
 
 BIN = Path(sys.executable).parent
 ENV = {k: v for k, v in os.environ.items() if k != "MPI4PY_RC_THREAD_LEVEL"}
@@ -20,7 +21,7 @@ def query(code: str, env=None) -> str:
     r = subprocess.run([sys.executable, "-c", code + "\nfrom mpi4py import MPI\n"
                         "print({MPI.THREAD_SINGLE: 'single', MPI.THREAD_FUNNELED: 'funneled',"
                         " MPI.THREAD_SERIALIZED: 'serialized', MPI.THREAD_MULTIPLE: 'multiple'}"
-                        "[MPI.Query_thread()])"], capture_output=True, text=True, timeout=60,
+                        "[MPI.Query_thread()])"], capture_output=True, text=True, timeout=HANG_S,
                        env=env or ENV)
     assert r.returncode == 0, r.stderr
     return r.stdout.split()[-1]
@@ -50,7 +51,7 @@ def test_batch_under_two_ranks_keeps_its_manager_thread(tmp_path):
     d = tmp_path / "b"
     r = subprocess.run([str(BIN / "mpiexec"), "-n", "2", str(BIN / "rackstress"), "batch",
                         str(sw), "--out", str(d), "--no-render"], capture_output=True,
-                       text=True, timeout=170, env=ENV)
+                       text=True, timeout=HANG_S, env=ENV)
     assert r.returncode == 0, r.stderr
     ix = json.loads((d / "batch.json").read_text())
     assert ix["complete"] is True and ix["passes"][-1]["manager"] == "thread", ix

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import dump_text, trajectory
+from conftest import HANG_S, dump_text, trajectory
 
 from rackstress.stress import AccumulatedDistance, VonMisesStrain, load_run
 from rackstress.stress.measures import (frame_positions, measure_frames, neighbourhoods,
@@ -202,7 +202,7 @@ def test_vtk_variants_open_in_their_readers(two_runs, tmp_path):
         out = tmp_path / fmt
         r = subprocess.run([RACKSTRESS, "stress", str(rundir), "--out", str(out), "--no-dump",
                             "--no-progress", "--vtk-format", fmt], capture_output=True, text=True,
-                           timeout=600)
+                           timeout=HANG_S)
         assert r.returncode == 0, r.stderr[-2000:]
     summary = json.loads((tmp_path / "paraview" / "stress.json").read_text())
     pk = summary["peak"]
@@ -364,7 +364,7 @@ def test_a_run_writes_the_leading_measure_once_a_frame_and_a_gzip_trajectory(two
     run = load_run(d)
     full = tmp_path / "full"
     r = subprocess.run([RACKSTRESS, "stress", str(d), "--out", str(full), "--no-dump",
-                        "--no-progress"], capture_output=True, text=True, timeout=600)
+                        "--no-progress"], capture_output=True, text=True, timeout=HANG_S)
     assert r.returncode == 0, r.stderr[-2000:]
     lean, every = (pv.get_reader(str(x / "vtk" / "run.pvd")) for x in (d, full))
     assert list(lean.time_values) == list(every.time_values) == list(run.steps)

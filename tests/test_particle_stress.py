@@ -17,6 +17,7 @@ from rackstress.runs.run import run
 from rackstress.stress import load_run
 from rackstress.stress.measures import ParticleStress
 from rackstress.stress.post import STRAIN_LIMIT, postprocess
+from conftest import HANG_S
 
 MM = SYSTEMS["mm-N-s"]
 AL = material("aluminium")                         # E 70 GPa, ν 0.33, 2700 kg/m³, yield 276 MPa
@@ -316,7 +317,7 @@ def test_lammps_on_two_ranks_matches_the_reference_engine(tmp_path):
     out = tmp_path / "mpi"
     proc = subprocess.run([MPIEXEC, "-n", "2", sys.executable, str(script), str(out),
                            str(Path(__file__).parent)], capture_output=True, text=True,
-                          timeout=600)
+                          timeout=HANG_S)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert json.loads((out / "summary.json").read_text())["ranks"] == 2
     ref = tmp_path / "ref"

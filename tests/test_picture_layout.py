@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import HANG_S
 
 RS = str(Path(sys.executable).parent / "rackstress")
 
@@ -19,7 +20,7 @@ def walk(tmp_path_factory):
     out = tmp_path_factory.mktemp("walk") / "ms"
     r = subprocess.run([RS, "run", "magpod-small", "--steps", "200", "--dump-every", "50",
                         "--out", str(out), "--no-render", "--no-progress"],
-                       capture_output=True, text=True, timeout=600)
+                       capture_output=True, text=True, timeout=HANG_S)
     assert r.returncode == 0, r.stderr
     return out
 

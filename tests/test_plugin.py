@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import dump_text, trajectory
+from conftest import HANG_S, dump_text, trajectory
 
 from rackstress import scenes
 from rackstress.engines.driver import drive
@@ -296,7 +296,7 @@ def test_rs_nve_checks_displacements_as_lammps_does(tmp_path):
             cmd = [str(BIN / "lmp"), "-in", "in.lammps", "-log", "log.lammps", "-screen", "none"]
             if ranks > 1:
                 cmd = [str(BIN / "mpiexec"), "-n", str(ranks), *cmd]
-            proc = subprocess.run(cmd, cwd=d, capture_output=True, text=True, timeout=600)
+            proc = subprocess.run(cmd, cwd=d, capture_output=True, text=True, timeout=HANG_S)
             assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
             log = (d / "log.lammps").read_text()
             builds = sum(int(n) for n in

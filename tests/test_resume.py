@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from conftest import dump_text, trajectory
+from conftest import HANG_S, dump_text, trajectory
 
 BIN = Path(sys.executable).parent
 RACKSTRESS = str(BIN / "rackstress")
@@ -20,7 +20,7 @@ RUN = ["run", "plane-rack", "--steps", "1200", "--restart-every", "100", "--dump
 
 
 def _run(args, **kw):
-    return subprocess.run([RACKSTRESS, *args], capture_output=True, text=True, timeout=120, **kw)
+    return subprocess.run([RACKSTRESS, *args], capture_output=True, text=True, timeout=HANG_S, **kw)
 
 
 def _state(rundir: Path):
@@ -36,7 +36,7 @@ def _killed_at(rundir: Path, at: int, run=RUN):
     p = subprocess.Popen([RACKSTRESS, *run, "--out", str(rundir)], start_new_session=True,
                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     step = None
-    deadline = time.monotonic() + 120
+    deadline = time.monotonic() + HANG_S
     while time.monotonic() < deadline:
         try:
             step = json.loads((rundir / "progress.json").read_text())["step"]

@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from conftest import dump_text, trajectory
+from conftest import HANG_S, dump_text, trajectory
 
 BIN = Path(sys.executable).parent
 RACKSTRESS = str(BIN / "rackstress")
@@ -20,7 +20,7 @@ RUN = ["run", "plane-rack", "--steps", "1200", "--dump-every", "4", "--no-render
 
 
 def _run(args):
-    return subprocess.run([RACKSTRESS, *args], capture_output=True, text=True, timeout=300)
+    return subprocess.run([RACKSTRESS, *args], capture_output=True, text=True, timeout=HANG_S)
 
 
 def _killed_after(rundir: Path, at: int):
@@ -91,7 +91,7 @@ def test_prepare_imports_in_a_thread_and_restores_the_switch_interval():
         "assert all(m in sys.modules for m in heavy), [m for m in heavy if m not in sys.modules]\n"
         "assert sys.getswitchinterval() == before\n"
         "print('ok')\n")
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=HANG_S)
     assert r.returncode == 0 and r.stdout.strip() == "ok", r.stderr
 
 
@@ -219,7 +219,7 @@ def alone(tmp_path_factory):
 
     out = tmp_path_factory.mktemp("alone") / "run"
     r = subprocess.run([RACKSTRESS, *HEAD, "--out", str(out)], capture_output=True, text=True,
-                       timeout=600, env=dict(os.environ, RACKSTRESS_HEAD_START="0"))
+                       timeout=HANG_S, env=dict(os.environ, RACKSTRESS_HEAD_START="0"))
     assert r.returncode == 0, r.stderr
     return out
 
@@ -239,13 +239,13 @@ def test_a_killed_head_start_loses_nothing(tmp_path, alone):
                          env=dict(os.environ, RACKSTRESS_HEAD_START="always"))
     killed = None
     t0 = time.monotonic()
-    while killed is None and p.poll() is None and time.monotonic() - t0 < 120:
+    while killed is None and p.poll() is None and time.monotonic() - t0 < HANG_S:
         kids = _children(p.pid)
         if kids:
             killed = kids[0]
             os.kill(killed, signal.SIGKILL)
         time.sleep(0.005)
-    stdout, stderr = p.communicate(timeout=600)
+    stdout, stderr = p.communicate(timeout=HANG_S)
     assert killed is not None, "no head start process was forked"
     assert p.returncode == 0, stderr
     assert "pictures:" in stdout and "peak paper" in stdout
@@ -294,13 +294,13 @@ def test_the_head_start_process_hands_over_what_it_measured(tmp_path, alone):
         "    f = Path(f'/proc/{a.pid}/stat').read_text().rsplit(')', 1)[1].split()\n"
         "    return int(f[11]) + int(f[12])\n"
         "last, still, t0 = -1, 0, time.monotonic()\n"
-        "while still < 10 and time.monotonic() - t0 < 240:   # idle for a second: all done\n"
+        "while still < 10 and time.monotonic() - t0 < 900:   # idle for a second: all done\n"
         "    time.sleep(0.1)\n"
         "    now = cpu()\n"
         "    still, last = (still + 1 if now == last else 0), now\n"
         "a.ended()\n"
         "print(a.go())\n")
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=HANG_S)
     assert r.returncode == 0 and r.stdout.strip().splitlines()[-1] == "0", r.stderr
     assert "peak paper" in r.stdout
     _same(_derived(out), _derived(alone))
@@ -327,7 +327,7 @@ def test_a_head_start_told_to_quit_writes_nothing(tmp_path):
         f"a = Ahead(Path({str(out)!r}), 101, True, lambda found: 9, lambda: ('x', []))\n"
         "a.follow(); time.sleep(3); a.ended(); time.sleep(1)\n"
         "a.quit(); print(a.status)\n")
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=HANG_S)
     assert r.returncode == 0 and r.stdout.strip() == "0", r.stderr
     time.sleep(0.2)
     assert {p: p.stat().st_mtime_ns for p in out.rglob("*")} == before

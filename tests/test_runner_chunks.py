@@ -6,6 +6,7 @@ from __future__ import annotations
 from rackstress import scenes
 from rackstress.engines.lammps.deck import compile_deck
 from rackstress.engines.lammps.runner import CHECK_EVERY, PLUGIN_CHECK_EVERY, LammpsRun
+from conftest import HANG_S
 
 
 def test_checkpoints_fall_on_their_steps_with_long_chunks(tmp_path):
@@ -108,7 +109,7 @@ def test_watchdog_names_the_first_chunk_end_past_the_bound_on_1_and_2_ranks(tmp_
     for mpi in ([], [MPIEXEC, "-n", "2"]):
         out = tmp_path / f"r{len(mpi)}"
         r = subprocess.run([*mpi, RS, "run", str(scene), "--allow-unstable", "--out", str(out),
-                            *QUIET], capture_output=True, text=True, timeout=180)
+                            *QUIET], capture_output=True, text=True, timeout=HANG_S)
         assert r.returncode == 3, r.stderr
         s = json.loads((out / "summary.json").read_text())
         assert s["status"] == "diverged" and s["ranks"] == (2 if mpi else 1)

@@ -18,6 +18,7 @@ import pytest
 from rackstress.errors import SceneError
 from rackstress.runs.sweep import load_sweep
 from rackstress.scenes.toml import load_toml
+from conftest import HANG_S
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLE = REPO / "examples" / "bracket"
@@ -355,7 +356,7 @@ def test_example_bracket_volume_count_and_supports():
 def test_example_stl_is_what_the_script_writes(tmp_path):
     import trimesh
     subprocess.run([sys.executable, str(EXAMPLE / "make_bracket.py"), str(tmp_path / "b.stl")],
-                   check=True, capture_output=True, timeout=120)
+                   check=True, capture_output=True, timeout=HANG_S)
     a, b = trimesh.load(tmp_path / "b.stl"), trimesh.load(EXAMPLE / "bracket.stl")
     assert a.volume == pytest.approx(b.volume, rel=1e-12)
     np.testing.assert_allclose(np.sort(a.vertices, axis=0), np.sort(b.vertices, axis=0), atol=1e-5)
@@ -367,7 +368,7 @@ def test_example_runs_and_sweeps_from_the_command_line(tmp_path):
     out = tmp_path / "run"
     proc = subprocess.run([str(RACKSTRESS), "run", str(EXAMPLE / "scene.toml"), "--out", str(out),
                            "--no-render", "--set", "speed=3", "--dt", "0.005"],
-                          capture_output=True, text=True, timeout=600)
+                          capture_output=True, text=True, timeout=HANG_S)
     assert proc.returncode == 0, proc.stderr[-3000:]
     s = json.loads((out / "summary.json").read_text())
     assert s["status"] == "ok" and s["steps"] == 600          # duration 3 at dt 0.005
@@ -384,7 +385,7 @@ def test_example_runs_and_sweeps_from_the_command_line(tmp_path):
 
 def test_rackstress_scenes_lists_a_files_own_parameters():
     proc = subprocess.run([str(RACKSTRESS), "scenes", "--json", str(EXAMPLE / "scene.toml")],
-                          capture_output=True, text=True, timeout=120)
+                          capture_output=True, text=True, timeout=HANG_S)
     assert proc.returncode == 0, proc.stderr
     listed = json.loads(proc.stdout)[str(EXAMPLE / "scene.toml")]["parameters"]
     assert listed["speed"] == 4.0 and listed["duration"] == 3.0 and "steps" not in listed

@@ -19,6 +19,7 @@ from rackstress.errors import SceneError
 from rackstress.model.operators import Bind, Collide, Const, Contact, Dampen, Force, Within
 from rackstress.model.particles import Group, lattice
 from rackstress.model.scene import Phase, Scene
+from conftest import HANG_S
 
 MPIEXEC = Path(sys.executable).with_name("mpiexec")
 
@@ -146,7 +147,7 @@ def test_impact_parity_under_mpi(tmp_path):
     p, counts = lammps_under_mpi(tmp_path, """
 from test_supports import impact_scene
 scenes_ = {"impact": impact_scene(phases=3)}
-""", timeout=600)["impact"]
+""", timeout=HANG_S)["impact"]
     assert counts.min() > 0                               # both ranks hold atoms
     sc = impact_scene(phases=3)
     ref = run_reference(sc)
