@@ -67,7 +67,10 @@ def main():
         if world().Get_rank() == 0:
             print(json.dumps({"wall": best}))
         return
+    import os
+
     mpiexec = Path(sys.executable).parent / "mpiexec"
+    load_start = list(os.getloadavg())
     rows = {}
     for case, (name, params) in CASES.items():
         ref = min(time_reference(name, params, args.steps) for _ in range(args.repeat))
@@ -87,7 +90,8 @@ def main():
               f"fast 1 rank {fast:7.3f} s ({fast / ref:5.2f}x)", flush=True)
     result = {"steps": args.steps, "repeat": args.repeat, "machine": platform.platform(),
               "cpus": __import__("os").cpu_count(), "python": platform.python_version(),
-              "numpy": np.__version__, "cases": rows}
+              "numpy": np.__version__, "load_avg_at_start": load_start,
+              "load_avg_at_end": list(os.getloadavg()), "cases": rows}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=2) + "\n")
     print(f"saved {args.out}")

@@ -91,6 +91,20 @@ def test_own_part_in_five_minutes(checkout):
     # the run ends by naming its report (a headless machine's browser prints nothing)
     said = next(out for cmd, _, out in done if cmd.startswith("rackstress run "))
     assert said.rstrip().splitlines()[-1].strip() == "report: runs/my-part/report.html"
+    # the tutorial quotes what these very commands print: each quoted line is printed so
+    # (a line ending in "…" is the start of one), so its figures cannot fall behind the run
+    tutorial = REPO / "docs" / "tutorials" / "own-part.md"
+    quoted = re.findall(r"<!-- output of: (.+?) -->\n```\n(.*?)```", tutorial.read_text(), re.S)
+    assert len(quoted) == 2
+    for cmd, block in quoted:
+        out = next(o for c, _, o in done if c.startswith(cmd))
+        for line in block.rstrip("\n").splitlines():
+            if line.endswith("…"):
+                assert any(o.startswith(line[:-1].rstrip()) for o in out.splitlines()), \
+                    f"{tutorial.name} quotes '{line}', but '{cmd}' printed:\n{out}"
+            else:
+                assert line in out.splitlines(), \
+                    f"{tutorial.name} quotes '{line}', but '{cmd}' printed:\n{out}"
     s = json.loads((run / "summary.json").read_text())
     assert s["units"] == "mm-N-s" and s["analysis"] == "static" and s["settled"] is True
     peak = s["stress"]["peak"]

@@ -155,4 +155,5 @@ def markdown(data) -> str:
         + md_table(HEADER, table_rows(data)) +
         f"\nTarget: 1,000,000 particles bound in ≤ {data['target_s']:g} s wall "
         f"({'met' if data['met'] else 'NOT met'}). Machine: {m['cores']} cores, load "
-        f"{m['load_avg_at_start']} at the start (shared: compare within the run).\n")
+        f"{' / '.join(f'{x:.1f}' for x in m['load_avg_at_start'])} (1 / 5 / 15 min) at the "
+        "start (shared: compare within the run).\n")

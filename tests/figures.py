@@ -1,0 +1,158 @@
+"""Figures quoted in the documentation, checked against the JSON their benchmark wrote.
+
+A page quotes a measured figure with a mark right after it, an HTML comment (invisible on the
+site, plain in the Markdown)::
+
+    magpod on the plugin, one rank: 0.102<!-- fig perf.json row(d.rows, scene="magpod",
+    kernels="plugin", ranks=1, particles="active only").ms_per_it --> ms an iteration
+
+``fig FILE EXPR``: FILE is the benchmark's JSON, relative to the page (as a Markdown link is);
+EXPR is an expression over its data ``d``: ``d.key`` or ``d["key with spaces"]``, ``[n]``,
+arithmetic (``+ - * /``, numbers), and ``row(list, key=value, …)`` (the first dict of ``list``
+whose keys have those values), ``col(list, key)`` (every dict's value of ``key``), ``min``,
+``max``, ``abs``, ``len``, ``sum``. The figure is the
+number just before the mark (``0.102``, ``33,689``, ``1.5e-3``, ``**1.89**``); it agrees when the
+expression's value rounds to it at the figure's own precision (its decimals, or its significant
+digits in ``e`` notation). ``tests/test_figures.py`` checks every mark of README.md and docs/, and
+that no checked page (:data:`CHECKED`) quotes a figure without one.
+
+    .venv/bin/python tests/figures.py docs/benchmarks/index.md     # each mark: quoted, value
+"""
+from __future__ import annotations
+
+import ast
+import json
+import math
+import re
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+#: a number, bold or not, then its mark
+MARK = re.compile(r"(?P<fig>[-+−]?\d[\d,]*(?:\.\d+)?(?:[eE][-+]?\d+)?)(?P<bold>\**)"
+                  r"<!--\s*fig\s+(?P<file>\S+)\s+(?P<expr>.*?)\s*-->", re.S)
+
+#: Hand-written pages every measured figure of which carries a mark (a test checks that none
+#: lacks one): a number followed by a unit of time, size or speed, a ratio (``×``) or a
+#: percentage. Pages a benchmark command writes are checked whole instead (test_figures.py).
+CHECKED = ["README.md", "docs/benchmarks/index.md", "docs/getting-started.md",
+           "docs/tutorials/own-part.md"]
+#: what counts as a measured figure on a checked page
+MEASURED = re.compile(r"(?<![\w.])\d[\d,]*(?:\.\d+)?(?:[eE][-+]?\d+)?\**\s?"
+                      r"(?:ms|µs|s|MB|GB|GiB|MiB|×|%)(?![\w])")
+
+
+def _row(seq, **match):
+    for r in seq:
+        if isinstance(r, dict) and all(r.get(k) == v for k, v in match.items()):
+            return r
+    raise KeyError(f"no row with {match}")
+
+
+_OPS = {ast.Add: lambda a, b: a + b, ast.Sub: lambda a, b: a - b,
+        ast.Mult: lambda a, b: a * b, ast.Div: lambda a, b: a / b}
+def _col(seq, key):
+    return [r[key] for r in seq if isinstance(r, dict) and r.get(key) is not None]
+
+
+_FUNCS = {"row": _row, "col": _col, "min": min, "max": max, "abs": abs, "len": len, "sum": sum}
+
+
+def evaluate(expr: str, data):
+    """``expr`` (module doc) over ``data`` (the JSON, as ``d``)."""
+    def ev(n):
+        if isinstance(n, ast.Expression):
+            return ev(n.body)
+        if isinstance(n, ast.Constant) and isinstance(n.value, (int, float, str)):
+            return n.value
+        if isinstance(n, ast.Name) and n.id == "d":
+            return data
+        if isinstance(n, ast.Attribute):
+            return ev(n.value)[n.attr]
+        if isinstance(n, ast.Subscript):
+            return ev(n.value)[ev(n.slice)]
+        if isinstance(n, ast.UnaryOp) and isinstance(n.op, ast.USub):
+            return -ev(n.operand)
+        if isinstance(n, ast.BinOp) and type(n.op) in _OPS:
+            return _OPS[type(n.op)](ev(n.left), ev(n.right))
+        if isinstance(n, ast.Call) and isinstance(n.func, ast.Name) and n.func.id in _FUNCS:
+            return _FUNCS[n.func.id](*[ev(a) for a in n.args],
+                                     **{k.arg: ev(k.value) for k in n.keywords})
+        if isinstance(n, (ast.List, ast.Tuple)):
+            return [ev(e) for e in n.elts]
+        raise ValueError(f"not allowed in a figure's expression: {ast.dump(n)[:60]}")
+
+    return ev(ast.parse(expr.replace("\n", " "), mode="eval"))
+
+
+def agrees(quoted: str, value) -> bool:
+    """Whether ``value`` rounds to the ``quoted`` figure at the figure's own precision."""
+    text = quoted.replace(",", "").replace("−", "-")
+    q = float(text)
+    if not isinstance(value, (int, float)) or not math.isfinite(value):
+        return False
+    if "e" in text.lower():
+        mant = text.lower().split("e")[0].lstrip("+-")
+        digits = len(mant.replace(".", "").lstrip("0")) or 1
+        return q == float(f"{value:.{digits - 1}e}")
+    decimals = len(text.split(".")[1]) if "." in text else 0
+    return abs(value - q) <= 0.5 * 10.0 ** -decimals * (1 + 1e-9)
+
+
+def _outside_code(text: str) -> str:
+    """``text`` with its fenced code blocks blanked (their lines kept, empty): an example of a
+    mark shown as code is no mark."""
+    lines, fenced = text.split("\n"), False
+    for k, line in enumerate(lines):
+        if line.lstrip().startswith("```"):
+            fenced = not fenced
+            lines[k] = ""
+        elif fenced:
+            lines[k] = ""
+    return "\n".join(lines)
+
+
+def marks(page: Path) -> list[dict]:
+    """Every mark of a page: the figure, the file, the expression, the value, agreement."""
+    out = []
+    text = _outside_code(page.read_text())
+    for m in MARK.finditer(text):
+        line = text.count("\n", 0, m.start()) + 1
+        rec = {"line": line, "figure": m["fig"], "file": m["file"], "expr": m["expr"]}
+        src = (page.parent / m["file"]).resolve()
+        try:
+            rec["value"] = evaluate(m["expr"], json.loads(src.read_text()))
+            rec["ok"] = agrees(m["fig"], rec["value"])
+        except (OSError, ValueError, KeyError, IndexError, TypeError, SyntaxError,
+                ZeroDivisionError) as exc:
+            rec["value"], rec["ok"] = f"{type(exc).__name__}: {exc}", False
+        out.append(rec)
+    return out
+
+
+def unmarked(page: Path) -> list[tuple[int, str]]:
+    """Measured figures (:data:`MEASURED`) of a page that carry no mark, outside code blocks
+    (commands and program output, which their own tests check)."""
+    found, fenced = [], False
+    for k, line in enumerate(page.read_text().splitlines(), 1):
+        if line.lstrip().startswith("```"):
+            fenced = not fenced
+            continue
+        if fenced:
+            continue
+        bare = MARK.sub("", line)
+        bare = re.sub(r"<!--.*?-->", "", bare)
+        bare = re.sub(r"`[^`]*`", "", bare)          # inline code: options, file names
+        for m in MEASURED.finditer(bare):
+            found.append((k, m.group(0)))
+    return found
+
+
+if __name__ == "__main__":
+    for arg in sys.argv[1:]:
+        for r in marks(Path(arg)):
+            print(f"{arg}:{r['line']}: {r['figure']} {'==' if r['ok'] else '!='} "
+                  f"{r['value']!r}  ({r['file']}: {r['expr']})")
+        for k, fig in unmarked(Path(arg)):
+            print(f"{arg}:{k}: {fig} has no mark")
