@@ -1,4 +1,4 @@
-"""The engineer's language (issue 22): units, materials, loads in newtons, supports by
+"""The engineer's language: units, materials, loads in newtons, supports by
 direction, static analysis. Expected values come from beam theory and hand calculation."""
 from __future__ import annotations
 

@@ -125,6 +125,7 @@ def test_resume_after_kill_and_overwrite_keep_the_users_file(tmp_path):
     assert "plan.txt" not in manifest(d)
 
 
+@pytest.mark.slow
 def test_render_stress_and_deck_out_never_replace_the_users_files(tmp_path):
     run = tmp_path / "run"
     r = rs("run", "plane-bound", "--engine", "reference", "--steps", "20", "--out", run, *QUIET)

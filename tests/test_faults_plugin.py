@@ -1,4 +1,4 @@
-"""Faults of the compiled plugin's path, played with real processes (issue 25, "Also in scope"):
+"""Faults of the compiled plugin's path, played with real processes:
 a plugin missing, cut short, corrupt or built for another LAMMPS (one line, then the Python
 callback); a rank killed with ``kill -9`` under ``mpiexec -n 2 lmp`` and under ``mpiexec -n 2
 rackstress run`` (every rank ends in bounded time; ``--resume`` writes the uninterrupted

@@ -1,5 +1,5 @@
-"""Faults of physical scenes, static analysis and batches over them, played with real processes
-(issue 25, "Also in scope"): a static run that cannot settle (a part that floats away, a
+"""Faults of physical scenes, static analysis and batches over them, played with real processes:
+a static run that cannot settle (a part that floats away, a
 mechanism) ends with ``not settled`` and exit 6 in bounded time; a load on a region that
 selects nothing, a mesh in other units than the scene's, a material without E are exit 2 with
 a message naming the place; a batch over mesh scenes refuses a missing STL before any job runs
@@ -129,7 +129,7 @@ def test_a_load_too_small_to_resolve_says_why_it_cannot_settle(tmp_path):
 def test_physical_input_errors_name_the_place(tmp_path, case):
     """Exit 2 and one paragraph naming the file and the field; nothing written.
 
-    The fault sweep of round 3 (numbers no solid or load has) found: E = 1e-300 Pa ran into
+    A fault sweep of numbers no solid or load has found: E = 1e-300 Pa ran into
     LAMMPS' "Non-numeric atom coords" (exit 3); E = 1e300 Pa, a force of 1e300 N or gravity of
     1e308 ended "not settled" (exit 6, a residual of nan); a prescribed displacement of 1e300
     mm lost atoms in LAMMPS (exit 3) and 1e6 mm, beyond the watchdog bound, did not settle."""

@@ -82,7 +82,9 @@ def test_a_benchmark_page_is_what_its_command_writes_from_its_json(page):
 
 
 #: a ticket or a work round given as the reason for something
-CITED = re.compile(r"\b(?:issues?|rounds?)\s+(?:#\s*)?\d+", re.I)
+CITED = re.compile(r"\b(?:issues?|rounds?)\s+(?:#\s*)?\d+"
+                   r"|\b(?:previous|last|this|earlier|next)\s+rounds?\b"
+                   r"|\brounds?\s+(?:one|two|three|four|five|six|seven|eight|nine|ten)\b", re.I)
 
 
 def test_no_text_cites_a_ticket_or_a_round():

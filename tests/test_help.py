@@ -1,4 +1,4 @@
-"""Help that teaches (issue 26, item 2): every command's --help has a one-line purpose and
+"""Help that teaches: every command's --help has a one-line purpose and
 examples, the command list is not cut short, ``rackstress scenes`` prints a table, and a typo
 in a scene key, a parameter, a scene name or a CLI choice names the closest valid one. Real
 processes of the installed ``rackstress`` command."""

@@ -1,4 +1,4 @@
-"""Measures kept over the particles that moved (issue 24: sediment-large's stress).
+"""Measures kept over the particles that moved (sediment-large's stress).
 
 Past the in-memory limit, a run whose sediment rests keeps its measures over the particles that
 moved and their strain neighbours only (:func:`rackstress.stress.measures.measure_columns`);

@@ -1,4 +1,4 @@
-"""Output that follows what moves (issue 24): the trajectory of a deck with a resting sediment
+"""Output that follows what moves: the trajectory of a deck with a resting sediment
 holds the displaced particles only, every reader puts the others at their original positions,
 the measures of every frame at once equal the per-frame AnalysisBase classes, and the VTK files
 open in their readers (pyvista, VTK's XML reader) in both variants.
@@ -326,7 +326,7 @@ def whole(blocks) -> dict:
 
 @pytest.mark.lammps
 def test_a_run_writes_the_leading_measure_once_a_frame_and_a_gzip_trajectory(two_runs, tmp_path):
-    """What 'rackstress run' leaves (issue 24): trajectory.dump.gz, a gzip member a frame, which
+    """What 'rackstress run' leaves: trajectory.dump.gz, a gzip member a frame, which
     gzip, MDAnalysis' own LAMMPSDUMP reader and load_run open as the text LAMMPS wrote; and the
     VTK series with the leading measure and displacement, its resting sediment written once,
     equal array for array to the full series 'rackstress stress RUNDIR' writes."""
@@ -404,7 +404,7 @@ def test_bench_e2e_dump_cost_and_table():
     assert "| magpod-small | the scene's | warm | 1.2 | 4.00 s | 96 of 101 | 1.00 s | " \
            "2.00 s (1.50 s) | 3.00 s | 10.00 s | 2.50× |  | 30.0 MB |" in md
     assert "`vtk/` 20.00 MB" in md and "| magpod-small | 5,705 | 300 |" in md
-    # issue 24's targets, from the same run: 10 s over its 4 s simulation; 30 MB
+    # the targets of README's first run, from the same run: 10 s over its 4 s simulation; 30 MB
     assert "| warm total / its simulation (beside the head start) | | 2.50× |" in md
     assert "the simulation's own time" not in md                  # no run without it
     assert "| run directory | ≤ 30 MB | 30.0 MB |" in md and "cold − warm" not in md

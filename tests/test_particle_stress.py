@@ -1,4 +1,4 @@
-"""Stress per particle in the scene's units (issue 22 item 5): expected values from hand
+"""Stress per particle in the scene's units: expected values from hand
 calculation and analytical fields — a pulled pair, uniform tension σ = F/A, pure bending M·z/I."""
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The picture defects of issue 26 (item 5), checked on geometry: the footprints plot's title
+"""Picture defects, checked on geometry: the footprints plot's title
 lies inside the figure and its panel fills the figure (it was clipped at the right with the
 left half empty), and no part name covers the peak ring (it did)."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The plugin's per-step work over the moving rows only (issue 23; rs_common.h, "Resting
+"""The plugin's per-step work over the moving rows only (rs_common.h, "Resting
 atoms"): ``rs/force``, ``rs/dampen`` (no contact) and ``rs/nve`` against LAMMPS' own ``fix
 addforce``, ``fix viscous`` and ``fix nve`` (the independent path: LAMMPS' implementation of the same arithmetic, Eqs. 8–9)
 in a deck whose resting atoms sit after ``atom_modify first``'s rows; the watchdog's prefix of

@@ -119,7 +119,7 @@ def test_own_part_in_five_minutes(checkout):
     # the FE model is the STL itself (the scene rebuilt from the run), not the particles' cells
     assert fea["mesh"] == "gmsh tetrahedra of my-part.stl" and not fea.get("note")
     assert fea["particles"] == s["groups"]["part"]["n"] and fea["units"] == "mm-N-s"
-    # issue 22's targets for a 3D part: rank correlation ≥ 0.8, top-5 % overlap ≥ 0.5
+    # the targets for a 3D part (docs/fea.md): rank correlation ≥ 0.8, top-5 % overlap ≥ 0.5
     assert fea["agreement"]["spearman"] >= 0.8 and fea["agreement"]["top5_overlap"] >= 0.5
     # and the peak von Mises away from re-entrant edges, supports and loads within 15 %
     assert fea["measure"] == "von_mises" and abs(fea["agreement"]["peak_ratio"] - 1) <= 0.15

@@ -1,4 +1,4 @@
-"""What ``rackstress run`` leaves behind by default, and the head start it takes (issue 24):
+"""What ``rackstress run`` leaves behind by default, and the head start it takes:
 a finished run drops the checkpoints it wrote only to survive a kill (a killed one still
 resumes to the uninterrupted trajectory, byte for byte), and the post-processing's imports load
 in a thread while LAMMPS runs. Real LAMMPS, real processes, a real SIGKILL."""

@@ -1,4 +1,4 @@
-"""``rackstress run``'s chunks on the compiled plugin (issue 23): the runner checks every
+"""``rackstress run``'s chunks on the compiled plugin: the runner checks every
 ``PLUGIN_CHECK_EVERY`` steps there, and a chunk still ends at every checkpoint's step, so the
 checkpoints fall where they fell with 10-step chunks and a resumed run stays bit for bit."""
 from __future__ import annotations

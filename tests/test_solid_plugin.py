@@ -1,4 +1,4 @@
-"""A material solid on the compiled plugin (issue 22): its bindings' per-pair c (the face
+"""A material solid on the compiled plugin: its bindings' per-pair c (the face
 compensation of ``model/solid.py``) as a few bond types, one ``rs/bind`` fix each, against the
 reference engine (the paper's equations in NumPy, an independent path) in real LAMMPS."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The planar validity cases as material scenes (issue 22, item 7): peak von Mises in MPa of a
+"""The planar validity cases as material scenes: peak von Mises in MPa of a
 user's aluminium scene against scikit-fem's plane-stress FEA and beam theory."""
 from __future__ import annotations
 

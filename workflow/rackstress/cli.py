@@ -1240,7 +1240,7 @@ TEACH = {
         "rackstress bench validity --out docs/benchmarks",
         "rackstress bench validity --planar --out docs/benchmarks",
     ]),
-    # commands the other engineers of this round add (applied when the command exists)
+    # commands that may not exist in every build (applied when the command exists)
     "fea": ("Check a run's part against linear-elastic FEA of the same part.", [
         "rackstress fea runs/bracket",
         "rackstress fea runs/bracket --E 70e3 --nu 0.33 --size 0.5",

@@ -165,7 +165,7 @@ def dump_costs(names, steps: int, reps: int = 5) -> list:
 
 
 def variants(rundir: Path) -> dict:
-    """The size of each way to write a finished run's VTK series and trajectory (issue 24), on
+    """The size of each way to write a finished run's VTK series and trajectory, on
     ``rundir`` (a warm ``rackstress run``), in one process and in turn: the VTK series with every
     measure (``rackstress stress``) and with the leading one (``rackstress run``), its zlib
     streams made by ISA-L (what a run writes) or by zlib, under each of VTK's XML compressors,
@@ -260,7 +260,8 @@ def run(out: Path, scene_names=SCENES, repeat: int = 1, steps: dict | None = Non
 
 
 def targets(data: dict) -> list:
-    """Issue 24's targets for magpod-small (README's first command), against these runs: each
+    """The targets for magpod-small (README's first command: a run whose start-up, measures and
+    pictures cost little beside its simulation), against these runs: each
     warm run's total over its own simulation, cold over warm (paired by repeat), the run
     directory's size."""
     runs = [r for r in data["runs"] if r["scene"] == "magpod-small" and "phases" in r]

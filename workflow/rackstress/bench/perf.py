@@ -68,7 +68,7 @@ CONFIGS = (("reference", "exact", 1), ("lammps", "exact", 1, "numpy"),
            ("lammps", "exact", 1, "plugin", "sediment-large", None),
            ("lammps", "exact", 1, "plugin", "sediment-large", 200),
            ("lammps", "exact", 2, "plugin", "sediment-large", 200),
-           # the larger sediment (issue 23: >= 4 M particles; a bed four times as long)
+           # the larger sediment (>= 4 M particles, what a cluster user brings; a bed four times as long)
            ("lammps", "exact", 1, "plugin", HUGE, 200),
            ("lammps", "exact", 2, "plugin", HUGE, 200),
            ("lammps", "exact", 2, "plugin", HUGE_WHOLE, 200),
@@ -78,7 +78,7 @@ CONFIGS = (("reference", "exact", 1), ("lammps", "exact", 1, "numpy"),
            # switch's setups and LAMMPS' reneighbourings (~30 ms each over 4 M atoms) too
            ("lammps", "exact", 1, "plugin", HUGE, 4800),
            ("lammps", "exact", 2, "plugin", HUGE, 4800),
-           # issue 23's block (bench.scaling.block_scene: 250,000 particles bound within(1.5)):
+           # the block (bench.scaling.block_scene: 250,000 particles bound within(1.5)):
            # the plugin against the numba callback on one rank, and on two ranks
            ("lammps", "exact", 1, "numba", "block", 200),
            ("lammps", "exact", 1, "plugin", "block", 200),
@@ -137,7 +137,7 @@ def parse_breakdown(log: str) -> dict:
 # ---------------------------------------------------------------------------- the worker
 def build_scene(name: str):
     """A built-in scene, ``NAME`` or ``NAME:key=value,key=value`` (``--set`` overrides), or
-    ``block``: bench.scaling's block of issue 23."""
+    ``block``: bench.scaling's block (a bound lattice of 250,000 particles)."""
     from rackstress import scenes
     from rackstress.scenes.builtins import parse_overrides
 
@@ -664,8 +664,7 @@ def markdown(data: dict) -> str:
                   "4 M atoms) and two or three of LAMMPS' reneighbourings; its gait cycle "
                   "(4800 iterations: four phases, three phase switches, the reneighbourings of "
                   "each) is what a user running the scene sees, and its 2-rank line says how much of "
-                  "each run was in LAMMPS' chunks and how much in the phase switches. Until "
-                  "issue 23's last round the page had the 200-iteration rows only (1.14×).", ""]
+                  "each run was in LAMMPS' chunks and how much in the phase switches.", ""]
     for r in data["rows"]:
         if r.get("python_operators"):
             lines.append(f"- {r['mode']} mode, Python operators: "

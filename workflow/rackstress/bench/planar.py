@@ -1,5 +1,5 @@
 """The three planar validity cases as a user builds them: aluminium in mm-N-s, loads in N, peak
-von Mises in MPa against plane-stress FEA (issue 22, item 7; ``rackstress bench validity``, or
+von Mises in MPa against plane-stress FEA (``rackstress bench validity``, or
 ``--planar`` for these rows alone).
 
 Each case is the paper-unit built-in of :mod:`rackstress.scenes.validation` at spacing 1 mm,

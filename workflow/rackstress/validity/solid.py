@@ -55,7 +55,8 @@ import numpy as np
 SINGULAR_WALLS = 1.0
 #: An FE boundary edge is re-entrant when its dihedral angle is concave by more than this.
 CONCAVE_DEG = 20.0
-#: Targets of issue 22 (3D part against tetrahedral FEA).
+#: Targets for a 3D part against tetrahedral FEA: the particles rank the stresses as FEA does
+#: and find the same hot spots (docs/fea.md).
 TARGET = {"spearman": 0.8, "top5_overlap": 0.5, "peak_ratio_error": 0.15}
 #: FE size in spacings (gmsh's largest element edge; cells are cut at the spacing).
 SIZE_SPACINGS = 1.0

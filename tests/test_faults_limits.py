@@ -1,4 +1,4 @@
-"""Faults of round three (issue 25), played with real processes as in ``test_faults.py``: a full
+"""Faults at the limits, played with real processes as in ``test_faults.py``: a full
 disk during post-processing and rendering (real tmpfs mounts), a schedule of 10¹² steps on the
 LAMMPS engine, scene expressions that would take unbounded time, parameters that are themselves
 expressions, NaN positions kept by a divergence, and the progress every long phase shows."""
@@ -334,7 +334,7 @@ def coincide_run(tmp_path, op: str, how: str):
 @pytest.mark.lammps
 @pytest.mark.parametrize("op", list(OPS))
 def test_a_pair_that_coincides_is_named_at_its_first_step_on_every_path(tmp_path, op):
-    """Issue 25: a bound (attracted, colliding) pair that coincides. The reference engine names
+    """A bound (attracted, colliding) pair that coincides. The reference engine names
     step 1 (hand calculation above); the compiled plugin (serial and ``mpiexec -n 2``) and the
     Python callback (serial and ``mpiexec -n 2``) name the same step and particle, exit 3
     ``diverged``, and keep frames 0 and 1 only, all finite. Was, on the plugin: step 2 (its
