@@ -257,6 +257,24 @@ class _Linear:
         self.solver.free()
 
 
+#: GMRES iterations preconditioned by an earlier tangent's factor before K is refactorized
+PRECONDITIONED_ITERATIONS = 40
+
+
+def _preconditioned(K, b: np.ndarray, lin: _Linear, rtol: float):
+    """K·x = b by GMRES preconditioned with ``lin``'s factorization of an earlier tangent
+    (K changes by the strains' order between Newton steps: a handful of iterations)."""
+    import scipy.sparse.linalg as spla
+
+    M = spla.LinearOperator(K.shape, matvec=lin.solver.solve, dtype=float)
+    x, _ = spla.gmres(K, b, M=M, rtol=0.1 * rtol, atol=0.0,
+                      restart=PRECONDITIONED_ITERATIONS, maxiter=1)
+    # judged by the true residual: the preconditioned one (GMRES' own test) can differ by the
+    # regularized factor's conditioning
+    ok = bool(np.all(np.isfinite(x)) and np.linalg.norm(K @ x - b) <= rtol * np.linalg.norm(b))
+    return x, ok
+
+
 def _refuse(scene, message: str):
     raise SceneError(f"scene '{scene.name}': the static analysis cannot hold this part: "
                      f"{message}")
@@ -536,6 +554,18 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
             if it == 0 and first is not None:
                 (lin, dx), fresh = first, True
                 factorizations += 1
+            elif lin is not None and lin.direct:
+                # the factor of an earlier tangent preconditions GMRES on this one: a few
+                # solves where a new factorization costs an analysis's worth each
+                K, _ = _tangent(p, prob)
+                dx, ok = _preconditioned(K, b, lin, rtol=rtol)
+                fresh = True
+                if not ok:
+                    if not lin.solver.refactor(K):
+                        lin.free()
+                        lin = _Linear(K, p, prob)
+                    factorizations += 1
+                    dx = lin.solve(b, rtol)
             elif refactor or lin is None or not lin.direct:
                 K, _ = _tangent(p, prob)
                 if lin is not None and lin.direct and not lin.solver.refactor(K):
@@ -557,14 +587,14 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
             step = np.zeros(3 * n)
             step[free] = dx
             step = step.reshape(n, 3)
-            m0 = float(np.linalg.norm(b))
+            m0 = worst
             # a step that makes things much worse is halved (large rotations, buckling); the
             # best trial is kept when none is good enough
             scale, best = 1.0, None
             for _ in range(10):
                 trial = p + scale * step
                 ft = forces(scene, trial, prob.pairs, prob.F_ext, prob.m)
-                r = float(np.linalg.norm(np.where(fixed, 0.0, ft)))
+                r = float(np.linalg.norm(np.where(fixed, 0.0, ft), axis=1).max())
                 if np.isfinite(r) and (best is None or r < best[0]):
                     best = (r, trial)
                 if np.isfinite(r) and r <= (GROWTH if fresh else 1.0) * m0:
