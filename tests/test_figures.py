@@ -60,6 +60,7 @@ GENERATED = {"accuracy.md": ("accuracy", "markdown", "accuracy.json"),
              "perf.md": ("perf", "markdown", "perf.json"),
              "scaling.md": ("scaling", "markdown", "scaling.json"),
              "stability.md": ("stability", "markdown", "stability.json"),
+             "static.md": ("static", "report", "static.json"),
              "stress.md": ("stress", "report", "stress.json"),
              "validity.md": ("validity", "report", "validity.json"),
              "validity3d.md": ("validity3d", "markdown", "validity3d.json")}

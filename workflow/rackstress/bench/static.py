@@ -157,7 +157,8 @@ def report(data: dict) -> str:
              "direct factorization where it fits (engines/linear.py) and AMG-CG alone (the "
              "iterative path, which was the only one above 6,000 unknowns).", "",
              f"Machine: {m['cores']} cores ({m['cpu']}), load average at start "
-             f"{m['load_avg_at_start']}; {m['note']}.", "",
+             f"{' / '.join(f'{x:.1f}' for x in m['load_avg_at_start'])} (1 / 5 / 15 min); "
+             f"{m['note']}.", "",
              md_table(head, rows)]
     errs = [r for r in data["rows"] if "error" in r]
     for r in errs:
