@@ -52,6 +52,23 @@ def progress_step(rundir: Path):
         return None
 
 
+def rss(pid: int) -> int:
+    """A process's resident memory, bytes."""
+    for line in open(f"/proc/{pid}/status"):
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) * 1024
+    raise AssertionError(f"no VmRSS for {pid}")
+
+
+def steps_done(rundir: Path, every: int) -> int:
+    """Steps a running run has done, from the frames of its dump (one every ``every`` steps,
+    the first at step 0); -1 before the dump exists: work counted, not time."""
+    try:
+        return every * ((rundir / "trajectory.dump").read_text().count("ITEM: TIMESTEP") - 1)
+    except OSError:
+        return -1
+
+
 def frames(dump: Path) -> list[int]:
     text = dump_text(dump)
     return [int(m) for m in re.findall(r"ITEM: TIMESTEP\n(\d+)\n", text)]
@@ -451,22 +468,12 @@ def test_any_number_of_steps_costs_no_memory_up_front(tmp_path):
                           "--out", str(out), *QUIET], stdout=subprocess.DEVNULL,
                          stderr=subprocess.PIPE)
 
-    def rss():
-        for line in open(f"/proc/{p.pid}/status"):
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) * 1024
-
-    def steps_done():
-        try:
-            return 600 * ((out / "trajectory.dump").read_text().count("ITEM: TIMESTEP") - 1)
-        except OSError:
-            return -1
     try:
-        assert wait_for(lambda: steps_done() >= 1200, proc=p)
-        first = rss()
-        assert wait_for(lambda: steps_done() >= 4800, proc=p)
+        assert wait_for(lambda: steps_done(out, 600) >= 1200, proc=p)
+        first = rss(p.pid)
+        assert wait_for(lambda: steps_done(out, 600) >= 4800, proc=p)
         assert p.poll() is None
-        assert rss() - first < 20e6
+        assert rss(p.pid) - first < 20e6
     finally:
         p.kill()
         p.wait()

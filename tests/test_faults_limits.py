@@ -15,7 +15,8 @@ import pytest
 from conftest import HANG_S, dump_text, trajectory
 
 from conftest import child_cpu
-from test_faults import QUIET, RS, fill, frames, leftovers, rs, tmpfs, wait_for  # noqa: F401
+from test_faults import (QUIET, RS, fill, frames, leftovers, rs, rss, steps_done,  # noqa: F401
+                         tmpfs, wait_for)
 
 
 # ---------------------------------------------------------------------------- disks
@@ -119,22 +120,12 @@ def test_any_number_of_steps_costs_no_memory_up_front_on_lammps(tmp_path):
                           "--restart-every", "0", "--dump-every", "5000", "--out", str(out),
                           *QUIET], stdout=subprocess.DEVNULL, stderr=err.open("w"))
 
-    def rss():
-        for line in open(f"/proc/{p.pid}/status"):
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) * 1024
-
-    def steps_done():
-        try:
-            return 5000 * ((out / "trajectory.dump").read_text().count("ITEM: TIMESTEP") - 1)
-        except OSError:
-            return -1
     try:
-        assert wait_for(lambda: steps_done() >= 10000, proc=p), err.read_text()
-        first = rss()
-        assert wait_for(lambda: steps_done() >= 40000, proc=p), err.read_text()
+        assert wait_for(lambda: steps_done(out, 5000) >= 10000, proc=p), err.read_text()
+        first = rss(p.pid)
+        assert wait_for(lambda: steps_done(out, 5000) >= 40000, proc=p), err.read_text()
         assert p.poll() is None, err.read_text()
-        assert rss() - first < 20e6
+        assert rss(p.pid) - first < 20e6
         assert len((out / "in.lammps").read_text().splitlines()) < 200
     finally:
         p.kill()
