@@ -653,10 +653,14 @@ def _post_job(rundir, render: bool = True):
     """A batch job's post-processing: the stress peaks into its summary.json (no VTK: run
     'rackstress stress BATCHDIR/JOB' for the files), and unless ``render`` is False its
     default pictures, report.html and 3D view, as 'rackstress run' leaves them."""
+    from mpi4py import MPI
+
     from rackstress.runs.rundir import locked
     from rackstress.stress.post import postprocess
 
-    with locked(rundir, create=False):      # its files recorded in the job's manifest
+    # its files recorded in the job's manifest; by this process alone (a job's root, while the
+    # other groups' roots run other jobs: no collective over the world)
+    with locked(rundir, create=False, comm=MPI.COMM_SELF):
         postprocess(rundir, vtk=False, dump=False)
         if render:
             from rackstress.render.pictures import render_default
