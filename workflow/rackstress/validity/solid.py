@@ -958,7 +958,8 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
             sols = [sol]
             break
     sol = sols[-1]
-    points, mname, values = _particle_points(rundir, sl, g.o), *_particle_measure(rundir, sl, measure)
+    mname, values = _particle_measure(rundir, sl, measure)
+    points = _particle_points(g.o, spacing, mname)
     res = sol.at(points)
     G = E_ / (2 * (1 + nu_))
     to_stress = 1.0 if mname == "von_mises" else (2 * math.sqrt(3) * G if mat or E else None)
@@ -1018,14 +1019,14 @@ def _stress_unit(summary: dict, bnd: dict) -> str:
     return {"mm-N-s": "MPa", "SI": "Pa"}.get(units, "stress units")
 
 
-def _particle_points(rundir: Path, sl: slice, o: np.ndarray) -> np.ndarray:
-    """Where each particle's measure is read: its original position (the stress recovery's
-    own points when the run records them, ``recovery.npz`` → ``points``)."""
-    path = rundir / "recovery.npz"
-    if path.is_file():
-        with np.load(path) as z:
-            if "points" in z.files and len(z["points"]) >= sl.stop:
-                return np.asarray(z["points"], float)[sl]
+def _particle_points(o: np.ndarray, spacing: float, mname: str) -> np.ndarray:
+    """Where each particle's measure is read: the stress's recovery point (the default
+    ``patch`` route: the centre inside the part, its cell's surface point on the surface,
+    :func:`rackstress.stress.tensor.part_recovery_points`), else the particle's position."""
+    if mname == "von_mises":
+        from rackstress.stress.tensor import part_recovery_points
+
+        return part_recovery_points(o, spacing)
     return np.asarray(o, float)
 
 
