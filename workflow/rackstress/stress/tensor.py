@@ -249,8 +249,9 @@ def to_output(s: np.ndarray) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- recovery
-#: patch recovery: the neighbours within this many spacings enter a particle's fit
-PATCH_RADIUS = 2.5
+#: patch recovery: the neighbours within this many spacings enter a particle's fit (its own
+#: bindings' reach, 18 neighbours inside: the smallest patch a linear fit needs)
+PATCH_RADIUS = 1.5
 
 
 def free_faces(o: np.ndarray, spacing: float) -> np.ndarray:

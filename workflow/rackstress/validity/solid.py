@@ -941,7 +941,10 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
                                            np.asarray(pd.regular_faces), near_size)
     else:
         concave = concave_edges(*cell_mesh(g.o, spacing))
-    singular = singular_points(concave, held_x, load_x, spacing)
+    # a support fixed in every direction has an edge where the stress is unbounded; a roller
+    # or a symmetry plane (some directions free) is a smooth boundary, not singular
+    full = np.asarray(bnd["held_mask"], bool)[hin].all(axis=1)
+    singular = singular_points(concave, held_x[full], load_x, spacing)
     volume = g.n * spacing ** 3
     sizes = [h * COARSER, h] if converge else [h]
     check_memory(elements_expected(volume, h), h, "expected before meshing")
