@@ -85,6 +85,18 @@ def test_fea_of_a_run_writes_its_check(run):
     assert "Finite-element check" in (run / "report.html").read_text()
 
 
+def test_fea_refuses_a_dynamic_run(run):
+    """The beam is a dynamic run (its last frame a moving state): exit 2 naming it and the
+    way out (analysis = "static", or --allow-dynamic, which labels the comparison)."""
+    r = _cli("fea", str(run))
+    assert r.returncode == 2, r.stderr
+    assert "a dynamic run" in r.stderr and "--allow-dynamic" in r.stderr
+    assert 'analysis = "static"' in r.stderr and "Traceback" not in r.stderr
+    if (run / "fea.json").is_file():
+        data = json.loads((run / "fea.json").read_text())
+        assert data["compared"].startswith("the last frame of a dynamic run")
+
+
 def test_fea_of_a_directory_that_is_not_a_run(tmp_path):
     r = _cli("fea", str(tmp_path))
     assert r.returncode == 2

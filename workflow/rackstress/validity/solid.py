@@ -699,7 +699,7 @@ def check_memory(n_elements: float, size: float, what: str) -> None:
 
 
 def solve_part(o, spacing, shape, held_x, held_mask, load_x, load_F, E, nu, size=None,
-               near=None, near_size=None, what="FE mesh"):
+               near=None, near_size=None, what="FE mesh", refined: bool = False):
     """FEA of a part: its shape (a mesh :class:`~rackstress.model.regions.Surface` → gmsh,
     refined to ``near_size`` around the points ``near``; else the union of the cells of
     ``o``), nodes in held particles' cells fixed in ``held_mask``'s directions, the particle
@@ -723,6 +723,14 @@ def solve_part(o, spacing, shape, held_x, held_mask, load_x, load_F, E, nu, size
     if how == "cells":
         p, t = cell_mesh(o, spacing)
         how = "the union of the particles' cells (6 tetrahedra a cube)"
+        h = spacing
+        if refined:                               # the cells' second mesh: each cut in 8
+            from rackstress.validity.tet import refine
+
+            check_memory(8 * t.shape[1], h / 2, what)
+            q, u = refine(p.T, t.T)
+            p, t, h = q.T, u.T, h / 2
+            how += ", each cut into 8"
     check_memory(t.shape[1], h, what)
     fixed = fixed_nodes(p, held_x, held_mask, spacing)
     forces = nodal_forces(p, t, load_x, load_F, spacing)
@@ -957,8 +965,18 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
             np.asarray(bnd["load_force"], float)[lin], E_, nu_, hs,
             np.concatenate([concave, curved]), near_size * hs / h, what=f"FE size {hs:.3g}")
         sols.append(sol)
-        if how.startswith("the union"):          # cells: one mesh, no second size
-            sols = [sol]
+        if how.startswith("the union"):          # cells: the second mesh is each cut in 8
+            if converge:
+                echo(f"fea: {name}: solving again with each tetrahedron cut into 8 …")
+                try:
+                    sols.append(solve_part(
+                        g.o, spacing, shape, held_x, np.asarray(bnd["held_mask"], bool)[hin],
+                        load_x, np.asarray(bnd["load_force"], float)[lin], E_, nu_,
+                        what="cells cut into 8", refined=True)[0])
+                    how += " (and each cut into 8)"
+                except FEAMemoryError as exc:
+                    note = "; ".join(x for x in (note, f"not solved at a second size: {exc}")
+                                     if x)
             break
     sol = sols[-1]
     mname, values = _particle_measure(rundir, sl, measure)
