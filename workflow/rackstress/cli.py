@@ -1141,8 +1141,23 @@ def bench_stress(out, quick):
 @click.option("--planar", is_flag=True,
               help="Only the planar cases as aluminium scenes in MPa (~2 min); rewrites their "
                    "section of validity.md.")
-def bench_validity(out, quick, planar):
+@click.option("--concentrations", is_flag=True,
+              help="Only the stress concentrations (plate with a hole, fillet, notch, C-frame, "
+                   "round shoulder): the governing stress against converged FEA and Peterson "
+                   "at three spacings (validity-concentrations.md).")
+@click.option("--case", "cases", multiple=True, help="With --concentrations: this case only "
+              "(repeatable): plate-hole, fillet, notch, cframe, round-shoulder.")
+@click.option("--spacings", help="With --concentrations: these spacings [mm], comma-separated "
+              "(default: each case's three).")
+def bench_validity(out, quick, planar, concentrations, cases, spacings):
     """Stress measures of three body models against linear-elastic FEA (three cases)."""
+    if concentrations or cases or spacings:
+        from rackstress.bench import concentrations as conc
+
+        conc.run_bench(out, cases=list(cases) or None,
+                       spacings=[float(x) for x in spacings.split(",")] if spacings else None,
+                       echo=click.echo)
+        return
     if planar:
         from rackstress.bench import planar as mod
 
@@ -1235,6 +1250,7 @@ TEACH = {
         "rackstress bench validity --quick --out /tmp/bench",
         "rackstress bench validity --out docs/benchmarks",
         "rackstress bench validity --planar --out docs/benchmarks",
+        "rackstress bench validity --concentrations --case plate-hole --spacings 0.8,0.6",
     ]),
     # commands the other engineers of this round add (applied when the command exists)
     "fea": ("Check a run's part against linear-elastic FEA of the same part.", [

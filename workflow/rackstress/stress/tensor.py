@@ -26,7 +26,7 @@ a uniform or linearly varying (bending) strain. C is the mean A_i/V_i of the par
 bound particles (the most bindings); a planar part's A is of rank 3 and the pseudo-inverse keeps
 its stress in the plane.
 
-**The cells' own moment** (``continuum``, the default of the ``von_mises`` measure). The
+**The cells' own moment** (``continuum``; the default ``patch`` route reads it at the surface). The
 virial puts each cell's force at its particle: a cell's own first moment ∫(x − x_i) σ dV =
 V·(a²/12)·∇σ (a cube of side a, σ linear) is not there, and equilibrium makes the layers carry
 it instead — a member N layers thick in bending reads N²/(N² − 1) × M·z/I (Σ z_l² over the
