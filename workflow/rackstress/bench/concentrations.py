@@ -279,8 +279,9 @@ def markdown(data: dict) -> str:
             + "\nThe last columns: each route of the measure (docs/stress.md) on the same run, "
             "its governing stress over FEA's — `patch` (the default) at the recovery points, "
             "the others at the particle centres.\n"
-            + f"\nMachine: {m.get('cores')} cores, load {m.get('load_avg_at_start')} at the "
-            f"start; {data['wall_s']:.0f} s wall.\n")
+            + f"\nMachine: {m.get('cores')} cores, load average "
+            f"{' / '.join(f'{x:.1f}' for x in (m.get('load_avg_at_start') or ()))} at the "
+            f"start of the last command; {data['wall_s']:.0f} s wall.\n")
 
 
 def table_rows(data) -> list:

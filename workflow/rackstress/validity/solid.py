@@ -547,12 +547,37 @@ class Singular:
 def singular_points(concave: np.ndarray, held_x: np.ndarray, load_x: np.ndarray,
                     spacing: float) -> Singular:
     """The FE check's singular set until the run records its own: re-entrant edges (of the
-    part's surface), held and loaded particles; the zone :data:`ZONE_SPACINGS` spacings."""
+    part's surface) and the edges of supports and loads on it (``concave``), held and loaded
+    particles; the zone :data:`ZONE_SPACINGS` spacings."""
     pts = np.concatenate([np.asarray(x, float).reshape(-1, 3) for x in (concave, held_x, load_x)])
     zone = ZONE_SPACINGS * float(spacing)
     return Singular(pts, zone, f"stresses within {ZONE_SPACINGS:g} spacings ({zone:.3g}) of a "
                     "re-entrant edge, a support or a load are left out of the governing "
                     "stress: the continuum's stress is unbounded there", float(spacing))
+
+
+def region_edges(o: np.ndarray, sel: np.ndarray, spacing: float) -> np.ndarray:
+    """Points on the edges of a support or a load region on the part's surface (k×3): for each
+    particle of the region (``sel``, bool over ``o``) on the surface with a nearest neighbour
+    outside the region, the midpoint of their recovery points — where the region's cells
+    end, on the surface: the line where a fixed or a loaded face meets a free one, singular
+    in the continuum."""
+    from scipy.spatial import cKDTree
+
+    from rackstress.stress.tensor import part_recovery_points
+
+    sel = np.asarray(sel, bool)
+    if not sel.any() or sel.all():
+        return np.zeros((0, 3))
+    a = float(spacing)
+    pts = part_recovery_points(o, a)
+    on_surface = np.any(np.abs(pts - o) > 1e-9 * a, axis=1)
+    pr = cKDTree(o).query_pairs(1.01 * a, output_type="ndarray")
+    if not len(pr):
+        return np.zeros((0, 3))
+    i, j = np.r_[pr[:, 0], pr[:, 1]], np.r_[pr[:, 1], pr[:, 0]]
+    edge = sel[i] & ~sel[j] & on_surface[i]
+    return np.unique(0.5 * (pts[i[edge]] + pts[j[edge]]), axis=0)
 
 
 def bands(values: np.ndarray, fea_vm: np.ndarray, dist: np.ndarray, spacing: float,
@@ -952,7 +977,14 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
     # a support fixed in every direction has an edge where the stress is unbounded; a roller
     # or a symmetry plane (some directions free) is a smooth boundary, not singular
     full = np.asarray(bnd["held_mask"], bool)[hin].all(axis=1)
-    singular = singular_points(concave, held_x[full], load_x, spacing)
+    held_sel = np.zeros(g.n, bool)
+    held_sel[hk[hin][full]] = True
+    load_sel = np.zeros(g.n, bool)
+    load_sel[lk[lin]] = True
+    edges = np.concatenate([region_edges(g.o, held_sel, spacing),
+                            region_edges(g.o, load_sel, spacing)])
+    singular = singular_points(np.concatenate([concave, edges]), held_x[full], load_x,
+                               spacing)
     volume = g.n * spacing ** 3
     sizes = [h * COARSER, h] if converge else [h]
     check_memory(elements_expected(volume, h), h, "expected before meshing")
@@ -963,7 +995,8 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
         sol, how, note, forces, fixed = solve_part(
             g.o, spacing, shape, held_x, np.asarray(bnd["held_mask"], bool)[hin], load_x,
             np.asarray(bnd["load_force"], float)[lin], E_, nu_, hs,
-            np.concatenate([concave, curved]), near_size * hs / h, what=f"FE size {hs:.3g}")
+            np.concatenate([concave, curved, edges]), near_size * hs / h,
+            what=f"FE size {hs:.3g}")
         sols.append(sol)
         if how.startswith("the union"):          # cells: the second mesh is each cut in 8
             if converge:
