@@ -75,17 +75,35 @@ def check_memory(scene: Scene, engine: str, ranks: int = 1) -> int:
 def scene_record(scene: Scene) -> dict:
     """What post-processing needs to know of a scene: its groups as atom types and id ranges."""
     types, mols = topology.group_types(scene), topology.group_mols(scene)
-    return {"scene": scene.name, "params": scene.params, "dt": scene.dt,
-            "source": scene_source(scene),
-            "steps": scene.total_steps,
-            "phases": [{"name": p.name, "steps": p.steps, "vars": dict(p.vars)}
-                       for p in scene.phases],
-            "cycles": scene.cycles,
-            "groups": [{"name": name, "kind": g.kind, "host": g.host, "n": g.n,
-                        "type": types[name], "mol": mols[name],
-                        "first_id": scene.offset(name) + 1, **material_record(scene, g)}
-                       for name, g in scene.groups.items()],
-            "units": units_record(scene.units)}
+    rec = {"scene": scene.name, "params": scene.params, "dt": scene.dt,
+           "source": scene_source(scene),
+           "steps": scene.total_steps,
+           "phases": [{"name": p.name, "steps": p.steps, "vars": dict(p.vars)}
+                      for p in scene.phases],
+           "cycles": scene.cycles,
+           "groups": [{"name": name, "kind": g.kind, "host": g.host, "n": g.n,
+                       "type": types[name], "mol": mols[name],
+                       "first_id": scene.offset(name) + 1, **material_record(scene, g),
+                       **surface_record(g)}
+                      for name, g in scene.groups.items()],
+           "units": units_record(scene.units)}
+    if scene.analysis == "static":
+        rec["analysis"] = "static"
+    return rec
+
+
+def surface_record(g) -> dict:
+    """A part's own surface and lattice spacing, where the scene knows them: ``mesh`` (the
+    file, absolute, and its placement: scale, rotate, translate) and ``spacing``; the static
+    report paints the stress on that surface (:mod:`rackstress.render.surface`)."""
+    meta = g.meta if isinstance(g.meta, dict) else {}
+    out = {}
+    if meta.get("mesh"):
+        out["mesh"] = {k: list(v) if isinstance(v, tuple) else v
+                       for k, v in meta["mesh"].items()}
+    if meta.get("spacing"):
+        out["spacing"] = float(meta["spacing"])
+    return out
 
 
 def units_record(u) -> dict:
@@ -168,7 +186,16 @@ def scene_source(scene: Scene) -> str | None:
 
 
 def group_figures(scene: Scene, p_start: np.ndarray, p_end: np.ndarray) -> dict:
-    """Per group: n, centre of mass at start and end, and max_deformation (docs/model.md, "Desired position")."""
+    """Per group: n, centre of mass at start and end, and max_deformation.
+
+    A moving part's ``max_deformation`` is the paper's: the largest distance from the desired
+    position, after its best-fit rigid motion (docs/model.md, "Desired position"). A static
+    analysis's parts are held by their supports, so their displacement is their deformation:
+    there ``max_deformation`` is the largest displacement |p − o| (the rigid fit would take
+    the bending out of a cantilever: 0.39 mm where its tip moved 0.92 mm), with the particle
+    (``max_deformation_particle``, LAMMPS atom id) and where it sits in the part
+    (``max_deformation_at``, undeformed)."""
+    static = scene.analysis == "static"
     out = {}
     for name, g in scene.groups.items():
         sl = scene.slice(name)
@@ -179,9 +206,81 @@ def group_figures(scene: Scene, p_start: np.ndarray, p_end: np.ndarray) -> dict:
             "kind": g.kind,
             "com_start": p_start[sl].mean(axis=0).tolist(),
             "com_end": end.mean(axis=0).tolist() if ok else None,
-            "max_deformation": rigid.max_deformation(g.o, end) if ok else None,
+            "max_deformation": rigid.max_deformation(g.o, end) if ok and not static else None,
         }
+        if static and ok and g.n:
+            u = np.linalg.norm(end - g.o, axis=1)
+            k = int(np.argmax(u))
+            out[name].update({"max_deformation": float(u[k]),
+                              "max_deformation_particle": scene.offset(name) + k + 1,
+                              "max_deformation_at": [float(x) for x in g.o[k]]})
     return out
+
+
+def support_reactions(scene: Scene, p: np.ndarray) -> tuple[list, dict]:
+    """The support reactions of a static state ``p`` and the load they answer.
+
+    On a held direction the support pushes what keeps the particle in place: minus the net
+    force of the bindings (Eq. 12) and the loads there, R = −(f_bind + F_ext). Summed per
+    support — each ``[[support]]`` table and prescribed displacement in the scene's order
+    (``Group.meta["supports"]``), the rest (``held``, a built-in scene's supports) as
+    ``held`` — with their moment about the origin, Σ p × R at the state's positions (where the
+    forces act: the bindings' forces are central, so their moments cancel there). At
+    equilibrium the reactions and the applied load sum to zero in force and in moment, up to
+    the unbalanced forces left on the free particles (at most the settle tolerance × the load
+    on each): an engineer's first check.
+
+    Returns
+    -------
+    reactions : list of dict
+        ``{"support", "group", "particles", "force": [Fx, Fy, Fz], "moment": [Mx, My, Mz]}``
+        in the scene's force and length units.
+    applied : dict
+        ``{"force", "moment"}`` of every external load (forces, pressures, weight) about the
+        origin.
+
+    Example
+    -------
+    >>> from rackstress.scenes import load                            # doctest: +SKIP
+    >>> sc = load("examples/cantilever/scene.toml")                   # doctest: +SKIP
+    >>> from rackstress.engines.static import solve                   # doctest: +SKIP
+    >>> reactions, applied = support_reactions(sc, solve(sc).p)       # doctest: +SKIP
+    >>> reactions[0]["force"]                                         # doctest: +SKIP
+    [0.0, 0.0, 100.0]
+    """
+    from rackstress.engines.static import _bind_pairs, external_forces, forces
+
+    F_ext = external_forces(scene)
+    f = forces(scene, p, _bind_pairs(scene), F_ext, scene.masses())
+    fixed = scene.fixed()
+    R = np.where(fixed, -f, 0.0)
+    taken = np.zeros_like(fixed)
+
+    def record(label, group, take):
+        r = np.where(take, R, 0.0)
+        rows = take.any(axis=1)
+        return {"support": label, "group": group, "particles": int(rows.sum()),
+                "force": [float(x) for x in r.sum(axis=0)],
+                "moment": [float(x) for x in np.cross(p[rows], r[rows]).sum(axis=0)]}
+
+    out = []
+    for name, g in scene.groups.items():
+        sl = scene.slice(name)
+        for label, mask, dirs in (g.meta or {}).get("supports", []) if isinstance(g.meta, dict) \
+                else []:
+            take = np.zeros_like(fixed)
+            take[sl] = mask[:, None] & np.asarray(dirs, bool)[None, :]
+            take &= fixed & ~taken
+            taken |= take
+            out.append(record(label, name, take))
+        rest = np.zeros_like(fixed)
+        rest[sl] = fixed[sl] & ~taken[sl]
+        if rest.any():
+            taken |= rest
+            out.append(record("held", name, rest))
+    applied = {"force": [float(x) for x in F_ext.sum(axis=0)],
+               "moment": [float(x) for x in np.cross(p, F_ext).sum(axis=0)]}
+    return out, applied
 
 
 def summarize(scene: Scene, engine: str, mode: str, p_end: np.ndarray, steps_done: int,
@@ -316,12 +415,14 @@ def execute_static(scene: Scene, out: Path, engine: str, mode: str, *, progress:
     extra.update({"analysis": "static", "settled": settled, "iterations": res.iterations,
                   "residual": max(res.residual, engine_rel), "residual_solver": res.residual,
                   "residual_engine": engine_rel, "tolerance": TOLERANCE,
-                  "applied_load": res.load, "solve_s": res.wall_s,
+                  "load_magnitude": res.load, "solve_s": res.wall_s,
                   "residual_history": res.history})
     if not settled and res.load > 0:
         # relative to the load: the unbalanced force rounding alone leaves (the hint of exit 6)
         extra["rounding_floor"] = rounding_floor(scene, scene.original_positions()) / res.load
     if root:
+        if np.isfinite(res.p).all():
+            extra["reactions"], extra["applied_load"] = support_reactions(scene, res.p)
         warnings = load_path_warnings(scene)
         for w in warnings:
             print(f"rackstress: warning: {scene.name}: {w['message']}", file=sys.stderr)

@@ -105,6 +105,14 @@ def supports(ctx, tables, groups: dict, select) -> None:
         for a in fix:
             g.fixed[mask, "xyz".index(a)] = True
         _refix(g)
+        _record_support(g, f"[[support]] #{k}", mask, fix)
+
+
+def _record_support(g, label: str, mask, fix) -> None:
+    """Which particles and directions a support holds, by its name in the scene file: the
+    static run sums each support's reactions (:func:`rackstress.runs.run.support_reactions`)."""
+    g.meta.setdefault("supports", []).append(
+        (label, np.array(mask, dtype=bool), tuple(a in fix for a in "xyz")))
 
 
 def _refix(g) -> None:
@@ -258,6 +266,7 @@ def loads(ctx, tables, groups: dict, operators: dict, u, select, ramp) -> dict:
             g.fixed[mask] = True
             g.u0[mask] = uvec
             _refix(g)
+            _record_support(g, f"[[load]] #{k} (displacement)", mask, "xyz")
             continue
         if kind != "gravity":
             _spacing(c, g)
