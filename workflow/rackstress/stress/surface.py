@@ -286,10 +286,9 @@ _MEMO: dict = {}
 def surfaces_for(run, fields, notes: list | None = None) -> list:
     """:func:`static_surfaces` of the run's last frame, made once per process and run (the
     notes said the first time are said again)."""
-    from rackstress.stress.post import _stamp
-
-    try:
-        key = (str(Path(run.rundir).resolve()), repr(_stamp(run)), tuple(fields.values))
+    try:        # the fields of one run, as post-processing keeps them for the process
+        key = (str(Path(run.rundir).resolve()), id(fields), fields.steps.tobytes(),
+               tuple(fields.values))
     except OSError:
         key = None
     if key is not None and key in _MEMO:
