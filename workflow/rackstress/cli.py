@@ -398,7 +398,12 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True,
     stop_prepared()             # joined before post-processing forks (prepare.py)
     discard_finished(out)       # a kill-only checkpoint of a finished run: never resumed
     static = summary.get("analysis") == "static"
+    units = {}
     if static:
+        try:
+            units = json.loads((Path(out) / "scene.json").read_text()).get("units") or {}
+        except (OSError, ValueError):
+            units = {}
         how = ("settled in" if summary.get("settled") else
                "NOT SETTLED (not an equilibrium: do not use its numbers) after")
         click.echo(f"{summary['scene']}: static, {how} {summary['iterations']} "
@@ -412,14 +417,15 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True,
         if static:          # a held part's deformation is its displacement (runs/run.py)
             at = g.get("max_deformation_at")
             click.echo(f"  {name:12s} n={g['n']:6d}  largest displacement="
-                       + (f"{md:.4g}" if md is not None else "-")
+                       + (f"{md:.4g} {units.get('length', '')}".rstrip() if md is not None
+                          else "-")
                        + (f" (particle {g['max_deformation_particle']} at "
                           f"({', '.join(f'{x:.4g}' for x in at)}))" if at else ""))
             continue
         click.echo(f"  {name:12s} n={g['n']:6d}  max_deformation="
                    + (f"{md:.4g}" if md is not None else "-"))
     if static:
-        _say_reactions(summary)
+        _say_reactions(summary, units)
     while _AHEAD:               # post-processing in the process that prepared it
         ahead = _AHEAD.pop()
         code = ahead.go()
@@ -435,20 +441,28 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True,
         _post_and_render(out, do_render, progress, dump_text)
 
 
-def _say_reactions(summary: dict) -> None:
-    """A static run's support reactions, one line each, and their sum against the load."""
+def _say_reactions(summary: dict, units: dict) -> None:
+    """A static run's support reactions, one line each, and their sum against the load (a
+    component below the settle tolerance × the load is what the solve leaves: 0)."""
+    import math
+
     reactions, applied = summary.get("reactions"), summary.get("applied_load")
     if not reactions or not applied:
         return
+    tol = float(summary.get("tolerance") or 1e-6) if summary.get("settled") else 0.0
 
-    def vec(v):
-        return "(" + ", ".join(f"{x:.4g}" for x in v) + ")"
+    def vec(v, of):
+        small = tol * math.sqrt(sum(x * x for x in of))
+        return "(" + ", ".join("0" if abs(x) < small else f"{x:.4g}" for x in v) + ")"
 
+    fu, lu = units.get("force", ""), units.get("length", "")
     for r in reactions:
-        click.echo(f"  reaction of {r['support']} on {r['group']}: force {vec(r['force'])}, "
-                   f"moment {vec(r['moment'])}")
+        click.echo(f"  reaction of {r['support']} on {r['group']}: force "
+                   f"{vec(r['force'], applied['force'])} {fu}, moment "
+                   f"{vec(r['moment'], applied['moment'])} {fu}·{lu}")
     total = [sum(r["force"][k] for r in reactions) for k in range(3)]
-    click.echo(f"  reactions' sum {vec(total)} against the applied load {vec(applied['force'])}")
+    click.echo(f"  reactions' sum {vec(total, applied['force'])} {fu} against the applied load "
+               f"{vec(applied['force'], applied['force'])} {fu}")
 
 
 def _forget(out: Path) -> None:

@@ -845,22 +845,36 @@ def render_static(rundir, measure: str | None = None, views=None,
                             "the headline's, away from singular points") + "): full colour")
     # the magnification: the largest displacement about FRACTION of the parts' size
     u = p[idx] - run.o[idx]
-    umax = float(np.nanmax(np.linalg.norm(u, axis=1))) if len(u) else 0.0
+    if not np.isfinite(u).all():        # a state that did not settle may hold anything
+        report.notes.append(f"{int((~np.isfinite(u).all(axis=1)).sum())} particle(s) have no "
+                            "finite position: drawn at their undeformed place")
+        p[idx] = np.where(np.isfinite(p[idx]), p[idx], run.o[idx])
+        u = p[idx] - run.o[idx]
+        for s in surfaces:
+            s.values["displacement"] = np.nan_to_num(s.values["displacement"], nan=0.0,
+                                                     posinf=0.0, neginf=0.0)
+    umax = float(np.linalg.norm(u, axis=1).max()) if len(u) else 0.0
     allpts = np.concatenate([s.points for s in surfaces]) if surfaces else run.o[idx]
     size = float(np.max(allpts.max(axis=0) - allpts.min(axis=0)))
     scale = magnification(umax, size)
+    far = scale * umax > size           # the part come apart: its shape is no picture of it
+    if far:
+        report.notes.append(f"the largest displacement, {umax:.3g}, exceeds the part's size "
+                            f"{size:.3g}: the pictures show the part undeformed")
+        scale = 0.0
     units = ((scene.get("units") or {}).get("length")) or "length units"
     settled = summary.get("settled", True) is not False
     lines = []
     if not settled:
-        lines.append((unsettled_text(summary), RED))
+        lines.append((unsettled_text(summary, short=True), RED))
     elif head:
         lines.append((headline_text(head), (0, 0, 0)))
     lines.append((f"deformed × {scale:g}: the largest displacement, {umax:.3g} {units}, drawn as "
                   f"{scale * umax:.3g} {units} ({100 * scale * umax / size:.2g} % of the part's "
                   f"size {size:.3g} {units})" if scale > 1 else
-                  f"deformation drawn to scale (largest displacement {umax:.3g} {units})",
-                  (0, 0, 0)))
+                  f"deformation drawn to scale (largest displacement {umax:.3g} {units})"
+                  if scale == 1 else f"drawn undeformed: the largest displacement, {umax:.3g} "
+                  f"{units}, exceeds the part's size", (0, 0, 0)))
     lines.append(("dark outline: the undeformed shape; positions in the part's own "
                   "(undeformed) coordinates", (90, 90, 90)))
     name = scene.get("scene", rundir.name)
@@ -876,10 +890,10 @@ def render_static(rundir, measure: str | None = None, views=None,
             side = ForkedJob(lambda: beside[0](report, measure, cmap), tmp / ".beside.json")
         cw, ch = window_size or CELL
         aspect = cw / ch
-        pts = [s.points + scale * s.values["displacement"] for s in surfaces]
+        pts = [] if far else [s.points + scale * s.values["displacement"] for s in surfaces]
         frame_pts = np.concatenate(pts + [s.points for s in surfaces]) if surfaces else run.o[idx]
         where = None
-        if head and head.get("particle") is not None:
+        if head and head.get("particle") is not None and settled:
             row = int(np.searchsorted(run.data.ids, int(head["particle"])))
             if row < run.n_atoms and run.data.ids[row] == int(head["particle"]):
                 where = run.o[row] + scale * (p[row] - run.o[row])
@@ -911,14 +925,16 @@ def render_static(rundir, measure: str | None = None, views=None,
         cells = []
         try:
             for view in views:
-                centre, half = framing(np.concatenate([shown[idx], run.o[idx]]), view, aspect)
+                centre, half = framing(run.o[idx] if far else
+                                       np.concatenate([shown[idx], run.o[idx]]), view, aspect)
                 cells.append(_cell(painter.paint(shown, values, view, centre, half), view))
         finally:
             painter.close()
-        part_lines = [(f"each particle (a lattice site of the part) coloured by its own value; "
-                       f"deformed × {scale:g} as the surface", (0, 0, 0))]
+        part_lines = [("each particle (a lattice site of the part) coloured by its own value; "
+                       + (f"deformed × {scale:g} as the surface" if scale else "undeformed"),
+                       (0, 0, 0))]
         if not settled:
-            part_lines.insert(0, (unsettled_text(summary), RED))
+            part_lines.insert(0, (unsettled_text(summary, short=True), RED))
         _save(tmp / "particles.png",
               _sheet(cells, header(W, f"{name}: the particles", label, report.vmax, cmap,
                                    part_lines)))

@@ -482,7 +482,9 @@ def _static_body(w, rundir: Path, summary: dict, scene: dict, post: dict, render
           f'data-particle="{_e(g.get("max_deformation_particle"))}" data-position="{_e(pos)}">'
           f"Largest displacement of <b>{_e(gname)}</b>: <b>{_num(md)} {_e(unit)}</b>, particle "
           f"{_e(g.get('max_deformation_particle'))} at ({_e(pos)}).</p>")
-    warns = summary.get("warnings") or []
+    warns = [wr for wr in summary.get("warnings") or []       # no stress of a non-equilibrium
+             if settled or allow_unsettled or wr.get("kind") not in ("large_strain",
+                                                                     "yield_exceeded")]
     if warns:
         w('<ul id="warnings">')
         for wr in warns:
@@ -501,7 +503,8 @@ def _static_body(w, rundir: Path, summary: dict, scene: dict, post: dict, render
     w('<h2 id="pictures">Pictures</h2>')
     fig = rundir / FIGURES
     if (fig / "sheet.png").is_file() and render.get("static"):
-        mag = render.get("magnification") or 1
+        mag = render.get("magnification")
+        mag = 1 if mag is None else mag
         unit = render.get("length_unit", "")
         src = ", ".join(f"{s['group']}: {s['source']}" for s in render.get("surfaces", []))
         w(f'<figure id="surface-picture" data-magnification="{mag:g}"><img src="{FIGURES}/'
@@ -511,7 +514,8 @@ def _static_body(w, rundir: Path, summary: dict, scene: dict, post: dict, render
           + (f"displacements × {mag:g} (the largest, "
              f"{_num(render.get('max_displacement'), 3)} {_e(unit)}, drawn as "
              f"{_num(mag * (render.get('max_displacement') or 0), 3)} {_e(unit)})"
-             if mag > 1 else "displacements to scale")
+             if mag > 1 else "displacements to scale" if mag == 1 else
+             "drawn undeformed: the displacements exceed the part's size")
           + "; dark outline: the undeformed shape; ring: the headline's point. The surface's "
           "values are fitted to the nearest particles (linear, docs/picture.md).</figcaption>"
           "</figure>")

@@ -440,8 +440,9 @@ def build_static_view(rundir, measure: str | None = None, cmap: str | None = Non
     values = fields.values[measure]
     coloured = run.displayed() or list(run.parts.values())
     k = len(run.steps) - 1
-    p = _frame(run, k)
     o = run.o
+    p = _frame(run, k)
+    p = np.where(np.isfinite(p), p, o)          # a state that did not settle may hold anything
     try:
         summary = json.loads((rundir / "summary.json").read_text())
     except (OSError, json.JSONDecodeError):
@@ -456,12 +457,13 @@ def build_static_view(rundir, measure: str | None = None, cmap: str | None = Non
             np.nanmax(values[k, idx]) if np.isfinite(values[k, idx]).any() else 1.0)
     if not vmax > 0:
         vmax = 1.0
-    scale = manifest.get("magnification")
+    scale = manifest.get("magnification") if manifest.get("static") else None
     allpts = np.concatenate([s.points for s in surfaces]) if surfaces else o[idx]
     size = float(np.max(allpts.max(axis=0) - allpts.min(axis=0))) or 1.0
-    if not scale:
-        umax = float(np.nanmax(np.linalg.norm(p[idx] - o[idx], axis=1)))
+    if scale is None:
+        umax = float(np.linalg.norm(p[idx] - o[idx], axis=1).max())
         scale = magnification(umax, size)
+        scale = 0.0 if scale * umax > size else scale   # come apart: drawn undeformed
     scale = float(scale)
 
     offscreen()
@@ -511,7 +513,7 @@ def build_static_view(rundir, measure: str | None = None, cmap: str | None = Non
                  np.nan_to_num(values[k, part.index])]), pts, s.spacing)
             disp, col = vals[:, :3], np.maximum(vals[:, 3], 0.0)
         else:
-            disp = s.values["displacement"]
+            disp = np.nan_to_num(s.values["displacement"], nan=0.0, posinf=0.0, neginf=0.0)
             col = s.values.get(measure)
             if col is None:
                 part = run.parts[s.group]
@@ -568,7 +570,7 @@ def build_static_view(rundir, measure: str | None = None, cmap: str | None = Non
     lo, hi = allpts.min(axis=0), allpts.max(axis=0)
     marker_r = 3.0 * max(part_radius(run, q) for q in coloured)
     where = None
-    if head and head.get("particle") is not None:
+    if head and head.get("particle") is not None and summary.get("settled") is not False:
         row = int(np.searchsorted(run.data.ids, int(head["particle"])))
         if row < run.n_atoms and run.data.ids[row] == int(head["particle"]):
             where = shown[row]
@@ -604,7 +606,8 @@ def build_static_view(rundir, measure: str | None = None, cmap: str | None = Non
             "gradient": ", ".join("#%02x%02x%02x" % tuple(int(c) for c in rgb) for rgb in stops),
             "scale": scale, "settled": settled,
             "note": (f"deformed × {scale:g}; grey: undeformed" if scale > 1 else
-                     "deformation to scale; grey: undeformed")
+                     "deformation to scale; grey: undeformed" if scale == 1 else
+                     "drawn undeformed (the displacements exceed the part's size)")
             + ("; NOT SETTLED: do not use these numbers" if not settled else
                "; blue: the headline's point" if where is not None else "")}
     rec = {"file": VIEW, "static": True, "measure": measure, "label": label, "vmax": vmax,
@@ -806,7 +809,8 @@ def section(rundir, built: dict | None = None) -> str:
             f"Shown: the part's surface ({rec['triangles']:,} triangles), coloured by "
             f"{e(rec['label'])} from 0 to {rec['vmax']:.4g} (the pictures' scale) and "
             + (f"deformed × {mag:g} (the pictures' magnification)" if mag > 1 else
-               "deformed to scale")
+               "deformed to scale" if mag == 1 else
+               "undeformed (the displacements exceed the part's size)")
             + "; the undeformed shape as a faint grey ghost with its edges. The check boxes "
             f"below it show the particles ({rec['shown']:,}, each coloured by its own value, at "
             "the same magnification) or hide the surface. "

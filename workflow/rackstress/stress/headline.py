@@ -74,8 +74,12 @@ def headline_text(h: dict) -> str:
             f"particle {h['particle']}{sf}")
 
 
-def unsettled_text(summary: dict) -> str:
-    """The red line of a run that did not settle."""
+def unsettled_text(summary: dict, short: bool = False) -> str:
+    """The red line of a run that did not settle (``short``: one a picture's header holds)."""
+    if short:
+        return (f"NOT SETTLED: not an equilibrium, do not use these numbers (residual "
+                f"{summary.get('residual', float('nan')):.2g}, {summary.get('iterations')} "
+                "Newton steps)")
     return (f"NOT SETTLED: not an equilibrium (largest unbalanced force "
             f"{summary.get('residual', float('nan')):.2g} of the applied load after "
             f"{summary.get('iterations')} Newton steps): do not use these numbers")

@@ -786,8 +786,10 @@ def describe_static(info: dict) -> list:
                      for m in ("von_mises", "strain") if (p := rec.get(m)) is not None]
             if shown:
                 lines.append(f"  {name:12s} largest " + "; ".join(shown))
+    kinds = {w["kind"] for w in STRESS_WARNINGS}
     for w in info.get("warnings") or []:
-        lines.append(f"  warning: {w['message']}")
+        if st["settled"] or w.get("kind") not in kinds:   # no stress of a non-equilibrium
+            lines.append(f"  warning: {w['message']}")
     for key, path in info["files"].items():
         lines.append(f"  {key}: {path}")
     for note in info.get("notes") or []:
