@@ -217,72 +217,6 @@ def group_figures(scene: Scene, p_start: np.ndarray, p_end: np.ndarray) -> dict:
     return out
 
 
-def support_reactions(scene: Scene, p: np.ndarray) -> tuple[list, dict]:
-    """The support reactions of a static state ``p`` and the load they answer.
-
-    On a held direction the support pushes what keeps the particle in place: minus the net
-    force of the bindings (Eq. 12) and the loads there, R = −(f_bind + F_ext). Summed per
-    support — each ``[[support]]`` table and prescribed displacement in the scene's order
-    (``Group.meta["supports"]``), the rest (``held``, a built-in scene's supports) as
-    ``held`` — with their moment about the origin, Σ p × R at the state's positions (where the
-    forces act: the bindings' forces are central, so their moments cancel there). At
-    equilibrium the reactions and the applied load sum to zero in force and in moment, up to
-    the unbalanced forces left on the free particles (at most the settle tolerance × the load
-    on each): an engineer's first check.
-
-    Returns
-    -------
-    reactions : list of dict
-        ``{"support", "group", "particles", "force": [Fx, Fy, Fz], "moment": [Mx, My, Mz]}``
-        in the scene's force and length units.
-    applied : dict
-        ``{"force", "moment"}`` of every external load (forces, pressures, weight) about the
-        origin.
-
-    Example
-    -------
-    >>> from rackstress.scenes import load                            # doctest: +SKIP
-    >>> sc = load("examples/cantilever/scene.toml")                   # doctest: +SKIP
-    >>> from rackstress.engines.static import solve                   # doctest: +SKIP
-    >>> reactions, applied = support_reactions(sc, solve(sc).p)       # doctest: +SKIP
-    >>> reactions[0]["force"]                                         # doctest: +SKIP
-    [0.0, 0.0, 100.0]
-    """
-    from rackstress.engines.static import _bind_pairs, external_forces, forces
-
-    F_ext = external_forces(scene)
-    f = forces(scene, p, _bind_pairs(scene), F_ext, scene.masses())
-    fixed = scene.fixed()
-    R = np.where(fixed, -f, 0.0)
-    taken = np.zeros_like(fixed)
-
-    def record(label, group, take):
-        r = np.where(take, R, 0.0)
-        rows = take.any(axis=1)
-        return {"support": label, "group": group, "particles": int(rows.sum()),
-                "force": [float(x) for x in r.sum(axis=0)],
-                "moment": [float(x) for x in np.cross(p[rows], r[rows]).sum(axis=0)]}
-
-    out = []
-    for name, g in scene.groups.items():
-        sl = scene.slice(name)
-        for label, mask, dirs in (g.meta or {}).get("supports", []) if isinstance(g.meta, dict) \
-                else []:
-            take = np.zeros_like(fixed)
-            take[sl] = mask[:, None] & np.asarray(dirs, bool)[None, :]
-            take &= fixed & ~taken
-            taken |= take
-            out.append(record(label, name, take))
-        rest = np.zeros_like(fixed)
-        rest[sl] = fixed[sl] & ~taken[sl]
-        if rest.any():
-            taken |= rest
-            out.append(record("held", name, rest))
-    applied = {"force": [float(x) for x in F_ext.sum(axis=0)],
-               "moment": [float(x) for x in np.cross(p, F_ext).sum(axis=0)]}
-    return out, applied
-
-
 def summarize(scene: Scene, engine: str, mode: str, p_end: np.ndarray, steps_done: int,
               wall_s: float, status: str, error: DivergenceError | None = None,
               extra: dict | None = None) -> dict:
@@ -378,12 +312,15 @@ def execute_static(scene: Scene, out: Path, engine: str, mode: str, *, progress:
     ``iterations``, ``residual`` and ``status`` ("settled" or "not settled")."""
     import sys
 
-    from rackstress.engines.static import TOLERANCE, engine_residual, rounding_floor, solve
+    from rackstress.engines.static import (TOLERANCE, engine_residual, release, rounding_floor,
+                                           solve, support_reactions)
 
     comm = comm or world()
     root = comm.Get_rank() == 0
     t0 = time.perf_counter()
     show = bool(progress and root and sys.stderr.isatty())
+    if not root:
+        release(scene)          # the part check's factorization: the solve is rank 0's
     res = solve(scene, progress=show) if root else None
     if comm.Get_size() > 1:
         res = comm.bcast(res, root=0)
@@ -415,15 +352,16 @@ def execute_static(scene: Scene, out: Path, engine: str, mode: str, *, progress:
     extra.update({"analysis": "static", "settled": settled, "iterations": res.iterations,
                   "residual": max(res.residual, engine_rel), "residual_solver": res.residual,
                   "residual_engine": engine_rel, "tolerance": TOLERANCE,
-                  "load_magnitude": res.load, "solve_s": res.wall_s,
-                  "residual_history": res.history})
+                  "applied_load_total": res.load, "solve_s": res.wall_s,
+                  "residual_history": res.history, "solver": res.solver,
+                  "factorizations": res.factorizations})
+    if root:
+        extra.update(support_reactions(scene, res))
     if not settled and res.load > 0:
         # relative to the load: the unbalanced force rounding alone leaves (the hint of exit 6)
         extra["rounding_floor"] = rounding_floor(scene, scene.original_positions()) / res.load
     if root:
-        if np.isfinite(res.p).all():
-            extra["reactions"], extra["applied_load"] = support_reactions(scene, res.p)
-        warnings = load_path_warnings(scene)
+        warnings = load_path_warnings(scene) + list(res.warnings)
         for w in warnings:
             print(f"rackstress: warning: {scene.name}: {w['message']}", file=sys.stderr)
         extra["warnings"] = warnings
@@ -627,6 +565,12 @@ def plan(scene: Scene, engine: str = "lammps", mode: str = "exact",
         pred = check_dt(scene, allow=allow_unstable, pred=_cached_prediction(fp))
         _cache_prediction(fp, pred)
     check_memory(scene, engine, comm.Get_size())
+    if scene.analysis == "static":
+        # the part check (rigid-body modes, mechanisms) before the directory is touched; its
+        # first factorization is kept on the scene for the solve (engines/static.py)
+        from rackstress.engines.static import check_part
+
+        check_part(scene)
     # LAMMPS runs the exact operators in the compiled plugin when it is there for this LAMMPS
     # (docs/plugin.md), else in the Python callback (one line says why); a resumed run keeps it
     deck = compile_deck(scene, mode, plugin=None if engine == "lammps" else False)
