@@ -109,14 +109,6 @@ def supports(ctx, tables, groups: dict, select) -> None:
         # which particles and directions this support holds: its reaction (engines/static.py)
         g.meta.setdefault("supports", []).append((f"[[support]] #{k}", mask, dirs))
         _refix(g)
-        _record_support(g, f"[[support]] #{k}", mask, fix)
-
-
-def _record_support(g, label: str, mask, fix) -> None:
-    """Which particles and directions a support holds, by its name in the scene file: the
-    static run sums each support's reactions (:func:`rackstress.runs.run.support_reactions`)."""
-    g.meta.setdefault("supports", []).append(
-        (label, np.array(mask, dtype=bool), tuple(a in fix for a in "xyz")))
 
 
 def _refix(g) -> None:
@@ -272,7 +264,6 @@ def loads(ctx, tables, groups: dict, operators: dict, u, select, ramp) -> dict:
             g.meta.setdefault("supports", []).append((f"[[load]] #{k} (displacement)", mask,
                                                       np.ones(3, dtype=bool)))
             _refix(g)
-            _record_support(g, f"[[load]] #{k} (displacement)", mask, "xyz")
             continue
         if kind != "gravity":
             _spacing(c, g)
