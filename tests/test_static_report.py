@@ -191,7 +191,7 @@ def test_max_deformation_is_the_largest_displacement(cantilever):
 
 @pytest.mark.lammps
 def test_the_surface_file_carries_the_particles_values_onto_the_parts_faces(cantilever):
-    """``vtk/surface.vtp``: the bar's own faces (y, z = ±5 mm, geometry) with ``von_mises``,
+    """``vtk/surface.vtp``: the bar's own faces (x = 0, 100; y, z = ±5 mm) with ``von_mises``,
     ``displacement`` and ``group_id``. On the top face at mid-span the surface's stress is
     beam theory's at the surface, M·c/I = 100·50·5/(10⁴/12) = 30 MPa (within 5 %), above the
     particles' layer at z = 4 (24 MPa): extrapolated to the face, not averaged inwards; the
@@ -205,6 +205,10 @@ def test_the_surface_file_carries_the_particles_values_onto_the_parts_faces(cant
     P = np.asarray(m.points)
     assert P[:, 2].max() == pytest.approx(5.0, abs=0.05) and P[:, 1].min() == pytest.approx(
         -5.0, abs=0.05)
+    # the end faces too, though the lattice's particles sit on them (x = 0 and 100: their
+    # cells half outside the bar, which their volumes say)
+    assert P[:, 0].min() == pytest.approx(0.0, abs=0.1) and P[:, 0].max() == pytest.approx(
+        100.0, abs=0.1)
     top = (np.abs(P[:, 0] - 50) < 1) & (P[:, 2] > 4.9) & (np.abs(P[:, 1]) < 3)
     assert top.sum() > 10
     assert m["von_mises"][top].mean() == pytest.approx(30.0, rel=0.05)

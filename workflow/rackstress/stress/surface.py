@@ -9,10 +9,11 @@ that skin and carries the particles' values onto it:
   that no edge is longer than 1.5 spacings nor any triangle larger than a spacing squared (a
   flat face of two long triangles would show no stress at all); any other part (``fill``,
   ``lattice``, ``parts``), or a mesh that cannot be read any more, gets the lattice's outer
-  surface: the particles splatted onto a grid of half a spacing, smoothed by a Gaussian of
-  half a spacing and contoured at half the lattice's number density (:func:`lattice_surface`). On a cubic lattice that level lies half a spacing
-  beyond the outer particle centres — where the part's faces are — and the ripple between
-  particles is ~1 % of the spacing;
+  surface: the particles splatted onto a grid of half a spacing, each weighted by its cell's
+  share of the part, smoothed by a Gaussian of half a spacing and contoured at half the
+  lattice's number density (:func:`lattice_surface`). On a cubic lattice that level lies on
+  the part's faces (half a spacing beyond the outer particle centres, or on them where a face
+  cuts their cells in half), and the ripple between particles is ~1 % of the spacing;
 * **the values**: at every surface point, a weighted least-squares *linear* fit to the nearest
   particles' values (moving least squares, Gaussian weights of one spacing; :func:`interpolate`),
   evaluated at the point: exact for a field linear in position (a bending stress, a rotation),
@@ -100,14 +101,17 @@ def _number_density(o: np.ndarray, a: float) -> float:
     return (np.sqrt(2.0) if np.max(counts) > 8 else 1.0) / a ** 3
 
 
-def lattice_surface(o: np.ndarray, a: float):
+def lattice_surface(o: np.ndarray, a: float, share: np.ndarray | None = None):
     """The outer surface of the particles ``o`` (spacing ``a``) as (points, triangles).
 
     The particles are splatted (trilinear weights) onto a grid of spacing a/2, smoothed by a
     Gaussian of σ = a/2 and contoured (VTK's flying edges) at half the lattice's number density
     per voxel: on a lattice filling a half-space that level lies a/2 beyond the last layer, the
     part's face; a single layer of particles still closes (its peak density is 0.68 of the
-    interior's)."""
+    interior's). ``share``: each particle's share of its cell that lies in the part
+    (``bindings.npz``'s volumes over a³, docs/calibration.md), its weight in the splat: a
+    layer whose cells the part's face cuts in half (the cantilever at spacing 0.8: the top
+    layer on the face z = 5) pulls the surface back onto the face, not a/2 beyond it."""
     from scipy.ndimage import gaussian_filter
     import pyvista as pv
 
@@ -118,9 +122,11 @@ def lattice_surface(o: np.ndarray, a: float):
     x = (o - lo) / h
     i0 = np.floor(x).astype(int)
     f = x - i0
+    weight = np.ones(len(o)) if share is None else np.clip(
+        np.nan_to_num(np.asarray(share, float), nan=1.0), 0.0, 1.0)
     for corner in range(8):
         d = np.array([(corner >> k) & 1 for k in range(3)])
-        w = np.prod(np.where(d, f, 1.0 - f), axis=1)
+        w = np.prod(np.where(d, f, 1.0 - f), axis=1) * weight
         idx = i0 + d
         np.add.at(grid, (idx[:, 0], idx[:, 1], idx[:, 2]), w)
     grid = gaussian_filter(grid, sigma=0.5 * a / h, mode="constant")
@@ -175,7 +181,16 @@ def surface_of(run, part, group_rec: dict, notes: list | None = None):
                 notes.append(f"part {part.name}: its mesh {mesh.get('file')} could not be read "
                              f"({type(exc).__name__}: {exc}); the pictures show the lattice's "
                              "outer surface instead")
-    pts, tri = lattice_surface(o, a)
+    share = None
+    try:
+        from rackstress.stress.measures import read_volumes
+
+        V = read_volumes(run)
+        if V is not None:
+            share = V[part.index] / a ** 3
+    except (OSError, ValueError):
+        share = None
+    pts, tri = lattice_surface(o, a, share)
     return pts, tri, "the lattice's outer surface", a, (pts, tri)
 
 
