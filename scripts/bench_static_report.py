@@ -4,8 +4,9 @@
 
 RUNDIR is a finished static run (``rackstress run SCENE --no-render``); without it the script
 runs ``examples/cantilever/scene.toml --set spacing=0.8`` (21,294 particles; named ``bar-0.8``:
-the report before took a run named like a built-in scene for that scene) first. Each repeat copies its inputs (scene.json, particles.data, the
-trajectory, bindings.npz, boundary.npz, summary.json) into a fresh directory and post-processes
+the report before took a run named like a built-in scene for that scene) first. Each repeat
+copies its inputs (scene.json, particles.data, the trajectory, bindings.npz, boundary.npz,
+summary.json) into a fresh directory and post-processes
 the copy as ``rackstress run`` does at its end (``rackstress.cli._post_and_render``: the
 measures, the peaks, the VTK files in a forked writer, the pictures, the 3D view, report.html),
 in a fresh process, once with this checkout's code and once with the baseline's
@@ -101,11 +102,13 @@ def accuracy(rundir: Path) -> dict:
     for x in (25.0, 50.0, 75.0):
         near = a / 2 + 1e-6
         face = (np.abs(P[:, 0] - x) <= near) & (P[:, 2] > 4.9) & (np.abs(P[:, 1]) < 3)
-        layer = (np.abs(o[:, 0] - x) <= near) & (o[:, 2] > top_o - 1e-6) & (np.abs(o[:, 1]) < 3)
+        layer = ((np.abs(o[:, 0] - x) <= near) & (o[:, 2] > top_o - a / 2)
+                 & (np.abs(o[:, 1]) < 3))
+        z = float(o[layer, 2].mean())
         rows.append({"x": x, "surface": float(vm[face].mean()),
                      "beam_surface": 100 * (100 - x) * 5 / (1e4 / 12),
-                     "particles": float(pv_vm[layer].mean()), "z_particles": float(top_o),
-                     "beam_particles": 100 * (100 - x) * top_o / (1e4 / 12)})
+                     "particles": float(pv_vm[layer].mean()), "z_particles": z,
+                     "beam_particles": 100 * (100 - x) * z / (1e4 / 12)})
     tip = P[:, 0] > P[:, 0].max() - a / 4
     lin = 3 + 2 * o[:, 0] - o[:, 1] + 0.5 * o[:, 2]
     exact = 3 + 2 * P[:, 0] - P[:, 1] + 0.5 * P[:, 2]
@@ -214,7 +217,7 @@ def main(argv=None) -> int:
                 lines.append(
                     f"| {r['spacing']:g} | {r['particles']:,} | {row['x']:g} | "
                     f"{row['surface']:.2f} | {row['beam_surface']:.2f} | {row['particles']:.2f}"
-                    f" (z = {row['z_particles']:g}) | {row['beam_particles']:.2f} | "
+                    f" (z = {row['z_particles']:.3g}) | {row['beam_particles']:.2f} | "
                     + (f"{r['z_max']:.3f} | {r['tip_deflection']:.4f} | "
                        f"{r['linear_error']:.1e} |" if first else "| | |"))
         lines.append("")
