@@ -397,8 +397,16 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True,
 
     stop_prepared()             # joined before post-processing forks (prepare.py)
     discard_finished(out)       # a kill-only checkpoint of a finished run: never resumed
-    if summary.get("analysis") == "static":
-        click.echo(f"{summary['scene']}: static, {summary['status']} in {summary['iterations']} "
+    static = summary.get("analysis") == "static"
+    units = {}
+    if static:
+        try:
+            units = json.loads((Path(out) / "scene.json").read_text()).get("units") or {}
+        except (OSError, ValueError):
+            units = {}
+        how = ("settled in" if summary.get("settled") else
+               "NOT SETTLED (not an equilibrium: do not use its numbers) after")
+        click.echo(f"{summary['scene']}: static, {how} {summary['iterations']} "
                    f"iterations (residual {summary['residual']:.2g} of the applied load) on "
                    f"{summary['engine']} in {summary['wall_s']:.2f} s -> {out}")
     else:
@@ -406,8 +414,18 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True,
                    f"({summary['mode']}) in {summary['wall_s']:.2f} s -> {out}")
     for name, g in summary["groups"].items():
         md = g["max_deformation"]
+        if static:          # a held part's deformation is its displacement (runs/run.py)
+            at = g.get("max_deformation_at")
+            click.echo(f"  {name:12s} n={g['n']:6d}  largest displacement="
+                       + (f"{md:.4g} {units.get('length', '')}".rstrip() if md is not None
+                          else "-")
+                       + (f" (particle {g['max_deformation_particle']} at "
+                          f"({', '.join(f'{x:.4g}' for x in at)}))" if at else ""))
+            continue
         click.echo(f"  {name:12s} n={g['n']:6d}  max_deformation="
                    + (f"{md:.4g}" if md is not None else "-"))
+    if static:
+        _say_reactions(summary, units)
     while _AHEAD:               # post-processing in the process that prepared it
         ahead = _AHEAD.pop()
         code = ahead.go()
@@ -421,6 +439,30 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True,
 
     with kept_open():           # particles.data read and the dump indexed once
         _post_and_render(out, do_render, progress, dump_text)
+
+
+def _say_reactions(summary: dict, units: dict) -> None:
+    """A static run's support reactions, one line each, and their sum against the load (a
+    component below the settle tolerance × the load is what the solve leaves: 0)."""
+    import math
+
+    reactions, applied = summary.get("reactions"), summary.get("applied_load")
+    if not reactions or not applied:
+        return
+    tol = float(summary.get("tolerance") or 1e-6) if summary.get("settled") else 0.0
+
+    def vec(v, of):
+        small = tol * math.sqrt(sum(x * x for x in of))
+        return "(" + ", ".join("0" if abs(x) < small else f"{x:.4g}" for x in v) + ")"
+
+    fu, lu = units.get("force", ""), units.get("length", "")
+    for r in reactions:
+        click.echo(f"  reaction of {r['support']} on {r['group']}: force "
+                   f"{vec(r['force'], applied['force'])} {fu}, moment "
+                   f"{vec(r['moment'], applied['moment'])} {fu}·{lu}")
+    total = [sum(r["force"][k] for r in reactions) for k in range(3)]
+    click.echo(f"  reactions' sum {vec(total, applied['force'])} {fu} against the applied load "
+               f"{vec(applied['force'], applied['force'])} {fu}")
 
 
 def _forget(out: Path) -> None:
@@ -670,9 +712,17 @@ def _csv(text):
               help="Render the complete frames of a dump that ends mid-frame.")
 @click.option("--progress/--no-progress", default=True, show_default=True,
               help="A progress bar on a terminal.")
+@click.option("--allow-unsettled", is_flag=True,
+              help="A static run that did not settle: show its headline stress and factor of "
+                   "safety in report.html anyway (struck out by default: the state is not an "
+                   "equilibrium); the red NOT SETTLED banner stays.")
 def render(rundir, frames, measure, views, groups, out, movie, movie_view, vmax, cmap,
-           allow_truncated, progress):
+           allow_truncated, progress, allow_unsettled=False):
     """Render the stress pictures, sheet, plots (and movie) of RUNDIR; refresh RUNDIR/report.html.
+
+    A static run gets the part's surface instead (figures/sheet.png: four views of the
+    deformed surface coloured by the stress; figures/particles.png: the particles): no frames,
+    no movie, no plots over time.
 
     Exit status: 0 done, 2 bad input.
     """
@@ -699,16 +749,21 @@ def render(rundir, frames, measure, views, groups, out, movie, movie_view, vmax,
                                  vmax=vmax, cmap=cmap, groups=_csv(groups), out=out,
                                  allow_truncated=allow_truncated, progress=progress)
             record_render(rundir, rep, time.perf_counter() - t0)
-            report = _write_report(rundir)
+            report = _write_report(rundir, allow_unsettled)
     except Exception as err:  # noqa: BLE001 - each kind has its exit status (_fail_any)
         _fail_any(err)
     for note in rep.notes:
         click.echo(f"note: {note}")
     pk = rep.peak
-    click.echo("frames: " + ", ".join(f"{s}" for _, _, s in rep.frames)
-               + f"; colour scale 0..{rep.vmax:.4g}"
-               + (f"; peak {pk['value']:.4g} at iteration {pk['iteration']}, particle "
-                  f"{pk['particle']} ({pk['group']})" if pk else ""))
+    if pk is not None and "iteration" not in pk:        # a static run's headline
+        from rackstress.stress.headline import headline_text
+
+        click.echo(f"colour scale 0..{rep.vmax:.4g}; " + headline_text(pk))
+    else:
+        click.echo("frames: " + ", ".join(f"{s}" for _, _, s in rep.frames)
+                   + f"; colour scale 0..{rep.vmax:.4g}"
+                   + (f"; peak {pk['value']:.4g} at iteration {pk['iteration']}, particle "
+                      f"{pk['particle']} ({pk['group']})" if pk else ""))
     for name in rep.files:
         click.echo(f"  wrote {rep.outdir / name}")
     if report is not None:
@@ -716,13 +771,13 @@ def render(rundir, frames, measure, views, groups, out, movie, movie_view, vmax,
     click.echo(f"rendered in {time.perf_counter() - t0:.1f} s")
 
 
-def _write_report(rundir):
+def _write_report(rundir, allow_unsettled: bool | None = None):
     """RUNDIR/report.html when RUNDIR is a run directory with a summary; else None."""
     from rackstress.render.report import write_report
 
     if not (Path(rundir) / "summary.json").is_file():
         return None
-    return write_report(rundir)
+    return write_report(rundir, allow_unsettled=allow_unsettled)
 
 
 @main.command()
