@@ -959,16 +959,25 @@ def _fea_inputs(rundir: Path) -> str | None:
 @click.option("--E", "E", type=float, help="Young's modulus (default: the part's material in "
               "summary.json, else 1: ranks do not depend on it).")
 @click.option("--nu", type=float, help="Poisson's ratio (default: the material's, else 0.3).")
-@click.option("--size", type=float, help="Largest FE edge (default: one particle spacing).")
+@click.option("--size", type=float, help="Largest FE edge (default: 1.5 particle spacings, "
+              "graded finer at re-entrant edges); a larger size needs less memory.")
 @click.option("--group", help="The part to solve (default: the one with a material, else the "
               "largest with supports or loads).")
 @click.option("--measure", help="The particle measure compared (default: von_mises if the run "
               "has it, else strain).")
-def fea(rundir, E, nu, size, group, measure):
+@click.option("--allow-unsettled", is_flag=True, help="Compare a static run that did not "
+              "settle (refused otherwise: its state is not an equilibrium).")
+@click.option("--allow-dynamic", is_flag=True, help="Compare a dynamic run's last frame with "
+              "the static FE solution (refused otherwise: a moving state is not one).")
+@click.option("--no-converge", is_flag=True, help="Solve at one FE size only (default: also "
+              "at a coarser one, to say how much the FE's own governing stress moves).")
+def fea(rundir, E, nu, size, group, measure, allow_unsettled, allow_dynamic, no_converge):
     """Check a run's part against linear-elastic FEA of the same part (the 'fem' extra).
 
     Writes fea.json, fea.npz, vtk/fea.vtp, vtk/fea_mesh.vtu, figures/fea.png and the report's
-    "Finite-element check" (docs/fea.md). Exit 2 for a run it cannot read or solve.
+    "Finite-element check" (docs/fea.md). Exit 2 for a run it cannot read or solve, a static
+    run that did not settle, a dynamic run (unless allowed) and an FE model that would not fit
+    in memory (the message says how much it needs and which --size fits).
     """
     try:
         from rackstress.validity import solid
@@ -983,16 +992,39 @@ def fea(rundir, E, nu, size, group, measure):
         _fail(RackstressError(f"rackstress fea {rundir}: {damaged}"), 2)
     try:
         data = solid.check_run(rundir, E=E, nu=nu, size=size, group=group, measure=measure,
-                               echo=click.echo)
+                               echo=click.echo, allow_unsettled=allow_unsettled,
+                               allow_dynamic=allow_dynamic, converge=not no_converge)
     except (ValueError, RackstressError) as exc:
-        _fail(RackstressError(f"rackstress fea {rundir}: {exc}"), 2)
+        _fail(RackstressError(f"rackstress fea {rundir}: {exc}"), getattr(exc, "exit_code", 2))
+    except MemoryError:
+        _fail(RackstressError(f"rackstress fea {rundir}: out of memory; try a coarser FE mesh "
+                              "(--size, e.g. twice the run's spacing)"), 2)
     _write_report(rundir)
-    ag = data["agreement"]
-    ratio = ag.get("peak_ratio")
-    click.echo(f"fea: {data['group']} ({data['particles']:,} particles, {data['mesh']}): "
-               f"Spearman {ag['spearman']:.3f}, top-5 % overlap {ag['top5_overlap']:.2f}, "
-               f"peak ratio " + ("pending" if ratio is None else f"{ratio:.3f}")
-               + f" ({data['measure']}); wrote {rundir}/fea.json")
+    ag, gv, unit = data["agreement"], data["governing"], data.get("stress_unit", "")
+    click.echo(f"fea: {data['group']} ({data['particles']:,} particles, {data['mesh']}, "
+               f"{data['fe']['tetrahedra']:,} tetrahedra): compares {data['compared']}")
+    click.echo(f"fea: Spearman {ag['spearman']:.3f}, top-5 % overlap {ag['top5_overlap']:.2f} "
+               f"({data['measure']})")
+    for b in data["bands"]:
+        if b["n"]:
+            click.echo(f"fea:   {b['band']:>5} spacings from a singular point: {b['n']:,} "
+                       "particles, " + ", ".join(
+                           f"{k} {b[v]:.3f}" for k, v in (("Spearman", "spearman"),
+                                                           ("peak ratio", "peak_ratio"),
+                                                           ("median error", "median_error"))
+                           if b[v] is not None))
+    if gv.get("value") is not None:
+        moved = "" if gv.get("moved") is None else \
+            f"; it moved {100 * gv['moved']:.1f} % from FE size {gv['coarser']['size']:.3g}"
+        click.echo(f"fea: FE's governing stress {gv['value']:.4g} {unit} at "
+                   f"{[round(x, 2) for x in gv['position']]} (zone {data['zone']['length']:.3g})"
+                   + moved)
+        if gv.get("ratio") is not None:
+            click.echo(f"fea: the particles there: {gv['particle_value']:.4g} {unit} (particle "
+                       f"{gv['particle']}, ratio {gv['ratio']:.3f}); their own governing "
+                       f"stress {gv['particles_governing']:.4g} (ratio "
+                       f"{gv['particles_governing_ratio']:.3f})")
+    click.echo(f"fea: wrote {rundir}/fea.json ({data['wall_s']:.0f} s)")
 
 
 @main.group()
@@ -1164,8 +1196,23 @@ def bench_stress(out, quick):
 @click.option("--planar", is_flag=True,
               help="Only the planar cases as aluminium scenes in MPa (~2 min); rewrites their "
                    "section of validity.md.")
-def bench_validity(out, quick, planar):
+@click.option("--concentrations", is_flag=True,
+              help="Only the stress concentrations (plate with a hole, fillet, notch, C-frame, "
+                   "round shoulder): the governing stress against converged FEA and Peterson "
+                   "at three spacings (validity-concentrations.md).")
+@click.option("--case", "cases", multiple=True, help="With --concentrations: this case only "
+              "(repeatable): plate-hole, fillet, notch, cframe, round-shoulder.")
+@click.option("--spacings", help="With --concentrations: these spacings [mm], comma-separated "
+              "(default: each case's three).")
+def bench_validity(out, quick, planar, concentrations, cases, spacings):
     """Stress measures of three body models against linear-elastic FEA (three cases)."""
+    if concentrations or cases or spacings:
+        from rackstress.bench import concentrations as conc
+
+        conc.run_bench(out, cases=list(cases) or None,
+                       spacings=[float(x) for x in spacings.split(",")] if spacings else None,
+                       echo=click.echo)
+        return
     if planar:
         from rackstress.bench import planar as mod
 
@@ -1273,6 +1320,7 @@ TEACH = {
         "rackstress bench validity --quick --out /tmp/bench",
         "rackstress bench validity --out docs/benchmarks",
         "rackstress bench validity --planar --out docs/benchmarks",
+        "rackstress bench validity --concentrations --case plate-hole --spacings 0.8,0.6",
     ]),
     # commands the other engineers of this round add (applied when the command exists)
     "fea": ("Check a run's part against linear-elastic FEA of the same part.", [

@@ -151,11 +151,36 @@ def fea_section(fea: dict) -> str:
     out += [f'<tr><td>{_e(a)}</td><td class="num">{_e(b)}</td><td>{_e(c)}</td></tr>'
             for a, b, c in rows]
     out.append("</tbody></table>")
+    if fea.get("compared"):
+        out.append(f"<p>Compared: {_e(fea['compared'])}.</p>")
+    gv, zone, unit = fea.get("governing") or {}, fea.get("zone") or {}, fea.get("stress_unit", "")
+    if zone.get("rule"):
+        out.append(f"<p>Zone: {_e(zone['rule'])}.</p>")
+    if gv.get("value") is not None:
+        moved = ("" if gv.get("moved") is None else
+                 f"; it moved {100 * gv['moved']:.1f} % from FE size "
+                 f"{_num((gv.get('coarser') or {}).get('size'))}")
+        there = ("" if gv.get("ratio") is None else
+                 f" The particles there: {_num(gv.get('particle_value'))} {_e(unit)} (ratio "
+                 f"{_num(gv['ratio'])}); their own governing stress "
+                 f"{_num(gv.get('particles_governing'))} {_e(unit)} (ratio "
+                 f"{_num(gv.get('particles_governing_ratio'))}).")
+        out.append(f"<p>FE's governing stress: {_num(gv['value'])} {_e(unit)} at "
+                   f"{_e([round(x, 2) for x in gv['position']])}{_e(moved)}.{_e(there)}</p>")
+    if fea.get("bands"):
+        out.append('<table id="fea-bands"><thead><tr><th>spacings from a singular point</th>'
+                   "<th>particles</th><th>Spearman ρ</th><th>peak ratio</th>"
+                   "<th>median error</th></tr></thead><tbody>")
+        out += [f"<tr><td>{_e(b['band'])}</td><td class=\"num\">{b['n']}</td>"
+                f"<td class=\"num\">{_num(b['spearman'])}</td>"
+                f"<td class=\"num\">{_num(b['peak_ratio'])}</td>"
+                f"<td class=\"num\">{_num(b['median_error'])}</td></tr>" for b in fea["bands"]]
+        out.append("</tbody></table>")
     if fea.get("note"):
         out.append(f"<p>{_e(fea['note'])}</p>")
     out.append(f'<figure><img src="{FIGURES}/fea.png" alt="particles and FEA side by side">'
                "<figcaption>The particle measure (left) and FEA's von Mises stress (right) "
-               "at the particles; <code>vtk/fea.vtp</code> holds both as point arrays "
+               "at the particles, on one colour scale; <code>vtk/fea.vtp</code> holds both as point arrays "
                "(<code>fea_von_mises</code>, <code>fea_displacement</code>)</figcaption>"
                "</figure>")
     return "\n".join(out)

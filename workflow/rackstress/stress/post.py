@@ -89,8 +89,9 @@ class TooLargeError(StressInputError):
 #: The fit of the desired position (one for summary, pictures, report and files).
 FIT = "robust"
 #: 2: a sediment's paper measure is |p − o| (no rest shape, measures.paper_frames);
-#: 3: the stress fields (extras) and the scene's units kept beside the measures
-CACHE_VERSION = 3
+#: 3: the stress fields (extras) and the scene's units kept beside the measures;
+#: 4: von_mises by patch recovery (the measure's default route)
+CACHE_VERSION = 4
 
 
 @dataclass
