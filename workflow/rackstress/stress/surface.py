@@ -21,6 +21,9 @@ that skin and carries the particles' values onto it:
   post-processor extrapolates from its integration points, not averaged inwards. A point
   farther than one spacing from every particle takes the fit at one spacing (no long
   extrapolation into a feature the lattice did not resolve); von Mises stress is kept ≥ 0.
+  The von Mises stress is fitted from where the measure put it: patch recovery (the default
+  route, docs/stress.md) already reads a surface particle's stress at its cell's surface point,
+  so the fit takes those points, not the centres, and the face is not extrapolated twice.
 
 :func:`static_surfaces` returns them per part (:class:`PartSurface`, points undeformed, in the
 part's own coordinates); :func:`write_surface` writes ``vtk/surface.vtp`` with the arrays named
@@ -256,6 +259,16 @@ def interpolate(o: np.ndarray, values: np.ndarray, x: np.ndarray, a: float,
 # ----------------------------------------------------------------------------- per run
 #: arrays carried onto the surface when the run has them (the VTK files' names)
 CARRIED = ("von_mises", "strain")
+#: measures whose values stand at the particles' recovery points, not at their centres
+RECOVERED = ("von_mises",)
+
+
+def recovered_points(o: np.ndarray) -> np.ndarray:
+    """Where a part's patch-recovered stress stands (:func:`rackstress.stress.tensor.
+    part_recovery_points`, as the ``von_mises`` measure computes them)."""
+    from rackstress.stress.tensor import part_recovery_points
+
+    return part_recovery_points(o)
 
 
 def static_surfaces(run, fields, frame: int = -1, notes: list | None = None) -> list:
@@ -282,11 +295,27 @@ def static_surfaces(run, fields, frame: int = -1, notes: list | None = None) -> 
                 continue
             cols.append(np.where(np.isfinite(col), col, np.nanmean(col))[:, None])
             names.append(m)
-        got = interpolate(o, np.concatenate(cols, axis=1), pts, a)     # one fit for all
-        vals = {"displacement": got[:, :3]}
-        for j, m in enumerate(names[1:]):
-            vals[m] = np.maximum(got[:, 3 + j], 0.0) if m in ("von_mises", "strain") \
-                else got[:, 3 + j]
+        # the displacement and the neighbourhood measures live at the particles; the patch-
+        # recovered stress (the von_mises measure's default route) already at each surface
+        # particle's recovery point on the face: fitted from there, it is not extrapolated
+        # a second time (tensor.part_recovery_points, the points the measure used)
+        at_rec = [j for j, m in enumerate(names) if m in RECOVERED]
+        at_o = [j for j in range(len(names)) if j not in at_rec]
+        vals, flat = {}, np.concatenate(cols, axis=1)
+        width = [c.shape[1] for c in cols]
+        start = np.r_[0, np.cumsum(width)]
+        for sel, where in ((at_o, o), (at_rec, recovered_points(o))):
+            if not sel:
+                continue
+            idx = np.concatenate([np.arange(start[j], start[j + 1]) for j in sel])
+            got = interpolate(where, flat[:, idx], pts, a)             # one fit per site set
+            k0 = 0
+            for j in sel:
+                v = got[:, k0:k0 + width[j]]
+                k0 += width[j]
+                m = names[j]
+                vals[m] = v if m == "displacement" else (
+                    np.maximum(v[:, 0], 0.0) if m in ("von_mises", "strain") else v[:, 0])
         out.append(PartSurface(part.name, pts, tri, source, a, vals,
                                {"surface_cpu_s": t1 - t0,
                                 "interpolate_cpu_s": time.process_time() - t1}, shape))
