@@ -8,7 +8,8 @@ site, plain in the Markdown)::
 
 ``fig FILE EXPR``: FILE is the benchmark's JSON, relative to the page (as a Markdown link is);
 EXPR is an expression over its data ``d``: ``d.key`` or ``d["key with spaces"]``, ``[n]``,
-arithmetic (``+ - * /``, numbers), and ``row(list, key=value, …)`` (the first dict of ``list``
+arithmetic (``+ - * /``, numbers), a list comprehension (``[r.a / r.b for s in d.x for r in
+s.rows]``), and ``row(list, key=value, …)`` (the first dict of ``list``
 whose keys have those values), ``col(list, key)`` (every dict's value of ``key``), ``min``,
 ``max``, ``abs``, ``len``, ``sum``. The figure is the
 number just before the mark (``0.102``, ``33,689``, ``1.5e-3``, ``**1.89**``); it agrees when the
@@ -56,34 +57,54 @@ def _col(seq, key):
     return [r[key] for r in seq if isinstance(r, dict) and r.get(key) is not None]
 
 
+_CMP = {ast.Eq: lambda a, b: a == b, ast.NotEq: lambda a, b: a != b,
+        ast.Lt: lambda a, b: a < b, ast.Gt: lambda a, b: a > b}
 _FUNCS = {"row": _row, "col": _col, "min": min, "max": max, "abs": abs, "len": len, "sum": sum}
 
 
 def evaluate(expr: str, data):
     """``expr`` (module doc) over ``data`` (the JSON, as ``d``)."""
-    def ev(n):
+    def ev(n, env):
         if isinstance(n, ast.Expression):
-            return ev(n.body)
+            return ev(n.body, env)
         if isinstance(n, ast.Constant) and isinstance(n.value, (int, float, str)):
             return n.value
-        if isinstance(n, ast.Name) and n.id == "d":
-            return data
+        if isinstance(n, ast.Name) and n.id in env:
+            return env[n.id]
         if isinstance(n, ast.Attribute):
-            return ev(n.value)[n.attr]
+            return ev(n.value, env)[n.attr]
         if isinstance(n, ast.Subscript):
-            return ev(n.value)[ev(n.slice)]
+            return ev(n.value, env)[ev(n.slice, env)]
         if isinstance(n, ast.UnaryOp) and isinstance(n.op, ast.USub):
-            return -ev(n.operand)
+            return -ev(n.operand, env)
         if isinstance(n, ast.BinOp) and type(n.op) in _OPS:
-            return _OPS[type(n.op)](ev(n.left), ev(n.right))
+            return _OPS[type(n.op)](ev(n.left, env), ev(n.right, env))
         if isinstance(n, ast.Call) and isinstance(n.func, ast.Name) and n.func.id in _FUNCS:
-            return _FUNCS[n.func.id](*[ev(a) for a in n.args],
-                                     **{k.arg: ev(k.value) for k in n.keywords})
+            return _FUNCS[n.func.id](*[ev(a, env) for a in n.args],
+                                     **{k.arg: ev(k.value, env) for k in n.keywords})
         if isinstance(n, (ast.List, ast.Tuple)):
-            return [ev(e) for e in n.elts]
+            return [ev(e, env) for e in n.elts]
+        if isinstance(n, ast.ListComp):       # [expr for x in list for y in x.rows if …]
+            out = []
+
+            def walk(k, local):
+                if k == len(n.generators):
+                    out.append(ev(n.elt, local))
+                    return
+                g = n.generators[k]
+                if not isinstance(g.target, ast.Name):
+                    raise ValueError("a comprehension's variable must be a plain name")
+                for item in ev(g.iter, local):
+                    inner = {**local, g.target.id: item}
+                    if all(ev(c, inner) for c in g.ifs):
+                        walk(k + 1, inner)
+            walk(0, env)
+            return out
+        if isinstance(n, ast.Compare) and len(n.ops) == 1 and type(n.ops[0]) in _CMP:
+            return _CMP[type(n.ops[0])](ev(n.left, env), ev(n.comparators[0], env))
         raise ValueError(f"not allowed in a figure's expression: {ast.dump(n)[:60]}")
 
-    return ev(ast.parse(expr.replace("\n", " "), mode="eval"))
+    return ev(ast.parse(expr.replace("\n", " "), mode="eval"), {"d": data})
 
 
 def agrees(quoted: str, value) -> bool:

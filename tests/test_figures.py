@@ -61,6 +61,8 @@ GENERATED = {"accuracy.md": ("accuracy", "markdown", "accuracy.json"),
              "scaling.md": ("scaling", "markdown", "scaling.json"),
              "stability.md": ("stability", "markdown", "stability.json"),
              "static.md": ("static", "report", "static.json"),
+             "validity-concentrations.md": ("concentrations", "markdown",
+                                            "validity-concentrations.json"),
              "stress.md": ("stress", "report", "stress.json"),
              "validity.md": ("validity", "report", "validity.json"),
              "validity3d.md": ("validity3d", "markdown", "validity3d.json")}
