@@ -21,14 +21,13 @@ part?" with an independent solution of the same problem:
 
 Agreement (:func:`agreement`): Spearman ρ and top-5 % overlap of the particle measure against
 FEA's σ_vm at the particles' original positions (:func:`rackstress.validity.compare.agreement`),
-and the peak ratio *away from singular points*: particles within one wall thickness t of a
-re-entrant (concave) edge of the FE boundary, of a held or of a loaded particle are left out of
-the peaks. σ is unbounded at a sharp re-entrant edge and under a concentrated load or support
-in the continuum, so a peak there measures the mesh, not the part; by Saint-Venant's principle
-such a local disturbance has decayed about one thickness of the member away, where both
-models converge. t is the part's own (:func:`wall_thickness`: the median over the particles of
-the shortest chord through the part along x, y or z), so the same points are compared at every
-spacing. A ``strain`` measure
+and the peak ratio *away from singular points*, by the governing stress's rule
+(:mod:`rackstress.stress.governing`): particles within the zone — max(2 spacings, 0.4 × the
+part's wall thickness) — of the part's sharp re-entrant edges, support boundaries and point
+loads (the run's ``singular.npz``) are left out of the peaks. σ is unbounded there in the
+continuum, so a peak there measures the mesh, not the part. A run without ``singular.npz``
+(an older one) falls back on the FE boundary's concave edges, the held and the loaded
+particles, and one wall thickness (:func:`wall_thickness`). A ``strain`` measure
 (von Mises shear strain η) is turned into stress by σ_vm = 2√3·G·η (exact for isotropic linear
 elasticity: both are √J₂ of the deviator), G = E / 2(1 + ν).
 
@@ -48,6 +47,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from rackstress.model.singular import wall_thickness  # noqa: F401 - the part's length, one home
 
 #: Singular points: particles nearer than this many of the part's wall thickness
 #: (:func:`wall_thickness`) to a re-entrant edge, a support or a load are left out of the peak
@@ -423,40 +424,6 @@ def concave_edges(p: np.ndarray, t: np.ndarray) -> np.ndarray:
     return tm.vertices[e].mean(axis=1) if len(adj) else np.zeros((0, 3))
 
 
-def wall_thickness(o: np.ndarray, spacing: float, shape=None) -> float:
-    """The part's wall thickness: the median over its particles of the shortest chord through
-    the part along x, y or z. A chord is a run of lattice neighbours, each cell counted with its
-    share of the part along that axis (:func:`rackstress.model.solid.axis_fractions`, when the
-    ``shape`` is known), so it is the part's own length, not a whole number of spacings.
-
-    >>> o = np.array([[x, y, z] for x in range(20) for y in range(3) for z in range(8)], float)
-    >>> wall_thickness(o, 1.0)                  # a 20 × 3 × 8 plate of cells: 3 thick
-    3.0
-    """
-    a = float(spacing)
-    o = np.asarray(o, float)
-    g = np.rint((o - o.min(axis=0)) / a).astype(np.int64)
-    if shape is not None:
-        from rackstress.model.solid import axis_fractions
-
-        phi = axis_fractions(o, a, shape)
-    else:
-        phi = np.ones((len(o), 3))
-    chord = np.full(len(o), np.inf)
-    for ax in range(3):
-        other = [k for k in range(3) if k != ax]
-        order = np.lexsort((g[:, ax], g[:, other[1]], g[:, other[0]]))
-        gs = g[order]
-        new = np.r_[True, np.any(gs[1:, other] != gs[:-1, other], axis=1)
-                    | (gs[1:, ax] != gs[:-1, ax] + 1)]
-        run = np.cumsum(new) - 1
-        length = np.bincount(run, weights=phi[order, ax]) * a
-        c = np.empty(len(o))
-        c[order] = length[run]
-        chord = np.minimum(chord, c)
-    return float(np.median(chord))
-
-
 def agreement(values: np.ndarray, fea_vm: np.ndarray, points: np.ndarray, zone: float,
               singular: np.ndarray, to_stress: float | None = None) -> dict:
     """ρ, top-5 % overlap (:func:`rackstress.validity.compare.agreement`) and the peak ratio
@@ -596,6 +563,19 @@ def _boundary(rundir: Path, scene) -> tuple[dict, str]:
     return boundary_from_scene(scene), "the scene (no boundary.npz)"
 
 
+def _singular_zone(rundir: Path, name: str):
+    """The run's singular points of part ``name`` and the zone the governing stress leaves out
+    around them (:mod:`rackstress.stress.governing`: one rule for the headline and this
+    check), or (None, None) for a run without ``singular.npz``."""
+    from rackstress.stress.governing import read_singular, zone
+
+    got = (read_singular(rundir) or {}).get(name)
+    if got is None:
+        return None, None
+    spacing, wall, sing = got
+    return sing.points, zone(spacing, wall)
+
+
 def _particle_measure(rundir: Path, sl: slice, measure: str | None):
     """The measure at the last frame, from the post-processing's fields: ``measures.npz`` is
     only a cache (written on request), so the fields are computed when it is absent."""
@@ -678,9 +658,11 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
     mname, values = _particle_measure(rundir, sl, measure)
     G = E_ / (2 * (1 + nu_))
     to_stress = 1.0 if mname == "von_mises" else (2 * math.sqrt(3) * G if mat or E else None)
-    singular = np.concatenate([concave_edges(sol.mesh.p, sol.mesh.t), g.o[hk[hin]],
-                               g.o[lk[lin]]])
-    zone = SINGULAR_WALLS * wall_thickness(g.o, spacing, shape)
+    singular, zone = _singular_zone(rundir, name)
+    if singular is None:            # a run without singular.npz: the FE boundary's own rule
+        singular = np.concatenate([concave_edges(sol.mesh.p, sol.mesh.t), g.o[hk[hin]],
+                                   g.o[lk[lin]]])
+        zone = SINGULAR_WALLS * wall_thickness(g.o, spacing, shape)
     agree = agreement(values, res["von_mises"], g.o, zone, singular, to_stress)
     F_tot = np.asarray(bnd["load_force"], float)[lin].sum(axis=0)
     data = {
