@@ -156,6 +156,57 @@ def fea_section(fea: dict) -> str:
     return "\n".join(out)
 
 
+def _pos(rec: dict) -> str:
+    pos = ", ".join(f"{x:.4g}" for x in rec.get("position", []))
+    return f"particle {rec['particle']} at ({_e(pos)})" + (
+        f", {_e(rec['near'])}" if rec.get("near") else "")
+
+
+def governing_section(stress: dict) -> str:
+    """The headline of a part with a material: the governing stress (away from singular
+    points) with its factor of safety and zone, the singular peak beside it (spacing-dependent,
+    with advice), and the error bar: ``--refine``'s small table, or a single run's estimate.
+    Empty when ``stress`` (``summary.json["stress"]``) has no governing stress."""
+    gov = stress.get("governing")
+    if not gov:
+        return ""
+    out = []
+    w = out.append
+    sf = (f", factor of safety against yield <b>{_num(gov['safety'], 3)}</b>"
+          if gov.get("safety") else "")
+    w(f'<p class="headline" id="headline" data-governing="{gov["value"]!r}">The governing von '
+      f"Mises stress is <b>{_num(gov['value'])}</b> {_e(gov['units'])} in "
+      f"<b>{_e(gov['group'])}</b>{sf}: {_pos(gov)}, iteration {gov['iteration']}.</p>")
+    w(f'<p class="note" id="rule">The governing stress is {_e(gov["rule"])} '
+      "(docs/stress.md).</p>")
+    sing = stress.get("singular")
+    if sing:
+        w(f'<p class="singular" id="singular" data-kind="{_e(sing["kind"])}">Singular peak: '
+          f"<b>{_num(sing['value'])}</b> {_e(sing['units'])} at a {_e(sing['kind'])}, "
+          f"{_pos(sing)} — <b>spacing-dependent</b>, not a property of the part: "
+          f"{_e(sing['advice'])}.</p>")
+    err = stress.get("error")
+    if err and err.get("extrapolated") is not None:
+        u = _e(err.get("units", gov["units"]))
+        rows = [(f"{h:.4g}", f"{n:,}" if n else "–", _num(v))
+                for h, v, n in zip(err["spacings"], err["values"],
+                                   err.get("particles") or [None] * len(err["values"]))]
+        w('<table id="error-bar"><thead><tr><th>spacing</th><th>particles</th>'
+          f"<th>governing [{u}]</th></tr></thead><tbody>")
+        for r in rows:
+            w("<tr>" + "".join(f"<td class=num>{c}</td>" for c in r) + "</tr>")
+        w(f"<tr><td>extrapolated (order {_num(err['order'], 2)})</td><td></td>"
+          f"<td class=num>{_num(err['extrapolated'])}</td></tr>")
+        w(f"<tr><td>converged value within</td><td></td><td class=num>{_num(err['low'])} … "
+          f"{_num(err['high'])}</td></tr></tbody></table>")
+        w(f'<p class="note">{_e(err["method"])}. The refined run is in '
+          f"<code>{_e(err.get('refine_dir', 'refine'))}/</code>.</p>")
+    elif err:
+        w(f'<p class="note" id="error-estimate">Error: this spacing may read the governing '
+          f"stress about {_num(100 * abs(err['relative']), 2)} % off ({_e(err['method'])}).</p>")
+    return "\n".join(out)
+
+
 def write_report(rundir, stability: bool = True, view: bool = True,
                  built_view: dict | None = None) -> Path:
     """Write ``RUNDIR/report.html`` from what the run directory holds; return its path.
@@ -184,10 +235,13 @@ def write_report(rundir, stability: bool = True, view: bool = True,
     w(f'<p class="note">{_e(rundir.resolve())} — written {_e(time.strftime("%Y-%m-%d %H:%M:%S"))}'
       "</p>")
 
-    # ---- the peak, in one sentence
+    # ---- the governing stress, the headline (docs/stress.md), else the peak in one sentence
     peak = (summary.get("stress") or {}).get("peak") or post.get("peak")
     w('<h2 id="peak">Where and when it was most stressed</h2>')
-    if peak:
+    gov_html = governing_section(summary.get("stress") or {})
+    if gov_html:
+        w(gov_html)
+    elif peak:
         pos = ", ".join(f"{x:.4g}" for x in peak.get("position", []))
         what = ("The largest von Mises stress (from the bindings' forces, docs/stress.md)"
                 if peak.get("measure") == "von_mises" else
@@ -200,6 +254,8 @@ def write_report(rundir, stability: bool = True, view: bool = True,
         w('<p class="headline">No peaks yet: run <code>rackstress stress '
           f"{_e(rundir)}</code>.</p>")
     for gname, sf in ((summary.get("stress") or {}).get("safety") or {}).items():
+        if sf.get("rule") == "governing":
+            continue                            # said with the governing stress
         w(f'<p class="safety" data-group="{_e(gname)}">Smallest factor of safety of '
           f"<b>{_e(gname)}</b> (yield / von Mises): <b>{_num(sf['min'])}</b> at iteration "
           f"{sf['iteration']}, particle {sf['particle']}.</p>")
