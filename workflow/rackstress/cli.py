@@ -146,15 +146,20 @@ def main():
 @click.option("--integrator", type=Choice(["euler", "verlet"]), default="euler",
               show_default=True, help="euler: Eq. 5, the paper's; verlet: the second-order mode "
               "(leapfrog with trapezoidal damping).")
+@click.option("--refine", is_flag=True,
+              help="A static part: solve it again at spacing/sqrt(2) into OUT/refine and give "
+                   "the governing stress's error bar (Richardson; docs/stress.md). With "
+                   "--resume OUT on a finished run: only the refinement.")
 def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progress, do_render,
         restart_every=None, resume_dir=None, allow_unstable=False, integrator="euler",
-        dump_all=False, dump_text=False):
+        dump_all=False, dump_text=False, refine=False):
     """Run SCENE (a built-in name or a .toml file) and write a run directory.
 
     Exit status (errors.py): 0 done, 2 bad input or a run directory in use or holding another
     run, 3 diverged (frames and summary kept), 4 the run is done but its pictures could not be
     rendered, 5 the disk refused a write (full, read-only, no permission), 6 a static analysis
-    did not settle (its state and summary kept).
+    did not settle (its state and summary kept); with --refine, 2 or 6 for the refined run
+    leave the first run whole.
     """
     import gc
 
@@ -180,6 +185,11 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
                     f"so {opts} cannot be given with it (the checkpoint fixes them); to change "
                     "them start a new run, e.g. with --overwrite")
             out = check_out(resume_dir)
+            if refine and (Path(out) / "summary.json").is_file():
+                rec = json.loads((Path(out) / "scene.json").read_text())
+                _refine(out, scene, sets, rec.get("engine", engine), rec.get("mode", mode),
+                        progress, do_render)
+                return
         elif scene is None:
             raise click.UsageError("Missing argument 'SCENE' (or give --resume RUNDIR).")
         elif out is not None:
@@ -196,8 +206,15 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
             _may_exit_now()
             return
         shown = progress and rank() == 0
+        if refine and not (scene.endswith(".toml") or Path(scene).is_file()):
+            raise RackstressError(f"scene '{scene}' is a built-in scene: --refine refines the "
+                                  "parts of a scene file (.toml) filled at a spacing")
         with phase(f"building the scene {scene}", shown):
             sc = _load_scene(scene, steps, dt, sets, integrator)
+        if refine:
+            from rackstress.stress.refine import check_refinable
+
+            check_refinable(sc)
         if rank() == 0:
             from rackstress.stress.warming import warm_in_background
 
@@ -261,6 +278,8 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
                                       keep_checkpoints=keep_checkpoints, head_start=head_start,
                                       guards=not _AHEAD)
             _finish(summary, out, do_render, progress, dump_text)
+        if refine and summary.get("settled") is not False:
+            _refine(out, scene, sets, engine, mode, progress, do_render)
         if summary.get("settled") is False:
             from rackstress.errors import EXIT_UNSETTLED
 
@@ -278,6 +297,40 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
     finally:
         gc.enable()
         _quit_ahead()
+
+
+def _refine(out: Path, scene, sets, engine: str, mode: str, progress: bool,
+            do_render: bool) -> None:
+    """``--refine``: the finished run in ``out`` again at spacing/√2 into ``out/refine``, its
+    error bar into ``out/summary.json`` and the report (:mod:`rackstress.stress.refine`)."""
+    from rackstress import scenes
+    from rackstress.lib.mpi import rank
+    from rackstress.stress.governing import describe
+    from rackstress.stress.refine import refine
+
+    if rank() != 0:
+        return
+    rec = json.loads((Path(out) / "scene.json").read_text())
+    spec = scene or rec.get("source")
+    if not spec:
+        raise RackstressError(f"{out}: its scene file is not recorded; give it: rackstress run "
+                              f"SCENE.toml --resume {out} --refine")
+    overrides = scenes.parse_overrides(sets) if sets else {
+        k: v for k, v in (rec.get("params") or {}).items()
+        if k not in ("file", "integrator", "dt", "analysis", "spacing_scale", "steps")}
+    from rackstress.runs.rundir import locked
+
+    with locked(out, create=False):
+        with phase(f"refining: the scene again at spacing/sqrt(2) into {Path(out) / 'refine'}",
+                   progress, ticker=False):
+            err = refine(out, spec, overrides, engine=engine, mode=mode, progress=progress,
+                         echo=click.echo)
+        summary = json.loads((Path(out) / "summary.json").read_text())
+        st = summary.get("stress") or {}
+        for line in describe(st.get("governing"), None, err):
+            click.echo(line)
+        if do_render:
+            _write_report(out)
 
 
 def _own_streams() -> bool:
@@ -1076,6 +1129,17 @@ def bench_scaling(out, quick, remodel, large, only):
 def bench_inside(out, quick):
     """Binding a mesh part inside its shape: 17,600 / 100,000 / 1,000,000 particles."""
     from rackstress.bench import inside as mod
+
+    data = mod.run_bench(out, quick=quick, echo=click.echo)
+    _bench_report(data, mod)
+
+
+@bench.command("governing")
+@_bench_out
+@click.option("--quick", is_flag=True, help="The C frame only, at two spacings, one FE size.")
+def bench_governing(out, quick):
+    """The governing stress, singular peak and --refine error bar against converged FEA."""
+    from rackstress.bench import governing as mod
 
     data = mod.run_bench(out, quick=quick, echo=click.echo)
     _bench_report(data, mod)
