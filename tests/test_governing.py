@@ -233,6 +233,14 @@ def test_refine_writes_the_error_bar_and_keeps_both_runs(refined):
     assert err["low"] <= err["extrapolated"] <= err["high"]
     assert "governing von Mises stress" in p.stdout and "error bar:" in p.stdout
     assert "singular peak" in p.stdout and "re-entrant edge" in p.stdout
+    # the report: the governing stress as the headline, the singular peak beside it, the table
+    from rackstress.render.report import write_report
+
+    html = write_report(out, view=False).read_text()
+    assert f'data-governing="{gov["value"]!r}"' in html and 'id="singular"' in html
+    table = html.split('id="error-bar"')[1].split("</table>")[0]
+    assert all(f"{v:.4g}" in table for v in err["values"])
+    assert f"{err['extrapolated']:.4g}" in table
 
 
 @pytest.mark.slow

@@ -40,7 +40,8 @@ LEVELS = (1.0, 1.0 / math.sqrt(2.0), 0.5)
 #: distance bands from the singular points, in spacings
 BANDS = ((0, 1), (1, 2), (2, 3), (3, 5), (5, math.inf))
 HEADER = ["part", "spacing", "particles", "zone", "governing (particles)", "singular peak",
-          "FEA governing", "particles / FEA"]
+          "FEA governing", "particles / FEA", "s/t at the governing point",
+          "|error| / (s/t)"]
 
 
 def _jaw_stl() -> Path | None:
@@ -130,6 +131,7 @@ def _level(scene: Path, spacing: float, scale: float, out: Path) -> dict:
 def case(name: str, scene: Path, spacing: float, h_far: float, h_near: float, work: Path,
          levels=LEVELS, fe_levels: int = 2, echo=print) -> dict:
     """One part through the levels, the error bars and the FE reference (module docstring)."""
+    from rackstress.model.singular import chords
     from rackstress.stress.governing import (LATTICE_ORDER, error_bar, record, read_singular,
                                              zone as zone_of)
     from rackstress.stress.post import compute_fields
@@ -152,11 +154,15 @@ def case(name: str, scene: Path, spacing: float, h_far: float, h_near: float, wo
         fields = compute_fields(rd)
         at = record(rd, fields, zone_override=z, singular=coarse)["parts"][part]
         own = record(rd, fields)["parts"][part]
+        o_part = rd.o[rd.parts[part].index]
+        t_gov = float(chords(o_part, r["spacing"])[at["governing"]["index"]])
         rows.append({"spacing": r["spacing"], "particles": r["particles"],
                      "settled": r["settled"], "cpu_s": r["cpu_s"],
                      "governing": at["governing"]["value"],
                      "governing_at": at["governing"]["position"],
                      "governing_own_zone": own["governing"]["value"], "own_zone": own["zone"],
+                     "thickness_at_governing": t_gov,
+                     "s_over_t": r["spacing"] / t_gov,
                      "singular_peak": (at["singular"] or {}).get("value"),
                      "singular_kind": (at["singular"] or {}).get("kind"),
                      "_vm": fields.values["von_mises"][-1][rd.parts[part].index],
@@ -194,6 +200,8 @@ def case(name: str, scene: Path, spacing: float, h_far: float, h_near: float, wo
                               "peak_ratio": float(r["_vm"][m].max() / fe_at[m].max())})
         r["bands"] = bands
         r["governing_over_fea"] = r["governing"] / fe_g
+        # what a single run's default estimate would need: |error| per s/t
+        r["error_per_s_over_t"] = abs(r["governing_over_fea"] - 1) / r["s_over_t"]
         del r["_vm"], r["_o"]
     covered = {"refine": bool(refine["low"] <= fe_g <= refine["high"]),
                "three": None if three is None else bool(three["low"] <= fe_g <= three["high"])}
@@ -210,7 +218,8 @@ def table_rows(data) -> list:
         for r in c["rows"]:
             out.append([c["name"], fmt(r["spacing"], 4), f"{r['particles']:,}", fmt(c["zone"]),
                         fmt(r["governing"], 4), fmt(r["singular_peak"], 4),
-                        fmt(c["fea_governing"], 4), fmt(r["governing_over_fea"])])
+                        fmt(c["fea_governing"], 4), fmt(r["governing_over_fea"]),
+                        fmt(r["s_over_t"]), fmt(r["error_per_s_over_t"])])
     return out
 
 
@@ -235,12 +244,14 @@ def run_bench(out=None, quick: bool = False, echo=print) -> dict:
 
     orders = [c["three"]["order"] for c in results
               if c["three"] and c["three"]["order_from"].startswith("measured")]
+    # the single run's error per s/t: the largest over every part and spacing (an envelope)
+    slope = max((r["error_per_s_over_t"] for c in results for r in c["rows"]), default=None)
     data = {"machine": {**start, "load_avg_at_end": machine().get("load_avg_at_start")},
             "quick": bool(quick), "levels": list(LEVELS[:2] if quick else LEVELS),
             "rule": {"zone_spacings": ZONE_SPACINGS, "zone_walls": ZONE_WALLS,
                      "refine_ratio": REFINE_RATIO, "lattice_order": LATTICE_ORDER,
                      "default_error_slope": DEFAULT_ERROR_SLOPE},
-            "measured_orders": orders, "cases": results,
+            "measured_orders": orders, "measured_error_slope": slope, "cases": results,
             "lattice": "the simple-cubic bind lattice with face compensation and boundary "
                        "fractions, the continuum stress route; the lattice's own Poisson's "
                        "ratio 1/4 (FEA: the material's ν)"}
@@ -268,6 +279,14 @@ def markdown(data) -> str:
              "the zone from every singular point.",
              "",
              md_table(HEADER, table_rows(data)),
+             f"The lattice's order of convergence, measured on each part from its three "
+             f"spacings: {', '.join(fmt(p) for p in data['measured_orders']) or '—'} (the code's "
+             f"LATTICE_ORDER: {fmt(data['rule']['lattice_order'])}). A single run's error per "
+             f"s/t (s the spacing, t the shortest chord through the part at the governing "
+             f"particle), the largest over every part and spacing: "
+             f"{fmt(data['measured_error_slope'])} (the code's DEFAULT_ERROR_SLOPE: "
+             f"{fmt(data['rule']['default_error_slope'])}).",
+             "",
              "## Error bars", "",
              md_table(["part", "--refine: extrapolated", "band", "covers FEA",
                        "3 spacings: order", "extrapolated", "band", "covers FEA", "FEA",

@@ -388,15 +388,13 @@ def support_boundary(o: np.ndarray, fixed: np.ndarray, spacing: float) -> np.nda
     held = f.all(axis=1) if f.ndim == 2 else f
     if not held.any() or held.all():
         return np.zeros(0, np.int64)
-    P = _neighbours(o, spacing)
-    if not len(P):
-        return np.zeros(0, np.int64)
-    i, j = P[:, 0], P[:, 1]
-    edge = np.zeros(len(o), bool)
-    mixed = held[i] != held[j]
-    edge[i[mixed & held[i]]] = True
-    edge[j[mixed & held[j]]] = True
-    return np.flatnonzero(edge)
+    from scipy.spatial import cKDTree
+
+    k = np.flatnonzero(held)
+    r = NEIGHBOUR * spacing * (1 + 1e-9)
+    every = cKDTree(o).query_ball_point(o[k], r, return_length=True)
+    held_only = cKDTree(o[k]).query_ball_point(o[k], r, return_length=True)
+    return k[every > held_only]
 
 
 def point_loads(o: np.ndarray, force: np.ndarray, spacing: float,

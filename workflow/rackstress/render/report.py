@@ -201,9 +201,14 @@ def governing_section(stress: dict) -> str:
           f"{_num(err['high'])}</td></tr></tbody></table>")
         w(f'<p class="note">{_e(err["method"])}. The refined run is in '
           f"<code>{_e(err.get('refine_dir', 'refine'))}/</code>.</p>")
+        if err.get("converging") is False:
+            w(f'<p class="warning" id="not-converged">Not converged: the governing stress moved '
+              f"by {_num(100 * err['change'], 2)} % between the two spacings; refine further, "
+              "or check it by FE (<code>rackstress fea</code>).</p>")
     elif err:
-        w(f'<p class="note" id="error-estimate">Error: this spacing may read the governing '
-          f"stress about {_num(100 * abs(err['relative']), 2)} % off ({_e(err['method'])}).</p>")
+        w(f'<p class="note" id="error-estimate">Error bar: ± '
+          f"{_num(100 * abs(err['relative']), 2)} %, {_num(err.get('low'))} … "
+          f"{_num(err.get('high'))} {_e(gov['units'])} ({_e(err['method'])}).</p>")
     return "\n".join(out)
 
 

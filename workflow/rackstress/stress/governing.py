@@ -28,13 +28,12 @@ Example
 """
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
 import numpy as np
 
-from rackstress.model.singular import KINDS, Singular, empty
+from rackstress.model.singular import KINDS, Singular
 
 #: The zone: particles nearer than this many spacings to a singular point are left out of the
 #: governing stress. Measured (``rackstress bench governing``, docs/stress.md): beyond two
@@ -51,6 +50,10 @@ REFINE_RATIO = math.sqrt(2.0)
 #: The order of the governing stress's convergence on the lattice, measured by ``rackstress
 #: bench governing`` (docs/benchmarks/governing.md), for a two-spacing Richardson estimate.
 LATTICE_ORDER = 1.0
+#: The last two spacings' governing stresses within this fraction of each other: the bar is
+#: a convergence's; beyond it the run says the value is not converged there (a hole or a
+#: curved face the lattice resolves as steps, a zone too near a concentration).
+CONVERGING = 0.10
 #: Roache's safety factors of the grid convergence index: 3 with an assumed order (two
 #: spacings), 1.25 with an order measured on the part (three).
 SAFETY_ASSUMED, SAFETY_MEASURED = 3.0, 1.25
@@ -408,39 +411,45 @@ def error_bar(values: list, spacings: list, order: float | None = None) -> dict:
     fs = SAFETY_MEASURED if src.startswith("measured") else SAFETY_ASSUMED
     ext = richardson(v[-2], v[-1], ratio, p)
     est = fs * abs(v[-1] - ext)
+    change = abs(v[-1] - v[-2]) / abs(v[-1]) if v[-1] else None
     return {"values": v, "spacings": h, "ratio": ratio, "order": float(p), "order_from": src,
             "extrapolated": ext, "estimate": est,
             "relative": (v[0] - ext) / ext if ext else None,
             "relative_fine": (v[-1] - ext) / ext if ext else None,
-            "low": v[-1] - est, "high": v[-1] + est, "safety_factor": fs,
+            "low": max(0.0, v[-1] - est), "high": v[-1] + est, "safety_factor": fs,
+            "change": change,
+            "converging": bool(change is not None and change <= CONVERGING),
             "method": f"Richardson extrapolation (order {p:.3g}, {src}) over spacings "
                       + ", ".join(f"{x:.4g}" for x in h)
                       + f"; error band: grid convergence index, safety factor {fs:g}"}
 
 
-#: What a single run's governing stress may be off by (relative, the sign: the lattice reads
-#: low), per the particles' layers across the member at the governing point (s/t): measured
-#: by ``rackstress bench governing`` (docs/benchmarks/governing.md).
+#: What a single run's governing stress may be off by, per s/t (s the spacing, t the shortest
+#: chord through the part at the governing particle): the largest |governing / FEA − 1| per
+#: s/t that ``rackstress bench governing`` measured over its parts and spacings
+#: (docs/benchmarks/governing.md: "A single run's error per s/t").
 DEFAULT_ERROR_SLOPE = 1.0
 
 
 def default_error(run, gov: dict) -> dict:
-    """What a single run's governing stress may be off by, without ``--refine``: the
-    particles read the stress at their centres, half a spacing inside the surface, so in
-    bending across a member t thick they read (1 − s/t) of the surface's value; measured on
-    the benchmark's parts (:data:`DEFAULT_ERROR_SLOPE`)."""
+    """What a single run's governing stress may be off by, without ``--refine``: ±
+    :data:`DEFAULT_ERROR_SLOPE` × s/t, the lattice's measured convergence. Why s/t: a particle
+    reads the stress at its centre, half a spacing inside the surface, which in bending across
+    a member t thick is s/t below the surface's value (hand calculation); particles on a convex
+    edge read a few per cent high. ``relative`` is the half-width of that band."""
+    from rackstress.model.singular import chords
+
     part = run.parts[gov["group"]]
     o = run.o[part.index]
     s = float(gov["spacing"])
-    from rackstress.model.singular import chords
-
     t = float(chords(o, s)[int(gov["index"])])
     rel = DEFAULT_ERROR_SLOPE * s / t
-    return {"estimate": rel * gov["value"], "relative": -rel, "thickness": t,
-            "method": f"a single spacing: the particle at the governing point is half a "
-                      f"spacing inside a member {t:.3g} thick, where bending reads about "
-                      f"{100 * rel:.2g} % below the surface's value (docs/stress.md, measured "
-                      "by rackstress bench governing); run with --refine for a measured error bar",
+    return {"estimate": rel * gov["value"], "relative": rel, "thickness": t,
+            "low": gov["value"] * (1 - rel), "high": gov["value"] * (1 + rel),
+            "method": f"a single spacing: ± {DEFAULT_ERROR_SLOPE:g} × s/t = ± {100 * rel:.2g} % "
+                      f"(s = {s:.4g}, t = {t:.3g} the part's thickness at the governing "
+                      "particle), the lattice's convergence measured by rackstress bench "
+                      "governing; run with --refine for this part's own error bar",
             "source": "docs/benchmarks/governing.md"}
 
 
@@ -467,10 +476,15 @@ def describe(gov: dict | None, sing: dict | None, error: dict | None) -> list:
                          f"{error['spacings'][-1]:.4g}; extrapolated {error['extrapolated']:.4g}"
                          f" {u} (order {error['order']:.2g}), converged value within "
                          f"{error['low']:.4g} … {error['high']:.4g} {u}")
+            if error.get("converging") is False:
+                lines.append(f"    not converged: the governing stress moved by "
+                             f"{100 * error['change']:.2g} % between the two spacings (more "
+                             f"than {100 * CONVERGING:g} %); refine further, or check it by "
+                             "FE (rackstress fea)")
         elif error:
-            lines.append(f"    may read about {100 * abs(error['relative']):.2g} % low at this "
-                         f"spacing ({error['thickness']:.3g} thick there); rackstress run "
-                         "--refine measures it")
+            lines.append(f"    may be off by about ±{100 * abs(error['relative']):.2g} % at this "
+                         f"spacing (the part is {error['thickness']:.3g} thick there; "
+                         "rackstress bench governing); rackstress run --refine measures it")
     if sing:
         lines.append(f"  singular peak {sing['value']:.4g} {sing['units']} at a "
                      f"{sing['kind']}, {_where(sing)}: spacing-dependent, not a property of "
