@@ -500,7 +500,7 @@ def _post_and_render(out: Path, do_render: bool, progress: bool, dump_text: bool
 
         squeeze = CompressJob(Path(out) / "trajectory.dump")   # read meanwhile; renamed at the end
     try:
-        _post_run(out, progress, background=do_render)
+        info = _post_run(out, progress, background=do_render)
         if do_render:
             from rackstress.render.pictures import render_default
 
@@ -520,6 +520,11 @@ def _post_and_render(out: Path, do_render: bool, progress: bool, dump_text: bool
             click.echo(f"  pictures: {rep.outdir} ({len(rep.files)} files, "
                        f"{time.perf_counter() - t0:.1f} s)")
         wait_files(out)
+        if info and info.get("governing"):        # the headline, last (docs/stress.md)
+            from rackstress.stress.post import describe_governing
+
+            for line in describe_governing(info):
+                click.echo(line)
     except Exception as err:  # noqa: BLE001 - the run itself is complete and kept
         click.echo(f"rackstress: error: the run finished, but writing its VTK files failed: "
                    f"{err} (retry with 'rackstress stress {out}')", err=True)
@@ -671,8 +676,9 @@ def _post_run(out, progress, background: bool = False):
         click.echo(f"rackstress: error: the run finished, but post-processing its stress "
                    f"failed: {err} (retry with 'rackstress stress {out}')", err=True)
         sys.exit(EXIT_RENDER)
-    for line in describe(info):
+    for line in describe(info, governing=False):
         click.echo(line)
+    return info
 
 
 def _post_job(rundir, render: bool = True):

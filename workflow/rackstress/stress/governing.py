@@ -483,7 +483,8 @@ def describe(gov: dict | None, sing: dict | None, error: dict | None) -> list:
                              "FE (rackstress fea)")
         elif error:
             lines.append(f"    may be off by about ±{100 * abs(error['relative']):.2g} % at this "
-                         f"spacing (the part is {error['thickness']:.3g} thick there; "
+                         f"spacing (the part is {error['thickness']:.3g} "
+                         f"{gov.get('length_units', '')} thick there; "
                          "rackstress bench governing); rackstress run --refine measures it")
     if sing:
         lines.append(f"  singular peak {sing['value']:.4g} {sing['units']} at a "

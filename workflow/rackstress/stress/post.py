@@ -732,10 +732,11 @@ def add_to_summary(summary_path: Path, info: dict) -> dict:
     return summary
 
 
-def describe(info: dict) -> list:
+def describe(info: dict, governing: bool = True) -> list:
     """Lines for the terminal: the overall peak, and per group the peaks of the paper measure
     and of the strain (the hot-spot measure of an elastic body, README "What the picture
-    means")."""
+    means"); for a part with a material the governing stress last, in the peak's place
+    (``governing``: False leaves it to the caller, who says it at the very end)."""
     lines = []
     pk = info.get("peak")
     gov = info.get("governing")
@@ -760,7 +761,7 @@ def describe(info: dict) -> list:
         lines.append(f"  {key}: {path}")
     for note in info.get("notes") or []:
         lines.append(f"  note: {note}")
-    if gov:
+    if gov and governing:
         lines.extend(describe_governing(info))
     return lines
 
