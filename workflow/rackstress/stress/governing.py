@@ -126,7 +126,8 @@ def singular_set(run) -> dict:
     Example
     -------
     >>> sing = singular_set(load_run("runs/bracket"))         # doctest: +SKIP
-    >>> sing["bracket"][2].counts()                           # doctest: +SKIP
+    >>> spacing, wall, points = sing["bracket"]               # doctest: +SKIP
+    >>> points.counts()                                       # doctest: +SKIP
     {'re-entrant edge': 65, 'support boundary': 84}
     """
     from rackstress.model import singular
