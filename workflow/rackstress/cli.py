@@ -1142,7 +1142,8 @@ def bench_inside(out, quick):
 
 @bench.command("governing")
 @_bench_out
-@click.option("--quick", is_flag=True, help="The C frame only, at two spacings, one FE size.")
+@click.option("--quick", is_flag=True, help="Every part at two spacings (h and h/sqrt(2), "
+              "--refine's pair) and one FE size: no three-spacing order.")
 def bench_governing(out, quick):
     """The governing stress, singular peak and --refine error bar against converged FEA."""
     from rackstress.bench import governing as mod
