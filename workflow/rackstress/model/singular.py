@@ -210,6 +210,22 @@ def sharp_edges(vertices, faces, spacing: float, sharp_deg: float = SHARP_DEG,
     return E[sharp], np.degrees(turning[sharp])
 
 
+def concave_points(vertices, faces, spacing: float) -> np.ndarray:
+    """Points every :data:`SAMPLE` spacings along every concave edge of a closed surface that
+    turns by more than half a degree: where it curves inwards (fillets, holes, and the sharp
+    edges too) — a stress concentration the lattice resolves only as steps."""
+    import trimesh
+
+    tm = trimesh.Trimesh(np.asarray(vertices, float), np.asarray(faces, np.int64),
+                         process=True, validate=False)
+    if len(tm.faces) < 4:
+        return np.zeros((0, 3))
+    ang = np.asarray(tm.face_adjacency_angles, float)
+    concave = ~np.asarray(tm.face_adjacency_convex, bool) & (ang > math.radians(0.5))
+    seg = np.asarray(tm.vertices)[tm.face_adjacency_edges[concave]]
+    return sample_segments(seg, SAMPLE * float(spacing))[0]
+
+
 def sample_segments(segments: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
     """Points along each segment, at most ``step`` apart, ends included: (points, segment)."""
     seg = np.asarray(segments, float).reshape(-1, 2, 3)

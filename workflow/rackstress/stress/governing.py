@@ -428,8 +428,34 @@ def error_bar(values: list, spacings: list, order: float | None = None) -> dict:
 #: What a single run's governing stress may be off by, per s/t (s the spacing, t the shortest
 #: chord through the part at the governing particle): the largest |governing / FEA − 1| per
 #: s/t that ``rackstress bench governing`` measured over its parts and spacings
-#: (docs/benchmarks/governing.md: "A single run's error per s/t").
+#: (docs/benchmarks/governing.md: "A single run's error per s/t"), where the governing
+#: particle lies on flat faces ...
 DEFAULT_ERROR_SLOPE = 1.0
+#: ... and where it lies within :data:`CURVED_SPACINGS` of a concave curved face (a fillet or
+#: a hole the lattice resolves as steps)
+CURVED_ERROR_SLOPE = 5.0
+CURVED_SPACINGS = 2.0
+
+
+def near_curved(rundir, name: str, position, spacing: float) -> bool:
+    """Whether ``position`` lies within :data:`CURVED_SPACINGS` of a concave edge of the part's
+    surface (``singular.npz``'s: fillets, holes, sharp edges alike)."""
+    from scipy.spatial import cKDTree
+
+    from rackstress.lib.runfiles import SINGULAR
+    from rackstress.model.singular import concave_points
+
+    try:
+        with np.load(Path(rundir) / SINGULAR, allow_pickle=False) as z:
+            k = [str(x) for x in z["parts"]].index(name)
+            V, F = z[f"surface_{k}_vertices"], z[f"surface_{k}_faces"]
+    except (OSError, KeyError, ValueError):
+        return False
+    pts = concave_points(V, F, spacing)
+    if not len(pts):
+        return False
+    d, _ = cKDTree(pts).query(np.asarray(position, float).reshape(1, 3))
+    return bool(d[0] <= CURVED_SPACINGS * spacing)
 
 
 def default_error(run, gov: dict) -> dict:
@@ -444,13 +470,17 @@ def default_error(run, gov: dict) -> dict:
     o = run.o[part.index]
     s = float(gov["spacing"])
     t = float(chords(o, s)[int(gov["index"])])
-    rel = DEFAULT_ERROR_SLOPE * s / t
-    return {"estimate": rel * gov["value"], "relative": rel, "thickness": t,
-            "low": gov["value"] * (1 - rel), "high": gov["value"] * (1 + rel),
-            "method": f"a single spacing: ± {DEFAULT_ERROR_SLOPE:g} × s/t = ± {100 * rel:.2g} % "
-                      f"(s = {s:.4g}, t = {t:.3g} the part's thickness at the governing "
-                      "particle), the lattice's convergence measured by rackstress bench "
-                      "governing; run with --refine for this part's own error bar",
+    curved = near_curved(run.rundir, gov["group"], gov["position"], s)
+    slope = CURVED_ERROR_SLOPE if curved else DEFAULT_ERROR_SLOPE
+    rel = slope * s / t
+    where = ("at a concave curved face (a fillet or hole the lattice resolves as steps)"
+             if curved else "on flat faces")
+    return {"estimate": rel * gov["value"], "relative": rel, "thickness": t, "curved": curved,
+            "low": max(0.0, gov["value"] * (1 - rel)), "high": gov["value"] * (1 + rel),
+            "method": f"a single spacing: ± {slope:g} × s/t = ± {100 * rel:.2g} % (s = {s:.4g}, "
+                      f"t = {t:.3g} the part's thickness at the governing particle, {where}), "
+                      "the lattice's convergence measured by rackstress bench governing; run "
+                      "with --refine for this part's own error bar",
             "source": "docs/benchmarks/governing.md"}
 
 
