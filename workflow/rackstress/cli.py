@@ -1241,7 +1241,7 @@ TEACH = {
     ]),
     "run": ("Run a scene and write its run directory, peaks and pictures.", [
         "rackstress run plane-rack --out runs/plane-rack",
-        "rackstress run scenes/two-blobs.toml --engine reference --steps 600 --out runs/tb",
+        "rackstress run examples/cframe/static.toml --refine --out runs/cframe",
         "mpiexec -n 2 rackstress run magpod-small --set cycles=2 --out runs/ms",
         "rackstress run --resume runs/ms",
     ]),
@@ -1307,6 +1307,10 @@ TEACH = {
     "bench inside": ("Binding a mesh part inside its shape, up to 10^6 particles.", [
         "rackstress bench inside --quick --out /tmp/bench",
         "rackstress bench inside --out docs/benchmarks",
+    ]),
+    "bench governing": ("The governing stress and --refine's error bar against FEA.", [
+        "rackstress bench governing --quick --out /tmp/bench",
+        "rackstress bench governing --out docs/benchmarks",
     ]),
     "bench validity3d": ("The bracket STL's von Mises stress [MPa] against tetrahedral FEA.", [
         "rackstress bench validity3d --quick --out /tmp/bench",

@@ -47,8 +47,10 @@ ZONE_WALLS = 0.4
 #: The refinement of ``rackstress run --refine``: the spacing divided by √2 (2.8× the
 #: particles; halving it would take 8×).
 REFINE_RATIO = math.sqrt(2.0)
-#: The order of the governing stress's convergence on the lattice, measured by ``rackstress
-#: bench governing`` (docs/benchmarks/governing.md), for a two-spacing Richardson estimate.
+#: The order of the governing stress's convergence on the lattice, for a two-spacing
+#: Richardson estimate: a particle reads the stress at its centre, half a spacing inside the
+#: surface, an error of order 1 in the spacing (hand calculation); ``rackstress bench
+#: governing`` measures each part's own order from three spacings (docs/benchmarks/governing.md).
 LATTICE_ORDER = 1.0
 #: The last two spacings' governing stresses within this fraction of each other: the bar is
 #: a convergence's; beyond it the run says the value is not converged there (a hole or a
