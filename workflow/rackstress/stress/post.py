@@ -669,7 +669,9 @@ def postprocess(rundir, vtk: bool = True, dump: bool = False, progress: bool = F
     write_json(out / STRESS_JSON, info)
     summary_path = Path(run.rundir) / "summary.json"      # the run's own record
     if summary_path.is_file():
-        add_to_summary(summary_path, info)
+        kept = add_to_summary(summary_path, info)
+        if info.get("governing") is not None:      # --refine's error bar, where it was kept
+            info["error"] = (kept.get("stress") or {}).get("error")
     if log is not None:
         for line in describe(info):
             log(line)
