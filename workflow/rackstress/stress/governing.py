@@ -432,12 +432,12 @@ def error_bar(values: list, spacings: list, order: float | None = None) -> dict:
 #: s/t that ``rackstress bench governing`` measured over its parts and spacings
 #: (docs/benchmarks/governing.md: "A single run's error per s/t"), where the governing
 #: particle lies on flat faces ...
-DEFAULT_ERROR_SLOPE = 1.0
+DEFAULT_ERROR_SLOPE = 0.79
 #: ... and where it lies within :data:`CURVED_SPACINGS` of a concave curved face (a fillet or
 #: a hole the lattice resolves as steps), at least this fraction whatever the spacing: the
 #: largest |governing / FEA − 1| the bench measured there (the steps' error does not shrink
 #: with s/t)
-CURVED_ERROR = 0.35
+CURVED_ERROR = 0.33
 CURVED_SPACINGS = 2.0
 
 

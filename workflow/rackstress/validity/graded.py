@@ -31,7 +31,20 @@ import numpy as np
 
 def graded_mesh(vertices, faces, points, h_far: float, h_near: float, grow: float = 0.5):
     """Tetrahedra (p 3×N, t 4×M) of the closed surface, sized min(h_far, h_near + grow·d)
-    at a distance d from the nearest of ``points`` (k×3; none: h_far everywhere)."""
+    at a distance d from the nearest of ``points`` (k×3; none: h_far everywhere). Where gmsh's
+    default surface algorithm leaves overlapping facets (the bracket at 0.75/0.15 mm), its
+    MeshAdapt algorithm is tried, then a near size 1.5 × larger."""
+    tries = ((h_near, None), (h_near, 1), (1.5 * h_near, 1))
+    for k, (hn, algorithm) in enumerate(tries):
+        try:
+            return _graded_mesh(vertices, faces, points, h_far, hn, grow, algorithm)
+        except Exception:  # noqa: BLE001 - gmsh says only "Exception"; the last try raises it
+            if k == len(tries) - 1:
+                raise
+    raise AssertionError("unreachable")
+
+
+def _graded_mesh(vertices, faces, points, h_far, h_near, grow, algorithm):
     import gmsh
     from rackstress.validity.solid import drop_slivers
 
@@ -70,6 +83,8 @@ def graded_mesh(vertices, faces, points, h_far: float, h_near: float, grow: floa
         for opt in ("Mesh.MeshSizeExtendFromBoundary", "Mesh.MeshSizeFromPoints",
                     "Mesh.MeshSizeFromCurvature"):
             gmsh.option.setNumber(opt, 0)
+        if algorithm is not None:
+            gmsh.option.setNumber("Mesh.Algorithm", algorithm)
         gmsh.model.mesh.generate(3)
         tags, coords, _ = gmsh.model.mesh.getNodes()
         etypes, _, enodes = gmsh.model.mesh.getElements(3)
