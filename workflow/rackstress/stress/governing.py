@@ -496,15 +496,18 @@ def _where(rec: dict) -> str:
     return f"particle {rec['particle']} at ({pos}){near}"
 
 
-def describe(gov: dict | None, sing: dict | None, error: dict | None) -> list:
-    """Terminal lines: the governing stress as the headline, its safety factor and zone, the
-    error bar, and the singular peak beside it (spacing-dependent, with advice)."""
+def describe(gov: dict | None, sing: dict | None, error: dict | None,
+             headline: bool = True) -> list:
+    """Terminal lines: the governing stress as the headline (``headline`` False: left to the
+    caller), its safety factor and zone, the error bar, and the singular peak beside it
+    (spacing-dependent, with advice)."""
     lines = []
     if gov:
         u = gov["units"]
         sf = f", factor of safety {gov['safety']:.3g}" if gov.get("safety") else ""
-        lines.append(f"  governing von Mises stress {gov['value']:.4g} {u} in {gov['group']}"
-                     f"{sf}: {_where(gov)}")
+        if headline:
+            lines.append(f"  governing von Mises stress {gov['value']:.4g} {u} in "
+                         f"{gov['group']}{sf}: {_where(gov)}")
         lines.append(f"    (the largest at least {gov['zone']:.3g} {gov.get('length_units', '')}"
                      " from sharp re-entrant edges, support boundaries and point loads)")
         if error and error.get("extrapolated") is not None:

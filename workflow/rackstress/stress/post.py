@@ -89,8 +89,9 @@ class TooLargeError(StressInputError):
 #: The fit of the desired position (one for summary, pictures, report and files).
 FIT = "robust"
 #: 2: a sediment's paper measure is |p − o| (no rest shape, measures.paper_frames);
-#: 3: the stress fields (extras) and the scene's units kept beside the measures
-CACHE_VERSION = 3
+#: 3: the stress fields (extras) and the scene's units kept beside the measures;
+#: 4: von_mises by patch recovery (the measure's default route)
+CACHE_VERSION = 4
 
 
 @dataclass
@@ -628,8 +629,10 @@ def postprocess(rundir, vtk: bool = True, dump: bool = False, progress: bool = F
     fields = compute_fields(run, progress=progress)
     group_peaks = peaks(run, fields)
     from rackstress.stress.governing import record as governing_record
+    from rackstress.stress.headline import is_static
 
     gov = governing_record(run, fields)
+    static = is_static(run.rundir)
     info = {"fit": FIT, "measures": {m: {"label": LABELS[m][0], "units": fields.unit(m)}
                                      for m in fields.measures},
             "default_measure": fields.default,
@@ -648,16 +651,30 @@ def postprocess(rundir, vtk: bool = True, dump: bool = False, progress: bool = F
                     error=gov.get("error"), governing_parts=gov["parts"])
     from rackstress.stress import export
 
+    extra = ()
+    if vtk and static and vtk_format == "paraview":
+        # the part's surface, the stress painted on it (stress/surface.py): made here once,
+        # for the VTK directory and for the pictures and 3D view that follow in this process
+        from rackstress.stress.surface import SURFACE_VTP, surfaces_for, write_surface
+
+        t, c = time.perf_counter(), time.process_time()
+        surfs = surfaces_for(run, fields, notes=info.setdefault("notes", []))
+        info["timings"]["surface_s"] = time.perf_counter() - t
+        info["timings"]["surface_cpu_s"] = time.process_time() - c
+        if not info["notes"]:
+            info.pop("notes")
+        extra = ((SURFACE_VTP, lambda path: write_surface(surfs, path)),)
+        info["files"]["surface"] = f"{VTK_DIR}/{SURFACE_VTP}"
     if vtk and background:
         from rackstress.lib.runfiles import PVD
 
         _PENDING[str(out.resolve())] = export.VtkJob(run, fields, out / VTK_DIR, vtk_format,
-                                                      vtk_measures)
+                                                      vtk_measures, extra=extra)
         info["files"]["vtk"] = f"{VTK_DIR}/{PVD}"
     elif vtk:
         t = time.perf_counter()
         pvd = export.write_vtk(run, fields, out / VTK_DIR, progress=progress, fmt=vtk_format,
-                               measures=vtk_measures)
+                               measures=vtk_measures, extra=extra)
         info["files"]["vtk"] = str(pvd.relative_to(out))
         info["timings"]["vtk_s"] = time.perf_counter() - t
     if dump:
@@ -669,9 +686,16 @@ def postprocess(rundir, vtk: bool = True, dump: bool = False, progress: bool = F
     write_json(out / STRESS_JSON, info)
     summary_path = Path(run.rundir) / "summary.json"      # the run's own record
     if summary_path.is_file():
-        kept = add_to_summary(summary_path, info)
+        summary = add_to_summary(summary_path, info)
         if info.get("governing") is not None:      # --refine's error bar, where it was kept
-            info["error"] = (kept.get("stress") or {}).get("error")
+            info["error"] = (summary.get("stress") or {}).get("error")
+        if static:          # what the end-of-run lines lead with (describe)
+            from rackstress.stress.headline import headline
+
+            info["static"] = {"settled": summary.get("settled", True) is not False,
+                              "residual": summary.get("residual"),
+                              "iterations": summary.get("iterations"),
+                              "headline": headline(summary, run.scene, run.rundir)}
     if log is not None:
         for line in describe(info):
             log(line)
@@ -738,7 +762,11 @@ def describe(info: dict, governing: bool = True) -> list:
     """Lines for the terminal: the overall peak, and per group the peaks of the paper measure
     and of the strain (the hot-spot measure of an elastic body, README "What the picture
     means"); for a part with a material the governing stress last, in the peak's place
-    (``governing``: False leaves it to the caller, who says it at the very end)."""
+    (``governing``: False leaves it to the caller, who says it at the very end). A static
+    run's (``info["static"]``, :func:`describe_static`) say whether it settled and lead with
+    its headline."""
+    if info.get("static"):
+        return describe_static(info, governing)
     lines = []
     pk = info.get("peak")
     gov = info.get("governing")
@@ -768,9 +796,54 @@ def describe(info: dict, governing: bool = True) -> list:
     return lines
 
 
+def describe_static(info: dict, governing: bool = True) -> list:
+    """A static run's lines: its headline stress (:func:`rackstress.stress.headline.headline`:
+    where in the part's own undeformed coordinates, the smallest factor of safety of the same
+    rule) and per group the largest von Mises stress and strain — or, for a run that did not
+    settle, that it gives no result (``summary.json`` keeps the numbers of its state). With a
+    governing stress its block (:func:`describe_governing`: zone, error bar, singular peak)
+    comes last, or, ``governing`` False, is left to the caller (said at the very end)."""
+    from rackstress.stress.headline import headline_text
+
+    st = info["static"]
+    lines = []
+    if not st["settled"]:
+        lines.append("  NOT SETTLED: no stress or factor of safety is reported: the state is not "
+                     "an equilibrium, do not use its numbers (summary.json keeps them; 'rackstress "
+                     "render RUNDIR --allow-unsettled' shows them in the report)")
+    else:
+        if st.get("headline") and not info.get("governing"):
+            lines.append("  " + headline_text(st["headline"]) + " (undeformed coordinates)")
+        for name, rec in info["groups"].items():
+            shown = [f"{m}={p['value']:.4g}{' ' + p['units'] if m == 'von_mises' else ''} "
+                     f"(particle {p['particle']})"
+                     for m in ("von_mises", "strain") if (p := rec.get(m)) is not None]
+            if shown:
+                lines.append(f"  {name:12s} largest " + "; ".join(shown))
+    kinds = {w["kind"] for w in STRESS_WARNINGS}
+    for w in info.get("warnings") or []:
+        if st["settled"] or w.get("kind") not in kinds:   # no stress of a non-equilibrium
+            lines.append(f"  warning: {w['message']}")
+    for key, path in info["files"].items():
+        lines.append(f"  {key}: {path}")
+    for note in info.get("notes") or []:
+        lines.append(f"  note: {note}")
+    if st["settled"] and info.get("governing") and governing:
+        lines.extend(describe_governing(info))
+    return lines
+
+
 def describe_governing(info: dict) -> list:
-    """The headline lines: the governing stress (where, its safety factor, the zone), the
+    """The headline lines: the governing stress (where, its safety factor, the zone) — a static
+    run's as its headline says it (:func:`rackstress.stress.headline.headline_text`) —, the
     singular peak beside it (spacing-dependent, what to do) and the error bar."""
     from rackstress.stress.governing import describe as gov_lines
 
-    return gov_lines(info.get("governing"), info.get("singular"), info.get("error"))
+    head = (info.get("static") or {}).get("headline")
+    lines = gov_lines(info.get("governing"), info.get("singular"), info.get("error"),
+                      headline=head is None)
+    if head is not None:
+        from rackstress.stress.headline import headline_text
+
+        lines.insert(0, "  " + headline_text(head) + " (undeformed coordinates)")
+    return lines
