@@ -1076,7 +1076,8 @@ def fea(rundir, E, nu, size, group, measure, allow_unsettled, allow_dynamic, no_
         moved = "" if gv.get("moved") is None else \
             f"; it moved {100 * gv['moved']:.1f} % from FE size {gv['coarser']['size']:.3g}"
         click.echo(f"fea: FE's governing stress {gv['value']:.4g} {unit} at "
-                   f"{[round(x, 2) for x in gv['position']]} (zone {data['zone']['length']:.3g})"
+                   f"{[round(x, 2) for x in gv['position']]} (zone {data['zone']['length']:.3g} from "
+                   f"{data['zone'].get('source', 'the FE surface')})"
                    + moved)
         if gv.get("ratio") is not None:
             click.echo(f"fea: the particles there: {gv['particle_value']:.4g} {unit} (particle "

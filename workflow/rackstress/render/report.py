@@ -155,7 +155,12 @@ def fea_section(fea: dict) -> str:
         out.append(f"<p>Compared: {_e(fea['compared'])}.</p>")
     gv, zone, unit = fea.get("governing") or {}, fea.get("zone") or {}, fea.get("stress_unit", "")
     if zone.get("rule"):
-        out.append(f"<p>Zone: {_e(zone['rule'])}.</p>")
+        src = ({"singular.npz": " (the run's singular points, singular.npz: the headline's "
+                                "rule)",
+                "fe surface": " (the FE surface's own edges, supports and loads: this run "
+                              "recorded no singular.npz)"}.get(zone.get("source"), ""))
+        out.append(f'<p id="fea-zone" data-source="{_e(zone.get("source", ""))}">Zone: '
+                   f"{_e(zone['rule'])}{_e(src)}.</p>")
     if gv.get("value") is not None:
         moved = ("" if gv.get("moved") is None else
                  f"; it moved {100 * gv['moved']:.1f} % from FE size "

@@ -493,13 +493,14 @@ class Singular:
 
     ``points`` (k×3): the re-entrant edges sampled, the held and the loaded particles;
     ``zone``: the exclusion distance (a length) of the governing stress; ``rule``: the rule in
-    one sentence, as the report states it. The headline's own set (the run's singular points)
-    is the same interface."""
+    one sentence, as the report states it; ``source``: where the set comes from
+    (``"singular.npz"``, the run's own, the headline's; ``"fe surface"`` without it)."""
 
     points: np.ndarray
     zone: float
     rule: str
     spacing: float
+    source: str = "fe surface"
 
     def distance(self, x: np.ndarray) -> np.ndarray:
         """Distance of each point (n×3) to the nearest singular point (inf: none)."""
@@ -523,12 +524,15 @@ def singular_points(concave: np.ndarray, held_x: np.ndarray, load_x: np.ndarray,
                     "stress: the continuum's stress is unbounded there", float(spacing))
 
 
-def run_singular(rundir, name: str, fe: Singular) -> Singular:
+def run_singular(rundir, name: str, fe: Singular, loads: np.ndarray) -> Singular:
     """The headline's singular set and zone where the run recorded them (``singular.npz``:
-    :func:`rackstress.stress.governing.read_singular`, the zone max(2 spacings, 0.4 × the wall
-    thickness)), with the FE's own points (``fe``: the loaded particles, whose FE loads are
-    nodal point forces, and the edges of supports and loads on the surface) added; ``fe`` as
-    it is for a run without ``singular.npz``."""
+    :func:`rackstress.stress.governing.read_singular`: the part's sharp re-entrant edges, its
+    supports' boundary and point loads; the zone max(2 spacings, 0.4 × the wall thickness)),
+    with the loaded particles added (``loads``, k×3: the FE carries each particle's load as
+    nodal point forces, unbounded there in the FE, not in the lattice); ``fe`` — the FE
+    surface's own concave edges, supports and loads, 2 spacings — for a run without
+    ``singular.npz``. The FE surface's concave edges are not added to the run's set: a
+    tessellated fillet would be singular for the FE check and not for the headline."""
     from rackstress.stress.governing import read_singular, zone
 
     got = (read_singular(rundir) or {}).get(name)
@@ -536,12 +540,12 @@ def run_singular(rundir, name: str, fe: Singular) -> Singular:
         return fe
     spacing, wall, sing = got
     z = zone(spacing, wall)
-    return Singular(np.concatenate([sing.points, fe.points]), z,
+    return Singular(np.concatenate([sing.points, np.asarray(loads, float).reshape(-1, 3)]), z,
                     f"stresses within {z:.3g} (max of {ZONE_SPACINGS:g} spacings and 0.4 of the "
                     "wall thickness) of a sharp re-entrant edge, a support's boundary or a "
                     "point load are left out of the governing stress, as in the headline "
                     "(and, for the FE, of the loaded particles): the continuum's stress is "
-                    "unbounded there", float(spacing))
+                    "unbounded there", float(spacing), "singular.npz")
 
 
 def region_edges(o: np.ndarray, sel: np.ndarray, spacing: float) -> np.ndarray:
@@ -973,7 +977,7 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
                             region_edges(g.o, load_sel, spacing)])
     singular = singular_points(np.concatenate([concave, edges]), held_x[full], load_x,
                                spacing)
-    singular = run_singular(rundir, name, singular)
+    singular = run_singular(rundir, name, singular, load_x)
     volume = g.n * spacing ** 3
     sizes = [h * COARSER, h] if converge else [h]
     check_memory(elements_expected(volume, h), h, "expected before meshing")
@@ -1040,7 +1044,8 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
         "loaded_particles": int(lin.sum()), "total_force": F_tot,
         "fe_total_force": forces.sum(axis=0),
         "zone": {"length": singular.zone, "spacings": singular.zone / spacing,
-                 "rule": singular.rule, "singular_points": int(len(singular.points))},
+                 "rule": singular.rule, "singular_points": int(len(singular.points)),
+                 "source": singular.source},
         "agreement": agree,
         "bands": bands(sv if sv is not None else values, res["von_mises"], dist, spacing),
         "governing": gov, "target": TARGET,
