@@ -170,9 +170,9 @@ def governing_fe(ref: dict, zone: float, singular=None) -> dict:
     every singular point (``singular``: default the reference's), and where."""
     sol = ref["solution"]
     s = singular if singular is not None else ref["singular"]
-    nodes = np.asarray(sol.mesh.p.T)
+    nodes = np.asarray(sol.mesh.p)                  # the vertices: the first P2 nodes
     if "_nodal_vm" not in ref:
-        ref["_nodal_vm"] = sol.at(nodes)["von_mises"]
+        ref["_nodal_vm"] = sol.nodal()["von_mises"][:len(nodes)]
     vm = ref["_nodal_vm"]
     d, _ = s.distance(nodes)
     ok = d >= zone
@@ -182,24 +182,20 @@ def governing_fe(ref: dict, zone: float, singular=None) -> dict:
 
 
 def solve_body(p, t, E: float, nu: float, fixed, x, F, spacing: float):
-    """Linear elasticity on the tetrahedra (p, t), P2, the vertices ``fixed`` (N×3 bool), each
-    particle force F_k (at x_k) a uniform body force over the elements whose centroids lie in
-    its cell (the cube of side ``spacing`` about x_k): Σ over those elements = F_k exactly."""
+    """Linear elasticity on the tetrahedra (p, t), P2 (:func:`rackstress.validity.solid.solve`),
+    the vertices ``fixed`` (N×3 bool), each particle force F_k (at x_k) a uniform body force
+    over the elements whose centroids lie in its cell (the cube of side ``spacing`` about x_k):
+    Σ over those elements = F_k exactly. A uniform body force b on a P2 tetrahedron of volume V
+    loads each vertex by −bV/20 and each edge node by bV/5 (∫N_i dV)."""
     from scipy.spatial import cKDTree
-    from skfem import (Basis, ElementTetP2, ElementVector, LinearForm, MeshTet, asm, condense,
-                       solve as lsolve)
-    from skfem.models.elasticity import lame_parameters, linear_elasticity
 
-    from rackstress.validity.solid import DIRECT_DOFS, Solution, _amg_solve
+    from rackstress.validity.solid import solve
+    from rackstress.validity.tet import Tet2
 
-    mesh = MeshTet(np.ascontiguousarray(p, float), np.ascontiguousarray(t, np.int64))
-    basis = Basis(mesh, ElementVector(ElementTetP2()))
-    K = asm(linear_elasticity(*lame_parameters(E, nu)), basis)
-    P = mesh.p.T
-    cen = P[mesh.t].mean(axis=0)
-    a, b, c, d = (P[mesh.t[k]] for k in range(4))
-    vol = np.abs(np.einsum("ij,ij->i", np.cross(b - a, c - a), d - a)) / 6.0
-    dens = np.zeros((mesh.t.shape[1], 3))
+    mesh = Tet2(np.asarray(p, float).T, np.asarray(t, np.int64).T)
+    cen = mesh.p[mesh.t].mean(axis=1)
+    vol = mesh.vol
+    dens = np.zeros((mesh.n_elements, 3))
     x = np.asarray(x, float).reshape(-1, 3)
     F = np.asarray(F, float).reshape(-1, 3)
     if len(x):
@@ -208,23 +204,24 @@ def solve_body(p, t, E: float, nu: float, fixed, x, F, spacing: float):
         cell_v = np.bincount(k[inside], weights=vol[inside], minlength=len(x))
         missing = np.flatnonzero(cell_v <= 0)
         if len(missing):          # a cell no centroid falls in: the element holding x_k
-            find = mesh.element_finder()
-            e = find(*x[missing].T)
+            e, _ = mesh.locate(x[missing])
             for j, ek in zip(missing, np.atleast_1d(e)):
                 inside[ek], k[ek] = True, j
             cell_v = np.bincount(k[inside], weights=vol[inside], minlength=len(x))
         dens[inside] = F[k[inside]] / cell_v[k[inside], None]
-    nq = basis.X.shape[1]
-    field = np.repeat(dens.T[:, :, None], nq, axis=2)             # 3 × elements × points
-    f = asm(LinearForm(lambda v, w: v[0] * w.f[0] + v[1] * w.f[1] + v[2] * w.f[2]), basis,
-            f=field)
-    nod = basis.nodal_dofs
-    N = mesh.p.shape[1]
-    fixed = np.asarray(fixed, bool)
-    D = np.concatenate([nod[k][fixed[:N, k]] for k in range(3)])
-    if not len(D):
+    Fe = dens * vol[:, None]                                      # each element's force
+    w = np.r_[np.full(4, -1.0 / 20.0), np.full(6, 1.0 / 5.0)]      # ∫N_i dV / V, P2 tet
+    f = np.zeros((mesh.n_nodes, 3))
+    for c in range(3):
+        f[:, c] = np.bincount(mesh.nodes.ravel(), weights=(Fe[:, c, None] * w).ravel(),
+                              minlength=mesh.n_nodes)
+    N = len(mesh.p)
+    fixed = np.asarray(fixed, bool)[:N]
+    fx = np.zeros((mesh.n_nodes, 3), bool)
+    fx[:N] = fixed
+    fx[N:] = fixed[mesh.edges[:, 0]] & fixed[mesh.edges[:, 1]]
+    if not fx.any():
         raise ValueError("no FE node is fixed: the part is not supported")
-    u = lsolve(*condense(K, f, D=D)) if basis.N <= DIRECT_DOFS else _amg_solve(K, f, D, basis)
-    return Solution(mesh, basis, u, float(E), float(nu),
-                    {"vertices": int(N), "tetrahedra": int(mesh.t.shape[1]),
-                     "dofs": int(basis.N), "loads": "body forces over the loaded cells"})
+    sol = solve(np.asarray(p, float), np.asarray(t, np.int64), E, nu, fx, f)
+    sol.info["loads"] = "body forces over the loaded cells"
+    return sol
