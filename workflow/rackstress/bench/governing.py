@@ -142,6 +142,7 @@ def case(name: str, scene: Path, spacing: float, h_far: float, h_near: float, wo
                                              read_singular, zone as zone_of)
     from rackstress.stress.post import compute_fields
     from rackstress.stress.rundata import load_run
+    from rackstress.stress.tensor import part_recovery_points
     from rackstress.validity.graded import governing_fe, reference
 
     runs = []
@@ -173,7 +174,8 @@ def case(name: str, scene: Path, spacing: float, h_far: float, h_near: float, wo
                      "singular_peak": (at["singular"] or {}).get("value"),
                      "singular_kind": (at["singular"] or {}).get("kind"),
                      "_vm": fields.values["von_mises"][-1][rd.parts[part].index],
-                     "_o": rd.o[rd.parts[part].index]})
+                     # where each value is read: its recovery point (patch recovery)
+                     "_o": part_recovery_points(rd.o[rd.parts[part].index])})
     g = [r["governing"] for r in rows]
     h = [r["spacing"] for r in rows]
     refine = error_bar(g[:2], h[:2], order=LATTICE_ORDER)
@@ -192,7 +194,7 @@ def case(name: str, scene: Path, spacing: float, h_far: float, h_near: float, wo
              f"tetrahedra, governing {gv['value']:.4g}")
         last = ref
     fe_g = fes[-1]["governing"]
-    # the particles against FEA at their own centres, by distance from the singular points
+    # the particles against FEA where their stress is read, by distance from the singular points
     sol = last["solution"]
     for r in rows:
         fe_at = sol.at(r["_o"])["von_mises"]

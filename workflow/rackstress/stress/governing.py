@@ -276,6 +276,7 @@ def record(run, fields, zone_override: float | None = None, singular: dict | Non
         them (docs/output.md).
     """
     from rackstress.stress.measures import material_parts
+    from rackstress.stress.tensor import part_recovery_points
 
     vm = fields.values.get("von_mises")
     if vm is None:
@@ -291,7 +292,11 @@ def record(run, fields, zone_override: float | None = None, singular: dict | Non
         part = run.parts[name]
         o = run.o[part.index]
         z = float(zone_override) if zone_override is not None else zone(spacing, wall)
-        best, sbest = _frames_governing(vm[:, part.index], o, s, z)
+        # distances from where each particle's stress is read — its recovery point (patch
+        # recovery, the von_mises route: a surface particle at its cell's surface point) —
+        # as the FE check measures them (validity.solid), so both apply one rule
+        read = part_recovery_points(o)          # as the measure reads it (its own spacing)
+        best, sbest = _frames_governing(vm[:, part.index], read, s, z)
         y = ((mats.get(name) or {}).get("material") or {}).get("yield")
         feats = part_features(run.rundir, name)
         gov = None
@@ -301,6 +306,7 @@ def record(run, fields, zone_override: float | None = None, singular: dict | Non
                    "particle": int(run.data.ids[part.index[j]]), "index": int(j),
                    "iteration": int(fields.steps[k]), "frame": int(k),
                    "position": [float(x) for x in o[j]],
+                   "read_at": [float(x) for x in read[j]],
                    "near": _near(feats, o[j]),
                    "safety": (float(y) / v) if (y and v > 0) else None,
                    "zone": z, "spacing": float(spacing),
