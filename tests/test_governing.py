@@ -163,7 +163,11 @@ def _step_runs(tmp_path, spacings, F=3600.0):
 def test_headline_stays_put_while_the_singular_peak_grows(tmp_path):
     """At 1, 2/3 and 1/2 mm the peak at the sharp ring grows (σ ~ r^−0.46 in the continuum:
     the nearest particle is half a spacing from it) while the governing stress, read 0.4 of the
-    6 mm walls (2.4 mm) away from it at every spacing, stays within 5 %."""
+    6 mm walls (2.4 mm) away from it at every spacing, stays within 5 %. The peak is read by
+    patch recovery (a linear fit over a patch that shrinks with the spacing), which keeps the
+    h^−0.46 growth of the singular part but not the per-step rate of the nearest particle's
+    raw value; so: it grows at every step, and over the two steps by more than twice the 5 %
+    band the headline has to stay in."""
     runs = _step_runs(tmp_path, (1.0, 2.0 / 3.0, 0.5))
     gov = [info["governing"] for _, info in runs]
     sing = [info["singular"] for _, info in runs]
@@ -172,17 +176,18 @@ def test_headline_stays_put_while_the_singular_peak_grows(tmp_path):
     assert max(values) / min(values) < 1.05
     # uniform tension in the shank: F/A = 100 MPa by hand (the shank's edges read a little high)
     assert all(95.0 < v < 110.0 for v in values)
-    # the singular peak, at the ring, grows with every refinement: by (1.5)^0.46 and
-    # (4/3)^0.46 for a right-angled re-entrant edge, ≥ 8 % a step here
+    # the singular peak, at the ring, grows with every refinement (its singular part by
+    # (1.5)^0.46 and (4/3)^0.46 for a right-angled re-entrant edge, on top of the bounded
+    # nominal stress), and by more than the headline may move
     assert all(s["kind"] == "re-entrant edge" for s in sing)
     peaks = [s["value"] for s in sing]
-    assert peaks[1] > 1.08 * peaks[0] and peaks[2] > 1.08 * peaks[1]
+    assert peaks[0] < peaks[1] < peaks[2] and peaks[2] > 1.10 * peaks[0]
     # the headline is never within the zone of a singular point
     for (d, _), g in zip(runs, gov):
         from rackstress.stress.governing import read_singular
 
         pts = read_singular(d)["bar"][2]
-        dist, _ = pts.distance(np.array([g["position"]]))
+        dist, _ = pts.distance(np.array([g["read_at"]]))     # where its stress is read
         assert dist[0] >= g["zone"] - 1e-9
 
 
@@ -198,27 +203,60 @@ DOGBONE = STEP.replace(
     "min = [15.4, -1, -1], max = [17, 11, 11]", "min = [21, -1, -1], max = [25, 11, 11]")
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def refined(tmp_path_factory):
-    """``rackstress run dogbone.toml --refine`` as a user runs it (a real process): the
-    dog-bone at 1 mm, then at 1/√2 mm into RUN/refine."""
+    """``rackstress run dogbone.toml --refine`` as a user runs it (a real process), killed
+    once the refinement has started, then ``rackstress run --resume RUN --refine``: the
+    dog-bone at 1 mm, then at 1/√2 mm into RUN/refine. Returns the run directory, the
+    resume's process, its summary and the summary the killed run left."""
     import json
+    import os
+    import signal
+    import subprocess
 
-    from test_faults import QUIET, rs
+    from conftest import RACKSTRESS
+    from test_faults import QUIET, rs, wait_for
 
     tmp = tmp_path_factory.mktemp("refine")
     scene = tmp / "dogbone.toml"
     scene.write_text(DOGBONE.format(F=3600.0))
     out = tmp / "run"
-    p = rs("run", scene, "--refine", "--engine", "reference", "--out", out, *QUIET, timeout=300)
+    proc = subprocess.Popen([RACKSTRESS, "run", str(scene), "--refine", "--engine",
+                             "reference", "--out", str(out), *QUIET],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            start_new_session=True)
+    try:
+        assert wait_for(lambda: (out / "refine" / "scene.json").exists(), 120, proc)
+        os.killpg(proc.pid, signal.SIGKILL)
+    finally:
+        proc.wait(timeout=60)
+    first = proc.stdout.read().decode()           # what the first run said before the kill
+    killed = json.loads((out / "summary.json").read_text())
+    fine_done = (out / "refine" / "summary.json").exists()
+    p = rs("run", "--resume", out, "--refine", *QUIET, timeout=300)    # the run's engine
     assert p.returncode == 0, p.stderr
-    return out, p, json.loads((out / "summary.json").read_text())
+    return out, p, json.loads((out / "summary.json").read_text()), (killed, fine_done, first)
 
 
-def test_refine_writes_the_error_bar_and_keeps_both_runs(refined):
+@pytest.mark.slow
+def test_refine_killed_resumed_error_bar_covers_converged_fea(refined):
+    """One refinement, killed and resumed (one test: the two runs are the suite's dearest):
+    killed while refining, the first run is whole (settled, its governing stress, the single
+    run's estimate) and the refined one unfinished; resumed, both runs kept, the error bar
+    from the first run's governing stress, Richardson by hand, the report's headline,
+    singular peak and table; and the band covers the converged value: FEA of the same part,
+    P2 graded toward the re-entrant ring (validity/graded.py), the refined run's supports and
+    loads, read at the same zone."""
     import json
 
-    out, p, summary = refined
+    from rackstress.stress.governing import read_singular
+    from rackstress.validity.graded import governing_fe, reference
+
+    out, p, summary, (killed, fine_done, first) = refined
+    assert killed["settled"] and killed["stress"]["governing"]["value"] > 0
+    assert killed["stress"]["error"].get("extrapolated") is None      # the default estimate
+    assert not fine_done
+    assert summary["stress"]["error"]["values"][0] == killed["stress"]["governing"]["value"]
     st = summary["stress"]
     gov, err = st["governing"], st["error"]
     fine = json.loads((out / "refine" / "summary.json").read_text())
@@ -232,25 +270,16 @@ def test_refine_writes_the_error_bar_and_keeps_both_runs(refined):
     assert err["extrapolated"] == pytest.approx(g2 + (g2 - g1) / (r - 1))
     assert err["low"] <= err["extrapolated"] <= err["high"]
     assert "governing von Mises stress" in p.stdout and "error bar:" in p.stdout
-    assert "singular peak" in p.stdout and "re-entrant edge" in p.stdout
+    assert "singular peak" in first and "re-entrant edge" in first       # the first run's lines
     # the report: the governing stress as the headline, the singular peak beside it, the table
     from rackstress.render.report import write_report
 
     html = write_report(out, view=False).read_text()
-    assert f'data-governing="{gov["value"]!r}"' in html and 'id="singular"' in html
+    assert 'id="headline" data-kind="governing"' in html and 'id="singular"' in html
+    assert f'data-value="{gov["value"]!r}"' in html
     table = html.split('id="error-bar"')[1].split("</table>")[0]
     assert all(f"{v:.4g}" in table for v in err["values"])
     assert f"{err['extrapolated']:.4g}" in table
-
-
-@pytest.mark.slow
-def test_refine_error_bar_covers_converged_fea(refined):
-    """The converged value: FEA of the same part, P2 graded toward the re-entrant ring
-    (validity/graded.py), the refined run's supports and loads, read at the same zone."""
-    from rackstress.stress.governing import read_singular
-    from rackstress.validity.graded import governing_fe, reference
-
-    out, _, summary = refined
     err = summary["stress"]["error"]
     sing = read_singular(out)["bar"][2]
     ref = reference(out / "refine", h_far=2.0, h_near=0.5, singular=sing)   # 0.2 % off h/1.3
@@ -258,38 +287,6 @@ def test_refine_error_bar_covers_converged_fea(refined):
     assert err["low"] <= fe["value"] <= err["high"]
     assert abs(fe["value"] / 100.0 - 1) < 0.1     # F/A = 100 MPa in the shank, by hand
     assert 6 + 2.4 <= fe["position"][0] <= 18 - 2.4        # the shank, away from the rings
-
-
-def test_interrupted_refine_leaves_the_run_and_resumes(tmp_path):
-    import json
-    import os
-    import signal
-    import subprocess
-
-    from conftest import RACKSTRESS
-    from test_faults import QUIET, rs, wait_for
-
-    scene = tmp_path / "dogbone.toml"
-    scene.write_text(DOGBONE.format(F=3600.0))
-    out = tmp_path / "run"
-    proc = subprocess.Popen([RACKSTRESS, "run", str(scene), "--refine", "--engine",
-                             "reference", "--out", str(out), *QUIET],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            start_new_session=True)
-    try:
-        assert wait_for(lambda: (out / "refine" / "scene.json").exists(), 120, proc)
-        os.killpg(proc.pid, signal.SIGKILL)
-    finally:
-        proc.wait(timeout=60)
-    summary = json.loads((out / "summary.json").read_text())
-    assert summary["settled"] and summary["stress"]["governing"]["value"] > 0
-    assert summary["stress"]["error"].get("extrapolated") is None      # the default estimate
-    assert not (out / "refine" / "summary.json").exists()
-    p = rs("run", "--resume", out, "--refine", *QUIET, timeout=300)    # the run's engine
-    assert p.returncode == 0, p.stderr
-    err = json.loads((out / "summary.json").read_text())["stress"]["error"]
-    assert err["extrapolated"] is not None and err["values"][0] == \
-        summary["stress"]["governing"]["value"]
 
 
 def test_refine_refuses_what_it_cannot_refine(tmp_path):
