@@ -839,6 +839,8 @@ def describe_governing(info: dict) -> list:
     singular peak beside it (spacing-dependent, what to do) and the error bar."""
     from rackstress.stress.governing import describe as gov_lines
 
+    if (info.get("static") or {}).get("settled") is False:
+        return []           # not an equilibrium: no stress as a result (describe_static)
     head = (info.get("static") or {}).get("headline")
     lines = gov_lines(info.get("governing"), info.get("singular"), info.get("error"),
                       headline=head is None)
