@@ -4,7 +4,8 @@ The governing stress (:mod:`rackstress.stress.governing`) is read at least a zon
 part's sharp re-entrant edges; a uniform FE mesh fine enough there is wasteful everywhere else.
 :func:`graded_mesh` meshes the part's own surface (a mesh part's STL, a CSG part's exact
 manifold3d surface: :func:`rackstress.model.singular.surface_of`) with gmsh, the element size
-growing from ``h_near`` at the re-entrant edges and the loaded particles by ``grow`` per unit
+growing from ``h_near`` at the re-entrant edges, the concave curved faces (fillets, holes) and
+the loaded particles by ``grow`` per unit
 distance up to ``h_far``;
 :func:`reference` solves it with the run's material, supports (the FE nodes in held particles'
 cells) and loads by (P2, AMG-preconditioned CG), each loaded particle's force as a body force over the
@@ -102,7 +103,7 @@ def _graded_mesh(vertices, faces, points, h_far, h_near, grow, algorithm):
 
 
 def reference(rundir, h_far: float, h_near: float, grow: float = 0.5, group: str | None = None,
-              singular=None) -> dict:
+              singular=None, curved: bool = True) -> dict:
     """Solve a run's part on a graded P2 mesh (module docstring).
 
     Parameters
@@ -115,6 +116,9 @@ def reference(rundir, h_far: float, h_near: float, grow: float = 0.5, group: str
     singular : Singular, optional
         The points the mesh is graded toward and the governing stress is read away from
         (default: the run's own, ``singular.npz``).
+    curved : bool
+        Grade toward the concave curved faces too (fillets, holes); False: only toward the
+        re-entrant edges and the loads (which leaves a free hole's concentration coarse).
 
     Returns
     -------
@@ -151,9 +155,13 @@ def reference(rundir, h_far: float, h_near: float, grow: float = 0.5, group: str
     hin = (hk >= 0) & (hk < g.n)
     lk = bnd["load_ids"] - 1 - sl.start
     lin = (lk >= 0) & (lk < g.n)
-    # graded toward the re-entrant edges (their stress varies fastest) and the loaded particles
-    # (each one's force a body force over the elements of its cell: they must resolve it)
-    toward = np.concatenate([singular.points[singular.kind == 0], g.o[lk[lin]]])
+    # graded toward the re-entrant edges (their stress varies fastest), the concave curved
+    # faces (fillets, free holes: bounded concentrations, often the governing stress) and the
+    # loaded particles (each one's force a body force over the elements of its cell: they must
+    # resolve it)
+    toward = np.concatenate([singular.points[singular.kind == 0],
+                             S.concave_points(V, F, h_far) if curved else np.zeros((0, 3)),
+                             g.o[lk[lin]]])
     p, t = graded_mesh(V, F, toward, h_far, h_near, grow)
     fx = fixed_nodes(p, g.o[hk[hin]], bnd["held_mask"][hin], spacing)
     mat = summary["groups"][name]["material"]
