@@ -24,6 +24,9 @@ DERIVED = (STRESS_DUMP, STRESS_JSON, CACHE, REPORT, VTK_DIR)
 #: the bindings of the parts with a material, for their stress (:mod:`rackstress.stress.tensor`):
 #: written when the run starts, from the scene (i, j, force coefficient m·c, L0²)
 BINDINGS = "bindings.npz"
+#: the singular points of the parts with a material (re-entrant edges, support boundaries,
+#: point loads: :mod:`rackstress.model.singular`), written when the run starts
+SINGULAR = "singular.npz"
 
 #: Every top-level name a rackstress command writes into a run directory (``run``, ``stress``,
 #: ``render``, ``fea``, a batch job). A new run refuses a directory holding one of these names
@@ -34,4 +37,5 @@ BINDINGS = "bindings.npz"
 RUN_FILES = ("scene.json", "summary.json", "progress.json", "particles.data", "in.lammps",
              "log.lammps", "trajectory.dump", "trajectory.dump.gz", "boundary.npz", BINDINGS,
              STABILITY, STRESS_JSON, STRESS_DUMP, CACHE, VTK_DIR, REPORT, "view3d.html",
-             "figures", "restart", "fea.json", "fea.npz", "job.json")
+             "figures", "restart", "fea.json", "fea.npz", "job.json", SINGULAR,
+             "refine")
