@@ -113,10 +113,12 @@ def _refix(g) -> None:
 
 
 def solids(ctx, groups: dict, operators: dict, u) -> dict:
-    """A material part's bind (the elastic lattice, :mod:`rackstress.model.solid`), put first
-    among the part's operators."""
+    """A material part's bind (the elastic lattice, :mod:`rackstress.model.solid`) and, for a
+    Poisson's ratio other than the bindings' own 1/4, its volumetric term
+    (:mod:`rackstress.model.volume`), put first among the part's operators."""
     from rackstress.model.regions import Box, Cylinder, Sphere
-    from rackstress.model.solid import REACH, Solid, bind_coefficient
+    from rackstress.model.solid import REACH, Solid
+    from rackstress.model.volume import Volume, coefficients
 
     out = {name: list(seq) for name, seq in operators.items()}
     for name, g in groups.items():
@@ -127,10 +129,16 @@ def solids(ctx, groups: dict, operators: dict, u) -> dict:
         shape = info["shape"]
         if isinstance(shape, (Box, Sphere, Cylinder)):
             shape = None          # convex: no binding between two inside points leaves it
-        c = bind_coefficient(g.material, u, a)
+        try:
+            c, cv = coefficients(g.material, u, a)
+        except SceneError as exc:
+            raise ctx.error(str(exc), f"group '{name}' material") from None
         solid = Solid(REACH * a, c, shape, spacing=a, material=g.material.name,
                       part=info["shape"])
-        out.setdefault(name, []).insert(0, Bind(name, solid))
+        seq = out.setdefault(name, [])
+        if any(cv):             # ν = 0, ... (every ν: the free faces' sub-cells)
+            seq.insert(0, Volume(name, solid, cv))
+        seq.insert(0, Bind(name, solid))
         if info["shape"] is not None:       # each cell's share of the part (stress volume)
             g.meta["fractions"] = solid.fractions(g.o)
             g.meta["fraction"] = g.meta["fractions"].prod(axis=1)
