@@ -203,3 +203,34 @@ def test_a_poissons_ratio_the_lattice_cannot_take_is_refused(tmp_path):
     assert "auxetic.toml" in r.stderr and "group 'b'" in r.stderr
     assert "Poisson's ratio -0.2" in r.stderr
     assert not (tmp_path / "run").exists()
+
+
+def test_a_laterally_constrained_block_has_the_constrained_modulus(tmp_path):
+    """A 20 mm cube of ten layers on rollers on its four sides and its floor, pressed by
+    10 MPa: σ/ε is E(1 − ν)/((1 + ν)(1 − 2ν)) within 2 % at ν = 0.45 (3.79·E; the former
+    lattice had 1.2·E whatever the material) — its held faces' cells cannot contract across
+    (plane strain there, docs/calibration.md "Loaded and held faces")."""
+    from rackstress.bench.nafems import block
+
+    r = block(0.45, 2.0, tmp_path)
+    assert r["settled"]
+    M = E * (1 - 0.45) / ((1 + 0.45) * (1 - 2 * 0.45))
+    assert r["stiffness_MPa"] == pytest.approx(M, rel=0.02)
+
+
+def test_a_cube_under_pressure_has_the_bulk_modulus(tmp_path):
+    """A 10 mm cube of five layers on three symmetry planes, 10 MPa of pressure on its other
+    three faces: K = p/(−tr ε) within 5 % of E/(3(1 − 2ν)) at ν = 0.45 (the pressed cells'
+    overhang pushes the faces' edges: without it 40 % soft), and the pressure's forces still
+    add up to p × the faces' area (the pushes cancel)."""
+    from rackstress.bench.lattice import CUBE, PLANES, S, _face, _grad, _scene
+
+    loads = "\n".join(_face(k, 1, "pressure", S) for k in range(3))
+    sc = _scene(tmp_path, "hydro", CUBE.replace("{supports}", PLANES).replace("{loads}", loads),
+                2.0, 0.45)
+    F = external_forces(sc)
+    assert np.allclose(F.sum(axis=0), [-1000.0, -1000.0, -1000.0], rtol=1e-12)
+    res = solve(sc)
+    assert res.settled
+    K = E / (3 * (1 - 2 * 0.45))
+    assert S / -np.trace(_grad(sc, res.p)) == pytest.approx(K, rel=0.05)

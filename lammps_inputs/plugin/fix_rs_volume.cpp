@@ -13,10 +13,11 @@
 
    * D_k = Σ_{j along axis k} e_ij/(n·L): its strain along each lattice axis (n = 2 inside,
      1 on a free face);
-   * its cell, φ_k·a along axis k (per-atom d2_rsphi, 1 inside), split into the span toward its
-     neighbours s_k = n_k/2 and the overhang h_k = φ_k − s_k: the sub-cell spanned along the
-     axes S gets θ_S = Σ_{k∈S} D_k and κ = c_|S|·Π_S s·Π_rest h (c_d = λ'_d/ρ: bulk, plane
-     stress, uniaxial stress, each less the bindings' own λ = μ);
+   * its cell, φ_k·a along axis k (per-atom d2_rsphi[1-3], 1 inside), split into the span toward
+     its neighbours s_k = n_k/2 and the overhang h_k = φ_k − s_k: the sub-cell spanned along the
+     axes S gets θ_S = Σ_{k∈S} D_k and κ = c_d·Π_S s·Π_rest h (c_d = λ'_d/ρ: bulk, plane
+     stress, uniaxial stress, each less the bindings' own λ = μ), d the axes of S and those
+     the particle is held along (d2_rsphi[4-6]: a support's overhang cannot contract);
    * on a face particle (one free face, normal l, outward σ, its in-face neighbours and the
      four diagonals inward there): the overhang's in-plane strains at its centroid, Dc_k =
      (1 + h)·D_k − h·G_k, G_k = (e_{k−σl} + e_{−k−σl})/L_diag − e_{−σl}/L, with the membrane's
@@ -78,9 +79,10 @@ static double *cells(Atom *atom, Error *error)
 {
   int flag, cols;
   int idx = atom->find_custom("rsphi", flag, cols);
-  if (idx < 0 || flag != 1 || cols != 3)
-    error->all(FLERR, "Fix rs/volume: needs each particle's cell extents as per-atom d2_rsphi 3 "
-               "(fix property/atom d2_rsphi 3, 1 inside the part, set from volume.atoms)");
+  if (idx < 0 || flag != 1 || cols != 6)
+    error->all(FLERR, "Fix rs/volume: needs each particle's cell extents and held directions as "
+               "per-atom d2_rsphi 6 (fix property/atom d2_rsphi 6: φ 1 inside the part, held 0 "
+               "or 1, set from volume.atoms)");
   return atom->darray[idx][0];
 }
 
@@ -161,9 +163,11 @@ void FixRSVolume::collect()
     }
     auto at = [&](int gx, int gy, int gz) { return slot[(gx + 1) * 9 + (gy + 1) * 3 + gz + 1]; };
     double s[3], h[3];
+    bool held[3];
     for (int k = 0; k < 3; k++) {
       s[k] = 0.5 * count[k];
-      h[k] = std::max(phi[3 * i + k] - s[k], 0.0);
+      h[k] = std::max(phi[6 * i + k] - s[k], 0.0);
+      held[k] = phi[6 * i + 3 + k] > 0.5;
     }
     // a face particle: one axis with one neighbour, both along the other two, and the four
     // diagonals inward from the free face
@@ -201,10 +205,13 @@ void FixRSVolume::collect()
     }
     // the sub-cells
     for (int S = 1; S < 8; S++) {
-      int d = ((S >> 0) & 1) + ((S >> 1) & 1) + ((S >> 2) & 1);
+      // the modulus of the axes free to contract: an overhang held across counts as spanned
+      int d = 0;
+      for (int k = 0; k < 3; k++) d += ((S >> k) & 1) || held[k] ? 1 : 0;
       double w = c[d - 1];
       for (int k = 0; k < 3; k++) w *= (S >> k) & 1 ? s[k] : h[k];
-      if (d == 2 && moment && !((S >> l) & 1)) w = 0.0;    // at its centroid, below
+      if (moment && ((S >> 0) & 1) + ((S >> 1) & 1) + ((S >> 2) & 1) == 2 && !((S >> l) & 1))
+        w = 0.0;    // at its centroid, below
       if (w == 0.0) continue;
       for (int dir = 0; dir < 27; dir++) {
         int p = slot[dir];
@@ -250,13 +257,30 @@ void FixRSVolume::collect()
       tptr.push_back((int) tpair.size());
     };
     const int both[2] = {0, 1}, first[1] = {0}, second[1] = {1};
-    term(both, 2, true, V * (c[1] + cmu));
+    term(both, 2, true, V * ((held[l] ? c[2] : c[1]) + cmu));
     term(first, 1, true, 2.0 * V * cmu);
     term(second, 1, true, 2.0 * V * cmu);
     term(both, 2, false, -V * cmu);
     term(first, 1, false, -2.0 * V * cmu);
     term(second, 1, false, -2.0 * V * cmu);
   }
+  // only the pairs some term reads (inside the part the six nearest): the step passes over
+  // those alone
+  std::vector<int> keep(pi.size(), -1);
+  for (int p : tpair) keep[p] = 0;
+  int nkeep = 0;
+  for (size_t p = 0; p < pi.size(); p++)
+    if (keep[p] == 0) {
+      keep[p] = nkeep;
+      pi[nkeep] = pi[p];
+      pj[nkeep] = pj[p];
+      pL[nkeep] = pL[p];
+      nkeep++;
+    }
+  pi.resize(nkeep);
+  pj.resize(nkeep);
+  pL.resize(nkeep);
+  for (int &p : tpair) p = keep[p];
   e.assign(pi.size(), 0.0);
   pull.assign(pi.size(), 0.0);
   built = true;

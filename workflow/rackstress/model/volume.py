@@ -139,10 +139,12 @@ class VolumeTerms:
 
 
 def build(o: np.ndarray, i: np.ndarray, j: np.ndarray, q: np.ndarray, spacing: float,
-          phi: np.ndarray, coef) -> VolumeTerms:
+          phi: np.ndarray, coef, fixed: np.ndarray | None = None) -> VolumeTerms:
     """The terms of the particles ``o`` whose bound pairs are (i, j) (sorted by i, both
     directions) with rest lengths² ``q``, on the cubic lattice of ``spacing``, cells ``phi``
-    (n, 3, in spacings) and moduli ``coef`` = (c₁, c₂, c₃, c_μ) (module doc)."""
+    (n, 3, in spacings) and moduli ``coef`` = (c₁, c₂, c₃, c_μ) (module doc). ``fixed`` (n, 3):
+    the directions a support holds each particle in; an overhang across a held direction
+    cannot contract there (plane strain: it counts as spanned in the modulus)."""
     import scipy.sparse as sp
 
     n, a = len(o), float(spacing)
@@ -157,6 +159,7 @@ def build(o: np.ndarray, i: np.ndarray, j: np.ndarray, q: np.ndarray, spacing: f
     np.add.at(count, (i[axial], axis[axial]), 1.0)
     s = 0.5 * count
     h = np.maximum(np.asarray(phi, float) - s, 0.0)
+    held = np.zeros((n, 3), bool) if fixed is None else np.asarray(fixed, bool)
     key = i * 27 + direction(g)
     order = np.argsort(key, kind="stable")
     skey = key[order]
@@ -221,7 +224,9 @@ def build(o: np.ndarray, i: np.ndarray, j: np.ndarray, q: np.ndarray, spacing: f
     # sub-cells: θ_S = Σ_{k∈S} D_k, κ = c_|S|·Π_S s·Π_rest h
     for S in range(1, 8):
         inS = [(S >> k) & 1 for k in range(3)]
-        w = np.full(n, cd[sum(inS) - 1])
+        # the modulus of the axes free to contract: an overhang held across counts as spanned
+        d = sum(inS) + sum(held[:, k] for k in range(3) if not inS[k])
+        w = np.asarray(cd, float)[np.minimum(d, 3) - 1]
         for k in range(3):
             w = w * (s[:, k] if inS[k] else h[:, k])
         if sum(inS) == 2:      # the face particles' overhang: at its centroid (below)
@@ -251,7 +256,7 @@ def build(o: np.ndarray, i: np.ndarray, j: np.ndarray, q: np.ndarray, spacing: f
             D[k] = [(pp, beta[pp]), (pm, beta[pm])]
             Dc[k] = [(pp, (1 + hh) * beta[pp]), (pm, (1 + hh) * beta[pm]),
                      (dp, -hh / L[dp]), (dm, -hh / L[dm]), (ax, hh / L[ax])]
-        add(who, Dc[ks[0]] + Dc[ks[1]], V * (c2 + cmu))
+        add(who, Dc[ks[0]] + Dc[ks[1]], V * (np.where(held[who, l], c3, c2) + cmu))
         for k in ks:
             add(who, Dc[k], 2.0 * V * cmu)
         add(who, D[ks[0]] + D[ks[1]], -V * cmu)
@@ -320,14 +325,15 @@ class Volume(Operator):
         import hashlib
 
         o = np.ascontiguousarray(group.o, dtype=float)
-        key = (id(self.solid), self.c, hashlib.sha1(o.tobytes()).hexdigest())
+        fixed = np.ascontiguousarray(group.fixed, dtype=bool)
+        key = (id(self.solid), self.c, hashlib.sha1(o.tobytes() + fixed.tobytes()).hexdigest())
         hit = _TERMS.get(group.name)
         if hit is not None and hit[0] == key:
             return hit[1]
         pl = Bind(group.name, self.solid).pairs(group, group)
         phi = (np.ones((len(o), 3)) if getattr(self.solid, "part", None) is None
                else self.solid.fractions(o))
-        out = build(o, pl.i, pl.j, pl.q, self.solid.spacing, phi, self.c)
+        out = build(o, pl.i, pl.j, pl.q, self.solid.spacing, phi, self.c, fixed)
         _TERMS[group.name] = (key, out)
         return out
 
@@ -403,6 +409,45 @@ class Volume(Operator):
         for c, (a, b) in enumerate(((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))):
             out[:, c] = np.bincount(t.i, weights=w * d[:, a] * d[:, b], minlength=t.n)
         return out
+
+
+def loaded_overhang(op: "Volume", group, loaded: np.ndarray, axis: int, pressure: float,
+                    nu: float) -> np.ndarray:
+    """The forces (n, 3, the scene's force unit) a ``pressure`` on the ``loaded`` particles'
+    face normal to ``axis`` adds through the cells' overhang (docs/calibration.md "Loaded
+    faces"): the overhang is a membrane in plane stress when the face is free; under σ_nn = −p
+    it carries the in-plane prestress λ/(λ + 2μ)·σ_nn = −p·ν/(1 − ν) as well, whose virtual
+    work −V·σ_pre·δθ over its in-plane strains D_k (the particle's own axial pairs, β per
+    pair) gives each in-plane neighbour −V·σ_pre·β·n̂ and the particle the opposite: nothing
+    inside a loaded face (the pushes cancel), an outward push along its edge."""
+    o = np.asarray(group.o, float)
+    n, a = len(o), float(op.solid.spacing)
+    pl = Bind(group.name, op.solid).pairs(group, group)
+    a2 = a * a
+    ax_ = np.abs(pl.q - a2) <= AXIAL_TOL * a2
+    i, j = pl.i[ax_], pl.j[ax_]
+    d = o[j] - o[i]
+    k = np.argmax(np.abs(d), axis=1)
+    count = np.zeros((n, 3))
+    np.add.at(count, (i, k), 1.0)
+    phi = (np.ones((n, 3)) if getattr(op.solid, "part", None) is None
+           else op.solid.fractions(o))
+    h = np.maximum(phi[:, axis] - 0.5 * count[:, axis], 0.0)
+    V = h * a ** 3
+    for q in range(3):
+        if q != axis:
+            V = V * phi[:, q]
+    face = np.asarray(loaded, bool) & (count[:, axis] == 1) & (V > 0)
+    sel = face[i] & (k != axis)
+    i, j, k, d = i[sel], j[sel], k[sel], d[sel]
+    L = np.sqrt(pl.q[ax_][sel])
+    pre = -float(pressure) * nu / (1.0 - nu)
+    f = (-V[i] * pre / (count[i, k] * L))[:, None] * (d / L[:, None])
+    F = np.zeros((n, 3))
+    for c in range(3):
+        F[:, c] = np.bincount(j, weights=f[:, c], minlength=n) - np.bincount(
+            i, weights=f[:, c], minlength=n)
+    return F
 
 
 # the scene's check of its operators knows this one too (a Volume exists only once this module

@@ -249,6 +249,10 @@ def loads(ctx, tables, groups: dict, operators: dict, u, select, ramp) -> dict:
                 phi = np.delete(g.meta["fractions"][where], int(np.argmax(np.abs(n))), axis=1)
                 area *= float(phi.prod(axis=1).mean())
             accel = -pr * area * n / m
+            extra = _overhang_push(out.get(name, []), g, where, n, pr, u)
+            if extra is not None:       # the pressed cells' overhang (model/volume.py)
+                for vec, sel in extra:
+                    out.setdefault(name, []).extend(_forces(vec / m, sel, ramp))
         else:       # displacement
             uvec = np.asarray(_vec3(c, t["displacement"], "displacement"))
             if ramp is not None:
@@ -278,6 +282,38 @@ def loads(ctx, tables, groups: dict, operators: dict, u, select, ramp) -> dict:
                     tuple(float(x) / RAMP_STAIRS for x in accel), where=where_t,
                     when=(PhaseIn("ramp", tuple(range(s, RAMP_STAIRS + 1))),)))
     return {name: out[name] for name in groups if name in out}
+
+
+def _forces(accel, where, ramp) -> list:
+    """The force operators of one load: constant, or ten stairs of a ramp."""
+    where_t = None if where is None or np.all(where) else tuple(bool(x) for x in where)
+    if ramp is None:
+        return [Force(tuple(float(x) for x in accel), where=where_t)]
+    return [Force(tuple(float(x) / RAMP_STAIRS for x in accel), where=where_t,
+                  when=(PhaseIn("ramp", tuple(range(s, RAMP_STAIRS + 1))),))
+            for s in range(1, RAMP_STAIRS + 1)]
+
+
+def _overhang_push(ops, g, where, n, pr, u):
+    """A pressure's push through the pressed cells' overhang (model.volume.loaded_overhang),
+    as (force, particles) of each distinct force vector; None without a volumetric term."""
+    from rackstress.model.volume import Volume, loaded_overhang
+
+    vol = [op for op in ops if isinstance(op, Volume)]
+    if not vol or float(np.abs(n).max()) < 1.0 - 1e-9:
+        return None      # (a pressure along no lattice axis: its faces are staircases)
+    F = loaded_overhang(vol[0], g, where, int(np.argmax(np.abs(n))), pr,
+                        float(g.material.in_units(u)["nu"]))
+    moved = np.flatnonzero(np.any(F != 0.0, axis=1))
+    if not len(moved):
+        return None
+    rows, inv = np.unique(np.round(F[moved], 12), axis=0, return_inverse=True)
+    out = []
+    for r in range(len(rows)):
+        sel = np.zeros(g.n, bool)
+        sel[moved[inv.reshape(-1) == r]] = True
+        out.append((rows[r], sel))
+    return out
 
 
 def exposed(o: np.ndarray, n: np.ndarray, a: float) -> np.ndarray:

@@ -326,42 +326,46 @@ class Deck:
         return [r for r in self.realized if r.plugin == "rs/volume"]
 
     def volume_atoms_text(self) -> str | None:
-        """``volume.atoms``: each boundary particle's cell extents φ (in spacings, along x, y,
-        z; docs/calibration.md "Walls of any thickness") as three sets of LAMMPS' atomfile
-        variable (``ID value``), for ``rs/volume``; the others' cells are whole (φ = 1).
-        None when the deck has no such term."""
-        rows = []
-        for r in self.volumes:
-            g, solid = self.scene.groups[r.target], r.op.solid
-            if getattr(solid, "part", None) is None:
-                continue
-            phi = solid.fractions(g.o)
-            k = np.flatnonzero(np.any(phi != 1.0, axis=1))
-            rows.append((k + self.scene.offset(r.target) + 1, phi[k]))
+        """``volume.atoms``: for ``rs/volume``, each boundary or held particle's cell extents φ
+        (in spacings, along x, y, z; docs/calibration.md "Walls of any thickness") and the
+        directions a support holds it in (0 or 1), six sets of LAMMPS' atomfile variable
+        (``ID value``) after a set of ones naming them; every other particle has a whole cell
+        (φ = 1) and is free. None when
+        the deck has no such term."""
         if not self.volumes:
             return None
-        ids = np.concatenate([x for x, _ in rows]) if rows else np.zeros(0, np.int64)
-        phi = np.concatenate([p for _, p in rows]) if rows else np.zeros((0, 3))
-        out = ["# rackstress: each boundary particle's cell extents (x, y, z sets) for "
-               "fix rs/volume"]
-        for k in range(3):
+        ids, cols = [], []
+        for r in self.volumes:
+            g, solid = self.scene.groups[r.target], r.op.solid
+            phi = (np.ones((g.n, 3)) if getattr(solid, "part", None) is None
+                   else solid.fractions(g.o))
+            held = np.asarray(g.fixed, bool)
+            k = np.flatnonzero(np.any(phi != 1.0, axis=1) | held.any(axis=1))
+            ids.append(k + self.scene.offset(r.target) + 1)
+            cols.append(np.column_stack([phi[k], held[k].astype(float)]))
+        ids = np.concatenate(ids)
+        cols = np.concatenate(cols)
+        out = ["# rackstress: for fix rs/volume, a set of 1 (which particles follow), then each "
+               "boundary or held particle's cell extents (x, y, z) and held directions (x, y, z)"]
+        cols = np.column_stack([np.ones(len(ids)), cols])
+        for k in range(7):
             out.append(f"{len(ids)}")
-            out += [f"{i} {v!r}" for i, v in zip(ids.tolist(), phi[:, k].tolist())]
+            out += [f"{i} {v!r}" for i, v in zip(ids.tolist(), cols[:, k].tolist())]
         return "\n".join(out) + "\n"
 
     def volume_commands(self, data_file: str) -> list[str]:
-        """After read_data: every particle of a volumetric term's part gets φ = 1 (a whole
-        cell), the boundary ones theirs from ``volume.atoms`` beside the data file
-        (:meth:`volume_atoms_text`, an atomfile variable: one set per axis)."""
+        """After read_data: every particle of a volumetric term's part gets a whole cell
+        (φ = 1) and no held direction, the boundary and held ones theirs from
+        ``volume.atoms`` beside the data file (:meth:`volume_atoms_text`, an atomfile
+        variable: one set per column)."""
         if not self.volumes:
             return []
         path = str(Path(data_file).with_name(VOLUME_ATOMS))
-        L = [f"set group {r.target} d2_rsphi[{k}] 1.0" for r in self.volumes for k in (1, 2, 3)]
+        L = [f"set group {r.target} d2_rsphi[{k}] {1.0 if k <= 3 else 0.0}"
+             for r in self.volumes for k in range(1, 7)]
         L += [f"variable rs_phi atomfile {path}", "group rs_vphi variable rs_phi"]
-        for k in (1, 2, 3):
-            if k > 1:
-                L.append("next rs_phi")
-            L.append(f"set group rs_vphi d2_rsphi[{k}] v_rs_phi")
+        for k in range(1, 7):
+            L += ["next rs_phi", f"set group rs_vphi d2_rsphi[{k}] v_rs_phi"]
         L += ["variable rs_phi delete", "group rs_vphi delete"]
         return L
 
@@ -1067,7 +1071,7 @@ def plugin_setup_commands(deck: Deck) -> list[str]:
         L = ["newton on off"] if deck.bonds is not None else []
     regions = " ".join(f"i_{_prop_name(n)}" for n in _region_names(deck.scene))
     if deck.volumes:              # rs/volume's cells (Deck.volume_commands)
-        regions = (regions + " d2_rsphi 3").strip()
+        regions = (regions + " d2_rsphi 6").strip()
     L.append(f"fix {PROP_FIX} all property/atom d2_rso 3 d_rsr {regions} ghost yes".replace("  ", " "))
     return L
 
