@@ -102,8 +102,12 @@ def supports(ctx, tables, groups: dict, select) -> None:
                           f"({fix!r}); name each direction to fix once: [\"x\", \"y\", "
                           "\"z\"] (the default) holds, one or two directions make a roller or "
                           "a symmetry plane", "fix")
+        dirs = np.zeros(3, dtype=bool)
         for a in fix:
             g.fixed[mask, "xyz".index(a)] = True
+            dirs["xyz".index(a)] = True
+        # which particles and directions this support holds: its reaction (engines/static.py)
+        g.meta.setdefault("supports", []).append((f"[[support]] #{k}", mask, dirs))
         _refix(g)
 
 
@@ -269,6 +273,8 @@ def loads(ctx, tables, groups: dict, operators: dict, u, select, ramp) -> dict:
                               "displacement")
             g.fixed[mask] = True
             g.u0[mask] = uvec
+            g.meta.setdefault("supports", []).append((f"[[load]] #{k} (displacement)", mask,
+                                                      np.ones(3, dtype=bool)))
             _refix(g)
             continue
         if kind != "gravity":
