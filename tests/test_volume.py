@@ -190,18 +190,20 @@ def test_reference_engine_and_static_solver_agree(tmp_path):
     assert abs(K - K.T).max() <= 1e-12 * abs(K).max()
 
 
-def test_a_poissons_ratio_the_lattice_cannot_take_is_refused(tmp_path):
-    """An auxetic material (ν < 0) is refused when the scene is read: exit 2, naming the
-    file, the group and the material (a real process)."""
-    f = tmp_path / "auxetic.toml"
+@pytest.mark.parametrize("nu,why", [(-0.2, "below 0"), (0.495, "above 0.49")])
+def test_a_poissons_ratio_the_lattice_cannot_take_is_refused(nu, why, tmp_path):
+    """An auxetic material (ν < 0) and a nearly incompressible one (ν > 0.49) are refused
+    when the scene is read: exit 2, naming the file, the group and the material (a real
+    process), nothing written."""
+    f = tmp_path / "odd.toml"
     f.write_text(BLOCK.format(shape='box = { min = [0, 0, 0], max = [4, 4, 4] }', a=1.0,
-                              nu=-0.2, hold=0.6))
+                              nu=nu, hold=0.6))
     r = subprocess.run([sys.executable, "-m", "rackstress.cli", "run", str(f), "--engine",
                         "reference", "--out", str(tmp_path / "run"), "--no-render"],
                        capture_output=True, text=True)
     assert r.returncode == 2, r.stderr
-    assert "auxetic.toml" in r.stderr and "group 'b'" in r.stderr
-    assert "Poisson's ratio -0.2" in r.stderr
+    assert "odd.toml" in r.stderr and "group 'b'" in r.stderr
+    assert f"Poisson's ratio {nu:g} is {why}" in r.stderr
     assert not (tmp_path / "run").exists()
 
 

@@ -127,10 +127,14 @@ material = "aluminium"
 on = "bar"
 where = {{ box = {{ min = [-1, -6, -6], max = [0.01, 6, 6] }} }}
 fix = ["x"]
-[[support]]            # the middle of that face pinned in y and z (no rigid motion)
+[[support]]            # the middle lines of that face pinned across (no rigid motion, no
+on = "bar"             # rotation about x about a single pinned point)
+where = {{ box = {{ min = [-1, {p}, -6], max = [0.01, {q}, 6] }} }}
+fix = ["y"]
+[[support]]
 on = "bar"
-where = {{ box = {{ min = [-1, {p}, {p}], max = [0.01, {q}, {q}] }} }}
-fix = ["y", "z"]
+where = {{ box = {{ min = [-1, -6, {p}], max = [0.01, 6, {q}] }} }}
+fix = ["z"]
 [[load]]
 on = "bar"
 where = {{ box = {{ min = [19.99, -6, -6], max = [21, 6, 6] }} }}
@@ -315,7 +319,7 @@ def report(d: dict) -> str:
            "thickness\").", "",
            "## Calibration: E_eff and ν of the lattice", "",
            "A 20 × 10 × 10 mm aluminium bar on rollers at x = 0 (`[[support]]` fixing x only, "
-           "its middle pinned in y and z) pulled by 1000 N (10 MPa) at x = 20: uniaxial "
+           "its middle lines pinned across) pulled by 1000 N (10 MPa) at x = 20: uniaxial "
            "stress, E_eff = σ/ε_xx (the end face's mean displacement), ν_eff = −ε_yy/ε_xx "
            "(the side faces' particles at mid-length, 10 − a apart), with c = E/(4(1 + ν)ρa²) "
            "and the volumetric term (docs/calibration.md).", "",

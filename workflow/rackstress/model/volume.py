@@ -38,9 +38,9 @@ quadratic terms in the extensions e_ij = ‖p_j − p_i‖ − L_ij of the parti
 
 A material of E, ν gets (:func:`coefficients`) μ = E/(2(1 + ν)) = k/a on its bindings, c =
 μ/(2ρa²) (k = 2c·m, m = ρ·a³; Eq. 12's stiffness at rest is 2c), and κ = V·λ'_d/ρ on its
-terms. ν = 0 … 0.45 at least are met within 0.01 at every spacing measured, from five layers
-across (docs/benchmarks/lattice.md); λ'/μ = (4ν − 1)/(1 − 2ν) grows without bound as ν → ½
-(:data:`NU_MAX`, docs/calibration.md "Near ν = ½").
+terms. ν = 0 … 0.45 are met within 0.01 at every spacing measured, from five layers across
+(docs/benchmarks/lattice.md); λ'/μ = (4ν − 1)/(1 − 2ν) grows without bound as ν → ½, and above
+:data:`NU_MAX` a scene is refused (docs/calibration.md "Near ν = ½").
 
 Every engine realizes the one formula (:meth:`Volume.accel`: each pair (i, j) of i's terms is
 pulled with s_ij = Σ_m κ_m·θ_m·C_m,ij along it, −∂(U/m)/∂p), its tangent stiffness
@@ -68,8 +68,9 @@ from rackstress.model.operators import OPERATOR_KINDS, Bind, Operator
 
 #: the smallest Poisson's ratio taken: an auxetic material (ν < 0) is not measured
 NU_MIN = 0.0
-#: the largest Poisson's ratio taken (docs/calibration.md "Near ν = ½")
-NU_MAX = 0.4999
+#: the largest Poisson's ratio taken (docs/calibration.md "Near ν = ½": at 0.49 a laterally
+#: constrained block of ten layers reads its constrained modulus within 3 %, at 0.499 10 % low)
+NU_MAX = 0.49
 #: the lattice's own Poisson's ratio without the term (the Cauchy relation of central springs)
 LATTICE_NU = 0.25
 #: a pair's offset within this fraction of the spacing of a lattice vector is that vector
@@ -93,8 +94,9 @@ def check_nu(nu: float, where: str) -> None:
     if nu > NU_MAX:
         raise SceneError(
             f"{where}: Poisson's ratio {nu:g} is above {NU_MAX:g}: a nearly incompressible "
-            "material is beyond what the lattice was measured to represent within its "
-            "calibration targets (docs/calibration.md \"Near ν = ½\"); give nu as at most "
+            "material: its bulk modulus is more than 50 times its shear modulus, and a part "
+            "that confines it (a support, a pressed face) was measured 10 % off at ν = 0.499 "
+            "(docs/calibration.md \"Near ν = ½\"); give nu as at most "
             f"{NU_MAX:g}, or check the part with the FE cross-check (rackstress fea)")
 
 
@@ -372,8 +374,9 @@ class Volume(Operator):
 
     @staticmethod
     def hessian(p, t: VolumeTerms):
-        """∂²(U/m)/∂p² (3n × 3n, CSR, symmetric): Jᵀ·Cᵀ·diag(κ)·C·J (J = ∂e/∂p: row (i, j) is
-        d̂ at j, −d̂ at i) plus each pair's s/‖d‖·(I − d̂d̂ᵀ) between its two ends."""
+        """∂²(U/m)/∂p² (3n × 3n, CSR, symmetric): Gᵀ·diag(κ)·G with G = C·J (J = ∂e/∂p: row
+        (i, j) is d̂ at j, −d̂ at i; G = ∂θ/∂p), plus each pair's s/‖d‖·(I − d̂d̂ᵀ) between its
+        two ends (its blocks summed per particle on the diagonal first)."""
         import scipy.sparse as sp
 
         n, P = t.n, len(t.i)
@@ -384,17 +387,23 @@ class Volume(Operator):
                             (np.repeat(np.arange(P), 6),
                              np.concatenate([3 * t.j[:, None] + k3, 3 * t.i[:, None] + k3],
                                             axis=1).ravel())), shape=(P, 3 * n))
-        A = (t.C.T @ sp.diags(t.kappa) @ t.C).tocsr()
+        G = (t.C @ Jm).tocsr()
+        H = G.T @ sp.diags(t.kappa) @ G
         w = s / r
-        B = w[:, None, None] * (np.eye(3)[None] - u[:, :, None] * u[:, None, :])
-        ri = (3 * t.i[:, None, None] + k3[None, :, None]).repeat(3, axis=2)
-        ci = (3 * t.i[:, None, None] + k3[None, None, :]).repeat(3, axis=1)
-        rj = (3 * t.j[:, None, None] + k3[None, :, None]).repeat(3, axis=2)
-        cj = (3 * t.j[:, None, None] + k3[None, None, :]).repeat(3, axis=1)
-        geo = sp.csr_matrix((np.concatenate([B, -B, -B, B]).ravel(),
-                             (np.concatenate([ri, ri, rj, rj]).ravel(),
-                              np.concatenate([ci, cj, ci, cj]).ravel())), shape=(3 * n, 3 * n))
-        return (Jm.T @ A @ Jm + geo).tocsr()
+        B = (w[:, None, None] * (np.eye(3)[None] - u[:, :, None] * u[:, None, :])).reshape(-1, 9)
+        D = np.zeros((n, 9))
+        for c in range(9):
+            D[:, c] = (np.bincount(t.i, weights=B[:, c], minlength=n)
+                       + np.bincount(t.j, weights=B[:, c], minlength=n))
+        rows = (3 * t.i[:, None, None] + k3[None, :, None]).repeat(3, axis=2).reshape(-1, 9)
+        cols = (3 * t.j[:, None, None] + k3[None, None, :]).repeat(3, axis=1).reshape(-1, 9)
+        drow = (3 * np.arange(n)[:, None, None] + k3[None, :, None]).repeat(3, axis=2)
+        dcol = (3 * np.arange(n)[:, None, None] + k3[None, None, :]).repeat(3, axis=1)
+        geo = sp.csr_matrix((np.concatenate([D.ravel(), -B.ravel(), -B.ravel()]),
+                             (np.concatenate([drow.ravel(), rows.ravel(), cols.ravel()]),
+                              np.concatenate([dcol.ravel(), cols.ravel(), rows.ravel()]))),
+                            shape=(3 * n, 3 * n))
+        return (H + geo).tocsr()
 
     @staticmethod
     def virial(p, t: VolumeTerms, m: np.ndarray) -> np.ndarray:

@@ -811,7 +811,8 @@ class ParticleStress(_RunAnalysis):
         d2 = np.einsum("ij,ij->i", d, d)
         s = T.stress(p, b, self._W2S, self._V, W=T.virial_of(d, d2, b[2], b[3], self._gather))
         if self.volume is not None:       # the material's Poisson's ratio: its own virial
-            s = s + T.volume_virial(p, self.volume) / self._V[:, None]
+            with np.errstate(divide="ignore", invalid="ignore"):   # V = 0 off the mask
+                s = s + T.volume_virial(p, self.volume) / self._V[:, None]
         if self._wm is not None:
             s = T.moment_corrected(s, b[0], b[1], self._wm, self._gather)
         s[~self._mask] = np.nan
