@@ -44,6 +44,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <unordered_map>
 
 using namespace LAMMPS_NS;
 using namespace FixConst;
@@ -264,19 +265,29 @@ void FixRSVolume::collect()
     term(first, 1, false, -2.0 * V * cmu);
     term(second, 1, false, -2.0 * V * cmu);
   }
-  // only the pairs some term reads (inside the part the six nearest): the step passes over
-  // those alone
+  // only the pairs some term reads (inside the part the six nearest), each once: a pair two
+  // owned atoms both read (their shared nearest bond) is measured and pulled once, by both
+  // terms' sums — the step passes over those alone
   std::vector<int> keep(pi.size(), -1);
   for (int p : tpair) keep[p] = 0;
+  std::unordered_map<long long, int> seen;
+  const long long nall = atom->nlocal + atom->nghost;
   int nkeep = 0;
-  for (size_t p = 0; p < pi.size(); p++)
-    if (keep[p] == 0) {
-      keep[p] = nkeep;
-      pi[nkeep] = pi[p];
-      pj[nkeep] = pj[p];
-      pL[nkeep] = pL[p];
-      nkeep++;
+  for (size_t p = 0; p < pi.size(); p++) {
+    if (keep[p] != 0) continue;
+    const long long lo = std::min(pi[p], pj[p]), hi = std::max(pi[p], pj[p]);
+    auto it = seen.find(lo * nall + hi);
+    if (it != seen.end()) {
+      keep[p] = it->second;    // the same two rows: e and its direction are the pair's
+      continue;
     }
+    seen.emplace(lo * nall + hi, nkeep);
+    keep[p] = nkeep;
+    pi[nkeep] = pi[p];
+    pj[nkeep] = pj[p];
+    pL[nkeep] = pL[p];
+    nkeep++;
+  }
   pi.resize(nkeep);
   pj.resize(nkeep);
   pL.resize(nkeep);
@@ -291,30 +302,36 @@ void FixRSVolume::post_force(int /*vflag*/)
   if (!built || neighbor->ago == 0) collect();
   const double *__restrict x = atom->x[0];
   const int np = (int) pi.size();
+  const int *__restrict PI = pi.data(), *__restrict PJ = pj.data();
+  const double *__restrict L = pL.data();
+  double *__restrict E = e.data(), *__restrict P = pull.data();
   for (int p = 0; p < np; p++) {
-    const double *xi = x + 3 * pi[p], *xj = x + 3 * pj[p];
+    const double *xi = x + 3 * PI[p], *xj = x + 3 * PJ[p];
     const double d0 = xj[0] - xi[0], d1 = xj[1] - xi[1], d2 = xj[2] - xi[2];
-    e[p] = std::sqrt(d0 * d0 + d1 * d1 + d2 * d2) - pL[p];
-    pull[p] = 0.0;
+    E[p] = std::sqrt(d0 * d0 + d1 * d1 + d2 * d2) - L[p];
+    P[p] = 0.0;
   }
   const int nt = (int) tkappa.size();
+  const int *__restrict TP = tptr.data(), *__restrict TQ = tpair.data();
+  const double *__restrict TV = tval.data(), *__restrict K = tkappa.data();
   for (int m = 0; m < nt; m++) {
     double th = 0.0;
-    for (int k = tptr[m]; k < tptr[m + 1]; k++) th += tval[k] * e[tpair[k]];
-    const double t = tkappa[m] * th;
-    for (int k = tptr[m]; k < tptr[m + 1]; k++) pull[tpair[k]] += t * tval[k];
+    for (int k = TP[m]; k < TP[m + 1]; k++) th += TV[k] * E[TQ[k]];
+    const double t = K[m] * th;
+    for (int k = TP[m]; k < TP[m + 1]; k++) P[TQ[k]] += t * TV[k];
   }
   const int nall = atom->nlocal + atom->nghost;
   fv.assign(3 * (size_t) nall, 0.0);
+  double *__restrict F = fv.data();
   for (int p = 0; p < np; p++) {
-    if (pull[p] == 0.0) continue;
-    const int i = pi[p], j = pj[p];
+    if (P[p] == 0.0) continue;
+    const int i = PI[p], j = PJ[p];
     const double *xi = x + 3 * i, *xj = x + 3 * j;
-    const double g = pull[p] / (e[p] + pL[p]);
+    const double g = P[p] / (E[p] + L[p]);
     for (int k = 0; k < 3; k++) {
       const double w = g * (xj[k] - xi[k]);
-      fv[3 * i + k] += w;
-      fv[3 * j + k] -= w;
+      F[3 * i + k] += w;
+      F[3 * j + k] -= w;
     }
   }
   // the partners' shares this rank computed as ghosts go to their owners
