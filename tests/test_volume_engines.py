@@ -1,7 +1,7 @@
 """The volumetric term (the material's Poisson's ratio) realized in every engine: the compiled
-plugin (``fix rs/volume``, serial, ``mpiexec -n 2``, plain ``lmp`` on a generated deck) and the
-Python callback (numba and NumPy kernels), each against the reference engine — the term's own
-formula in NumPy, an independent path — to round-off."""
+plugin (``fix rs/volume``, serial, ``mpiexec -n 2``, plain ``lmp`` on a generated deck), the
+Python callback (numba and NumPy kernels) and the static solver's forces, each against the
+reference engine — the term's own formula in NumPy, an independent path — to round-off."""
 from __future__ import annotations
 
 import shutil
@@ -15,6 +15,7 @@ from rackstress.engines.driver import drive
 from rackstress.engines.lammps.deck import compile_deck
 from rackstress.engines.lammps.runner import LammpsRun
 from rackstress.engines.reference import Reference
+from rackstress.engines.static import _bind_pairs, external_forces, forces
 from rackstress.scenes.toml import load_toml
 
 pytestmark = pytest.mark.lammps
@@ -66,24 +67,30 @@ def _accelerations(deck, p):
     return f / m[:, None]
 
 
-@pytest.mark.parametrize("how", ["plugin", "numba", "numpy"])
+@pytest.mark.parametrize("how", ["plugin", "numba", "numpy", "static"])
 def test_one_evaluation_on_a_distorted_part(how, tmp_path, monkeypatch):
-    """The forces of one step on a randomly distorted holed plate: the plugin's rs/volume
-    and the callback's kernels equal the reference engine's to round-off (1e-12 of the
-    largest), on every free particle."""
+    """The forces of one step on a randomly distorted holed plate: the plugin's rs/volume,
+    the callback's kernels and the static solver's forces with the loads (÷ m) equal the
+    reference engine's to round-off (1e-12 of the largest), on every free particle — one
+    scene, every engine."""
     _, sc = _scene(tmp_path)
-    if how != "plugin":
-        monkeypatch.setenv("RACKSTRESS_KERNELS", how)
-    deck = compile_deck(sc, "exact", plugin=how == "plugin")
-    want = {"plugin": ["rs/bind", "rs/volume"], "numba": ["python", "python"],
-            "numpy": ["python", "python"]}[how]
-    assert [r.how for r in deck.realized if r.target == "plate"][:2] == want
     rng = np.random.default_rng(7)
     p = sc.original_positions() + 0.01 * rng.standard_normal((sc.n_particles, 3))
     ref = Reference(sc)
     ref.p = p.copy()
     a_ref = ref.accelerations({})
-    got = _accelerations(deck, p)
+    if how == "static":
+        m = sc.masses()
+        F = external_forces(sc)
+        got = forces(sc, p, _bind_pairs(sc), F, m) / m[:, None]
+    else:
+        if how != "plugin":
+            monkeypatch.setenv("RACKSTRESS_KERNELS", how)
+        deck = compile_deck(sc, "exact", plugin=how == "plugin")
+        want = {"plugin": ["rs/bind", "rs/volume"], "numba": ["python", "python"],
+                "numpy": ["python", "python"]}[how]
+        assert [r.how for r in deck.realized if r.target == "plate"][:2] == want
+        got = _accelerations(deck, p)
     free = ~sc.fixed()
     assert np.abs(np.where(free, got - a_ref, 0.0)).max() <= 1e-12 * np.abs(a_ref).max()
 
