@@ -473,10 +473,12 @@ README_PART = """
 name = "my-part"
 units = "mm-N-s"
 analysis = "static"
+[params]
+spacing = 1.0
 [[group]]
 name = "part"
 mesh = "{stl}"
-spacing = 1.0
+spacing = "$spacing"
 material = "aluminium"
 [[support]]
 on = "part"
