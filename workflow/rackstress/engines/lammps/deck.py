@@ -226,8 +226,10 @@ class Deck:
 
     # ------------------------------------------------------------------ input deck
     def setup_commands(self, data_file: str = "particles.data", dump_file: str | None = "trajectory.dump",
-                       dump_every: int = 100) -> list[str]:
-        """Everything before the first run: styles, groups, static fixes, dump."""
+                       dump_every: int = 100, volume_file: str | None = None) -> list[str]:
+        """Everything before the first run: styles, groups, static fixes, dump. ``volume_file``:
+        the word for ``volume.atoms`` when ``data_file`` is a variable (``${rs_pathN}``, whose
+        name has no folder to put it beside); by default the file beside ``data_file``."""
         sc, types = self.scene, topology.group_types(self.scene)
         L = [f"# rackstress deck: scene '{sc.name}', mode '{self.mode}', "
              f"{sc.n_particles} particles, dt = {sc.dt:g}"]
@@ -275,7 +277,7 @@ class Deck:
         L.append(f"timestep {_f(sc.dt)}")
         for name in sc.groups:
             L.append(f"group {name} type {types[name]}")
-        L += self.volume_commands(data_file)
+        L += self.volume_commands(data_file, volume_file)
         if self.passive:
             L.append(f"# {', '.join(self.passive)}: at rest until touched; integrated and damped "
                      f"only once the callback adds a particle to {MOVE_GROUP}")
@@ -353,14 +355,14 @@ class Deck:
             out += [f"{i} {v!r}" for i, v in zip(ids.tolist(), cols[:, k].tolist())]
         return "\n".join(out) + "\n"
 
-    def volume_commands(self, data_file: str) -> list[str]:
+    def volume_commands(self, data_file: str, volume_file: str | None = None) -> list[str]:
         """After read_data: every particle of a volumetric term's part gets a whole cell
         (φ = 1) and no held direction, the boundary and held ones theirs from
         ``volume.atoms`` beside the data file (:meth:`volume_atoms_text`, an atomfile
         variable: one set per column)."""
         if not self.volumes:
             return []
-        path = str(Path(data_file).with_name(VOLUME_ATOMS))
+        path = volume_file or str(Path(data_file).with_name(VOLUME_ATOMS))
         L = [f"set group {r.target} d2_rsphi[{k}] {1.0 if k <= 3 else 0.0}"
              for r in self.volumes for k in range(1, 7)]
         L += [f"variable rs_phi atomfile {path}", "group rs_vphi variable rs_phi"]

@@ -29,8 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-from rackstress.engines.lammps.deck import (MOVE_GROUP, PY_FIX, PY_NAPPLY, Deck, _global_int,
-                                           balance_commands)
+from rackstress.engines.lammps.deck import (MOVE_GROUP, PY_FIX, PY_NAPPLY, VOLUME_ATOMS, Deck,
+                                           _global_int, balance_commands)
 from rackstress.engines.lammps.plugin import locate as _locate_plugin
 from rackstress.errors import DivergenceError, RackstressError, StorageError
 from rackstress.lib.vec import fresh_zeros
@@ -123,7 +123,10 @@ class LammpsRun:
             lib = plugin_library()
             self.command(f"plugin load {self.path_word(lib)}")
             self._plugin = _watch_plugin(lib, self.lmp)
-        for cmd in deck.setup_commands(self.path_word(data), dump, dump_every):
+        # rs/volume's cells beside the data file, through its own path variable (a variable
+        # names no folder: volume.atoms beside "${rs_pathN}" would be relative to the cwd)
+        vol = self.path_word(data.with_name(VOLUME_ATOMS)) if deck.volumes else None
+        for cmd in deck.setup_commands(self.path_word(data), dump, dump_every, vol):
             self.command(cmd)
             if dump is not None and cmd.startswith("dump ") and " custom " in cmd:
                 self._dump_id = cmd.split()[1]
