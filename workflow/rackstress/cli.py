@@ -899,6 +899,43 @@ def _fea_inputs(rundir: Path) -> str | None:
     return None
 
 
+@main.command("inspect")
+@click.argument("file", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--scale", type=float, help="Multiply the file's coordinates (1000: metres to "
+              "mm, 25.4: inches to mm); the same as a scene's scale.")
+@click.option("--budget", type=click.IntRange(min=1), default=None,
+              help="Particles the suggested spacing may make (default 20,000).")
+@click.option("--json", "as_json", is_flag=True, help="Everything as JSON, for scripts.")
+@click.option("--all", "all_faces", is_flag=True, help="Every flat face, not the largest only.")
+@click.option("--png", type=click.Path(dir_okay=False, path_type=Path),
+              help="Also a picture of the part with the names written on it.")
+def inspect_cmd(file, scale, budget, as_json, all_faces, png):
+    """A part's holes (H1, H2, ...), flat faces (F1, F2, ...), size, bodies, volume,
+    watertightness, thinnest walls and the spacing a scene without one gets.
+
+    The names are what a scene file holds and loads by: where = { hole = "H1" },
+    where = { face = "F3" }. Exit 2 for a file it cannot read.
+    """
+    from rackstress.scenes import features as ft
+    from rackstress.scenes import inspect as insp
+
+    try:
+        info = insp.inspect_part(file, scale=scale, budget=budget or ft.BUDGET)
+        if png is not None:
+            insp.picture(file, png, scale=scale)
+            info["picture"] = str(png)
+    except RackstressError as err:
+        _fail(err, err.exit_code)
+    except OSError as err:
+        _fail(RackstressError(os_error_message(err, "write")), EXIT_STORAGE)
+    if as_json:
+        click.echo(json.dumps(info, indent=1))
+        return
+    click.echo(insp.text(info, all_faces=all_faces))
+    if png is not None:
+        click.echo(f"picture: {png}")
+
+
 @main.command("fea")
 @click.argument("rundir", type=click.Path(file_okay=False, path_type=Path))
 @click.option("--E", "E", type=float, help="Young's modulus (default: the part's material in "
@@ -1205,6 +1242,11 @@ TEACH = {
         "rackstress bench validity --planar --out docs/benchmarks",
     ]),
     # commands the other engineers of this round add (applied when the command exists)
+    "inspect": ("A part's named holes and faces, walls and a spacing, before a scene.", [
+        "rackstress inspect examples/bracket/bracket.stl",
+        "rackstress inspect arm.stl --scale 1000 --png arm-names.png",
+        "rackstress inspect part.step --json > part.json",
+    ]),
     "fea": ("Check a run's part against linear-elastic FEA of the same part.", [
         "rackstress fea runs/bracket",
         "rackstress fea runs/bracket --E 70e3 --nu 0.33 --size 0.5",
