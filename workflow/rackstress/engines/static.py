@@ -73,7 +73,9 @@ def check_static(scene) -> None:
                 f"constant loads; '{op.label()}' on '{target}' is not one (collisions, "
                 "attractions and phase-conditioned operators depend on the motion): set "
                 "analysis = \"dynamic\"")
-    if not scene.fixed().any():
+    from rackstress.model.constraints import supported
+
+    if not supported(scene).any():
         raise SceneError(f"scene '{scene.name}': a static analysis needs a support (held or "
                          "[[support]]): without one the part has no equilibrium, it floats away")
 
@@ -143,9 +145,10 @@ def stiffness(p: np.ndarray, pairs, m: np.ndarray):
     return sp.csr_matrix((vals, (rows, cols)), shape=(3 * n, 3 * n))
 
 
-def rigid_modes(p: np.ndarray, free: np.ndarray) -> np.ndarray:
-    """The six rigid-body modes (3 translations, 3 rotations) on the free unknowns: the
-    near-null space smoothed aggregation needs for elasticity."""
+def rigid_modes(p: np.ndarray, free) -> np.ndarray:
+    """The six rigid-body modes (3 translations, 3 rotations) on the free unknowns (``free``:
+    their boolean mask, or the supports' :class:`ConstraintMap`): the near-null space smoothed
+    aggregation needs for elasticity."""
     n = len(p)
     c = p - p.mean(axis=0)
     B = np.zeros((3 * n, 6))
@@ -154,7 +157,7 @@ def rigid_modes(p: np.ndarray, free: np.ndarray) -> np.ndarray:
     B[1::3, 3], B[2::3, 3] = -c[:, 2], c[:, 1]
     B[0::3, 4], B[2::3, 4] = c[:, 2], -c[:, 0]
     B[0::3, 5], B[1::3, 5] = -c[:, 1], c[:, 0]
-    return B[free]
+    return free.modes(B) if hasattr(free, "modes") else B[free]
 
 
 def _linear_solve(K, b, p, free, rtol, cache: dict):
@@ -200,8 +203,12 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
     o = scene.original_positions()
     n = len(o)
     m = scene.masses()
-    fixed = scene.fixed().reshape(-1)
-    free = ~fixed
+    from rackstress.model.constraints import ConstraintMap
+
+    # the supports as u = T·q + prescribed (model/constraints.py): T selects the free unknowns
+    # where only axes are fixed, rollers on any face and pins in holes otherwise
+    cmap = ConstraintMap.of_scene(scene)
+    free = cmap.free if cmap.trivial else cmap
     p = o + scene.prescribed()
     pairs = _bind_pairs(scene)
     F_ext = external_forces(scene)
@@ -216,13 +223,13 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
     # and a residual "settled" against them failed the engine's check (exit 6)
     reactions = load == 0.0
     if progress:
-        say(f"static: {n:,} particles, {len(pairs[0]):,} bindings, {int(free.sum()):,} "
+        say(f"static: {n:,} particles, {len(pairs[0]):,} bindings, {cmap.unknowns:,} "
             f"unknowns")
     while True:
         f = forces(scene, p, pairs, F_ext, m)
         if reactions:
-            load = float(np.linalg.norm(np.where(fixed.reshape(n, 3), f, 0.0), axis=1).sum())
-        unbalanced = np.where(fixed.reshape(n, 3), 0.0, f)
+            load = float(np.linalg.norm(f - cmap.unbalanced(f), axis=1).sum())
+        unbalanced = cmap.unbalanced(f)
         worst = float(np.linalg.norm(unbalanced, axis=1).max()) if n else 0.0
         rel = worst / load if load > 0 else (0.0 if worst == 0 else float("inf"))
         history.append(rel)
@@ -235,20 +242,19 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
             break
         if it >= max_iterations:
             break
-        K = stiffness(p, pairs, m)[free][:, free]
-        b = f.reshape(-1)[free]
+        K = cmap.reduce(stiffness(p, pairs, m))
+        b = cmap.restrict(f)
         # inexact Newton: the linear solve need only be as exact as the residual is small
         # (the step leaves rtol·‖b‖ unbalanced: a tenth of what settling allows)
         rtol = min(1e-2, max(1e-10, 0.1 * tolerance / rel))
         dx, _ = _linear_solve(K.tocsr(), b, p, free, rtol, cache)
-        step = np.zeros(3 * n)
-        step[free] = dx
+        step = cmap.expand(dx).reshape(-1)
         # a Newton step that makes things much worse is halved (large rotations, buckling)
         scale = 1.0
         for _ in range(8):
             trial = p + scale * step.reshape(n, 3)
             ft = forces(scene, trial, pairs, F_ext, m)
-            wt = float(np.linalg.norm(np.where(fixed.reshape(n, 3), 0.0, ft), axis=1).max())
+            wt = float(np.linalg.norm(cmap.unbalanced(ft), axis=1).max())
             if np.isfinite(wt) and wt <= 4.0 * worst:
                 break
             scale *= 0.5
@@ -282,8 +288,10 @@ def engine_residual(scene, engine, p: np.ndarray, reactions: float | None = None
     scene with only prescribed displacements — the engines hold a fixed particle by zeroing
     its force, so they cannot give them (the check was then an absolute force in newtons
     read as a fraction of the load)."""
+    from rackstress.model.constraints import ConstraintMap
+
     m = scene.masses()
-    fixed = scene.fixed()
+    cmap = ConstraintMap.of_scene(scene)
     if getattr(engine, "name", "") == "reference":
         engine.p = p.copy()
         a = engine.accelerations({})
@@ -300,6 +308,6 @@ def engine_residual(scene, engine, p: np.ndarray, reactions: float | None = None
     f = m[:, None] * a
     if load == 0.0:
         load = reactions if reactions is not None else float(
-            np.linalg.norm(np.where(fixed, f, 0.0), axis=1).sum())
-    worst = float(np.linalg.norm(np.where(fixed, 0.0, f), axis=1).max())
+            np.linalg.norm(f - cmap.unbalanced(f), axis=1).sum())
+    worst = float(np.linalg.norm(cmap.unbalanced(f), axis=1).max())
     return worst / load if load > 0 else worst
