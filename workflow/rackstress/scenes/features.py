@@ -667,7 +667,15 @@ def nice_up(x: float) -> float:
     if not (x > 0 and math.isfinite(x)):
         raise ValueError(f"not a positive length: {x!r}")
     e = 10.0 ** (math.floor(math.log10(x)) - 1)
-    return float(f"{math.ceil(x / e - 1e-9) * e:.12g}")
+    return float(f"{math.ceil(x / e * (1 - 1e-9)) * e:.12g}")
+
+
+def nice_down(x: float) -> float:
+    """``x`` rounded down to two significant digits (0.2467 → 0.24, 3.28 → 3.2)."""
+    if not (x > 0 and math.isfinite(x)):
+        raise ValueError(f"not a positive length: {x!r}")
+    e = 10.0 ** (math.floor(math.log10(x)) - 1)
+    return float(f"{math.floor(x / e * (1 + 1e-9)) * e:.12g}")
 
 
 def choose_spacing(volume: float, walls: Walls | None, budget: int = BUDGET) -> dict:
@@ -687,9 +695,11 @@ def choose_spacing(volume: float, walls: Walls | None, budget: int = BUDGET) -> 
     t = walls.percentile(WALL_PERCENTILE) if walls is not None else math.nan
     a_budget = (volume / budget) ** (1.0 / 3.0)
     a_wall = t / ACROSS if math.isfinite(t) else 0.0
-    a = nice_up(max(a_wall, a_budget))
+    # rounded to two digits: down where the walls set it (they keep their 3 particles), up
+    # where the budget does (it keeps its count)
+    a = max(nice_down(a_wall) if a_wall > 0 else 0.0, nice_up(a_budget))
     n = volume / a ** 3
-    if a_wall >= a_budget:
+    if a_wall > 0 and nice_down(a_wall) >= nice_up(a_budget):
         why = (f"{ACROSS} particles across its walls of {t:.3g} (all but the thinnest "
                f"{WALL_PERCENTILE:g} % of its surface are at least that thick): about "
                f"{n:,.0f} particles, within the budget of {budget:,}")
@@ -703,3 +713,97 @@ def choose_spacing(volume: float, walls: Walls | None, budget: int = BUDGET) -> 
         by = "budget"
     return {"spacing": a, "particles": int(round(n)), "budget": budget,
             "wall": t if math.isfinite(t) else None, "limited_by": by, "reason": why}
+
+
+# --------------------------------------------------------------------------- parts of scenes
+def surface_features(surface) -> Features:
+    """The named features of a placed mesh part (a :class:`rackstress.scenes.mesh.MeshSurface`
+    from ``read_surface``): found on its file's mesh as read and scaled, so the names are
+    the file's (``rackstress inspect FILE --scale S``), then rotated and moved with the part."""
+    import os
+
+    place = surface.placement
+    f = _file_features(str(os.path.realpath(surface.file)), os.stat(surface.file).st_mtime_ns,
+                       tuple(place.scale))
+    return f.placed(place.rotate, place.translate)
+
+
+from functools import lru_cache  # noqa: E402
+
+
+@lru_cache(maxsize=16)
+def _file_features(file: str, mtime_ns: int, scale: tuple) -> Features:
+    from rackstress.scenes.mesh import _checked
+
+    V, T, _ = _checked(file, mtime_ns)
+    return part_features((V * np.asarray(scale), T))
+
+
+class PartGeometry:
+    """A mesh part of a scene (its placed surface and lattice spacing), whose named features
+    regions select: ``hole = "H2"``, ``face = { near = [x, y, z] }`` (:meth:`region`)."""
+
+    def __init__(self, surface, spacing: float):
+        self.surface, self.spacing = surface, float(spacing)
+        self._features = None
+
+    @property
+    def features(self) -> Features:
+        if self._features is None:
+            self._features = surface_features(self.surface)
+        return self._features
+
+    def feature(self, kind: str, spec):
+        """The hole or face a region names: by name ("H2") or the nearest to a point
+        ({ near = [x, y, z] })."""
+        f = self.features
+        have = f.holes if kind == "hole" else f.faces
+        file = self.surface.file
+        if isinstance(spec, dict):
+            near = spec.get("near")
+            if set(spec) != {"near"} or not (isinstance(near, list) and len(near) == 3 and all(
+                    isinstance(x, (int, float)) and not isinstance(x, bool) for x in near)):
+                raise SceneError(f"must be a {kind}'s name (\"{kind[0].upper()}1\") or "
+                                 f"{{ near = [x, y, z] }}, got {spec!r}")
+            if not have:
+                raise SceneError(f"mesh {file} has no {kind}s to choose the nearest from "
+                                 f"({_listing(f, kind)})")
+            name = f.nearest(near, within=math.inf, kinds=(kind,))
+            return f.get(name.split()[1])
+        if not isinstance(spec, str):
+            raise SceneError(f"must be a {kind}'s name (\"{kind[0].upper()}1\") or "
+                             f"{{ near = [x, y, z] }}, got {spec!r}")
+        for x in have:
+            if x.name == spec:
+                return x
+        raise SceneError(f"mesh {file} has no {kind} '{spec}'; {_listing(f, kind)} (rackstress "
+                         f"inspect {file}" + (f" --scale {self.surface.placement.scale[0]:g}"
+                                              if self.surface.placement.scale[0] != 1 else "")
+                         + " lists them with their positions)")
+
+    def region(self, kind: str, spec):
+        """The particles within one spacing of the named hole's bore or face
+        (:class:`rackstress.model.regions.NearSurface`), the feature attached."""
+        from rackstress.model.regions import NearSurface
+
+        x = self.feature(kind, spec)
+        reg = NearSurface(self.features.feature_points(x), self.spacing, f"{kind} {x.name}")
+        reg.feature = x
+        return reg
+
+
+def _listing(f: Features, kind: str, most: int = 12) -> str:
+    have = f.holes if kind == "hole" else f.faces
+    if not have:
+        return f"it has no {kind}s" + (f" (its faces: {', '.join(x.name for x in f.faces[:most])})"
+                                        if kind == "hole" and f.faces else "")
+    names = []
+    for x in have[:most]:
+        if kind == "hole":
+            names.append(f"{x.name} (diameter {2 * x.radius:.4g}, {'through' if x.through else 'blind'}, "
+                         f"at {[float(f'{c:.4g}') for c in x.centre]})")
+        else:
+            names.append(f"{x.name} (area {x.area:.4g}, normal "
+                         f"{[float(f'{c:.3g}') + 0.0 for c in x.normal]})")
+    more = f" and {len(have) - most} more" if len(have) > most else ""
+    return f"its {kind}s are {', '.join(names)}{more}"
