@@ -239,19 +239,29 @@ def _canonical(d: np.ndarray) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- features
-def part_features(mesh) -> Features:
+def part_features(mesh, cad: tuple | None = None) -> Features:
     """The named holes and faces of ``mesh`` (module doc).
 
     Parameters
     ----------
     mesh : trimesh.Trimesh, pyvista.PolyData, MeshSurface or (vertices, triangles)
         A closed surface; several bodies are allowed (features are found on each).
+    cad : (face of each triangle, {face: kind}), optional
+        A STEP part's CAD faces (:func:`rackstress.scenes.mesh.step_surface`): its planes are
+        the faces and its cylinders the candidate holes, instead of strips found in the mesh.
 
     Returns
     -------
     Features
     """
-    tm = as_trimesh(mesh)
+    if cad is not None:          # the triangles keep their order: each is its CAD face's
+        import trimesh
+
+        tm = trimesh.Trimesh(np.asarray(mesh[0], float), np.asarray(mesh[1], np.int64),
+                             process=False)
+        tm.merge_vertices()
+    else:
+        tm = as_trimesh(mesh)
     V, T = np.asarray(tm.vertices), np.asarray(tm.faces)
     nT = len(T)
     if nT == 0:
@@ -281,7 +291,30 @@ def part_features(mesh) -> Features:
     fa, fb = facet_of[adj[:, 0]], facet_of[adj[:, 1]]
     between = fa != fb
     crease = between & (ang >= BEND_MIN) & (ang <= BEND_MAX)
-    cyl = _merge_coaxial(V, _cylinders(V, T, tm, facet_of, nF, fa, fb, ang, ev, crease, body))
+    if cad is not None:
+        owner, kinds = np.asarray(cad[0]), cad[1]
+        groups = [np.flatnonzero(owner == tag) for tag in sorted(kinds)]
+        groups = [g for g in groups if len(g)]
+        facet_of = np.zeros(nT, dtype=np.int64)
+        for k, g in enumerate(groups):
+            facet_of[g] = k
+        nF = len(groups)
+        fa_area = np.array([tm.area_faces[g].sum() for g in groups])
+        fa_normal = np.array([_unit(np.sum(tm.face_normals[g] * tm.area_faces[g, None], axis=0))
+                              for g in groups])
+        fa, fb = facet_of[adj[:, 0]], facet_of[adj[:, 1]]
+        between = fa != fb
+        kind_of = [kinds[int(owner[g[0]])] for g in groups]
+        pieces = [_cad_cylinder(V, T, tm, g, k) for k, g in enumerate(groups)
+                  if kind_of[k] == "Cylinder"]
+        cyl = _merge_coaxial(V, [c for c in pieces if c is not None])
+        for c in cyl:
+            c["body"] = int(body[c["triangles"][0]])
+        planar = np.array([kd == "Plane" for kd in kind_of])
+    else:
+        cyl = _merge_coaxial(V, _cylinders(V, T, tm, facet_of, nF, fa, fb, ang, ev, crease,
+                                           body))
+        planar = None
     in_curved = np.zeros(nF, dtype=bool)
     holes, fillets = [], 0
     for c in cyl:
@@ -300,6 +333,8 @@ def part_features(mesh) -> Features:
                       h["segments"], h["body"], h["triangles"])
                  for i, h in enumerate(holes, 1)]
 
+    if planar is not None:       # a CAD part: its planes only
+        in_curved |= ~planar
     faces = _faces(V, T, tm, groups, facet_of, fa_area, fa_normal, in_curved, fa, fb, ang, ev,
                    between, body)
     faces.sort(key=lambda f: (-round(f["area"] / q ** 2 * 1e-4), *np.round(f["centre"] / q)))
@@ -367,6 +402,40 @@ def _cylinders(V, T, tm, facet_of, nF, fa, fb, ang, ev, crease, body) -> list:
             c["body"] = int(body[c["triangles"][0]])
             out.append(c)
     return out
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    n = float(np.linalg.norm(v))
+    return v / n if n > 0 else v
+
+
+def _cad_cylinder(V, T, tm, tris: np.ndarray, facet: int) -> dict | None:
+    """A CAD cylinder face (STEP) as a piece: its axis is the direction its normals are all
+    perpendicular to (the least eigenvector of Σ a·n·nᵀ), its circle the least-squares fit of
+    its vertices projected along it."""
+    import trimesh
+
+    n, w = tm.face_normals[tris], tm.area_faces[tris]
+    evals, evecs = np.linalg.eigh((n * w[:, None]).T @ n)
+    a = _canonical(evecs[:, 0])
+    u, v = _basis(a)
+    vid = np.unique(T[tris])
+    q = np.column_stack([V[vid] @ u, V[vid] @ v])
+    try:
+        c2, r, _ = trimesh.nsphere.fit_nsphere(q)
+    except Exception:  # noqa: BLE001 - a degenerate fit is no cylinder
+        return None
+    if not (r > 0 and np.isfinite(r)):
+        return None
+    centre0 = c2[0] * u + c2[1] * v
+    cen = tm.triangles_center[tris]
+    radial = cen - centre0 - np.outer(cen @ a, a)
+    radial /= np.maximum(np.linalg.norm(radial, axis=1, keepdims=True), 1e-300)
+    inward = float(np.average(np.sum(n * radial, axis=1), weights=w)) < 0
+    s = V[vid] @ a
+    return {"facets": np.array([facet]), "triangles": np.asarray(tris), "axis": a,
+            "point": centre0, "radius": float(r), "inward": inward,
+            "span": (float(s.min()), float(s.max())), "vertices": vid}
 
 
 def _members(facet_of: np.ndarray, nF: int) -> list:
@@ -733,8 +802,11 @@ from functools import lru_cache  # noqa: E402
 
 @lru_cache(maxsize=16)
 def _file_features(file: str, mtime_ns: int, scale: tuple) -> Features:
-    from rackstress.scenes.mesh import _checked
+    from rackstress.scenes.mesh import STEP_FORMATS, _checked, step_surface
 
+    if file.lower().endswith(STEP_FORMATS):      # its CAD faces: planes and cylinders
+        V, T, owner, kinds = step_surface(file, cad=True)
+        return part_features((V * np.asarray(scale), T), cad=(owner, kinds))
     V, T, _ = _checked(file, mtime_ns)
     return part_features((V * np.asarray(scale), T))
 

@@ -157,11 +157,15 @@ def read_triangles(file) -> tuple[np.ndarray, np.ndarray]:
 STEP_CHORD, STEP_SEGMENTS = 5e-4, 36
 
 
-def step_surface(file: str) -> tuple[np.ndarray, np.ndarray]:
+def step_surface(file: str, cad: bool = False) -> tuple:
     """(vertices, triangles) of the solids of a STEP file, meshed on their surfaces by gmsh
     (OpenCASCADE reads the file; curves get at least :data:`STEP_SEGMENTS` segments a full
     circle and the mesh no element larger than a fifth of the part). The triangles are turned
-    to face out of each solid (trimesh's ``fix_normals``). gmsh is the ``fem`` extra's."""
+    to face out of each solid (trimesh's ``fix_normals``). gmsh is the ``fem`` extra's.
+
+    ``cad``: also the CAD face each triangle lies on and each face's kind ("Plane",
+    "Cylinder", ...: gmsh's ``getType``), for :func:`rackstress.scenes.features.part_features`.
+    """
     try:
         import gmsh
     except ImportError as exc:
@@ -197,20 +201,25 @@ def step_surface(file: str) -> tuple[np.ndarray, np.ndarray]:
         tags, coords, _ = gmsh.model.mesh.getNodes()
         where = np.zeros(int(tags.max()) + 1, dtype=np.int64)
         where[tags.astype(np.int64)] = np.arange(len(tags))
-        tris = []
+        tris, owner, kinds = [], [], {}
         for dim, tag in gmsh.model.getEntities(2):
+            kinds[int(tag)] = gmsh.model.getType(dim, tag)
             types, _, nodes = gmsh.model.mesh.getElements(dim, tag)
             for t, nd in zip(types, nodes):
                 if t == 2:                                        # 3-node triangles
                     tris.append(where[np.asarray(nd, dtype=np.int64).reshape(-1, 3)])
+                    owner.append(np.full(len(tris[-1]), int(tag)))
     finally:
         gmsh.finalize()
     if not tris:
         raise SceneError(f"mesh file {file}: gmsh made no surface triangles of its solids")
+    # merged vertices, every triangle kept in order (each keeps its CAD face)
     tm = trimesh.Trimesh(np.asarray(coords, float).reshape(-1, 3), np.concatenate(tris),
-                         process=True)
+                         process=False)
+    tm.merge_vertices()
     tm.fix_normals(multibody=True)
-    return np.asarray(tm.vertices), np.asarray(tm.faces, dtype=np.int64)
+    out = (np.asarray(tm.vertices), np.asarray(tm.faces, dtype=np.int64))
+    return out + (np.concatenate(owner), kinds) if cad else out
 
 
 @lru_cache(maxsize=32)
