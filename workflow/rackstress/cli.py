@@ -199,6 +199,12 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
         with phase(f"building the scene {scene}", shown):
             sc = _load_scene(scene, steps, dt, sets, integrator)
         if rank() == 0:
+            said, warned = run_mod.sizing_lines(sc)
+            for line in said:
+                click.echo(line)
+            for line in warned:
+                click.echo(f"rackstress: warning: {sc.name}: {line}", err=True)
+        if rank() == 0:
             from rackstress.stress.warming import warm_in_background
 
             warm_in_background()        # a first run compiles the measures' loop meanwhile

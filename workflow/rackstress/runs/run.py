@@ -205,6 +205,10 @@ def summarize(scene: Scene, engine: str, mode: str, p_end: np.ndarray, steps_don
                       "particle": error.local, "index": error.index,
                       "atom_id": None if error.index is None else error.index + 1}
     s["units"] = scene.units.name
+    for name, g in scene.groups.items():        # a mesh part: its spacing and thin walls
+        sizing = mesh_sizing(g)
+        if sizing is not None:
+            s["groups"][name]["sizing"] = sizing
     if scene.units.physical:
         for name, g in scene.groups.items():
             if g.material is not None:
@@ -213,6 +217,39 @@ def summarize(scene: Scene, engine: str, mode: str, p_end: np.ndarray, steps_don
     if extra:
         s.update(extra)
     return s
+
+
+def mesh_sizing(g) -> dict | None:
+    """A mesh part's spacing, how it was chosen (None: given) and its walls thinner than three
+    spacings (:mod:`rackstress.scenes.features`), or None for another group."""
+    geo = (g.meta or {}).get("part") if isinstance(g.meta, dict) else None
+    if geo is None:
+        return None
+    return {"spacing": geo.spacing, "chosen": getattr(geo, "choice", None),
+            "thin_walls": list(getattr(geo, "thin", []) or [])}
+
+
+def sizing_lines(scene: Scene) -> tuple[list, list]:
+    """What ``rackstress run`` says of its mesh parts: (lines for stdout: a spacing chosen and
+    why; warnings: walls thinner than three spacings, where and near which feature)."""
+    say, warn = [], []
+    for name, g in scene.groups.items():
+        sz = mesh_sizing(g)
+        if sz is None:
+            continue
+        if sz["chosen"]:
+            say.append(f"  {name}: spacing {sz['spacing']:g} chosen: {sz['chosen']['reason']} "
+                       "(set spacing = ... in the group, or --set spacing=...)")
+        for t in sz["thin_walls"][:3]:
+            where = ", ".join(f"{x:.4g}" for x in t["position"])
+            warn.append(f"'{name}': a wall {t['thickness']:.3g} thick at [{where}]"
+                        + (f" (near {t['near']})" if t.get("near") else "")
+                        + f" has fewer than 3 particles across at spacing {sz['spacing']:g}: "
+                        "its stress there is coarse; a smaller spacing resolves it")
+        if len(sz["thin_walls"]) > 3:
+            warn.append(f"'{name}': {len(sz['thin_walls']) - 3} more place(s) with walls "
+                        "thinner than 3 spacings (summary.json: groups.NAME.sizing)")
+    return say, warn
 
 
 def write_boundary(scene: Scene, out) -> None:

@@ -134,7 +134,12 @@ def supports(ctx, tables, groups: dict, select, region_of=None) -> None:
         if kind in ("roller", "symmetry"):
             point, n = _support_plane(c, t, kind, feature)
             if mask is None:         # the particles on the plane: within half a spacing
-                a = _spacing(c, g)
+                a = (g.meta.get("spacing") or (g.meta.get("solid") or {}).get("spacing")
+                     or getattr(g.meta.get("part"), "spacing", None))
+                if a is None:
+                    raise c.error("a symmetry plane without 'where' takes the particles within "
+                                  "half a spacing of it; this group has no lattice spacing: "
+                                  "give where = { ... }", "plane")
                 mask = np.abs((g.o - point) @ n) <= 0.5 * a * (1.0 + 1e-9)
                 if not mask.any():
                     raise c.error(f"no particle of '{name}' lies within half a spacing "
