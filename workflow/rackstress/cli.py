@@ -1169,6 +1169,24 @@ def bench_validity(out, quick, planar):
     cantilever.run_bench(out, quick=quick, echo=click.echo)
 
 
+@bench.command("parts")
+@_bench_out
+@click.option("--fea/--no-fea", default=True, show_default=True,
+              help="Check each settled part by FEA (rackstress fea); --no-fea for speed.")
+@click.option("--only", multiple=True, help="Only parts whose name contains this (repeatable).")
+@click.option("--set", "sets", multiple=True, metavar="KEY=VALUE",
+              help="Override every part's scene, e.g. --set budget=5000 (repeatable).")
+def bench_parts(out, fea, only, sets):
+    """Every real part of examples/parts/ through the static path: particles, spacing, Newton
+    steps, residual, solve time, peak and the FE agreement (docs/benchmarks/parts.md)."""
+    from rackstress import scenes
+    from rackstress.bench import parts as mod
+
+    data = mod.run_bench(out, fea=fea, only=only or None,
+                         sets=scenes.parse_overrides(sets), echo=click.echo)
+    _bench_report(data, mod)
+
+
 @bench.command("cantilever")
 @_bench_out
 @click.option("--quick", is_flag=True, help="Spacings 2 and 1 only, no 100,000-particle run.")
@@ -1278,6 +1296,11 @@ TEACH = {
         "rackstress bench scaling --quick --out /tmp/bench",
         "rackstress bench scaling --large --out docs/benchmarks",
         "rackstress bench scaling --scene magpod --out docs/benchmarks",
+    ]),
+    "bench parts": ("Every real part of examples/parts/ through the static path.", [
+        "rackstress bench parts --no-fea --out /tmp/bench",
+        "rackstress bench parts --only so100 --set budget=5000 --out /tmp/bench",
+        "rackstress bench parts --out docs/benchmarks",
     ]),
     "bench stress": ("Stress from particles against tension and bending.", [
         "rackstress bench stress --quick --out /tmp/bench",
