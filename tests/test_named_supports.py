@@ -188,7 +188,6 @@ force = [{100 if half else 200}, 0, 0]
 '''
 
 
-@pytest.mark.slow
 def test_symmetry_plane_halves_the_part(tmp_path):
     from rackstress.runs.run import run
     from rackstress.stress import load_run
@@ -261,3 +260,20 @@ def test_spacing_chosen_and_set(tmp_path):
     out = run_cli(["scenes", str(toml)], tmp_path)
     assert out.returncode == 0 and "spacing" in out.stdout and "budget" in out.stdout
 
+
+
+@pytest.mark.slow
+def test_pinned_run_on_lammps_then_fea_refuses(tmp_path):
+    """The whole path as a user runs it: the pinned bar on LAMMPS (its engine checks the
+    settled state through the constraint map), then ``rackstress fea``, which holds axes only
+    and says so (exit 2)."""
+    import json
+
+    toml = bar_scene(tmp_path, "pinned")
+    out = run_cli(["run", str(toml), "--no-render", "--out", str(tmp_path / "r")], tmp_path)
+    assert out.returncode == 0, out.stderr
+    summary = json.loads((tmp_path / "r" / "summary.json").read_text())
+    assert summary["settled"] and summary["residual_engine"] <= summary["tolerance"]
+    fea = run_cli(["fea", str(tmp_path / "r")], tmp_path)
+    assert fea.returncode == 2
+    assert "not x, y or z" in fea.stderr and "pinned" in fea.stderr

@@ -46,12 +46,14 @@ def case(name: str, work: Path, fea: bool = True, sets: dict | None = None, echo
     from rackstress.stress.post import postprocess
 
     scene = parts_dir() / name / "scene.toml"
-    row = {"part": name, "scene": str(scene.relative_to(parts_dir().parents[1]))}
+    root = str(parts_dir().parents[1]) + os.sep
+    row = {"part": name, "scene": str(scene).replace(root, "")}
+    short = lambda exc: str(exc).replace(root, "")     # noqa: E731 - paths in the repository
     t0 = time.process_time()
     try:
         sc = load(str(scene), dict(sets or {}))
     except RackstressError as exc:
-        row.update(status="refused (exit 2)", reason=str(exc))
+        row.update(status="refused (exit 2)", reason=short(exc))
         echo(f"{name}: refused: {exc}")
         return row
     row["load_cpu_s"] = time.process_time() - t0
@@ -66,7 +68,7 @@ def case(name: str, work: Path, fea: bool = True, sets: dict | None = None, echo
     try:
         summary = run(sc, out, progress=False, overwrite=True)
     except RackstressError as exc:
-        row.update(status=f"failed (exit {exc.exit_code})", reason=str(exc))
+        row.update(status=f"failed (exit {exc.exit_code})", reason=short(exc))
         echo(f"{name}: failed: {exc}")
         return row
     row["run_cpu_s"] = time.process_time() - t0
@@ -91,7 +93,7 @@ def case(name: str, work: Path, fea: bool = True, sets: dict | None = None, echo
             row.update(fea_spearman=ag.get("spearman"), fea_top5=ag.get("top5_overlap"),
                        fea_peak_ratio=ag.get("peak_ratio"), fea_s=time.perf_counter() - t0)
         except (ValueError, RackstressError) as exc:
-            row["fea_error"] = str(exc)
+            row["fea_error"] = short(exc)
     echo(f"{name}: {row['particles']:,} particles at {fmt(row['spacing'])} "
          f"({row['spacing_how']}), {row['status']} in {row['iterations']} steps, residual "
          f"{fmt(row['residual'])}, solve {fmt(row['solve_s'])} s, peak {fmt(peak)} MPa"

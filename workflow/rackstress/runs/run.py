@@ -266,9 +266,13 @@ def write_boundary(scene: Scene, out) -> None:
     path = Path(out) / "boundary.npz"
     tmp = Path(out) / ".boundary.tmp.npz"
     try:
+        from rackstress.model.constraints import supported
+
+        constrained = np.flatnonzero(supported(scene) & ~fixed.any(axis=1))
         np.savez(tmp, held_ids=(held + 1).astype(np.int64), held_mask=fixed[held],
                  load_ids=(loaded + 1).astype(np.int64), load_force=F[loaded].astype(np.float64),
-                 units=np.str_(scene.units.name))
+                 units=np.str_(scene.units.name),
+                 constrained_ids=(constrained + 1).astype(np.int64))
         tmp.replace(path)
     except OSError as exc:
         raise storage_error(exc, "write", path) from None
@@ -282,7 +286,9 @@ def load_path_warnings(scene: Scene) -> list[dict]:
 
     from rackstress.engines.static import _bind_pairs, external_forces
 
-    fixed = scene.fixed().any(axis=1)
+    from rackstress.model.constraints import supported
+
+    fixed = supported(scene)          # a fixed direction, a pin, a roller on any face
     F = external_forces(scene)
     loaded = np.any(F != 0.0, axis=1)
     if not loaded.any():
