@@ -29,8 +29,9 @@ Example
 >>> cm = ConstraintMap.of_groups([g])
 >>> cm.unknowns
 5
->>> np.round(cm.unbalanced(np.array([[0., 0, 0], [3, 4, 0]])), 12).tolist()
-[[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
+>>> f = np.array([[0., 0, 0], [7, 1, 2]])      # 5 along the normal, (4, -3, 2) across it
+>>> (cm.unbalanced(f).round(12) + 0.0).tolist()
+[[0.0, 0.0, 0.0], [4.0, -3.0, 2.0]]
 """
 from __future__ import annotations
 

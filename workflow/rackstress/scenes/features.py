@@ -37,8 +37,8 @@ Example
 >>> f = part_features(plate)
 >>> [(h.name, round(h.radius, 3), h.through) for h in f.holes]
 [('H1', 3.0, True)]
->>> f.faces[0].name, round(f.faces[0].area, 1)
-('F1', 771.8)
+>>> f.faces[0].name, round(f.faces[0].area, 3)      # 40 × 20 less the 32-gon of r 3
+('F1', 771.907)
 >>> f.nearest([3.5, 0, 0])
 'hole H1'
 """
