@@ -1266,7 +1266,7 @@ TEACH = {
         "rackstress bench validity --planar --out docs/benchmarks",
     ]),
     # commands the other engineers of this round add (applied when the command exists)
-    "inspect": ("A part's named holes and faces, walls and a spacing, before a scene.", [
+    "inspect": ("Name a part's holes and faces; its walls and a spacing.", [
         "rackstress inspect examples/bracket/bracket.stl",
         "rackstress inspect arm.stl --scale 1000 --png arm-names.png",
         "rackstress inspect part.step --json > part.json",

@@ -54,7 +54,7 @@ def case(name: str, work: Path, fea: bool = True, sets: dict | None = None, echo
         sc = load(str(scene), dict(sets or {}))
     except RackstressError as exc:
         row.update(status="refused (exit 2)", reason=short(exc))
-        echo(f"{name}: refused: {exc}")
+        echo(f"{name}: refused: {short(exc)}")
         return row
     row["load_cpu_s"] = time.process_time() - t0
     g = next(iter(sc.groups.values()))
@@ -69,7 +69,7 @@ def case(name: str, work: Path, fea: bool = True, sets: dict | None = None, echo
         summary = run(sc, out, progress=False, overwrite=True)
     except RackstressError as exc:
         row.update(status=f"failed (exit {exc.exit_code})", reason=short(exc))
-        echo(f"{name}: failed: {exc}")
+        echo(f"{name}: failed: {short(exc)}")
         return row
     row["run_cpu_s"] = time.process_time() - t0
     row.update(settled=bool(summary.get("settled")), iterations=summary.get("iterations"),

@@ -157,6 +157,40 @@ def read_triangles(file) -> tuple[np.ndarray, np.ndarray]:
 STEP_CHORD, STEP_SEGMENTS = 5e-4, 36
 
 
+class _quiet:
+    """Standard output and error of this process (its C++ libraries' too) to /dev/null for the
+    block: OpenCASCADE prints its STEP reader's messages there, and the error that follows
+    says what went wrong in one paragraph."""
+
+    def __enter__(self):
+        import sys
+
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (AttributeError, ValueError):
+                pass
+        self.saved = []
+        try:
+            null = os.open(os.devnull, os.O_WRONLY)
+        except OSError:
+            return self
+        for fd in (1, 2):
+            try:
+                self.saved.append((fd, os.dup(fd)))
+                os.dup2(null, fd)
+            except OSError:
+                pass
+        os.close(null)
+        return self
+
+    def __exit__(self, *exc):
+        for fd, copy in self.saved:
+            os.dup2(copy, fd)
+            os.close(copy)
+        return False
+
+
 def step_surface(file: str, cad: bool = False) -> tuple:
     """(vertices, triangles) of the solids of a STEP file, meshed on their surfaces by gmsh
     (OpenCASCADE reads the file; curves get at least :data:`STEP_SEGMENTS` segments a full
@@ -181,7 +215,8 @@ def step_surface(file: str, cad: bool = False) -> tuple:
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.option.setNumber("General.Verbosity", 0)
         try:
-            gmsh.model.occ.importShapes(file)
+            with _quiet():                  # OpenCASCADE's own parse messages: said below
+                gmsh.model.occ.importShapes(file)
             gmsh.model.occ.synchronize()
         except Exception as exc:  # noqa: BLE001 - gmsh raises Exception for a bad file
             raise SceneError(f"mesh file {file}: gmsh's OpenCASCADE reader cannot read it as "
