@@ -1176,14 +1176,16 @@ def bench_validity(out, quick, planar):
 @click.option("--only", multiple=True, help="Only parts whose name contains this (repeatable).")
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE",
               help="Override every part's scene, e.g. --set budget=5000 (repeatable).")
-def bench_parts(out, fea, only, sets):
+@click.option("--timeout", type=click.FloatRange(min=1), default=900.0, show_default=True,
+              help="Seconds a part's run (and its FE check) may take before it is stopped.")
+def bench_parts(out, fea, only, sets, timeout):
     """Every real part of examples/parts/ through the static path: particles, spacing, Newton
     steps, residual, solve time, peak and the FE agreement (docs/benchmarks/parts.md)."""
     from rackstress import scenes
     from rackstress.bench import parts as mod
 
     data = mod.run_bench(out, fea=fea, only=only or None,
-                         sets=scenes.parse_overrides(sets), echo=click.echo)
+                         sets=scenes.parse_overrides(sets), echo=click.echo, timeout=timeout)
     _bench_report(data, mod)
 
 

@@ -36,64 +36,97 @@ def part_names(only=None) -> list:
     return names
 
 
-def case(name: str, work: Path, fea: bool = True, sets: dict | None = None, echo=print) -> dict:
-    """One part: load, solve (LAMMPS), stress, and the FE check; its row."""
-    import json
+#: seconds a part's run may take before the bench stops it (``--timeout``): today's solver can
+#: spend hours on a part it will not settle
+TIMEOUT_S = 900.0
 
-    from rackstress.errors import RackstressError
-    from rackstress.runs.run import mesh_sizing, run
-    from rackstress.scenes import load
-    from rackstress.stress.post import postprocess
+
+def _rackstress() -> list:
+    """The ``rackstress`` command of this interpreter (its venv's script, else ``-m``)."""
+    import sys
+
+    exe = Path(sys.executable).with_name("rackstress")
+    return [str(exe)] if exe.is_file() else [sys.executable, "-m", "rackstress.cli"]
+
+
+def _cpu_children() -> float:
+    import resource
+
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
+def _error_of(stderr: str) -> str:
+    """The last ``rackstress: error:`` paragraph of a command's stderr."""
+    lines = [ln for ln in stderr.splitlines() if ln.startswith("rackstress: error:")]
+    return lines[-1].split("rackstress: error:", 1)[1].strip() if lines else \
+        (stderr.strip().splitlines() or ["(no message)"])[-1]
+
+
+def case(name: str, work: Path, fea: bool = True, sets: dict | None = None, echo=print,
+         timeout: float = TIMEOUT_S) -> dict:
+    """One part as a user runs it, each command a process of its own: ``rackstress run SCENE
+    --no-render`` (LAMMPS; the stress measured), then ``rackstress fea``; its row."""
+    import json
+    import subprocess
 
     scene = parts_dir() / name / "scene.toml"
     root = str(parts_dir().parents[1]) + os.sep
     row = {"part": name, "scene": str(scene).replace(root, "")}
-    short = lambda exc: str(exc).replace(root, "")     # noqa: E731 - paths in the repository
-    t0 = time.process_time()
-    try:
-        sc = load(str(scene), dict(sets or {}))
-    except RackstressError as exc:
-        row.update(status="refused (exit 2)", reason=short(exc))
-        echo(f"{name}: refused: {short(exc)}")
-        return row
-    row["load_cpu_s"] = time.process_time() - t0
-    g = next(iter(sc.groups.values()))
-    sz = mesh_sizing(g) or {}
-    row["particles"] = sc.n_particles
-    row["spacing"] = sz.get("spacing")
-    row["spacing_how"] = (sz["chosen"]["limited_by"] if sz.get("chosen") else "given")
-    row["thin_walls"] = len(sz.get("thin_walls") or [])
+    short = lambda text: str(text).replace(root, "")     # noqa: E731 - repository paths
     out = work / name
-    t0 = time.process_time()
+    args = [*_rackstress(), "run", str(scene), "--no-render", "--no-progress", "--out",
+            str(out), "--overwrite"]
+    for k, v in (sets or {}).items():
+        args += ["--set", f"{k}={v}"]
+    cpu0, t0 = _cpu_children(), time.perf_counter()
     try:
-        summary = run(sc, out, progress=False, overwrite=True)
-    except RackstressError as exc:
-        row.update(status=f"failed (exit {exc.exit_code})", reason=short(exc))
-        echo(f"{name}: failed: {short(exc)}")
+        r = subprocess.run(args, capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        row.update(status=f"stopped after {timeout:.0f} s", run_wall_s=timeout,
+                   reason=f"the run had not ended after {timeout:.0f} s (--timeout): today's "
+                          "solver had not settled it")
+        echo(f"{name}: stopped after {timeout:.0f} s")
         return row
-    row["run_cpu_s"] = time.process_time() - t0
-    row.update(settled=bool(summary.get("settled")), iterations=summary.get("iterations"),
-               residual=summary.get("residual"), solve_s=summary.get("solve_s"))
-    info = postprocess(out)
-    stress = json.loads((out / "summary.json").read_text()).get("stress", {}) or info or {}
+    row["run_wall_s"] = time.perf_counter() - t0
+    row["run_cpu_s"] = _cpu_children() - cpu0
+    summary_file = out / "summary.json"
+    if r.returncode == 2 or not summary_file.is_file():
+        row.update(status=f"refused (exit {r.returncode})", reason=short(_error_of(r.stderr)))
+        echo(f"{name}: refused: {row['reason']}")
+        return row
+    s = json.loads(summary_file.read_text())
+    g = next(iter(s["groups"].values()))
+    sz = g.get("sizing") or {}
+    row.update(particles=s.get("n_particles"), spacing=sz.get("spacing"),
+               spacing_how=(sz["chosen"]["limited_by"] if sz.get("chosen") else "given"),
+               thin_walls=len(sz.get("thin_walls") or []), settled=bool(s.get("settled")),
+               iterations=s.get("iterations"), residual=s.get("residual"),
+               solve_s=s.get("solve_s"))
+    stress = s.get("stress") or {}
     gov = stress.get("governing")
     peak = (gov or {}).get("value")
     if peak is None:
         peak = (stress.get("peak") or {}).get("value")
-    row["peak_mpa"] = peak
-    row["peak_kind"] = "governing" if gov else "peak"
-    row["status"] = "settled" if row["settled"] else "not settled (exit 6)"
+    row["peak_mpa"], row["peak_kind"] = peak, ("governing" if gov else "peak")
+    row["status"] = {0: "settled", 6: "not settled (exit 6)"}.get(
+        r.returncode, f"failed (exit {r.returncode})")
+    if r.returncode not in (0, 6):
+        row["reason"] = short(_error_of(r.stderr))
     if fea and row["settled"]:
-        from rackstress.validity.solid import check_run
-
         t0 = time.perf_counter()
         try:
-            data = check_run(out, echo=lambda *a, **k: None)
-            ag = data["agreement"]
-            row.update(fea_spearman=ag.get("spearman"), fea_top5=ag.get("top5_overlap"),
-                       fea_peak_ratio=ag.get("peak_ratio"), fea_s=time.perf_counter() - t0)
-        except (ValueError, RackstressError) as exc:
-            row["fea_error"] = short(exc)
+            f = subprocess.run([*_rackstress(), "fea", str(out)], capture_output=True,
+                               text=True, timeout=timeout)
+            if f.returncode == 0:
+                ag = json.loads((out / "fea.json").read_text())["agreement"]
+                row.update(fea_spearman=ag.get("spearman"), fea_top5=ag.get("top5_overlap"),
+                           fea_peak_ratio=ag.get("peak_ratio"))
+            else:
+                row["fea_error"] = short(_error_of(f.stderr))
+        except subprocess.TimeoutExpired:
+            row["fea_error"] = f"rackstress fea had not ended after {timeout:.0f} s"
+        row["fea_s"] = time.perf_counter() - t0
     echo(f"{name}: {row['particles']:,} particles at {fmt(row['spacing'])} "
          f"({row['spacing_how']}), {row['status']} in {row['iterations']} steps, residual "
          f"{fmt(row['residual'])}, solve {fmt(row['solve_s'])} s, peak {fmt(peak)} MPa"
@@ -102,7 +135,7 @@ def case(name: str, work: Path, fea: bool = True, sets: dict | None = None, echo
 
 
 def run_bench(out=None, fea: bool = True, only=None, sets: dict | None = None,
-              echo=print) -> dict:
+              echo=print, timeout: float = TIMEOUT_S) -> dict:
     """Every part (module doc); returns the data written to ``parts.json``."""
     t0 = time.perf_counter()
     start = machine()
@@ -110,13 +143,13 @@ def run_bench(out=None, fea: bool = True, only=None, sets: dict | None = None,
     rows = []
     with tempfile.TemporaryDirectory(prefix="rs-parts-") as tmp:
         for name in part_names(only):
-            rows.append(case(name, Path(tmp), fea=fea, sets=sets, echo=echo))
+            rows.append(case(name, Path(tmp), fea=fea, sets=sets, echo=echo, timeout=timeout))
     try:
         load_end = os.getloadavg()
     except OSError:  # pragma: no cover
         load_end = None
     data = {"machine": {**start, "load_avg_at_end": load_end}, "fea": bool(fea),
-            "sets": dict(sets or {}), "rows": rows,
+            "sets": dict(sets or {}), "timeout_s": timeout, "rows": rows,
             "settled": sum(1 for r in rows if r.get("settled")), "parts": len(rows)}
     data["files"] = [str(out / "parts.json"), str(out / "parts.md")]
     data["wall_s"] = time.perf_counter() - t0
@@ -148,6 +181,7 @@ def markdown(data) -> str:
         "",
         "Generated by `rackstress bench parts"
         + ("" if data.get("fea") else " --no-fea") + (f" {sets}" if sets else "")
+        + (f" --timeout {data['timeout_s']:g}" if data.get("timeout_s") != TIMEOUT_S else "")
         + "` (workflow/rackstress/bench/parts.py); do not edit by hand. Each part of "
         "`examples/parts/` (its `SOURCE.md` says where it comes from and under which licence) "
         "is loaded as its `scene.toml` says — supports and loads by hole and face names, the "
@@ -159,8 +193,10 @@ def markdown(data) -> str:
         f"{data['settled']} of {data['parts']} parts settled. Machine: {m.get('cores')} cores "
         f"({m.get('cpu')}), load average {fmt(load[0] if load else None)} at the start, "
         f"{fmt((m.get('load_avg_at_end') or [None])[0])} at the end; {data['wall_s']:.0f} s "
-        "wall in all. *solve* is the static solver's wall time, *run CPU* the CPU time of the "
-        "whole run (scene, solve, the engine's check, output); *spacing* says whether the "
+        f"wall in all; a run still going after {data.get('timeout_s', TIMEOUT_S):g} s is "
+        "stopped and says so. Each part is `rackstress run SCENE --no-render` and `rackstress "
+        "fea`, processes of their own. *solve* is the static solver's wall time, *run CPU* the "
+        "CPU time of the whole `rackstress run` (scene, solve, the engine's check, stress); *spacing* says whether the "
         "walls or the budget set it, or the scene gave it; *peak* is the governing stress "
         "where the run has one, else the largest von Mises stress.",
         "",
