@@ -73,8 +73,9 @@ def case(name: str, work: Path, fea: bool = True, sets: dict | None = None, echo
     scene = parts_dir() / name / "scene.toml"
     root = str(parts_dir().parents[1]) + os.sep
     row = {"part": name, "scene": str(scene).replace(root, "")}
-    short = lambda text: str(text).replace(root, "")     # noqa: E731 - repository paths
     out = work / name
+    # paths in the repository, and the run by its part's name, not this machine's temporary
+    short = lambda text: str(text).replace(str(out), name).replace(root, "")  # noqa: E731
     args = [*_rackstress(), "run", str(scene), "--no-render", "--no-progress", "--out",
             str(out), "--overwrite"]
     for k, v in (sets or {}).items():
