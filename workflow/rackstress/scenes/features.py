@@ -35,8 +35,8 @@ Example
 >>> plate = trimesh.creation.box((40, 20, 4)).difference(
 ...     trimesh.creation.cylinder(radius=3, height=10, sections=32))
 >>> f = part_features(plate)
->>> [(h.name, round(h.radius, 3), h.through) for h in f.holes]
-[('H1', 3.0, True)]
+>>> len(f.holes), f.holes[0].name, round(f.holes[0].radius, 3), f.holes[0].through
+(1, 'H1', 3.0, True)
 >>> f.faces[0].name, round(f.faces[0].area, 3)      # 40 × 20 less the 32-gon of r 3
 ('F1', 771.907)
 >>> f.nearest([3.5, 0, 0])
