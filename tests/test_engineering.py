@@ -284,23 +284,20 @@ force = [10, 0, 0]
 """
 
 
-def test_unsettled_static_run_exits_6_and_warns_of_the_load_path(tmp_path):
-    """A load on a piece bound to no support: no equilibrium. The run says so plainly, exits
-    6, and warns that the load never reaches a support."""
+def test_a_load_on_an_unsupported_piece_is_refused_before_the_solve(tmp_path):
+    """A load on a piece bound to no support: no equilibrium. The part check says so before
+    any Newton step (exit 2, was exit 6 after every iteration), naming the piece and what to
+    do; nothing is written."""
     f = tmp_path / "drift.toml"
     f.write_text(UNSUPPORTED)
     out = tmp_path / "run"
     r = subprocess.run([sys.executable, "-m", "rackstress.cli", "run", str(f), "--engine",
                         "reference", "--out", str(out), "--no-render"], capture_output=True,
                        text=True)
-    assert r.returncode == 6, (r.returncode, r.stderr)
-    assert "did not settle" in r.stderr
-    s = json.loads((out / "summary.json").read_text())
-    assert s["settled"] is False and s["status"] == "not settled"
-    kinds = [w["kind"] for w in s["warnings"]]
-    # the stress warnings (large_strain, yield_exceeded) may describe the drifted state too
-    assert kinds.count("load_path") == 1 and set(kinds) <= {"load_path", "large_strain",
-                                                           "yield_exceeded"}, kinds
+    assert r.returncode == 2, (r.returncode, r.stderr)
+    assert "held by no support" in r.stderr and "floats away" in r.stderr
+    assert "Traceback" not in r.stderr and "iteration" not in r.stderr
+    assert not (out / "summary.json").exists()
 
 
 def test_material_needs_units(tmp_path):

@@ -69,11 +69,12 @@ def summary(rundir: Path) -> dict:
 # ---------------------------------------------------------------------------- not settled
 @pytest.mark.lammps
 @pytest.mark.parametrize("case", ["mechanism", "floats away"])
-def test_a_static_run_that_cannot_settle_is_exit_6_in_bounded_time(tmp_path, case):
+def test_a_static_run_that_cannot_settle_is_refused_before_the_solve(tmp_path, case):
     """A mechanism (a bar held on one line of particles turns about it) and a part with no
     support at all beside a held one (its load reaches no support): no equilibrium exists.
-    The run stops after its iterations, says ``not settled`` in one line and in summary.json,
-    and exits 6; the same bar clamped settles (exit 0)."""
+    The part check refuses both before any Newton step (exit 2, one paragraph naming the part
+    and what to do; was exit 6 after 25 iterations), and nothing is written; the same bar
+    clamped settles (exit 0)."""
     if case == "mechanism":
         scene, sets = hinge(tmp_path), ["--set", "pin=0.1"]
     else:
@@ -84,18 +85,16 @@ def test_a_static_run_that_cannot_settle_is_exit_6_in_bounded_time(tmp_path, cas
     t0 = time.monotonic()
     r = rs("run", scene, *sets, "--out", out, *QUIET, timeout=300)
     took = time.monotonic() - t0
-    assert r.returncode == 6, r.stderr
-    assert took < 120, took
+    assert r.returncode == 2, r.stderr
+    assert took < 60, took
     errors = [line for line in r.stderr.splitlines() if line.startswith("rackstress: error")]
-    assert len(errors) == 1 and "did not settle" in errors[0], r.stderr
+    assert len(errors) == 1 and "cannot hold this part" in errors[0], r.stderr
     assert "Traceback" not in r.stderr
-    s = summary(out)
-    assert s["analysis"] == "static" and s["settled"] is False
-    assert s["status"] == "not settled" and s["residual"] > 1e-6
-    assert "rounding" not in r.stderr    # a mechanism, not a load too small to resolve
-    if case == "floats away":            # the unsupported part is named before the solve
-        assert "'loose'" in r.stderr and "no support" in r.stderr
+    assert not (out / "summary.json").exists()
+    if case == "floats away":            # the unsupported part is named
+        assert "'loose'" in errors[0] and "no support" in errors[0]
     else:                                # the clamped bar: the same scene settles
+        assert "turn about the axis" in errors[0]
         ok = rs("run", scene, "--set", "pin=2.5", "--out", tmp_path / "ok", *QUIET, timeout=300)
         assert ok.returncode == 0, ok.stderr
         assert summary(tmp_path / "ok")["status"] == "settled"
@@ -228,20 +227,23 @@ def test_a_batch_with_a_missing_stl_is_refused_before_any_job_runs(tmp_path):
 
 @pytest.mark.lammps
 def test_a_batch_records_a_job_that_did_not_settle(tmp_path):
-    """Two jobs of the hinge: clamped (settles) and pinned on a line (a mechanism). The batch
-    goes on (exit 0, as with a diverged job) and batch.json, the job's summary and the batch
-    report say ``not settled`` (was: ``ok``)."""
-    hinge(tmp_path)
+    """Two jobs of the clamped hinge bar: under 10 N (settles) and under 1e-9 N (too small
+    for rounding to resolve: it cannot settle; a mechanism is now refused before its solve).
+    The batch goes on (exit 0, as with a diverged job) and batch.json, the job's summary and
+    the batch report say ``not settled`` (was: ``ok``)."""
+    scene = hinge(tmp_path)
+    scene.write_text(scene.read_text().replace("pin = 2.5", "pin = 2.5\nload = 10.0")
+                     .replace("force = [0, -10, 0]", 'force = [0, "$(-load)", 0]'))
     sweep = tmp_path / "sweep.toml"
-    sweep.write_text('scene = "hinge.toml"\nengine = "lammps"\n\n[grid]\npin = [2.5, 0.1]\n')
+    sweep.write_text('scene = "hinge.toml"\nengine = "lammps"\n\n[grid]\nload = [10.0, 1e-9]\n')
     out = tmp_path / "b"
     r = rs("batch", sweep, "--out", out, timeout=600)
     assert r.returncode == 0, r.stderr
-    jobs = {j["params"]["pin"]: j for j in json.loads((out / "batch.json").read_text())["jobs"]}
-    assert jobs[2.5]["status"] == "ok", jobs[2.5]
-    assert jobs[0.1]["status"] == "not settled", jobs[0.1]
-    assert "did not settle" in jobs[0.1]["error"]
-    assert summary(out / jobs[0.1]["dir"])["status"] == "not settled"
+    jobs = {j["params"]["load"]: j for j in json.loads((out / "batch.json").read_text())["jobs"]}
+    assert jobs[10.0]["status"] == "ok", jobs[10.0]
+    assert jobs[1e-9]["status"] == "not settled", jobs[1e-9]
+    assert "did not settle" in jobs[1e-9]["error"]
+    assert summary(out / jobs[1e-9]["dir"])["status"] == "not settled"
     counts = json.loads((out / "batch.json").read_text())["counts"]
     assert counts == {"ok": 1, "not settled": 1}
     page = (out / "report.html").read_text()

@@ -1202,6 +1202,21 @@ def bench_cantilever(out, quick):
     click.echo(cantilever.report(data))
 
 
+@bench.command("static")
+@_bench_out
+@click.option("--quick", is_flag=True, help="The cantilever at 2 and 1 mm only.")
+@click.option("--scene", "scenes", multiple=True, type=click.Path(exists=True),
+              help="A static scene file to add (repeatable), e.g. a part of your own.")
+def bench_static(out, quick, scenes):
+    """The static solve's CPU, wall, Newton steps, residual and peak memory on the cantilever
+    up to ~100,000 particles and on the SO-ARM100's parts, by the direct factorization and by
+    AMG-CG alone (docs/benchmarks/static.md)."""
+    from rackstress.bench import static
+
+    data = static.run_bench(out, quick=quick, scenes=scenes, echo=click.echo)
+    click.echo(static.report(data))
+
+
 if __name__ == "__main__":  # pragma: no cover
     entry()
 
@@ -1281,6 +1296,10 @@ TEACH = {
     "bench cantilever": ("The aluminium cantilever against beam theory, to equilibrium.", [
         "rackstress bench cantilever --quick --out /tmp/bench",
         "rackstress bench cantilever --out docs/benchmarks",
+    ]),
+    "bench static": ("The static solve's time and memory, direct against AMG-CG.", [
+        "rackstress bench static --quick --out /tmp/bench",
+        "rackstress bench static --scene my-part.toml --out docs/benchmarks",
     ]),
     "bench inside": ("Binding a mesh part inside its shape, up to 10^6 particles.", [
         "rackstress bench inside --quick --out /tmp/bench",

@@ -6,11 +6,20 @@ the reference engine's kernels). Eq. 12 is the gradient of c·(r²/2 − L0²·l
 pair (DESIGN §6), so the bindings' tangent stiffness K = −∂(m·a)/∂p is symmetric and Newton's
 step K·Δp = m·a(p) converges quadratically; for small strains the first step is the linear-
 elastic answer, and two or three more remove what the bindings' rotation leaves (Eq. 12 is
-geometrically exact: ~1 % of the load on the cantilever). Each linear solve is a direct sparse factorization (SuperLU) for
-up to :data:`DIRECT_DOFS` unknowns, else conjugate gradients preconditioned by smoothed-
-aggregation algebraic multigrid (pyamg) with the six rigid-body modes as near-null space:
-plain dynamic relaxation would need ~ω_max/ω_1·ln(1/tol) steps — tens of thousands for a
-slender part — where this takes a few multigrid cycles per Newton step (docs/calibration.md).
+geometrically exact: ~1 % of the load on the cantilever).
+
+Each linear solve (:mod:`rackstress.engines.linear`) is a sparse direct LDLᵀ factorization
+(MKL PARDISO) wherever its own memory and work estimates fit, reused across Newton steps while
+the residual falls tenfold a step (modified Newton); AMG-preconditioned conjugate gradients for
+the largest parts. The tangent carries ε·diag(K) (:data:`REGULARIZATION`): a wall one particle
+thick has no stiffness across itself at rest, and without it the step is undefined there
+(an iterative solve stalled on those modes: the residual stayed at 2e-6 of the load for 18
+Newton steps on a corner brace; docs/calibration.md "Static analysis").
+
+Before the first step the part is checked (:func:`check_part`, :mod:`rackstress.engines.
+mechanisms`): a body held by nothing, supports that leave a rigid motion free, a load across a
+wall one particle thick or on a mechanism are refused in seconds (SceneError, exit 2) naming
+the particles and what to do.
 
 Settled means: the largest unbalanced force on any particle is below :data:`TOLERANCE` times
 the total applied load (the sum of the magnitudes of the external forces, or of the support
@@ -29,7 +38,8 @@ from __future__ import annotations
 
 import sys
 import time
-from dataclasses import dataclass
+import weakref
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -40,8 +50,6 @@ from rackstress.model.operators import Bind, Dampen, Force
 TOLERANCE = 1e-6
 #: Newton steps before giving up (a small-strain part settles in 2)
 MAX_ITERATIONS = 25
-#: unknowns up to which each Newton step is a direct sparse solve
-DIRECT_DOFS = 6_000
 
 
 @dataclass
@@ -55,6 +63,15 @@ class StaticResult:
     load: float
     history: list
     wall_s: float
+    #: n×3 force each support applies at ``p`` (zero on free directions); their sum balances
+    #: the applied load (Σ reactions = −Σ loads, and so do their moments)
+    reactions: np.ndarray | None = None
+    #: the linear solver of the last step ("pardiso", "superlu", "amg-cg")
+    solver: str = ""
+    #: tangents factorized (or AMG hierarchies built): Newton steps minus reused factors
+    factorizations: int = 0
+    #: what :func:`check_part` warned of (walls one particle thick)
+    warnings: list = field(default_factory=list)
 
 
 def check_static(scene) -> None:
@@ -147,8 +164,8 @@ def stiffness(p: np.ndarray, pairs, m: np.ndarray):
 
 def rigid_modes(p: np.ndarray, free) -> np.ndarray:
     """The six rigid-body modes (3 translations, 3 rotations) on the free unknowns (``free``:
-    their boolean mask, or the supports' :class:`ConstraintMap`): the near-null space smoothed
-    aggregation needs for elasticity."""
+    their boolean mask, or the supports' :class:`~rackstress.model.constraints.ConstraintMap`):
+    the near-null space smoothed aggregation needs for elasticity."""
     n = len(p)
     c = p - p.mean(axis=0)
     B = np.zeros((3 * n, 6))
@@ -160,30 +177,368 @@ def rigid_modes(p: np.ndarray, free) -> np.ndarray:
     return free.modes(B) if hasattr(free, "modes") else B[free]
 
 
-def _linear_solve(K, b, p, free, rtol, cache: dict):
-    """Solve K·x = b on the free unknowns: SuperLU when small, else conjugate gradients
-    preconditioned by smoothed-aggregation AMG, whose hierarchy is built once (``cache``) and
-    kept for the later Newton steps (the tangent changes little between them)."""
+#: the tangent carries ε·diag(K) on every free unknown (docs/calibration.md "Static analysis"):
+#: a mode of K with no stiffness at rest (a wall one particle thick, bent across itself) gets
+#: ε of a binding's, so each step is defined; the forces are Eq. 12's own, so the equilibrium
+#: found is the lattice's whatever ε — ε only slows Newton's convergence by ε/λ_min per step
+REGULARIZATION = 1e-10
+#: modified Newton: a factorization is kept for the next step while the residual falls at
+#: least this much per step (the tangent barely changes: small strains), else K is rebuilt
+REUSE_RATIO = 0.1
+#: a trial step may leave up to this many times the unbalanced force it started from (a full
+#: Newton step from the undeformed state under a large load overshoots before it settles)
+GROWTH = 4.0
+#: what check_part found per scene (by id, dropped with the scene): warnings, first step
+_CHECKS: dict = {}
+
+
+@dataclass
+class _Problem:
+    """What every Newton step needs: the scene's arrays, once."""
+
+    n: int
+    o: np.ndarray
+    m: np.ndarray
+    fixed: np.ndarray          # n×3: held directions (supports, prescribed displacements)
+    free: np.ndarray           # 3n: the unknowns (the held directions' complement)
+    pairs: tuple
+    F_ext: np.ndarray
+    load: float
+    #: the supports as u = T·q + prescribed (model/constraints.py): T selects ``free`` where
+    #: only axes are fixed; rollers on any face, symmetry planes and pins make it a map
+    cmap: object = None
+
+
+def _problem(scene) -> _Problem:
+    from rackstress.model.constraints import ConstraintMap
+
+    o = scene.original_positions()
+    fixed = scene.fixed()
+    F = external_forces(scene)
+    return _Problem(len(o), o, scene.masses(), fixed, ~fixed.reshape(-1), _bind_pairs(scene),
+                    F, float(np.linalg.norm(F, axis=1).sum()), ConstraintMap.of_scene(scene))
+
+
+def _tangent(p: np.ndarray, prob: _Problem):
+    """K on the free unknowns at ``p``, plus ε·diag(K) (:data:`REGULARIZATION`); and that ε·D."""
+    import scipy.sparse as sp
+
+    K = prob.cmap.reduce(stiffness(p, prob.pairs, prob.m)).tocsr()
+    d = K.diagonal()
+    pos = d[d > 0]
+    floor = 1e-3 * float(pos.mean()) if len(pos) else 1.0
+    reg = REGULARIZATION * np.maximum(d, floor)
+    return (K + sp.diags(reg)).tocsr(), reg
+
+
+class _Linear:
+    """The linear solver of one tangent: the direct factorization where it fits
+    (:func:`rackstress.engines.linear.plan_direct`), else AMG-CG."""
+
+    #: False: AMG-CG whatever the size (``rackstress bench static`` compares the two)
+    direct_allowed = True
+
+    def __init__(self, K, p: np.ndarray, prob: _Problem):
+        from rackstress.engines import linear
+
+        t0 = time.process_time()
+        self.K = K
+        f = linear.plan_direct(K) if self.direct_allowed else None
+        if f is not None:
+            self.solver, self.direct = f.factor(), True
+        else:
+            self.solver = linear.AMG(K, rigid_modes(p, prob.cmap))
+            self.direct = False
+        self.kind = self.solver.kind
+        self.setup_s = time.process_time() - t0
+
+    def solve(self, b: np.ndarray, rtol: float, K=None) -> np.ndarray:
+        if self.direct:
+            return self.solver.solve(b)
+        return self.solver.solve(b, rtol=rtol, K=K)
+
+    @property
+    def converged(self) -> bool:
+        return self.direct or self.solver.converged
+
+    def free(self) -> None:
+        self.solver.free()
+
+
+#: GMRES iterations preconditioned by an earlier tangent's factor before K is refactorized
+PRECONDITIONED_ITERATIONS = 40
+
+
+def _preconditioned(K, b: np.ndarray, lin: _Linear, rtol: float):
+    """K·x = b by GMRES preconditioned with ``lin``'s factorization of an earlier tangent
+    (K changes by the strains' order between Newton steps: a handful of iterations)."""
     import scipy.sparse.linalg as spla
 
-    if K.shape[0] <= DIRECT_DOFS:
-        return spla.spsolve(K.tocsc(), b), "direct"
-    import pyamg
+    M = spla.LinearOperator(K.shape, matvec=lin.solver.solve, dtype=float)
+    x, _ = spla.gmres(K, b, M=M, rtol=0.1 * rtol, atol=0.0,
+                      restart=PRECONDITIONED_ITERATIONS, maxiter=1)
+    # judged by the true residual: the preconditioned one (GMRES' own test) can differ by the
+    # regularized factor's conditioning
+    ok = bool(np.all(np.isfinite(x)) and np.linalg.norm(K @ x - b) <= rtol * np.linalg.norm(b))
+    return x, ok
 
-    if "M" not in cache:
-        ml = pyamg.smoothed_aggregation_solver(K, B=rigid_modes(p, free), symmetry="symmetric",
-                                               strength=("symmetric", {"theta": 0.0}),
-                                               max_coarse=500, coarse_solver="splu")
-        # splu: the coarsest level factorized once; pyamg's default (a pseudo-inverse by SVD of
-        # a dense ~1,500² matrix) took 90 % of the bracket's solve (7 s against 0.7 s CPU)
-        cache["M"] = ml.aspreconditioner(cycle="V")
-    x, info = spla.cg(K, b, rtol=rtol, maxiter=2000, M=cache["M"])
-    return x, "amg-cg" if info == 0 else "amg-cg (not converged)"
+
+def _refuse(scene, message: str):
+    raise SceneError(f"scene '{scene.name}': the static analysis cannot hold this part: "
+                     f"{message}")
+
+
+def _held_rows(prob: _Problem, idx: np.ndarray):
+    """For :func:`rackstress.engines.mechanisms.rigid_modes_left`: where a constraint holds
+    part of the body (a pin, a roller off the axes), the rigid modes' rows that it holds —
+    (I − T·Tᵀ) of the modes on the body's unknowns (T: the constraint map); None where only
+    axes are fixed (the held directions' rows, as ever)."""
+    if prob.cmap.trivial:
+        return None
+
+    def rows(R: np.ndarray) -> np.ndarray:            # R: (k, 3, 6) over the body
+        T = prob.cmap.T
+        full = np.zeros((3 * prob.n, R.shape[2]))
+        dof = (3 * idx[:, None] + np.arange(3)).ravel()
+        full[dof] = R.reshape(-1, R.shape[2])
+        held = full - T @ (T.T @ full)
+        return held[dof]
+    return rows
+
+
+def _with_constraints(D: np.ndarray, prob: _Problem) -> np.ndarray:
+    """Each particle's stiffness block plus the directions a constraint holds it in (a
+    roller's normal; every direction of a pinned ring's particles: the ring is rigid), as
+    ``local_mechanisms`` adds the fixed axes."""
+    cm = prob.cmap
+    if cm.trivial:
+        return D
+    D = D.copy()
+    scale = np.maximum(np.trace(D, axis1=1, axis2=2), 1e-300)
+    for i, B in cm.bases.items():              # held: the complement of its free directions
+        D[i] += scale[i] * (np.eye(3) - B @ B.T)
+    for i in cm.ring_particles:
+        D[i] += scale[i] * np.eye(3)
+    return D
+
+
+def _check_bodies(scene, prob: _Problem) -> None:
+    """Check 1 of :mod:`rackstress.engines.mechanisms`: every body's six rigid-body modes are
+    held. Raises SceneError naming the first body that is not, and how many more there are."""
+    from rackstress.engines import mechanisms as mech
+
+    I, J = prob.pairs[0], prob.pairs[1]
+    from rackstress.model.constraints import supported
+
+    count, label = mech.components(prob.n, I, J)
+    held = prob.fixed
+    held_any = supported(scene)          # a fixed direction, a pin, a roller on any face
+    problems = []
+    order = np.argsort(label, kind="stable")
+    bounds = np.searchsorted(label[order], np.arange(count + 1))
+    bound = np.bincount(I, minlength=prob.n) > 0
+    for c in range(count):
+        idx = order[bounds[c]:bounds[c + 1]]
+        if not held_any[idx].any():
+            problems.append(f"{mech.where(scene, idx)} are held by no support and bound to "
+                            "no particle that is: that body floats away. Add a [[support]] on "
+                            "it, or bind it to the held part (bodies of one part must touch, "
+                            "not only come close)")
+            continue
+        if len(idx) == 1 and not bound[idx[0]]:
+            if not held[idx[0]].all():
+                problems.append(f"{mech.where(scene, idx)} is bound to nothing and held in "
+                                "only some directions: it slides freely; hold it in every "
+                                "direction or remove it")
+            continue
+        left = mech.rigid_modes_left(prob.o[idx], held[idx], _held_rows(prob, idx))
+        if left:
+            mode = left[0]
+            ax = np.round(mode["axis"], 4).tolist()
+            if mode["kind"] == "translation":
+                how = f"slide along {ax}"
+            else:
+                how = (f"turn about the axis along {ax} through "
+                       f"{np.round(mode['point'], 4).tolist()}")
+            problems.append(f"{mech.where(scene, idx)} are held so that the whole body can "
+                            f"still {how}" + (f" (and {len(left) - 1} more rigid motion(s))"
+                                              if len(left) > 1 else "")
+                            + ": the supports leave a rigid-body motion free. Hold a region "
+                            "that is not on one line (a face, or two bolts apart), or fix the "
+                            "direction the rollers leave free somewhere")
+    if problems:
+        more = f" ({len(problems) - 1} more bod{'y' if len(problems) == 2 else 'ies'} like it)" \
+            if len(problems) > 1 else ""
+        _refuse(scene, problems[0] + more)
+
+
+def _check_particles(scene, prob: _Problem) -> list[dict]:
+    """Check 2: particles lacking a direction. Loaded across it: refused; else one warning
+    per group (a membrane: the lattice has no stiffness across a wall one particle thick)."""
+    from rackstress.engines import mechanisms as mech
+
+    I, J, C, _ = prob.pairs
+    D = _with_constraints(mech.local_blocks(prob.n, prob.o, I, J, C, prob.m), prob)
+    bad, rank, P = mech.local_mechanisms(D, prob.fixed)
+    if not len(bad):
+        return []
+    F = prob.F_ext[bad]
+    across = np.linalg.norm(np.einsum("kij,kj->ki", P, F), axis=1)
+    loaded = across > 1e-6 * np.maximum(np.linalg.norm(F, axis=1), 1e-300)
+    a = scene.groups[scene.group_of(int(bad[0]))[0]].meta.get("spacing")
+    finer = f" (spacing ≤ {a / 2:g} puts two across a wall of {a:g})" if a else ""
+    if loaded.any():
+        idx = bad[loaded]
+        what = ("walls one particle thick" if (rank[loaded] == 2).any()
+                else "struts one particle wide")
+        _refuse(scene, f"{mech.where(scene, idx)} carry a load across a direction in which no "
+                       f"binding holds them ({what}: the lattice has no stiffness across "
+                       "them). Move the load onto the thick part, or use a finer spacing"
+                       + finer)
+    out = []
+    for name in scene.groups:
+        sl = scene.slice(name)
+        k = bad[(bad >= sl.start) & (bad < sl.stop)]
+        if not len(k):
+            continue
+        parts = mech.clusters(scene, k, I, J)
+        out.append({"kind": "membrane", "groups": [name], "particles": int(len(k)),
+                    "message": f"{mech.where(scene, k)} lie in walls one particle thick or "
+                               f"struts one particle wide ({len(parts)} place(s), the largest "
+                               f"{mech.where(scene, parts[0])}): no binding holds them across, "
+                               "so those walls carry load only in their own plane (a "
+                               "membrane), their bending is not represented; a finer spacing"
+                               + finer + " represents it"})
+    return out
+
+
+def _check_first_step(scene, prob: _Problem, lin: _Linear, dx: np.ndarray, b: np.ndarray,
+                      reg: np.ndarray) -> None:
+    """Check 3: the first step's work taken by the regularization (a loaded mechanism)."""
+    from rackstress.engines import mechanisms as mech
+
+    work = abs(float(b @ dx))
+    if not (work > 0) or not lin.converged:
+        return
+    share = float(reg @ (dx * dx)) / work
+    if not (share > mech.MECHANISM_SHARE) and np.all(np.isfinite(dx)):
+        return
+    if prob.cmap.trivial:
+        moving = mech.mechanism_particles(dx, reg, prob.n, prob.free)
+    else:                           # each unknown's energy spread on its particles
+        e = abs(prob.cmap.T) @ (reg * dx * dx)
+        moving = mech.mechanism_particles(np.ones(3 * prob.n), e, prob.n,
+                                          np.ones(3 * prob.n, dtype=bool))
+    parts = mech.clusters(scene, moving, prob.pairs[0], prob.pairs[1])
+    named = "; ".join(mech.where(scene, c) for c in parts[:mech.NAMED])
+    _refuse(scene, f"the load moves {len(moving)} particle(s) that no binding resists (a "
+                   f"mechanism: {named}): they are held by fewer bindings than they have "
+                   "directions — hinged on one line of particles, a wall one particle thick "
+                   "between thicker parts, or bodies that touch along an edge only. Add a "
+                   "support there, thicken the wall or use a finer spacing, or join the "
+                   "bodies along a face")
+
+
+def check_part(scene, progress: bool = False) -> list[dict]:
+    """Check the part before solving (:mod:`rackstress.engines.mechanisms`): bodies held by
+    nothing or left a rigid motion, particles lacking a direction, loaded mechanisms. Raises
+    :class:`SceneError` (exit 2) naming the particles, where they are and what to do; returns
+    the warnings (walls one particle thick, unloaded). The first Newton step's factorization,
+    made here, is kept on ``scene`` for :func:`solve`.
+
+    Example
+    -------
+    >>> from rackstress.scenes import load                       # doctest: +SKIP
+    >>> check_part(load("examples/cantilever/scene.toml"))       # doctest: +SKIP
+    []
+    """
+    cached = _CHECKS.get(id(scene))
+    if cached is not None:
+        return cached["warnings"]
+    t0 = time.perf_counter()
+    check_static(scene)
+    prob = _problem(scene)
+    _check_bodies(scene, prob)
+    warnings = _check_particles(scene, prob)
+    p = prob.o + scene.prescribed()
+    f = forces(scene, p, prob.pairs, prob.F_ext, prob.m)
+    b = prob.cmap.restrict(f)
+    first = None
+    if b.size and np.any(b != 0):
+        K, reg = _tangent(p, prob)
+        lin = _Linear(K, p, prob)
+        dx = lin.solve(b, rtol=1e-10)
+        try:
+            _check_first_step(scene, prob, lin, dx, b, reg)
+        except SceneError:
+            lin.free()
+            raise
+        first = (lin, dx)
+    _CHECKS[id(scene)] = {"warnings": warnings, "first": first,
+                          "seconds": time.perf_counter() - t0}
+    weakref.finalize(scene, release_id, id(scene))
+    if progress:
+        print(f"static: part checked in {time.perf_counter() - t0:.1f} s", file=sys.stderr,
+              flush=True)
+    return warnings
+
+
+def reactions(scene, p: np.ndarray) -> np.ndarray:
+    """n×3 force each support applies at ``p`` (zero on free directions): −(the bindings' force
+    + the loads) on every held direction, so that with them every particle is balanced."""
+    prob = _problem(scene)
+    f = forces(scene, p, prob.pairs, prob.F_ext, prob.m)
+    return -(f - prob.cmap.unbalanced(f))
+
+
+def release(scene) -> None:
+    """Drop what :func:`check_part` kept on ``scene`` (its first factorization): a rank that
+    does not solve, or a caller that will not."""
+    release_id(id(scene))
+
+
+def release_id(key: int) -> None:
+    cached = _CHECKS.pop(key, None)
+    if cached and cached.get("first"):
+        cached["first"][0].free()
+
+
+def support_reactions(scene, res: StaticResult) -> dict:
+    """``summary.json``'s ``reactions`` and ``applied_load`` (scene units): per ``[[support]]``
+    (and prescribed displacement, and ``held``) the force its particles' held directions
+    apply at the equilibrium and its moment about the origin; the loads' force and moment.
+    Equilibrium makes their sums cancel: Σ reactions = −applied load, moments too (the
+    bindings' forces are central, so they cancel in pairs, forces and moments)."""
+    p, R = res.p, res.reactions
+    F = external_forces(scene)
+    taken = np.zeros(R.shape, dtype=bool)
+    rows = []
+    for name, g in scene.groups.items():
+        sl = scene.slice(name)
+        for label, mask, dirs in g.meta.get("supports", []):
+            sel = np.zeros(R.shape, dtype=bool)
+            # dirs None: a constraint (pin, roller off the axes): all of its particles' reaction
+            sel[sl] = mask[:, None] & (True if dirs is None else dirs[None, :] & g.fixed)
+            sel &= ~taken
+            taken |= sel
+            r = np.where(sel, R, 0.0)
+            rows.append({"support": label if len(scene.groups) == 1 else f"{label} ({name})",
+                         "force": r.sum(axis=0).tolist(),
+                         "moment": np.cross(p, r).sum(axis=0).tolist()})
+    from rackstress.model.constraints import supported
+
+    rest = np.where(~taken & (scene.fixed() | supported(scene)[:, None]), R, 0.0)
+    if rest.any():
+        rows.append({"support": "held", "force": rest.sum(axis=0).tolist(),
+                     "moment": np.cross(p, rest).sum(axis=0).tolist()})
+    return {"reactions": rows,
+            "applied_load": {"force": F.sum(axis=0).tolist(),
+                             "moment": np.cross(p, F).sum(axis=0).tolist()}}
 
 
 def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATIONS,
           progress: bool = False) -> StaticResult:
-    """The equilibrium of ``scene`` by Newton's method (module doc).
+    """The equilibrium of ``scene`` by Newton's method (module doc), after :func:`check_part`.
 
     Parameters
     ----------
@@ -197,70 +552,122 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
     Returns
     -------
     StaticResult
+
+    Raises
+    ------
+    SceneError
+        What :func:`check_part` refuses: a body held by nothing or free to turn, a load across
+        a wall one particle thick, a loaded mechanism.
     """
     t0 = time.perf_counter()
-    check_static(scene)
-    o = scene.original_positions()
-    n = len(o)
-    m = scene.masses()
-    from rackstress.model.constraints import ConstraintMap
-
-    # the supports as u = T·q + prescribed (model/constraints.py): T selects the free unknowns
-    # where only axes are fixed, rollers on any face and pins in holes otherwise
-    cmap = ConstraintMap.of_scene(scene)
-    free = cmap.free if cmap.trivial else cmap
-    p = o + scene.prescribed()
-    pairs = _bind_pairs(scene)
-    F_ext = external_forces(scene)
-    history = []
     say = (lambda msg: print(msg, file=sys.stderr, flush=True)) if progress else (lambda msg: None)
-    load = float(np.linalg.norm(F_ext, axis=1).sum())
+    warnings = check_part(scene, progress=progress)
+    first = _CHECKS[id(scene)]["first"]
+    prob = _problem(scene)
+    n, cmap = prob.n, prob.cmap
+    p = prob.o + scene.prescribed()
+    history = []
+    load = prob.load
     it, settled, rel = 0, False, float("inf")
-    cache: dict = {}
     # only displacements prescribed: the load is the support reactions at the current state,
     # as the engine's own check takes them (engine_residual); the first state's reactions
     # (the displaced face pulled against an undeformed part) were ~10⁴ × the equilibrium's,
     # and a residual "settled" against them failed the engine's check (exit 6)
-    reactions = load == 0.0
-    if progress:
-        say(f"static: {n:,} particles, {len(pairs[0]):,} bindings, {cmap.unknowns:,} "
-            f"unknowns")
-    while True:
-        f = forces(scene, p, pairs, F_ext, m)
-        if reactions:
-            load = float(np.linalg.norm(f - cmap.unbalanced(f), axis=1).sum())
-        unbalanced = cmap.unbalanced(f)
-        worst = float(np.linalg.norm(unbalanced, axis=1).max()) if n else 0.0
-        rel = worst / load if load > 0 else (0.0 if worst == 0 else float("inf"))
-        history.append(rel)
-        say(f"static: iteration {it}, residual {rel:.3g} of the applied load "
-            f"({time.perf_counter() - t0:.1f} s)")
-        if not np.isfinite(rel):
-            break
-        if rel <= tolerance or load == 0.0:
-            settled = True
-            break
-        if it >= max_iterations:
-            break
-        K = cmap.reduce(stiffness(p, pairs, m))
-        b = cmap.restrict(f)
-        # inexact Newton: the linear solve need only be as exact as the residual is small
-        # (the step leaves rtol·‖b‖ unbalanced: a tenth of what settling allows)
-        rtol = min(1e-2, max(1e-10, 0.1 * tolerance / rel))
-        dx, _ = _linear_solve(K.tocsr(), b, p, free, rtol, cache)
-        step = cmap.expand(dx).reshape(-1)
-        # a Newton step that makes things much worse is halved (large rotations, buckling)
-        scale = 1.0
-        for _ in range(8):
-            trial = p + scale * step.reshape(n, 3)
-            ft = forces(scene, trial, pairs, F_ext, m)
-            wt = float(np.linalg.norm(cmap.unbalanced(ft), axis=1).max())
-            if np.isfinite(wt) and wt <= 4.0 * worst:
+    by_reactions = load == 0.0
+    say(f"static: {n:,} particles, {len(prob.pairs[0]):,} bindings, {cmap.unknowns:,} "
+        f"unknowns")
+    lin, fresh, factorizations, solver = None, False, 0, ""
+    refactor = True
+    try:
+        while True:
+            f = forces(scene, p, prob.pairs, prob.F_ext, prob.m)
+            unbalanced = cmap.unbalanced(f)
+            if by_reactions:
+                load = float(np.linalg.norm(f - unbalanced, axis=1).sum())
+            worst = float(np.linalg.norm(unbalanced, axis=1).max()) if n else 0.0
+            new = worst / load if load > 0 else (0.0 if worst == 0 else float("inf"))
+            if history and not new <= REUSE_RATIO * history[-1]:
+                refactor = True            # modified Newton no longer pays: a new tangent
+            rel = new
+            history.append(rel)
+            say(f"static: iteration {it}, residual {rel:.3g} of the applied load "
+                f"({solver or 'start'}; {time.perf_counter() - t0:.1f} s)")
+            if not np.isfinite(rel):
                 break
-            scale *= 0.5
-        p = trial
-        it += 1
-    return StaticResult(p, settled, it, rel, load, history, time.perf_counter() - t0)
+            if rel <= tolerance or load == 0.0:
+                settled = True
+                break
+            if it >= max_iterations:
+                break
+            b = cmap.restrict(f)
+            # inexact Newton for AMG-CG: the linear solve need only be as exact as the
+            # residual is small (the step leaves rtol·‖b‖ unbalanced: a tenth of what
+            # settling allows)
+            rtol = min(1e-2, max(1e-10, 0.1 * tolerance / rel))
+            if it == 0 and first is not None:
+                (lin, dx), fresh = first, True
+                factorizations += 1
+            elif lin is not None and lin.direct:
+                # the factor of an earlier tangent preconditions GMRES on this one: a few
+                # solves where a new factorization costs an analysis's worth each
+                K, _ = _tangent(p, prob)
+                dx, ok = _preconditioned(K, b, lin, rtol=rtol)
+                fresh = True
+                if not ok:
+                    if not lin.solver.refactor(K):
+                        lin.free()
+                        lin = _Linear(K, p, prob)
+                    factorizations += 1
+                    dx = lin.solve(b, rtol)
+            elif refactor or lin is None or not lin.direct:
+                K, _ = _tangent(p, prob)
+                if lin is not None and lin.direct and not lin.solver.refactor(K):
+                    lin.free()
+                    lin = None
+                elif lin is not None and lin.direct:
+                    factorizations += 1
+                if lin is None:
+                    lin = _Linear(K, p, prob)
+                    factorizations += 1
+                dx = lin.solve(b, rtol, K=K)
+                fresh = True
+            else:
+                dx, fresh = lin.solve(b, rtol), False
+            refactor = False
+            solver = lin.kind + ("" if fresh else ", factor reused")
+            if not lin.converged:
+                solver += " (not converged)"
+            step = cmap.expand(dx)
+            m0 = worst
+            # a step that makes things much worse is halved (large rotations, buckling); the
+            # best trial is kept when none is good enough
+            scale, best = 1.0, None
+            for _ in range(10):
+                trial = p + scale * step
+                ft = forces(scene, trial, prob.pairs, prob.F_ext, prob.m)
+                r = float(np.linalg.norm(cmap.unbalanced(ft), axis=1).max())
+                if np.isfinite(r) and (best is None or r < best[0]):
+                    best = (r, trial)
+                if np.isfinite(r) and r <= (GROWTH if fresh else 1.0) * m0:
+                    break
+                if not fresh:          # a reused factor that does not help: a new tangent
+                    break
+                scale *= 0.5
+            if best is not None and (fresh or best[0] < m0):
+                p = best[1]
+            elif not fresh:
+                refactor = True        # the old factor's step did not help: stay, refactor
+            else:
+                p = trial
+            it += 1
+    finally:
+        if lin is not None:
+            lin.free()
+        _CHECKS.pop(id(scene), None)
+    f = forces(scene, p, prob.pairs, prob.F_ext, prob.m)
+    return StaticResult(p, settled, it, rel, load, history, time.perf_counter() - t0,
+                        reactions=-(f - cmap.unbalanced(f)), solver=lin.kind if lin else "",
+                        factorizations=factorizations, warnings=warnings)
 
 
 def rounding_floor(scene, p: np.ndarray) -> float:

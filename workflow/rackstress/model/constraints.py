@@ -107,10 +107,15 @@ class ConstraintMap:
     when only axes are fixed (T then selects them: ``trivial``), else None.
     """
 
-    def __init__(self, T, prescribed: np.ndarray, free: np.ndarray | None):
+    def __init__(self, T, prescribed: np.ndarray, free: np.ndarray | None,
+                 bases: dict | None = None, ring_particles: np.ndarray | None = None):
         self.T = T
         self.prescribed = prescribed
         self.free = free
+        #: {global index: 3×k orthonormal free directions} of the particles a Normals holds
+        self.bases = bases or {}
+        #: global indices of the particles of pinned rings
+        self.ring_particles = np.zeros(0, np.int64) if ring_particles is None else ring_particles
 
     @property
     def trivial(self) -> bool:
@@ -172,9 +177,11 @@ class ConstraintMap:
         cols.append(np.arange(len(dof)))
         vals.append(np.ones(len(dof)))
         col = len(dof)
+        bases = {}
         for i, ns in sorted(normals.items()):
             held = [np.eye(3)[k] for k in range(3) if fixed[i, k]]
             basis = _complement(np.array(ns + held))
+            bases[i] = basis.T.reshape(3, -1)
             for b in basis:
                 rows.append(3 * i + np.arange(3))
                 cols.append(np.full(3, col))
@@ -191,7 +198,7 @@ class ConstraintMap:
         T = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
                           shape=(3 * n, col))
         T.eliminate_zeros()
-        return cls(T, np.zeros((n, 3)), None)
+        return cls(T, np.zeros((n, 3)), None, bases, np.flatnonzero(in_ring))
 
     # ---------------------------------------------------------------- the map
     def expand(self, q: np.ndarray) -> np.ndarray:

@@ -322,12 +322,15 @@ def execute_static(scene: Scene, out: Path, engine: str, mode: str, *, progress:
     ``iterations``, ``residual`` and ``status`` ("settled" or "not settled")."""
     import sys
 
-    from rackstress.engines.static import TOLERANCE, engine_residual, rounding_floor, solve
+    from rackstress.engines.static import (TOLERANCE, engine_residual, release, rounding_floor,
+                                           solve, support_reactions)
 
     comm = comm or world()
     root = comm.Get_rank() == 0
     t0 = time.perf_counter()
     show = bool(progress and root and sys.stderr.isatty())
+    if not root:
+        release(scene)          # the part check's factorization: the solve is rank 0's
     res = solve(scene, progress=show) if root else None
     if comm.Get_size() > 1:
         res = comm.bcast(res, root=0)
@@ -359,13 +362,16 @@ def execute_static(scene: Scene, out: Path, engine: str, mode: str, *, progress:
     extra.update({"analysis": "static", "settled": settled, "iterations": res.iterations,
                   "residual": max(res.residual, engine_rel), "residual_solver": res.residual,
                   "residual_engine": engine_rel, "tolerance": TOLERANCE,
-                  "applied_load": res.load, "solve_s": res.wall_s,
-                  "residual_history": res.history})
+                  "applied_load_total": res.load, "solve_s": res.wall_s,
+                  "residual_history": res.history, "solver": res.solver,
+                  "factorizations": res.factorizations})
+    if root:
+        extra.update(support_reactions(scene, res))
     if not settled and res.load > 0:
         # relative to the load: the unbalanced force rounding alone leaves (the hint of exit 6)
         extra["rounding_floor"] = rounding_floor(scene, scene.original_positions()) / res.load
     if root:
-        warnings = load_path_warnings(scene)
+        warnings = load_path_warnings(scene) + list(res.warnings)
         for w in warnings:
             print(f"rackstress: warning: {scene.name}: {w['message']}", file=sys.stderr)
         extra["warnings"] = warnings
@@ -569,6 +575,12 @@ def plan(scene: Scene, engine: str = "lammps", mode: str = "exact",
         pred = check_dt(scene, allow=allow_unstable, pred=_cached_prediction(fp))
         _cache_prediction(fp, pred)
     check_memory(scene, engine, comm.Get_size())
+    if scene.analysis == "static":
+        # the part check (rigid-body modes, mechanisms) before the directory is touched; its
+        # first factorization is kept on the scene for the solve (engines/static.py)
+        from rackstress.engines.static import check_part
+
+        check_part(scene)
     # LAMMPS runs the exact operators in the compiled plugin when it is there for this LAMMPS
     # (docs/plugin.md), else in the Python callback (one line says why); a resumed run keeps it
     deck = compile_deck(scene, mode, plugin=None if engine == "lammps" else False)

@@ -129,7 +129,9 @@ def supports(ctx, tables, groups: dict, select, region_of=None) -> None:
         feature = getattr(region, "feature", None)
         label = f"[[support]] #{k} ({kind})"
         if kind == "fixed":
-            _fix_axes(c, t, g, mask)
+            dirs = _fix_axes(c, t, g, mask)
+            # which particles and directions this support holds: its reaction (engines/static)
+            g.meta.setdefault("supports", []).append((f"[[support]] #{k}", mask, dirs))
             continue
         if kind in ("roller", "symmetry"):
             point, n = _support_plane(c, t, kind, feature)
@@ -149,12 +151,15 @@ def supports(ctx, tables, groups: dict, select, region_of=None) -> None:
             if axis is not None:     # an axis: the engines' fixed directions (also dynamic)
                 g.fixed[mask, axis] = True
                 _refix(g)
+                g.meta.setdefault("supports", []).append((label, mask, np.eye(3, dtype=bool)[axis]))
             else:
                 ids = np.flatnonzero(mask)
                 g.constraints.append(Normals(ids, np.tile(n, (len(ids), 1)), label))
+                g.meta.setdefault("supports", []).append((label, mask, None))
             continue
         point, axis = _support_axis(c, t, kind, feature)
         ids = np.flatnonzero(mask)
+        g.meta.setdefault("supports", []).append((label, mask, None))   # its whole reaction
         if kind == "pinned":
             try:
                 g.constraints.append(Ring(ids, point, axis, label))
@@ -200,9 +205,12 @@ def _fix_axes(c, t: dict, g, mask) -> None:
                       f"({fix!r}); name each direction to fix once: [\"x\", \"y\", "
                       "\"z\"] (the default) holds, one or two directions make a roller or "
                       "a symmetry plane", "fix")
+    dirs = np.zeros(3, dtype=bool)
     for a in fix:
         g.fixed[mask, "xyz".index(a)] = True
+        dirs["xyz".index(a)] = True
     _refix(g)
+    return dirs
 
 
 def _unit(c, value, field: str) -> np.ndarray:
@@ -419,6 +427,8 @@ def loads(ctx, tables, groups: dict, operators: dict, u, select, ramp) -> dict:
                               "displacement")
             g.fixed[mask] = True
             g.u0[mask] = uvec
+            g.meta.setdefault("supports", []).append((f"[[load]] #{k} (displacement)", mask,
+                                                      np.ones(3, dtype=bool)))
             _refix(g)
             continue
         if kind != "gravity":
