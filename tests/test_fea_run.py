@@ -60,7 +60,7 @@ def run(tmp_path_factory):
 def test_fea_of_a_run_writes_its_check(run):
     import pyvista as pv
 
-    r = _cli("fea", str(run))
+    r = _cli("fea", str(run), "--allow-dynamic")
     assert r.returncode == 0, r.stderr
     assert "Spearman" in r.stdout
     data = json.loads((run / "fea.json").read_text())
@@ -85,6 +85,18 @@ def test_fea_of_a_run_writes_its_check(run):
     assert "Finite-element check" in (run / "report.html").read_text()
 
 
+def test_fea_refuses_a_dynamic_run(run):
+    """The beam is a dynamic run (its last frame a moving state): exit 2 naming it and the
+    way out (analysis = "static", or --allow-dynamic, which labels the comparison)."""
+    r = _cli("fea", str(run))
+    assert r.returncode == 2, r.stderr
+    assert "a dynamic run" in r.stderr and "--allow-dynamic" in r.stderr
+    assert 'analysis = "static"' in r.stderr and "Traceback" not in r.stderr
+    if (run / "fea.json").is_file():
+        data = json.loads((run / "fea.json").read_text())
+        assert data["compared"].startswith("the last frame of a dynamic run")
+
+
 def test_fea_of_a_directory_that_is_not_a_run(tmp_path):
     r = _cli("fea", str(tmp_path))
     assert r.returncode == 2
@@ -98,7 +110,7 @@ def test_boundary_npz_is_used_when_present(run, tmp_path):
 
     first = json.loads((run / "fea.json").read_text()) if (run / "fea.json").is_file() else None
     if first is None:
-        assert _cli("fea", str(run)).returncode == 0
+        assert _cli("fea", str(run), "--allow-dynamic").returncode == 0
     base = np.load(run / "fea.npz")["fea_von_mises"]
     twin = tmp_path / "twin"
     shutil.copytree(run, twin)
@@ -107,7 +119,7 @@ def test_boundary_npz_is_used_when_present(run, tmp_path):
     np.savez(twin / "boundary.npz", held_ids=o_ids[x == 0].astype(np.int64),
              held_mask=np.ones((9, 3), bool), load_ids=o_ids[x == 11].astype(np.int64),
              load_force=np.tile([0.0, 0.0, -0.02], (9, 1)), units=np.str_("paper"))
-    r = _cli("fea", str(twin))
+    r = _cli("fea", str(twin), "--allow-dynamic")
     assert r.returncode == 0, r.stderr
     data = json.loads((twin / "fea.json").read_text())
     assert data["boundary"] == "boundary.npz"

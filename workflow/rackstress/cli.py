@@ -403,8 +403,16 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True,
 
     stop_prepared()             # joined before post-processing forks (prepare.py)
     discard_finished(out)       # a kill-only checkpoint of a finished run: never resumed
-    if summary.get("analysis") == "static":
-        click.echo(f"{summary['scene']}: static, {summary['status']} in {summary['iterations']} "
+    static = summary.get("analysis") == "static"
+    units = {}
+    if static:
+        try:
+            units = json.loads((Path(out) / "scene.json").read_text()).get("units") or {}
+        except (OSError, ValueError):
+            units = {}
+        how = ("settled in" if summary.get("settled") else
+               "NOT SETTLED (not an equilibrium: do not use its numbers) after")
+        click.echo(f"{summary['scene']}: static, {how} {summary['iterations']} "
                    f"iterations (residual {summary['residual']:.2g} of the applied load) on "
                    f"{summary['engine']} in {summary['wall_s']:.2f} s -> {out}")
     else:
@@ -412,8 +420,18 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True,
                    f"({summary['mode']}) in {summary['wall_s']:.2f} s -> {out}")
     for name, g in summary["groups"].items():
         md = g["max_deformation"]
+        if static:          # a held part's deformation is its displacement (runs/run.py)
+            at = g.get("max_deformation_at")
+            click.echo(f"  {name:12s} n={g['n']:6d}  largest displacement="
+                       + (f"{md:.4g} {units.get('length', '')}".rstrip() if md is not None
+                          else "-")
+                       + (f" (particle {g['max_deformation_particle']} at "
+                          f"({', '.join(f'{x:.4g}' for x in at)}))" if at else ""))
+            continue
         click.echo(f"  {name:12s} n={g['n']:6d}  max_deformation="
                    + (f"{md:.4g}" if md is not None else "-"))
+    if static:
+        _say_reactions(summary, units)
     while _AHEAD:               # post-processing in the process that prepared it
         ahead = _AHEAD.pop()
         code = ahead.go()
@@ -427,6 +445,30 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True,
 
     with kept_open():           # particles.data read and the dump indexed once
         _post_and_render(out, do_render, progress, dump_text)
+
+
+def _say_reactions(summary: dict, units: dict) -> None:
+    """A static run's support reactions, one line each, and their sum against the load (a
+    component below the settle tolerance × the load is what the solve leaves: 0)."""
+    import math
+
+    reactions, applied = summary.get("reactions"), summary.get("applied_load")
+    if not reactions or not applied:
+        return
+    tol = float(summary.get("tolerance") or 1e-6) if summary.get("settled") else 0.0
+
+    def vec(v, of):
+        small = tol * math.sqrt(sum(x * x for x in of))
+        return "(" + ", ".join("0" if abs(x) < small else f"{x:.4g}" for x in v) + ")"
+
+    fu, lu = units.get("force", ""), units.get("length", "")
+    for r in reactions:
+        click.echo(f"  reaction of {r['support']} on {r['group']}: force "
+                   f"{vec(r['force'], applied['force'])} {fu}, moment "
+                   f"{vec(r['moment'], applied['moment'])} {fu}·{lu}")
+    total = [sum(r["force"][k] for r in reactions) for k in range(3)]
+    click.echo(f"  reactions' sum {vec(total, applied['force'])} {fu} against the applied load "
+               f"{vec(applied['force'], applied['force'])} {fu}")
 
 
 def _forget(out: Path) -> None:
@@ -676,9 +718,17 @@ def _csv(text):
               help="Render the complete frames of a dump that ends mid-frame.")
 @click.option("--progress/--no-progress", default=True, show_default=True,
               help="A progress bar on a terminal.")
+@click.option("--allow-unsettled", is_flag=True,
+              help="A static run that did not settle: show its headline stress and factor of "
+                   "safety in report.html anyway (struck out by default: the state is not an "
+                   "equilibrium); the red NOT SETTLED banner stays.")
 def render(rundir, frames, measure, views, groups, out, movie, movie_view, vmax, cmap,
-           allow_truncated, progress):
+           allow_truncated, progress, allow_unsettled=False):
     """Render the stress pictures, sheet, plots (and movie) of RUNDIR; refresh RUNDIR/report.html.
+
+    A static run gets the part's surface instead (figures/sheet.png: four views of the
+    deformed surface coloured by the stress; figures/particles.png: the particles): no frames,
+    no movie, no plots over time.
 
     Exit status: 0 done, 2 bad input.
     """
@@ -705,16 +755,21 @@ def render(rundir, frames, measure, views, groups, out, movie, movie_view, vmax,
                                  vmax=vmax, cmap=cmap, groups=_csv(groups), out=out,
                                  allow_truncated=allow_truncated, progress=progress)
             record_render(rundir, rep, time.perf_counter() - t0)
-            report = _write_report(rundir)
+            report = _write_report(rundir, allow_unsettled)
     except Exception as err:  # noqa: BLE001 - each kind has its exit status (_fail_any)
         _fail_any(err)
     for note in rep.notes:
         click.echo(f"note: {note}")
     pk = rep.peak
-    click.echo("frames: " + ", ".join(f"{s}" for _, _, s in rep.frames)
-               + f"; colour scale 0..{rep.vmax:.4g}"
-               + (f"; peak {pk['value']:.4g} at iteration {pk['iteration']}, particle "
-                  f"{pk['particle']} ({pk['group']})" if pk else ""))
+    if pk is not None and "iteration" not in pk:        # a static run's headline
+        from rackstress.stress.headline import headline_text
+
+        click.echo(f"colour scale 0..{rep.vmax:.4g}; " + headline_text(pk))
+    else:
+        click.echo("frames: " + ", ".join(f"{s}" for _, _, s in rep.frames)
+                   + f"; colour scale 0..{rep.vmax:.4g}"
+                   + (f"; peak {pk['value']:.4g} at iteration {pk['iteration']}, particle "
+                      f"{pk['particle']} ({pk['group']})" if pk else ""))
     for name in rep.files:
         click.echo(f"  wrote {rep.outdir / name}")
     if report is not None:
@@ -722,13 +777,13 @@ def render(rundir, frames, measure, views, groups, out, movie, movie_view, vmax,
     click.echo(f"rendered in {time.perf_counter() - t0:.1f} s")
 
 
-def _write_report(rundir):
+def _write_report(rundir, allow_unsettled: bool | None = None):
     """RUNDIR/report.html when RUNDIR is a run directory with a summary; else None."""
     from rackstress.render.report import write_report
 
     if not (Path(rundir) / "summary.json").is_file():
         return None
-    return write_report(rundir)
+    return write_report(rundir, allow_unsettled=allow_unsettled)
 
 
 @main.command()
@@ -947,16 +1002,25 @@ def inspect_cmd(file, scale, budget, as_json, all_faces, png):
 @click.option("--E", "E", type=float, help="Young's modulus (default: the part's material in "
               "summary.json, else 1: ranks do not depend on it).")
 @click.option("--nu", type=float, help="Poisson's ratio (default: the material's, else 0.3).")
-@click.option("--size", type=float, help="Largest FE edge (default: one particle spacing).")
+@click.option("--size", type=float, help="Largest FE edge (default: 1.5 particle spacings, "
+              "graded finer at re-entrant edges); a larger size needs less memory.")
 @click.option("--group", help="The part to solve (default: the one with a material, else the "
               "largest with supports or loads).")
 @click.option("--measure", help="The particle measure compared (default: von_mises if the run "
               "has it, else strain).")
-def fea(rundir, E, nu, size, group, measure):
+@click.option("--allow-unsettled", is_flag=True, help="Compare a static run that did not "
+              "settle (refused otherwise: its state is not an equilibrium).")
+@click.option("--allow-dynamic", is_flag=True, help="Compare a dynamic run's last frame with "
+              "the static FE solution (refused otherwise: a moving state is not one).")
+@click.option("--no-converge", is_flag=True, help="Solve at one FE size only (default: also "
+              "at a coarser one, to say how much the FE's own governing stress moves).")
+def fea(rundir, E, nu, size, group, measure, allow_unsettled, allow_dynamic, no_converge):
     """Check a run's part against linear-elastic FEA of the same part (the 'fem' extra).
 
     Writes fea.json, fea.npz, vtk/fea.vtp, vtk/fea_mesh.vtu, figures/fea.png and the report's
-    "Finite-element check" (docs/fea.md). Exit 2 for a run it cannot read or solve.
+    "Finite-element check" (docs/fea.md). Exit 2 for a run it cannot read or solve, a static
+    run that did not settle, a dynamic run (unless allowed) and an FE model that would not fit
+    in memory (the message says how much it needs and which --size fits).
     """
     try:
         from rackstress.validity import solid
@@ -971,16 +1035,39 @@ def fea(rundir, E, nu, size, group, measure):
         _fail(RackstressError(f"rackstress fea {rundir}: {damaged}"), 2)
     try:
         data = solid.check_run(rundir, E=E, nu=nu, size=size, group=group, measure=measure,
-                               echo=click.echo)
+                               echo=click.echo, allow_unsettled=allow_unsettled,
+                               allow_dynamic=allow_dynamic, converge=not no_converge)
     except (ValueError, RackstressError) as exc:
-        _fail(RackstressError(f"rackstress fea {rundir}: {exc}"), 2)
+        _fail(RackstressError(f"rackstress fea {rundir}: {exc}"), getattr(exc, "exit_code", 2))
+    except MemoryError:
+        _fail(RackstressError(f"rackstress fea {rundir}: out of memory; try a coarser FE mesh "
+                              "(--size, e.g. twice the run's spacing)"), 2)
     _write_report(rundir)
-    ag = data["agreement"]
-    ratio = ag.get("peak_ratio")
-    click.echo(f"fea: {data['group']} ({data['particles']:,} particles, {data['mesh']}): "
-               f"Spearman {ag['spearman']:.3f}, top-5 % overlap {ag['top5_overlap']:.2f}, "
-               f"peak ratio " + ("pending" if ratio is None else f"{ratio:.3f}")
-               + f" ({data['measure']}); wrote {rundir}/fea.json")
+    ag, gv, unit = data["agreement"], data["governing"], data.get("stress_unit", "")
+    click.echo(f"fea: {data['group']} ({data['particles']:,} particles, {data['mesh']}, "
+               f"{data['fe']['tetrahedra']:,} tetrahedra): compares {data['compared']}")
+    click.echo(f"fea: Spearman {ag['spearman']:.3f}, top-5 % overlap {ag['top5_overlap']:.2f} "
+               f"({data['measure']})")
+    for b in data["bands"]:
+        if b["n"]:
+            click.echo(f"fea:   {b['band']:>5} spacings from a singular point: {b['n']:,} "
+                       "particles, " + ", ".join(
+                           f"{k} {b[v]:.3f}" for k, v in (("Spearman", "spearman"),
+                                                           ("peak ratio", "peak_ratio"),
+                                                           ("median error", "median_error"))
+                           if b[v] is not None))
+    if gv.get("value") is not None:
+        moved = "" if gv.get("moved") is None else \
+            f"; it moved {100 * gv['moved']:.1f} % from FE size {gv['coarser']['size']:.3g}"
+        click.echo(f"fea: FE's governing stress {gv['value']:.4g} {unit} at "
+                   f"{[round(x, 2) for x in gv['position']]} (zone {data['zone']['length']:.3g})"
+                   + moved)
+        if gv.get("ratio") is not None:
+            click.echo(f"fea: the particles there: {gv['particle_value']:.4g} {unit} (particle "
+                       f"{gv['particle']}, ratio {gv['ratio']:.3f}); their own governing "
+                       f"stress {gv['particles_governing']:.4g} (ratio "
+                       f"{gv['particles_governing_ratio']:.3f})")
+    click.echo(f"fea: wrote {rundir}/fea.json ({data['wall_s']:.0f} s)")
 
 
 @main.group()
@@ -1152,8 +1239,23 @@ def bench_stress(out, quick):
 @click.option("--planar", is_flag=True,
               help="Only the planar cases as aluminium scenes in MPa (~2 min); rewrites their "
                    "section of validity.md.")
-def bench_validity(out, quick, planar):
+@click.option("--concentrations", is_flag=True,
+              help="Only the stress concentrations (plate with a hole, fillet, notch, C-frame, "
+                   "round shoulder): the governing stress against converged FEA and Peterson "
+                   "at three spacings (validity-concentrations.md).")
+@click.option("--case", "cases", multiple=True, help="With --concentrations: this case only "
+              "(repeatable): plate-hole, fillet, notch, cframe, round-shoulder.")
+@click.option("--spacings", help="With --concentrations: these spacings [mm], comma-separated "
+              "(default: each case's three).")
+def bench_validity(out, quick, planar, concentrations, cases, spacings):
     """Stress measures of three body models against linear-elastic FEA (three cases)."""
+    if concentrations or cases or spacings:
+        from rackstress.bench import concentrations as conc
+
+        conc.run_bench(out, cases=list(cases) or None,
+                       spacings=[float(x) for x in spacings.split(",")] if spacings else None,
+                       echo=click.echo)
+        return
     if planar:
         from rackstress.bench import planar as mod
 
@@ -1281,6 +1383,7 @@ TEACH = {
         "rackstress bench validity --quick --out /tmp/bench",
         "rackstress bench validity --out docs/benchmarks",
         "rackstress bench validity --planar --out docs/benchmarks",
+        "rackstress bench validity --concentrations --case plate-hole --spacings 0.8,0.6",
     ]),
     # commands the other engineers of this round add (applied when the command exists)
     "inspect": ("Name a part's holes and faces; its walls and a spacing.", [

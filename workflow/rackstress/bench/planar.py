@@ -292,7 +292,7 @@ def section(data: dict) -> str:
              "as a user writes them: `units = \"mm-N-s\"`, `material = \"aluminium\"` (E = "
              "70 GPa, ν = 0.33) on a `fill`ed part (the solid lattice), `[[support]]`, "
              "`[[load]]` with forces in N, `analysis = \"static\"`, run by `rackstress run`, "
-             "stress by the run's default `von_mises` measure (continuum route) in MPa. Plates "
+             "stress by the run's default `von_mises` measure (patch route) in MPa. Plates "
              f"of {data['layers']} layers (t = 3 spacings, free faces, the middle layer a "
              "symmetry plane held in z only): the fewest with an interior layer; plane-stress "
              "FEA (scikit-fem P2, E = 70,000 MPa, ν = 0.33, meshes 4 and 8 per mm) carries the "

@@ -506,7 +506,9 @@ def release_id(key: int) -> None:
 def support_reactions(scene, res: StaticResult) -> dict:
     """``summary.json``'s ``reactions`` and ``applied_load`` (scene units): per ``[[support]]``
     (and prescribed displacement, and ``held``) the force its particles' held directions
-    apply at the equilibrium and its moment about the origin; the loads' force and moment.
+    apply at the equilibrium and its moment about the origin, with its group and how many
+    particles it holds (a particle two supports hold counts for the first); the loads' force
+    and moment.
     Equilibrium makes their sums cancel: Σ reactions = −applied load, moments too (the
     bindings' forces are central, so they cancel in pairs, forces and moments)."""
     p, R = res.p, res.reactions
@@ -523,13 +525,18 @@ def support_reactions(scene, res: StaticResult) -> dict:
             taken |= sel
             r = np.where(sel, R, 0.0)
             rows.append({"support": label if len(scene.groups) == 1 else f"{label} ({name})",
+                         "group": name, "particles": int(sel.any(axis=1).sum()),
                          "force": r.sum(axis=0).tolist(),
                          "moment": np.cross(p, r).sum(axis=0).tolist()})
     from rackstress.model.constraints import supported
 
-    rest = np.where(~taken & (scene.fixed() | supported(scene)[:, None]), R, 0.0)
+    held = ~taken & (scene.fixed() | supported(scene)[:, None])
+    rest = np.where(held, R, 0.0)
     if rest.any():
-        rows.append({"support": "held", "force": rest.sum(axis=0).tolist(),
+        groups = [name for name in scene.groups if held[scene.slice(name)].any()]
+        rows.append({"support": "held", "group": ", ".join(groups),
+                     "particles": int(held.any(axis=1).sum()),
+                     "force": rest.sum(axis=0).tolist(),
                      "moment": np.cross(p, rest).sum(axis=0).tolist()})
     return {"reactions": rows,
             "applied_load": {"force": F.sum(axis=0).tolist(),

@@ -56,7 +56,6 @@ when complete; on any error nothing of the render remains.
 """
 from __future__ import annotations
 
-import functools
 import json
 import os
 import shutil
@@ -68,24 +67,18 @@ import numpy as np
 
 from rackstress.errors import EXIT_STORAGE, StorageError, storage_error
 from rackstress.lib.jsonio import write_json
-from rackstress.render.draw import colour_table, stress_rgba
+from rackstress.render.draw import (LABEL_H, PNG_COMPRESS, VIEWS, _inside, colour_bar,
+                                    colour_table, ring_text_box, stress_rgba)
+from rackstress.render.draw import font as _font
 from rackstress.render.draw import offscreen as _offscreen
 from rackstress.render.draw import part_radius as _part_radius
+from rackstress.render.draw import screen_axes as _screen_axes
 from rackstress.stress import PartMotion, StressInputError, load_run
 from rackstress.stress.post import LABELS, compute_fields
 
 #: The iterations of the paper's Fig. 12.
 PAPER_FRAMES = (1320, 2600, 4720, 17480)
 DEFAULT_VIEWS = ("right", "front", "left")
-#: view → (direction from the focal point to the camera, view-up).
-VIEWS = {
-    "right": ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0)),
-    "left": ((0.0, 0.0, -1.0), (0.0, 1.0, 0.0)),
-    "front": ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0)),
-    "back": ((-1.0, 0.0, 0.0), (0.0, 1.0, 0.0)),
-    "top": ((0.0, 1.0, 0.0), (0.0, 0.0, -1.0)),
-    "iso": ((1.0, 0.8, 1.0), (0.0, 1.0, 0.0)),
-}
 CONTEXT_RGB, CONTEXT_ALPHA = (0.78, 0.74, 0.66), 0.12
 WINDOW = (1024, 768)
 FIGURES = "figures"
@@ -95,7 +88,6 @@ HEADER_H = 112
 #: from the others' box has flown away; particles this many part sizes outside their part's
 #: 1–99 % box likewise.
 FLOWN = 2.0
-PNG_COMPRESS = 1
 #: the plots' PNG files likewise (matplotlib's default is zlib 6): the same pixels, magpod-small's
 #: three 0.18 MB against 0.16 MB, encoded in 22 ms of CPU against 31
 PLOT_PNG = {"compress_level": PNG_COMPRESS}
@@ -112,17 +104,6 @@ class RenderReport:
     peak: dict | None = None
     parts: dict = field(default_factory=dict)
     report: Path | None = None
-
-
-@functools.lru_cache(maxsize=None)
-def _font(size: int):
-    import importlib.util
-
-    from PIL import ImageFont
-
-    # matplotlib's own copy of DejaVu Sans (found without importing matplotlib, which is slow)
-    base = Path(importlib.util.find_spec("matplotlib").origin).parent
-    return ImageFont.truetype(str(base / "mpl-data" / "fonts" / "ttf" / "DejaVuSans.ttf"), size)
 
 
 # ----------------------------------------------------------------------------- parts
@@ -154,14 +135,6 @@ def select_parts(run, groups=None) -> tuple[list, list, list]:
 
 
 # ----------------------------------------------------------------------------- framing
-def _screen_axes(view: str):
-    direction, up = VIEWS[view]
-    d = np.asarray(direction, float) / np.linalg.norm(direction)
-    u = np.asarray(up, float) - np.dot(up, d) * d
-    u /= np.linalg.norm(u)
-    return np.cross(u, d), u, d     # screen right, screen up, towards the camera
-
-
 def _robust_box(q: np.ndarray):
     if len(q) >= 20:
         return np.quantile(q, 0.01, axis=0), np.quantile(q, 0.99, axis=0)
@@ -393,23 +366,7 @@ def header_strip(width: int, title: str, label: str, vmax: float, cmap: str, leg
         y += 18
     if peak_line:
         dr.text((10, y), peak_line, fill=(150, 0, 0), font=small)
-    x0, x1 = int(0.55 * width), int(0.96 * width)
-    dr.text((x0, 6), label, fill="black", font=small)
-    table = (colour_table(cmap) * 255).round().astype(np.uint8)
-    cols = table[np.linspace(0, 255, x1 - x0).round().astype(int)]
-    bar = np.repeat(cols[None, :, :], 22, axis=0)
-    arr = np.asarray(img).copy()
-    arr[28:50, x0:x1] = bar
-    img = Image.fromarray(arr)
-    dr = ImageDraw.Draw(img)
-    dr.rectangle([x0, 28, x1 - 1, 49], outline="black")
-    for t in np.linspace(0.0, 1.0, 5):
-        x = x0 + t * (x1 - 1 - x0)
-        dr.line([x, 50, x, 55], fill="black")
-        s = f"{t * vmax:.3g}"
-        tw = dr.textlength(s, font=small)
-        dr.text((min(max(x - tw / 2, x0 - 10), x1 - tw), 57), s, fill="black", font=small)
-    return np.asarray(img)
+    return np.asarray(colour_bar(img, int(0.55 * width), int(0.96 * width), label, vmax, cmap))
 
 
 def annotate(img: np.ndarray, step: int, view: str, labels: list, ring=None,
@@ -445,24 +402,8 @@ def annotate(img: np.ndarray, step: int, view: str, labels: list, ring=None,
     return np.asarray(im)
 
 
-#: Height of a 13-pixel label's box, in pixels.
-LABEL_H = 16
-
-
 def _overlaps(a, b) -> bool:
     return a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]
-
-
-def ring_text_box(x, y, r, tw, th, w, h) -> tuple:
-    """The box (x0, y0, x1, y1) of the peak ring's text: right of the ring, else left of it,
-    else under it — never over the ring, never cut at the picture's edge."""
-    cy = min(max(y - 8, 2), h - 48)
-    for tx in (x + r + 6, x - r - 6 - tw):
-        if 2 <= tx and tx + tw <= w - 2:
-            return (tx, cy, tx + tw, cy + th)
-    tx = _inside(x - tw / 2, tw, w)
-    ty = y + r + 6 if y + r + 6 + th <= h - 48 else max(2, y - r - 6 - th)
-    return (tx, ty, tx + tw, ty + th)
 
 
 def place_labels(anchors, widths, taken, w, h, th: int = LABEL_H) -> list:
@@ -488,11 +429,6 @@ def place_labels(anchors, widths, taken, w, h, th: int = LABEL_H) -> list:
         boxes.append(box)
         taken = [*taken, box]
     return boxes
-
-
-def _inside(x: float, width: float, w: int, margin: float = 2.0) -> float:
-    """The left edge of a text ``width`` wide moved so the text lies inside ``[0, w)``."""
-    return max(margin, min(x, w - width - margin))
 
 
 def _save_png(path: Path, img: np.ndarray) -> None:
@@ -626,6 +562,21 @@ def render(rundir, frames=None, measure: str | None = None, views=DEFAULT_VIEWS,
 
     t0, c0 = time.perf_counter(), time.process_time()
     rundir = Path(rundir)
+    from rackstress.stress.headline import is_static
+
+    if is_static(rundir):           # one state, no time: the part's surface (render/static.py)
+        from rackstress.render.static import STATIC_VIEWS
+
+        if frames or movie:
+            raise StressInputError(
+                f"{rundir} is a static analysis: it has one state, the equilibrium, so "
+                f"{'--frames' if frames else '--movie'} has nothing to choose from; render it "
+                "without")
+        return render_static(rundir, measure=measure,
+                             views=STATIC_VIEWS if list(views) == list(DEFAULT_VIEWS) else views,
+                             vmax=vmax, cmap=cmap, out=out, progress=progress, beside=beside,
+                             groups=groups,
+                             window_size=None if tuple(window_size) == WINDOW else window_size)
     if measure is not None and measure not in LABELS:
         raise StressInputError(f"unknown measure '{measure}'; measures: {', '.join(LABELS)}")
     views = list(views)
@@ -797,6 +748,232 @@ def render(rundir, frames=None, measure: str | None = None, views=DEFAULT_VIEWS,
         shutil.rmtree(tmp, ignore_errors=True)
         if isinstance(exc, OSError) and not isinstance(exc, StorageError) and exc.errno:
             raise storage_error(exc, "write the pictures into", outdir) from None
+        raise
+    return report
+
+
+def render_static(rundir, measure: str | None = None, views=None,
+                  vmax: float | None = None, cmap: str = "paper", out=None, window_size=None,
+                  progress: bool = False, beside=None, groups=None):
+    """The pictures of a static run (:mod:`rackstress.render.static`: the part's surface,
+    deformed, the stress painted on it; the particles) into ``RUNDIR/figures`` (or ``out``).
+
+    Parameters
+    ----------
+    rundir : path
+        A static run directory (``analysis = "static"``).
+    measure : str, optional
+        Default: von Mises stress for a part with a material, else the paper's measure.
+    views : list of str
+        Of ``iso, front, right, top, left, back`` (:data:`rackstress.render.pictures.VIEWS`).
+    vmax : float, optional
+        Top of the colour scale (default: the headline's value, else the largest on the part).
+    beside : (work, done), optional
+        As :func:`rackstress.render.pictures.render`: ``work(report, measure, cmap)`` in a forked
+        child (the 3D view) while the pictures are painted, its result handed to ``done``.
+
+    Returns
+    -------
+    rackstress.render.pictures.RenderReport
+
+    Example
+    -------
+    >>> rep = render_static("runs/cantilever")                   # doctest: +SKIP
+    >>> rep.files                                                # doctest: +SKIP
+    ['sheet.png', 'particles.png', 'render.json']
+    """
+    from rackstress.render.static import (CELL, RED, STATIC_VIEWS, SurfacePainter, _cell,
+                                          _project, _save, _sheet, framing, header,
+                                          magnification)
+    from rackstress.stress.headline import headline, headline_text, unsettled_text
+    from rackstress.stress.surface import surfaces_for
+
+    t0, c0 = time.perf_counter(), time.process_time()
+    rundir = Path(rundir)
+    views = list(views or STATIC_VIEWS)
+    for v in views:
+        if v not in VIEWS:
+            raise StressInputError(f"unknown view '{v}'; views: {', '.join(VIEWS)}")
+    if measure is not None and measure not in LABELS:
+        raise StressInputError(f"unknown measure '{measure}'; measures: {', '.join(LABELS)}")
+    if vmax is not None and not vmax > 0:
+        raise StressInputError(f"--vmax must be positive, got {vmax}")
+    colour_table(cmap)
+    run = load_run(rundir)
+    fields = compute_fields(run, cache=True)
+    measure = measure or fields.default
+    if measure not in fields.values:
+        raise StressInputError(f"{rundir}: no measure '{measure}' in this run; measures: "
+                               f"{', '.join(fields.values)}")
+    try:
+        summary = json.loads((rundir / "summary.json").read_text())
+    except (OSError, ValueError):
+        summary = {}
+    scene = run.scene or {}
+    report = RenderReport(output_dir(rundir, measure, out, fields.default))
+    coloured, _, hidden = select_parts(run, groups)
+    report.parts = {"coloured": [p.name for p in coloured], "context": [], "hidden": hidden}
+    t = time.perf_counter()
+    surfaces = [s for s in surfaces_for(run, fields, notes=report.notes)
+                if s.group in report.parts["coloured"]]
+    report.timings["surface_s"] = time.perf_counter() - t
+    k = len(run.steps) - 1
+    p = np.asarray(run.trajectory[k].data["positions64"], dtype=np.float64)
+    values = np.asarray(fields.values[measure][k], dtype=np.float64)
+    for s in surfaces:                      # another measure than the surfaces carry
+        if measure not in s.values:
+            from rackstress.stress.surface import interpolate
+
+            part = run.parts[s.group]
+            col = values[part.index]
+            s.values[measure] = interpolate(run.o[part.index],
+                                            np.where(np.isfinite(col), col, 0.0), s.points,
+                                            s.spacing)
+    head = headline(summary, scene, rundir) if measure == fields.default else None
+    label = fields.label(measure)
+    idx = np.concatenate([q.index for q in coloured])
+    top = float(np.nanmax(values[idx])) if np.isfinite(values[idx]).any() else 0.0
+    if vmax is not None:
+        report.vmax = float(vmax)
+    elif head and head.get("value") and head["value"] > 0:
+        report.vmax = float(head["value"])
+    else:
+        report.vmax = top if top > 0 else 1.0
+    if top > report.vmax * (1 + 1e-9):
+        report.notes.append(f"values up to {top:.4g} lie above the colour scale's top "
+                            f"{report.vmax:.4g} (" + ("--vmax" if vmax is not None else
+                            "the headline's, away from singular points") + "): full colour")
+    # the magnification: the largest displacement about FRACTION of the parts' size
+    u = p[idx] - run.o[idx]
+    if not np.isfinite(u).all():        # a state that did not settle may hold anything
+        report.notes.append(f"{int((~np.isfinite(u).all(axis=1)).sum())} particle(s) have no "
+                            "finite position: drawn at their undeformed place")
+        p[idx] = np.where(np.isfinite(p[idx]), p[idx], run.o[idx])
+        u = p[idx] - run.o[idx]
+        for s in surfaces:
+            s.values["displacement"] = np.nan_to_num(s.values["displacement"], nan=0.0,
+                                                     posinf=0.0, neginf=0.0)
+    umax = float(np.linalg.norm(u, axis=1).max()) if len(u) else 0.0
+    allpts = np.concatenate([s.points for s in surfaces]) if surfaces else run.o[idx]
+    size = float(np.max(allpts.max(axis=0) - allpts.min(axis=0)))
+    scale = magnification(umax, size)
+    far = scale * umax > size           # the part come apart: its shape is no picture of it
+    if far:
+        report.notes.append(f"the largest displacement, {umax:.3g}, exceeds the part's size "
+                            f"{size:.3g}: the pictures show the part undeformed")
+        scale = 0.0
+    units = ((scene.get("units") or {}).get("length")) or "length units"
+    settled = summary.get("settled", True) is not False
+    lines = []
+    if not settled:
+        lines.append((unsettled_text(summary, short=True), RED))
+    elif head:
+        lines.append((headline_text(head), (0, 0, 0)))
+    lines.append((f"deformed × {scale:g}: the largest displacement, {umax:.3g} {units}, drawn as "
+                  f"{scale * umax:.3g} {units} ({100 * scale * umax / size:.2g} % of the part's "
+                  f"size {size:.3g} {units})" if scale > 1 else
+                  f"deformation drawn to scale (largest displacement {umax:.3g} {units})"
+                  if scale == 1 else f"drawn undeformed: the largest displacement, {umax:.3g} "
+                  f"{units}, exceeds the part's size", (0, 0, 0)))
+    lines.append(("dark outline: the undeformed shape; positions in the part's own "
+                  "(undeformed) coordinates", (90, 90, 90)))
+    name = scene.get("scene", rundir.name)
+    tmp = rundir / f".render.tmp{os.getpid()}"
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir()
+    side = None
+    try:
+        if beside is not None:
+            from rackstress.runs.forked import ForkedJob
+
+            side = ForkedJob(lambda: beside[0](report, measure, cmap), tmp / ".beside.json")
+        cw, ch = window_size or CELL
+        aspect = cw / ch
+        pts = [] if far else [s.points + scale * s.values["displacement"] for s in surfaces]
+        frame_pts = np.concatenate(pts + [s.points for s in surfaces]) if surfaces else run.o[idx]
+        where = None
+        if head and head.get("particle") is not None and settled:
+            row = int(np.searchsorted(run.data.ids, int(head["particle"])))
+            if row < run.n_atoms and run.data.ids[row] == int(head["particle"]):
+                where = run.o[row] + scale * (p[row] - run.o[row])
+        ring_text = (f"{head['value']:.3g} {head.get('units', '')}".strip()
+                     if head and settled else "")
+        t = time.perf_counter()
+        painter = SurfacePainter(surfaces, scale, measure, report.vmax, cmap, (cw, ch))
+        cells = []
+        try:
+            for view in views:
+                centre, half = framing(frame_pts, view, aspect)
+                ring = None
+                if where is not None:
+                    x, y = _project(where, view, centre, half, (cw, ch))
+                    ring = (x, y, 14.0)
+                cells.append(_cell(painter.paint(view, centre, half), view, ring, ring_text))
+        finally:
+            painter.close()
+        W = cw * min(2, len(cells))
+        sheet_head = header(W, f"{name}: {label.split(' [')[0]} on the part's surface", label,
+                            report.vmax, cmap, lines)
+        _save(tmp / "sheet.png", _sheet(cells, sheet_head))
+        report.files.append("sheet.png")
+        report.timings["surface_pictures_s"] = time.perf_counter() - t
+        t = time.perf_counter()
+        shown = p.copy()
+        shown[idx] = run.o[idx] + scale * (p[idx] - run.o[idx])
+        painter = Painter(run, coloured, [], report.vmax, cmap, (cw, ch))
+        cells = []
+        try:
+            for view in views:
+                centre, half = framing(run.o[idx] if far else
+                                       np.concatenate([shown[idx], run.o[idx]]), view, aspect)
+                cells.append(_cell(painter.paint(shown, values, view, centre, half), view))
+        finally:
+            painter.close()
+        part_lines = [("each particle (a lattice site of the part) coloured by its own value; "
+                       + (f"deformed × {scale:g} as the surface" if scale else "undeformed"),
+                       (0, 0, 0))]
+        if not settled:
+            part_lines.insert(0, (unsettled_text(summary, short=True), RED))
+        _save(tmp / "particles.png",
+              _sheet(cells, header(W, f"{name}: the particles", label, report.vmax, cmap,
+                                   part_lines)))
+        report.files.append("particles.png")
+        report.timings["particle_pictures_s"] = time.perf_counter() - t
+        if side is not None:
+            from rackstress.runs.forked import ForkedError
+
+            t = time.perf_counter()
+            try:
+                got = side.join()
+            except ForkedError as exc:
+                got = {"error": ["RuntimeError", exc.message]}
+            report.timings["beside_wait_s"] = time.perf_counter() - t
+            if side.cpu_s is not None:
+                report.timings["beside_cpu_s"] = side.cpu_s
+            side = None
+            beside[1](got)
+        report.peak = head
+        report.timings["total_s"] = time.perf_counter() - t0
+        report.timings["cpu_s"] = time.process_time() - c0
+        manifest = {"rundir": str(rundir), "static": True, "measure": measure, "label": label,
+                    "vmax": report.vmax, "cmap": cmap, "views": views, "headline": head,
+                    "settled": settled, "magnification": scale, "max_displacement": umax,
+                    "part_size": size, "length_unit": units,
+                    "surfaces": [{"group": s.group, "source": s.source, "points": len(s.points),
+                                  "triangles": len(s.faces), "spacing": s.spacing}
+                                 for s in surfaces],
+                    "parts": report.parts, "frames": [], "files": report.files,
+                    "notes": report.notes, "timings": report.timings}
+        write_json(tmp / "render.json", manifest)
+        report.files.append("render.json")
+        _move_in(tmp, report.outdir)
+    except BaseException as exc:
+        if side is not None:
+            side.kill()
+        shutil.rmtree(tmp, ignore_errors=True)
+        if isinstance(exc, OSError) and not isinstance(exc, StorageError) and exc.errno:
+            raise storage_error(exc, "write the pictures into", report.outdir) from None
         raise
     return report
 

@@ -43,6 +43,11 @@ img{max-width:100%;height:auto;border:1px solid #ddd;margin:.3em 0}
 .headline{font-size:1.15em;background:#fff3f0;border-left:4px solid #c00;padding:.6em 1em}
 .note{color:#666;font-size:.9em}figure{margin:1em 0}figcaption{color:#555;font-size:.9em}
 .ok{color:#060}.bad{color:#b00}
+.banner{font-size:1.1em;padding:.6em 1em;margin:.8em 0;border-left:6px solid}
+.banner.settled{background:#eef8ee;border-color:#080}
+.banner.unsettled{background:#fde8e8;border-color:#c00;color:#900}
+.withheld{color:#888;background:#f4f4f4;border-left-color:#aaa}
+td.sum{font-weight:bold}
 """
 
 
@@ -146,23 +151,50 @@ def fea_section(fea: dict) -> str:
     out += [f'<tr><td>{_e(a)}</td><td class="num">{_e(b)}</td><td>{_e(c)}</td></tr>'
             for a, b, c in rows]
     out.append("</tbody></table>")
+    if fea.get("compared"):
+        out.append(f"<p>Compared: {_e(fea['compared'])}.</p>")
+    gv, zone, unit = fea.get("governing") or {}, fea.get("zone") or {}, fea.get("stress_unit", "")
+    if zone.get("rule"):
+        out.append(f"<p>Zone: {_e(zone['rule'])}.</p>")
+    if gv.get("value") is not None:
+        moved = ("" if gv.get("moved") is None else
+                 f"; it moved {100 * gv['moved']:.1f} % from FE size "
+                 f"{_num((gv.get('coarser') or {}).get('size'))}")
+        there = ("" if gv.get("ratio") is None else
+                 f" The particles there: {_num(gv.get('particle_value'))} {_e(unit)} (ratio "
+                 f"{_num(gv['ratio'])}); their own governing stress "
+                 f"{_num(gv.get('particles_governing'))} {_e(unit)} (ratio "
+                 f"{_num(gv.get('particles_governing_ratio'))}).")
+        out.append(f"<p>FE's governing stress: {_num(gv['value'])} {_e(unit)} at "
+                   f"{_e([round(x, 2) for x in gv['position']])}{_e(moved)}.{_e(there)}</p>")
+    if fea.get("bands"):
+        out.append('<table id="fea-bands"><thead><tr><th>spacings from a singular point</th>'
+                   "<th>particles</th><th>Spearman ρ</th><th>peak ratio</th>"
+                   "<th>median error</th></tr></thead><tbody>")
+        out += [f"<tr><td>{_e(b['band'])}</td><td class=\"num\">{b['n']}</td>"
+                f"<td class=\"num\">{_num(b['spearman'])}</td>"
+                f"<td class=\"num\">{_num(b['peak_ratio'])}</td>"
+                f"<td class=\"num\">{_num(b['median_error'])}</td></tr>" for b in fea["bands"]]
+        out.append("</tbody></table>")
     if fea.get("note"):
         out.append(f"<p>{_e(fea['note'])}</p>")
     out.append(f'<figure><img src="{FIGURES}/fea.png" alt="particles and FEA side by side">'
                "<figcaption>The particle measure (left) and FEA's von Mises stress (right) "
-               "at the particles; <code>vtk/fea.vtp</code> holds both as point arrays "
+               "at the particles, on one colour scale; <code>vtk/fea.vtp</code> holds both as point arrays "
                "(<code>fea_von_mises</code>, <code>fea_displacement</code>)</figcaption>"
                "</figure>")
     return "\n".join(out)
 
 
 def write_report(rundir, stability: bool = True, view: bool = True,
-                 built_view: dict | None = None) -> Path:
+                 built_view: dict | None = None, allow_unsettled: bool | None = None) -> Path:
     """Write ``RUNDIR/report.html`` from what the run directory holds; return its path.
 
     ``view``: also write ``RUNDIR/view3d.html``, the peak frame in 3D, and embed it
     (:mod:`rackstress.render.view3d`); ``built_view``: it was built already
-    (:func:`rackstress.render.view3d.section`'s ``built``).
+    (:func:`rackstress.render.view3d.section`'s ``built``). A static run's page is its own
+    (:func:`_static_body`); ``allow_unsettled``: show the headline of one that did not settle
+    (recorded in ``summary.json``'s ``render``; None: as recorded, else withheld).
 
     Example
     -------
@@ -180,10 +212,57 @@ def write_report(rundir, stability: bool = True, view: bool = True,
     w("<!DOCTYPE html>")
     w('<html lang="en"><head><meta charset="utf-8">')
     w(f"<title>rackstress report: {_e(name)}</title><style>{CSS}</style></head><body>")
-    w(f"<h1>{_e(name)}: run report</h1>")
+    static = summary.get("analysis") == "static" or scene.get("analysis") == "static"
+    w(f"<h1>{_e(name)}: " + ("static analysis" if static else "run report") + "</h1>")
     w(f'<p class="note">{_e(rundir.resolve())} — written {_e(time.strftime("%Y-%m-%d %H:%M:%S"))}'
       "</p>")
 
+    if static:
+        _static_body(w, rundir, summary, scene, post, render, name, view, built_view,
+                     allow_unsettled)
+    else:
+        _dynamic_body(w, rundir, summary, scene, post, render, name, stability, view,
+                      built_view)
+
+    # ---- files
+    w('<h2 id="files">Files to open elsewhere</h2><ul>')
+    if (rundir / "vtk" / "surface.vtp").is_file():
+        w('<li><a href="vtk/surface.vtp">vtk/surface.vtp</a> — the part\'s surface, undeformed, '
+          "with the values carried onto it from the particles (point data named as theirs: "
+          "von_mises, displacement, strain; group_id); in ParaView, Warp By Vector on "
+          "displacement draws it deformed</li>")
+    links = [("vtk/run.pvd", "VTK time series: open in ParaView or pyvista (point data: "
+                             "group_id and group_NAME, type, radius, displacement, every "
+                             "measure; time = iteration; for OVITO: rackstress stress RUNDIR "
+                             "--vtk-format ovito)"),
+             ("stress.dump", "LAMMPS dump with the measures as named columns (OVITO)"),
+             ("summary.json", "the run's summary, peaks included"),
+             ("stress.json", "the post-processing record"),
+             (final_name(rundir), "the trajectory (dump custom id type mol x y z, gzip once "
+                                  "the run has finished; with a resting sediment the "
+                                  "particles that moved, the others as in particles.data)"),
+             ("particles.data", "LAMMPS data file (original positions)"),
+             ("in.lammps", "the LAMMPS input deck"),
+             (f"{FIGURES}/render.json", "what the pictures show")]
+    for rel, what in links:
+        if (rundir / rel).is_file() or rel == final_name(rundir) != dump_path(rundir).name:
+            w(f'<li><a href="{_e(rel)}">{_e(rel)}</a> — {_e(what)}</li>')
+    w("</ul></body></html>")
+    path = rundir / REPORT
+    tmp = rundir / f".{REPORT}.tmp{os.getpid()}"
+    try:
+        tmp.write_text("\n".join(out) + "\n", encoding="utf-8")
+        os.replace(tmp, path)
+    except OSError as exc:          # a full disk: no half report left
+        tmp.unlink(missing_ok=True)
+        raise storage_error(exc, "write", path) from None
+    return path
+
+
+def _dynamic_body(w, rundir: Path, summary: dict, scene: dict, post: dict, render: dict,
+                  name: str, stability: bool, view: bool, built_view) -> None:
+    """A dynamic run's sections: the peak over the run, the peak frame in 3D, the pictures
+    and plots over time, the run's facts, the scene, the stability margin of Eq. 5."""
     # ---- the peak, in one sentence
     peak = (summary.get("stress") or {}).get("peak") or post.get("peak")
     w('<h2 id="peak">Where and when it was most stressed</h2>')
@@ -340,31 +419,255 @@ def write_report(rundir, stability: bool = True, view: bool = True,
     else:
         w('<p class="note">Not available for this scene.</p>')
 
-    # ---- files
-    w('<h2 id="files">Files to open elsewhere</h2><ul>')
-    links = [("vtk/run.pvd", "VTK time series: open in ParaView or pyvista (point data: "
-                             "group_id and group_NAME, type, radius, displacement, every "
-                             "measure; time = iteration; for OVITO: rackstress stress RUNDIR "
-                             "--vtk-format ovito)"),
-             ("stress.dump", "LAMMPS dump with the measures as named columns (OVITO)"),
-             ("summary.json", "the run's summary, peaks included"),
-             ("stress.json", "the post-processing record"),
-             (final_name(rundir), "the trajectory (dump custom id type mol x y z, gzip once "
-                                  "the run has finished; with a resting sediment the "
-                                  "particles that moved, the others as in particles.data)"),
-             ("particles.data", "LAMMPS data file (original positions)"),
-             ("in.lammps", "the LAMMPS input deck"),
-             (f"{FIGURES}/render.json", "what the pictures show")]
-    for rel, what in links:
-        if (rundir / rel).is_file() or rel == final_name(rundir) != dump_path(rundir).name:
-            w(f'<li><a href="{_e(rel)}">{_e(rel)}</a> — {_e(what)}</li>')
-    w("</ul></body></html>")
-    path = rundir / REPORT
-    tmp = rundir / f".{REPORT}.tmp{os.getpid()}"
-    try:
-        tmp.write_text("\n".join(out) + "\n", encoding="utf-8")
-        os.replace(tmp, path)
-    except OSError as exc:          # a full disk: no half report left
-        tmp.unlink(missing_ok=True)
-        raise storage_error(exc, "write", path) from None
-    return path
+
+def _vec(v, digits: int = 4, scale: float | None = None) -> list:
+    """Table cells of a vector; below ``scale`` (the settle tolerance × the load's size) a
+    value is what the solve leaves, shown as 0 (the exact value in the cell's title and the
+    row's data-*)."""
+    out = []
+    for x in v:
+        x = float(x)
+        if scale and abs(x) < scale:
+            out.append(f'<td class="num" title="{x!r}">0</td>')
+        else:
+            out.append(f'<td class="num">{_num(x, digits)}</td>')
+    return out
+
+
+def _static_body(w, rundir: Path, summary: dict, scene: dict, post: dict, render: dict,
+                 name: str, view: bool, built_view, allow_unsettled: bool | None) -> None:
+    """A static analysis's sections, as an FE post-processor's report reads: settled or NOT
+    SETTLED first; the headline stress (governing, else the peak) with the factor of safety of
+    the same rule, where in the part's own coordinates; the support reactions against the
+    applied load; the part in 3D and its pictures (the surface, deformed, and the particles);
+    the largest values per part; the solve's facts. Nothing over time."""
+    from rackstress.stress.headline import headline, unsettled_advice
+
+    settled = summary.get("settled", True) is not False
+    rec = summary.get("render") or {}
+    if allow_unsettled is None:
+        allow_unsettled = bool(rec.get("allow_unsettled"))
+    elif (rundir / "summary.json").is_file():       # kept for the next report of this run
+        from rackstress.lib.jsonio import write_json
+
+        summary.setdefault("render", {})["allow_unsettled"] = bool(allow_unsettled)
+        write_json(rundir / "summary.json", summary)
+    tol = summary.get("tolerance")
+    if settled:
+        w(f'<div class="banner settled" id="status" data-status="settled"><b>Settled</b>: an '
+          f"equilibrium, the largest unbalanced force {_num(summary.get('residual'), 2)} of the "
+          f"applied load (at most {_e(tol)}) after {_e(summary.get('iterations'))} Newton "
+          "steps.</div>")
+    else:
+        w(f'<div class="banner unsettled" id="status" data-status="not settled"><b>NOT SETTLED '
+          f"— do not use these numbers.</b> The largest unbalanced force is "
+          f"{_num(summary.get('residual'), 3)} of the applied load after "
+          f"{_e(summary.get('iterations'))} Newton steps (settled means at most {_e(tol)}): "
+          "the state below is not an equilibrium, and its stresses, displacements and "
+          f"reactions are not the part's. What to do: {_e(unsettled_advice(summary))}.</div>")
+
+    # ---- the headline
+    w('<h2 id="peak">Result</h2>')
+    head = headline(summary, scene, rundir)
+    if head is None:
+        w('<p class="headline" id="headline">No stress yet: run <code>rackstress stress '
+          f"{_e(rundir)}</code>.</p>")
+    elif not settled and not allow_unsettled:
+        w('<p class="headline withheld" id="headline" data-withheld="true">No stress or factor '
+          "of safety is shown: the state is not an equilibrium. <code>rackstress render "
+          f"{_e(rundir)} --allow-unsettled</code> shows them here, marked as such "
+          "(<code>summary.json</code> keeps them).</p>")
+    else:
+        rule = head.get("rule") or ""
+        cls = "headline" if settled else "headline withheld"
+        pos = ", ".join(f"{x:.4g}" for x in head.get("position") or [])
+        w(f'<p class="{cls}" id="headline" data-kind="{_e(head["kind"])}" '
+          f'data-value="{head["value"]!r}" data-particle="{_e(head["particle"])}" '
+          f'data-safety="{head["safety"]!r}" data-position="{_e(pos)}">'
+          + ("" if settled else "<b>Not an equilibrium (shown on request):</b> ")
+          + ("Governing von Mises stress" if head["kind"] == "governing" else
+             "Largest von Mises stress" if head.get("measure") == "von_mises" else
+             f"Largest {_e(head.get('measure'))}")
+          + f" <b>{_num(head['value'])} {_e(head.get('units', ''))}</b> in "
+          f"<b>{_e(head['group'])}</b> at ({_e(pos)}) in the part's own undeformed coordinates"
+          + (f", near <b>{_e(head['near'])}</b>" if head.get("near") else "")
+          + f", particle {_e(head['particle'])}"
+          + (f"; smallest factor of safety <b>{_num(head['safety'], 3)}</b> (yield / that "
+             "stress)" if head.get("safety") else "")
+          + ".</p>")
+        if rule:
+            w(f'<p class="note" id="headline-rule">{_e(rule[0].upper() + rule[1:])}.</p>')
+    for gname, g in (summary.get("groups") or {}).items():
+        md, at = g.get("max_deformation"), g.get("max_deformation_at")
+        if md is None or at is None:
+            continue
+        unit = (scene.get("units") or {}).get("length", "")
+        pos = ", ".join(f"{x:.4g}" for x in at)
+        w(f'<p class="displacement" data-group="{_e(gname)}" data-value="{md!r}" '
+          f'data-particle="{_e(g.get("max_deformation_particle"))}" data-position="{_e(pos)}">'
+          f"Largest displacement of <b>{_e(gname)}</b>: <b>{_num(md)} {_e(unit)}</b>, particle "
+          f"{_e(g.get('max_deformation_particle'))} at ({_e(pos)}).</p>")
+    warns = [wr for wr in summary.get("warnings") or []       # no stress of a non-equilibrium
+             if settled or allow_unsettled or wr.get("kind") not in ("large_strain",
+                                                                     "yield_exceeded")]
+    if warns:
+        w('<ul id="warnings">')
+        for wr in warns:
+            w(f'<li class="warning" data-kind="{_e(wr.get("kind", ""))}">Warning: '
+              f"{_e(wr.get('message', ''))}</li>")
+        w("</ul>")
+
+    # ---- the reactions
+    _reactions(w, summary, scene, settled)
+
+    # ---- the part in 3D and its pictures
+    if view:
+        from rackstress.render.view3d import section
+
+        w(section(rundir, built_view))
+    w('<h2 id="pictures">Pictures</h2>')
+    fig = rundir / FIGURES
+    if (fig / "sheet.png").is_file() and render.get("static"):
+        mag = render.get("magnification")
+        mag = 1 if mag is None else mag
+        unit = render.get("length_unit", "")
+        src = ", ".join(f"{s['group']}: {s['source']}" for s in render.get("surfaces", []))
+        w(f'<figure id="surface-picture" data-magnification="{mag:g}"><img src="{FIGURES}/'
+          'sheet.png" alt="the part\'s surface, deformed, coloured by the stress">'
+          f"<figcaption>{_e(render.get('label', ''))} on the part's surface ({_e(src)}), "
+          f"colour scale 0..{_num(render.get('vmax'))}; "
+          + (f"displacements × {mag:g} (the largest, "
+             f"{_num(render.get('max_displacement'), 3)} {_e(unit)}, drawn as "
+             f"{_num(mag * (render.get('max_displacement') or 0), 3)} {_e(unit)})"
+             if mag > 1 else "displacements to scale" if mag == 1 else
+             "drawn undeformed: the displacements exceed the part's size")
+          + "; dark outline: the undeformed shape; ring: the headline's point. The surface's "
+          "values are fitted to the nearest particles (linear, docs/picture.md).</figcaption>"
+          "</figure>")
+        if (fig / "particles.png").is_file():
+            w(f'<figure id="particles-picture"><img src="{FIGURES}/particles.png" '
+              'alt="the particles, coloured by the stress"><figcaption>The particles the '
+              "surface was fitted to, each coloured by its own value, at the same "
+              "magnification.</figcaption></figure>")
+        for note in render.get("notes", []):
+            w(f'<p class="note">{_e(note)}</p>')
+    else:
+        w(f'<p class="note">No pictures: run <code>rackstress render {_e(rundir)}</code>.</p>')
+
+    # ---- the largest values per part (no measure of motion: a static run has none)
+    rows = [(g, m, r) for g, grec in (summary.get("groups") or {}).items()
+            for m, r in ((grec or {}).get("peak") or {}).items()
+            if m not in ("paper", "accumulated")]
+    if rows and (settled or allow_unsettled):
+        w('<table id="peaks"><thead><tr><th>group</th><th>measure</th><th>largest</th>'
+          "<th>units</th><th>particle</th><th>position (undeformed)</th></tr></thead><tbody>")
+        for g, m, r in rows:
+            if r is None:
+                w(f'<tr data-group="{_e(g)}" data-measure="{_e(m)}"><td>{_e(g)}</td>'
+                  f"<td>{_e(m)}</td><td colspan=4>undefined</td></tr>")
+                continue
+            pos = ", ".join(f"{x:.4g}" for x in r.get("original") or r.get("position", []))
+            w(f'<tr data-group="{_e(g)}" data-measure="{_e(m)}" data-value="{r["value"]!r}" '
+              f'data-particle="{r["particle"]}" data-position="{_e(pos)}"><td>{_e(g)}</td>'
+              f"<td>{_e(m)}</td><td class=num>{_num(r['value'], 6)}</td>"
+              f"<td>{_e(r.get('units', ''))}</td><td class=num>{r['particle']}</td>"
+              f"<td>{_e(pos)}</td></tr>")
+        w("</tbody></table>")
+        w('<p class="note">The same numbers as <code>summary.json</code> '
+          "(<code>groups.NAME.peak.MEASURE</code>) and the particles' point data in "
+          "<code>vtk/run.pvd</code>. von_mises: von Mises stress from the bindings' forces per "
+          "particle volume; strain: von Mises shear strain; d2min: non-affine D²min.</p>")
+
+    # ---- the finite-element check
+    fea = _load(rundir / "fea.json")
+    if fea:
+        w(fea_section(fea))
+
+    # ---- the solve
+    timings = post.get("timings") or {}
+    facts = [("scene", name), ("analysis", "static"), ("status", summary.get("status")),
+             ("Newton iterations", summary.get("iterations")),
+             ("residual (largest unbalanced force / applied load)",
+              _num(summary.get("residual"), 3)),
+             ("settled below", summary.get("tolerance")),
+             ("engine", summary.get("engine")), ("particles", summary.get("n_particles")),
+             ("ranks", summary.get("ranks")),
+             ("solve wall time [s]", _num(summary.get("solve_s"), 3)),
+             ("run wall time [s]", _num(summary.get("wall_s"), 3)),
+             ("stress post-processing [s]", _num(timings.get("total_s"), 3)),
+             ("pictures [s]", _num((summary.get("render") or {}).get("wall_s"), 3)),
+             ("units", summary.get("units"))]
+    if summary.get("error"):
+        facts.append(("error", summary["error"].get("message")))
+    w('<h2 id="facts">The solve</h2><table id="run-facts"><tbody>')
+    for k, v in facts:
+        if v is not None:
+            w(f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>")
+    w("</tbody></table>")
+    w('<h2 id="scene">Scene and parameters</h2><table id="params"><tbody>')
+    for k, v in (summary.get("params") or scene.get("params") or {}).items():
+        w(f"<tr><th>{_e(k)}</th><td>{_e(json.dumps(v))}</td></tr>")
+    w("</tbody></table>")
+    if scene.get("groups"):
+        unit = (scene.get("units") or {}).get("length", "")
+        w('<table id="groups"><thead><tr><th>group</th><th>kind</th><th>n</th><th>material</th>'
+          f"<th>largest displacement [{_e(unit)}]</th></tr></thead><tbody>")
+        for g in scene["groups"]:
+            md = ((summary.get("groups") or {}).get(g["name"]) or {}).get("max_deformation")
+            w(f"<tr><td>{_e(g['name'])}</td><td>{_e(g.get('kind'))}</td>"
+              f"<td class=num>{g.get('n')}</td>"
+              f"<td>{_e((g.get('material') or {}).get('name', ''))}</td>"
+              f"<td class=num>{_num(md)}</td></tr>")
+        w("</tbody></table>")
+
+
+def _reactions(w, summary: dict, scene: dict, settled: bool) -> None:
+    """The support reactions per support, their sum and the applied load (force and moment
+    about the origin), and how far they are from balancing: an engineer's first check."""
+    reactions, applied = summary.get("reactions"), summary.get("applied_load")
+    w('<h2 id="reactions">Support reactions</h2>')
+    if not reactions or not applied:
+        w('<p class="note">No reactions recorded for this run (a run made before they were '
+          "recorded: run it again).</p>")
+        return
+    u = scene.get("units") or {}
+    fu, lu = u.get("force", "force units"), u.get("length", "length units")
+    w('<table id="reaction-table"><thead><tr><th>support</th><th>part</th><th>particles</th>'
+      f"<th>F<sub>x</sub> [{_e(fu)}]</th><th>F<sub>y</sub></th><th>F<sub>z</sub></th>"
+      f"<th>M<sub>x</sub> [{_e(fu)}·{_e(lu)}]</th><th>M<sub>y</sub></th><th>M<sub>z</sub></th>"
+      "</tr></thead><tbody>")
+    import math
+
+    F = [sum(r["force"][k] for r in reactions) for k in range(3)]
+    M = [sum(r["moment"][k] for r in reactions) for k in range(3)]
+    tol = float(summary.get("tolerance") or 1e-6) if settled else 0.0
+    fs = tol * max(math.sqrt(sum(x * x for x in F)),
+                   math.sqrt(sum(x * x for x in applied["force"])))
+    ms = tol * max(math.sqrt(sum(x * x for x in M)),
+                   math.sqrt(sum(x * x for x in applied["moment"])))
+    for r in reactions:
+        w(f'<tr class="reaction" data-support="{_e(r["support"])}" '
+          f'data-force="{_e(json.dumps(r["force"]))}" data-moment="{_e(json.dumps(r["moment"]))}">'
+          f"<td>{_e(r['support'])}</td><td>{_e(r.get('group', ''))}</td>"
+          f"<td class=num>{_e(r.get('particles', ''))}</td>"
+          + "".join(_vec(r["force"], scale=fs) + _vec(r["moment"], scale=ms)) + "</tr>")
+    w('<tr id="reaction-sum"><td class="sum">sum of the reactions</td><td></td><td></td>'
+      + "".join(_vec(F, scale=fs) + _vec(M, scale=ms)) + "</tr>")
+    w('<tr id="applied-load"><td class="sum">applied load</td><td></td><td></td>'
+      + "".join(_vec(applied["force"], scale=fs) + _vec(applied["moment"], scale=ms))
+      + "</tr>")
+    dF = [a + b for a, b in zip(F, applied["force"])]
+    dM = [a + b for a, b in zip(M, applied["moment"])]
+    w('<tr id="reaction-balance"><td class="sum">reactions + load (0 at equilibrium)</td>'
+      "<td></td><td></td>" + "".join(_vec(dF, 2) + _vec(dM, 2)) + "</tr>")
+    w("</tbody></table>")
+    nF = math.sqrt(sum(x * x for x in applied["force"]))
+    off = math.sqrt(sum(x * x for x in dF)) / nF if nF > 0 else None
+    w('<p class="note" id="reaction-note">Each reaction is what its support pushes on the '
+      "particles it holds (minus the net force of the bindings and loads there), moments "
+      "about the origin at the deformed positions; the sum balances the applied load up to "
+      "the unbalanced forces left on the free particles"
+      + (f" (here {_num(off, 2)} of the load)" if off is not None else "")
+      + ("." if settled else ": this run did not settle, so they do not balance it.")
+      + "</p>")
+

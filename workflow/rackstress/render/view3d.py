@@ -252,6 +252,11 @@ def build_view(rundir, measure: str | None = None, cmap: str | None = None,
         manifest = json.loads((rundir / "figures" / "render.json").read_text())
     except (OSError, json.JSONDecodeError):
         pass
+    from rackstress.stress.headline import is_static
+
+    if is_static(rundir):
+        return build_static_view(rundir, measure=measure, cmap=cmap, vmax=vmax,
+                                 manifest=manifest)
     measure = measure or manifest.get("measure") or "paper"
     cmap = cmap or manifest.get("cmap") or "paper"
     run = load_run(rundir)
@@ -270,10 +275,6 @@ def build_view(rundir, measure: str | None = None, cmap: str | None = None,
 
     offscreen()
     import vtkmodules.vtkRenderingOpenGL2  # noqa: F401 - registers the OpenGL classes
-    from trame_vtk.modules.vtk.serializers import (SynchronizationContext, extract_array_hash,
-                                                   initialize_serializers, reference_id,
-                                                   serialize)
-    from trame_vtk.modules.vtk.serializers.registry import register_instance_serializer
     from vtkmodules.vtkRenderingCore import (vtkActor, vtkGlyph3DMapper, vtkPolyDataMapper,
                                              vtkRenderer, vtkRenderWindow)
 
@@ -342,20 +343,7 @@ def build_view(rundir, measure: str | None = None, cmap: str | None = None,
     ren.SetNearClippingPlaneTolerance(0.001)    # what VTK takes for a 24-bit depth buffer
     ren.ResetCameraClippingRange()
 
-    initialize_serializers()
-    register_instance_serializer("vtkGlyph3DMapper", _glyph_serializer)
-    register_instance_serializer("vtkOpenGLGlyph3DMapper", _glyph_serializer)
-    ctx = SynchronizationContext()
-    scene = serialize(None, rw, "rackstress-view", ctx, 1)
-    scene["extra"] = {"vtkRefId": reference_id(rw), "centerOfRotation": cam.GetFocalPoint(),
-                      "camera": reference_id(cam)}
-    hashes = {e["hash"]: {**e, "content": ctx.get_cached_data_array(e["hash"], False)}
-              for e in extract_array_hash(scene)}
-    buf = io.BytesIO()
-    with zipfile.ZipFile(buf, "w") as zf:
-        zf.writestr("index.json", json.dumps({"hashes": hashes, "scene": scene}),
-                    compress_type=zipfile.ZIP_DEFLATED)
-    rw.Finalize()
+    buf = _serialized(rw, cam)
 
     # the slider's frames: positions (float32) and colours (uint8) of the coloured parts
     n_col = sum(q.n for q in parts)
@@ -380,9 +368,321 @@ def build_view(rundir, measure: str | None = None, cmap: str | None = None,
            if peak else None,
            "shown": n_col, "context": (ctx_shown, ctx_total),
            "frames": [f["iteration"] for f in frames], "marker_radius": marker_r}
-    _write(rundir / VIEW, buf.getvalue(), info, rec)
+    _write(rundir / VIEW, buf, info, rec)
     rec["bytes"] = (rundir / VIEW).stat().st_size
     return rec
+
+
+def _serialized(rw, cam) -> bytes:
+    """The render window as trame-vtk's offline viewer loads it: its scene and arrays, zipped;
+    the window finalized."""
+    from trame_vtk.modules.vtk.serializers import (SynchronizationContext, extract_array_hash,
+                                                   initialize_serializers, reference_id,
+                                                   serialize)
+    from trame_vtk.modules.vtk.serializers.registry import register_instance_serializer
+
+    initialize_serializers()
+    register_instance_serializer("vtkGlyph3DMapper", _glyph_serializer)
+    register_instance_serializer("vtkOpenGLGlyph3DMapper", _glyph_serializer)
+    ctx = SynchronizationContext()
+    scene = serialize(None, rw, "rackstress-view", ctx, 1)
+    scene["extra"] = {"vtkRefId": reference_id(rw), "centerOfRotation": cam.GetFocalPoint(),
+                      "camera": reference_id(cam)}
+    hashes = {e["hash"]: {**e, "content": ctx.get_cached_data_array(e["hash"], False)}
+              for e in extract_array_hash(scene)}
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w") as zf:
+        zf.writestr("index.json", json.dumps({"hashes": hashes, "scene": scene}),
+                    compress_type=zipfile.ZIP_DEFLATED)
+    rw.Finalize()
+    return buf.getvalue()
+
+
+def _surface_poly(points: np.ndarray, faces: np.ndarray, rgb: np.ndarray | None = None):
+    """A triangle surface (float32 points) with optional uint8 RGB point colours."""
+    from vtkmodules.util.numpy_support import numpy_to_vtk
+
+    from rackstress.render.static import _poly
+
+    poly = _poly(np.asarray(points, np.float32).astype(np.float64), faces)
+    if rgb is not None:
+        arr = numpy_to_vtk(np.ascontiguousarray(rgb, dtype=np.uint8), deep=True)
+        arr.SetName("rgb")
+        poly.GetPointData().SetScalars(arr)
+    return poly
+
+
+#: a static view's surfaces beyond this many triangles are decimated for the page
+MAX_TRIANGLES = 150_000
+
+
+def build_static_view(rundir, measure: str | None = None, cmap: str | None = None,
+                      vmax: float | None = None, manifest: dict | None = None) -> dict:
+    """``RUNDIR/view3d.html`` of a static run: the part's surface, deformed by the pictures'
+    magnification and coloured by their measure and scale (:mod:`rackstress.render.static`);
+    the undeformed shape as a faint ghost with its sharp edges; the particles (hidden until
+    asked: a check box) at the same magnification; the headline's point marked. Returns what
+    it shows, as :func:`build_view` (``frames`` holds the equilibrium's iteration only).
+    """
+    from rackstress.render.draw import offscreen, part_radius
+    from rackstress.render.static import magnification, surface_rgb
+    from rackstress.stress.headline import headline
+    from rackstress.stress import load_run
+    from rackstress.stress.post import compute_fields
+    from rackstress.stress.surface import interpolate, surfaces_for
+
+    rundir = Path(rundir)
+    manifest = manifest or {}
+    run = load_run(rundir)
+    fields = compute_fields(run, cache=True)
+    measure = measure or manifest.get("measure") or fields.default
+    cmap = cmap or manifest.get("cmap") or "paper"
+    values = fields.values[measure]
+    coloured = run.displayed() or list(run.parts.values())
+    k = len(run.steps) - 1
+    o = run.o
+    p = _frame(run, k)
+    p = np.where(np.isfinite(p), p, o)          # a state that did not settle may hold anything
+    try:
+        summary = json.loads((rundir / "summary.json").read_text())
+    except (OSError, json.JSONDecodeError):
+        summary = {}
+    head = headline(summary, run.scene) if measure == fields.default else None
+    surfaces = [s for s in surfaces_for(run, fields) if s.group in {q.name for q in coloured}]
+    idx = np.concatenate([q.index for q in coloured])
+    if vmax is None:
+        vmax = float(manifest.get("vmax") or 0.0) if manifest.get("measure") == measure else 0.0
+    if not vmax > 0:
+        vmax = float(head["value"]) if head and head.get("value") else float(
+            np.nanmax(values[k, idx]) if np.isfinite(values[k, idx]).any() else 1.0)
+    if not vmax > 0:
+        vmax = 1.0
+    scale = manifest.get("magnification") if manifest.get("static") else None
+    allpts = np.concatenate([s.points for s in surfaces]) if surfaces else o[idx]
+    size = float(np.max(allpts.max(axis=0) - allpts.min(axis=0))) or 1.0
+    if scale is None:
+        umax = float(np.linalg.norm(p[idx] - o[idx], axis=1).max())
+        scale = magnification(umax, size)
+        scale = 0.0 if scale * umax > size else scale   # come apart: drawn undeformed
+    scale = float(scale)
+
+    offscreen()
+    import vtkmodules.vtkRenderingOpenGL2  # noqa: F401 - registers the OpenGL classes
+    from vtkmodules.vtkFiltersCore import (vtkFeatureEdges, vtkPolyDataNormals,
+                                           vtkQuadricDecimation)
+    from vtkmodules.vtkRenderingCore import (vtkActor, vtkGlyph3DMapper, vtkPolyDataMapper,
+                                             vtkRenderer, vtkRenderWindow)
+
+    ren = vtkRenderer()
+    ren.SetBackground(1.0, 1.0, 1.0)
+    rw = _plain(vtkRenderWindow)
+    rw.AddRenderer(ren)
+    keep = []
+    roles = {"surface": [], "undeformed": [], "particles": [], "marker": []}
+
+    def add(mapper, role, colour=None, opacity=1.0, lines=False):
+        actor = vtkActor()
+        actor.SetMapper(mapper)
+        prop = actor.GetProperty()
+        if colour is not None:
+            prop.SetColor(*colour)
+        prop.SetOpacity(opacity)
+        if lines:
+            prop.SetLighting(False)
+            prop.SetLineWidth(1.5)
+        ren.AddActor(actor)
+        roles[role].append(ren.GetActors().GetNumberOfItems() - 1)
+        keep.extend([mapper, actor])
+
+    shown_tri = 0
+    for s in surfaces:
+        pts, faces = s.points, s.faces
+        if len(faces) > MAX_TRIANGLES:          # the page's size: the pictures keep them all
+            dec = vtkQuadricDecimation()
+            dec.SetInputData(_surface_poly(pts, faces))
+            dec.SetTargetReduction(1.0 - MAX_TRIANGLES / len(faces))
+            dec.Update()
+            from vtkmodules.util.numpy_support import vtk_to_numpy
+
+            out = dec.GetOutput()
+            pts = vtk_to_numpy(out.GetPoints().GetData()).astype(np.float64)
+            faces = vtk_to_numpy(out.GetPolys().GetConnectivityArray()).reshape(-1, 3)
+            part = run.parts[s.group]
+            vals = interpolate(o[part.index], np.column_stack(
+                [p[part.index] - o[part.index],
+                 np.nan_to_num(values[k, part.index])]), pts, s.spacing)
+            disp, col = vals[:, :3], np.maximum(vals[:, 3], 0.0)
+        else:
+            disp = np.nan_to_num(s.values["displacement"], nan=0.0, posinf=0.0, neginf=0.0)
+            col = s.values.get(measure)
+            if col is None:
+                part = run.parts[s.group]
+                col = interpolate(o[part.index], np.nan_to_num(values[k, part.index]), pts,
+                                  s.spacing)
+        shown_tri += len(faces)
+        normals = vtkPolyDataNormals()      # smooth shading, sharp edges kept (split at 40°)
+        normals.SetInputData(_surface_poly(pts + scale * disp, faces,
+                                           surface_rgb(col, vmax, cmap)))
+        normals.SetFeatureAngle(40.0)
+        normals.SplittingOn()
+        normals.Update()
+        keep.append(normals)
+        m = vtkPolyDataMapper()
+        m.SetInputData(normals.GetOutput())
+        m.ScalarVisibilityOn()
+        m.SetColorModeToDefault()
+        m.SetScalarModeToUsePointData()
+        add(m, "surface")
+        ghost = _surface_poly(*(s.shape or (pts, faces)))
+        m = vtkPolyDataMapper()
+        m.SetInputData(ghost)
+        m.ScalarVisibilityOff()
+        add(m, "undeformed", (0.55, 0.55, 0.55), 0.18)
+        edges = vtkFeatureEdges()
+        edges.SetInputData(ghost)
+        edges.BoundaryEdgesOn()
+        edges.FeatureEdgesOn()
+        edges.SetFeatureAngle(60.0)
+        edges.NonManifoldEdgesOff()
+        edges.ManifoldEdgesOff()
+        edges.ColoringOff()
+        edges.Update()
+        if edges.GetOutput().GetNumberOfPoints():       # a smooth lattice surface has none
+            m = vtkPolyDataMapper()
+            m.SetInputData(edges.GetOutput())
+            m.ScalarVisibilityOff()
+            add(m, "undeformed", (0.2, 0.2, 0.2), 1.0, lines=True)
+        keep.extend([ghost, edges])
+    shown = o.copy()
+    shown[idx] = o[idx] + scale * (p[idx] - o[idx])
+    for part in coloured:
+        mapper = vtkGlyph3DMapper()
+        poly = _points(shown[part.index], _rgb(values[k, part.index], vmax, cmap))
+        mapper.SetInputData(poly)
+        mapper.SetSourceData(_sphere(part_radius(run, part)))
+        mapper.ScalingOff()
+        mapper.OrientOff()
+        mapper.ScalarVisibilityOn()
+        mapper.SetColorModeToDefault()
+        mapper.SetScalarModeToUsePointData()
+        add(mapper, "particles")
+        keep.append(poly)
+    lo, hi = allpts.min(axis=0), allpts.max(axis=0)
+    marker_r = 3.0 * max(part_radius(run, q) for q in coloured)
+    where = None
+    if head and head.get("particle") is not None and summary.get("settled") is not False:
+        row = int(np.searchsorted(run.data.ids, int(head["particle"])))
+        if row < run.n_atoms and run.data.ids[row] == int(head["particle"]):
+            where = shown[row]
+    if where is not None:
+        m = vtkPolyDataMapper()
+        m.SetInputData(_marker(marker_r, 0.25 * float(np.max(hi - lo)) + marker_r))
+        m.ScalarVisibilityOff()
+        marker = vtkActor()
+        marker.SetMapper(m)
+        pr = marker.GetProperty()
+        pr.SetRepresentationToWireframe()
+        pr.SetColor(*MARKER_RGB)
+        pr.SetLighting(False)
+        marker.SetPosition(*map(float, where))
+        ren.AddActor(marker)
+        roles["marker"].append(ren.GetActors().GetNumberOfItems() - 1)
+        keep.extend([m, marker])
+    cam = ren.GetActiveCamera()
+    centre = 0.5 * (lo + hi)
+    cam.SetFocalPoint(*map(float, centre))
+    # from the iso side, as the pictures' first view (from the headline's side, the view ran
+    # along the cantilever from its clamp)
+    cam.SetPosition(*map(float, centre + _view_direction(centre, None)
+                         * 2.0 * (float(np.linalg.norm(hi - lo)) or 1.0)))
+    cam.SetViewUp(0.0, 1.0, 0.0)
+    ren.SetNearClippingPlaneTolerance(0.001)
+    ren.ResetCameraClippingRange()
+    data = _serialized(rw, cam)
+    label = fields.label(measure)
+    stops = _rgb(np.linspace(0.0, vmax, 9), vmax, cmap)
+    settled = summary.get("settled", True) is not False
+    info = {"roles": roles, "label": label, "vmax": f"{vmax:.4g}",
+            "gradient": ", ".join("#%02x%02x%02x" % tuple(int(c) for c in rgb) for rgb in stops),
+            "scale": scale, "settled": settled,
+            "note": (f"deformed × {scale:g}; grey: undeformed" if scale > 1 else
+                     "deformation to scale; grey: undeformed" if scale == 1 else
+                     "drawn undeformed (the displacements exceed the part's size)")
+            + ("; NOT SETTLED: do not use these numbers" if not settled else
+               "; blue: the headline's point" if where is not None else "")}
+    rec = {"file": VIEW, "static": True, "measure": measure, "label": label, "vmax": vmax,
+           "cmap": cmap, "magnification": scale, "settled": settled,
+           "peak": {k_: head[k_] for k_ in ("value", "particle", "group", "position")}
+           if head else None,
+           "shown": int(len(idx)), "context": (0, 0), "triangles": int(shown_tri),
+           "frames": [int(run.steps[k])], "marker_radius": marker_r}
+    _write(rundir / VIEW, data, info, rec, STATIC_CONTROLS)
+    rec["bytes"] = (rundir / VIEW).stat().st_size
+    return rec
+
+
+STATIC_CONTROLS = r"""
+<div id="rs-controls" style="position:fixed;left:0;right:0;bottom:0;z-index:10;background:
+rgba(255,255,255,.9);font:13px DejaVu Sans,Helvetica,Arial,sans-serif;padding:6px 10px;
+border-top:1px solid #ccc">
+<label><input type="checkbox" id="rs-surface" checked> surface</label>
+<label><input type="checkbox" id="rs-undeformed" checked> undeformed</label>
+<label><input type="checkbox" id="rs-particles"> particles</label>
+<span id="rs-scale" style="white-space:nowrap;margin-left:1em">0 <span id="rs-bar"
+style="display:inline-block;width:120px;height:10px;vertical-align:middle;border:1px solid
+#999"></span> <span id="rs-vmax"></span></span> <span id="rs-note"></span></div>
+<script>
+(function () {
+  const info = JSON.parse(document.getElementById("rs-frames").textContent);
+  function actors() {
+    const rw = window.global && window.global.renderWindow;
+    if (!rw) return null;
+    const a = rw.getRenderers().map(function (r) { return r.getActors(); })
+      .reduce(function (x, y) { return y.length > x.length ? y : x; }, []);
+    let n = 0;
+    Object.keys(info.roles).forEach(function (k) { n += info.roles[k].length; });
+    if (a.length < n) return null;
+    // the scene's arrays arrive after it, and with them its own visibility: wait for them
+    for (const role of ["surface", "undeformed", "particles"]) {
+      for (const i of info.roles[role]) {
+        const m = a[i].getMapper(), pd = m && m.getInputData(0);
+        if (!pd || !pd.getPoints() || pd.getPoints().getNumberOfPoints() === 0) return null;
+      }
+    }
+    return [rw, a];
+  }
+  function apply() {
+    const got = actors();
+    if (!got) return false;
+    const rw = got[0], a = got[1];
+    ["surface", "undeformed", "particles"].forEach(function (role) {
+      const on = document.getElementById("rs-" + role).checked;
+      info.roles[role].forEach(function (i) { a[i].setVisibility(on); });
+    });
+    rw.render();
+    return true;
+  }
+  ["surface", "undeformed", "particles"].forEach(function (role) {
+    document.getElementById("rs-" + role).addEventListener("change", apply);
+  });
+  // view3d.html#particles: the particles, not the skin; #show=surface,undeformed: those only
+  const want = /show=([a-z,]*)/.exec(location.hash) ||
+    (/particles/.test(location.hash) ? [null, "particles,undeformed"] : null);
+  if (want) {
+    const on = want[1].split(",");
+    ["surface", "undeformed", "particles"].forEach(function (role) {
+      document.getElementById("rs-" + role).checked = on.indexOf(role) >= 0;
+    });
+  }
+  (function retry() { if (!apply()) setTimeout(retry, 100); })();
+  document.getElementById("rs-note").textContent = info.note;
+  if (!info.settled) document.getElementById("rs-note").style.color = "#b00";
+  document.getElementById("rs-vmax").textContent = info.vmax + " " + info.label;
+  document.getElementById("rs-bar").style.background =
+    "linear-gradient(to right, " + info.gradient + ")";
+})();
+</script>
+"""
 
 
 CONTROLS = r"""
@@ -449,8 +749,9 @@ width:120px;height:10px;vertical-align:middle;border:1px solid #999"></span>
 """
 
 
-def _write(path: Path, data: bytes, info: dict, rec: dict) -> None:
-    """The viewer page with the scene and the slider's frames inlined; written atomically."""
+def _write(path: Path, data: bytes, info: dict, rec: dict, controls: str | None = None) -> None:
+    """The viewer page with the scene and the slider's frames (a static view: which actors
+    are which) inlined; written atomically."""
     b64 = base64.b64encode(data).decode()
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
     with open(_viewer_html(), encoding="utf-8") as src, open(tmp, "w", encoding="utf-8") as out:
@@ -463,7 +764,7 @@ def _write(path: Path, data: bytes, info: dict, rec: dict) -> None:
                 out.write('<script type="application/json" id="rs-frames">')
                 out.write(json.dumps(info).replace("</", "<\\/"))
                 out.write("</script>\n")
-                out.write(CONTROLS)
+                out.write(controls or CONTROLS)
                 out.write("<script>\nfunction loadDataSet() {\n"
                           "  const container = document.querySelector('.content') || "
                           "document.querySelector('body');\n"
@@ -482,7 +783,11 @@ def section(rundir, built: dict | None = None) -> str:
     def e(x):
         return html.escape(str(x), quote=True)
 
-    out = ['<h2 id="view3d">The peak frame in 3D</h2>']
+    from rackstress.stress.headline import is_static
+
+    static = is_static(rundir)
+    out = ['<h2 id="view3d">' + ("The part in 3D" if static else "The peak frame in 3D")
+           + "</h2>"]
     try:
         if built and "error" in built:
             raise built["error"]
@@ -490,6 +795,33 @@ def section(rundir, built: dict | None = None) -> str:
     except Exception as exc:  # noqa: BLE001 - the report shows everything else
         out.append(f'<p class="note" id="view3d-missing">No 3D view: {e(type(exc).__name__)}: '
                    f"{e(exc)}</p>")
+        return "\n".join(out)
+    if rec.get("static"):
+        pk = rec["peak"]
+        mag = rec["magnification"]
+        out.append(
+            f'<iframe id="view3d-frame" src="{e(rec["file"])}" title="3D view of the part" '
+            'style="width:100%;height:620px;border:1px solid #ddd"></iframe>')
+        out.append(
+            f'<p class="note" id="view3d-what" data-shown="{rec["shown"]}" '
+            f'data-triangles="{rec["triangles"]}" data-magnification="{mag:g}" '
+            f'data-bytes="{rec["bytes"]}">'
+            f"Shown: the part's surface ({rec['triangles']:,} triangles), coloured by "
+            f"{e(rec['label'])} from 0 to {rec['vmax']:.4g} (the pictures' scale) and "
+            + (f"deformed × {mag:g} (the pictures' magnification)" if mag > 1 else
+               "deformed to scale" if mag == 1 else
+               "undeformed (the displacements exceed the part's size)")
+            + "; the undeformed shape as a faint grey ghost with its edges. The check boxes "
+            f"below it show the particles ({rec['shown']:,}, each coloured by its own value, at "
+            "the same magnification) or hide the surface. "
+            + (f"The blue wire sphere and pin mark particle {pk['particle']} "
+               f"({e(pk['group'])}, {pk['value']:.4g}), the headline's. "
+               if pk and rec.get("settled", True) else
+               "NOT SETTLED: the state shown is not an equilibrium. "
+               if not rec.get("settled", True) else "")
+            + "Drag to rotate, wheel to zoom, shift-drag to pan. "
+            f'<a href="{e(rec["file"])}">Open it alone</a> ({rec["bytes"] / 1e6:.1f} MB, '
+            "vtk.js, works offline).</p>")
         return "\n".join(out)
     pk = rec["peak"]
     shown, total = rec["context"]

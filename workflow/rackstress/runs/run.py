@@ -75,17 +75,35 @@ def check_memory(scene: Scene, engine: str, ranks: int = 1) -> int:
 def scene_record(scene: Scene) -> dict:
     """What post-processing needs to know of a scene: its groups as atom types and id ranges."""
     types, mols = topology.group_types(scene), topology.group_mols(scene)
-    return {"scene": scene.name, "params": scene.params, "dt": scene.dt,
-            "source": scene_source(scene),
-            "steps": scene.total_steps,
-            "phases": [{"name": p.name, "steps": p.steps, "vars": dict(p.vars)}
-                       for p in scene.phases],
-            "cycles": scene.cycles,
-            "groups": [{"name": name, "kind": g.kind, "host": g.host, "n": g.n,
-                        "type": types[name], "mol": mols[name],
-                        "first_id": scene.offset(name) + 1, **material_record(scene, g)}
-                       for name, g in scene.groups.items()],
-            "units": units_record(scene.units)}
+    rec = {"scene": scene.name, "params": scene.params, "dt": scene.dt,
+           "source": scene_source(scene),
+           "steps": scene.total_steps,
+           "phases": [{"name": p.name, "steps": p.steps, "vars": dict(p.vars)}
+                      for p in scene.phases],
+           "cycles": scene.cycles,
+           "groups": [{"name": name, "kind": g.kind, "host": g.host, "n": g.n,
+                       "type": types[name], "mol": mols[name],
+                       "first_id": scene.offset(name) + 1, **material_record(scene, g),
+                       **surface_record(g)}
+                      for name, g in scene.groups.items()],
+           "units": units_record(scene.units)}
+    if scene.analysis == "static":
+        rec["analysis"] = "static"
+    return rec
+
+
+def surface_record(g) -> dict:
+    """A part's own surface and lattice spacing, where the scene knows them: ``mesh`` (the
+    file, absolute, and its placement: scale, rotate, translate) and ``spacing``; the static
+    report paints the stress on that surface (:mod:`rackstress.render.surface`)."""
+    meta = g.meta if isinstance(g.meta, dict) else {}
+    out = {}
+    if meta.get("mesh"):
+        out["mesh"] = {k: list(v) if isinstance(v, tuple) else v
+                       for k, v in meta["mesh"].items()}
+    if meta.get("spacing"):
+        out["spacing"] = float(meta["spacing"])
+    return out
 
 
 def units_record(u) -> dict:
@@ -168,7 +186,16 @@ def scene_source(scene: Scene) -> str | None:
 
 
 def group_figures(scene: Scene, p_start: np.ndarray, p_end: np.ndarray) -> dict:
-    """Per group: n, centre of mass at start and end, and max_deformation (docs/model.md, "Desired position")."""
+    """Per group: n, centre of mass at start and end, and max_deformation.
+
+    A moving part's ``max_deformation`` is the paper's: the largest distance from the desired
+    position, after its best-fit rigid motion (docs/model.md, "Desired position"). A static
+    analysis's parts are held by their supports, so their displacement is their deformation:
+    there ``max_deformation`` is the largest displacement |p − o| (the rigid fit would take
+    the bending out of a cantilever: 0.39 mm where its tip moved 0.92 mm), with the particle
+    (``max_deformation_particle``, LAMMPS atom id) and where it sits in the part
+    (``max_deformation_at``, undeformed)."""
+    static = scene.analysis == "static"
     out = {}
     for name, g in scene.groups.items():
         sl = scene.slice(name)
@@ -179,8 +206,14 @@ def group_figures(scene: Scene, p_start: np.ndarray, p_end: np.ndarray) -> dict:
             "kind": g.kind,
             "com_start": p_start[sl].mean(axis=0).tolist(),
             "com_end": end.mean(axis=0).tolist() if ok else None,
-            "max_deformation": rigid.max_deformation(g.o, end) if ok else None,
+            "max_deformation": rigid.max_deformation(g.o, end) if ok and not static else None,
         }
+        if static and ok and g.n:
+            u = np.linalg.norm(end - g.o, axis=1)
+            k = int(np.argmax(u))
+            out[name].update({"max_deformation": float(u[k]),
+                              "max_deformation_particle": scene.offset(name) + k + 1,
+                              "max_deformation_at": [float(x) for x in g.o[k]]})
     return out
 
 

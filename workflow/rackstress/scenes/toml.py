@@ -93,6 +93,8 @@ from rackstress.model.scene import Phase, Scene, steps_for
 DEFAULTS = {"dt": 0.01, "cycles": 1, "bound": 1.0e4, "steps": 1200}
 #: Keys ``--set`` may override in an explicit scene (besides the names of its ``[params]``).
 OVERRIDABLE = ("dt", "steps", "duration", "cycles", "bound")
+#: Of those, what a static analysis does not use (``rackstress scenes`` leaves them out)
+STATIC_UNUSED = ("dt", "steps", "duration", "cycles")
 
 _TOP_KEYS = ("name", "dt", "cycles", "bound", "steps", "duration", "params", "group",
              "operator", "phase", "units", "analysis", "load", "support", "budget")
@@ -186,6 +188,9 @@ def scene_parameters(path) -> dict:
             from rackstress.scenes.features import BUDGET
 
             settings["budget"] = data.get("budget", BUDGET)
+    if data.get("analysis") == "static":
+        for k in STATIC_UNUSED:        # an equilibrium has no time step, length or cycles
+            settings.pop(k, None)
     return {**{k: v for k, v in settings.items() if v is not None}, **params}
 
 
@@ -674,6 +679,14 @@ def _plain_group(c: _Ctx, t: dict, base: Path, sizing: dict | None = None) -> Gr
     if geometry is not None:
         g.meta["part"] = geometry
     _regions(c, t, g, base)
+    if source == "mesh":        # the part's own surface, placed: the report paints on it
+        from dataclasses import asdict
+
+        from rackstress.scenes.mesh import placement
+
+        file = Path(t["mesh"]) if Path(t["mesh"]).is_absolute() else base / t["mesh"]
+        g.meta["mesh"] = {"file": str(file.resolve()), **asdict(placement(
+            *(t.get(k) for k in ("scale", "rotate", "translate"))))}
     if "material" in t or "solid" in t:
         if source == "positions":
             raise c.error("a material part is a filled lattice (mesh, fill, parts or lattice), "

@@ -299,7 +299,7 @@ class _Vtp:
 
 def write_vtk(run, fields, outdir, progress: bool = False, fmt: str = "paraview",
               measures: str = "all", compressor: str = "zlib", level: int = 1,
-              writer: str = "numpy", deflate: str = "isal") -> Path:
+              writer: str = "numpy", deflate: str = "isal", extra=()) -> Path:
     """Write ``outdir/run.pvd`` and one ``.vtp`` per frame; return the ``.pvd`` path.
     ``fmt``: ``"paraview"`` (compressed, appended) or ``"ovito"`` (module docstring).
     ``measures``: ``"all"`` (every measure, ``rackstress stress``) or ``"default"`` (the leading
@@ -311,6 +311,8 @@ def write_vtk(run, fields, outdir, progress: bool = False, fmt: str = "paraview"
     (:class:`_Vtp`, a third of VTK's time), made by ``deflate``: ``"isal"`` (ISA-L at
     ``level``, 0-3: a third of the time again) or ``"zlib"`` (VTK's own compressed bytes);
     ``"vtk"`` (and every other variant) through ``vtkXMLPolyDataWriter``.
+    ``extra``: (name, write(path)) pairs of further files of the directory (a static run's
+    ``surface.vtp``), written with the series, before it replaces the old directory.
 
     Example
     -------
@@ -447,6 +449,8 @@ def write_vtk(run, fields, outdir, progress: bool = False, fmt: str = "paraview"
                              f'file={quoteattr(REST)}/>')
         lines += ["  </Collection>", "</VTKFile>", ""]
         _write_bytes(tmp / PVD, "\n".join(lines).encode())
+        for name, write in extra:
+            write(tmp / name)
         _swap_in(tmp, outdir)
     except BaseException as exc:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -469,7 +473,8 @@ class VtkJob:
     ``.pvd`` path and the wall time, or raises the child's error. Without fork it writes at
     :meth:`join`."""
 
-    def __init__(self, run, fields, outdir, fmt: str = "paraview", measures: str = "all"):
+    def __init__(self, run, fields, outdir, fmt: str = "paraview", measures: str = "all",
+                 extra=()):
         import tempfile
         import time
 
@@ -480,7 +485,7 @@ class VtkJob:
                                     dir=Path(outdir).parent)
         os.close(fd)
         self.job = ForkedJob(lambda: str(write_vtk(run, fields, Path(outdir), fmt=fmt,
-                                                    measures=measures)), name)
+                                                    measures=measures, extra=extra)), name)
 
     def join(self) -> tuple[Path, float]:
         import time

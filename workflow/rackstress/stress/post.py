@@ -89,8 +89,9 @@ class TooLargeError(StressInputError):
 #: The fit of the desired position (one for summary, pictures, report and files).
 FIT = "robust"
 #: 2: a sediment's paper measure is |p − o| (no rest shape, measures.paper_frames);
-#: 3: the stress fields (extras) and the scene's units kept beside the measures
-CACHE_VERSION = 3
+#: 3: the stress fields (extras) and the scene's units kept beside the measures;
+#: 4: von_mises by patch recovery (the measure's default route)
+CACHE_VERSION = 4
 
 
 @dataclass
@@ -618,6 +619,9 @@ def postprocess(rundir, vtk: bool = True, dump: bool = False, progress: bool = F
     out.mkdir(parents=True, exist_ok=True)
     fields = compute_fields(run, progress=progress)
     group_peaks = peaks(run, fields)
+    from rackstress.stress.headline import is_static
+
+    static = is_static(run.rundir)
     info = {"fit": FIT, "measures": {m: {"label": LABELS[m][0], "units": fields.unit(m)}
                                      for m in fields.measures},
             "default_measure": fields.default,
@@ -633,16 +637,30 @@ def postprocess(rundir, vtk: bool = True, dump: bool = False, progress: bool = F
         info["timings"]["follow_error"] = fields.timings["follow_error"]
     from rackstress.stress import export
 
+    extra = ()
+    if vtk and static and vtk_format == "paraview":
+        # the part's surface, the stress painted on it (stress/surface.py): made here once,
+        # for the VTK directory and for the pictures and 3D view that follow in this process
+        from rackstress.stress.surface import SURFACE_VTP, surfaces_for, write_surface
+
+        t, c = time.perf_counter(), time.process_time()
+        surfs = surfaces_for(run, fields, notes=info.setdefault("notes", []))
+        info["timings"]["surface_s"] = time.perf_counter() - t
+        info["timings"]["surface_cpu_s"] = time.process_time() - c
+        if not info["notes"]:
+            info.pop("notes")
+        extra = ((SURFACE_VTP, lambda path: write_surface(surfs, path)),)
+        info["files"]["surface"] = f"{VTK_DIR}/{SURFACE_VTP}"
     if vtk and background:
         from rackstress.lib.runfiles import PVD
 
         _PENDING[str(out.resolve())] = export.VtkJob(run, fields, out / VTK_DIR, vtk_format,
-                                                      vtk_measures)
+                                                      vtk_measures, extra=extra)
         info["files"]["vtk"] = f"{VTK_DIR}/{PVD}"
     elif vtk:
         t = time.perf_counter()
         pvd = export.write_vtk(run, fields, out / VTK_DIR, progress=progress, fmt=vtk_format,
-                               measures=vtk_measures)
+                               measures=vtk_measures, extra=extra)
         info["files"]["vtk"] = str(pvd.relative_to(out))
         info["timings"]["vtk_s"] = time.perf_counter() - t
     if dump:
@@ -654,7 +672,14 @@ def postprocess(rundir, vtk: bool = True, dump: bool = False, progress: bool = F
     write_json(out / STRESS_JSON, info)
     summary_path = Path(run.rundir) / "summary.json"      # the run's own record
     if summary_path.is_file():
-        add_to_summary(summary_path, info)
+        summary = add_to_summary(summary_path, info)
+        if static:          # what the end-of-run lines lead with (describe)
+            from rackstress.stress.headline import headline
+
+            info["static"] = {"settled": summary.get("settled", True) is not False,
+                              "residual": summary.get("residual"),
+                              "iterations": summary.get("iterations"),
+                              "headline": headline(summary, run.scene, run.rundir)}
     if log is not None:
         for line in describe(info):
             log(line)
@@ -712,7 +737,10 @@ def add_to_summary(summary_path: Path, info: dict) -> dict:
 def describe(info: dict) -> list:
     """Lines for the terminal: the overall peak, and per group the peaks of the paper measure
     and of the strain (the hot-spot measure of an elastic body, README "What the picture
-    means")."""
+    means"). A static run's (``info["static"]``, :func:`describe_static`) say whether it
+    settled and lead with its headline."""
+    if info.get("static"):
+        return describe_static(info)
     lines = []
     pk = info.get("peak")
     if pk:
@@ -730,6 +758,39 @@ def describe(info: dict) -> list:
                      f"{sf['iteration']}, particle {sf['particle']})")
     for w in info.get("warnings") or []:
         lines.append(f"  warning: {w['message']}")
+    for key, path in info["files"].items():
+        lines.append(f"  {key}: {path}")
+    for note in info.get("notes") or []:
+        lines.append(f"  note: {note}")
+    return lines
+
+
+def describe_static(info: dict) -> list:
+    """A static run's lines: its headline stress (:func:`rackstress.stress.headline.headline`:
+    where in the part's own undeformed coordinates, the smallest factor of safety of the same
+    rule) and per group the largest von Mises stress and strain — or, for a run that did not
+    settle, that it gives no result (``summary.json`` keeps the numbers of its state)."""
+    from rackstress.stress.headline import headline_text
+
+    st = info["static"]
+    lines = []
+    if not st["settled"]:
+        lines.append("  NOT SETTLED: no stress or factor of safety is reported: the state is not "
+                     "an equilibrium, do not use its numbers (summary.json keeps them; 'rackstress "
+                     "render RUNDIR --allow-unsettled' shows them in the report)")
+    else:
+        if st.get("headline"):
+            lines.append("  " + headline_text(st["headline"]) + " (undeformed coordinates)")
+        for name, rec in info["groups"].items():
+            shown = [f"{m}={p['value']:.4g}{' ' + p['units'] if m == 'von_mises' else ''} "
+                     f"(particle {p['particle']})"
+                     for m in ("von_mises", "strain") if (p := rec.get(m)) is not None]
+            if shown:
+                lines.append(f"  {name:12s} largest " + "; ".join(shown))
+    kinds = {w["kind"] for w in STRESS_WARNINGS}
+    for w in info.get("warnings") or []:
+        if st["settled"] or w.get("kind") not in kinds:   # no stress of a non-equilibrium
+            lines.append(f"  warning: {w['message']}")
     for key, path in info["files"].items():
         lines.append(f"  {key}: {path}")
     for note in info.get("notes") or []:

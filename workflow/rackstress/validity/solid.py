@@ -49,20 +49,43 @@ from pathlib import Path
 
 import numpy as np
 
-#: Singular points: particles nearer than this many of the part's wall thickness
-#: (:func:`wall_thickness`) to a re-entrant edge, a support or a load are left out of the peak
-#: ratio — Saint-Venant's distance, a length of the part's own, the same at every spacing.
-SINGULAR_WALLS = 1.0
+from rackstress.errors import RackstressError
+
+#: The governing stress is read at least this many spacings from a singular point (a
+#: re-entrant edge, a support, a load): the headline's rule, used by the FE check until the
+#: run records its own singular set and zone (``summary.json`` → ``stress.governing.zone``)
+ZONE_SPACINGS = 2.0
+#: the distance bands of the agreement, in spacings from the nearest singular point
+BANDS = ((0.0, 1.0), (1.0, 2.0), (2.0, 5.0), (5.0, float("inf")))
 #: An FE boundary edge is re-entrant when its dihedral angle is concave by more than this.
 CONCAVE_DEG = 20.0
+#: a surface's facets meeting at more than this (and at most CONCAVE_DEG) tessellate a curved
+#: face: a fillet or a hole, where the FE mesh is refined as at re-entrant edges
+CURVED_DEG = 1.0
 #: Targets of issue 22 (3D part against tetrahedral FEA).
 TARGET = {"spearman": 0.8, "top5_overlap": 0.5, "peak_ratio_error": 0.15}
-#: FE size in spacings (gmsh's largest element edge; cells are cut at the spacing).
-SIZE_SPACINGS = 1.0
+#: FE size in spacings (gmsh's largest element edge; cells are cut at the spacing): P2
+#: elements 2 spacings long carry a linear stress each, and near re-entrant edges they are
+#: graded down to :data:`NEAR_SPACINGS` (docs/fea.md, the sizes measured)
+SIZE_SPACINGS = 2.0
+#: FE size at the re-entrant edges, in spacings
+NEAR_SPACINGS = 0.35
+#: near a re-entrant edge the FE size is this fraction of the distance to it (between the
+#: near and the far size): a quarter of the governing zone's 2 spacings at its boundary
+GRADE = 0.25
+#: the second, coarser mesh that says how far the FE's own answer moved: sizes × this
+COARSER = 2 ** 0.5
+#: memory of the FE solution per tetrahedron beyond the process's own (numbering, assembly,
+#: multigrid hierarchy, projection, evaluation; peak RSS measured on the C-frame: 16.8 kB at
+#: 39,193 tetrahedra, 17.9 kB at 15,494)
+BYTES_PER_ELEMENT = 18.0e3
+#: and what it takes whatever the mesh (gmsh, the imports' first touches)
+MEMORY_FLOOR = 150e6
+#: tetrahedra gmsh makes per size³ of volume (measured: 86,534 in the 18,000 mm³ C-frame at
+#: size 1 mm)
+TETS_PER_SIZE3 = 4.8
 #: FE systems up to this many unknowns are solved directly (SuperLU), larger by AMG-CG
 DIRECT_DOFS = 20_000
-#: relative residual of the FE conjugate-gradient solve
-CG_RTOL = 1e-10
 
 
 # --------------------------------------------------------------------------- meshes
@@ -133,11 +156,14 @@ def drop_slivers(vertices: np.ndarray, faces: np.ndarray, rel: float = 1e-9) -> 
     return np.asarray(f, dtype=np.int64)
 
 
-def surface_mesh(vertices: np.ndarray, faces: np.ndarray, size: float):
+def surface_mesh(vertices: np.ndarray, faces: np.ndarray, size: float, near=None,
+                 near_size: float | None = None):
     """Tetrahedra of the closed surface (vertices, triangles) by gmsh, largest edge ``size``:
     (p 3×N, t 4×M). Slivers are removed (:func:`drop_slivers`), the surface is classified into
     patches (40° feature angle), each reparametrized and remeshed, then the volume meshed
-    (gmsh runs headless, quietly)."""
+    (gmsh runs headless, quietly). ``near`` (k×3 points, the re-entrant edges sampled):
+    elements of :data:`GRADE` × the distance d from them, between ``near_size`` and ``size``
+    — the stress falls steeply there, and the governing stress is read a few spacings away."""
     import gmsh
 
     faces = drop_slivers(vertices, faces)
@@ -157,6 +183,18 @@ def surface_mesh(vertices: np.ndarray, faces: np.ndarray, size: float):
         gmsh.model.geo.addVolume([loop])
         gmsh.model.geo.synchronize()
         gmsh.option.setNumber("Mesh.MeshSizeMax", float(size))
+        if near is not None and len(near) and near_size and near_size < size:
+            pts = [gmsh.model.geo.addPoint(*map(float, x)) for x in np.asarray(near)]
+            gmsh.model.geo.synchronize()
+            fd = gmsh.model.mesh.field.add("Distance")
+            gmsh.model.mesh.field.setNumbers(fd, "PointsList", pts)
+            ft = gmsh.model.mesh.field.add("Threshold")
+            gmsh.model.mesh.field.setNumber(ft, "InField", fd)
+            gmsh.model.mesh.field.setNumber(ft, "SizeMin", float(near_size))
+            gmsh.model.mesh.field.setNumber(ft, "SizeMax", float(size))
+            gmsh.model.mesh.field.setNumber(ft, "DistMin", float(near_size / GRADE))
+            gmsh.model.mesh.field.setNumber(ft, "DistMax", float(size / GRADE))
+            gmsh.model.mesh.field.setAsBackgroundMesh(ft)
         gmsh.model.mesh.generate(3)
         tags, coords, _ = gmsh.model.mesh.getNodes()
         etypes, _, enodes = gmsh.model.mesh.getElements(3)
@@ -173,68 +211,93 @@ def surface_mesh(vertices: np.ndarray, faces: np.ndarray, size: float):
             np.ascontiguousarray(t.reshape(4, -1)))
 
 
+def surface_features(vertices: np.ndarray, faces: np.ndarray, step: float):
+    """Points every ``step`` along the re-entrant edges (concave by > :data:`CONCAVE_DEG`) of a
+    closed triangulated surface, and along its curved faces' facet edges (bent by
+    :data:`CURVED_DEG` … CONCAVE_DEG: a fillet, a hole, tessellated): (concave k×3, curved
+    m×3). Stress concentrates at both; the FE mesh is refined there."""
+    import trimesh
+
+    tm = trimesh.Trimesh(np.asarray(vertices, float), np.asarray(faces, np.int64),
+                         process=True)
+    if not len(tm.face_adjacency):
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    ang = np.degrees(tm.face_adjacency_angles)
+    concave = ~tm.face_adjacency_convex & (ang > CONCAVE_DEG)
+    curved = (ang > CURVED_DEG) & (ang <= CONCAVE_DEG)
+
+    def sample(edges):
+        out = []
+        for a, b in edges:
+            A, B = tm.vertices[a], tm.vertices[b]
+            n = max(2, int(np.ceil(np.linalg.norm(B - A) / step)) + 1)
+            out.append(A + np.linspace(0.0, 1.0, n)[:, None] * (B - A))
+        return np.unique(np.vstack(out), axis=0) if out else np.zeros((0, 3))
+
+    return sample(tm.face_adjacency_edges[concave]), sample(tm.face_adjacency_edges[curved])
+
+
 # --------------------------------------------------------------------------- solution
 @dataclass
 class Solution:
-    """A solved part: mesh, P2 basis, displacement, projected strain; :meth:`at` evaluates."""
+    """A solved part: its P2 mesh (:class:`rackstress.validity.tet.Tet2`), the displacement of
+    every node (n × 3) and the strain projected onto continuous P2 (n × 6); :meth:`at`
+    evaluates."""
 
     mesh: object
-    basis: object
     u: np.ndarray
+    eps: np.ndarray
     E: float
     nu: float
     info: dict = field(default_factory=dict)
 
-    def __post_init__(self):
-        from skfem import ElementTetP2
-
-        self._sb = self.basis.with_element(ElementTetP2())
-        g = self.basis.interpolate(self.u).grad
-        self._eps = _project(self._sb, [0.5 * (g[i][j] + g[j][i]) for i, j in
-                                        ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))])
-
-    def _inside(self, x: np.ndarray) -> np.ndarray:
-        """Points the element search misses (on the boundary) moved a little towards the
-        nearest element's centroid (:func:`rackstress.validity.fea.move_inside`, up to the
-        centroid itself)."""
-        from rackstress.validity.fea import move_inside
-
-        return move_inside(self.mesh, x, fracs=(1e-9, 1e-6, 1e-3, 1e-2, 0.1, 0.5, 1.0))
-
     def at(self, points) -> dict:
         """``displacement`` (n×3), ``stress`` (n×6: xx yy zz xy xz yz) and ``von_mises`` (n) at
-        ``points`` (n×3)."""
-        from rackstress.validity.fea import _probes
-
-        x = self._inside(np.asarray(points, float).reshape(-1, 3))
-        P = _probes(self._sb, x)
-        e = np.stack([P @ c for c in self._eps], axis=1)
-        u = (_probes(self.basis, x) @ self.u).reshape(3, -1).T
-        lam = self.E * self.nu / ((1 + self.nu) * (1 - 2 * self.nu))
-        mu = self.E / (2 * (1 + self.nu))
-        tr = e[:, :3].sum(axis=1)
-        s = 2 * mu * e
-        s[:, :3] += lam * tr[:, None]
+        ``points`` (n×3); a point on or just outside the faceted surface is taken at the
+        nearest point of the mesh (:meth:`~rackstress.validity.tet.Tet2.locate`)."""
+        x = np.asarray(points, float).reshape(-1, 3)
+        u = np.empty((len(x), 3))
+        e = np.empty((len(x), 6))
+        for s in range(0, len(x), 65536):
+            sl = slice(s, s + 65536)
+            el, lam = self.mesh.locate(x[sl])
+            u[sl] = self.mesh.interpolate(self.u, el, lam)
+            e[sl] = self.mesh.interpolate(self.eps, el, lam)
+        s = hooke(e, self.E, self.nu)
         return {"displacement": u, "stress": s, "von_mises": von_mises(s)}
 
+    def nodal(self) -> dict:
+        """The same fields at every P2 node of the mesh (``mesh.X``)."""
+        s = hooke(self.eps, self.E, self.nu)
+        return {"displacement": self.u, "stress": s, "von_mises": von_mises(s)}
 
-def _project(sb, fields) -> list:
-    """L² projections of quadrature-point ``fields`` onto the scalar basis ``sb``: one mass
-    matrix, conjugate gradients with its diagonal (a P2 mass matrix is well conditioned; a
-    sparse factorization of it fills in and takes minutes on 10⁵ tetrahedra)."""
+
+def hooke(e: np.ndarray, E: float, nu: float) -> np.ndarray:
+    """σ = λ tr ε I + 2μ ε of strains (n × 6, tensor shears) → stresses (n × 6)."""
+    lam = E * nu / ((1 + nu) * (1 - 2 * nu))
+    mu = E / (2 * (1 + nu))
+    s = 2 * mu * e
+    s[:, :3] += lam * e[:, :3].sum(axis=1)[:, None]
+    return s
+
+
+def project_strain(mesh, u: np.ndarray, M=None) -> np.ndarray:
+    """The L² projection of ε(u) onto continuous P2 (n × 6): one mass matrix, conjugate
+    gradients with its diagonal (a P2 mass matrix is well conditioned)."""
     import scipy.sparse.linalg as spla
-    from skfem import BilinearForm, LinearForm, asm
 
-    M = asm(BilinearForm(lambda u, v, w: u * v), sb).tocsr()
+    M = mesh.mass() if M is None else M
+    b = mesh.strain_load(u)
     D = spla.LinearOperator(M.shape, matvec=lambda x, d=1.0 / M.diagonal(): d * x)
-    out = []
-    for fld in fields:
-        f = asm(LinearForm(lambda v, w: w["e"] * v), sb, e=fld)
-        scale = max(float(np.abs(f).max()), 1e-300)
-        x, info = spla.cg(M, f / scale, rtol=1e-12, atol=0.0, maxiter=2000, M=D)
+    out = np.zeros_like(b)
+    for c in range(6):
+        scale = float(np.abs(b[:, c]).max())
+        if scale == 0.0:
+            continue
+        x, info = spla.cg(M, b[:, c] / scale, rtol=1e-12, atol=0.0, maxiter=2000, M=D)
         if info != 0:
             raise RuntimeError(f"the stress projection did not converge ({info})")
-        out.append(x * scale)
+        out[:, c] = x * scale
     return out
 
 
@@ -245,69 +308,72 @@ def von_mises(s: np.ndarray) -> np.ndarray:
                    + 3 * (xy ** 2 + xz ** 2 + yz ** 2))
 
 
-def solve(p, t, E: float, nu: float, fixed, forces) -> Solution:
-    """Linear elasticity on the tetrahedra (p, t) with P2 elements.
+def _on_nodes(mesh, a: np.ndarray | None, n_vertices: int, kind: str) -> np.ndarray:
+    """``a`` given per vertex (N rows) or per P2 node: per P2 node. A midpoint is fixed in a
+    direction when both its edge's vertices are; forces given per vertex stay there."""
+    n = mesh.n_nodes
+    if a is None:
+        return np.zeros((n, 3), bool if kind == "fixed" else float)
+    a = np.asarray(a)
+    if a.ndim == 1:
+        a = np.repeat(a[:, None], 3, axis=1)
+    if len(a) == n:
+        return a
+    if len(a) != n_vertices:
+        raise ValueError(f"{kind}: {len(a)} rows for {n_vertices} vertices and {n} nodes")
+    out = np.zeros((n, 3), a.dtype)
+    out[:n_vertices] = a
+    if kind == "fixed":
+        out[n_vertices:] = a[mesh.edges[:, 0]] & a[mesh.edges[:, 1]]
+    return out
 
-    ``fixed``: N×3 bool over the mesh vertices (a direction fixed), or N bool (all three);
-    ``forces``: N×3 nodal forces at the vertices (None: none).
+
+def solve(p, t, E: float, nu: float, fixed, forces, echo=None) -> Solution:
+    """Linear elasticity on the tetrahedra (p 3×N, t 4×M) with P2 elements
+    (:mod:`rackstress.validity.tet`).
+
+    ``fixed``: bool over the vertices (N×3: a direction fixed; N: all three) or over the P2
+    nodes (``Tet2.X``); ``forces``: nodal forces (N×3 at the vertices, or per P2 node; None:
+    none). Up to :data:`DIRECT_DOFS` unknowns a direct sparse solve, above it conjugate
+    gradients preconditioned by a two-grid cycle (P2 smoothing, AMG on P1).
     """
-    from skfem import Basis, ElementTetP2, ElementVector, MeshTet, asm, condense, solve as lsolve
-    from skfem.models.elasticity import lame_parameters, linear_elasticity
+    import time
 
-    mesh = MeshTet(np.ascontiguousarray(p, float), np.ascontiguousarray(t, np.int64))
-    basis = Basis(mesh, ElementVector(ElementTetP2()))
-    K = asm(linear_elasticity(*lame_parameters(E, nu)), basis)
-    nod = basis.nodal_dofs                     # 3 × N: the dofs of each vertex, per direction
-    N = mesh.p.shape[1]
-    fixed = np.asarray(fixed, bool)
-    if fixed.ndim == 1:
-        fixed = np.repeat(fixed[:, None], 3, axis=1)
-    f = np.zeros(basis.N)
-    if forces is not None:
-        for d in range(3):
-            f[nod[d]] += np.asarray(forces, float)[:N, d]
-    D = np.concatenate([nod[d][fixed[:N, d]] for d in range(3)])
-    if not len(D):
-        raise ValueError("no FE node is fixed: the part is not supported")
-    if basis.N <= DIRECT_DOFS:
-        u = lsolve(*condense(K, f, D=D))
-    else:
-        u = _amg_solve(K, f, D, basis)
-    return Solution(mesh, basis, u, float(E), float(nu),
-                    {"vertices": int(N), "tetrahedra": int(mesh.t.shape[1]),
-                     "dofs": int(basis.N)})
-
-
-def _amg_solve(K, f, D, basis) -> np.ndarray:
-    """K u = f with the dofs D fixed at 0, by conjugate gradients preconditioned with
-    smoothed-aggregation AMG (pyamg) on the six rigid-body modes of the dofs' own positions:
-    seconds where SuperLU's fill-in on P2 tetrahedra takes minutes; converged to
-    :data:`CG_RTOL` of the load, far below the discretization error."""
-    import pyamg
     import scipy.sparse.linalg as spla
+    from threadpoolctl import threadpool_limits
 
-    free = np.ones(basis.N, dtype=bool)
-    free[D] = False
-    x = np.asarray(basis.doflocs, float).T                  # N_dofs × 3
-    comp = np.empty(basis.N, dtype=np.int64)
-    for d, idx in enumerate(basis.split_indices()):
-        comp[idx] = d
-    c = x - x.mean(axis=0)
-    B = np.zeros((basis.N, 6))
-    B[np.arange(basis.N), comp] = 1.0
-    for m, (a, b) in enumerate(((1, 2), (2, 0), (0, 1))):      # rotation about axis m
-        B[comp == a, 3 + m] = -c[comp == a, b]
-        B[comp == b, 3 + m] = c[comp == b, a]
-    Kf = K[free][:, free].tocsr()
-    ml = pyamg.smoothed_aggregation_solver(Kf, B=B[free], symmetry="symmetric",
-                                           strength=("symmetric", {"theta": 0.0}),
-                                           max_coarse=500, coarse_solver="splu")
-    u = np.zeros(basis.N)
-    u[free], info = spla.cg(Kf, f[free], rtol=CG_RTOL, maxiter=5000,
-                            M=ml.aspreconditioner(cycle="V"))
-    if info != 0:
-        raise RuntimeError(f"the FE solve did not converge (conjugate gradients, {info} steps)")
-    return u
+    from rackstress.validity.tet import Tet2, eliminate, solve_cg
+
+    c0 = time.process_time()
+    P = np.asarray(p, float)
+    mesh = Tet2(P.T, np.asarray(t).T)
+    fx = _on_nodes(mesh, fixed, P.shape[1], "fixed").astype(bool)
+    f = _on_nodes(mesh, forces, P.shape[1], "forces").astype(float)
+    if not fx.any():
+        raise ValueError("no FE node is fixed: the part is not supported")
+    # BLAS threads only spin in the conjugate gradients' vector operations: one is faster
+    # (3x less CPU measured on a loaded two-core machine)
+    stages = {}
+    with threadpool_limits(1):
+        K = eliminate(mesh.stiffness(E, nu), fx).tocsr()      # one copy: the solver's
+        M = mesh.mass()
+        mesh.release()                                         # the assembly's pattern
+        f[fx] = 0.0
+        dofs = 3 * mesh.n_nodes
+        stages["assembly"] = time.process_time() - c0
+        if dofs <= DIRECT_DOFS:
+            u, its = spla.spsolve(K.tocsc(), f.ravel()), 0
+        else:
+            u, its = solve_cg(mesh, K, f.ravel(), fx)
+        del K
+        stages["solve"] = time.process_time() - c0 - stages["assembly"]
+        u = u.reshape(-1, 3)
+        eps = project_strain(mesh, u, M)
+        stages["projection"] = time.process_time() - c0 - stages["assembly"] - stages["solve"]
+    return Solution(mesh, u, eps, float(E), float(nu),
+                    {"vertices": int(P.shape[1]), "tetrahedra": int(mesh.n_elements),
+                     "nodes": int(mesh.n_nodes), "dofs": int(dofs), "cg_iterations": int(its),
+                     "cpu_s": time.process_time() - c0, "stages_cpu_s": stages})
 
 
 # --------------------------------------------------------------------------- boundary
@@ -316,8 +382,6 @@ def nodal_forces(p: np.ndarray, t: np.ndarray, x: np.ndarray, F: np.ndarray,
     """N×3 vertex forces carrying the particle forces F at x with the same total force and
     moment (module docstring)."""
     from scipy.spatial import cKDTree
-
-    from skfem import MeshTet
 
     P = p.T
     out = np.zeros_like(P)
@@ -336,12 +400,11 @@ def nodal_forces(p: np.ndarray, t: np.ndarray, x: np.ndarray, F: np.ndarray,
                 w = w0 + A.T @ np.linalg.solve(A @ A.T, r)
         if w is None:                                  # the tetrahedron holding it
             if mesh is None:
-                mesh = MeshTet(p, t)
-                find = mesh.element_finder()
-            e = int(find(*xk[:, None])[0])
-            near = t[:, e]
-            V = np.vstack([np.ones(4), P[near].T])
-            w = np.linalg.solve(V, np.r_[1.0, xk])
+                from rackstress.validity.tet import Tet2
+
+                mesh = Tet2(P, np.asarray(t).T)
+            e, lam = mesh.locate(xk[None])
+            near, w = mesh.t[e[0]], lam[0]
         out[near] += w[:, None] * Fk[None, :]
     return out
 
@@ -457,11 +520,114 @@ def wall_thickness(o: np.ndarray, spacing: float, shape=None) -> float:
     return float(np.median(chord))
 
 
+@dataclass
+class Singular:
+    """Where the continuum's stress is unbounded, and how far from it a stress is read.
+
+    ``points`` (k×3): the re-entrant edges sampled, the held and the loaded particles;
+    ``zone``: the exclusion distance (a length) of the governing stress; ``rule``: the rule in
+    one sentence, as the report states it. The headline's own set (the run's singular points)
+    is the same interface."""
+
+    points: np.ndarray
+    zone: float
+    rule: str
+    spacing: float
+
+    def distance(self, x: np.ndarray) -> np.ndarray:
+        """Distance of each point (n×3) to the nearest singular point (inf: none)."""
+        from scipy.spatial import cKDTree
+
+        x = np.asarray(x, float).reshape(-1, 3)
+        if not len(self.points):
+            return np.full(len(x), np.inf)
+        return cKDTree(self.points).query(x)[0]
+
+
+def singular_points(concave: np.ndarray, held_x: np.ndarray, load_x: np.ndarray,
+                    spacing: float) -> Singular:
+    """The FE check's singular set until the run records its own: re-entrant edges (of the
+    part's surface) and the edges of supports and loads on it (``concave``), held and loaded
+    particles; the zone :data:`ZONE_SPACINGS` spacings."""
+    pts = np.concatenate([np.asarray(x, float).reshape(-1, 3) for x in (concave, held_x, load_x)])
+    zone = ZONE_SPACINGS * float(spacing)
+    return Singular(pts, zone, f"stresses within {ZONE_SPACINGS:g} spacings ({zone:.3g}) of a "
+                    "re-entrant edge, a support or a load are left out of the governing "
+                    "stress: the continuum's stress is unbounded there", float(spacing))
+
+
+def region_edges(o: np.ndarray, sel: np.ndarray, spacing: float) -> np.ndarray:
+    """Points on the edges of a support or a load region on the part's surface (k×3): for each
+    particle of the region (``sel``, bool over ``o``) on the surface with a nearest neighbour
+    outside the region, the midpoint of their recovery points — where the region's cells
+    end, on the surface: the line where a fixed or a loaded face meets a free one, singular
+    in the continuum."""
+    from scipy.spatial import cKDTree
+
+    from rackstress.stress.tensor import part_recovery_points
+
+    sel = np.asarray(sel, bool)
+    if not sel.any() or sel.all():
+        return np.zeros((0, 3))
+    a = float(spacing)
+    pts = part_recovery_points(o, a)
+    on_surface = np.any(np.abs(pts - o) > 1e-9 * a, axis=1)
+    pr = cKDTree(o).query_pairs(1.01 * a, output_type="ndarray")
+    if not len(pr):
+        return np.zeros((0, 3))
+    i, j = np.r_[pr[:, 0], pr[:, 1]], np.r_[pr[:, 1], pr[:, 0]]
+    edge = sel[i] & ~sel[j] & on_surface[i]
+    return np.unique(0.5 * (pts[i[edge]] + pts[j[edge]]), axis=0)
+
+
+def bands(values: np.ndarray, fea_vm: np.ndarray, dist: np.ndarray, spacing: float,
+          edges=BANDS) -> list:
+    """Agreement by distance from the singular points, in spacings (``edges``: (lo, hi)
+    pairs): per band the particles in it, Spearman ρ, the peak ratio (particles' largest over
+    FEA's largest in the band) and the median of |particle − FEA| over FEA's largest.
+
+    >>> d = np.array([0.5, 1.5, 3.0, 4.0, 9.0, 12.0])
+    >>> b = bands(np.array([9, 4, 3, 2, 1, 1.0]), np.array([5, 4, 3, 2, 1, 1.1]), d, 1.0)
+    >>> [(x["band"], x["n"], x["peak_ratio"]) for x in b]
+    [('0-1', 1, 1.8), ('1-2', 1, 1.0), ('2-5', 2, 1.0), ('>5', 2, 0.9090909090909091)]
+    """
+    from scipy.stats import spearmanr
+
+    out = []
+    d = np.asarray(dist, float) / float(spacing)
+    for lo, hi in edges:
+        sel = (d >= lo) & (d < hi) & np.isfinite(values) & np.isfinite(fea_vm)
+        v, f = np.asarray(values)[sel], np.asarray(fea_vm)[sel]
+        row = {"band": f"{lo:g}-{hi:g}" if np.isfinite(hi) else f">{lo:g}", "lo": lo,
+               "hi": hi if np.isfinite(hi) else None, "n": int(sel.sum()),
+               "spearman": None, "peak_ratio": None, "median_error": None,
+               "peak_particles": None, "peak_fea": None}
+        if len(v):
+            row.update(peak_particles=float(v.max()), peak_fea=float(f.max()),
+                       peak_ratio=float(v.max() / f.max()) if f.max() > 0 else None,
+                       median_error=float(np.median(np.abs(v - f)) / f.max())
+                       if f.max() > 0 else None)
+            if len(v) > 2 and np.ptp(v) > 0 and np.ptp(f) > 0:
+                row["spearman"] = float(spearmanr(v, f).statistic)
+        out.append(row)
+    return out
+
+
+def governing(fe_x: np.ndarray, fe_vm: np.ndarray, singular: Singular) -> dict:
+    """The FE's governing stress: its largest von Mises stress at least the zone away from
+    every singular point (over the FE's own nodes ``fe_x``), and where."""
+    away = singular.distance(fe_x) >= singular.zone
+    if not away.any():
+        return {"value": None, "position": None}
+    k = np.flatnonzero(away)[int(np.argmax(fe_vm[away]))]
+    return {"value": float(fe_vm[k]), "position": fe_x[k].tolist()}
+
+
 def agreement(values: np.ndarray, fea_vm: np.ndarray, points: np.ndarray, zone: float,
               singular: np.ndarray, to_stress: float | None = None) -> dict:
     """ρ, top-5 % overlap (:func:`rackstress.validity.compare.agreement`) and the peak ratio
-    away from ``singular`` points (k×3), those within ``zone`` (a length: SINGULAR_WALLS ×
-    :func:`wall_thickness`) left out: particle peak × ``to_stress`` / FEA peak."""
+    away from ``singular`` points (k×3), those within ``zone`` (a length) left out: particle
+    peak × ``to_stress`` / FEA peak."""
     from scipy.spatial import cKDTree
 
     from rackstress.validity.compare import agreement as ranks
@@ -495,11 +661,76 @@ def write_json(path: Path, data: dict) -> None:
     tmp.replace(path)
 
 
-def solve_part(o, spacing, shape, held_x, held_mask, load_x, load_F, E, nu, size=None):
-    """FEA of a part: its shape (a mesh :class:`~rackstress.model.regions.Surface` → gmsh; else
-    the union of the cells of ``o``), nodes in held particles' cells fixed in ``held_mask``'s
-    directions, the particle forces spread to the nodes. Returns (Solution, how it was meshed,
-    a note or None, nodal forces, fixed nodes)."""
+class FEAMemoryError(RackstressError):
+    """The FE model would not fit in the memory this process may use (exit 2: choose a
+    coarser ``--size``)."""
+
+
+def available_bytes() -> tuple[float, str]:
+    """The memory this process may still take, and what limits it: the smaller of the
+    system's available memory (``/proc/meminfo`` MemAvailable) and, under ``ulimit -v``, the
+    address space left (RLIMIT_AS − VmSize)."""
+    import resource
+
+    avail, why = float("inf"), "no limit known"
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                avail, why = float(line.split()[1]) * 1024, "the system's available memory"
+    except OSError:
+        pass
+    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    if soft != resource.RLIM_INFINITY:
+        used = 0.0
+        try:
+            for line in Path("/proc/self/status").read_text().splitlines():
+                if line.startswith("VmSize:"):
+                    used = float(line.split()[1]) * 1024
+        except OSError:
+            pass
+        if soft - used < avail:
+            avail, why = max(0.0, soft - used), f"the address-space limit (ulimit -v {soft // 1024})"
+    return avail, why
+
+
+def memory_needed(n_elements: int) -> float:
+    """Bytes the FE solution of ``n_elements`` P2 tetrahedra takes beyond what the process
+    holds: :data:`BYTES_PER_ELEMENT` each (measured: assembly, AMG hierarchy, projection)."""
+    return BYTES_PER_ELEMENT * float(n_elements) + MEMORY_FLOOR
+
+
+def elements_expected(volume: float, size: float) -> float:
+    """Tetrahedra gmsh makes of ``volume`` at largest edge ``size`` (measured
+    :data:`TETS_PER_SIZE3` per size³), before any refinement."""
+    return TETS_PER_SIZE3 * float(volume) / float(size) ** 3
+
+
+def check_memory(n_elements: float, size: float, what: str) -> None:
+    """Refuse (:class:`FEAMemoryError`) an FE model that would not fit, saying how much it
+    needs and which ``--size`` would fit."""
+    need = memory_needed(n_elements)
+    avail, why = available_bytes()
+    if need <= avail:
+        return
+    fit = size * (need / max(avail - MEMORY_FLOOR, 1.0)) ** (1 / 3) * 1.1 \
+        if avail > MEMORY_FLOOR else None
+    raise FEAMemoryError(
+        f"the FE model ({what}: about {n_elements:,.0f} quadratic tetrahedra at FE size "
+        f"{size:.3g}) needs about {need / 2**30:.2f} GB of memory and {avail / 2**30:.2f} GB "
+        f"is free ({why}). Reduce it with a coarser FE mesh"
+        + (f": --size {fit:.3g} needs about {memory_needed(n_elements * (size / fit) ** 3) / 2**30:.2f} GB"
+           if fit else "")
+        + ", or check a run at a larger spacing (fewer particles), or free memory")
+
+
+def solve_part(o, spacing, shape, held_x, held_mask, load_x, load_F, E, nu, size=None,
+               near=None, near_size=None, what="FE mesh", refined: bool = False):
+    """FEA of a part: its shape (a mesh :class:`~rackstress.model.regions.Surface` → gmsh,
+    refined to ``near_size`` around the points ``near``; else the union of the cells of
+    ``o``), nodes in held particles' cells fixed in ``held_mask``'s directions, the particle
+    forces spread to the nodes. Returns (Solution, how it was meshed, a note or None, nodal
+    forces, fixed nodes). The mesh is checked against the memory free before it is solved
+    (:func:`check_memory`)."""
     from rackstress.model.regions import Surface
 
     how, note = "cells", None
@@ -507,16 +738,38 @@ def solve_part(o, spacing, shape, held_x, held_mask, load_x, load_F, E, nu, size
     if isinstance(shape, Surface):
         try:
             pd = shape.polydata
-            p, t = surface_mesh(np.asarray(pd.points), np.asarray(pd.regular_faces), h)
+            p, t = surface_mesh(np.asarray(pd.points), np.asarray(pd.regular_faces), h,
+                                near, near_size)
             how = f"gmsh tetrahedra of {Path(shape.name).name}"
+        except MemoryError:
+            raise
         except Exception as exc:  # noqa: BLE001 - gmsh refused the surface: say so, use cells
             note = f"gmsh could not mesh {shape.name} ({exc}); the union of the cells is used"
     if how == "cells":
         p, t = cell_mesh(o, spacing)
         how = "the union of the particles' cells (6 tetrahedra a cube)"
+        h = spacing
+        if refined:                               # the cells' second mesh: each cut in 8
+            from rackstress.validity.tet import refine
+
+            check_memory(8 * t.shape[1], h / 2, what)
+            q, u = refine(p.T, t.T)
+            p, t, h = q.T, u.T, h / 2
+            how += ", each cut into 8"
+    check_memory(t.shape[1], h, what)
     fixed = fixed_nodes(p, held_x, held_mask, spacing)
     forces = nodal_forces(p, t, load_x, load_F, spacing)
-    return solve(p, t, E, nu, fixed, forces), how, note, forces, fixed
+    try:
+        sol = solve(p, t, E, nu, fixed, forces)
+    except MemoryError:
+        avail, why = available_bytes()
+        raise FEAMemoryError(
+            f"the FE model ({what}: {t.shape[1]:,} quadratic tetrahedra at FE size {h:.3g}) ran "
+            f"out of memory ({avail / 2**30:.2f} GB free now, {why}; about "
+            f"{memory_needed(t.shape[1]) / 2**30:.2f} GB was expected). Reduce it with a "
+            f"coarser FE mesh (--size {1.3 * h:.3g} or more) or free memory") from None
+    sol.info["size"] = h
+    return sol, how, note, forces, fixed
 
 
 # --------------------------------------------------------------------------- a run directory
@@ -625,16 +878,55 @@ def _particle_displacement(rundir: Path, sl: slice):
         return None
 
 
+def compared_state(summary: dict, rundir, allow_unsettled: bool = False,
+                   allow_dynamic: bool = False) -> str:
+    """What the FE check compares, in a sentence; a refusal (ValueError, exit 2) for a static
+    run that did not settle (``summary.json`` → ``status``) or a dynamic run, unless allowed.
+
+    The FE solution is a static equilibrium: against a state that is not one (a part still
+    moving, a solve stopped short) its agreement measures the motion, not the picture."""
+    status = summary.get("status")
+    if summary.get("analysis") == "static":
+        if status == "settled":
+            return "the static equilibrium"
+        why = (f"{rundir}: the static analysis did not settle (summary.json: status "
+               f"\"{status}\", residual {summary.get('residual', float('nan')):.2g} of the "
+               "applied load)")
+        if not allow_unsettled:
+            raise ValueError(why + ": its state is not an equilibrium, and the FE solution "
+                             "is one, so their agreement would measure the unbalanced forces. "
+                             "Settle it first (docs/faults.md), or pass --allow-unsettled to "
+                             "compare it anyway, labelled as such")
+        return f"a state that did not settle (residual {summary.get('residual', 0):.2g})"
+    where = f"step {summary.get('steps')} of {summary.get('steps_requested')}"
+    if not allow_dynamic:
+        raise ValueError(f"{rundir}: a dynamic run (status \"{status}\", analysis not "
+                         f"static): its last frame ({where}) is a moving state, and the FE "
+                         "solution is the static equilibrium under the same supports and "
+                         "loads, so their agreement would measure the motion. Run the scene "
+                         "with analysis = \"static\", or pass --allow-dynamic to compare "
+                         "the last frame anyway, labelled as such")
+    return (f"the last frame of a dynamic run ({where}) against the static FE solution: "
+            "agreement only as far as that frame is at rest")
+
+
 def check_run(rundir, E: float | None = None, nu: float | None = None,
               size: float | None = None, group: str | None = None,
-              measure: str | None = None, echo=print, keep: bool = False) -> dict:
+              measure: str | None = None, echo=print, keep: bool = False,
+              allow_unsettled: bool = False, allow_dynamic: bool = False,
+              converge: bool = True) -> dict:
     """Solve a run's part by FEA and compare it with the particle measure (module docstring).
 
-    Writes ``fea.json`` (the agreement and how the FEA was set up), ``fea.npz``
-    (``fea_von_mises``, ``fea_displacement`` per particle of the part, the particle measure),
-    ``vtk/fea.vtp`` (the part's particles with both fields as point arrays), ``vtk/fea_mesh.vtu``
-    (the FE mesh with ``von_mises`` and ``displacement``), ``figures/fea.png`` (both fields side
-    by side) and the report's "Finite-element check" section.
+    Refuses a static run that did not settle and a dynamic run (:func:`compared_state`)
+    unless allowed, and an FE model that would not fit in memory (:class:`FEAMemoryError`).
+    With ``converge`` the part is solved at two FE sizes (× :data:`COARSER`), and the change
+    of the FE's governing stress between them is reported. Writes ``fea.json`` (the
+    agreement overall and by distance band, the governing point, how the FEA was set up),
+    ``fea.npz`` (``fea_von_mises``, ``fea_displacement`` per particle of the part, the
+    particle measure), ``vtk/fea.vtp`` (the part's particles with both fields as point
+    arrays), ``vtk/fea_mesh.vtu`` (the FE mesh with ``von_mises`` and ``displacement``),
+    ``figures/fea.png`` (both fields on one colour scale) and the report's "Finite-element
+    check" section.
 
     Example
     -------
@@ -642,11 +934,13 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
     """
     import time
 
+    from rackstress.model.regions import Surface
     from rackstress.runs.resume import rebuild_scene
 
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     rundir = Path(rundir)
     summary = json.loads((rundir / "summary.json").read_text())
+    state = compared_state(summary, rundir, allow_unsettled, allow_dynamic)
     rebuilt = None
     try:
         scene = rebuild_scene(rundir)
@@ -676,48 +970,131 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
         raise ValueError(f"part '{name}' carries no external load (boundary: {bsource}); a "
                          "load that reaches it by contact from another group is not modelled "
                          "by the FEA")
-    echo(f"fea: {name}: meshing and solving …")
-    sol, how, note, forces, fixed = solve_part(
-        g.o, spacing, shape, g.o[hk[hin]], np.asarray(bnd["held_mask"], bool)[hin],
-        g.o[lk[lin]], np.asarray(bnd["load_force"], float)[lin], E_, nu_, size)
-    res = sol.at(g.o)
+    held_x, load_x = g.o[hk[hin]], g.o[lk[lin]]
+    h = float(size) if size else SIZE_SPACINGS * spacing
+    near_size = NEAR_SPACINGS * spacing * (h / (SIZE_SPACINGS * spacing))
+    curved = np.zeros((0, 3))
+    if isinstance(shape, Surface):
+        pd = shape.polydata
+        concave, curved = surface_features(np.asarray(pd.points),
+                                           np.asarray(pd.regular_faces), near_size)
+    else:
+        concave = concave_edges(*cell_mesh(g.o, spacing))
+    # a support fixed in every direction has an edge where the stress is unbounded; a roller
+    # or a symmetry plane (some directions free) is a smooth boundary, not singular
+    full = np.asarray(bnd["held_mask"], bool)[hin].all(axis=1)
+    held_sel = np.zeros(g.n, bool)
+    held_sel[hk[hin][full]] = True
+    load_sel = np.zeros(g.n, bool)
+    load_sel[lk[lin]] = True
+    edges = np.concatenate([region_edges(g.o, held_sel, spacing),
+                            region_edges(g.o, load_sel, spacing)])
+    singular = singular_points(np.concatenate([concave, edges]), held_x[full], load_x,
+                               spacing)
+    volume = g.n * spacing ** 3
+    sizes = [h * COARSER, h] if converge else [h]
+    check_memory(elements_expected(volume, h), h, "expected before meshing")
+    sols = []
+    for k, hs in enumerate(sizes):
+        echo(f"fea: {name}: meshing and solving at FE size {hs:.3g} "
+             f"({k + 1} of {len(sizes)}) …")
+        sol, how, note, forces, fixed = solve_part(
+            g.o, spacing, shape, held_x, np.asarray(bnd["held_mask"], bool)[hin], load_x,
+            np.asarray(bnd["load_force"], float)[lin], E_, nu_, hs,
+            np.concatenate([concave, curved, edges]), near_size * hs / h,
+            what=f"FE size {hs:.3g}")
+        sols.append(sol)
+        if how.startswith("the union"):          # cells: the second mesh is each cut in 8
+            if converge:
+                echo(f"fea: {name}: solving again with each tetrahedron cut into 8 …")
+                try:
+                    sols.append(solve_part(
+                        g.o, spacing, shape, held_x, np.asarray(bnd["held_mask"], bool)[hin],
+                        load_x, np.asarray(bnd["load_force"], float)[lin], E_, nu_,
+                        what="cells cut into 8", refined=True)[0])
+                    how += " (and each cut into 8)"
+                except FEAMemoryError as exc:
+                    note = "; ".join(x for x in (note, f"not solved at a second size: {exc}")
+                                     if x)
+            break
+    sol = sols[-1]
     mname, values = _particle_measure(rundir, sl, measure)
+    points = _particle_points(g.o, spacing, mname)
+    res = sol.at(points)
     G = E_ / (2 * (1 + nu_))
     to_stress = 1.0 if mname == "von_mises" else (2 * math.sqrt(3) * G if mat or E else None)
-    singular = np.concatenate([concave_edges(sol.mesh.p, sol.mesh.t), g.o[hk[hin]],
-                               g.o[lk[lin]]])
-    zone = SINGULAR_WALLS * wall_thickness(g.o, spacing, shape)
-    agree = agreement(values, res["von_mises"], g.o, zone, singular, to_stress)
+    sv = values * to_stress if to_stress is not None else None
+    dist = singular.distance(points)
+    agree = agreement(values, res["von_mises"], points, singular.zone, singular.points,
+                      to_stress)
+    fe_gov = [governing(s_.mesh.X, s_.nodal()["von_mises"], singular) for s_ in sols]
+    gov = dict(fe_gov[-1])
+    if len(sols) > 1 and fe_gov[0]["value"] and gov["value"]:
+        gov["coarser"] = {"size": sols[0].info["size"], "value": fe_gov[0]["value"],
+                          "position": fe_gov[0]["position"]}
+        gov["moved"] = abs(gov["value"] - fe_gov[0]["value"]) / gov["value"]
+    if sv is not None and gov["value"]:
+        k = int(np.argmin(np.linalg.norm(points - np.asarray(gov["position"]), axis=1)))
+        away = dist >= singular.zone
+        kp = np.flatnonzero(away)[int(np.nanargmax(sv[away]))] if away.any() else None
+        gov.update(particle=int(sl.start + k + 1), particle_position=points[k].tolist(),
+                   particle_distance=float(np.linalg.norm(points[k] - gov["position"])),
+                   particle_value=float(sv[k]), ratio=float(sv[k] / gov["value"]),
+                   particles_governing=None if kp is None else float(sv[kp]),
+                   particles_governing_ratio=None if kp is None else float(sv[kp] / gov["value"]))
     F_tot = np.asarray(bnd["load_force"], float)[lin].sum(axis=0)
     data = {
         "group": name, "particles": int(g.n), "spacing": spacing, "measure": mname,
         "to_stress": to_stress, "units": str(bnd.get("units", summary.get("units", "paper"))),
+        "stress_unit": _stress_unit(summary, bnd), "compared": state,
         "material": {"E": E_, "nu": nu_, "from": "summary.json" if mat else
                      ("options" if E is not None else "default (E = 1, ν = 0.3)")},
         "boundary": bsource, "mesh": how, "fe": sol.info,
+        "fe_meshes": [s_.info for s_ in sols],
         "note": "; ".join(x for x in (rebuilt and rebuilt + ": the part is the union of its "
                                       "particles' cells", note) if x) or None,
         "held_particles": int(hin.sum()), "fixed_fe_nodes": int(fixed.any(axis=1).sum()),
         "loaded_particles": int(lin.sum()), "total_force": F_tot,
         "fe_total_force": forces.sum(axis=0),
-        "agreement": agree, "target": TARGET,
+        "zone": {"length": singular.zone, "spacings": singular.zone / spacing,
+                 "rule": singular.rule, "singular_points": int(len(singular.points))},
+        "agreement": agree,
+        "bands": bands(sv if sv is not None else values, res["von_mises"], dist, spacing),
+        "governing": gov, "target": TARGET,
         "fea_peak_von_mises": float(res["von_mises"].max()),
         "fea_max_displacement": float(np.linalg.norm(res["displacement"], axis=1).max()),
     }
     data["wall_s"] = time.perf_counter() - t0
+    data["cpu_s"] = time.process_time() - c0
     disp = _particle_displacement(rundir, sl)
-    _write_outputs(rundir, g.o, values, mname, res, disp, sol, data)
+    _write_outputs(rundir, points, values, mname, res, disp, sol, data)
     if keep:          # for a benchmark's other stress routes: the same points and FEA field
-        data.update(_o=g.o, _fea_vm=res["von_mises"], _singular=singular, _values=values,
-                    _slice=sl, _zone=zone)
+        data.update(_o=g.o, _points=points, _fea_vm=res["von_mises"], _singular=singular,
+                    _values=values, _slice=sl, _zone=singular.zone, _sol=sol)
     return data
+
+
+def _stress_unit(summary: dict, bnd: dict) -> str:
+    units = str(bnd.get("units", summary.get("units", "paper")))
+    return {"mm-N-s": "MPa", "SI": "Pa"}.get(units, "stress units")
+
+
+def _particle_points(o: np.ndarray, spacing: float, mname: str) -> np.ndarray:
+    """Where each particle's measure is read: the stress's recovery point (the default
+    ``patch`` route: the centre inside the part, its cell's surface point on the surface,
+    :func:`rackstress.stress.tensor.part_recovery_points`), else the particle's position."""
+    if mname == "von_mises":
+        from rackstress.stress.tensor import part_recovery_points
+
+        return part_recovery_points(o, spacing)
+    return np.asarray(o, float)
 
 
 def _write_outputs(rundir: Path, o, values, mname, res, disp, sol, data) -> None:
     import pyvista as pv
 
     np.savez(rundir / "fea.npz", fea_von_mises=res["von_mises"],
-             fea_displacement=res["displacement"], **{mname: values})
+             fea_displacement=res["displacement"], points=o, **{mname: values})
     (rundir / "vtk").mkdir(exist_ok=True)
     cloud = pv.PolyData(np.ascontiguousarray(o))
     cloud.point_data["fea_von_mises"] = res["von_mises"]
@@ -727,20 +1104,30 @@ def _write_outputs(rundir: Path, o, values, mname, res, disp, sol, data) -> None
         cloud.point_data["displacement"] = disp
     cloud.save(rundir / "vtk" / "fea.vtp")
     m = sol.mesh
-    grid = pv.UnstructuredGrid({pv.CellType.TETRA: m.t.T.copy()}, m.p.T.copy())
-    nodal = sol.at(m.p.T)
-    grid.point_data["von_mises"] = nodal["von_mises"]
-    grid.point_data["displacement"] = nodal["displacement"]
+    nv = len(m.p)
+    grid = pv.UnstructuredGrid({pv.CellType.TETRA: m.t.copy()}, m.p.copy())
+    nodal = sol.nodal()
+    grid.point_data["von_mises"] = nodal["von_mises"][:nv]
+    grid.point_data["displacement"] = nodal["displacement"][:nv]
     grid.save(rundir / "vtk" / "fea_mesh.vtu")
     (rundir / "figures").mkdir(exist_ok=True)
-    picture(o, values, mname, res["von_mises"], rundir / "figures" / "fea.png", data)
+    picture(o, values * (data["to_stress"] or 1.0), mname, res["von_mises"],
+            rundir / "figures" / "fea.png", data)
     data["files"] = ["fea.json", "fea.npz", "vtk/fea.vtp", "vtk/fea_mesh.vtu", "figures/fea.png"]
     write_json(rundir / "fea.json", data)
 
 
-def picture(o, values, mname, fea_vm, path: Path, data: dict) -> None:
-    """The particle measure and FEA's von Mises side by side (each on its own scale, grey to
-    red as the report's pictures; viewed along the part's thinnest axis)."""
+def colour_limit(values: np.ndarray, fea_vm: np.ndarray) -> float:
+    """The one upper limit of both panels of fea.png: the larger of the two fields' 99.5th
+    percentiles, so neither panel's hot spot is clipped more than the other's."""
+    v = [np.nanpercentile(x, 99.5) for x in (values, fea_vm) if np.isfinite(x).any()]
+    return float(max(v)) if v and max(v) > 0 else 1.0
+
+
+def picture(o, values, mname, fea_vm, path: Path, data: dict):
+    """The particle stress and FEA's von Mises side by side on one colour scale (grey to red
+    as the report's pictures; viewed along the part's thinnest axis) with one colour bar in
+    the run's stress unit; returns the figure's two colour limits (for a test)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -751,17 +1138,28 @@ def picture(o, values, mname, fea_vm, path: Path, data: dict) -> None:
     order = np.argsort(o[:, axis])              # the near side drawn last
     fig, axes = plt.subplots(1, 2, figsize=(11, 5), constrained_layout=True)
     ag = data["agreement"]
+    unit = data.get("stress_unit") or "stress units"
+    label = "von Mises stress" if data.get("to_stress") is not None else mname
+    vmax = colour_limit(values, fea_vm) if data.get("to_stress") is not None else None
+    limits = []
     for ax, v, title in ((axes[0], values, f"particles: {mname}"),
                          (axes[1], fea_vm, "FEA: von Mises stress")):
         sc = ax.scatter(o[order, a], o[order, b], c=v[order], s=8, cmap="Reds",
-                        vmin=0, vmax=np.nanpercentile(v, 99.5))
+                        vmin=0, vmax=vmax if vmax is not None else np.nanpercentile(v, 99.5))
+        limits.append(sc.get_clim())
         ax.set_aspect("equal")
         ax.set_title(title)
         ax.set_xlabel("xyz"[a])
         ax.set_ylabel("xyz"[b])
-        fig.colorbar(sc, ax=ax, shrink=0.8)
+        if vmax is None:
+            fig.colorbar(sc, ax=ax, shrink=0.8)
+    if vmax is not None:
+        fig.colorbar(sc, ax=list(axes), shrink=0.8, label=f"{label} [{unit}]")
+    gv = data.get("governing") or {}
     fig.suptitle(f"{data['group']}: Spearman ρ = {ag['spearman']:.3f}, top-5 % overlap = "
-                 f"{ag['top5_overlap']:.2f}" + ("" if ag.get("peak_ratio") is None else
-                                                f", peak ratio {ag['peak_ratio']:.3f}"))
+                 f"{ag['top5_overlap']:.2f}" + ("" if gv.get("ratio") is None else
+                                                f", at FEA's governing point "
+                                                f"{gv['ratio']:.3f}"))
     fig.savefig(path, dpi=110)
     plt.close(fig)
+    return limits

@@ -1,0 +1,163 @@
+"""The stress recovery and the FE check that compares where it matters: patch recovery on a
+field with a known answer, the distance bands and the governing point on a synthetic set,
+fea.png's one colour scale, and ``rackstress fea``'s refusals in real processes (a static run
+that did not settle, an FE model that would not fit in memory, under ``ulimit -v`` too)."""
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+
+from rackstress.stress import tensor as T
+from rackstress.validity import solid
+from test_faults import QUIET, RS, rs
+from test_faults_static import hinge
+
+
+def _block(nx, ny, nz, a=1.0):
+    return np.array([[x, y, z] for x in range(nx) for y in range(ny) for z in range(nz)],
+                    float) * a
+
+
+def test_patch_recovery_reads_a_linear_field_on_the_surface():
+    """A stress varying linearly through a bar (σ_xx = 5 + 2x − 3y, σ_yz = 1 + z): the
+    recovered value at each particle's recovery point is the field there — on the faces half a
+    spacing out (x = −0.25 … 2.75 at spacing 0.5), at the centre inside — by the per-frame
+    path (patch_matrix) and the direct fit alike."""
+    a = 0.5
+    o = _block(6, 4, 3, a)
+    pts = T.part_recovery_points(o)
+    faces = T.free_faces(o, a)
+    assert np.array_equal(pts, o + 0.5 * a * faces)
+    assert pts[:, 0].min() == pytest.approx(-0.25) and pts[:, 0].max() == pytest.approx(2.75)
+    assert np.all(pts[T.interior(faces)] == o[T.interior(faces)])
+
+    def field(x):
+        s = np.zeros((len(x), 6))
+        s[:, 0] = 5 + 2 * x[:, 0] - 3 * x[:, 1]
+        s[:, 3] = 1 + x[:, 2]
+        return s
+
+    want = field(pts)
+    W = T.patch_matrix(o, a, pts)
+    assert np.asarray(W @ field(o)) == pytest.approx(want, abs=1e-9)
+    assert T.patch_recover(o, field(o), a, pts) == pytest.approx(want, abs=1e-9)
+    # a constant field stays itself: each row of W sums to 1
+    assert np.asarray(W.sum(axis=1)).ravel() == pytest.approx(np.ones(len(o)))
+
+
+def test_patch_recovery_keeps_parts_apart():
+    """Two blocks side by side, each with its own constant stress: a particle's patch takes
+    only its own part (labels), so each reads its own value right up to the gap."""
+    o = np.vstack([_block(3, 3, 3), _block(3, 3, 3) + [3.0, 0, 0]])
+    lab = np.repeat([0, 1], 27)
+    s = np.where(lab[:, None] == 0, 1.0, 7.0) * np.ones((1, 6))
+    pts = np.vstack([T.part_recovery_points(o[:27]), T.part_recovery_points(o[27:])])
+    rec = np.asarray(T.patch_matrix(o, 1.0, pts, lab) @ s)
+    assert rec[:27] == pytest.approx(np.ones((27, 6)))
+    assert rec[27:] == pytest.approx(7 * np.ones((27, 6)))
+
+
+def test_bands_and_the_governing_point_of_a_synthetic_set():
+    """Particles at known distances (in spacings 0.5, 1.5, 3, 4, 8, 12) from one singular
+    point: each band holds those particles; its peak ratio is the particles' largest over
+    FEA's largest in it, its median error the median |particle − FEA| over FEA's largest
+    (hand calculation); the governing point is FEA's largest at ≥ 2 spacings."""
+    a = 2.0
+    d = np.array([0.5, 1.5, 3.0, 4.0, 8.0, 12.0]) * a
+    x = np.column_stack([d, np.zeros(6), np.zeros(6)])
+    sing = solid.Singular(np.zeros((1, 3)), 2 * a, "two spacings", a)
+    assert sing.distance(x) == pytest.approx(d)
+    part = np.array([90.0, 50, 40, 31, 20, 10])
+    fea = np.array([100.0, 60, 42, 30, 20, 12])
+    b = {r["band"]: r for r in solid.bands(part, fea, sing.distance(x), a)}
+    assert [b[k]["n"] for k in ("0-1", "1-2", "2-5", ">5")] == [1, 1, 2, 2]
+    assert b["2-5"]["peak_ratio"] == pytest.approx(40 / 42)
+    assert b["2-5"]["median_error"] == pytest.approx(np.median([2.0, 1.0]) / 42)
+    assert b[">5"]["peak_ratio"] == pytest.approx(20 / 20)
+    assert b[">5"]["spearman"] is None                       # two points: no rank test
+    gov = solid.governing(x, fea, sing)
+    assert gov["value"] == 42 and gov["position"] == [6.0, 0.0, 0.0]
+
+
+def test_both_panels_of_fea_png_share_one_colour_scale(tmp_path):
+    """fea.png: the particles' and FEA's von Mises on one scale (the larger 99.5th
+    percentile), one colour bar labelled in the run's unit."""
+    rng = np.random.default_rng(1)
+    o = rng.uniform(0, 10, (400, 3)) * [1, 1, 0.2]
+    part, fea = rng.uniform(0, 50, 400), rng.uniform(0, 80, 400)
+    data = {"group": "part", "to_stress": 1.0, "stress_unit": "MPa",
+            "agreement": {"spearman": 0.9, "top5_overlap": 0.5}, "governing": {}}
+    lim = solid.picture(o, part, "von_mises", fea, tmp_path / "fea.png", data)
+    assert lim[0] == lim[1] == (0.0, pytest.approx(np.percentile(fea, 99.5)))
+    assert (tmp_path / "fea.png").stat().st_size > 10_000
+
+
+# ------------------------------------------------------------------ real processes
+@pytest.fixture(scope="module")
+def settled(tmp_path_factory):
+    """The clamped steel bar of the static faults, settled."""
+    d = tmp_path_factory.mktemp("check")
+    out = d / "run"
+    r = rs("run", hinge(d), "--out", out, *QUIET, timeout=300)
+    assert r.returncode == 0, r.stderr
+    return out
+
+
+@pytest.mark.lammps
+def test_fea_refuses_a_run_that_did_not_settle(tmp_path, settled):
+    """A run directory whose summary says "not settled" (as a static run that stopped short
+    leaves it): exit 2 with the reason; --allow-unsettled compares it and says so."""
+    d = tmp_path / "unsettled"
+    shutil.copytree(settled, d)
+    s = json.loads((d / "summary.json").read_text())
+    s.update(status="not settled", settled=False, residual=3e-3)
+    (d / "summary.json").write_text(json.dumps(s))
+    r = rs("fea", d, timeout=300)
+    assert r.returncode == 2, r.stderr
+    assert "did not settle" in r.stderr and "--allow-unsettled" in r.stderr
+    assert "Traceback" not in r.stderr and not (d / "fea.json").exists()
+    r = rs("fea", d, "--allow-unsettled", "--no-converge", timeout=300)
+    assert r.returncode == 0, r.stderr
+    data = json.loads((d / "fea.json").read_text())
+    assert "did not settle" in data["compared"]
+
+
+@pytest.mark.lammps
+@pytest.mark.slow
+def test_fea_of_a_settled_run_reports_bands_and_its_own_convergence(settled):
+    """The settled bar: the agreement by band, the zone and its rule, the FE's governing
+    stress at two FE sizes (how much it moved), the particles' value at its point."""
+    r = rs("fea", settled, timeout=600)
+    assert r.returncode == 0, r.stderr
+    data = json.loads((settled / "fea.json").read_text())
+    assert data["compared"] == "the static equilibrium"
+    assert [b["band"] for b in data["bands"]] == ["0-1", "1-2", "2-5", ">5"]
+    assert sum(b["n"] for b in data["bands"]) == data["particles"]
+    assert data["zone"]["spacings"] == 2.0 and "spacings" in data["zone"]["rule"]
+    gov = data["governing"]
+    assert len(data["fe_meshes"]) == 2 and gov["coarser"]["size"] > data["fe"]["size"]
+    assert 0 <= gov["moved"] < 0.1 and 0.5 < gov["ratio"] < 1.5
+    assert "spacings from a singular point" in r.stdout and "moved" in r.stdout
+
+
+@pytest.mark.lammps
+def test_fea_refuses_an_fe_model_that_would_not_fit(settled):
+    """--size far below the spacing: the FE model's memory is estimated before meshing and
+    refused with how much it needs and which --size fits (exit 2, nothing written); under
+    ``ulimit -v`` the limit is the address space left, named in the message."""
+    before = set(p.name for p in settled.iterdir())
+    r = rs("fea", settled, "--size", "0.01", timeout=300)
+    assert r.returncode == 2, r.stderr
+    assert "needs about" in r.stderr and "--size" in r.stderr and "GB" in r.stderr
+    assert "Traceback" not in r.stderr
+    assert set(p.name for p in settled.iterdir()) == before
+    # 3.5 GB of address space: the imports fit, 300,000 tetrahedra (5 GB) do not
+    r = subprocess.run(["bash", "-c", f"ulimit -v 3500000; exec {RS} fea {settled} --size 0.15"],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2, r.stderr
+    assert "ulimit -v 3500000" in r.stderr and "needs about" in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr and "MemoryError" not in r.stderr

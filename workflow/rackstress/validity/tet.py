@@ -1,0 +1,335 @@
+"""Quadratic tetrahedra (P2) for linear elasticity: numbered, assembled, solved and evaluated a
+bounded chunk of elements at a time.
+
+What ``rackstress fea`` needs of a finite-element code is small — one isotropic material, one
+element, point supports and point loads — and it must stay within a minute and two gigabytes
+for a 20,000-particle part (docs/fea.md). scikit-fem's general forms build each element
+matrix from 900 symbolic products and keep every basis function's values and gradients at
+every quadrature point (for 86,534 tetrahedra: 376 s and gigabytes before the solve), so the
+few formulas are written here, vectorized over elements:
+
+* **numbering** — the 10 nodes of a P2 tetrahedron are its 4 vertices and the midpoints of its
+  6 edges (01, 12, 02, 03, 13, 23, scikit-fem's order); each node carries u_x, u_y, u_z, so the
+  stiffness matrix is a block-sparse matrix of 3 × 3 node blocks (scipy BSR), the layout
+  smoothed-aggregation AMG aggregates by node;
+* **shape functions** in barycentric coordinates λ: vertex i, λ_i(2λ_i − 1); edge (i, j),
+  4λ_iλ_j; their gradients from ∇λ, constant on an affine tetrahedron;
+* **stiffness** K_e = Σ_q w_q V (λ ∇·N_a ∇·N_b + μ(∇N_a·∇N_b I + ∇N_b ⊗ ∇N_a)), a 4-point
+  rule of degree 2, exact for the product of two linear gradients;
+* **mass** (the L² projection of the strain) with an 11-point rule of degree 4, exact;
+* **supports** by symmetric elimination in place (rows and columns of the fixed components
+  zeroed, the diagonal kept), so the block structure stays;
+* **solution** — conjugate gradients preconditioned by a two-grid cycle in the degree: Gauss–
+  Seidel on P2, smoothed-aggregation AMG (pyamg, on the six rigid-body modes) on the P1
+  vertices (:func:`p_multigrid`);
+* **evaluation** — a point is found in one of the tetrahedra with the nearest centroids
+  (k-d tree; its barycentric coordinates ≥ −1e-9), and a point a faceted surface leaves just
+  outside is taken at the nearest point of its best tetrahedron (λ clipped to [0, 1]).
+
+Example
+-------
+>>> import numpy as np
+>>> p = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
+>>> m = Tet2(p, np.array([[0, 1, 2, 3]]))
+>>> m.n_nodes, m.X[4].tolist()                        # 4 vertices, 6 midpoints; edge 01
+(10, [0.5, 0.0, 0.0])
+>>> round(float(m.vol[0]), 6)
+0.166667
+"""
+from __future__ import annotations
+
+import numpy as np
+
+#: local edges of a tetrahedron, in the order of its nodes 4 … 9
+EDGES = ((0, 1), (1, 2), (0, 2), (0, 3), (1, 3), (2, 3))
+#: elements assembled or evaluated at a time (bounds the work arrays: 30 × 30 doubles each)
+CHUNK = 8192
+#: conjugate-gradient tolerance of the elastic solve (relative residual), far below the
+#: discretization error of the stress (a per cent at the spacing)
+CG_RTOL = 1e-8
+#: a point is inside a tetrahedron when its smallest barycentric coordinate is above this
+INSIDE_TOL = -1e-9
+
+
+def _quadrature(order: int):
+    """(λ (q, 4), weights (q,) summing to 1) of scikit-fem's rule of ``order`` on the
+    reference tetrahedron."""
+    from skfem.quadrature import get_quadrature
+    from skfem.refdom import RefTet
+
+    X, W = get_quadrature(RefTet, order)
+    lam = np.vstack([1.0 - X.sum(axis=0), X]).T
+    return lam, W / W.sum()
+
+
+def shape(lam: np.ndarray) -> np.ndarray:
+    """P2 shape functions (…, 10) at barycentric coordinates ``lam`` (…, 4)."""
+    out = np.empty(lam.shape[:-1] + (10,))
+    out[..., :4] = lam * (2.0 * lam - 1.0)
+    for k, (i, j) in enumerate(EDGES):
+        out[..., 4 + k] = 4.0 * lam[..., i] * lam[..., j]
+    return out
+
+
+def shape_grad(lam: np.ndarray, gl: np.ndarray) -> np.ndarray:
+    """Gradients (e, q, 10, 3) of the shape functions at ``lam`` (q, 4) or (e, q, 4), with
+    ``gl`` = ∇λ of each element (e, 4, 3)."""
+    lam = np.broadcast_to(lam, (len(gl),) + lam.shape[-2:])
+    out = np.empty(lam.shape[:2] + (10, 3))
+    out[:, :, :4] = (4.0 * lam - 1.0)[..., None] * gl[:, None, :, :]
+    for k, (i, j) in enumerate(EDGES):
+        out[:, :, 4 + k] = 4.0 * (lam[..., i, None] * gl[:, None, j]
+                                  + lam[..., j, None] * gl[:, None, i])
+    return out
+
+
+class Tet2:
+    """A tetrahedral mesh with its P2 nodes: ``X`` (n_nodes, 3), ``nodes`` (e, 10), ``vol``
+    and ``gl`` (∇λ, e × 4 × 3) per element. ``p`` (N, 3) vertices, ``t`` (e, 4)."""
+
+    def __init__(self, p, t):
+        p = np.ascontiguousarray(p, float)
+        t = np.array(t, dtype=np.int64).reshape(-1, 4)
+        J = np.stack([p[t[:, k]] - p[t[:, 0]] for k in (1, 2, 3)], axis=2)   # columns
+        det = np.linalg.det(J)
+        neg = det < 0
+        t[neg, 1], t[neg, 2] = t[neg, 2].copy(), t[neg, 1].copy()
+        J[neg] = J[neg][:, :, [1, 0, 2]]
+        det = np.abs(det)
+        self.p, self.t = p, t
+        self.vol = det / 6.0
+        Jinv = np.linalg.inv(J)                       # rows: ∇λ_1, ∇λ_2, ∇λ_3
+        self.gl = np.concatenate([-Jinv.sum(axis=1, keepdims=True), Jinv], axis=1)
+        e = np.sort(np.concatenate([t[:, [i, j]] for i, j in EDGES]), axis=1)
+        uniq, inv = np.unique(e, axis=0, return_inverse=True)
+        self.edges = uniq
+        nv = len(p)
+        self.nodes = np.concatenate([t, nv + inv.reshape(len(EDGES), -1).T], axis=1)
+        self.X = np.concatenate([p, 0.5 * (p[uniq[:, 0]] + p[uniq[:, 1]])])
+        self.n_nodes = len(self.X)
+        self._tree = None
+
+    def release(self) -> None:
+        """Forget the assembly's sparsity pattern (100 positions an element)."""
+        self._pat = None
+
+    @property
+    def n_elements(self) -> int:
+        return len(self.t)
+
+    # ------------------------------------------------------------------ assembly
+    def _pattern(self):
+        """The node-block sparsity (indptr, indices) and, per element, the position of each
+        of its 100 blocks in it (e, 100), built once."""
+        if getattr(self, "_pat", None) is None:
+            n = self.n_nodes
+            rows = np.repeat(self.nodes, 10, axis=1)
+            cols = np.tile(self.nodes, (1, 10))
+            key = rows * n + cols
+            uniq = np.unique(key)
+            r = uniq // n
+            indptr = np.searchsorted(r, np.arange(n + 1))
+            pos = np.searchsorted(uniq, key)
+            self._pat = (indptr, (uniq % n).astype(np.int32), pos)
+        return self._pat
+
+    def stiffness(self, E: float, nu: float):
+        """K (3n × 3n, scipy BSR of 3 × 3 node blocks) of isotropic linear elasticity."""
+        import scipy.sparse as sp
+
+        lam_, mu = E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
+        indptr, indices, pos = self._pattern()
+        lq, wq = _quadrature(2)
+        data = np.zeros((len(indices), 9))
+        for s in range(0, self.n_elements, CHUNK):
+            sl = slice(s, s + CHUNK)
+            G = shape_grad(lq, self.gl[sl])                      # e, q, 10, 3
+            w = self.vol[sl, None] * wq[None, :]                 # e, q
+            Gw = G * w[..., None, None]
+            # K_ab,ij = Σ_q w (λ G_ai G_bj + μ G_aj G_bi + μ δ_ij G_a·G_b)
+            Kb = lam_ * np.einsum("eqai,eqbj->eabij", Gw, G)
+            Kb += mu * np.einsum("eqaj,eqbi->eabij", Gw, G)
+            dot = mu * np.einsum("eqak,eqbk->eab", Gw, G)
+            for d in range(3):
+                Kb[..., d, d] += dot
+            P = pos[sl].ravel()
+            Kb = Kb.reshape(-1, 9)
+            for c in range(9):
+                data[:, c] += np.bincount(P, weights=Kb[:, c], minlength=len(indices))
+        n = self.n_nodes
+        return sp.bsr_matrix((data.reshape(-1, 3, 3), indices, indptr), shape=(3 * n, 3 * n))
+
+    def mass(self):
+        """M (n × n, CSR) of the scalar P2 basis: ∫ N_a N_b (degree-4 rule, exact)."""
+        import scipy.sparse as sp
+
+        indptr, indices, pos = self._pattern()
+        lq, wq = _quadrature(4)
+        N = shape(lq)                                            # q, 10
+        ref = np.einsum("q,qa,qb->ab", wq, N, N).ravel()         # per unit volume
+        data = np.bincount(pos.ravel(), weights=(self.vol[:, None] * ref[None]).ravel(),
+                           minlength=len(indices))
+        return sp.csr_matrix((data, indices, indptr), shape=(self.n_nodes,) * 2)
+
+    def strain_load(self, u: np.ndarray) -> np.ndarray:
+        """b (n, 6): ∫ ε(u) N_a per node, ε in xx yy zz xy xz yz (tensor shears), for the L²
+        projection M e = b of the strain onto continuous P2."""
+        lq, wq = _quadrature(4)
+        N = shape(lq)
+        U = u.reshape(-1, 3)
+        out = np.zeros((self.n_nodes, 6))
+        for s in range(0, self.n_elements, CHUNK):
+            sl = slice(s, s + CHUNK)
+            G = shape_grad(lq, self.gl[sl])                      # e, q, 10, 3
+            g = np.einsum("eqak,eai->eqik", G, U[self.nodes[sl]])   # ∂u_i/∂x_k
+            eps = _sym6(g)                                       # e, q, 6
+            b = np.einsum("q,qa,eqc->eac", wq, N, eps) * self.vol[sl, None, None]
+            idx = self.nodes[sl].ravel()
+            for c in range(6):
+                out[:, c] += np.bincount(idx, weights=b[..., c].ravel(), minlength=self.n_nodes)
+        return out
+
+    # ------------------------------------------------------------------ evaluation
+    def locate(self, x: np.ndarray, k: int = 12):
+        """(element, λ) of each point (m, 3): the tetrahedron holding it among the ``k``
+        nearest centroids, else (a point on or just outside the surface) the candidate it is
+        least outside of, λ clipped to [0, 1] — its nearest point there."""
+        from scipy.spatial import cKDTree
+
+        x = np.asarray(x, float).reshape(-1, 3)
+        if self._tree is None:
+            self._tree = cKDTree(self.p[self.t].mean(axis=1))
+        elem = np.zeros(len(x), dtype=np.int64)
+        lam = np.zeros((len(x), 4))
+        todo = np.arange(len(x))
+        for kk in (min(k, self.n_elements), min(8 * k, self.n_elements)):
+            if not len(todo):
+                break
+            _, cand = self._tree.query(x[todo], k=kk)
+            cand = np.asarray(cand).reshape(len(todo), kk)
+            L = self._bary(x[todo], cand)                         # m, k, 4
+            score = L.min(axis=2)
+            best = np.argmax(score, axis=1)
+            r = np.arange(len(todo))
+            elem[todo] = cand[r, best]
+            lam[todo] = L[r, best]
+            todo = todo[score[r, best] < INSIDE_TOL]
+        lam = np.clip(lam, 0.0, 1.0)
+        lam /= lam.sum(axis=1, keepdims=True)
+        return elem, lam
+
+    def _bary(self, x, cand):
+        x0 = self.p[self.t[cand, 0]]                              # m, k, 3
+        l123 = np.einsum("mkij,mkj->mki", self.gl[cand][:, :, 1:], x[:, None, :] - x0)
+        return np.concatenate([1.0 - l123.sum(axis=2, keepdims=True), l123], axis=2)
+
+    def interpolate(self, values: np.ndarray, elem: np.ndarray, lam: np.ndarray) -> np.ndarray:
+        """Nodal ``values`` (n, c) at located points: (m, c)."""
+        return np.einsum("ma,mac->mc", shape(lam), values[self.nodes[elem]])
+
+
+def refine(p: np.ndarray, t: np.ndarray):
+    """Each tetrahedron cut into 8 (its corners' four and the inner octahedron's four, about
+    the diagonal between the midpoints of edges 02 and 13): (p N'×3, t M'×4), conforming —
+    the second, finer mesh of a part made of cells.
+
+    >>> p = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
+    >>> q, u = refine(p, np.array([[0, 1, 2, 3]]))
+    >>> len(q), len(u), round(float(Tet2(q, u).vol.sum()), 6)
+    (10, 8, 0.166667)
+    """
+    m = Tet2(p, t)
+    n = m.nodes                                   # 0-3 corners, 4: 01, 5: 12, 6: 02, 7: 03,
+    kids = [(0, 4, 6, 7), (1, 4, 5, 8), (2, 5, 6, 9), (3, 7, 8, 9),     # 8: 13, 9: 23
+            (4, 6, 7, 8), (4, 5, 6, 8), (6, 7, 8, 9), (5, 6, 8, 9)]
+    return m.X, np.concatenate([n[:, list(k)] for k in kids])
+
+
+def _sym6(g: np.ndarray) -> np.ndarray:
+    """Symmetric parts of gradients g[..., i, k] as (…, 6): xx yy zz xy xz yz."""
+    return np.stack([g[..., 0, 0], g[..., 1, 1], g[..., 2, 2],
+                     0.5 * (g[..., 0, 1] + g[..., 1, 0]), 0.5 * (g[..., 0, 2] + g[..., 2, 0]),
+                     0.5 * (g[..., 1, 2] + g[..., 2, 1])], axis=-1)
+
+
+def rigid_modes(X: np.ndarray) -> np.ndarray:
+    """The six rigid-body motions of the nodes ``X`` (n, 3) as (3n, 6), interleaved x y z."""
+    n = len(X)
+    c = X - X.mean(axis=0)
+    B = np.zeros((n, 3, 6))
+    for d in range(3):
+        B[:, d, d] = 1.0
+    for m, (a, b) in enumerate(((1, 2), (2, 0), (0, 1))):      # rotation about axis m
+        B[:, a, 3 + m] = -c[:, b]
+        B[:, b, 3 + m] = c[:, a]
+    return B.reshape(3 * n, 6)
+
+
+def eliminate(K, fixed: np.ndarray):
+    """K with the rows and columns of the ``fixed`` components (n, 3 bool) zeroed and their
+    diagonal kept (symmetric elimination of u = 0 in place; the BSR structure stays)."""
+    n = K.shape[0] // 3
+    rows = np.repeat(np.arange(n), np.diff(K.indptr))
+    keep_r = ~fixed[rows]                                      # nnzb, 3
+    keep_c = ~fixed[K.indices]
+    diag = K.diagonal().copy()
+    K.data *= keep_r[:, :, None] & keep_c[:, None, :]
+    on = rows == K.indices
+    for d in range(3):
+        sel = on & fixed[rows, d]
+        K.data[sel, d, d] = diag[3 * rows[sel] + d]
+    return K
+
+
+def p_multigrid(mesh, K, fixed: np.ndarray):
+    """A preconditioner for the P2 stiffness ``K`` (supports eliminated): one V-cycle of
+    a two-grid method in the polynomial degree — a symmetric Gauss–Seidel sweep on P2, the
+    residual restricted to the P1 vertices (a midpoint's value is its edge's mean), smoothed-
+    aggregation AMG (pyamg, on the six rigid-body modes) on the Galerkin P1 operator, and back.
+    Aggregating the P1 graph rather than the P2 one halves the conjugate gradients' work
+    (61 against 89 iterations, 5.1 against 10.7 s of CPU on the C-frame's 62k unknowns)."""
+    import pyamg
+    import scipy.sparse as sp
+    from pyamg.multilevel import MultilevelSolver
+    from pyamg.relaxation.smoothing import change_smoothers
+
+    nv, n = len(mesh.p), mesh.n_nodes
+    mid = np.arange(nv, n)
+    Pn = sp.csr_matrix((np.r_[np.ones(nv), np.full(2 * len(mid), 0.5)],
+                        (np.r_[np.arange(nv), mid, mid],
+                         np.r_[np.arange(nv), mesh.edges[:, 0], mesh.edges[:, 1]])),
+                       shape=(n, nv))
+    free = (~fixed.ravel()).astype(float)
+    P = (sp.diags(free) @ sp.kron(Pn, sp.identity(3), format="csr")).tocsr()
+    Kc = K.tocsr()
+    A1 = (P.T @ Kc @ P).tocsr()
+    empty = A1.diagonal() == 0                       # fixed vertex components
+    A1 = (A1 + sp.diags(empty.astype(float))).tobsr(blocksize=(3, 3))
+    B1 = rigid_modes(mesh.p)
+    B1[empty] = 0.0
+    ml1 = pyamg.smoothed_aggregation_solver(A1, B=B1, symmetry="symmetric",
+                                            strength=("symmetric", {"theta": 0.0}),
+                                            max_coarse=1000)
+    top = MultilevelSolver.Level()
+    top.A, top.P, top.R = Kc, P, P.T.tocsr()
+    ml = MultilevelSolver([top] + ml1.levels, coarse_solver="pinv")
+    gs = ("gauss_seidel", {"sweep": "symmetric"})
+    change_smoothers(ml, presmoother=gs, postsmoother=gs)
+    return Kc, ml.aspreconditioner(cycle="V")
+
+
+def solve_cg(mesh, K, f: np.ndarray, fixed: np.ndarray, rtol: float = CG_RTOL):
+    """K u = f by conjugate gradients preconditioned by :func:`p_multigrid`; returns
+    (u, iterations)."""
+    import scipy.sparse.linalg as spla
+
+    Kc, M = p_multigrid(mesh, K, fixed)
+    it = [0]
+
+    def count(_):
+        it[0] += 1
+
+    u, info = spla.cg(Kc, f, rtol=rtol, atol=0.0, maxiter=2000, M=M, callback=count)
+    if info != 0:
+        raise RuntimeError(f"the FE solve did not converge (conjugate gradients, {info} steps)")
+    return u, it[0]
