@@ -28,7 +28,7 @@ def run(args, cwd, python=None):
 
 
 def bar(tmp_path) -> Path:
-    m = (Manifold.cube((60.0, 10.0, 6.0))
+    m = (Manifold.cube((30.0, 10.0, 6.0))
          - Manifold.cylinder(10.0, 2.5, 2.5, 32).translate((10.0, 5.0, -2.0))).to_mesh()
     trimesh.Trimesh(np.asarray(m.vert_properties)[:, :3], np.asarray(m.tri_verts)).export(
         tmp_path / "bar.stl")
@@ -71,7 +71,7 @@ on = "bar"
 where = { hole = "H1" }
 [[load]]
 on = "bar"
-where = { face = { near = [60, 5, 3] } }
+where = { face = { near = [30, 5, 3] } }
 force = [0, -10, 0]
 ''')
     out = run(["run", "s.toml", "--engine", "reference", "--no-render", "--out", "r"], tmp_path)
@@ -116,7 +116,7 @@ on = "bar"
 where = { hole = "H1" }
 [[load]]
 on = "bar"
-where = { face = { near = [60, 5, 3] } }
+where = { face = { near = [30, 5, 3] } }
 force = [0, -10, 0]
 ''')
     out = run(["run", "s.toml", "--engine", "reference", "--no-render", "--out", "r"], tmp_path)

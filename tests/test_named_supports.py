@@ -9,7 +9,7 @@ Expected values by hand (statics) and by an independent path:
   each roller's reaction lies along its face's normal, λ1 = P·cos 30° on the bottom, λ2 = P·sin
   30° on the side (equilibrium of three forces);
 * a plate with a hole pulled along its length, whole and halved by a symmetry plane through
-  the hole: the same stress (the whole part is the independent path);
+  the hole: the same stress around the hole (the whole part is the independent path);
 * scenes with bad names and dynamic runs with supports the engines cannot hold, as real
   ``rackstress run`` processes: exit 2 naming the file and field.
 """
@@ -45,9 +45,10 @@ def reactions(sc, p):
     return -(f - ConstraintMap.of_scene(sc).unbalanced(f))
 
 
-def bar_scene(tmp_path, first: str) -> Path:
-    """A 100 × 10 × 6 aluminium bar with holes of r 2.5 (axis z) at x = 10 and 90, the first
-    held as ``first``, the second by a cylindrical support, 100 N in −y at mid-span."""
+def bar_scene(tmp_path, first: str, spacing: float = 1.5) -> Path:
+    """A 100 × 10 × 6 aluminium bar with holes of r 2.5 (axis z) at x = 10 and 90 (particles
+    ``spacing`` apart), the first held as ``first``, the second by a cylindrical support,
+    100 N in −y at mid-span."""
     bar = Manifold.cube((100.0, 10.0, 6.0))
     for x in (10.0, 90.0):
         bar -= Manifold.cylinder(10.0, 2.5, 2.5, 48).translate((x, 5.0, -2.0))
@@ -59,7 +60,7 @@ analysis = "static"
 [[group]]
 name = "bar"
 mesh = "bar.stl"
-spacing = 1.0
+spacing = {spacing}
 material = "aluminium"
 [[support]]
 on = "bar"
@@ -207,10 +208,16 @@ def test_symmetry_plane_halves_the_part(tmp_path):
     index = {k: i for i, k in enumerate(key(pos[False]))}
     match = np.array([index[k] for k in key(pos[True])])
     whole, half = vm[False][match], vm[True]
-    # the peak (at the hole's side, y = 14) and the field two spacings from the plane on
-    assert half.max() == pytest.approx(whole.max(), rel=0.02)
-    away = pos[True][:, 1] >= 12
-    rel = np.abs(half[away] - whole[away]) / whole.max()
+    # compared around the hole (10 < x < 30), ten spacings from the clamp and the loaded end:
+    # the end's load is shared by its particles, and the half's row on the plane takes a whole
+    # share (100 N over 11 rows against 200 N over 21: 4.5 % less a particle), so at the loaded
+    # face the two differ by how the load is spread, not by the plane
+    o = pos[True]
+    hole = (o[:, 0] > 10) & (o[:, 0] < 30)
+    # the peak there (at the hole's side, y = 14) and the field two spacings from the plane on
+    assert half[hole].max() == pytest.approx(whole[hole].max(), rel=0.02)
+    away = hole & (o[:, 1] >= 12)
+    rel = np.abs(half[away] - whole[away]) / whole[hole].max()
     assert np.median(rel) < 0.01 and rel.max() < 0.05
 
 
@@ -243,7 +250,7 @@ def test_dynamic_pin_is_exit_2(tmp_path):
 
 def test_spacing_chosen_and_set(tmp_path):
     toml = bar_scene(tmp_path, "pinned")
-    text = toml.read_text().replace("spacing = 1.0\n", "")
+    text = toml.read_text().replace("spacing = 1.5\n", "")
     toml.write_text(text)
     sc = scenes.load(str(toml))
     geo = sc.groups["bar"].meta["part"]
