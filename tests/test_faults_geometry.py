@@ -1,6 +1,7 @@
 """Failures of the geometry path (docs/faults.md), each as a real ``rackstress`` process: a
 face named on a part that is not one mesh, a second support on a pinned ring, STEP files gmsh
-cannot read or without gmsh, and the warning for walls thinner than three spacings."""
+cannot read or without gmsh, the warning for walls thinner than three spacings, and a file of
+several bodies (its bodies listed, and the split it advises followed)."""
 from __future__ import annotations
 
 import json
@@ -127,3 +128,41 @@ force = [0, -10, 0]
     sizing = json.loads((tmp_path / "r" / "summary.json").read_text())["groups"]["bar"]["sizing"]
     assert sizing["spacing"] == 1.0 and sizing["chosen"] is None
     assert sizing["thin_walls"] and all(2.4 < w["thickness"] < 3 for w in sizing["thin_walls"])
+
+
+def test_several_bodies_are_listed_and_split_as_advised(tmp_path):
+    """Two boxes 20 × 10 × 10 overlapping by half (x 0–20 and 10–30) in one STL: refused,
+    each body listed; the advised line of Python and ``parts = [...]`` then fill the union,
+    30 × 10 × 10 = 3,000 mm³ (by construction), once: 3,000 particles at spacing 1, not the
+    bodies' 4,000."""
+    import re
+
+    a, b = trimesh.creation.box((20, 10, 10)), trimesh.creation.box((20, 10, 10))
+    a.apply_translation((10, 5, 5))
+    b.apply_translation((20, 5, 5))
+    trimesh.util.concatenate([a, b]).export(tmp_path / "two.stl")
+    (tmp_path / "s.toml").write_text(HEAD + """
+[[group]]
+name = "p"
+mesh = "two.stl"
+spacing = 1.0
+material = "aluminium"
+""")
+    out = run(["run", "s.toml", "--engine", "reference", "--no-render", "--out", "r"], tmp_path)
+    assert out.returncode == 2 and not (tmp_path / "r").exists()
+    err = out.stderr
+    assert "two.stl" in err and "It holds 2 bodies" in err
+    assert err.count("12 triangles, volume 2000") == 2
+    advice = re.search(r'python -c "(.*?)"\)', err).group(1)
+    parts = re.search(r"parts = (\[.*?\])", err).group(1)
+    assert subprocess.run([sys.executable, "-c", advice], cwd=tmp_path).returncode == 0
+    (tmp_path / "s.toml").write_text(HEAD + f"""
+[[group]]
+name = "p"
+parts = {parts}
+spacing = 1.0
+""")
+    from rackstress import scenes
+
+    sc = scenes.load(str(tmp_path / "s.toml"))
+    assert abs(sc.n_particles - 3000) <= 0.03 * 3000

@@ -279,9 +279,8 @@ def _checked(file: str, mtime_ns: int):
         raise SceneError(
             f"mesh file {file}: the surface touches or intersects itself ({len(e)} edge(s) "
             f"shared by more than two triangles, e.g. at "
-            f"{np.round(tm.vertices[e[0][0]], 6).tolist()}); its inside is not defined. Union "
-            "the bodies in the CAD tool before exporting, or give each body as its own part (a "
-            "group's parts are united)")
+            f"{np.round(tm.vertices[e[0][0]], 6).tolist()}); its inside is not defined. "
+            + _bodies_advice(tm, file))
     if not tm.is_winding_consistent:
         raise SceneError(f"mesh file {file}: the triangles are not consistently oriented "
                          "(some normals point inwards); re-export the solid from the CAD tool")
@@ -290,12 +289,35 @@ def _checked(file: str, mtime_ns: int):
         raise SceneError(
             f"mesh file {file}: the surface overlaps or intersects itself (e.g. at "
             f"{np.round(where[0], 6).tolist()} a ray is inside it twice); its inside is not "
-            "defined. Union the bodies in the CAD tool before exporting, or give each body as "
-            "its own part (a group's parts are united)")
+            "defined. " + _bodies_advice(tm, file))
     volume = float(tm.volume)
     if not abs(volume) > 0:
         raise SceneError(f"mesh file {file}: encloses no volume")
     return tm.vertices.copy(), tm.faces.copy(), volume
+
+
+def _bodies_advice(tm, file: str) -> str:
+    """What to do with a surface whose inside is not defined: for a file of several bodies
+    (connected shells, trimesh's ``split``), each body named by its triangles, volume and box
+    in the file's units, and how to write them as files of their own for a group's ``parts``
+    (united, overlaps filled once); else: union the bodies in the CAD tool."""
+    bodies = tm.split(only_watertight=False)
+    if len(bodies) < 2:
+        return ("Union the bodies in the CAD tool before exporting, or give each body as its "
+                "own part (a group's parts are united)")
+    stem = Path(file).stem
+    listed = "; ".join(
+        f"body {i}: {len(b.faces)} triangles, volume {abs(b.volume):.4g}, box "
+        f"{np.round(b.bounds[0], 4).tolist()} … {np.round(b.bounds[1], 4).tolist()}"
+        + ("" if b.is_watertight else " (not closed)")
+        for i, b in enumerate(bodies, 1))
+    names = ", ".join(f'{{ mesh = "{stem}-{i}.stl" }}' for i in range(1, len(bodies) + 1))
+    return (f"It holds {len(bodies)} bodies ({listed}). Union them in the CAD tool before "
+            "exporting, or write each to a file of its own (python -c \"import trimesh; "
+            f"[b.export(f'{stem}-{{i}}.stl') for i, b in enumerate(trimesh.load("
+            f"'{Path(file).name}').split(only_watertight=False), 1)]\") and fill the group "
+            f"from them: parts = [{names}] (a group's parts are united: overlaps are filled "
+            "once; the scale, rotate and translate go into each)")
 
 
 def self_intersections(tm, rays_per_axis: int = 24, seed: int = 0) -> np.ndarray:
