@@ -201,6 +201,15 @@ def test_symmetry_plane_halves_the_part(tmp_path):
         out = tmp_path / f"run{half}"
         summary = run(sc, out, engine="reference", progress=False)
         assert summary["settled"]
+        # summary.json's reactions: one per [[support]], summing to minus the load
+        rows = summary["reactions"]
+        assert [r["support"] for r in rows] == ["[[support]] #1"] + (
+            ["[[support]] #2 (symmetry)"] if half else [])
+        total = np.sum([r["force"] for r in rows], axis=0)
+        np.testing.assert_allclose(total, -np.asarray(summary["applied_load"]["force"]),
+                                   atol=1e-5 * (100 if half else 200))
+        if half:        # the plane pushes along its normal (y) only
+            assert rows[1]["force"][0] == 0 and rows[1]["force"][2] == 0
         vm[half] = ParticleStress(load_run(out)).run().results.von_mises[-1]
         pos[half] = sc.original_positions()
     # the half's particles are the whole's with y ≥ 10 (one lattice, a layer on the plane)
@@ -281,6 +290,15 @@ def test_pinned_run_on_lammps_then_fea_refuses(tmp_path):
     assert out.returncode == 0, out.stderr
     summary = json.loads((tmp_path / "r" / "summary.json").read_text())
     assert summary["settled"] and summary["residual_engine"] <= summary["tolerance"]
+    # a reaction per [[support]]: each hole carries half the 100 N (moments about the pin)
+    pin, cyl = summary["reactions"]
+    assert pin["support"] == "[[support]] #1 (pinned)"
+    assert cyl["support"] == "[[support]] #2 (cylindrical)"
+    assert pin["force"][1] == pytest.approx(50, abs=0.1) and cyl["force"][1] == pytest.approx(
+        50, abs=0.1)
+    # no moment about the pin's axis (z through (10, 5)): M_z − (x·F_y − y·F_x) at the pin
+    about_pin = pin["moment"][2] - (10 * pin["force"][1] - 5 * pin["force"][0])
+    assert abs(about_pin) <= 1e-4 * 100 * 80
     fea = run_cli(["fea", str(tmp_path / "r")], tmp_path)
     assert fea.returncode == 2
     assert "not x, y or z" in fea.stderr and "pinned" in fea.stderr
