@@ -138,6 +138,11 @@ def test_fea_of_a_settled_run_reports_bands_and_its_own_convergence(settled):
     assert [b["band"] for b in data["bands"]] == ["0-1", "1-2", "2-5", ">5"]
     assert sum(b["n"] for b in data["bands"]) == data["particles"]
     assert data["zone"]["spacings"] == 2.0 and "spacings" in data["zone"]["rule"]
+    # the zone is the headline's: the run's singular points (singular.npz) and its zone, the
+    # bar 4 thick at spacing 1 so two spacings govern (0.4 × 4 < 2)
+    s = json.loads((settled / "summary.json").read_text())
+    assert data["zone"]["source"] == "singular.npz"
+    assert data["zone"]["length"] == pytest.approx(s["stress"]["governing"]["zone"]) == 2.0
     gov = data["governing"]
     assert len(data["fe_meshes"]) == 2 and gov["coarser"]["size"] > data["fe"]["size"]
     assert 0 <= gov["moved"] < 0.1 and 0.5 < gov["ratio"] < 1.5

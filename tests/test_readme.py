@@ -93,8 +93,8 @@ def test_own_part_in_five_minutes(checkout):
     peak = s["stress"]["peak"]
     assert peak["measure"] == "von_mises" and peak["units"] == "MPa"
     # hand calculation (examples/bracket/static.toml): 100 N on a 26 mm lever arm of a
-    # 3 × 16 mm section gives σ = M·(h/2)/I ≈ 108 MPa at the arm's root surface; the one-bolt
-    # support and the re-entrant corners concentrate it further, so the peak is of that order
+    # 3 × 16 mm section gives σ = M·(h/2)/I ≈ 108 MPa at the arm's root surface; the bolts'
+    # edges and the re-entrant corners concentrate it further, so the peak is of that order
     assert 50 < peak["value"] < 500
     assert (run / "figures" / "sheet.png").stat().st_size > 0
     assert (run / "report.html").stat().st_size > 0

@@ -146,15 +146,20 @@ def main():
 @click.option("--integrator", type=Choice(["euler", "verlet"]), default="euler",
               show_default=True, help="euler: Eq. 5, the paper's; verlet: the second-order mode "
               "(leapfrog with trapezoidal damping).")
+@click.option("--refine", is_flag=True,
+              help="A static part: solve it again at spacing/sqrt(2) into OUT/refine and give "
+                   "the governing stress's error bar (Richardson; docs/stress.md). With "
+                   "--resume OUT on a finished run: only the refinement.")
 def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progress, do_render,
         restart_every=None, resume_dir=None, allow_unstable=False, integrator="euler",
-        dump_all=False, dump_text=False):
+        dump_all=False, dump_text=False, refine=False):
     """Run SCENE (a built-in name or a .toml file) and write a run directory.
 
     Exit status (errors.py): 0 done, 2 bad input or a run directory in use or holding another
     run, 3 diverged (frames and summary kept), 4 the run is done but its pictures could not be
     rendered, 5 the disk refused a write (full, read-only, no permission), 6 a static analysis
-    did not settle (its state and summary kept).
+    did not settle (its state and summary kept); with --refine, 2 or 6 for the refined run
+    leave the first run whole.
     """
     import gc
 
@@ -180,6 +185,11 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
                     f"so {opts} cannot be given with it (the checkpoint fixes them); to change "
                     "them start a new run, e.g. with --overwrite")
             out = check_out(resume_dir)
+            if refine and (Path(out) / "summary.json").is_file():
+                rec = json.loads((Path(out) / "scene.json").read_text())
+                _refine(out, scene, sets, rec.get("engine", engine), rec.get("mode", mode),
+                        progress, do_render)
+                return
         elif scene is None:
             raise click.UsageError("Missing argument 'SCENE' (or give --resume RUNDIR).")
         elif out is not None:
@@ -196,8 +206,15 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
             _may_exit_now()
             return
         shown = progress and rank() == 0
+        if refine and not (scene.endswith(".toml") or Path(scene).is_file()):
+            raise RackstressError(f"scene '{scene}' is a built-in scene: --refine refines the "
+                                  "parts of a scene file (.toml) filled at a spacing")
         with phase(f"building the scene {scene}", shown):
             sc = _load_scene(scene, steps, dt, sets, integrator)
+        if refine:
+            from rackstress.stress.refine import check_refinable
+
+            check_refinable(sc)
         if rank() == 0:
             said, warned = run_mod.sizing_lines(sc)
             for line in said:
@@ -267,6 +284,8 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
                                       keep_checkpoints=keep_checkpoints, head_start=head_start,
                                       guards=not _AHEAD)
             _finish(summary, out, do_render, progress, dump_text)
+        if refine and summary.get("settled") is not False:
+            _refine(out, scene, sets, engine, mode, progress, do_render)
         if summary.get("settled") is False:
             from rackstress.errors import EXIT_UNSETTLED
 
@@ -284,6 +303,40 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
     finally:
         gc.enable()
         _quit_ahead()
+
+
+def _refine(out: Path, scene, sets, engine: str, mode: str, progress: bool,
+            do_render: bool) -> None:
+    """``--refine``: the finished run in ``out`` again at spacing/√2 into ``out/refine``, its
+    error bar into ``out/summary.json`` and the report (:mod:`rackstress.stress.refine`)."""
+    from rackstress import scenes
+    from rackstress.lib.mpi import rank
+    from rackstress.stress.governing import describe
+    from rackstress.stress.refine import refine
+
+    if rank() != 0:
+        return
+    rec = json.loads((Path(out) / "scene.json").read_text())
+    spec = scene or rec.get("source")
+    if not spec:
+        raise RackstressError(f"{out}: its scene file is not recorded; give it: rackstress run "
+                              f"SCENE.toml --resume {out} --refine")
+    overrides = scenes.parse_overrides(sets) if sets else {
+        k: v for k, v in (rec.get("params") or {}).items()
+        if k not in ("file", "integrator", "dt", "analysis", "spacing_scale", "steps")}
+    from rackstress.runs.rundir import locked
+
+    with locked(out, create=False):
+        with phase(f"refining: the scene again at spacing/sqrt(2) into {Path(out) / 'refine'}",
+                   progress, ticker=False):
+            err = refine(out, spec, overrides, engine=engine, mode=mode, progress=progress,
+                         echo=click.echo)
+        summary = json.loads((Path(out) / "summary.json").read_text())
+        st = summary.get("stress") or {}
+        for line in describe(st.get("governing"), None, err):
+            click.echo(line)
+        if do_render:
+            _write_report(out)
 
 
 def _own_streams() -> bool:
@@ -495,7 +548,7 @@ def _post_and_render(out: Path, do_render: bool, progress: bool, dump_text: bool
 
         squeeze = CompressJob(Path(out) / "trajectory.dump")   # read meanwhile; renamed at the end
     try:
-        _post_run(out, progress, background=do_render)
+        info = _post_run(out, progress, background=do_render)
         if do_render:
             from rackstress.render.pictures import render_default
 
@@ -515,6 +568,11 @@ def _post_and_render(out: Path, do_render: bool, progress: bool, dump_text: bool
             click.echo(f"  pictures: {rep.outdir} ({len(rep.files)} files, "
                        f"{time.perf_counter() - t0:.1f} s)")
         wait_files(out)
+        if info and info.get("governing"):        # the headline, last (docs/stress.md)
+            from rackstress.stress.post import describe_governing
+
+            for line in describe_governing(info):
+                click.echo(line)
     except Exception as err:  # noqa: BLE001 - the run itself is complete and kept
         click.echo(f"rackstress: error: the run finished, but writing its VTK files failed: "
                    f"{err} (retry with 'rackstress stress {out}')", err=True)
@@ -666,8 +724,9 @@ def _post_run(out, progress, background: bool = False):
         click.echo(f"rackstress: error: the run finished, but post-processing its stress "
                    f"failed: {err} (retry with 'rackstress stress {out}')", err=True)
         sys.exit(EXIT_RENDER)
-    for line in describe(info):
+    for line in describe(info, governing=False):
         click.echo(line)
+    return info
 
 
 def _post_job(rundir, render: bool = True):
@@ -1060,7 +1119,8 @@ def fea(rundir, E, nu, size, group, measure, allow_unsettled, allow_dynamic, no_
         moved = "" if gv.get("moved") is None else \
             f"; it moved {100 * gv['moved']:.1f} % from FE size {gv['coarser']['size']:.3g}"
         click.echo(f"fea: FE's governing stress {gv['value']:.4g} {unit} at "
-                   f"{[round(x, 2) for x in gv['position']]} (zone {data['zone']['length']:.3g})"
+                   f"{[round(x, 2) for x in gv['position']]} (zone {data['zone']['length']:.3g} from "
+                   f"{data['zone'].get('source', 'the FE surface')})"
                    + moved)
         if gv.get("ratio") is not None:
             click.echo(f"fea: the particles there: {gv['particle_value']:.4g} {unit} (particle "
@@ -1211,6 +1271,18 @@ def bench_inside(out, quick):
     _bench_report(data, mod)
 
 
+@bench.command("governing")
+@_bench_out
+@click.option("--quick", is_flag=True, help="Every part at two spacings (h and h/sqrt(2), "
+              "--refine's pair) and one FE size: no three-spacing order.")
+def bench_governing(out, quick):
+    """The governing stress, singular peak and --refine error bar against converged FEA."""
+    from rackstress.bench import governing as mod
+
+    data = mod.run_bench(out, quick=quick, echo=click.echo)
+    _bench_report(data, mod)
+
+
 @bench.command("validity3d")
 @_bench_out
 @click.option("--quick", is_flag=True, help="Spacing 1 only.")
@@ -1335,7 +1407,7 @@ TEACH = {
     ]),
     "run": ("Run a scene and write its run directory, peaks and pictures.", [
         "rackstress run plane-rack --out runs/plane-rack",
-        "rackstress run scenes/two-blobs.toml --engine reference --steps 600 --out runs/tb",
+        "rackstress run examples/cframe/static.toml --refine --out runs/cframe",
         "mpiexec -n 2 rackstress run magpod-small --set cycles=2 --out runs/ms",
         "rackstress run --resume runs/ms",
     ]),
@@ -1407,6 +1479,10 @@ TEACH = {
     "bench inside": ("Binding a mesh part inside its shape, up to 10^6 particles.", [
         "rackstress bench inside --quick --out /tmp/bench",
         "rackstress bench inside --out docs/benchmarks",
+    ]),
+    "bench governing": ("The governing stress and --refine's error bar against FEA.", [
+        "rackstress bench governing --quick --out /tmp/bench",
+        "rackstress bench governing --out docs/benchmarks",
     ]),
     "bench validity3d": ("The bracket STL's von Mises stress [MPa] against tetrahedral FEA.", [
         "rackstress bench validity3d --quick --out /tmp/bench",

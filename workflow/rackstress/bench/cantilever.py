@@ -117,10 +117,14 @@ material = "aluminium"
 on = "bar"
 where = {{ box = {{ min = [-1, -6, -6], max = [0.01, 6, 6] }} }}
 fix = ["x"]
-[[support]]            # the middle of that face pinned in y and z (no rigid motion)
+[[support]]            # the middle lines of that face pinned across (no rigid motion, no
+on = "bar"             # rotation about x about a single pinned point)
+where = {{ box = {{ min = [-1, {p}, -6], max = [0.01, {q}, 6] }} }}
+fix = ["y"]
+[[support]]
 on = "bar"
-where = {{ box = {{ min = [-1, {p}, {p}], max = [0.01, {q}, {q}] }} }}
-fix = ["y", "z"]
+where = {{ box = {{ min = [-1, -6, {p}], max = [0.01, 6, {q}] }} }}
+fix = ["z"]
 [[load]]
 on = "bar"
 where = {{ box = {{ min = [19.99, -6, -6], max = [21, 6, 6] }} }}

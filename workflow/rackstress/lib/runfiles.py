@@ -24,3 +24,6 @@ DERIVED = (STRESS_DUMP, STRESS_JSON, CACHE, REPORT, VTK_DIR)
 #: the bindings of the parts with a material, for their stress (:mod:`rackstress.stress.tensor`):
 #: written when the run starts, from the scene (i, j, force coefficient m·c, L0²)
 BINDINGS = "bindings.npz"
+#: the singular points of the parts with a material (re-entrant edges, support boundaries,
+#: point loads: :mod:`rackstress.model.singular`), written when the run starts
+SINGULAR = "singular.npz"

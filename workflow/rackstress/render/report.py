@@ -155,7 +155,12 @@ def fea_section(fea: dict) -> str:
         out.append(f"<p>Compared: {_e(fea['compared'])}.</p>")
     gv, zone, unit = fea.get("governing") or {}, fea.get("zone") or {}, fea.get("stress_unit", "")
     if zone.get("rule"):
-        out.append(f"<p>Zone: {_e(zone['rule'])}.</p>")
+        src = ({"singular.npz": " (the run's singular points, singular.npz: the headline's "
+                                "rule)",
+                "fe surface": " (the FE surface's own edges, supports and loads: this run "
+                              "recorded no singular.npz)"}.get(zone.get("source"), ""))
+        out.append(f'<p id="fea-zone" data-source="{_e(zone.get("source", ""))}">Zone: '
+                   f"{_e(zone['rule'])}{_e(src)}.</p>")
     if gv.get("value") is not None:
         moved = ("" if gv.get("moved") is None else
                  f"; it moved {100 * gv['moved']:.1f} % from FE size "
@@ -183,6 +188,64 @@ def fea_section(fea: dict) -> str:
                "at the particles, on one colour scale; <code>vtk/fea.vtp</code> holds both as point arrays "
                "(<code>fea_von_mises</code>, <code>fea_displacement</code>)</figcaption>"
                "</figure>")
+    return "\n".join(out)
+
+
+def _pos(rec: dict) -> str:
+    pos = ", ".join(f"{x:.4g}" for x in rec.get("position", []))
+    return f"particle {rec['particle']} at ({_e(pos)})" + (
+        f", {_e(rec['near'])}" if rec.get("near") else "")
+
+
+def governing_section(stress: dict, headline: bool = True) -> str:
+    """The headline of a part with a material: the governing stress (away from singular
+    points) with its factor of safety and zone (``headline`` False: said already, by a static
+    report's headline), the singular peak beside it (spacing-dependent, with advice), and the
+    error bar: ``--refine``'s small table, or a single run's estimate. Empty when ``stress``
+    (``summary.json["stress"]``) has no governing stress."""
+    gov = stress.get("governing")
+    if not gov:
+        return ""
+    out = []
+    w = out.append
+    sf = (f", factor of safety against yield <b>{_num(gov['safety'], 3)}</b>"
+          if gov.get("safety") else "")
+    if headline:
+        w(f'<p class="headline" id="headline" data-governing="{gov["value"]!r}">The governing '
+          f"von Mises stress is <b>{_num(gov['value'])}</b> {_e(gov['units'])} in "
+          f"<b>{_e(gov['group'])}</b>{sf}: {_pos(gov)}, iteration {gov['iteration']}.</p>")
+        w(f'<p class="note" id="rule">The governing stress is {_e(gov["rule"])} '
+          "(docs/stress.md).</p>")
+    sing = stress.get("singular")
+    if sing:
+        w(f'<p class="singular" id="singular" data-kind="{_e(sing["kind"])}">Singular peak: '
+          f"<b>{_num(sing['value'])}</b> {_e(sing['units'])} at a {_e(sing['kind'])}, "
+          f"{_pos(sing)} — <b>spacing-dependent</b>, not a property of the part: "
+          f"{_e(sing['advice'])}.</p>")
+    err = stress.get("error")
+    if err and err.get("extrapolated") is not None:
+        u = _e(err.get("units", gov["units"]))
+        rows = [(f"{h:.4g}", f"{n:,}" if n else "–", _num(v))
+                for h, v, n in zip(err["spacings"], err["values"],
+                                   err.get("particles") or [None] * len(err["values"]))]
+        w('<table id="error-bar"><thead><tr><th>spacing</th><th>particles</th>'
+          f"<th>governing [{u}]</th></tr></thead><tbody>")
+        for r in rows:
+            w("<tr>" + "".join(f"<td class=num>{c}</td>" for c in r) + "</tr>")
+        w(f"<tr><td>extrapolated (order {_num(err['order'], 2)})</td><td></td>"
+          f"<td class=num>{_num(err['extrapolated'])}</td></tr>")
+        w(f"<tr><td>converged value within</td><td></td><td class=num>{_num(err['low'])} … "
+          f"{_num(err['high'])}</td></tr></tbody></table>")
+        w(f'<p class="note">{_e(err["method"])}. The refined run is in '
+          f"<code>{_e(err.get('refine_dir', 'refine'))}/</code>.</p>")
+        if err.get("converging") is False:
+            w(f'<p class="warning" id="not-converged">Not converged: the governing stress moved '
+              f"by {_num(100 * err['change'], 2)} % between the two spacings; refine further, "
+              "or check it by FE (<code>rackstress fea</code>).</p>")
+    elif err:
+        w(f'<p class="note" id="error-estimate">Error bar: ± '
+          f"{_num(100 * abs(err['relative']), 2)} %, {_num(err.get('low'))} … "
+          f"{_num(err.get('high'))} {_e(gov['units'])} ({_e(err['method'])}).</p>")
     return "\n".join(out)
 
 
@@ -263,10 +326,13 @@ def _dynamic_body(w, rundir: Path, summary: dict, scene: dict, post: dict, rende
                   name: str, stability: bool, view: bool, built_view) -> None:
     """A dynamic run's sections: the peak over the run, the peak frame in 3D, the pictures
     and plots over time, the run's facts, the scene, the stability margin of Eq. 5."""
-    # ---- the peak, in one sentence
+    # ---- the governing stress, the headline (docs/stress.md), else the peak in one sentence
     peak = (summary.get("stress") or {}).get("peak") or post.get("peak")
     w('<h2 id="peak">Where and when it was most stressed</h2>')
-    if peak:
+    gov_html = governing_section(summary.get("stress") or {})
+    if gov_html:
+        w(gov_html)
+    elif peak:
         pos = ", ".join(f"{x:.4g}" for x in peak.get("position", []))
         what = ("The largest von Mises stress (from the bindings' forces, docs/stress.md)"
                 if peak.get("measure") == "von_mises" else
@@ -279,6 +345,8 @@ def _dynamic_body(w, rundir: Path, summary: dict, scene: dict, post: dict, rende
         w('<p class="headline">No peaks yet: run <code>rackstress stress '
           f"{_e(rundir)}</code>.</p>")
     for gname, sf in ((summary.get("stress") or {}).get("safety") or {}).items():
+        if sf.get("rule") == "governing":
+            continue                            # said with the governing stress
         w(f'<p class="safety" data-group="{_e(gname)}">Smallest factor of safety of '
           f"<b>{_e(gname)}</b> (yield / von Mises): <b>{_num(sf['min'])}</b> at iteration "
           f"{sf['iteration']}, particle {sf['particle']}.</p>")
@@ -497,6 +565,8 @@ def _static_body(w, rundir: Path, summary: dict, scene: dict, post: dict, render
           + ".</p>")
         if rule:
             w(f'<p class="note" id="headline-rule">{_e(rule[0].upper() + rule[1:])}.</p>')
+        if settled and head["kind"] == "governing":     # the singular peak, the error bar
+            w(governing_section(summary.get("stress") or {}, headline=False))
     for gname, g in (summary.get("groups") or {}).items():
         md, at = g.get("max_deformation"), g.get("max_deformation_at")
         if md is None or at is None:

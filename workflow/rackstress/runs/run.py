@@ -309,6 +309,64 @@ def write_boundary(scene: Scene, out) -> None:
         tmp.replace(path)
     except OSError as exc:
         raise storage_error(exc, "write", path) from None
+    write_singular(scene, out, fixed, F)
+
+
+def singular_of(scene: Scene, fixed=None, F=None) -> dict:
+    """Per part with a material: (spacing, wall thickness, singular points) — the spacing they
+    were found at, the part's wall thickness (:func:`rackstress.model.singular.wall_thickness`,
+    its boundary cells' shares counted) and :func:`rackstress.model.singular.find`'s points
+    (re-entrant edges from its shape, the boundary of its supports, its point loads)."""
+    from rackstress.engines.static import external_forces
+    from rackstress.model import singular
+
+    fixed = scene.fixed() if fixed is None else fixed
+    F = external_forces(scene) if F is None else F
+    out = {}
+    for name, g in scene.groups.items():
+        if g.material is None:
+            continue
+        sl = scene.slice(name)
+        spacing, shape = singular.part_geometry(scene, name)
+        meta = g.meta if isinstance(g.meta, dict) else {}
+        wall = singular.wall_thickness(g.o, spacing, phi=meta.get("fractions"))
+        out[name] = (spacing, wall, singular.find(g.o, spacing, shape, fixed[sl], F[sl]))
+    return out
+
+
+def write_singular(scene: Scene, out, fixed=None, F=None) -> None:
+    """``singular.npz`` (:data:`rackstress.lib.runfiles.SINGULAR`): :func:`singular_of` as
+    arrays — ``points`` (k×3, the parts' undeformed coordinates), ``kind`` (index into
+    :data:`rackstress.model.singular.KINDS`), ``angle`` (an edge's turning in degrees),
+    ``part`` (index into ``parts``), and per part ``parts``, ``spacing``, ``wall``, ``source`` and its
+    surface (``surface_K_vertices``, ``surface_K_faces``: the named features) — for
+    post-processing's governing stress (:mod:`rackstress.stress.governing`). Nothing is
+    written for a scene without a material part."""
+    from rackstress.errors import storage_error
+    from rackstress.lib.runfiles import SINGULAR
+
+    found = singular_of(scene, fixed, F)
+    if not found:
+        return
+    names = list(found)
+    pts = [found[n][2] for n in names]
+    path = Path(out) / SINGULAR
+    tmp = Path(out) / f".{SINGULAR}.tmp.npz"
+    try:
+        np.savez(tmp, points=np.concatenate([s.points for s in pts]).reshape(-1, 3),
+                 kind=np.concatenate([s.kind for s in pts]).astype(np.int64),
+                 angle=np.concatenate([s.angle for s in pts]).astype(float),
+                 part=np.repeat(np.arange(len(names)), [len(s) for s in pts]).astype(np.int64),
+                 parts=np.array(names), spacing=np.array([found[n][0] for n in names]),
+                 wall=np.array([found[n][1] for n in names]),
+                 source=np.array([s.source for s in pts]),
+                 notes=np.array(["; ".join(s.notes) for s in pts]),
+                 **{f"surface_{k}_{what}": np.asarray(x) for k, s in enumerate(pts)
+                    if s.surface is not None
+                    for what, x in zip(("vertices", "faces"), s.surface)})
+        tmp.replace(path)
+    except OSError as exc:
+        raise storage_error(exc, "write", path) from None
 
 
 def load_path_warnings(scene: Scene) -> list[dict]:

@@ -14,7 +14,7 @@ __all__ = ["BUILDERS", "build", "load", "load_toml", "parameters", "parse_overri
            "parse_value"]
 
 
-def load(spec: str, overrides: dict | None = None):
+def load(spec: str, overrides: dict | None = None, spacing_scale: float = 1.0):
     """A scene from a built-in name or a ``.toml`` file path, with ``--set`` overrides applied.
 
     Parameters
@@ -24,6 +24,9 @@ def load(spec: str, overrides: dict | None = None):
         ``docs/scenes.md``; :func:`rackstress.scenes.toml.load_toml`).
     overrides : dict, optional
         Parameter values by name: a built-in scene's parameters or a file's ``[params]``.
+    spacing_scale : float
+        A scene file's parts filled at their spacing times this (``rackstress run --refine``);
+        built-in scenes take no other than 1.
 
     Returns
     -------
@@ -36,5 +39,10 @@ def load(spec: str, overrides: dict | None = None):
     """
     overrides = dict(overrides or {})
     if spec.endswith(".toml") or Path(spec).is_file():
-        return load_toml(spec, overrides)
+        return load_toml(spec, overrides, spacing_scale=spacing_scale)
+    if spacing_scale != 1.0:
+        from rackstress.errors import SceneError
+
+        raise SceneError(f"scene '{spec}' is a built-in scene: --refine refines the parts of a "
+                         "scene file (.toml) filled from a mesh or shape at a spacing")
     return build(spec, **overrides)

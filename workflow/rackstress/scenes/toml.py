@@ -70,6 +70,7 @@ Example
 from __future__ import annotations
 
 import ast
+import contextvars
 import math
 import operator as _op
 import re
@@ -131,8 +132,23 @@ from rackstress.scenes.fields import (_Ctx, _array_of_tables, _check_keys, _desc
 
 
 # --------------------------------------------------------------------------- entry point
-def load_toml(path, overrides: dict | None = None) -> Scene:
-    """The scene described by the TOML file ``path``, with ``--set`` ``overrides`` applied."""
+#: What every filled part's spacing is multiplied by while a scene file is read
+#: (:func:`load_toml`'s ``spacing_scale``: ``rackstress run --refine``'s finer run).
+_SPACING_SCALE = contextvars.ContextVar("spacing_scale", default=1.0)
+
+
+def load_toml(path, overrides: dict | None = None, spacing_scale: float = 1.0) -> Scene:
+    """The scene described by the TOML file ``path``, with ``--set`` ``overrides`` applied;
+    every part filled from a mesh or shape at its ``spacing`` × ``spacing_scale``
+    (``rackstress run --refine``), recorded as the parameter ``spacing_scale``."""
+    if spacing_scale != 1.0:
+        token = _SPACING_SCALE.set(float(spacing_scale))
+        try:
+            scene = load_toml(path, overrides)
+        finally:
+            _SPACING_SCALE.reset(token)
+        scene.params["spacing_scale"] = float(spacing_scale)
+        return scene
     overrides = dict(overrides or {})
     file = str(path)
     ctx = _Ctx(file)
@@ -608,13 +624,19 @@ def _plain_group(c: _Ctx, t: dict, base: Path, sizing: dict | None = None) -> Gr
                           "positions")
         o = np.array([_vec3(c, p, f"positions[{i}]") for i, p in enumerate(pos)], dtype=float)
     elif source == "lattice":
+        if _SPACING_SCALE.get() != 1.0 and "material" in t:
+            raise c.error("a lattice = { shape, spacing } part cannot be refined (its particles "
+                          "are counted by its shape); fill it from a box instead (fill = { box "
+                          "= ... }) to run it with --refine", "lattice")
         o, spacing = _lattice(c, t["lattice"], "lattice")
         packing, shape = "cubic", None
     else:
         if sizing.get("spacing") is not None:        # --set spacing=... : every filled part
-            spacing = _number(c, sizing["spacing"], "--set spacing", positive=True)
+            spacing = _number(c, sizing["spacing"], "--set spacing", positive=True) \
+                * _SPACING_SCALE.get()
         elif "spacing" in t:
-            spacing = _number(c, t["spacing"], "spacing", positive=True)
+            spacing = _number(c, t["spacing"], "spacing", positive=True) \
+                * _SPACING_SCALE.get()
         elif source != "mesh":
             raise c.error("missing required field 'spacing' (a part filled from shapes needs "
                           "its lattice spacing; a part from one mesh gets one chosen from its "
@@ -735,7 +757,7 @@ def _mesh_sizing(c: _Ctx, t: dict, surface, spacing, sizing: dict):
     choice = None
     if spacing is None:
         choice = ft.choose_spacing(surface.volume, walls, sizing.get("budget", ft.BUDGET))
-        spacing = choice["spacing"]
+        spacing = choice["spacing"] * _SPACING_SCALE.get()      # --refine: spacing/√2
     geometry = ft.PartGeometry(surface, spacing)
     thin = walls.thinner_than(ft.ACROSS * spacing)
     if thin:           # named only when there is something to say (the features cost ~0.5 s)

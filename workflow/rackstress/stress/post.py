@@ -550,21 +550,30 @@ def stress_warnings(run, fields: Fields) -> list:
     return out
 
 
-def safety(run, fields: Fields) -> dict:
+def safety(run, fields: Fields, gov: dict | None = None) -> dict:
     """Per part with a yield strength: the smallest factor of safety (yield / von Mises) over
-    the run, where and when."""
+    the run, where and when — by the governing stress's rule (:mod:`.governing`: away from
+    singular points, at the governing particle) when ``gov`` (its :func:`~.governing.record`)
+    has the part; the smallest over every particle is kept beside it as ``singular_min``."""
     out = {}
     sf = fields.extras.get("safety")
     if sf is None:
         return out
+    parts = (gov or {}).get("parts") or {}
     for name in material_parts(run):
         part = run.parts[name]
         hit = _argmax(-sf[:, part.index])
         if hit is None:
             continue
         k, j = hit
-        out[name] = {"min": float(sf[k, part.index[j]]), "iteration": int(fields.steps[k]),
-                     "particle": int(run.data.ids[part.index[j]]), "frame": int(k)}
+        rec = {"min": float(sf[k, part.index[j]]), "iteration": int(fields.steps[k]),
+               "particle": int(run.data.ids[part.index[j]]), "frame": int(k)}
+        g = (parts.get(name) or {}).get("governing")
+        if g is not None and g.get("safety") is not None:
+            rec = {"min": g["safety"], "iteration": g["iteration"], "particle": g["particle"],
+                   "frame": g["frame"], "rule": "governing", "zone": g["zone"],
+                   "singular_min": rec["min"], "singular_particle": rec["particle"]}
+        out[name] = rec
     return out
 
 
@@ -619,8 +628,10 @@ def postprocess(rundir, vtk: bool = True, dump: bool = False, progress: bool = F
     out.mkdir(parents=True, exist_ok=True)
     fields = compute_fields(run, progress=progress)
     group_peaks = peaks(run, fields)
+    from rackstress.stress.governing import record as governing_record
     from rackstress.stress.headline import is_static
 
+    gov = governing_record(run, fields)
     static = is_static(run.rundir)
     info = {"fit": FIT, "measures": {m: {"label": LABELS[m][0], "units": fields.unit(m)}
                                      for m in fields.measures},
@@ -628,13 +639,16 @@ def postprocess(rundir, vtk: bool = True, dump: bool = False, progress: bool = F
             "frames": len(fields.steps), "first_iteration": int(fields.steps[0]),
             "last_iteration": int(fields.steps[-1]),
             "peak": overall_peak(run, group_peaks, fields.default), "groups": group_peaks,
-            "warnings": stress_warnings(run, fields), "safety": safety(run, fields),
+            "warnings": stress_warnings(run, fields), "safety": safety(run, fields, gov),
             "files": {},
             "timings": {"measures_s": fields.timings.get("compute_s", 0.0),
                         "frames_measured_while_running":
                             fields.timings.get("frames_measured_while_running", 0)}}
     if fields.timings.get("follow_error"):
         info["timings"]["follow_error"] = fields.timings["follow_error"]
+    if gov:
+        info.update(governing=gov["governing"], singular=gov["singular"],
+                    error=gov.get("error"), governing_parts=gov["parts"])
     from rackstress.stress import export
 
     extra = ()
@@ -673,6 +687,8 @@ def postprocess(rundir, vtk: bool = True, dump: bool = False, progress: bool = F
     summary_path = Path(run.rundir) / "summary.json"      # the run's own record
     if summary_path.is_file():
         summary = add_to_summary(summary_path, info)
+        if info.get("governing") is not None:      # --refine's error bar, where it was kept
+            info["error"] = (summary.get("stress") or {}).get("error")
         if static:          # what the end-of-run lines lead with (describe)
             from rackstress.stress.headline import headline
 
@@ -719,6 +735,7 @@ def add_to_summary(summary_path: Path, info: dict) -> dict:
         summary = json.loads(Path(summary_path).read_text())
     except json.JSONDecodeError as exc:
         raise StressInputError(f"{summary_path}: not valid JSON ({exc})") from None
+    summary_before = summary.get("stress") or {}
     groups = summary.setdefault("groups", {})
     for name, rec in info["groups"].items():
         groups.setdefault(name, {})["peak"] = rec
@@ -727,6 +744,13 @@ def add_to_summary(summary_path: Path, info: dict) -> dict:
                          "default_measure": info.get("default_measure", "paper")}
     if info.get("safety"):
         summary["stress"]["safety"] = info["safety"]
+    if info.get("governing") is not None or info.get("singular") is not None:
+        old = (summary_before or {}).get("error") or {}
+        summary["stress"].update(governing=info.get("governing"), singular=info.get("singular"),
+                                 zone_parts=info.get("governing_parts"))
+        # the error bar of --refine (measured) outlives a post-processing run again
+        summary["stress"]["error"] = old if old.get("extrapolated") is not None else \
+            info.get("error")
     kinds = {w["kind"] for w in STRESS_WARNINGS}
     kept = [w for w in summary.get("warnings") or [] if w.get("kind") not in kinds]
     summary["warnings"] = kept + list(info.get("warnings") or [])
@@ -734,16 +758,19 @@ def add_to_summary(summary_path: Path, info: dict) -> dict:
     return summary
 
 
-def describe(info: dict) -> list:
+def describe(info: dict, governing: bool = True) -> list:
     """Lines for the terminal: the overall peak, and per group the peaks of the paper measure
     and of the strain (the hot-spot measure of an elastic body, README "What the picture
-    means"). A static run's (``info["static"]``, :func:`describe_static`) say whether it
-    settled and lead with its headline."""
+    means"); for a part with a material the governing stress last, in the peak's place
+    (``governing``: False leaves it to the caller, who says it at the very end). A static
+    run's (``info["static"]``, :func:`describe_static`) say whether it settled and lead with
+    its headline."""
     if info.get("static"):
-        return describe_static(info)
+        return describe_static(info, governing)
     lines = []
     pk = info.get("peak")
-    if pk:
+    gov = info.get("governing")
+    if pk and not gov:
         lines.append(f"  peak {pk['measure']} = {pk['value']:.4g} {pk['units']} in {pk['group']} "
                      f"at iteration {pk['iteration']}, particle {pk['particle']} at "
                      f"({', '.join(f'{x:.3g}' for x in pk['position'])})")
@@ -754,6 +781,8 @@ def describe(info: dict) -> list:
         if shown:
             lines.append(f"  {name:12s} peak " + "; ".join(shown))
     for name, sf in (info.get("safety") or {}).items():
+        if sf.get("rule") == "governing":
+            continue                        # said with the governing stress
         lines.append(f"  {name:12s} smallest factor of safety {sf['min']:.3g} (iteration "
                      f"{sf['iteration']}, particle {sf['particle']})")
     for w in info.get("warnings") or []:
@@ -762,14 +791,18 @@ def describe(info: dict) -> list:
         lines.append(f"  {key}: {path}")
     for note in info.get("notes") or []:
         lines.append(f"  note: {note}")
+    if gov and governing:
+        lines.extend(describe_governing(info))
     return lines
 
 
-def describe_static(info: dict) -> list:
+def describe_static(info: dict, governing: bool = True) -> list:
     """A static run's lines: its headline stress (:func:`rackstress.stress.headline.headline`:
     where in the part's own undeformed coordinates, the smallest factor of safety of the same
     rule) and per group the largest von Mises stress and strain — or, for a run that did not
-    settle, that it gives no result (``summary.json`` keeps the numbers of its state)."""
+    settle, that it gives no result (``summary.json`` keeps the numbers of its state). With a
+    governing stress its block (:func:`describe_governing`: zone, error bar, singular peak)
+    comes last, or, ``governing`` False, is left to the caller (said at the very end)."""
     from rackstress.stress.headline import headline_text
 
     st = info["static"]
@@ -779,7 +812,7 @@ def describe_static(info: dict) -> list:
                      "an equilibrium, do not use its numbers (summary.json keeps them; 'rackstress "
                      "render RUNDIR --allow-unsettled' shows them in the report)")
     else:
-        if st.get("headline"):
+        if st.get("headline") and not info.get("governing"):
             lines.append("  " + headline_text(st["headline"]) + " (undeformed coordinates)")
         for name, rec in info["groups"].items():
             shown = [f"{m}={p['value']:.4g}{' ' + p['units'] if m == 'von_mises' else ''} "
@@ -795,4 +828,24 @@ def describe_static(info: dict) -> list:
         lines.append(f"  {key}: {path}")
     for note in info.get("notes") or []:
         lines.append(f"  note: {note}")
+    if st["settled"] and info.get("governing") and governing:
+        lines.extend(describe_governing(info))
+    return lines
+
+
+def describe_governing(info: dict) -> list:
+    """The headline lines: the governing stress (where, its safety factor, the zone) — a static
+    run's as its headline says it (:func:`rackstress.stress.headline.headline_text`) —, the
+    singular peak beside it (spacing-dependent, what to do) and the error bar."""
+    from rackstress.stress.governing import describe as gov_lines
+
+    if (info.get("static") or {}).get("settled") is False:
+        return []           # not an equilibrium: no stress as a result (describe_static)
+    head = (info.get("static") or {}).get("headline")
+    lines = gov_lines(info.get("governing"), info.get("singular"), info.get("error"),
+                      headline=head is None)
+    if head is not None:
+        from rackstress.stress.headline import headline_text
+
+        lines.insert(0, "  " + headline_text(head) + " (undeformed coordinates)")
     return lines

@@ -50,6 +50,7 @@ from pathlib import Path
 import numpy as np
 
 from rackstress.errors import RackstressError
+from rackstress.model.singular import wall_thickness  # noqa: F401 - the part's length, one home
 
 #: The governing stress is read at least this many spacings from a singular point (a
 #: re-entrant edge, a support, a load): the headline's rule, used by the FE check until the
@@ -486,53 +487,20 @@ def concave_edges(p: np.ndarray, t: np.ndarray) -> np.ndarray:
     return tm.vertices[e].mean(axis=1) if len(adj) else np.zeros((0, 3))
 
 
-def wall_thickness(o: np.ndarray, spacing: float, shape=None) -> float:
-    """The part's wall thickness: the median over its particles of the shortest chord through
-    the part along x, y or z. A chord is a run of lattice neighbours, each cell counted with its
-    share of the part along that axis (:func:`rackstress.model.solid.axis_fractions`, when the
-    ``shape`` is known), so it is the part's own length, not a whole number of spacings.
-
-    >>> o = np.array([[x, y, z] for x in range(20) for y in range(3) for z in range(8)], float)
-    >>> wall_thickness(o, 1.0)                  # a 20 × 3 × 8 plate of cells: 3 thick
-    3.0
-    """
-    a = float(spacing)
-    o = np.asarray(o, float)
-    g = np.rint((o - o.min(axis=0)) / a).astype(np.int64)
-    if shape is not None:
-        from rackstress.model.solid import axis_fractions
-
-        phi = axis_fractions(o, a, shape)
-    else:
-        phi = np.ones((len(o), 3))
-    chord = np.full(len(o), np.inf)
-    for ax in range(3):
-        other = [k for k in range(3) if k != ax]
-        order = np.lexsort((g[:, ax], g[:, other[1]], g[:, other[0]]))
-        gs = g[order]
-        new = np.r_[True, np.any(gs[1:, other] != gs[:-1, other], axis=1)
-                    | (gs[1:, ax] != gs[:-1, ax] + 1)]
-        run = np.cumsum(new) - 1
-        length = np.bincount(run, weights=phi[order, ax]) * a
-        c = np.empty(len(o))
-        c[order] = length[run]
-        chord = np.minimum(chord, c)
-    return float(np.median(chord))
-
-
 @dataclass
 class Singular:
     """Where the continuum's stress is unbounded, and how far from it a stress is read.
 
     ``points`` (k×3): the re-entrant edges sampled, the held and the loaded particles;
     ``zone``: the exclusion distance (a length) of the governing stress; ``rule``: the rule in
-    one sentence, as the report states it. The headline's own set (the run's singular points)
-    is the same interface."""
+    one sentence, as the report states it; ``source``: where the set comes from
+    (``"singular.npz"``, the run's own, the headline's; ``"fe surface"`` without it)."""
 
     points: np.ndarray
     zone: float
     rule: str
     spacing: float
+    source: str = "fe surface"
 
     def distance(self, x: np.ndarray) -> np.ndarray:
         """Distance of each point (n×3) to the nearest singular point (inf: none)."""
@@ -554,6 +522,30 @@ def singular_points(concave: np.ndarray, held_x: np.ndarray, load_x: np.ndarray,
     return Singular(pts, zone, f"stresses within {ZONE_SPACINGS:g} spacings ({zone:.3g}) of a "
                     "re-entrant edge, a support or a load are left out of the governing "
                     "stress: the continuum's stress is unbounded there", float(spacing))
+
+
+def run_singular(rundir, name: str, fe: Singular, loads: np.ndarray) -> Singular:
+    """The headline's singular set and zone where the run recorded them (``singular.npz``:
+    :func:`rackstress.stress.governing.read_singular`: the part's sharp re-entrant edges, its
+    supports' boundary and point loads; the zone max(2 spacings, 0.4 × the wall thickness)),
+    with the loaded particles added (``loads``, k×3: the FE carries each particle's load as
+    nodal point forces, unbounded there in the FE, not in the lattice); ``fe`` — the FE
+    surface's own concave edges, supports and loads, 2 spacings — for a run without
+    ``singular.npz``. The FE surface's concave edges are not added to the run's set: a
+    tessellated fillet would be singular for the FE check and not for the headline."""
+    from rackstress.stress.governing import read_singular, zone
+
+    got = (read_singular(rundir) or {}).get(name)
+    if got is None:
+        return fe
+    spacing, wall, sing = got
+    z = zone(spacing, wall)
+    return Singular(np.concatenate([sing.points, np.asarray(loads, float).reshape(-1, 3)]), z,
+                    f"stresses within {z:.3g} (max of {ZONE_SPACINGS:g} spacings and 0.4 of the "
+                    "wall thickness) of a sharp re-entrant edge, a support's boundary or a "
+                    "point load are left out of the governing stress, as in the headline "
+                    "(and, for the FE, of the loaded particles): the continuum's stress is "
+                    "unbounded there", float(spacing), "singular.npz")
 
 
 def region_edges(o: np.ndarray, sel: np.ndarray, spacing: float) -> np.ndarray:
@@ -991,6 +983,7 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
                             region_edges(g.o, load_sel, spacing)])
     singular = singular_points(np.concatenate([concave, edges]), held_x[full], load_x,
                                spacing)
+    singular = run_singular(rundir, name, singular, load_x)
     volume = g.n * spacing ** 3
     sizes = [h * COARSER, h] if converge else [h]
     check_memory(elements_expected(volume, h), h, "expected before meshing")
@@ -1057,7 +1050,8 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
         "loaded_particles": int(lin.sum()), "total_force": F_tot,
         "fe_total_force": forces.sum(axis=0),
         "zone": {"length": singular.zone, "spacings": singular.zone / spacing,
-                 "rule": singular.rule, "singular_points": int(len(singular.points))},
+                 "rule": singular.rule, "singular_points": int(len(singular.points)),
+                 "source": singular.source},
         "agreement": agree,
         "bands": bands(sv if sv is not None else values, res["von_mises"], dist, spacing),
         "governing": gov, "target": TARGET,

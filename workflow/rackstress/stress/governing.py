@@ -1,0 +1,539 @@
+"""The governing stress: the largest von Mises stress away from the part's singular points.
+
+At a sharp re-entrant edge, at the edge of a support and under a point load the continuum's
+stress is unbounded (:mod:`rackstress.model.singular`): the particles' peak there grows as the
+spacing shrinks and measures the spacing, not the part. The number an engineer acts on is the
+**governing stress** — the largest von Mises stress at least :func:`zone` away from every
+singular point, read where the lattice converges — with the singular peak beside it, marked as
+spacing-dependent, and what to do about it (docs/stress.md "The governing stress").
+
+* :func:`singular_set` — a run's singular points per part (``singular.npz``, written when the
+  run started; for an older run, the lattice's concave edges and ``boundary.npz``'s supports
+  and loads);
+* :func:`governing` — (index, value) of the largest value at least ``zone`` from every
+  singular point; :func:`singular_peak` — the largest within it;
+* :func:`record` — both, per part and overall, for ``summary.json["stress"]``;
+* :func:`richardson`, :func:`observed_order`, :func:`error_bar` — the error bar of
+  ``rackstress run --refine`` (two spacings; three give the order) and :func:`default_error`,
+  what a single run may be off by, from the lattice's measured convergence.
+
+Example
+-------
+>>> import numpy as np
+>>> from rackstress.model.singular import Singular
+>>> s = Singular(np.array([[0.0, 0, 0]]), np.array([0]), np.array([90.0]))
+>>> x = np.array([[0.5, 0, 0], [3.0, 0, 0], [6.0, 0, 0]])
+>>> governing(np.array([9.0, 5.0, 4.0]), x, s, zone=2.0)     # the 9 is within 2 of the edge
+(1, 5.0)
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from rackstress.model.singular import KINDS, Singular
+
+#: The zone: particles nearer than this many spacings to a singular point are left out of the
+#: governing stress. Measured (``rackstress bench governing``, docs/stress.md): beyond two
+#: spacings the particles read what converged FEA reads at the same points.
+ZONE_SPACINGS = 2.0
+#: ... and never less than this fraction of the part's wall thickness t: two spacings at the
+#: spacing that puts five particles across the wall, the distance from a notch at which a
+#: finite-element hot-spot reading starts (0.4 t), the same at every spacing finer than t/5,
+#: so runs at those spacings read the same points.
+ZONE_WALLS = 0.4
+#: The refinement of ``rackstress run --refine``: the spacing divided by √2 (2.8× the
+#: particles; halving it would take 8×).
+REFINE_RATIO = math.sqrt(2.0)
+#: The order of the governing stress's convergence on the lattice, for a two-spacing
+#: Richardson estimate: a particle reads the stress at its centre, half a spacing inside the
+#: surface, an error of order 1 in the spacing (hand calculation); ``rackstress bench
+#: governing`` measures each part's own order from three spacings (docs/benchmarks/governing.md).
+LATTICE_ORDER = 1.0
+#: The last two spacings' governing stresses within this fraction of each other: the bar is
+#: a convergence's; beyond it the run says the value is not converged there (a hole or a
+#: curved face the lattice resolves as steps, a zone too near a concentration).
+CONVERGING = 0.10
+#: Roache's safety factors of the grid convergence index: 3 with an assumed order (two
+#: spacings), 1.25 with an order measured on the part (three).
+SAFETY_ASSUMED, SAFETY_MEASURED = 3.0, 1.25
+
+RULE = ("the largest von Mises stress at least {zone:.3g} {unit} ({n:.3g} spacings) from every "
+        "sharp re-entrant edge, support boundary and point load of the part, where the "
+        "continuum's stress is unbounded and a peak measures the spacing")
+ADVICE = {
+    "re-entrant edge": ("a sharp re-entrant edge: its stress is unbounded in the continuum and "
+                        "this value grows as the spacing shrinks. Round the edge with a fillet "
+                        "(of radius r ≥ 1.5 spacings the lattice resolves it; the real part's "
+                        "radius sets its real peak), refine the spacing to see the trend, or "
+                        "take the corner to a local FE submodel"),
+    "support boundary": ("the edge of a rigid support: singular in the model, where the real "
+                         "clamp, bolt or washer is compliant. Model the support as it bears "
+                         "(a pin in a hole, a washer's area) or read the governing stress"),
+    "point load": ("a load on a few particles (a point or line load): its stress grows as the "
+                   "spacing shrinks. Spread the load over the real contact area"),
+}
+
+
+def zone(spacing: float, wall: float | None = None) -> float:
+    """The distance from singular points within which the governing stress is not read:
+    max(:data:`ZONE_SPACINGS` × spacing, :data:`ZONE_WALLS` × wall thickness).
+
+    >>> zone(1.0, 10.0), zone(1.0, 3.0), zone(0.5, 5.0)     # 0.4 t, 2 spacings, 0.4 t
+    (4.0, 2.0, 2.0)
+    """
+    z = ZONE_SPACINGS * float(spacing)
+    if wall is not None and np.isfinite(wall):
+        z = max(z, ZONE_WALLS * float(wall))
+    return float(z)
+
+
+# --------------------------------------------------------------------------- singular points
+def read_singular(rundir) -> dict | None:
+    """``singular.npz`` of a run: ``{part: (spacing, wall, Singular)}``, or None when absent."""
+    from rackstress.lib.runfiles import SINGULAR
+
+    path = Path(rundir) / SINGULAR
+    if not path.is_file():
+        return None
+    with np.load(path, allow_pickle=False) as z:
+        names = [str(x) for x in z["parts"]]
+        out = {}
+        for k, name in enumerate(names):
+            sel = z["part"] == k
+            notes = [n for n in str(z["notes"][k]).split("; ") if n] if "notes" in z else []
+            wall = float(z["wall"][k]) if "wall" in z else None
+            out[name] = (float(z["spacing"][k]), wall,
+                         Singular(z["points"][sel], z["kind"][sel], z["angle"][sel],
+                                  str(z["source"][k]), notes))
+    return out
+
+
+def singular_set(run) -> dict:
+    """Every part's singular points: ``{part: (spacing, wall, Singular)}`` for the parts with
+    a material (:func:`rackstress.stress.measures.material_parts`).
+
+    From ``singular.npz`` (written when the run started, from the part's shape); for a run
+    without it, from its record: re-entrant edges from the lattice
+    (:func:`rackstress.model.singular.lattice_edges`), supports and loads from
+    ``boundary.npz``.
+
+    Parameters
+    ----------
+    run : RunData
+        :func:`rackstress.stress.load_run`.
+
+    Example
+    -------
+    >>> sing = singular_set(load_run("runs/bracket"))         # doctest: +SKIP
+    >>> spacing, wall, points = sing["bracket"]               # doctest: +SKIP
+    >>> points.counts()                                       # doctest: +SKIP
+    {'re-entrant edge': 65, 'support boundary': 84}
+    """
+    from rackstress.model import singular
+    from rackstress.stress.measures import material_parts
+
+    got = read_singular(run.rundir)
+    names = list(material_parts(run)) or [p.name for p in run.displayed()]
+    if got is not None:
+        return {n: got[n] for n in names if n in got}
+    bnd = {}
+    path = Path(run.rundir) / "boundary.npz"
+    if path.is_file():
+        with np.load(path) as z:
+            bnd = {k: z[k] for k in z.files}
+    out = {}
+    for name in names:
+        part = run.parts[name]
+        o = run.o[part.index]
+        spacing = singular.nearest_spacing(o)
+        fixed = np.zeros((len(o), 3), bool)
+        force = np.zeros((len(o), 3))
+        if bnd:
+            row = {int(i): k for k, i in enumerate(run.data.ids[part.index])}
+            for i, m in zip(bnd["held_ids"], bnd["held_mask"]):
+                if int(i) in row:
+                    fixed[row[int(i)]] = m
+            for i, f in zip(bnd["load_ids"], bnd["load_force"]):
+                if int(i) in row:
+                    force[row[int(i)]] = f
+        s = singular.find(o, spacing, None, fixed, force)
+        s.notes.append("singular.npz missing (a run of an older rackstress): re-entrant "
+                       "edges from the lattice")
+        out[name] = (spacing, singular.wall_thickness(o, spacing), s)
+    return out
+
+
+# --------------------------------------------------------------------------- the rule
+def governing(values, positions, singular: Singular, zone: float):
+    """(index, value) of the largest finite ``values`` at least ``zone`` from every point of
+    ``singular``; (None, None) when every value is within it.
+
+    Parameters
+    ----------
+    values : (n,) array
+    positions : (n, 3) array
+        Where each value is (undeformed positions: the zone is the part's, not its motion's).
+    singular : Singular
+    zone : float
+    """
+    v = np.asarray(values, float).reshape(-1)
+    d, _ = singular.distance(positions)
+    ok = np.isfinite(v) & (d >= zone)
+    if not ok.any():
+        return None, None
+    k = int(np.flatnonzero(ok)[np.argmax(v[ok])])
+    return k, float(v[k])
+
+
+def singular_peak(values, positions, singular: Singular, zone: float):
+    """(index, value, kind, distance) of the largest finite value within ``zone`` of a
+    singular point (kind: that nearest point's, :data:`KINDS`); Nones when there is none."""
+    v = np.asarray(values, float).reshape(-1)
+    d, near = singular.distance(positions)
+    ok = np.isfinite(v) & (d < zone)
+    if not ok.any():
+        return None, None, None, None
+    k = int(np.flatnonzero(ok)[np.argmax(v[ok])])
+    return k, float(v[k]), KINDS[int(singular.kind[near[k]])], float(d[k])
+
+
+def _frames_governing(vm: np.ndarray, o: np.ndarray, singular: Singular, z: float):
+    """Over a (frames × n) array: (frame, index, value) of the governing stress, and of the
+    singular peak (frame, index, value, kind, distance)."""
+    d, near = singular.distance(o)
+    away = d >= z
+    best, sbest = None, None
+    for k in range(vm.shape[0]):
+        row = vm[k]
+        fin = np.isfinite(row)
+        a = fin & away
+        if a.any():
+            j = int(np.flatnonzero(a)[np.argmax(row[a])])
+            if best is None or row[j] > best[2]:
+                best = (k, j, float(row[j]))
+        s = fin & ~away
+        if s.any():
+            j = int(np.flatnonzero(s)[np.argmax(row[s])])
+            if sbest is None or row[j] > sbest[2]:
+                sbest = (k, j, float(row[j]), KINDS[int(singular.kind[near[j]])], float(d[j]))
+    return best, sbest
+
+
+def _near(features, x):
+    if features is None:
+        return None
+    try:
+        return features.nearest(x)
+    except Exception:  # noqa: BLE001 - a name is a help, not a result
+        return None
+
+
+def part_features(rundir, name: str):
+    """The named features of a part's surface (``rackstress.scenes.features`` when it exists),
+    from the surface kept in ``singular.npz``; None otherwise."""
+    try:
+        from rackstress.scenes import features as feat
+    except ImportError:
+        return None
+    from rackstress.lib.runfiles import SINGULAR
+
+    path = Path(rundir) / SINGULAR
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            k = [str(x) for x in z["parts"]].index(name)
+            key = f"surface_{k}"
+            if key + "_vertices" not in z:
+                return None
+            V, F = z[key + "_vertices"], z[key + "_faces"]
+        return feat.part_features((V, F))
+    except Exception:  # noqa: BLE001 - a name is a help, not a result
+        return None
+
+
+def record(run, fields, zone_override: float | None = None, singular: dict | None = None):
+    """The governing stress and the singular peak, per part with a material and overall.
+
+    Parameters
+    ----------
+    run : RunData
+    fields : Fields
+        :func:`rackstress.stress.post.compute_fields` (``von_mises``, ``safety``).
+    zone_override : float, optional
+        The zone to use instead of :func:`zone` of each part's spacing (``--refine`` reads the
+        refined run at the coarse run's zone).
+    singular : dict, optional
+        ``{part: (spacing, Singular)}`` to use instead of the run's own (the coarse run's, for
+        a refined run: the same points left out).
+
+    Returns
+    -------
+    dict
+        ``{"governing": {...}, "singular": {...}, "parts": {part: {"governing", "singular"}}}``
+        or ``{}`` without a ``von_mises`` measure; records as ``summary.json["stress"]`` keeps
+        them (docs/output.md).
+    """
+    from rackstress.stress.measures import material_parts
+    from rackstress.stress.tensor import part_recovery_points
+
+    vm = fields.values.get("von_mises")
+    if vm is None:
+        return {}
+    sing = singular if singular is not None else singular_set(run)
+    unit = fields.unit("von_mises")
+    length = ((run.scene or {}).get("units") or {}).get("length") or "length units"
+    mats = material_parts(run)
+    parts = {}
+    for name, (spacing, wall, s) in sing.items():
+        if name not in run.parts:
+            continue
+        part = run.parts[name]
+        o = run.o[part.index]
+        z = float(zone_override) if zone_override is not None else zone(spacing, wall)
+        # distances from where each particle's stress is read — its recovery point (patch
+        # recovery, the von_mises route: a surface particle at its cell's surface point) —
+        # as the FE check measures them (validity.solid), so both apply one rule
+        read = part_recovery_points(o)          # as the measure reads it (its own spacing)
+        best, sbest = _frames_governing(vm[:, part.index], read, s, z)
+        y = ((mats.get(name) or {}).get("material") or {}).get("yield")
+        feats = part_features(run.rundir, name)
+        gov = None
+        if best is not None:
+            k, j, v = best
+            gov = {"value": v, "units": unit, "group": name, "length_units": length,
+                   "particle": int(run.data.ids[part.index[j]]), "index": int(j),
+                   "iteration": int(fields.steps[k]), "frame": int(k),
+                   "position": [float(x) for x in o[j]],
+                   "read_at": [float(x) for x in read[j]],
+                   "near": _near(feats, o[j]),
+                   "safety": (float(y) / v) if (y and v > 0) else None,
+                   "zone": z, "spacing": float(spacing),
+                   "rule": RULE.format(zone=z, unit=length, n=z / spacing)}
+        sp = None
+        if sbest is not None:
+            k, j, v, kind, dist = sbest
+            sp = {"value": v, "units": unit, "group": name, "kind": kind,
+                  "particle": int(run.data.ids[part.index[j]]), "index": int(j),
+                  "iteration": int(fields.steps[k]), "frame": int(k),
+                  "position": [float(x) for x in o[j]], "distance": dist,
+                  "near": _near(feats, o[j]),
+                  "spacing_dependent": True,
+                  "note": "spacing-dependent: unbounded in the continuum",
+                  "advice": ADVICE[kind]}
+        parts[name] = {"governing": gov, "singular": sp, "zone": z, "spacing": float(spacing),
+                       "wall": wall,
+                       "singular_points": s.counts(), "source": s.source,
+                       "notes": list(s.notes)}
+    if not parts:
+        return {}
+    govs = [p["governing"] for p in parts.values() if p["governing"]]
+    sings = [p["singular"] for p in parts.values() if p["singular"]]
+    top = max(govs, key=lambda g: g["value"]) if govs else None
+    out = {"governing": top,
+           "singular": max(sings, key=lambda g: g["value"]) if sings else None,
+           "parts": parts}
+    if top is not None:
+        out["error"] = default_error(run, top)
+    return out
+
+
+# --------------------------------------------------------------------------- the error bar
+def richardson(coarse: float, fine: float, ratio: float = REFINE_RATIO,
+               order: float = LATTICE_ORDER) -> float:
+    """Richardson's extrapolation of a value converging as h^order: from the values at h
+    (``coarse``) and h/ratio (``fine``), fine + (fine − coarse)/(ratio^order − 1).
+
+    >>> richardson(90.0, 95.0, ratio=2.0, order=1.0)     # errors 10 and 5: the limit 100
+    100.0
+    """
+    return float(fine + (fine - coarse) / (ratio ** order - 1.0))
+
+
+def observed_order(g1: float, g2: float, g3: float, ratio: float = REFINE_RATIO,
+                   spacings=None):
+    """The order p of convergence from three values at h, h/r, h/r² (``ratio`` r):
+    p = ln((g1 − g2)/(g2 − g3)) / ln r; at any three ``spacings`` (h1 > h2 > h3) the p solving
+    (g1 − g2)/(g2 − g3) = (h1^p − h2^p)/(h2^p − h3^p) (bisection). None when the differences
+    change sign (not in the asymptotic range) or vanish, or p is outside 0.05 … 8.
+
+    >>> round(observed_order(80.0, 90.0, 95.0, ratio=2.0), 6)   # errors 20, 10, 5: order 1
+    1.0
+    >>> round(observed_order(91.0, 96.0, 99.0, spacings=(3, 2, 1)), 6)   # 100 − h²: order 2
+    2.0
+    """
+    d1, d2 = g1 - g2, g2 - g3
+    if d1 == 0 or d2 == 0 or (d1 > 0) != (d2 > 0):
+        return None
+    q = d1 / d2
+    if spacings is None:
+        p = math.log(q) / math.log(ratio)
+        return float(p) if 0.05 <= p <= 8.0 else None
+    h1, h2, h3 = (float(x) for x in spacings)
+
+    def f(p):
+        return (h1 ** p - h2 ** p) / (h2 ** p - h3 ** p) - q
+
+    lo, hi = 0.05, 8.0
+    if f(lo) * f(hi) > 0:
+        return None
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if f(lo) * f(mid) <= 0:
+            hi = mid
+        else:
+            lo = mid
+    return float(0.5 * (lo + hi))
+
+
+def error_bar(values: list, spacings: list, order: float | None = None) -> dict:
+    """The error bar of the governing stress from its values at two or three spacings
+    (coarsest first, each the previous over one ratio).
+
+    Richardson's extrapolation with the order measured from three values
+    (:func:`observed_order`) when it can be, else :data:`LATTICE_ORDER` (the lattice's, from
+    ``rackstress bench governing``); the error band is Roache's grid convergence index: the
+    safety factor (:data:`SAFETY_MEASURED` with a measured order, :data:`SAFETY_ASSUMED` with
+    an assumed one) times the distance from the finest value to the extrapolation. Returns
+    ``{"values", "spacings", "ratio", "order", "order_from", "extrapolated", "estimate" (the
+    half-width of the band about the finest value), "relative" (of the coarsest value against
+    the extrapolation), "low", "high", "method"}``.
+
+    >>> e = error_bar([90.0, 95.0], [1.0, 0.5], order=1.0)
+    >>> e["extrapolated"], e["estimate"], round(e["relative"], 3)
+    (100.0, 15.0, -0.1)
+    """
+    v = [float(x) for x in values]
+    h = [float(x) for x in spacings]
+    if len(v) < 2:
+        raise ValueError("an error bar needs the governing stress at two spacings at least")
+    ratio = h[-2] / h[-1]
+    p, src = order, "given"
+    if len(v) >= 3 and p is None:
+        p = observed_order(v[-3], v[-2], v[-1], spacings=h[-3:])
+        src = "measured on this part (three spacings)"
+        if p is not None and not (0.3 <= p <= 4.0):
+            p = None
+    if p is None:
+        p, src = LATTICE_ORDER, "the lattice's, measured by rackstress bench governing"
+    fs = SAFETY_MEASURED if src.startswith("measured") else SAFETY_ASSUMED
+    ext = richardson(v[-2], v[-1], ratio, p)
+    est = fs * abs(v[-1] - ext)
+    change = abs(v[-1] - v[-2]) / abs(v[-1]) if v[-1] else None
+    return {"values": v, "spacings": h, "ratio": ratio, "order": float(p), "order_from": src,
+            "extrapolated": ext, "estimate": est,
+            "relative": (v[0] - ext) / ext if ext else None,
+            "relative_fine": (v[-1] - ext) / ext if ext else None,
+            "low": max(0.0, v[-1] - est), "high": v[-1] + est, "safety_factor": fs,
+            "change": change,
+            "converging": bool(change is not None and change <= CONVERGING),
+            "method": f"Richardson extrapolation (order {p:.3g}, {src}) over spacings "
+                      + ", ".join(f"{x:.4g}" for x in h)
+                      + f"; error band: grid convergence index, safety factor {fs:g}"}
+
+
+#: What a single run's governing stress may be off by, per s/t (s the spacing, t the shortest
+#: chord through the part at the governing particle): the largest |governing / FEA − 1| per
+#: s/t that ``rackstress bench governing`` measured over its parts and spacings
+#: (docs/benchmarks/governing.md: "A single run's error per s/t"), where the governing
+#: particle lies on flat faces ...
+DEFAULT_ERROR_SLOPE = 0.79
+#: ... and where it lies within :data:`CURVED_SPACINGS` of a concave curved face (a fillet or
+#: a hole the lattice resolves as steps), at least this fraction whatever the spacing: the
+#: largest |governing / FEA − 1| the bench measured there (the steps' error does not shrink
+#: with s/t)
+CURVED_ERROR = 0.33
+CURVED_SPACINGS = 2.0
+
+
+def near_curved(rundir, name: str, position, spacing: float) -> bool:
+    """Whether ``position`` lies within :data:`CURVED_SPACINGS` of a concave edge of the part's
+    surface (``singular.npz``'s: fillets, holes, sharp edges alike)."""
+    from scipy.spatial import cKDTree
+
+    from rackstress.lib.runfiles import SINGULAR
+    from rackstress.model.singular import concave_points
+
+    try:
+        with np.load(Path(rundir) / SINGULAR, allow_pickle=False) as z:
+            k = [str(x) for x in z["parts"]].index(name)
+            V, F = z[f"surface_{k}_vertices"], z[f"surface_{k}_faces"]
+    except (OSError, KeyError, ValueError):
+        return False
+    pts = concave_points(V, F, spacing)
+    if not len(pts):
+        return False
+    d, _ = cKDTree(pts).query(np.asarray(position, float).reshape(1, 3))
+    return bool(d[0] <= CURVED_SPACINGS * spacing)
+
+
+def default_error(run, gov: dict) -> dict:
+    """What a single run's governing stress may be off by, without ``--refine``: ±
+    :data:`DEFAULT_ERROR_SLOPE` × s/t, the lattice's measured convergence. Why s/t: a particle
+    reads the stress at its centre, half a spacing inside the surface, which in bending across
+    a member t thick is s/t below the surface's value (hand calculation); particles on a convex
+    edge read a few per cent high. ``relative`` is the half-width of that band."""
+    from rackstress.model.singular import chords
+
+    part = run.parts[gov["group"]]
+    o = run.o[part.index]
+    s = float(gov["spacing"])
+    t = float(chords(o, s)[int(gov["index"])])
+    curved = near_curved(run.rundir, gov["group"], gov["position"], s)
+    rel = DEFAULT_ERROR_SLOPE * s / t
+    how = f"± {DEFAULT_ERROR_SLOPE:g} × s/t = ± {100 * rel:.2g} %"
+    if curved and CURVED_ERROR > rel:
+        rel = CURVED_ERROR
+        how = (f"± {100 * rel:.2g} %, the lattice's error at a concave curved face (a fillet or "
+               "hole it resolves as steps), whatever the spacing")
+    return {"estimate": rel * gov["value"], "relative": rel, "thickness": t, "curved": curved,
+            "low": max(0.0, gov["value"] * (1 - rel)), "high": gov["value"] * (1 + rel),
+            "method": f"a single spacing: {how} (s = {s:.4g}, t = {t:.3g} the part's thickness "
+                      "at the governing particle), the lattice's convergence measured by "
+                      "rackstress bench governing; run with --refine for this part's own "
+                      "error bar",
+            "source": "docs/benchmarks/governing.md"}
+
+
+def _where(rec: dict) -> str:
+    pos = ", ".join(f"{x:.4g}" for x in rec["position"])
+    near = f", {rec['near']}" if rec.get("near") else ""
+    return f"particle {rec['particle']} at ({pos}){near}"
+
+
+def describe(gov: dict | None, sing: dict | None, error: dict | None,
+             headline: bool = True) -> list:
+    """Terminal lines: the governing stress as the headline (``headline`` False: left to the
+    caller), its safety factor and zone, the error bar, and the singular peak beside it
+    (spacing-dependent, with advice)."""
+    lines = []
+    if gov:
+        u = gov["units"]
+        sf = f", factor of safety {gov['safety']:.3g}" if gov.get("safety") else ""
+        if headline:
+            lines.append(f"  governing von Mises stress {gov['value']:.4g} {u} in "
+                         f"{gov['group']}{sf}: {_where(gov)}")
+        lines.append(f"    (the largest at least {gov['zone']:.3g} {gov.get('length_units', '')}"
+                     " from sharp re-entrant edges, support boundaries and point loads)")
+        if error and error.get("extrapolated") is not None:
+            lines.append(f"    error bar: {gov['value']:.4g} {u} at spacing "
+                         f"{error['spacings'][0]:.4g}, {error['values'][-1]:.4g} at "
+                         f"{error['spacings'][-1]:.4g}; extrapolated {error['extrapolated']:.4g}"
+                         f" {u} (order {error['order']:.2g}), converged value within "
+                         f"{error['low']:.4g} … {error['high']:.4g} {u}")
+            if error.get("converging") is False:
+                lines.append(f"    not converged: the governing stress moved by "
+                             f"{100 * error['change']:.2g} % between the two spacings (more "
+                             f"than {100 * CONVERGING:g} %); refine further, or check it by "
+                             "FE (rackstress fea)")
+        elif error:
+            lines.append(f"    may be off by about ±{100 * abs(error['relative']):.2g} % at this "
+                         f"spacing (the part is {error['thickness']:.3g} "
+                         f"{gov.get('length_units', '')} thick there; "
+                         "rackstress bench governing); rackstress run --refine measures it")
+    if sing:
+        lines.append(f"  singular peak {sing['value']:.4g} {sing['units']} at a "
+                     f"{sing['kind']}, {_where(sing)}: spacing-dependent, not a property of "
+                     f"the part; {sing['advice'].split(':')[0]}")
+    return lines

@@ -1,0 +1,137 @@
+"""``rackstress run --refine``: the same scene at spacing/√2, and the governing stress's error bar.
+
+After a run at its spacing h (the run directory ``RUN``), :func:`refine` runs the scene again
+with every part filled at h/√2 (:data:`~rackstress.stress.governing.REFINE_RATIO`) into
+``RUN/refine`` — a run directory of its own, locked, resumable and overwritten only by this
+step —, reads its governing stress at the first run's zone and singular points (the same
+quantity at both spacings: :func:`rackstress.stress.governing.record` with the coarse run's
+``singular`` and ``zone_override``), and writes into ``RUN/summary.json["stress"]["error"]``
+Richardson's extrapolation and the error band (:func:`rackstress.stress.governing.error_bar`,
+the lattice's measured order). ``RUN`` is complete before the refined run starts: a refined
+run that is interrupted leaves it as it was (``--resume RUN --refine`` does the refinement
+again).
+
+Example
+-------
+>>> refine("runs/cframe", "examples/cframe/static.toml")["extrapolated"]   # doctest: +SKIP
+99.2
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from rackstress.errors import EXIT_UNSETTLED, RackstressError
+from rackstress.stress.governing import REFINE_RATIO, error_bar, record, singular_set
+
+#: the refined run's directory inside the run
+REFINE_DIR = "refine"
+
+
+class RefineError(RackstressError):
+    """The refinement cannot be made (no governing stress, a run that did not settle): exit 2,
+    or 6 (``EXIT_UNSETTLED``) when the refined run did not settle."""
+
+
+def _finished(rundir: Path) -> dict | None:
+    try:
+        return json.loads((rundir / "summary.json").read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def check_refinable(scene) -> None:
+    """Refuse, before anything runs, a scene ``--refine`` cannot refine: a dynamic analysis
+    (its peak is a time's, and the time step changes with the spacing) or one without a part
+    with a material (no von Mises stress, no governing stress)."""
+    if getattr(scene, "analysis", None) != "static":
+        raise RefineError(f"scene '{scene.name}' is not a static analysis (analysis = "
+                          "\"static\"): --refine gives the error bar of a static part's "
+                          "governing stress")
+    if not any(g.material is not None for g in scene.groups.values()):
+        raise RefineError(f"scene '{scene.name}' has no part with a material: --refine "
+                          "refines the governing von Mises stress of a material part")
+
+
+def refine(rundir, spec: str, overrides: dict | None = None, engine: str = "lammps",
+           mode: str = "exact", progress: bool = False, echo=print,
+           ratio: float = REFINE_RATIO) -> dict:
+    """Run ``spec`` at spacing/``ratio`` into ``RUNDIR/refine`` and write the error bar.
+
+    Parameters
+    ----------
+    rundir : path
+        A finished run of ``spec`` (its ``summary.json`` with a governing stress).
+    spec : str
+        The scene file the run was made from; ``overrides`` its ``--set`` values.
+
+    Returns
+    -------
+    dict
+        The error bar, as written into ``summary.json["stress"]["error"]``.
+
+    Raises
+    ------
+    RefineError
+        The run has no governing stress (no part with a material) or did not settle.
+    """
+    from rackstress.lib.jsonio import write_json
+    from rackstress.runs.run import run as run_scene
+    from rackstress.scenes import load
+    from rackstress.stress.post import compute_fields, postprocess
+    from rackstress.stress.rundata import load_run
+
+    rundir = Path(rundir)
+    summary = _finished(rundir)
+    if summary is None:
+        raise RefineError(f"{rundir}: no finished run to refine (no summary.json)")
+    if summary.get("settled") is False or summary.get("status") in ("diverged", "not settled"):
+        raise RefineError(f"{rundir}: the run did not settle ({summary.get('status')}): its "
+                          "stress is not an equilibrium's, so it has no error bar to refine")
+    gov = (summary.get("stress") or {}).get("governing")
+    if not gov:
+        raise RefineError(f"{rundir}: no governing stress (a part with a material and its "
+                          "von Mises stress) to refine")
+    coarse_run = load_run(rundir)
+    sing = singular_set(coarse_run)
+    scale = float(json.loads((rundir / "scene.json").read_text()).get("params", {})
+                  .get("spacing_scale", 1.0))
+    fine_dir = rundir / REFINE_DIR
+    fine_summary = _finished(fine_dir)
+    sc = load(spec, overrides, spacing_scale=scale / ratio)
+    done = (fine_summary is not None and fine_summary.get("settled") is not False
+            and fine_summary.get("n_particles") == sc.n_particles
+            and (fine_summary.get("params") or {}).get("spacing_scale") == scale / ratio)
+    if not done:
+        echo(f"refine: {sc.name} at spacing / {ratio:.4g} ({sc.n_particles:,} particles) into "
+             f"{fine_dir}")
+        run_scene(sc, fine_dir, engine=engine, mode=mode, progress=progress, overwrite=True)
+        fine_summary = _finished(fine_dir)
+        if fine_summary.get("settled") is False:
+            err = RefineError(f"{fine_dir}: the refined run did not settle (residual "
+                              f"{fine_summary.get('residual'):.3g} of the load); the first "
+                              f"run in {rundir} is kept as it was, without an error bar")
+            err.exit_code = EXIT_UNSETTLED
+            raise err
+        postprocess(fine_dir, vtk=False, dump=False)
+    else:
+        echo(f"refine: {fine_dir} holds the refined run already")
+    fine_run = load_run(fine_dir)
+    fields = compute_fields(fine_run)
+    parts = (summary.get("stress") or {}).get("zone_parts") or {}
+    z = (parts.get(gov["group"]) or {}).get("zone", gov["zone"])
+    fine = record(fine_run, fields, zone_override=z, singular=sing)
+    fg = (fine.get("parts") or {}).get(gov["group"], {}).get("governing")
+    if fg is None:
+        raise RefineError(f"{fine_dir}: every particle of '{gov['group']}' lies within the "
+                          f"zone ({z:.3g}) of a singular point")
+    h = float(gov["spacing"])
+    err = error_bar([gov["value"], fg["value"]], [h, h / ratio])
+    err.update(refine_dir=REFINE_DIR, group=gov["group"], zone=z, units=gov["units"],
+               governing_fine={k: fg[k] for k in ("value", "particle", "position", "iteration")},
+               particles=[int(summary.get("n_particles", 0)),
+                          int(fine_summary.get("n_particles", 0))])
+    summary = _finished(rundir)          # as it is now (post-processing may have added to it)
+    summary.setdefault("stress", {})["error"] = err
+    write_json(rundir / "summary.json", summary)
+    return err
