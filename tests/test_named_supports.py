@@ -79,10 +79,16 @@ force = [0, -100, 0]
 
 
 def test_pinned_hole_carries_no_moment(tmp_path):
+    from rackstress.runs.run import singular_of
+
     P, L = 100.0, 80.0
-    moments = {}
+    moments, edges = {}, {}
     for first in ("pinned", "fixed"):
         sc = scenes.load(str(bar_scene(tmp_path, first)))
+        # the support's edge on the first bore: singular points, whether it turns or not
+        points = singular_of(sc)["bar"][2]
+        sup = points.points[points.kind == 1]
+        edges[first] = sup[np.hypot(sup[:, 0] - 10, sup[:, 1] - 5) < 4.5]
         res = solve(sc)
         assert res.settled, (first, res.residual)
         R = reactions(sc, res.p)
@@ -103,6 +109,9 @@ def test_pinned_hole_carries_no_moment(tmp_path):
             assert RB[1] == pytest.approx(P / 2, abs=1e-3 * P)
     # held fixed, the same hole takes a share of the bending moment
     assert abs(moments["fixed"]) > 0.01 * P * L
+    # a pinned bore's edge is a support's edge as the fixed bore's (the independent path)
+    assert len(edges["pinned"]) > 0
+    np.testing.assert_array_equal(edges["pinned"], edges["fixed"])
 
 
 def test_roller_on_a_sloped_face(tmp_path):

@@ -330,7 +330,24 @@ def singular_of(scene: Scene, fixed=None, F=None) -> dict:
         spacing, shape = singular.part_geometry(scene, name)
         meta = g.meta if isinstance(g.meta, dict) else {}
         wall = singular.wall_thickness(g.o, spacing, phi=meta.get("fractions"))
-        out[name] = (spacing, wall, singular.find(g.o, spacing, shape, fixed[sl], F[sl]))
+        out[name] = (spacing, wall, singular.find(g.o, spacing, shape, _bores_held(g, fixed[sl]),
+                                                  F[sl]))
+    return out
+
+
+def _bores_held(g, fixed: np.ndarray) -> np.ndarray:
+    """``fixed`` (the part's held axes) with a pinned hole's ring and a cylindrical support's
+    bore counted as held in every direction: their edge on the bore is a support's edge, as a
+    fixed hole's is; a roller or symmetry plane (one direction) is not, as a held axis is not."""
+    from rackstress.model.constraints import Ring
+
+    out = np.array(fixed, dtype=bool, copy=True)
+    for con in getattr(g, "constraints", ()):
+        if isinstance(con, Ring):
+            out[con.ids] = True
+        else:                        # Normals: held in two directions or more (a bore)
+            ids, counts = np.unique(con.ids, return_counts=True)
+            out[ids[counts >= 2]] = True
     return out
 
 
