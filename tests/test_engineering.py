@@ -30,9 +30,12 @@ def _tip(spacing: float) -> float:
 
 
 def _virial_sxx(sc, p, rows):
-    """σ_xx of particles ``rows`` from their bindings' forces (virial, Σ r⊗f / 2V), MPa."""
+    """σ_xx of particles ``rows`` from their bindings' forces (virial, Σ r⊗f / 2V) and from
+    the material's volumetric term (each particle's own terms' Σ r⊗f / V, the term that gives
+    the lattice the material's Poisson's ratio: docs/calibration.md), MPa."""
     from rackstress.engines.static import _bind_pairs
     from rackstress.model.operators import Bind
+    from rackstress.model.volume import Volume, volume_terms
 
     I, J, C, Q = _bind_pairs(sc)
     m = sc.masses()
@@ -42,6 +45,9 @@ def _virial_sxx(sc, p, rows):
     r = p[J] - p[I]
     V = sc.groups["bar"].volume
     s = np.bincount(I, weights=r[:, 0] * f[:, 0], minlength=len(p)) / (2 * V)
+    vol = volume_terms(sc)
+    if vol is not None:
+        s = s + Volume.virial(p, vol, m)[:, 0] / V
     return s[rows]
 
 

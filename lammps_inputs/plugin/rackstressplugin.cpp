@@ -15,6 +15,7 @@
      fix rs/dampen   dampen, Eq. 9, and conditional dampen, Eq. 28
      fix rs/force    a constant force, Eq. 8
      fix rs/nve      integrate, Eq. 5 (fix nve's arithmetic over the moving rows)
+     fix rs/volume   a material part's volumetric term (its Poisson's ratio; beyond the paper)
    Phase conditions (Eq. 4's ⟨P⟩ on the gait phase) are the deck's: a phase-conditioned operator
    is a fix defined in the phases where its condition holds and removed at the switch.
 ------------------------------------------------------------------------- */
@@ -26,6 +27,7 @@
 #include "fix_rs_force.h"
 #include "fix_rs_nve.h"
 #include "fix_rs_rack.h"
+#include "fix_rs_volume.h"
 
 #ifndef RS_LAMMPS_VERSION
 #define RS_LAMMPS_VERSION "22 Jul 2025"
@@ -89,4 +91,6 @@ extern "C" void lammpsplugin_init(void *lmp, void *handle, void *regfunc)
       (lammpsplugin_factory2 *) &make<FixRSForce>);
   add(lmp, handle, reg, "rs/nve", "rackstress: velocity Verlet over the moving rows (Eq. 5)",
       (lammpsplugin_factory2 *) &make<FixRSNVE>);
+  add(lmp, handle, reg, "rs/volume", "rackstress: a material part's volumetric term",
+      (lammpsplugin_factory2 *) &make<FixRSVolume>);
 }

@@ -1376,6 +1376,32 @@ def bench_cantilever(out, quick):
     click.echo(cantilever.report(data))
 
 
+@bench.command("lattice")
+@_bench_out
+@click.option("--quick", is_flag=True, help="Spacings 2 and 1 only.")
+def bench_lattice(out, quick):
+    """The lattice's calibration proven: E_eff and ν_eff (uniaxial tension), bulk modulus
+    (hydrostatic box) and shear modulus on the axes and at 45° (isotropy) at ν = 0, 0.2, 0.3,
+    0.33, 0.45 and three spacings (docs/benchmarks/lattice.md)."""
+    from rackstress.bench import lattice
+
+    data = lattice.run_bench(out, quick=quick, echo=click.echo)
+    click.echo(lattice.report(data))
+
+
+@bench.command("nafems")
+@_bench_out
+@click.option("--quick", is_flag=True, help="The two coarser spacings only.")
+def bench_nafems(out, quick):
+    """NAFEMS LE1 (elliptic membrane) and LE10 (thick plate under pressure), a hole's K_t
+    (Kirsch) and a laterally constrained block at ν = 0.3 and 0.45, three spacings each
+    (docs/benchmarks/nafems.md)."""
+    from rackstress.bench import nafems
+
+    data = nafems.run_bench(out, quick=quick, echo=click.echo)
+    click.echo(nafems.report(data))
+
+
 @bench.command("static")
 @_bench_out
 @click.option("--quick", is_flag=True, help="The cantilever at 2 and 1 mm only.")

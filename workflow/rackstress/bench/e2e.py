@@ -135,7 +135,7 @@ def dump_costs(names, steps: int, reps: int = 5) -> list:
                 deck = compile_deck(sc, "exact")
                 d = Path(tmp) / name
                 d.mkdir()
-                (d / "particles.data").write_text(deck.data_text())
+                deck.write_data(d / "particles.data")
                 eng = LammpsRun(deck, d, dump_every=10 ** 8)
                 runs.append((name, sc, deck, d, eng))
                 eng.run_schedule()

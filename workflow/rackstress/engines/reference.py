@@ -20,6 +20,7 @@ from rackstress.model.operators import (Attract, Bind, Collide, Dampen, Force, c
                                         contact_groups, integrate, phase_active)
 from rackstress.model.scene import Scene
 from rackstress.model.verlet import integrate_verlet
+from rackstress.model.volume import Volume
 from rackstress.engines.watchdog import check, first_nonfinite, force_error
 
 __all__ = ["Reference", "integrate", "KERNELS"]
@@ -135,6 +136,15 @@ class Reference:
         if self.holds(op.when, site[0], phase, cache):
             pl = self._pair_list(site, op)
             _accumulate(a, pl.i, Bind.accel(self.p[pl.i], self.p[pl.j], pl.c, pl.q))
+
+    def _volume(self, a, site, op, phase, cache):
+        if self.holds(op.when, site[0], phase, cache):
+            key = ("volume", site)
+            if key not in self._pairs:
+                sl = self.scene.slice(site[0])
+                self._pairs[key] = (sl, op.terms(self.scene.groups[site[0]]))
+            sl, t = self._pairs[key]
+            a[sl] += Volume.accel(self.p[sl], t)
 
     def _attract(self, a, site, op, phase, cache):
         if self.holds(op.when, site[0], phase, cache):
@@ -257,4 +267,4 @@ class Reference:
 
 #: The reference kernel evaluating each operator class (adding an operator adds one entry).
 KERNELS = {Force: Reference._force, Dampen: Reference._dampen, Collide: Reference._collide,
-           Bind: Reference._bind, Attract: Reference._attract}
+           Bind: Reference._bind, Attract: Reference._attract, Volume: Reference._volume}

@@ -45,6 +45,7 @@ import numpy as np
 
 from rackstress.errors import SceneError
 from rackstress.model.operators import Bind, Dampen, Force
+from rackstress.model.volume import Volume, volume_terms
 
 #: settled when the largest unbalanced particle force ≤ TOLERANCE × total applied load
 TOLERANCE = 1e-6
@@ -81,7 +82,7 @@ def check_static(scene) -> None:
         for op in seq:
             if isinstance(op, Dampen):
                 continue               # no velocity at equilibrium
-            if isinstance(op, Bind) and not op.when:
+            if isinstance(op, (Bind, Volume)) and not op.when:
                 continue
             if isinstance(op, Force) and not op.when:
                 continue
@@ -128,17 +129,36 @@ def _bind_pairs(scene):
 
 
 def forces(scene, p: np.ndarray, pairs, F_ext: np.ndarray, m: np.ndarray) -> np.ndarray:
-    """m·a(p): the bindings' force (Eq. 12) plus the external loads, n×3."""
+    """m·a(p): the bindings' force (Eq. 12) and the material parts' volumetric term
+    (:func:`volume_force`) plus the external loads, n×3."""
     I, J, C, Q = pairs
     a = Bind.accel(p[I], p[J], C, Q)
     out = np.zeros_like(p)
     for k in range(3):
         out[:, k] = np.bincount(I, weights=a[:, k] * m[I], minlength=len(p))
-    return out + F_ext
+    return out + volume_force(volume_terms(scene), p, m) + F_ext
 
 
-def stiffness(p: np.ndarray, pairs, m: np.ndarray):
-    """K = −∂(m·a)/∂p of the bindings (3n×3n, CSR): Eq. 12 linearized (Bind.jacobian)."""
+# ------------------------------------------------------------------ the volumetric term
+def volume_force(vol, p: np.ndarray, m: np.ndarray):
+    """m·a of the volumetric term (:meth:`rackstress.model.volume.Volume.accel`), or 0 when
+    the scene has none (``vol`` None: no material part)."""
+    if vol is None:
+        return 0.0
+    return m[:, None] * Volume.accel(p, vol)
+
+
+def volume_stiffness(vol, p: np.ndarray, m: np.ndarray):
+    """Its K = −∂(m·a)/∂p = m·∂²(U/m)/∂p² (3n × 3n, CSR, symmetric: a part's particles have
+    one mass; :meth:`rackstress.model.volume.Volume.hessian`)."""
+    import scipy.sparse as sp
+
+    return (sp.diags(np.repeat(m, 3)) @ Volume.hessian(p, vol)).tocsr()
+
+
+def stiffness(p: np.ndarray, pairs, m: np.ndarray, volume=None):
+    """K = −∂(m·a)/∂p of the bindings (3n×3n, CSR): Eq. 12 linearized (Bind.jacobian), and of
+    the volumetric term ``volume`` (:func:`volume_stiffness`) when there is one."""
     import scipy.sparse as sp
 
     I, J, C, Q = pairs
@@ -159,7 +179,8 @@ def stiffness(p: np.ndarray, pairs, m: np.ndarray):
     rows = np.concatenate([rows_d.ravel(), rows_ij.ravel()])
     cols = np.concatenate([cols_d.ravel(), cols_ij.ravel()])
     vals = np.concatenate([D.ravel(), -B.ravel()])
-    return sp.csr_matrix((vals, (rows, cols)), shape=(3 * n, 3 * n))
+    K = sp.csr_matrix((vals, (rows, cols)), shape=(3 * n, 3 * n))
+    return K if volume is None else (K + volume_stiffness(volume, p, m)).tocsr()
 
 
 def rigid_modes(p: np.ndarray, free) -> np.ndarray:
@@ -207,6 +228,8 @@ class _Problem:
     #: the supports as u = T·q + prescribed (model/constraints.py): T selects ``free`` where
     #: only axes are fixed; rollers on any face, symmetry planes and pins make it a map
     cmap: object = None
+    #: the material parts' volumetric term (model/volume.py), None without one
+    volume: object = None
 
 
 def _problem(scene) -> _Problem:
@@ -216,14 +239,15 @@ def _problem(scene) -> _Problem:
     fixed = scene.fixed()
     F = external_forces(scene)
     return _Problem(len(o), o, scene.masses(), fixed, ~fixed.reshape(-1), _bind_pairs(scene),
-                    F, float(np.linalg.norm(F, axis=1).sum()), ConstraintMap.of_scene(scene))
+                    F, float(np.linalg.norm(F, axis=1).sum()), ConstraintMap.of_scene(scene),
+                    volume_terms(scene))
 
 
 def _tangent(p: np.ndarray, prob: _Problem):
     """K on the free unknowns at ``p``, plus ε·diag(K) (:data:`REGULARIZATION`); and that ε·D."""
     import scipy.sparse as sp
 
-    K = prob.cmap.reduce(stiffness(p, prob.pairs, prob.m)).tocsr()
+    K = prob.cmap.reduce(stiffness(p, prob.pairs, prob.m, volume=prob.volume)).tocsr()
     d = K.diagonal()
     pos = d[d > 0]
     floor = 1e-3 * float(pos.mean()) if len(pos) else 1.0
@@ -689,6 +713,14 @@ def rounding_floor(scene, p: np.ndarray) -> float:
         return 0.0
     m = scene.masses()
     per = np.bincount(I, weights=2.0 * np.abs(C) * m[I], minlength=len(p))
+    vol = volume_terms(scene)
+    if vol is not None:       # a pair's stiffness in the terms: Σ|Cᵀ·diag(κ)·C| along its row
+        import scipy.sparse as sp
+
+        A = abs(vol.C.T @ sp.diags(vol.kappa) @ vol.C)
+        w = np.asarray(A.sum(axis=1)).ravel()
+        per = per + m * (np.bincount(vol.i, weights=w, minlength=len(p))
+                         + np.bincount(vol.j, weights=w, minlength=len(p)))
     return float(np.finfo(float).eps * np.abs(p).max() * per.max())
 
 

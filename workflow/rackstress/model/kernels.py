@@ -93,6 +93,8 @@ def warm() -> dict:
     k.bind_block(x, 0, 1, 1, 2, np.ones((2, 1)), np.ones((2, 1)), np.ones((2, 1)), True, acc)
     k.bind_pairs(x, r, s, r, s, one, one, one, True, acc)
     k.attract_pairs(x, r, s, r, one, acc)
+    k.volume_pairs(x, r, s, one, np.array([0, 2], np.int64), r, one, np.ones(1), r, s,
+                   np.zeros(2), np.zeros(2), acc)
     k.touching(x, r, s, np.full(2, 4.0))
     k.collide(x, r, s, np.full(2, 4.0), 3.0)
     k.dampen(np.ones((3, 3)), r, r, 2.0, acc)
@@ -396,6 +398,44 @@ if nb is not None:
                 acc[aj[k], 0] -= c * d0
                 acc[aj[k], 1] -= c * d1
                 acc[aj[k], 2] -= c * d2_
+
+    @nb.njit(**_OPTS)
+    def volume_pairs(x, ri, rj, L, tptr, tidx, tval, kappa, ai, aj, e, s, acc):
+        """A material's volumetric term (:class:`rackstress.model.volume.Volume`) over its
+        pairs (rows ri, rj of x, rest lengths L) and terms (CSR tptr, tidx, tval: θ = C·e,
+        κ per term): e = ‖d‖ − L, the pulls s = Cᵀ·(κ·θ), and each pair's s·d/‖d‖ added to
+        accumulator row ai and taken from aj (−1: not here). ``e`` and ``s`` are scratch of
+        one entry a pair."""
+        for p in range(len(ri)):
+            i, j = ri[p], rj[p]
+            d0 = x[j, 0] - x[i, 0]
+            d1 = x[j, 1] - x[i, 1]
+            d2_ = x[j, 2] - x[i, 2]
+            e[p] = np.sqrt(d0 * d0 + d1 * d1 + d2_ * d2_) - L[p]
+            s[p] = 0.0
+        for m in range(len(kappa)):
+            th = 0.0
+            for k in range(tptr[m], tptr[m + 1]):
+                th += tval[k] * e[tidx[k]]
+            t = kappa[m] * th
+            for k in range(tptr[m], tptr[m + 1]):
+                s[tidx[k]] += t * tval[k]
+        for p in range(len(ri)):
+            if s[p] == 0.0:
+                continue
+            i, j = ri[p], rj[p]
+            d0 = x[j, 0] - x[i, 0]
+            d1 = x[j, 1] - x[i, 1]
+            d2_ = x[j, 2] - x[i, 2]
+            g = s[p] / (e[p] + L[p])
+            if ai[p] >= 0:
+                acc[ai[p], 0] += g * d0
+                acc[ai[p], 1] += g * d1
+                acc[ai[p], 2] += g * d2_
+            if aj[p] >= 0:
+                acc[aj[p], 0] -= g * d0
+                acc[aj[p], 1] -= g * d1
+                acc[aj[p], 2] -= g * d2_
 
     @nb.njit(**_OPTS)
     def attract_pairs(x, ri, rj, ai, cI, acc):

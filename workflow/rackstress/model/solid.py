@@ -8,9 +8,11 @@ material (docs/calibration.md):
 * Eq. 12's stiffness along a binding at rest is 2c (an acceleration per length, DESIGN §6), so
   one binding is a spring of k = 2·c·m between particles of mass m = ρ·a³;
 * the lattice with equal first and second neighbour springs is isotropic in the continuum
-  limit: C11 = 3k/a, C12 = C44 = k/a, hence ν = 1/4 and E = 2.5·k/a;
-* so E = 5·c·ρ·a², and a material of Young's modulus E gets ``c = E / (5·ρ·a²)``
-  (:func:`bind_coefficient`). The lattice's ν is 1/4 whatever the material's.
+  limit: C11 = 3k/a, C12 = C44 = k/a, hence λ = μ = k/a and ν = 1/4 (E = 2.5·k/a);
+* the volumetric term (:mod:`rackstress.model.volume`) adds λ' to λ, so the bindings carry
+  the material's shear modulus, μ = E/(2(1 + ν)) = k/a, and a material of E and ν gets
+  ``c = E / (4·(1 + ν)·ρ·a²)`` (:func:`bind_coefficient`; E/(5ρa²) at ν = 1/4, where the
+  volumetric term vanishes).
 
 At a free face the second-neighbour bindings that would leave the part are missing, and the
 face layer is softer than the bulk (a bar of N particles across is 2/(3N) too soft in tension).
@@ -30,7 +32,7 @@ Example
 >>> from rackstress.model.materials import material
 >>> from rackstress.model.units import SYSTEMS
 >>> round(bind_coefficient(material("aluminium"), SYSTEMS["mm-N-s"], 1.0) / 1e12, 4)
-5.1852
+4.8733
 """
 from __future__ import annotations
 
@@ -42,8 +44,9 @@ from rackstress.errors import SceneError
 from rackstress.model.operators import WithinInside
 
 #: E = LATTICE_E · k / a for the simple-cubic lattice with equal 1st/2nd-neighbour springs
+#: alone (no volumetric term: ν = 1/4)
 LATTICE_E = 2.5
-#: the lattice's own Poisson's ratio (C12 / (C11 + C12))
+#: the lattice's own Poisson's ratio without the volumetric term (C12 / (C11 + C12))
 LATTICE_NU = 0.25
 #: what a missing second-neighbour binding at a face gives the face-parallel nearest binding
 #: along its projection: half of it lies inside the part (the half-spacing skin), and a
@@ -68,11 +71,12 @@ REACH = 1.5
 
 
 def bind_coefficient(material, units, spacing: float) -> float:
-    """c of Eq. 12 making the cubic lattice of ``spacing`` as stiff as ``material``:
-    c = E / (5·ρ·a²) in the scene's ``units`` (k = 2·c·m, m = ρ·a³, E = 2.5·k/a)."""
-    props = material.in_units(units)
-    a = float(spacing)
-    return props["E"] / (2.0 * LATTICE_E * props["density"] * a * a)
+    """c of Eq. 12 giving the cubic lattice of ``spacing`` the ``material``'s shear modulus:
+    c = E / (4·(1 + ν)·ρ·a²) in the scene's ``units`` (k = 2·c·m, m = ρ·a³, μ = k/a); the
+    volumetric term (:func:`rackstress.model.volume.coefficients`) gives it the material's ν."""
+    from rackstress.model.volume import coefficients
+
+    return coefficients(material, units, spacing)[0]
 
 
 @dataclass(frozen=True)

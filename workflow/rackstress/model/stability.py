@@ -153,6 +153,17 @@ def linearize(scene: Scene, phase: Mapping, p: np.ndarray | None = None) -> dict
         sl = scene.slice(target)
         g_t = scene.groups[target]
         for op in seq:
+            if getattr(op, "kind", "") == "volume":
+                if phase_active(op.when, phase):      # a material part's many-body term
+                    I, J, B = _volume_blocks(op, g_t, sl.start, p[sl])
+                    if len(I):
+                        labels.append(_label(target, op))
+                        Is.append(I)
+                        Js.append(J)
+                        Bs.append(B)
+                        norms.append(np.linalg.norm(B, ord=2, axis=(1, 2)))
+                        labs.append(np.full(len(I), len(labels) - 1))
+                continue
             if not op.pair:        # dampen: Γ (contact assumed); force: a constant
                 gamma[sl] += op.damping(phase_active(op.when, phase))
                 continue
@@ -182,6 +193,26 @@ def linearize(scene: Scene, phase: Mapping, p: np.ndarray | None = None) -> dict
             "B": cat(Bs, (0, 3, 3)), "norm": cat(norms, (0,)),
             "label": cat(labs, (0,)).astype(np.int64), "labels": labels, "gamma": gamma,
             "virtual": virtual}
+
+
+def _volume_blocks(op, group, offset: int, p: np.ndarray):
+    """The volumetric term's tangent stiffness (:meth:`rackstress.model.volume.Volume.hessian`)
+    as pair blocks: K[p, u] = −B for every p ≠ u, so K[p, p] = Σ_u B (its rows sum to zero: a
+    translation moves no extension)."""
+    from rackstress.model.volume import Volume
+
+    H = Volume.hessian(p, op.terms(group)).tocoo()
+    n = group.n
+    r, c = H.row // 3, H.col // 3
+    off = r != c
+    B = np.zeros((0, 3, 3))
+    if off.any():
+        key = r[off] * n + c[off]
+        uniq, inv = np.unique(key, return_inverse=True)
+        B = np.zeros((len(uniq), 3, 3))
+        np.add.at(B, (inv, H.row[off] % 3, H.col[off] % 3), -H.data[off])
+        return uniq // n + offset, uniq % n + offset, B
+    return np.zeros(0, np.int64), np.zeros(0, np.int64), B
 
 
 def stiffness_matrix(lin: dict, N: int):

@@ -114,6 +114,8 @@ def _scale(op, s: float):
         return dataclasses.replace(op, c=s * op.c, extra=s * op.extra)
     if isinstance(op, (Collide, Bind, Attract)):
         return dataclasses.replace(op, coeff=dataclasses.replace(op.coeff, c=s * op.coeff.c))
+    if getattr(op, "kind", "") == "volume":     # a material part's many-body term
+        return dataclasses.replace(op, c=tuple(s * c for c in op.c))
     raise SceneError(f"verlet mode cannot scale operator {op!r}")  # pragma: no cover
 
 

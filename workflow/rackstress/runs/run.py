@@ -43,6 +43,10 @@ def default_dump_every(scene: Scene) -> int:
 BYTES_PER_PARTICLE = {"lammps": 700, "reference": 900}
 #: Bytes a bind pair costs (index pairs, coefficients, L0²: 4 float64/int64 arrays, twice).
 BYTES_PER_PAIR = 64
+#: Bytes the volumetric term costs a particle of a material part (model/volume.py: its six
+#: nearest pairs' i, j, L and one term's owner, κ and six coefficients with their columns,
+#: twice for the engines' copies)
+VOLUME_BYTES_PER_PARTICLE = 600
 
 
 def check_memory(scene: Scene, engine: str, ranks: int = 1) -> int:
@@ -54,10 +58,13 @@ def check_memory(scene: Scene, engine: str, ranks: int = 1) -> int:
     """
     from rackstress.lib.cells import count_within
     from rackstress.model.operators import Bind, Within
+    from rackstress.model.volume import Volume
 
-    pairs = 0
+    pairs, extra = 0, 0
     for target, seq in scene.operators.items():
         for op in seq:
+            if isinstance(op, Volume):
+                extra += scene.groups[target].n * VOLUME_BYTES_PER_PARTICLE
             if not isinstance(op, Bind):
                 continue
             t, u = scene.groups[target], scene.groups[op.source]
@@ -65,8 +72,8 @@ def check_memory(scene: Scene, engine: str, ranks: int = 1) -> int:
                 pairs += count_within(t.o, u.o, float(op.coeff.d))
             else:
                 pairs += t.n * u.n
-    need = (scene.n_particles * BYTES_PER_PARTICLE.get(engine, 900) + pairs * BYTES_PER_PAIR) \
-        * max(1, ranks)
+    need = (scene.n_particles * BYTES_PER_PARTICLE.get(engine, 900) + pairs * BYTES_PER_PAIR
+            + extra) * max(1, ranks)
     require_memory(need, f"scene '{scene.name}' ({scene.n_particles:,} particles, up to "
                          f"{pairs:,} bind pairs, {ranks} rank(s), {engine} engine)")
     return need
@@ -129,16 +136,38 @@ def write_bindings(scene: Scene, path: Path) -> int:
     global particle order — ``i`` (the bound particle), ``j`` (its partner), ``k`` = m_i·c (the
     binding's force per length, Eq. 12 times the mass) and ``L0sq`` — so that post-processing
     finds the stress from the bindings' forces (:mod:`rackstress.stress.tensor`) without the
-    scene. Returns the number of bindings (0: no file written)."""
+    scene. With a volumetric term (a material's Poisson's ratio, :mod:`rackstress.model.volume`)
+    its terms too — ``vi``, ``vj``, ``vL`` (their pairs), ``vowner``, ``vK`` = m·κ (energies)
+    and the sparse ``C`` as ``vC_indptr``, ``vC_indices``, ``vC_data`` — whose virial the
+    stress adds (:meth:`rackstress.model.volume.Volume.virial`). Returns the number of
+    bindings (0: no file written)."""
     b = bindings_of(scene)
     if b is None:
         return 0
     idx = np.int32 if scene.n_particles < 2 ** 31 else np.int64
     tmp = path.with_name(f".{path.name}.tmp.npz")
+    extra = {}
+    vol = volume_of(scene)
+    if vol is not None:
+        m = scene.masses()
+        extra = {"vi": vol.i.astype(idx), "vj": vol.j.astype(idx), "vL": vol.L,
+                 "vowner": vol.owner.astype(idx), "vK": m[vol.owner] * vol.kappa,
+                 "vC_indptr": vol.C.indptr.astype(np.int64),
+                 "vC_indices": vol.C.indices.astype(np.int64), "vC_data": vol.C.data}
     np.savez(tmp, i=b[0].astype(idx), j=b[1].astype(idx), k=b[2], L0sq=b[3],
-             V=volumes_of(scene))
+             V=volumes_of(scene), **extra)
     tmp.replace(path)
     return len(b[0])
+
+
+def volume_of(scene: Scene):
+    """The volumetric terms of the material parts (:func:`rackstress.model.volume.volume_terms`:
+    unconditional ones on groups with a material and a volume), or None."""
+    from rackstress.model.volume import volume_terms
+
+    if not any(g.material is not None and g.volume is not None for g in scene.groups.values()):
+        return None
+    return volume_terms(scene)
 
 
 def volumes_of(scene: Scene) -> np.ndarray:
@@ -827,7 +856,7 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
                                          "ratio": pred["ratio"], "set_by": describe_limit(pred),
                                          "scene": scene.name, "params": scene.params})
         try:
-            (out / "particles.data").write_text(deck.data_text())
+            deck.write_data(out / "particles.data")
             write_bindings(scene, out / BINDINGS)
             if engine == "lammps":
                 (out / "in.lammps").write_text(deck.input_text(dump_every))

@@ -283,10 +283,12 @@ def _refix(g) -> None:
 
 
 def solids(ctx, groups: dict, operators: dict, u) -> dict:
-    """A material part's bind (the elastic lattice, :mod:`rackstress.model.solid`), put first
-    among the part's operators."""
+    """A material part's bind (the elastic lattice, :mod:`rackstress.model.solid`) and, for a
+    Poisson's ratio other than the bindings' own 1/4, its volumetric term
+    (:mod:`rackstress.model.volume`), put first among the part's operators."""
     from rackstress.model.regions import Box, Cylinder, Sphere
-    from rackstress.model.solid import REACH, Solid, bind_coefficient
+    from rackstress.model.solid import REACH, Solid
+    from rackstress.model.volume import Volume, coefficients
 
     out = {name: list(seq) for name, seq in operators.items()}
     for name, g in groups.items():
@@ -297,10 +299,16 @@ def solids(ctx, groups: dict, operators: dict, u) -> dict:
         shape = info["shape"]
         if isinstance(shape, (Box, Sphere, Cylinder)):
             shape = None          # convex: no binding between two inside points leaves it
-        c = bind_coefficient(g.material, u, a)
+        try:
+            c, cv = coefficients(g.material, u, a)
+        except SceneError as exc:
+            raise ctx.error(str(exc), f"group '{name}' material") from None
         solid = Solid(REACH * a, c, shape, spacing=a, material=g.material.name,
                       part=info["shape"])
-        out.setdefault(name, []).insert(0, Bind(name, solid))
+        seq = out.setdefault(name, [])
+        if any(cv):             # ν = 0, ... (every ν: the free faces' sub-cells)
+            seq.insert(0, Volume(name, solid, cv))
+        seq.insert(0, Bind(name, solid))
         if info["shape"] is not None:       # each cell's share of the part (stress volume)
             g.meta["fractions"] = solid.fractions(g.o)
             g.meta["fraction"] = g.meta["fractions"].prod(axis=1)
@@ -411,6 +419,10 @@ def loads(ctx, tables, groups: dict, operators: dict, u, select, ramp) -> dict:
                 phi = np.delete(g.meta["fractions"][where], int(np.argmax(np.abs(n))), axis=1)
                 area *= float(phi.prod(axis=1).mean())
             accel = -pr * area * n / m
+            extra = _overhang_push(out.get(name, []), g, where, n, pr, u)
+            if extra is not None:       # the pressed cells' overhang (model/volume.py)
+                for vec, sel in extra:
+                    out.setdefault(name, []).extend(_forces(vec / m, sel, ramp))
         else:       # displacement
             uvec = np.asarray(_vec3(c, t["displacement"], "displacement"))
             if ramp is not None:
@@ -442,6 +454,38 @@ def loads(ctx, tables, groups: dict, operators: dict, u, select, ramp) -> dict:
                     tuple(float(x) / RAMP_STAIRS for x in accel), where=where_t,
                     when=(PhaseIn("ramp", tuple(range(s, RAMP_STAIRS + 1))),)))
     return {name: out[name] for name in groups if name in out}
+
+
+def _forces(accel, where, ramp) -> list:
+    """The force operators of one load: constant, or ten stairs of a ramp."""
+    where_t = None if where is None or np.all(where) else tuple(bool(x) for x in where)
+    if ramp is None:
+        return [Force(tuple(float(x) for x in accel), where=where_t)]
+    return [Force(tuple(float(x) / RAMP_STAIRS for x in accel), where=where_t,
+                  when=(PhaseIn("ramp", tuple(range(s, RAMP_STAIRS + 1))),))
+            for s in range(1, RAMP_STAIRS + 1)]
+
+
+def _overhang_push(ops, g, where, n, pr, u):
+    """A pressure's push through the pressed cells' overhang (model.volume.loaded_overhang),
+    as (force, particles) of each distinct force vector; None without a volumetric term."""
+    from rackstress.model.volume import Volume, loaded_overhang
+
+    vol = [op for op in ops if isinstance(op, Volume)]
+    if not vol or float(np.abs(n).max()) < 1.0 - 1e-9:
+        return None      # (a pressure along no lattice axis: its faces are staircases)
+    F = loaded_overhang(vol[0], g, where, int(np.argmax(np.abs(n))), pr,
+                        float(g.material.in_units(u)["nu"]))
+    moved = np.flatnonzero(np.any(F != 0.0, axis=1))
+    if not len(moved):
+        return None
+    rows, inv = np.unique(np.round(F[moved], 12), axis=0, return_inverse=True)
+    out = []
+    for r in range(len(rows)):
+        sel = np.zeros(g.n, bool)
+        sel[moved[inv.reshape(-1) == r]] = True
+        out.append((rows[r], sel))
+    return out
 
 
 def exposed(o: np.ndarray, n: np.ndarray, a: float) -> np.ndarray:

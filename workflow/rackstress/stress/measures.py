@@ -756,6 +756,7 @@ class ParticleStress(_RunAnalysis):
         self.method = method
         self.UNITS = stress_unit(run)
         self.bindings = read_bindings(run)
+        self.volume = read_volume_terms(run)
         self._mat = mats
 
     def _prepare(self):
@@ -824,6 +825,9 @@ class ParticleStress(_RunAnalysis):
         d = p[b[1]] - p[b[0]]
         d2 = np.einsum("ij,ij->i", d, d)
         s = T.stress(p, b, self._W2S, self._V, W=T.virial_of(d, d2, b[2], b[3], self._gather))
+        if self.volume is not None:       # the material's Poisson's ratio: its own virial
+            with np.errstate(divide="ignore", invalid="ignore"):   # V = 0 off the mask
+                s = s + T.volume_virial(p, self.volume) / self._V[:, None]
         if self._wm is not None:
             s = T.moment_corrected(s, b[0], b[1], self._wm, self._gather)
         if self._patch is not None:
@@ -857,6 +861,33 @@ def read_volumes(run):
             return None
         V = z["V"].astype(np.float64)
     return V if len(V) == run.n_atoms else None
+
+
+def read_volume_terms(run):
+    """The volumetric terms of the run's ``bindings.npz`` (:func:`rackstress.runs.run.
+    write_bindings`: a material's Poisson's ratio) as a :class:`rackstress.model.volume.
+    VolumeTerms` with m·κ for κ (energies: its virial is a force × length), or None."""
+    import scipy.sparse as sp
+
+    from rackstress.lib.runfiles import BINDINGS
+    from rackstress.model.volume import VolumeTerms
+
+    path = Path(run.rundir) / BINDINGS
+    if not path.is_file():
+        return None
+    with np.load(path, allow_pickle=False) as z:
+        if "vi" not in z.files:
+            return None
+        n = run.n_atoms
+        i, j = z["vi"].astype(np.int64), z["vj"].astype(np.int64)
+        owner, K = z["vowner"].astype(np.int64), z["vK"].astype(np.float64)
+        if len(i) and (min(i.min(), j.min()) < 0 or max(i.max(), j.max()) >= n):
+            raise StressInputError(f"{path}: a volumetric term names particle "
+                                   f"{int(max(i.max(), j.max()))} but the run has {n}: the file "
+                                   "is not of this run")
+        C = sp.csr_matrix((z["vC_data"], z["vC_indices"], z["vC_indptr"]),
+                          shape=(len(owner), len(i)))
+        return VolumeTerms(i, j, z["vL"].astype(np.float64), owner, K, C, n)
 
 
 def read_bindings(run):

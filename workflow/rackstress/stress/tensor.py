@@ -105,6 +105,17 @@ def incidence(i: np.ndarray, n: int):
     return csr_matrix((np.ones(m), (np.asarray(i), np.arange(m))), shape=(n, m))
 
 
+def volume_virial(p: np.ndarray, terms) -> np.ndarray:
+    """W_i of a material's volumetric term (n, 6, internal Voigt order; ``terms`` a
+    :class:`rackstress.model.volume.VolumeTerms` whose κ are energies, m·κ): each particle's own
+    terms' Σ s·d ⊗ d/‖d‖ (:meth:`rackstress.model.volume.Volume.virial`, derived in
+    docs/calibration.md "The stress"). Added to the bindings' virial, it makes the stress the
+    material's: under a uniform strain V_i·λ'·tr ε·I inside the part."""
+    from rackstress.model.volume import Volume
+
+    return Volume.virial(p, terms, np.ones(terms.n))
+
+
 def binding_moment(o: np.ndarray, i: np.ndarray, j: np.ndarray, k: np.ndarray,
                    n: int | None = None) -> np.ndarray:
     """A_i = ½ Σ_j k L0² m mᵀ (n, 6, 6) at the original positions ``o`` (module docstring)."""

@@ -38,6 +38,7 @@ from rackstress.model.kernels import warm as warm_kernels
 from rackstress.model.operators import (Attract, Bind, Collide, Const, Dampen, Force,
                                         contact_candidates, contact_groups, phase_active,
                                         reverse_of)
+from rackstress.model.volume import Volume
 
 
 class PartnerLost(RuntimeError):
@@ -915,6 +916,42 @@ class AttractTerm(Term):
         return self._by_phase[key]
 
 
+class VolumeTerm(Term):
+    """A material's volumetric term (:class:`rackstress.model.volume.Volume`): its pairs'
+    extensions, each term's κ·θ, the pulls Cᵀ·κθ along the pairs, on both ends of each pair
+    owned here. Every term reads its owner's pairs only, so a rank that sees a particle and
+    its neighbours evaluates its terms (the callback's ghost cutoff spans the bound groups)."""
+
+    def __init__(self, forces, r):
+        super().__init__(forces, r)
+        sc = forces.scene
+        self.t = r.op.terms(sc.groups[r.target]).shifted(self.sl.start, forces.n)
+        C = self.t.C
+        self.tptr, self.tidx = C.indptr.astype(np.int64), C.indices.astype(np.int64)
+        self.tval = C.data.astype(np.float64)
+        self._e, self._s = np.zeros(len(self.t.i)), np.zeros(len(self.t.i))
+
+    def add(self, fr, acc):
+        if not self.forces.holds(fr, self):
+            return
+        key = ("volume", id(self))
+        if key not in fr.memo:
+            ri, rj = fr.rows(f"volume on {self.target}", self.t.i, self.t.j)
+            fr.memo[key] = (ri, rj, fr.compact(ri), fr.compact(rj))
+        ri, rj, ai, aj = fr.memo[key]
+        t, k = self.t, self.forces.compiled
+        if k is not None:
+            k.volume_pairs(fr.x, ri, rj, t.L, self.tptr, self.tidx, self.tval, t.kappa, ai,
+                           aj, self._e, self._s, acc)
+            return
+        d = fr.x[rj] - fr.x[ri]
+        r = np.sqrt(rowdot(d, d))
+        s = t.C.T @ (t.kappa * (t.C @ (r - t.L)))
+        g = (s / r)[:, None] * d
+        fr.add(ri, g)
+        fr.add(rj, -g)
+
+
 def _leading(mask: np.ndarray, bit: int, n: int) -> int:
     """How many leading rows have ``bit`` set, when every row with it comes before every row
     without it (LAMMPS' ``atom_modify first`` order just after it reordered): a bisection."""
@@ -1150,7 +1187,7 @@ class Fused:
 
 #: The term realizing each operator class in the callback.
 TERMS = {Force: ForceTerm, Dampen: DampenTerm, Collide: CollideTerm, Bind: BindTerm,
-         Attract: AttractTerm}
+         Attract: AttractTerm, Volume: VolumeTerm}
 
 
 class PyForces:

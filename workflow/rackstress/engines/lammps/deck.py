@@ -92,6 +92,7 @@ from rackstress.model.operators import (Attract, Bind, Collide, Const, Dampen, F
                                         contact_groups, phase_active, reverse_of)
 from rackstress.model.scene import Phase, Scene
 from rackstress.model.verlet import scaled_scene
+from rackstress.model.volume import Volume
 
 MODES = ("exact", "fast")
 #: The fix external that carries every Python-realized operator.
@@ -274,6 +275,7 @@ class Deck:
         L.append(f"timestep {_f(sc.dt)}")
         for name in sc.groups:
             L.append(f"group {name} type {types[name]}")
+        L += self.volume_commands(data_file)
         if self.passive:
             L.append(f"# {', '.join(self.passive)}: at rest until touched; integrated and damped "
                      f"only once the callback adds a particle to {MOVE_GROUP}")
@@ -316,6 +318,64 @@ class Deck:
         if dump_file:
             L += self.dump_commands(dump_file, dump_every)
         return L
+
+    # ------------------------------------------------------------------ rs/volume's cells
+    @property
+    def volumes(self) -> list:
+        """The realized volumetric terms of a plugin deck (``rs/volume``)."""
+        return [r for r in self.realized if r.plugin == "rs/volume"]
+
+    def volume_atoms_text(self) -> str | None:
+        """``volume.atoms``: for ``rs/volume``, each boundary or held particle's cell extents φ
+        (in spacings, along x, y, z; docs/calibration.md "Walls of any thickness") and the
+        directions a support holds it in (0 or 1), six sets of LAMMPS' atomfile variable
+        (``ID value``) after a set of ones naming them; every other particle has a whole cell
+        (φ = 1) and is free. None when
+        the deck has no such term."""
+        if not self.volumes:
+            return None
+        ids, cols = [], []
+        for r in self.volumes:
+            g, solid = self.scene.groups[r.target], r.op.solid
+            phi = (np.ones((g.n, 3)) if getattr(solid, "part", None) is None
+                   else solid.fractions(g.o))
+            held = np.asarray(g.fixed, bool)
+            k = np.flatnonzero(np.any(phi != 1.0, axis=1) | held.any(axis=1))
+            ids.append(k + self.scene.offset(r.target) + 1)
+            cols.append(np.column_stack([phi[k], held[k].astype(float)]))
+        ids = np.concatenate(ids)
+        cols = np.concatenate(cols)
+        out = ["# rackstress: for fix rs/volume, a set of 1 (which particles follow), then each "
+               "boundary or held particle's cell extents (x, y, z) and held directions (x, y, z)"]
+        cols = np.column_stack([np.ones(len(ids)), cols])
+        for k in range(7):
+            out.append(f"{len(ids)}")
+            out += [f"{i} {v!r}" for i, v in zip(ids.tolist(), cols[:, k].tolist())]
+        return "\n".join(out) + "\n"
+
+    def volume_commands(self, data_file: str) -> list[str]:
+        """After read_data: every particle of a volumetric term's part gets a whole cell
+        (φ = 1) and no held direction, the boundary and held ones theirs from
+        ``volume.atoms`` beside the data file (:meth:`volume_atoms_text`, an atomfile
+        variable: one set per column)."""
+        if not self.volumes:
+            return []
+        path = str(Path(data_file).with_name(VOLUME_ATOMS))
+        L = [f"set group {r.target} d2_rsphi[{k}] {1.0 if k <= 3 else 0.0}"
+             for r in self.volumes for k in range(1, 7)]
+        L += [f"variable rs_phi atomfile {path}", "group rs_vphi variable rs_phi"]
+        for k in range(1, 7):
+            L += ["next rs_phi", f"set group rs_vphi d2_rsphi[{k}] v_rs_phi"]
+        L += ["variable rs_phi delete", "group rs_vphi delete"]
+        return L
+
+    def write_data(self, path) -> None:
+        """The data file at ``path`` and, for a volumetric term, ``volume.atoms`` beside it."""
+        path = Path(path)
+        path.write_text(self.data_text())
+        text = self.volume_atoms_text()
+        if text is not None:
+            path.with_name(VOLUME_ATOMS).write_text(text)
 
     def dump_commands(self, dump_file: str, dump_every: int) -> list[str]:
         """The trajectory's ``dump``. In a deck with passive groups it follows what moves: each
@@ -481,6 +541,10 @@ class Deck:
         op, fid = r.op, f"{PLUGIN_FIX}{idx}"
         if r.plugin == "rs/dampen":
             return f"fix {fid} {r.target} rs/dampen {_f(op.extra)} contact {contact_groups(op.when)[0]}"
+        if r.plugin == "rs/volume":       # the moduli per unit density (the style × its mass)
+            return (f"fix {fid} {r.target} rs/volume {_f(op.solid.spacing)} "
+                    + " ".join(_f(x) for x in op.c) + " btype "
+                    + " ".join(str(bt) for bt, _ in r.btypes))
         c = _f(op.coeff.c)
         if r.plugin == "rs/bind":          # one fix per bond type: rs_pN, rs_pN_2, …
             return "\n".join(
@@ -931,9 +995,15 @@ def _realize_pair(cx: dict, target: str, k: int, op) -> Realized:
     return Realized(target, op, native, partner=partner, site=site)
 
 
+def _realize_volume(cx: dict, target: str, k: int, op) -> Realized:
+    """A material part's volumetric term: the plugin's ``rs/volume`` over its bind's bonds
+    (:func:`_plugin_realize`), else the callback (it has no native LAMMPS style)."""
+    return Realized(target, op, None, True, site=(target, k))
+
+
 #: operator class → its realization on LAMMPS (adding an operator adds one entry)
 REALIZE = {Force: _realize_force, Dampen: _realize_dampen, Collide: _realize_pair,
-           Bind: _realize_pair, Attract: _realize_pair}
+           Bind: _realize_pair, Attract: _realize_pair, Volume: _realize_volume}
 
 
 def plugin_passive_skin(scene: Scene, passive) -> float:
@@ -968,6 +1038,8 @@ def passive_groups(scene: Scene, realized: list) -> tuple:
 # ---------------------------------------------------------------------------- plugin
 #: the plugin fixes' ids (rs_p + the operator's place in Deck.realized)
 PLUGIN_FIX = "rs_p"
+#: the file beside the data file holding rs/volume's cells (Deck.volume_atoms_text)
+VOLUME_ATOMS = "volume.atoms"
 #: LAMMPS' own fix property/atom holding what the plugin's styles read per atom
 PROP_FIX = "rs_prop"
 
@@ -998,6 +1070,8 @@ def plugin_setup_commands(deck: Deck) -> list[str]:
     else:
         L = ["newton on off"] if deck.bonds is not None else []
     regions = " ".join(f"i_{_prop_name(n)}" for n in _region_names(deck.scene))
+    if deck.volumes:              # rs/volume's cells (Deck.volume_commands)
+        regions = (regions + " d2_rsphi 6").strip()
     L.append(f"fix {PROP_FIX} all property/atom d2_rso 3 d_rsr {regions} ghost yes".replace("  ", " "))
     return L
 
@@ -1051,6 +1125,14 @@ def _plugin_realize(scene: Scene, realized: list) -> tuple | None:
             r.plugin = "rs/collide"
         elif isinstance(op, Attract):
             r.plugin = "rs/attract"
+        elif isinstance(op, Volume):
+            # over the bonds of the part's own bind (realized before it: it comes first)
+            carrier = [b for b in realized if b.plugin == "rs/bind" and b.target == r.target
+                       and b.op.source == r.target and b.op.coeff is op.solid]
+            if op.when or not carrier:
+                return None, (f"{r.target} <- {op.label()}: the volumetric term needs its "
+                              "part's unconditional bind as rs/bind bonds")
+            r.plugin, r.btypes = "rs/volume", carrier[0].btypes
         elif isinstance(op, Bind) and type(op.coeff) is Const:
             r.plugin = "rs/rack"
         elif isinstance(op, Bind):
@@ -1300,7 +1382,7 @@ def write_deck(scene: Scene, out: Path, mode: str = "exact", dump_every: int = 1
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     deck = compile_deck(scene, mode, plugin=plugin)
-    (out / "particles.data").write_text(deck.data_text())
+    deck.write_data(out / "particles.data")
     (out / "in.lammps").write_text(deck.input_text(dump_every))
     return deck
 

@@ -33,7 +33,8 @@ STAMP = "build.json"
 #: the packaged plugin (setup.py puts it here)
 PACKAGED = Path(__file__).resolve().parent / "plugin_lib"
 #: the styles the plugin registers
-STYLES = ("rs/rack", "rs/bind", "rs/collide", "rs/attract", "rs/dampen", "rs/force", "rs/nve")
+STYLES = ("rs/rack", "rs/bind", "rs/collide", "rs/attract", "rs/dampen", "rs/force", "rs/nve",
+          "rs/volume")
 _MONTHS = ("Jan", "Feb", "Mar", "Apr", "May", "Jun", "Jul", "Aug", "Sep", "Oct", "Nov", "Dec")
 
 

@@ -109,7 +109,7 @@ class LammpsRun:
             self._tmp = tempfile.TemporaryDirectory()
             data = Path(self._tmp.name) / "particles.data"
             if self.comm.Get_rank() == 0:
-                data.write_text(deck.data_text())
+                deck.write_data(data)
             data = Path(self.comm.bcast(str(data), root=0))
             self.comm.Barrier()
         dump = str(out / "trajectory.dump") if out is not None else None

@@ -1,0 +1,238 @@
+"""The lattice's volumetric term (model/volume.py): the material's Poisson's ratio.
+
+Expected values come from Hooke's law (σ = λ·tr ε·I + 2μ·ε of the material's E and ν), from
+finite differences of the term's own energy and forces (an independent path to its forces and
+tangent), and from the reference engine against the static solver on the same state."""
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from rackstress.engines.reference import Reference
+from rackstress.engines.static import (_bind_pairs, external_forces, forces, solve, stiffness)
+from rackstress.model.operators import Bind
+from rackstress.model.volume import Volume, lame, volume_terms
+from rackstress.scenes.toml import load_toml
+
+E = 70000.0            # MPa
+RHO = 2.7e-9           # t/mm³
+
+BLOCK = """
+name = "block"
+units = "mm-N-s"
+analysis = "static"
+[[group]]
+name = "b"
+fill = {{ {shape} }}
+spacing = {a}
+material = {{ E = 70e9, nu = {nu}, density = 2700 }}
+[[support]]
+on = "b"
+where = {{ box = {{ min = [-100, -100, -100], max = [{hold}, 100, 100] }} }}
+"""
+
+BAR = """
+name = "bar"
+units = "mm-N-s"
+analysis = "static"
+[[group]]
+name = "bar"
+fill = {{ box = {{ min = [0, 0, 0], max = [30, 10, 10] }} }}
+spacing = {a}
+material = {{ E = 70e9, nu = {nu}, density = 2700 }}
+[[support]]            # rollers on x = 0, the middle line pinned across
+on = "bar"
+where = {{ box = {{ min = [-1, -1, -1], max = [{h}, 11, 11] }} }}
+fix = ["x"]
+[[support]]
+on = "bar"
+where = {{ box = {{ min = [-1, {c0}, -1], max = [{h}, {c1}, 11] }} }}
+fix = ["y"]
+[[support]]
+on = "bar"
+where = {{ box = {{ min = [-1, -1, {c0}], max = [{h}, 11, {c1}] }} }}
+fix = ["z"]
+[[load]]
+on = "bar"
+where = {{ box = {{ min = [{e}, -1, -1], max = [31, 11, 11] }} }}
+force = [1000, 0, 0]
+"""
+
+
+def _scene(tmp_path, text, name="s.toml"):
+    f = tmp_path / name
+    f.write_text(text)
+    return load_toml(f)
+
+
+def _block(tmp_path, nu, a=1.0, shape='box = { min = [0, 0, 0], max = [7, 7, 7] }'):
+    return _scene(tmp_path, BLOCK.format(shape=shape, a=a, nu=nu, hold=0.6))
+
+
+def _virial(sc, p):
+    """Each particle's stress (n, 3, 3) from its bindings (½ Σ r ⊗ f) and its volumetric
+    terms (each particle's own: Volume.virial), over its cell's volume."""
+    I, J, C, Q = _bind_pairs(sc)
+    m = sc.masses()
+    f = Bind.accel(p[I], p[J], C, Q) * m[I][:, None]
+    r = p[J] - p[I]
+    n = len(p)
+    W = np.zeros((n, 3, 3))
+    for x in range(3):
+        for y in range(3):
+            W[:, x, y] = 0.5 * np.bincount(I, weights=r[:, x] * f[:, y], minlength=n)
+    vol = volume_terms(sc)
+    if vol is not None:
+        Wv = Volume.virial(p, vol, m)
+        for c, (x, y) in enumerate(((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))):
+            W[:, x, y] += Wv[:, c]
+            if x != y:
+                W[:, y, x] += Wv[:, c]
+    V = sc.groups[next(iter(sc.groups))].volume
+    return W / V
+
+
+@pytest.mark.parametrize("nu", [0.0, 0.2, 0.33, 0.45])
+def test_inside_the_part_the_lattice_is_the_isotropic_material(nu, tmp_path):
+    """Under any uniform strain ε (tension, shear on the axes, shear at 45°) a particle inside
+    the part carries Hooke's σ = λ·tr ε·I + 2μ·ε of the material's E and ν: C11, C12 and C44
+    are the material's, and C44 = (C11 − C12)/2 (isotropy) holds with the term."""
+    sc = _block(tmp_path, nu)
+    o = sc.original_positions()
+    lam, mu = lame(E, nu)
+    inner = np.all((o > 2.0) & (o < 5.0), axis=1)
+    c45 = np.sqrt(0.5)
+    R = np.array([[c45, -c45, 0], [c45, c45, 0], [0, 0, 1]])
+    for eps in (np.diag([1.0, 0, 0]), np.diag([1.0, -0.3, 0.2]),
+                np.array([[0, 1.0, 0], [1.0, 0, 0], [0, 0, 0]]),
+                R @ np.diag([1.0, -1.0, 0]) @ R.T,             # pure shear at 45° to the axes
+                np.array([[0.1, 0.4, -0.2], [0.4, -0.3, 0.5], [-0.2, 0.5, 0.2]])):
+        eps = 1e-7 * eps
+        s = _virial(sc, o + o @ eps.T)[inner]
+        want = lam * np.trace(eps) * np.eye(3) + 2 * mu * eps
+        assert np.abs(s - want[None]).max() <= 1e-5 * np.abs(want).max(), (eps, s[0], want)
+
+
+@pytest.mark.parametrize("nu", [0.0, 0.33, 0.45])
+def test_uniaxial_tension_of_a_bar_five_layers_thick(nu, tmp_path):
+    """A 30 × 10 × 10 mm bar of five layers (spacing 2), 10 MPa along x, solved statically:
+    E_eff = σ/ε_xx within 1 % of E and ν_eff = −ε_yy/ε_xx (a least-squares fit of the
+    lateral displacements over the gauge length) within 0.005 of ν — the free faces' cells
+    are the material's too (docs/calibration.md)."""
+    a = 2.0
+    sc = _scene(tmp_path, BAR.format(a=a, nu=nu, h=a / 2, c0=5 - a / 2 - 1e-6,
+                                     c1=5 + a / 2 + 1e-6, e=30 - a / 2))
+    res = solve(sc)
+    assert res.settled
+    o = sc.original_positions()
+    u = res.p - o
+    gauge = (o[:, 0] > 10) & (o[:, 0] < 20)
+    exx = np.polyfit(o[gauge, 0], u[gauge, 0], 1)[0]
+    eyy = np.polyfit(o[gauge, 1], u[gauge, 1], 1)[0]
+    ezz = np.polyfit(o[gauge, 2], u[gauge, 2], 1)[0]
+    assert 10.0 / exx == pytest.approx(E, rel=0.01)
+    assert -eyy / exx == pytest.approx(nu, abs=0.005)
+    assert -ezz / exx == pytest.approx(nu, abs=0.005)
+
+
+SHAPES = {"holeplate": 'difference = [ { box = { min = [-4, -4, 0], max = [4, 4, 3] } }, '
+                       '{ cylinder = { start = [0, 0, -1], end = [0, 0, 4], radius = 1.7 } } ]',
+          "sphere": 'sphere = { centre = [0, 0, 0], radius = 3.3 }'}
+
+
+@pytest.mark.parametrize("shape", sorted(SHAPES))
+def test_forces_and_tangent_are_the_energys_derivatives(shape, tmp_path):
+    """On a distorted part with curved faces and a hole (cells of every fraction): the
+    acceleration is −∂(U/m)/∂p and the tangent −∂a/∂p, both by central finite differences
+    of the term's own energy and forces; the tangent is symmetric; a rigid rotation of the
+    distorted state changes the energy by round-off only (extensions are rotation-free)."""
+    sc = _scene(tmp_path, BLOCK.format(shape=SHAPES[shape], a=0.9, nu=0.4, hold=0.6))
+    (name, g), = sc.groups.items()
+    op = next(x for x in sc.operators[name] if isinstance(x, Volume))
+    t = op.terms(g)
+    rng = np.random.default_rng(5)
+    p = g.o + 0.02 * rng.standard_normal(g.o.shape)
+    a = Volume.accel(p, t)
+    H = Volume.hessian(p, t)
+    assert abs(H - H.T).max() <= 1e-12 * abs(H).max()
+    h = 1e-6
+    for k in rng.choice(len(p), 6, replace=False):
+        for x in range(3):
+            dp = np.zeros_like(p)
+            dp[k, x] = h
+            dE = (Volume.energy(p + dp, t) - Volume.energy(p - dp, t)) / (2 * h)
+            assert -dE == pytest.approx(a[k, x], rel=1e-5, abs=1e-6 * np.abs(a).max())
+            col = -(Volume.accel(p + dp, t) - Volume.accel(p - dp, t)).ravel() / (2 * h)
+            got = H[:, 3 * k + x].toarray().ravel()
+            assert np.abs(col - got).max() <= 1e-5 * np.abs(got).max()
+    th = 0.7
+    R = np.array([[np.cos(th), -np.sin(th), 0], [np.sin(th), np.cos(th), 0], [0, 0, 1]])
+    e0 = Volume.energy(p, t)
+    assert Volume.energy(p @ R.T + 3.0, t) == pytest.approx(e0, rel=1e-9)
+
+
+def test_reference_engine_and_static_solver_agree(tmp_path):
+    """The reference engine's accelerations × m are the static solver's forces (less the
+    external loads) on a distorted part, to round-off: one formula, two engines."""
+    sc = _scene(tmp_path, BLOCK.format(shape=SHAPES["holeplate"], a=0.9, nu=0.33, hold=0.6))
+    rng = np.random.default_rng(1)
+    p = sc.original_positions() + 0.01 * rng.standard_normal((sc.n_particles, 3))
+    m = sc.masses()
+    f = forces(sc, p, _bind_pairs(sc), external_forces(sc), m) - external_forces(sc)
+    eng = Reference(sc)
+    eng.p = p.copy()
+    a = eng.accelerations({})
+    assert np.abs(a * m[:, None] - f).max() <= 1e-12 * np.abs(f).max()
+    K = stiffness(p, _bind_pairs(sc), m, volume=volume_terms(sc))
+    assert abs(K - K.T).max() <= 1e-12 * abs(K).max()
+
+
+@pytest.mark.parametrize("nu,why", [(-0.2, "below 0"), (0.495, "above 0.49")])
+def test_a_poissons_ratio_the_lattice_cannot_take_is_refused(nu, why, tmp_path):
+    """An auxetic material (ν < 0) and a nearly incompressible one (ν > 0.49) are refused
+    when the scene is read: exit 2, naming the file, the group and the material (a real
+    process), nothing written."""
+    f = tmp_path / "odd.toml"
+    f.write_text(BLOCK.format(shape='box = { min = [0, 0, 0], max = [4, 4, 4] }', a=1.0,
+                              nu=nu, hold=0.6))
+    r = subprocess.run([sys.executable, "-m", "rackstress.cli", "run", str(f), "--engine",
+                        "reference", "--out", str(tmp_path / "run"), "--no-render"],
+                       capture_output=True, text=True)
+    assert r.returncode == 2, r.stderr
+    assert "odd.toml" in r.stderr and "group 'b'" in r.stderr
+    assert f"Poisson's ratio {nu:g} is {why}" in r.stderr
+    assert not (tmp_path / "run").exists()
+
+
+def test_a_laterally_constrained_block_has_the_constrained_modulus(tmp_path):
+    """A 20 mm cube of ten layers on rollers on its four sides and its floor, pressed by
+    10 MPa: σ/ε is E(1 − ν)/((1 + ν)(1 − 2ν)) within 2 % at ν = 0.45 (3.79·E; the former
+    lattice had 1.2·E whatever the material) — its held faces' cells cannot contract across
+    (plane strain there, docs/calibration.md "Loaded and held faces")."""
+    from rackstress.bench.nafems import block
+
+    r = block(0.45, 2.0, tmp_path)
+    assert r["settled"]
+    M = E * (1 - 0.45) / ((1 + 0.45) * (1 - 2 * 0.45))
+    assert r["stiffness_MPa"] == pytest.approx(M, rel=0.02)
+
+
+def test_a_cube_under_pressure_has_the_bulk_modulus(tmp_path):
+    """A 10 mm cube of five layers on three symmetry planes, 10 MPa of pressure on its other
+    three faces: K = p/(−tr ε) within 5 % of E/(3(1 − 2ν)) at ν = 0.45 (the pressed cells'
+    overhang pushes the faces' edges: without it 40 % soft), and the pressure's forces still
+    add up to p × the faces' area (the pushes cancel)."""
+    from rackstress.bench.lattice import CUBE, PLANES, S, _face, _grad, _scene
+
+    loads = "\n".join(_face(k, 1, "pressure", S) for k in range(3))
+    sc = _scene(tmp_path, "hydro", CUBE.replace("{supports}", PLANES).replace("{loads}", loads),
+                2.0, 0.45)
+    F = external_forces(sc)
+    assert np.allclose(F.sum(axis=0), [-1000.0, -1000.0, -1000.0], rtol=1e-12)
+    res = solve(sc)
+    assert res.settled
+    K = E / (3 * (1 - 2 * 0.45))
+    assert S / -np.trace(_grad(sc, res.p)) == pytest.approx(K, rel=0.05)

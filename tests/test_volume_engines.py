@@ -1,0 +1,150 @@
+"""The volumetric term (the material's Poisson's ratio) realized in every engine: the compiled
+plugin (``fix rs/volume``, serial, ``mpiexec -n 2``, plain ``lmp`` on a generated deck), the
+Python callback (numba and NumPy kernels) and the static solver's forces, each against the
+reference engine — the term's own formula in NumPy, an independent path — to round-off."""
+from __future__ import annotations
+
+import shutil
+
+import numpy as np
+import pytest
+from conftest import lammps_under_mpi, trajectory
+from test_plugin import _cli, _frames, _lmp, _same_to_dump_precision
+
+from rackstress.engines.driver import drive
+from rackstress.engines.lammps.deck import compile_deck
+from rackstress.engines.lammps.runner import LammpsRun
+from rackstress.engines.reference import Reference
+from rackstress.engines.static import _bind_pairs, external_forces, forces
+from rackstress.scenes.toml import load_toml
+
+pytestmark = pytest.mark.lammps
+
+#: a holed plate of a rubbery ν (κ/μ large: the term dominates), cells of every fraction
+#: round the hole, loaded off its supports: it bends and twists
+HOLED = """
+name = "holed"
+units = "mm-N-s"
+analysis = "dynamic"
+steps = {steps}
+
+[[group]]
+name = "plate"
+fill = {{ difference = [ {{ box = {{ min = [0, 0, 0], max = [10, 6, 3] }} }},
+                        {{ cylinder = {{ start = [5, 3, -1], end = [5, 3, 4], radius = 1.6 }} }} ] }}
+spacing = 0.9
+material = {{ E = 70e9, nu = 0.45, density = 2700 }}
+
+[[support]]
+on = "plate"
+where = {{ box = {{ min = [-1, -1, -1], max = [0.6, 7, 4] }} }}
+
+[[load]]
+on = "plate"
+where = {{ box = {{ min = [9.3, -1, -1], max = [11, 3, 4] }} }}
+force = [0, 20, -50]
+"""
+
+
+def _scene(tmp_path, steps=300):
+    f = tmp_path / "holed.toml"
+    f.write_text(HOLED.format(steps=steps))
+    return f, load_toml(f)
+
+
+def _accelerations(deck, p):
+    """LAMMPS' forces / its masses (the paper's accelerations) after ``run 0`` at ``p``."""
+    run = LammpsRun(deck, None)
+    try:
+        run.enter_phase(deck.scene.phases[0].vars)
+        run.scatter("x", p)
+        run.command("run 0 post no")
+        f = run.gather_forces()
+    finally:
+        run.close()
+    sc = deck.scene
+    m = np.concatenate([np.full(g.n, deck.masses.get(n, 1.0)) for n, g in sc.groups.items()])
+    return f / m[:, None]
+
+
+@pytest.mark.parametrize("how", ["plugin", "numba", "numpy", "static"])
+def test_one_evaluation_on_a_distorted_part(how, tmp_path, monkeypatch):
+    """The forces of one step on a randomly distorted holed plate: the plugin's rs/volume,
+    the callback's kernels and the static solver's forces with the loads (÷ m) equal the
+    reference engine's to round-off (1e-12 of the largest), on every free particle — one
+    scene, every engine."""
+    _, sc = _scene(tmp_path)
+    rng = np.random.default_rng(7)
+    p = sc.original_positions() + 0.01 * rng.standard_normal((sc.n_particles, 3))
+    ref = Reference(sc)
+    ref.p = p.copy()
+    a_ref = ref.accelerations({})
+    if how == "static":
+        m = sc.masses()
+        F = external_forces(sc)
+        got = forces(sc, p, _bind_pairs(sc), F, m) / m[:, None]
+    else:
+        if how != "plugin":
+            monkeypatch.setenv("RACKSTRESS_KERNELS", how)
+        deck = compile_deck(sc, "exact", plugin=how == "plugin")
+        want = {"plugin": ["rs/bind", "rs/volume"], "numba": ["python", "python"],
+                "numpy": ["python", "python"]}[how]
+        assert [r.how for r in deck.realized if r.target == "plate"][:2] == want
+        got = _accelerations(deck, p)
+    free = ~sc.fixed()
+    assert np.abs(np.where(free, got - a_ref, 0.0)).max() <= 1e-12 * np.abs(a_ref).max()
+
+
+@pytest.mark.parametrize("plugin", [True, False])
+def test_short_dynamic_run_follows_the_reference(plugin, tmp_path, reference_final):
+    """300 steps of the loaded plate (explicit dynamics, the time step from the predicted
+    stability limit, which the term stiffens): LAMMPS with the plugin, and with the callback,
+    end where the reference engine does, to 1e-10 mm."""
+    _, sc = _scene(tmp_path)
+    ref = reference_final(sc)
+    assert np.abs(ref - sc.original_positions()).max() > 1e-5       # it really moved
+    run = LammpsRun(compile_deck(sc, "exact", plugin=plugin), None)
+    try:
+        p = drive(run).positions
+    finally:
+        run.close()
+    assert np.abs(p - ref).max() <= 1e-10
+
+
+@pytest.mark.slow
+@pytest.mark.mpi
+def test_runs_under_mpi(tmp_path, reference_final):
+    """The same under ``mpiexec -n 2`` (atoms split over both ranks; the plugin's forces on
+    partners seen as ghosts reach their owners by one reverse communication): plugin and
+    callback both end at the reference engine's positions to 1e-10 mm."""
+    f, sc = _scene(tmp_path)
+    ref = reference_final(sc)
+    setup = f"""
+from rackstress.scenes.toml import load_toml
+scenes_ = {{"s": load_toml({str(f)!r})}}
+"""
+    for plugin in (True, False):
+        out = tmp_path / ("plugin" if plugin else "callback")
+        out.mkdir()
+        p, counts = lammps_under_mpi(out, setup, plugin=plugin)["s"]
+        assert len(counts) == 2 and counts.min() > 0
+        assert np.abs(p - ref).max() <= 1e-10, plugin
+
+
+@pytest.mark.slow
+@pytest.mark.mpi
+def test_standalone_deck_in_plain_lmp(tmp_path):
+    """``rackstress deck`` (data file, volume.atoms with the boundary cells, in.lammps) run
+    by the venv's plain ``lmp`` and ``mpiexec -n 2 lmp`` writes the reference engine's
+    trajectory, frame by frame, to the dump's precision."""
+    f, _ = _scene(tmp_path, steps=200)
+    _cli("run", str(f), "--engine", "reference", "--out", str(tmp_path / "ref"),
+         "--no-render", "--no-progress")
+    ref = _frames(trajectory(tmp_path / "ref"))
+    _cli("deck", str(f), "--out", str(tmp_path / "deck1"))
+    text = (tmp_path / "deck1" / "in.lammps").read_text()
+    assert " rs/volume " in text and "external" not in text
+    assert (tmp_path / "deck1" / "volume.atoms").is_file()
+    shutil.copytree(tmp_path / "deck1", tmp_path / "deck2")
+    _same_to_dump_precision(_lmp(tmp_path / "deck1", 1), ref)
+    _same_to_dump_precision(_lmp(tmp_path / "deck2", 2), ref)

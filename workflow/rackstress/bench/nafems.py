@@ -1,0 +1,476 @@
+"""``rackstress bench nafems``: NAFEMS linear-elastic benchmarks and two classical cases on the
+elastic lattice with the material's Poisson's ratio (docs/calibration.md).
+
+Targets: NAFEMS, *The Standard NAFEMS Benchmarks*, TNSB Rev. 3 (1990), problems LE1 and LE10
+(the geometry and loads as reproduced in public verification suites, e.g. seamplex Fino's cases
+010-nafems-le1 and 012-nafems-le10, and Code_Aster's SSLP/SSLV test manuals):
+
+* **LE1, elliptic membrane** — the quarter of a plate between the ellipses (x/2)² + y² = 1 and
+  (x/3.25)² + (y/2.75)² = 1 (metres), 0.1 m thick, E = 210 GPa, ν = 0.3, plane stress; 10 MPa
+  of outward normal pressure on the outer edge; u_y = 0 on y = 0, u_x = 0 on x = 0 (symmetry
+  planes as rollers). σ_yy at D = (2, 0): **92.7 MPa**.
+* **LE10, thick plate under pressure** — the same two ellipses, 0.6 m thick (z from 0 to 0.6),
+  1 MPa of pressure on the upper face; u_y = 0 on y = 0, u_x = 0 on x = 0, u_x = u_y = 0 on
+  the outer curved face, u_z = 0 along that face's mid-plane line (z = 0.3). σ_yy at
+  D = (2, 0, 0.6): **−5.38 MPa**.
+* **Kirsch** — a plate 0.5 × 0.5 m with a central hole of 0.1 m diameter (d/W = 0.2) in plane
+  stress (a membrane one layer thick, as LE1), 10 MPa of tension on its x faces, at ν = 0.3 and
+  0.45: K_t = σ_max/σ_gross against
+  Peterson's finite-width chart (Pilkey & Pilkey, *Peterson's Stress Concentration Factors*,
+  3rd ed., Chart 4.1: K_tn = 3 − 3.14(d/W) + 3.667(d/W)² − 1.527(d/W)³ on the net section,
+  3.13 on the gross), which plane stress makes independent of ν.
+* **Constrained block** — a 20 mm cube on rollers on its four side faces and its floor,
+  pressed by 10 MPa on its top: axial stiffness σ/ε against the constrained modulus
+  E(1 − ν)/((1 + ν)(1 − 2ν)) (1.35 E at ν = 0.3, 3.79 E at ν = 0.45; a ν = 1/4 lattice has 1.2 E
+  whatever the material).
+
+The stress at a point is read as the project's stress measure gives it (``ParticleStress``,
+the default ``patch`` route: the bindings' and the volumetric term's virial over each
+particle's cell, the free faces' cell moment restored, fitted linearly over each particle's
+patch and read at its recovery point — on the face for a surface particle, docs/stress.md) at
+the particle nearest the point, whose position is reported; beside it the value at the point extrapolated from the field
+near it (:func:`extrapolated`: the parabola through the three nearest particles half a spacing
+or more inside, on the lattice line through the point) — the project's recovery lags a steep
+concentration at the surface particle itself (docs/stress.md). Three spacings each; the order
+of convergence from the last two errors.
+
+Writes ``docs/benchmarks/nafems.{md,json}``.
+"""
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from rackstress.bench import machine
+
+LE1_TARGET, LE10_TARGET = 92.7, -5.38         # MPa, NAFEMS TNSB Rev. 3 (1990)
+TARGET = 0.05
+
+#: the ellipses of LE1 and LE10 (semi-axes, metres)
+INNER, OUTER = (2.0, 1.0), (3.25, 2.75)
+SEGMENTS = 720
+
+
+def ring_stl(path: Path, z0: float, z1: float) -> Path:
+    """A closed triangle mesh of the quarter ring between the two ellipses (x, y ≥ 0), from
+    z0 to z1: each ellipse as SEGMENTS chords (angle parameter t: (A cos t, B sin t)), the
+    two at the same t joined in quadrilaterals."""
+    import trimesh
+
+    t = np.linspace(0.0, np.pi / 2, SEGMENTS + 1)
+    inner = np.column_stack([INNER[0] * np.cos(t), INNER[1] * np.sin(t)])
+    outer = np.column_stack([OUTER[0] * np.cos(t), OUTER[1] * np.sin(t)])
+    inner[-1, 0] = outer[-1, 0] = 0.0           # exactly on the axes
+    inner[0, 1] = outer[0, 1] = 0.0
+    n = len(t)
+    V = np.concatenate([np.column_stack([inner, np.full(n, z0)]),
+                        np.column_stack([outer, np.full(n, z0)]),
+                        np.column_stack([inner, np.full(n, z1)]),
+                        np.column_stack([outer, np.full(n, z1)])])
+    i0, o0, i1, o1 = 0, n, 2 * n, 3 * n
+    F = []
+    for k in range(n - 1):
+        F += [[i0 + k, o0 + k + 1, o0 + k], [i0 + k, i0 + k + 1, o0 + k + 1]]          # bottom
+        F += [[i1 + k, o1 + k, o1 + k + 1], [i1 + k, o1 + k + 1, i1 + k + 1]]          # top
+        F += [[o0 + k, o0 + k + 1, o1 + k + 1], [o0 + k, o1 + k + 1, o1 + k]]          # outer
+        F += [[i0 + k, i1 + k + 1, i0 + k + 1], [i0 + k, i1 + k, i1 + k + 1]]          # inner
+    F += [[i0, o0, o1], [i0, o1, i1]]                                                   # y = 0
+    e = n - 1
+    F += [[i0 + e, i1 + e, o1 + e], [i0 + e, o1 + e, o0 + e]]                           # x = 0
+    mesh = trimesh.Trimesh(V, np.array(F), process=True)
+    trimesh.repair.fix_normals(mesh)
+    if not mesh.is_watertight:                       # pragma: no cover - a geometry slip
+        raise RuntimeError("the LE ring mesh is not watertight")
+    mesh.export(path)
+    return path
+
+
+SCENE = """
+name = "{name}"
+units = "SI"
+analysis = "static"
+[[group]]
+name = "p"
+mesh = "{stl}"
+spacing = {a}
+origin = [0, 0, {oz}]
+material = {{ E = 210e9, nu = {nu}, density = 7850 }}
+[[support]]
+on = "p"
+where = {{ box = {{ min = [-1, -1, -1], max = [{h}, 4, 2] }} }}
+fix = ["x"]
+[[support]]
+on = "p"
+where = {{ box = {{ min = [-1, -1, -1], max = [4, {h}, 2] }} }}
+fix = ["y"]
+"""
+
+
+def _outer_layer(o: np.ndarray, a: float) -> np.ndarray:
+    """The particles of the outer curved face: within a spacing of the outer ellipse."""
+    r = np.sqrt((o[:, 0] / OUTER[0]) ** 2 + (o[:, 1] / OUTER[1]) ** 2)
+    return (1.0 - r) * min(OUTER) < a
+
+
+def _run_and_measure(sc, tmp: Path, name: str):
+    """Run ``sc`` statically on the reference engine into a run directory and read its stress
+    with the project's measure (ParticleStress, its default patch route): (stress n × 3 × 3 in
+    the scene's stress unit, whether it settled)."""
+    from rackstress.runs.run import run
+    from rackstress.stress import load_run
+    from rackstress.stress.measures import ParticleStress
+
+    out = tmp / name
+    run(sc, out, engine="reference", progress=False, dump_every=1)
+    r = ParticleStress(load_run(out)).run().results
+    s6 = r.stress[-1]                                        # xx yy zz xy yz xz
+    S = np.empty((len(s6), 3, 3))
+    for c, (x, y) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (0, 2))):
+        S[:, x, y] = S[:, y, x] = s6[:, c]
+    summary = json.loads((out / "summary.json").read_text())
+    return S, summary.get("settled", summary.get("status") == "settled")
+
+
+def le1(a: float, tmp: Path) -> dict:
+    """LE1 at spacing ``a`` (metres). A membrane in plane stress: its stress does not depend
+    on its thickness (the load scales with it), so the lattice is one layer, a thick (exactly
+    plane stress: every cell overhangs both free faces, docs/calibration.md), the pressure
+    10 MPa × a on the outer edge per unit length; a divides 2 m, so a particle sits at D."""
+    from rackstress.scenes.toml import load_toml
+
+    stl = ring_stl(tmp / f"le1-{a:g}.stl", 0.0, a)
+    f = tmp / f"le1-{a:g}.toml"
+    f.write_text(SCENE.format(name="le1", stl=stl.name, a=a, oz=a / 2, nu=0.3, h=a / 2)
+                 + """[[support]]           # out of its plane: nothing (one layer)
+on = "p"
+fix = ["z"]
+""")
+    sc = load_toml(f)
+    o = sc.groups["p"].o
+    # 10 MPa outward on the outer edge: each outer particle's share of the arc, by angle
+    # (the arc between the midpoints to its neighbours), times the thickness a
+    k = np.flatnonzero(_outer_layer(o, a) & _exposed_outward(o, a))
+    t = np.arctan2(o[k, 1] / OUTER[1], o[k, 0] / OUTER[0])
+    ordr = np.argsort(t)
+    k, t = k[ordr], t[ordr]
+    mids = np.concatenate([[0.0], 0.5 * (t[1:] + t[:-1]), [np.pi / 2]])
+    ds = np.array([_arc(t0, t1) for t0, t1 in zip(mids[:-1], mids[1:])])
+    tc = 0.5 * (mids[:-1] + mids[1:])
+    nrm = np.column_stack([np.cos(tc) / OUTER[0], np.sin(tc) / OUTER[1], np.zeros(len(tc))])
+    nrm /= np.linalg.norm(nrm, axis=1)[:, None]
+    F = np.zeros((len(o), 3))
+    F[k] = 10e6 * a * ds[:, None] * nrm
+    sc = _with_forces(sc, "p", F)
+    S, settled = _run_and_measure(sc, tmp, f"le1-{a:g}")
+    k = int(np.argmin(np.linalg.norm(o[:, :2] - [2.0, 0.0], axis=1)))
+    ext = extrapolated(o, S[:, 1, 1], [2.0, 0.0, a / 2], [1.0, 0, 0], a) / 1e6
+    return {"spacing": a, "layers": 1, "particles": sc.n_particles, "settled": settled,
+            "at": o[k].tolist(), "sigma_yy_MPa": float(S[k, 1, 1]) / 1e6,
+            "ratio": float(S[k, 1, 1]) / 1e6 / LE1_TARGET, "extrapolated_MPa": ext,
+            "extrapolated_ratio": ext / LE1_TARGET}
+
+
+def extrapolated(o: np.ndarray, values: np.ndarray, point, along, a: float) -> float:
+    """The value at ``point`` of the parabola through the three particles nearest it on the
+    lattice line through it along ``along`` (unit axis) that lie half a spacing or more inside:
+    a reading of a surface value from the field near it, stated beside the project's own
+    (the particle's), not a replacement for it."""
+    point, along = np.asarray(point, float), np.asarray(along, float)
+    rel = o - point
+    t = rel @ along
+    off = rel - t[:, None] * along[None, :]
+    line = (np.linalg.norm(off, axis=1) < 1e-6 * a) & (t >= 0.5 * a) & np.isfinite(values)
+    k = np.flatnonzero(line)[np.argsort(t[line])][:3]
+    if len(k) < 3:
+        return float("nan")
+    c = np.polyfit(t[k], values[k], 2)
+    return float(np.polyval(c, 0.0))
+
+
+def _arc(t0: float, t1: float) -> float:
+    """Arc length of the outer ellipse between angle parameters t0 and t1."""
+    t = np.linspace(t0, t1, 65)
+    dx, dy = -OUTER[0] * np.sin(t), OUTER[1] * np.cos(t)
+    w = np.sqrt(dx * dx + dy * dy)
+    return float(np.sum(0.5 * (w[1:] + w[:-1]) * np.diff(t)))
+
+
+def _exposed_outward(o: np.ndarray, a: float) -> np.ndarray:
+    """Particles whose outward lattice neighbour (along x or y, away from the origin) is
+    missing: the outer edge's own particles."""
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(o)
+    out = np.zeros(len(o), bool)
+    for e in ((a, 0, 0), (0, a, 0)):
+        d, _ = tree.query(o + np.array(e), distance_upper_bound=0.01 * a)
+        out |= ~np.isfinite(d)
+    return out
+
+
+def _with_forces(sc, name: str, F: np.ndarray):
+    """``sc`` with the forces ``F`` (N, per particle) as force operators (one per distinct
+    vector, Eq. 8: accelerations F/m on the particles that carry it)."""
+    import dataclasses
+
+    from rackstress.model.operators import Force
+
+    m = sc.groups[name].mass(sc.units)
+    keys, inv = np.unique(np.round(F, 9), axis=0, return_inverse=True)
+    ops = list(sc.operators[name])
+    for k, vec in enumerate(keys):
+        if not np.any(vec):
+            continue
+        ops.append(Force(tuple(float(x) / m for x in vec), where=tuple(bool(b) for b in
+                                                                      inv.reshape(-1) == k)))
+    return dataclasses.replace(sc, operators={**sc.operators, name: ops})
+
+
+def le10(a: float, tmp: Path) -> dict:
+    """LE10 at spacing ``a``, which divides 0.3 m and 2 m: the lattice's layers on the upper
+    and lower faces (z = 0 … 0.6), one on the mid-plane, a particle at D."""
+    from rackstress.scenes.toml import load_toml
+
+    layers = int(round(0.6 / a)) + 1
+    stl = ring_stl(tmp / "le10.stl", 0.0, 0.6)
+    f = tmp / f"le10-{a:g}.toml"
+    f.write_text(SCENE.format(name="le10", stl=stl.name, a=a, oz=0.0, nu=0.3, h=a / 2)
+                 + f"""[[load]]
+on = "p"
+where = {{ box = {{ min = [-1, -1, {0.6 - a / 2}], max = [4, 4, 1] }} }}
+pressure = 1e6
+normal = [0, 0, 1]
+""")
+    sc = load_toml(f)
+    g = sc.groups["p"]
+    o = g.o
+    outer = _outer_layer(o, a) & _exposed_outward(o, a)
+    g.fixed[outer, 0] = g.fixed[outer, 1] = True
+    mid = outer & (np.abs(o[:, 2] - 0.3) < 1e-9)
+    if not mid.any():
+        raise RuntimeError(f"LE10 at spacing {a}: no layer on the mid-plane")
+    g.fixed[mid, 2] = True
+    g.held = np.ascontiguousarray(g.fixed.all(axis=1))
+    g.v0 = np.zeros_like(o)
+    S, settled = _run_and_measure(sc, tmp, f"le10-{a:g}")
+    k = int(np.argmin(np.linalg.norm(o - [2.0, 0.0, 0.6], axis=1)))
+    ext = extrapolated(o, S[:, 1, 1], [2.0, 0.0, 0.6], [1.0, 0, 0], a) / 1e6
+    return {"spacing": a, "layers": layers, "particles": sc.n_particles, "settled": settled,
+            "at": o[k].tolist(), "sigma_yy_MPa": float(S[k, 1, 1]) / 1e6,
+            "ratio": float(S[k, 1, 1]) / 1e6 / LE10_TARGET, "extrapolated_MPa": ext,
+            "extrapolated_ratio": ext / LE10_TARGET}
+
+
+KIRSCH = """
+name = "kirsch"
+units = "SI"
+analysis = "static"
+[[group]]
+name = "p"
+fill = {{ difference = [ {{ box = {{ min = [-0.25, -0.25, 0], max = [0.25, 0.25, {a}] }} }},
+                        {{ cylinder = {{ start = [0, 0, -1], end = [0, 0, 1], radius = 0.05 }} }} ] }}
+spacing = {a}
+origin = [0, 0, {oz}]
+material = {{ E = 210e9, nu = {nu}, density = 7850 }}
+[[support]]          # symmetry: the middle lines held across, the middle layer in z
+on = "p"
+where = {{ box = {{ min = [-{q}, -1, -1], max = [{q}, 1, 1] }} }}
+fix = ["x"]
+[[support]]
+on = "p"
+where = {{ box = {{ min = [-1, -{q}, -1], max = [1, {q}, 1] }} }}
+fix = ["y"]
+[[support]]          # out of its plane: nothing (one layer)
+on = "p"
+fix = ["z"]
+[[load]]
+on = "p"
+where = {{ box = {{ min = [{e}, -1, -1], max = [1, 1, 1] }} }}
+pressure = -10e6
+normal = [1, 0, 0]
+[[load]]
+on = "p"
+where = {{ box = {{ min = [-1, -1, -1], max = [-{e}, 1, 1] }} }}
+pressure = -10e6
+normal = [-1, 0, 0]
+"""
+#: Peterson's chart 4.1 at d/W = 0.2, on the gross section
+KIRSCH_KT = (3.0 - 3.14 * 0.2 + 3.667 * 0.04 - 1.527 * 0.008) / 0.8
+
+
+def kirsch(nu: float, a: float, tmp: Path) -> dict:
+    from rackstress.scenes.toml import load_toml
+
+    f = tmp / f"kirsch-{nu:g}-{a:g}.toml"
+    f.write_text(KIRSCH.format(a=a, nu=nu, oz=a / 2, q=0.1 * a, zq=0.6 * a, e=0.25 - a / 2))
+    sc = load_toml(f)
+    S, settled = _run_and_measure(sc, tmp, f"kirsch-{nu:g}-{a:g}")
+    o = sc.original_positions()
+    z = a / 2                                                # the one layer
+    side = (np.abs(o[:, 0]) < 0.5 * a) & (o[:, 1] > 0)
+    k = np.flatnonzero(side)[np.argmin(o[side, 1])]          # the hole's side, on y > 0
+    kt = float(S[k, 0, 0]) / 10e6
+    ext = extrapolated(o, S[:, 0, 0], [0.0, 0.05, z], [0, 1.0, 0], a) / 10e6
+    return {"nu": nu, "spacing": a, "particles": sc.n_particles, "settled": settled,
+            "at": o[k].tolist(), "Kt": kt, "ratio": kt / KIRSCH_KT, "Kt_extrapolated": ext,
+            "extrapolated_ratio": ext / KIRSCH_KT}
+
+
+BLOCK = """
+name = "block"
+units = "mm-N-s"
+analysis = "static"
+[[group]]
+name = "p"
+fill = {{ box = {{ min = [0, 0, 0], max = [20, 20, 20] }} }}
+spacing = {a}
+material = {{ E = 70e9, nu = {nu}, density = 2700 }}
+[[support]]
+on = "p"
+where = {{ box = {{ min = [-1, -1, -1], max = [21, 21, {h}] }} }}
+fix = ["z"]
+[[support]]
+on = "p"
+where = {{ box = {{ min = [-1, -1, -1], max = [{h}, 21, 21] }} }}
+fix = ["x"]
+[[support]]
+on = "p"
+where = {{ box = {{ min = [{e}, -1, -1], max = [21, 21, 21] }} }}
+fix = ["x"]
+[[support]]
+on = "p"
+where = {{ box = {{ min = [-1, -1, -1], max = [21, {h}, 21] }} }}
+fix = ["y"]
+[[support]]
+on = "p"
+where = {{ box = {{ min = [-1, {e}, -1], max = [21, 21, 21] }} }}
+fix = ["y"]
+[[load]]
+on = "p"
+where = {{ box = {{ min = [-1, -1, {e}], max = [21, 21, 21] }} }}
+pressure = 10
+normal = [0, 0, 1]
+"""
+
+
+def block(nu: float, a: float, tmp: Path) -> dict:
+    from rackstress.engines.static import solve
+    from rackstress.scenes.toml import load_toml
+
+    f = tmp / f"block-{nu:g}-{a:g}.toml"
+    f.write_text(BLOCK.format(a=a, nu=nu, h=a / 2, e=20 - a / 2))
+    sc = load_toml(f)
+    res = solve(sc)
+    o = sc.original_positions()
+    u = res.p - o
+    inner = (o[:, 2] > 5) & (o[:, 2] < 15)
+    ezz = np.polyfit(o[inner, 2], u[inner, 2], 1)[0]
+    E = 70000.0
+    M = E * (1 - nu) / ((1 + nu) * (1 - 2 * nu))
+    return {"nu": nu, "spacing": a, "particles": sc.n_particles, "settled": bool(res.settled),
+            "stiffness_MPa": -10.0 / ezz, "constrained_modulus_MPa": M,
+            "ratio": -10.0 / ezz / M}
+
+
+def order(spacings, errors) -> float | None:
+    """The observed order of convergence from the last two (spacing, |error|) pairs."""
+    e = [abs(x) for x in errors]
+    if len(e) < 2 or min(e[-2:]) <= 0:
+        return None
+    return float(np.log(e[-2] / e[-1]) / np.log(spacings[-2] / spacings[-1]))
+
+
+def run_bench(out: Path | None = None, quick: bool = False, echo=print) -> dict:
+    import tempfile
+
+    from rackstress.bench import out_dir
+
+    out = out_dir(out)
+    sp = {"le1": (0.05, 0.025, 0.0125), "le10": (0.1, 0.05, 1 / 30),
+          "kirsch": (0.01, 0.005, 0.0025), "block": (4.0, 2.0, 1.0)}
+    if quick:
+        sp = {k: v[:2] for k, v in sp.items()}
+    data = {"machine": machine(), "quick": quick, "targets": {"LE1": LE1_TARGET,
+                                                              "LE10": LE10_TARGET,
+                                                              "Kirsch_Kt": KIRSCH_KT}}
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        for name, fn, args in (("LE1", le1, [()]), ("LE10", le10, [()]),
+                               ("Kirsch", kirsch, [(0.3,), (0.45,)]),
+                               ("block", block, [(0.3,), (0.45,)])):
+            rows = []
+            for extra in args:
+                for a in sp[name.lower()]:
+                    t0 = time.process_time()
+                    r = fn(*extra, a, tmp)
+                    r["cpu_s"] = time.process_time() - t0
+                    r = {k: float(v) if isinstance(v, np.floating) else
+                         bool(v) if isinstance(v, np.bool_) else v for k, v in r.items()}
+                    rows.append(r)
+                    echo(f"  {name} {' '.join(f'nu {x:g}' for x in extra)} spacing {a:g}: "
+                         + ", ".join(f"{k} {v:.4g}" for k, v in r.items()
+                                     if isinstance(v, float) and k not in ("spacing",)))
+            data[name] = rows
+    for name in ("LE1", "LE10"):
+        rows = data[name]
+        for tag, key in (("", "ratio"), ("_extrapolated", "extrapolated_ratio")):
+            data[f"{name}_order{tag}"] = order([r["spacing"] for r in rows],
+                                               [r[key] - 1 for r in rows])
+            data[f"{name}_within{tag}"] = bool(abs(rows[-1][key] - 1) <= TARGET)
+    (out / "nafems.json").write_text(json.dumps(data, indent=1))
+    (out / "nafems.md").write_text(report(data))
+    return data
+
+
+def report(d: dict) -> str:
+    from rackstress.bench import md_table
+
+    L = ["# NAFEMS linear-elastic benchmarks and classical cases", "",
+         "Written by `rackstress bench nafems` (its module doc holds every geometry, load, "
+         "support and source). Each case solved statically on the reference engine and read "
+         "through the project's stress measure (`rackstress.stress.measures.ParticleStress`, "
+         "the default `patch` route, docs/stress.md) at the particle nearest the point, "
+         "whose position "
+         "is given.", ""]
+    if d.get("quick"):
+        L += ["**`--quick`**: the two coarser spacings of each case only (the \"finest "
+              "spacing\" and the order below are theirs); the third, finest spacing comes from "
+              "the full command.", ""]
+    for name, target in (("LE1", LE1_TARGET), ("LE10", LE10_TARGET)):
+        L += [f"## {name}: σ_yy at D, target {target} MPa (NAFEMS TNSB Rev. 3, 1990)", ""]
+        rows = [[f"{r['spacing']:g}", r["layers"], f"{r['particles']:,}",
+                 "(" + ", ".join(f"{x:.4g}" for x in r["at"]) + ")",
+                 f"{r['sigma_yy_MPa']:.2f}", f"{(r['ratio'] - 1) * 100:+.1f} %",
+                 f"{r['extrapolated_MPa']:.2f}", f"{(r['extrapolated_ratio'] - 1) * 100:+.1f} %",
+                 "yes" if r["settled"] else "**no**"] for r in d[name]]
+        L += [md_table(["spacing [m]", "layers", "particles", "particle at D [m]",
+                        "σ_yy there [MPa]", "error", "σ_yy extrapolated to D [MPa]", "error",
+                        "settled"], rows)]
+        o, oe = d.get(f"{name}_order"), d.get(f"{name}_order_extrapolated")
+        L += [f"At the finest spacing, the project's reading (the particle at D): "
+              f"{'within' if d[f'{name}_within'] else '**not within**'} {TARGET * 100:.0f} % "
+              f"of the target; extrapolated to D: "
+              f"{'within' if d[f'{name}_within_extrapolated'] else '**not within**'}. Observed "
+              f"order of convergence from the last two spacings: "
+              f"{'—' if o is None else f'{o:.2f}'} (particle), "
+              f"{'—' if oe is None else f'{oe:.2f}'} (extrapolated).", ""]
+    L += [f"## Kirsch: a hole's K_t (target {KIRSCH_KT:.3f}, Peterson chart 4.1, d/W = 0.2)",
+          ""]
+    rows = [[f"{r['nu']:g}", f"{r['spacing']:g}", f"{r['particles']:,}",
+             "(" + ", ".join(f"{x:.4g}" for x in r["at"]) + ")", f"{r['Kt']:.3f}",
+             f"{(r['ratio'] - 1) * 100:+.1f} %", f"{r['Kt_extrapolated']:.3f}",
+             f"{(r['extrapolated_ratio'] - 1) * 100:+.1f} %"] for r in d["Kirsch"]]
+    L += [md_table(["ν", "spacing [m]", "particles", "particle at the hole's side [m]", "K_t",
+                    "error", "K_t extrapolated", "error"], rows), ""]
+    L += ["## A laterally constrained block: σ/ε against E(1 − ν)/((1 + ν)(1 − 2ν))", ""]
+    rows = [[f"{r['nu']:g}", f"{r['spacing']:g}", f"{r['particles']:,}",
+             f"{r['stiffness_MPa']:.0f}", f"{r['constrained_modulus_MPa']:.0f}",
+             f"{(r['ratio'] - 1) * 100:+.1f} %"] for r in d["block"]]
+    L += [md_table(["ν", "spacing [mm]", "particles", "σ/ε [MPa]", "constrained modulus [MPa]",
+                    "error"], rows), "",
+          f"Machine: {d['machine']['cores']} cores, load average "
+          f"{d['machine']['load_avg_at_start']} at the start."]
+    return "\n".join(L) + "\n"
