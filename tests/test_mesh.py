@@ -204,8 +204,12 @@ def test_unit_mistakes_and_spacing_errors_name_the_file(meshes, tmp_path):
     assert str(meshes["plate"]) in str(exc.value) and "larger than the part" in str(exc.value)
     with pytest.raises(SceneError, match="does not exist"):
         read_surface(tmp_path / "missing.stl")
+    (tmp_path / "part.iges").write_text("IGES")
+    with pytest.raises(SceneError, match="unknown surface format '.iges'"):
+        read_surface(tmp_path / "part.iges")
+    # STEP is read by gmsh's OpenCASCADE reader: a file it cannot read is named
     (tmp_path / "part.step").write_text("ISO-10303-21;")
-    with pytest.raises(SceneError, match="unknown surface format '.step'"):
+    with pytest.raises(SceneError, match="part.step: gmsh's OpenCASCADE reader cannot read"):
         read_surface(tmp_path / "part.step")
     (tmp_path / "junk.stl").write_bytes(b"\x00" * 10)
     with pytest.raises(SceneError, match="junk.stl"):

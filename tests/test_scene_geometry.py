@@ -257,7 +257,8 @@ def test_fill_shape_and_hcp(tmp_path):
 
 @pytest.mark.parametrize("snippet, needles", [
     ('mesh = "nope.stl"\nspacing = 1.0', ["[[group]] #1 'g'", "mesh", "nope.stl", "does not exist"]),
-    ('mesh = "part.stl"', ["missing required field 'spacing'"]),
+    # a mesh part without spacing gets one from its walls; a fill has no walls to ask
+    ('fill = { box = { min = [0, 0, 0], max = [4, 2, 3] } }', ["missing required field 'spacing'"]),
     ('mesh = "part.stl"\nspacing = 5.0', ["part.stl", "larger than the part"]),
     ('mesh = "part.stl"\nspacing = 0.0001', ["part.stl", "more than", "scale"]),
     ('lattice = { shape = [2, 1, 1] }\ntranslate = [1, 0, 0]', ["translate", "places a group's mesh"]),

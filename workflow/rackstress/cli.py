@@ -232,6 +232,12 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
 
             check_refinable(sc)
         if rank() == 0:
+            said, warned = run_mod.sizing_lines(sc)
+            for line in said:
+                click.echo(line)
+            for line in warned:
+                click.echo(f"rackstress: warning: {sc.name}: {line}", err=True)
+        if rank() == 0:
             from rackstress.stress.warming import warm_in_background
 
             warm_in_background()        # a first run compiles the measures' loop meanwhile
@@ -1046,6 +1052,43 @@ def _fea_inputs(rundir: Path) -> str | None:
     return None
 
 
+@main.command("inspect")
+@click.argument("file", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--scale", type=float, help="Multiply the file's coordinates (1000: metres to "
+              "mm, 25.4: inches to mm); the same as a scene's scale.")
+@click.option("--budget", type=click.IntRange(min=1), default=None,
+              help="Particles the suggested spacing may make (default 20,000).")
+@click.option("--json", "as_json", is_flag=True, help="Everything as JSON, for scripts.")
+@click.option("--all", "all_faces", is_flag=True, help="Every flat face, not the largest only.")
+@click.option("--png", type=click.Path(dir_okay=False, path_type=Path),
+              help="Also a picture of the part with the names written on it.")
+def inspect_cmd(file, scale, budget, as_json, all_faces, png):
+    """A part's holes (H1, H2, ...), flat faces (F1, F2, ...), size, bodies, volume,
+    watertightness, thinnest walls and the spacing a scene without one gets.
+
+    The names are what a scene file holds and loads by: where = { hole = "H1" },
+    where = { face = "F3" }. Exit 2 for a file it cannot read.
+    """
+    from rackstress.scenes import features as ft
+    from rackstress.scenes import inspect as insp
+
+    try:
+        info = insp.inspect_part(file, scale=scale, budget=budget or ft.BUDGET)
+        if png is not None:
+            insp.picture(file, png, scale=scale)
+            info["picture"] = str(png)
+    except RackstressError as err:
+        _fail(err, err.exit_code)
+    except OSError as err:
+        _fail(RackstressError(os_error_message(err, "write")), EXIT_STORAGE)
+    if as_json:
+        click.echo(json.dumps(info, indent=1))
+        return
+    click.echo(insp.text(info, all_faces=all_faces))
+    if png is not None:
+        click.echo(f"picture: {png}")
+
+
 @main.command("fea")
 @click.argument("rundir", type=click.Path(file_okay=False, path_type=Path))
 @click.option("--E", "E", type=float, help="Young's modulus (default: the part's material in "
@@ -1340,6 +1383,26 @@ def bench_validity(out, quick, planar, concentrations, cases, spacings):
     cantilever.run_bench(out, quick=quick, echo=click.echo)
 
 
+@bench.command("parts")
+@_bench_out
+@click.option("--fea/--no-fea", default=True, show_default=True,
+              help="Check each settled part by FEA (rackstress fea); --no-fea for speed.")
+@click.option("--only", multiple=True, help="Only parts whose name contains this (repeatable).")
+@click.option("--set", "sets", multiple=True, metavar="KEY=VALUE",
+              help="Override every part's scene, e.g. --set budget=5000 (repeatable).")
+@click.option("--timeout", type=click.FloatRange(min=1), default=900.0, show_default=True,
+              help="Seconds a part's run (and its FE check) may take before it is stopped.")
+def bench_parts(out, fea, only, sets, timeout):
+    """Every real part of examples/parts/ through the static path: particles, spacing, Newton
+    steps, residual, solve time, peak and the FE agreement (docs/benchmarks/parts.md)."""
+    from rackstress import scenes
+    from rackstress.bench import parts as mod
+
+    data = mod.run_bench(out, fea=fea, only=only or None,
+                         sets=scenes.parse_overrides(sets), echo=click.echo, timeout=timeout)
+    _bench_report(data, mod)
+
+
 @bench.command("cantilever")
 @_bench_out
 @click.option("--quick", is_flag=True, help="Spacings 2 and 1 only, no 100,000-particle run.")
@@ -1461,6 +1524,11 @@ TEACH = {
         "rackstress bench validity --concentrations --case plate-hole --spacings 0.8,0.6",
     ]),
     # commands that may not exist in every build (applied when the command exists)
+    "inspect": ("Name a part's holes and faces; its walls and a spacing.", [
+        "rackstress inspect examples/bracket/bracket.stl",
+        "rackstress inspect arm.stl --scale 1000 --png arm-names.png",
+        "rackstress inspect part.step --json > part.json",
+    ]),
     "fea": ("Check a run's part against linear-elastic FEA of the same part.", [
         "rackstress fea runs/bracket",
         "rackstress fea runs/bracket --E 70e3 --nu 0.33 --size 0.5",
@@ -1494,6 +1562,11 @@ TEACH = {
         "rackstress bench scaling --quick --out /tmp/bench",
         "rackstress bench scaling --large --out docs/benchmarks",
         "rackstress bench scaling --scene magpod --out docs/benchmarks",
+    ]),
+    "bench parts": ("Every real part of examples/parts/ through the static path.", [
+        "rackstress bench parts --no-fea --out /tmp/bench",
+        "rackstress bench parts --only so100 --set budget=5000 --out /tmp/bench",
+        "rackstress bench parts --out docs/benchmarks",
     ]),
     "bench stress": ("Stress from particles against tension and bending.", [
         "rackstress bench stress --quick --out /tmp/bench",

@@ -70,14 +70,17 @@ def _mode_rows(x: np.ndarray, centre: np.ndarray, size: float) -> np.ndarray:
     return R
 
 
-def rigid_modes_left(x: np.ndarray, held: np.ndarray) -> list[dict]:
+def rigid_modes_left(x: np.ndarray, held: np.ndarray, rows=None) -> list[dict]:
     """The rigid-body motions of the body with particles ``x`` (n, 3) that move none of its
     ``held`` directions (n, 3 booleans): each ``{"kind": "translation" | "rotation", "axis":
-    unit vector, "point": a point on the rotation axis}``. Empty: the supports hold it."""
+    unit vector, "point": a point on the rotation axis}``. Empty: the supports hold it.
+    ``rows``: a function of the modes' rows (n, 3, 6) giving the held rows instead (supports
+    that hold no whole axis: :mod:`rackstress.model.constraints`)."""
     x = np.asarray(x, float)
     centre = x.mean(axis=0)
     size = max(float(np.abs(x - centre).max()), 1e-300)
-    R = _mode_rows(x, centre, size)[held]              # (held directions, 6)
+    R = _mode_rows(x, centre, size)
+    R = R[held] if rows is None else rows(R)            # (held directions, 6)
     G = R.T @ R
     w, V = np.linalg.eigh(G)
     top = max(float(w[-1]), 1.0)

@@ -91,7 +91,9 @@ def check_static(scene) -> None:
                 f"constant loads; '{op.label()}' on '{target}' is not one (collisions, "
                 "attractions and phase-conditioned operators depend on the motion): set "
                 "analysis = \"dynamic\"")
-    if not scene.fixed().any():
+    from rackstress.model.constraints import supported
+
+    if not supported(scene).any():
         raise SceneError(f"scene '{scene.name}': a static analysis needs a support (held or "
                          "[[support]]): without one the part has no equilibrium, it floats away")
 
@@ -181,9 +183,10 @@ def stiffness(p: np.ndarray, pairs, m: np.ndarray, volume=None):
     return K if volume is None else (K + volume_stiffness(volume, p, m)).tocsr()
 
 
-def rigid_modes(p: np.ndarray, free: np.ndarray) -> np.ndarray:
-    """The six rigid-body modes (3 translations, 3 rotations) on the free unknowns: the
-    near-null space smoothed aggregation needs for elasticity."""
+def rigid_modes(p: np.ndarray, free) -> np.ndarray:
+    """The six rigid-body modes (3 translations, 3 rotations) on the free unknowns (``free``:
+    their boolean mask, or the supports' :class:`~rackstress.model.constraints.ConstraintMap`):
+    the near-null space smoothed aggregation needs for elasticity."""
     n = len(p)
     c = p - p.mean(axis=0)
     B = np.zeros((3 * n, 6))
@@ -192,7 +195,7 @@ def rigid_modes(p: np.ndarray, free: np.ndarray) -> np.ndarray:
     B[1::3, 3], B[2::3, 3] = -c[:, 2], c[:, 1]
     B[0::3, 4], B[2::3, 4] = c[:, 2], -c[:, 0]
     B[0::3, 5], B[1::3, 5] = -c[:, 1], c[:, 0]
-    return B[free]
+    return free.modes(B) if hasattr(free, "modes") else B[free]
 
 
 #: the tangent carries ε·diag(K) on every free unknown (docs/calibration.md "Static analysis"):
@@ -222,23 +225,29 @@ class _Problem:
     pairs: tuple
     F_ext: np.ndarray
     load: float
+    #: the supports as u = T·q + prescribed (model/constraints.py): T selects ``free`` where
+    #: only axes are fixed; rollers on any face, symmetry planes and pins make it a map
+    cmap: object = None
     #: the material parts' volumetric term (model/volume.py), None without one
     volume: object = None
 
 
 def _problem(scene) -> _Problem:
+    from rackstress.model.constraints import ConstraintMap
+
     o = scene.original_positions()
     fixed = scene.fixed()
     F = external_forces(scene)
     return _Problem(len(o), o, scene.masses(), fixed, ~fixed.reshape(-1), _bind_pairs(scene),
-                    F, float(np.linalg.norm(F, axis=1).sum()), volume_terms(scene))
+                    F, float(np.linalg.norm(F, axis=1).sum()), ConstraintMap.of_scene(scene),
+                    volume_terms(scene))
 
 
 def _tangent(p: np.ndarray, prob: _Problem):
     """K on the free unknowns at ``p``, plus ε·diag(K) (:data:`REGULARIZATION`); and that ε·D."""
     import scipy.sparse as sp
 
-    K = stiffness(p, prob.pairs, prob.m, volume=prob.volume)[prob.free][:, prob.free].tocsr()
+    K = prob.cmap.reduce(stiffness(p, prob.pairs, prob.m, volume=prob.volume)).tocsr()
     d = K.diagonal()
     pos = d[d > 0]
     floor = 1e-3 * float(pos.mean()) if len(pos) else 1.0
@@ -262,7 +271,7 @@ class _Linear:
         if f is not None:
             self.solver, self.direct = f.factor(), True
         else:
-            self.solver = linear.AMG(K, rigid_modes(p, prob.free))
+            self.solver = linear.AMG(K, rigid_modes(p, prob.cmap))
             self.direct = False
         self.kind = self.solver.kind
         self.setup_s = time.process_time() - t0
@@ -303,21 +312,58 @@ def _refuse(scene, message: str):
                      f"{message}")
 
 
+def _held_rows(prob: _Problem, idx: np.ndarray):
+    """For :func:`rackstress.engines.mechanisms.rigid_modes_left`: where a constraint holds
+    part of the body (a pin, a roller off the axes), the rigid modes' rows that it holds —
+    (I − T·Tᵀ) of the modes on the body's unknowns (T: the constraint map); None where only
+    axes are fixed (the held directions' rows, as ever)."""
+    if prob.cmap.trivial:
+        return None
+
+    def rows(R: np.ndarray) -> np.ndarray:            # R: (k, 3, 6) over the body
+        T = prob.cmap.T
+        full = np.zeros((3 * prob.n, R.shape[2]))
+        dof = (3 * idx[:, None] + np.arange(3)).ravel()
+        full[dof] = R.reshape(-1, R.shape[2])
+        held = full - T @ (T.T @ full)
+        return held[dof]
+    return rows
+
+
+def _with_constraints(D: np.ndarray, prob: _Problem) -> np.ndarray:
+    """Each particle's stiffness block plus the directions a constraint holds it in (a
+    roller's normal; every direction of a pinned ring's particles: the ring is rigid), as
+    ``local_mechanisms`` adds the fixed axes."""
+    cm = prob.cmap
+    if cm.trivial:
+        return D
+    D = D.copy()
+    scale = np.maximum(np.trace(D, axis1=1, axis2=2), 1e-300)
+    for i, B in cm.bases.items():              # held: the complement of its free directions
+        D[i] += scale[i] * (np.eye(3) - B @ B.T)
+    for i in cm.ring_particles:
+        D[i] += scale[i] * np.eye(3)
+    return D
+
+
 def _check_bodies(scene, prob: _Problem) -> None:
     """Check 1 of :mod:`rackstress.engines.mechanisms`: every body's six rigid-body modes are
     held. Raises SceneError naming the first body that is not, and how many more there are."""
     from rackstress.engines import mechanisms as mech
 
     I, J = prob.pairs[0], prob.pairs[1]
+    from rackstress.model.constraints import supported
+
     count, label = mech.components(prob.n, I, J)
     held = prob.fixed
+    held_any = supported(scene)          # a fixed direction, a pin, a roller on any face
     problems = []
     order = np.argsort(label, kind="stable")
     bounds = np.searchsorted(label[order], np.arange(count + 1))
     bound = np.bincount(I, minlength=prob.n) > 0
     for c in range(count):
         idx = order[bounds[c]:bounds[c + 1]]
-        if not held[idx].any():
+        if not held_any[idx].any():
             problems.append(f"{mech.where(scene, idx)} are held by no support and bound to "
                             "no particle that is: that body floats away. Add a [[support]] on "
                             "it, or bind it to the held part (bodies of one part must touch, "
@@ -329,7 +375,7 @@ def _check_bodies(scene, prob: _Problem) -> None:
                                 "only some directions: it slides freely; hold it in every "
                                 "direction or remove it")
             continue
-        left = mech.rigid_modes_left(prob.o[idx], held[idx])
+        left = mech.rigid_modes_left(prob.o[idx], held[idx], _held_rows(prob, idx))
         if left:
             mode = left[0]
             ax = np.round(mode["axis"], 4).tolist()
@@ -356,7 +402,7 @@ def _check_particles(scene, prob: _Problem) -> list[dict]:
     from rackstress.engines import mechanisms as mech
 
     I, J, C, _ = prob.pairs
-    D = mech.local_blocks(prob.n, prob.o, I, J, C, prob.m)
+    D = _with_constraints(mech.local_blocks(prob.n, prob.o, I, J, C, prob.m), prob)
     bad, rank, P = mech.local_mechanisms(D, prob.fixed)
     if not len(bad):
         return []
@@ -401,7 +447,12 @@ def _check_first_step(scene, prob: _Problem, lin: _Linear, dx: np.ndarray, b: np
     share = float(reg @ (dx * dx)) / work
     if not (share > mech.MECHANISM_SHARE) and np.all(np.isfinite(dx)):
         return
-    moving = mech.mechanism_particles(dx, reg, prob.n, prob.free)
+    if prob.cmap.trivial:
+        moving = mech.mechanism_particles(dx, reg, prob.n, prob.free)
+    else:                           # each unknown's energy spread on its particles
+        e = abs(prob.cmap.T) @ (reg * dx * dx)
+        moving = mech.mechanism_particles(np.ones(3 * prob.n), e, prob.n,
+                                          np.ones(3 * prob.n, dtype=bool))
     parts = mech.clusters(scene, moving, prob.pairs[0], prob.pairs[1])
     named = "; ".join(mech.where(scene, c) for c in parts[:mech.NAMED])
     _refuse(scene, f"the load moves {len(moving)} particle(s) that no binding resists (a "
@@ -435,7 +486,7 @@ def check_part(scene, progress: bool = False) -> list[dict]:
     warnings = _check_particles(scene, prob)
     p = prob.o + scene.prescribed()
     f = forces(scene, p, prob.pairs, prob.F_ext, prob.m)
-    b = f.reshape(-1)[prob.free]
+    b = prob.cmap.restrict(f)
     first = None
     if b.size and np.any(b != 0):
         K, reg = _tangent(p, prob)
@@ -461,7 +512,7 @@ def reactions(scene, p: np.ndarray) -> np.ndarray:
     + the loads) on every held direction, so that with them every particle is balanced."""
     prob = _problem(scene)
     f = forces(scene, p, prob.pairs, prob.F_ext, prob.m)
-    return np.where(prob.fixed, -f, 0.0)
+    return -(f - prob.cmap.unbalanced(f))
 
 
 def release(scene) -> None:
@@ -492,7 +543,8 @@ def support_reactions(scene, res: StaticResult) -> dict:
         sl = scene.slice(name)
         for label, mask, dirs in g.meta.get("supports", []):
             sel = np.zeros(R.shape, dtype=bool)
-            sel[sl] = mask[:, None] & dirs[None, :] & g.fixed
+            # dirs None: a constraint (pin, roller off the axes): all of its particles' reaction
+            sel[sl] = mask[:, None] & (True if dirs is None else dirs[None, :] & g.fixed)
             sel &= ~taken
             taken |= sel
             r = np.where(sel, R, 0.0)
@@ -500,9 +552,11 @@ def support_reactions(scene, res: StaticResult) -> dict:
                          "group": name, "particles": int(sel.any(axis=1).sum()),
                          "force": r.sum(axis=0).tolist(),
                          "moment": np.cross(p, r).sum(axis=0).tolist()})
-    rest = np.where(~taken & scene.fixed(), R, 0.0)
+    from rackstress.model.constraints import supported
+
+    held = ~taken & (scene.fixed() | supported(scene)[:, None])
+    rest = np.where(held, R, 0.0)
     if rest.any():
-        held = ~taken & scene.fixed()
         groups = [name for name in scene.groups if held[scene.slice(name)].any()]
         rows.append({"support": "held", "group": ", ".join(groups),
                      "particles": int(held.any(axis=1).sum()),
@@ -541,7 +595,7 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
     warnings = check_part(scene, progress=progress)
     first = _CHECKS[id(scene)]["first"]
     prob = _problem(scene)
-    n, fixed, free = prob.n, prob.fixed, prob.free
+    n, cmap = prob.n, prob.cmap
     p = prob.o + scene.prescribed()
     history = []
     load = prob.load
@@ -551,16 +605,16 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
     # (the displaced face pulled against an undeformed part) were ~10⁴ × the equilibrium's,
     # and a residual "settled" against them failed the engine's check (exit 6)
     by_reactions = load == 0.0
-    say(f"static: {n:,} particles, {len(prob.pairs[0]):,} bindings, {int(free.sum()):,} "
+    say(f"static: {n:,} particles, {len(prob.pairs[0]):,} bindings, {cmap.unknowns:,} "
         f"unknowns")
     lin, fresh, factorizations, solver = None, False, 0, ""
     refactor = True
     try:
         while True:
             f = forces(scene, p, prob.pairs, prob.F_ext, prob.m)
+            unbalanced = cmap.unbalanced(f)
             if by_reactions:
-                load = float(np.linalg.norm(np.where(fixed, f, 0.0), axis=1).sum())
-            unbalanced = np.where(fixed, 0.0, f)
+                load = float(np.linalg.norm(f - unbalanced, axis=1).sum())
             worst = float(np.linalg.norm(unbalanced, axis=1).max()) if n else 0.0
             new = worst / load if load > 0 else (0.0 if worst == 0 else float("inf"))
             if history and not new <= REUSE_RATIO * history[-1]:
@@ -576,7 +630,7 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
                 break
             if it >= max_iterations:
                 break
-            b = f.reshape(-1)[free]
+            b = cmap.restrict(f)
             # inexact Newton for AMG-CG: the linear solve need only be as exact as the
             # residual is small (the step leaves rtol·‖b‖ unbalanced: a tenth of what
             # settling allows)
@@ -614,9 +668,7 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
             solver = lin.kind + ("" if fresh else ", factor reused")
             if not lin.converged:
                 solver += " (not converged)"
-            step = np.zeros(3 * n)
-            step[free] = dx
-            step = step.reshape(n, 3)
+            step = cmap.expand(dx)
             m0 = worst
             # a step that makes things much worse is halved (large rotations, buckling); the
             # best trial is kept when none is good enough
@@ -624,7 +676,7 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
             for _ in range(10):
                 trial = p + scale * step
                 ft = forces(scene, trial, prob.pairs, prob.F_ext, prob.m)
-                r = float(np.linalg.norm(np.where(fixed, 0.0, ft), axis=1).max())
+                r = float(np.linalg.norm(cmap.unbalanced(ft), axis=1).max())
                 if np.isfinite(r) and (best is None or r < best[0]):
                     best = (r, trial)
                 if np.isfinite(r) and r <= (GROWTH if fresh else 1.0) * m0:
@@ -645,7 +697,7 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
         _CHECKS.pop(id(scene), None)
     f = forces(scene, p, prob.pairs, prob.F_ext, prob.m)
     return StaticResult(p, settled, it, rel, load, history, time.perf_counter() - t0,
-                        reactions=np.where(fixed, -f, 0.0), solver=lin.kind if lin else "",
+                        reactions=-(f - cmap.unbalanced(f)), solver=lin.kind if lin else "",
                         factorizations=factorizations, warnings=warnings)
 
 
@@ -682,8 +734,10 @@ def engine_residual(scene, engine, p: np.ndarray, reactions: float | None = None
     scene with only prescribed displacements — the engines hold a fixed particle by zeroing
     its force, so they cannot give them (the check was then an absolute force in newtons
     read as a fraction of the load)."""
+    from rackstress.model.constraints import ConstraintMap
+
     m = scene.masses()
-    fixed = scene.fixed()
+    cmap = ConstraintMap.of_scene(scene)
     if getattr(engine, "name", "") == "reference":
         engine.p = p.copy()
         a = engine.accelerations({})
@@ -700,6 +754,6 @@ def engine_residual(scene, engine, p: np.ndarray, reactions: float | None = None
     f = m[:, None] * a
     if load == 0.0:
         load = reactions if reactions is not None else float(
-            np.linalg.norm(np.where(fixed, f, 0.0), axis=1).sum())
-    worst = float(np.linalg.norm(np.where(fixed, 0.0, f), axis=1).max())
+            np.linalg.norm(f - cmap.unbalanced(f), axis=1).sum())
+    worst = float(np.linalg.norm(cmap.unbalanced(f), axis=1).max())
     return worst / load if load > 0 else worst

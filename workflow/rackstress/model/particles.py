@@ -63,6 +63,9 @@ class Group:
     fixed: np.ndarray | None = None
     #: n×3 prescribed displacements of the fixed directions (static analysis), None: zero
     u0: np.ndarray | None = None
+    #: supports that fix no axis: rollers on any face, symmetry planes, pins in holes
+    #: (:mod:`rackstress.model.constraints`; static analysis only)
+    constraints: list = field(default_factory=list)
 
     def __post_init__(self):
         self.o = np.ascontiguousarray(self.o, dtype=np.float64).reshape(-1, 3)

@@ -16,6 +16,7 @@ region                 contains the point x when
 ``Norm2Below(v)``      ‖x‖² < v (Eq. 15's pulled corner; strict, as printed)
 ``Ids(ids)``           its index in the group is one of ``ids`` (0-based, the group's id order)
 ``Surface(mesh)``      inside a closed triangle mesh (VTK's enclosed-points test, via pyvista)
+``NearSurface(t, d)``  within d of the triangles t (a named hole's bore, a flat face)
 ``Union(a, b, …)``     in any of them;  ``a | b``
 ``Intersection(…)``    in all of them;  ``a & b``
 ``Difference(a, b…)``  in a and in none of the others;  ``a - b``
@@ -266,6 +267,44 @@ class Surface(Region):
 
     def __repr__(self):
         return f"Surface({self.name!r})"
+
+
+class NearSurface(Region):
+    """Points within ``distance`` of a piece of a part's surface: the triangles ``triangles``
+    (k×3×3) of a named hole's bore or a flat face (:mod:`rackstress.scenes.features`), whose
+    ``name`` ("hole H2", "face F5") is for messages. The distance is trimesh's closest point
+    on those triangles, for the points in their bounding box grown by ``distance``."""
+
+    def __init__(self, triangles, distance: float, name: str = "surface"):
+        self.triangles = np.asarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
+        self.distance, self.name = float(distance), name
+        if not len(self.triangles):
+            raise SceneError(f"{name}: has no triangles")
+        if not self.distance > 0:
+            raise SceneError(f"{name}: the selection distance must be positive")
+
+    def mask(self, o):
+        import trimesh
+
+        o = _as_points(o)
+        out = np.zeros(len(o), dtype=bool)
+        lo, hi = self.bounds()
+        near = np.flatnonzero(np.all((o >= lo) & (o <= hi), axis=1))
+        if not len(near):
+            return out
+        tri = self.triangles
+        sub = trimesh.Trimesh(tri.reshape(-1, 3), np.arange(3 * len(tri)).reshape(-1, 3),
+                              process=False)
+        _, dist, _ = trimesh.proximity.closest_point(sub, o[near])
+        out[near] = np.asarray(dist) <= self.distance * (1.0 + TOL)
+        return out
+
+    def bounds(self):
+        pts = self.triangles.reshape(-1, 3)
+        return pts.min(axis=0) - self.distance, pts.max(axis=0) + self.distance
+
+    def __repr__(self):
+        return f"NearSurface({self.name!r}, within {self.distance:g})"
 
 
 def grid_points(origin, spacing, dims) -> np.ndarray:

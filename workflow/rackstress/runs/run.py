@@ -267,6 +267,10 @@ def summarize(scene: Scene, engine: str, mode: str, p_end: np.ndarray, steps_don
                       "particle": error.local, "index": error.index,
                       "atom_id": None if error.index is None else error.index + 1}
     s["units"] = scene.units.name
+    for name, g in scene.groups.items():        # a mesh part: its spacing and thin walls
+        sizing = mesh_sizing(g)
+        if sizing is not None:
+            s["groups"][name]["sizing"] = sizing
     if scene.units.physical:
         for name, g in scene.groups.items():
             if g.material is not None:
@@ -275,6 +279,39 @@ def summarize(scene: Scene, engine: str, mode: str, p_end: np.ndarray, steps_don
     if extra:
         s.update(extra)
     return s
+
+
+def mesh_sizing(g) -> dict | None:
+    """A mesh part's spacing, how it was chosen (None: given) and its walls thinner than three
+    spacings (:mod:`rackstress.scenes.features`), or None for another group."""
+    geo = (g.meta or {}).get("part") if isinstance(g.meta, dict) else None
+    if geo is None:
+        return None
+    return {"spacing": geo.spacing, "chosen": getattr(geo, "choice", None),
+            "thin_walls": list(getattr(geo, "thin", []) or [])}
+
+
+def sizing_lines(scene: Scene) -> tuple[list, list]:
+    """What ``rackstress run`` says of its mesh parts: (lines for stdout: a spacing chosen and
+    why; warnings: walls thinner than three spacings, where and near which feature)."""
+    say, warn = [], []
+    for name, g in scene.groups.items():
+        sz = mesh_sizing(g)
+        if sz is None:
+            continue
+        if sz["chosen"]:
+            say.append(f"  {name}: spacing {sz['spacing']:g} chosen: {sz['chosen']['reason']} "
+                       "(set spacing = ... in the group, or --set spacing=...)")
+        for t in sz["thin_walls"][:3]:
+            where = ", ".join(f"{x:.4g}" for x in t["position"])
+            warn.append(f"'{name}': a wall {t['thickness']:.3g} thick at [{where}]"
+                        + (f" (near {t['near']})" if t.get("near") else "")
+                        + f" has fewer than 3 particles across at spacing {sz['spacing']:g}: "
+                        "its stress there is coarse; a smaller spacing resolves it")
+        if len(sz["thin_walls"]) > 3:
+            warn.append(f"'{name}': {len(sz['thin_walls']) - 3} more place(s) with walls "
+                        "thinner than 3 spacings (summary.json: groups.NAME.sizing)")
+    return say, warn
 
 
 def write_boundary(scene: Scene, out) -> None:
@@ -291,9 +328,13 @@ def write_boundary(scene: Scene, out) -> None:
     path = Path(out) / "boundary.npz"
     tmp = Path(out) / ".boundary.tmp.npz"
     try:
+        from rackstress.model.constraints import supported
+
+        constrained = np.flatnonzero(supported(scene) & ~fixed.any(axis=1))
         np.savez(tmp, held_ids=(held + 1).astype(np.int64), held_mask=fixed[held],
                  load_ids=(loaded + 1).astype(np.int64), load_force=F[loaded].astype(np.float64),
-                 units=np.str_(scene.units.name))
+                 units=np.str_(scene.units.name),
+                 constrained_ids=(constrained + 1).astype(np.int64))
         tmp.replace(path)
     except OSError as exc:
         raise storage_error(exc, "write", path) from None
@@ -318,7 +359,24 @@ def singular_of(scene: Scene, fixed=None, F=None) -> dict:
         spacing, shape = singular.part_geometry(scene, name)
         meta = g.meta if isinstance(g.meta, dict) else {}
         wall = singular.wall_thickness(g.o, spacing, phi=meta.get("fractions"))
-        out[name] = (spacing, wall, singular.find(g.o, spacing, shape, fixed[sl], F[sl]))
+        out[name] = (spacing, wall, singular.find(g.o, spacing, shape, _bores_held(g, fixed[sl]),
+                                                  F[sl]))
+    return out
+
+
+def _bores_held(g, fixed: np.ndarray) -> np.ndarray:
+    """``fixed`` (the part's held axes) with a pinned hole's ring and a cylindrical support's
+    bore counted as held in every direction: their edge on the bore is a support's edge, as a
+    fixed hole's is; a roller or symmetry plane (one direction) is not, as a held axis is not."""
+    from rackstress.model.constraints import Ring
+
+    out = np.array(fixed, dtype=bool, copy=True)
+    for con in getattr(g, "constraints", ()):
+        if isinstance(con, Ring):
+            out[con.ids] = True
+        else:                        # Normals: held in two directions or more (a bore)
+            ids, counts = np.unique(con.ids, return_counts=True)
+            out[ids[counts >= 2]] = True
     return out
 
 
@@ -365,10 +423,10 @@ def load_path_warnings(scene: Scene) -> list[dict]:
     from scipy.sparse.csgraph import connected_components
 
     from rackstress.engines.static import _bind_pairs, external_forces
-
+    from rackstress.model.constraints import supported
     from rackstress.scenes.physical import held_load_warnings
 
-    fixed = scene.fixed().any(axis=1)
+    fixed = supported(scene)          # a fixed direction, a pin, a roller on any face
     F = external_forces(scene)
     loaded = np.any(F != 0.0, axis=1)
     if not loaded.any():

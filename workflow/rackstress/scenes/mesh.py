@@ -34,7 +34,9 @@ from rackstress.errors import SceneError
 from rackstress.model.regions import Surface
 
 #: File endings read as surfaces (anything else is refused with this list).
-SURFACE_FORMATS = (".stl", ".obj", ".ply", ".vtk", ".vtp")
+SURFACE_FORMATS = (".stl", ".obj", ".ply", ".vtk", ".vtp", ".step", ".stp")
+#: of them, STEP solids (read by gmsh's OpenCASCADE reader, the ``fem`` extra)
+STEP_FORMATS = (".step", ".stp")
 
 
 @dataclass(frozen=True)
@@ -104,17 +106,32 @@ def read_surface(path, scale=None, rotate=None, translate=None, base: Path | Non
     placed = place.apply(vertices)
     poly = pv.PolyData.from_regular_faces(placed, faces)
     det = float(np.prod(place.scale))
-    return MeshSurface(poly, str(p), abs(volume * det))
+    surface = MeshSurface(poly, str(p), abs(volume * det))
+    surface.file, surface.placement = str(p), place
+    return surface
 
 
-@lru_cache(maxsize=32)
-def _checked(file: str, mtime_ns: int):
-    """(vertices, triangles, signed volume) of a checked mesh file (cached per file version)."""
+def read_triangles(file) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices, triangles) of the surface in ``file``, as written (no checks): pyvista's
+    readers, or for STEP (``.step``, ``.stp``) gmsh's OpenCASCADE reader (:func:`step_surface`).
+
+    Raises
+    ------
+    SceneError
+        naming the file: missing, of an unknown format, unreadable, or holding no triangles.
+    """
+    p = Path(file)
+    if not p.is_file():
+        raise SceneError(f"mesh file {p} does not exist")
+    if p.suffix.lower() not in SURFACE_FORMATS:
+        raise SceneError(f"mesh file {p}: unknown surface format '{p.suffix}'; readable: "
+                         f"{', '.join(SURFACE_FORMATS)}")
+    if p.suffix.lower() in STEP_FORMATS:
+        return step_surface(str(p))
     import pyvista as pv
-    import trimesh
-
     import warnings
 
+    file = str(p)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")      # the reader's failure is reported below
@@ -131,8 +148,121 @@ def _checked(file: str, mtime_ns: int):
         raise SceneError(f"mesh file {file}: holds no triangle surface ({exc})") from None
     if surf.n_cells == 0 or surf.n_points < 4:
         raise SceneError(f"mesh file {file}: holds no triangle surface (no faces)")
-    faces = np.asarray(surf.regular_faces, dtype=np.int64)
-    vertices = np.asarray(surf.points, dtype=np.float64)
+    return (np.asarray(surf.points, dtype=np.float64),
+            np.asarray(surf.regular_faces, dtype=np.int64))
+
+
+#: the chord tolerance of a STEP part's surface mesh: this fraction of its size (an STL
+#: export's "fine": 0.05 mm on a 100 mm part); and at least this many segments round a circle
+STEP_CHORD, STEP_SEGMENTS = 5e-4, 36
+
+
+class _quiet:
+    """Standard output and error of this process (its C++ libraries' too) to /dev/null for the
+    block: OpenCASCADE prints its STEP reader's messages there, and the error that follows
+    says what went wrong in one paragraph."""
+
+    def __enter__(self):
+        import sys
+
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (AttributeError, ValueError):
+                pass
+        self.saved = []
+        try:
+            null = os.open(os.devnull, os.O_WRONLY)
+        except OSError:
+            return self
+        for fd in (1, 2):
+            try:
+                self.saved.append((fd, os.dup(fd)))
+                os.dup2(null, fd)
+            except OSError:
+                pass
+        os.close(null)
+        return self
+
+    def __exit__(self, *exc):
+        for fd, copy in self.saved:
+            os.dup2(copy, fd)
+            os.close(copy)
+        return False
+
+
+def step_surface(file: str, cad: bool = False) -> tuple:
+    """(vertices, triangles) of the solids of a STEP file, meshed on their surfaces by gmsh
+    (OpenCASCADE reads the file; curves get at least :data:`STEP_SEGMENTS` segments a full
+    circle and the mesh no element larger than a fifth of the part). The triangles are turned
+    to face out of each solid (trimesh's ``fix_normals``). gmsh is the ``fem`` extra's.
+
+    ``cad``: also the CAD face each triangle lies on and each face's kind ("Plane",
+    "Cylinder", ...: gmsh's ``getType``), for :func:`rackstress.scenes.features.part_features`.
+    """
+    try:
+        import gmsh
+    except ImportError as exc:
+        raise SceneError(f"mesh file {file}: a STEP part is read by gmsh's OpenCASCADE reader, "
+                         f"which needs the 'fem' extra: pip install 'rackstress[fem]' ({exc})"
+                         ) from None
+    import trimesh
+
+    if gmsh.isInitialized():
+        gmsh.finalize()
+    gmsh.initialize(["-noenv"], readConfigFiles=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.option.setNumber("General.Verbosity", 0)
+        try:
+            with _quiet():                  # OpenCASCADE's own parse messages: said below
+                gmsh.model.occ.importShapes(file)
+            gmsh.model.occ.synchronize()
+        except Exception as exc:  # noqa: BLE001 - gmsh raises Exception for a bad file
+            raise SceneError(f"mesh file {file}: gmsh's OpenCASCADE reader cannot read it as "
+                             f"STEP ({str(exc).strip() or 'no shape'}); export the part from "
+                             "CAD again as STEP AP203/AP214, or as STL") from None
+        if not gmsh.model.getEntities(3):
+            raise SceneError(f"mesh file {file}: holds no solid (only "
+                             f"{len(gmsh.model.getEntities(2))} surface(s)); a part is filled "
+                             "from its inside: export the solid body")
+        lo = np.array(gmsh.model.getBoundingBox(-1, -1)[:3])
+        hi = np.array(gmsh.model.getBoundingBox(-1, -1)[3:])
+        size = float(np.linalg.norm(hi - lo))
+        gmsh.option.setNumber("Mesh.MeshSizeMax", size / 5.0)
+        gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", STEP_SEGMENTS)
+        gmsh.option.setNumber("Mesh.MeshSizeMin", STEP_CHORD * size)
+        gmsh.model.mesh.generate(2)
+        tags, coords, _ = gmsh.model.mesh.getNodes()
+        where = np.zeros(int(tags.max()) + 1, dtype=np.int64)
+        where[tags.astype(np.int64)] = np.arange(len(tags))
+        tris, owner, kinds = [], [], {}
+        for dim, tag in gmsh.model.getEntities(2):
+            kinds[int(tag)] = gmsh.model.getType(dim, tag)
+            types, _, nodes = gmsh.model.mesh.getElements(dim, tag)
+            for t, nd in zip(types, nodes):
+                if t == 2:                                        # 3-node triangles
+                    tris.append(where[np.asarray(nd, dtype=np.int64).reshape(-1, 3)])
+                    owner.append(np.full(len(tris[-1]), int(tag)))
+    finally:
+        gmsh.finalize()
+    if not tris:
+        raise SceneError(f"mesh file {file}: gmsh made no surface triangles of its solids")
+    # merged vertices, every triangle kept in order (each keeps its CAD face)
+    tm = trimesh.Trimesh(np.asarray(coords, float).reshape(-1, 3), np.concatenate(tris),
+                         process=False)
+    tm.merge_vertices()
+    tm.fix_normals(multibody=True)
+    out = (np.asarray(tm.vertices), np.asarray(tm.faces, dtype=np.int64))
+    return out + (np.concatenate(owner), kinds) if cad else out
+
+
+@lru_cache(maxsize=32)
+def _checked(file: str, mtime_ns: int):
+    """(vertices, triangles, signed volume) of a checked mesh file (cached per file version)."""
+    import trimesh
+
+    vertices, faces = read_triangles(file)
     if not np.all(np.isfinite(vertices)):
         raise SceneError(f"mesh file {file}: has non-finite vertex coordinates")
     tm = trimesh.Trimesh(vertices=vertices, faces=faces, process=True)
@@ -149,9 +279,8 @@ def _checked(file: str, mtime_ns: int):
         raise SceneError(
             f"mesh file {file}: the surface touches or intersects itself ({len(e)} edge(s) "
             f"shared by more than two triangles, e.g. at "
-            f"{np.round(tm.vertices[e[0][0]], 6).tolist()}); its inside is not defined. Union "
-            "the bodies in the CAD tool before exporting, or give each body as its own part (a "
-            "group's parts are united)")
+            f"{np.round(tm.vertices[e[0][0]], 6).tolist()}); its inside is not defined. "
+            + _bodies_advice(tm, file))
     if not tm.is_winding_consistent:
         raise SceneError(f"mesh file {file}: the triangles are not consistently oriented "
                          "(some normals point inwards); re-export the solid from the CAD tool")
@@ -160,12 +289,35 @@ def _checked(file: str, mtime_ns: int):
         raise SceneError(
             f"mesh file {file}: the surface overlaps or intersects itself (e.g. at "
             f"{np.round(where[0], 6).tolist()} a ray is inside it twice); its inside is not "
-            "defined. Union the bodies in the CAD tool before exporting, or give each body as "
-            "its own part (a group's parts are united)")
+            "defined. " + _bodies_advice(tm, file))
     volume = float(tm.volume)
     if not abs(volume) > 0:
         raise SceneError(f"mesh file {file}: encloses no volume")
     return tm.vertices.copy(), tm.faces.copy(), volume
+
+
+def _bodies_advice(tm, file: str) -> str:
+    """What to do with a surface whose inside is not defined: for a file of several bodies
+    (connected shells, trimesh's ``split``), each body named by its triangles, volume and box
+    in the file's units, and how to write them as files of their own for a group's ``parts``
+    (united, overlaps filled once); else: union the bodies in the CAD tool."""
+    bodies = tm.split(only_watertight=False)
+    if len(bodies) < 2:
+        return ("Union the bodies in the CAD tool before exporting, or give each body as its "
+                "own part (a group's parts are united)")
+    stem = Path(file).stem
+    listed = "; ".join(
+        f"body {i}: {len(b.faces)} triangles, volume {abs(b.volume):.4g}, box "
+        f"{np.round(b.bounds[0], 4).tolist()} … {np.round(b.bounds[1], 4).tolist()}"
+        + ("" if b.is_watertight else " (not closed)")
+        for i, b in enumerate(bodies, 1))
+    names = ", ".join(f'{{ mesh = "{stem}-{i}.stl" }}' for i in range(1, len(bodies) + 1))
+    return (f"It holds {len(bodies)} bodies ({listed}). Union them in the CAD tool before "
+            "exporting, or write each to a file of its own (python -c \"import trimesh; "
+            f"[b.export(f'{stem}-{{i}}.stl') for i, b in enumerate(trimesh.load("
+            f"'{Path(file).name}').split(only_watertight=False), 1)]\") and fill the group "
+            f"from them: parts = [{names}] (a group's parts are united: overlaps are filled "
+            "once; the scale, rotate and translate go into each)")
 
 
 def self_intersections(tm, rays_per_axis: int = 24, seed: int = 0) -> np.ndarray:

@@ -13,8 +13,10 @@ Everything here becomes the paper's model (docs/scenes.md "Physical scenes", doc
   of a region is p·a² per exposed particle; gravity is an acceleration; a prescribed
   displacement fixes the particles' directions at o + u (static analysis); ``ramp`` raises a
   load in ten equal stairs over the given time (dynamic runs, as phases);
-* ``[[support]]`` tables fix all or some directions of the selected particles (held, rollers,
-  symmetry planes).
+* ``[[support]]`` tables hold the selected particles by ``type``: ``fixed`` (all or the
+  listed directions: held, rollers and symmetry planes along axes), ``roller`` and
+  ``symmetry`` along any normal, ``cylindrical`` and ``pinned`` about a hole's axis (the last
+  three, off the axes, as :mod:`rackstress.model.constraints`: static analysis only).
 """
 from __future__ import annotations
 
@@ -23,6 +25,7 @@ import math
 import numpy as np
 
 from rackstress.errors import SceneError
+from rackstress.model.constraints import Normals, Ring, axis_of
 from rackstress.model.operators import Bind, Collide, Attract, Force, PhaseIn
 from rackstress.model.scene import Phase, steps_for
 from rackstress.model.units import PAPER, units as unit_named
@@ -31,7 +34,7 @@ _LOAD_KINDS = ("force", "pressure", "gravity", "displacement")
 #: The largest load component accepted (force, pressure, gravity): beyond, squares overflow.
 HUGE_LOAD = 1e150
 _LOAD_KEYS = ("on", "where", "normal", "ramp") + _LOAD_KINDS
-_SUPPORT_KEYS = ("on", "where", "fix")
+_SUPPORT_KEYS = ("on", "where", "fix", "type", "normal", "axis", "plane")
 #: stairs of a load ramp (each 1/RAMP_STAIRS of the full load, one phase each)
 RAMP_STAIRS = 10
 
@@ -70,48 +73,210 @@ def _group_of(c, t: dict, groups: dict):
 
 
 def _selection(c, t: dict, g, select) -> np.ndarray:
-    """The particles ``where`` selects (default all); ``select(c, table, field, o)`` is the
-    scene reader's region → mask."""
+    """The particles ``where`` selects (default all); ``select(c, table, field, o, group)``
+    is the scene reader's region → mask."""
     if "where" not in t:
         return np.ones(g.n, dtype=bool)
-    mask = select(c, t["where"], "where", g.o)
+    mask = select(c, t["where"], "where", g.o, g)
     if not mask.any():
         raise c.error("selects no particle of the group (check the region against the "
                       "part's positions and the scene's length unit)", "where")
     return mask
 
 
-def supports(ctx, tables, groups: dict, select) -> None:
-    """``[[support]]``: fix the listed directions (default all: held) of the selected particles."""
-    from rackstress.scenes.fields import _array_of_tables, _check_keys
+def supports(ctx, tables, groups: dict, select, region_of=None) -> None:
+    """``[[support]]``: hold the selected particles as its ``type`` says (module doc):
+    ``fixed`` in the listed directions (default all: held), ``roller`` and ``symmetry`` along
+    a normal, ``cylindrical`` radially and axially about an axis, ``pinned`` as a rigid ring
+    turning about it. ``region_of(c, table, field, group)`` is the scene reader's region of a
+    table (a named hole or face brings its axis or normal)."""
+    from rackstress.scenes.fields import _array_of_tables, _check_keys, _string
 
     for k, t in enumerate(_array_of_tables(ctx, tables, "support"), 1):
         c = ctx.at(f"[[support]] #{k}")
         _check_keys(c, t, _SUPPORT_KEYS)
         name, g = _group_of(c, t, groups)
-        c = ctx.at(f"[[support]] #{k} (on '{name}')")
-        mask = _selection(c, t, g, select)
-        fix = t.get("fix", ["x", "y", "z"])
-        if (not isinstance(fix, list) or not fix
-                or not all(isinstance(a, str) and a in ("x", "y", "z") for a in fix)):
-            raise c.error(f"must be a non-empty array of directions among \"x\", \"y\", \"z\" "
-                          f"(a roller on a floor: [\"z\"]), got {fix!r}", "fix")
-        twice = sorted({a for a in fix if fix.count(a) > 1})
-        if twice:      # ["x", "x"] for ["x", "y"]: the part would be a mechanism (exit 6)
-            raise c.error(f"lists {', '.join(repr(a) for a in twice)} more than once "
-                          f"({fix!r}); name each direction to fix once: [\"x\", \"y\", "
-                          "\"z\"] (the default) holds, one or two directions make a roller or "
-                          "a symmetry plane", "fix")
-        dirs = np.zeros(3, dtype=bool)
-        for a in fix:
-            g.fixed[mask, "xyz".index(a)] = True
-            dirs["xyz".index(a)] = True
-        # which particles and directions this support holds: its reaction (engines/static.py)
-        g.meta.setdefault("supports", []).append((f"[[support]] #{k}", mask, dirs))
-        _refix(g)
-        if "supported_by" not in g.meta:        # which [[support]] holds each particle (last)
-            g.meta["supported_by"] = np.zeros(g.n, dtype=np.int32)
-        g.meta["supported_by"][mask] = k
+        kind = _string(c, t.get("type", "fixed"), "type")
+        if kind not in SUPPORT_TYPES:
+            from rackstress.scenes.fields import _hint
+
+            raise c.error(f"unknown support type '{kind}'{_hint(kind, SUPPORT_TYPES)}; types: "
+                          + "; ".join(f"{a} ({b})" for a, b in SUPPORT_TYPES.items()), "type")
+        c = ctx.at(f"[[support]] #{k} (on '{name}', {kind})")
+        for key, owner in (("fix", "fixed"), ("normal", "roller"), ("axis", "pinned"),
+                           ("plane", "symmetry")):
+            if key in t and kind not in (owner,) + (("cylindrical",) if key == "axis" else ()):
+                raise c.error(f"'{key}' belongs to a {owner} support"
+                              + (" or a cylindrical one" if key == "axis" else "")
+                              + f", not a {kind} one", key)
+        region = None
+        if "where" in t:
+            if region_of is not None:
+                region = region_of(c, t["where"], "where", g)
+                try:
+                    mask = region.mask(g.o)
+                except SceneError as exc:
+                    raise c.error(str(exc), "where") from None
+            else:
+                mask = select(c, t["where"], "where", g.o)
+            if not mask.any():
+                raise c.error("selects no particle of the group (check the region against the "
+                              "part's positions and the scene's length unit)", "where")
+        elif kind == "symmetry":
+            mask = None
+        else:
+            mask = np.ones(g.n, dtype=bool)
+        if mask is not None:     # which [[support]] holds each particle (the last named)
+            g.meta.setdefault("supported_by", np.zeros(g.n, dtype=np.int32))[mask] = k
+        feature = getattr(region, "feature", None)
+        label = f"[[support]] #{k} ({kind})"
+        if kind == "fixed":
+            dirs = _fix_axes(c, t, g, mask)
+            # which particles and directions this support holds: its reaction (engines/static)
+            g.meta.setdefault("supports", []).append((f"[[support]] #{k}", mask, dirs))
+            continue
+        if kind in ("roller", "symmetry"):
+            point, n = _support_plane(c, t, kind, feature)
+            if mask is None:         # the particles on the plane: within half a spacing
+                a = (g.meta.get("spacing") or (g.meta.get("solid") or {}).get("spacing")
+                     or getattr(g.meta.get("part"), "spacing", None))
+                if a is None:
+                    raise c.error("a symmetry plane without 'where' takes the particles within "
+                                  "half a spacing of it; this group has no lattice spacing: "
+                                  "give where = { ... }", "plane")
+                mask = np.abs((g.o - point) @ n) <= 0.5 * a * (1.0 + 1e-9)
+                if not mask.any():
+                    raise c.error(f"no particle of '{name}' lies within half a spacing "
+                                  f"({0.5 * a:g}) of the plane through {point.tolist()} normal "
+                                  f"to {n.tolist()}", "plane")
+            axis = axis_of(n)
+            if axis is not None:     # an axis: the engines' fixed directions (also dynamic)
+                g.fixed[mask, axis] = True
+                _refix(g)
+                g.meta.setdefault("supports", []).append((label, mask, np.eye(3, dtype=bool)[axis]))
+            else:
+                ids = np.flatnonzero(mask)
+                g.constraints.append(Normals(ids, np.tile(n, (len(ids), 1)), label))
+                g.meta.setdefault("supports", []).append((label, mask, None))
+            continue
+        point, axis = _support_axis(c, t, kind, feature)
+        ids = np.flatnonzero(mask)
+        g.meta.setdefault("supports", []).append((label, mask, None))   # its whole reaction
+        if kind == "pinned":
+            try:
+                g.constraints.append(Ring(ids, point, axis, label))
+            except SceneError as exc:
+                raise c.error(str(exc)) from None
+            continue
+        # cylindrical: radial and axial fixed, the turn about the axis free
+        rel = g.o[ids] - point
+        radial = rel - np.outer(rel @ axis, axis)
+        rho = np.linalg.norm(radial, axis=1)
+        on_axis = rho <= 1e-9 * max(float(rho.max()), 1e-300)
+        radial[~on_axis] /= rho[~on_axis, None]
+        normals = [radial[~on_axis], np.tile(axis, (len(ids), 1))]
+        pid = [ids[~on_axis], ids]
+        if on_axis.any():                # a particle on the axis has no turn: held
+            from rackstress.scenes.features import _basis
+
+            u, v = _basis(axis)
+            normals += [np.tile(u, (int(on_axis.sum()), 1)), np.tile(v, (int(on_axis.sum()), 1))]
+            pid += [ids[on_axis]] * 2
+        g.constraints.append(Normals(np.concatenate(pid), np.concatenate(normals), label))
+
+
+#: a [[support]]'s ``type`` and what it holds
+SUPPORT_TYPES = {
+    "fixed": "the directions of 'fix', default all three: held",
+    "pinned": "a bolt: the bore turns as one rigid ring about the hole's axis",
+    "cylindrical": "radial and axial held, the turn about the axis free",
+    "roller": "the face's normal direction held, the face free to slide",
+    "symmetry": "a symmetry plane: its normal direction held",
+}
+
+
+def _fix_axes(c, t: dict, g, mask) -> None:
+    fix = t.get("fix", ["x", "y", "z"])
+    if (not isinstance(fix, list) or not fix
+            or not all(isinstance(a, str) and a in ("x", "y", "z") for a in fix)):
+        raise c.error(f"must be a non-empty array of directions among \"x\", \"y\", \"z\" "
+                      f"(a roller on a floor: [\"z\"]), got {fix!r}", "fix")
+    twice = sorted({a for a in fix if fix.count(a) > 1})
+    if twice:      # ["x", "x"] for ["x", "y"]: the part would be a mechanism (exit 6)
+        raise c.error(f"lists {', '.join(repr(a) for a in twice)} more than once "
+                      f"({fix!r}); name each direction to fix once: [\"x\", \"y\", "
+                      "\"z\"] (the default) holds, one or two directions make a roller or "
+                      "a symmetry plane", "fix")
+    dirs = np.zeros(3, dtype=bool)
+    for a in fix:
+        g.fixed[mask, "xyz".index(a)] = True
+        dirs["xyz".index(a)] = True
+    _refix(g)
+    return dirs
+
+
+def _unit(c, value, field: str) -> np.ndarray:
+    from rackstress.scenes.fields import _vec3
+
+    n = np.asarray(_vec3(c, value, field))
+    if not np.linalg.norm(n) > 0:
+        raise c.error("must not be zero", field)
+    return n / np.linalg.norm(n)
+
+
+def _support_plane(c, t: dict, kind: str, feature):
+    """(point, unit normal) of a roller or symmetry support: its ``normal`` / ``plane``, else
+    the named face's."""
+    from rackstress.scenes.fields import _check_keys, _require, _table, _vec3
+
+    if kind == "symmetry" and "plane" in t:
+        b = _table(c, t["plane"], "plane")
+        _check_keys(c.at(f"{c.where}: plane"), b, ("point", "normal"))
+        return (np.asarray(_vec3(c, _require(c.at(f"{c.where}: plane"), b, "point"),
+                                 "plane.point")),
+                _unit(c, _require(c.at(f"{c.where}: plane"), b, "normal"), "plane.normal"))
+    if "normal" in t:
+        n = _unit(c, t["normal"], "normal")
+        return (np.asarray(feature.centre) if feature is not None else np.zeros(3)), n
+    if feature is not None and getattr(feature, "kind", "") == "face":
+        return np.asarray(feature.centre, float), np.asarray(feature.normal, float)
+    need = "plane = { point = [x, y, z], normal = [nx, ny, nz] }" if kind == "symmetry" else \
+        "normal = [nx, ny, nz]"
+    raise c.error(f"a {kind} support holds the direction normal to a face: give {need}, or "
+                  "select a named face (where = { face = \"F3\" }: its normal)")
+
+
+def _support_axis(c, t: dict, kind: str, feature):
+    """(point, unit direction) of a pinned or cylindrical support: its ``axis``, else the
+    named hole's."""
+    from rackstress.scenes.fields import _check_keys, _require, _table, _vec3
+
+    if "axis" in t:
+        b = _table(c, t["axis"], "axis")
+        _check_keys(c.at(f"{c.where}: axis"), b, ("point", "direction"))
+        req = c.at(f"{c.where}: axis")
+        return (np.asarray(_vec3(c, _require(req, b, "point"), "axis.point")),
+                _unit(c, _require(req, b, "direction"), "axis.direction"))
+    if feature is not None and getattr(feature, "kind", "") == "hole":
+        return np.asarray(feature.centre, float), np.asarray(feature.axis, float)
+    raise c.error(f"a {kind} support turns about an axis: select a named hole (where = {{ hole "
+                  "= \"H1\" }: its axis), or give axis = { point = [x, y, z], direction = "
+                  "[dx, dy, dz] }")
+
+
+def check_constraints(ctx, groups: dict, analysis: str) -> None:
+    """Supports that fix no axis (rollers off the axes, symmetry planes at an angle, pinned
+    and cylindrical supports) are solved by the static analysis only: LAMMPS' time stepping
+    holds whole axes (``fix setforce``)."""
+    if analysis == "static":
+        return
+    for name, g in groups.items():
+        for con in g.constraints:
+            raise ctx.error(f"{con.label} on '{name}' holds directions that are not x, y or z "
+                            "(a roller or symmetry plane at an angle, a pinned or cylindrical "
+                            "hole); time stepping holds whole axes only (LAMMPS' fix setforce): "
+                            "solve the part with analysis = \"static\", or hold axes "
+                            "(type = \"fixed\" with fix = [\"x\", ...])", "analysis")
 
 
 def _refix(g) -> None:

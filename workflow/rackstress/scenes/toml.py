@@ -98,7 +98,11 @@ OVERRIDABLE = ("dt", "steps", "duration", "cycles", "bound")
 STATIC_UNUSED = ("dt", "steps", "duration", "cycles")
 
 _TOP_KEYS = ("name", "dt", "cycles", "bound", "steps", "duration", "params", "group",
-             "operator", "phase", "units", "analysis", "load", "support")
+             "operator", "phase", "units", "analysis", "load", "support", "budget")
+#: ``--set`` keys of every explicit scene besides OVERRIDABLE, unless its [params] has them:
+#: ``spacing`` (every filled part's lattice spacing) and ``budget`` (the particles a part
+#: whose spacing is chosen from its walls may have)
+_SIZING = ("spacing", "budget")
 _BUILTIN_KEYS = ("scene", "params")
 #: How a plain group's particles are made: exactly one of these (or ``rack``).
 _SOURCES = ("positions", "lattice", "mesh", "fill", "parts")
@@ -108,8 +112,8 @@ _GROUP_KEYS = ("name", "kind", "rack", "offset") + _SOURCES + (
 _LATTICE_KEYS = ("shape", "spacing", "origin")
 _PHASE_KEYS = ("name", "steps", "duration", "vars")
 #: Region shapes (docs/scenes.md "Regions"): the one key a region table names.
-REGION_KEYS = ("box", "sphere", "cylinder", "plane", "mesh", "ids", "norm2_lt", "union",
-               "intersection", "difference")
+REGION_KEYS = ("box", "sphere", "cylinder", "plane", "mesh", "ids", "norm2_lt", "hole", "face",
+               "union", "intersection", "difference")
 _MESH_PLACEMENT = ("translate", "rotate", "scale")
 _COMMON_OP_KEYS = ("on", "op", "when", "contact")
 _OP_KEYS = {
@@ -191,6 +195,15 @@ def scene_parameters(path) -> dict:
     settings = {k: data.get(k, DEFAULTS.get(k)) for k in OVERRIDABLE}
     if "duration" in data and "steps" not in data:
         settings.pop("steps")          # the run's length is its duration
+    groups = [g for g in data.get("group", []) if isinstance(g, dict)
+              and any(k in g for k in ("mesh", "fill", "parts"))]
+    if groups and "spacing" not in params:
+        settings["spacing"] = next((g["spacing"] for g in groups if "spacing" in g),
+                                   "chosen from the walls")
+        if any("spacing" not in g and "mesh" in g for g in groups):
+            from rackstress.scenes.features import BUDGET
+
+            settings["budget"] = data.get("budget", BUDGET)
     if data.get("analysis") == "static":
         for k in STATIC_UNUSED:        # an equilibrium has no time step, length or cycles
             settings.pop(k, None)
@@ -300,13 +313,16 @@ def _scene_params(ctx: _Ctx, data: dict, overrides: dict) -> tuple[dict, dict]:
         if key in OVERRIDABLE:
             settings[key] = value
             continue
+        if key in _SIZING and key not in table:     # every filled part's spacing; the budget
+            settings[key] = value
+            continue
         if key not in table:
             listing = ", ".join(f"{k}={v!r}" for k, v in table.items()) or "none"
-            hint = did_you_mean(key, [*OVERRIDABLE, *table])
+            hint = did_you_mean(key, [*OVERRIDABLE, *_SIZING, *table])
             raise ctx.error(f"the scene has no parameter '{key}'"
                             f"{' (' + hint + ')' if hint else ''}; --set takes "
-                            f"{', '.join(OVERRIDABLE)} and the scene's [params]: {listing}",
-                            "--set")
+                            f"{', '.join(OVERRIDABLE + _SIZING)} and the scene's [params]: "
+                            f"{listing}", "--set")
         default = table[key]
         if _is_number(default) and not _is_number(value):
             raise ctx.error(f"parameter {key} must be a number (its default is {default!r}), "
@@ -466,10 +482,11 @@ def _build_explicit(ctx: _Ctx, data: dict, overrides: dict, user: dict) -> Scene
     from rackstress.scenes import physical
 
     unit_system = physical.scene_units(ctx, data)
-    groups = _groups(ctx, data["group"], base)
+    groups = _groups(ctx, data["group"], base, _sizing(ctx, data, overrides))
     physical.check_materials(ctx, groups, unit_system)
-    select = lambda c, value, field, o: _mask(c, _region(c, value, field, base), o, field)  # noqa: E731
-    physical.supports(ctx, data.get("support", []), groups, select)
+    region_of = lambda c, value, field, g=None: _region(c, value, field, base, g)  # noqa: E731
+    select = lambda c, value, field, o, g=None: _mask(c, region_of(c, value, field, g), o, field)  # noqa: E731
+    physical.supports(ctx, data.get("support", []), groups, select, region_of)
     ramp = physical.ramp_of(ctx, data.get("load", []))
     if ramp is not None:
         settings["ramp"] = physical.ramp_phases(ctx, data, ramp, length, dt)
@@ -479,6 +496,7 @@ def _build_explicit(ctx: _Ctx, data: dict, overrides: dict, user: dict) -> Scene
     operators = physical.loads(ctx, data.get("load", []), groups, operators, unit_system,
                                select, ramp)
     analysis = physical.analysis_of(ctx, data, groups, operators, ramp)
+    physical.check_constraints(ctx, groups, analysis)
 
     params = {"file": ctx.file, "dt": dt, "cycles": settings["cycles"],
               "bound": settings["bound"], **user}
@@ -513,7 +531,7 @@ def _build_explicit(ctx: _Ctx, data: dict, overrides: dict, user: dict) -> Scene
     return scene
 
 
-def _groups(ctx: _Ctx, value, base: Path) -> dict:
+def _groups(ctx: _Ctx, value, base: Path, sizing: dict | None = None) -> dict:
     tables = _array_of_tables(ctx, value, "group")
     if not tables:
         raise ctx.error("an explicit scene needs at least one [[group]] table")
@@ -533,7 +551,7 @@ def _groups(ctx: _Ctx, value, base: Path) -> dict:
     # order of the scene is the file order.
     for t, c in zip(tables, gctx):
         if "rack" not in t:
-            built[t["name"]] = _plain_group(c, t, base)
+            built[t["name"]] = _plain_group(c, t, base, sizing)
     for t, c in zip(tables, gctx):
         if "rack" in t:
             built[t["name"]] = _rack_group(c, t, built, names, base)
@@ -580,7 +598,8 @@ def _radii(c: _Ctx, value, n: int) -> np.ndarray:
     return r
 
 
-def _plain_group(c: _Ctx, t: dict, base: Path) -> Group:
+def _plain_group(c: _Ctx, t: dict, base: Path, sizing: dict | None = None) -> Group:
+    sizing = sizing or {}
     has = [k for k in _SOURCES if k in t]
     if len(has) != 1:
         raise c.error(f"needs exactly one of {', '.join(map(repr, _SOURCES))} or 'rack'"
@@ -597,7 +616,7 @@ def _plain_group(c: _Ctx, t: dict, base: Path) -> Group:
         if key in t and source != "mesh":
             raise c.error(f"'{key}' places a group's mesh (mesh = \"file\"); inside fill or "
                           "parts give it next to each mesh", key)
-    spacing = None
+    spacing, geometry = None, None
     if source == "positions":
         pos = t["positions"]
         if not isinstance(pos, list) or not pos:
@@ -612,8 +631,16 @@ def _plain_group(c: _Ctx, t: dict, base: Path) -> Group:
         o, spacing = _lattice(c, t["lattice"], "lattice")
         packing, shape = "cubic", None
     else:
-        spacing = _number(c, _require(c, t, "spacing"), "spacing", positive=True) \
-            * _SPACING_SCALE.get()
+        if sizing.get("spacing") is not None:        # --set spacing=... : every filled part
+            spacing = _number(c, sizing["spacing"], "--set spacing", positive=True) \
+                * _SPACING_SCALE.get()
+        elif "spacing" in t:
+            spacing = _number(c, t["spacing"], "spacing", positive=True) \
+                * _SPACING_SCALE.get()
+        elif source != "mesh":
+            raise c.error("missing required field 'spacing' (a part filled from shapes needs "
+                          "its lattice spacing; a part from one mesh gets one chosen from its "
+                          "walls when it has none)")
         packing = t.get("packing", "cubic")
         if packing not in PACKINGS:
             raise c.error(f"must be one of {', '.join(PACKINGS)}, got {_describe(packing)}",
@@ -623,6 +650,7 @@ def _plain_group(c: _Ctx, t: dict, base: Path) -> Group:
         if source == "mesh":
             solids.append(_region(c, {k: t[k] for k in ("mesh",) + _MESH_PLACEMENT if k in t},
                                   "mesh", base))
+            spacing, geometry = _mesh_sizing(c, t, solids[0], spacing, sizing)
         elif source == "fill":
             solids.append(_region(c, t["fill"], "fill", base))
         else:
@@ -667,9 +695,11 @@ def _plain_group(c: _Ctx, t: dict, base: Path) -> Group:
     else:
         raise c.error("missing required field 'radius' (positions have no spacing to take "
                       "spacing/2 from)")
-    held = _held(c, t, o, base)
+    held = _held(c, t, o, base, geometry)
     v0 = _vec3(c, t["velocity"], "velocity") if "velocity" in t else None
     g = _wrap(c, lambda: Group(t["name"], o, r, kind=_kind(c, t, "part"), held=held, v0=v0))
+    if geometry is not None:
+        g.meta["part"] = geometry
     _regions(c, t, g, base)
     if source == "mesh":        # the part's own surface, placed: the report paints on it
         from dataclasses import asdict
@@ -704,6 +734,38 @@ def _plain_group(c: _Ctx, t: dict, base: Path) -> Group:
     return g
 
 
+def _sizing(ctx: _Ctx, data: dict, overrides: dict) -> dict:
+    """``--set spacing=...`` (every filled part's spacing) and the particle ``budget`` of a
+    part whose spacing is chosen from its walls (top-level key, or ``--set budget=...``)."""
+    from rackstress.scenes.features import BUDGET
+
+    out = {"spacing": overrides.get("spacing"), "budget": BUDGET}
+    for where, table in (("budget", data), ("--set budget", overrides)):
+        if "budget" in table:
+            out["budget"] = _integer(ctx, table["budget"], where, 1)
+    return out
+
+
+def _mesh_sizing(c: _Ctx, t: dict, surface, spacing, sizing: dict):
+    """(spacing, the part's named-feature finder) of a part from one mesh: the spacing given,
+    or one chosen from its walls within the particle budget
+    (:func:`rackstress.scenes.features.choose_spacing`); its walls thinner than three
+    spacings go into ``sizing["notes"]``, said by ``rackstress run``."""
+    from rackstress.scenes import features as ft
+
+    walls = ft.wall_thickness(surface)
+    choice = None
+    if spacing is None:
+        choice = ft.choose_spacing(surface.volume, walls, sizing.get("budget", ft.BUDGET))
+        spacing = choice["spacing"] * _SPACING_SCALE.get()      # --refine: spacing/√2
+    geometry = ft.PartGeometry(surface, spacing)
+    thin = walls.thinner_than(ft.ACROSS * spacing)
+    if thin:           # named only when there is something to say (the features cost ~0.5 s)
+        thin = walls.thinner_than(ft.ACROSS * spacing, geometry.features)
+    geometry.choice, geometry.thin = choice, thin
+    return spacing, geometry
+
+
 def _lattice(c: _Ctx, value, field: str):
     lat = _table(c, value, field)
     lc = c.at(f"{c.where}: {field}")
@@ -717,10 +779,10 @@ def _lattice(c: _Ctx, value, field: str):
     return _wrap(lc, lambda: lattice(shape, spacing, origin)), spacing
 
 
-def _held(c: _Ctx, t: dict, o: np.ndarray, base: Path):
+def _held(c: _Ctx, t: dict, o: np.ndarray, base: Path, geometry=None):
     if "held" not in t:
         return None
-    region = _region(c, t["held"], "held", base)
+    region = _region(c, t["held"], "held", base, geometry)
     mask = _mask(c, region, o, "held")
     if not mask.any():
         raise c.error("selects no particle of the group: a support must hold at least one "
@@ -775,10 +837,10 @@ def _regions(c: _Ctx, t: dict, g: Group, base: Path) -> None:
     for key, idx in regions.items():
         field = f"regions.{key}"
         if isinstance(idx, dict):                 # one shape: index 1 inside, 0 outside
-            out[key] = _mask(c, _region(c, idx, field, base), g.o, field).astype(np.int64)
+            out[key] = _mask(c, _region(c, idx, field, base, g), g.o, field).astype(np.int64)
             continue
         if isinstance(idx, list) and idx and all(isinstance(x, dict) for x in idx):
-            shapes = [_region(c, x, f"{field}[{i}]", base) for i, x in enumerate(idx)]
+            shapes = [_region(c, x, f"{field}[{i}]", base, g) for i, x in enumerate(idx)]
             try:
                 out[key] = rg.index_vector(shapes, g.o)
             except SceneError as exc:
@@ -795,8 +857,9 @@ def _regions(c: _Ctx, t: dict, g: Group, base: Path) -> None:
 
 
 # --------------------------------------------------------------------------- regions
-def _region(c: _Ctx, value, field: str, base: Path):
-    """A region (docs/scenes.md "Regions") from its table: exactly one shape key."""
+def _region(c: _Ctx, value, field: str, base: Path, part=None):
+    """A region (docs/scenes.md "Regions") from its table: exactly one shape key. ``part``:
+    the group whose particles it selects (a named ``hole`` or ``face`` is its mesh's)."""
     t = _table(c, value, field)
     shape = [k for k in REGION_KEYS if k in t]
     if len(shape) != 1:
@@ -839,6 +902,14 @@ def _region(c: _Ctx, value, field: str, base: Path):
                                 _vec3(c, _require(req, b, "normal"), f"{f}.normal"))
         if kind == "norm2_lt":
             return rg.Norm2Below(_number(c, v, f))
+        if kind in ("hole", "face"):
+            geo = _part_geometry(part)
+            if geo is None:
+                what = f"group '{part.name}'" if part is not None else "this selection"
+                raise c.error(f"a {kind} is named on a part's mesh (rackstress inspect FILE "
+                              f"lists them); {what} is not made from one mesh (mesh = "
+                              "\"file\"): select its particles by shape (box, cylinder, ...)", f)
+            return geo.region(kind, v)
         if kind == "ids":
             if not isinstance(v, list):
                 raise c.error(f"must be an array of particle indices, got {_describe(v)}", f)
@@ -860,7 +931,7 @@ def _region(c: _Ctx, value, field: str, base: Path):
         # union / intersection / difference
         if not isinstance(v, list) or not v:
             raise c.error(f"must be a non-empty array of region tables, got {_describe(v)}", f)
-        parts = [_region(c, x, f"{f}[{i}]", base) for i, x in enumerate(v)]
+        parts = [_region(c, x, f"{f}[{i}]", base, part) for i, x in enumerate(v)]
         if kind == "difference" and len(parts) < 2:
             raise c.error("needs at least two regions: the first minus the others", f)
         return {"union": rg.Union, "intersection": rg.Intersection,
@@ -869,6 +940,16 @@ def _region(c: _Ctx, value, field: str, base: Path):
         if str(exc).startswith(c.file):
             raise
         raise c.error(str(exc), f) from None
+
+
+def _part_geometry(part):
+    """The named-feature finder of a group made from one mesh (None otherwise): a built
+    group's ``meta["part"]``, or the finder itself (a group's ``held``, before the group)."""
+    if part is None:
+        return None
+    if hasattr(part, "region"):
+        return part
+    return (getattr(part, "meta", None) or {}).get("part")
 
 
 def _wrap(c: _Ctx, make):
@@ -991,7 +1072,8 @@ def _operator(c: _Ctx, kind: str, t: dict, on: str, groups: dict, when: tuple, p
         accel = _vec3(c, _require(c, t, "accel"), "accel")
         where = None
         if "where" in t:
-            mask = _mask(c, _region(c, t["where"], "where", base), groups[on].o, "where")
+            mask = _mask(c, _region(c, t["where"], "where", base, groups[on]), groups[on].o,
+                         "where")
             where = tuple(bool(m) for m in mask)
         return Force(accel, where=where, when=when)
     if kind == "dampen":

@@ -942,6 +942,12 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
         if not (rundir / "boundary.npz").is_file():
             raise ValueError(f"{rebuilt} and the run has no boundary.npz") from None
     bnd, bsource = _boundary(rundir, scene)
+    if len(bnd.get("constrained_ids", ())):     # pinned, cylindrical, rollers off the axes
+        raise ValueError(
+            f"its supports hold {len(bnd['constrained_ids'])} particle(s) in directions that "
+            "are not x, y or z (a pinned or cylindrical hole, a roller or symmetry plane at an "
+            "angle); the FE check holds whole axes only: check a variant of the scene with "
+            "those supports as type = \"fixed\"")
     name = _part_group(scene, summary, bnd, group)
     g, sl = scene.groups[name], scene.slice(name)
     spacing = _spacing(scene, name)

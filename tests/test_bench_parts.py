@@ -1,0 +1,28 @@
+"""``rackstress bench parts`` at its smallest: one real part that settles and one the mesh
+check refuses, both rows of the table (nothing is left out), written as JSON and Markdown."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from rackstress.bench import parts
+
+
+@pytest.mark.slow
+def test_bench_parts_rows_for_settled_and_refused(tmp_path):
+    data = parts.run_bench(tmp_path, fea=False, only=("finger-edu-lower", "so100-base"),
+                           echo=lambda *a: None)
+    rows = {r["part"]: r for r in data["rows"]}
+    assert set(rows) == {"finger-edu-lower-link", "so100-base"}
+    ok = rows["finger-edu-lower-link"]
+    assert ok["settled"] and ok["status"] == "settled" and ok["residual"] <= 1e-6
+    assert ok["spacing_how"] in ("walls", "budget") and ok["particles"] > 500
+    assert ok["peak_mpa"] > 0 and ok["iterations"] >= 1
+    # the multi-body base: refused by the mesh check, a row with its reason
+    bad = rows["so100-base"]
+    assert bad["status"] == "refused (exit 2)" and "Base.stl" in bad["reason"]
+    assert "/work/" not in bad["reason"]          # paths in the repository, not this machine's
+    md = (tmp_path / "parts.md").read_text()
+    assert "finger-edu-lower-link" in md and "so100-base" in md and "refused (exit 2)" in md
+    assert json.loads((tmp_path / "parts.json").read_text())["parts"] == 2

@@ -1,0 +1,213 @@
+"""``rackstress bench parts``: every real part of ``examples/parts/`` through the static path.
+
+Each part (a folder with its STL, ``scene.toml`` and ``SOURCE.md``) is loaded as its scene
+says — supports and loads by hole and face names, the spacing chosen from its walls within
+the particle budget unless the scene gives one — solved to equilibrium on LAMMPS, its stress
+measured, and checked against finite elements (``rackstress fea``; ``--no-fea`` skips it).
+One row a part: particles, spacing and how it was chosen, Newton steps, residual, solve time
+(the solver's wall time, and the CPU time of the whole run), the peak von Mises stress (the
+governing stress where the run has one), settled or not, the FE agreement. A part the
+static path refuses (exit 2: a mesh it cannot fill) or that does not settle (exit 6) is a row
+too, with its reason: nothing is left out.
+
+Writes ``docs/benchmarks/parts.json`` and ``parts.md``.
+"""
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from pathlib import Path
+
+from rackstress.bench import fmt, machine, md_table, out_dir, repository_file, write_json
+
+HEADER = ["part", "particles", "spacing [mm]", "Newton steps", "residual", "solve [s]",
+          "run CPU [s]", "peak [MPa]", "settled", "FE ρ", "FE peak ratio", "status"]
+
+
+def parts_dir() -> Path:
+    return repository_file("examples", "parts")
+
+
+def part_names(only=None) -> list:
+    names = sorted(p.name for p in parts_dir().iterdir() if (p / "scene.toml").is_file())
+    if only:
+        names = [n for n in names if any(o in n for o in only)]
+    return names
+
+
+#: seconds a part's run may take before the bench stops it (``--timeout``): today's solver can
+#: spend hours on a part it will not settle
+TIMEOUT_S = 900.0
+
+
+def _rackstress() -> list:
+    """The ``rackstress`` command of this interpreter (its venv's script, else ``-m``)."""
+    import sys
+
+    exe = Path(sys.executable).with_name("rackstress")
+    return [str(exe)] if exe.is_file() else [sys.executable, "-m", "rackstress.cli"]
+
+
+def _cpu_children() -> float:
+    import resource
+
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
+def _error_of(stderr: str) -> str:
+    """The last ``rackstress: error:`` paragraph of a command's stderr."""
+    lines = [ln for ln in stderr.splitlines() if ln.startswith("rackstress: error:")]
+    return lines[-1].split("rackstress: error:", 1)[1].strip() if lines else \
+        (stderr.strip().splitlines() or ["(no message)"])[-1]
+
+
+def case(name: str, work: Path, fea: bool = True, sets: dict | None = None, echo=print,
+         timeout: float = TIMEOUT_S) -> dict:
+    """One part as a user runs it, each command a process of its own: ``rackstress run SCENE
+    --no-render`` (LAMMPS; the stress measured), then ``rackstress fea``; its row."""
+    import json
+    import subprocess
+
+    scene = parts_dir() / name / "scene.toml"
+    root = str(parts_dir().parents[1]) + os.sep
+    row = {"part": name, "scene": str(scene).replace(root, "")}
+    out = work / name
+    # paths in the repository, and the run by its part's name, not this machine's temporary
+    short = lambda text: str(text).replace(str(out), name).replace(root, "")  # noqa: E731
+    args = [*_rackstress(), "run", str(scene), "--no-render", "--no-progress", "--out",
+            str(out), "--overwrite"]
+    for k, v in (sets or {}).items():
+        args += ["--set", f"{k}={v}"]
+    cpu0, t0 = _cpu_children(), time.perf_counter()
+    try:
+        r = subprocess.run(args, capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        row.update(status=f"stopped after {timeout:.0f} s", run_wall_s=timeout,
+                   reason=f"the run had not ended after {timeout:.0f} s (--timeout): today's "
+                          "solver had not settled it")
+        echo(f"{name}: stopped after {timeout:.0f} s")
+        return row
+    row["run_wall_s"] = time.perf_counter() - t0
+    row["run_cpu_s"] = _cpu_children() - cpu0
+    summary_file = out / "summary.json"
+    if r.returncode == 2 or not summary_file.is_file():
+        row.update(status=f"refused (exit {r.returncode})", reason=short(_error_of(r.stderr)))
+        echo(f"{name}: refused: {row['reason']}")
+        return row
+    s = json.loads(summary_file.read_text())
+    g = next(iter(s["groups"].values()))
+    sz = g.get("sizing") or {}
+    row.update(particles=s.get("n_particles"), spacing=sz.get("spacing"),
+               spacing_how=(sz["chosen"]["limited_by"] if sz.get("chosen") else "given"),
+               thin_walls=len(sz.get("thin_walls") or []), settled=bool(s.get("settled")),
+               iterations=s.get("iterations"), residual=s.get("residual"),
+               solve_s=s.get("solve_s"))
+    stress = s.get("stress") or {}
+    gov = stress.get("governing")
+    peak = (gov or {}).get("value")
+    if peak is None:
+        peak = (stress.get("peak") or {}).get("value")
+    row["peak_mpa"], row["peak_kind"] = peak, ("governing" if gov else "peak")
+    row["status"] = {0: "settled", 6: "not settled (exit 6)"}.get(
+        r.returncode, f"failed (exit {r.returncode})")
+    if r.returncode not in (0, 6):
+        row["reason"] = short(_error_of(r.stderr))
+    if fea and row["settled"]:
+        t0 = time.perf_counter()
+        try:
+            f = subprocess.run([*_rackstress(), "fea", str(out)], capture_output=True,
+                               text=True, timeout=timeout)
+            if f.returncode == 0:
+                ag = json.loads((out / "fea.json").read_text())["agreement"]
+                row.update(fea_spearman=ag.get("spearman"), fea_top5=ag.get("top5_overlap"),
+                           fea_peak_ratio=ag.get("peak_ratio"))
+            else:
+                row["fea_error"] = short(_error_of(f.stderr))
+        except subprocess.TimeoutExpired:
+            row["fea_error"] = f"rackstress fea had not ended after {timeout:.0f} s"
+        row["fea_s"] = time.perf_counter() - t0
+    echo(f"{name}: {row['particles']:,} particles at {fmt(row['spacing'])} "
+         f"({row['spacing_how']}), {row['status']} in {row['iterations']} steps, residual "
+         f"{fmt(row['residual'])}, solve {fmt(row['solve_s'])} s, peak {fmt(peak)} MPa"
+         + (f", FE ρ {fmt(row.get('fea_spearman'))}" if "fea_spearman" in row else ""))
+    return row
+
+
+def run_bench(out=None, fea: bool = True, only=None, sets: dict | None = None,
+              echo=print, timeout: float = TIMEOUT_S) -> dict:
+    """Every part (module doc); returns the data written to ``parts.json``."""
+    t0 = time.perf_counter()
+    start = machine()
+    out = out_dir(out)
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="rs-parts-") as tmp:
+        for name in part_names(only):
+            rows.append(case(name, Path(tmp), fea=fea, sets=sets, echo=echo, timeout=timeout))
+    try:
+        load_end = os.getloadavg()
+    except OSError:  # pragma: no cover
+        load_end = None
+    data = {"machine": {**start, "load_avg_at_end": load_end}, "fea": bool(fea),
+            "sets": dict(sets or {}), "timeout_s": timeout, "rows": rows,
+            "settled": sum(1 for r in rows if r.get("settled")), "parts": len(rows)}
+    data["files"] = [str(out / "parts.json"), str(out / "parts.md")]
+    data["wall_s"] = time.perf_counter() - t0
+    write_json(out / "parts.json", data)
+    (out / "parts.md").write_text(markdown(data))
+    return data
+
+
+def table_rows(data) -> list:
+    rows = []
+    for r in data["rows"]:
+        sp = r.get("spacing")
+        rows.append([
+            r["part"], fmt(r.get("particles"), 6) if r.get("particles") else "—",
+            (f"{fmt(sp)} ({r['spacing_how']})" if sp else "—"),
+            fmt(r.get("iterations")), fmt(r.get("residual"), 2), fmt(r.get("solve_s")),
+            fmt(r.get("run_cpu_s")), fmt(r.get("peak_mpa")),
+            {True: "yes", False: "**no**"}.get(r.get("settled"), "—"),
+            fmt(r.get("fea_spearman")), fmt(r.get("fea_peak_ratio")), r.get("status", "—")])
+    return rows
+
+
+def markdown(data) -> str:
+    m = data["machine"]
+    load = m.get("load_avg_at_start")
+    sets = ", ".join(f"--set {k}={v}" for k, v in data.get("sets", {}).items())
+    out = [
+        "# Real parts: the static path on parts nobody here drew",
+        "",
+        "Generated by `rackstress bench parts"
+        + ("" if data.get("fea") else " --no-fea") + (f" {sets}" if sets else "")
+        + (f" --timeout {data['timeout_s']:g}" if data.get("timeout_s") != TIMEOUT_S else "")
+        + "` (workflow/rackstress/bench/parts.py); do not edit by hand. Each part of "
+        "`examples/parts/` (its `SOURCE.md` says where it comes from and under which licence) "
+        "is loaded as its `scene.toml` says — supports and loads by hole and face names, the "
+        "spacing chosen from its walls within the particle budget (20,000 unless set) where the "
+        "scene gives none — solved to equilibrium on LAMMPS, its stress measured, and checked "
+        "by `rackstress fea`" + ("" if data.get("fea") else " (skipped here: `--no-fea`)")
+        + ".",
+        "",
+        f"{data['settled']} of {data['parts']} parts settled. Machine: {m.get('cores')} cores "
+        f"({m.get('cpu')}), load average {fmt(load[0] if load else None)} at the start, "
+        f"{fmt((m.get('load_avg_at_end') or [None])[0])} at the end; {data['wall_s']:.0f} s "
+        f"wall in all; a run still going after {data.get('timeout_s', TIMEOUT_S):g} s is "
+        "stopped and says so. Each part is `rackstress run SCENE --no-render` and `rackstress "
+        "fea`, processes of their own. *solve* is the static solver's wall time, *run CPU* the "
+        "CPU time of the whole `rackstress run` (scene, solve, the engine's check, stress); *spacing* says whether the "
+        "walls or the budget set it, or the scene gave it; *peak* is the governing stress "
+        "where the run has one, else the largest von Mises stress.",
+        "",
+        md_table(HEADER, table_rows(data)),
+    ]
+    notes = [r for r in data["rows"] if r.get("reason") or r.get("fea_error")]
+    if notes:
+        out.append("Why:")
+        out.append("")
+        for r in notes:
+            out.append(f"* **{r['part']}**: {r.get('reason') or r.get('fea_error')}")
+        out.append("")
+    return "\n".join(out)
