@@ -82,10 +82,10 @@ def test_numbers_no_solid_has_name_the_likely_slip(table, slip):
 
 
 def test_quantities_with_units_give_the_presets_lattice_exactly(tmp_path):
-    """c = E/(4·(1 + ν)·ρ·a²) (docs/calibration.md) by hand, in mm-N-s: E = 70 GPa = 70,000
-    MPa, ν = 0.33, ρ = 2.7 g/cm³ = 2.7e-9 t/mm³, a = 1 mm: c = 70,000 / (4 · 1.33 · 2.7e-9)
-    = 4.873294…e12 /s²."""
-    hand = 70000.0 / (4.0 * 1.33 * 2.7e-9 * 1.0 ** 2)
+    """c = E/(5·ρ·a²) (docs/calibration.md, the lattice's own ν) by hand, in mm-N-s: E = 70
+    GPa = 70,000 MPa, ρ = 2.7 g/cm³ = 2.7e-9 t/mm³, a = 1 mm: c = 70,000 / (5 · 2.7e-9)
+    = 5.185185…e12 /s²."""
+    hand = 70000.0 / (5.0 * 2.7e-9 * 1.0 ** 2)
     preset = bind_c(bar(tmp_path, '"aluminium"'))
     for table in ('{ E = "70 GPa", nu = 0.33, density = "2.7 g/cm3", yield = "276 MPa" }',
                   '{ E = "70000 N/mm^2", nu = 0.33, density = "2.7e-9 t/mm^3" }',

@@ -29,6 +29,7 @@ name = "b"
 fill = {{ {shape} }}
 spacing = {a}
 material = {{ E = 70e9, nu = {nu}, density = 2700 }}
+poisson = "material"
 [[support]]
 on = "b"
 where = {{ box = {{ min = [-100, -100, -100], max = [{hold}, 100, 100] }} }}
@@ -43,6 +44,7 @@ name = "bar"
 fill = {{ box = {{ min = [0, 0, 0], max = [30, 10, 10] }} }}
 spacing = {a}
 material = {{ E = 70e9, nu = {nu}, density = 2700 }}
+poisson = "material"
 [[support]]            # rollers on x = 0, the middle line pinned across
 on = "bar"
 where = {{ box = {{ min = [-1, -1, -1], max = [{h}, 11, 11] }} }}

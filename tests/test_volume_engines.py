@@ -34,6 +34,7 @@ fill = {{ difference = [ {{ box = {{ min = [0, 0, 0], max = [10, 6, 3] }} }},
                         {{ cylinder = {{ start = [5, 3, -1], end = [5, 3, 4], radius = 1.6 }} }} ] }}
 spacing = 0.9
 material = {{ E = 70e9, nu = 0.45, density = 2700 }}
+poisson = "material"
 
 [[support]]
 on = "plate"

@@ -1568,6 +1568,14 @@ TEACH = {
         "rackstress bench parts --only so100 --set budget=5000 --out /tmp/bench",
         "rackstress bench parts --out docs/benchmarks",
     ]),
+    "bench lattice": ("E, ν, bulk and shear moduli with the volumetric term.", [
+        "rackstress bench lattice --quick --out /tmp/bench",
+        "rackstress bench lattice --out docs/benchmarks",
+    ]),
+    "bench nafems": ("NAFEMS LE1 and LE10, Kirsch and a constrained block.", [
+        "rackstress bench nafems --quick --out /tmp/bench",
+        "rackstress bench nafems --out docs/benchmarks",
+    ]),
     "bench stress": ("Stress from particles against tension and bending.", [
         "rackstress bench stress --quick --out /tmp/bench",
         "rackstress bench stress --out docs/benchmarks",

@@ -8,11 +8,11 @@ physical units against beam theory and scikit-fem, and its calibration.
   particle's share of the bar, computed here) against M·z/I at the top particles' centres
   (27.0 MPa at z = 4.5), Newton iterations, residual, solve time;
 * **calibration**: a 20 × 10 × 10 mm bar on rollers pulled by 10 MPa, uniaxial stress:
-  E_eff = σ/ε_xx and ν_eff = −ε_yy/ε_xx at each spacing, against E and ν of the material
-  (``rackstress bench lattice`` proves it at every ν);
-* **ν's effect**: scikit-fem hexahedra on the same cantilever with ν = 0.33 and ν = 1/4: how much
-  the peak von Mises at the clamp and the tip deflection move when only ν changes (what the
-  former lattice, ν = 1/4 whatever the material, cost);
+  E_eff = σ/ε_xx and ν_eff = −ε_yy/ε_xx at each spacing, against E of the material and the
+  lattice's ν = 1/4 (``poisson = "material"`` gives the material's, ``rackstress bench
+  lattice``);
+* **ν's cost**: scikit-fem hexahedra on the same cantilever with ν = 0.33 and ν = 1/4: how much
+  the peak von Mises at the clamp and the tip deflection move when only ν changes;
 * **speed**: a 125 × 10 × 10 mm bar at 0.5 mm (100,400 particles) to equilibrium, beside
   scikit-fem's assembly and solve of the same part (trilinear hexahedra on the particles as
   nodes, the same AMG-preconditioned CG) — interleaved in one process.
@@ -314,22 +314,22 @@ def report(d: dict) -> str:
     L_ += ["", f"Spread of tip / beam over the spacings: "
            f"{(max(tips) - min(tips)) / min(tips) * 100:.1f} % (target ≤ 5 %). The stress is "
            "the virial of the bindings' forces, Σ r⊗f / 2V per particle, computed by this "
-           "benchmark (and the volumetric term's own virial, docs/calibration.md), V each "
-           "particle's share of the bar from its geometry (docs/calibration.md \"Walls of any "
-           "thickness\").", "",
+           "benchmark, V each particle's share of the bar from its geometry "
+           "(docs/calibration.md \"Walls of any thickness\").", "",
            "## Calibration: E_eff and ν of the lattice", "",
            "A 20 × 10 × 10 mm aluminium bar on rollers at x = 0 (`[[support]]` fixing x only, "
            "its middle lines pinned across) pulled by 1000 N (10 MPa) at x = 20: uniaxial "
            "stress, E_eff = σ/ε_xx (the end face's mean displacement), ν_eff = −ε_yy/ε_xx "
-           "(the side faces' particles at mid-length, 10 − a apart), with c = E/(4(1 + ν)ρa²) "
-           "and the volumetric term (docs/calibration.md).", "",
+           "(the side faces' particles at mid-length, 10 − a apart), with c = E/(5ρa²) "
+           "(docs/calibration.md).", "",
            "| spacing [mm] | particles | E_eff [MPa] | E_eff / E | ν_eff |", "|---|---|---|---|---|"]
     for r in d["calibration"]:
         L_.append(f"| {r['spacing']:g} | {r['particles']:,} | {r['E_eff_MPa']:.0f} | "
                   f"{r['E_ratio']:.4f} | {r['nu_eff']:.4f} |")
-    L_ += ["", "## What ν = 1/4 cost (the former lattice)", "",
+    L_ += ["", "## What the lattice's ν = 1/4 costs", "",
            "scikit-fem trilinear hexahedra (nodes on the 1 mm lattice) on the same cantilever, "
-           "only ν changed (the lattice now has the material's ν):", "",
+           "only ν changed (`poisson = \"material\"` gives a part the material's ν, "
+           "docs/calibration.md):", "",
            "| ν | tip [mm] | peak von Mises at the clamp [MPa] | mid-span top σ_xx [MPa] |",
            "|---|---|---|---|"]
     for r in d["nu_cost"]:

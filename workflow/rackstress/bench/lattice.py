@@ -35,7 +35,7 @@ SPACINGS = (2.0, 1.0, 0.5)
 S = 10.0                                      # MPa, every load
 TARGET_NU, TARGET_E = 0.01, 0.02
 
-_MAT = "material = {{ E = 70e9, nu = {nu}, density = 2700 }}"
+_MAT = "material = {{ E = 70e9, nu = {nu}, density = 2700 }}\npoisson = \"material\""
 
 BAR = """
 name = "tension"
@@ -364,7 +364,7 @@ def _cost_scene(path: str, a: float, old: bool):
     from rackstress.model.volume import Volume
     from rackstress.scenes.toml import load_toml
 
-    sc = load_toml(Path(path), {"spacing": a})
+    sc = load_toml(Path(path), {"spacing": a}, poisson="lattice" if old else "material")
     if not old:
         return sc
     ops = {}

@@ -98,6 +98,7 @@ mesh = "{stl}"
 spacing = {a}
 origin = [0, 0, {oz}]
 material = {{ E = 210e9, nu = {nu}, density = 7850 }}
+poisson = "material"
 [[support]]
 on = "p"
 where = {{ box = {{ min = [-1, -1, -1], max = [{h}, 4, 2] }} }}
@@ -275,6 +276,7 @@ fill = {{ difference = [ {{ box = {{ min = [-0.25, -0.25, 0], max = [0.25, 0.25,
 spacing = {a}
 origin = [0, 0, {oz}]
 material = {{ E = 210e9, nu = {nu}, density = 7850 }}
+poisson = "material"
 [[support]]          # symmetry: the middle lines held across, the middle layer in z
 on = "p"
 where = {{ box = {{ min = [-{q}, -1, -1], max = [{q}, 1, 1] }} }}
@@ -328,6 +330,7 @@ name = "p"
 fill = {{ box = {{ min = [0, 0, 0], max = [20, 20, 20] }} }}
 spacing = {a}
 material = {{ E = 70e9, nu = {nu}, density = 2700 }}
+poisson = "material"
 [[support]]
 on = "p"
 where = {{ box = {{ min = [-1, -1, -1], max = [21, 21, {h}] }} }}

@@ -9,10 +9,12 @@ material (docs/calibration.md):
   one binding is a spring of k = 2·c·m between particles of mass m = ρ·a³;
 * the lattice with equal first and second neighbour springs is isotropic in the continuum
   limit: C11 = 3k/a, C12 = C44 = k/a, hence λ = μ = k/a and ν = 1/4 (E = 2.5·k/a);
-* the volumetric term (:mod:`rackstress.model.volume`) adds λ' to λ, so the bindings carry
-  the material's shear modulus, μ = E/(2(1 + ν)) = k/a, and a material of E and ν gets
-  ``c = E / (4·(1 + ν)·ρ·a²)`` (:func:`bind_coefficient`; E/(5ρa²) at ν = 1/4, where the
-  volumetric term vanishes).
+* so E = 5·c·ρ·a², and a material of Young's modulus E gets ``c = E / (5·ρ·a²)``
+  (:func:`bind_coefficient`): the lattice's ν is 1/4 whatever the material's (the default,
+  ``poisson = "lattice"``);
+* with ``poisson = "material"`` the volumetric term (:mod:`rackstress.model.volume`) adds λ'
+  to λ, so the bindings carry the material's shear modulus, μ = E/(2(1 + ν)) = k/a, and
+  c = E / (4·(1 + ν)·ρ·a²) (:func:`rackstress.model.volume.coefficients`).
 
 At a free face the second-neighbour bindings that would leave the part are missing, and the
 face layer is softer than the bulk (a bar of N particles across is 2/(3N) too soft in tension).
@@ -32,7 +34,7 @@ Example
 >>> from rackstress.model.materials import material
 >>> from rackstress.model.units import SYSTEMS
 >>> round(bind_coefficient(material("aluminium"), SYSTEMS["mm-N-s"], 1.0) / 1e12, 4)
-4.8733
+5.1852
 """
 from __future__ import annotations
 
@@ -71,12 +73,13 @@ REACH = 1.5
 
 
 def bind_coefficient(material, units, spacing: float) -> float:
-    """c of Eq. 12 giving the cubic lattice of ``spacing`` the ``material``'s shear modulus:
-    c = E / (4·(1 + ν)·ρ·a²) in the scene's ``units`` (k = 2·c·m, m = ρ·a³, μ = k/a); the
-    volumetric term (:func:`rackstress.model.volume.coefficients`) gives it the material's ν."""
-    from rackstress.model.volume import coefficients
-
-    return coefficients(material, units, spacing)[0]
+    """c of Eq. 12 making the cubic lattice of ``spacing`` as stiff as ``material`` in
+    tension: c = E / (5·ρ·a²) in the scene's ``units`` (k = 2·c·m, m = ρ·a³, E = 2.5·k/a), the
+    lattice's own ν = 1/4. With the volumetric term (``poisson = "material"``) the bindings
+    carry the shear modulus instead: :func:`rackstress.model.volume.coefficients`."""
+    props = material.in_units(units)
+    a = float(spacing)
+    return props["E"] / (2.0 * LATTICE_E * props["density"] * a * a)
 
 
 @dataclass(frozen=True)

@@ -285,11 +285,11 @@ def _refix(g) -> None:
 
 
 def solids(ctx, groups: dict, operators: dict, u) -> dict:
-    """A material part's bind (the elastic lattice, :mod:`rackstress.model.solid`) and, for a
-    Poisson's ratio other than the bindings' own 1/4, its volumetric term
-    (:mod:`rackstress.model.volume`), put first among the part's operators."""
+    """A material part's bind (the elastic lattice, :mod:`rackstress.model.solid`) and, with
+    ``poisson = "material"``, its volumetric term (:mod:`rackstress.model.volume`: the
+    material's ν instead of the bindings' own 1/4), put first among the part's operators."""
     from rackstress.model.regions import Box, Cylinder, Sphere
-    from rackstress.model.solid import REACH, Solid
+    from rackstress.model.solid import REACH, Solid, bind_coefficient
     from rackstress.model.volume import Volume, coefficients
 
     out = {name: list(seq) for name, seq in operators.items()}
@@ -301,8 +301,10 @@ def solids(ctx, groups: dict, operators: dict, u) -> dict:
         shape = info["shape"]
         if isinstance(shape, (Box, Sphere, Cylinder)):
             shape = None          # convex: no binding between two inside points leaves it
+        volumetric = info.get("poisson", "lattice") == "material"
         try:
-            c, cv = coefficients(g.material, u, a)
+            c, cv = coefficients(g.material, u, a) if volumetric else (
+                bind_coefficient(g.material, u, a), (0.0,))
         except SceneError as exc:
             raise ctx.error(str(exc), f"group '{name}' material") from None
         solid = Solid(REACH * a, c, shape, spacing=a, material=g.material.name,

@@ -108,7 +108,7 @@ _BUILTIN_KEYS = ("scene", "params")
 _SOURCES = ("positions", "lattice", "mesh", "fill", "parts")
 _GROUP_KEYS = ("name", "kind", "rack", "offset") + _SOURCES + (
     "spacing", "packing", "origin", "translate", "rotate", "scale", "radius", "regions", "held",
-    "velocity", "material", "solid")
+    "velocity", "material", "solid", "poisson")
 _LATTICE_KEYS = ("shape", "spacing", "origin")
 _PHASE_KEYS = ("name", "steps", "duration", "vars")
 #: Region shapes (docs/scenes.md "Regions"): the one key a region table names.
@@ -137,10 +137,23 @@ from rackstress.scenes.fields import (_Ctx, _array_of_tables, _check_keys, _desc
 _SPACING_SCALE = contextvars.ContextVar("spacing_scale", default=1.0)
 
 
-def load_toml(path, overrides: dict | None = None, spacing_scale: float = 1.0) -> Scene:
+#: The Poisson's ratio of a material part that does not say (``poisson``): :func:`load_toml`'s
+#: ``poisson`` ("lattice" unless a caller, e.g. ``rackstress bench lattice``, asks otherwise).
+_POISSON = contextvars.ContextVar("poisson", default="lattice")
+
+
+def load_toml(path, overrides: dict | None = None, spacing_scale: float = 1.0,
+              poisson: str | None = None) -> Scene:
     """The scene described by the TOML file ``path``, with ``--set`` ``overrides`` applied;
     every part filled from a mesh or shape at its ``spacing`` × ``spacing_scale``
-    (``rackstress run --refine``), recorded as the parameter ``spacing_scale``."""
+    (``rackstress run --refine``), recorded as the parameter ``spacing_scale``; ``poisson``
+    ("lattice" or "material") for the material parts whose table does not say."""
+    if poisson is not None:
+        token = _POISSON.set(poisson)
+        try:
+            return load_toml(path, overrides, spacing_scale)
+        finally:
+            _POISSON.reset(token)
     if spacing_scale != 1.0:
         token = _SPACING_SCALE.set(float(spacing_scale))
         try:
@@ -709,6 +722,9 @@ def _plain_group(c: _Ctx, t: dict, base: Path, sizing: dict | None = None) -> Gr
         file = Path(t["mesh"]) if Path(t["mesh"]).is_absolute() else base / t["mesh"]
         g.meta["mesh"] = {"file": str(file.resolve()), **asdict(placement(
             *(t.get(k) for k in ("scale", "rotate", "translate"))))}
+    if "poisson" in t and "material" not in t:
+        raise c.error("'poisson' chooses the Poisson's ratio of a material part's lattice; "
+                      "give the part a material", "poisson")
     if "material" in t or "solid" in t:
         if source == "positions":
             raise c.error("a material part is a filled lattice (mesh, fill, parts or lattice), "
@@ -730,7 +746,13 @@ def _plain_group(c: _Ctx, t: dict, base: Path, sizing: dict | None = None) -> Gr
         solid = t.get("solid", True)
         if not isinstance(solid, bool):
             raise c.error(f"must be true or false, got {_describe(solid)}", "solid")
-        g.meta["solid"] = {"spacing": float(spacing), "shape": shape, "bind": solid}
+        poisson = t.get("poisson", _POISSON.get())
+        if poisson not in ("lattice", "material"):
+            raise c.error(f"must be \"lattice\" (the bindings' own ν = 1/4, the default) or "
+                          f"\"material\" (the material's ν through the volumetric term, "
+                          f"docs/calibration.md), got {_describe(poisson)}", "poisson")
+        g.meta["solid"] = {"spacing": float(spacing), "shape": shape, "bind": solid,
+                           "poisson": poisson}
     return g
 
 
