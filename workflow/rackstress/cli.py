@@ -589,14 +589,14 @@ def _post_and_render(out: Path, do_render: bool, progress: bool, dump_text: bool
                 sys.exit(EXIT_STORAGE if isinstance(err, StorageError) else EXIT_RENDER)
             click.echo(f"  pictures: {rep.outdir} ({len(rep.files)} files, "
                        f"{time.perf_counter() - t0:.1f} s)")
-            if getattr(rep, "report", None):    # a headless machine's browser says nothing
-                click.echo(f"  report: {rep.report}")
         wait_files(out)
-        if info and info.get("governing"):        # the headline, last (docs/stress.md)
+        if info and info.get("governing"):        # the headline (docs/stress.md)
             from rackstress.stress.post import describe_governing
 
             for line in describe_governing(info):
                 click.echo(line)
+        if do_render and getattr(rep, "report", None):   # last: a headless machine's browser
+            click.echo(f"  report: {rep.report}")         # says nothing
     except Exception as err:  # noqa: BLE001 - the run itself is complete and kept
         click.echo(f"rackstress: error: the run finished, but writing its VTK files failed: "
                    f"{err} (retry with 'rackstress stress {out}')", err=True)
