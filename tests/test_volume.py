@@ -209,6 +209,29 @@ def test_a_poissons_ratio_the_lattice_cannot_take_is_refused(nu, why, tmp_path):
     assert not (tmp_path / "run").exists()
 
 
+@pytest.mark.parametrize("line,said", [
+    ('poisson = "steel"', 'must be "lattice"'),
+    ('poisson = "material"', None)])
+def test_a_poisson_key_that_is_neither_is_refused(line, said, tmp_path):
+    """``poisson`` is "lattice" (ν = 1/4, the default) or "material" (the volumetric term):
+    anything else is exit 2 naming the file, the group and the key, nothing written (a real
+    process). A part without a material has no lattice to choose for: refused too."""
+    f = tmp_path / "odd.toml"
+    text = BLOCK.format(shape='box = { min = [0, 0, 0], max = [4, 4, 4] }', a=1.0, nu=0.3,
+                        hold=0.6).replace('poisson = "material"\n', line + "\n")
+    if said is None:                       # the same key on a part with no material
+        text = text.replace("material = { E = 70e9, nu = 0.3, density = 2700 }\n", "")
+        said = "give the part a material"
+    f.write_text(text)
+    r = subprocess.run([sys.executable, "-m", "rackstress.cli", "run", str(f), "--engine",
+                        "reference", "--out", str(tmp_path / "run"), "--no-render"],
+                       capture_output=True, text=True)
+    assert r.returncode == 2, r.stderr
+    assert "odd.toml" in r.stderr and "'b'" in r.stderr and "poisson" in r.stderr
+    assert said in r.stderr and "Traceback" not in r.stderr
+    assert not (tmp_path / "run").exists()
+
+
 def test_a_laterally_constrained_block_has_the_constrained_modulus(tmp_path):
     """A 20 mm cube of ten layers on rollers on its four sides and its floor, pressed by
     10 MPa: σ/ε is E(1 − ν)/((1 + ν)(1 − 2ν)) within 2 % at ν = 0.45 (3.79·E; the former
