@@ -65,6 +65,22 @@ def _pardiso_prototype():
 _PARDISO: list = []
 
 
+def _mkl_threads():
+    """MKL on one thread for PARDISO unless ``MKL_NUM_THREADS`` says otherwise: the speed
+    targets are per core, batch jobs run one solve per core, and MKL's threads in a process
+    where LAMMPS and VTK have loaded their own OpenMP runtime crashed PARDISO's analysis
+    (a segmentation fault in ``phase 11``, reproduced by a LAMMPS run and a render before a
+    static solve in one process; none on one thread)."""
+    import contextlib
+    import os
+
+    if os.environ.get("MKL_NUM_THREADS"):
+        return contextlib.nullcontext()
+    from threadpoolctl import threadpool_limits
+
+    return threadpool_limits(limits=1, user_api="blas")
+
+
 def backend() -> str:
     """The direct solver this installation has: ``"pardiso"`` or ``"superlu"`` (fallback)."""
     if not _PARDISO:
@@ -110,7 +126,8 @@ class Pardiso:
     def _call(self, phase: int, b=None):
         self.ps.set_phase(phase)
         rhs = np.zeros((self.n, 1)) if b is None else np.asfortranarray(b, dtype=float)
-        return self.ps._call_pardiso(self.A, rhs)
+        with _mkl_threads():
+            return self.ps._call_pardiso(self.A, rhs)
 
     def analyse(self) -> "Pardiso":
         """Ordering and symbolic factorization; sets :attr:`bytes` and :attr:`flops`."""

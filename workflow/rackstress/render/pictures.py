@@ -867,8 +867,9 @@ def render_static(rundir, measure: str | None = None, views=None,
     lines = []
     if not settled:
         lines.append((unsettled_text(summary, short=True), RED))
-    elif head:
-        lines.append((headline_text(head), (0, 0, 0)))
+    elif head:                           # the safety on a line of its own: one line ran
+        stress, _, safety = headline_text(head).partition("; ")    # under the colour bar
+        lines += [(stress, (0, 0, 0))] + ([(safety, (0, 0, 0))] if safety else [])
     lines.append((f"deformed × {scale:g}: the largest displacement, {umax:.3g} {units}, drawn as "
                   f"{scale * umax:.3g} {units} ({100 * scale * umax / size:.2g} % of the part's "
                   f"size {size:.3g} {units})" if scale > 1 else
