@@ -108,6 +108,25 @@ def screen_axes(view: str):
     return np.cross(u, d), u, d     # screen right, screen up, towards the camera
 
 
+def snapshot(ren, rw, size, centre, up, direction, half: float) -> np.ndarray:
+    """The h×w×3 picture of VTK renderer ``ren`` in window ``rw``: a parallel camera on
+    ``centre``, looking against ``direction`` with ``up`` up, ``half`` the half-height shown."""
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+    from vtkmodules.vtkCommonCore import vtkUnsignedCharArray
+
+    cam = ren.GetActiveCamera()
+    cam.SetFocalPoint(*map(float, centre))
+    cam.SetPosition(*map(float, np.asarray(centre) + direction * 10.0 * half))
+    cam.SetViewUp(*map(float, up))
+    cam.SetParallelScale(half)
+    ren.ResetCameraClippingRange()
+    rw.Render()
+    buf = vtkUnsignedCharArray()
+    w, h = size
+    rw.GetPixelData(0, 0, w - 1, h - 1, 0, buf, 0)
+    return vtk_to_numpy(buf).reshape(h, w, 3)[::-1].copy()
+
+
 def colour_bar(img, x0: int, x1: int, label: str, vmax: float, cmap: str):
     """The colour bar from ``x0`` to ``x1`` of a header strip (a PIL image): its label above,
     the scale from 0 to ``vmax`` below; the image returned."""

@@ -73,6 +73,7 @@ from rackstress.render.draw import font as _font
 from rackstress.render.draw import offscreen as _offscreen
 from rackstress.render.draw import part_radius as _part_radius
 from rackstress.render.draw import screen_axes as _screen_axes
+from rackstress.render.draw import snapshot
 from rackstress.stress import PartMotion, StressInputError, load_run
 from rackstress.stress.post import LABELS, compute_fields
 
@@ -259,8 +260,7 @@ class Painter:
         return np.column_stack([0.5 * w + (d @ right) * s, 0.5 * h - (d @ up) * s])
 
     def paint(self, p: np.ndarray, values: np.ndarray, view: str, centre, half: float):
-        from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy
-        from vtkmodules.vtkCommonCore import vtkUnsignedCharArray
+        from vtkmodules.util.numpy_support import numpy_to_vtk
 
         right, up, direction = _screen_axes(view)
         px_per_unit = self.size[1] / (2.0 * half)
@@ -276,17 +276,7 @@ class Painter:
                     poly.GetPointData().SetScalars(arr)
                 poly.Modified()
                 actor.GetProperty().SetPointSize(max(2.0, 2.0 * r * px_per_unit))
-        cam = self.ren.GetActiveCamera()
-        cam.SetFocalPoint(*map(float, centre))
-        cam.SetPosition(*map(float, np.asarray(centre) + direction * 10.0 * half))
-        cam.SetViewUp(*map(float, up))
-        cam.SetParallelScale(half)
-        self.ren.ResetCameraClippingRange()
-        self.rw.Render()
-        buf = vtkUnsignedCharArray()
-        w, h = self.size
-        self.rw.GetPixelData(0, 0, w - 1, h - 1, 0, buf, 0)
-        return vtk_to_numpy(buf).reshape(h, w, 3)[::-1].copy()
+        return snapshot(self.ren, self.rw, self.size, centre, up, direction, half)
 
     def warm(self) -> None:
         """Paint the rest shape once, unseen: the render window and its GL programs are made
@@ -701,18 +691,8 @@ def render(rundir, frames=None, measure: str | None = None, views=DEFAULT_VIEWS,
             meanwhile(report, measure, cmap)
             report.timings["meanwhile_s"] = time.perf_counter() - t
         if side is not None:
-            from rackstress.runs.forked import ForkedError
-
-            t = time.perf_counter()
-            try:
-                got = side.join()
-            except ForkedError as exc:
-                got = {"error": ["RuntimeError", exc.message]}
-            report.timings["beside_wait_s"] = time.perf_counter() - t
-            if side.cpu_s is not None:
-                report.timings["beside_cpu_s"] = side.cpu_s
-            side = None
-            beside[1](got)
+            done, side = side, None
+            _join_beside(done, beside, report)
         if plotter is not None:
             t = time.perf_counter()
             files, notes, wall, then = plotter.join()
@@ -942,18 +922,8 @@ def render_static(rundir, measure: str | None = None, views=None,
         report.files.append("particles.png")
         report.timings["particle_pictures_s"] = time.perf_counter() - t
         if side is not None:
-            from rackstress.runs.forked import ForkedError
-
-            t = time.perf_counter()
-            try:
-                got = side.join()
-            except ForkedError as exc:
-                got = {"error": ["RuntimeError", exc.message]}
-            report.timings["beside_wait_s"] = time.perf_counter() - t
-            if side.cpu_s is not None:
-                report.timings["beside_cpu_s"] = side.cpu_s
-            side = None
-            beside[1](got)
+            done, side = side, None
+            _join_beside(done, beside, report)
         report.peak = head
         report.timings["total_s"] = time.perf_counter() - t0
         report.timings["cpu_s"] = time.process_time() - c0
@@ -1031,6 +1001,22 @@ class _Background:
 
     def kill(self):
         self.job.kill()
+
+
+def _join_beside(side, beside, report) -> None:
+    """Wait for the job run beside the pictures (``side``, a ForkedJob), time it into
+    ``report`` and hand its result, or its error, to ``beside``'s second callable."""
+    from rackstress.runs.forked import ForkedError
+
+    t = time.perf_counter()
+    try:
+        got = side.join()
+    except ForkedError as exc:
+        got = {"error": ["RuntimeError", exc.message]}
+    report.timings["beside_wait_s"] = time.perf_counter() - t
+    if side.cpu_s is not None:
+        report.timings["beside_cpu_s"] = side.cpu_s
+    beside[1](got)
 
 
 def render_default(rundir, progress: bool = False) -> RenderReport:

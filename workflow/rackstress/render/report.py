@@ -55,6 +55,16 @@ def _e(x) -> str:
     return html.escape(str(x), quote=True)
 
 
+def _warnings(w, warns: list) -> None:
+    """The run's warnings as the report's ``#warnings`` list (nothing when there are none)."""
+    if warns:
+        w('<ul id="warnings">')
+        for wr in warns:
+            w(f'<li class="warning" data-kind="{_e(wr.get("kind", ""))}">Warning: '
+              f"{_e(wr.get('message', ''))}</li>")
+        w("</ul>")
+
+
 def _num(v, digits: int = 4) -> str:
     if v is None:
         return "–"
@@ -351,12 +361,7 @@ def _dynamic_body(w, rundir: Path, summary: dict, scene: dict, post: dict, rende
           f"<b>{_e(gname)}</b> (yield / von Mises): <b>{_num(sf['min'])}</b> at iteration "
           f"{sf['iteration']}, particle {sf['particle']}.</p>")
     warns = summary.get("warnings") or []
-    if warns:
-        w('<ul id="warnings">')
-        for wr in warns:
-            w(f'<li class="warning" data-kind="{_e(wr.get("kind", ""))}">Warning: '
-              f"{_e(wr.get('message', ''))}</li>")
-        w("</ul>")
+    _warnings(w, warns)
     groups = summary.get("groups") or {}
     rows = [(g, m, rec) for g, grec in groups.items()
             for m, rec in ((grec or {}).get("peak") or {}).items()]
@@ -580,12 +585,7 @@ def _static_body(w, rundir: Path, summary: dict, scene: dict, post: dict, render
     warns = [wr for wr in summary.get("warnings") or []       # no stress of a non-equilibrium
              if settled or allow_unsettled or wr.get("kind") not in ("large_strain",
                                                                      "yield_exceeded")]
-    if warns:
-        w('<ul id="warnings">')
-        for wr in warns:
-            w(f'<li class="warning" data-kind="{_e(wr.get("kind", ""))}">Warning: '
-              f"{_e(wr.get('message', ''))}</li>")
-        w("</ul>")
+    _warnings(w, warns)
 
     # ---- the reactions
     _reactions(w, summary, scene, settled)

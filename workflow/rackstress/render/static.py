@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from rackstress.render.draw import (LABEL_H, PNG_COMPRESS, colour_bar, colour_table, font,
-                                    ring_text_box, screen_axes)
+                                    ring_text_box, screen_axes, snapshot)
 from rackstress.render.draw import offscreen as _offscreen
 
 #: the largest displacement is drawn as about this fraction of the part's size
@@ -160,21 +160,8 @@ class SurfacePainter:
             self.keep += [deformed, normals, mapper, actor, undeformed, outline, om, oa]
 
     def paint(self, view: str, centre, half: float) -> np.ndarray:
-        from vtkmodules.util.numpy_support import vtk_to_numpy
-        from vtkmodules.vtkCommonCore import vtkUnsignedCharArray
-
         _, up, direction = screen_axes(view)
-        cam = self.ren.GetActiveCamera()
-        cam.SetFocalPoint(*map(float, centre))
-        cam.SetPosition(*map(float, np.asarray(centre) + direction * 10.0 * half))
-        cam.SetViewUp(*map(float, up))
-        cam.SetParallelScale(half)
-        self.ren.ResetCameraClippingRange()
-        self.rw.Render()
-        buf = vtkUnsignedCharArray()
-        w, h = self.size
-        self.rw.GetPixelData(0, 0, w - 1, h - 1, 0, buf, 0)
-        return vtk_to_numpy(buf).reshape(h, w, 3)[::-1].copy()
+        return snapshot(self.ren, self.rw, self.size, centre, up, direction, half)
 
     def close(self):
         self.rw.Finalize()
