@@ -357,31 +357,11 @@ print(json.dumps({"cpu_s": cpu, "iterations": res.iterations, "settled": bool(re
 
 
 def _cost_scene(path: str, a: float, old: bool):
-    """The cost bar at spacing ``a``; ``old``: the lattice as it was before the volumetric
-    term — the bindings alone, c = E/(5ρa²) (ν = 1/4 whatever the material)."""
-    import dataclasses
-
-    from rackstress.model.volume import Volume
+    """The cost bar at spacing ``a``; ``old``: the lattice without the volumetric term — the
+    bindings alone, c = E/(5ρa²) (ν = 1/4 whatever the material, ``poisson = "lattice"``)."""
     from rackstress.scenes.toml import load_toml
 
-    sc = load_toml(Path(path), {"spacing": a}, poisson="lattice" if old else "material")
-    if not old:
-        return sc
-    ops = {}
-    for name, seq in sc.operators.items():
-        keep = []
-        for op in seq:
-            if isinstance(op, Volume):
-                continue
-            if getattr(op, "coeff", None) is not None and hasattr(op.coeff, "spacing"):
-                g = sc.groups[name]
-                props = g.material.in_units(sc.units)
-                c_old = props["E"] / (5.0 * props["density"] * a * a)
-                op = dataclasses.replace(op, coeff=dataclasses.replace(op.coeff, c=c_old))
-            keep.append(op)
-        ops[name] = keep
-    return dataclasses.replace(sc, operators=ops)
-
+    return load_toml(Path(path), {"spacing": a}, poisson="lattice" if old else "material")
 
 COST_BAR = """
 name = "cost"
