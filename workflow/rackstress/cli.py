@@ -69,7 +69,7 @@ def _fail_any(err: BaseException, out=None):
 
     Errors rackstress raises reach every rank alike; anything else may have reached one rank
     only while the others wait for it, so under MPI it ends all of them (MPI_Abort)."""
-    from rackstress.lib.mpi import abort, world
+    from rackstress.lib.mpi import abort, settle, world
 
     if isinstance(err, DivergenceError):
         msg, code = f"{err} (run directory: {out})", EXIT_DIVERGED
@@ -97,6 +97,7 @@ def _fail_any(err: BaseException, out=None):
         click.echo(f"rackstress: error: {msg}", err=True)
     if comm.Get_size() > 1 and not isinstance(err, RackstressError):
         abort(comm, code)
+    settle(comm)      # rank 0 has released the run directory before any rank exits
     sys.exit(code)
 
 

@@ -95,6 +95,26 @@ def agree(err, comm):
 ABORT_GRACE_S = 0.5
 
 
+#: Seconds a rank ending on an error every rank raised waits for the others (:func:`settle`).
+SETTLE_S = 30.0
+
+
+def settle(comm, timeout: float = SETTLE_S) -> None:
+    """Wait, at most ``timeout`` seconds, until every rank of ``comm`` is here, before this
+    rank exits on an error every rank raised. The launcher ends the remaining ranks as soon as
+    one exits with a failure status, so a rank that exited first could kill rank 0 midway
+    through releasing the run directory (seen: the manifest's temporary file left behind). A
+    non-blocking barrier with a limit: an error raised on one rank only never hangs the exit."""
+    import time
+
+    if comm is None or comm.Get_size() == 1:
+        return
+    req = comm.Ibarrier()
+    end = time.monotonic() + timeout
+    while not req.Test() and time.monotonic() < end:
+        time.sleep(0.01)
+
+
 def abort(comm, code: int) -> None:
     """End every rank of ``comm`` with ``code`` (MPI_Abort), once what this rank has written
     to stderr has had time to reach the launcher."""
