@@ -1063,7 +1063,10 @@ def _fea_inputs(rundir: Path) -> str | None:
 @click.option("--all", "all_faces", is_flag=True, help="Every flat face, not the largest only.")
 @click.option("--png", type=click.Path(dir_okay=False, path_type=Path),
               help="Also a picture of the part with the names written on it.")
-def inspect_cmd(file, scale, budget, as_json, all_faces, png):
+@click.option("--bodies", type=click.Choice(["one", "united"]), default="one",
+              show_default=True, help="united: the union of the file's bodies, as a scene "
+              "with bodies = \"united\" fills it and names its holes and faces.")
+def inspect_cmd(file, scale, budget, as_json, all_faces, png, bodies):
     """A part's holes (H1, H2, ...), flat faces (F1, F2, ...), size, bodies, volume,
     watertightness, thinnest walls and the spacing a scene without one gets.
 
@@ -1074,9 +1077,9 @@ def inspect_cmd(file, scale, budget, as_json, all_faces, png):
     from rackstress.scenes import inspect as insp
 
     try:
-        info = insp.inspect_part(file, scale=scale, budget=budget or ft.BUDGET)
+        info = insp.inspect_part(file, scale=scale, budget=budget or ft.BUDGET, bodies=bodies)
         if png is not None:
-            insp.picture(file, png, scale=scale)
+            insp.picture(file, png, scale=scale, bodies=bodies)
             info["picture"] = str(png)
     except RackstressError as err:
         _fail(err, err.exit_code)

@@ -793,7 +793,7 @@ def surface_features(surface) -> Features:
 
     place = surface.placement
     f = _file_features(str(os.path.realpath(surface.file)), os.stat(surface.file).st_mtime_ns,
-                       tuple(place.scale))
+                       tuple(place.scale), bool(getattr(surface, "united", False)))
     return f.placed(place.rotate, place.translate)
 
 
@@ -801,13 +801,13 @@ from functools import lru_cache  # noqa: E402
 
 
 @lru_cache(maxsize=16)
-def _file_features(file: str, mtime_ns: int, scale: tuple) -> Features:
+def _file_features(file: str, mtime_ns: int, scale: tuple, united: bool = False) -> Features:
     from rackstress.scenes.mesh import STEP_FORMATS, _checked, step_surface
 
-    if file.lower().endswith(STEP_FORMATS):      # its CAD faces: planes and cylinders
+    if file.lower().endswith(STEP_FORMATS) and not united:   # its CAD faces: planes, cylinders
         V, T, owner, kinds = step_surface(file, cad=True)
         return part_features((V * np.asarray(scale), T), cad=(owner, kinds))
-    V, T, _ = _checked(file, mtime_ns)
+    V, T, _ = _checked(file, mtime_ns, united)
     return part_features((V * np.asarray(scale), T))
 
 

@@ -26,15 +26,17 @@ from rackstress.scenes import features as ft
 FACES_SHOWN = 12
 
 
-def inspect_part(path, scale=None, budget: int = ft.BUDGET) -> dict:
+def inspect_part(path, scale=None, budget: int = ft.BUDGET, bodies: str = "one") -> dict:
     """Size, bodies, volume, watertightness, holes, faces, walls and the chosen spacing of
-    the part in ``path`` (its coordinates × ``scale``: one factor, or one per axis)."""
+    the part in ``path`` (its coordinates × ``scale``: one factor, or one per axis);
+    ``bodies = "united"``: of the union of its bodies, as a scene with that key fills it and
+    names its features (:func:`rackstress.scenes.mesh.united_triangles`)."""
     import trimesh
 
-    from rackstress.scenes.mesh import placement, read_triangles
+    from rackstress.scenes.mesh import placement
 
     place = placement(scale)
-    V, T = read_triangles(path)
+    V, T = _triangles(path, bodies)
     V = place.apply(V)
     tm = trimesh.Trimesh(V, T, process=True)
     edges, counts = np.unique(tm.edges_sorted, axis=0, return_counts=True)
@@ -158,7 +160,18 @@ def text(info: dict, all_faces: bool = False) -> str:
     return "\n".join(out)
 
 
-def picture(path, out, scale=None, size=(1200, 900)) -> Path:
+def _triangles(path, bodies: str):
+    """The file's triangles as read, or (``bodies = "united"``) their bodies' union."""
+    from rackstress.errors import SceneError
+    from rackstress.scenes.mesh import BODIES, read_triangles, united_triangles
+
+    if bodies not in BODIES:
+        raise SceneError(f"bodies must be one of {', '.join(BODIES)}, got {bodies!r}")
+    V, T = read_triangles(path)
+    return united_triangles(V, T, str(path)) if bodies == "united" else (V, T)
+
+
+def picture(path, out, scale=None, size=(1200, 900), bodies: str = "one") -> Path:
     """A PNG of the part from its isometric side with each hole's and face's name written
     at it (pyvista off-screen): what an engineer looks at to pick them."""
     import os
@@ -167,10 +180,10 @@ def picture(path, out, scale=None, size=(1200, 900)) -> Path:
         os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
     import pyvista as pv
 
-    from rackstress.scenes.mesh import placement, read_triangles
+    from rackstress.scenes.mesh import placement
 
     place = placement(scale)
-    V, T = read_triangles(path)
+    V, T = _triangles(path, bodies)
     V = place.apply(V)
     f = ft.part_features((V, T))
     poly = pv.PolyData.from_regular_faces(V, T)

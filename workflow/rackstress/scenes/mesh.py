@@ -74,6 +74,11 @@ def placement(scale=None, rotate=None, translate=None) -> Placement:
     return Placement(s, rot, tr)
 
 
+#: what a mesh part's ``bodies`` may be: "one" (a file of several bodies is refused, naming
+#: them) or "united" (their union is the part)
+BODIES = ("one", "united")
+
+
 class MeshSurface(Surface):
     """A checked, placed closed surface: a :class:`Surface` region with its ``volume``."""
 
@@ -82,8 +87,10 @@ class MeshSurface(Surface):
         self.volume = float(volume)
 
 
-def read_surface(path, scale=None, rotate=None, translate=None, base: Path | None = None) -> MeshSurface:
-    """Read, check and place the closed surface in ``path`` (relative to ``base`` if given).
+def read_surface(path, scale=None, rotate=None, translate=None, base: Path | None = None,
+                 bodies: str = "one") -> MeshSurface:
+    """Read, check and place the closed surface in ``path`` (relative to ``base`` if given);
+    ``bodies = "united"``: the union of the file's bodies (:func:`united_triangles`).
 
     Raises
     ------
@@ -100,14 +107,18 @@ def read_surface(path, scale=None, rotate=None, translate=None, base: Path | Non
     if p.suffix.lower() not in SURFACE_FORMATS:
         raise SceneError(f"mesh file {p}: unknown surface format '{p.suffix}'; readable: "
                          f"{', '.join(SURFACE_FORMATS)}")
-    vertices, faces, volume = _checked(str(p.resolve()), os.stat(p).st_mtime_ns)
+    if bodies not in BODIES:
+        raise SceneError(f"bodies must be one of {', '.join(map(repr, BODIES))}, got "
+                         f"{bodies!r}")
+    united = bodies == "united"
+    vertices, faces, volume = _checked(str(p.resolve()), os.stat(p).st_mtime_ns, united)
     import pyvista as pv
 
     placed = place.apply(vertices)
     poly = pv.PolyData.from_regular_faces(placed, faces)
     det = float(np.prod(place.scale))
     surface = MeshSurface(poly, str(p), abs(volume * det))
-    surface.file, surface.placement = str(p), place
+    surface.file, surface.placement, surface.united = str(p), place, united
     return surface
 
 
@@ -257,14 +268,77 @@ def step_surface(file: str, cad: bool = False) -> tuple:
     return out + (np.concatenate(owner), kinds) if cad else out
 
 
+#: ``bodies = "united"`` grows each body by this fraction about its box's centre before the
+#: union: bodies that touch face to face then overlap and fuse (manifold3d keeps exactly
+#: touching faces apart, as two solids), and gaps of a few micrometres between faces meant to
+#: touch close (at 1e-4 the SO-ARM base kept such a pair, which the winding test of
+#: :func:`self_intersections` could not tell apart from an overlap). 0.05 mm on a 100 mm body,
+#: a few per cent of any spacing such a part gets; its volume grows 0.3 %
+UNITE_GROW = 1e-3
+
+
+def united_triangles(vertices: np.ndarray, faces: np.ndarray, file: str) -> tuple:
+    """(vertices, triangles) of the union of the bodies (connected shells) of a surface: what
+    ``bodies = "united"`` fills, and ``rackstress inspect`` names, for a file of several
+    bodies that overlap or touch (a CAD export of a multi-body part; a slicer unites them the
+    same way). Each body must be a closed, consistently oriented shell; the union is
+    manifold3d's exact boolean (:data:`UNITE_GROW`), its zero-volume slivers dropped.
+
+    Raises
+    ------
+    SceneError
+        naming the body (its triangles and box) that is not a closed solid.
+    """
+    import trimesh
+    from manifold3d import Error, Manifold, Mesh64, OpType
+
+    tm = trimesh.Trimesh(vertices, faces, process=True)
+    bodies = tm.split(only_watertight=False, repair=False)
+    if len(bodies) < 2:
+        return vertices, faces
+    solids = []
+    for i, b in enumerate(bodies, 1):
+        lo, hi = b.bounds
+        where = (f"mesh file {file}: body {i} of {len(bodies)} ({len(b.faces)} triangles, box "
+                 f"{np.round(lo, 6).tolist()} … {np.round(hi, 6).tolist()})")
+        _, counts = np.unique(b.edges_sorted, axis=0, return_counts=True)
+        if np.any(counts != 2) or not b.is_winding_consistent:
+            raise SceneError(f"{where} is not a closed, consistently oriented shell, so it "
+                             "cannot be united with the others (bodies = \"united\" unites "
+                             "closed bodies): close it in the CAD tool, or leave it out")
+        V = np.asarray(b.vertices, float)
+        F = np.asarray(b.faces, np.int64)
+        if b.volume < 0:
+            F = F[:, ::-1]
+        c = 0.5 * (lo + hi)
+        m = Manifold(Mesh64(np.ascontiguousarray(c + (V - c) * (1.0 + UNITE_GROW)),
+                            np.ascontiguousarray(F, np.uint64)))
+        if m.status() != Error.NoError or m.is_empty():
+            raise SceneError(f"{where} is not a solid manifold3d can unite ({m.status().name})"
+                             "; repair it in the CAD tool")
+        solids.append(m)
+    mesh = Manifold.batch_boolean(solids, OpType.Add).to_mesh64()
+    u = trimesh.Trimesh(np.asarray(mesh.vert_properties, float)[:, :3],
+                        np.asarray(mesh.tri_verts, np.int64), process=True)
+    pieces = u.split(only_watertight=False, repair=False)
+    with np.errstate(invalid="ignore", divide="ignore"):      # a sliver's centre of mass
+        vols = [abs(float(x.volume)) for x in pieces]
+    keep = [x for x, v in zip(pieces, vols) if v > 1e-9 * sum(vols)]
+    out = keep[0] if len(keep) == 1 else trimesh.util.concatenate(keep)
+    return np.asarray(out.vertices, float), np.asarray(out.faces, np.int64)
+
+
 @lru_cache(maxsize=32)
-def _checked(file: str, mtime_ns: int):
-    """(vertices, triangles, signed volume) of a checked mesh file (cached per file version)."""
+def _checked(file: str, mtime_ns: int, united: bool = False):
+    """(vertices, triangles, signed volume) of a checked mesh file (cached per file version);
+    ``united``: of the union of its bodies (:func:`united_triangles`)."""
     import trimesh
 
     vertices, faces = read_triangles(file)
     if not np.all(np.isfinite(vertices)):
         raise SceneError(f"mesh file {file}: has non-finite vertex coordinates")
+    if united:
+        vertices, faces = united_triangles(vertices, faces, file)
     tm = trimesh.Trimesh(vertices=vertices, faces=faces, process=True)
     edges, counts = np.unique(tm.edges_sorted, axis=0, return_counts=True)
     if np.any(counts == 1):
@@ -301,19 +375,22 @@ def _bodies_advice(tm, file: str) -> str:
     (connected shells, trimesh's ``split``), each body named by its triangles, volume and box
     in the file's units, and how to write them as files of their own for a group's ``parts``
     (united, overlaps filled once); else: union the bodies in the CAD tool."""
-    bodies = tm.split(only_watertight=False)
+    bodies = tm.split(only_watertight=False, repair=False)
     if len(bodies) < 2:
         return ("Union the bodies in the CAD tool before exporting, or give each body as its "
                 "own part (a group's parts are united)")
     stem = Path(file).stem
+    first = ('Give bodies = "united" beside mesh to fill their union as one part (each body '
+             "closed; bodies that overlap or touch are fused, as a slicer does; rackstress "
+             f"inspect {Path(file).name} --bodies united names its holes and faces). ")
     listed = "; ".join(
         f"body {i}: {len(b.faces)} triangles, volume {abs(b.volume):.4g}, box "
         f"{np.round(b.bounds[0], 4).tolist()} … {np.round(b.bounds[1], 4).tolist()}"
         + ("" if b.is_watertight else " (not closed)")
         for i, b in enumerate(bodies, 1))
     names = ", ".join(f'{{ mesh = "{stem}-{i}.stl" }}' for i in range(1, len(bodies) + 1))
-    return (f"It holds {len(bodies)} bodies ({listed}). Union them in the CAD tool before "
-            "exporting, or write each to a file of its own (python -c \"import trimesh; "
+    return (f"It holds {len(bodies)} bodies ({listed}). " + first + "Or union them in the "
+            "CAD tool before exporting, or write each to a file of its own (python -c \"import trimesh; "
             f"[b.export(f'{stem}-{{i}}.stl') for i, b in enumerate(trimesh.load("
             f"'{Path(file).name}').split(only_watertight=False), 1)]\") and fill the group "
             f"from them: parts = [{names}] (a group's parts are united: overlaps are filled "

@@ -108,13 +108,14 @@ _BUILTIN_KEYS = ("scene", "params")
 _SOURCES = ("positions", "lattice", "mesh", "fill", "parts")
 _GROUP_KEYS = ("name", "kind", "rack", "offset") + _SOURCES + (
     "spacing", "packing", "origin", "translate", "rotate", "scale", "radius", "regions", "held",
-    "velocity", "material", "solid", "poisson")
+    "velocity", "material", "solid", "poisson", "bodies")
 _LATTICE_KEYS = ("shape", "spacing", "origin")
 _PHASE_KEYS = ("name", "steps", "duration", "vars")
 #: Region shapes (docs/scenes.md "Regions"): the one key a region table names.
 REGION_KEYS = ("box", "sphere", "cylinder", "plane", "mesh", "ids", "norm2_lt", "hole", "face",
                "union", "intersection", "difference")
-_MESH_PLACEMENT = ("translate", "rotate", "scale")
+#: keys that go with a mesh: its placement, and what a file of several bodies is (mesh.BODIES)
+_MESH_PLACEMENT = ("translate", "rotate", "scale", "bodies")
 _COMMON_OP_KEYS = ("on", "op", "when", "contact")
 _OP_KEYS = {
     "force": ("accel", "where"),
@@ -940,7 +941,7 @@ def _region(c: _Ctx, value, field: str, base: Path, part=None):
                     raise c.error(f"index {i!r} is not an integer", f)
             return rg.Ids(v)
         if kind == "mesh":
-            from rackstress.scenes.mesh import read_surface
+            from rackstress.scenes.mesh import BODIES, read_surface
 
             file = _string(c, v, f)
             scale = t.get("scale")
@@ -949,7 +950,13 @@ def _region(c: _Ctx, value, field: str, base: Path, part=None):
                               f"{field}.scale")
             rot = _vec3(c, t["rotate"], f"{field}.rotate") if "rotate" in t else None
             tr = _vec3(c, t["translate"], f"{field}.translate") if "translate" in t else None
-            return read_surface(file, scale=scale, rotate=rot, translate=tr, base=base)
+            bodies = t.get("bodies", "one")
+            if bodies not in BODIES:
+                raise c.error(f"must be one of {', '.join(map(repr, BODIES))} (\"united\": the "
+                              f"union of the file's bodies is the part), got "
+                              f"{_describe(bodies)}", "bodies" if field == kind else f"{field}.bodies")
+            return read_surface(file, scale=scale, rotate=rot, translate=tr, base=base,
+                                bodies=bodies)
         # union / intersection / difference
         if not isinstance(v, list) or not v:
             raise c.error(f"must be a non-empty array of region tables, got {_describe(v)}", f)
