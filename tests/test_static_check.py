@@ -195,3 +195,25 @@ def test_direct_and_iterative_solves_agree_on_the_cantilever():
     x2 = linear.AMG(K, static.rigid_modes(prob.o, prob.free)).solve(b, rtol=1e-12)
     assert np.abs(x1 - x2).max() < 1e-7 * np.abs(x1).max()
     assert linear.backend() == "pardiso"         # the package the project depends on loads
+
+
+def test_a_solve_that_does_not_settle_says_where_and_names_thin_walls(tmp_path):
+    """A solve stopped before its first step (no Newton step allowed) leaves the applied load
+    unbalanced: its largest unbalanced force is the load on the strut's tip, particle 124 at
+    [24.5, 1.5, 1.5] (the load box, by construction), 1 N of the 1 N applied, in a strut one
+    particle wide; exit 6's message says so and what to do."""
+    from rackstress.cli import _unbalanced_hint
+    from rackstress.engines import static
+    from rackstress.scenes import load
+
+    scene = tmp_path / "strut.toml"
+    scene.write_text(STRUT.replace("FX", "1").replace("FY", "0"))
+    res = static.solve(load(str(scene)), max_iterations=0)
+    assert not res.settled
+    u = res.unbalanced
+    assert u["particle"] == 124 and u["position"] == [24.5, 1.5, 1.5]
+    assert u["force"] == pytest.approx(1.0, rel=1e-12)
+    assert u["worst"] == 1 and u["in_thin_walls"] == 1 and u["spacing"] == 1.0
+    hint = _unbalanced_hint({"unbalanced_at": u})
+    assert "particle 124 of 'bar' at (24.5, 1.5, 1.5)" in hint
+    assert "walls one particle thick" in hint and "spacing ≤ 0.5" in hint

@@ -315,7 +315,8 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
                            f"settle: the largest unbalanced force is {summary['residual']:.3g} of "
                            f"the applied load after {summary['iterations']} iterations (settled "
                            f"means at most {summary['tolerance']:g}); the state written to {out} "
-                           "is not an equilibrium" + _rounding_hint(summary), err=True)
+                           "is not an equilibrium" + _unbalanced_hint(summary)
+                           + _rounding_hint(summary), err=True)
             sys.exit(EXIT_UNSETTLED)
         _may_exit_now()
     except Exception as err:  # noqa: BLE001 - each kind has its exit status (_fail_any)
@@ -1009,6 +1010,27 @@ def _batch_page(batchdir):
     from rackstress.render.batch_report import write_batch_report
 
     return write_batch_report(batchdir)
+
+
+def _unbalanced_hint(summary: dict) -> str:
+    """Where a static run that did not settle left its largest unbalanced force, and when
+    most of the largest lie in walls one particle thick, why and what to do
+    (engines.static.unbalanced_at)."""
+    u = summary.get("unbalanced_at") or {}
+    if "particle" not in u:
+        return ""
+    pos = ", ".join(f"{x:.4g}" for x in u["position"])
+    out = (f". The largest stays at particle {u['particle']} of '{u['group']}' at ({pos}) as "
+           "drawn")
+    if u["in_thin_walls"] * 2 >= u["worst"]:
+        a = u.get("spacing")
+        finer = f" (spacing ≤ {a / 2:g})" if a else ""
+        out += (f"; {u['in_thin_walls']} of the {u['worst']} largest lie in or beside walls one "
+                "particle thick, which have no stiffness across themselves but what their "
+                "stretching gives (they buckle under compression), so Newton's method cannot "
+                "settle them: a finer spacing" + finer + " puts two particles across those "
+                "walls (summary.json: warnings)")
+    return out
 
 
 def _rounding_hint(summary: dict) -> str:

@@ -73,6 +73,8 @@ class StaticResult:
     factorizations: int = 0
     #: what :func:`check_part` warned of (walls one particle thick)
     warnings: list = field(default_factory=list)
+    #: where the largest unbalanced forces stay (a run that did not settle): :func:`unbalanced_at`
+    unbalanced: dict | None = None
 
 
 def check_static(scene) -> None:
@@ -419,7 +421,7 @@ def _check_particles(scene, prob: _Problem) -> list[dict]:
                        f"binding holds them ({what}: the lattice has no stiffness across "
                        "them). Move the load onto the thick part, or use a finer spacing"
                        + finer)
-    out = []
+    out = [{"kind": "_membrane_ids", "ids": bad}]
     for name in scene.groups:
         sl = scene.slice(name)
         k = bad[(bad >= sl.start) & (bad < sl.stop)]
@@ -484,6 +486,9 @@ def check_part(scene, progress: bool = False) -> list[dict]:
     prob = _problem(scene)
     _check_bodies(scene, prob)
     warnings = _check_particles(scene, prob)
+    membrane = next((w["ids"] for w in warnings if w["kind"] == "_membrane_ids"),
+                    np.zeros(0, np.int64))
+    warnings = [w for w in warnings if w["kind"] != "_membrane_ids"]
     p = prob.o + scene.prescribed()
     f = forces(scene, p, prob.pairs, prob.F_ext, prob.m)
     b = prob.cmap.restrict(f)
@@ -498,7 +503,7 @@ def check_part(scene, progress: bool = False) -> list[dict]:
             lin.free()
             raise
         first = (lin, dx)
-    _CHECKS[id(scene)] = {"warnings": warnings, "first": first,
+    _CHECKS[id(scene)] = {"warnings": warnings, "first": first, "membrane": membrane,
                           "seconds": time.perf_counter() - t0}
     weakref.finalize(scene, release_id, id(scene))
     if progress:
@@ -594,6 +599,7 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
     say = (lambda msg: print(msg, file=sys.stderr, flush=True)) if progress else (lambda msg: None)
     warnings = check_part(scene, progress=progress)
     first = _CHECKS[id(scene)]["first"]
+    membrane = _CHECKS[id(scene)]["membrane"]
     prob = _problem(scene)
     n, cmap = prob.n, prob.cmap
     p = prob.o + scene.prescribed()
@@ -698,7 +704,42 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
     f = forces(scene, p, prob.pairs, prob.F_ext, prob.m)
     return StaticResult(p, settled, it, rel, load, history, time.perf_counter() - t0,
                         reactions=-(f - cmap.unbalanced(f)), solver=lin.kind if lin else "",
-                        factorizations=factorizations, warnings=warnings)
+                        factorizations=factorizations, warnings=warnings,
+                        unbalanced=None if settled else unbalanced_at(
+                            scene, prob, cmap.unbalanced(f), load, membrane))
+
+
+#: the particles :func:`unbalanced_at` looks at: the largest unbalanced forces
+WORST = 20
+
+
+def unbalanced_at(scene, prob: _Problem, unbalanced: np.ndarray, load: float,
+                  membrane: np.ndarray) -> dict:
+    """Where a solve that did not settle leaves its largest unbalanced forces: the worst
+    particle (index, position as drawn, its force over the load) and how many of the
+    :data:`WORST` largest lie in walls one particle thick or next to them (``membrane``, from
+    :func:`check_part`). Such a wall has no stiffness across itself at rest, only what its
+    stretching gives it, which grows with its deflection and turns negative under compression
+    (it buckles): Newton's method settles it slowly or not at all (docs/calibration.md
+    "Static analysis"), and a finer spacing, which puts two particles across it, is the cure."""
+    r = np.linalg.norm(unbalanced, axis=1)
+    if not len(r) or not np.isfinite(r).all():
+        return {}
+    worst = np.argsort(-r)[:WORST]
+    worst = worst[r[worst] >= 0.01 * r[worst[0]]]          # the forces that matter
+    near = np.zeros(prob.n, bool)
+    near[np.asarray(membrane, np.int64)] = True
+    I, J = prob.pairs[0], prob.pairs[1]
+    ring = near.copy()
+    ring[J[near[I]]] = True
+    ring[I[near[J]]] = True
+    i = int(worst[0])
+    group = scene.group_of(i)[0]
+    return {"particle": i, "group": group,
+            "position": [float(x) for x in prob.o[i]],
+            "force": float(r[i] / load) if load > 0 else float(r[i]),
+            "worst": int(len(worst)), "in_thin_walls": int(ring[worst].sum()),
+            "spacing": scene.groups[group].meta.get("spacing")}
 
 
 def rounding_floor(scene, p: np.ndarray) -> float:

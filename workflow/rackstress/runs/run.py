@@ -505,6 +505,8 @@ def execute_static(scene: Scene, out: Path, engine: str, mode: str, *, progress:
                   "factorizations": res.factorizations})
     if root:
         extra.update(support_reactions(scene, res))
+    if not settled and res.unbalanced:
+        extra["unbalanced_at"] = res.unbalanced
     if not settled and res.load > 0:
         # relative to the load: the unbalanced force rounding alone leaves (the hint of exit 6)
         extra["rounding_floor"] = rounding_floor(scene, scene.original_positions()) / res.load
