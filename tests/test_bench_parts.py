@@ -1,5 +1,6 @@
 """``rackstress bench parts`` at its smallest: one real part that settles and one the mesh
-check refuses, both rows of the table (nothing is left out), written as JSON and Markdown."""
+check refuses (the SO-ARM base's four bodies without ``bodies = "united"``), both rows of the
+table (nothing is left out), written as JSON and Markdown."""
 from __future__ import annotations
 
 import json
@@ -11,8 +12,16 @@ from rackstress.bench import parts
 
 @pytest.mark.slow
 def test_bench_parts_rows_for_settled_and_refused(tmp_path):
-    data = parts.run_bench(tmp_path, fea=False, only=("finger-edu-lower", "so100-base"),
-                           echo=lambda *a: None)
+    import shutil
+
+    corpus = tmp_path / "examples" / "parts"
+    for name in ("finger-edu-lower-link", "so100-base"):
+        shutil.copytree(parts.parts_dir() / name, corpus / name)
+    scene = corpus / "so100-base" / "scene.toml"
+    text = scene.read_text()
+    assert 'bodies = "united"\n' in text
+    scene.write_text(text.replace('bodies = "united"\n', ""))       # the file as it comes
+    data = parts.run_bench(tmp_path / "out", fea=False, echo=lambda *a: None, corpus=corpus)
     rows = {r["part"]: r for r in data["rows"]}
     assert set(rows) == {"finger-edu-lower-link", "so100-base"}
     ok = rows["finger-edu-lower-link"]
@@ -22,7 +31,7 @@ def test_bench_parts_rows_for_settled_and_refused(tmp_path):
     # the multi-body base: refused by the mesh check, a row with its reason
     bad = rows["so100-base"]
     assert bad["status"] == "refused (exit 2)" and "Base.stl" in bad["reason"]
-    assert "/work/" not in bad["reason"]          # paths in the repository, not this machine's
-    md = (tmp_path / "parts.md").read_text()
+    assert str(tmp_path) not in bad["reason"]     # paths in the corpus, not this machine's
+    md = (tmp_path / "out" / "parts.md").read_text()
     assert "finger-edu-lower-link" in md and "so100-base" in md and "refused (exit 2)" in md
-    assert json.loads((tmp_path / "parts.json").read_text())["parts"] == 2
+    assert json.loads((tmp_path / "out" / "parts.json").read_text())["parts"] == 2

@@ -191,6 +191,7 @@ def test_bodies_united_fill_the_union_name_its_faces_and_settle(tmp_path):
     _three_boxes(tmp_path)
     refused = run(["inspect", "three.stl"], tmp_path)
     assert refused.returncode == 0 and "3 bodies" in refused.stdout
+    assert "bodies = \"united\"" in refused.stdout
     out = run(["inspect", "three.stl", "--bodies", "united", "--json"], tmp_path)
     assert out.returncode == 0, out.stderr
     info = json.loads(out.stdout)

@@ -3,6 +3,8 @@ tension (σ = F/A), a 3D cantilever (tip deflection P·L³/3EI + shear, bending 
 loads' total force and moment, the supports' fixed directions, and a mesh part by gmsh."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -157,6 +159,28 @@ def test_a_sliver_is_removed_and_the_surface_stays_closed():
     assert t2.volume == pytest.approx(8 / 6)
     area = np.linalg.norm(np.cross(v[out[:, 1]] - v[out[:, 0]], v[out[:, 2]] - v[out[:, 0]]), axis=1)
     assert (area > 1e-9).all() and len(out) == len(f2)
+
+
+def test_slivers_beside_slivers_end_and_keep_a_real_part_closed():
+    """The printed finger link of examples/parts (a real STL): two zero-area triangles side
+    by side, each the other's neighbour across its long edge — splitting one at its middle
+    vertex makes slivers again, and the removal went round for ever (over ten minutes in
+    ``rackstress bench parts``' FE check; a hang here is the test's timeout). It ends, every
+    edge still has two triangles, and the volume is the file's (trimesh's, by the divergence
+    theorem: zero-area triangles add none)."""
+    import trimesh
+
+    from rackstress.scenes.mesh import read_triangles
+    from rackstress.validity.solid import drop_slivers
+
+    stl = Path(__file__).parents[1] / "examples/parts/finger-edu-upper-link/upper_link.stl"
+    v, f = read_triangles(stl)
+    out = drop_slivers(v, f)
+    edges = np.sort(np.concatenate([out[:, [0, 1]], out[:, [1, 2]], out[:, [2, 0]]]), axis=1)
+    _, counts = np.unique(edges, axis=0, return_counts=True)
+    assert (counts == 2).all()
+    assert trimesh.Trimesh(v, out, process=False).volume == pytest.approx(
+        trimesh.Trimesh(v, f, process=False).volume, rel=1e-12)
 
 
 def test_points_are_probed_a_bounded_chunk_at_a_time():

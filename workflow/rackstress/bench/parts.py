@@ -29,8 +29,9 @@ def parts_dir() -> Path:
     return repository_file("examples", "parts")
 
 
-def part_names(only=None) -> list:
-    names = sorted(p.name for p in parts_dir().iterdir() if (p / "scene.toml").is_file())
+def part_names(only=None, corpus: Path | None = None) -> list:
+    names = sorted(p.name for p in (corpus or parts_dir()).iterdir()
+                   if (p / "scene.toml").is_file())
     if only:
         names = [n for n in names if any(o in n for o in only)]
     return names
@@ -64,14 +65,15 @@ def _error_of(stderr: str) -> str:
 
 
 def case(name: str, work: Path, fea: bool = True, sets: dict | None = None, echo=print,
-         timeout: float = TIMEOUT_S) -> dict:
+         timeout: float = TIMEOUT_S, corpus: Path | None = None) -> dict:
     """One part as a user runs it, each command a process of its own: ``rackstress run SCENE
     --no-render`` (LAMMPS; the stress measured), then ``rackstress fea``; its row."""
     import json
     import subprocess
 
-    scene = parts_dir() / name / "scene.toml"
-    root = str(parts_dir().parents[1]) + os.sep
+    corpus = corpus or parts_dir()
+    scene = corpus / name / "scene.toml"
+    root = str(corpus.parents[1]) + os.sep
     row = {"part": name, "scene": str(scene).replace(root, "")}
     out = work / name
     # paths in the repository, and the run by its part's name, not this machine's temporary
@@ -136,15 +138,17 @@ def case(name: str, work: Path, fea: bool = True, sets: dict | None = None, echo
 
 
 def run_bench(out=None, fea: bool = True, only=None, sets: dict | None = None,
-              echo=print, timeout: float = TIMEOUT_S) -> dict:
-    """Every part (module doc); returns the data written to ``parts.json``."""
+              echo=print, timeout: float = TIMEOUT_S, corpus: Path | None = None) -> dict:
+    """Every part (module doc) of ``corpus`` (default: ``examples/parts/``); returns the data
+    written to ``parts.json``."""
     t0 = time.perf_counter()
     start = machine()
     out = out_dir(out)
     rows = []
     with tempfile.TemporaryDirectory(prefix="rs-parts-") as tmp:
-        for name in part_names(only):
-            rows.append(case(name, Path(tmp), fea=fea, sets=sets, echo=echo, timeout=timeout))
+        for name in part_names(only, corpus):
+            rows.append(case(name, Path(tmp), fea=fea, sets=sets, echo=echo, timeout=timeout,
+                             corpus=corpus))
     try:
         load_end = os.getloadavg()
     except OSError:  # pragma: no cover

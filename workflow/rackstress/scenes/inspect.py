@@ -53,7 +53,8 @@ def inspect_part(path, scale=None, budget: int = ft.BUDGET, bodies: str = "one")
     scale_used = list(place.scale)
     return {
         "file": str(path), "scale": scale_used[0] if len(set(scale_used)) == 1 else scale_used,
-        "triangles": int(len(tm.faces)), "bodies": f.bodies, "watertight": watertight,
+        "triangles": int(len(tm.faces)), "bodies": f.bodies, "united": bodies == "united",
+        "watertight": watertight,
         "open_edges": open_edges, "shared_edges": shared,
         "volume": volume, "bounds": [lo.tolist(), hi.tolist()], "size": size.tolist(),
         "units_hint": _units_hint(float(size.max())),
@@ -115,6 +116,10 @@ def text(info: dict, all_faces: bool = False) -> str:
         out.append(f"  volume {_g(info['volume'], 5)}")
     if info["units_hint"]:
         out.append(f"  note: {info['units_hint']}")
+    if info["bodies"] > 1 and not info.get("united"):
+        out.append(f"  note: {info['bodies']} bodies: a scene fills their union as one part with "
+                   "bodies = \"united\" beside mesh; --bodies united names the union's holes "
+                   "and faces (the names below are of the file as it is)")
     out.append("")
     holes = info["holes"]
     out.append(f"holes ({len(holes)}): hold one with where = {{ hole = \"H1\" }}")
