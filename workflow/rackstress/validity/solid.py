@@ -125,7 +125,11 @@ def cell_mesh(o: np.ndarray, spacing: float):
     return p, t
 
 
-def drop_slivers(vertices: np.ndarray, faces: np.ndarray, rel: float = 1e-9) -> np.ndarray:
+#: a triangle of area ≤ this × (the part's size)² is a sliver (:func:`drop_slivers`)
+SLIVER_AREA = 1e-9
+
+
+def drop_slivers(vertices: np.ndarray, faces: np.ndarray, rel: float = SLIVER_AREA) -> np.ndarray:
     """The triangles without the zero-area ones (three collinear vertices, as CSG leaves where
     a hole meets a face), the surface kept closed and conforming: the neighbour across a
     sliver's long edge is split at the sliver's middle vertex. gmsh cannot parametrize a patch
@@ -201,6 +205,14 @@ def surface_mesh(vertices: np.ndarray, faces: np.ndarray, size: float, near=None
     import gmsh
 
     faces = drop_slivers(vertices, faces)
+    v = np.asarray(vertices, float)
+    f = np.asarray(faces, np.int64)
+    area = np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
+    left = area <= SLIVER_AREA * float(np.ptp(v, axis=0).max()) ** 2
+    if left.any():        # gmsh's classification did not end in 10 minutes on such a pair
+        at = np.round(v[f[left][0]].mean(axis=0), 4).tolist()
+        raise ValueError(f"{int(left.sum())} zero-area triangle(s) side by side remain (e.g. at "
+                         f"{at}), which gmsh cannot parametrize")
 
     gmsh.initialize(["-noenv"], readConfigFiles=False)
     try:
