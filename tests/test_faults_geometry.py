@@ -36,6 +36,20 @@ def bar(tmp_path) -> Path:
     return tmp_path / "bar.stl"
 
 
+def boxes(path: Path, *sized_at, open_body: int | None = None) -> Path:
+    """An STL of boxes, each (size, centre), one body each; ``open_body``: that box without
+    its first triangle (a hole in its shell)."""
+    bodies = []
+    for k, (size, centre) in enumerate(sized_at):
+        b = trimesh.creation.box(size)
+        b.apply_translation(centre)
+        if k == open_body:
+            b = trimesh.Trimesh(b.vertices, b.faces[1:], process=False)
+        bodies.append(b)
+    trimesh.util.concatenate(bodies).export(path)
+    return path
+
+
 def test_face_on_a_part_that_is_not_a_mesh(tmp_path):
     (tmp_path / "s.toml").write_text(HEAD + '''
 [[group]]
@@ -137,10 +151,7 @@ def test_several_bodies_are_listed_and_split_as_advised(tmp_path):
     bodies' 4,000."""
     import re
 
-    a, b = trimesh.creation.box((20, 10, 10)), trimesh.creation.box((20, 10, 10))
-    a.apply_translation((10, 5, 5))
-    b.apply_translation((20, 5, 5))
-    trimesh.util.concatenate([a, b]).export(tmp_path / "two.stl")
+    boxes(tmp_path / "two.stl", ((20, 10, 10), (10, 5, 5)), ((20, 10, 10), (20, 5, 5)))
     (tmp_path / "s.toml").write_text(HEAD + """
 [[group]]
 name = "p"
@@ -171,15 +182,9 @@ spacing = 1.0
 def _three_boxes(tmp_path, open_second=False) -> Path:
     """Boxes 20 × 10 × 10 at x 0–20 and 10–30 and 11 × 10 × 10 at x 29–40, each overlapping
     the next, in one STL: their union is the bar 40 × 10 × 10 = 4,000 mm³ (by construction)."""
-    a, b = trimesh.creation.box((20, 10, 10)), trimesh.creation.box((20, 10, 10))
-    c = trimesh.creation.box((11, 10, 10))
-    a.apply_translation((10, 5, 5))
-    b.apply_translation((20, 5, 5))
-    c.apply_translation((34.5, 5, 5))
-    if open_second:
-        b = trimesh.Trimesh(b.vertices, b.faces[1:], process=False)     # a hole in its shell
-    trimesh.util.concatenate([a, b, c]).export(tmp_path / "three.stl")
-    return tmp_path / "three.stl"
+    return boxes(tmp_path / "three.stl", ((20, 10, 10), (10, 5, 5)),
+                 ((20, 10, 10), (20, 5, 5)), ((11, 10, 10), (34.5, 5, 5)),
+                 open_body=1 if open_second else None)
 
 
 def test_bodies_united_fill_the_union_name_its_faces_and_settle(tmp_path):
@@ -243,25 +248,21 @@ def test_bodies_united_on_a_real_file_of_bodies_touching_at_edges(tmp_path):
 
 
 def test_bodies_united_names_the_body_that_is_not_closed(tmp_path):
+    """Exit 2, nothing written: a body with a hole in its shell (named), a value that is
+    neither "one" nor "united" (the key named)."""
     _three_boxes(tmp_path, open_second=True)
-    (tmp_path / "s.toml").write_text(HEAD + """
+    for bodies, said in (("united", ["three.stl: body ",
+                                     "is not a closed, consistently oriented shell"]),
+                         ("merge", ["bodies: must be one of 'one', 'united'"])):
+        (tmp_path / "s.toml").write_text(HEAD + f"""
 [[group]]
 name = "bar"
 mesh = "three.stl"
-bodies = "united"
+bodies = "{bodies}"
 spacing = 2.0
 material = "aluminium"
 """)
-    r = run(["run", "s.toml", "--engine", "reference", "--no-render", "--out", "r"], tmp_path)
-    assert r.returncode == 2 and not (tmp_path / "r").exists()
-    assert "three.stl: body " in r.stderr and "is not a closed, consistently oriented shell" \
-        in r.stderr and "Traceback" not in r.stderr
-    (tmp_path / "s.toml").write_text(HEAD + """
-[[group]]
-name = "bar"
-mesh = "three.stl"
-bodies = "merge"
-spacing = 2.0
-""")
-    r = run(["run", "s.toml", "--engine", "reference", "--no-render", "--out", "r"], tmp_path)
-    assert r.returncode == 2 and "bodies: must be one of 'one', 'united'" in r.stderr, r.stderr
+        r = run(["run", "s.toml", "--engine", "reference", "--no-render", "--out", "r"],
+                tmp_path)
+        assert r.returncode == 2 and not (tmp_path / "r").exists(), r.stderr
+        assert all(x in r.stderr for x in said) and "Traceback" not in r.stderr, r.stderr

@@ -398,16 +398,17 @@ def _check_bodies(scene, prob: _Problem) -> None:
         _refuse(scene, problems[0] + more)
 
 
-def _check_particles(scene, prob: _Problem) -> list[dict]:
+def _check_particles(scene, prob: _Problem) -> tuple[list[dict], np.ndarray]:
     """Check 2: particles lacking a direction. Loaded across it: refused; else one warning
-    per group (a membrane: the lattice has no stiffness across a wall one particle thick)."""
+    per group (a membrane: the lattice has no stiffness across a wall one particle thick).
+    Returns the warnings and those particles (for :func:`unbalanced_at`)."""
     from rackstress.engines import mechanisms as mech
 
     I, J, C, _ = prob.pairs
     D = _with_constraints(mech.local_blocks(prob.n, prob.o, I, J, C, prob.m), prob)
     bad, rank, P = mech.local_mechanisms(D, prob.fixed)
     if not len(bad):
-        return []
+        return [], bad
     F = prob.F_ext[bad]
     across = np.linalg.norm(np.einsum("kij,kj->ki", P, F), axis=1)
     loaded = across > 1e-6 * np.maximum(np.linalg.norm(F, axis=1), 1e-300)
@@ -421,7 +422,7 @@ def _check_particles(scene, prob: _Problem) -> list[dict]:
                        f"binding holds them ({what}: the lattice has no stiffness across "
                        "them). Move the load onto the thick part, or use a finer spacing"
                        + finer)
-    out = [{"kind": "_membrane_ids", "ids": bad}]
+    out = []
     for name in scene.groups:
         sl = scene.slice(name)
         k = bad[(bad >= sl.start) & (bad < sl.stop)]
@@ -435,7 +436,7 @@ def _check_particles(scene, prob: _Problem) -> list[dict]:
                                "so those walls carry load only in their own plane (a "
                                "membrane), their bending is not represented; a finer spacing"
                                + finer + " represents it"})
-    return out
+    return out, bad
 
 
 def _check_first_step(scene, prob: _Problem, lin: _Linear, dx: np.ndarray, b: np.ndarray,
@@ -485,10 +486,7 @@ def check_part(scene, progress: bool = False) -> list[dict]:
     check_static(scene)
     prob = _problem(scene)
     _check_bodies(scene, prob)
-    warnings = _check_particles(scene, prob)
-    membrane = next((w["ids"] for w in warnings if w["kind"] == "_membrane_ids"),
-                    np.zeros(0, np.int64))
-    warnings = [w for w in warnings if w["kind"] != "_membrane_ids"]
+    warnings, membrane = _check_particles(scene, prob)
     p = prob.o + scene.prescribed()
     f = forces(scene, p, prob.pairs, prob.F_ext, prob.m)
     b = prob.cmap.restrict(f)

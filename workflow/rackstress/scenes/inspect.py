@@ -167,13 +167,11 @@ def text(info: dict, all_faces: bool = False) -> str:
 
 def _triangles(path, bodies: str):
     """The file's triangles as read, or (``bodies = "united"``) their bodies' union."""
-    from rackstress.errors import SceneError
-    from rackstress.scenes.mesh import BODIES, read_triangles, united_triangles
+    from rackstress.scenes.mesh import is_united, read_triangles, united_triangles
 
-    if bodies not in BODIES:
-        raise SceneError(f"bodies must be one of {', '.join(BODIES)}, got {bodies!r}")
+    united = is_united(bodies)
     V, T = read_triangles(path)
-    return united_triangles(V, T, str(path)) if bodies == "united" else (V, T)
+    return united_triangles(V, T, str(path)) if united else (V, T)
 
 
 def picture(path, out, scale=None, size=(1200, 900), bodies: str = "one") -> Path:

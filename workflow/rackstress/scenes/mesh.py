@@ -79,6 +79,15 @@ def placement(scale=None, rotate=None, translate=None) -> Placement:
 BODIES = ("one", "united")
 
 
+def is_united(bodies: str) -> bool:
+    """Whether ``bodies`` (:data:`BODIES`) asks for the union of a file's bodies; anything
+    else is a SceneError naming the values."""
+    if bodies not in BODIES:
+        raise SceneError(f"bodies must be one of {', '.join(map(repr, BODIES))} (\"united\": "
+                         f"the union of the file's bodies is the part), got {bodies!r}")
+    return bodies == "united"
+
+
 class MeshSurface(Surface):
     """A checked, placed closed surface: a :class:`Surface` region with its ``volume``."""
 
@@ -107,10 +116,7 @@ def read_surface(path, scale=None, rotate=None, translate=None, base: Path | Non
     if p.suffix.lower() not in SURFACE_FORMATS:
         raise SceneError(f"mesh file {p}: unknown surface format '{p.suffix}'; readable: "
                          f"{', '.join(SURFACE_FORMATS)}")
-    if bodies not in BODIES:
-        raise SceneError(f"bodies must be one of {', '.join(map(repr, BODIES))}, got "
-                         f"{bodies!r}")
-    united = bodies == "united"
+    united = is_united(bodies)
     vertices, faces, volume = _checked(str(p.resolve()), os.stat(p).st_mtime_ns, united)
     import pyvista as pv
 

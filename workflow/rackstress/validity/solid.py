@@ -129,6 +129,11 @@ def cell_mesh(o: np.ndarray, spacing: float):
 SLIVER_AREA = 1e-9
 
 
+def _twice_areas(v: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """|(b − a) × (c − a)| of each triangle (a, b, c) of ``F``: twice its area."""
+    return np.linalg.norm(np.cross(v[F[:, 1]] - v[F[:, 0]], v[F[:, 2]] - v[F[:, 0]]), axis=1)
+
+
 def drop_slivers(vertices: np.ndarray, faces: np.ndarray, rel: float = SLIVER_AREA) -> np.ndarray:
     """The triangles without the zero-area ones (three collinear vertices, as CSG leaves where
     a hole meets a face), the surface kept closed and conforming: the neighbour across a
@@ -137,22 +142,17 @@ def drop_slivers(vertices: np.ndarray, faces: np.ndarray, rel: float = SLIVER_AR
     slivers (and the triangles a split makes) are visited: linear in the triangles (a rescan
     of every triangle for each sliver took over ten minutes on a printed finger link)."""
     v = np.asarray(vertices, float)
-    f = [list(map(int, t)) for t in np.asarray(faces)]
-    tiny = rel * float(np.ptp(v, axis=0).max()) ** 2
-
-    def area2(t) -> float:
-        a, b, c = t
-        return float(np.linalg.norm(np.cross(v[b] - v[a], v[c] - v[a])))
-
     F = np.asarray(faces, np.int64).reshape(-1, 3)
-    areas = np.linalg.norm(np.cross(v[F[:, 1]] - v[F[:, 0]], v[F[:, 2]] - v[F[:, 0]]), axis=1)
-    queue = [int(k) for k in np.flatnonzero(areas <= tiny)][::-1]
+    tiny = rel * float(np.ptp(v, axis=0).max()) ** 2
+    queue = [int(k) for k in np.flatnonzero(_twice_areas(v, F) <= tiny)][::-1]
     if not queue:
         return F
+    f = F.tolist()
+
+    def area2(t) -> float:
+        return float(_twice_areas(v, np.asarray([t]))[0])
+
     owner = {}                                  # directed edge (a, b) -> its triangle
-    for j, t in enumerate(f):
-        for r in range(3):
-            owner[(t[r], t[(r + 1) % 3])] = j
     alive = [True] * len(f)
     splits = 4 * len(queue) + 16        # a sliver beside a sliver splits it into slivers: bound
 
@@ -165,6 +165,8 @@ def drop_slivers(vertices: np.ndarray, faces: np.ndarray, rel: float = SLIVER_AR
             elif owner.get(e) == j:
                 del owner[e]
 
+    for j in range(len(f)):
+        register(j, True)
     while queue and splits > 0:
         k = queue.pop()
         if not alive[k] or area2(f[k]) > tiny:
@@ -204,11 +206,9 @@ def surface_mesh(vertices: np.ndarray, faces: np.ndarray, size: float, near=None
     — the stress falls steeply there, and the governing stress is read a few spacings away."""
     import gmsh
 
-    faces = drop_slivers(vertices, faces)
     v = np.asarray(vertices, float)
-    f = np.asarray(faces, np.int64)
-    area = np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
-    left = area <= SLIVER_AREA * float(np.ptp(v, axis=0).max()) ** 2
+    f = drop_slivers(v, faces)
+    left = _twice_areas(v, f) <= SLIVER_AREA * float(np.ptp(v, axis=0).max()) ** 2
     if left.any():        # gmsh's classification did not end in 10 minutes on such a pair
         at = np.round(v[f[left][0]].mean(axis=0), 4).tolist()
         raise ValueError(f"{int(left.sum())} zero-area triangle(s) side by side remain (e.g. at "
@@ -219,8 +219,6 @@ def surface_mesh(vertices: np.ndarray, faces: np.ndarray, size: float, near=None
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.model.add("part")
         s = gmsh.model.addDiscreteEntity(2)
-        v = np.asarray(vertices, float)
-        f = np.asarray(faces, np.int64)
         gmsh.model.mesh.addNodes(2, s, np.arange(1, len(v) + 1), v.ravel())
         gmsh.model.mesh.addElementsByType(s, 2, [], (f + 1).ravel())
         gmsh.model.mesh.classifySurfaces(math.radians(40.0), True, True, math.pi)
