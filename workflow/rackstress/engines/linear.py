@@ -7,9 +7,8 @@ stiffness). Two ways:
 
 * **direct**: Intel MKL PARDISO through ``pypardiso`` (symmetric indefinite LDLᵀ, METIS
   ordering, ``mtype = -2``), analysed first (:meth:`Pardiso.analyse`: its own estimate of the
-  factor's memory and floating-point work), then factorized once and reused across Newton
-  steps while the tangent changes little (modified Newton, docs/calibration.md "Static
-  analysis"). It resolves every mode of K whatever its conditioning — a wall one particle
+  factor's memory and floating-point work), then each Newton step's tangent factorized on
+  that analysis (:meth:`Pardiso.refactor`; docs/calibration.md "Static analysis"). It resolves every mode of K whatever its conditioning — a wall one particle
   thick, a long slender arm — where an iterative solve stalls on the near-singular ones.
   Without ``pypardiso`` (a platform MKL has no wheel for) SciPy's SuperLU serves, slower.
 * **AMG-CG**: smoothed-aggregation multigrid (pyamg) with the six rigid-body modes as near-null

@@ -19,9 +19,9 @@ group, and what to do:
    (:func:`local_mechanisms`).
 3. **Loaded mechanisms of whole clusters** (a block hinged on one line of particles, a wall one
    particle thick between two thick ones): found by the first linear solve, which carries a
-   regularization ε·diag(K) (:data:`rackstress.engines.static.REGULARIZATION`). A loaded
+   regularization μ·L (:data:`rackstress.engines.static.REGULARIZATION`). A loaded
    mechanism is held by that alone, so it takes nearly all the step's work; a part held by its
-   bindings gives it ε/λ_min of it (~10⁻³ for the most slender parts here)
+   bindings gives it ~μ·λ_L/λ_K of it (L the bindings' Laplacian)
    (:func:`mechanism_particles`).
 
 Example
@@ -42,7 +42,7 @@ RIGID_TOL = 1e-9
 #: a particle lacks a direction when its block's eigenvalue is below this × its largest
 LOCAL_TOL = 1e-8
 #: share of the first step's work taken by the regularization above which a load drives a
-#: mechanism (a part held by its bindings: ε/λ_min, below 1e-2 for every part measured)
+#: mechanism (a part held by its bindings: ~μ·λ_L/λ_K, far below it)
 MECHANISM_SHARE = 0.5
 #: where a group has more mechanism particles than this, the message names this many places
 NAMED = 3
@@ -154,10 +154,7 @@ def clusters(scene, idx: np.ndarray, I: np.ndarray, J: np.ndarray) -> list[np.nd
     return sorted(out, key=len, reverse=True)
 
 
-def mechanism_particles(dx: np.ndarray, reg: np.ndarray, n: int, free: np.ndarray) -> np.ndarray:
+def mechanism_particles(per: np.ndarray) -> np.ndarray:
     """The particles a loaded mechanism moves: those holding ≥ 1 % of the regularization's
-    energy ε·Σ D_ii·Δx_i² (``reg`` = ε·D on the free unknowns)."""
-    e = np.zeros(3 * n)
-    e[free] = reg * dx * dx
-    per = e.reshape(n, 3).sum(axis=1)
+    energy (``per``: each particle's share)."""
     return np.flatnonzero(per >= 0.01 * per.max()) if per.max() > 0 else np.zeros(0, int)

@@ -9,12 +9,14 @@ elastic answer, and two or three more remove what the bindings' rotation leaves 
 geometrically exact: ~1 % of the load on the cantilever).
 
 Each linear solve (:mod:`rackstress.engines.linear`) is a sparse direct LDLᵀ factorization
-(MKL PARDISO) wherever its own memory and work estimates fit, reused across Newton steps while
-the residual falls tenfold a step (modified Newton); AMG-preconditioned conjugate gradients for
-the largest parts. The tangent carries ε·diag(K) (:data:`REGULARIZATION`): a wall one particle
-thick has no stiffness across itself at rest, and without it the step is undefined there
-(an iterative solve stalled on those modes: the residual stayed at 2e-6 of the load for 18
-Newton steps on a corner brace; docs/calibration.md "Static analysis").
+(MKL PARDISO) wherever its own memory and work estimates fit, each step's tangent factorized
+on the first one's ordering; AMG-preconditioned conjugate gradients for the largest parts. The
+tangent carries μ·L (:data:`REGULARIZATION`), L the bindings' graph Laplacian: a wall one
+particle thick has no stiffness across itself at rest, and μ·L makes each step defined there
+and moves the wall with its edges. μ rises when a step does not lower the unbalanced force
+and falls when it does (Levenberg–Marquardt): such walls are a nonlinear structure of their own
+(a membrane's force ~ w³), and a plain Newton step there overshoots (18 steps on a gripper jaw
+where the rest settled in two; docs/calibration.md "Static analysis").
 
 Before the first step the part is checked (:func:`check_part`, :mod:`rackstress.engines.
 mechanisms`): a body held by nothing, supports that leave a rigid motion free, a load across a
@@ -142,6 +144,26 @@ def forces(scene, p: np.ndarray, pairs, F_ext: np.ndarray, m: np.ndarray) -> np.
 
 
 # ------------------------------------------------------------------ the volumetric term
+def energy_change(prob: "_Problem", p: np.ndarray, trial: np.ndarray) -> float:
+    """Π(trial) − Π(p): the change of the potential whose gradient is −m·a (module doc), per
+    pair m·c·(Δ(r²)/2 − L0²·ln(r₁/r₀)) (Eq. 12's; each pair listed from both ends), the
+    volumetric term's ½·m·κ·θ², minus the external forces' work. Taken as differences, so
+    that it is exact near equilibrium where Π itself is ~10⁶ × the change."""
+    I, J, C, Q = prob.pairs
+    d0, d1 = p[J] - p[I], trial[J] - trial[I]
+    r0, r1 = np.einsum("ij,ij->i", d0, d0), np.einsum("ij,ij->i", d1, d1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        bind = 0.5 * np.sum(prob.m[I] * C * (0.5 * (r1 - r0) - 0.5 * Q * np.log(r1 / r0)))
+    out = float(bind) - float(np.sum(prob.F_ext * (trial - p)))
+    vol = prob.volume
+    if vol is not None:
+        def u(x):
+            th = vol.C @ Volume.extensions(x, vol)[2]
+            return 0.5 * prob.m[vol.owner] * vol.kappa * th * th
+        out += float(np.sum(u(trial) - u(p)))
+    return out if np.isfinite(out) else float("inf")
+
+
 def volume_force(vol, p: np.ndarray, m: np.ndarray):
     """m·a of the volumetric term (:meth:`rackstress.model.volume.Volume.accel`), or 0 when
     the scene has none (``vol`` None: no material part)."""
@@ -200,14 +222,28 @@ def rigid_modes(p: np.ndarray, free) -> np.ndarray:
     return free.modes(B) if hasattr(free, "modes") else B[free]
 
 
-#: the tangent carries ε·diag(K) on every free unknown (docs/calibration.md "Static analysis"):
-#: a mode of K with no stiffness at rest (a wall one particle thick, bent across itself) gets
-#: ε of a binding's, so each step is defined; the forces are Eq. 12's own, so the equilibrium
-#: found is the lattice's whatever ε — ε only slows Newton's convergence by ε/λ_min per step
+#: the tangent carries μ·L (docs/calibration.md "Static analysis"): L is the bindings' graph
+#: Laplacian, each binding a spring c·m in every direction, so μ·L resists only relative motion
+#: of bound particles. A mode of K with no stiffness at rest (a wall one particle thick, bent
+#: across itself) then follows its neighbours (L·Δx = 0 there: the harmonic interpolation of
+#: its edges, whatever μ) instead of staying where it was; the forces are Eq. 12's own, so the
+#: equilibrium found is the lattice's whatever μ. μ starts at this value and rises (×100) when
+#: a step does not lower the unbalanced force, falls (÷10) when it lowers it tenfold: Levenberg–Marquardt,
+#: the step shortened only in the soft modes (a membrane's w³ stiffness, a buckling wall)
 REGULARIZATION = 1e-10
-#: modified Newton: a factorization is kept for the next step while the residual falls at
-#: least this much per step (the tangent barely changes: small strains), else K is rebuilt
-REUSE_RATIO = 0.1
+#: μ's growth on a rejected step, its fall on a step that lowers the unbalanced force tenfold
+#: (a weaker step keeps μ), its ceiling (then the step is halved instead, as a line search)
+MU_UP, MU_DOWN, MU_MAX = 100.0, 10.0, 1e-2
+#: a step that raises the unbalanced force is still taken where the energy fell by the
+#: tangent's prediction within this fraction (ρ = ΔΠ / (−½·b·Δx) in 1 ± 0.5) and the largest
+#: unbalanced force grew at most GROWTH times
+MODEL_AGREEMENT = 0.5
+#: steps at μ's ceiling that do not halve the unbalanced force before μ·L gives way to
+#: μ·diag(K)
+STALL = 2
+#: ε·diag(K) beside μ·L: an anchor, so that a rigid motion the supports leave free (refused
+#: by check_part before any step) cannot make the tangent singular
+ANCHOR = 1e-14
 #: a trial step may leave up to this many times the unbalanced force it started from (a full
 #: Newton step from the undeformed state under a large load overshoots before it settles)
 GROWTH = 4.0
@@ -232,6 +268,8 @@ class _Problem:
     cmap: object = None
     #: the material parts' volumetric term (model/volume.py), None without one
     volume: object = None
+    #: the bindings' Laplacian on the free unknowns (:func:`_spread`), built on first use
+    spread: object = None
 
 
 def _problem(scene) -> _Problem:
@@ -245,16 +283,38 @@ def _problem(scene) -> _Problem:
                     volume_terms(scene))
 
 
-def _tangent(p: np.ndarray, prob: _Problem):
-    """K on the free unknowns at ``p``, plus ε·diag(K) (:data:`REGULARIZATION`); and that ε·D."""
+def _spread(prob: _Problem):
+    """L on the free unknowns: Σ over bindings of c·m·(e_i − e_j)(e_i − e_j)ᵀ ⊗ I₃ (the graph
+    Laplacian of the bindings, isotropic), once per problem."""
+    import scipy.sparse as sp
+
+    if prob.spread is None:
+        I, J, C, _ = prob.pairs
+        n = prob.n
+        w = 0.5 * C * prob.m[I]                 # each pair is listed from both ends
+        k = np.arange(3)
+        ri, rj = (3 * I[:, None] + k).ravel(), (3 * J[:, None] + k).ravel()
+        ww = np.repeat(w, 3)
+        L = sp.csr_matrix((np.concatenate([ww, -ww, ww, -ww]),
+                           (np.concatenate([ri, ri, rj, rj]), np.concatenate([ri, rj, rj, ri]))),
+                          shape=(3 * n, 3 * n))
+        prob.spread = prob.cmap.reduce(L).tocsr()
+    return prob.spread
+
+
+def _tangent(p: np.ndarray, prob: _Problem, mu: float = REGULARIZATION, spread: bool = True):
+    """K on the free unknowns at ``p`` plus the regularization R = μ·L + ε·diag(K)
+    (:data:`REGULARIZATION`, :data:`ANCHOR`), or μ·diag(K) (``spread`` False: Marquardt's,
+    after μ·L stalled); returns K + R and R."""
     import scipy.sparse as sp
 
     K = prob.cmap.reduce(stiffness(p, prob.pairs, prob.m, volume=prob.volume)).tocsr()
     d = K.diagonal()
     pos = d[d > 0]
     floor = 1e-3 * float(pos.mean()) if len(pos) else 1.0
-    reg = REGULARIZATION * np.maximum(d, floor)
-    return (K + sp.diags(reg)).tocsr(), reg
+    D = sp.diags(np.maximum(d, floor))
+    R = (mu * _spread(prob) + ANCHOR * D if spread else mu * D).tocsr()
+    return (K + R).tocsr(), R
 
 
 class _Linear:
@@ -291,22 +351,14 @@ class _Linear:
         self.solver.free()
 
 
-#: GMRES iterations preconditioned by an earlier tangent's factor before K is refactorized
-PRECONDITIONED_ITERATIONS = 40
-
-
-def _preconditioned(K, b: np.ndarray, lin: _Linear, rtol: float):
-    """K·x = b by GMRES preconditioned with ``lin``'s factorization of an earlier tangent
-    (K changes by the strains' order between Newton steps: a handful of iterations)."""
-    import scipy.sparse.linalg as spla
-
-    M = spla.LinearOperator(K.shape, matvec=lin.solver.solve, dtype=float)
-    x, _ = spla.gmres(K, b, M=M, rtol=0.1 * rtol, atol=0.0,
-                      restart=PRECONDITIONED_ITERATIONS, maxiter=1)
-    # judged by the true residual: the preconditioned one (GMRES' own test) can differ by the
-    # regularized factor's conditioning
-    ok = bool(np.all(np.isfinite(x)) and np.linalg.norm(K @ x - b) <= rtol * np.linalg.norm(b))
-    return x, ok
+def _refactored(lin: _Linear, K, p: np.ndarray, prob: _Problem) -> _Linear:
+    """``lin`` factorizing ``K`` on its own ordering where it can (same pattern: a new
+    tangent, or the same one with another μ), else a new solver."""
+    if lin.direct and lin.solver.refactor(K):
+        lin.K = K
+        return lin
+    lin.free()
+    return _Linear(K, p, prob)
 
 
 def _refuse(scene, message: str):
@@ -440,22 +492,27 @@ def _check_particles(scene, prob: _Problem) -> tuple[list[dict], np.ndarray]:
 
 
 def _check_first_step(scene, prob: _Problem, lin: _Linear, dx: np.ndarray, b: np.ndarray,
-                      reg: np.ndarray) -> None:
-    """Check 3: the first step's work taken by the regularization (a loaded mechanism)."""
+                      R) -> None:
+    """Check 3: the first step's work taken by the regularization R (a loaded mechanism)."""
     from rackstress.engines import mechanisms as mech
 
     work = abs(float(b @ dx))
     if not (work > 0) or not lin.converged:
         return
-    share = float(reg @ (dx * dx)) / work
+    share = abs(float(dx @ (R @ dx))) / work
     if not (share > mech.MECHANISM_SHARE) and np.all(np.isfinite(dx)):
         return
-    if prob.cmap.trivial:
-        moving = mech.mechanism_particles(dx, reg, prob.n, prob.free)
-    else:                           # each unknown's energy spread on its particles
-        e = abs(prob.cmap.T) @ (reg * dx * dx)
-        moving = mech.mechanism_particles(np.ones(3 * prob.n), e, prob.n,
-                                          np.ones(3 * prob.n, dtype=bool))
+    # the particles it moves: by each one's Σ R_kk·Δx_k², not by μ·L's energy, which a block
+    # that slides rigidly holds only in the bindings it slides on
+    d = np.maximum(R.diagonal(), 0.0) * dx * dx
+    if not prob.cmap.trivial:
+        d = abs(prob.cmap.T) @ d
+        per = d.reshape(prob.n, 3).sum(axis=1)
+    else:
+        full = np.zeros(3 * prob.n)
+        full[prob.free] = d
+        per = full.reshape(prob.n, 3).sum(axis=1)
+    moving = mech.mechanism_particles(per)
     parts = mech.clusters(scene, moving, prob.pairs[0], prob.pairs[1])
     named = "; ".join(mech.where(scene, c) for c in parts[:mech.NAMED])
     _refuse(scene, f"the load moves {len(moving)} particle(s) that no binding resists (a "
@@ -492,16 +549,16 @@ def check_part(scene, progress: bool = False) -> list[dict]:
     b = prob.cmap.restrict(f)
     first = None
     if b.size and np.any(b != 0):
-        K, reg = _tangent(p, prob)
+        K, R = _tangent(p, prob)
         lin = _Linear(K, p, prob)
         dx = lin.solve(b, rtol=1e-10)
         try:
-            _check_first_step(scene, prob, lin, dx, b, reg)
+            _check_first_step(scene, prob, lin, dx, b, R)
         except SceneError:
             lin.free()
             raise
         first = (lin, dx)
-    _CHECKS[id(scene)] = {"warnings": warnings, "first": first, "membrane": membrane,
+    _CHECKS[id(scene)] = {"warnings": warnings, "first": first, "membrane": membrane, "prob": prob,
                           "seconds": time.perf_counter() - t0}
     weakref.finalize(scene, release_id, id(scene))
     if progress:
@@ -598,9 +655,10 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
     warnings = check_part(scene, progress=progress)
     first = _CHECKS[id(scene)]["first"]
     membrane = _CHECKS[id(scene)]["membrane"]
-    prob = _problem(scene)
+    prob = _CHECKS[id(scene)]["prob"]
     n, cmap = prob.n, prob.cmap
     p = prob.o + scene.prescribed()
+    start = p.copy()
     history = []
     load = prob.load
     it, settled, rel = 0, False, float("inf")
@@ -611,8 +669,8 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
     by_reactions = load == 0.0
     say(f"static: {n:,} particles, {len(prob.pairs[0]):,} bindings, {cmap.unknowns:,} "
         f"unknowns")
-    lin, fresh, factorizations, solver = None, False, 0, ""
-    refactor = True
+    lin, factorizations, solver = None, 0, ""
+    mu, spread, stalled, least = REGULARIZATION, True, 0, None
     try:
         while True:
             f = forces(scene, p, prob.pairs, prob.F_ext, prob.m)
@@ -621,10 +679,10 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
                 load = float(np.linalg.norm(f - unbalanced, axis=1).sum())
             worst = float(np.linalg.norm(unbalanced, axis=1).max()) if n else 0.0
             new = worst / load if load > 0 else (0.0 if worst == 0 else float("inf"))
-            if history and not new <= REUSE_RATIO * history[-1]:
-                refactor = True            # modified Newton no longer pays: a new tangent
             rel = new
             history.append(rel)
+            if np.isfinite(rel) and (least is None or rel < least[0]):
+                least = (rel, p)
             say(f"static: iteration {it}, residual {rel:.3g} of the applied load "
                 f"({solver or 'start'}; {time.perf_counter() - t0:.1f} s)")
             if not np.isfinite(rel):
@@ -639,66 +697,77 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
             # residual is small (the step leaves rtol·‖b‖ unbalanced: a tenth of what
             # settling allows)
             rtol = min(1e-2, max(1e-10, 0.1 * tolerance / rel))
-            if it == 0 and first is not None:
-                (lin, dx), fresh = first, True
+            if it == 0 and first is not None and mu == REGULARIZATION:
+                lin, dx = first
                 factorizations += 1
-            elif lin is not None and lin.direct:
-                # the factor of an earlier tangent preconditions GMRES on this one: a few
-                # solves where a new factorization costs an analysis's worth each
-                K, _ = _tangent(p, prob)
-                dx, ok = _preconditioned(K, b, lin, rtol=rtol)
-                fresh = True
-                if not ok:
-                    if not lin.solver.refactor(K):
-                        lin.free()
-                        lin = _Linear(K, p, prob)
-                    factorizations += 1
-                    dx = lin.solve(b, rtol)
-            elif refactor or lin is None or not lin.direct:
-                K, _ = _tangent(p, prob)
-                if lin is not None and lin.direct and not lin.solver.refactor(K):
-                    lin.free()
-                    lin = None
-                elif lin is not None and lin.direct:
-                    factorizations += 1
-                if lin is None:
-                    lin = _Linear(K, p, prob)
-                    factorizations += 1
+            else:
+                K, _ = _tangent(p, prob, mu, spread)
+                lin = _refactored(lin, K, p, prob) if lin is not None else _Linear(K, p, prob)
+                factorizations += 1
                 dx = lin.solve(b, rtol, K=K)
-                fresh = True
-            else:
-                dx, fresh = lin.solve(b, rtol), False
-            refactor = False
-            solver = lin.kind + ("" if fresh else ", factor reused")
-            if not lin.converged:
-                solver += " (not converged)"
-            step = cmap.expand(dx)
-            m0 = worst
-            # a step that makes things much worse is halved (large rotations, buckling); the
-            # best trial is kept when none is good enough
-            scale, best = 1.0, None
-            for _ in range(10):
-                trial = p + scale * step
-                ft = forces(scene, trial, prob.pairs, prob.F_ext, prob.m)
-                r = float(np.linalg.norm(cmap.unbalanced(ft), axis=1).max())
-                if np.isfinite(r) and (best is None or r < best[0]):
-                    best = (r, trial)
-                if np.isfinite(r) and r <= (GROWTH if fresh else 1.0) * m0:
+            norm0 = float(np.linalg.norm(unbalanced))
+            # Levenberg–Marquardt (REGULARIZATION): a step that does not lower the
+            # unbalanced force (its 2-norm: the largest alone may rise while a wall catches
+            # up with its edges) is solved again with μ ×100, which shortens it in the soft
+            # modes only
+            accepted, step = None, cmap.expand(dx)
+            while spread:
+                trial = p + step
+                ut = cmap.unbalanced(forces(scene, trial, prob.pairs, prob.F_ext, prob.m))
+                r2 = float(np.linalg.norm(ut))
+                if np.isfinite(r2) and r2 < norm0:
+                    accepted = trial
                     break
-                if not fresh:          # a reused factor that does not help: a new tangent
+                # or the energy fell as the tangent's quadratic model predicts (−½·b·Δx): a
+                # sound Newton step whose residual rose where the model is least exact
+                rho = energy_change(prob, p, trial) / (-0.5 * float(b @ dx))
+                if MODEL_AGREEMENT <= rho <= 1.0 / MODEL_AGREEMENT:
+                    accepted = trial
                     break
-                scale *= 0.5
-            if best is not None and (fresh or best[0] < m0):
-                p = best[1]
-            elif not fresh:
-                refactor = True        # the old factor's step did not help: stay, refactor
+                if mu >= MU_MAX:
+                    break
+                mu = min(mu * MU_UP, MU_MAX)
+                K, _ = _tangent(p, prob, mu, spread)
+                lin = _refactored(lin, K, p, prob)
+                factorizations += 1
+                dx = lin.solve(b, rtol, K=K)
+                step = cmap.expand(dx)
+            solver = lin.kind if lin.converged else lin.kind + " (not converged)"
+            if accepted is not None:
+                p = accepted
+                stalled = stalled + 1 if mu > 0.5 * MU_MAX / MU_DOWN and r2 > 0.5 * norm0 else 0
+                mu = max(mu / MU_DOWN, REGULARIZATION)
             else:
-                p = trial
+                # μ at its ceiling: the step is halved (large rotations, buckling); a trial may
+                # leave up to GROWTH × the unbalanced force it started from, the best is kept
+                scale, best = 1.0, None
+                for _ in range(10):
+                    trial = p + scale * step
+                    ft = forces(scene, trial, prob.pairs, prob.F_ext, prob.m)
+                    r = float(np.linalg.norm(cmap.unbalanced(ft), axis=1).max())
+                    if np.isfinite(r) and (best is None or r < best[0]):
+                        best = (r, trial)
+                    if np.isfinite(r) and r <= GROWTH * worst:
+                        break
+                    scale *= 0.5
+                p = best[1] if best is not None else trial
+                stalled += 1
+            if spread and stalled >= STALL:
+                # μ·L stalled (a wall buckling under it): from the start again with ε·diag(K)
+                # and full Newton steps, halved only where the unbalanced force grows more
+                # than GROWTH times (what settled the wrist housing of examples/parts)
+                spread, mu, stalled, p = False, REGULARIZATION, 0, start.copy()
+                say("static: the Levenberg–Marquardt steps stalled; from the start again "
+                    "with plain Newton steps")
             it += 1
     finally:
         if lin is not None:
             lin.free()
         _CHECKS.pop(id(scene), None)
+    if not settled and least is not None and least[0] < rel:
+        # a solve that did not settle ends on the least unbalanced state it passed (the
+        # restart after a stall may end worse than where μ·L stalled)
+        rel, p = least
     f = forces(scene, p, prob.pairs, prob.F_ext, prob.m)
     return StaticResult(p, settled, it, rel, load, history, time.perf_counter() - t0,
                         reactions=-(f - cmap.unbalanced(f)), solver=lin.kind if lin else "",
