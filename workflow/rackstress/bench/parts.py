@@ -154,7 +154,7 @@ def run_bench(out=None, fea: bool = True, only=None, sets: dict | None = None,
     except OSError:  # pragma: no cover
         load_end = None
     data = {"machine": {**start, "load_avg_at_end": load_end}, "fea": bool(fea),
-            "sets": dict(sets or {}), "timeout_s": timeout, "rows": rows,
+            "sets": dict(sets or {}), "only": list(only or []), "timeout_s": timeout, "rows": rows,
             "settled": sum(1 for r in rows if r.get("settled")), "parts": len(rows)}
     data["files"] = [str(out / "parts.json"), str(out / "parts.md")]
     data["wall_s"] = time.perf_counter() - t0
@@ -180,7 +180,8 @@ def table_rows(data) -> list:
 def markdown(data) -> str:
     m = data["machine"]
     load = m.get("load_avg_at_start")
-    sets = ", ".join(f"--set {k}={v}" for k, v in data.get("sets", {}).items())
+    sets = " ".join([f"--set {k}={v}" for k, v in data.get("sets", {}).items()]
+                    + [f"--only {o}" for o in data.get("only", [])])
     out = [
         "# Real parts: the static path on parts nobody here drew",
         "",
