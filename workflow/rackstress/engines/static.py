@@ -147,8 +147,9 @@ def forces(scene, p: np.ndarray, pairs, F_ext: np.ndarray, m: np.ndarray) -> np.
 def energy_change(prob: "_Problem", p: np.ndarray, trial: np.ndarray) -> float:
     """Π(trial) − Π(p): the change of the potential whose gradient is −m·a (module doc), per
     pair m·c·(Δ(r²)/2 − L0²·ln(r₁/r₀)) (Eq. 12's; each pair listed from both ends), the
-    volumetric term's ½·m·κ·θ², minus the external forces' work. Taken as differences, so
-    that it is exact near equilibrium where Π itself is ~10⁶ × the change."""
+    volumetric term's ½·m·κ·θ², minus the external forces' work. Taken as differences per
+    pair, not as Π(trial) − Π(p): near equilibrium Π is many orders above its change. Still
+    rounding-limited there, which is why :func:`solve` trusts it only within ρ ∈ [½, 2]."""
     I, J, C, Q = prob.pairs
     d0, d1 = p[J] - p[I], trial[J] - trial[I]
     r0, r1 = np.einsum("ij,ij->i", d0, d0), np.einsum("ij,ij->i", d1, d1)
