@@ -235,9 +235,9 @@ REGULARIZATION = 1e-10
 #: μ's growth on a rejected step, its fall on a step that lowers the unbalanced force tenfold
 #: (a weaker step keeps μ), its ceiling (then the step is halved instead, as a line search)
 MU_UP, MU_DOWN, MU_MAX = 100.0, 10.0, 1e-2
-#: a step that raises the unbalanced force is still taken where the energy fell by the
-#: tangent's prediction within this fraction (ρ = ΔΠ / (−½·b·Δx) in 1 ± 0.5) and the largest
-#: unbalanced force grew at most GROWTH times
+#: a step that raises the unbalanced force is still taken where the energy changed as the
+#: tangent predicts within this factor (ρ = ΔΠ / (−½·b·Δx) in [½, 2]); further out ρ is the
+#: rounding of a tiny ΔΠ near equilibrium, not progress
 MODEL_AGREEMENT = 0.5
 #: steps at μ's ceiling that do not halve the unbalanced force before μ·L gives way to
 #: μ·diag(K)
