@@ -227,20 +227,21 @@ def rigid_modes(p: np.ndarray, free) -> np.ndarray:
 #: Laplacian, each binding a spring c·m in every direction, so μ·L resists only relative motion
 #: of bound particles. A mode of K with no stiffness at rest (a wall one particle thick, bent
 #: across itself) then follows its neighbours (L·Δx = 0 there: the harmonic interpolation of
-#: its edges, whatever μ) instead of staying where it was; the forces are Eq. 12's own, so the
-#: equilibrium found is the lattice's whatever μ. μ starts at this value and rises (×100) when
-#: a step does not lower the unbalanced force, falls (÷10) when it lowers it tenfold: Levenberg–Marquardt,
-#: the step shortened only in the soft modes (a membrane's w³ stiffness, a buckling wall)
+#: the thick parts bounding it, whatever μ) instead of staying where it was; the forces are
+#: Eq. 12's own, so the equilibrium found is the lattice's whatever μ. μ starts at this value,
+#: rises (×100) when a step is not taken and falls (÷10) with each step taken: Levenberg–
+#: Marquardt, the step shortened only in the soft modes (a membrane's w³ stiffness, a buckling
+#: wall)
 REGULARIZATION = 1e-10
-#: μ's growth on a rejected step, its fall on a step that lowers the unbalanced force tenfold
-#: (a weaker step keeps μ), its ceiling (then the step is halved instead, as a line search)
+#: μ's growth on a step not taken, its fall on one taken, its ceiling (then the step is halved
+#: instead, as a line search)
 MU_UP, MU_DOWN, MU_MAX = 100.0, 10.0, 1e-2
 #: a step that raises the unbalanced force is still taken where the energy changed as the
 #: tangent predicts within this factor (ρ = ΔΠ / (−½·b·Δx) in [½, 2]); further out ρ is the
 #: rounding of a tiny ΔΠ near equilibrium, not progress
 MODEL_AGREEMENT = 0.5
-#: steps at μ's ceiling that do not halve the unbalanced force before μ·L gives way to
-#: μ·diag(K)
+#: steps at μ's ceiling that do not halve the unbalanced force before the solve starts again
+#: with ε·diag(K) and plain Newton steps
 STALL = 2
 #: ε·diag(K) beside μ·L: an anchor, so that a rigid motion the supports leave free (refused
 #: by check_part before any step) cannot make the tangent singular
