@@ -158,10 +158,8 @@ def energy_change(prob: "_Problem", p: np.ndarray, trial: np.ndarray) -> float:
     out = float(bind) - float(np.sum(prob.F_ext * (trial - p)))
     vol = prob.volume
     if vol is not None:
-        def u(x):
-            th = vol.C @ Volume.extensions(x, vol)[2]
-            return 0.5 * prob.m[vol.owner] * vol.kappa * th * th
-        out += float(np.sum(u(trial) - u(p)))
+        m = prob.m[vol.owner]
+        out += float(np.sum(m * (Volume.term_energies(trial, vol) - Volume.term_energies(p, vol))))
     return out if np.isfinite(out) else float("inf")
 
 
@@ -330,7 +328,6 @@ class _Linear:
         from rackstress.engines import linear
 
         t0 = time.process_time()
-        self.K = K
         f = linear.plan_direct(K) if self.direct_allowed else None
         if f is not None:
             self.solver, self.direct = f.factor(), True
@@ -357,7 +354,6 @@ def _refactored(lin: _Linear, K, p: np.ndarray, prob: _Problem) -> _Linear:
     """``lin`` factorizing ``K`` on its own ordering where it can (same pattern: a new
     tangent, or the same one with another μ), else a new solver."""
     if lin.direct and lin.solver.refactor(K):
-        lin.K = K
         return lin
     lin.free()
     return _Linear(K, p, prob)
@@ -507,13 +503,8 @@ def _check_first_step(scene, prob: _Problem, lin: _Linear, dx: np.ndarray, b: np
     # the particles it moves: by each one's Σ R_kk·Δx_k², not by μ·L's energy, which a block
     # that slides rigidly holds only in the bindings it slides on
     d = np.maximum(R.diagonal(), 0.0) * dx * dx
-    if not prob.cmap.trivial:
-        d = abs(prob.cmap.T) @ d
-        per = d.reshape(prob.n, 3).sum(axis=1)
-    else:
-        full = np.zeros(3 * prob.n)
-        full[prob.free] = d
-        per = full.reshape(prob.n, 3).sum(axis=1)
+    cm = prob.cmap                  # each unknown's share spread on its particles
+    per = (cm.expand(d) if cm.trivial else (abs(cm.T) @ d).reshape(-1, 3)).sum(axis=1)
     moving = mech.mechanism_particles(per)
     parts = mech.clusters(scene, moving, prob.pairs[0], prob.pairs[1])
     named = "; ".join(mech.where(scene, c) for c in parts[:mech.NAMED])
@@ -673,6 +664,10 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
         f"unknowns")
     lin, factorizations, solver = None, 0, ""
     mu, spread, stalled, least = REGULARIZATION, True, 0, None
+
+    def unbalanced_of(x: np.ndarray) -> np.ndarray:
+        return cmap.unbalanced(forces(scene, x, prob.pairs, prob.F_ext, prob.m))
+
     try:
         while True:
             f = forces(scene, p, prob.pairs, prob.F_ext, prob.m)
@@ -699,7 +694,7 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
             # residual is small (the step leaves rtol·‖b‖ unbalanced: a tenth of what
             # settling allows)
             rtol = min(1e-2, max(1e-10, 0.1 * tolerance / rel))
-            if it == 0 and first is not None and mu == REGULARIZATION:
+            if it == 0 and first is not None:
                 lin, dx = first
                 factorizations += 1
             else:
@@ -715,8 +710,7 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
             accepted, step = None, cmap.expand(dx)
             while spread:
                 trial = p + step
-                ut = cmap.unbalanced(forces(scene, trial, prob.pairs, prob.F_ext, prob.m))
-                r2 = float(np.linalg.norm(ut))
+                r2 = float(np.linalg.norm(unbalanced_of(trial)))
                 if np.isfinite(r2) and r2 < norm0:
                     accepted = trial
                     break
@@ -745,8 +739,7 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
                 scale, best = 1.0, None
                 for _ in range(10):
                     trial = p + scale * step
-                    ft = forces(scene, trial, prob.pairs, prob.F_ext, prob.m)
-                    r = float(np.linalg.norm(cmap.unbalanced(ft), axis=1).max())
+                    r = float(np.linalg.norm(unbalanced_of(trial), axis=1).max())
                     if np.isfinite(r) and (best is None or r < best[0]):
                         best = (r, trial)
                     if np.isfinite(r) and r <= GROWTH * worst:

@@ -348,10 +348,15 @@ class Volume(Operator):
         return d, r, r - t.L
 
     @staticmethod
+    def term_energies(p, t: VolumeTerms) -> np.ndarray:
+        """½·κ·θ² of each term (an energy per unit mass of its owner)."""
+        th = t.C @ Volume.extensions(p, t)[2]
+        return 0.5 * t.kappa * th * th
+
+    @staticmethod
     def energy(p, t: VolumeTerms) -> float:
         """U/m = Σ ½·κ·θ² (an energy per unit mass)."""
-        th = t.C @ Volume.extensions(p, t)[2]
-        return float(0.5 * np.sum(t.kappa * th * th))
+        return float(np.sum(Volume.term_energies(p, t)))
 
     @staticmethod
     def pulls(p, t: VolumeTerms):
