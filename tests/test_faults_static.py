@@ -301,8 +301,8 @@ def test_fea_without_boundary_npz_rebuilds_a_scene_file_named_like_a_built_in(tm
     bare = tmp_path / "bare"
     shutil.copytree(out, bare)
     (bare / "boundary.npz").unlink()
-    for d in (out, bare):
-        r = rs("fea", d, timeout=HANG_S)
+    for d in (out, bare):        # the boundary's source is the point, not the FE's size
+        r = rs("fea", d, "--no-converge", timeout=HANG_S)
         assert r.returncode == 0, r.stderr
     import numpy as np
 

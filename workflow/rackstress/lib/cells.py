@@ -24,6 +24,10 @@ def _candidates(a: np.ndarray, b: np.ndarray, r: float, half: bool):
     kb = (cb[:, 0] * np.uint64(s1) + cb[:, 1]) * np.uint64(s2) + cb[:, 2]
     order = np.argsort(kb, kind="stable")
     ks = kb[order]
+    # the queries in key order too: a sorted needle array is searched in cache order (4 M
+    # points: 0.8 s a search unsorted, a tenth of that sorted)
+    by = order if half else np.argsort(ka, kind="stable")
+    ka = ka[by]
     for d in np.ndindex(3, 3, 3):
         dx, dy, dz = (x - 1 for x in d)
         if half and (dx, dy, dz) < (0, 0, 0):
@@ -33,7 +37,7 @@ def _candidates(a: np.ndarray, b: np.ndarray, r: float, half: bool):
         n = np.searchsorted(ks, ka + off, "right") - first
         if not n.any():
             continue
-        i = np.repeat(np.arange(len(ka)), n)
+        i = np.repeat(by, n)
         j = np.repeat(first, n) + np.arange(len(i)) - np.repeat(np.cumsum(n) - n, n)
         j = order[j]
         if half and off == 0:
