@@ -1442,6 +1442,19 @@ def bench_cantilever(out, quick):
     click.echo(cantilever.report(data))
 
 
+@bench.command("dynamics")
+@_bench_out
+@click.option("--quick", is_flag=True, help="Spacing 2 mm only.")
+def bench_dynamics(out, quick):
+    """Time stepping in physical units against analytical answers: the cantilever's free
+    vibration (f1–f3 against Timoshenko and Euler–Bernoulli) and a bar striking a wall (the
+    stress wave ρ·c·v and its arrival), at spacings 2, 1.25 and 1 mm
+    (docs/benchmarks/dynamics.md)."""
+    from rackstress.bench import dynamics
+
+    dynamics.run_bench(out, spacings=(2.0,) if quick else dynamics.SPACINGS, echo=click.echo)
+
+
 @bench.command("lattice")
 @_bench_out
 @click.option("--quick", is_flag=True, help="Spacings 2 and 1 only.")
