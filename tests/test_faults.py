@@ -457,21 +457,59 @@ def test_final_step_is_always_dumped_on_lammps(tmp_path):
     assert frames(trajectory(out)) == [0, 10, 20, 25]
 
 
+PHASES = """name = "phases"
+dt = 0.01
+
+[[group]]
+name = "a"
+kind = "part"
+positions = [[0, 0, 0], [1.5, 0, 0], [0, 1.5, 0], [0, 0, 1.5]]
+radius = 0.5
+
+[[operator]]
+on = "a"
+op = "bind"
+from = "a"
+c = 1.0
+
+[[operator]]
+on = "a"
+op = "dampen"
+c = 1.0
+extra = 1.0
+when = { k = [1] }
+
+[[phase]]
+name = "one"
+steps = 600
+vars = { k = 1 }
+
+[[phase]]
+name = "two"
+steps = 600
+vars = { k = 2 }
+"""
+
+
 def test_any_number_of_steps_costs_no_memory_up_front(tmp_path):
-    """``--steps 1000000000000``: the memory of the run stays flat as it works. Measured over
-    work, not time: the process's memory once 1,200 steps are done (the first phase's compiled
-    kernels loaded), then once one more phase of 1,200 is (was: one Phase object per 1,200
-    steps kept, ~35 MB a second of running on a quiet machine, about these steps' time)."""
+    """``--steps 1000000000000`` on the reference engine: the memory of the run stays flat as
+    it works (was: one Phase object per 1,200 steps kept, ~35 MB a second of running). A
+    schedule of two 600-step phases, its damping switched by the phase, on four particles:
+    measured over work, not time — the process's memory once 12,000 steps are done (20 phase
+    switches: every kernel loaded), then once 108,000 more are (180 more switches: a phase
+    that left 110 kB behind would pass 20 MB)."""
+    scene = tmp_path / "phases.toml"
+    scene.write_text(PHASES)
     out = tmp_path / "r"
-    p = subprocess.Popen([RS, "run", "plane-bound", "--engine", "reference", "--steps",
+    p = subprocess.Popen([RS, "run", scene, "--engine", "reference", "--steps",
                           "1000000000000", "--restart-every", "0", "--dump-every", "600",
                           "--out", str(out), *QUIET], stdout=subprocess.DEVNULL,
                          stderr=subprocess.PIPE)
 
     try:
-        assert wait_for(lambda: steps_done(out, 600) >= 1200, proc=p)
+        assert wait_for(lambda: steps_done(out, 600) >= 12000, proc=p)
         first = rss(p.pid)
-        assert wait_for(lambda: steps_done(out, 600) >= 2400, proc=p)
+        assert wait_for(lambda: steps_done(out, 600) >= 120000, proc=p)
         assert p.poll() is None
         assert rss(p.pid) - first < 20e6
     finally:

@@ -15,7 +15,7 @@ import pytest
 from conftest import HANG_S, dump_text, trajectory
 
 from conftest import child_cpu
-from test_faults import (QUIET, RS, fill, frames, leftovers, rs, rss, steps_done,  # noqa: F401
+from test_faults import (PHASES, QUIET, RS, fill, frames, leftovers, rs, rss, steps_done,  # noqa: F401
                          tmpfs, wait_for)
 
 
@@ -112,18 +112,23 @@ def frames_of(text):
 @pytest.mark.lammps
 def test_any_number_of_steps_costs_no_memory_up_front_on_lammps(tmp_path):
     """``--steps 1000000000000`` on LAMMPS: the deck's schedule was built eagerly (MemoryError
-    after minutes); now its in.lammps is a few lines and the run's memory stays flat. Measured
-    over work, not time: the memory once 10,000 steps are done, then once 30,000 more are."""
+    after minutes); now its in.lammps is a few lines and the run's memory stays flat. The two
+    600-step phases of test_faults.PHASES (damping switched by the phase), measured over work,
+    not time: the memory once 120,000 steps are done (200 phase switches), then once 1,080,000
+    more are (1,800 more switches, each a LAMMPS ``run`` and a velocity shift: a switch that
+    left 11 kB behind would pass 20 MB)."""
+    scene = tmp_path / "phases.toml"
+    scene.write_text(PHASES)
     out = tmp_path / "r"
     err = tmp_path / "stderr"
-    p = subprocess.Popen([RS, "run", "plane-bound", "--steps", "1000000000000",
-                          "--restart-every", "0", "--dump-every", "5000", "--out", str(out),
+    p = subprocess.Popen([RS, "run", scene, "--steps", "1000000000000",
+                          "--restart-every", "0", "--dump-every", "600", "--out", str(out),
                           *QUIET], stdout=subprocess.DEVNULL, stderr=err.open("w"))
 
     try:
-        assert wait_for(lambda: steps_done(out, 5000) >= 10000, proc=p), err.read_text()
+        assert wait_for(lambda: steps_done(out, 600) >= 120000, proc=p), err.read_text()
         first = rss(p.pid)
-        assert wait_for(lambda: steps_done(out, 5000) >= 40000, proc=p), err.read_text()
+        assert wait_for(lambda: steps_done(out, 600) >= 1200000, proc=p), err.read_text()
         assert p.poll() is None, err.read_text()
         assert rss(p.pid) - first < 20e6
         assert len((out / "in.lammps").read_text().splitlines()) < 200

@@ -1577,6 +1577,10 @@ TEACH = {
         "rackstress bench cantilever --quick --out /tmp/bench",
         "rackstress bench cantilever --out docs/benchmarks",
     ]),
+    "bench dynamics": ("Vibration and a stress wave in physical units, against theory.", [
+        "rackstress bench dynamics --quick --out /tmp/bench",
+        "rackstress bench dynamics --out docs/benchmarks",
+    ]),
     "bench static": ("The static solve's time and memory, direct against AMG-CG.", [
         "rackstress bench static --quick --out /tmp/bench",
         "rackstress bench static --scene my-part.toml --out docs/benchmarks",

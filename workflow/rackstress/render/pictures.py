@@ -1483,9 +1483,27 @@ def stress_figure(run, values, label, coloured, peak):
     ax.set_xlabel("iteration")
     ax.set_ylabel(label.replace(" [", "\n["))
     ax.set_title(f"{run.scene.get('scene', '')}: stress per part over time")
+    timed = _time_axis(ax, run)
     ax.legend(fontsize=7, ncol=2)
-    fig.subplots_adjust(left=0.14, right=0.98, bottom=0.12, top=0.92)
+    fig.subplots_adjust(left=0.14, right=0.98, bottom=0.12, top=0.82 if timed else 0.92)
     return fig
+
+
+def _time_axis(ax, run) -> bool:
+    """A physical-units run's time on the top axis (iteration × dt, in s, ms or µs as its
+    length asks), beside the iterations; whether there is one."""
+    units = run.scene.get("units") if isinstance(run.scene, dict) else None
+    dt = float(run.scene.get("dt") or 0.0) if isinstance(run.scene, dict) else 0.0
+    if not isinstance(units, dict) or not units.get("time") or not dt > 0 or not len(run.steps):
+        return False
+    total = dt * float(max(run.steps[-1], 1))
+    scale, name = next(((f, n) for f, n in ((1.0, ""), (1e3, "m"), (1e6, "µ"), (1e9, "n"))
+                        if total * f >= 1.0), (1e9, "n"))
+    k = dt * scale
+    top = ax.secondary_xaxis("top", functions=(lambda it: it * k, lambda t: t / k))
+    top.set_xlabel(f"time [{name}{units['time']}]", fontsize=8)
+    top.tick_params(labelsize=7)
+    return True
 
 
 def com_figure(motion, coloured):
