@@ -3,6 +3,8 @@ docs/benchmarks/dynamics.md): the cantilever's free vibration and a bar striking
 LAMMPS as ``rackstress run`` steps them."""
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -45,3 +47,41 @@ def test_a_bar_striking_a_wall_carries_rho_c_v_at_the_bar_speed():
     assert r["sigma_expected"] == pytest.approx(-2.7e-9 * c * 1000.0, rel=1e-12)
     assert r["sigma_plateau"] == pytest.approx(-13.75, rel=0.02)
     assert r["arrival"] == pytest.approx(50.0 / c, rel=0.02)
+
+
+@pytest.mark.lammps
+def test_a_runs_peaks_over_time_per_particle_and_when(tmp_path):
+    """``rackstress run`` of a dynamic scene writes vtk/peaks_over_time.vtp: each particle's
+    largest von Mises stress over the frames (equal to the series' own frame-by-frame values,
+    read back by pyvista) and its time; no particle of the struck bar peaks before the wave
+    can reach it (x/c, c = √(E/ρ): the front's precursor travels at most at the lattice's
+    longitudinal speed, within 10 % of it for this bar)."""
+    import subprocess
+    import sys
+
+    import pyvista as pv
+
+    out = tmp_path / "impact"
+    r = subprocess.run([sys.executable, "-m", "rackstress.cli", "run", str(dynamics.IMPACT),
+                        "--out", str(out), "--dump-every", "5", "--no-render", "--no-progress"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    peaks = pv.read(out / "vtk" / "peaks_over_time.vtp")
+    series = pv.get_reader(out / "vtk" / "run.pvd")
+    frames, steps = [], []
+    for t in series.time_values:
+        series.set_active_time_value(t)
+        m = series.read()[0]
+        frames.append(np.asarray(m.point_data["von_mises"])[np.argsort(m.point_data["id"])])
+        steps.append(int(round(t)))
+    V = np.array(frames)
+    order = np.argsort(peaks["id"])
+    assert np.allclose(peaks["von_mises_max"][order], V.max(axis=0), rtol=1e-6, atol=1e-6)
+    k = np.asarray(peaks["von_mises_max_iteration"])[order]
+    assert np.array_equal(k, np.asarray(steps)[V.argmax(axis=0)])
+    dt = float(json.loads((out / "summary.json").read_text())["dt"])
+    assert np.allclose(peaks["von_mises_max_time"], peaks["von_mises_max_iteration"] * dt)
+    x = np.asarray(peaks.points)[:, 0]
+    c = np.sqrt(70000.0 / 2.7e-9)
+    far = x > 10.0
+    assert (np.asarray(peaks["von_mises_max_time"])[far] >= 0.9 * x[far] / c).all()

@@ -670,6 +670,11 @@ def postprocess(rundir, vtk: bool = True, dump: bool = False, progress: bool = F
             info.pop("notes")
         extra = ((SURFACE_VTP, lambda path: write_surface(surfs, path)),)
         info["files"]["surface"] = f"{VTK_DIR}/{SURFACE_VTP}"
+    elif vtk and vtk_format == "paraview" and len(fields.steps) > 1:
+        # a run in time: each particle's peak over the frames, and when (export.py)
+        extra = ((export.PEAKS_VTP, lambda path: export.write_peaks_over_time(run, fields,
+                                                                               path)),)
+        info["files"]["peaks_over_time"] = f"{VTK_DIR}/{export.PEAKS_VTP}"
     if vtk and background:
         from rackstress.lib.runfiles import PVD
 
