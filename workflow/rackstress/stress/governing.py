@@ -503,10 +503,11 @@ def _where(rec: dict) -> str:
 
 
 def describe(gov: dict | None, sing: dict | None, error: dict | None,
-             headline: bool = True) -> list:
+             headline: bool = True, static: bool = True) -> list:
     """Terminal lines: the governing stress as the headline (``headline`` False: left to the
     caller), its safety factor and zone, the error bar, and the singular peak beside it
-    (spacing-dependent, with advice)."""
+    (spacing-dependent, with advice). ``static`` False (a run in time): ``--refine``, which
+    refines static parts only, is not offered."""
     lines = []
     if gov:
         u = gov["units"]
@@ -531,7 +532,8 @@ def describe(gov: dict | None, sing: dict | None, error: dict | None,
             lines.append(f"    may be off by about ±{100 * abs(error['relative']):.2g} % at this "
                          f"spacing (the part is {error['thickness']:.3g} "
                          f"{gov.get('length_units', '')} thick there; "
-                         "rackstress bench governing); rackstress run --refine measures it")
+                         "rackstress bench governing)"
+                         + ("; rackstress run --refine measures it" if static else ""))
     if sing:
         lines.append(f"  singular peak {sing['value']:.4g} {sing['units']} at a "
                      f"{sing['kind']}, {_where(sing)}: spacing-dependent, not a property of "

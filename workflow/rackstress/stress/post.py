@@ -853,7 +853,7 @@ def describe_governing(info: dict) -> list:
         return []           # not an equilibrium: no stress as a result (describe_static)
     head = (info.get("static") or {}).get("headline")
     lines = gov_lines(info.get("governing"), info.get("singular"), info.get("error"),
-                      headline=head is None)
+                      headline=head is None, static=info.get("static") is not None)
     if head is not None:
         from rackstress.stress.headline import headline_text
 
