@@ -1448,7 +1448,7 @@ def bench_cantilever(out, quick):
 def bench_dynamics(out, quick):
     """Time stepping in physical units against analytical answers: the cantilever's free
     vibration (f1–f3 against Timoshenko and Euler–Bernoulli) and a bar striking a wall (the
-    stress wave ρ·c·v and its arrival), at spacings 2, 1.25 and 1 mm
+    stress wave ρ·c·v and its arrival) and two bars in contact, at spacings 2, 1.25 and 1 mm
     (docs/benchmarks/dynamics.md)."""
     from rackstress.bench import dynamics
 

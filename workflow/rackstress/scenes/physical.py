@@ -321,6 +321,79 @@ def solids(ctx, groups: dict, operators: dict, u) -> dict:
     return {name: out[name] for name in groups if name in out}
 
 
+#: ``[[contact]]`` keys
+_CONTACT_KEYS = ("between", "stiffness")
+
+
+def contact_stiffness(m1, m2, a: float, factor: float = 1.0) -> float:
+    """k = factor·E*·a: the stiffness of one particle pair in contact, E* = 1/((1 − ν₁²)/E₁ +
+    (1 − ν₂²)/E₂) the pair's contact modulus (Hertz's) and ``a`` the spacing (the mean of the
+    two parts'). A contact pair per a² of face makes the interface as compliant as a layer
+    of thickness a/factor of modulus E*: about one lattice layer of either part at factor 1,
+    so contact neither softens the parts much nor stiffens the scene beyond its bindings (a
+    binding of the calibrated lattice is 0.4·E·a), and the time step the stability
+    prediction gives stays the lattice's (docs/calibration.md "Contact").
+
+    ``m1``, ``m2`` are the two materials in the scene's units (``Material.in_units``).
+
+    Example
+    -------
+    >>> al = {"E": 70000.0, "nu": 0.33}
+    >>> round(contact_stiffness(al, al, 2.0), 1)                  # E* = E/(2(1 − ν²))
+    78554.6
+    """
+    e_star = 1.0 / ((1 - m1["nu"] ** 2) / m1["E"] + (1 - m2["nu"] ** 2) / m2["E"])
+    return float(factor * e_star * a)
+
+
+def contacts(ctx, tables, groups: dict, operators: dict, u) -> dict:
+    """``[[contact]]``: two material parts that may touch, each pushed off the other by the
+    paper's ``collide`` (Eq. 10, c·(u − p)·min(0, 1 − R²/d²), R the sum of the radii: zero at
+    first touch, 2·c·m per unit of overlap there) with c from the materials instead of a paper
+    acceleration: each side's c = k/(2·m) with k = :func:`contact_stiffness`, so that the two
+    forces of a pair are equal and opposite whatever the particles weigh."""
+    from rackstress.model.operators import Collide, Const
+    from rackstress.scenes.fields import _array_of_tables, _check_keys, _number, _string
+
+    out = {name: list(seq) for name, seq in operators.items()}
+    for k, t in enumerate(_array_of_tables(ctx, tables, "contact"), 1):
+        c = ctx.at(f"[[contact]] #{k}")
+        if "friction" in t:
+            raise c.error("Coulomb friction is not modelled: contact is frictionless (the "
+                          "paper's collide pushes along the line of centres only); remove "
+                          "'friction'", "friction")
+        _check_keys(c, t, _CONTACT_KEYS)
+        pair = t.get("between")
+        if not (isinstance(pair, list) and len(pair) == 2):
+            raise c.error("'between' must name two groups, e.g. between = [\"bracket\", "
+                          "\"floor\"]", "between")
+        names = [_string(c, x, "between") for x in pair]
+        if names[0] == names[1]:
+            raise c.error(f"a part in contact with itself ('{names[0]}') is not modelled: "
+                          "name two different groups", "between")
+        parts = []
+        for name in names:
+            if name not in groups:
+                raise c.error(f"unknown group '{name}' (groups: {', '.join(groups)})",
+                              "between")
+            g = groups[name]
+            if g.material is None or "spacing" not in g.meta:
+                raise c.error(f"group '{name}' is not a material part (a [[group]] with a "
+                              "material, filled at a spacing): contact is derived from the "
+                              "two materials; between paper groups use [[operator]] op = "
+                              "\"collide\" with its own c", "between")
+            parts.append(g)
+        factor = _number(c, t.get("stiffness", 1.0), "stiffness", positive=True)
+        mats = [g.material.in_units(u) for g in parts]
+        a = 0.5 * (float(parts[0].meta["spacing"]) + float(parts[1].meta["spacing"]))
+        kc = contact_stiffness(mats[0], mats[1], a, factor)
+        for me, other in ((0, 1), (1, 0)):
+            m = parts[me].mass(u)
+            out.setdefault(names[me], []).append(
+                Collide(names[other], Const(kc / (2.0 * m))))
+    return {name: out[name] for name in groups if name in out}
+
+
 def ramp_of(ctx, tables):
     """The ramp time shared by the scene's loads (one ramp per scene), or None."""
     ramps = {float(t["ramp"]) for t in tables if isinstance(t, dict) and "ramp" in t

@@ -98,7 +98,7 @@ OVERRIDABLE = ("dt", "steps", "duration", "cycles", "bound")
 STATIC_UNUSED = ("dt", "steps", "duration", "cycles")
 
 _TOP_KEYS = ("name", "dt", "cycles", "bound", "steps", "duration", "params", "group",
-             "operator", "phase", "units", "analysis", "load", "support", "budget")
+             "operator", "phase", "units", "analysis", "load", "support", "budget", "contact")
 #: ``--set`` keys of every explicit scene besides OVERRIDABLE, unless its [params] has them:
 #: ``spacing`` (every filled part's lattice spacing) and ``budget`` (the particles a part
 #: whose spacing is chosen from its walls may have)
@@ -509,6 +509,7 @@ def _build_explicit(ctx: _Ctx, data: dict, overrides: dict, user: dict) -> Scene
     operators = physical.solids(ctx, groups, operators, unit_system)
     operators = physical.loads(ctx, data.get("load", []), groups, operators, unit_system,
                                select, ramp)
+    operators = physical.contacts(ctx, data.get("contact", []), groups, operators, unit_system)
     analysis = physical.analysis_of(ctx, data, groups, operators, ramp)
     physical.check_constraints(ctx, groups, analysis)
 
