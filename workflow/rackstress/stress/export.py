@@ -513,8 +513,9 @@ PEAKS_VTP = "peaks_over_time.vtp"
 
 
 def write_peaks_over_time(run, fields, path) -> None:
-    """``vtk/peaks_over_time.vtp``: every particle at its original position with each
-    measure's largest value over the run's frames (``<measure>_max``), the iteration it was
+    """``vtk/peaks_over_time.vtp`` (a run in time with a material part): every particle at
+    its original position with each measure's largest value over the run's frames
+    (``<measure>_max``), the iteration it was
     reached at (``<measure>_max_iteration``, the first where it ties) and, in a physical-units
     run, its time (``<measure>_max_time``, iteration × dt): where and when a moving part was
     stressed most, beside the frame-by-frame series. A particle never finite has NaN.

@@ -670,8 +670,10 @@ def postprocess(rundir, vtk: bool = True, dump: bool = False, progress: bool = F
             info.pop("notes")
         extra = ((SURFACE_VTP, lambda path: write_surface(surfs, path)),)
         info["files"]["surface"] = f"{VTK_DIR}/{SURFACE_VTP}"
-    elif vtk and vtk_format == "paraview" and len(fields.steps) > 1:
-        # a run in time: each particle's peak over the frames, and when (export.py)
+    elif vtk and vtk_format == "paraview" and len(fields.steps) > 1 and \
+            "von_mises" in fields.values:
+        # a material part in time: each particle's peak over the frames, and when
+        # (export.py; the paper's scenes, without a material, write what they wrote)
         extra = ((export.PEAKS_VTP, lambda path: export.write_peaks_over_time(run, fields,
                                                                                path)),)
         info["files"]["peaks_over_time"] = f"{VTK_DIR}/{export.PEAKS_VTP}"
