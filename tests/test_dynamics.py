@@ -85,6 +85,17 @@ def test_a_runs_peaks_over_time_per_particle_and_when(tmp_path):
     assert np.array_equal(k, np.asarray(steps)[V.argmax(axis=0)])
     dt = float(json.loads((out / "summary.json").read_text())["dt"])
     assert np.allclose(peaks["von_mises_max_time"], peaks["von_mises_max_iteration"] * dt)
+    # the governing stress frame by frame (the plot's line): its largest over the frames is the
+    # run's governing stress, which summary.json found frame by frame in a loop of its own
+    from rackstress.stress.governing import over_time
+    from rackstress.stress.post import compute_fields
+    from rackstress.stress.rundata import load_run
+
+    run = load_run(out)
+    series = over_time(run, compute_fields(run, cache=True).values["von_mises"])
+    gov = json.loads((out / "summary.json").read_text())["stress"]["governing"]
+    assert np.nanmax(series["bar"]) == pytest.approx(gov["value"], rel=1e-12)
+    assert len(series["bar"]) == len(steps)
     x = np.asarray(peaks.points)[:, 0]
     c = np.sqrt(70000.0 / 2.7e-9)
     far = x > 10.0

@@ -1476,6 +1476,18 @@ def stress_figure(run, values, label, coloured, peak):
                                                                                  1), np.nan)
         ax.plot(steps, vmax, color=colour, label=f"{part.name} max")
         ax.plot(steps, vmean, color=colour, ls="--", label=f"{part.name} mean")
+    if label.startswith(LABELS["von_mises"][0]):
+        # the governing stress (away from singular points) frame by frame (stress/governing)
+        from rackstress.stress.governing import over_time
+
+        try:
+            gov = over_time(run, values)
+        except Exception:  # noqa: BLE001 - a plot line, not a result: the max stays drawn
+            gov = {}
+        for k, part in enumerate(coloured):
+            if part.name in gov and np.isfinite(gov[part.name]).any():
+                ax.plot(steps, gov[part.name], color=f"C{k % 10}", ls=":", lw=1.6,
+                        label=f"{part.name} governing")
     pk = peak
     if pk:
         ax.plot([pk["iteration"]], [pk["value"]], "k*", ms=12,

@@ -222,6 +222,27 @@ def _frames_governing(vm: np.ndarray, o: np.ndarray, singular: Singular, z: floa
     return best, sbest
 
 
+def over_time(run, vm: np.ndarray) -> dict:
+    """The governing stress of each material part frame by frame: the largest of ``vm``
+    (frames × particles, von Mises) at least the part's zone away from its singular points,
+    read where the measure reads it — :func:`record`'s rule, so its largest over the frames
+    is the run's governing stress. ``{part: (frames,) array}`` (NaN where no particle is
+    finite); what the stress-over-time plot draws beside the plain maximum."""
+    from rackstress.stress.tensor import part_recovery_points
+
+    out = {}
+    for name, (spacing, wall, s) in singular_set(run).items():
+        if name not in run.parts:
+            continue
+        idx = run.parts[name].index
+        d, _ = s.distance(part_recovery_points(run.o[idx]))
+        v = np.asarray(vm[:, idx], float)
+        ok = np.isfinite(v) & (d >= zone(spacing, wall))[None, :]
+        best = np.where(ok, v, -np.inf).max(axis=1)
+        out[name] = np.where(np.isfinite(best), best, np.nan)
+    return out
+
+
 def _near(features, x):
     if features is None:
         return None
