@@ -46,7 +46,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rackstress.errors import SceneError
-from rackstress.model.operators import Bind, Dampen, Force
+from rackstress.model.operators import Bind, Collide, Const, Dampen, Force
 from rackstress.model.volume import Volume, volume_terms
 
 #: settled when the largest unbalanced particle force ≤ TOLERANCE × total applied load
@@ -90,6 +90,8 @@ def check_static(scene) -> None:
                 continue
             if isinstance(op, Force) and not op.when:
                 continue
+            if is_contact(scene, target, op):
+                continue               # two material parts' contact: a penalty (_pairs_at)
             raise SceneError(
                 f"scene '{scene.name}': static analysis finds the equilibrium of bindings under "
                 f"constant loads; '{op.label()}' on '{target}' is not one (collisions, "
@@ -132,6 +134,75 @@ def _bind_pairs(scene):
     return np.concatenate(I), np.concatenate(J), np.concatenate(C), np.concatenate(Q)
 
 
+def is_contact(scene, target: str, op) -> bool:
+    """Whether ``op`` on ``target`` is one side of two material parts' contact (``[[contact]]``,
+    :func:`rackstress.scenes.physical.contacts`): a collide with a constant c between two parts
+    with materials, the other side's collide there too with the same c·m, so that each pair's
+    two forces are equal and opposite and its tangent symmetric."""
+    if not (isinstance(op, Collide) and isinstance(op.coeff, Const) and not op.when):
+        return False
+    gt, gs = scene.groups[target], scene.groups.get(op.source)
+    if gs is None or gt.material is None or gs.material is None or op.source == target:
+        return False
+    mt, ms = gt.mass(scene.units), gs.mass(scene.units)
+    return any(isinstance(o, Collide) and isinstance(o.coeff, Const) and o.source == target
+               and not o.when and abs(o.coeff.c * ms - op.coeff.c * mt)
+               <= 1e-9 * abs(op.coeff.c * mt)
+               for o in scene.operators.get(op.source, []))
+
+
+def _contacts(scene) -> tuple:
+    """Each side of every material contact: (target slice, source slice, c, the target's and
+    the source's radii)."""
+    out = []
+    for target, seq in scene.operators.items():
+        for op in seq:
+            if is_contact(scene, target, op):
+                out.append((scene.slice(target), scene.slice(op.source), float(op.coeff.c),
+                            np.asarray(scene.groups[target].r, float),
+                            np.asarray(scene.groups[op.source].r, float)))
+    return tuple(out)
+
+
+def _pairs_at(prob: "_Problem", p: np.ndarray, slack: float = 0.0):
+    """The bindings' pairs and, with contact, every pair of the two parts in contact at ``p``:
+    closer than the sum of their radii R (× (1 + ``slack``): a tangent also takes the pairs
+    that just touch, whose force is zero and whose stiffness 2·c·m along the line of centres
+    is not). In contact, Eq. 10 is Eq. 12 with L0 = R, so a pair enters as a binding with
+    q = R² (forces, tangent); its force is zero at d = R and it is dropped beyond."""
+    if not prob.contact:
+        return prob.pairs
+    from scipy.spatial import cKDTree
+
+    I, J, C, Q = ([x] for x in prob.pairs)
+    for st, ss, c, rt, rs in prob.contact:
+        reach = float(rt.max() + rs.max()) * (1.0 + slack)
+        dm = cKDTree(p[st]).sparse_distance_matrix(cKDTree(p[ss]), reach,
+                                                   output_type="ndarray")
+        i, j, d = dm["i"].astype(np.int64), dm["j"].astype(np.int64), dm["v"]
+        R2 = (rt[i] + rs[j]) ** 2
+        keep = d * d <= R2 * (1.0 + slack) ** 2
+        I.append(i[keep] + st.start)
+        J.append(j[keep] + ss.start)
+        C.append(np.full(int(keep.sum()), c))
+        Q.append(R2[keep])
+    return (np.concatenate(I), np.concatenate(J), np.concatenate(C), np.concatenate(Q))
+
+
+def contact_energy(prob: "_Problem", p: np.ndarray) -> float:
+    """The contacts' potential at ``p``: per pair in contact m·c·((d² − R²)/2 − R²·ln(d/R))
+    (Eq. 10's, zero at d = R; each pair listed from both ends, so halved)."""
+    if not prob.contact:
+        return 0.0
+    I, J, C, Q = _pairs_at(prob, p)
+    n = len(prob.pairs[0])
+    I, J, C, Q = I[n:], J[n:], C[n:], Q[n:]
+    d2 = np.einsum("ij,ij->i", p[J] - p[I], p[J] - p[I])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        e = prob.m[I] * C * (0.5 * (d2 - Q) - 0.5 * Q * np.log(d2 / Q))
+    return float(0.5 * np.sum(e))
+
+
 def forces(scene, p: np.ndarray, pairs, F_ext: np.ndarray, m: np.ndarray) -> np.ndarray:
     """m·a(p): the bindings' force (Eq. 12) and the material parts' volumetric term
     (:func:`volume_force`) plus the external loads, n×3."""
@@ -156,6 +227,8 @@ def energy_change(prob: "_Problem", p: np.ndarray, trial: np.ndarray) -> float:
     with np.errstate(divide="ignore", invalid="ignore"):
         bind = 0.5 * np.sum(prob.m[I] * C * (0.5 * (r1 - r0) - 0.5 * Q * np.log(r1 / r0)))
     out = float(bind) - float(np.sum(prob.F_ext * (trial - p)))
+    if prob.contact:
+        out += contact_energy(prob, trial) - contact_energy(prob, p)
     vol = prob.volume
     if vol is not None:
         m = prob.m[vol.owner]
@@ -247,6 +320,9 @@ ANCHOR = 1e-14
 #: a trial step may leave up to this many times the unbalanced force it started from (a full
 #: Newton step from the undeformed state under a large load overshoots before it settles)
 GROWTH = 4.0
+#: a contact pair within (1 + this) × the sum of the radii is in the tangent (just touching:
+#: no force yet, but its stiffness along the line of centres)
+CONTACT_SLACK = 1e-6
 #: what check_part found per scene (by id, dropped with the scene): warnings, first step
 _CHECKS: dict = {}
 
@@ -270,6 +346,8 @@ class _Problem:
     volume: object = None
     #: the bindings' Laplacian on the free unknowns (:func:`_spread`), built on first use
     spread: object = None
+    #: the material contacts (:func:`_contacts`): their pairs change with p (:func:`_pairs_at`)
+    contact: tuple = ()
 
 
 def _problem(scene) -> _Problem:
@@ -280,7 +358,7 @@ def _problem(scene) -> _Problem:
     F = external_forces(scene)
     return _Problem(len(o), o, scene.masses(), fixed, ~fixed.reshape(-1), _bind_pairs(scene),
                     F, float(np.linalg.norm(F, axis=1).sum()), ConstraintMap.of_scene(scene),
-                    volume_terms(scene))
+                    volume_terms(scene), contact=_contacts(scene))
 
 
 def _spread(prob: _Problem):
@@ -308,7 +386,8 @@ def _tangent(p: np.ndarray, prob: _Problem, mu: float = REGULARIZATION, spread: 
     after μ·L stalled); returns K + R and R."""
     import scipy.sparse as sp
 
-    K = prob.cmap.reduce(stiffness(p, prob.pairs, prob.m, volume=prob.volume)).tocsr()
+    K = prob.cmap.reduce(stiffness(p, _pairs_at(prob, p, slack=CONTACT_SLACK), prob.m,
+                                   volume=prob.volume)).tocsr()
     d = K.diagonal()
     pos = d[d > 0]
     floor = 1e-3 * float(pos.mean()) if len(pos) else 1.0
@@ -403,7 +482,8 @@ def _check_bodies(scene, prob: _Problem) -> None:
     held. Raises SceneError naming the first body that is not, and how many more there are."""
     from rackstress.engines import mechanisms as mech
 
-    I, J = prob.pairs[0], prob.pairs[1]
+    # bodies pressed together hold each other (their contact's pairs at the start)
+    I, J = _pairs_at(prob, prob.o, slack=CONTACT_SLACK)[:2]
     from rackstress.model.constraints import supported
 
     count, label = mech.components(prob.n, I, J)
@@ -538,7 +618,7 @@ def check_part(scene, progress: bool = False) -> list[dict]:
     _check_bodies(scene, prob)
     warnings, membrane = _check_particles(scene, prob)
     p = prob.o + scene.prescribed()
-    f = forces(scene, p, prob.pairs, prob.F_ext, prob.m)
+    f = forces(scene, p, _pairs_at(prob, p), prob.F_ext, prob.m)
     b = prob.cmap.restrict(f)
     first = None
     if b.size and np.any(b != 0):
@@ -564,7 +644,7 @@ def reactions(scene, p: np.ndarray) -> np.ndarray:
     """n×3 force each support applies at ``p`` (zero on free directions): −(the bindings' force
     + the loads) on every held direction, so that with them every particle is balanced."""
     prob = _problem(scene)
-    f = forces(scene, p, prob.pairs, prob.F_ext, prob.m)
+    f = forces(scene, p, _pairs_at(prob, p), prob.F_ext, prob.m)
     return -(f - prob.cmap.unbalanced(f))
 
 
@@ -666,11 +746,11 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
     mu, spread, stalled, least = REGULARIZATION, True, 0, None
 
     def unbalanced_of(x: np.ndarray) -> np.ndarray:
-        return cmap.unbalanced(forces(scene, x, prob.pairs, prob.F_ext, prob.m))
+        return cmap.unbalanced(forces(scene, x, _pairs_at(prob, x), prob.F_ext, prob.m))
 
     try:
         while True:
-            f = forces(scene, p, prob.pairs, prob.F_ext, prob.m)
+            f = forces(scene, p, _pairs_at(prob, p), prob.F_ext, prob.m)
             unbalanced = cmap.unbalanced(f)
             if by_reactions:
                 load = float(np.linalg.norm(f - unbalanced, axis=1).sum())
@@ -763,12 +843,36 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
         # a solve that did not settle ends on the least unbalanced state it passed (the
         # restart after a stall may end worse than where μ·L stalled)
         rel, p = least
-    f = forces(scene, p, prob.pairs, prob.F_ext, prob.m)
+    if not settled and prob.contact:
+        _check_separation(scene, prob, p)
+    f = forces(scene, p, _pairs_at(prob, p), prob.F_ext, prob.m)
     return StaticResult(p, settled, it, rel, load, history, time.perf_counter() - t0,
                         reactions=-(f - cmap.unbalanced(f)), solver=lin.kind if lin else "",
                         factorizations=factorizations, warnings=warnings,
                         unbalanced=None if settled else unbalanced_at(
                             scene, prob, cmap.unbalanced(f), load, membrane))
+
+
+def _check_separation(scene, prob: _Problem, p: np.ndarray) -> None:
+    """An unsettled solve with contact: if two parts in contact no longer touch anywhere, the
+    load pulls one off the other (contact pushes, it does not pull) and nothing else holds
+    it: refused, naming them (exit 2), instead of 25 steps on a part that floats away."""
+    names = list(scene.groups)
+    starts = [scene.slice(n).start for n in names]
+    for st, ss, c, rt, rs in prob.contact:
+        from scipy.spatial import cKDTree
+
+        reach = float(rt.max() + rs.max())
+        d, _ = cKDTree(p[ss]).query(p[st], k=1)
+        if np.all(d > reach):
+            a = names[starts.index(st.start)]
+            b = names[starts.index(ss.start)]
+            gap = float(d.min() - reach)
+            _refuse(scene, f"'{a}' and '{b}' separate: the load pulls them apart and contact "
+                           f"pushes, it does not pull (their nearest particles end {gap:.3g} "
+                           "further apart than touching), so nothing holds the part it pulls "
+                           "off. Support that part, reverse the load, or bind the two parts "
+                           "(one group) if they are joined")
 
 
 #: the particles :func:`unbalanced_at` looks at: the largest unbalanced forces

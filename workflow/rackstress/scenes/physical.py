@@ -618,7 +618,8 @@ def exposed(o: np.ndarray, n: np.ndarray, a: float) -> np.ndarray:
 
 def analysis_of(ctx, data: dict, groups: dict, operators: dict, ramp) -> str:
     """``analysis`` as given, else static for a scene with a material and no motion (no
-    initial velocity, no collisions or attractions, no phases, no ramp)."""
+    initial velocity, no collisions or attractions but two material parts' contact, no
+    phases, no ramp)."""
     if "analysis" in data:
         a = data["analysis"]
         if a not in ("static", "dynamic"):
@@ -628,6 +629,9 @@ def analysis_of(ctx, data: dict, groups: dict, operators: dict, ramp) -> str:
     if not any(g.material is not None for g in groups.values()):
         return "dynamic"
     moving = any(np.any(g.v0) for g in groups.values())
-    contact = any(isinstance(op, (Collide, Attract)) or op.when
-                  for seq in operators.values() for op in seq)
+    # two material parts' contact ([[contact]]) is no motion: parts pressed together settle
+    contact = any((isinstance(op, (Collide, Attract)) and not (
+                       isinstance(op, Collide) and groups[t].material is not None
+                       and getattr(groups.get(op.source), "material", None) is not None))
+                  or op.when for t, seq in operators.items() for op in seq)
     return "dynamic" if (moving or contact or ramp is not None or "phase" in data) else "static"

@@ -1,0 +1,132 @@
+"""Two material parts pressed together, solved statically (``[[contact]]`` in a static scene:
+engines/static.py, its contact pairs a penalty that changes with the positions)."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+#: an aluminium block 20 × 10 × 20 mm on a base of the same size, held at the base's bottom
+#: layer; the block may only move along y (its x and z held), pushed down by LOAD newtons on
+#: its top layer; the two touch through [[contact]]
+PRESS = """name = "press"
+units = "mm-N-s"
+
+[params]
+spacing = 2.0
+load = 1000.0
+
+[[group]]
+name = "base"
+fill = { box = { min = [0, 0, 0], max = [20, 10, 20] } }
+spacing = "$spacing"
+origin = ["$(spacing / 2)", "$(spacing / 2)", "$(spacing / 2)"]
+material = "aluminium"
+
+[[group]]
+name = "block"
+fill = { box = { min = [0, 10, 0], max = [20, 20, 20] } }
+spacing = "$spacing"
+origin = ["$(spacing / 2)", "$(10 + spacing / 2)", "$(spacing / 2)"]
+material = "aluminium"
+
+[[support]]
+on = "base"
+where = { box = { min = [-1, -1, -1], max = [21, "$(spacing)", 21] } }
+
+[[support]]
+on = "block"
+fix = ["x", "z"]
+
+[[load]]
+on = "block"
+where = { box = { min = [-1, "$(20 - spacing)", -1], max = [21, 21, 21] } }
+force = [0, "$(-load)", 0]
+
+[[contact]]
+between = ["base", "block"]
+"""
+
+
+def _scene(tmp_path, text=PRESS):
+    from rackstress.scenes import load
+
+    f = tmp_path / "press.toml"
+    f.write_text(text)
+    return f, load(str(f))
+
+
+def test_a_block_pressed_on_a_base_settles_and_carries_its_load_through_the_contact(tmp_path):
+    """Statics alone: the base's support pushes back the whole 1,000 N, and every horizontal
+    layer of the block carries it — the middle layer's mean σ_yy (the bindings' virial over
+    each particle's 2 mm cube) is −F/A = −1000/400 = −2.5 MPa within 1 %. The contact pushes
+    (the two parts overlap, by less than a spacing) and the scene is static by default."""
+    from rackstress.engines import static
+    from rackstress.engines.static import _bind_pairs, support_reactions
+    from rackstress.model.operators import Bind
+
+    _, sc = _scene(tmp_path)
+    assert sc.analysis == "static"
+    res = static.solve(sc)
+    assert res.settled and res.residual <= 1e-6
+    reac = support_reactions(sc, res)["reactions"]
+    base = next(r for r in reac if r["group"] == "base")
+    assert base["force"][1] == pytest.approx(1000.0, rel=1e-5)
+    o, p = sc.original_positions(), res.p
+    blk = sc.slice("block")
+    gap = p[blk, 1].min() - p[sc.slice("base"), 1].max()
+    assert 0 < gap < 2.0                       # pressed: closer than the sum of the radii
+    I, J, C, Q = _bind_pairs(sc)
+    mid = np.flatnonzero(np.isclose(o[:, 1], 15.0) & (np.arange(len(o)) >= blk.start))
+    keep = np.isin(I, mid)
+    f = Bind.accel(p[I[keep]], p[J[keep]], C[keep], Q[keep]) * sc.masses()[I[keep]][:, None]
+    syy = ((p[J[keep], 1] - p[I[keep], 1]) * f[:, 1]).sum() / 2 / (len(mid) * 2.0 ** 3)
+    assert syy == pytest.approx(-2.5, rel=0.01)
+
+
+def test_the_contact_energy_is_the_potential_of_its_forces(tmp_path):
+    """The solver weighs its steps by Π; with the parts pressed into each other (every
+    facing pair in contact) the central difference of Π along a random direction equals −f·v
+    (Eq. 10's kernel, an independent path) to 1e-6 of itself."""
+    from rackstress.engines import static
+
+    _, sc = _scene(tmp_path)
+    prob = static._problem(sc)
+    assert len(prob.contact) == 2              # each side of the contact
+    p = prob.o.copy()
+    p[sc.slice("block"), 1] -= 0.3             # 0.3 mm into the base
+    rng = np.random.default_rng(3)
+    p += 0.01 * rng.standard_normal(p.shape)
+    pairs = static._pairs_at(prob, p)
+    assert len(pairs[0]) > len(prob.pairs[0])  # contact pairs there
+    v = rng.standard_normal(p.shape)
+    f = static.forces(sc, p, pairs, prob.F_ext, prob.m)
+    h = 1e-6
+    slope = static.energy_change(prob, p - h * v, p + h * v) / (2 * h)
+    assert slope == pytest.approx(-np.sum(f * v), rel=1e-6)
+
+
+@pytest.mark.lammps
+def test_pressed_parts_on_lammps_and_pulled_parts_refused(tmp_path):
+    """``rackstress run``: LAMMPS evaluates the contact itself (its lepton pair style) at the
+    solver's equilibrium and agrees (residual ≤ 1e-6); the same scene with the load reversed
+    pulls the block off the base, which contact cannot hold: exit 2 naming both parts, not
+    a run that ends "not settled"."""
+    f, _ = _scene(tmp_path)
+    out = tmp_path / "r"
+    r = subprocess.run([sys.executable, "-m", "rackstress.cli", "run", str(f), "--out", str(out),
+                        "--no-render", "--no-progress"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    s = json.loads((out / "summary.json").read_text())
+    assert s["status"] == "settled" and s["residual_engine"] <= 1e-6
+    assert "pair_style lepton" in (out / "in.lammps").read_text()
+    pull = tmp_path / "pull.toml"
+    pull.write_text(PRESS.replace('force = [0, "$(-load)", 0]', 'force = [0, "$(load)", 0]'))
+    r = subprocess.run([sys.executable, "-m", "rackstress.cli", "run", str(pull), "--out",
+                        str(tmp_path / "p"), "--no-render", "--no-progress"],
+                       capture_output=True, text=True)
+    assert r.returncode == 2, r.stderr
+    assert "'base' and 'block' separate" in r.stderr and "contact" in r.stderr
