@@ -130,3 +130,4 @@ def test_pressed_parts_on_lammps_and_pulled_parts_refused(tmp_path):
                        capture_output=True, text=True)
     assert r.returncode == 2, r.stderr
     assert "'base' and 'block' separate" in r.stderr and "contact" in r.stderr
+    assert "Traceback" not in r.stderr and not (tmp_path / "p" / "summary.json").exists()
