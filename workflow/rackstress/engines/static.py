@@ -18,6 +18,11 @@ and falls when it does (Levenberg–Marquardt): such walls are a nonlinear struc
 (a membrane's force ~ w³), and a plain Newton step there overshoots (18 steps on a gripper jaw
 where the rest settled in two; docs/calibration.md "Static analysis").
 
+Two material parts pressed together (``[[contact]]``: the paper's collide, Eq. 10, its c from
+their materials) are a penalty whose pairs change with the positions: in contact Eq. 10 is
+Eq. 12 with L0 = R, the sum of the radii, so each pair closer than R is taken as a binding of
+that length at every state (:func:`_pairs_at`), and none beyond (docs/calibration.md "Contact").
+
 Before the first step the part is checked (:func:`check_part`, :mod:`rackstress.engines.
 mechanisms`): a body held by nothing, supports that leave a rigid motion free, a load across a
 wall one particle thick or on a mechanism are refused in seconds (SceneError, exit 2) naming
@@ -856,12 +861,12 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
 def _check_separation(scene, prob: _Problem, p: np.ndarray) -> None:
     """An unsettled solve with contact: if two parts in contact no longer touch anywhere, the
     load pulls one off the other (contact pushes, it does not pull) and nothing else holds
-    it: refused, naming them (exit 2), instead of 25 steps on a part that floats away."""
+    it: refused, naming them (exit 2), not reported as a state that did not settle."""
+    from scipy.spatial import cKDTree
+
     names = list(scene.groups)
     starts = [scene.slice(n).start for n in names]
     for st, ss, c, rt, rs in prob.contact:
-        from scipy.spatial import cKDTree
-
         reach = float(rt.max() + rs.max())
         d, _ = cKDTree(p[ss]).query(p[st], k=1)
         if np.all(d > reach):
