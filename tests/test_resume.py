@@ -120,3 +120,26 @@ def test_resume_without_checkpoint_is_refused(tmp_path):
     (tmp_path / "a" / "summary.json").unlink()
     r = _run(["run", "--resume", str(tmp_path / "a"), "--no-render", "--no-progress"])
     assert r.returncode == 2 and "no progress.json" in r.stderr
+
+
+def test_stress_of_a_run_whose_dump_ends_mid_frame_takes_allow_truncated(tmp_path):
+    """A run killed while LAMMPS wrote a frame (made here: its dump cut half-way through the
+    last frame): ``rackstress stress RUNDIR`` refuses it naming the step (exit 2), and with
+    ``--allow-truncated`` analyses the complete frames (exit 0; was: the flag was not passed
+    on for a run directory, so the killed-and-resumed test failed whenever the kill landed
+    mid-frame)."""
+    d = tmp_path / "r"
+    r = _run(["run", "plane-rack", "--steps", "200", "--dump-every", "4", "--dump-text",
+              "--no-render", "--no-progress", "--out", str(d)])
+    assert r.returncode == 0, r.stderr
+    dump = d / "trajectory.dump"
+    text = dump.read_text()
+    last = text.rfind("ITEM: TIMESTEP")
+    dump.write_text(text[:last + (len(text) - last) // 2])
+    (d / "summary.json").unlink()
+    r = _run(["stress", str(d), "--no-progress"])
+    assert r.returncode == 2 and "ends mid-frame at step 200" in r.stderr, r.stderr
+    r = _run(["stress", str(d), "--allow-truncated", "--no-progress"])
+    assert r.returncode == 0, r.stderr
+    assert text.count("ITEM: TIMESTEP") - 1 == \
+        (d / "stress.dump").read_text().count("ITEM: TIMESTEP") == 50

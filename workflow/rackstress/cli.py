@@ -926,7 +926,8 @@ def stress(inputs, out, vtk, write_dump, parts, atom_style, dt, allow_truncated,
             with locked(inputs[0], create=False), \
                     phase("computing the stress measures", progress, ticker=False):
                 info = postprocess(inputs[0], vtk=vtk, dump=write_dump, progress=progress,
-                                   out=out, vtk_format=vtk_format)
+                                   out=out, vtk_format=vtk_format,
+                                   allow_truncated=allow_truncated)
             where = out or inputs[0]
         elif len(inputs) == 2:
             from rackstress.stress.foreign import load_plain
