@@ -55,6 +55,7 @@ def _planar_in(text: str, data: dict) -> str:
 #: page: (module of rackstress.bench, its function from the JSON to the page, the JSON)
 GENERATED = {"accuracy.md": ("accuracy", "markdown", "accuracy.json"),
              "cantilever.md": ("cantilever", "report", "cantilever.json"),
+             "dynamics.md": ("dynamics", "report", "dynamics.json"),
              "e2e.md": ("e2e", "markdown", "e2e.json"),
              "inside.md": ("inside", "markdown", "inside.json"),
              "perf.md": ("perf", "markdown", "perf.json"),
