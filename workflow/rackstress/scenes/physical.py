@@ -534,17 +534,54 @@ def loads(ctx, tables, groups: dict, operators: dict, u, select, ramp) -> dict:
     return {name: out[name] for name in groups if name in out}
 
 
+def _held_part(g, idx: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """The part of the force ``f`` on each particle ``idx`` of ``g`` that its supports take
+    before it deforms anything (rows, len(idx) × 3): on fixed axes and on a roller's, symmetry
+    plane's or cylindrical bore's normals (:class:`~rackstress.model.constraints.Normals`) its
+    projection on the directions held; on a pinned hole's ring (:class:`~rackstress.model.
+    constraints.Ring`, one rigid body turning about its axis) all of it but the share its
+    moment about the axis carries — φ = |Σ f·(â × r_i)| / Σ |f|·|â × r_i| over the loaded
+    particles of the ring: a push through the pin (φ = 0) goes into it whole, a turn
+    (φ = 1) reaches the part whole."""
+    from rackstress.model.constraints import Normals, Ring
+
+    pos = {int(i): k for k, i in enumerate(idx)}
+    vecs = [[np.eye(3)[a] for a in range(3) if g.fixed[i, a]] for i in idx]
+    out = np.zeros((len(idx), 3))
+    ringed = np.zeros(len(idx), dtype=bool)
+    for con in getattr(g, "constraints", None) or []:
+        if isinstance(con, Normals):
+            for i, n in zip(con.ids, con.normals):
+                if int(i) in pos:
+                    vecs[pos[int(i)]].append(n)
+        elif isinstance(con, Ring):
+            ks = [pos[int(i)] for i in con.ids if int(i) in pos]
+            if not ks:
+                continue
+            t = np.cross(con.axis, g.o[idx[ks]] - con.point)       # each one's lever
+            reach = float((np.linalg.norm(t, axis=1) * np.linalg.norm(f)).sum())
+            phi = abs(float((t @ f).sum())) / reach if reach > 0 else 0.0
+            out[ks] = (1.0 - phi) * f
+            ringed[ks] = True
+    for k, v in enumerate(vecs):
+        if v and not ringed[k]:                # an orthonormal basis of their span
+            u, sv, _ = np.linalg.svd(np.asarray(v, float).T, full_matrices=False)
+            q = u[:, sv > 1e-9 * sv.max()]
+            out[k] = q @ (q.T @ f)
+    return out
+
+
 def _held_share(c, k: int, name: str, g, where: np.ndarray, f: np.ndarray, given, kind):
     """A force or pressure on particles a ``[[support]]`` holds goes straight into the
     support: the engines zero a held direction's force, so it deforms nothing. All of it: the
     load is refused (it would settle in 0 iterations at 0 MPa); part of it: a warning on the
     part (``g.meta["held_load"]``, :func:`held_load_warnings`) naming the share, the force and
     the support. ``f``: the force on each loaded particle (the same on each)."""
-    if not g.fixed[where].any() or not np.linalg.norm(f) > 0:
+    if not np.linalg.norm(f) > 0:
         return
-    held = np.linalg.norm(g.fixed[where] * f[None, :], axis=1)   # each particle's lost part
+    held = np.linalg.norm(_held_part(g, np.flatnonzero(where), f), axis=1)
     share = float(held.sum() / (len(held) * np.linalg.norm(f)))
-    if share <= 0.0:
+    if share <= 1e-12:
         return
     by = g.meta.get("supported_by")
     nums = sorted({int(x) for x in by[where][held > 0]}) if by is not None else []
