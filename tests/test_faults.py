@@ -491,6 +491,28 @@ vars = { k = 2 }
 """
 
 
+def memory_growth_over_phases(tmp_path, engine: list, first: int, then: int):
+    """Run PHASES with ``--steps 1000000000000`` (``engine``: the engine's arguments) and
+    measure its resident memory once ``first`` steps are done and again once ``then`` are,
+    over work, not time; returns (the growth in bytes, the run directory)."""
+    scene = tmp_path / "phases.toml"
+    scene.write_text(PHASES)
+    out = tmp_path / "r"
+    err = tmp_path / "stderr"
+    p = subprocess.Popen([RS, "run", scene, *engine, "--steps", "1000000000000",
+                          "--restart-every", "0", "--dump-every", "600", "--out", str(out),
+                          *QUIET], stdout=subprocess.DEVNULL, stderr=err.open("w"))
+    try:
+        assert wait_for(lambda: steps_done(out, 600) >= first, proc=p), err.read_text()
+        before = rss(p.pid)
+        assert wait_for(lambda: steps_done(out, 600) >= then, proc=p), err.read_text()
+        assert p.poll() is None, err.read_text()
+        return rss(p.pid) - before, out
+    finally:
+        p.kill()
+        p.wait()
+
+
 def test_any_number_of_steps_costs_no_memory_up_front(tmp_path):
     """``--steps 1000000000000`` on the reference engine: the memory of the run stays flat as
     it works (was: one Phase object per 1,200 steps kept, ~35 MB a second of running). A
@@ -498,23 +520,8 @@ def test_any_number_of_steps_costs_no_memory_up_front(tmp_path):
     measured over work, not time — the process's memory once 12,000 steps are done (20 phase
     switches: every kernel loaded), then once 108,000 more are (180 more switches: a phase
     that left 110 kB behind would pass 20 MB)."""
-    scene = tmp_path / "phases.toml"
-    scene.write_text(PHASES)
-    out = tmp_path / "r"
-    p = subprocess.Popen([RS, "run", scene, "--engine", "reference", "--steps",
-                          "1000000000000", "--restart-every", "0", "--dump-every", "600",
-                          "--out", str(out), *QUIET], stdout=subprocess.DEVNULL,
-                         stderr=subprocess.PIPE)
-
-    try:
-        assert wait_for(lambda: steps_done(out, 600) >= 12000, proc=p)
-        first = rss(p.pid)
-        assert wait_for(lambda: steps_done(out, 600) >= 120000, proc=p)
-        assert p.poll() is None
-        assert rss(p.pid) - first < 20e6
-    finally:
-        p.kill()
-        p.wait()
+    growth, _ = memory_growth_over_phases(tmp_path, ["--engine", "reference"], 12000, 120000)
+    assert growth < 20e6
 
 
 def test_a_lattice_too_large_for_the_machine_is_refused(tmp_path):

@@ -15,8 +15,8 @@ import pytest
 from conftest import HANG_S, dump_text, trajectory
 
 from conftest import child_cpu
-from test_faults import (PHASES, QUIET, RS, fill, frames, leftovers, rs, rss, steps_done,  # noqa: F401
-                         tmpfs, wait_for)
+from test_faults import (QUIET, RS, fill, frames, leftovers,  # noqa: F401
+                         memory_growth_over_phases, rs, tmpfs)
 
 
 # ---------------------------------------------------------------------------- disks
@@ -117,24 +117,9 @@ def test_any_number_of_steps_costs_no_memory_up_front_on_lammps(tmp_path):
     not time: the memory once 120,000 steps are done (200 phase switches), then once 1,080,000
     more are (1,800 more switches, each a LAMMPS ``run`` and a velocity shift: a switch that
     left 11 kB behind would pass 20 MB)."""
-    scene = tmp_path / "phases.toml"
-    scene.write_text(PHASES)
-    out = tmp_path / "r"
-    err = tmp_path / "stderr"
-    p = subprocess.Popen([RS, "run", scene, "--steps", "1000000000000",
-                          "--restart-every", "0", "--dump-every", "600", "--out", str(out),
-                          *QUIET], stdout=subprocess.DEVNULL, stderr=err.open("w"))
-
-    try:
-        assert wait_for(lambda: steps_done(out, 600) >= 120000, proc=p), err.read_text()
-        first = rss(p.pid)
-        assert wait_for(lambda: steps_done(out, 600) >= 1200000, proc=p), err.read_text()
-        assert p.poll() is None, err.read_text()
-        assert rss(p.pid) - first < 20e6
-        assert len((out / "in.lammps").read_text().splitlines()) < 200
-    finally:
-        p.kill()
-        p.wait()
+    growth, out = memory_growth_over_phases(tmp_path, [], 120000, 1200000)
+    assert growth < 20e6
+    assert len((out / "in.lammps").read_text().splitlines()) < 200
 
 
 # ---------------------------------------------------------------------------- scene expressions
