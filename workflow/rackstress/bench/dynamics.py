@@ -32,6 +32,7 @@ Writes ``docs/benchmarks/dynamics.{md,json,png}``.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -140,17 +141,12 @@ def _stepped(path: Path, spacing: float, duration: float | None, every: int, sam
     from rackstress.engines.driver import drive
     from rackstress.engines.lammps.deck import compile_deck
     from rackstress.engines.lammps.runner import LammpsRun
+    from rackstress.model.scene import steps_for
     from rackstress.scenes import load
 
-    over = {"spacing": spacing}
-    sc = load(str(path), over)
+    sc = load(str(path), {"spacing": spacing})
     if duration is not None:
-        from rackstress.model.scene import steps_for
-
-        steps = steps_for(duration, sc.dt)
-        from dataclasses import replace
-
-        sc.phases[0] = replace(sc.phases[0], steps=steps, duration=duration)
+        sc.phases[0] = replace(sc.phases[0], steps=steps_for(duration, sc.dt), duration=duration)
     run = LammpsRun(compile_deck(sc, "exact"), None)
     try:
         sample(0.0, run.positions())
@@ -192,30 +188,48 @@ def vibration(spacing: float, duration: float | None = None, echo=print) -> dict
     return row
 
 
+def _section_stress(scene, section: np.ndarray, volume: float):
+    """σ_xx(p) of a cross-section's particles ``section``: their bindings' virial
+    Σ_j r_x·f_x / (2V) over the section's volume (as rackstress.bench.cantilever.virial, the
+    pairs found once for every frame sampled)."""
+    from rackstress.engines.static import _bind_pairs
+    from rackstress.model.operators import Bind
+
+    I_, J, C, Q = _bind_pairs(scene)
+    keep = np.isin(I_, section)
+    I_, J, C, Q = I_[keep], J[keep], C[keep], Q[keep]
+    m = scene.masses()[I_]
+
+    def sxx(p: np.ndarray) -> float:
+        f = Bind.accel(p[I_], p[J], C, Q) * m[:, None]
+        return float(((p[J, 0] - p[I_, 0]) * f[:, 0]).sum() / 2 / volume)
+
+    return sxx
+
+
+def _plateau(t: np.ndarray, s: np.ndarray, arrive: float, back: float):
+    """The stress behind a wave front: the samples from a quarter of the way between its
+    arrival and the return of its reflection to a fifth of that interval before the return,
+    and their mean."""
+    window = (t > arrive + 0.25 * (back - arrive)) & (t < back - 0.2 * (back - arrive))
+    return window, float(s[window].mean())
+
+
 def impact(spacing: float, echo=print) -> dict:
     """σ_xx at mid-length of the bar striking the wall, over time, at ``spacing``."""
     from rackstress.bench.cantilever import cells
-    from rackstress.engines.static import _bind_pairs
-    from rackstress.model.operators import Bind
     from rackstress.scenes import load
 
     sc0 = load(str(IMPACT), {"spacing": spacing})
     o = sc0.original_positions()
     xs = np.unique(o[:, 0])
     mid = np.flatnonzero(np.isclose(o[:, 0], xs[np.argmin(np.abs(xs - L / 2))]))
-    # the section's particles' virial σ_xx = Σ_j r_x·f_x / (2V) over their bindings (as
-    # rackstress.bench.cantilever.virial, with the pairs found once)
-    I_, J, C, Q = _bind_pairs(sc0)
-    keep = np.isin(I_, mid)
-    I_, J, C, Q = I_[keep], J[keep], C[keep], Q[keep]
-    m = sc0.masses()[I_]
-    V = cells(o, spacing)[mid].sum()
+    sxx = _section_stress(sc0, mid, cells(o, spacing)[mid].sum())
     t, s = [], []
 
     def sample(time_, p):
-        f = Bind.accel(p[I_], p[J], C, Q) * m[:, None]
         t.append(time_)
-        s.append(float(((p[J, 0] - p[I_, 0]) * f[:, 0]).sum() / 2 / V))
+        s.append(sxx(p))
 
     sc, wall, steps = _stepped(IMPACT, spacing, None, 1, sample)
     t, s = np.asarray(t), np.asarray(s)
@@ -224,8 +238,7 @@ def impact(spacing: float, echo=print) -> dict:
     x = float(o[mid, 0].mean())
     arrive, back = x / c, (2 * L - x) / c                         # the front, the reflection
     amp = RHO * c * v                                             # −ρ·c·|v| (compression)
-    window = (t > arrive + 0.25 * (back - arrive)) & (t < back - 0.2 * (back - arrive))
-    plateau = float(s[window].mean())
+    window, plateau = _plateau(t, s, arrive, back)
     # the arrival: the step at t_a that carries the same impulse up to the plateau's start T,
     # σ_p·(T − t_a) = ∫₀ᵀ σ dt (the front rises in stairs, the bar's lateral ringing, so the
     # time it first reaches half the plateau jumps between them with the spacing)
@@ -250,8 +263,6 @@ def collision(spacing: float, echo=print) -> dict:
     """Two equal bars through ``[[contact]]``: σ_xx at the struck bar's mid-length, how long
     the bars touch, and their velocities after (equal bars exchange their motion)."""
     from rackstress.bench.cantilever import cells
-    from rackstress.engines.static import _bind_pairs
-    from rackstress.model.operators import Bind
     from rackstress.scenes import load
 
     sc0 = load(str(COLLISION), {"spacing": spacing})
@@ -263,20 +274,15 @@ def collision(spacing: float, echo=print) -> dict:
     xs = np.unique(xr)
     mid = np.flatnonzero(np.isclose(o[:, 0], xs[np.argmin(np.abs(xs - (x0 + half / 2)))])
                          & (np.arange(len(o)) >= right.start))
-    I_, J, C, Q = _bind_pairs(sc0)
-    keep = np.isin(I_, mid)
-    I_, J, C, Q = I_[keep], J[keep], C[keep], Q[keep]
-    m = sc0.masses()[I_]
-    lo = o[left, 0].max()
-    facing_l = np.flatnonzero(np.isclose(o[:, 0], lo) & (np.arange(len(o)) < left.stop))
+    sxx = _section_stress(sc0, mid, cells(o - np.array([x0, 0.0, 0.0]), spacing)[mid].sum())
+    facing_l = np.flatnonzero(np.isclose(o[:, 0], o[left, 0].max())
+                              & (np.arange(len(o)) < left.stop))
     facing_r = np.flatnonzero(np.isclose(o[:, 0], x0) & (np.arange(len(o)) >= right.start))
-    V = cells(o - np.array([x0, 0.0, 0.0]), spacing)[mid].sum()
     t, s, gap, com = [], [], [], []
 
     def sample(time_, p):
-        f = Bind.accel(p[I_], p[J], C, Q) * m[:, None]
         t.append(time_)
-        s.append(float(((p[J, 0] - p[I_, 0]) * f[:, 0]).sum() / 2 / V))
+        s.append(sxx(p))
         gap.append(float(p[facing_r, 0].mean() - p[facing_l, 0].mean()))
         com.append((float(p[left, 0].mean()), float(p[right, 0].mean())))
 
@@ -284,27 +290,26 @@ def collision(spacing: float, echo=print) -> dict:
     t, s, gap, com = np.asarray(t), np.asarray(s), np.asarray(gap), np.asarray(com)
     c = np.sqrt(E / RHO)
     v = float(sc.params["speed"])
-    L = float(o[left, 0].max() - o[left, 0].min()) + spacing          # each bar's length
-    arrive, back = (half / 2) / c, (2 * L - half / 2) / c
-    window = (t > arrive + 0.25 * (back - arrive)) & (t < back - 0.2 * (back - arrive))
-    plateau = float(s[window].mean())
+    length = float(o[left, 0].max() - o[left, 0].min()) + spacing      # each bar's, n·a
+    arrive, back = (half / 2) / c, (2 * length - half / 2) / c
+    window, plateau = _plateau(t, s, arrive, back)
     touching = gap < spacing                    # R = the sum of the radii = one spacing
     end = int(np.flatnonzero(touching)[-1]) + 1 if touching.any() else 0
     duration = float(t[min(end, len(t) - 1)])
     tail = t > t[-1] - 0.15 * (t[-1] - duration)                        # after the contact
     vel = [float(np.polyfit(t[tail], com[tail, k], 1)[0]) for k in (0, 1)]
     row = {"spacing": spacing, "particles": sc.n_particles, "dt": sc.dt, "steps": steps,
-           "wall_s": wall, "c": c, "speed": v, "length": L,
+           "wall_s": wall, "c": c, "speed": v, "length": length,
            "sigma_expected": -RHO * c * v / 2, "sigma_plateau": plateau,
            "sigma_ratio": plateau / (-RHO * c * v / 2), "sigma_spread": float(s[window].std()),
-           "contact_expected": 2 * L / c, "contact": duration,
-           "contact_ratio": duration / (2 * L / c),
+           "contact_expected": 2 * length / c, "contact": duration,
+           "contact_ratio": duration / (2 * length / c),
            "velocity_after": vel, "momentum_ratio": (vel[0] + vel[1]) / v,
            "history": {"t": t.tolist(), "sigma_xx": s.tolist(), "gap": gap.tolist()}}
     echo(f"  collision at {spacing:g} mm ({sc.n_particles:,} particles, {steps} steps, "
          f"{wall:.2f} s): σ_xx {plateau:.2f} MPa against −ρcv/2 {-RHO * c * v / 2:.2f} "
          f"({100 * (row['sigma_ratio'] - 1):+.1f} %); in contact {duration * 1e6:.2f} µs "
-         f"against 2L/c {2 * L / c * 1e6:.2f}; after: {vel[0]:.0f} and {vel[1]:.0f} mm/s "
+         f"against 2L/c {2 * length / c * 1e6:.2f}; after: {vel[0]:.0f} and {vel[1]:.0f} mm/s "
          f"(against 0 and {v:.0f})")
     return row
 
