@@ -169,17 +169,14 @@ def _contacts(scene) -> tuple:
     return tuple(out)
 
 
-def _pairs_at(prob: "_Problem", p: np.ndarray, slack: float = 0.0):
-    """The bindings' pairs and, with contact, every pair of the two parts in contact at ``p``:
-    closer than the sum of their radii R (× (1 + ``slack``): a tangent also takes the pairs
-    that just touch, whose force is zero and whose stiffness 2·c·m along the line of centres
-    is not). In contact, Eq. 10 is Eq. 12 with L0 = R, so a pair enters as a binding with
-    q = R² (forces, tangent); its force is zero at d = R and it is dropped beyond."""
-    if not prob.contact:
-        return prob.pairs
+def _contact_pairs(prob: "_Problem", p: np.ndarray, slack: float = 0.0):
+    """Every pair of two parts in contact at ``p``, (i, j, c, R²) as a binding's: closer than
+    the sum of their radii R (× (1 + ``slack``): a tangent also takes the pairs that just
+    touch, whose force is zero and whose stiffness 2·c·m along the line of centres is not).
+    In contact, Eq. 10 is Eq. 12 with L0 = R; beyond R a pair has no force and is left out."""
     from scipy.spatial import cKDTree
 
-    I, J, C, Q = ([x] for x in prob.pairs)
+    I, J, C, Q = [], [], [], []
     for st, ss, c, rt, rs in prob.contact:
         reach = float(rt.max() + rs.max()) * (1.0 + slack)
         dm = cKDTree(p[st]).sparse_distance_matrix(cKDTree(p[ss]), reach,
@@ -194,14 +191,21 @@ def _pairs_at(prob: "_Problem", p: np.ndarray, slack: float = 0.0):
     return (np.concatenate(I), np.concatenate(J), np.concatenate(C), np.concatenate(Q))
 
 
+def _pairs_at(prob: "_Problem", p: np.ndarray, slack: float = 0.0):
+    """The bindings' pairs and, with contact, the pairs in contact at ``p``
+    (:func:`_contact_pairs`), as one list of bindings (forces, tangent)."""
+    if not prob.contact:
+        return prob.pairs
+    return tuple(np.concatenate([a, b]) for a, b in zip(prob.pairs,
+                                                         _contact_pairs(prob, p, slack)))
+
+
 def contact_energy(prob: "_Problem", p: np.ndarray) -> float:
     """The contacts' potential at ``p``: per pair in contact m·c·((d² − R²)/2 − R²·ln(d/R))
     (Eq. 10's, zero at d = R; each pair listed from both ends, so halved)."""
     if not prob.contact:
         return 0.0
-    I, J, C, Q = _pairs_at(prob, p)
-    n = len(prob.pairs[0])
-    I, J, C, Q = I[n:], J[n:], C[n:], Q[n:]
+    I, J, C, Q = _contact_pairs(prob, p)
     d2 = np.einsum("ij,ij->i", p[J] - p[I], p[J] - p[I])
     with np.errstate(divide="ignore", invalid="ignore"):
         e = prob.m[I] * C * (0.5 * (d2 - Q) - 0.5 * Q * np.log(d2 / Q))
