@@ -200,20 +200,32 @@ def singular_peak(values, positions, singular: Singular, zone: float):
     return k, float(v[k]), KINDS[int(singular.kind[near[k]])], float(d[k])
 
 
+def _largest_away(vm: np.ndarray, away: np.ndarray):
+    """Per frame of a (frames × n) array, the largest finite value among the particles
+    ``away`` and the first particle holding it: (values, indices), −inf where none is (a
+    frame at a time: no second frames × n array)."""
+    values, where = np.full(len(vm), -np.inf), np.zeros(len(vm), dtype=np.int64)
+    for k, row in enumerate(vm):
+        a = np.isfinite(row) & away
+        if a.any():
+            j = int(np.flatnonzero(a)[np.argmax(row[a])])
+            values[k], where[k] = row[j], j
+    return values, where
+
+
 def _frames_governing(vm: np.ndarray, o: np.ndarray, singular: Singular, z: float):
     """Over a (frames × n) array: (frame, index, value) of the governing stress, and of the
     singular peak (frame, index, value, kind, distance)."""
     d, near = singular.distance(o)
     away = d >= z
+    values, where = _largest_away(vm, away)
     best, sbest = None, None
+    if np.isfinite(values).any():
+        k = int(np.argmax(values))
+        best = (k, int(where[k]), float(values[k]))
     for k in range(vm.shape[0]):
         row = vm[k]
         fin = np.isfinite(row)
-        a = fin & away
-        if a.any():
-            j = int(np.flatnonzero(a)[np.argmax(row[a])])
-            if best is None or row[j] > best[2]:
-                best = (k, j, float(row[j]))
         s = fin & ~away
         if s.any():
             j = int(np.flatnonzero(s)[np.argmax(row[s])])
@@ -236,9 +248,7 @@ def over_time(run, vm: np.ndarray) -> dict:
             continue
         idx = run.parts[name].index
         d, _ = s.distance(part_recovery_points(run.o[idx]))
-        v = np.asarray(vm[:, idx], float)
-        ok = np.isfinite(v) & (d >= zone(spacing, wall))[None, :]
-        best = np.where(ok, v, -np.inf).max(axis=1)
+        best, _ = _largest_away(np.asarray(vm[:, idx], float), d >= zone(spacing, wall))
         out[name] = np.where(np.isfinite(best), best, np.nan)
     return out
 
