@@ -251,3 +251,24 @@ def test_points_outside_the_mesh_do_not_ask_every_element_at_once():
     assert r.returncode == 0, r.stderr[-2000:]
     dmax, inside = r.stdout.split()
     assert float(dmax) < 1e-5 and int(inside) == 3000
+
+
+def test_the_compiled_assembly_equals_its_numpy_statement():
+    """validity.tet's P2 stiffness scatter: the compiled loop (numba) and its NumPy statement
+    (nine bincounts, the path without numba) give the same K to round-off on a random mesh."""
+    from scipy.spatial import Delaunay
+
+    from rackstress.validity import tet
+
+    rng = np.random.default_rng(1)
+    P = rng.random((400, 3))
+    t = Delaunay(P).simplices
+    compiled = tet.Tet2(P, t).stiffness(70e3, 0.3)
+    saved = tet._SCATTER
+    try:
+        tet._SCATTER = tet._scatter_numpy
+        plain = tet.Tet2(P, t).stiffness(70e3, 0.3)
+    finally:
+        tet._SCATTER = saved
+    assert tet._scatter_compiled() is not None          # numba is a dependency: compiled ran
+    assert abs(compiled - plain).max() <= 1e-12 * abs(plain).max()

@@ -82,3 +82,25 @@ def test_solid_on_the_plugin_equals_the_reference_engine(tmp_path, reference_fin
     finally:
         run.close()
     assert np.abs(p - ref).max() <= 1e-10
+
+
+def test_weight_levels_compiled_and_plain_agree_to_the_bit():
+    """model.solid.levels clusters the bindings' weights into at most 16 values (the plugin's
+    bond types): the interior's most common weight kept exact, the rest replaced by their
+    cluster means. Its 1D k-means table, compiled (numba) and in NumPy (the path without
+    numba), gives the same weights to the bit."""
+    from rackstress.model import solid
+
+    rng = np.random.default_rng(0)
+    w = np.r_[np.ones(5000), rng.random(3000) * 2, np.round(rng.random(500), 2)]
+    compiled = solid.levels(w)
+    saved = solid._KMEANS
+    try:
+        solid._KMEANS = solid._kmeans_table_numpy
+        plain = solid.levels(w)
+    finally:
+        solid._KMEANS = saved
+    assert solid._kmeans_table_compiled() is not None
+    assert np.array_equal(compiled, plain)
+    assert len(np.unique(compiled)) <= solid.WEIGHT_LEVELS
+    assert np.all(compiled[:5000] == 1.0)
