@@ -1504,16 +1504,15 @@ def stress_figure(run, values, label, coloured, peak):
 def _time_axis(ax, run) -> bool:
     """A physical-units run's time on the top axis (iteration × dt, in s, ms or µs as its
     length asks), beside the iterations; whether there is one."""
-    units = run.scene.get("units") if isinstance(run.scene, dict) else None
-    dt = float(run.scene.get("dt") or 0.0) if isinstance(run.scene, dict) else 0.0
-    if not isinstance(units, dict) or not units.get("time") or not dt > 0 or not len(run.steps):
+    if run.time_unit is None or not len(run.steps):
         return False
+    dt = run.dt
     total = dt * float(max(run.steps[-1], 1))
     scale, name = next(((f, n) for f, n in ((1.0, ""), (1e3, "m"), (1e6, "µ"), (1e9, "n"))
                         if total * f >= 1.0), (1e9, "n"))
     k = dt * scale
     top = ax.secondary_xaxis("top", functions=(lambda it: it * k, lambda t: t / k))
-    top.set_xlabel(f"time [{name}{units['time']}]", fontsize=8)
+    top.set_xlabel(f"time [{name}{run.time_unit}]", fontsize=8)
     top.tick_params(labelsize=7)
     return True
 

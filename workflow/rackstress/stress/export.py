@@ -533,8 +533,7 @@ def write_peaks_over_time(run, fields, path) -> None:
     gid, _ = group_ids(run)
     pd.point_data["id"] = run.data.ids.astype(np.int32)
     pd.point_data["group_id"] = gid
-    units = run.scene.get("units") if isinstance(run.scene, dict) else None
-    dt = float(run.dt) if isinstance(units, dict) and units.get("time") and run.dt else None
+    dt = run.dt if run.time_unit is not None else None
     rows = np.arange(len(run.o))
     for m, vals in fields.values.items():
         v = np.asarray(vals, float)

@@ -70,6 +70,13 @@ class RunData:
         return float(self.scene.get("dt") or 1.0)
 
     @property
+    def time_unit(self) -> str | None:
+        """The scene's unit of time ("s") in physical units, None in the paper's (its time is
+        iterations × t, no unit)."""
+        units = self.scene.get("units") if isinstance(self.scene, dict) else None
+        return units.get("time") if isinstance(units, dict) and units.get("time") else None
+
+    @property
     def trajectory(self):
         return self.universe.trajectory
 
