@@ -15,7 +15,19 @@ whose keys have those values), ``col(list, key)`` (every dict's value of ``key``
 number just before the mark (``0.102``, ``33,689``, ``1.5e-3``, ``**1.89**``); it agrees when the
 expression's value rounds to it at the figure's own precision (its decimals, or its significant
 digits in ``e`` notation). ``tests/test_figures.py`` checks every mark of README.md and docs/, and
-that no checked page (:data:`CHECKED`) quotes a figure without one.
+that no hand-written page quotes a figure without one.
+
+A number that is not measured — a setting of a scene (a spacing, a load), a target, a material's
+datum, a hand calculation or an analytical answer — says so instead, with its reason, its mark
+right after the number as a ``fig`` mark is::
+
+    pulled by 50<!-- given: the scene's load --> N at the far hole
+
+A figure a test compares with a command's own output (a tutorial's printed peak, say) names
+that test instead: ``<!-- checked: tests/test_readme.py::test_name -->``; the test must exist.
+
+``given: WHY``: the reason is required. A measured figure with no benchmark JSON behind it has
+no mark at all and fails: link the page its command writes, or make a command write it.
 
     .venv/bin/python tests/figures.py docs/benchmarks/index.md     # each mark: quoted, value
 """
@@ -34,14 +46,18 @@ REPO = Path(__file__).resolve().parents[1]
 MARK = re.compile(r"(?P<fig>[-+−]?\d[\d,]*(?:\.\d+)?(?:[eE][-+]?\d+)?)(?P<bold>\**)"
                   r"<!--\s*fig\s+(?P<file>\S+)\s+(?P<expr>.*?)\s*-->", re.S)
 
-#: Hand-written pages every measured figure of which carries a mark (a test checks that none
-#: lacks one): a number followed by a unit of time, size or speed, a ratio (``×``) or a
-#: percentage. Pages a benchmark command writes are checked whole instead (test_figures.py).
-CHECKED = ["README.md", "docs/benchmarks/index.md", "docs/getting-started.md",
-           "docs/tutorials/own-part.md"]
-#: what counts as a measured figure on a checked page
+#: what counts as a figure on a hand-written page: a number followed by a unit of time, memory,
+#: stress, length, force, frequency or speed, a ratio (``×``) or a percentage. Each carries a
+#: ``fig`` or a ``given`` mark; pages a benchmark command writes are checked whole instead
+#: (test_figures.py).
 MEASURED = re.compile(r"(?<![\w.])\d[\d,]*(?:\.\d+)?(?:[eE][-+]?\d+)?\**\s?"
-                      r"(?:ms|µs|s|MB|GB|GiB|MiB|×|%)(?![\w])")
+                      r"(?:ms|µs|s|MB|GB|GiB|MiB|×|%|GPa|MPa|kPa|Pa|mm|µm|m/s|mm/s|Hz|kHz|kN|N)"
+                      r"(?![\w/])")
+#: a figure a named test compares with a command's output (module doc)
+CHECKED_BY = re.compile(r"[-+−]?\d[\d,]*(?:\.\d+)?(?:[eE][-+]?\d+)?\**"
+                        r"<!--\s*checked:\s*(?P<file>tests/\S+?\.py)::(?P<test>\w+)\s*-->")
+#: a number that is not measured, and why (module doc)
+GIVEN = re.compile(r"[-+−]?\d[\d,]*(?:\.\d+)?(?:[eE][-+]?\d+)?\**<!--\s*given:\s*\S.*?-->")
 
 
 def _row(seq, **match):
@@ -162,7 +178,7 @@ def unmarked(page: Path) -> list[tuple[int, str]]:
             continue
         if fenced:
             continue
-        bare = MARK.sub("", line)
+        bare = CHECKED_BY.sub("", GIVEN.sub("", MARK.sub("", line)))
         bare = re.sub(r"<!--.*?-->", "", bare)
         bare = re.sub(r"`[^`]*`", "", bare)          # inline code: options, file names
         for m in MEASURED.finditer(bare):
@@ -170,10 +186,24 @@ def unmarked(page: Path) -> list[tuple[int, str]]:
     return found
 
 
+def tests_named(page: Path) -> list[tuple[int, str, bool]]:
+    """Each ``checked:`` mark of a page: its line, the test, whether that test exists."""
+    out = []
+    text = _outside_code(page.read_text())
+    for m in CHECKED_BY.finditer(text):
+        src = REPO / m["file"]
+        ok = src.is_file() and re.search(rf"^def {m['test']}\(", src.read_text(), re.M) is not None
+        out.append((text.count("\n", 0, m.start()) + 1, f"{m['file']}::{m['test']}", ok))
+    return out
+
+
 if __name__ == "__main__":
     for arg in sys.argv[1:]:
         for r in marks(Path(arg)):
             print(f"{arg}:{r['line']}: {r['figure']} {'==' if r['ok'] else '!='} "
                   f"{r['value']!r}  ({r['file']}: {r['expr']})")
+        for k, name, ok in tests_named(Path(arg)):
+            if not ok:
+                print(f"{arg}:{k}: names {name}, which does not exist")
         for k, fig in unmarked(Path(arg)):
             print(f"{arg}:{k}: {fig} has no mark")

@@ -336,8 +336,9 @@ def report(d: dict) -> str:
                          f"{r['peak_change'] * 100:+.1f} %",
                          "(" + ", ".join(f"{x:.3g}" for x in r["new"]["at"]) + ")"]
                         for r in d["examples"]]), ""]
-    L += [f"Machine: {d['machine']['cores']} cores, load average "
-          f"{d['machine']['load_avg_at_start']} at the start."]
+    load = ", ".join(f"{x:.2f}" for x in d["machine"]["load_avg_at_start"])
+    L += [f"Machine: {d['machine']['cores']} cores, load average (1, 5, 15 min) {load} at the "
+          "start."]
     return "\n".join(L) + "\n"
 
 
