@@ -151,6 +151,51 @@ def test_contact_tables_are_checked(tmp_path):
     assert "not a material part" in str(exc.value) and "collide" in str(exc.value)
 
 
+@pytest.mark.lammps
+def test_a_contact_too_stiff_for_the_step_is_a_divergence_naming_its_step(tmp_path):
+    """A contact a million times stiffer, run at the lattice's time step (--allow-unstable):
+    the bars start touching at zero force, close by v·dt in the first step, and the pair's
+    spring k = 10⁶·E*·a throws each first-layer particle at Δv = (k/m)·(v·dt)·dt in the
+    second, far beyond its material's wave speed √(E/ρ) (hand calculation below). The run stops
+    as diverged (exit 3) naming that step, the particle and both speeds; on LAMMPS, which looks
+    every hundred steps, at its first look, saying after which step it went wrong."""
+    import re
+
+    from test_faults import rs
+
+    from rackstress.model.materials import PRESETS
+
+    al = PRESETS["aluminium"]
+    a, v, dt = 5.0, 1000.0, 1.8e-7                     # mm, mm/s, s
+    e_star = al.E / 1e6 / (2 * (1 - al.nu ** 2))       # MPa: two equal materials
+    m = al.density * 1e-12 * a ** 3                     # t (kg → t, m³ → mm³)
+    jump = 1e6 * e_star * a / m * (v * dt) * dt        # mm/s
+    c = (al.E / al.density) ** 0.5 * 1000.0             # mm/s
+    assert jump > 3 * c
+    scene = tmp_path / "stiff.toml"
+    scene.write_text(dynamics.COLLISION.read_text()
+                     .replace("spacing = 2.0 ", "spacing = 5.0 ")
+                     .replace('between = ["left", "right"]',
+                              'between = ["left", "right"]\nstiffness = 1e6'))
+    for engine in ("reference", "lammps"):
+        out = tmp_path / engine
+        r = rs("run", scene, "--out", out, "--engine", engine, "--dt", dt, "--allow-unstable",
+               "--steps", 300, "--no-render")
+        assert r.returncode == 3, r.stderr
+        s = json.loads((out / "summary.json").read_text())
+        assert s["status"] == "diverged", s
+        msg = s["error"]["message"]
+        assert "faster than its material's wave speed" in msg and "mm/s" in msg, msg
+        assert s["error"]["group"] in ("left", "right")
+        got = [float(x) for x in re.findall(r"(?:moves at|√\(E/ρ\) =) ([\d.e+]+) mm/s", msg)]
+        assert got[1] == pytest.approx(c, rel=1e-3)
+        if engine == "reference":                      # looks every step: the step itself
+            assert s["error"]["step"] == 2, msg
+            assert got[0] == pytest.approx(jump, rel=0.02), msg
+        else:
+            assert s["error"]["step"] == 100 and "after step 0" in msg, msg
+
+
 def _frame(rundir, last: bool):
     """Positions (id order) of a run's first or last dumped frame, from the dump's own text."""
     from conftest import dump_text, trajectory

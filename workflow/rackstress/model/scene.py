@@ -140,6 +140,24 @@ class Scene:
         """Mass of every particle in the scene's units (:meth:`Group.mass`), global order."""
         return np.concatenate([np.full(g.n, g.mass(self.units)) for g in self.groups.values()])
 
+    def speed_limits(self) -> np.ndarray | None:
+        """Each particle's material wave speed √(E/ρ) in the scene's units (∞ where its group
+        has no material), or None when no group has one (the paper's scenes).
+
+        A particle moving faster than its material's wave speed carries a strain of order one
+        (a wave's particle velocity is ε·c): the elastic lattice has blown up, which the
+        watchdog stops as a divergence."""
+        if getattr(self, "_speed", False) is False:
+            lim = [np.full(g.n, np.sqrt(g.material.in_units(self.units)["E"]
+                                        / g.material.in_units(self.units)["density"])
+                           if g.material is not None else np.inf)
+                   for g in self.groups.values()]
+            self._speed = None if all(g.material is None for g in self.groups.values()) \
+                else np.concatenate(lim)
+            if self._speed is not None:
+                self._speed.flags.writeable = False
+        return self._speed
+
     def initial_velocities(self) -> np.ndarray:
         """v at step 0 of every particle in global order (zero unless a group sets ``v0``)."""
         return np.concatenate([g.v0 for g in self.groups.values()])

@@ -34,7 +34,7 @@ from rackstress.engines.lammps.deck import (MOVE_GROUP, PY_FIX, PY_NAPPLY, VOLUM
 from rackstress.engines.lammps.plugin import locate as _locate_plugin
 from rackstress.errors import DivergenceError, RackstressError, StorageError
 from rackstress.lib.vec import fresh_zeros
-from rackstress.engines.watchdog import divergence_error, find_divergence, force_error
+from rackstress.engines.watchdog import divergence_error, find_divergence, force_error, too_fast
 
 #: Steps between watchdog checks (and progress updates) on LAMMPS.
 CHECK_EVERY = 10
@@ -84,6 +84,7 @@ class LammpsRun:
         if append and logfile != "none":
             self.command(f"log {self.path_word(logfile)} append")
         self.step = 0
+        self._looked = 0            # the state the run starts from is the scene's own
         self.root = self.comm.Get_rank() == 0
         self.dump_every = int(dump_every)
         self._dump_file = (self.path_word(out / "trajectory.dump", dump=True)
@@ -493,6 +494,9 @@ class LammpsRun:
         n = nlocal if rows is None else min(rows, nlocal)
         return tuple(a[:n] for a in self._owned_views[:3])
 
+    #: the step of the watchdog's last look that found nothing (None: none yet)
+    _looked: int | None = None
+
     def check(self) -> None:
         """The watchdog on every rank's atoms; all ranks raise the same DivergenceError. Under
         MPI one reduction decides (the plugin's non-finite record and the watchdog's finding on
@@ -508,7 +512,8 @@ class LammpsRun:
         x, v, tag = self._owned(rows)
         o = self.scene.original_positions()
         k = self.py.compiled if self.py is not None else None
-        if k is not None and k.within_bound(x, v, o, tag, float(self.scene.bound) ** 2):
+        if k is not None and k.within_bound(x, v, o, tag, float(self.scene.bound) ** 2) \
+                and not too_fast(self.scene, v, tag.astype(np.int64) - 1).any():
             found = None            # the common case, in one compiled pass
         elif len(tag) and tag[0] == 1 and tag[-1] == len(tag) and np.array_equal(
                 tag, self._ids[:len(tag)]):
@@ -538,7 +543,8 @@ class LammpsRun:
         if everything:
             worst = max(everything, key=lambda f: (not f["finite"], f["disp"]))
             worst["count"] = sum(f["count"] for f in everything)
-            raise divergence_error(self.scene, self.step, worst)
+            raise divergence_error(self.scene, self.step, worst, since=self._looked)
+        self._looked = self.step
         if self.comm.Get_size() > 1 and self._reach:
             self._grow_cutoff(x, tag.astype(np.int64))
 
@@ -753,7 +759,7 @@ class LammpsRun:
             mask = self.lmp.numpy.extract_atom("mask")[:nlocal]
             ids = self.lmp.numpy.extract_atom("id")[:nlocal].astype(np.int64) - 1
             mask[off[ids]] |= self._move_bit
-        self.step = int(ck.step)
+        self.step = self._looked = int(ck.step)
         self.realign(ck.f)
         self._phase = previous
 
