@@ -21,7 +21,7 @@ the cantilever (``examples/cantilever``, 100 N on a 100 × 10 × 10 mm aluminium
 25, 50, 75 mm, M·c/I = P·(L − x)·5/(10⁴/12), the particles' top layer beside it (z = 5 − a/2),
 where the surface lies (its largest z), the free end's deflection (P·L³/(3EI) plus shear:
 0.576 mm), and the fit's error on a linear field at the surface's points.
-Writes ``OUT/static-report.md`` and ``.json``.
+Writes ``OUT/static-report.json`` and ``OUT/static-report.md``, :func:`markdown` of it.
 """
 from __future__ import annotations
 
@@ -181,13 +181,32 @@ def main(argv=None) -> int:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     best = {k: min(v, key=lambda r: r["cpu_s"] + r["cpu_children_s"]) for k, v in rows.items()}
-    n = summary.get("n_particles")
+    data = {"command": f"{command} --baseline {args.baseline}", "date": time.strftime("%Y-%m-%d"),
+            "repeat": args.repeat, "rundir": str(args.rundir), "scene": summary.get("scene"),
+            "particles": summary.get("n_particles"), "baseline": args.baseline, "runs": rows,
+            "best": best, "accuracy": acc}
+    shutil.rmtree(tmp, ignore_errors=True)
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "static-report.json").write_text(json.dumps(data, indent=1))
+    text = markdown(data)
+    (args.out / "static-report.md").write_text(text)
+    print(text)
+    return 0
+
+
+def markdown(data: dict) -> str:
+    """The page, from the data :func:`main` writes to static-report.json (a record without the
+    command, date or repeat count, as the first one, prints what it holds)."""
+    best, acc, n = data["best"], data["accuracy"], data["particles"]
+    command = data.get("command", f"python scripts/bench_static_report.py --baseline "
+                                  f"{data['baseline']}")
+    repeat = data.get("repeat", min(len(v) for v in data["runs"].values()))
+    when = f" ({data['date']})" if data.get("date") else ""
     lines = ["# A static run's post-processing: before and after the static report", "",
-             f"`{command} --baseline {args.baseline}` "
-             f"({time.strftime('%Y-%m-%d')}): `{summary.get('scene')}`, {n:,} particles, "
+             f"`{command}`{when}: `{data.get('scene')}`, {n:,} particles, "
              f"post-processed as `rackstress run` does at its end (measures, VTK files, "
-             f"pictures, 3D view, report), best of {args.repeat} by CPU time, in one run of "
-             "this script (alternating).", "",
+             f"pictures, 3D view, report), best of {repeat} by CPU time, in one run of "
+             "this script (alternating; the figures are in `static-report.json`).", "",
              "| code | CPU (process) [s] | CPU (forked children) [s] | CPU total [s] | wall [s] "
              "| load |", "|---|---|---|---|---|---|"]
     for k, r in best.items():
@@ -221,15 +240,7 @@ def main(argv=None) -> int:
                     + (f"{r['z_max']:.3f} | {r['tip_deflection']:.4f} | "
                        f"{r['linear_error']:.1e} |" if first else "| | |"))
         lines.append("")
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "static-report.md").write_text("\n".join(lines))
-    shutil.rmtree(tmp, ignore_errors=True)
-    (args.out / "static-report.json").write_text(json.dumps(
-        {"rundir": str(args.rundir), "scene": summary.get("scene"), "particles": n,
-         "baseline": args.baseline, "runs": rows, "best": best, "accuracy": acc}, indent=1))
-    print("\n".join(lines))
-    return 0
-
+    return "\n".join(lines)
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Phase error per unit cost of one-step schemes on an undamped mode x'' = −ω²x.
 
-    python scripts/phase_error.py [--out docs/benchmarks/phase-error.md]
+    python scripts/phase_error.py [--out docs/benchmarks/phase-error.md]   # and phase-error.json
 
 Why the verlet mode's gain over Eq. 5 is capped on lightly damped stiff scenes (README, "What
 the picture means"): Eq. 5 and the verlet mode carry such a mode at the same modified frequency
@@ -108,15 +108,74 @@ def table():
     return rows
 
 
+def stability_limit(one_step, hi=4.0, n=4000):
+    """The first ω·H at which a scheme's one-step matrix (step H, ω = 1) turns unstable
+    (|trace| ≥ 2), scanned on a grid up to ``hi`` and refined by bisection; None if none."""
+    def stable(x):
+        return abs(np.trace(one_step(x))) < 2.0
+    grid = np.linspace(hi / n, hi, n)
+    for a, b in zip(grid[:-1], grid[1:]):
+        if stable(a) and not stable(b):
+            for _ in range(60):
+                m = 0.5 * (a + b)
+                a, b = (m, b) if stable(m) else (a, m)
+            return float(0.5 * (a + b))
+    return None
+
+
+#: the plane-bound figures the reading quotes, from ``rackstress bench accuracy``'s JSON
+ACCURACY = Path(__file__).resolve().parents[1] / "docs/benchmarks/accuracy.json"
+
+
+def plane_bound(path: Path = ACCURACY) -> dict | None:
+    """plane-bound's error constants (Eq. 5's error ≈ A·t, the verlet mode's ≈ B·t²) and Eq. 5's
+    predicted stability limit, as ``rackstress bench accuracy`` measured them."""
+    import json
+
+    try:
+        data = json.loads(path.read_text())
+        ec = next(s for s in data["scenes"] if s["scene"] == "plane-bound")["error_constants"]
+    except (OSError, ValueError, KeyError, StopIteration):
+        return None
+    ref = ec["reference"]
+    return {"source": "docs/benchmarks/accuracy.json, plane-bound, error_constants.reference",
+            "A": ref["A"], "B": ref["B"], "t_max": ref["t_max"]}
+
+
+def measure() -> dict:
+    """Everything the page prints: the table, the orders, the reading's figures."""
+    rows = [{"omega_h": wh, "verlet": _nan(ev), "best_two_stage": _nan(best),
+             "best_lambda": _nan(lam), "omelyan": _nan(om), "yoshida": _nan(y4),
+             "force_gradient_free": _nan(fg2), "force_gradient_one_evaluation": _nan(fg3)}
+            for wh, ev, best, lam, om, y4, fg2, fg3 in table()]
+    orders = {name: math.log2(rel_error(f(0.1, 1.0), 0.1) / rel_error(f(0.05, 1.0), 0.05))
+              for name, f in (("Störmer–Verlet", verlet), ("Yoshida", yoshida),
+                              ("force-gradient 4A", force_gradient))}
+    at = next(r for r in rows if r["omega_h"] == 0.84)
+    return {"omega_h": list(OMEGA_H), "rows": rows, "orders": orders,
+            "yoshida_limit_omega_H": stability_limit(lambda x: yoshida(x, 1.0)),
+            "verlet_error_at_1_5": rel_error(verlet(1.5, 1.0), 1.5),
+            "force_gradient_limit_omega_h": 2.0 * math.sqrt(3.0) / 3.0,
+            "at_0_84": {"free": at["verlet"] / at["force_gradient_free"],
+                        "one_evaluation": at["verlet"] / at["force_gradient_one_evaluation"]},
+            "plane_bound": plane_bound()}
+
+
+def _nan(x):
+    return None if x is None or math.isnan(x) else float(x)
+
+
 def fmt(x):
-    return "unstable" if math.isnan(x) else f"{x:.3g}"
+    return "unstable" if x is None else f"{x:.3g}"
 
 
-def markdown(rows) -> str:
+def markdown(data) -> str:
+    """The page, from :func:`measure`'s data (as written to phase-error.json)."""
     out = ["# Phase error per unit cost on an undamped mode", "",
            "Regenerate: `python scripts/phase_error.py` (exact 2×2 one-step matrices of "
            "x'' = −ω²x; h = time per force evaluation, so every column costs the same per unit "
-           "time). Entries: the worst relative frequency error |ω̃/ω − 1| over all modes "
+           "time; the figures are in `phase-error.json`). Entries: the worst relative "
+           "frequency error |ω̃/ω − 1| over all modes "
            "0 < ω ≤ ω_max (a scene's spectrum up to its stiffest mode); 'unstable' where one of "
            "them diverges.", "",
            "| ω_max·h | Störmer–Verlet = Eq. 5 = verlet mode (step h) | best two-stage splitting "
@@ -124,41 +183,65 @@ def markdown(rows) -> str:
            "| force-gradient 4A, gradient free (step 2h) | force-gradient 4A, gradient = one "
            "evaluation (step 3h) |",
            "|---|---|---|---|---|---|---|---|"]
-    for wh, ev, best, lam, om, y4, fg2, fg3 in rows:
-        out.append(f"| {wh:g} | {fmt(ev)} | {fmt(best)} | {lam:.3f} | {fmt(om)} | {fmt(y4)} "
-                   f"| {fmt(fg2)} | {fmt(fg3)} |")
-    orders = {name: math.log2(rel_error(f(0.1, 1.0), 0.1) / rel_error(f(0.05, 1.0), 0.05))
-              for name, f in (("Störmer–Verlet", verlet), ("Yoshida", yoshida),
-                              ("force-gradient 4A", force_gradient))}
+    for r in data["rows"]:
+        lam = "—" if r["best_lambda"] is None else f"{r['best_lambda']:.3f}"
+        out.append(f"| {r['omega_h']:g} | {fmt(r['verlet'])} | {fmt(r['best_two_stage'])} "
+                   f"| {lam} | {fmt(r['omelyan'])} | {fmt(r['yoshida'])} "
+                   f"| {fmt(r['force_gradient_free'])} "
+                   f"| {fmt(r['force_gradient_one_evaluation'])} |")
+    ylim = data["yoshida_limit_omega_H"]
+    free, one = data["at_0_84"]["free"], data["at_0_84"]["one_evaluation"]
     out += ["", "Check of the formulas: observed order of the frequency error on one mode "
-            "(ω·H = 0.1 → 0.05): " + ", ".join(f"{k} {v:.2f}" for k, v in orders.items())
-            + " (the relative frequency error is of order p for a scheme of order p).", "",
-            "Reading: no two-stage splitting beats Störmer–Verlet at equal cost (the best "
-            "λ is ¼: two Verlet half-size steps, the same scheme); Yoshida's fourth order "
-            "wins only for small ω·h and is unstable from ω·h ≈ 0.52 (its step 3h reaches its "
-            "limit ≈ 1.57). On plane-bound (d = 10) the stiffest mode has ω ≈ 84 (Eq. 5's "
-            "predicted limit 0.0238 ≈ 2/ω), so ω·t = 0.84 at the default t = 0.01 and 1.68 "
-            "at t = 0.02 (beyond this table, where Verlet's error is already 13 % at ω·h = 1.5). "
-            "The force-gradient scheme is the one candidate that beats Störmer–Verlet there: "
-            "at ω_max·h = 0.84 by 15× if its gradient term cost nothing, but by 2.2× once the "
-            "gradient costs one evaluation, as a Hessian-vector product does (a finite "
-            "difference of two forces, or a second pass over the pairs), and it is unstable "
-            "from ω_max·h = 2√3/3 ≈ 1.15 then (its trace/2 = 1 − x/2 + x²/24 − x³/864, "
-            "x = ω²H², reaches −1 at (x − 12)³ = 0). Eq. 5's error is about A·t + B·t² "
-            "against the verlet "
-            "mode's B·t²; replacing B·t² by a 2.2× smaller phase error lifts the ratio at "
-            "plane-bound's t = 0.01 from ~4 to ~9 in the best case, still short of 10, for a "
-            "fourth-order scheme whose damping terms (velocity-dependent, not a splitting of "
-            "T and V) would need their own treatment.", ""]
+            "(ω·H = 0.1 → 0.05): " + ", ".join(f"{k} {v:.2f}" for k, v in data["orders"].items())
+            + " (the relative frequency error is of order p for a scheme of order p).", ""]
+    reading = ("Reading: no two-stage splitting beats Störmer–Verlet at equal cost (the best "
+               "λ is ¼: two Verlet half-size steps, the same scheme); Yoshida's fourth order "
+               f"wins only for small ω·h and is unstable from ω·h ≈ {ylim / 3:.2f} (its step 3h "
+               f"reaches its limit ≈ {ylim:.2f}). ")
+    pb = data.get("plane_bound")
+    if pb:
+        w = 2.0 / pb["t_max"]
+        reading += (f"On plane-bound (d = 10) the stiffest mode has ω ≈ {w:.0f} (Eq. 5's "
+                    f"predicted limit {pb['t_max']:.3g} ≈ 2/ω, `accuracy.json`), so "
+                    f"ω·t = {w * 0.01:.2f} at the default t = 0.01 and {w * 0.02:.2f} "
+                    "at t = 0.02 (beyond this table, where Verlet's error is already "
+                    f"{100 * data['verlet_error_at_1_5']:.0f} % at ω·h = 1.5). ")
+    reading += ("The force-gradient scheme is the one candidate that beats Störmer–Verlet there: "
+                f"at ω_max·h = 0.84 by {free:.0f}× if its gradient term cost nothing, but by "
+                f"{one:.1f}× once the "
+                "gradient costs one evaluation, as a Hessian-vector product does (a finite "
+                "difference of two forces, or a second pass over the pairs), and it is unstable "
+                f"from ω_max·h = 2√3/3 ≈ {data['force_gradient_limit_omega_h']:.2f} then (its "
+                "trace/2 = 1 − x/2 + x²/24 − x³/864, "
+                "x = ω²H², reaches −1 at (x − 12)³ = 0). Eq. 5's error is about A·t + B·t² "
+                "against the verlet mode's B·t²")
+    if pb:
+        now = pb["A"] / (pb["B"] * 0.01)
+        best = now * one
+        reading += (f" (plane-bound: A = {pb['A']:.2g}, B = {pb['B']:.0f}, `accuracy.json`); "
+                    f"replacing B·t² by a {one:.1f}× smaller phase error lifts the ratio A/(B·t) "
+                    f"at plane-bound's t = 0.01 from ~{now:.0f} to ~{best:.0f} in the best case, "
+                    + ("still short of 10" if best < 10 else "past 10")
+                    + ", for a fourth-order scheme whose damping terms (velocity-dependent, not "
+                    "a splitting of T and V) would need their own treatment.")
+    else:
+        reading += "."
+    out += [reading, ""]
     return "\n".join(out)
 
 
 def main():
+    import json
+
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path,
-                    default=Path(__file__).resolve().parents[1] / "docs/benchmarks/phase-error.md")
+                    default=Path(__file__).resolve().parents[1] / "docs/benchmarks/phase-error.md",
+                    help="the page; its figures go to the .json beside it")
     args = ap.parse_args()
-    text = markdown(table())
+    data = measure()
+    args.out.with_suffix(".json").write_text(json.dumps(data, indent=1, ensure_ascii=False)
+                                             + "\n")
+    text = markdown(data)
     args.out.write_text(text)
     print(text)
 

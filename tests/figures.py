@@ -186,7 +186,7 @@ def unmarked(page: Path) -> list[tuple[int, str]]:
     return found
 
 
-def tests_named(page: Path) -> list[tuple[int, str, bool]]:
+def named_tests(page: Path) -> list[tuple[int, str, bool]]:
     """Each ``checked:`` mark of a page: its line, the test, whether that test exists."""
     out = []
     text = _outside_code(page.read_text())
@@ -202,7 +202,7 @@ if __name__ == "__main__":
         for r in marks(Path(arg)):
             print(f"{arg}:{r['line']}: {r['figure']} {'==' if r['ok'] else '!='} "
                   f"{r['value']!r}  ({r['file']}: {r['expr']})")
-        for k, name, ok in tests_named(Path(arg)):
+        for k, name, ok in named_tests(Path(arg)):
             if not ok:
                 print(f"{arg}:{k}: names {name}, which does not exist")
         for k, fig in unmarked(Path(arg)):

@@ -15,7 +15,7 @@ import re
 from pathlib import Path
 
 import pytest
-from figures import REPO, marks, tests_named, unmarked
+from figures import REPO, marks, named_tests, unmarked
 
 PAGES = sorted([REPO / "README.md", *(REPO / "docs").rglob("*.md")])
 
@@ -56,13 +56,17 @@ GENERATED = {"accuracy.md": ("accuracy", "markdown", "accuracy.json"),
              "governing.md": ("governing", "markdown", "governing.json"),
              "inside.md": ("inside", "markdown", "inside.json"),
              "lattice.md": ("lattice", "report", "lattice.json"),
+             "mesh-fill.md": ("scripts/bench_mesh_fill.py", "markdown", "mesh-fill.json"),
              "nafems.md": ("nafems", "report", "nafems.json"),
              "parts.md": ("parts", "markdown", "parts.json"),
              "parts-100k/parts.md": ("parts", "markdown", "parts-100k/parts.json"),
              "perf.md": ("perf", "markdown", "perf.json"),
+             "phase-error.md": ("scripts/phase_error.py", "markdown", "phase-error.json"),
              "scaling.md": ("scaling", "markdown", "scaling.json"),
              "stability.md": ("stability", "markdown", "stability.json"),
              "static.md": ("static", "report", "static.json"),
+             "static-report.md": ("scripts/bench_static_report.py", "markdown",
+                                  "static-report.json"),
              "validity-concentrations.md": ("concentrations", "markdown",
                                             "validity-concentrations.json"),
              "stress.md": ("stress", "report", "stress.json"),
@@ -82,7 +86,7 @@ def test_a_written_page_quotes_no_figure_without_its_mark(page):
     assert not found, "\n".join(f"{page}:{k}: {fig} has no fig, checked or given mark "
                                 "(tests/figures.py)" for k, fig in found)
     missing = [f"{page}:{k}: names {name}, which does not exist"
-               for k, name, ok in tests_named(REPO / page) if not ok]
+               for k, name, ok in named_tests(REPO / page) if not ok]
     assert not missing, "\n".join(missing)
 
 
