@@ -213,13 +213,17 @@ def _frame(rundir, last: bool):
 def test_contact_runs_alike_on_the_reference_engine_and_lammps_under_mpi(tmp_path):
     """The two bars in contact, 120 steps (the wave well into both): LAMMPS on two ranks
     (the contact as its lepton pair style) reaches the reference engine's positions to
-    round-off."""
+    round-off. At step 60, mid-contact, the layer of each bar that touches reads the
+    compression the layer behind it does, σ_xx = −ρ·c·v/2 (6.87 MPa by hand; within 15 %: the
+    penalty contact rings about it, measured 6 %), and its contact pressure is ρ·c·v/2 too —
+    the contact's force counted once (its cells' share of the bar is half: the surface passes
+    through the particles; counted twice it read 13.6)."""
     import subprocess
     import sys
     from pathlib import Path
 
     mpiexec = Path(sys.executable).parent / "mpiexec"
-    common = [str(dynamics.COLLISION), "--steps", "120", "--dump-every", "120", "--no-render",
+    common = [str(dynamics.COLLISION), "--steps", "120", "--dump-every", "60", "--no-render",
               "--no-progress"]
     ref = subprocess.run([sys.executable, "-m", "rackstress.cli", "run", *common, "--engine",
                           "reference", "--out", str(tmp_path / "ref")],
@@ -234,6 +238,23 @@ def test_contact_runs_alike_on_the_reference_engine_and_lammps_under_mpi(tmp_pat
     moved = np.abs(a - _frame(tmp_path / "ref", last=False)).max()
     assert moved > 1e-3                       # the bars moved and pressed: not a trivial check
     assert np.abs(a - b).max() < 1e-9 * 100.0
+    from rackstress.model.materials import PRESETS
+    from rackstress.stress.measures import ParticleStress
+    from rackstress.stress.rundata import load_run
+
+    al = PRESETS["aluminium"]
+    half = al.density * (al.E / al.density) ** 0.5 * 1.0 / 2 / 1e6        # MPa at 1 m/s
+    run = load_run(tmp_path / "mpi")
+    k = list(run.steps).index(60)
+    r = ParticleStress(run, method="virial").run().results
+    for name, face_x, behind_x in (("left", 50.0, 46.0), ("right", 52.0, 56.0)):
+        idx = run.parts[name].index
+        face = idx[np.isclose(run.o[idx, 0], face_x)]
+        behind = idx[np.isclose(run.o[idx, 0], behind_x)]
+        assert len(face) == len(behind) == 25
+        assert -r.stress[k][face, 0].mean() == pytest.approx(half, rel=0.15), name
+        assert -r.stress[k][behind, 0].mean() == pytest.approx(half, rel=0.15), name
+        assert r.contact_pressure[k][face].mean() == pytest.approx(half, rel=0.15), name
 
 
 @pytest.mark.lammps

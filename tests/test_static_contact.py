@@ -123,6 +123,7 @@ def test_pressed_parts_on_lammps_and_pulled_parts_refused(tmp_path):
     s = json.loads((out / "summary.json").read_text())
     assert s["status"] == "settled" and s["residual_engine"] <= 1e-6
     assert "pair_style lepton" in (out / "in.lammps").read_text()
+    _contact_layers_carry_the_load(out)
     pull = tmp_path / "pull.toml"
     pull.write_text(PRESS.replace('force = [0, "$(-load)", 0]', 'force = [0, "$(load)", 0]'))
     r = subprocess.run([sys.executable, "-m", "rackstress.cli", "run", str(pull), "--out",
@@ -131,3 +132,32 @@ def test_pressed_parts_on_lammps_and_pulled_parts_refused(tmp_path):
     assert r.returncode == 2, r.stderr
     assert "'base' and 'block' separate" in r.stderr and "contact" in r.stderr
     assert "Traceback" not in r.stderr and not (tmp_path / "p" / "summary.json").exists()
+
+
+def _contact_layers_carry_the_load(out):
+    """The stress of the run's own files (``rackstress run``'s post-processing): every layer of
+    both parts carries σ_yy = −F/A = −2.5 MPa by the plain virial (exact in a section sum),
+    the two layers that touch included — their contact's force enters their virial as a
+    binding's (without it they read half); the contact pressure averages F/A over the 10 × 10
+    particles of each face, its forces over the cells' faces sum to the 1,000 N load; the run's
+    report names the contact and its pressure."""
+    from rackstress.stress.measures import ParticleStress
+    from rackstress.stress.rundata import load_run
+
+    run = load_run(out)
+    r = ParticleStress(run, method="virial").run().results
+    o, s, pc = run.o, r.stress[-1], r.contact_pressure[-1]
+    for name, layers in (("base", (3.0, 5.0, 7.0, 9.0)), ("block", (11.0, 13.0, 15.0, 17.0))):
+        idx = run.parts[name].index
+        for y in layers:
+            at = idx[np.isclose(o[idx, 1], y)]
+            assert len(at) == 100
+            assert s[at, 1].mean() == pytest.approx(-2.5, rel=0.01), (name, y)
+        face = idx[np.isclose(o[idx, 1], 9.0 if name == "base" else 11.0)]
+        assert np.all(pc[face] > 0) and np.count_nonzero(pc[idx] > 0) == 100
+        assert pc[face].mean() == pytest.approx(2.5, rel=0.01)
+        assert pc[face].sum() * 2.0 ** 2 == pytest.approx(1000.0, rel=0.01)
+    st = json.loads((out / "stress.json").read_text())
+    (c,) = st["contact"]
+    assert sorted(c["parts"]) == ["base", "block"] and c["touching"]
+    assert c["peak"] == pytest.approx(2.5, rel=0.05) and c["units"] == "MPa"

@@ -156,7 +156,7 @@ def is_contact(scene, target: str, op) -> bool:
                for o in scene.operators.get(op.source, []))
 
 
-def _contacts(scene) -> tuple:
+def material_contacts(scene) -> tuple:
     """Each side of every material contact: (target slice, source slice, c, the target's and
     the source's radii)."""
     out = []
@@ -367,7 +367,7 @@ def _problem(scene) -> _Problem:
     F = external_forces(scene)
     return _Problem(len(o), o, scene.masses(), fixed, ~fixed.reshape(-1), _bind_pairs(scene),
                     F, float(np.linalg.norm(F, axis=1).sum()), ConstraintMap.of_scene(scene),
-                    volume_terms(scene), contact=_contacts(scene))
+                    volume_terms(scene), contact=material_contacts(scene))
 
 
 def _spread(prob: _Problem):

@@ -139,8 +139,12 @@ def write_bindings(scene: Scene, path: Path) -> int:
     scene. With a volumetric term (a material's Poisson's ratio, :mod:`rackstress.model.volume`)
     its terms too — ``vi``, ``vj``, ``vL`` (their pairs), ``vowner``, ``vK`` = m·κ (energies)
     and the sparse ``C`` as ``vC_indptr``, ``vC_indices``, ``vC_data`` — whose virial the
-    stress adds (:meth:`rackstress.model.volume.Volume.virial`). Returns the number of
-    bindings (0: no file written)."""
+    stress adds (:meth:`rackstress.model.volume.Volume.virial`). With material parts in contact
+    (``[[contact]]``) each side of each contact — ``ct`` (its target's and source's first and
+    end particle), ``ck`` (the pair's force per length m·c) — and every particle's radius
+    ``r``, so that the contact's force enters the stress of the layers that touch and the
+    contact pressure is read (:func:`rackstress.stress.measures.read_contacts`). Returns the
+    number of bindings (0: no file written)."""
     b = bindings_of(scene)
     if b is None:
         return 0
@@ -154,6 +158,15 @@ def write_bindings(scene: Scene, path: Path) -> int:
                  "vowner": vol.owner.astype(idx), "vK": m[vol.owner] * vol.kappa,
                  "vC_indptr": vol.C.indptr.astype(np.int64),
                  "vC_indices": vol.C.indices.astype(np.int64), "vC_data": vol.C.data}
+    from rackstress.engines.static import material_contacts
+
+    contacts = material_contacts(scene)
+    if contacts:
+        m = scene.masses()
+        extra.update(ct=np.array([[t.start, t.stop, s.start, s.stop]
+                                  for t, s, *_ in contacts], np.int64),
+                     ck=np.array([m[t.start] * c for t, _, c, *_ in contacts]),
+                     r=np.concatenate([g.r for g in scene.groups.values()]))
     np.savez(tmp, i=b[0].astype(idx), j=b[1].astype(idx), k=b[2], L0sq=b[3],
              V=volumes_of(scene), **extra)
     tmp.replace(path)

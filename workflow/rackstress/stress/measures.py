@@ -757,6 +757,7 @@ class ParticleStress(_RunAnalysis):
         self.UNITS = stress_unit(run)
         self.bindings = read_bindings(run)
         self.volume = read_volume_terms(run)
+        self.contacts = read_contacts(run)
         self._mat = mats
 
     def _prepare(self):
@@ -768,6 +769,8 @@ class ParticleStress(_RunAnalysis):
         self.results.principal = np.full(shape + (3,), np.nan)
         self.results.safety = np.full(shape, np.nan)
         self.results.bind_strain = np.full(shape, np.nan)
+        if self.contacts is not None:
+            self.results.contact_pressure = np.full(shape, np.nan)
         V = np.full(n, np.nan)
         self._yield = np.full(n, np.nan)
         mine = [p for p in self.parts if p.name in self._mat]
@@ -792,6 +795,7 @@ class ParticleStress(_RunAnalysis):
             self._W2S = None
             self._mask[:] = False
             return
+        self._area = V ** (2.0 / 3.0)        # a whole cell's face: the contact's area a²
         Vi = read_volumes(run)               # each cell's own share of the part, if written
         self._V = V if Vi is None else np.where(np.isfinite(Vi) & self._mask, Vi, V)
         self._gather = T.incidence(b[0], n)
@@ -828,6 +832,8 @@ class ParticleStress(_RunAnalysis):
         if self.volume is not None:       # the material's Poisson's ratio: its own virial
             with np.errstate(divide="ignore", invalid="ignore"):   # V = 0 off the mask
                 s = s + T.volume_virial(p, self.volume) / self._V[:, None]
+        if self.contacts is not None:     # the contact's force on the layers that touch
+            s = s + self._contact(p, k)
         if self._wm is not None:
             s = T.moment_corrected(s, b[0], b[1], self._wm, self._gather)
         if self._patch is not None:
@@ -846,6 +852,35 @@ class ParticleStress(_RunAnalysis):
         bs[~self._mask] = np.nan
         self.results.bind_strain[k] = bs
         return vm
+
+
+    def _contact(self, p: np.ndarray, k: int) -> np.ndarray:
+        """The contacts' virial per particle volume at ``p`` (n, 6): a pair in contact is a
+        binding of length R (:func:`contact_pairs`), its force shared by both particles'
+        virials as a binding's, as far as its line lies inside each particle's cell; and, into ``results.contact_pressure``, each particle's
+        contact force over its cell's face area a² (zero where nothing touches)."""
+        i, j, kc, R2 = contact_pairs(p, self.contacts)
+        n = len(p)
+        d = p[j] - p[i]
+        d2 = np.einsum("ij,ij->i", d, d)
+        # the part of the pair's line inside the particle's own cell: half of it where the
+        # cell is whole (the part's surface half a spacing beyond the particle, the contact's
+        # force crossing the cell as a binding's does), none where the surface passes through
+        # the particle (a cell whose share of the part is half: its stress, the bindings'
+        # virial over that share, already carries the force the contact puts on it);
+        # between, (2·share − 1)
+        share = np.clip(self._V / self._area ** 1.5, 0.0, 1.0)
+        w = np.clip(2.0 * share[i] - 1.0, 0.0, 1.0)
+        W = T.virial_of(d, d2, kc * w, R2, T.incidence(i, n))
+        f = (kc * (1.0 - R2 / d2))[:, None] * d if len(i) else np.zeros((0, 3))
+        F = np.stack([np.bincount(i, weights=f[:, c], minlength=n) for c in range(3)], axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            pc = np.linalg.norm(F, axis=1) / self._area
+            out = W / self._V[:, None]
+        pc[~self._mask] = np.nan
+        self.results.contact_pressure[k] = pc
+        out[~self._mask] = 0.0
+        return out
 
 
 def read_volumes(run):
@@ -888,6 +923,45 @@ def read_volume_terms(run):
         C = sp.csr_matrix((z["vC_data"], z["vC_indices"], z["vC_indptr"]),
                           shape=(len(owner), len(i)))
         return VolumeTerms(i, j, z["vL"].astype(np.float64), owner, K, C, n)
+
+
+def read_contacts(run):
+    """The material contacts of the run's ``bindings.npz`` (:func:`rackstress.runs.run.
+    write_bindings`): a list of (target rows, source rows, m·c) per side of each contact and
+    every particle's radius, or None for a run without contact."""
+    from rackstress.lib.runfiles import BINDINGS
+
+    path = Path(run.rundir) / BINDINGS
+    if not path.is_file():
+        return None
+    with np.load(path, allow_pickle=False) as z:
+        if "ct" not in z.files:
+            return None
+        ct, ck, r = z["ct"].astype(np.int64), z["ck"].astype(np.float64), z["r"]
+    if len(r) != run.n_atoms or (len(ct) and ct.max() > run.n_atoms):
+        raise StressInputError(f"{path}: its contacts name particles beyond the run's "
+                               f"{run.n_atoms}: the file is not of this run")
+    return [(slice(int(a), int(b)), slice(int(c), int(d)), float(k))
+            for (a, b, c, d), k in zip(ct, ck)], np.asarray(r, np.float64)
+
+
+def contact_pairs(p: np.ndarray, contacts) -> tuple:
+    """The pairs in contact at ``p`` (``contacts`` from :func:`read_contacts`), each listed
+    from both ends as a binding is: (i, j, m·c, R²) with R the sum of the two radii, the
+    pairs closer than R only (Eq. 10 acts there alone; in contact it is Eq. 12 with L0 = R)."""
+    from scipy.spatial import cKDTree
+
+    sides, r = contacts
+    I, J, K, Q = [], [], [], []
+    for st, ss, k in sides:
+        reach = float(r[st].max() + r[ss].max())
+        dm = cKDTree(p[st]).sparse_distance_matrix(cKDTree(p[ss]), reach, output_type="ndarray")
+        i, j, d = dm["i"].astype(np.int64) + st.start, dm["j"].astype(np.int64) + ss.start, dm["v"]
+        R2 = (r[i] + r[j]) ** 2
+        keep = d * d < R2
+        I.append(i[keep]), J.append(j[keep]), K.append(np.full(int(keep.sum()), k))
+        Q.append(R2[keep])
+    return tuple(np.concatenate(x) if x else np.zeros(0) for x in (I, J, K, Q))
 
 
 def read_bindings(run):

@@ -73,7 +73,7 @@ def register_measure(name: str, label: str, units: str, fn) -> None:
 #: Per-particle fields kept beside the ranked measures (not ranked by their maximum: a tensor,
 #: a vector, a factor of safety whose *smallest* value matters): written into the VTK files,
 #: kept in float32 (11 values a particle and frame; ``von_mises`` itself stays float64).
-EXTRAS = ("stress", "principal", "safety", "bind_strain")
+EXTRAS = ("stress", "principal", "safety", "bind_strain", "contact_pressure")
 #: Small-strain validity: a binding stretched or shortened by more than this fraction
 #: (|d/L0 − 1|) makes the linear-elastic reading of the stress doubtful (warning).
 STRAIN_LIMIT = 0.05
@@ -90,8 +90,9 @@ class TooLargeError(StressInputError):
 FIT = "robust"
 #: 2: a sediment's paper measure is |p − o| (no rest shape, measures.paper_frames);
 #: 3: the stress fields (extras) and the scene's units kept beside the measures;
-#: 4: von_mises by patch recovery (the measure's default route)
-CACHE_VERSION = 4
+#: 4: von_mises by patch recovery (the measure's default route); 5: the contact's force in the
+#: stress of the layers that touch, and the contact pressure
+CACHE_VERSION = 5
 
 
 @dataclass
@@ -259,7 +260,8 @@ def compute_fields(run, cache: bool = True, progress: bool = False,
         r = stress.run().results
         values["von_mises"] = r.von_mises
         units["von_mises"] = stress.UNITS
-        extras = {m: r[m].astype(np.float32) for m in EXTRAS}    # pictures' precision: half
+        extras = {m: r[m].astype(np.float32) for m in EXTRAS      # pictures' precision: half
+                  if m in r}                 # (contact_pressure: a run with [[contact]] only)
     u = (run.scene or {}).get("units") or {}
     if u.get("name") not in (None, "paper"):          # the scene's own units, not generic ones
         units.update({"paper": u["length"], "accumulated": f"{u['length']}·{u['time']}",
@@ -550,6 +552,40 @@ def stress_warnings(run, fields: Fields) -> list:
     return out
 
 
+def contact_summary(run, fields: Fields) -> list:
+    """Per pair of parts in contact (``[[contact]]``): the largest contact pressure over the
+    run — each particle's contact force over its cell's face area — where (particle, its part)
+    and when, and the force the contact carries then (the sum of one side's contact forces;
+    statics: the load it passes on). Empty without contact."""
+    pc = fields.extras.get("contact_pressure")
+    if pc is None:
+        return []
+    from rackstress.stress.measures import read_contacts
+
+    sides, _ = read_contacts(run)
+    names = {p.index[0]: name for name, p in run.parts.items() if len(p.index)}
+    out, seen = [], set()
+    for st, ss, _k in sides:
+        a, b = names.get(st.start), names.get(ss.start)
+        if a is None or b is None or frozenset((a, b)) in seen:
+            continue
+        seen.add(frozenset((a, b)))
+        rows = np.r_[run.parts[a].index, run.parts[b].index]
+        hit = _argmax(pc[:, rows])
+        if hit is None or not np.nanmax(pc[hit[0], rows]) > 0:
+            out.append({"parts": [a, b], "touching": False, "units": fields.unit("von_mises"),
+                        "message": f"contact {a}–{b}: the parts never touch"})
+            continue
+        k, j = hit
+        value, q = float(pc[k, rows[j]]), int(rows[j])
+        area = float(np.nansum(pc[k, run.parts[a].index] > 0))
+        out.append({"parts": [a, b], "touching": True, "peak": value,
+                    "units": fields.unit("von_mises"), "particle": int(run.data.ids[q]),
+                    "group": a if q in set(run.parts[a].index.tolist()) else b,
+                    "iteration": int(fields.steps[k]), "particles_touching": int(area)})
+    return out
+
+
 def safety(run, fields: Fields, gov: dict | None = None) -> dict:
     """Per part with a yield strength: the smallest factor of safety (yield / von Mises) over
     the run, where and when — by the governing stress's rule (:mod:`.governing`: away from
@@ -645,6 +681,7 @@ def postprocess(rundir, vtk: bool = True, dump: bool = False, progress: bool = F
             "last_iteration": int(fields.steps[-1]),
             "peak": overall_peak(run, group_peaks, fields.default), "groups": group_peaks,
             "warnings": stress_warnings(run, fields), "safety": safety(run, fields, gov),
+            "contact": contact_summary(run, fields),
             "files": {},
             "timings": {"measures_s": fields.timings.get("compute_s", 0.0),
                         "frames_measured_while_running":
@@ -792,6 +829,7 @@ def describe(info: dict, governing: bool = True) -> list:
                  for m in ("von_mises", "paper", "strain") if (p := rec.get(m)) is not None]
         if shown:
             lines.append(f"  {name:12s} peak " + "; ".join(shown))
+    lines.extend(describe_contact(info))
     for name, sf in (info.get("safety") or {}).items():
         if sf.get("rule") == "governing":
             continue                        # said with the governing stress
@@ -832,6 +870,7 @@ def describe_static(info: dict, governing: bool = True) -> list:
                      for m in ("von_mises", "strain") if (p := rec.get(m)) is not None]
             if shown:
                 lines.append(f"  {name:12s} largest " + "; ".join(shown))
+        lines.extend(describe_contact(info))
     kinds = {w["kind"] for w in STRESS_WARNINGS}
     for w in info.get("warnings") or []:
         if st["settled"] or w.get("kind") not in kinds:   # no stress of a non-equilibrium
@@ -842,6 +881,20 @@ def describe_static(info: dict, governing: bool = True) -> list:
         lines.append(f"  note: {note}")
     if st["settled"] and info.get("governing") and governing:
         lines.extend(describe_governing(info))
+    return lines
+
+
+def describe_contact(info: dict) -> list:
+    """A line per pair of parts in contact (:func:`contact_summary`)."""
+    lines = []
+    for c in info.get("contact") or []:
+        a, b = c["parts"]
+        if not c["touching"]:
+            lines.append(f"  contact {a}–{b}: the parts never touch")
+            continue
+        lines.append(f"  contact {a}–{b}: largest contact pressure {c['peak']:.4g} {c['units']} "
+                     f"at {c['group']} particle {c['particle']} (iteration {c['iteration']}), "
+                     f"{c['particles_touching']} of {a}'s particles touching then")
     return lines
 
 
