@@ -718,6 +718,12 @@ def stress_unit(run) -> str:
     return u.get("stress") if u.get("name") not in (None, "paper") else "stress units"
 
 
+#: what ``ParticleStress.results.contact_sides`` holds per frame and side of a contact: the
+#: largest contact pressure on that side's particles from the other part, the particle (row),
+#: how many of its particles it presses, the total force the other part puts on it (x, y, z)
+CONTACT_SIDE = ("peak", "particle", "touching", "fx", "fy", "fz")
+
+
 class ParticleStress(_RunAnalysis):
     """Stress per particle from the bindings' forces, in the scene's stress unit.
 
@@ -771,6 +777,8 @@ class ParticleStress(_RunAnalysis):
         self.results.bind_strain = np.full(shape, np.nan)
         if self.contacts is not None:
             self.results.contact_pressure = np.full(shape, np.nan)
+            self.results.contact_sides = np.zeros((self.n_frames, len(self.contacts[0]),
+                                                   len(CONTACT_SIDE)))
         V = np.full(n, np.nan)
         self._yield = np.full(n, np.nan)
         mine = [p for p in self.parts if p.name in self._mat]
@@ -857,9 +865,12 @@ class ParticleStress(_RunAnalysis):
     def _contact(self, p: np.ndarray, k: int) -> np.ndarray:
         """The contacts' virial per particle volume at ``p`` (n, 6): a pair in contact is a
         binding of length R (:func:`contact_pairs`), its force shared by both particles'
-        virials as a binding's, as far as its line lies inside each particle's cell; and, into ``results.contact_pressure``, each particle's
-        contact force over its cell's face area a² (zero where nothing touches)."""
-        i, j, kc, R2 = contact_pairs(p, self.contacts)
+        virials as a binding's, as far as its line lies inside each particle's cell; into
+        ``results.contact_pressure`` each particle's contact force over its cell's face area a²
+        (zero where nothing touches), and into ``results.contact_sides`` per side of each
+        contact its largest pressure, that particle, the particles it presses and its total
+        force (:data:`CONTACT_SIDE`)."""
+        i, j, kc, R2, side = contact_pairs(p, self.contacts)
         n = len(p)
         d = p[j] - p[i]
         d2 = np.einsum("ij,ij->i", d, d)
@@ -879,6 +890,14 @@ class ParticleStress(_RunAnalysis):
             out = W / self._V[:, None]
         pc[~self._mask] = np.nan
         self.results.contact_pressure[k] = pc
+        for m, (st, _, _) in enumerate(self.contacts[0]):
+            on = side == m
+            Fs = np.stack([np.bincount(i[on] - st.start, weights=f[on, c],
+                                       minlength=st.stop - st.start) for c in range(3)], axis=1)
+            ps = np.linalg.norm(Fs, axis=1) / self._area[st]
+            top = int(np.argmax(ps)) if len(ps) else 0
+            self.results.contact_sides[k, m] = (ps[top] if len(ps) else 0.0, st.start + top,
+                                                np.count_nonzero(ps > 0), *Fs.sum(axis=0))
         out[~self._mask] = 0.0
         return out
 
@@ -947,21 +966,22 @@ def read_contacts(run):
 
 def contact_pairs(p: np.ndarray, contacts) -> tuple:
     """The pairs in contact at ``p`` (``contacts`` from :func:`read_contacts`), each listed
-    from both ends as a binding is: (i, j, m·c, R²) with R the sum of the two radii, the
-    pairs closer than R only (Eq. 10 acts there alone; in contact it is Eq. 12 with L0 = R)."""
+    from both ends as a binding is: (i, j, m·c, R², side) with R the sum of the two radii and
+    side the contact's entry it belongs to, the pairs closer than R only (Eq. 10 acts there
+    alone; in contact it is Eq. 12 with L0 = R)."""
     from scipy.spatial import cKDTree
 
     sides, r = contacts
-    I, J, K, Q = [], [], [], []
-    for st, ss, k in sides:
+    I, J, K, Q, S = [], [], [], [], []
+    for side, (st, ss, k) in enumerate(sides):
         reach = float(r[st].max() + r[ss].max())
         dm = cKDTree(p[st]).sparse_distance_matrix(cKDTree(p[ss]), reach, output_type="ndarray")
         i, j, d = dm["i"].astype(np.int64) + st.start, dm["j"].astype(np.int64) + ss.start, dm["v"]
         R2 = (r[i] + r[j]) ** 2
         keep = d * d < R2
         I.append(i[keep]), J.append(j[keep]), K.append(np.full(int(keep.sum()), k))
-        Q.append(R2[keep])
-    return tuple(np.concatenate(x) if x else np.zeros(0) for x in (I, J, K, Q))
+        Q.append(R2[keep]), S.append(np.full(int(keep.sum()), side))
+    return tuple(np.concatenate(x) if x else np.zeros(0) for x in (I, J, K, Q, S))
 
 
 def read_bindings(run):

@@ -107,6 +107,9 @@ class Fields:
     units: dict = field(default_factory=dict)
     #: name → (n_frames, n_atoms[, k]) per-particle fields of :data:`EXTRAS`
     extras: dict = field(default_factory=dict)
+    #: parts in contact: (n_frames, sides, 4) per side of each contact
+    #: (:data:`rackstress.stress.measures.CONTACT_SIDE`), else None
+    contact_sides: object = None
 
     @property
     def measures(self) -> list:
@@ -145,11 +148,12 @@ def _load_cache(run, path: Path) -> Fields | None:
             extras = {m: z["x_" + m] for m in json.loads(str(z["extras"]))}
             units = json.loads(str(z["units"]))
             steps = z["steps"]
+            sides = z["contact_sides"] if "contact_sides" in z.files else None
     except (OSError, KeyError, ValueError):
         return None
     if not np.array_equal(steps, run.steps):
         return None
-    return Fields(steps, values, units=units, extras=extras)
+    return Fields(steps, values, units=units, extras=extras, contact_sides=sides)
 
 
 def _save_cache(run, fields: Fields, path: Path) -> None:
@@ -158,7 +162,9 @@ def _save_cache(run, fields: Fields, path: Path) -> None:
         np.savez(tmp, stamp=json.dumps(_stamp(run)), measures=json.dumps(fields.measures),
                  extras=json.dumps(list(fields.extras)), units=json.dumps(fields.units),
                  steps=fields.steps, **fields.values,
-                 **{"x_" + m: v for m, v in fields.extras.items()})
+                 **{"x_" + m: v for m, v in fields.extras.items()},
+                 **({} if fields.contact_sides is None
+                    else {"contact_sides": fields.contact_sides}))
         os.replace(tmp, path)
     except OSError:
         tmp.unlink(missing_ok=True)       # a cache that cannot be written is only a cache
@@ -262,13 +268,15 @@ def compute_fields(run, cache: bool = True, progress: bool = False,
         units["von_mises"] = stress.UNITS
         extras = {m: r[m].astype(np.float32) for m in EXTRAS      # pictures' precision: half
                   if m in r}                 # (contact_pressure: a run with [[contact]] only)
+        sides = r.get("contact_sides")
     u = (run.scene or {}).get("units") or {}
     if u.get("name") not in (None, "paper"):          # the scene's own units, not generic ones
         units.update({"paper": u["length"], "accumulated": f"{u['length']}·{u['time']}",
                       "d2min": f"{u['length']}²"})
     for name, fn in EXTRA_MEASURES.items():
         values[name] = fn(run, values)
-    fields = Fields(got["steps"], values, units=units, extras=extras)
+    fields = Fields(got["steps"], values, units=units, extras=extras,
+                    contact_sides=sides if stress is not None else None)
     fields.timings["compute_s"] = time.perf_counter() - t0
     fields.timings["cached"] = False
     fields.timings["frames_measured_while_running"] = head.used if head is not None else 0
@@ -554,35 +562,39 @@ def stress_warnings(run, fields: Fields) -> list:
 
 def contact_summary(run, fields: Fields) -> list:
     """Per pair of parts in contact (``[[contact]]``): the largest contact pressure over the
-    run — each particle's contact force over its cell's face area — where (particle, its part)
-    and when, and the force the contact carries then (the sum of one side's contact forces;
-    statics: the load it passes on). Empty without contact."""
-    pc = fields.extras.get("contact_pressure")
-    if pc is None:
+    run — a particle's contact force from the other part over its cell's face a² — where
+    (particle, its part) and when, how many particles of each part touch then and the force
+    the contact carries then (statics: the load it passes on). Empty without contact."""
+    cs = fields.contact_sides
+    if cs is None or not cs.shape[1]:
         return []
     from rackstress.stress.measures import read_contacts
 
     sides, _ = read_contacts(run)
     names = {p.index[0]: name for name, p in run.parts.items() if len(p.index)}
-    out, seen = [], set()
-    for st, ss, _k in sides:
+    pairs: dict = {}
+    for m, (st, ss, _k) in enumerate(sides):
         a, b = names.get(st.start), names.get(ss.start)
-        if a is None or b is None or frozenset((a, b)) in seen:
+        if a is not None and b is not None:
+            pairs.setdefault(frozenset((a, b)), []).append((m, a))
+    out = []
+    unit = fields.unit("von_mises") if "von_mises" in fields.values else "stress units"
+    force_unit = ((run.scene or {}).get("units") or {}).get("force", "force units")
+    for key, ms in pairs.items():
+        parts = [ms[0][1]] + sorted(key - {ms[0][1]})
+        peak = np.max([cs[:, m, 0] for m, _ in ms], axis=0)       # per frame
+        if not peak.max() > 0:
+            out.append({"parts": parts, "touching": False, "units": unit})
             continue
-        seen.add(frozenset((a, b)))
-        rows = np.r_[run.parts[a].index, run.parts[b].index]
-        hit = _argmax(pc[:, rows])
-        if hit is None or not np.nanmax(pc[hit[0], rows]) > 0:
-            out.append({"parts": [a, b], "touching": False, "units": fields.unit("von_mises"),
-                        "message": f"contact {a}–{b}: the parts never touch"})
-            continue
-        k, j = hit
-        value, q = float(pc[k, rows[j]]), int(rows[j])
-        area = float(np.nansum(pc[k, run.parts[a].index] > 0))
-        out.append({"parts": [a, b], "touching": True, "peak": value,
-                    "units": fields.unit("von_mises"), "particle": int(run.data.ids[q]),
-                    "group": a if q in set(run.parts[a].index.tolist()) else b,
-                    "iteration": int(fields.steps[k]), "particles_touching": int(area)})
+        k = int(np.argmax(peak))
+        m, side = max(ms, key=lambda e: cs[k, e[0], 0])
+        q = int(cs[k, m, 1])
+        out.append({"parts": parts, "touching": True, "peak": float(cs[k, m, 0]),
+                    "units": unit, "group": side, "particle": int(run.data.ids[q]),
+                    "iteration": int(fields.steps[k]),
+                    "particles_touching": {a: int(cs[k, e, 2]) for e, a in ms},
+                    "force": {a: cs[k, e, 3:6].tolist() for e, a in ms},
+                    "force_units": force_unit})
     return out
 
 
@@ -892,9 +904,11 @@ def describe_contact(info: dict) -> list:
         if not c["touching"]:
             lines.append(f"  contact {a}–{b}: the parts never touch")
             continue
+        touching = ", ".join(f"{n} of {g}'s" for g, n in c["particles_touching"].items())
         lines.append(f"  contact {a}–{b}: largest contact pressure {c['peak']:.4g} {c['units']} "
-                     f"at {c['group']} particle {c['particle']} (iteration {c['iteration']}), "
-                     f"{c['particles_touching']} of {a}'s particles touching then")
+                     f"on {c['group']} particle {c['particle']} (iteration {c['iteration']}); "
+                     f"{touching} particles pressed then; force on {a} "
+                     f"({', '.join(f'{x:.4g}' for x in c['force'][a])}) {c['force_units']}")
     return lines
 
 
