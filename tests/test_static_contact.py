@@ -112,7 +112,7 @@ def test_the_contact_energy_is_the_potential_of_its_forces(tmp_path):
 
 @pytest.mark.lammps
 def test_pressed_parts_on_lammps_and_pulled_parts_refused(tmp_path):
-    """``rackstress run``: LAMMPS evaluates the contact itself (its lepton pair style) at the
+    """``rackstress run``: LAMMPS evaluates the contact itself (the plugin's rs/collide) at the
     solver's equilibrium and agrees (residual ≤ 1e-6); the same scene with the load reversed
     pulls the block off the base, which contact cannot hold: exit 2 naming both parts, not
     a run that ends "not settled"."""
@@ -123,7 +123,7 @@ def test_pressed_parts_on_lammps_and_pulled_parts_refused(tmp_path):
     assert r.returncode == 0, r.stderr
     s = json.loads((out / "summary.json").read_text())
     assert s["status"] == "settled" and s["residual_engine"] <= 1e-6
-    assert "pair_style lepton" in (out / "in.lammps").read_text()
+    assert "rs/collide" in (out / "in.lammps").read_text()
     _contact_layers_carry_the_load(out)
     pull = tmp_path / "pull.toml"
     pull.write_text(PRESS.replace('force = [0, "$(-load)", 0]', 'force = [0, "$(load)", 0]'))
@@ -199,3 +199,42 @@ def test_the_pin_joint_assembly_passes_its_load_through_both_contacts(tmp_path):
     assert (sig[gap, 5] * V[gap]).sum() == pytest.approx(1250.0, rel=0.01)
     # 40 cells of 1 mm² for the half disc's 39.3 mm²: the mean reads 1.8 % low
     assert sig[gap, 5].mean() == pytest.approx(5000.0 / (2 * np.pi * 10 ** 2 / 4), rel=0.02)
+    # the contact's edges (singular, left out of the governing stress): where the pin bears
+    # on the rim of the lug's bore at its face toward the gap (z = 4.5, the bore's radius 5
+    # give or take a spacing) — none on the symmetry plane z = 0, a mirror, not a free face;
+    # the lug's points are the pin's too, and the cheek's rim (z = 6.5) is the clevis's
+    from rackstress.stress.governing import contact_edges
+    from rackstress.stress.post import compute_fields
+
+    edges = contact_edges(run, compute_fields(run))
+    for part, z in (("lug", 4.5), ("clevis", 6.5)):
+        e = edges[part]
+        assert len(e) and np.allclose(e[:, 2], z), part
+        assert np.all(np.abs(np.hypot(e[:, 0], e[:, 1]) - 5.0) <= 1.0), part
+    assert len(edges["pin"]) == len(edges["lug"]) + len(edges["clevis"])
+    gov = st["governing_parts"]["lug"]
+    assert gov["singular_points"].get("contact edge") == len(edges["lug"])
+
+
+def test_refine_scales_the_spacing_parameter_and_what_follows_it():
+    """``--refine`` loads the scene at spacing/√2 as ``--set spacing=…`` would: the pin joint's
+    lattice origin, "$(spacing / 2)", follows, so the first layer still lies half a (new)
+    spacing off each symmetry plane, every part on one lattice (the pin's and the holes'
+    particles complementary: touching at R, none closer) — scaling the parts' spacing alone
+    left the origin at 0.5 mm and no particle within half a spacing of the planes (exit 2)."""
+    from scipy.spatial import cKDTree
+
+    from rackstress.scenes.toml import load_toml
+
+    repo = Path(__file__).resolve().parents[1]
+    sc = load_toml(repo / "examples" / "assembly" / "pin-joint.toml",
+                   spacing_scale=1 / np.sqrt(2))
+    a = 1 / np.sqrt(2)
+    assert sc.params["spacing_scale"] == pytest.approx(a)
+    for name in ("lug", "clevis", "pin"):
+        o = sc.groups[name].o
+        assert o[:, 1].min() == pytest.approx(a / 2) and o[:, 2].min() == pytest.approx(a / 2)
+        assert sc.groups[name].fixed[np.isclose(o[:, 2], a / 2), 2].all()   # the plane holds
+    pin, lug = sc.groups["pin"].o, sc.groups["lug"].o
+    d, _ = cKDTree(lug).query(pin)
+    assert d.min() == pytest.approx(a, rel=1e-9)

@@ -147,7 +147,7 @@ def _stepped(path: Path, spacing: float, duration: float | None, every: int, sam
     sc = load(str(path), {"spacing": spacing})
     if duration is not None:
         sc.phases[0] = replace(sc.phases[0], steps=steps_for(duration, sc.dt), duration=duration)
-    run = LammpsRun(compile_deck(sc, "exact"), None)
+    run = LammpsRun(compile_deck(sc, "exact", plugin=None), None)
     try:
         sample(0.0, run.positions())
         t0 = time.perf_counter()
@@ -314,6 +314,55 @@ def collision(spacing: float, echo=print) -> dict:
     return row
 
 
+#: steps of each timed run of :func:`contact_cost`, and how many times each variant runs
+COST_STEPS, COST_REPEAT = 1000, 3
+
+
+def contact_cost(spacing: float, steps: int = COST_STEPS, repeat: int = COST_REPEAT,
+                 echo=print) -> dict:
+    """What contact costs a step: the two bars of the collision, run ``steps`` steps on LAMMPS
+    with their ``[[contact]]`` and without it (the same two parts, passing through each other),
+    the variants alternating ``repeat`` times, the best CPU time of each (one process: the
+    machine's load touches both alike)."""
+    import tempfile
+
+    from rackstress.engines.driver import drive
+    from rackstress.engines.lammps.deck import compile_deck
+    from rackstress.engines.lammps.runner import LammpsRun
+    from rackstress.scenes import load
+
+    text = COLLISION.read_text()
+    plain = text.replace('[[contact]]\nbetween = ["left", "right"]', "")
+    assert plain != text, "the collision scene's [[contact]] table moved"
+    best = {"contact": float("inf"), "none": float("inf")}
+    with tempfile.TemporaryDirectory() as tmp:
+        paths = {"contact": COLLISION, "none": Path(tmp) / "collision-plain.toml"}
+        paths["none"].write_text(plain)
+        n = None
+        for _ in range(repeat):
+            for name, path in paths.items():
+                sc = load(str(path), {"spacing": spacing})
+                sc.phases[0] = replace(sc.phases[0], steps=steps,
+                                       duration=steps * sc.dt)
+                n = sc.n_particles
+                run = LammpsRun(compile_deck(sc, "exact", plugin=None), None)
+                try:
+                    c0 = time.process_time()
+                    drive(run, check_every=steps)
+                    best[name] = min(best[name], time.process_time() - c0)
+                finally:
+                    run.close()
+    row = {"spacing": spacing, "particles": n, "steps": steps, "repeat": repeat,
+           "cpu_contact_s": best["contact"], "cpu_none_s": best["none"],
+           "ms_per_step_contact": 1e3 * best["contact"] / steps,
+           "ms_per_step_none": 1e3 * best["none"] / steps,
+           "ratio": best["contact"] / best["none"]}
+    echo(f"  contact cost at {spacing:g} mm ({n:,} particles): "
+         f"{row['ms_per_step_contact']:.3f} ms a step with [[contact]], "
+         f"{row['ms_per_step_none']:.3f} without ({row['ratio']:.2f}×)")
+    return row
+
+
 def run_bench(out: Path | None = None, spacings=SPACINGS, echo=print) -> dict:
     """Both validations at each spacing; writes dynamics.{json,md,png} into ``out``."""
     from rackstress.bench import out_dir
@@ -325,6 +374,7 @@ def run_bench(out: Path | None = None, spacings=SPACINGS, echo=print) -> dict:
     data = {"vibration": [vibration(a, echo=echo) for a in spacings],
             "impact": [impact(a, echo=echo) for a in spacings],
             "collision": [collision(a, echo=echo) for a in spacings],
+            "cost": [contact_cost(a, echo=echo) for a in spacings],
             "wall_s": None, "machine": None}
     data["wall_s"] = time.perf_counter() - t0
     data["machine"] = machine()
@@ -482,6 +532,25 @@ def report(data: dict) -> str:
             f"{r['contact_expected'] * 1e6:.2f} | {r['contact_ratio']:.3f} | "
             f"{r['velocity_after'][0]:.0f}, {r['velocity_after'][1]:.0f} | "
             f"{r['momentum_ratio']:.4f} |")
+    if data.get("cost"):
+        lines += [
+            "",
+            "**What contact costs a step**: the same two bars run "
+            f"{data['cost'][0]['steps']:,} steps with their `[[contact]]` and without it (then "
+            "they pass through each other), on LAMMPS in this process, the variants alternating "
+            f"{data['cost'][0]['repeat']} times, the best CPU time of each. The contact is "
+            "the plugin's `rs/collide`, one fix a side, over the pairs its own search finds "
+            "near the other part (LAMMPS' `pair_style lepton` gives the same forces to "
+            "round-off but parses its expression every step).",
+            "",
+            "| spacing [mm] | particles | with `[[contact]]` [ms a step] | without [ms a step] | "
+            "ratio |",
+            "|---|---|---|---|---|",
+        ]
+        for r in data["cost"]:
+            lines.append(f"| {r['spacing']:g} | {r['particles']:,} | "
+                         f"{r['ms_per_step_contact']:.3f} | {r['ms_per_step_none']:.3f} | "
+                         f"{r['ratio']:.2f} |")
     lines += ["", "![The tip's spectrum, σ_xx at mid-length, the bars in contact](dynamics.png)",
               ""]
     return "\n".join(lines)

@@ -87,11 +87,11 @@ def divergence_error(scene: Scene, step: int, found: dict,
     else:
         what = (f"it is {found['disp']:.4g} units from its original position, beyond the "
                 f"watchdog bound {scene.bound:g}")
-    when = f"at step {step}" if since is None or since >= step - 1 else (
-        f"at step {step} (it went wrong after step {since}, the watchdog's previous look)")
+    when = "" if since is None or since >= step - 1 else (
+        f" It went wrong after step {since}, the watchdog's previous look.")
     return DivergenceError(
-        f"run diverged {when}: '{group}' particle {local} (atom id {k + 1}): {what}. "
-        f"{found['count']} particle(s) out of bound or too fast. A smaller time step (dt = "
+        f"run diverged at step {step}: '{group}' particle {local} (atom id {k + 1}): {what}. "
+        f"{found['count']} particle(s) out of bound or too fast.{when} A smaller time step (dt = "
         f"{scene.dt:g} now) or weaker coefficients keep Eq. 5 stable (t < 2/ω_max); the output "
         "written up to here is kept.", step=step, index=k, group=group, local=local,
         value=found["disp"])

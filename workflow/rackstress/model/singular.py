@@ -43,7 +43,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 #: The kinds of singular point, in the order ``Singular.kind`` indexes them.
-KINDS = ("re-entrant edge", "support boundary", "point load")
+KINDS = ("re-entrant edge", "support boundary", "point load", "contact edge")
 #: A concave edge is sharp when the surface turns by at least this across the window.
 SHARP_DEG = 20.0
 #: The window's width across an edge, in spacings (±WINDOW/2 about it): a fillet of radius r

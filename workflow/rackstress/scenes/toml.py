@@ -156,11 +156,20 @@ def load_toml(path, overrides: dict | None = None, spacing_scale: float = 1.0,
         finally:
             _POISSON.reset(token)
     if spacing_scale != 1.0:
-        token = _SPACING_SCALE.set(float(spacing_scale))
-        try:
-            scene = load_toml(path, overrides)
-        finally:
-            _SPACING_SCALE.reset(token)
+        base = _spacing_parameter(path, overrides)
+        if base is not None:
+            # the scene's own ``spacing`` parameter scaled, as ``--set spacing=…`` would set
+            # it: every filled part takes it, and what the scene derives from it (a lattice
+            # origin half a spacing off a symmetry plane) follows
+            scene = load_toml(path, {**(overrides or {}), "spacing": base * spacing_scale})
+            if "spacing" in scene.params:       # recorded as given, with the scale beside it
+                scene.params["spacing"] = base  # (a resume rebuilds it the same way)
+        else:
+            token = _SPACING_SCALE.set(float(spacing_scale))
+            try:
+                scene = load_toml(path, overrides)
+            finally:
+                _SPACING_SCALE.reset(token)
         scene.params["spacing_scale"] = float(spacing_scale)
         return scene
     overrides = dict(overrides or {})
@@ -184,6 +193,24 @@ def load_toml(path, overrides: dict | None = None, spacing_scale: float = 1.0,
     if "scene" in data:
         return _load_builtin(ctx, data, overrides)
     return _load_explicit(ctx, data, overrides)
+
+
+def _spacing_parameter(path, overrides: dict | None) -> float | None:
+    """The value of an explicit scene's ``spacing`` parameter (``--set`` or its [params]), or
+    None when it has none (or the file does not read: the load that follows says why)."""
+    if overrides and overrides.get("spacing") is not None:
+        value = overrides["spacing"]
+    else:
+        try:
+            with open(path, "rb") as fh:
+                data = tomllib.load(fh)
+        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+            return None
+        if "scene" in data:
+            return None
+        value = (data.get("params") or {}).get("spacing")
+    return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) \
+        and value > 0 else None
 
 
 def scene_parameters(path) -> dict:

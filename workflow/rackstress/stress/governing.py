@@ -61,8 +61,8 @@ CONVERGING = 0.10
 SAFETY_ASSUMED, SAFETY_MEASURED = 3.0, 1.25
 
 RULE = ("the largest von Mises stress at least {zone:.3g} {unit} ({n:.3g} spacings) from every "
-        "sharp re-entrant edge, support boundary and point load of the part, where the "
-        "continuum's stress is unbounded and a peak measures the spacing")
+        "sharp re-entrant edge, support boundary, point load and contact edge of the part, "
+        "where the continuum's stress is unbounded and a peak measures the spacing")
 ADVICE = {
     "re-entrant edge": ("a sharp re-entrant edge: its stress is unbounded in the continuum and "
                         "this value grows as the spacing shrinks. Round the edge with a fillet "
@@ -74,6 +74,11 @@ ADVICE = {
                          "(a pin in a hole, a washer's area) or read the governing stress"),
     "point load": ("a load on a few particles (a point or line load): its stress grows as the "
                    "spacing shrinks. Spread the load over the real contact area"),
+    "contact edge": ("where a contact reaches the edge of a face (a pin bearing on a hole's "
+                     "rim, a punch's edge): singular like a rigid support's edge, the pressure "
+                     "and stress there grow as the spacing shrinks. A chamfer or radius on the "
+                     "rim, or a longer bearing, spreads it in the real part; read the governing "
+                     "stress beside it"),
 }
 
 
@@ -163,6 +168,81 @@ def singular_set(run) -> dict:
         s.notes.append("singular.npz missing (a run of an older rackstress): re-entrant "
                        "edges from the lattice")
         out[name] = (spacing, singular.wall_thickness(o, spacing), s)
+    return out
+
+
+def contact_edges(run, fields) -> dict:
+    """Per part in contact (``[[contact]]``): its particles pressed in some frame
+    (``contact_pressure`` > 0) that have a free face — a lattice neighbour's site one spacing
+    along an axis that no particle of any part occupies (within half a spacing) and no support
+    holds across (a symmetry plane's mirror is there) — the points where a contact reaches the
+    edge of a face (a pin on a hole's rim). ``{part: (k, 3) original positions}``, the points
+    given to the part and to every part it touches."""
+    pc = fields.extras.get("contact_pressure")
+    if pc is None:
+        return {}
+    from scipy.spatial import cKDTree
+
+    from rackstress.stress.measures import read_contacts
+
+    pressed = (np.nan_to_num(np.asarray(pc, float)) > 0).any(axis=0)
+    if not pressed.any():
+        return {}
+    o = run.o
+    held = np.zeros((len(o), 3), bool)
+    path = Path(run.rundir) / "boundary.npz"
+    if path.is_file():
+        row = {int(i): k for k, i in enumerate(run.data.ids)}
+        with np.load(path) as z:
+            for i, m in zip(z["held_ids"], z["held_mask"]):
+                if int(i) in row:
+                    held[row[int(i)]] = m
+    tree = cKDTree(o)
+    sides, r = read_contacts(run)
+    names = {p.index[0]: name for name, p in run.parts.items() if len(p.index)}
+    partners: dict = {}
+    for st, ss, _k in sides:
+        a, b = names.get(st.start), names.get(ss.start)
+        if a is not None and b is not None:
+            partners.setdefault(a, set()).add(b)
+    out: dict = {}
+    for name in partners:
+        idx = run.parts[name].index
+        idx = idx[pressed[idx]]
+        if not len(idx):
+            continue
+        a = 2.0 * float(np.median(r[idx]))          # the spacing: two radii
+        rim = np.zeros(len(idx), bool)
+        for axis in range(3):
+            for sign in (-1.0, 1.0):
+                site = o[idx].copy()
+                site[:, axis] += sign * a
+                d, _ = tree.query(site)
+                rim |= (d > 0.5 * a) & ~held[idx, axis]
+        pts = o[idx[rim]]
+        for part in (name, *partners[name]):
+            out.setdefault(part, []).append(pts)
+    return {k: np.concatenate(v) for k, v in out.items() if sum(len(x) for x in v)}
+
+
+def with_contact_edges(run, fields, sing: dict) -> dict:
+    """``sing`` (:func:`singular_set`) with each part's contact edges (:func:`contact_edges`)
+    among its singular points, kind ``"contact edge"``."""
+    from rackstress.model import singular
+
+    edges = contact_edges(run, fields)
+    if not edges:
+        return sing
+    kind = singular.KINDS.index("contact edge")
+    out = dict(sing)
+    for name, pts in edges.items():
+        if name not in out:
+            continue
+        spacing, wall, s = out[name]
+        add = Singular(pts, np.full(len(pts), kind, np.int64), np.full(len(pts), np.nan))
+        both = singular.concat([s, add], s.source)
+        both.notes, both.surface = list(s.notes), s.surface
+        out[name] = (spacing, wall, both)
     return out
 
 
@@ -312,7 +392,8 @@ def record(run, fields, zone_override: float | None = None, singular: dict | Non
     vm = fields.values.get("von_mises")
     if vm is None:
         return {}
-    sing = singular if singular is not None else singular_set(run)
+    sing = singular if singular is not None else with_contact_edges(run, fields,
+                                                                     singular_set(run))
     unit = fields.unit("von_mises")
     length = ((run.scene or {}).get("units") or {}).get("length") or "length units"
     mats = material_parts(run)
@@ -341,6 +422,7 @@ def record(run, fields, zone_override: float | None = None, singular: dict | Non
                    "near": _near(feats, o[j]),
                    "safety": (float(y) / v) if (y and v > 0) else None,
                    "zone": z, "spacing": float(spacing),
+                   "contact_edges": "contact edge" in s.counts(),
                    "rule": RULE.format(zone=z, unit=length, n=z / spacing)}
         sp = None
         if sbest is not None:
@@ -546,8 +628,11 @@ def describe(gov: dict | None, sing: dict | None, error: dict | None,
         if headline:
             lines.append(f"  governing von Mises stress {gov['value']:.4g} {u} in "
                          f"{gov['group']}{sf}: {_where(gov)}")
+        kinds = ("sharp re-entrant edges, support boundaries, point loads and contact edges"
+                 if gov.get("contact_edges") else
+                 "sharp re-entrant edges, support boundaries and point loads")
         lines.append(f"    (the largest at least {gov['zone']:.3g} {gov.get('length_units', '')}"
-                     " from sharp re-entrant edges, support boundaries and point loads)")
+                     f" from {kinds})")
         if error and error.get("extrapolated") is not None:
             lines.append(f"    error bar: {gov['value']:.4g} {u} at spacing "
                          f"{error['spacings'][0]:.4g}, {error['values'][-1]:.4g} at "

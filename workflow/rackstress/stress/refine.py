@@ -22,7 +22,8 @@ import json
 from pathlib import Path
 
 from rackstress.errors import EXIT_UNSETTLED, RackstressError
-from rackstress.stress.governing import REFINE_RATIO, error_bar, record, singular_set
+from rackstress.stress.governing import (REFINE_RATIO, error_bar, record, singular_set,
+                                         with_contact_edges)
 
 #: the refined run's directory inside the run
 REFINE_DIR = "refine"
@@ -93,7 +94,8 @@ def refine(rundir, spec: str, overrides: dict | None = None, engine: str = "lamm
         raise RefineError(f"{rundir}: no governing stress (a part with a material and its "
                           "von Mises stress) to refine")
     coarse_run = load_run(rundir)
-    sing = singular_set(coarse_run)
+    # the coarse run's singular points, its contact edges included (found from its result)
+    sing = with_contact_edges(coarse_run, compute_fields(coarse_run), singular_set(coarse_run))
     scale = float(json.loads((rundir / "scene.json").read_text()).get("params", {})
                   .get("spacing_scale", 1.0))
     fine_dir = rundir / REFINE_DIR

@@ -11,6 +11,8 @@ dampen                      one ``fix viscous`` for all groups, γ = c·m per ty
 dampen (phase-conditioned)  ``fix viscous`` on the group, γ = c·m, redefined at phase switches
 dampen + contact extra      base as above; the extra term in the Python callback
 collide, reciprocal         ``pair_style lepton`` E = K((r²−R²)/2 − R² ln(r/R)), cut R (Eq. 10)
+collide, material contact   the plugin's ``rs/collide``, one fix a side (``[[contact]]``:
+                            :func:`material_contacts`), when the deck uses the plugin
 collide, one-way            Python callback (a Verlet list over local + ghost atoms)
 collide, contact-searched   Python callback, when a contact condition (Eq. 28's damping)
                             already searches the same two groups: the pairs are found once, and
@@ -910,15 +912,16 @@ RECIPROCAL = {Collide: ("lepton", _collide_foldable, _fold_collide),
               Bind: ("harmonic", _bind_foldable, _fold_bind)}
 
 
-def solve_masses(scene: Scene, mode: str):
+def solve_masses(scene: Scene, mode: str, unfolded=frozenset()):
     """Group masses making every reciprocal-capable pair one LAMMPS interaction (module doc).
 
     Returns (masses, pairs) where pairs maps an operator's place (group, index) → the place of
     its reverse, for the pairs that fit. A collide between two groups a contact condition
-    already searches stays in Python.
+    already searches stays in Python, as one between the pairs of groups ``unfolded`` (each a
+    frozenset of two names: material contacts the plugin carries, :func:`material_contacts`).
     """
     ratio_edges = []  # (A, B, m_A/m_B, site, reverse site)
-    searched = contact_searched(scene)
+    searched = contact_searched(scene) | set(unfolded)
     ops = scene.operators
     for target, seq in ops.items():
         for k, op in enumerate(seq):
@@ -1211,6 +1214,19 @@ def _say_once(line: str) -> None:
         sys.stderr.write(line + "\n")
 
 
+def material_contacts(scene: Scene) -> frozenset:
+    """The pairs of groups (frozensets of two names) whose collides are a contact between two
+    material parts (``[[contact]]``: unconditional, both groups with a material)."""
+    out = set()
+    for target, seq in scene.operators.items():
+        for op in seq:
+            if (isinstance(op, Collide) and not op.when and op.source != target
+                    and scene.groups[target].material is not None
+                    and scene.groups[op.source].material is not None):
+                out.add(frozenset((target, op.source)))
+    return frozenset(out)
+
+
 def use_plugin(requested: bool | None = None) -> bool:
     """Whether decks use the compiled plugin: ``requested``, else not when the callback's
     kernels are asked for (``RACKSTRESS_KERNELS=numba|numpy``), else whenever the plugin is
@@ -1259,7 +1275,13 @@ def compile_deck(scene: Scene, mode: str = "exact", measure_fast: bool = False,
     if integrator == "verlet":
         scene = scaled_scene(scene)
     if native:
-        masses, pairs = solve_masses(scene, mode)
+        # two material parts in contact ([[contact]]): the plugin's rs/collide, one fix a
+        # side — the same forces to round-off as pair_style lepton, without lepton's parsing
+        # of its expression every step (rackstress bench dynamics: what contact costs a step)
+        unfolded = material_contacts(scene) if mode == "exact" else frozenset()
+        if unfolded and not (plugin or plugin is None and use_plugin(None)):
+            unfolded = frozenset()
+        masses, pairs = solve_masses(scene, mode, unfolded)
     else:
         masses, pairs = {name: 1.0 for name in scene.groups}, {}
     cx = {"scene": scene, "masses": masses, "pairs": pairs, "types": topology.group_types(scene),
