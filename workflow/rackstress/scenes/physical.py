@@ -603,10 +603,11 @@ def _held_share(c, k: int, name: str, g, where: np.ndarray, f: np.ndarray, given
 
 
 def held_load_warnings(scene) -> list[dict]:
-    """The warnings of loads partly on particles a support holds (:func:`_held_share`), as
-    ``summary.json`` records them (``kind``, ``groups``, ``share``, ``message``)."""
-    return [dict(w) for g in scene.groups.values()
-            for w in (g.meta.get("held_load", []) if isinstance(g.meta, dict) else [])]
+    """The warnings of loads partly on particles a support holds (:func:`_held_share`) and of
+    parts in contact drawn overlapping (``contact_overlap``), as ``summary.json`` records them
+    (``kind``, ``groups``, ``share`` or ``sites``, ``message``)."""
+    return [dict(w) for g in scene.groups.values() if isinstance(g.meta, dict)
+            for w in g.meta.get("held_load", []) + g.meta.get("warnings", [])]
 
 
 def _forces(accel, where, ramp) -> list:

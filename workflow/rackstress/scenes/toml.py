@@ -650,6 +650,7 @@ def _plain_group(c: _Ctx, t: dict, base: Path, sizing: dict | None = None) -> Gr
         raise c.error("'offset' is for rack groups (rack = \"<host>\") only", "offset")
     source = has[0]
     filled = source in ("mesh", "fill", "parts")
+    overlap = None                   # sites a part in contact before it holds (_claim_sites)
     for key in ("spacing", "packing", "origin"):
         if key in t and not filled:
             raise c.error(f"'{key}' is for parts filled from a mesh or shape (mesh, fill, "
@@ -723,11 +724,20 @@ def _plain_group(c: _Ctx, t: dict, base: Path, sizing: dict | None = None) -> Gr
             names = [getattr(s, "name", None) for s in solids if isinstance(s, rg.Surface)]
             if names:
                 what += f" (mesh {', '.join(names)})"
+            origin = _shared_origin(t, spacing, packing, origin, sizing)
             try:
                 filled_o = [fill(region, spacing, packing, origin, name=what)]
             except SceneError as exc:
                 raise SceneError(str(exc)) from None
         o = union_positions(*filled_o, *blocks)
+        if solids and not blocks:
+            o, lost = _claim_sites(c, t["name"], o, spacing, packing, sizing)
+            if lost:
+                overlap = {"kind": "contact_overlap", "groups": [t["name"]], "sites": lost,
+                           "message": f"part '{t['name']}': {lost} of its lattice sites lie "
+                           "inside a part it is in contact with, filled before it, and are "
+                           "that part's: the two are drawn overlapping (or share a face a "
+                           "site lies on)"}
         shape = None if blocks or not solids else (solids[0] if len(solids) == 1
                                                     else rg.Union(solids))
     if "radius" in t:
@@ -742,6 +752,8 @@ def _plain_group(c: _Ctx, t: dict, base: Path, sizing: dict | None = None) -> Gr
     g = _wrap(c, lambda: Group(t["name"], o, r, kind=_kind(c, t, "part"), held=held, v0=v0))
     if geometry is not None:
         g.meta["part"] = geometry
+    if overlap:
+        g.meta.setdefault("warnings", []).append(overlap)
     _regions(c, t, g, base)
     if source == "mesh":        # the part's own surface, placed: the report paints on it
         from dataclasses import asdict
@@ -790,11 +802,65 @@ def _sizing(ctx: _Ctx, data: dict, overrides: dict) -> dict:
     part whose spacing is chosen from its walls (top-level key, or ``--set budget=...``)."""
     from rackstress.scenes.features import BUDGET
 
-    out = {"spacing": overrides.get("spacing"), "budget": BUDGET}
+    out = {"spacing": overrides.get("spacing"), "budget": BUDGET,
+           "contact": _contact_names(data), "lattice": {}}
     for where, table in (("budget", data), ("--set budget", overrides)):
         if "budget" in table:
             out["budget"] = _integer(ctx, table["budget"], where, 1)
     return out
+
+
+def _contact_names(data: dict) -> list:
+    """The groups a ``[[contact]]`` table names, in file order (malformed tables are left to
+    :func:`rackstress.scenes.physical.contacts`, which names the fault)."""
+    out = []
+    tables = data.get("contact", [])
+    for t in tables if isinstance(tables, list) else []:
+        between = t.get("between") if isinstance(t, dict) else None
+        if isinstance(between, list):
+            out += [b for b in between if isinstance(b, str) and b not in out]
+    return out
+
+
+def _shared_origin(t: dict, spacing, packing: str, origin, sizing: dict):
+    """Parts in contact share one lattice: a part named in a ``[[contact]]`` that gives no
+    ``origin`` is filled through the lattice of the first such part filled before it at the
+    same spacing (cubic packing), so that no two of their particles start closer than a
+    spacing — the contact's R — and flat faces that meet start touching at zero force.
+    (Each part centred in its own box put a real plate 0.2 mm into the base under it: the
+    contact started pressed with 7.7e5 N.)"""
+    shared = sizing.get("lattice") or {}
+    if (origin is None and packing == "cubic" and t["name"] in sizing.get("contact", ())
+            and shared.get("origin") is not None
+            and abs(shared["spacing"] - spacing) <= 1e-9 * spacing):
+        return shared["origin"]
+    return origin
+
+
+def _claim_sites(c: _Ctx, name: str, o: np.ndarray, spacing, packing: str, sizing: dict):
+    """``o`` of a part in contact without the lattice sites an earlier part in contact holds
+    (two parts drawn overlapping, or sharing a face a site lies on: the site is the earlier
+    part's); the part's lattice recorded for those after it (:func:`_shared_origin`).
+    Returns (o, how many sites it gave up)."""
+    if name not in sizing.get("contact", ()) or packing != "cubic" or spacing is None \
+            or not len(o):
+        return o, 0
+    shared = sizing.setdefault("lattice", {})
+    if shared.get("origin") is None:
+        shared.update(origin=[float(x) for x in o[0]], spacing=float(spacing), taken=[])
+    lost = 0
+    if shared["taken"] and abs(shared["spacing"] - spacing) <= 1e-9 * spacing:
+        from scipy.spatial import cKDTree
+
+        d, _ = cKDTree(np.concatenate(shared["taken"])).query(o)
+        keep = d > 1e-6 * spacing
+        lost = int((~keep).sum())
+        if keep.sum() == 0:
+            raise c.error(f"every particle of '{name}' lies where a part before it in contact "
+                          "already has one: the two parts are drawn one inside the other")
+        o = o[keep]
+    shared["taken"].append(o)
+    return o, lost
 
 
 def _mesh_sizing(c: _Ctx, t: dict, surface, spacing, sizing: dict):
