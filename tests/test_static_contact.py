@@ -214,6 +214,17 @@ def test_the_pin_joint_assembly_passes_its_load_through_both_contacts(tmp_path):
     assert len(edges["pin"]) == len(edges["lug"]) + len(edges["clevis"])
     gov = st["governing_parts"]["lug"]
     assert gov["singular_points"].get("contact edge") == len(edges["lug"])
+    # its contact pressure pictured on the pin alone: the colour scale's top is the largest
+    # pressure on the pin, the one stress.json names for the clevis-pin contact
+    r = subprocess.run([sys.executable, "-m", "rackstress.cli", "render", str(out), "--measure",
+                        "contact_pressure", "--groups", "pin", "--views", "iso,top"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    rec = json.loads((out / "figures" / "contact_pressure" / "render.json").read_text())
+    assert rec["label"] == "contact pressure [MPa]" and rec["parts"]["coloured"] == ["pin"]
+    on_pin = max(c["peak"] for c in st["contact"] if c["group"] == "pin")
+    assert rec["vmax"] == pytest.approx(on_pin, rel=1e-6)
+    assert (out / "figures" / "contact_pressure" / "sheet.png").stat().st_size > 10_000
 
 
 def test_refine_scales_the_spacing_parameter_and_what_follows_it():

@@ -788,12 +788,14 @@ def _csv(text):
                    "1320,2600,4720,17480 if the run reaches them, else 4 spread over the run, "
                    "and the iteration of the peak.")
 @click.option("--measure", type=Choice(["paper", "accumulated", "strain", "d2min",
-                                        "virial", "von_mises"]),
+                                        "virial", "von_mises", "contact_pressure"]),
               help="Default: von_mises for a scene with a material, else paper. "
                    "paper: distance from desired position (Sec. 5.2); accumulated: its time "
                    "integral; strain: von Mises shear strain; d2min: non-affine D2min; "
                    "virial: LAMMPS per-atom stress (if the dump has it); von_mises: von Mises "
-                   "stress from the bindings' forces, in the scene's stress unit (MPa).")
+                   "stress from the bindings' forces, in the scene's stress unit (MPa); "
+                   "contact_pressure: parts in contact ([[contact]]), each particle's contact "
+                   "force over its cell's face.")
 @click.option("--views", default="right,front,left", show_default=True,
               help="Comma-separated: right, front, left, back, top, iso.")
 @click.option("--groups", metavar="PART,...",

@@ -178,7 +178,7 @@ def contact_edges(run, fields) -> dict:
     holds across (a symmetry plane's mirror is there) — the points where a contact reaches the
     edge of a face (a pin on a hole's rim). ``{part: (k, 3) original positions}``, the points
     given to the part and to every part it touches."""
-    pc = fields.extras.get("contact_pressure")
+    pc = fields.values.get("contact_pressure")
     if pc is None:
         return {}
     from scipy.spatial import cKDTree

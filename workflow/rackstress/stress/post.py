@@ -50,6 +50,7 @@ LABELS = {
     "d2min": ("non-affine displacement D²min", "length² units"),
     "virial": ("per-atom von Mises stress × volume", "energy units"),
     "von_mises": ("von Mises stress", "stress units"),
+    "contact_pressure": ("contact pressure", "stress units"),
 }
 #: Further measures, computed after the built-in ones by :func:`compute_fields` and carried
 #: everywhere the built-in ones go (peaks, VTK point arrays, pictures, report) with no special
@@ -73,7 +74,7 @@ def register_measure(name: str, label: str, units: str, fn) -> None:
 #: Per-particle fields kept beside the ranked measures (not ranked by their maximum: a tensor,
 #: a vector, a factor of safety whose *smallest* value matters): written into the VTK files,
 #: kept in float32 (11 values a particle and frame; ``von_mises`` itself stays float64).
-EXTRAS = ("stress", "principal", "safety", "bind_strain", "contact_pressure")
+EXTRAS = ("stress", "principal", "safety", "bind_strain")
 #: Small-strain validity: a binding stretched or shortened by more than this fraction
 #: (|d/L0 − 1|) makes the linear-elastic reading of the stress doubtful (warning).
 STRAIN_LIMIT = 0.05
@@ -266,9 +267,11 @@ def compute_fields(run, cache: bool = True, progress: bool = False,
         r = stress.run().results
         values["von_mises"] = r.von_mises
         units["von_mises"] = stress.UNITS
-        extras = {m: r[m].astype(np.float32) for m in EXTRAS      # pictures' precision: half
-                  if m in r}                 # (contact_pressure: a run with [[contact]] only)
+        extras = {m: r[m].astype(np.float32) for m in EXTRAS}    # pictures' precision: half
         sides = r.get("contact_sides")
+        if "contact_pressure" in r:          # parts in contact: a measure of its own (its
+            values["contact_pressure"] = r.contact_pressure      # peaks, pictures, VTK)
+            units["contact_pressure"] = stress.UNITS
     u = (run.scene or {}).get("units") or {}
     if u.get("name") not in (None, "paper"):          # the scene's own units, not generic ones
         units.update({"paper": u["length"], "accumulated": f"{u['length']}·{u['time']}",
