@@ -180,20 +180,15 @@ def _contact_pairs(prob: "_Problem", p: np.ndarray, slack: float = 0.0):
     the sum of their radii R (× (1 + ``slack``): a tangent also takes the pairs that just
     touch, whose force is zero and whose stiffness 2·c·m along the line of centres is not).
     In contact, Eq. 10 is Eq. 12 with L0 = R; beyond R a pair has no force and is left out."""
-    from scipy.spatial import cKDTree
+    from rackstress.lib.cells import touching_pairs
 
     I, J, C, Q = [], [], [], []
     for st, ss, c, rt, rs in prob.contact:
-        reach = float(rt.max() + rs.max()) * (1.0 + slack)
-        dm = cKDTree(p[st]).sparse_distance_matrix(cKDTree(p[ss]), reach,
-                                                   output_type="ndarray")
-        i, j, d = dm["i"].astype(np.int64), dm["j"].astype(np.int64), dm["v"]
-        R2 = (rt[i] + rs[j]) ** 2
-        keep = d * d <= R2 * (1.0 + slack) ** 2
-        I.append(i[keep] + st.start)
-        J.append(j[keep] + ss.start)
-        C.append(np.full(int(keep.sum()), c))
-        Q.append(R2[keep])
+        i, j, R2 = touching_pairs(p[st], p[ss], rt, rs, slack)
+        I.append(i + st.start)
+        J.append(j + ss.start)
+        C.append(np.full(len(i), c))
+        Q.append(R2)
     return (np.concatenate(I), np.concatenate(J), np.concatenate(C), np.concatenate(Q))
 
 

@@ -88,3 +88,21 @@ def any_closer(a: np.ndarray, b: np.ndarray, r: float) -> bool:
         return False
     return any(bool(np.any(np.sum((a[i] - b[j]) ** 2, axis=1) < r * r))
                for i, j in _candidates(a, b, r, half=False))
+
+
+def touching_pairs(a: np.ndarray, b: np.ndarray, ra: np.ndarray, rb: np.ndarray,
+                   slack: float = 0.0) -> tuple:
+    """The pairs of a point of ``a`` and one of ``b`` at most the sum of their radii apart
+    (× (1 + ``slack``)): (i, j, R²) with i into ``a``, j into ``b`` and R = ra[i] + rb[j] —
+    two parts' particles in contact (Eq. 10 acts within R)."""
+    from scipy.spatial import cKDTree
+
+    ra, rb = np.asarray(ra, float), np.asarray(rb, float)
+    if not len(a) or not len(b):
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
+    reach = float(ra.max() + rb.max()) * (1.0 + slack)
+    dm = cKDTree(a).sparse_distance_matrix(cKDTree(b), reach, output_type="ndarray")
+    i, j, d = dm["i"].astype(np.int64), dm["j"].astype(np.int64), dm["v"]
+    R2 = (ra[i] + rb[j]) ** 2
+    keep = d * d <= R2 * (1.0 + slack) ** 2
+    return i[keep], j[keep], R2[keep]

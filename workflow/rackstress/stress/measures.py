@@ -967,20 +967,16 @@ def read_contacts(run):
 def contact_pairs(p: np.ndarray, contacts) -> tuple:
     """The pairs in contact at ``p`` (``contacts`` from :func:`read_contacts`), each listed
     from both ends as a binding is: (i, j, m·c, R², side) with R the sum of the two radii and
-    side the contact's entry it belongs to, the pairs closer than R only (Eq. 10 acts there
-    alone; in contact it is Eq. 12 with L0 = R)."""
-    from scipy.spatial import cKDTree
+    side the contact's entry it belongs to, the pairs within R (Eq. 10 acts there alone, zero
+    at R; in contact it is Eq. 12 with L0 = R: :func:`rackstress.lib.cells.touching_pairs`)."""
+    from rackstress.lib.cells import touching_pairs
 
     sides, r = contacts
     I, J, K, Q, S = [], [], [], [], []
     for side, (st, ss, k) in enumerate(sides):
-        reach = float(r[st].max() + r[ss].max())
-        dm = cKDTree(p[st]).sparse_distance_matrix(cKDTree(p[ss]), reach, output_type="ndarray")
-        i, j, d = dm["i"].astype(np.int64) + st.start, dm["j"].astype(np.int64) + ss.start, dm["v"]
-        R2 = (r[i] + r[j]) ** 2
-        keep = d * d < R2
-        I.append(i[keep]), J.append(j[keep]), K.append(np.full(int(keep.sum()), k))
-        Q.append(R2[keep]), S.append(np.full(int(keep.sum()), side))
+        i, j, R2 = touching_pairs(p[st], p[ss], r[st], r[ss])
+        I.append(i + st.start), J.append(j + ss.start), K.append(np.full(len(i), k))
+        Q.append(R2), S.append(np.full(len(i), side))
     return tuple(np.concatenate(x) if x else np.zeros(0) for x in (I, J, K, Q, S))
 
 
