@@ -214,6 +214,28 @@ def test_the_pin_joint_assembly_passes_its_load_through_both_contacts(tmp_path):
     assert len(edges["pin"]) == len(edges["lug"]) + len(edges["clevis"])
     gov = st["governing_parts"]["lug"]
     assert gov["singular_points"].get("contact edge") == len(edges["lug"])
+    # plain lmp: in.lammps is the equilibrium's deck (the positions from equilibrium.dump, one
+    # run 0); its forces, each × the scene's particle mass / its type's mass, leave the same
+    # largest unbalanced force as the run's own engine check, to round-off
+    import shutil
+
+    from rackstress.scenes import load
+
+    plain = tmp_path / "plain"
+    plain.mkdir()
+    for name in ("in.lammps", "particles.data", "equilibrium.dump"):
+        shutil.copy(out / name, plain / name)
+    lmp = Path(sys.executable).parent / "lmp"
+    r = subprocess.run([str(lmp), "-in", "in.lammps"], cwd=plain, capture_output=True,
+                       text=True, timeout=900)
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr
+    rows = (plain / "forces.dump").read_text().split("ITEM: ATOMS")[1].splitlines()[1:]
+    fa = np.array([ln.split() for ln in rows if ln.strip()], float)
+    fa = fa[np.argsort(fa[:, 0])][:, 1:4]
+    sc = load(str(repo / "examples" / "assembly" / "pin-joint.toml"))
+    md = np.concatenate([np.full(g.n, s["masses"][n]) for n, g in sc.groups.items()])
+    worst = np.linalg.norm(fa * (sc.masses() / md)[:, None], axis=1).max()
+    assert worst / s["applied_load_total"] == pytest.approx(s["residual_engine"], rel=1e-6)
     # its contact pressure pictured on the pin alone: the colour scale's top is the largest
     # pressure on the pin, the one stress.json names for the clevis-pin contact
     r = subprocess.run([sys.executable, "-m", "rackstress.cli", "render", str(out), "--measure",

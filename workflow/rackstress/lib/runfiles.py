@@ -28,6 +28,9 @@ BINDINGS = "bindings.npz"
 #: point loads: :mod:`rackstress.model.singular`), written when the run starts
 SINGULAR = "singular.npz"
 
+#: a static run's equilibrium on LAMMPS (ids and positions), what its ``in.lammps`` reads
+EQUILIBRIUM = "equilibrium.dump"
+
 #: Every top-level name a rackstress command writes into a run directory (``run``, ``stress``,
 #: ``render``, ``fea``, a batch job). A new run refuses a directory holding one of these names
 #: that no run wrote (it would write over the user's file), and in a run directory written
@@ -38,4 +41,4 @@ RUN_FILES = ("scene.json", "summary.json", "progress.json", "particles.data", "i
              "log.lammps", "trajectory.dump", "trajectory.dump.gz", "boundary.npz", BINDINGS,
              STABILITY, STRESS_JSON, STRESS_DUMP, CACHE, VTK_DIR, REPORT, "view3d.html",
              "figures", "restart", "fea.json", "fea.npz", "job.json", SINGULAR,
-             "refine", "volume.atoms")
+             "refine", "volume.atoms", EQUILIBRIUM)

@@ -502,6 +502,16 @@ def execute_static(scene: Scene, out: Path, engine: str, mode: str, *, progress:
             if eng._dump_id is not None:
                 eng.command(f"write_dump all custom {eng._dump_file} id type mol x y z modify "
                             "sort id format float %.10g append yes")
+            if out is not None and not eng.deck.python_ops:
+                # plain lmp reproduces the check: in.lammps becomes the equilibrium's deck
+                from rackstress.lib.runfiles import EQUILIBRIUM
+
+                word = eng.path_word(Path(out) / EQUILIBRIUM, dump=True)
+                eng.command(f"write_dump all custom {word} id x y z modify sort id "
+                            "format float %.17g")
+                if root:
+                    (Path(out) / "in.lammps").write_text(
+                        eng.deck.equilibrium_text(max(1, res.iterations)))
         extra = dict(extra or {}, dump_every=1)
         if engine == "lammps":
             extra.update({"ranks": eng.comm.Get_size(), "lammps_version": eng.lmp.version(),

@@ -706,6 +706,22 @@ class Deck:
         L.append(f"velocity {self.moving} set v_rs_vhx v_rs_vhy v_rs_vhz units box")
         return L
 
+    def equilibrium_text(self, step: int) -> str:
+        """The deck of a static run's equilibrium (``in.lammps`` once it settled): the scene's
+        styles and supports as :meth:`setup_commands` writes them, the equilibrium's positions
+        read from ``equilibrium.dump`` (the original ones stay in ``particles.data``: what the
+        bindings' rest lengths come from), one ``run 0``, and every atom's force there into
+        ``forces.dump`` — in LAMMPS' units (force = the deck's mass × the paper's acceleration:
+        × the scene's particle mass / its type's mass for newtons, docs/tutorials/lammps-decks.md).
+        Plain ``lmp -in in.lammps`` reproduces the engine's check of the equilibrium."""
+        L = self.setup_commands(dump_file=None)
+        L += ["# the equilibrium rackstress found (static analysis): its positions, then one "
+              "force evaluation",
+              f"read_dump equilibrium.dump {int(step)} x y z box no format native",
+              "run 0 post no",
+              "write_dump all custom forces.dump id fx fy fz modify sort id format float %.17g"]
+        return "\n".join(L) + "\n"
+
     def input_text(self, dump_every: int = 100, loop_after: int = LOOP_AFTER) -> str:
         py = self.python_ops
         L = self.setup_commands(dump_every=dump_every)
