@@ -827,8 +827,8 @@ def _shared_origin(t: dict, spacing, packing: str, origin, sizing: dict):
     ``origin`` is filled through the lattice of the first such part filled before it at the
     same spacing (cubic packing), so that no two of their particles start closer than a
     spacing — the contact's R — and flat faces that meet start touching at zero force.
-    (Each part centred in its own box put a real plate 0.2 mm into the base under it: the
-    contact started pressed with 7.7e5 N.)"""
+    (Each part centred in its own box started a real plate's nearest particles 0.06 mm
+    pressed into the base under it: the contact pushed with 7.7e5 N before any load.)"""
     shared = sizing.get("lattice") or {}
     if (origin is None and packing == "cubic" and t["name"] in sizing.get("contact", ())
             and shared.get("origin") is not None
