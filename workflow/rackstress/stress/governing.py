@@ -144,31 +144,35 @@ def singular_set(run) -> dict:
     names = list(material_parts(run)) or [p.name for p in run.displayed()]
     if got is not None:
         return {n: got[n] for n in names if n in got}
-    bnd = {}
-    path = Path(run.rundir) / "boundary.npz"
-    if path.is_file():
-        with np.load(path) as z:
-            bnd = {k: z[k] for k in z.files}
+    held, loads = boundary_rows(run)
     out = {}
     for name in names:
         part = run.parts[name]
         o = run.o[part.index]
         spacing = singular.nearest_spacing(o)
-        fixed = np.zeros((len(o), 3), bool)
-        force = np.zeros((len(o), 3))
-        if bnd:
-            row = {int(i): k for k, i in enumerate(run.data.ids[part.index])}
-            for i, m in zip(bnd["held_ids"], bnd["held_mask"]):
-                if int(i) in row:
-                    fixed[row[int(i)]] = m
-            for i, f in zip(bnd["load_ids"], bnd["load_force"]):
-                if int(i) in row:
-                    force[row[int(i)]] = f
-        s = singular.find(o, spacing, None, fixed, force)
+        s = singular.find(o, spacing, None, held[part.index], loads[part.index])
         s.notes.append("singular.npz missing (a run of an older rackstress): re-entrant "
                        "edges from the lattice")
         out[name] = (spacing, singular.wall_thickness(o, spacing), s)
     return out
+
+
+def boundary_rows(run) -> tuple[np.ndarray, np.ndarray]:
+    """The run's ``boundary.npz`` per particle (id order): the directions each is held in
+    (n×3 booleans) and the load on it (n×3); all False and zero without the file."""
+    n = run.n_atoms
+    held, loads = np.zeros((n, 3), bool), np.zeros((n, 3))
+    path = Path(run.rundir) / "boundary.npz"
+    if path.is_file():
+        row = {int(i): k for k, i in enumerate(run.data.ids)}
+        with np.load(path) as z:
+            for i, m in zip(z["held_ids"], z["held_mask"]):
+                if int(i) in row:
+                    held[row[int(i)]] = m
+            for i, f in zip(z["load_ids"], z["load_force"]):
+                if int(i) in row:
+                    loads[row[int(i)]] = f
+    return held, loads
 
 
 def contact_edges(run, fields) -> dict:
@@ -183,28 +187,18 @@ def contact_edges(run, fields) -> dict:
         return {}
     from scipy.spatial import cKDTree
 
-    from rackstress.stress.measures import read_contacts
+    from rackstress.stress.measures import contact_parts, read_contacts
 
     pressed = (np.nan_to_num(np.asarray(pc, float)) > 0).any(axis=0)
     if not pressed.any():
         return {}
     o = run.o
-    held = np.zeros((len(o), 3), bool)
-    path = Path(run.rundir) / "boundary.npz"
-    if path.is_file():
-        row = {int(i): k for k, i in enumerate(run.data.ids)}
-        with np.load(path) as z:
-            for i, m in zip(z["held_ids"], z["held_mask"]):
-                if int(i) in row:
-                    held[row[int(i)]] = m
+    held, _ = boundary_rows(run)
     tree = cKDTree(o)
     sides, r = read_contacts(run)
-    names = {p.index[0]: name for name, p in run.parts.items() if len(p.index)}
     partners: dict = {}
-    for st, ss, _k in sides:
-        a, b = names.get(st.start), names.get(ss.start)
-        if a is not None and b is not None:
-            partners.setdefault(a, set()).add(b)
+    for _m, a, b in contact_parts(run, sides):
+        partners.setdefault(a, set()).add(b)
     out: dict = {}
     for name in partners:
         idx = run.parts[name].index

@@ -806,6 +806,8 @@ class ParticleStress(_RunAnalysis):
         self._area = V ** (2.0 / 3.0)        # a whole cell's face: the contact's area a²
         Vi = read_volumes(run)               # each cell's own share of the part, if written
         self._V = V if Vi is None else np.where(np.isfinite(Vi) & self._mask, Vi, V)
+        with np.errstate(divide="ignore", invalid="ignore"):   # the cells' shares (_contact)
+            self._share = np.clip(self._V / V, 0.0, 1.0)
         self._gather = T.incidence(b[0], n)
         self._wm = None
         if self.method == "completed":
@@ -880,8 +882,7 @@ class ParticleStress(_RunAnalysis):
         # the particle (a cell whose share of the part is half: its stress, the bindings'
         # virial over that share, already carries the force the contact puts on it);
         # between, (2·share − 1)
-        share = np.clip(self._V / self._area ** 1.5, 0.0, 1.0)
-        w = np.clip(2.0 * share[i] - 1.0, 0.0, 1.0)
+        w = np.clip(2.0 * self._share[i] - 1.0, 0.0, 1.0)
         W = T.virial_of(d, d2, kc * w, R2, T.incidence(i, n))
         f = (kc * (1.0 - R2 / d2))[:, None] * d if len(i) else np.zeros((0, 3))
         F = np.stack([np.bincount(i, weights=f[:, c], minlength=n) for c in range(3)], axis=1)
@@ -962,6 +963,14 @@ def read_contacts(run):
                                f"{run.n_atoms}: the file is not of this run")
     return [(slice(int(a), int(b)), slice(int(c), int(d)), float(k))
             for (a, b, c, d), k in zip(ct, ck)], np.asarray(r, np.float64)
+
+
+def contact_parts(run, sides) -> list:
+    """(side index, target part, source part) of each side of ``sides`` (from
+    :func:`read_contacts`) whose two parts the run has: the parts a contact is between."""
+    names = {p.index[0]: name for name, p in run.parts.items() if len(p.index)}
+    return [(m, names[st.start], names[ss.start]) for m, (st, ss, _k) in enumerate(sides)
+            if st.start in names and ss.start in names]
 
 
 def contact_pairs(p: np.ndarray, contacts) -> tuple:

@@ -571,15 +571,11 @@ def contact_summary(run, fields: Fields) -> list:
     cs = fields.contact_sides
     if cs is None or not cs.shape[1]:
         return []
-    from rackstress.stress.measures import read_contacts
+    from rackstress.stress.measures import contact_parts, read_contacts
 
-    sides, _ = read_contacts(run)
-    names = {p.index[0]: name for name, p in run.parts.items() if len(p.index)}
     pairs: dict = {}
-    for m, (st, ss, _k) in enumerate(sides):
-        a, b = names.get(st.start), names.get(ss.start)
-        if a is not None and b is not None:
-            pairs.setdefault(frozenset((a, b)), []).append((m, a))
+    for m, a, b in contact_parts(run, read_contacts(run)[0]):
+        pairs.setdefault(frozenset((a, b)), []).append((m, a))
     out = []
     unit = fields.unit("von_mises") if "von_mises" in fields.values else "stress units"
     force_unit = ((run.scene or {}).get("units") or {}).get("force", "force units")

@@ -24,6 +24,7 @@ from pathlib import Path
 from rackstress.errors import EXIT_UNSETTLED, RackstressError
 from rackstress.stress.governing import (REFINE_RATIO, error_bar, record, singular_set,
                                          with_contact_edges)
+from rackstress.stress.measures import read_contacts
 
 #: the refined run's directory inside the run
 REFINE_DIR = "refine"
@@ -94,8 +95,11 @@ def refine(rundir, spec: str, overrides: dict | None = None, engine: str = "lamm
         raise RefineError(f"{rundir}: no governing stress (a part with a material and its "
                           "von Mises stress) to refine")
     coarse_run = load_run(rundir)
-    # the coarse run's singular points, its contact edges included (found from its result)
-    sing = with_contact_edges(coarse_run, compute_fields(coarse_run), singular_set(coarse_run))
+    # the coarse run's singular points, its contact edges included (found from its result:
+    # its measures, only for a run with parts in contact)
+    sing = singular_set(coarse_run)
+    if read_contacts(coarse_run) is not None:
+        sing = with_contact_edges(coarse_run, compute_fields(coarse_run), sing)
     scale = float(json.loads((rundir / "scene.json").read_text()).get("params", {})
                   .get("spacing_scale", 1.0))
     fine_dir = rundir / REFINE_DIR

@@ -1232,15 +1232,11 @@ def _say_once(line: str) -> None:
 
 def material_contacts(scene: Scene) -> frozenset:
     """The pairs of groups (frozensets of two names) whose collides are a contact between two
-    material parts (``[[contact]]``: unconditional, both groups with a material)."""
-    out = set()
-    for target, seq in scene.operators.items():
-        for op in seq:
-            if (isinstance(op, Collide) and not op.when and op.source != target
-                    and scene.groups[target].material is not None
-                    and scene.groups[op.source].material is not None):
-                out.add(frozenset((target, op.source)))
-    return frozenset(out)
+    material parts (``[[contact]]``: :func:`rackstress.engines.static.is_contact`)."""
+    from rackstress.engines.static import is_contact
+
+    return frozenset(frozenset((target, op.source)) for target, seq in scene.operators.items()
+                     for op in seq if is_contact(scene, target, op))
 
 
 def use_plugin(requested: bool | None = None) -> bool:
