@@ -29,10 +29,12 @@ import time
 
 import numpy as np
 
-#: floating-point work (flop) of one factorization up to which the direct solve is chosen: about
-#: 5 s on one core at the ~10 Gflop/s PARDISO reaches here (docs/benchmarks/static.md); above,
-#: AMG-CG (a few seconds for 100,000 particles) is faster
-DIRECT_FLOPS = 6e10
+#: floating-point work (flop) of one factorization up to which the direct solve is chosen:
+#: about 20 s on one core at the ~10 Gflop/s PARDISO reaches here; above, AMG-CG. AMG-CG is
+#: fast on solid parts but slow on thin walls: the SO-100 base at 93,236 particles (1.8e11 flop,
+#: 1.4 GB) took 164 CG iterations a solve, 5× the time of factorizing each Newton step's tangent
+#: (docs/benchmarks/parts-100k); the crossover was 6e10 on the solid blocks
+DIRECT_FLOPS = 3e11
 #: share of the available memory a factorization may take
 DIRECT_MEMORY_SHARE = 0.5
 #: unknowns beyond which the factorization is not even analysed (its ordering alone takes
@@ -154,10 +156,25 @@ class Pardiso:
         A.sort_indices()
         if not (np.array_equal(A.indptr, self.A.indptr)
                 and np.array_equal(A.indices, self.A.indices)):
-            return False
+            # fewer entries (some summed to zero and dropped): their values on the analysed
+            # pattern, if every one of them is in it
+            old = self._keys(self.A)
+            new = self._keys(A)
+            at = np.minimum(np.searchsorted(old, new), len(old) - 1)
+            if not (len(old) and np.array_equal(old[at], new)):
+                return False
+            data = np.zeros(len(old))
+            data[at] = A.data
+            A = sp.csr_matrix((data, self.A.indices, self.A.indptr), shape=self.A.shape)
         self.A = A
         self.factor()
         return True
+
+    @staticmethod
+    def _keys(A) -> np.ndarray:
+        """Each stored entry of CSR ``A`` (sorted indices) as row·n + column, ascending."""
+        rows = np.repeat(np.arange(A.shape[0], dtype=np.int64), np.diff(A.indptr))
+        return rows * A.shape[1] + A.indices.astype(np.int64)
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         return np.asarray(self._call(33, b)).reshape(-1)
