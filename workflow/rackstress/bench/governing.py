@@ -338,6 +338,13 @@ def run_bench(out=None, quick: bool = False, echo=print) -> dict:
     return data
 
 
+#: what the page says where no order was measured: --quick has two spacings; a full run's
+#: three values gave none between 0.3 and 4 (not monotone, or not converging)
+NO_ORDER = {True: "— (--quick)",
+            False: "none (no part's three values converge monotonically at an order between "
+                   "0.3 and 4)"}
+
+
 def markdown(data) -> str:
     m = data["machine"]
     lines = ["# The governing stress, its singular peak and its error bar",
@@ -351,7 +358,8 @@ def markdown(data) -> str:
              "",
              "Each part at spacings h, h/√2, h/2; every spacing's governing stress read at the "
              "coarsest run's zone and singular points. FEA: P2 tetrahedra graded toward the "
-             "re-entrant edges (validity/graded.py), the finest run's supports and loads; its "
+             "re-entrant edges, the concave curved faces and the loads (validity/graded.py), "
+             "the finest run's supports and loads; its "
              "governing stress is the largest nodal von Mises stress (surface included) at least "
              "the zone from every singular point.",
              "",
@@ -360,7 +368,7 @@ def markdown(data) -> str:
                                              for f in data["failed"]) + "."), ""]
                if data.get("failed") else []),
              f"The lattice's order of convergence, measured on each part from its three "
-             f"spacings: {', '.join(fmt(p) for p in data['measured_orders']) or '— (--quick)'}"
+             f"spacings: {', '.join(fmt(p) for p in data['measured_orders']) or NO_ORDER[data['quick']]}"
              f"; the error bars below use order {fmt(data['rule']['lattice_order'])}. A single "
              f"run's error per "
              f"s/t (s the spacing, t the shortest chord through the part at the governing "
