@@ -22,8 +22,8 @@ import json
 from pathlib import Path
 
 from rackstress.errors import EXIT_UNSETTLED, RackstressError
-from rackstress.stress.governing import (REFINE_RATIO, error_bar, record, singular_set,
-                                         with_contact_edges)
+from rackstress.stress.governing import (REFINE_RATIO, default_error, error_bar, record,
+                                         singular_set, with_contact_edges, with_single_run)
 from rackstress.stress.measures import read_contacts
 
 #: the refined run's directory inside the run
@@ -132,7 +132,10 @@ def refine(rundir, spec: str, overrides: dict | None = None, engine: str = "lamm
         raise RefineError(f"{fine_dir}: every particle of '{gov['group']}' lies within the "
                           f"zone ({z:.3g}) of a singular point")
     h = float(gov["spacing"])
-    err = error_bar([gov["value"], fg["value"]], [h, h / ratio])
+    # never narrower than the refined run's own single-run band (a fillet's or hole's peak
+    # the lattice does not resolve, two values agreeing by chance)
+    err = with_single_run(error_bar([gov["value"], fg["value"]], [h, h / ratio]),
+                          default_error(fine_run, fg))
     err.update(refine_dir=REFINE_DIR, group=gov["group"], zone=z, units=gov["units"],
                governing_fine={k: fg[k] for k in ("value", "particle", "position", "iteration")},
                particles=[int(summary.get("n_particles", 0)),
