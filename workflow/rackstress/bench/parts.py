@@ -22,7 +22,8 @@ from pathlib import Path
 from rackstress.bench import fmt, machine, md_table, out_dir, repository_file, write_json
 
 HEADER = ["part", "particles", "spacing [mm]", "Newton steps", "residual", "solve [s]",
-          "run CPU [s]", "peak [MPa]", "settled", "FE ρ", "FE peak ratio", "status"]
+          "run CPU [s]", "peak [MPa]", "settled", "FE ρ", "FE peak ratio", "FE CPU [s]",
+          "FE memory [GB]", "status"]
 
 
 def parts_dir() -> Path:
@@ -118,23 +119,51 @@ def case(name: str, work: Path, fea: bool = True, sets: dict | None = None, echo
         row["reason"] = short(_error_of(r.stderr))
     if fea and row["settled"]:
         t0 = time.perf_counter()
-        try:
-            f = subprocess.run([*_rackstress(), "fea", str(out)], capture_output=True,
-                               text=True, timeout=timeout)
-            if f.returncode == 0:
-                ag = json.loads((out / "fea.json").read_text())["agreement"]
-                row.update(fea_spearman=ag.get("spearman"), fea_top5=ag.get("top5_overlap"),
-                           fea_peak_ratio=ag.get("peak_ratio"))
-            else:
-                row["fea_error"] = short(_error_of(f.stderr))
-        except subprocess.TimeoutExpired:
+        code, err, usage = _timed([*_rackstress(), "fea", str(out)], timeout)
+        if usage is not None:     # this process's own CPU time and peak memory
+            row.update(fea_cpu_s=usage.ru_utime + usage.ru_stime,
+                       fea_rss_gb=usage.ru_maxrss * 1024 / 2 ** 30)
+        if code is None:
             row["fea_error"] = f"rackstress fea had not ended after {timeout:.0f} s"
+        elif code == 0:
+            fj = json.loads((out / "fea.json").read_text())
+            ag, gov = fj["agreement"], fj.get("governing") or {}
+            row.update(fea_spearman=ag.get("spearman"), fea_top5=ag.get("top5_overlap"),
+                       fea_peak_ratio=ag.get("peak_ratio"), fea_mesh=fj.get("mesh"),
+                       fea_note=fj.get("note"), fea_tetrahedra=fj["fe"].get("tetrahedra"),
+                       fea_governing_ratio=gov.get("ratio"), fea_moved=gov.get("moved"),
+                       fea_budget=fj.get("fe_budget"))
+        else:
+            row["fea_error"] = short(_error_of(err))
         row["fea_s"] = time.perf_counter() - t0
     echo(f"{name}: {row['particles']:,} particles at {fmt(row['spacing'])} "
          f"({row['spacing_how']}), {row['status']} in {row['iterations']} steps, residual "
          f"{fmt(row['residual'])}, solve {fmt(row['solve_s'])} s, peak {fmt(peak)} MPa"
          + (f", FE ρ {fmt(row.get('fea_spearman'))}" if "fea_spearman" in row else ""))
     return row
+
+
+def _timed(args: list, timeout: float):
+    """Run ``args``; (exit status or None if stopped after ``timeout`` s, its stderr, its
+    resource usage — CPU time and peak resident memory of that process alone, os.wait4)."""
+    import subprocess
+
+    with tempfile.TemporaryFile("w+") as err:
+        p = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=err, text=True)
+        end = time.monotonic() + timeout
+        while True:
+            pid, status, usage = os.wait4(p.pid, os.WNOHANG)
+            if pid:
+                p.returncode = os.waitstatus_to_exitcode(status)
+                break
+            if time.monotonic() > end:
+                p.kill()
+                _, status, usage = os.wait4(p.pid, 0)
+                p.returncode = None
+                break
+            time.sleep(0.2)
+        err.seek(0)
+        return p.returncode, err.read(), usage
 
 
 def run_bench(out=None, fea: bool = True, only=None, sets: dict | None = None,
@@ -173,7 +202,8 @@ def table_rows(data) -> list:
             fmt(r.get("iterations")), fmt(r.get("residual"), 2), fmt(r.get("solve_s")),
             fmt(r.get("run_cpu_s")), fmt(r.get("peak_mpa")),
             {True: "yes", False: "**no**"}.get(r.get("settled"), "—"),
-            fmt(r.get("fea_spearman")), fmt(r.get("fea_peak_ratio")), r.get("status", "—")])
+            fmt(r.get("fea_spearman")), fmt(r.get("fea_peak_ratio")), fmt(r.get("fea_cpu_s")),
+            fmt(r.get("fea_rss_gb")), r.get("status", "—")])
     return rows
 
 
@@ -204,10 +234,30 @@ def markdown(data) -> str:
         "fea`, processes of their own. *solve* is the static solver's wall time, *run CPU* the "
         "CPU time of the whole `rackstress run` (scene, solve, the engine's check, stress); *spacing* says whether the "
         "walls or the budget set it, or the scene gave it; *peak* is the governing stress "
-        "where the run has one, else the largest von Mises stress.",
+        "where the run has one, else the largest von Mises stress."
+        + (" *FE ρ* is Spearman's rank correlation of the particles' stress with the FE's at "
+           "the particles, *FE peak ratio* the particles' largest over the FE's largest at "
+           "least the zone away from singular points (docs/fea.md); *FE CPU* and *FE memory* "
+           "are `rackstress fea`'s own CPU time and peak resident memory, both FE sizes (the "
+           "FE check's target: 60 s and 2 GB for 20,000 particles)." if data.get("fea") else ""),
         "",
         md_table(HEADER, table_rows(data)),
     ]
+    meshed = [r for r in data["rows"] if r.get("fea_mesh")]
+    if meshed:
+        out += ["FE meshes (`fea.json` → `mesh`, `note`, `fe_budget`):", ""]
+        for r in meshed:
+            b = r.get("fea_budget") or {}
+            out.append(f"* **{r['part']}**: {r['fea_mesh']}, {fmt(r.get('fea_tetrahedra'), 6)} "
+                       "tetrahedra"
+                       + (f"; graded to {fmt(b['near_size'])} mm, not {fmt(b['near_size_wanted'])}"
+                          f", within the budget of {b['elements']:,}" if b.get("raised") else "")
+                       + (f"; the FE's governing stress moved {100 * r['fea_moved']:.1f} % from "
+                          "the coarser FE mesh" if r.get("fea_moved") is not None else "")
+                       + (f"; the particles at the FE's governing point: "
+                          f"{fmt(r['fea_governing_ratio'])} of the FE's"
+                          if r.get("fea_governing_ratio") is not None else ""))
+        out.append("")
     notes = [r for r in data["rows"] if r.get("reason") or r.get("fea_error")]
     if notes:
         out.append("Why:")

@@ -53,6 +53,10 @@ class Normals:
     ids: np.ndarray
     normals: np.ndarray
     label: str = "support"
+    #: a cylindrical support's axis (a point on it, its direction): the normals are radial
+    #: about it and along it — kept so that another discretization of the part (the FE check's
+    #: nodes) takes its own radial directions; None for a plane's normals
+    cylinder: tuple | None = None
 
     def __post_init__(self):
         ids = np.asarray(self.ids, dtype=np.int64).reshape(-1)

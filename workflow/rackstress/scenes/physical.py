@@ -182,7 +182,8 @@ def supports(ctx, tables, groups: dict, select, region_of=None) -> None:
             u, v = _basis(axis)
             normals += [np.tile(u, (int(on_axis.sum()), 1)), np.tile(v, (int(on_axis.sum()), 1))]
             pid += [ids[on_axis]] * 2
-        g.constraints.append(Normals(np.concatenate(pid), np.concatenate(normals), label))
+        g.constraints.append(Normals(np.concatenate(pid), np.concatenate(normals), label,
+                                     (np.asarray(point, float), np.asarray(axis, float))))
 
 
 #: a [[support]]'s ``type`` and what it holds

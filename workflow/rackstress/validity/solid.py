@@ -88,6 +88,14 @@ MEMORY_FLOOR = 150e6
 TETS_PER_SIZE3 = 4.8
 #: FE systems up to this many unknowns are solved directly (SuperLU), larger by AMG-CG
 DIRECT_DOFS = 20_000
+#: the finer FE mesh's budget of tetrahedra: the FE check's target of ≤ 60 s of one core and ≤ 2 GB for a
+#: 20,000-particle part, with both FE sizes (measured on the finger's lower link: 179,215
+#: tetrahedra took 59.5 s of CPU and 2.4 GB, 68,822 took 21.6 s; at a budget of 80,000 the
+#: solo12 hip took 113 s and 1.95 GB with both sizes on a loaded machine). Where the grading to
+#: :data:`NEAR_SPACINGS` at re-entrant edges and curved faces would exceed it (a part curved
+#: all over refines everywhere), the finest size is raised until it fits
+#: (:func:`near_size_within`); ``fea.json`` → ``fe_budget`` says so
+FE_ELEMENTS = 50_000
 
 
 # --------------------------------------------------------------------------- meshes
@@ -197,22 +205,102 @@ def drop_slivers(vertices: np.ndarray, faces: np.ndarray, rel: float = SLIVER_AR
 
 
 def surface_mesh(vertices: np.ndarray, faces: np.ndarray, size: float, near=None,
-                 near_size: float | None = None):
+                 near_size: float | None = None, info: dict | None = None,
+                 reparametrize: bool = True):
     """Tetrahedra of the closed surface (vertices, triangles) by gmsh, largest edge ``size``:
     (p 3×N, t 4×M). Slivers are removed (:func:`drop_slivers`), the surface is classified into
     patches (40° feature angle), each reparametrized and remeshed, then the volume meshed
     (gmsh runs headless, quietly). ``near`` (k×3 points, the re-entrant edges sampled):
     elements of :data:`GRADE` × the distance d from them, between ``near_size`` and ``size``
-    — the stress falls steeply there, and the governing stress is read a few spacings away."""
-    import gmsh
+    — the stress falls steeply there, and the governing stress is read a few spacings away.
 
+    Where gmsh cannot reparametrize the surface (a patch that is not a disc: "Wrong topology
+    of boundary mesh for parametrization"; a remeshed thin wall whose two faces cross:
+    "overlapping facets"; tiny facets side by side, on which its classification does not
+    end), the volume is meshed inside the file's own triangles: the same closed surface, its
+    facets as the file has them, not refined at the features, nor graded inside (graded
+    towards the file's coarse facets, gmsh took over 80 s on the finger's upper link, 0.5 s
+    without). Before, such a part fell back on the particles' cells cut in 8 (minutes, up to
+    8 GB). Halving the file's long edges first made gmsh's volume mesher run for minutes on
+    the thin triangles it leaves. Tiny facets side by side are welded first (:func:`weld`).
+    ``info`` (a dict) receives ``surface``: which way was taken; ``reparametrize=False``
+    goes that way at once (the FE check's second size, where the first could not)."""
     v = np.asarray(vertices, float)
     f = drop_slivers(v, faces)
-    left = _twice_areas(v, f) <= SLIVER_AREA * float(np.ptp(v, axis=0).max()) ** 2
-    if left.any():        # gmsh's classification did not end in 10 minutes on such a pair
-        at = np.round(v[f[left][0]].mean(axis=0), 4).tolist()
-        raise ValueError(f"{int(left.sum())} zero-area triangle(s) side by side remain (e.g. at "
-                         f"{at}), which gmsh cannot parametrize")
+    tiny = SLIVER_AREA * float(np.ptp(v, axis=0).max()) ** 2
+    left = _twice_areas(v, f) <= tiny
+    if left.any():       # tiny facets side by side: weld their corners, if it stays closed
+        w, g = weld(v, f)
+        if g is not None:
+            v, f = w, drop_slivers(w, g)
+            left = _twice_areas(v, f) <= tiny
+    if left.any():
+        e = v[f[left]] - v[np.roll(f[left], 1, axis=1)]
+        flat = _twice_areas(v, f[left]) <= FLAT * (e ** 2).sum(axis=2).max(axis=1)
+        if flat.any():    # three collinear points: no tetrahedron can have it as a face
+            at = np.round(v[f[left][flat][0]].mean(axis=0), 4).tolist()
+            raise ValueError(f"{int(flat.sum())} zero-area triangle(s) side by side remain "
+                             f"(e.g. at {at}), which gmsh cannot mesh")
+    info = {} if info is None else info
+    why = None
+    if not reparametrize:
+        why = "it could not at the other FE size"
+    elif not left.any():   # gmsh's classification did not end in 10 minutes on a tiny pair
+        try:
+            out = _gmsh_volume(v, f, size, near, near_size, reparametrize=True)
+            info["surface"] = "remeshed by gmsh"
+            return out
+        except Exception as exc:  # noqa: BLE001 - gmsh's own error: its words, below
+            why = str(exc)
+    else:
+        why = f"{int(left.sum())} tiny facets side by side"
+    info["surface"] = (f"the volume inside the file's own triangles (gmsh could not "
+                       f"reparametrize the surface: {why})")
+    return _gmsh_volume(v, f, size, None, None, reparametrize=False)
+
+
+#: corners closer than this × the part's size are welded into one where tiny facets remain
+WELD = 1e-4
+
+
+def weld(v: np.ndarray, f: np.ndarray, rel: float = WELD):
+    """(vertices, triangles) with the vertices closer than ``rel`` × the part's size merged
+    (each cluster at its first vertex) and the triangles that collapse dropped; (v, None) if
+    the result is not a closed, consistently oriented surface. The finger's upper link
+    (199 mm): 56 pairs of corners within 0.02 mm, 60 triangles of 0.002–0.013 mm edges gone,
+    its volume 155,020.995 → 155,021.084 mm³; gmsh meshes it (with those facets its volume
+    mesher did not end in 2 minutes)."""
+    import scipy.sparse as sp
+    import trimesh
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    v, f = np.asarray(v, float), np.asarray(f, np.int64)
+    pr = cKDTree(v).query_pairs(rel * float(np.ptp(v, axis=0).max()), output_type="ndarray")
+    if not len(pr):
+        return v, None
+    n = len(v)
+    k, lab = connected_components(sp.coo_matrix((np.ones(len(pr)), (pr[:, 0], pr[:, 1])),
+                                                shape=(n, n)), directed=False)
+    first = np.full(k, -1, np.int64)
+    first[lab[::-1]] = np.arange(n)[::-1]
+    g = lab[f]
+    g = g[(g[:, 0] != g[:, 1]) & (g[:, 1] != g[:, 2]) & (g[:, 0] != g[:, 2])]
+    w = v[first]
+    m = trimesh.Trimesh(w, g, process=False)
+    if not (m.is_watertight and m.is_winding_consistent):
+        return v, None
+    return w, g
+
+
+#: a tiny triangle (:data:`SLIVER_AREA`) is flat when twice its area ≤ this × its longest
+#: edge² (its height under 1 % of its length; three collinear points: 0)
+FLAT = 1e-2
+
+
+def _gmsh_volume(v, f, size, near, near_size, reparametrize: bool):
+    """gmsh's tetrahedra inside the closed triangulated surface (v, f) (:func:`surface_mesh`)."""
+    import gmsh
 
     gmsh.initialize(["-noenv"], readConfigFiles=False)
     try:
@@ -221,8 +309,11 @@ def surface_mesh(vertices: np.ndarray, faces: np.ndarray, size: float, near=None
         s = gmsh.model.addDiscreteEntity(2)
         gmsh.model.mesh.addNodes(2, s, np.arange(1, len(v) + 1), v.ravel())
         gmsh.model.mesh.addElementsByType(s, 2, [], (f + 1).ravel())
-        gmsh.model.mesh.classifySurfaces(math.radians(40.0), True, True, math.pi)
-        gmsh.model.mesh.createGeometry()
+        if reparametrize:
+            gmsh.model.mesh.classifySurfaces(math.radians(40.0), True, True, math.pi)
+            gmsh.model.mesh.createGeometry()
+        else:
+            gmsh.model.mesh.createTopology()
         loop = gmsh.model.geo.addSurfaceLoop([e[1] for e in gmsh.model.getEntities(2)])
         gmsh.model.geo.addVolume([loop])
         gmsh.model.geo.synchronize()
@@ -250,9 +341,22 @@ def surface_mesh(vertices: np.ndarray, faces: np.ndarray, size: float, near=None
     index = np.zeros(int(tags.max()) + 1, dtype=np.int64)
     index[tags.astype(np.int64)] = np.arange(len(tags))
     t = index[np.asarray(tet[0], np.int64).reshape(-1, 4)].T
+    X = coords.reshape(-1, 3)
+    if not reparametrize:
+        # inside a file's own facets gmsh leaves flat tetrahedra, four corners on one face (the
+        # SO-100 base: 89 of 13,879 with volume < 1e-6 × edge³, 6 of them inverted): no
+        # stiffness, a singular system. They hold no volume; the rest stay conforming
+        vol = np.einsum("ij,ij->j", np.cross(X[t[1]] - X[t[0]], X[t[2]] - X[t[0]], axis=1).T,
+                        (X[t[3]] - X[t[0]]).T) / 6
+        edge = np.max([np.linalg.norm(X[t[i]] - X[t[j]], axis=1)
+                       for i in range(4) for j in range(i + 1, 4)], axis=0)
+        t = t[:, np.abs(vol) > FLAT_TET * edge ** 3]
     used, t = np.unique(t, return_inverse=True)
-    return (np.ascontiguousarray(coords.reshape(-1, 3)[used].T),
-            np.ascontiguousarray(t.reshape(4, -1)))
+    return (np.ascontiguousarray(X[used].T), np.ascontiguousarray(t.reshape(4, -1)))
+
+
+#: a tetrahedron of volume ≤ this × its longest edge³ is flat (a regular one: 0.118)
+FLAT_TET = 1e-6
 
 
 def surface_features(vertices: np.ndarray, faces: np.ndarray, step: float):
@@ -279,6 +383,105 @@ def surface_features(vertices: np.ndarray, faces: np.ndarray, step: float):
         return np.unique(np.vstack(out), axis=0) if out else np.zeros((0, 3))
 
     return sample(tm.face_adjacency_edges[concave]), sample(tm.face_adjacency_edges[curved])
+
+
+# --------------------------------------------------------------------------- general supports
+@dataclass
+class CellConstraints:
+    """The supports of a part that hold no whole axis — :mod:`rackstress.model.constraints`'
+    :class:`~rackstress.model.constraints.Normals` (a roller or a symmetry plane at an angle,
+    a cylindrical hole) and :class:`~rackstress.model.constraints.Ring` (a pinned hole) over
+    the particles at ``x`` (``items``' ids index ``x``) — carried to the FE nodes with the
+    meaning the particle model gives them: every FE node inside (the closed cell of) a
+    particle a constraint lists is held by it (:meth:`on_nodes`).
+
+    * a plane's normal: the node keeps u·n = 0;
+    * a cylindrical support: u·r̂ = 0 and u·â = 0 with r̂ the node's own radial direction
+      about the axis (not the particle's: a turn of the bore stays free);
+    * a pinned hole: all its nodes move as one rigid ring turning about the axis,
+      u = θ · â × (x − c), θ one unknown (a node in a ring's cell is held by the ring only:
+      a fixed node beside it would lock the turn the pin leaves free).
+    """
+
+    x: np.ndarray
+    spacing: float
+    items: list
+
+    def __bool__(self) -> bool:
+        return bool(self.items)
+
+    def on_nodes(self, X: np.ndarray, fixed: np.ndarray):
+        """(constraints over the node indices of ``X`` (n×3), ``fixed`` without the ring
+        nodes): the items as :class:`Normals` and :class:`Ring` of the FE nodes."""
+        from scipy.spatial import cKDTree
+
+        from rackstress.model.constraints import Normals, Ring
+
+        X = np.asarray(X, float)
+        fixed = np.array(fixed, bool)
+        h = 0.5 * float(self.spacing) * (1 + 1e-6)
+        tree = cKDTree(X)
+
+        def nodes_of(ids):
+            """(node, particle) pairs: the node inside the particle's closed cell."""
+            ids = np.asarray(ids, np.int64)
+            pts = np.asarray(self.x, float)[ids]
+            cand = tree.query_ball_point(pts, h * math.sqrt(3))
+            nn = np.fromiter((k for c in cand for k in c), np.int64)
+            pp = np.repeat(np.arange(len(ids)), [len(c) for c in cand])
+            inside = np.all(np.abs(X[nn] - pts[pp]) <= h, axis=1)
+            return nn[inside], pp[inside]
+
+        out, ring_nodes = [], np.zeros(len(X), bool)
+        for c in self.items:
+            if isinstance(c, Ring):
+                nn, _ = nodes_of(c.ids)
+                nn = np.unique(nn)
+                nn = nn[~ring_nodes[nn]]                 # a node in two rings: the first's
+                if len(nn):
+                    ring_nodes[nn] = True
+                    out.append(Ring(nn, c.point, c.axis, c.label))
+        for c in self.items:
+            if isinstance(c, Ring):
+                continue
+            nn, pp = nodes_of(c.ids)
+            keep = ~ring_nodes[nn]
+            nn, pp = nn[keep], pp[keep]
+            if c.cylinder is not None:                   # the node's own radial direction
+                point, axis = (np.asarray(a, float) for a in c.cylinder)
+                axis = axis / np.linalg.norm(axis)
+                nn = np.unique(nn)
+                rel = X[nn] - point
+                radial = rel - np.outer(rel @ axis, axis)
+                rho = np.linalg.norm(radial, axis=1)
+                on = rho <= 1e-9 * max(float(rho.max(initial=0.0)), 1e-300)
+                radial[on] = 0.0
+                radial[~on] /= rho[~on, None]
+                held = fixed[nn].copy()
+                held[on] = True                          # on the axis: no turn, held
+                fixed[nn] = held
+                ids = np.r_[nn[~on], nn]
+                normals = np.r_[radial[~on], np.tile(axis, (len(nn), 1))]
+            else:                                        # each node once per distinct normal
+                pairs = np.unique(np.c_[nn, np.round(c.normals[pp], 12)], axis=0)
+                ids, normals = pairs[:, 0].astype(np.int64), pairs[:, 1:]
+            if len(ids):
+                out.append(Normals(ids, normals, c.label))
+        fixed[ring_nodes] = False
+        return out, fixed
+
+
+def constraint_map(X: np.ndarray, fixed: np.ndarray, items: list):
+    """T (3n × m, CSR, orthonormal columns) with u = T·q over the FE nodes at ``X``:
+    :class:`rackstress.model.constraints.ConstraintMap` — the particle model's own map — of
+    the nodes as one group (fixed axes, normals, rigid rings)."""
+    from types import SimpleNamespace
+
+    from rackstress.model.constraints import ConstraintMap
+
+    g = SimpleNamespace(name="fe", o=np.asarray(X, float), n=len(X),
+                        fixed=np.asarray(fixed, bool), constraints=list(items))
+    return ConstraintMap.of_groups([g], g.o)
 
 
 # --------------------------------------------------------------------------- solution
@@ -372,14 +575,24 @@ def _on_nodes(mesh, a: np.ndarray | None, n_vertices: int, kind: str) -> np.ndar
     return out
 
 
-def solve(p, t, E: float, nu: float, fixed, forces, echo=None) -> Solution:
+def solve(p, t, E: float, nu: float, fixed, forces, echo=None,
+          constraints: CellConstraints | None = None, method: str = "auto") -> Solution:
     """Linear elasticity on the tetrahedra (p 3×N, t 4×M) with P2 elements
     (:mod:`rackstress.validity.tet`).
 
     ``fixed``: bool over the vertices (N×3: a direction fixed; N: all three) or over the P2
     nodes (``Tet2.X``); ``forces``: nodal forces (N×3 at the vertices, or per P2 node; None:
-    none). Up to :data:`DIRECT_DOFS` unknowns a direct sparse solve, above it conjugate
-    gradients preconditioned by a two-grid cycle (P2 smoothing, AMG on P1).
+    none); ``constraints``: supports that hold no whole axis (:class:`CellConstraints` of
+    particles, or :class:`~rackstress.model.constraints.Normals` and ``Ring`` over the P2
+    nodes), imposed exactly by u = T·q (:func:`constraint_map`): Tᵀ·K·T q = Tᵀ·f.
+    ``method``: ``"auto"`` — up to :data:`DIRECT_DOFS` unknowns SuperLU, above it MKL
+    PARDISO where its own estimate of the factor fits :data:`DIRECT_MEMORY` and
+    ``engines.linear``'s work limit (:func:`rackstress.engines.linear.plan_direct`), else
+    conjugate gradients preconditioned by a two-grid cycle (P2 smoothing, AMG on P1; with
+    constraints, the cycle of K with each constrained node's held directions stiffened by
+    its own diagonal, seen through T); ``"direct"`` or ``"cg"`` force one. A mesh inside an
+    STL's own facets is poorly shaped: the SO-100 base's 82,656 unknowns took 752
+    conjugate-gradient steps (39 s of CPU).
     """
     import time
 
@@ -393,8 +606,15 @@ def solve(p, t, E: float, nu: float, fixed, forces, echo=None) -> Solution:
     mesh = Tet2(P.T, np.asarray(t).T)
     fx = _on_nodes(mesh, fixed, P.shape[1], "fixed").astype(bool)
     f = _on_nodes(mesh, forces, P.shape[1], "forces").astype(float)
-    if not fx.any():
+    items = []
+    if isinstance(constraints, CellConstraints):
+        items, fx = constraints.on_nodes(mesh.X, fx)
+    elif constraints:                   # Normals and Ring over the P2 nodes (``Tet2.X``)
+        items = list(constraints)
+    if not fx.any() and not items:
         raise ValueError("no FE node is fixed: the part is not supported")
+    if items:
+        return _solve_constrained(mesh, P, E, nu, fx, f, items, method, c0)
     # BLAS threads only spin in the conjugate gradients' vector operations: one is faster
     # (3x less CPU measured on a loaded two-core machine)
     stages = {}
@@ -405,10 +625,15 @@ def solve(p, t, E: float, nu: float, fixed, forces, echo=None) -> Solution:
         f[fx] = 0.0
         dofs = 3 * mesh.n_nodes
         stages["assembly"] = time.process_time() - c0
-        if dofs <= DIRECT_DOFS:
+        plan = _direct_plan(K, method)
+        if plan == "superlu":
             u, its = spla.spsolve(K.tocsc(), f.ravel()), 0
+        elif plan is not None:
+            u, its = plan.factor().solve(f.ravel()), 0
+            plan.free()
         else:
             u, its = solve_cg(mesh, K, f.ravel(), fx)
+        solver = plan or "cg" if isinstance(plan, str) or plan is None else plan.kind
         del K
         stages["solve"] = time.process_time() - c0 - stages["assembly"]
         u = u.reshape(-1, 3)
@@ -417,7 +642,113 @@ def solve(p, t, E: float, nu: float, fixed, forces, echo=None) -> Solution:
     return Solution(mesh, u, eps, float(E), float(nu),
                     {"vertices": int(P.shape[1]), "tetrahedra": int(mesh.n_elements),
                      "nodes": int(mesh.n_nodes), "dofs": int(dofs), "cg_iterations": int(its),
-                     "cpu_s": time.process_time() - c0, "stages_cpu_s": stages})
+                     "solver": solver, "cpu_s": time.process_time() - c0, "stages_cpu_s": stages})
+
+
+def _direct_plan(K, method: str):
+    """"superlu", an analysed PARDISO factorization, or None (conjugate gradients) for the
+    system ``K`` under ``method`` (:func:`solve`)."""
+    if method == "cg":
+        return None
+    n = K.shape[0]
+    if n <= DIRECT_DOFS or (method == "direct" and n <= 4 * DIRECT_DOFS):
+        return "superlu"
+    from rackstress.engines.linear import Pardiso, backend, plan_direct
+
+    if method == "direct":
+        return Pardiso(K.tocsr()).analyse() if backend() == "pardiso" else "superlu"
+    avail, _ = available_bytes()
+    return plan_direct(K.tocsr(), available=int(min(avail, DIRECT_MEMORY)))
+
+
+#: the memory the FE's direct factorization may count on (half of it for the factor,
+#: ``engines.linear.DIRECT_MEMORY_SHARE``): the FE check's target of 2 GB in all
+DIRECT_MEMORY = 2 * 2 ** 30
+
+
+def _solve_constrained(mesh, P, E, nu, fx, f, items, method, c0) -> Solution:
+    """:func:`solve` with supports that hold no whole axis: u = T·q (:func:`constraint_map`),
+    Tᵀ·K·T q = Tᵀ·f, directly where it fits (:func:`_direct_plan`), else by conjugate gradients
+    preconditioned by Tᵀ·M⁻¹·T, M the two-grid cycle of K with the fixed axes eliminated and
+    each constrained node's held directions (I − B·Bᵀ, B its free basis; every direction of a
+    ring's node) stiffened by its own diagonal block's trace — as K + α·N·Nᵀ tends to the
+    constrained operator on T's range when α grows. Records each ring's turn θ (rad)."""
+    import time
+
+    import scipy.sparse.linalg as spla
+    from threadpoolctl import threadpool_limits
+
+    from rackstress.model.constraints import Ring
+    from rackstress.validity.tet import eliminate, p_multigrid
+
+    stages = {}
+    n = mesh.n_nodes
+    with threadpool_limits(1):
+        cm = constraint_map(mesh.X, fx, items)
+        T = cm.T.tocsr()
+        K = mesh.stiffness(E, nu)
+        M = mesh.mass()
+        A = (T.T @ K.tocsr() @ T).tocsr()
+        b = T.T @ f.ravel()
+        dofs = A.shape[0]
+        stages["assembly"] = time.process_time() - c0
+        plan = _direct_plan(A, method)
+        solver = plan or "cg" if isinstance(plan, str) or plan is None else plan.kind
+        if plan is not None:
+            mesh.release()
+            del K
+            if plan == "superlu":
+                q, its = spla.spsolve(A.tocsc(), b), 0
+            else:
+                q, its = plan.factor().solve(b), 0
+                plan.free()
+        else:
+            from rackstress.validity.tet import CG_RTOL
+
+            K = eliminate(K, fx)
+            mesh.release()
+            rows = np.repeat(np.arange(n), np.diff(K.indptr))
+            on = np.flatnonzero(rows == K.indices)                   # the diagonal blocks
+            held = np.zeros((n, 3, 3))
+            for i, B in cm.bases.items():
+                held[i] = np.eye(3) - B @ B.T
+            held[cm.ring_particles] = np.eye(3)
+            node = rows[on]
+            trace = np.trace(K.data[on], axis1=1, axis2=2)
+            K.data[on] += trace[:, None, None] * held[node]
+            _, Mk = p_multigrid(mesh, K, fx)
+            del K
+            pre = spla.LinearOperator(A.shape, matvec=lambda r: T.T @ (Mk @ (T @ r)))
+            it = [0]
+
+            def count(_):
+                it[0] += 1
+
+            q, info = spla.cg(A, b, rtol=CG_RTOL, atol=0.0, maxiter=2000, M=pre,
+                              callback=count)
+            if info != 0:
+                raise RuntimeError(f"the FE solve did not converge (conjugate gradients, "
+                                   f"{info} steps)")
+            its = it[0]
+        del A
+        stages["solve"] = time.process_time() - c0 - stages["assembly"]
+        u = np.asarray(T @ q).reshape(-1, 3)
+        eps = project_strain(mesh, u, M)
+        stages["projection"] = time.process_time() - c0 - stages["assembly"] - stages["solve"]
+    rings = []
+    for c in items:
+        if isinstance(c, Ring):
+            r = mesh.X[c.ids] - c.point
+            t = np.cross(c.axis, r)
+            k = int(np.argmax(np.linalg.norm(t, axis=1)))
+            rings.append({"label": c.label, "nodes": int(len(c.ids)),
+                          "turn_rad": float(u[c.ids[k]] @ t[k] / (t[k] @ t[k]))})
+    return Solution(mesh, u, eps, float(E), float(nu),
+                    {"vertices": int(P.shape[1]), "tetrahedra": int(mesh.n_elements),
+                     "nodes": int(mesh.n_nodes), "dofs": int(dofs), "cg_iterations": int(its),
+                     "constrained_nodes": int(sum(len(np.unique(c.ids)) for c in items)),
+                     "rings": rings,
+                     "solver": solver, "cpu_s": time.process_time() - c0, "stages_cpu_s": stages})
 
 
 # --------------------------------------------------------------------------- boundary
@@ -441,7 +772,10 @@ def nodal_forces(p: np.ndarray, t: np.ndarray, x: np.ndarray, F: np.ndarray,
             if np.linalg.matrix_rank(A) == 4:
                 w0 = np.full(len(near), 1.0 / len(near))
                 r = np.r_[1.0, xk] - A @ w0
-                w = w0 + A.T @ np.linalg.solve(A @ A.T, r)
+                try:
+                    w = w0 + A.T @ np.linalg.solve(A @ A.T, r)
+                except np.linalg.LinAlgError:     # nodes on one plane to rounding (a file's
+                    w = None                      # facet, solo-upper-leg): the tetrahedron's
         if w is None:                                  # the tetrahedron holding it
             if mesh is None:
                 from rackstress.validity.tet import Tet2
@@ -740,6 +1074,40 @@ def elements_expected(volume: float, size: float) -> float:
     return TETS_PER_SIZE3 * float(volume) / float(size) ** 3
 
 
+def graded_elements(x: np.ndarray, cell_volume: float, near: np.ndarray, size: float,
+                    near_size: float) -> float:
+    """Tetrahedra gmsh makes in the volume sampled by the points ``x`` (each standing for
+    ``cell_volume``) under :func:`surface_mesh`'s size field h = clip(GRADE·d, near_size,
+    size), d the distance to ``near``: :data:`TETS_PER_SIZE3` · Σ cell_volume / h³. On the
+    finger's lower link: 64,292 and 168,744 expected, 68,822 and 179,215 made."""
+    from scipy.spatial import cKDTree
+
+    x = np.asarray(x, float).reshape(-1, 3)
+    near = np.asarray(near, float).reshape(-1, 3)
+    d = cKDTree(near).query(x)[0] if len(near) else np.full(len(x), np.inf)
+    h = np.clip(GRADE * d, near_size, size)
+    return float(TETS_PER_SIZE3 * cell_volume * np.sum(1.0 / h ** 3))
+
+
+def near_size_within(x, cell_volume, near, size, near_size, budget=FE_ELEMENTS):
+    """The finest FE size, ``near_size`` or the smallest larger one (up to ``size``: no
+    grading) whose graded mesh is expected within ``budget`` tetrahedra
+    (:func:`graded_elements`), and that expectation."""
+    n = graded_elements(x, cell_volume, near, size, near_size)
+    if n <= budget or near_size >= size:
+        return near_size, n
+    lo, hi = math.log(near_size), math.log(size)
+    if graded_elements(x, cell_volume, near, size, size) > budget:
+        return size, graded_elements(x, cell_volume, near, size, size)
+    for _ in range(30):
+        mid = 0.5 * (lo + hi)
+        if graded_elements(x, cell_volume, near, size, math.exp(mid)) > budget:
+            lo = mid
+        else:
+            hi = mid
+    return math.exp(hi), graded_elements(x, cell_volume, near, size, math.exp(hi))
+
+
 def check_memory(n_elements: float, size: float, what: str) -> None:
     """Refuse (:class:`FEAMemoryError`) an FE model that would not fit, saying how much it
     needs and which ``--size`` would fit."""
@@ -759,7 +1127,8 @@ def check_memory(n_elements: float, size: float, what: str) -> None:
 
 
 def solve_part(o, spacing, shape, held_x, held_mask, load_x, load_F, E, nu, size=None,
-               near=None, near_size=None, what="FE mesh", refined: bool = False):
+               near=None, near_size=None, what="FE mesh", refined: bool = False,
+               constraints: CellConstraints | None = None, reparametrize: bool = True):
     """FEA of a part: its shape (a mesh :class:`~rackstress.model.regions.Surface` → gmsh,
     refined to ``near_size`` around the points ``near``; else the union of the cells of
     ``o``), nodes in held particles' cells fixed in ``held_mask``'s directions, the particle
@@ -773,9 +1142,13 @@ def solve_part(o, spacing, shape, held_x, held_mask, load_x, load_F, E, nu, size
     if isinstance(shape, Surface):
         try:
             pd = shape.polydata
+            got = {}
             p, t = surface_mesh(np.asarray(pd.points), np.asarray(pd.regular_faces), h,
-                                near, near_size)
+                                near, near_size, info=got, reparametrize=reparametrize)
             how = f"gmsh tetrahedra of {Path(shape.name).name}"
+            if "own triangles" in got.get("surface", ""):
+                how += " inside its own triangles"
+                note = got["surface"]
         except MemoryError:
             raise
         except Exception as exc:  # noqa: BLE001 - gmsh refused the surface: say so, use cells
@@ -795,7 +1168,7 @@ def solve_part(o, spacing, shape, held_x, held_mask, load_x, load_F, E, nu, size
     fixed = fixed_nodes(p, held_x, held_mask, spacing)
     forces = nodal_forces(p, t, load_x, load_F, spacing)
     try:
-        sol = solve(p, t, E, nu, fixed, forces)
+        sol = solve(p, t, E, nu, fixed, forces, constraints=constraints)
     except MemoryError:
         avail, why = available_bytes()
         raise FEAMemoryError(
@@ -984,15 +1357,17 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
         if not (rundir / "boundary.npz").is_file():
             raise ValueError(f"{rebuilt} and the run has no boundary.npz") from None
     bnd, bsource = _boundary(rundir, scene)
-    if len(bnd.get("constrained_ids", ())):     # pinned, cylindrical, rollers off the axes
+    if rebuilt and len(bnd.get("constrained_ids", ())):  # pinned, cylindrical, oblique rollers
         raise ValueError(
-            f"its supports hold {len(bnd['constrained_ids'])} particle(s) in directions that "
-            "are not x, y or z (a pinned or cylindrical hole, a roller or symmetry plane at an "
-            "angle); the FE check holds whole axes only: check a variant of the scene with "
-            "those supports as type = \"fixed\"")
+            f"{rundir}: {rebuilt}, and its supports hold {len(bnd['constrained_ids'])} "
+            "particle(s) in directions that are not x, y or z (a pinned or cylindrical hole, "
+            "a roller or symmetry plane at an angle): their axes and normals are the scene's "
+            "(boundary.npz records only which particles), so the FE check cannot model them. "
+            "Restore the scene file the run was made from, or run it again")
     name = _part_group(scene, summary, bnd, group)
     g, sl = scene.groups[name], scene.slice(name)
     spacing = _spacing(scene, name)
+    constraints = CellConstraints(g.o, spacing, list(getattr(g, "constraints", None) or []))
     mat = ((summary.get("groups") or {}).get(name) or {}).get("material") or {}
     E_ = float(E if E is not None else mat.get("E", 1.0))
     nu_ = float(nu if nu is not None else mat.get("nu", 0.3))
@@ -1030,16 +1405,37 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
     volume = g.n * spacing ** 3
     sizes = [h * COARSER, h] if converge else [h]
     check_memory(elements_expected(volume, h), h, "expected before meshing")
-    sols = []
+    near = np.concatenate([concave, curved, edges])
+    wanted = near_size
+    budget = None
+    if isinstance(shape, Surface):
+        near_size, expected = near_size_within(g.o, spacing ** 3, near, h, near_size)
+        budget = {"elements": FE_ELEMENTS, "expected": expected, "near_size": near_size,
+                  "near_size_wanted": wanted, "raised": near_size > wanted}
+        if near_size > wanted:
+            echo(f"fea: {name}: the grading to {wanted:.3g} at edges and curved faces would "
+                 f"make about {graded_elements(g.o, spacing ** 3, near, h, wanted):,.0f} "
+                 f"tetrahedra; graded to {near_size:.3g} instead, within the budget of "
+                 f"{FE_ELEMENTS:,}")
+    sols, reparam, note = [], True, None
     for k, hs in enumerate(sizes):
         echo(f"fea: {name}: meshing and solving at FE size {hs:.3g} "
              f"({k + 1} of {len(sizes)}) …")
-        sol, how, note, forces, fixed = solve_part(
+        sol, how, note_k, forces, fixed = solve_part(
             g.o, spacing, shape, held_x, np.asarray(bnd["held_mask"], bool)[hin], load_x,
             np.asarray(bnd["load_force"], float)[lin], E_, nu_, hs,
-            np.concatenate([concave, curved, edges]), near_size * hs / h,
-            what=f"FE size {hs:.3g}")
+            near, near_size * hs / h, what=f"FE size {hs:.3g}", constraints=constraints,
+            reparametrize=reparam)
         sols.append(sol)
+        note = note if k else note_k           # the first mesh's: why gmsh took that way
+        reparam = "inside its own triangles" not in how
+        if not reparam and k == 0 and len(sizes) > 1:
+            # inside the file's own facets the FE size changes only the interior: the same
+            # mesh again would say nothing of convergence, at twice the cost
+            note = "; ".join(x for x in (note, "one FE mesh: inside the file's own facets "
+                                         "another FE size gives nearly the same mesh, so "
+                                         "the FE's convergence is not measured") if x)
+            break
         if how.startswith("the union"):          # cells: the second mesh is each cut in 8
             if converge:
                 echo(f"fea: {name}: solving again with each tetrahedron cut into 8 …")
@@ -1047,7 +1443,7 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
                     sols.append(solve_part(
                         g.o, spacing, shape, held_x, np.asarray(bnd["held_mask"], bool)[hin],
                         load_x, np.asarray(bnd["load_force"], float)[lin], E_, nu_,
-                        what="cells cut into 8", refined=True)[0])
+                        what="cells cut into 8", refined=True, constraints=constraints)[0])
                     how += " (and each cut into 8)"
                 except FEAMemoryError as exc:
                     note = "; ".join(x for x in (note, f"not solved at a second size: {exc}")
@@ -1085,11 +1481,15 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
         "stress_unit": _stress_unit(summary, bnd), "compared": state,
         "material": {"E": E_, "nu": nu_, "from": "summary.json" if mat else
                      ("options" if E is not None else "default (E = 1, ν = 0.3)")},
-        "boundary": bsource, "mesh": how, "fe": sol.info,
+        "boundary": bsource, "mesh": how, "fe": sol.info, "fe_budget": budget,
         "fe_meshes": [s_.info for s_ in sols],
         "note": "; ".join(x for x in (rebuilt and rebuilt + ": the part is the union of its "
                                       "particles' cells", note) if x) or None,
         "held_particles": int(hin.sum()), "fixed_fe_nodes": int(fixed.any(axis=1).sum()),
+        "constrained": [{"label": c.label, "kind": type(c).__name__.lower(),
+                         "particles": int(len(np.unique(c.ids)))} for c in constraints.items],
+        "constrained_fe_nodes": sol.info.get("constrained_nodes", 0),
+        "rings": sol.info.get("rings", []),
         "loaded_particles": int(lin.sum()), "total_force": F_tot,
         "fe_total_force": forces.sum(axis=0),
         "zone": {"length": singular.zone, "spacings": singular.zone / spacing,
