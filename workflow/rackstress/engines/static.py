@@ -512,17 +512,10 @@ def _volume_near(vol, mark: np.ndarray):
                        vol.kappa[terms], Ct[:, read].tocsr(), vol.n)
 
 
-def _relaxed(prob: _Problem, x: np.ndarray, sets: list, allowed: float, unbalanced_of):
-    """``x`` with the near-mechanisms of ``sets`` settled (:func:`_relax`) to
-    :data:`RELAX_GOAL` of the largest unbalanced force (at least a hundredth of ``allowed``,
-    what settling allows), or ``x`` itself where there are none."""
-    if not sets:
-        return x
-    u = unbalanced_of(x)
-    if not np.all(np.isfinite(u)):
-        return x
-    goal = max(RELAX_GOAL * float(np.linalg.norm(u, axis=1).max()), 1e-2 * allowed)
-    return _relax(prob, x, sets, goal)[0]
+def _relax_goal(unbalanced: np.ndarray, allowed: float) -> float:
+    """Where :func:`_relax` stops: :data:`RELAX_GOAL` of the largest unbalanced force
+    (``unbalanced``, n×3), at least a hundredth of ``allowed`` (what settling allows)."""
+    return max(RELAX_GOAL * float(np.linalg.norm(unbalanced, axis=1).max()), 1e-2 * allowed)
 
 
 def _relax(prob: _Problem, p: np.ndarray, sets: list, goal: float) -> tuple[np.ndarray, int,
@@ -1054,18 +1047,19 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
             accepted, step = None, cmap.expand(dx)
             while spread:
                 trial = p + step
-                r2 = float(np.linalg.norm(unbalanced_of(trial)))
-                if relaxed and not (np.isfinite(r2) and r2 < norm0):
+                u2 = unbalanced_of(trial)
+                r2 = float(np.linalg.norm(u2))
+                if relaxed and np.isfinite(r2) and not r2 < norm0:
                     # judged again with the near-mechanisms settled (_relax): the step's
                     # linear motion of a strut or membrane may be far outside its tangent's
                     # reach (the SO-100 base at 93,236 particles, 3.3e-6 of the load: the full
                     # step raised the unbalanced force 850×, and two more factorizations
                     # shortened it; relaxed, it is 1e-8). Only then: where the plain step is
                     # taken, relaxing first slowed others (the fixed jaw: 4 → 20 steps)
-                    settled_trial = _relaxed(prob, trial, relaxed, tolerance * load,
-                                             unbalanced_of)
+                    settled_trial = _relax(prob, trial, relaxed,
+                                           _relax_goal(u2, tolerance * load))[0]
                     rs = float(np.linalg.norm(unbalanced_of(settled_trial)))
-                    if np.isfinite(rs) and (not np.isfinite(r2) or rs < r2):
+                    if np.isfinite(rs) and rs < r2:
                         trial, r2 = settled_trial, rs
                 if np.isfinite(r2) and r2 < norm0:
                     accepted = trial
@@ -1109,9 +1103,7 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
                 # they no longer push: the next step's to remove)
                 u0 = unbalanced_of(p)
                 before = float(np.linalg.norm(u0))
-                goal = max(RELAX_GOAL * float(np.linalg.norm(u0, axis=1).max()),
-                           1e-2 * tolerance * load)
-                q, k, reached = _relax(prob, p, relaxed, goal)
+                q, k, reached = _relax(prob, p, relaxed, _relax_goal(u0, tolerance * load))
                 after = float(np.linalg.norm(unbalanced_of(q))) if k else before
                 if k and (after <= before or reached and after <= GROWTH * before):
                     p = q

@@ -596,7 +596,6 @@ def solve(p, t, E: float, nu: float, fixed, forces, echo=None,
     """
     import time
 
-    import scipy.sparse.linalg as spla
     from threadpoolctl import threadpool_limits
 
     from rackstress.validity.tet import Tet2, eliminate, solve_cg
@@ -626,14 +625,11 @@ def solve(p, t, E: float, nu: float, fixed, forces, echo=None,
         dofs = 3 * mesh.n_nodes
         stages["assembly"] = time.process_time() - c0
         plan = _direct_plan(K, method)
-        if plan == "superlu":
-            u, its = spla.spsolve(K.tocsc(), f.ravel()), 0
-        elif plan is not None:
-            u, its = plan.factor().solve(f.ravel()), 0
-            plan.free()
+        solver = _solver_name(plan)
+        if plan is not None:
+            u, its = _solve_direct(plan, K, f.ravel()), 0
         else:
             u, its = solve_cg(mesh, K, f.ravel(), fx)
-        solver = plan or "cg" if isinstance(plan, str) or plan is None else plan.kind
         del K
         stages["solve"] = time.process_time() - c0 - stages["assembly"]
         u = u.reshape(-1, 3)
@@ -659,6 +655,26 @@ def _direct_plan(K, method: str):
         return Pardiso(K.tocsr()).analyse() if backend() == "pardiso" else "superlu"
     avail, _ = available_bytes()
     return plan_direct(K.tocsr(), available=int(min(avail, DIRECT_MEMORY)))
+
+
+def _solver_name(plan) -> str:
+    """What :func:`solve` records as its solver for a :func:`_direct_plan`."""
+    if plan is None:
+        return "cg"
+    return plan if isinstance(plan, str) else plan.kind
+
+
+def _solve_direct(plan, A, b: np.ndarray) -> np.ndarray:
+    """A·x = b by a :func:`_direct_plan` that is not None (SuperLU, or PARDISO's analysed
+    factorization, freed after)."""
+    import scipy.sparse.linalg as spla
+
+    if plan == "superlu":
+        return spla.spsolve(A.tocsc(), b)
+    try:
+        return plan.factor().solve(b)
+    finally:
+        plan.free()
 
 
 #: the memory the FE's direct factorization may count on (half of it for the factor,
@@ -693,15 +709,11 @@ def _solve_constrained(mesh, P, E, nu, fx, f, items, method, c0) -> Solution:
         dofs = A.shape[0]
         stages["assembly"] = time.process_time() - c0
         plan = _direct_plan(A, method)
-        solver = plan or "cg" if isinstance(plan, str) or plan is None else plan.kind
+        solver = _solver_name(plan)
         if plan is not None:
             mesh.release()
             del K
-            if plan == "superlu":
-                q, its = spla.spsolve(A.tocsc(), b), 0
-            else:
-                q, its = plan.factor().solve(b), 0
-                plan.free()
+            q, its = _solve_direct(plan, A, b), 0
         else:
             from rackstress.validity.tet import CG_RTOL
 
@@ -1097,8 +1109,9 @@ def near_size_within(x, cell_volume, near, size, near_size, budget=FE_ELEMENTS):
     if n <= budget or near_size >= size:
         return near_size, n
     lo, hi = math.log(near_size), math.log(size)
-    if graded_elements(x, cell_volume, near, size, size) > budget:
-        return size, graded_elements(x, cell_volume, near, size, size)
+    coarsest = graded_elements(x, cell_volume, near, size, size)
+    if coarsest > budget:
+        return size, coarsest
     for _ in range(30):
         mid = 0.5 * (lo + hi)
         if graded_elements(x, cell_volume, near, size, math.exp(mid)) > budget:
