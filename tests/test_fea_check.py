@@ -166,3 +166,29 @@ def test_fea_refuses_an_fe_model_that_would_not_fit(settled):
     assert r.returncode == 2, r.stderr
     assert "ulimit -v 3500000" in r.stderr and "needs about" in r.stderr, r.stderr
     assert "Traceback" not in r.stderr and "MemoryError" not in r.stderr
+
+
+@pytest.mark.lammps
+def test_a_finer_fe_mesh_skips_the_direct_analysis_its_coarser_one_failed(tmp_path, settled,
+                                                                         monkeypatch):
+    """When the coarser FE mesh's direct factor is refused (here: no memory granted to it),
+    the finer mesh, whose factor can only be larger, goes to conjugate gradients without
+    another PARDISO analysis: one analysis for the two sizes, both solved by CG."""
+    from rackstress.engines import linear
+
+    d = tmp_path / "run"
+    shutil.copytree(settled, d)
+    calls = []
+    analyse = linear.Pardiso.analyse
+
+    def counted(self):
+        calls.append(self.n)
+        return analyse(self)
+
+    monkeypatch.setattr(linear.Pardiso, "analyse", counted)
+    monkeypatch.setattr(solid, "DIRECT_DOFS", 0)
+    monkeypatch.setattr(solid, "DIRECT_MEMORY", 1)
+    got = solid.check_run(d, echo=lambda *_: None)
+    assert len(calls) == 1 and got["fe"]["solver"] == "cg"
+    assert got["fe"]["dofs"] > calls[0]             # the finer mesh, never analysed
+    assert [m["solver"] for m in got["fe_meshes"]] == ["cg", "cg"]

@@ -1141,7 +1141,8 @@ def check_memory(n_elements: float, size: float, what: str) -> None:
 
 def solve_part(o, spacing, shape, held_x, held_mask, load_x, load_F, E, nu, size=None,
                near=None, near_size=None, what="FE mesh", refined: bool = False,
-               constraints: CellConstraints | None = None, reparametrize: bool = True):
+               constraints: CellConstraints | None = None, reparametrize: bool = True,
+               method: str = "auto"):
     """FEA of a part: its shape (a mesh :class:`~rackstress.model.regions.Surface` → gmsh,
     refined to ``near_size`` around the points ``near``; else the union of the cells of
     ``o``), nodes in held particles' cells fixed in ``held_mask``'s directions, the particle
@@ -1181,7 +1182,7 @@ def solve_part(o, spacing, shape, held_x, held_mask, load_x, load_F, E, nu, size
     fixed = fixed_nodes(p, held_x, held_mask, spacing)
     forces = nodal_forces(p, t, load_x, load_F, spacing)
     try:
-        sol = solve(p, t, E, nu, fixed, forces, constraints=constraints)
+        sol = solve(p, t, E, nu, fixed, forces, constraints=constraints, method=method)
     except MemoryError:
         avail, why = available_bytes()
         raise FEAMemoryError(
@@ -1430,7 +1431,7 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
                  f"make about {graded_elements(g.o, spacing ** 3, near, h, wanted):,.0f} "
                  f"tetrahedra; graded to {near_size:.3g} instead, within the budget of "
                  f"{FE_ELEMENTS:,}")
-    sols, reparam, note = [], True, None
+    sols, reparam, note, method = [], True, None, "auto"
     for k, hs in enumerate(sizes):
         echo(f"fea: {name}: meshing and solving at FE size {hs:.3g} "
              f"({k + 1} of {len(sizes)}) …")
@@ -1438,8 +1439,13 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
             g.o, spacing, shape, held_x, np.asarray(bnd["held_mask"], bool)[hin], load_x,
             np.asarray(bnd["load_force"], float)[lin], E_, nu_, hs,
             near, near_size * hs / h, what=f"FE size {hs:.3g}", constraints=constraints,
-            reparametrize=reparam)
+            reparametrize=reparam, method=method)
         sols.append(sol)
+        if sol.info["solver"] == "cg" and sol.info["dofs"] > DIRECT_DOFS:
+            # the direct factor was refused at this size (PARDISO's own estimate after its
+            # analysis: the hip's 206,406 unknowns 1.5 GB, 3.6e11 flop); the finer mesh's
+            # is larger still, so its analysis (7 s of CPU on the hip) is not made again
+            method = "cg"
         note = note if k else note_k           # the first mesh's: why gmsh took that way
         reparam = "inside its own triangles" not in how
         if not reparam and k == 0 and len(sizes) > 1:
@@ -1456,7 +1462,8 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
                     sols.append(solve_part(
                         g.o, spacing, shape, held_x, np.asarray(bnd["held_mask"], bool)[hin],
                         load_x, np.asarray(bnd["load_force"], float)[lin], E_, nu_,
-                        what="cells cut into 8", refined=True, constraints=constraints)[0])
+                        what="cells cut into 8", refined=True, constraints=constraints,
+                        method=method)[0])
                     how += " (and each cut into 8)"
                 except FEAMemoryError as exc:
                     note = "; ".join(x for x in (note, f"not solved at a second size: {exc}")
