@@ -87,7 +87,8 @@ def _magpod_frames(steps=40, every=20, phase_steps=20):
 
 def test_leg_stress_scales_linearly_with_the_acceleration_scale():
     """Doubling g doubles every force in newtons and so every stress (linear elasticity);
-    the peak is the largest of the per-frame values, at its frame."""
+    doubling the length a paper unit doubles every stress too; the peak is the largest of the
+    per-frame values, at its frame."""
     sc, frames = _magpod_frames()
     one = leg_stress(sc, frames, PhysicalMapping(unit_length=0.005, g=9.81),
                      paper_at_peak=False)
@@ -96,6 +97,11 @@ def test_leg_stress_scales_linearly_with_the_acceleration_scale():
     assert one.von_mises.shape == (len(frames), 764)
     assert np.nanmax(one.von_mises) > 0
     np.testing.assert_allclose(two.von_mises, 2 * one.von_mises, rtol=1e-4,
+                               atol=1e-6 * float(np.nanmax(one.von_mises)))
+    # twice the length a paper unit: masses 8×, sections 4×, so every stress 2× (hand)
+    big = leg_stress(sc, frames, PhysicalMapping(unit_length=0.01, g=9.81),
+                     paper_at_peak=False)
+    np.testing.assert_allclose(big.von_mises, 2 * one.von_mises, rtol=1e-4,
                                atol=1e-6 * float(np.nanmax(one.von_mises)))
     top = one.von_mises.max()
     assert one.peak["von_mises_mpa"] == pytest.approx(float(top))
@@ -117,3 +123,34 @@ def test_phase_at_names_the_phase_whose_iterations_follow_the_step():
     assert phase_at(sc, 9) == {"r": 4, "l": 6}
     assert phase_at(sc, 10) == {"r": 1, "l": 7}
     assert phase_at(sc, 40) == {"r": 3, "l": 5}        # the last step: the last phase
+
+
+def test_a_run_writes_the_legs_stress_beside_the_dump(tmp_path):
+    """``rackstress run magpod-physical-small`` (reference engine, a short walk): the float32
+    file holds frames × 764 values; the JSON's per-particle maximum over the run is the
+    largest of the file's frames, at the frame and iteration it names; the peak is the
+    largest of all."""
+    import json
+
+    from click.testing import CliRunner
+
+    from rackstress.cli import main
+
+    out = tmp_path / "mps"
+    r = CliRunner().invoke(main, ["run", "magpod-physical-small", "--engine", "reference",
+                                  "--set", "phase_steps=10", "--set", "sediment_nx=20",
+                                  "--set", "sediment_nz=20", "--dump-every", "5",
+                                  "--no-render", "--no-progress", "--out", str(out)],
+                           catch_exceptions=False)
+    assert r.exit_code == 0, r.output
+    assert "legs in physical units" in r.output
+    rec = json.loads((out / "legs_physical.json").read_text())
+    vm = np.fromfile(out / "legs_von_mises.f32", "<f4").reshape(rec["shape"])
+    assert vm.shape == (len(rec["steps"]), 764) == (9, 764)     # steps 0, 5, …, 40
+    top = np.asarray(rec["max_per_particle_mpa"])
+    k = np.asarray(rec["max_frame"])
+    np.testing.assert_array_equal(top, vm.max(axis=0))
+    np.testing.assert_array_equal(vm[k, np.arange(764)], vm.max(axis=0))
+    assert rec["max_step"] == [rec["steps"][i] for i in k]
+    assert rec["peak"]["von_mises_mpa"] == pytest.approx(float(vm.max()))
+    assert rec["peak"]["step"] == rec["steps"][int(np.argmax(vm.max(axis=1)))]

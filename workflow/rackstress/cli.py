@@ -510,7 +510,7 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True,
     if static:
         _say_reactions(summary, units)
     elif summary.get("status") == "ok" and _physical(out):
-        _legs(out, progress)
+        _legs(out, progress, pictures=do_render)
     while _AHEAD:               # post-processing in the process that prepared it
         ahead = _AHEAD.pop()
         code = ahead.go()
@@ -535,10 +535,10 @@ def _physical(out: Path) -> bool:
     return bool((rec.get("params") or {}).get("physical"))
 
 
-def _legs(out: Path, progress: bool) -> None:
+def _legs(out: Path, progress: bool, pictures: bool = True) -> None:
     """The legs' quasi-static von Mises in MPa per frame (:mod:`rackstress.stress.legs`):
     ``legs_von_mises.f32`` and ``legs_physical.json`` beside the dump, the time plot and the
-    peak picture in ``legs/``."""
+    peak picture in ``legs/`` (unless ``pictures`` is False: ``--no-render``)."""
     from rackstress.render.legs import PEAK_PICTURE, TIME_PLOT, peak_picture, time_plot
     from rackstress.stress.legs import run_legs
 
@@ -547,8 +547,9 @@ def _legs(out: Path, progress: bool) -> None:
         with phase("the legs' stress in MPa (quasi-static per frame)", progress, ticker=False):
             res, path = run_legs(out)
         t_stress = time.perf_counter() - t0
-        time_plot(res, Path(out) / "legs" / TIME_PLOT)
-        peak_picture(res, Path(out) / "legs" / PEAK_PICTURE)
+        if pictures:
+            time_plot(res, Path(out) / "legs" / TIME_PLOT)
+            peak_picture(res, Path(out) / "legs" / PEAK_PICTURE)
         rec = json.loads(path.read_text())      # the pictures' time beside the stress's
         rec["timings"]["pictures_s"] = time.perf_counter() - t0 - t_stress
         rec["timings"]["legs_command_s"] = t_stress
@@ -563,7 +564,7 @@ def _legs(out: Path, progress: bool) -> None:
                f"{fig['cycle_s']:.2f} s): peak von Mises {pk['von_mises_mpa']:.3g} MPa on the "
                f"{pk['leg']} (particle {pk['particle']}) at iteration {pk['step']} "
                f"(t = {pk['time_s']:.2f} s); {len(res.steps)} frames in {t_stress:.2f} s "
-               f"-> {path}, {Path(out) / 'legs'}")
+               f"-> {path}" + (f", {Path(out) / 'legs'}" if pictures else ""))
 
 
 def _say_reactions(summary: dict, units: dict) -> None:

@@ -257,6 +257,7 @@ class LegLattice:
         self.B = rigid_modes(self.o, np.ones(3 * n, bool))
         _, _, piv = sla.qr(self.B.T, mode="economic", pivoting=True)
         self.pinned = np.sort(piv[:6])
+        self._Bpinv = np.linalg.pinv(self.B)
         self.free = np.setdiff1d(np.arange(3 * n), self.pinned)
         Kf = self.K[self.free][:, self.free].tocsr()
         self.factor = factorize(Kf)
@@ -282,8 +283,7 @@ class LegLattice:
         u = np.zeros_like(b)
         if b.shape[1]:
             u[self.free] = self.factor.solve_many(np.asfortranarray(b[self.free]))
-        B = self.B
-        u -= B @ np.linalg.lstsq(B, u, rcond=None)[0]
+        u -= self.B @ (self._Bpinv @ u)           # the rigid part (least squares)
         u = u.T.reshape(-1, self.n, 3)
         return u if many else u[0]
 
