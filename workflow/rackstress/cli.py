@@ -509,8 +509,6 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True,
                    + (f"{md:.4g}" if md is not None else "-"))
     if static:
         _say_reactions(summary, units)
-    elif summary.get("status") == "ok" and _physical(out):
-        _legs(out, progress, pictures=do_render)
     while _AHEAD:               # post-processing in the process that prepared it
         ahead = _AHEAD.pop()
         code = ahead.go()
@@ -527,12 +525,14 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True,
 
 
 def _physical(out: Path) -> bool:
-    """Whether the run in ``out`` is a MagPod in physical units (``magpod-physical-small``)."""
+    """Whether the run in ``out`` is a MagPod in physical units (``magpod-physical-small``)
+    that ran to its end."""
     try:
         rec = json.loads((Path(out) / "scene.json").read_text())
+        status = json.loads((Path(out) / "summary.json").read_text()).get("status")
     except (OSError, ValueError):
         return False
-    return bool((rec.get("params") or {}).get("physical"))
+    return bool((rec.get("params") or {}).get("physical")) and status == "ok"
 
 
 def _legs(out: Path, progress: bool, pictures: bool = True) -> None:
@@ -634,6 +634,8 @@ def _post_and_render(out: Path, do_render: bool, progress: bool, dump_text: bool
                 sys.exit(EXIT_STORAGE if isinstance(err, StorageError) else EXIT_RENDER)
             click.echo(f"  pictures: {rep.outdir} ({len(rep.files)} files, "
                        f"{time.perf_counter() - t0:.1f} s)")
+        if _physical(out):      # after the pictures: their modules loaded, the VTK meanwhile
+            _legs(out, progress, pictures=do_render)
         wait_files(out)
         if info and info.get("governing"):        # the headline (docs/stress.md)
             from rackstress.stress.post import describe_governing
