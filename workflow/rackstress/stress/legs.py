@@ -200,6 +200,27 @@ def relieve(x: np.ndarray, f: np.ndarray, m) -> tuple[np.ndarray, np.ndarray, np
 
 
 # ----------------------------------------------------------------------------- the leg lattice
+def layer_boxes(o: np.ndarray, a: float):
+    """The part the lattice sites ``o`` fill, as the union of one box per layer (along y) when
+    every layer is a full rectangle of sites (MagPod's leg: a column on a foot), each site's
+    cell of side ``a`` inside; None otherwise. With it no binding crosses the notch at the
+    column's foot (:class:`rackstress.model.operators.WithinInside`)."""
+    from rackstress.model.regions import Box
+
+    o = np.asarray(o, float)
+    y = np.round((o[:, 1] - o[:, 1].min()) / a).astype(np.int64)
+    region = None
+    for k in np.unique(y):
+        q = o[y == k]
+        lo, hi = q.min(axis=0), q.max(axis=0)
+        ext = np.round((hi - lo) / a).astype(np.int64) + 1
+        if ext[0] * ext[2] != len(q) or ext[1] != 1:
+            return None
+        box = Box(tuple(lo - a / 2), tuple(hi + a / 2))
+        region = box if region is None else region | box
+    return region
+
+
 class LegLattice:
     """One leg as an elastic lattice of its material: Eq. 12 bindings within 1.5 spacings
     (:class:`rackstress.model.solid.Solid`, the free faces compensated), its stiffness
@@ -247,7 +268,8 @@ class LegLattice:
         self.m = mat.density * self.a ** 3
         c = bind_coefficient(mat, SYSTEMS["SI"], self.a)
         g = Group("leg", self.o, 0.5 * self.a, material=mat, volume=self.a ** 3)
-        pl = Bind("leg", Solid(REACH * self.a, c, None, spacing=self.a,
+        self.region = layer_boxes(self.o, self.a)
+        pl = Bind("leg", Solid(REACH * self.a, c, self.region, spacing=self.a,
                                material=mat.name)).pairs(g, g)
         self.pairs = (pl.i, pl.j, pl.c, pl.q)
         mass = np.full(n, self.m)
