@@ -154,3 +154,23 @@ def test_a_run_writes_the_legs_stress_beside_the_dump(tmp_path):
     assert rec["max_step"] == [rec["steps"][i] for i in k]
     assert rec["peak"]["von_mises_mpa"] == pytest.approx(float(vm.max()))
     assert rec["peak"]["step"] == rec["steps"][int(np.argmax(vm.max(axis=1)))]
+
+
+def test_the_physical_scene_walks_as_magpod_small_to_the_bit():
+    """magpod-physical-small is magpod-small's scene (groups, operators, phases, dt) under
+    another name: 20 reference-engine steps give the same positions exactly."""
+    from rackstress.engines.reference import Reference
+    from rackstress.scenes import build
+
+    kw = dict(phase_steps=10, sediment_nx=20, sediment_nz=20)
+    a, b = build("magpod-small", **kw), build("magpod-physical-small", **kw)
+    assert a.operators == b.operators and a.phases == b.phases and a.dt == b.dt
+    np.testing.assert_array_equal(a.original_positions(), b.original_positions())
+    ra, rb = Reference(a), Reference(b)
+    for _, ph, _ in a.schedule():
+        for _ in range(ph.steps):
+            ra.step(ph.vars)
+            rb.step(ph.vars)
+        if ra.step_count >= 20:
+            break
+    np.testing.assert_array_equal(ra.p, rb.p)
