@@ -427,6 +427,15 @@ def leg_stress(scene, frames, mapping: PhysicalMapping | None = None,
     Returns
     -------
     LegStress
+
+    Examples
+    --------
+    >>> from rackstress.engines.dumpio import read_frames, dump_path          # doctest: +SKIP
+    >>> sc = build("magpod-physical-small")                                   # doctest: +SKIP
+    >>> res = leg_stress(sc, read_frames(dump_path("runs/mps"), sc.original_positions()))
+    ... # doctest: +SKIP
+    >>> res.peak["von_mises_mpa"], res.peak["step"]                           # doctest: +SKIP
+    (0.145, 0)
     """
     from rackstress.lib.rigid import kabsch, robust_deformation
 
@@ -533,7 +542,19 @@ def write(res: LegStress, out) -> Path:
 
 def run_legs(rundir, progress: bool = False) -> tuple[LegStress, Path]:
     """The legs' physical stress of a finished MagPod run: the scene rebuilt from its
-    ``scene.json``, the dump's frames read, :func:`leg_stress`, :func:`write`."""
+    ``scene.json``, the dump's frames read, :func:`leg_stress`, :func:`write`.
+
+    Returns
+    -------
+    (LegStress, Path)
+        The result and the path of ``legs_physical.json``.
+
+    Examples
+    --------
+    >>> res, path = run_legs("runs/mps")                       # doctest: +SKIP
+    >>> res.von_mises.shape                                    # doctest: +SKIP
+    (101, 764)
+    """
     from rackstress.engines.dumpio import dump_path, read_frames
     from rackstress.scenes import build, parameters
 
