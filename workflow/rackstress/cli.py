@@ -524,6 +524,49 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True,
         _post_and_render(out, do_render, progress, dump_text)
 
 
+def _physical(out: Path) -> bool:
+    """Whether the run in ``out`` is a MagPod in physical units (``magpod-physical-small``)
+    that ran to its end."""
+    try:
+        rec = json.loads((Path(out) / "scene.json").read_text())
+        status = json.loads((Path(out) / "summary.json").read_text()).get("status")
+    except (OSError, ValueError):
+        return False
+    return bool((rec.get("params") or {}).get("physical")) and status == "ok"
+
+
+def _legs(out: Path, progress: bool, pictures: bool = True) -> None:
+    """The legs' quasi-static von Mises in MPa per frame (:mod:`rackstress.stress.legs`):
+    ``legs_von_mises.f32`` and ``legs_physical.json`` beside the dump, the time plot and the
+    peak picture in ``legs/`` (unless ``pictures`` is False: ``--no-render``)."""
+    from rackstress.render.legs import PEAK_PICTURE, TIME_PLOT, peak_picture, time_plot
+    from rackstress.stress.legs import run_legs
+
+    t0 = time.perf_counter()
+    try:
+        with phase("the legs' stress in MPa (quasi-static per frame)", progress, ticker=False):
+            res, path = run_legs(out)
+        t_stress = time.perf_counter() - t0
+        if pictures:
+            time_plot(res, Path(out) / "legs" / TIME_PLOT)
+            peak_picture(res, Path(out) / "legs" / PEAK_PICTURE)
+        rec = json.loads(path.read_text())      # the pictures' time beside the stress's
+        rec["timings"]["pictures_s"] = time.perf_counter() - t0 - t_stress
+        rec["timings"]["legs_command_s"] = t_stress
+        path.write_text(json.dumps(rec, indent=1))
+    except Exception as err:  # noqa: BLE001 - the run itself is complete and kept
+        click.echo(f"rackstress: error: the run finished, but its legs' physical stress "
+                   f"failed: {err}", err=True)
+        sys.exit(EXIT_STORAGE if isinstance(err, (StorageError, OSError)) else EXIT_RENDER)
+    pk, fig = res.peak, res.figures
+    click.echo(f"  legs in physical units ({fig['unit_length_mm']:g} mm a paper unit, "
+               f"{fig['material']}, a leg {fig['leg_mass_g']:.0f} g, a gait cycle "
+               f"{fig['cycle_s']:.2f} s): peak von Mises {pk['von_mises_mpa']:.3g} MPa on the "
+               f"{pk['leg']} (particle {pk['particle']}) at iteration {pk['step']} "
+               f"(t = {pk['time_s']:.2f} s); {len(res.steps)} frames in {t_stress:.2f} s "
+               f"-> {path}" + (f", {Path(out) / 'legs'}" if pictures else ""))
+
+
 def _say_reactions(summary: dict, units: dict) -> None:
     """A static run's support reactions, one line each, and their sum against the load (a
     component below the settle tolerance × the load is what the solve leaves: 0)."""
@@ -591,6 +634,8 @@ def _post_and_render(out: Path, do_render: bool, progress: bool, dump_text: bool
                 sys.exit(EXIT_STORAGE if isinstance(err, StorageError) else EXIT_RENDER)
             click.echo(f"  pictures: {rep.outdir} ({len(rep.files)} files, "
                        f"{time.perf_counter() - t0:.1f} s)")
+        if _physical(out):      # after the pictures: their modules loaded, the VTK meanwhile
+            _legs(out, progress, pictures=do_render)
         wait_files(out)
         if info and info.get("governing"):        # the headline (docs/stress.md)
             from rackstress.stress.post import describe_governing
@@ -1499,6 +1544,24 @@ def bench_static(out, quick, scenes):
     click.echo(static.report(data))
 
 
+@bench.command("magpod-physical")
+@_bench_out
+@click.option("--repeats", type=click.IntRange(min=1), default=2, show_default=True,
+              help="Runs of each scene, alternately (the fastest of each is compared).")
+@click.option("--phase-steps", type=click.IntRange(min=1), default=1200, show_default=True,
+              help="Iterations a gait phase (the scene's 1200; fewer only for a quick look).")
+def bench_magpod_physical(out, repeats, phase_steps):
+    """MagPod in physical units: one gait cycle of magpod-physical-small (its legs' von Mises
+    in MPa, quasi-static per frame) against magpod-small's, as a cost ratio; the mapping, the
+    legs' lowest natural frequency against the gait's, a bar against F/A
+    (docs/benchmarks/magpod-physical.md, docs/magpod/physical.md)."""
+    from rackstress.bench import magpod_physical
+
+    data = magpod_physical.run_bench(out, repeats=repeats, phase_steps=phase_steps,
+                                     echo=click.echo)
+    click.echo(magpod_physical.markdown(data))
+
+
 if __name__ == "__main__":  # pragma: no cover
     entry()
 
@@ -1583,6 +1646,10 @@ TEACH = {
     "bench dynamics": ("Vibration and a stress wave in physical units, against theory.", [
         "rackstress bench dynamics --quick --out /tmp/bench",
         "rackstress bench dynamics --out docs/benchmarks",
+    ]),
+    "bench magpod-physical": ("MagPod's legs in MPa: cost against magpod-small, checks.", [
+        "rackstress bench magpod-physical --repeats 1 --phase-steps 300 --out /tmp/bench",
+        "rackstress bench magpod-physical --out docs/benchmarks",
     ]),
     "bench static": ("The static solve's time and memory, direct against AMG-CG.", [
         "rackstress bench static --quick --out /tmp/bench",

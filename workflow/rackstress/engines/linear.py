@@ -179,6 +179,11 @@ class Pardiso:
     def solve(self, b: np.ndarray) -> np.ndarray:
         return np.asarray(self._call(33, b)).reshape(-1)
 
+    def solve_many(self, B: np.ndarray) -> np.ndarray:
+        """The solves of the columns of ``B`` (n, k) with the factor, in one call."""
+        B = np.asarray(B, dtype=float)
+        return np.asarray(self._call(33, B)).reshape(B.shape)
+
     def free(self) -> None:
         try:
             self.ps.set_phase(-1)
@@ -218,6 +223,10 @@ class SuperLU:
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         return self.lu.solve(np.asarray(b, dtype=float))
+
+    def solve_many(self, B: np.ndarray) -> np.ndarray:
+        """The solves of the columns of ``B`` (n, k) with the factor, in one call."""
+        return self.lu.solve(np.asarray(B, dtype=float))
 
     def free(self) -> None:
         self.lu = None

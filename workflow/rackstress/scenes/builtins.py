@@ -5,7 +5,7 @@ import inspect
 
 from rackstress.errors import SceneError
 from rackstress.lib.suggest import did_you_mean
-from rackstress.scenes.magpod import magpod, magpod_small
+from rackstress.scenes.magpod import magpod, magpod_physical_small, magpod_small
 from rackstress.scenes.plane import plane_bound, plane_rack
 from rackstress.scenes.large import sediment_large
 from rackstress.scenes.validation import cantilever, l_bracket, plate_hole
@@ -16,6 +16,7 @@ BUILDERS = {
     "plane-rack": plane_rack,
     "magpod": magpod,
     "magpod-small": magpod_small,
+    "magpod-physical-small": magpod_physical_small,
     "sediment-large": sediment_large,
     # validation cases against linear elasticity (rackstress bench validity)
     "cantilever": cantilever,

@@ -360,3 +360,38 @@ def magpod_small(sediment_nx: int = 56, sediment_nz: int = 36, sediment_back: in
     scene = magpod(name="magpod-small", **kw)
     scene.params = dict(kw)        # this builder's own keywords, so --set/rebuilds round-trip
     return scene
+
+
+def magpod_physical_small(unit_length_mm: float = 5.0, leg_material: str = "aluminium",
+                          g: float = 9.81, sediment_nx: int = 56, sediment_nz: int = 36,
+                          sediment_back: int = 10, phase_steps: int = 1200, cycles: int = 1,
+                          dt: float = 0.01) -> Scene:
+    """magpod-small in physical units: the same walk, its aluminium legs' von Mises in MPa.
+
+    The walk is :func:`magpod_small`'s, unchanged (paper units); after the run
+    :mod:`rackstress.stress.legs` gives each leg its quasi-static stress per frame under a
+    stated mapping: ``unit_length_mm`` millimetres per paper unit (a guess: the paper gives no
+    size), legs of ``leg_material`` (a preset of :mod:`rackstress.model.materials`), the
+    paper's push-down on the legs read as ``g`` (m/s²). docs/magpod/physical.md.
+
+    Examples
+    --------
+    >>> sc = magpod_physical_small()
+    >>> sc.name, sc.params["physical"], sc.n_particles
+    ('magpod-physical-small', True, 5705)
+    """
+    for label, v in (("unit_length_mm", unit_length_mm), ("g", g)):
+        if not v > 0:
+            raise SceneError(f"magpod-physical-small: {label} must be positive, got {v!r}")
+    from rackstress.model.materials import PRESETS
+
+    if leg_material not in PRESETS:
+        raise SceneError(f"magpod-physical-small: leg_material must be one of "
+                         f"{', '.join(PRESETS)}, got {leg_material!r}")
+    kw = {k: v for k, v in locals().items() if k not in ("label", "v", "PRESETS")}
+    scene = magpod_small(sediment_nx=sediment_nx, sediment_nz=sediment_nz,
+                         sediment_back=sediment_back, phase_steps=phase_steps, cycles=cycles,
+                         dt=dt)
+    scene.name = "magpod-physical-small"
+    scene.params = dict(kw, physical=True)
+    return scene
