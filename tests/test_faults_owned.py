@@ -60,7 +60,7 @@ def test_overwrite_keeps_the_scene_and_stl_the_run_sits_beside(tmp_path):
     assert "my-part.stl" in r.stderr and "left as they are" in r.stderr
     assert {"summary.json", "trajectory.dump.gz", "scene.json"} <= manifest(d)
     assert not {"my-part.stl", "my-part.toml"} & manifest(d)
-    f = rs("fea", d, "--no-converge")       # its files are the point here, not the FE's size
+    f = rs("fea", d, "--no-converge", "--size", "8")   # its files are the point, not the FE
     assert f.returncode == 0, f.stderr
     assert {"fea.json", "fea.npz"} <= manifest(d)
     (d / "notes.txt").write_text("mine")
