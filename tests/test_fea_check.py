@@ -192,3 +192,24 @@ def test_a_finer_fe_mesh_skips_the_direct_analysis_its_coarser_one_failed(tmp_pa
     assert len(calls) == 1 and got["fe"]["solver"] == "cg"
     assert got["fe"]["dofs"] > calls[0]             # the finer mesh, never analysed
     assert [m["solver"] for m in got["fe_meshes"]] == ["cg", "cg"]
+
+
+def test_mesh_quality_names_slivers_and_a_poor_mesh():
+    """q = 6·√2·V/ℓ³ (ℓ the rms edge): the corner tetrahedron of the unit cube, V = 1/6, three
+    edges 1 and three √2 (ℓ² = 1.5): q = √2/1.5^1.5 = 0.7698; a flat one 0.01 above the
+    middle of its base's hypotenuse, V = 0.5·0.01/3, ℓ² = (4 + 3·0.5001)/6: q = 0.0161, a
+    sliver. One sliver in two is a poor mesh (above 5 %); the report says so."""
+    from rackstress.render.report import fea_section
+
+    p = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [0.5, 0.5, 0.01]], float)
+    q = solid.mesh_quality(p, np.array([[0, 1, 2, 3]]))
+    assert q["min"] == pytest.approx(2 ** 0.5 / 1.5 ** 1.5) and not q["poor"]
+    q = solid.mesh_quality(p, np.array([[0, 1, 2, 4]]))
+    l2 = (4 + 3 * 0.5001) / 6
+    assert q["min"] == pytest.approx(6 * 2 ** 0.5 * (0.5 * 0.01 / 3) / l2 ** 1.5)
+    assert q["sliver_share"] == 1.0 and q["poor"]
+    q = solid.mesh_quality(p, np.array([[0, 1, 2, 3], [0, 1, 2, 4]]))
+    assert q["sliver_share"] == 0.5 and q["poor"]
+    html = fea_section({"fe_quality": dict(q, why="50 % of the FE's tetrahedra are slivers")})
+    assert 'id="fea-poor"' in html and "50 % of the FE" in html
+    assert 'id="fea-poor"' not in fea_section({"fe_quality": {"poor": False}})

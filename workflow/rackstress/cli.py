@@ -1219,6 +1219,8 @@ def fea(rundir, E, nu, size, group, measure, allow_unsettled, allow_dynamic, no_
     ag, gv, unit = data["agreement"], data["governing"], data.get("stress_unit", "")
     click.echo(f"fea: {data['group']} ({data['particles']:,} particles, {data['mesh']}, "
                f"{data['fe']['tetrahedra']:,} tetrahedra): compares {data['compared']}")
+    if data["fe_quality"]["poor"]:
+        click.echo(f"fea: POOR FE MESH: {data['fe_quality']['why']}")
     click.echo(f"fea: Spearman {ag['spearman']:.3f}, top-5 % overlap {ag['top5_overlap']:.2f} "
                f"({data['measure']})")
     for b in data["bands"]:

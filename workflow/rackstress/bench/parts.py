@@ -20,10 +20,11 @@ import time
 from pathlib import Path
 
 from rackstress.bench import fmt, machine, md_table, out_dir, repository_file, write_json
+from rackstress.validity.solid import POOR_SLIVERS, SLIVER_Q
 
 HEADER = ["part", "particles", "spacing [mm]", "Newton steps", "residual", "solve [s]",
-          "run CPU [s]", "peak [MPa]", "settled", "FE ρ", "FE peak ratio", "FE CPU [s]",
-          "FE memory [GB]", "status"]
+          "run CPU [s]", "peak [MPa]", "settled", "FE slivers", "FE ρ", "FE peak ratio",
+          "FE CPU [s]", "FE memory [GB]", "status"]
 
 
 def parts_dir() -> Path:
@@ -132,7 +133,7 @@ def case(name: str, work: Path, fea: bool = True, sets: dict | None = None, echo
                        fea_peak_ratio=ag.get("peak_ratio"), fea_mesh=fj.get("mesh"),
                        fea_note=fj.get("note"), fea_tetrahedra=fj["fe"].get("tetrahedra"),
                        fea_governing_ratio=gov.get("ratio"), fea_moved=gov.get("moved"),
-                       fea_budget=fj.get("fe_budget"))
+                       fea_budget=fj.get("fe_budget"), fea_quality=fj.get("fe_quality"))
         else:
             row["fea_error"] = short(_error_of(err))
         row["fea_s"] = time.perf_counter() - t0
@@ -202,9 +203,17 @@ def table_rows(data) -> list:
             fmt(r.get("iterations")), fmt(r.get("residual"), 2), fmt(r.get("solve_s")),
             fmt(r.get("run_cpu_s")), fmt(r.get("peak_mpa")),
             {True: "yes", False: "**no**"}.get(r.get("settled"), "—"),
-            fmt(r.get("fea_spearman")), fmt(r.get("fea_peak_ratio")), fmt(r.get("fea_cpu_s")),
+            _slivers(r.get("fea_quality")), fmt(r.get("fea_spearman")), fmt(r.get("fea_peak_ratio")), fmt(r.get("fea_cpu_s")),
             fmt(r.get("fea_rss_gb")), r.get("status", "—")])
     return rows
+
+
+def _slivers(q) -> str:
+    """The FE mesh's share of slivers, bold and "poor" where its stress is no reference."""
+    if not q:
+        return "—"
+    share = f"{100 * q['sliver_share']:.1f} %"
+    return f"**{share}: poor**" if q.get("poor") else share
 
 
 def markdown(data) -> str:
@@ -236,7 +245,10 @@ def markdown(data) -> str:
         "walls or the budget set it, or the scene gave it; *peak* is the governing stress "
         "where the run has one, else the largest von Mises stress."
         + (" *FE ρ* is Spearman's rank correlation of the particles' stress with the FE's at "
-           "the particles, *FE peak ratio* the particles' largest over the FE's largest at "
+           "the particles, *FE slivers* the share of the FE mesh's tetrahedra of quality below "
+           f"{SLIVER_Q:g} (1: regular; above {100 * POOR_SLIVERS:g} % the mesh is **poor**: its "
+           "stress is no reference and its ρ and ratio say nothing of the particles; "
+           "docs/fea.md), *FE peak ratio* the particles' largest over the FE's largest at "
            "least the zone away from singular points (docs/fea.md); *FE CPU* and *FE memory* "
            "are `rackstress fea`'s own CPU time and peak resident memory, both FE sizes (the "
            "FE check's target: 60 s and 2 GB for 20,000 particles)." if data.get("fea") else ""),

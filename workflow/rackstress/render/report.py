@@ -161,6 +161,10 @@ def fea_section(fea: dict) -> str:
     out += [f'<tr><td>{_e(a)}</td><td class="num">{_e(b)}</td><td>{_e(c)}</td></tr>'
             for a, b, c in rows]
     out.append("</tbody></table>")
+    fq = fea.get("fe_quality") or {}
+    if fq.get("poor"):
+        out.append(f'<p id="fea-poor" class="warn"><b>Poor FE mesh</b>: {_e(fq.get("why"))}.'
+                   "</p>")
     if fea.get("compared"):
         out.append(f"<p>Compared: {_e(fea['compared'])}.</p>")
     gv, zone, unit = fea.get("governing") or {}, fea.get("zone") or {}, fea.get("stress_unit", "")
