@@ -949,8 +949,10 @@ def examples_report(data: dict) -> list:
         f"{d['spacing']:g} mm: {d['particles']:,} particles, the bracket {d['bracket']:,} and "
         f"the floor {d['floor']:,}. *Peak*: the run's own record (summary.json "
         "`groups.bracket.peak.von_mises`), the largest von Mises stress of any bracket "
-        f"particle over the run's {d['frames']} frames, which particle and when; *governing*: "
-        "the largest away from the singular points (summary.json `stress.governing`).",
+        f"particle over the run's {d['frames']} frames, which particle and when (every "
+        "particle's own peak and its time: the run's `vtk/peaks_over_time.vtp`); "
+        "*governing*: the largest away from the singular points (summary.json "
+        "`stress.governing`).",
         "",
         "| spacing [mm] | particles | steps | simulation [s] | command wall [s] | command CPU "
         "[s] | peak von Mises [MPa] | at [µs] | particle (its original x, y, z [mm]) | "
@@ -987,8 +989,8 @@ def examples_report(data: dict) -> list:
                      f"{m['peak']['value']:.4f} | {m['peak']['time'] * 1e6:.2f} |")
     lines += [
         "",
-        "The positions are compared frame by frame, every particle (a frame leaves out the "
-        "floor's held particles, which stand where `particles.data` puts them). Plain `lmp` "
+        "The positions are compared frame by frame, every particle of every frame both "
+        "dumped (the scene has no resting group: each frame holds all of them). Plain `lmp` "
         "runs the deck `rackstress deck` writes ("
         + ("the run's own `in.lammps` and `particles.data`, byte for byte"
            if (d.get("lmp") or {}).get("same_data_file") and (d.get("lmp") or {}).get(
@@ -1049,7 +1051,9 @@ def examples_report(data: dict) -> list:
                 "LAMMPS on both ranks then computes the forces at it (`run 0`), the run's "
                 "check. So two ranks give the serial run's answer, not a faster one: "
                 f"{m['status']}, {m['iterations']} Newton steps, the equilibrium "
-                + ("the serial run's to the dump's precision" if m["to_dump_precision"] else
+                + ("identical to the serial run's in every dumped digit"
+                   if m["final_max_mm"] == 0.0 else
+                   "the serial run's to the dump's precision" if m["to_dump_precision"] else
                    f"within {m['final_max_mm']:.3g} mm of the serial run's")
                 + f", the largest contact pressure {m['contact_peak']:.4f} MPa (serial "
                 f"{a['contact_peak']:.4f}), governing {_s(m['governing'], 4)} MPa (serial "
