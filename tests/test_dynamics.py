@@ -341,6 +341,8 @@ def test_the_drop_bench_row_lands_as_physics_says_and_plain_lmp_steps_it_alike(d
     assert vel["v_min"] >= -(v0 + G * T) * (1 + 1e-9)
     assert abs(vel["v_end"]) < v0
     assert r["peak"]["units"] == "MPa" and 0 < r["peak"]["time"] <= T * (1 + 1e-9)
+    assert r["contact"]["units"] == "MPa" and r["contact"]["peak"] > 0
+    assert r["contact"]["group"] in ("bracket", "floor")
     pk = pv.read(serial / "vtk" / "peaks_over_time.vtp")
     brk = np.asarray(pk["group_id"]) == np.asarray(pk["group_id"])[np.argmin(pk["id"])]
     y = np.asarray(pk.points)[brk, 1]
