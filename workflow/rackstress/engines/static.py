@@ -94,6 +94,9 @@ class StaticResult:
     warnings: list = field(default_factory=list)
     #: where the largest unbalanced forces stay (a run that did not settle): :func:`unbalanced_at`
     unbalanced: dict | None = None
+    #: contact: the active sets taken (the first at the start, one more each time Newton's
+    #: method settled a set and the pairs in contact changed); 0 without contact
+    contact_sets: int = 0
 
 
 def check_static(scene) -> None:
@@ -1140,7 +1143,7 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
     return StaticResult(p, settled, it, rel, load, history, time.perf_counter() - t0,
                         reactions=-(f - cmap.unbalanced(f)), solver=lin.kind if lin else "",
                         factorizations=lin.count if lin else 0, warnings=warnings,
-                        unbalanced=None if settled else unbalanced_at(
+                        contact_sets=sets, unbalanced=None if settled else unbalanced_at(
                             scene, prob, cmap.unbalanced(f), load, membrane))
 
 

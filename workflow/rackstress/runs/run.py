@@ -527,7 +527,8 @@ def execute_static(scene: Scene, out: Path, engine: str, mode: str, *, progress:
                   "residual_engine": engine_rel, "tolerance": TOLERANCE,
                   "applied_load_total": res.load, "solve_s": res.wall_s,
                   "residual_history": res.history, "solver": res.solver,
-                  "factorizations": res.factorizations})
+                  "factorizations": res.factorizations,
+                  "contact_sets": getattr(res, "contact_sets", 0)})
     if root:
         extra.update(support_reactions(scene, res))
     if not settled and res.unbalanced:
