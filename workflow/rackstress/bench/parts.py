@@ -203,8 +203,9 @@ def table_rows(data) -> list:
             fmt(r.get("iterations")), fmt(r.get("residual"), 2), fmt(r.get("solve_s")),
             fmt(r.get("run_cpu_s")), fmt(r.get("peak_mpa")),
             {True: "yes", False: "**no**"}.get(r.get("settled"), "—"),
-            _slivers(r.get("fea_quality")), fmt(r.get("fea_spearman")), fmt(r.get("fea_peak_ratio")), fmt(r.get("fea_cpu_s")),
-            fmt(r.get("fea_rss_gb")), r.get("status", "—")])
+            _slivers(r.get("fea_quality")), fmt(r.get("fea_spearman")),
+            fmt(r.get("fea_peak_ratio")), fmt(r.get("fea_cpu_s")), fmt(r.get("fea_rss_gb")),
+            r.get("status", "—")])
     return rows
 
 

@@ -361,8 +361,8 @@ FLAT_TET = 1e-6
 #: a tetrahedron is a sliver when its quality (:func:`mesh_quality`) is below this
 SLIVER_Q = 0.05
 #: an FE mesh with more than this share of slivers is poor: its stress is no reference. The
-#: corpus (examples/parts, docs/fea.md): gmsh's remeshed surfaces 0.0–0.4 %, the meshes made
-#: inside a file's own facets 21–60 %, among them the fixed jaw's (43 %), whose FE put
+#: corpus (examples/parts, docs/benchmarks/parts.md): the meshes gmsh remeshes 0.0 %, those
+#: filled inside a file's own facets 18–61 %, among them the fixed jaw's (43 %), whose FE put
 #: 893 MPa at a sliver under a 10 N load that the particles carry at 0.57 MPa
 POOR_SLIVERS = 0.05
 
@@ -370,10 +370,12 @@ POOR_SLIVERS = 0.05
 def mesh_quality(p: np.ndarray, t: np.ndarray) -> dict:
     """Each tetrahedron's quality q = 6·√2·V / ℓ³ (ℓ the root mean square of its six edges;
     1 for a regular tetrahedron, 0 for a flat one) over the mesh (p N×3, t M×4, a
-    :class:`~rackstress.validity.tet.Tet2`'s ``p`` and ``t``): its minimum, median, the share of slivers (q < :data:`SLIVER_Q`) and whether the
-    mesh is poor (that share above :data:`POOR_SLIVERS`).
+    :class:`~rackstress.validity.tet.Tet2`'s ``p`` and ``t``): its minimum, median, the share
+    of slivers (q < :data:`SLIVER_Q`) and whether the mesh is poor (that share above
+    :data:`POOR_SLIVERS`). A regular tetrahedron:
 
-    >>> p = np.array([[0, 0, 0], [1, 0, 0], [0.5, 3 ** 0.5 / 2, 0], [0.5, 3 ** 0.5 / 6, (2 / 3) ** 0.5]])
+    >>> p = np.array([[0, 0, 0], [1, 0, 0], [0.5, 3 ** 0.5 / 2, 0],
+    ...               [0.5, 3 ** 0.5 / 6, (2 / 3) ** 0.5]])
     >>> q = mesh_quality(p, np.array([[0, 1, 2, 3]]))
     >>> round(q["min"], 12), q["sliver_share"], q["poor"]
     (1.0, 0.0, False)
