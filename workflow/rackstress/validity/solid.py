@@ -1534,7 +1534,9 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
                           f"regular one 1)" + (": the mesh is the file's own coarse facets "
                                                "filled" if "own triangles" in how else "")
                           + "; its stress is not a reference, and this comparison says "
-                          "nothing of the particles")
+                          "nothing of the particles. gmsh remeshes a surface of well-shaped "
+                          "facets: an STL exported again with a maximum edge length (a "
+                          "setting of most CAD exporters) may let it")
     data = {
         "group": name, "particles": int(g.n), "spacing": spacing, "measure": mname,
         "to_stress": to_stress, "units": str(bnd.get("units", summary.get("units", "paper"))),
