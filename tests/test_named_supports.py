@@ -10,6 +10,9 @@ Expected values by hand (statics) and by an independent path:
   30° on the side (equilibrium of three forces);
 * a plate with a hole pulled along its length, whole and halved by a symmetry plane through
   the hole: the same stress around the hole (the whole part is the independent path);
+* an eighth of a bar on three symmetry planes (the lattice half a spacing off each plane),
+  pulled by F: σ_xx = F/A on the layer held on the plane as inside (statics; the plain virial
+  reads half there by hand: the bindings beyond the plane are gone);
 * scenes with bad names and dynamic runs with supports the engines cannot hold, as real
   ``rackstress run`` processes: exit 2 naming the file and field.
 """
@@ -318,3 +321,55 @@ def test_pinned_run_on_lammps_then_fea_models_the_pin(tmp_path):
     (ring,) = got["rings"]
     E, I, L = got["material"]["E"], 6 * 10 ** 3 / 12, 80.0
     assert abs(ring["turn_rad"]) == pytest.approx(100 * L ** 2 / (16 * E * I), rel=0.03)
+
+
+QUARTER_BAR = """
+name = "eighth"
+units = "mm-N-s"
+analysis = "static"
+[[group]]
+name = "bar"
+fill = { box = { min = [0, 0, 0], max = [20, 6, 6] } }
+spacing = 1.0
+material = "aluminium"
+[[support]]
+type = "symmetry"
+on = "bar"
+plane = { point = [0, 0, 0], normal = [1, 0, 0] }
+[[support]]
+type = "symmetry"
+on = "bar"
+plane = { point = [0, 0, 0], normal = [0, 1, 0] }
+[[support]]
+type = "symmetry"
+on = "bar"
+plane = { point = [0, 0, 0], normal = [0, 0, 1] }
+[[load]]
+on = "bar"
+where = { box = { min = [19.4, -1, -1], max = [21, 7, 7] } }
+force = [36, 0, 0]
+"""
+
+
+def test_the_layer_on_a_symmetry_plane_reads_the_stress_across_it(tmp_path):
+    """σ_xx = F/A = 36 N / 36 mm² = 1 MPa in the bar; the layer held on the plane x = 0
+    (particles at x = 0.5) reads it too: the plane's force on the cells' face counts (the plain
+    virial: half there, by hand — the bindings beyond the plane are gone)."""
+    from rackstress.runs.run import run
+    from rackstress.stress import load_run
+    from rackstress.stress.measures import ParticleStress
+
+    (tmp_path / "e.toml").write_text(QUARTER_BAR)
+    out = tmp_path / "run"
+    assert run(scenes.load(str(tmp_path / "e.toml")), out, engine="reference",
+               progress=False)["settled"]
+    rd = load_run(out)
+    x = rd.o[:, 0]
+    for method, tol in (("continuum", 0.01), ("patch", 0.03)):
+        sxx = ParticleStress(rd, method=method).run().results.stress[-1][:, 0]
+        for layer in (0.5, 1.5, 10.5):
+            assert np.mean(sxx[np.isclose(x, layer)]) == pytest.approx(1.0, rel=tol), \
+                (method, layer)
+    sxx = ParticleStress(rd, method="virial").run().results.stress[-1][:, 0]
+    assert np.mean(sxx[np.isclose(x, 0.5)]) == pytest.approx(0.5, rel=0.01)
+    assert np.mean(sxx[np.isclose(x, 10.5)]) == pytest.approx(1.0, rel=0.01)

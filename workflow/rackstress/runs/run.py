@@ -168,7 +168,7 @@ def write_bindings(scene: Scene, path: Path) -> int:
                      ck=np.array([m[t.start] * c for t, _, c, *_ in contacts]),
                      r=np.concatenate([g.r for g in scene.groups.values()]))
     np.savez(tmp, i=b[0].astype(idx), j=b[1].astype(idx), k=b[2], L0sq=b[3],
-             V=volumes_of(scene), **extra)
+             V=volumes_of(scene), **fractions_of(scene), **extra)
     tmp.replace(path)
     return len(b[0])
 
@@ -194,6 +194,24 @@ def volumes_of(scene: Scene) -> np.ndarray:
         k = scene.offset(name)
         V[k:k + g.n] = g.volume * (1.0 if f is None else np.asarray(f))
     return V
+
+
+def fractions_of(scene: Scene) -> dict:
+    """``{"phi": n×3}`` of a static scene: each particle's cell extent along x, y and z in
+    spacings, in global order — a material part's :func:`rackstress.model.solid.axis_fractions`
+    (1: a whole cell), NaN elsewhere — where a support's face lies (the stress measure adds
+    the supports' forces there; a dynamic run's loads at a frame are not in its files, so its
+    held particles' forces are not known there: ``{}``)."""
+    if scene.analysis != "static":
+        return {}
+    phi = np.full((scene.n_particles, 3), np.nan)
+    for name, g in scene.groups.items():
+        if g.material is None or g.volume is None:
+            continue
+        f = g.meta.get("fractions") if isinstance(g.meta, dict) else None
+        k = scene.offset(name)
+        phi[k:k + g.n] = 1.0 if f is None else np.asarray(f)
+    return {"phi": phi}
 
 
 def bindings_of(scene: Scene):

@@ -818,6 +818,9 @@ class ParticleStress(_RunAnalysis):
             self._W2S = None
             if self.method in ("continuum", "patch"):
                 self._wm = T.surface_moment(run.o, b[0], b[1], b[3], n)
+        self._held_faces = None
+        if self.method in ("continuum", "patch"):
+            self._held_faces = self._support_faces(run, b, mine)
         self._patch = None
         if self.method == "patch":
             labels = np.full(n, -1, np.int64)
@@ -830,6 +833,67 @@ class ParticleStress(_RunAnalysis):
             np.minimum.at(a2, b[0], b[3])            # each particle's nearest binding
             a = float(np.sqrt(np.median(a2[np.isfinite(a2)])))
             self._patch = T.patch_matrix(run.o, a, points, labels)
+
+    def _support_faces(self, run, b, mine):
+        """The particles a support holds across a face of their cell (a roller, a symmetry
+        plane, a clamp: a held direction along which the lattice neighbour is missing), or
+        None: (rows, held n×3 mask, offset n×3 to the face, load n×3, the bindings acting on
+        the rows and their incidence). The support's force acts on that face as the missing
+        half of the bindings would: without it the layer held half a spacing off a symmetry
+        plane read half the stress across the plane. The face lies (φ − ½)·a beyond the
+        particle (φ its cell's extent along the axis, ``read_fractions``): a particle on the
+        plane itself has half a cell, its stress whole already, and gets nothing. Static runs
+        (``phi`` written) only: a dynamic run's loads at a frame are not in its files."""
+        from rackstress.stress.rundata import boundary_rows
+
+        phi = read_fractions(run)
+        if b is None or not len(b[0]) or phi is None:
+            return None
+        held, loads = boundary_rows(run)
+        held &= self._mask[:, None]
+        if not held.any():
+            return None
+        a2 = np.full(run.n_atoms, np.inf)
+        np.minimum.at(a2, b[0], b[3])
+        off = np.zeros((run.n_atoms, 3))
+        for part in mine:
+            idx = np.asarray(part.index)
+            h = held[idx]
+            if not h.any() or not np.isfinite(a2[idx]).any():
+                continue
+            a = float(np.sqrt(np.median(a2[idx][np.isfinite(a2[idx])])))
+            reach = np.clip(np.nan_to_num(phi[idx], nan=1.0) - 0.5, 0.0, 1.0) * a
+            off[idx] = np.where(h, T.free_faces(run.o[idx], a), 0.0) * reach
+        rows = np.flatnonzero(np.any(off != 0.0, axis=1))
+        if not len(rows):
+            return None
+        at = np.full(run.n_atoms, -1, np.int64)
+        at[rows] = np.arange(len(rows))
+        sel = np.flatnonzero(at[b[0]] >= 0)             # the bindings acting on them
+        return rows, held[rows], off[rows], loads[rows], sel, T.incidence(at[b[0][sel]],
+                                                                           len(rows))
+
+    def _support_virial(self, p, d, d2) -> np.ndarray:
+        """W of the supports' forces on the faces they hold (n, 6): Σ_k x_k ⊗ R_k symmetrized,
+        R = −(the bindings', the volumetric term's and the load's force) in the held
+        directions, x_k the vector from the particle to the face across axis k where it is
+        held there, else (a clamp's shear) the held faces' mean point (``_support_faces``)."""
+        rows, held, off, loads, sel, gather = self._held_faces
+        k, q = self._b[2][sel], self._b[3][sel]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            f = (k * (1.0 - q / d2[sel]))[:, None] * d[sel]
+        F = np.asarray(gather @ f)
+        if self.volume is not None:
+            F = F + _volume_forces(p, self.volume)[rows]
+        R = -np.where(held, F + loads, 0.0)
+        mean = off / np.maximum((off != 0.0).sum(axis=1, keepdims=True), 1)
+        M = np.zeros((len(rows), 3, 3))
+        for k in range(3):
+            at = np.where((off[:, k] != 0.0)[:, None], np.eye(3)[k] * off[:, k:k + 1], mean)
+            M[:, :, k] = at * R[:, k:k + 1]
+        W = np.zeros((len(p), 6))
+        W[rows] = np.stack([0.5 * (M[:, r, c] + M[:, c, r]) for r, c in T.VOIGT], axis=1)
+        return W
 
     def _measure(self, p):
         k, out = self._frame_index, np.full(len(p), np.nan)
@@ -844,6 +908,8 @@ class ParticleStress(_RunAnalysis):
                 s = s + T.volume_virial(p, self.volume) / self._V[:, None]
         if self.contacts is not None:     # the contact's force on the layers that touch
             s = s + self._contact(p, k)
+        if self._held_faces is not None:  # a support's force on the face it holds
+            s = s + self._support_virial(p, d, d2) / self._V[:, None]
         if self._wm is not None:
             s = T.moment_corrected(s, b[0], b[1], self._wm, self._gather)
         if self._patch is not None:
@@ -901,6 +967,21 @@ class ParticleStress(_RunAnalysis):
                                                 np.count_nonzero(ps > 0), *Fs.sum(axis=0))
         out[~self._mask] = 0.0
         return out
+
+
+def read_fractions(run):
+    """Each particle's cell extent per axis in spacings (n, 3) from the run's ``bindings.npz``
+    (``phi``, :func:`rackstress.runs.run.fractions_of`), or None for a file without it."""
+    from rackstress.lib.runfiles import BINDINGS
+
+    path = Path(run.rundir) / BINDINGS
+    if not path.is_file():
+        return None
+    with np.load(path, allow_pickle=False) as z:
+        if "phi" not in z.files:
+            return None
+        phi = z["phi"].astype(np.float64)
+    return phi if phi.shape == (run.n_atoms, 3) else None
 
 
 def read_volumes(run):
@@ -1008,6 +1089,13 @@ def read_bindings(run):
                                f"{int(max(i.max(), j.max()))} but the run has {n}: the file is "
                                "not of this run")
     return i.astype(np.int64), j.astype(np.int64), k.astype(np.float64), q.astype(np.float64)
+
+
+def _volume_forces(p, terms) -> np.ndarray:
+    """The volumetric term's forces (n, 3; ``terms`` with m·κ, :func:`read_volume_terms`)."""
+    from rackstress.model.volume import Volume
+
+    return Volume.accel(p, terms)
 
 
 # ----------------------------------------------------------------------------- motion

@@ -255,3 +255,21 @@ def _parts(scene: dict, data: DataFile, rundir: Path) -> dict:
         raise DataMismatchError(f"{rundir / SCENE}: the groups hold {total} particles but "
                                 f"{rundir / DATA} has {len(data.ids)}")
     return parts
+
+
+def boundary_rows(run) -> tuple[np.ndarray, np.ndarray]:
+    """The run's ``boundary.npz`` per particle (id order): the directions each is held in
+    (n×3 booleans) and the load on it (n×3); all False and zero without the file."""
+    n = run.n_atoms
+    held, loads = np.zeros((n, 3), bool), np.zeros((n, 3))
+    path = Path(run.rundir) / "boundary.npz"
+    if path.is_file():
+        row = {int(i): k for k, i in enumerate(run.data.ids)}
+        with np.load(path) as z:
+            for i, m in zip(z["held_ids"], z["held_mask"]):
+                if int(i) in row:
+                    held[row[int(i)]] = m
+            for i, f in zip(z["load_ids"], z["load_force"]):
+                if int(i) in row:
+                    loads[row[int(i)]] = f
+    return held, loads
