@@ -171,7 +171,8 @@ def test_the_pin_joint_assembly_passes_its_load_through_both_contacts(tmp_path):
     carries F/4 = 1,250 N: the pin puts exactly that on the lug (+x) and the clevis (−x); the
     lug's net section through the hole carries it, σ_xx = F/((w − d)·t) = 35.7 MPa on average
     (the virial, exact in a section sum); the pin's section in the gap between lug and cheek
-    carries it as shear, τ = F/(2·π·d²/4) = 31.8 MPa on average (double shear)."""
+    carries it as shear, τ = F/(2·π·d²/4) = 31.8 MPa on average (double shear); the pin's
+    layer on its symmetry plane carries the moment the plane's support does."""
     from rackstress.stress.measures import ParticleStress, read_volumes
     from rackstress.stress.rundata import load_run
 
@@ -199,6 +200,18 @@ def test_the_pin_joint_assembly_passes_its_load_through_both_contacts(tmp_path):
     assert (sig[gap, 5] * V[gap]).sum() == pytest.approx(1250.0, rel=0.01)
     # 40 cells of 1 mm² for the half disc's 39.3 mm²: the mean reads 1.8 % low
     assert sig[gap, 5].mean() == pytest.approx(5000.0 / (2 * np.pi * 10 ** 2 / 4), rel=0.02)
+    # the pin's bending at mid-span, on its symmetry plane z = 0 (its layer z = 0.5 held in z):
+    # the layer's Σ σ_zz·x·a² is the moment the plane's support carries about y, which
+    # summary.json states (statics: its reactions' moment about the origin, M_y = −Σ x·R_z);
+    # the run's default stress counts the plane's force on the layer's face (the plain virial:
+    # half, its bindings beyond the plane gone), within the layer's half-spacing offset and
+    # the staircase section
+    m_y = next(x["moment"][1] for x in s["reactions"]
+               if x["group"] == "pin" and np.allclose(x["force"][:2], 0.0, atol=1e-6 * 1250))
+    mid = pin[np.isclose(o[pin, 2], 0.5)]
+    sig_c = ParticleStress(run, method="continuum").run().results.stress[-1]
+    assert (sig_c[mid, 2] * o[mid, 0]).sum() == pytest.approx(m_y, rel=0.1)
+    assert (sig[mid, 2] * o[mid, 0]).sum() == pytest.approx(m_y / 2, rel=0.1)
     # the contact's edges (singular, left out of the governing stress): where the pin bears
     # on the rim of the lug's bore at its face toward the gap (z = 4.5, the bore's radius 5
     # give or take a spacing) — none on the symmetry plane z = 0, a mirror, not a free face;
