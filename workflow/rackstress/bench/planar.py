@@ -347,32 +347,42 @@ def section(data: dict) -> str:
              + [f"{r['staircase']['peak_neighbours']}, "
                 f"{r['staircase']['peak_r_minus_hole']:.3f} mm"] for r in plates]))
     if plates and not data.get("quick"):
-        lines += ["", "**What it shows** (static solves: the figures reproduce exactly). Where "
-                  "the part's edges are lattice faces (the cantilever, the L-bracket away from "
-                  "its singular corner) the peak is within 4 % of FEA at the centres and 3 % of "
-                  "its cell means at spacing 1 mm. The plate's peak sits on the hole, which the "
-                  "lattice draws as a staircase, and it does not converge to FEA's: at 4 "
-                  "spacings the particles at the hole's sides, (0, ±4), lie on the cylinder and "
-                  "are not filled, so the peak is a spacing out and 12 % low; with 8, 16 and "
-                  "32 spacings the ratio runs 0.92, 1.01, 1.17. Against Kirsch (the 81 mm "
-                  "plate, 4 and 8 spacings) the particles' peak is 0.887 and 0.945 of his "
-                  "field's peak at the centres, 0.988 and 1.03 of its cell means. The staircase table "
-                  "says why: particles with a full ring of neighbours beside the hole converge "
-                  "to FEA (mean 1.11, 1.06, 1.03, 1.00), but those at a step's inner corner "
-                  "read about 1.1 × FEA on average and up to 1.2–1.4 × at every spacing — the "
-                  "staircase's own notch, which has no length scale and so does not shrink — "
-                  "and at ⅛ mm the peak is a single particle whose centre lies 0.002 mm from "
-                  "the circle with 4 of its 8 in-plane neighbours (1.28 × FEA at its centre). "
-                  "On a curved edge the particles' peak therefore carries the staircase's "
-                  "−12 % … +17 % whatever the spacing; the peak of the full-ring particles is "
-                  "the converging figure. Nothing was tuned: the scenes are the built-ins' "
-                  "geometry in mm.", ""]
+        lines += ["", _what_it_shows(rows, plates), ""]
     m = data.get("machine", {})
     la = m.get("load_avg_at_start")
     la = " / ".join(f"{x:.2f}" for x in la) if isinstance(la, (list, tuple)) else "?"
     lines += ["", f"Wall {data['wall_s']:.0f} s, CPU {data['cpu_s']:.0f} s on one core (load "
               f"average {la} at the start).", ""]
     return "\n".join(lines)
+
+
+def _what_it_shows(rows: list, plates: list) -> str:
+    """The section's reading of its own tables (every figure from them)."""
+    def at(case, a=1.0):
+        return next((r for r in rows if r["case"] == case and r["spacing"] == a), None)
+
+    flat = [(name, at(case)) for name, case in (("the cantilever", "cantilever"),
+                                                ("the L-bracket", "l-bracket")) if at(case)]
+    holes = sorted((r for r in plates if r["case"] == "plate-hole"), key=lambda r: -r["spacing"])
+    out = ["**What it shows** (static solves: the figures reproduce exactly)."]
+    if flat:
+        out.append(" Where the part's edges are lattice faces (" + " and ".join(
+            f"{n}, {r['ratio']:.3f}" for n, r in flat) + " of FEA's peak at the centres, "
+            "at 1 mm) the run's default measure reads the peak on the face, where it is "
+            "higher than at the centres FEA is read at.")
+    if holes:
+        out.append(" The plate's peak sits on the hole, which the lattice draws as a "
+                   "staircase: " + ", ".join(f"{r['ratio']:.3f}" for r in holes)
+                   + " of FEA's at " + ", ".join(f"{r['hole_spacings']:g}" for r in holes)
+                   + " spacings per radius, the patch fit flattening the last spacing's "
+                   "steep rise (docs/stress.md, \"Patch recovery\"); the particles with a full "
+                   "ring of neighbours beside the hole read " + ", ".join(
+                       f"{r['staircase']['8']['mean']:.3f}" for r in holes) + " and those "
+                   "at a step's inner corner " + ", ".join(
+                       f"{r['staircase']['7']['mean']:.3f}" for r in holes)
+                   + " of FEA at their centres (means).")
+    out.append(" Nothing was tuned: the scenes are the built-ins' geometry in mm.")
+    return "".join(out)
 
 
 def write_section(md: Path, text: str, before: str = "## Against FEA seen through") -> None:
