@@ -5,7 +5,7 @@ Targets: NAFEMS, *The Standard NAFEMS Benchmarks*, TNSB Rev. 3 (1990), problems 
 (the geometry and loads as reproduced in public verification suites, e.g. seamplex Fino's cases
 010-nafems-le1 and 012-nafems-le10, and Code_Aster's SSLP/SSLV test manuals):
 
-* **LE1, elliptic membrane** (also with the lattice a part is filled with by default, cells
+* **LE1, elliptic membrane** (also with the lattice a mesh part gets by default, cells
   tiling the quarter: ``LE1_filled``) — the quarter of a plate between the ellipses (x/2)² + y² = 1 and
   (x/3.25)² + (y/2.75)² = 1 (metres), 0.1 m thick, E = 210 GPa, ν = 0.3, plane stress; 10 MPa
   of outward normal pressure on the outer edge; u_y = 0 on y = 0, u_x = 0 on x = 0 (symmetry
@@ -141,7 +141,7 @@ def le1(a: float, tmp: Path, filled: bool = False) -> dict:
     on its thickness (the load scales with it), so the lattice is one layer, a thick (exactly
     plane stress: every cell overhangs both free faces, docs/calibration.md), the pressure
     10 MPa × a on the outer edge per unit length; a divides 2 m, so a particle sits at D.
-    ``filled``: the lattice as a part is filled by default instead — its cells tiling the
+    ``filled``: the lattice a mesh part gets by default instead — its cells tiling the
     quarter, the particles half a spacing off both symmetry planes, the rows next to them held
     across (a symmetry plane's support), the particle nearest D half a spacing from it along
     each axis."""
@@ -184,7 +184,7 @@ fix = ["z"]
 
 
 def le1_filled(a: float, tmp: Path) -> dict:
-    """:func:`le1` with the lattice as a part is filled by default (``filled=True``)."""
+    """:func:`le1` with the lattice a mesh part gets by default (``filled=True``)."""
     return le1(a, tmp, filled=True)
 
 
@@ -462,7 +462,7 @@ def report(d: dict) -> str:
                          ("LE10", LE10_TARGET)):
         if name not in d:
             continue
-        title = "LE1, the lattice as a part is filled by default" if name == "LE1_filled" \
+        title = "LE1, the lattice a mesh part gets by default" if name == "LE1_filled" \
             else name
         L += [f"## {title}: σ_yy at D, target {target} MPa (NAFEMS TNSB Rev. 3, 1990)", ""]
         if name == "LE1_filled":

@@ -61,6 +61,7 @@ from scipy.spatial import cKDTree
 from rackstress.stress import tensor as T
 from rackstress.stress.dump import DumpColumnsError, StressInputError
 from rackstress.stress.fit import FITS
+from rackstress.stress.rundata import boundary_rows
 
 #: Cutoff of the strain neighbourhood in units of the part's typical (median nearest) spacing.
 CUTOFF_FACTOR = 1.5
@@ -844,8 +845,6 @@ class ParticleStress(_RunAnalysis):
         particle (φ its cell's extent along the axis, ``read_fractions``): a particle on the
         plane itself has half a cell, its stress whole already, and gets nothing. Static runs
         (``phi`` written) only: a dynamic run's loads at a frame are not in its files."""
-        from rackstress.stress.rundata import boundary_rows
-
         phi = read_fractions(run)
         if b is None or not len(b[0]) or phi is None:
             return None
@@ -909,7 +908,8 @@ class ParticleStress(_RunAnalysis):
         if self.contacts is not None:     # the contact's force on the layers that touch
             s = s + self._contact(p, k)
         if self._held_faces is not None:  # a support's force on the face it holds
-            s = s + self._support_virial(p, d, d2) / self._V[:, None]
+            with np.errstate(divide="ignore", invalid="ignore"):   # V = 0 off the mask
+                s = s + self._support_virial(p, d, d2) / self._V[:, None]
         if self._wm is not None:
             s = T.moment_corrected(s, b[0], b[1], self._wm, self._gather)
         if self._patch is not None:
