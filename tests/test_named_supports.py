@@ -323,7 +323,7 @@ def test_pinned_run_on_lammps_then_fea_models_the_pin(tmp_path):
     assert abs(ring["turn_rad"]) == pytest.approx(100 * L ** 2 / (16 * E * I), rel=0.03)
 
 
-QUARTER_BAR = """
+EIGHTH_BAR = """
 name = "eighth"
 units = "mm-N-s"
 analysis = "static"
@@ -359,7 +359,7 @@ def test_the_layer_on_a_symmetry_plane_reads_the_stress_across_it(tmp_path):
     from rackstress.stress import load_run
     from rackstress.stress.measures import ParticleStress
 
-    (tmp_path / "e.toml").write_text(QUARTER_BAR)
+    (tmp_path / "e.toml").write_text(EIGHTH_BAR)
     out = tmp_path / "run"
     assert run(scenes.load(str(tmp_path / "e.toml")), out, engine="reference",
                progress=False)["settled"]

@@ -969,34 +969,31 @@ class ParticleStress(_RunAnalysis):
         return out
 
 
-def read_fractions(run):
-    """Each particle's cell extent per axis in spacings (n, 3) from the run's ``bindings.npz``
-    (``phi``, :func:`rackstress.runs.run.fractions_of`), or None for a file without it."""
+def _bindings_array(run, key: str, shape: tuple):
+    """The array ``key`` of the run's ``bindings.npz`` as float64 when it has ``shape``, or
+    None: a file without it (written before it was) or of another run."""
     from rackstress.lib.runfiles import BINDINGS
 
     path = Path(run.rundir) / BINDINGS
     if not path.is_file():
         return None
     with np.load(path, allow_pickle=False) as z:
-        if "phi" not in z.files:
+        if key not in z.files:
             return None
-        phi = z["phi"].astype(np.float64)
-    return phi if phi.shape == (run.n_atoms, 3) else None
+        x = z[key].astype(np.float64)
+    return x if x.shape == shape else None
+
+
+def read_fractions(run):
+    """Each particle's cell extent per axis in spacings (n, 3) from the run's ``bindings.npz``
+    (``phi``, :func:`rackstress.runs.run.fractions_of`: static runs), or None."""
+    return _bindings_array(run, "phi", (run.n_atoms, 3))
 
 
 def read_volumes(run):
     """Each particle's volume from the run's ``bindings.npz`` (``V``: the boundary cells' own
     share of the part, docs/calibration.md), or None for a file without it."""
-    from rackstress.lib.runfiles import BINDINGS
-
-    path = Path(run.rundir) / BINDINGS
-    if not path.is_file():
-        return None
-    with np.load(path, allow_pickle=False) as z:
-        if "V" not in z.files:
-            return None
-        V = z["V"].astype(np.float64)
-    return V if len(V) == run.n_atoms else None
+    return _bindings_array(run, "V", (run.n_atoms,))
 
 
 def read_volume_terms(run):
