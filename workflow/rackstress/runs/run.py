@@ -546,7 +546,7 @@ def execute_static(scene: Scene, out: Path, engine: str, mode: str, *, progress:
                   "applied_load_total": res.load, "solve_s": res.wall_s,
                   "residual_history": res.history, "solver": res.solver,
                   "factorizations": res.factorizations,
-                  "contact_sets": getattr(res, "contact_sets", 0)})
+                  "contact_sets": res.contact_sets})
     if root:
         extra.update(support_reactions(scene, res))
     if not settled and res.unbalanced:

@@ -819,9 +819,11 @@ class ParticleStress(_RunAnalysis):
             self._W2S = None
             if self.method in ("continuum", "patch"):
                 self._wm = T.surface_moment(run.o, b[0], b[1], b[3], n)
+        a2 = np.full(n, np.inf)
+        np.minimum.at(a2, b[0], b[3])                # each particle's nearest binding
         self._held_faces = None
         if self.method in ("continuum", "patch"):
-            self._held_faces = self._support_faces(run, b, mine)
+            self._held_faces = self._support_faces(run, b, mine, a2)
         self._patch = None
         if self.method == "patch":
             labels = np.full(n, -1, np.int64)
@@ -830,12 +832,10 @@ class ParticleStress(_RunAnalysis):
                 labels[part.index] = k
                 points[part.index] = T.part_recovery_points(run.o[part.index])
             self.points = points
-            a2 = np.full(n, np.inf)
-            np.minimum.at(a2, b[0], b[3])            # each particle's nearest binding
             a = float(np.sqrt(np.median(a2[np.isfinite(a2)])))
             self._patch = T.patch_matrix(run.o, a, points, labels)
 
-    def _support_faces(self, run, b, mine):
+    def _support_faces(self, run, b, mine, a2):
         """The particles a support holds across a face of their cell (a roller, a symmetry
         plane, a clamp: a held direction along which the lattice neighbour is missing), or
         None: (rows, held n×3 mask, offset n×3 to the face, load n×3, the bindings acting on
@@ -844,7 +844,8 @@ class ParticleStress(_RunAnalysis):
         plane read half the stress across the plane. The face lies (φ − ½)·a beyond the
         particle (φ its cell's extent along the axis, ``read_fractions``): a particle on the
         plane itself has half a cell, its stress whole already, and gets nothing. Static runs
-        (``phi`` written) only: a dynamic run's loads at a frame are not in its files."""
+        (``phi`` written) only: a dynamic run's loads at a frame are not in its files. ``a2``:
+        each particle's nearest binding's squared length (its part's spacing)."""
         phi = read_fractions(run)
         if b is None or not len(b[0]) or phi is None:
             return None
@@ -852,8 +853,6 @@ class ParticleStress(_RunAnalysis):
         held &= self._mask[:, None]
         if not held.any():
             return None
-        a2 = np.full(run.n_atoms, np.inf)
-        np.minimum.at(a2, b[0], b[3])
         off = np.zeros((run.n_atoms, 3))
         for part in mine:
             idx = np.asarray(part.index)
@@ -882,8 +881,10 @@ class ParticleStress(_RunAnalysis):
         with np.errstate(divide="ignore", invalid="ignore"):
             f = (k * (1.0 - q / d2[sel]))[:, None] * d[sel]
         F = np.asarray(gather @ f)
-        if self.volume is not None:
-            F = F + _volume_forces(p, self.volume)[rows]
+        if self.volume is not None:      # its κ are m·κ (read_volume_terms): forces
+            from rackstress.model.volume import Volume
+
+            F = F + Volume.accel(p, self.volume)[rows]
         R = -np.where(held, F + loads, 0.0)
         mean = off / np.maximum((off != 0.0).sum(axis=1, keepdims=True), 1)
         M = np.zeros((len(rows), 3, 3))
@@ -1086,13 +1087,6 @@ def read_bindings(run):
                                f"{int(max(i.max(), j.max()))} but the run has {n}: the file is "
                                "not of this run")
     return i.astype(np.int64), j.astype(np.int64), k.astype(np.float64), q.astype(np.float64)
-
-
-def _volume_forces(p, terms) -> np.ndarray:
-    """The volumetric term's forces (n, 3; ``terms`` with m·κ, :func:`read_volume_terms`)."""
-    from rackstress.model.volume import Volume
-
-    return Volume.accel(p, terms)
 
 
 # ----------------------------------------------------------------------------- motion
