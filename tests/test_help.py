@@ -141,3 +141,19 @@ def test_a_typo_in_a_files_own_parameter_names_it(tmp_path):
     scene.write_text(SCENE.format(extra="", op="dampen", ref="gap"))
     r = rs("deck", scene, "--set", "gpa=2", "--out", tmp_path / "d")
     assert r.returncode == 2 and "did you mean 'gap'?" in r.stderr, r.stderr
+
+
+def test_scenes_table_keeps_its_columns_for_a_scene_file_with_a_long_path():
+    """A scene file's path longer than the first column goes on a line of its own; the
+    description and the parameters keep whole words (a 78-character path once left them 10
+    characters a line, 'spacing' and 'budget' broken apart)."""
+    from rackstress.cli import scenes_table
+
+    name = "/tmp/pytest-of-someone/pytest-12/popen-gw1/test_spacing_chosen_and_set0/bar.toml"
+    row = {"name": name, "particles": 5600, "shows": "A bar bolted at two holes and pulled",
+           "parameters": {"spacing": None, "budget": 20000}}
+    lines = scenes_table([row]).splitlines()
+    assert name in lines
+    assert any(line.rstrip().endswith("5,600  A bar bolted at two holes and pulled")
+               for line in lines)
+    assert any("parameters: spacing=None, budget=20000" in line for line in lines)

@@ -753,18 +753,28 @@ def _scene_row(spec: str) -> dict:
             "parameters": params}
 
 
+#: the widest scene name ``rackstress scenes`` keeps in its first column
+NAME_W = 32
+
+
 def scenes_table(rows: list, width: int = 100) -> str:
     """The table ``rackstress scenes`` prints: a row per scene (name, particles, what it shows)
     and its parameters with their defaults, wrapped beneath it."""
     import textwrap
 
-    name_w = max(len("SCENE"), *(len(r["name"]) for r in rows))
+    # a name longer than NAME_W (a scene file's path) takes a line of its own: the columns
+    # keep their room (a 78-character path left the descriptions 10 characters a line)
+    name_w = min(NAME_W, max(len("SCENE"), *(len(r["name"]) for r in rows)))
     head = f"{'SCENE':<{name_w}}  {'PARTICLES':>9}  WHAT IT SHOWS"
     indent = " " * (name_w + 13)
     out = [head, "-" * min(width, max(len(head), 60))]
     for r in rows:
         shows = textwrap.wrap(r["shows"], width - len(indent)) or [""]
-        out.append(f"{r['name']:<{name_w}}  {r['particles']:>9,}  {shows[0]}")
+        name = r["name"]
+        if len(name) > name_w:
+            out.append(name)
+            name = ""
+        out.append(f"{name:<{name_w}}  {r['particles']:>9,}  {shows[0]}")
         out += [indent + line for line in shows[1:]]
         params = ", ".join(f"{k}={v!r}" if isinstance(v, str) else f"{k}={v}"
                            for k, v in r["parameters"].items())
