@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 from rackstress.bench import fmt, machine, md_table, out_dir, repository_file, write_json
+from rackstress.lib.resources import cpu_children
 from rackstress.validity.solid import POOR_SLIVERS, SLIVER_Q
 
 HEADER = ["part", "particles", "spacing [mm]", "Newton steps", "residual", "solve [s]",
@@ -52,13 +53,6 @@ def _rackstress() -> list:
     return [str(exe)] if exe.is_file() else [sys.executable, "-m", "rackstress.cli"]
 
 
-def _cpu_children() -> float:
-    import resource
-
-    r = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return r.ru_utime + r.ru_stime
-
-
 def _error_of(stderr: str) -> str:
     """The last ``rackstress: error:`` paragraph of a command's stderr."""
     lines = [ln for ln in stderr.splitlines() if ln.startswith("rackstress: error:")]
@@ -84,7 +78,7 @@ def case(name: str, work: Path, fea: bool = True, sets: dict | None = None, echo
             str(out), "--overwrite"]
     for k, v in (sets or {}).items():
         args += ["--set", f"{k}={v}"]
-    cpu0, t0 = _cpu_children(), time.perf_counter()
+    cpu0, t0 = cpu_children(), time.perf_counter()
     try:
         r = subprocess.run(args, capture_output=True, text=True, timeout=timeout)
     except subprocess.TimeoutExpired:
@@ -94,7 +88,7 @@ def case(name: str, work: Path, fea: bool = True, sets: dict | None = None, echo
         echo(f"{name}: stopped after {timeout:.0f} s")
         return row
     row["run_wall_s"] = time.perf_counter() - t0
-    row["run_cpu_s"] = _cpu_children() - cpu0
+    row["run_cpu_s"] = cpu_children() - cpu0
     summary_file = out / "summary.json"
     if r.returncode == 2 or not summary_file.is_file():
         row.update(status=f"refused (exit {r.returncode})", reason=short(_error_of(r.stderr)))

@@ -64,3 +64,12 @@ def require_memory(need: int, what: str) -> None:
         raise SceneError(f"{what} needs about {need / 2**30:.1f} GiB and this machine has "
                          f"{have / 2**30:.1f} GiB available{limited}: make it smaller or use a "
                          "larger machine")
+
+
+def cpu_children() -> float:
+    """CPU seconds (user + system) of this process's ended children (a benchmark's runs,
+    the FE check's fTetWild)."""
+    import resource
+
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
