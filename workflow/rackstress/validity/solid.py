@@ -270,10 +270,7 @@ def surface_mesh(vertices: np.ndarray, faces: np.ndarray, size: float, near=None
         tw = f"(gmsh could not reparametrize the file's surface: {why})"
         try:
             p, t = _gmsh_volume(V, F, size, None, None, reparametrize=False, netgen=True)
-            want = np.einsum("ij,ij->i", V[F[:, 0]], np.cross(V[F[:, 1]], V[F[:, 2]])).sum() / 6
-            P = p.T
-            got = np.abs(np.einsum("ij,ij->i", np.cross(P[t[1]] - P[t[0]], P[t[2]] - P[t[0]]),
-                                   P[t[3]] - P[t[0]])).sum() / 6
+            got, want = np.abs(tet_volumes(p.T, t.T)).sum(), enclosed_volume(V, F)
             if abs(got / want - 1) > FILL_TOL:
                 raise RuntimeError(f"its tetrahedra hold {got / want:.2%} of the surface's "
                                    "volume")
@@ -313,9 +310,9 @@ _CLEAN: dict = {}
 
 def _tetwild(v: np.ndarray, f: np.ndarray, edge: float, envelope: float):
     """fTetWild's tetrahedra (X k×3, t m×4) of the volume inside (v, f), edges about
-    ``edge``, its surface within ``envelope`` of (v, f), in a process of its own: it writes ``_tracked_surface.stl`` into its working
-    directory (a temporary one here, not the user's), and a crash or a hang of its C++ ends
-    that process, not the FE check."""
+    ``edge``, its surface within ``envelope`` of (v, f), in a process of its own: it writes
+    ``_tracked_surface.stl`` into its working directory (a temporary one here, not the
+    user's), and a crash or a hang of its C++ ends that process, not the FE check."""
     import subprocess
     import sys
     import tempfile
@@ -341,6 +338,19 @@ def _tetwild(v: np.ndarray, f: np.ndarray, edge: float, envelope: float):
 
 #: seconds fTetWild may take before the FE check gives up on it (the fixed jaw: 24 s)
 TETWILD_TIMEOUT = 600.0
+
+
+def tet_volumes(X: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Signed volume of each tetrahedron t (M×4) of the points X (N×3)."""
+    P = X[t]
+    return np.einsum("ij,ij->i", np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]),
+                     P[:, 3] - P[:, 0]) / 6
+
+
+def enclosed_volume(V: np.ndarray, F: np.ndarray) -> float:
+    """The volume inside the closed triangulated surface (V k×3, F m×3; positive when its
+    triangles face outwards), by the divergence theorem."""
+    return float(np.einsum("ij,ij->i", V[F[:, 0]], np.cross(V[F[:, 1]], V[F[:, 2]])).sum() / 6)
 
 
 def own_tetrahedra(own) -> tuple[np.ndarray, np.ndarray]:
@@ -385,10 +395,8 @@ def clean_surface(v: np.ndarray, f: np.ndarray, edge: float):
         envelope = ENVELOPE * float(edge)
         edge = max(float(edge), math.sqrt(4 * area / (math.sqrt(3) * most)))
         X, t = _tetwild(v, f, edge, envelope)
-        P = X[t]
-        held = np.abs(np.einsum("ij,ij->i", np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]),
-                                P[:, 3] - P[:, 0])).sum() / 6
-        want = abs(np.einsum("ij,ij->i", v[f[:, 0]], np.cross(v[f[:, 1]], v[f[:, 2]])).sum()) / 6
+        vol = tet_volumes(X, t)
+        held, want = np.abs(vol).sum(), abs(enclosed_volume(v, f))
         if abs(held / want - 1) > TETWILD_VOLUME_TOL:
             raise RuntimeError(f"fTetWild's tetrahedra hold {held / want:.1%} of the file's "
                                "volume")
@@ -403,8 +411,7 @@ def clean_surface(v: np.ndarray, f: np.ndarray, edge: float):
         inward = np.einsum("ij,ij->i", n, X[d] - X[b[:, 0]]) > 0
         b[inward] = b[inward][:, [0, 2, 1]]
         used, bi = np.unique(b, return_inverse=True)
-        neg = np.einsum("ij,ij->i", np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]),
-                        P[:, 3] - P[:, 0]) < 0
+        neg = vol < 0
         t[neg] = t[neg][:, [0, 2, 1, 3]]     # fTetWild's come inverted: positive volumes
         _CLEAN.clear()                        # one part at a time
         _CLEAN[key] = (X[used], bi.reshape(-1, 3), edge, X, t)
