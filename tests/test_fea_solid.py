@@ -246,7 +246,7 @@ def test_a_part_gmsh_cannot_reparametrize_is_meshed_inside_ftetwilds_surface():
 
 
 def test_without_pytetwild_a_part_gmsh_cannot_reparametrize_is_filled_inside_its_own_facets():
-    """Where pytetwild is not installed (a install without the fem extra's), the jaw is meshed
+    """Where pytetwild is not installed (an install without the fem extra), the jaw is meshed
     inside the file's own triangles as before, and says so: a real process in which the
     package cannot be imported. Its tetrahedra fill the file's volume to 0.5 %, as the
     remeshed bracket's do (gmsh's boundary recovery adds points on the surface: 0.39 %)."""
