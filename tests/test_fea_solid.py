@@ -518,3 +518,24 @@ def test_ftetwilds_own_tetrahedra_fill_the_base_at_both_fe_sizes():
     edges = np.linalg.norm(V2[F2[:, 0]] - V2[F2[:, 1]], axis=1)
     assert np.median(edges) >= 0.5 * 5.73 * 0.5          # cut in two, about the edge asked
     assert not mesh_quality(p.T, t.T)["poor"] and not mesh_quality(p2.T, t2.T)["poor"]
+
+
+def test_a_surface_whose_bodies_meet_along_an_edge_is_not_filled_by_gmsh():
+    """Two cubes that share only an edge: their boundary has 4 triangles at that edge (two a
+    cube), so it is not a manifold surface; gmsh's tetrahedra inside it would meet there at an
+    edge only, a hinge under which the FE's conjugate gradients did not converge (the SO-100
+    base inside fTetWild's surface). ``open_edges`` counts it (by hand: the one shared edge),
+    and 0 for one closed cube."""
+    import trimesh
+
+    from rackstress.validity.solid import open_edges
+
+    a = trimesh.creation.box(extents=(1, 1, 1))
+    b = a.copy()
+    b.apply_translation((1, 1, 0))                   # touches a along the edge x = y = 0.5
+    V = np.vstack([a.vertices, b.vertices])
+    F = np.vstack([a.faces, b.faces + len(a.vertices)])
+    key = {tuple(np.round(x, 9)): i for i, x in enumerate(V)}
+    F = np.vectorize(lambda i: key[tuple(np.round(V[i], 9))])(F)   # one vertex a corner
+    assert open_edges(np.asarray(a.faces)) == 0
+    assert open_edges(F) == 1

@@ -269,6 +269,9 @@ def surface_mesh(vertices: np.ndarray, faces: np.ndarray, size: float, near=None
     else:
         tw = f"(gmsh could not reparametrize the file's surface: {why})"
         try:
+            loose = open_edges(F)
+            if loose:       # gmsh's tetrahedra would meet there at an edge only: a hinge
+                raise RuntimeError(f"{loose} of its edges are not shared by two triangles")
             p, t = _gmsh_volume(V, F, size, None, None, reparametrize=False, netgen=True)
             got, want = np.abs(tet_volumes(p.T, t.T)).sum(), enclosed_volume(V, F)
             if abs(got / want - 1) > FILL_TOL:
@@ -277,10 +280,20 @@ def surface_mesh(vertices: np.ndarray, faces: np.ndarray, size: float, near=None
             info["surface"] = f"the volume inside fTetWild's surface of the file {tw}"
             return p, t
         except Exception as exc:  # noqa: BLE001 - gmsh's words, said: fTetWild's own mesh
-            info["surface"] = ("fTetWild's own tetrahedra" + (", each cut into 8" if own[2]
-                                                               else "")
-                               + f" {tw}; gmsh could not fill fTetWild's surface: {exc}")
-            return own_tetrahedra(own)
+            n = len(own[1])
+            if not own[2] and 8 * n > OWN_SLACK * FE_ELEMENTS:
+                # cut into 8 at the second size they would exceed the budget: coarser ones
+                # (the fixed jaw's 13,398 made 107,184, 62.5 s of CPU and 1.89 GB)
+                try:
+                    own = clean_surface(v, f, size, coarser=(8 * n / FE_ELEMENTS) ** (1 / 3))[2]
+                except Exception as err:  # noqa: BLE001 - fTetWild's own words: say them
+                    why = f"{why}; fTetWild failed at a coarser size: {err}"
+                    own = None
+            if own is not None:
+                info["surface"] = ("fTetWild's own tetrahedra" + (", each cut into 8" if own[2]
+                                                                   else "")
+                                   + f" {tw}; gmsh could not fill fTetWild's surface: {exc}")
+                return own_tetrahedra(own)
     info["surface"] = (f"the volume inside the file's own triangles (gmsh could not "
                        f"reparametrize the surface: {why})")
     return _gmsh_volume(v, f, size, None, None, reparametrize=False)
@@ -298,6 +311,9 @@ FILL_TOL = 1e-3
 #: are filled (measured: the fixed jaw 0.9953–0.9972, the SO-100 base's union 0.9879–0.9912;
 #: its four bodies as the file has them, touching face to face, once 0.918: a body lost)
 TETWILD_VOLUME_TOL = 0.03
+#: fTetWild's own tetrahedra, cut into 8 at the second FE size, may exceed the budget of
+#: tetrahedra by this factor before a coarser set is made
+OWN_SLACK = 1.25
 #: fTetWild's envelope, × the edge length asked: its surface stays this close to the file's
 #: (the fixed jaw at edge 2.47 mm: 0.49 mm, a third of its particles' spacing)
 ENVELOPE = 0.2
@@ -340,6 +356,22 @@ def _tetwild(v: np.ndarray, f: np.ndarray, edge: float, envelope: float):
 TETWILD_TIMEOUT = 600.0
 
 
+def open_edges(F: np.ndarray) -> int:
+    """How many edges of the triangles F (m×3) are not shared by exactly two of them (0: a
+    closed manifold surface; fTetWild's surface of the SO-100 base's four bodies had some
+    where two of them touch along an edge, and the FE's conjugate gradients inside gmsh's
+    filling of it did not converge in 2,000 steps).
+
+    >>> open_edges(np.array([[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2]]))   # a tetrahedron
+    0
+    >>> open_edges(np.array([[0, 1, 2]]))
+    3
+    """
+    e = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+    _, n = np.unique(e, axis=0, return_counts=True)
+    return int((n != 2).sum())
+
+
 def tet_volumes(X: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Signed volume of each tetrahedron t (M×4) of the points X (N×3)."""
     P = X[t]
@@ -365,7 +397,7 @@ def own_tetrahedra(own) -> tuple[np.ndarray, np.ndarray]:
     return np.ascontiguousarray(X.T), np.ascontiguousarray(t.T)
 
 
-def clean_surface(v: np.ndarray, f: np.ndarray, edge: float):
+def clean_surface(v: np.ndarray, f: np.ndarray, edge: float, coarser: float = 1.0):
     """A closed surface of well-shaped triangles around the volume of (v, f), for a file's
     surface gmsh cannot reparametrize: the boundary of fTetWild's tetrahedra (Hu et al., "Fast
     Tetrahedral Meshing in the Wild", 2020; ``pytetwild``), edges about ``edge``, within
@@ -377,7 +409,9 @@ def clean_surface(v: np.ndarray, f: np.ndarray, edge: float):
 
     Returns (vertices k×3, triangles m×3, outward) and fTetWild's own tetrahedra (X, t, and
     whether the surface was cut: then they are to be cut into 8 too), the mesh where gmsh
-    cannot fill the surface (:func:`surface_mesh`)."""
+    cannot fill the surface (:func:`surface_mesh`). ``coarser`` > 1 makes the file's surface
+    again, its edges that many times the last one's (its own tetrahedra then fit the budget
+    when cut into 8)."""
     import hashlib
     import importlib.util
 
@@ -386,7 +420,7 @@ def clean_surface(v: np.ndarray, f: np.ndarray, edge: float):
     v = np.ascontiguousarray(v, float)
     f = np.ascontiguousarray(f, np.int32)
     key = hashlib.sha1(v.tobytes() + f.tobytes()).hexdigest()
-    if key not in _CLEAN:
+    if key not in _CLEAN or coarser > 1:
         # within the FE budget: the finer mesh's surface (these triangles cut in four) is
         # filled with about TETS_PER_TRIANGLE tetrahedra a triangle
         # (the envelope stays that of the edge asked: the shape no coarser than the FE's)
@@ -394,6 +428,8 @@ def clean_surface(v: np.ndarray, f: np.ndarray, edge: float):
         most = FE_ELEMENTS / (4 * TETS_PER_TRIANGLE)
         envelope = ENVELOPE * float(edge)
         edge = max(float(edge), math.sqrt(4 * area / (math.sqrt(3) * most)))
+        if key in _CLEAN:
+            edge = coarser * _CLEAN[key][2]
         X, t = _tetwild(v, f, edge, envelope)
         vol = tet_volumes(X, t)
         held, want = np.abs(vol).sum(), abs(enclosed_volume(v, f))
@@ -1656,11 +1692,23 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
     for k, hs in enumerate(sizes):
         echo(f"fea: {name}: meshing and solving at FE size {hs:.3g} "
              f"({k + 1} of {len(sizes)}) …")
-        sol, how, note_k, forces, fixed = solve_part(
-            g.o, spacing, shape, held_x, np.asarray(bnd["held_mask"], bool)[hin], load_x,
-            np.asarray(bnd["load_force"], float)[lin], E_, nu_, hs,
-            near, near_size * hs / h, what=f"FE size {hs:.3g}", constraints=constraints,
-            reparametrize=reparam, method=method)
+        try:
+            sol, how_k, note_k, forces_k, fixed_k = solve_part(
+                g.o, spacing, shape, held_x, np.asarray(bnd["held_mask"], bool)[hin], load_x,
+                np.asarray(bnd["load_force"], float)[lin], E_, nu_, hs,
+                near, near_size * hs / h, what=f"FE size {hs:.3g}", constraints=constraints,
+                reparametrize=reparam, method=method)
+        except RuntimeError as exc:        # the FE solve itself (conjugate gradients)
+            if not sols:
+                raise ValueError(f"the FE check of part '{name}' failed at FE size {hs:.3g}: "
+                                 f"{exc}. Try another FE size (--size), or --no-converge"
+                                 ) from None
+            note = "; ".join(x for x in (note, f"not solved at FE size {hs:.3g}: {exc}; "
+                                         "the coarser FE mesh is the reference, its "
+                                         "convergence not measured") if x)
+            echo(f"fea: {name}: FE size {hs:.3g} failed ({exc}); the coarser mesh is kept")
+            break
+        how, forces, fixed = how_k, forces_k, fixed_k
         sols.append(sol)
         if sol.info["solver"] == "cg" and sol.info["dofs"] > DIRECT_DOFS:
             # the direct factor was refused at this size (PARDISO's own estimate after its
