@@ -819,10 +819,10 @@ class ParticleStress(_RunAnalysis):
             self._W2S = None
             if self.method in ("continuum", "patch"):
                 self._wm = T.surface_moment(run.o, b[0], b[1], b[3], n)
-        a2 = np.full(n, np.inf)
-        np.minimum.at(a2, b[0], b[3])                # each particle's nearest binding
         self._held_faces = None
         if self.method in ("continuum", "patch"):
+            a2 = np.full(n, np.inf)
+            np.minimum.at(a2, b[0], b[3])            # each particle's nearest binding
             self._held_faces = self._support_faces(run, b, mine, a2)
         self._patch = None
         if self.method == "patch":

@@ -129,9 +129,7 @@ def cell_mesh(o: np.ndarray, spacing: float):
     k = used // (dims[0] * dims[1])
     p = (lo[:, None] + s * np.stack([i, j, k]).astype(float))
     # orient every tetrahedron positively
-    a, b, cc, d = (p[:, t[r]] for r in range(4))
-    vol = np.einsum("ij,ij->j", np.cross(b - a, cc - a, axis=0), d - a)
-    swap = vol < 0
+    swap = tet_volumes(p.T, t.T) < 0
     t[1, swap], t[2, swap] = t[2, swap].copy(), t[1, swap].copy()
     return p, t
 
@@ -374,6 +372,23 @@ def open_edges(F: np.ndarray) -> int:
     return int((n != 2).sum())
 
 
+def boundary_triangles(X: np.ndarray, t: np.ndarray):
+    """The boundary of the tetrahedra t (M×4) of the points X (N×3): the faces that belong to
+    one tetrahedron only, each turned to face away from its fourth corner (outwards).
+    Returns (the points they use, k; the triangles m×3 numbered over those points)."""
+    faces = np.concatenate([t[:, [1, 2, 3]], t[:, [0, 3, 2]], t[:, [0, 1, 3]], t[:, [0, 2, 1]]])
+    opposite = np.concatenate([t[:, 0], t[:, 1], t[:, 2], t[:, 3]])
+    _, inv, cnt = np.unique(np.sort(faces, axis=1), axis=0, return_inverse=True,
+                            return_counts=True)
+    once = cnt[inv.ravel()] == 1
+    b, d = faces[once], opposite[once]
+    n = np.cross(X[b[:, 1]] - X[b[:, 0]], X[b[:, 2]] - X[b[:, 0]])
+    inward = np.einsum("ij,ij->i", n, X[d] - X[b[:, 0]]) > 0
+    b[inward] = b[inward][:, [0, 2, 1]]
+    used, bi = np.unique(b, return_inverse=True)
+    return used, bi.reshape(-1, 3)
+
+
 def tet_volumes(X: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Signed volume of each tetrahedron t (M×4) of the points X (N×3)."""
     P = X[t]
@@ -438,21 +453,11 @@ def clean_surface(v: np.ndarray, f: np.ndarray, edge: float, coarser: float = 1.
         if abs(held / want - 1) > TETWILD_VOLUME_TOL:
             raise RuntimeError(f"fTetWild's tetrahedra hold {held / want:.1%} of the file's "
                                "volume")
-        faces = np.concatenate([t[:, [1, 2, 3]], t[:, [0, 3, 2]], t[:, [0, 1, 3]],
-                                t[:, [0, 2, 1]]])
-        opposite = np.concatenate([t[:, 0], t[:, 1], t[:, 2], t[:, 3]])
-        _, inv, cnt = np.unique(np.sort(faces, axis=1), axis=0, return_inverse=True,
-                                return_counts=True)
-        once = cnt[inv.ravel()] == 1
-        b, d = faces[once], opposite[once]
-        n = np.cross(X[b[:, 1]] - X[b[:, 0]], X[b[:, 2]] - X[b[:, 0]])
-        inward = np.einsum("ij,ij->i", n, X[d] - X[b[:, 0]]) > 0
-        b[inward] = b[inward][:, [0, 2, 1]]
-        used, bi = np.unique(b, return_inverse=True)
+        used, bi = boundary_triangles(X, t)
         neg = vol < 0
         t[neg] = t[neg][:, [0, 2, 1, 3]]     # fTetWild's come inverted: positive volumes
         _CLEAN.clear()                        # one part at a time
-        _CLEAN[key] = (X[used], bi.reshape(-1, 3), edge, X, t, envelope)
+        _CLEAN[key] = (X[used], bi, edge, X, t, envelope)
     V, F, e, X, t, _ = _CLEAN[key]
     finer = e > 1.2 * edge
     if finer:
@@ -554,8 +559,7 @@ def _gmsh_volume(v, f, size, near, near_size, reparametrize: bool, netgen: bool 
         # inside a file's own facets gmsh leaves flat tetrahedra, four corners on one face (the
         # SO-100 base: 89 of 13,879 with volume < 1e-6 × edge³, 6 of them inverted): no
         # stiffness, a singular system. They hold no volume; the rest stay conforming
-        vol = np.einsum("ij,ij->j", np.cross(X[t[1]] - X[t[0]], X[t[2]] - X[t[0]], axis=1).T,
-                        (X[t[3]] - X[t[0]]).T) / 6
+        vol = tet_volumes(X, t.T)
         edge = np.max([np.linalg.norm(X[t[i]] - X[t[j]], axis=1)
                        for i in range(4) for j in range(i + 1, 4)], axis=0)
         t = t[:, np.abs(vol) > FLAT_TET * edge ** 3]
@@ -588,9 +592,9 @@ def mesh_quality(p: np.ndarray, t: np.ndarray) -> dict:
     >>> round(q["min"], 12), q["sliver_share"], q["poor"]
     (1.0, 0.0, False)
     """
-    X = np.asarray(p, float)[np.asarray(t)[:, :4]]
-    V = np.abs(np.einsum("ij,ij->i", np.cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]),
-                         X[:, 3] - X[:, 0])) / 6
+    T = np.asarray(t)[:, :4]
+    X = np.asarray(p, float)[T]
+    V = np.abs(tet_volumes(np.asarray(p, float), T))
     l2 = np.mean([((X[:, i] - X[:, j]) ** 2).sum(axis=1)
                   for i in range(4) for j in range(i + 1, 4)], axis=0)
     q = 6 * math.sqrt(2) * V / l2 ** 1.5
@@ -1108,20 +1112,9 @@ def concave_edges(p: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Midpoints (k×3) of the FE boundary's re-entrant edges (concave by > CONCAVE_DEG)."""
     import trimesh
 
-    faces = np.sort(np.concatenate([t[[0, 1, 2]], t[[0, 1, 3]], t[[0, 2, 3]], t[[1, 2, 3]]],
-                                   axis=1).T, axis=1)
-    uniq, inv, cnt = np.unique(faces, axis=0, return_inverse=True, return_counts=True)
-    # orient each boundary face outwards: away from its tetrahedron's fourth vertex
-    bnd = np.flatnonzero(cnt[inv.reshape(-1)] == 1)
-    tet = bnd % t.shape[1]
-    tri = faces[bnd]
-    other = np.array([np.setdiff1d(t[:, e], f)[0] for e, f in zip(tet, tri)])
     P = p.T
-    n = np.cross(P[tri[:, 1]] - P[tri[:, 0]], P[tri[:, 2]] - P[tri[:, 0]])
-    flip = np.einsum("ij,ij->i", n, P[other] - P[tri[:, 0]]) > 0
-    tri[flip] = tri[flip][:, [0, 2, 1]]
-    used, tri2 = np.unique(tri, return_inverse=True)
-    tm = trimesh.Trimesh(P[used], tri2.reshape(-1, 3), process=False)
+    used, tri = boundary_triangles(P, np.asarray(t).T)
+    tm = trimesh.Trimesh(P[used], tri, process=False)
     adj = tm.face_adjacency
     concave = ~tm.face_adjacency_convex & (np.degrees(tm.face_adjacency_angles) > CONCAVE_DEG)
     e = tm.face_adjacency_edges[concave]
