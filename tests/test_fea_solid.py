@@ -510,10 +510,11 @@ def test_ftetwilds_own_tetrahedra_fill_the_part_at_both_fe_sizes():
     file_volume = abs(trimesh.Trimesh(v, f).volume)
     _, _, own = clean_surface(v, f, 4.5)
     assert not own[2]
-    p, t = own_tetrahedra(own)
+    p, t, how = own_tetrahedra(own)
     V2, F2, own2 = clean_surface(v, f, 2.5)               # the second size: the same, cut
-    assert own2[2]
-    p2, t2 = own_tetrahedra(own2)
+    assert own2[2] and how == ""
+    p2, t2, how2 = own_tetrahedra(own2)
+    assert how2 == ", each cut into 8"
     assert t2.shape[1] == 8 * t.shape[1] and 8 * t.shape[1] <= 50_000
     assert _tet_volume(p, t) == pytest.approx(file_volume, rel=2e-2)
     assert _tet_volume(p2, t2) == pytest.approx(_tet_volume(p, t), rel=1e-9)
@@ -563,7 +564,43 @@ def test_ftetwilds_tetrahedra_made_coarser_keep_the_envelope():
     _, _, own = clean_surface(v, f, 8.0, coarser=1.5)      # as surface_mesh asks: its FE size
     assert solid_module._CLEAN[next(iter(solid_module._CLEAN))][5] == pytest.approx(0.2 * 3.2)
     assert len(own[1]) < n1 and not own[2]
-    p, t = own_tetrahedra(own)
+    p, t, _ = own_tetrahedra(own)
     assert _tet_volume(p, t) == pytest.approx(file_volume, rel=1e-2)
     _, _, finer = clean_surface(v, f, 2.0)                 # the second FE size: the same, cut
     assert finer[2] and len(finer[1]) == len(own[1])
+
+
+def _own_block(k: int):
+    """fTetWild's own tetrahedra as ``own_tetrahedra`` gets them at the second FE size: a
+    k × k × k block of unit cubes, 6 tetrahedra each."""
+    g = np.stack(np.meshgrid(*[np.arange(k) + 0.5] * 3, indexing="ij"), -1).reshape(-1, 3)
+    p, t = cell_mesh(g, 1.0)
+    assert t.shape[1] == 6 * k ** 3
+    return p.T, t.T, True
+
+
+@pytest.mark.parametrize("k, all_of_them", [(12, True), (17, False)])
+def test_own_tetrahedra_too_many_to_cut_into_8_are_bisected_and_stay_conforming(k, all_of_them):
+    """fTetWild's own tetrahedra whose 8-fold would exceed the FE budget (50,000) are bisected
+    at their longest edges at the second FE size: all of a 12 × 12 × 12 block's 10,368 — each
+    cube's 6 share its main diagonal, their longest edge, so each is cut once, no neighbour
+    more: exactly twice as many (by hand) — and of a 17-block's 29,478 as many as fit, those
+    on the surface first: more, within the budget. Either way the block's volume (k³, by
+    hand) to round-off and a conforming mesh: its boundary is the block's surface (6 k², by
+    hand), closed, no inner face left unshared (a hanging node would add area)."""
+    import trimesh
+
+    from rackstress.validity.solid import boundary_triangles, open_edges, own_tetrahedra
+
+    own = _own_block(k)
+    n = len(own[1])
+    q, u, how = own_tetrahedra(own)
+    if all_of_them:
+        assert how == ", each bisected at its longest edge" and u.shape[1] == 2 * n
+    else:
+        assert "by bisecting those on the surface" in how and n < u.shape[1] <= 50_000
+    assert _tet_volume(q, u) == pytest.approx(k ** 3, rel=1e-12)
+    used, F = boundary_triangles(q.T, u.T)
+    assert open_edges(F) == 0
+    area = trimesh.Trimesh(q.T[used], F, process=False).area
+    assert area == pytest.approx(6 * k ** 2, rel=1e-12)

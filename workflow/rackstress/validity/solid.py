@@ -279,20 +279,20 @@ def surface_mesh(vertices: np.ndarray, faces: np.ndarray, size: float, near=None
             return p, t
         except Exception as exc:  # noqa: BLE001 - gmsh's words, said: fTetWild's own mesh
             n = len(own[1])
-            if not own[2] and 8 * n > FE_ELEMENTS:
-                # cut into 8 at the second size they would exceed the budget: coarser ones
-                # (the fixed jaw's 13,398 made 107,184, 62.5 s of CPU and 1.89 GB)
+            if not own[2] and n > OWN_MOST * FE_ELEMENTS:
+                # the second size could bisect too few of them (under half): coarser ones
+                # (the fixed jaw's 13,398 cut into 8 made 107,184, 62.5 s of CPU and 1.89 GB)
                 try:
-                    own = clean_surface(v, f, size,
-                                        coarser=(8 * n / (OWN_AIM * FE_ELEMENTS)) ** (1 / 3))[2]
+                    own = clean_surface(v, f, size, coarser=(
+                        BISECT_GROWTH * n / (OWN_AIM * FE_ELEMENTS)) ** (1 / 3))[2]
                 except Exception as err:  # noqa: BLE001 - fTetWild's own words: say them
                     why = f"{why}; fTetWild failed at a coarser size: {err}"
                     own = None
             if own is not None:
-                info["surface"] = ("fTetWild's own tetrahedra" + (", each cut into 8" if own[2]
-                                                                   else "")
-                                   + f" {tw}; gmsh could not fill fTetWild's surface: {exc}")
-                return own_tetrahedra(own)
+                p, t, cut = own_tetrahedra(own)
+                info["surface"] = (f"fTetWild's own tetrahedra{cut} {tw}; gmsh could not "
+                                   f"fill fTetWild's surface: {exc}")
+                return p, t
     info["surface"] = (f"the volume inside the file's own triangles (gmsh could not "
                        f"reparametrize the surface: {why})")
     return _gmsh_volume(v, f, size, None, None, reparametrize=False)
@@ -310,10 +310,23 @@ FILL_TOL = 1e-3
 #: are filled (measured: the fixed jaw 0.9953–0.9972, the SO-100 base's union 0.971–0.991;
 #: its four bodies as the file has them, touching face to face, once 0.918: a body lost)
 TETWILD_VOLUME_TOL = 0.03
-#: fTetWild's own tetrahedra that, cut into 8 at the second FE size, would exceed the budget
-#: of tetrahedra are made again, coarser, aiming at this share of it (at 1.25 × the budget
-#: the SO-100 base's 62,232 took 65.2 s of CPU under load 3.5, over the 60 s target)
+#: fTetWild's own tetrahedra too many to bisect at the second FE size (:data:`OWN_MOST`)
+#: are made again, coarser, aiming at this share of the budget once bisected, which
+#: :func:`_bisect_within` also aims at
+#: (at 1.25 × the budget the SO-100 base's 62,232 took 65.2 s of CPU under load 3.5, over the
+#: 60 s target)
 OWN_AIM = 0.85
+#: tetrahedra a tetrahedron of fTetWild's becomes, all bisected at their longest edge and their
+#: neighbours as conformity needs (:func:`rackstress.validity.tet.bisect`; the SO-100 base's
+#: 9,298: 39,964, 4.30): where 8 times as many would exceed the budget, the second FE size
+#: bisects them instead (where all would, as many as fit: :func:`_bisect_within`), and
+#: fTetWild runs once (a coarser second run was 17–24 s of the base's 59–72 s of CPU)
+BISECT_GROWTH = 4.3
+#: more of fTetWild's own tetrahedra than this share of the budget are made again, coarser
+#: (aiming at :data:`OWN_AIM` of it once bisected): the second FE size could bisect only
+#: about half of them or fewer. Up to it fTetWild runs once: the fixed jaw's 13,398, of which
+#: those on the surface and the largest are bisected, within the budget
+OWN_MOST = 0.3
 #: fTetWild's envelope, × the edge length asked: its surface stays this close to the file's
 #: (the fixed jaw at edge 2.47 mm: 0.49 mm, a third of its particles' spacing)
 ENVELOPE = 0.2
@@ -402,16 +415,58 @@ def enclosed_volume(V: np.ndarray, F: np.ndarray) -> float:
     return float(np.einsum("ij,ij->i", V[F[:, 0]], np.cross(V[F[:, 1]], V[F[:, 2]])).sum() / 6)
 
 
-def own_tetrahedra(own) -> tuple[np.ndarray, np.ndarray]:
-    """fTetWild's own tetrahedra (``clean_surface``'s third item) as (p 3×N, t 4×M), each cut
-    into 8 where its surface was cut in four (the second FE size): the FE mesh where gmsh
-    cannot fill fTetWild's surface."""
+def own_tetrahedra(own) -> tuple[np.ndarray, np.ndarray, str]:
+    """fTetWild's own tetrahedra (``clean_surface``'s third item) as (p 3×N, t 4×M, how they
+    were cut), the FE mesh where gmsh cannot fill fTetWild's surface. Where its surface was
+    cut in four (the second FE size), each is cut into 8 (edges halved), or where 8 times as
+    many would exceed :data:`FE_ELEMENTS`, bisected at its longest edge (about
+    :data:`BISECT_GROWTH` times as many, edges about 1/1.6 as long)."""
     X, t, finer = own
+    how = ""
     if finer:
-        from rackstress.validity.tet import refine
+        from rackstress.validity.tet import bisect, refine
 
-        X, t = refine(X, t)
-    return np.ascontiguousarray(X.T), np.ascontiguousarray(t.T)
+        n = len(t)
+        if 8 * n <= FE_ELEMENTS:
+            X, t = refine(X, t)
+            how = ", each cut into 8"
+        elif BISECT_GROWTH * n <= FE_ELEMENTS:
+            X, t = bisect(X, t)
+            how = ", each bisected at its longest edge"
+        else:
+            X, t = _bisect_within(X, t)
+            how = (f", {len(t) / n:.1f} times as many by bisecting those on the surface "
+                   "(the largest first) within the budget")
+    return np.ascontiguousarray(X.T), np.ascontiguousarray(t.T), how
+
+
+def _bisect_within(X: np.ndarray, t: np.ndarray):
+    """(X, t) with as many tetrahedra bisected at their longest edges as keeps the mesh within
+    :data:`OWN_AIM` × :data:`FE_ELEMENTS`: those with a face on the surface first (the
+    stress and its governing point are there), the largest first, then the inner ones; the
+    count a bisection makes (with the neighbours conformity cuts) is found by trying, at most
+    four times (0.2 s each at 40,000)."""
+    from rackstress.validity.tet import bisect
+
+    n, aim = len(t), OWN_AIM * FE_ELEMENTS
+    faces = np.sort(np.concatenate([t[:, [1, 2, 3]], t[:, [0, 2, 3]], t[:, [0, 1, 3]],
+                                    t[:, [0, 1, 2]]]), axis=1)
+    _, inv, cnt = np.unique(faces, axis=0, return_inverse=True, return_counts=True)
+    outer = np.zeros(n, bool)
+    np.logical_or.at(outer, np.tile(np.arange(n), 4), cnt[inv.ravel()] == 1)
+    order = np.lexsort((-np.abs(tet_volumes(X, t)), ~outer))
+    m = int(max(aim - n, 0) / (BISECT_GROWTH - 1))
+    best = (X, t)
+    for _ in range(4):
+        if m < 1:
+            break
+        Y, u = bisect(X, t, order[:m])
+        if len(u) <= FE_ELEMENTS:
+            best = (Y, u)
+            if len(u) >= 0.9 * aim:
+                break
+        m = min(n, int(m * (aim - n) / max(len(u) - n, 1)))
+    return best
 
 
 def clean_surface(v: np.ndarray, f: np.ndarray, edge: float, coarser: float = 1.0):
@@ -425,10 +480,10 @@ def clean_surface(v: np.ndarray, f: np.ndarray, edge: float, coarser: float = 1.
     FE meshes fill the same shape and their difference is the FE's own convergence.
 
     Returns (vertices k×3, triangles m×3, outward) and fTetWild's own tetrahedra (X, t, and
-    whether the surface was cut: then they are to be cut into 8 too), the mesh where gmsh
-    cannot fill the surface (:func:`surface_mesh`). ``coarser`` > 1 makes the file's surface
-    again, its edges that many times the last one's, its envelope the same (its own
-    tetrahedra then fit the budget when cut into 8)."""
+    whether the surface was cut: then they are to be cut too, :func:`own_tetrahedra`), the
+    mesh where gmsh cannot fill the surface (:func:`surface_mesh`). ``coarser`` > 1 makes the
+    file's surface again, its edges that many times the last one's, its envelope the same
+    (its own tetrahedra then fit the budget when cut)."""
     import hashlib
     import importlib.util
 
@@ -1412,8 +1467,9 @@ def solve_part(o, spacing, shape, held_x, held_mask, load_x, load_F, E, nu, size
                 how += " inside fTetWild's surface"
                 note = got["surface"]
             elif "fTetWild's own" in got.get("surface", ""):
-                how = f"fTetWild's tetrahedra of {Path(shape.name).name}" + (
-                    ", each cut into 8" if "cut into 8" in got["surface"] else "")
+                cut = got["surface"].split(" (gmsh could not")[0]
+                how = f"fTetWild's tetrahedra of {Path(shape.name).name}" + cut.removeprefix(
+                    "fTetWild's own tetrahedra")
                 note = got["surface"]
         except MemoryError:
             raise

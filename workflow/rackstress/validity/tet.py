@@ -295,6 +295,26 @@ def refine(p: np.ndarray, t: np.ndarray):
     return m.X, np.concatenate([n[:, list(k)] for k in kids])
 
 
+def bisect(p: np.ndarray, t: np.ndarray, marked: np.ndarray | None = None):
+    """Each tetrahedron (or each of ``marked``, indices) bisected at its longest edge, and its
+    neighbours as conformity needs (scikit-fem's ``MeshTet.refined`` of those elements:
+    longest-edge bisection): (p N'×3, t M'×4). All of them: about 4.3 times as many
+    tetrahedra (fTetWild's 9,298 of the SO-100 base: 39,964 in 0.2 s; none below quality
+    0.04), edges about 1/1.6 as long — a finer mesh between the same one and :func:`refine`'s
+    8 times as many.
+
+    >>> p = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
+    >>> q, u = bisect(p, np.array([[0, 1, 2, 3]]))
+    >>> len(u) > 1, round(float(Tet2(q, u).vol.sum()), 6)
+    (True, 0.166667)
+    """
+    from skfem import MeshTet
+
+    m = MeshTet(np.ascontiguousarray(p.T, float), np.ascontiguousarray(t.T, np.int32))
+    r = m.refined(np.arange(m.t.shape[1]) if marked is None else np.asarray(marked, np.int32))
+    return np.asarray(r.p.T, float), np.asarray(r.t.T, np.int64)
+
+
 def _sym6(g: np.ndarray) -> np.ndarray:
     """Symmetric parts of gradients g[..., i, k] as (…, 6): xx yy zz xy xz yz."""
     return np.stack([g[..., 0, 0], g[..., 1, 1], g[..., 2, 2],
