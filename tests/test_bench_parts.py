@@ -35,3 +35,23 @@ def test_bench_parts_rows_for_settled_and_refused(tmp_path):
     md = (tmp_path / "out" / "parts.md").read_text()
     assert "finger-edu-lower-link" in md and "so100-base" in md and "refused (exit 2)" in md
     assert json.loads((tmp_path / "out" / "parts.json").read_text())["parts"] == 2
+
+
+def test_parts_page_says_ftetwilds_edge_not_a_grading():
+    """An FE mesh on fTetWild's surface is not graded: parts.md gives the edge fTetWild was
+    asked for and its envelope (``fea.json`` → ``fe``), a gmsh-remeshed one its grading."""
+    from pathlib import Path
+
+    data = json.loads((Path(__file__).parents[1] / "docs" / "benchmarks" / "parts.json")
+                      .read_text())
+    rows = {r["part"]: r for r in data["rows"]}
+    rows["so100-base"].update(fea_ftetwild_edge=5.73, fea_ftetwild_envelope=0.498)
+    rows["solo12-hip"].update(fea_budget={"raised": True, "near_size": 2.29,
+                                          "near_size_wanted": 1.12, "elements": 50_000})
+    rows["solo12-hip"].pop("fea_ftetwild_edge", None)
+    md = parts.markdown(data)
+    base = next(x for x in md.splitlines() if x.startswith("* **so100-base**"))
+    assert "fTetWild's surface at edges of 5.73 mm (within 0.498 mm of the file's), not " \
+           "graded" in base and "graded to" not in base
+    hip = next(x for x in md.splitlines() if x.startswith("* **solo12-hip**"))
+    assert "graded to 2.29 mm, not 1.12" in hip

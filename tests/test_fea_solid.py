@@ -245,6 +245,12 @@ def test_a_part_gmsh_cannot_reparametrize_is_meshed_inside_ftetwilds_surface():
     p2, t2 = surface_mesh(v, f, 3.2, near_size=2.2, info=info2, reparametrize=False)
     assert "fTetWild" in info2["surface"] and t2.shape[1] > t.shape[1]
     assert _tet_volume(p2, t2) == pytest.approx(vol, rel=1e-9)
+    # the edge fTetWild was asked for, said (fea.json → fe): 3.2, above the budget's
+    # √(4 · 19,686 / (√3 · 4,808)) = 3.08 mm by hand, its envelope 0.2 × 3.2; the second
+    # size cuts the same surface, so it says the same
+    for got in (info, info2):
+        assert got["ftetwild_edge"] == pytest.approx(3.2)
+        assert got["ftetwild_envelope"] == pytest.approx(0.64)
 
 
 def test_without_pytetwild_a_part_gmsh_cannot_reparametrize_is_filled_inside_its_own_facets():

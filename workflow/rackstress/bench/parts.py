@@ -127,7 +127,9 @@ def case(name: str, work: Path, fea: bool = True, sets: dict | None = None, echo
                        fea_peak_ratio=ag.get("peak_ratio"), fea_mesh=fj.get("mesh"),
                        fea_note=fj.get("note"), fea_tetrahedra=fj["fe"].get("tetrahedra"),
                        fea_governing_ratio=gov.get("ratio"), fea_moved=gov.get("moved"),
-                       fea_budget=fj.get("fe_budget"), fea_quality=fj.get("fe_quality"))
+                       fea_budget=fj.get("fe_budget"), fea_quality=fj.get("fe_quality"),
+                       fea_ftetwild_edge=fj["fe"].get("ftetwild_edge"),
+                       fea_ftetwild_envelope=fj["fe"].get("ftetwild_envelope"))
         else:
             row["fea_error"] = short(_error_of(err))
         row["fea_s"] = time.perf_counter() - t0
@@ -257,7 +259,10 @@ def markdown(data) -> str:
             b = r.get("fea_budget") or {}
             out.append(f"* **{r['part']}**: {r['fea_mesh']}, {fmt(r.get('fea_tetrahedra'), 6)} "
                        "tetrahedra"
-                       + (f"; graded to {fmt(b['near_size'])} mm, not {fmt(b['near_size_wanted'])}"
+                       + (f"; fTetWild's surface at edges of {fmt(r['fea_ftetwild_edge'])} mm "
+                          f"(within {fmt(r['fea_ftetwild_envelope'])} mm of the file's), not "
+                          "graded" if r.get("fea_ftetwild_edge") else
+                          f"; graded to {fmt(b['near_size'])} mm, not {fmt(b['near_size_wanted'])}"
                           f", within the budget of {b['elements']:,}" if b.get("raised") else "")
                        + (f"; the FE's governing stress moved {100 * r['fea_moved']:.1f} % from "
                           "the coarser FE mesh" if r.get("fea_moved") is not None else "")

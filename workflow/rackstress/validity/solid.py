@@ -227,7 +227,8 @@ def surface_mesh(vertices: np.ndarray, faces: np.ndarray, size: float, near=None
     Now such a surface is first rebuilt by fTetWild (:func:`clean_surface`, edges
     ``near_size``) and gmsh fills that; the file's own triangles remain the way where
     pytetwild is not installed or fails.
-    ``info`` (a dict) receives ``surface``: which way was taken; ``reparametrize=False``
+    ``info`` (a dict) receives ``surface``: which way was taken (and fTetWild's edge and
+    envelope where it made the surface, :func:`clean_surface`); ``reparametrize=False``
     goes that way at once (the FE check's second size, where the first could not)."""
     v = np.asarray(vertices, float)
     f = drop_slivers(v, faces)
@@ -259,7 +260,8 @@ def surface_mesh(vertices: np.ndarray, faces: np.ndarray, size: float, near=None
     else:
         why = f"{int(left.sum())} tiny facets side by side"
     try:
-        V, F, own = clean_surface(v, f, near_size if near_size and near_size < size else size)
+        V, F, own = clean_surface(v, f, near_size if near_size and near_size < size else size,
+                                  info=info)
     except ImportError:       # no pytetwild (the fem extra installs it): the file's facets
         pass
     except Exception as exc:  # noqa: BLE001 - fTetWild's own error: said, then the file's
@@ -284,7 +286,7 @@ def surface_mesh(vertices: np.ndarray, faces: np.ndarray, size: float, near=None
                 # (the fixed jaw's 13,398 cut into 8 made 107,184, 62.5 s of CPU and 1.89 GB)
                 try:
                     own = clean_surface(v, f, size, coarser=(
-                        BISECT_GROWTH * n / (OWN_AIM * FE_ELEMENTS)) ** (1 / 3))[2]
+                        BISECT_GROWTH * n / (OWN_AIM * FE_ELEMENTS)) ** (1 / 3), info=info)[2]
                 except Exception as err:  # noqa: BLE001 - fTetWild's own words: say them
                     why = f"{why}; fTetWild failed at a coarser size: {err}"
                     own = None
@@ -469,7 +471,8 @@ def _bisect_within(X: np.ndarray, t: np.ndarray):
     return best
 
 
-def clean_surface(v: np.ndarray, f: np.ndarray, edge: float, coarser: float = 1.0):
+def clean_surface(v: np.ndarray, f: np.ndarray, edge: float, coarser: float = 1.0,
+                  info: dict | None = None):
     """A closed surface of well-shaped triangles around the volume of (v, f), for a file's
     surface gmsh cannot reparametrize: the boundary of fTetWild's tetrahedra (Hu et al., "Fast
     Tetrahedral Meshing in the Wild", 2020; ``pytetwild``), edges about ``edge``, within
@@ -483,7 +486,9 @@ def clean_surface(v: np.ndarray, f: np.ndarray, edge: float, coarser: float = 1.
     whether the surface was cut: then they are to be cut too, :func:`own_tetrahedra`), the
     mesh where gmsh cannot fill the surface (:func:`surface_mesh`). ``coarser`` > 1 makes the
     file's surface again, its edges that many times the last one's, its envelope the same
-    (its own tetrahedra then fit the budget when cut)."""
+    (its own tetrahedra then fit the budget when cut). ``info`` (a dict) receives
+    ``ftetwild_edge`` and ``ftetwild_envelope``: the edge fTetWild was asked for (raised to
+    fit the budget; before the second size cuts it) and its envelope."""
     import hashlib
     import importlib.util
 
@@ -513,7 +518,9 @@ def clean_surface(v: np.ndarray, f: np.ndarray, edge: float, coarser: float = 1.
         t[neg] = t[neg][:, [0, 2, 1, 3]]     # fTetWild's come inverted: positive volumes
         _CLEAN.clear()                        # one part at a time
         _CLEAN[key] = (X[used], bi, edge, X, t, envelope)
-    V, F, e, X, t, _ = _CLEAN[key]
+    V, F, e, X, t, envelope = _CLEAN[key]
+    if info is not None:
+        info.update(ftetwild_edge=float(e), ftetwild_envelope=float(envelope))
     finer = e > 1.2 * edge
     if finer:
         import trimesh
@@ -1451,12 +1458,11 @@ def solve_part(o, spacing, shape, held_x, held_mask, load_x, load_F, E, nu, size
     (:func:`check_memory`)."""
     from rackstress.model.regions import Surface
 
-    how, note = "cells", None
+    how, note, got = "cells", None, {}
     h = float(size) if size else SIZE_SPACINGS * spacing
     if isinstance(shape, Surface):
         try:
             pd = shape.polydata
-            got = {}
             p, t = surface_mesh(np.asarray(pd.points), np.asarray(pd.regular_faces), h,
                                 near, near_size, info=got, reparametrize=reparametrize)
             how = f"gmsh tetrahedra of {Path(shape.name).name}"
@@ -1499,6 +1505,9 @@ def solve_part(o, spacing, shape, held_x, held_mask, load_x, load_F, E, nu, size
             f"{memory_needed(t.shape[1]) / 2**30:.2f} GB was expected). Reduce it with a "
             f"coarser FE mesh (--size {1.3 * h:.3g} or more) or free memory") from None
     sol.info["size"] = h
+    if "fTetWild" in how and "ftetwild_edge" in got:      # fTetWild's surface, not graded
+        sol.info.update(ftetwild_edge=got["ftetwild_edge"],
+                        ftetwild_envelope=got["ftetwild_envelope"])
     return sol, how, note, forces, fixed
 
 
