@@ -312,11 +312,10 @@ FILL_TOL = 1e-3
 #: are filled (measured: the fixed jaw 0.9953–0.9972, the SO-100 base's union 0.971–0.991;
 #: its four bodies as the file has them, touching face to face, once 0.918: a body lost)
 TETWILD_VOLUME_TOL = 0.03
-#: fTetWild's own tetrahedra too many to bisect at the second FE size (:data:`OWN_MOST`)
-#: are made again, coarser, aiming at this share of the budget once bisected, which
-#: :func:`_bisect_within` also aims at
-#: (at 1.25 × the budget the SO-100 base's 62,232 took 65.2 s of CPU under load 3.5, over the
-#: 60 s target)
+#: the share of the budget of tetrahedra the second FE size aims at where fTetWild's own are
+#: bisected in part (:func:`_bisect_within`), and fTetWild's coarser rebuild once bisected
+#: (:data:`OWN_MOST`): at 1.25 × the budget the SO-100 base's 62,232 took 65.2 s of CPU under
+#: load 3.5, over the 60 s target
 OWN_AIM = 0.85
 #: tetrahedra a tetrahedron of fTetWild's becomes, all bisected at their longest edge and their
 #: neighbours as conformity needs (:func:`rackstress.validity.tet.bisect`; the SO-100 base's
@@ -438,7 +437,8 @@ def own_tetrahedra(own) -> tuple[np.ndarray, np.ndarray, str]:
         else:
             X, t = _bisect_within(X, t)
             how = (f", {len(t) / n:.1f} times as many by bisecting those on the surface "
-                   "(the largest first) within the budget")
+                   "(the largest first) within the budget" if len(t) > n else
+                   ", not cut (no bisection of them fitted the budget)")
     return np.ascontiguousarray(X.T), np.ascontiguousarray(t.T), how
 
 

@@ -311,7 +311,12 @@ def bisect(p: np.ndarray, t: np.ndarray, marked: np.ndarray | None = None):
     from skfem import MeshTet
 
     m = MeshTet(np.ascontiguousarray(p.T, float), np.ascontiguousarray(t.T, np.int32))
-    r = m.refined(np.arange(m.t.shape[1]) if marked is None else np.asarray(marked, np.int32))
+    state = np.random.get_state()     # scikit-fem seeds numpy's global generator: put it back
+    try:
+        r = m.refined(np.arange(m.t.shape[1]) if marked is None
+                      else np.asarray(marked, np.int32))
+    finally:
+        np.random.set_state(state)
     return np.asarray(r.p.T, float), np.asarray(r.t.T, np.int64)
 
 
