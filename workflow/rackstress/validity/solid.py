@@ -226,7 +226,11 @@ def surface_mesh(vertices: np.ndarray, faces: np.ndarray, size: float, near=None
     the thin triangles it leaves. Tiny facets side by side are welded first (:func:`weld`).
     Now such a surface is first rebuilt by fTetWild (:func:`clean_surface`, edges
     ``near_size``) and gmsh fills that; the file's own triangles remain the way where
-    pytetwild is not installed or fails.
+    pytetwild is not installed or fails. Zero-area triangles side by side that neither
+    :func:`drop_slivers` nor :func:`weld` removes go to fTetWild at once (it takes the file as
+    a soup of triangles): before, gmsh refused them and the FE check fell back on the cells
+    (a trial surface of the SO-100 base: 196 s of CPU, 10.7 GB); without pytetwild they are
+    a ``ValueError`` naming where.
     ``info`` (a dict) receives ``surface``: which way was taken (and fTetWild's edge and
     envelope where it made the surface, :func:`clean_surface`); ``reparametrize=False``
     goes that way at once (the FE check's second size, where the first could not)."""
@@ -239,16 +243,19 @@ def surface_mesh(vertices: np.ndarray, faces: np.ndarray, size: float, near=None
         if g is not None:
             v, f = w, drop_slivers(w, g)
             left = _twice_areas(v, f) <= tiny
+    flat_why = None
     if left.any():
         e = v[f[left]] - v[np.roll(f[left], 1, axis=1)]
         flat = _twice_areas(v, f[left]) <= FLAT * (e ** 2).sum(axis=2).max(axis=1)
         if flat.any():    # three collinear points: no tetrahedron can have it as a face
             at = np.round(v[f[left][flat][0]].mean(axis=0), 4).tolist()
-            raise ValueError(f"{int(flat.sum())} zero-area triangle(s) side by side remain "
-                             f"(e.g. at {at}), which gmsh cannot mesh")
+            flat_why = (f"{int(flat.sum())} zero-area triangle(s) side by side remain (e.g. "
+                        f"at {at}), which gmsh cannot mesh")
     info = {} if info is None else info
     why = None
-    if not reparametrize:
+    if flat_why:          # fTetWild takes a triangle soup: its surface has none of them
+        why = flat_why
+    elif not reparametrize:
         why = "it could not at the other FE size"
     elif not left.any():   # gmsh's classification did not end in 10 minutes on a tiny pair
         try:
@@ -295,6 +302,8 @@ def surface_mesh(vertices: np.ndarray, faces: np.ndarray, size: float, near=None
                 info["surface"] = (f"fTetWild's own tetrahedra{cut} {tw}; gmsh could not "
                                    f"fill fTetWild's surface: {exc}")
                 return p, t
+    if flat_why:          # inside the file's own triangles gmsh cannot mesh them either
+        raise ValueError(why)
     info["surface"] = (f"the volume inside the file's own triangles (gmsh could not "
                        f"reparametrize the surface: {why})")
     return _gmsh_volume(v, f, size, None, None, reparametrize=False)
