@@ -232,7 +232,8 @@ def surface_mesh(vertices: np.ndarray, faces: np.ndarray, size: float, near=None
     (a trial surface of the SO-100 base: 196 s of CPU, 10.7 GB); without pytetwild they are
     a ``ValueError`` naming where.
     ``info`` (a dict) receives ``surface``: which way was taken (and fTetWild's edge and
-    envelope where it made the surface, :func:`clean_surface`); ``reparametrize=False``
+    envelope where it made the surface, :func:`clean_surface`; ``cut``: how its own
+    tetrahedra were cut, :func:`own_tetrahedra`); ``reparametrize=False``
     goes that way at once (the FE check's second size, where the first could not)."""
     v = np.asarray(vertices, float)
     f = drop_slivers(v, faces)
@@ -301,6 +302,7 @@ def surface_mesh(vertices: np.ndarray, faces: np.ndarray, size: float, near=None
                 p, t, cut = own_tetrahedra(own)
                 info["surface"] = (f"fTetWild's own tetrahedra{cut} {tw}; gmsh could not "
                                    f"fill fTetWild's surface: {exc}")
+                info["cut"] = cut
                 return p, t
     if flat_why:          # inside the file's own triangles gmsh cannot mesh them either
         raise ValueError(why)
@@ -395,15 +397,21 @@ def open_edges(F: np.ndarray) -> int:
     return int((n != 2).sum())
 
 
+def _faces_once(t: np.ndarray):
+    """The four faces of each tetrahedron t (M×4), face k of the 4M opposite corner k // M
+    of tetrahedron k % M, and which of them belong to that tetrahedron only (the boundary)."""
+    faces = np.concatenate([t[:, [1, 2, 3]], t[:, [0, 3, 2]], t[:, [0, 1, 3]], t[:, [0, 2, 1]]])
+    _, inv, cnt = np.unique(np.sort(faces, axis=1), axis=0, return_inverse=True,
+                            return_counts=True)
+    return faces, cnt[inv.ravel()] == 1
+
+
 def boundary_triangles(X: np.ndarray, t: np.ndarray):
     """The boundary of the tetrahedra t (M×4) of the points X (N×3): the faces that belong to
     one tetrahedron only, each turned to face away from its fourth corner (outwards).
     Returns (the points they use, k; the triangles m×3 numbered over those points)."""
-    faces = np.concatenate([t[:, [1, 2, 3]], t[:, [0, 3, 2]], t[:, [0, 1, 3]], t[:, [0, 2, 1]]])
+    faces, once = _faces_once(t)
     opposite = np.concatenate([t[:, 0], t[:, 1], t[:, 2], t[:, 3]])
-    _, inv, cnt = np.unique(np.sort(faces, axis=1), axis=0, return_inverse=True,
-                            return_counts=True)
-    once = cnt[inv.ravel()] == 1
     b, d = faces[once], opposite[once]
     n = np.cross(X[b[:, 1]] - X[b[:, 0]], X[b[:, 2]] - X[b[:, 0]])
     inward = np.einsum("ij,ij->i", n, X[d] - X[b[:, 0]]) > 0
@@ -460,11 +468,7 @@ def _bisect_within(X: np.ndarray, t: np.ndarray):
     from rackstress.validity.tet import bisect
 
     n, aim = len(t), OWN_AIM * FE_ELEMENTS
-    faces = np.sort(np.concatenate([t[:, [1, 2, 3]], t[:, [0, 2, 3]], t[:, [0, 1, 3]],
-                                    t[:, [0, 1, 2]]]), axis=1)
-    _, inv, cnt = np.unique(faces, axis=0, return_inverse=True, return_counts=True)
-    outer = np.zeros(n, bool)
-    np.logical_or.at(outer, np.tile(np.arange(n), 4), cnt[inv.ravel()] == 1)
+    outer = _faces_once(t)[1].reshape(4, n).any(axis=0)
     order = np.lexsort((-np.abs(tet_volumes(X, t)), ~outer))
     m = int(max(aim - n, 0) / (BISECT_GROWTH - 1))
     best = (X, t)
@@ -1482,9 +1486,7 @@ def solve_part(o, spacing, shape, held_x, held_mask, load_x, load_F, E, nu, size
                 how += " inside fTetWild's surface"
                 note = got["surface"]
             elif "fTetWild's own" in got.get("surface", ""):
-                cut = got["surface"].split(" (gmsh could not")[0]
-                how = f"fTetWild's tetrahedra of {Path(shape.name).name}" + cut.removeprefix(
-                    "fTetWild's own tetrahedra")
+                how = f"fTetWild's tetrahedra of {Path(shape.name).name}{got['cut']}"
                 note = got["surface"]
         except MemoryError:
             raise
