@@ -156,14 +156,18 @@ def test_a_run_writes_the_legs_stress_beside_the_dump(tmp_path):
     assert rec["peak"]["step"] == rec["steps"][int(np.argmax(vm.max(axis=1)))]
 
 
-def test_the_physical_scene_walks_as_magpod_small_to_the_bit():
+@pytest.mark.parametrize("plain,physical", [("magpod-small", "magpod-physical-small"),
+                                            ("magpod", "magpod-physical")])
+def test_the_physical_scene_walks_as_its_plain_walk_to_the_bit(plain, physical):
     """magpod-physical-small is magpod-small's scene (groups, operators, phases, dt) under
-    another name: 20 reference-engine steps give the same positions exactly."""
+    another name, and magpod-physical the paper's magpod's: 20 reference-engine steps give the
+    same positions exactly."""
     from rackstress.engines.reference import Reference
     from rackstress.scenes import build
 
     kw = dict(phase_steps=10, sediment_nx=20, sediment_nz=20)
-    a, b = build("magpod-small", **kw), build("magpod-physical-small", **kw)
+    a, b = build(plain, **kw), build(physical, **kw)
+    assert b.name == physical and b.params["physical"] is True
     assert a.operators == b.operators and a.phases == b.phases and a.dt == b.dt
     np.testing.assert_array_equal(a.original_positions(), b.original_positions())
     ra, rb = Reference(a), Reference(b)

@@ -525,8 +525,8 @@ def _finish(summary: dict, out: Path, do_render: bool, progress: bool = True,
 
 
 def _physical(out: Path) -> bool:
-    """Whether the run in ``out`` is a MagPod in physical units (``magpod-physical-small``)
-    that ran to its end."""
+    """Whether the run in ``out`` is a MagPod in physical units (``magpod-physical-small``,
+    ``magpod-physical``) that ran to its end."""
     try:
         rec = json.loads((Path(out) / "scene.json").read_text())
         status = json.loads((Path(out) / "summary.json").read_text()).get("status")
@@ -1568,7 +1568,8 @@ def bench_static(out, quick, scenes):
               help="Iterations a gait phase (the scene's 1200; fewer only for a quick look).")
 def bench_magpod_physical(out, repeats, phase_steps):
     """MagPod in physical units: one gait cycle of magpod-physical-small (its legs' von Mises
-    in MPa, quasi-static per frame) against magpod-small's, as a cost ratio; the mapping, the
+    in MPa, quasi-static per frame) against magpod-small's, and the paper's four cycles of
+    magpod-physical against magpod's, as cost ratios; the mapping, the
     legs' lowest natural frequency against the gait's, a bar against F/A
     (docs/benchmarks/magpod-physical.md, docs/magpod/physical.md)."""
     from rackstress.bench import magpod_physical

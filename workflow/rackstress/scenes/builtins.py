@@ -5,7 +5,8 @@ import inspect
 
 from rackstress.errors import SceneError
 from rackstress.lib.suggest import did_you_mean
-from rackstress.scenes.magpod import magpod, magpod_physical_small, magpod_small
+from rackstress.scenes.magpod import (magpod, magpod_physical, magpod_physical_small,
+                                      magpod_small)
 from rackstress.scenes.plane import plane_bound, plane_rack
 from rackstress.scenes.large import sediment_large
 from rackstress.scenes.validation import cantilever, l_bracket, plate_hole
@@ -17,6 +18,7 @@ BUILDERS = {
     "magpod": magpod,
     "magpod-small": magpod_small,
     "magpod-physical-small": magpod_physical_small,
+    "magpod-physical": magpod_physical,
     "sediment-large": sediment_large,
     # validation cases against linear elasticity (rackstress bench validity)
     "cantilever": cantilever,

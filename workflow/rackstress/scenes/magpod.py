@@ -362,6 +362,26 @@ def magpod_small(sediment_nx: int = 56, sediment_nz: int = 36, sediment_back: in
     return scene
 
 
+def _physical(walk, name: str, unit_length_mm: float, leg_material: str, g: float,
+              kw: dict) -> Scene:
+    """The scene ``walk()`` builds (a MagPod's walk, in paper units), named ``name`` and marked
+    physical: after the run :mod:`rackstress.stress.legs` reads its legs in MPa under the
+    mapping the three numbers state (checked before the walk is built); ``kw`` the builder's
+    own keywords (``--set`` round-trips)."""
+    for label, v in (("unit_length_mm", unit_length_mm), ("g", g)):
+        if not v > 0:
+            raise SceneError(f"{name}: {label} must be positive, got {v!r}")
+    from rackstress.model.materials import PRESETS
+
+    if leg_material not in PRESETS:
+        raise SceneError(f"{name}: leg_material must be one of "
+                         f"{', '.join(PRESETS)}, got {leg_material!r}")
+    scene = walk()
+    scene.name = name
+    scene.params = dict(kw, physical=True)
+    return scene
+
+
 def magpod_physical_small(unit_length_mm: float = 5.0, leg_material: str = "aluminium",
                           g: float = 9.81, sediment_nx: int = 56, sediment_nz: int = 36,
                           sediment_back: int = 10, phase_steps: int = 1200, cycles: int = 1,
@@ -380,18 +400,33 @@ def magpod_physical_small(unit_length_mm: float = 5.0, leg_material: str = "alum
     >>> sc.name, sc.params["physical"], sc.n_particles
     ('magpod-physical-small', True, 5705)
     """
-    for label, v in (("unit_length_mm", unit_length_mm), ("g", g)):
-        if not v > 0:
-            raise SceneError(f"magpod-physical-small: {label} must be positive, got {v!r}")
-    from rackstress.model.materials import PRESETS
+    kw = dict(locals())
+    def walk():
+        return magpod_small(sediment_nx=sediment_nx, sediment_nz=sediment_nz,
+                            sediment_back=sediment_back, phase_steps=phase_steps,
+                            cycles=cycles, dt=dt)
 
-    if leg_material not in PRESETS:
-        raise SceneError(f"magpod-physical-small: leg_material must be one of "
-                         f"{', '.join(PRESETS)}, got {leg_material!r}")
-    kw = {k: v for k, v in locals().items() if k not in ("label", "v", "PRESETS")}
-    scene = magpod_small(sediment_nx=sediment_nx, sediment_nz=sediment_nz,
-                         sediment_back=sediment_back, phase_steps=phase_steps, cycles=cycles,
-                         dt=dt)
-    scene.name = "magpod-physical-small"
-    scene.params = dict(kw, physical=True)
-    return scene
+    return _physical(walk, "magpod-physical-small", unit_length_mm, leg_material, g, kw)
+
+
+def magpod_physical(unit_length_mm: float = 5.0, leg_material: str = "aluminium",
+                    g: float = 9.81, sediment_nx: int = 300, sediment_nz: int = 100,
+                    sediment_back: int = 25, phase_steps: int = 1200, cycles: int = 4,
+                    dt: float = 0.01) -> Scene:
+    """The paper's MagPod in physical units: :func:`magpod`'s whole walk (33,689 particles,
+    four gait cycles on the full sediment, paper units, unchanged), its legs' von Mises in MPa
+    per frame under the mapping of :func:`magpod_physical_small` (docs/magpod/physical.md).
+
+    Examples
+    --------
+    >>> sc = magpod_physical()
+    >>> sc.name, sc.params["physical"], sc.n_particles
+    ('magpod-physical', True, 33689)
+    """
+    kw = dict(locals())
+    def walk():
+        return magpod(sediment_nx=sediment_nx, sediment_nz=sediment_nz,
+                      sediment_back=sediment_back, phase_steps=phase_steps, cycles=cycles,
+                      dt=dt)
+
+    return _physical(walk, "magpod-physical", unit_length_mm, leg_material, g, kw)

@@ -418,7 +418,8 @@ def leg_stress(scene, frames, mapping: PhysicalMapping | None = None,
     Parameters
     ----------
     scene : Scene
-        A MagPod (``magpod``, ``magpod-small``, ``magpod-physical-small``).
+        A MagPod (``magpod``, ``magpod-small``, ``magpod-physical-small``,
+        ``magpod-physical``).
     frames : iterable of (int, (n, 3) array)
         The dumped states (paper units), e.g. :func:`rackstress.engines.dumpio.read_frames`.
     mapping : PhysicalMapping, optional
