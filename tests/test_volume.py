@@ -261,3 +261,53 @@ def test_a_cube_under_pressure_has_the_bulk_modulus(tmp_path):
     assert res.settled
     K = E / (3 * (1 - 2 * 0.45))
     assert S / -np.trace(_grad(sc, res.p)) == pytest.approx(K, rel=0.05)
+
+
+SHEET = """
+name = "sheet"
+units = "mm-N-s"
+analysis = "static"
+[[group]]
+name = "sheet"
+fill = {{ box = {{ min = [0, 0, 0], max = [30, 10, {a}] }} }}
+spacing = {a}
+material = {{ E = 70e9, nu = {nu}, density = 2700 }}
+poisson = "material"
+[[support]]            # rollers on x = 0, the middle line held across
+on = "sheet"
+where = {{ box = {{ min = [-1, -1, -1], max = [{h}, 11, 11] }} }}
+fix = ["x"]
+[[support]]
+on = "sheet"
+where = {{ box = {{ min = [-1, {c0}, -1], max = [{h}, {c1}, 11] }} }}
+fix = ["y"]
+[[support]]            # one layer: every particle held out of its plane
+on = "sheet"
+where = {{ box = {{ min = [-1, -1, -1], max = [31, 11, 11] }} }}
+fix = ["z"]
+[[load]]
+on = "sheet"
+where = {{ box = {{ min = [{e}, -1, -1], max = [31, 11, 11] }} }}
+force = [{F}, 0, 0]
+"""
+
+
+@pytest.mark.parametrize("nu", [0.0, 0.33, 0.45])
+def test_a_sheet_one_layer_thick_held_out_of_its_plane_is_in_plane_stress(nu, tmp_path):
+    """A 30 × 10 mm sheet one layer thick (spacing 1), every particle held in z (its
+    out-of-plane motion: a membrane), 10 MPa along x: plane stress, E_eff = σ/ε_xx within 1 %
+    of E and ν_eff = −ε_yy/ε_xx within 0.005 of ν (plane strain would read E/(1 − ν²) and
+    ν/(1 − ν): 1.12·E and 0.49 at ν = 0.33). The support holds no face of the sheet: there is
+    none across z, no neighbour on either side (model/volume.py build)."""
+    a = 1.0
+    sc = _scene(tmp_path, SHEET.format(a=a, nu=nu, h=a / 2, c0=5 - a / 2 - 1e-6,
+                                       c1=5 + a / 2 + 1e-6, e=30 - a / 2, F=10.0 * 10 * a))
+    res = solve(sc)
+    assert res.settled
+    o = sc.original_positions()
+    u = res.p - o
+    gauge = (o[:, 0] > 10) & (o[:, 0] < 20)
+    exx = np.polyfit(o[gauge, 0], u[gauge, 0], 1)[0]
+    eyy = np.polyfit(o[gauge, 1], u[gauge, 1], 1)[0]
+    assert 10.0 / exx == pytest.approx(E, rel=0.01)
+    assert -eyy / exx == pytest.approx(nu, abs=0.005)

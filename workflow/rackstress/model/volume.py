@@ -146,7 +146,9 @@ def build(o: np.ndarray, i: np.ndarray, j: np.ndarray, q: np.ndarray, spacing: f
     directions) with rest lengths² ``q``, on the cubic lattice of ``spacing``, cells ``phi``
     (n, 3, in spacings) and moduli ``coef`` = (c₁, c₂, c₃, c_μ) (module doc). ``fixed`` (n, 3):
     the directions a support holds each particle in; an overhang across a held direction
-    cannot contract there (plane strain: it counts as spanned in the modulus)."""
+    cannot contract there (plane strain: it counts as spanned in the modulus) — unless the
+    particle has no neighbour along it at all (one layer: the support only removes the
+    sheet's out-of-plane motion, the sheet stays in plane stress)."""
     import scipy.sparse as sp
 
     n, a = len(o), float(spacing)
@@ -162,6 +164,10 @@ def build(o: np.ndarray, i: np.ndarray, j: np.ndarray, q: np.ndarray, spacing: f
     s = 0.5 * count
     h = np.maximum(np.asarray(phi, float) - s, 0.0)
     held = np.zeros((n, 3), bool) if fixed is None else np.asarray(fixed, bool)
+    # a support across an axis along which the particle has no neighbour at all (a sheet one
+    # layer thick held in its normal) holds no face: it only takes the sheet's out-of-plane
+    # motion, and both overhangs stay free to contract (plane stress, not plane strain)
+    held = held & (count > 0)
     key = i * 27 + direction(g)
     order = np.argsort(key, kind="stable")
     skey = key[order]
