@@ -108,6 +108,7 @@ def case(name: str, work: Path, fea: bool = True, sets: dict | None = None, echo
     if peak is None:
         peak = (stress.get("peak") or {}).get("value")
     row["peak_mpa"], row["peak_kind"] = peak, ("governing" if gov else "peak")
+    row["peak_read"] = (gov or {}).get("read")         # patch fit or notch reading
     row["status"] = {0: "settled", 6: "not settled (exit 6)"}.get(
         r.returncode, f"failed (exit {r.returncode})")
     if r.returncode not in (0, 6):
@@ -127,6 +128,7 @@ def case(name: str, work: Path, fea: bool = True, sets: dict | None = None, echo
                        fea_peak_ratio=ag.get("peak_ratio"), fea_mesh=fj.get("mesh"),
                        fea_note=fj.get("note"), fea_tetrahedra=fj["fe"].get("tetrahedra"),
                        fea_governing_ratio=gov.get("ratio"), fea_moved=gov.get("moved"),
+                       fea_governing_mpa=gov.get("value"),
                        fea_budget=fj.get("fe_budget"), fea_quality=fj.get("fe_quality"),
                        fea_ftetwild_edge=fj["fe"].get("ftetwild_edge"),
                        fea_ftetwild_envelope=fj["fe"].get("ftetwild_envelope"))
@@ -268,7 +270,12 @@ def markdown(data) -> str:
                           "the coarser FE mesh" if r.get("fea_moved") is not None else "")
                        + (f"; the particles at the FE's governing point: "
                           f"{fmt(r['fea_governing_ratio'])} of the FE's"
-                          if r.get("fea_governing_ratio") is not None else ""))
+                          if r.get("fea_governing_ratio") is not None else "")
+                       + (f"; the run's governing stress ({r.get('peak_read') or 'patch'} "
+                          f"reading) over the FE's: "
+                          f"{fmt(r['peak_mpa'] / r['fea_governing_mpa'])}"
+                          if r.get("fea_governing_mpa") and r.get("peak_mpa") is not None
+                          and r.get("peak_kind") == "governing" else ""))
         out.append("")
     notes = [r for r in data["rows"] if r.get("reason") or r.get("fea_error")]
     if notes:

@@ -155,23 +155,39 @@ def sharp_edges(vertices, faces, spacing: float, sharp_deg: float = SHARP_DEG,
     >>> sharp_edges(box.vertices, box.faces, 0.5)[0].shape        # a box is convex: none
     (0, 2, 3)
     """
+    E, _, turning, _ = concave_turning(vertices, faces, spacing, sharp_deg, window)
+    sharp = np.degrees(turning) >= sharp_deg - 1e-9
+    return E[sharp], np.degrees(turning[sharp])
+
+
+def concave_turning(vertices, faces, spacing: float, sharp_deg: float = SHARP_DEG,
+                    window: float = WINDOW):
+    """Every concave edge of a closed triangle surface with how far the surface turns across
+    a window of ``window``·spacing about it (:func:`sharp_edges`' measure; an edge that turns
+    by ``sharp_deg`` on its own counts only itself): (segments (c, 2, 3), own angles (c,),
+    turning (c,), both in radians, unit normals into the part (c, 3)). A fillet or hole of
+    radius r turns by about window·spacing/r: its radius at the scale of the window."""
     import trimesh
     from scipy.spatial import cKDTree
 
     tm = trimesh.Trimesh(np.asarray(vertices, float), np.asarray(faces, np.int64),
                          process=True, validate=False)
+    none = (np.zeros((0, 2, 3)), np.zeros(0), np.zeros(0), np.zeros((0, 3)))
     if len(tm.faces) < 4:
-        return np.zeros((0, 2, 3)), np.zeros(0)
+        return none
     ang = np.asarray(tm.face_adjacency_angles, float)
     concave = ~np.asarray(tm.face_adjacency_convex, bool) & (ang > math.radians(0.5))
     if not concave.any():
-        return np.zeros((0, 2, 3)), np.zeros(0)
+        return none
     E = np.asarray(tm.vertices)[tm.face_adjacency_edges[concave]]        # (c, 2, 3)
     th = ang[concave]
+    fn = np.asarray(tm.face_normals)[tm.face_adjacency[concave]]         # (c, 2, 3)
+    inward = -(fn[:, 0] + fn[:, 1])
+    inward /= np.maximum(np.linalg.norm(inward, axis=1), 1e-300)[:, None]
     a, b = E[:, 0], E[:, 1]
     L = np.linalg.norm(b - a, axis=1)
     ok = L > 0
-    E, th, a, b, L = E[ok], th[ok], a[ok], b[ok], L[ok]
+    E, th, a, b, L, inward = E[ok], th[ok], a[ok], b[ok], L[ok], inward[ok]
     t = (b - a) / L[:, None]
     m = 0.5 * (a + b)
     half = 0.5 * window * float(spacing)
@@ -206,8 +222,7 @@ def sharp_edges(vertices, faces, spacing: float, sharp_deg: float = SHARP_DEG,
         p = pa[P] + w[:, None] * (pb[P] - pa[P])
         near = np.linalg.norm(p - m[I], axis=1) <= half * (1 + 1e-9)
         turning += np.bincount(I[near], weights=th[J[near]], minlength=len(E))
-    sharp = np.degrees(turning) >= sharp_deg - 1e-9
-    return E[sharp], np.degrees(turning[sharp])
+    return E, th, turning, inward
 
 
 def concave_points(vertices, faces, spacing: float) -> np.ndarray:

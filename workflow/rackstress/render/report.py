@@ -230,6 +230,13 @@ def governing_section(stress: dict, headline: bool = True) -> str:
           f"<b>{_e(gov['group'])}</b>{sf}: {_pos(gov)}, iteration {gov['iteration']}.</p>")
         w(f'<p class="note" id="rule">The governing stress is {_e(gov["rule"])} '
           "(docs/stress.md).</p>")
+        if gov.get("read") == "notch":
+            nk = gov["notch"]
+            w(f'<p class="note" id="notch">Read on a concave curved face of radius '
+              f"{_num(nk['radius'], 3)} {_e(gov.get('length_units', ''))} by the notch reading, "
+              "a fit of the particles beneath it to a notch's field (docs/stress.md \"The "
+              f"notch reading\"); the patch fit of the particles reads "
+              f"{_num(gov['patch_value'])} {_e(gov['units'])}.</p>")
     sing = stress.get("singular")
     if sing:
         w(f'<p class="singular" id="singular" data-kind="{_e(sing["kind"])}">Singular peak: '

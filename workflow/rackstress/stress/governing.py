@@ -416,6 +416,9 @@ def record(run, fields, zone_override: float | None = None, singular: dict | Non
                    "contact_edges": "contact edge" in s.counts(),
                    "curved_face": curved,
                    "rule": RULE.format(zone=z, unit=length, n=z / spacing)}
+            if (run.scene or {}).get("analysis") == "static":
+                _with_notch(gov, notch_peak(run, name, spacing, s, z, k), o,
+                            run.data.ids[part.index], feats, y)
         sp = None
         if sbest is not None:
             k, j, v, kind, dist = sbest
@@ -442,6 +445,23 @@ def record(run, fields, zone_override: float | None = None, singular: dict | Non
     if top is not None:
         out["error"] = default_error(run, top)
     return out
+
+
+def _with_notch(gov: dict, nk: dict | None, o: np.ndarray, ids, feats, y) -> None:
+    """Put the notch reading ``nk`` (:func:`notch_peak`) in ``gov``, and make it the governing
+    stress where it is the larger: the concave face's peak that the particles' patch fit
+    flattens (``"read": "notch"``, the patch's own value kept as ``patch_value``)."""
+    gov["notch"] = nk
+    gov["read"] = "patch"
+    if nk is None or not nk["value"] > gov["value"]:
+        return
+    j = int(nk["index"])
+    gov["patch_value"] = gov["value"]
+    gov.update(value=nk["value"], index=j, particle=int(ids[j]),
+               position=[float(x) for x in o[j]], read_at=list(nk["position"]),
+               near=_near(feats, np.asarray(nk["position"])),
+               safety=(float(y) / nk["value"]) if (y and nk["value"] > 0) else None,
+               read="notch")
 
 
 # --------------------------------------------------------------------------- the error bar
@@ -555,6 +575,12 @@ DEFAULT_ERROR_SLOPE = 0.79
 #: spacing (docs/stress.md "Patch recovery")
 CURVED_ERROR = 0.48
 CURVED_SPACINGS = 2.0
+#: What the notch reading (:func:`notch_peak`), where it is the governing stress, may be off
+#: by: the largest |reading / converged FEA − 1| that ``rackstress bench validity
+#: --concentrations`` measured on its parts with fillets and holes of radius at least
+#: :data:`NOTCH_MIN_RADIUS` spacings (docs/benchmarks/validity-concentrations.md); the
+#: filleted C frame of ``rackstress bench governing`` checks it.
+NOTCH_ERROR = 0.18
 
 
 def curved_near(rundir, name: str, points, spacing: float) -> np.ndarray:
@@ -563,16 +589,13 @@ def curved_near(rundir, name: str, points, spacing: float) -> np.ndarray:
     False where the run has no surface for the part."""
     from scipy.spatial import cKDTree
 
-    from rackstress.lib.runfiles import SINGULAR
     from rackstress.model.singular import concave_points
 
     x = np.asarray(points, float).reshape(-1, 3)
-    try:
-        with np.load(Path(rundir) / SINGULAR, allow_pickle=False) as z:
-            k = [str(v) for v in z["parts"]].index(name)
-            V, F = z[f"surface_{k}_vertices"], z[f"surface_{k}_faces"]
-    except (OSError, KeyError, ValueError):
+    surf = _surface(rundir, name)
+    if surf is None:
         return np.zeros(len(x), bool)
+    V, F = surf
     pts = concave_points(V, F, spacing)
     if not len(pts):
         return np.zeros(len(x), bool)
@@ -584,6 +607,85 @@ def near_curved(rundir, name: str, position, spacing: float) -> bool:
     """Whether ``position`` lies within :data:`CURVED_SPACINGS` of a concave edge of the part's
     surface (:func:`curved_near` of one point)."""
     return bool(curved_near(rundir, name, position, spacing)[0])
+
+
+#: The notch reading (:mod:`rackstress.stress.notch`) reads a concave curved face whose radius
+#: is at least this many spacings: below it the face is two or three particles across, its
+#: staircase steps one particle each, and the tube's samples are the steps' (the filleted C
+#: frame at 1 mm, radius 2 spacings: 1.16 of FEA's peak, measured while building this).
+NOTCH_MIN_RADIUS = 2.5
+#: ... each face point's reading the median of those within this many spacings of it.
+NOTCH_SMOOTH = 0.5
+#: ... and no face point within this many spacings of a particle clamped, loaded or pressed
+#: by a contact: the face bears a load there, it is no free notch.
+NOTCH_CLEAR = 2.0
+
+
+def _surface(rundir, name: str):
+    """The part's closed surface from ``singular.npz`` (vertices, faces), or None."""
+    from rackstress.lib.runfiles import SINGULAR
+
+    try:
+        with np.load(Path(rundir) / SINGULAR, allow_pickle=False) as z:
+            k = [str(v) for v in z["parts"]].index(name)
+            return z[f"surface_{k}_vertices"], z[f"surface_{k}_faces"]
+    except (OSError, KeyError, ValueError):
+        return None
+
+
+def notch_peak(run, name: str, spacing: float, singular: Singular, zone_: float,
+               frame: int) -> dict | None:
+    """The largest notch reading (:mod:`rackstress.stress.notch`) of the part's concave curved
+    faces of radius at least :data:`NOTCH_MIN_RADIUS` spacings, at least ``zone_`` from every
+    singular point and :data:`NOTCH_CLEAR` spacings from whatever bears on the part (a clamp,
+    a load, a contact's pressure), in ``frame``: each face point's reading the median of those
+    within :data:`NOTCH_SMOOTH` spacings of it (one tube's samples fall on the staircase's
+    steps); None
+    where the part has no such face or no reading. The particles' ``continuum`` stress
+    (at their centres, :class:`~rackstress.stress.measures.ParticleStress`) of that frame is
+    what is fitted."""
+    from scipy.spatial import cKDTree
+
+    from rackstress.stress import notch
+    from rackstress.stress.measures import ParticleStress
+
+    surf = _surface(run.rundir, name)
+    if surf is None:
+        return None
+    a = float(spacing)
+    pts, rho, nrm = notch.faces(surf[0], surf[1], a)
+    keep = (rho >= NOTCH_MIN_RADIUS * a) & (singular.distance(pts)[0] >= zone_) \
+        if len(pts) else np.zeros(0, bool)
+    if not keep.any():
+        return None
+    pts, rho, nrm = pts[keep], rho[keep], nrm[keep]
+    part = run.parts[name]
+    st = ParticleStress(run, parts=[name], method="continuum")
+    st.run(frames=[int(frame)])
+    vm = np.asarray(st.results.von_mises[0])[part.index]
+    o = run.o[part.index]
+    # a face that something bears on is no free notch: not read within NOTCH_CLEAR of a
+    # particle clamped (held in every direction), loaded or pressed by a contact
+    held, loads = boundary_rows(run)
+    engaged = held.all(axis=1) | np.any(loads != 0.0, axis=1)
+    if "contact_pressure" in st.results:
+        engaged |= np.nan_to_num(np.asarray(st.results.contact_pressure[0])) > 0.0
+    engaged = engaged[part.index]
+    if engaged.any():
+        d, _ = cKDTree(o[engaged]).query(pts)
+        free = d > NOTCH_CLEAR * a
+        pts, rho, nrm = pts[free], rho[free], nrm[free]
+    r = notch.readings(o, vm, pts, rho, nrm, a)
+    ok = np.isfinite(r)
+    if not ok.any():
+        return None
+    pts, rho, r = pts[ok], rho[ok], r[ok]
+    smooth = np.array([np.median(r[n]) for n in
+                       cKDTree(pts).query_ball_point(pts, NOTCH_SMOOTH * a * (1 + 1e-9))])
+    k = int(np.argmax(smooth))
+    j = int(cKDTree(o).query(pts[k])[1])
+    return {"value": float(smooth[k]), "position": [float(x) for x in pts[k]],
+            "radius": float(rho[k]), "index": j, "faces_read": int(len(r))}
 
 
 def band(value: float, relative: float) -> tuple[float, float]:
@@ -645,7 +747,12 @@ def default_error(run, gov: dict) -> dict:
     curved = near_curved(run.rundir, gov["group"], gov["position"], s)
     rel = DEFAULT_ERROR_SLOPE * s / t
     how = f"± {DEFAULT_ERROR_SLOPE:g} × s/t = ± {100 * rel:.2g} %"
-    if curved and CURVED_ERROR > rel:
+    if gov.get("read") == "notch":
+        rel = max(rel, NOTCH_ERROR)
+        how = (f"± {100 * rel:.2g} %, the notch reading's error at a concave curved face of "
+               f"radius {gov['notch']['radius']:.3g} (rackstress bench validity "
+               "--concentrations)")
+    elif curved and CURVED_ERROR > rel:
         rel = CURVED_ERROR
         how = (f"± {100 * rel:.2g} %, the lattice's error at a concave curved face (a fillet or "
                "hole it resolves as steps), whatever the spacing")
@@ -687,6 +794,12 @@ def describe(gov: dict | None, sing: dict | None, error: dict | None,
         if headline:
             lines.append(f"  governing von Mises stress {gov['value']:.4g} {u} in "
                          f"{gov['group']}{sf}: {_where(gov)}")
+        if gov.get("read") == "notch":
+            lines.append(f"    read on a concave curved face of radius "
+                         f"{gov['notch']['radius']:.3g} {gov.get('length_units', '')} by the "
+                         "notch reading (a fit of the "
+                         "particles beneath it to a notch's field: docs/stress.md); the patch "
+                         f"fit of the particles reads {gov['patch_value']:.4g} {u}")
         kinds = ("sharp re-entrant edges, support boundaries, point loads and contact edges"
                  if gov.get("contact_edges") else
                  "sharp re-entrant edges, support boundaries and point loads")
