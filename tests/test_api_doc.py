@@ -23,7 +23,8 @@ def test_api_examples_run_as_documented(tmp_path, monkeypatch):
 DOCTESTED = ["rackstress.scenes.builtins", "rackstress.scenes", "rackstress.model.operators",
              "rackstress.model.particles", "rackstress.model.regions", "rackstress.model.verlet",
              "rackstress.lib.rigid", "rackstress.runs.fingerprint", "rackstress.runs.rundir",
-             "rackstress.engines.lammps.runner", "rackstress.stress.legs"]
+             "rackstress.engines.lammps.runner", "rackstress.stress.legs",
+             "rackstress.stress.notch"]
 
 
 @pytest.mark.parametrize("module", DOCTESTED)
