@@ -58,8 +58,8 @@ def basis(x, rho: float) -> np.ndarray:
 def surface_value(depth, values, rho: float, spacing: float) -> float | None:
     """σ(0) = A + B of :func:`basis`'s two-term fit A + B·(ρ/(ρ + x))³ to ``values`` at
     ``depth`` (least squares with A, B ≥ 0: a von Mises stress, a far field and a rise toward
-    the face — a field that falls toward the face reads its far value, not an extrapolation
-    below it), or None where the samples cannot carry it (fewer than :data:`MIN_SAMPLES`, or
+    the face — where the samples fall toward the face the fit is their mean, not an
+    extrapolation below them), or None where the samples cannot carry it (fewer than :data:`MIN_SAMPLES`, or
     their depths within half a spacing of each other).
 
     >>> x = np.array([0.5, 1.5, 2.5])
