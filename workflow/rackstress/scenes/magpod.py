@@ -362,21 +362,25 @@ def magpod_small(sediment_nx: int = 56, sediment_nz: int = 36, sediment_back: in
     return scene
 
 
-def _physical(walk, name: str, unit_length_mm: float, leg_material: str, g: float,
-              kw: dict) -> Scene:
-    """The scene ``walk()`` builds (a MagPod's walk, in paper units), named ``name`` and marked
-    physical: after the run :mod:`rackstress.stress.legs` reads its legs in MPa under the
-    mapping the three numbers state (checked before the walk is built); ``kw`` the builder's
-    own keywords (``--set`` round-trips)."""
-    for label, v in (("unit_length_mm", unit_length_mm), ("g", g)):
-        if not v > 0:
-            raise SceneError(f"{name}: {label} must be positive, got {v!r}")
+#: the keywords of a MagPod in physical units that state the mapping (the rest are its walk's)
+MAPPING_KEYS = ("unit_length_mm", "leg_material", "g")
+
+
+def _physical(walk, name: str, kw: dict) -> Scene:
+    """``walk(**rest)`` (a MagPod's walk, in paper units; ``rest`` the keywords ``kw`` has
+    beside :data:`MAPPING_KEYS`), named ``name`` and marked physical: after the run
+    :mod:`rackstress.stress.legs` reads its legs in MPa under the mapping ``kw`` states
+    (checked before the walk is built); ``kw`` the builder's own keywords (``--set``
+    round-trips)."""
+    for label in ("unit_length_mm", "g"):
+        if not kw[label] > 0:
+            raise SceneError(f"{name}: {label} must be positive, got {kw[label]!r}")
     from rackstress.model.materials import PRESETS
 
-    if leg_material not in PRESETS:
+    if kw["leg_material"] not in PRESETS:
         raise SceneError(f"{name}: leg_material must be one of "
-                         f"{', '.join(PRESETS)}, got {leg_material!r}")
-    scene = walk()
+                         f"{', '.join(PRESETS)}, got {kw['leg_material']!r}")
+    scene = walk(**{k: v for k, v in kw.items() if k not in MAPPING_KEYS})
     scene.name = name
     scene.params = dict(kw, physical=True)
     return scene
@@ -400,13 +404,7 @@ def magpod_physical_small(unit_length_mm: float = 5.0, leg_material: str = "alum
     >>> sc.name, sc.params["physical"], sc.n_particles
     ('magpod-physical-small', True, 5705)
     """
-    kw = dict(locals())
-    def walk():
-        return magpod_small(sediment_nx=sediment_nx, sediment_nz=sediment_nz,
-                            sediment_back=sediment_back, phase_steps=phase_steps,
-                            cycles=cycles, dt=dt)
-
-    return _physical(walk, "magpod-physical-small", unit_length_mm, leg_material, g, kw)
+    return _physical(magpod_small, "magpod-physical-small", dict(locals()))
 
 
 def magpod_physical(unit_length_mm: float = 5.0, leg_material: str = "aluminium",
@@ -423,10 +421,4 @@ def magpod_physical(unit_length_mm: float = 5.0, leg_material: str = "aluminium"
     >>> sc.name, sc.params["physical"], sc.n_particles
     ('magpod-physical', True, 33689)
     """
-    kw = dict(locals())
-    def walk():
-        return magpod(sediment_nx=sediment_nx, sediment_nz=sediment_nz,
-                      sediment_back=sediment_back, phase_steps=phase_steps, cycles=cycles,
-                      dt=dt)
-
-    return _physical(walk, "magpod-physical", unit_length_mm, leg_material, g, kw)
+    return _physical(magpod, "magpod-physical", dict(locals()))

@@ -683,7 +683,7 @@ def notch_peak(run, name: str, spacing: float, singular: Singular, zone_: float,
     smooth = np.array([np.median(r[n]) for n in
                        cKDTree(pts).query_ball_point(pts, NOTCH_SMOOTH * a * (1 + 1e-9))])
     k = int(np.argmax(smooth))
-    j = int(cKDTree(o).query(pts[k])[1])
+    j = int(np.argmin(np.einsum("ij,ij->i", o - pts[k], o - pts[k])))    # nearest particle
     return {"value": float(smooth[k]), "position": [float(x) for x in pts[k]],
             "radius": float(rho[k]), "index": j, "faces_read": int(len(r))}
 
