@@ -269,6 +269,8 @@ def test_refine_killed_resumed_error_bar_covers_converged_fea(refined):
     r = math.sqrt(2) ** err["order"]
     assert err["extrapolated"] == pytest.approx(g2 + (g2 - g1) / (r - 1))
     assert err["low"] <= err["extrapolated"] <= err["high"]
+    # what the refinement reports: the finer run's value, the centre of Roache's band
+    assert err["value"] == g2 and err["low"] <= g2 <= err["high"]
     assert "governing von Mises stress" in p.stdout and "error bar:" in p.stdout
     assert "singular peak" in first and "re-entrant edge" in first       # the first run's lines
     # the report: the governing stress as the headline, the singular peak beside it, the table
@@ -280,6 +282,7 @@ def test_refine_killed_resumed_error_bar_covers_converged_fea(refined):
     table = html.split('id="error-bar"')[1].split("</table>")[0]
     assert all(f"{v:.4g}" in table for v in err["values"])
     assert f"{err['extrapolated']:.4g}" in table
+    assert f"{g2:.4g}" in table.split('id="refined"')[1].split("</tr>")[0]
     err = summary["stress"]["error"]
     sing = read_singular(out)["bar"][2]
     ref = reference(out / "refine", h_far=2.0, h_near=0.5, singular=sing)   # 0.2 % off h/1.3

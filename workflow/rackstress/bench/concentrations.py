@@ -169,8 +169,10 @@ def _torus(R, r, x):
     return t
 
 
-def run_case(case: str, a: float, work: Path, echo=print) -> dict:
-    """One case at spacing ``a``: the run, its governing stress, the FE check."""
+def run_case(case: str, a: float, work: Path, echo=print, refine: bool = False) -> dict:
+    """One case at spacing ``a``: the run, its governing stress, the FE check; with
+    ``refine``, ``rackstress run --refine``'s second run at a/√2 and its error bar
+    (:func:`refined`)."""
     from rackstress.runs.run import run
     from rackstress.scenes import load
     from rackstress.validity import solid
@@ -219,6 +221,8 @@ def run_case(case: str, a: float, work: Path, echo=print) -> dict:
         sel = away if method == "patch" else centre
         row.setdefault("routes", {})[method] = float(np.nanmax(v[sel]) / gov["value"]) \
             if gov["value"] else None
+    if refine:
+        row["refined"] = refined(out, f, gov["value"], echo=echo)
     if book.get("peterson_MPa"):
         row["ratio_peterson"] = row["governing_MPa"] / book["peterson_MPa"]
         row["fea_over_peterson"] = gov["value"] / book["peterson_MPa"]
@@ -227,6 +231,27 @@ def run_case(case: str, a: float, work: Path, echo=print) -> dict:
          f"{100 * (gov.get('moved') or 0):.2f} % between FE sizes) → {row['ratio']:.3f}"
          + (f"; Peterson {book['peterson_MPa']:.2f}" if book.get("peterson_MPa") else ""))
     return row
+
+
+def refined(out: Path, scene: Path, fea: float, echo=print) -> dict:
+    """``rackstress run --refine`` on the run ``out`` of ``scene`` as a user runs it
+    (:func:`rackstress.stress.refine.refine`: the scene again at spacing/√2, read at the
+    first run's zone), against FEA's governing stress ``fea`` (converged, from the first
+    run's check): what it reports (the finer run's value), Richardson's extrapolation, the
+    band and whether the band covers FEA's value."""
+    from rackstress.stress.refine import refine
+
+    err = refine(out, str(scene), echo=lambda *x: None)
+    r = {k: err.get(k) for k in ("value", "extrapolated", "low", "high", "order", "spacings",
+                                 "particles", "change")}
+    fine = json.loads((out / "refine" / "summary.json").read_text())
+    r.update(ratio=err["value"] / fea, extrapolated_ratio=err["extrapolated"] / fea,
+             covers=bool(err["low"] <= fea <= err["high"]),
+             read=((fine.get("stress") or {}).get("governing") or {}).get("read"))
+    echo(f"    --refine: {err['value']:.2f} MPa at {err['spacings'][-1]:.3g} mm "
+         f"({r['ratio']:.3f} of FEA), extrapolated {err['extrapolated']:.2f} "
+         f"({r['extrapolated_ratio']:.3f}), band {err['low']:.2f} … {err['high']:.2f}")
+    return r
 
 
 def run_bench(out: Path | None = None, cases=None, spacings=None, echo=print) -> dict:
@@ -243,7 +268,8 @@ def run_bench(out: Path | None = None, cases=None, spacings=None, echo=print) ->
     with tempfile.TemporaryDirectory(prefix="rs-conc-") as tmp:
         for case in cases or CASES:
             for a in spacings or SPACINGS[case]:
-                rows.append(run_case(case, float(a), Path(tmp), echo=echo))
+                rows.append(run_case(case, float(a), Path(tmp), echo=echo,
+                                     refine=float(a) == SPACINGS[case][1]))
     new = {(r["case"], r["spacing"]) for r in rows}
     kept = [r for r in old["rows"] if (r["case"], r["spacing"]) not in new]
     data = {"rows": sorted(kept + rows, key=lambda r: (CASES.index(r["case"]), -r["spacing"])),
@@ -296,9 +322,39 @@ def markdown(data: dict) -> str:
             "governing stress), read by the patch fit or, where a concave curved face's is "
             "the larger, by the notch reading (docs/stress.md \"The notch reading\"), and the "
             "radius of the face it read in spacings.\n\n" + notch_summary(data) + "\n"
+            + refined_table(data)
             + f"\nMachine: {m.get('cores')} cores, load average "
             f"{' / '.join(f'{x:.1f}' for x in (m.get('load_avg_at_start') or ()))} at the "
             f"start of the last command; {data['wall_s']:.0f} s wall.\n")
+
+
+def refined_table(data: dict) -> str:
+    """The rows refined by ``rackstress run --refine`` (the default, middle, spacing)."""
+    from rackstress.bench import fmt, md_table
+
+    rows = [r for r in data["rows"] if r.get("refined")]
+    if not rows:
+        return ""
+    ok = [r for r in rows if abs(r["refined"]["ratio"] - 1) <= TARGET["refined"]]
+    cover = [r for r in rows if r["refined"]["covers"]]
+    return ("\n## After `--refine`\n\n`rackstress run --refine` on the default (middle) "
+            "spacing's run, as a user runs it: the scene again at spacing/√2, its governing "
+            "stress read at the first run's zone. What it reports is the finer run's value, "
+            "with Roache's band about it (docs/stress.md \"The error bar\"); Richardson's "
+            "extrapolation sets the band's width.\n\n"
+            + md_table(["case", "spacing [mm]", "refined at [mm]", "particles",
+                        "headline [MPa]", "refined [MPa]", "read by", "refined / FEA",
+                        "extrapolated [MPa]", "extrapolated / FEA", "band [MPa]",
+                        "covers FEA"],
+                       [[r["case"], fmt(r["spacing"]), fmt(r["refined"]["spacings"][-1], 3),
+                         f"{r['refined']['particles'][-1]:,}", fmt(r.get("headline_MPa"), 4),
+                         fmt(r["refined"]["value"], 4), r["refined"].get("read") or "—",
+                         fmt(r["refined"]["ratio"], 3), fmt(r["refined"]["extrapolated"], 4),
+                         fmt(r["refined"]["extrapolated_ratio"], 3),
+                         f"{fmt(r['refined']['low'], 4)} … {fmt(r['refined']['high'], 4)}",
+                         "yes" if r["refined"]["covers"] else "no"] for r in rows])
+            + f"\nWithin {100 * TARGET['refined']:g} % of FEA after `--refine`: {len(ok)} of "
+            f"{len(rows)}; the band covers FEA's value on {len(cover)} of {len(rows)}.\n")
 
 
 def notch_summary(data: dict) -> str:

@@ -400,16 +400,21 @@ def markdown(data) -> str:
              f"{fmt(data['rule'].get('notch_error'))}).",
              "",
              "## Error bars", "",
-             "Richardson's extrapolation with Roache's grid convergence index (safety factor 3 "
-             "with the assumed order, 1.25 with a measured one), the band never narrower than "
+             "What `--refine` reports: the finer run's value (h/√2), with Roache's grid "
+             "convergence index about it (safety factor 3 with the assumed order, 1.25 with a "
+             "measured one) from Richardson's extrapolation, the band never narrower than "
              "the finer run's own single-run band: ± the measured error per s/t, or at a "
              "concave curved face ± CURVED_ERROR and up to the face's largest value over "
              f"1 − CURVED_ERROR ({fmt(data['rule'].get('curved_error'))}; "
              "stress.governing.with_single_run, default_error).", "",
-             md_table(["part", "--refine: extrapolated", "band", "covers FEA",
+             md_table(["part", "--refine: refined", "refined / FEA", "extrapolated",
+                       "extrapolated / FEA", "band", "covers FEA",
                        "3 spacings: order", "extrapolated", "band", "covers FEA", "FEA",
                        "FEA change between its two sizes"],
-                      [[c["name"], fmt(c["refine"]["extrapolated"], 4),
+                      [[c["name"], fmt(c["refine"]["values"][-1], 4),
+                        fmt(c["refine"]["values"][-1] / c["fea_governing"], 3),
+                        fmt(c["refine"]["extrapolated"], 4),
+                        fmt(c["refine"]["extrapolated"] / c["fea_governing"], 3),
                         f"{fmt(c['refine']['low'], 4)} … {fmt(c['refine']['high'], 4)}",
                         "yes" if c["covered"]["refine"] else "no",
                         fmt(c["three"]["order"]) if c["three"] else "—",

@@ -253,8 +253,10 @@ def governing_section(stress: dict, headline: bool = True) -> str:
           f"<th>governing [{u}]</th></tr></thead><tbody>")
         for r in rows:
             w("<tr>" + "".join(f"<td class=num>{c}</td>" for c in r) + "</tr>")
-        w(f"<tr><td>extrapolated (order {_num(err['order'], 2)})</td><td></td>"
+        w(f"<tr><td>extrapolated (order {_num(err['order'], 2)}), sets the band</td><td></td>"
           f"<td class=num>{_num(err['extrapolated'])}</td></tr>")
+        w(f'<tr id="refined"><td><b>refined: the finer run\'s value</b></td><td></td>'
+          f"<td class=num><b>{_num(err['values'][-1])}</b></td></tr>")
         w(f"<tr><td>converged value within</td><td></td><td class=num>{_num(err['low'])} … "
           f"{_num(err['high'])}</td></tr></tbody></table>")
         w(f'<p class="note">{_e(err["method"])}. The refined run is in '
