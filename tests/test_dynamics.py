@@ -120,8 +120,8 @@ def test_two_bars_in_contact_exchange_their_motion():
 
 
 def test_contact_tables_are_checked(tmp_path):
-    """[[contact]] names two different material parts, takes no friction (not modelled: said
-    so), and its stiffness factor is positive; each refusal names the table and the key."""
+    """[[contact]] names two different material parts, its friction is a number >= 0 and its
+    stiffness factor is positive; each refusal names the table and the key."""
     from rackstress.errors import SceneError
     from rackstress.scenes.toml import load_toml
 
@@ -129,8 +129,10 @@ def test_contact_tables_are_checked(tmp_path):
     cases = {
         'between = ["left", "left"]': ("[[contact]] #1", "between", "itself"),
         'between = ["left", "floor"]': ("[[contact]] #1", "unknown group 'floor'"),
-        'between = ["left", "right"]\nfriction = 0.3': ("[[contact]] #1", "friction",
-                                                        "not modelled"),
+        'between = ["left", "right"]\nfriction = -0.3': ("[[contact]] #1", "friction",
+                                                         ">= 0"),
+        'between = ["left", "right"]\nfriction = "a"': ("[[contact]] #1", "friction",
+                                                        "finite number"),
         'between = ["left", "right"]\nstiffness = -1': ("[[contact]] #1", "stiffness"),
         'between = "left"': ("[[contact]] #1", "between", "two groups"),
     }

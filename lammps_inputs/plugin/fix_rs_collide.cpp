@@ -1,7 +1,7 @@
 /* ----------------------------------------------------------------------
    rackstress plugin: fix rs/collide — directed collide, Eqs. 10–11.
 
-     fix ID TARGET rs/collide SOURCE c [activate MOVING]
+     fix ID TARGET rs/collide SOURCE c [friction MU ETA] [activate MOVING]
 
    On each target particle p, from every source particle u that overlaps it (Eq. 11), Eq. 10
    with the reach the paper's prose gives (R = r_p + r_u, docs/model.md erratum 1):
@@ -15,6 +15,14 @@
    (Contacts::refresh, taken again from the candidates when one of them has moved skin/8).
    Radii: per-atom d_rsr.
 
+   friction MU ETA: the pair's regularized Coulomb friction, history-free (LAMMPS' pair
+   gran/hooke, tangential linear_nohistory; rackstress Collide.friction), added on the target:
+
+     −min(MU·a_n, ETA·‖v_t‖)·v_t/‖v_t‖,   a_n = c·(R² − d²)/d,
+
+   v_t the tangential part of v_p − v_u; ETA = ζ/m_p, ζ the pair's tangential damping. It reads
+   the partner's velocity: a ghost's needs comm_modify vel yes (checked at init).
+
    activate MOVING (active-only integration, docs/model.md "Active particles"): MOVING is the
    group `fix nve` integrates and `atom_modify first` keeps first in LAMMPS' arrays. A resting
    target particle (not in MOVING) within r_p + r_u + 2·skin of a source particle in MOVING is
@@ -27,6 +35,7 @@
 #include "fix_rs_collide.h"
 
 #include "atom.h"
+#include "comm.h"
 #include "error.h"
 #include "neighbor.h"
 #include "update.h"
@@ -43,12 +52,27 @@ using namespace FixConst;
 static constexpr double NEAR = 0.25;
 
 FixRSCollide::FixRSCollide(LAMMPS *lmp, int narg, char **arg) :
-    Fix(lmp, narg, arg), actbit(0), built(false), in_setup(false), touching(0)
+    Fix(lmp, narg, arg), actbit(0), mu(0.0), eta(0.0), built(false), in_setup(false),
+    touching(0)
 {
-  if (narg != 5 && !(narg == 7 && strcmp(arg[5], "activate") == 0))
-    error->all(FLERR, "Illegal fix rs/collide command: fix ID TARGET rs/collide SOURCE c "
-               "[activate MOVING]");
-  if (narg == 7) actbit = RackStress::groupbit(group, error, "rs/collide", "activate", arg[6]);
+  const char *usage = "Illegal fix rs/collide command: fix ID TARGET rs/collide SOURCE c "
+                      "[friction MU ETA] [activate MOVING]";
+  if (narg < 5) error->all(FLERR, usage);
+  for (int k = 5; k < narg;) {
+    if (strcmp(arg[k], "activate") == 0 && k + 1 < narg && !actbit) {
+      actbit = RackStress::groupbit(group, error, "rs/collide", "activate", arg[k + 1]);
+      k += 2;
+    } else if (strcmp(arg[k], "friction") == 0 && k + 2 < narg && mu == 0.0) {
+      mu = utils::numeric(FLERR, arg[k + 1], false, lmp);
+      eta = utils::numeric(FLERR, arg[k + 2], false, lmp);
+      if (!(std::isfinite(mu) && mu > 0.0 && std::isfinite(eta) && eta >= 0.0))
+        error->all(FLERR, "Fix rs/collide: friction needs MU > 0 and ETA >= 0, got {} {}",
+                   arg[k + 1], arg[k + 2]);
+      k += 3;
+    } else {
+      error->all(FLERR, usage);
+    }
+  }
   sourcebit = RackStress::groupbit(group, error, "rs/collide", "source", arg[3]);
   c = utils::numeric(FLERR, arg[4], false, lmp);
   if (!std::isfinite(c)) error->all(FLERR, "Fix rs/collide: coefficient c must be finite, got {}", arg[4]);
@@ -62,6 +86,9 @@ int FixRSCollide::setmask()
 void FixRSCollide::init()
 {
   RackStress::radii(atom, error, "rs/collide");
+  if (mu > 0.0 && comm->nprocs > 1 && !comm->ghost_velocity)
+    error->all(FLERR, "Fix rs/collide: friction reads the partners' velocities: the deck "
+               "needs comm_modify vel yes");
 }
 
 void FixRSCollide::setup(int vflag)
@@ -81,7 +108,7 @@ void FixRSCollide::post_force(int /*vflag*/)
   }
   // the candidates that can touch before any of them moves NEAR/2 (rs_common.h, Contacts)
   list.refresh(lmp, r, NEAR * neighbor->skin);
-  double **x = atom->x, **f = atom->f;
+  double **x = atom->x, **f = atom->f, **v = atom->v;
   touching = 0;
   for (size_t q = 0; q < list.near_rows.size(); q++) {
     int i = list.rows[list.near_rows[q]];
@@ -97,7 +124,19 @@ void FixRSCollide::post_force(int /*vflag*/)
       double R = r[i] + r[j], R2 = R * R;
       if (!(d2 < R2)) continue;    // Eq. 11: only overlapping pairs (Eq. 10 is zero beyond)
       double s = c * std::fmin(0.0, 1.0 - R2 / d2);
-      for (int e = 0; e < 3; e++) a[e] += s * d[e];
+      if (mu > 0.0) {    // the pair's Coulomb friction (header), with Eq. 10's term
+        double an = c * (R2 - d2) / std::sqrt(d2);
+        double w[3], t[3];
+        for (int e = 0; e < 3; e++) w[e] = v[i][e] - v[j][e];
+        double pr = (w[0] * d[0] + w[1] * d[1] + w[2] * d[2]) / d2;
+        for (int e = 0; e < 3; e++) t[e] = w[e] - pr * d[e];
+        double vt = std::sqrt(t[0] * t[0] + t[1] * t[1] + t[2] * t[2]);
+        double lim = mu * an;
+        double k = lim < eta * vt ? lim / vt : eta;
+        for (int e = 0; e < 3; e++) a[e] += s * d[e] - k * t[e];
+      } else {
+        for (int e = 0; e < 3; e++) a[e] += s * d[e];
+      }
       any = true;
     }
     if (!any) continue;

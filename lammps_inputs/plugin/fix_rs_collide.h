@@ -30,6 +30,7 @@ class FixRSCollide : public Fix {
   int sourcebit;
   int actbit;       // the moving group of active-only integration (keyword activate), or 0
   double c;
+  double mu, eta;   // friction MU ETA (0: frictionless)
   bool built, in_setup;
   int touching;
   RackStress::Contacts list;

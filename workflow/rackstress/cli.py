@@ -41,6 +41,7 @@ def _load_scene(scene: str, steps, dt, sets, integrator: str | None = None):
         sc.integrator = integrator
         if integrator != "euler":       # recorded where it changes the scene (Eq. 5 is the default)
             sc.params["integrator"] = integrator
+            sc.validate()               # what the other integrator does not model
     if dt is not None:
         if not dt > 0:
             raise RackstressError(f"--dt must be positive, got {dt}")

@@ -130,7 +130,11 @@ class Reference:
         if self.holds(op.when, site[0], phase, cache):
             I, J, R2 = self.contacts(site[0], op.source, cache)
             c = np.full(len(I), float(op.coeff.c))
-            _accumulate(a, I, Collide.accel(self.p[I], self.p[J], c, R2))
+            contrib = Collide.accel(self.p[I], self.p[J], c, R2)
+            if op.mu > 0:       # Coulomb friction, from the velocities of this state
+                contrib = contrib + Collide.friction(self.p[I], self.p[J], self.v[I],
+                                                     self.v[J], c, R2, op.mu, op.eta)
+            _accumulate(a, I, contrib)
 
     def _bind(self, a, site, op, phase, cache):
         if self.holds(op.when, site[0], phase, cache):

@@ -481,6 +481,34 @@ if nb is not None:
         return out
 
     @nb.njit(**_OPTS)
+    def collide_friction(x, v, a, b, R2, c, mu, eta):
+        """Eq. 10 and the pair's Coulomb friction (Collide.friction) for overlapping rows (a
+        from b): the contributions, one row per pair."""
+        out = np.empty((len(a), 3))
+        for k in range(len(a)):
+            i, j = a[k], b[k]
+            d0 = x[j, 0] - x[i, 0]
+            d1 = x[j, 1] - x[i, 1]
+            d2_ = x[j, 2] - x[i, 2]
+            dd = d0 * d0 + d1 * d1 + d2_ * d2_
+            w = c * col_f(dd, R2[k])
+            an = c * (R2[k] - dd) / np.sqrt(dd)
+            w0 = v[i, 0] - v[j, 0]
+            w1 = v[i, 1] - v[j, 1]
+            w2 = v[i, 2] - v[j, 2]
+            pr = (w0 * d0 + w1 * d1 + w2 * d2_) / dd
+            t0 = w0 - pr * d0
+            t1 = w1 - pr * d1
+            t2 = w2 - pr * d2_
+            s = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+            lim = mu * an
+            f = lim / s if lim < eta * s else eta
+            out[k, 0] = w * d0 - f * t0
+            out[k, 1] = w * d1 - f * t1
+            out[k, 2] = w * d2_ - f * t2
+        return out
+
+    @nb.njit(**_OPTS)
     def dampen(v, rows, arows, c, acc):
         """Eq. 9, −c·v, for owned rows into their accumulator rows."""
         for k in range(len(rows)):

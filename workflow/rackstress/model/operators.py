@@ -462,10 +462,56 @@ class Collide(PairOperator):
     source: str
     coeff: Coefficient
     when: tuple = ()
+    #: Coulomb friction (``[[contact]] friction``): the coefficient μ, and η, the tangential
+    #: damping per unit of this side's mass (ζ/m, ζ = γ_t·m_eff: :meth:`friction`); 0: none
+    mu: float = 0.0
+    eta: float = 0.0
 
     kind: ClassVar[str] = "collide"
     fixed_pairs: ClassVar[bool] = False
     coefficients: ClassVar[tuple] = (Const,)
+
+    def label(self) -> str:
+        fr = f" friction(mu={self.mu:g}, eta={self.eta:.6g})" if self.mu > 0 else ""
+        return f"{self.kind}({self.source}, {self.coeff.label()}){fr}" + self._when()
+
+    def check(self, target, groups) -> None:
+        super().check(target, groups)
+        if not (np.isfinite(self.mu) and self.mu >= 0 and np.isfinite(self.eta)
+                and self.eta >= 0):
+            raise SceneError(f"operator collide on '{target}': friction needs mu >= 0 and "
+                             f"eta >= 0, got mu = {self.mu!r}, eta = {self.eta!r}")
+
+    @staticmethod
+    def friction(p, u, vp, vu, c, R2, mu, eta):
+        """The regularized Coulomb friction of an overlapping pair on p from u, history-free
+        (LAMMPS' pair gran/hooke, tangential linear_nohistory):
+
+            a_t = −min(μ·a_n, η·‖v_t‖)·v_t/‖v_t‖,   a_n = c·(R² − d²)/d  (Eq. 10's magnitude),
+
+        v_t the tangential part of v_p − v_u (across n = (u − p)/d). ``c``: per pair (arrays).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> p, u = np.zeros((2, 3)), np.array([[0, -1.5, 0], [0, -1.5, 0]])
+        >>> vp = np.array([[1e-3, 0, 0], [10.0, 0, 0]])        # slow: viscous; fast: Coulomb
+        >>> a = Collide.friction(p, u, vp, np.zeros((2, 3)), np.full(2, 100.0), np.full(2, 4.0),
+        ...                      0.5, 20.0)
+        >>> [round(float(x), 6) for x in a[:, 0]], float(np.abs(a[:, 1:]).max())
+        ([-0.02, -58.333333], 0.0)
+        """
+        diff = u - p
+        d2 = rowdot(diff, diff)
+        an = c * (R2 - d2) / np.sqrt(d2)
+        w = vp - vu
+        vt = w - (rowdot(w, diff) / d2)[:, None] * diff
+        s = np.sqrt(rowdot(vt, vt))
+        lim = mu * an
+        slip = lim < eta * s
+        k = np.full(len(s), float(eta))
+        k[slip] = lim[slip] / s[slip]
+        return -k[:, None] * vt
 
     @classmethod
     def coefficient_rule(cls, coeff) -> str:

@@ -280,6 +280,13 @@ class Scene:
         if self.integrator not in ("euler", "verlet"):
             raise SceneError(f"scene '{self.name}': integrator must be 'euler' (Eq. 5) or "
                              f"'verlet', got {self.integrator!r}")
+        if self.integrator == "verlet":
+            rubbing = [t for t, seq in self.operators.items()
+                       if any(getattr(op, "mu", 0.0) > 0 for op in seq)]
+            if rubbing:
+                raise SceneError(f"scene '{self.name}': the friction of '{rubbing[0]}''s "
+                                 "contact reads the velocities of Eq. 5's step; it is not "
+                                 "modelled with integrator 'verlet': use 'euler'")
         if not (np.isfinite(self.dt) and self.dt > 0):
             raise SceneError(f"scene '{self.name}': time step dt must be positive, got {self.dt!r}")
         if not self.phases:

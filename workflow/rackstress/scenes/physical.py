@@ -323,7 +323,7 @@ def solids(ctx, groups: dict, operators: dict, u) -> dict:
 
 
 #: ``[[contact]]`` keys
-_CONTACT_KEYS = ("between", "stiffness")
+_CONTACT_KEYS = ("between", "stiffness", "friction")
 
 
 def contact_stiffness(m1, m2, a: float, factor: float = 1.0) -> float:
@@ -347,6 +347,22 @@ def contact_stiffness(m1, m2, a: float, factor: float = 1.0) -> float:
     return float(factor * e_star * a)
 
 
+def friction_damping(k: float, m1: float, m2: float) -> float:
+    """ζ = γ_t·m_eff, the tangential damping (force per relative tangential speed) of a contact
+    pair's regularized Coulomb friction below its Coulomb limit, with γ_t = ω_c = √(k/m_eff):
+    half the normal contact's critical damping rate 2·ω_c (LAMMPS' usual γ_t = γ_n/2 with γ_n
+    critical). A particle's own tangential damping rate is ζ/m ≤ ω_c, about half the lattice's
+    highest frequency for two parts of one material (k = E*·a against its bindings' 0.4·E·a),
+    so Eq. 5 stays stable at the lattice's step (λt² < 4 − 2γt: docs/calibration.md
+    "Friction"); and as large as that allows, so that a part held by friction creeps slowest.
+
+    >>> round(friction_damping(2.0, 1.0, 1.0), 6)       # √(k·m_eff) = √(2·0.5)
+    1.0
+    """
+    m_eff = m1 * m2 / (m1 + m2)
+    return float(math.sqrt(k * m_eff))
+
+
 def contacts(ctx, tables, groups: dict, operators: dict, u) -> dict:
     """``[[contact]]``: two material parts that may touch, each pushed off the other by the
     paper's ``collide`` (Eq. 10, c·(u − p)·min(0, 1 − R²/d²), R the sum of the radii: zero at
@@ -359,11 +375,11 @@ def contacts(ctx, tables, groups: dict, operators: dict, u) -> dict:
     out = {name: list(seq) for name, seq in operators.items()}
     for k, t in enumerate(_array_of_tables(ctx, tables, "contact"), 1):
         c = ctx.at(f"[[contact]] #{k}")
-        if "friction" in t:
-            raise c.error("Coulomb friction is not modelled: contact is frictionless (the "
-                          "paper's collide pushes along the line of centres only); remove "
-                          "'friction'", "friction")
         _check_keys(c, t, _CONTACT_KEYS)
+        mu = _number(c, t.get("friction", 0.0), "friction")
+        if mu < 0:
+            raise c.error(f"the friction coefficient must be >= 0 (0: frictionless), got {mu!r}",
+                          "friction")
         pair = t.get("between")
         if not (isinstance(pair, list) and len(pair) == 2):
             raise c.error("'between' must name two groups, e.g. between = [\"bracket\", "
@@ -388,10 +404,11 @@ def contacts(ctx, tables, groups: dict, operators: dict, u) -> dict:
         mats = [g.material.in_units(u) for g in parts]
         a = 0.5 * (float(parts[0].meta["spacing"]) + float(parts[1].meta["spacing"]))
         kc = contact_stiffness(mats[0], mats[1], a, factor)
+        zeta = friction_damping(kc, parts[0].mass(u), parts[1].mass(u)) if mu > 0 else 0.0
         for me, other in ((0, 1), (1, 0)):
             m = parts[me].mass(u)
             out.setdefault(names[me], []).append(
-                Collide(names[other], Const(kc / (2.0 * m))))
+                Collide(names[other], Const(kc / (2.0 * m)), mu=mu, eta=zeta / m))
     return {name: out[name] for name in groups if name in out}
 
 

@@ -538,6 +538,11 @@ def _build_explicit(ctx: _Ctx, data: dict, overrides: dict, user: dict) -> Scene
                                select, ramp)
     operators = physical.contacts(ctx, data.get("contact", []), groups, operators, unit_system)
     analysis = physical.analysis_of(ctx, data, groups, operators, ramp)
+    if analysis == "static" and any(getattr(op, "mu", 0.0) > 0 for seq in operators.values()
+                                    for op in seq):
+        raise ctx.error("friction acts on sliding parts in time (analysis = \"dynamic\"); a "
+                        "static analysis solves frictionless contact: remove 'friction' or "
+                        "declare analysis = \"dynamic\"", "[[contact]] friction")
     physical.check_constraints(ctx, groups, analysis)
 
     params = {"file": ctx.file, "dt": dt, "cycles": settings["cycles"],

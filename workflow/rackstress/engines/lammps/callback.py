@@ -109,7 +109,9 @@ class Frame:
         if lmp is not None:
             nall = self.nlocal + self.nghost
             self.x = lmp.numpy.extract_atom("x")[:nall]
-            self.v = lmp.numpy.extract_atom("v")[:self.nlocal]
+            # ghosts too: a contact's friction reads its partner's velocity (the deck sends
+            # ghost velocities then: comm_modify vel yes)
+            self.v = lmp.numpy.extract_atom("v")[:nall]
             #: LAMMPS' force array: the callback adds its forces here itself (fix external's
             #: own add pass over every owned atom never runs: deck.PY_NAPPLY)
             self.f = lmp.numpy.extract_atom("f")[:self.nlocal]
@@ -839,6 +841,8 @@ class CollideTerm(Term):
         super().__init__(forces, r)
         self.s = forces.scene.slice(r.op.source)
         self.c = float(r.op.coeff.c)
+        #: Coulomb friction (Collide.friction): μ and η, or μ = 0
+        self.mu, self.eta = float(r.op.mu), float(r.op.eta)
         self.dense_stop = 0     # writes its (few) target rows sparsely
 
     def add(self, fr, acc):
@@ -848,6 +852,15 @@ class CollideTerm(Term):
         if not len(a):
             return
         F, k = self.forces, self.forces.compiled
+        if self.mu > 0:         # Eq. 10 and the pair's friction, one row per pair
+            if k is not None:
+                fr.add(a, k.collide_friction(fr.x, fr.v, a, b, R2, self.c, self.mu, self.eta))
+            else:
+                c = np.full(len(a), self.c)
+                fr.add(a, Collide.accel(fr.x[a], fr.x[b], c, R2)
+                       + Collide.friction(fr.x[a], fr.x[b], fr.v[a], fr.v[b], c, R2, self.mu,
+                                          self.eta))
+            return
         if k is not None and fr.identity:   # straight into the accumulators
             k.collide_add(fr.x, a, b, R2, self.c, acc, fr.acc_rows, F.sacc, F.sflag,
                           F.stouched, F.snt)
@@ -1019,6 +1032,8 @@ class Fused:
                 if not self._pair_term(pt, span, conds):
                     return None
             elif isinstance(t, CollideTerm):
+                if t.mu > 0:
+                    return None     # friction reads velocities: term by term (CollideTerm)
                 L, rev = self._list(t.sl, t.s, f"collide on {t.target}")
                 self._op(kernels.OP_COLLIDE, (L, rev), (t.c,), conds)
             elif isinstance(t, DampenTerm):

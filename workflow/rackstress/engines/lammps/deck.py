@@ -264,6 +264,9 @@ class Deck:
         if self.plugin:
             L += plugin_property_commands(self.scene)
         L.append(f"comm_modify cutoff {self.ghost_cutoff:.6g}")
+        if any(getattr(r.op, "mu", 0.0) > 0 for r in self.realized):
+            # a contact's friction reads its partner's velocity, a ghost's under MPI
+            L.append("comm_modify vel yes")
         L.append(f"neighbor {self.lammps_skin:g} bin")
         binsize = ""
         if self.lepton:
@@ -561,9 +564,14 @@ class Deck:
                 s = _prop_name(op.coeff.source.format(**phase_vars))
                 return f"fix {fid} {r.target} rs/attract {op.source} {c} {t} {s}"
             return f"fix {fid} {r.target} rs/attract {op.source} {c} all all"
-        if r.plugin == "rs/collide" and r.target in self.passive:
-            # a resting target joins the moving group one reneighbouring before it is touched
-            return f"fix {fid} {r.target} rs/collide {op.source} {c} activate {MOVE_GROUP}"
+        if r.plugin == "rs/collide":
+            fric = f" friction {_f(op.mu)} {_f(op.eta)}" if op.mu > 0 else ""
+            if r.target in self.passive:
+                # a resting target joins the moving group one reneighbouring before it is
+                # touched
+                return (f"fix {fid} {r.target} rs/collide {op.source} {c}{fric} activate "
+                        f"{MOVE_GROUP}")
+            return f"fix {fid} {r.target} rs/collide {op.source} {c}{fric}"
         return f"fix {fid} {r.target} {r.plugin} {op.source} {c}"
 
     def phase_commands(self, phase_vars, previous=None) -> list[str]:
@@ -905,6 +913,7 @@ def _collide_foldable(scene: Scene, target: str, op, mode: str, searched: set) -
     unconditional, both groups have one radius each (one R per type pair), and no contact
     condition already searches the two groups (then it rides on that search in Python)."""
     return (frozenset((target, op.source)) not in searched
+            and not op.mu > 0           # friction reads velocities: not a pair potential
             and _uniform_radius(scene.groups[target]) is not None
             and _uniform_radius(scene.groups[op.source]) is not None)
 
