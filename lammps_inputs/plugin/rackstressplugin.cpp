@@ -16,6 +16,7 @@
      fix rs/force    a constant force, Eq. 8
      fix rs/nve      integrate, Eq. 5 (fix nve's arithmetic over the moving rows)
      fix rs/volume   a material part's volumetric term (its Poisson's ratio; beyond the paper)
+     fix rs/indent   a rigid spherical indenter, linear penalty ([[indenter]]; beyond the paper)
    Phase conditions (Eq. 4's ⟨P⟩ on the gait phase) are the deck's: a phase-conditioned operator
    is a fix defined in the phases where its condition holds and removed at the switch.
 ------------------------------------------------------------------------- */
@@ -25,6 +26,7 @@
 #include "fix_rs_collide.h"
 #include "fix_rs_dampen.h"
 #include "fix_rs_force.h"
+#include "fix_rs_indent.h"
 #include "fix_rs_nve.h"
 #include "fix_rs_rack.h"
 #include "fix_rs_volume.h"
@@ -93,4 +95,6 @@ extern "C" void lammpsplugin_init(void *lmp, void *handle, void *regfunc)
       (lammpsplugin_factory2 *) &make<FixRSNVE>);
   add(lmp, handle, reg, "rs/volume", "rackstress: a material part's volumetric term",
       (lammpsplugin_factory2 *) &make<FixRSVolume>);
+  add(lmp, handle, reg, "rs/indent", "rackstress: a rigid spherical indenter, linear penalty",
+      (lammpsplugin_factory2 *) &make<FixRSIndent>);
 }

@@ -1398,6 +1398,18 @@ def bench_inside(out, quick):
     _bench_report(data, mod)
 
 
+@bench.command("hertz")
+@_bench_out
+@click.option("--quick", is_flag=True, help="The coarsest spacing only.")
+def bench_hertz(out, quick):
+    """Hertz's sphere on a flat (``[[indenter]]``): contact radius and peak pressure against
+    Hertz's, static and on LAMMPS, at three spacings -> docs/benchmarks/hertz.{json,md}."""
+    from rackstress.bench import hertz as mod
+
+    data = mod.run_bench(out, quick=quick, echo=click.echo)
+    _bench_report(data, mod)
+
+
 @bench.command("governing")
 @_bench_out
 @click.option("--quick", is_flag=True, help="Every part at two spacings (h and h/sqrt(2), "
@@ -1677,6 +1689,9 @@ TEACH = {
         "rackstress bench inside --quick --out /tmp/bench",
         "rackstress bench inside --out docs/benchmarks",
     ]),
+    "bench hertz": ("Hertz's sphere on a flat: contact radius and pressure vs theory.", [
+        "rackstress bench hertz",
+        "rackstress bench hertz --quick --out /tmp/hertz"]),
     "bench governing": ("The governing stress and --refine's error bar against FEA.", [
         "rackstress bench governing --quick --out /tmp/bench",
         "rackstress bench governing --out docs/benchmarks",

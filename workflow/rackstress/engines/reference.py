@@ -16,8 +16,9 @@ import numpy as np
 
 from rackstress.errors import DivergenceError
 from rackstress.lib.vec import rowdot
-from rackstress.model.operators import (Attract, Bind, Collide, Dampen, Force, contact_candidates,
-                                        contact_groups, integrate, phase_active)
+from rackstress.model.operators import (Attract, Bind, Collide, Dampen, Force, Indent,
+                                        contact_candidates, contact_groups, integrate,
+                                        phase_active)
 from rackstress.model.scene import Scene
 from rackstress.model.verlet import integrate_verlet
 from rackstress.model.volume import Volume
@@ -155,6 +156,14 @@ class Reference:
             pl = self._pair_list(site, op, phase)
             _accumulate(a, pl.i, Attract.accel(self.p[pl.i], self.p[pl.j], pl.c))
 
+    def _indent(self, a, site, op, phase, cache):
+        # the sphere's centre at this step: a(p_n) uses the centre of step n (rs/indent's
+        # ntimestep when LAMMPS evaluates the forces of the same state)
+        if self.holds(op.when, site[0], phase, cache):
+            sl = self.scene.slice(site[0])
+            a[sl] += Indent.accel(self.p[sl], self.radius[sl], np.asarray(op.k, float),
+                                  op.centre_at(self.step_count), op.radius)
+
     # ------------------------------------------------------------------ motion
     def damping(self, phase: Mapping) -> np.ndarray:
         """γ per particle: the dampen coefficients (Eq. 9) acting now, extras whose conditions hold."""
@@ -271,4 +280,5 @@ class Reference:
 
 #: The reference kernel evaluating each operator class (adding an operator adds one entry).
 KERNELS = {Force: Reference._force, Dampen: Reference._dampen, Collide: Reference._collide,
-           Bind: Reference._bind, Attract: Reference._attract, Volume: Reference._volume}
+           Bind: Reference._bind, Attract: Reference._attract, Volume: Reference._volume,
+           Indent: Reference._indent}

@@ -63,7 +63,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rackstress.errors import SceneError
-from rackstress.model.operators import Bind, Collide, Const, Dampen, Force
+from rackstress.model.operators import Bind, Collide, Const, Dampen, Force, Indent
 from rackstress.model.volume import Volume, volume_terms
 
 #: settled when the largest unbalanced particle force ≤ TOLERANCE × total applied load
@@ -110,6 +110,8 @@ def check_static(scene) -> None:
                 continue
             if isinstance(op, Force) and not op.when:
                 continue
+            if isinstance(op, Indent) and not op.when and op.steps == 0:
+                continue               # a rigid sphere at its place: a penalty (indenter.py)
             if is_contact(scene, target, op):
                 continue               # two material parts' contact: a penalty (_pairs_at)
             raise SceneError(
@@ -246,15 +248,21 @@ def contact_energy(prob: "_Problem", p: np.ndarray) -> float:
     return float(0.5 * np.sum(e))
 
 
-def forces(scene, p: np.ndarray, pairs, F_ext: np.ndarray, m: np.ndarray) -> np.ndarray:
+def forces(scene, p: np.ndarray, pairs, F_ext: np.ndarray, m: np.ndarray,
+           indenter=None) -> np.ndarray:
     """m·a(p): the bindings' force (Eq. 12) and the material parts' volumetric term
-    (:func:`volume_force`) plus the external loads, n×3."""
+    (:func:`volume_force`) plus the external loads and the indenters' push (``indenter``:
+    :class:`rackstress.engines.indenter.Indenters`, its held set while the solver holds one),
+    n×3."""
     I, J, C, Q = pairs
     a = Bind.accel(p[I], p[J], C, Q)
     out = np.zeros_like(p)
     for k in range(3):
         out[:, k] = np.bincount(I, weights=a[:, k] * m[I], minlength=len(p))
-    return out + volume_force(volume_terms(scene), p, m) + F_ext
+    out = out + volume_force(volume_terms(scene), p, m) + F_ext
+    if indenter is not None:
+        out = out + indenter.force(p)
+    return out
 
 
 # ------------------------------------------------------------------ the volumetric term
@@ -272,6 +280,8 @@ def energy_change(prob: "_Problem", p: np.ndarray, trial: np.ndarray) -> float:
     out = float(bind) - float(np.sum(prob.F_ext * (trial - p)))
     if prob.contact:
         out += contact_energy(prob, trial) - contact_energy(prob, p)
+    if prob.indenter is not None:
+        out += prob.indenter.energy(trial) - prob.indenter.energy(p)
     vol = prob.volume
     if vol is not None:
         m = prob.m[vol.owner]
@@ -412,6 +422,8 @@ class _Problem:
     #: the pairs in contact held as two-sided bindings (i, j, c, R²) while Newton converges
     #: (:func:`_update_contacts`); None: the pairs closer than R at each state
     active: tuple | None = None
+    #: the indenters (``[[indenter]]``: engines/indenter.py), None without one
+    indenter: object = None
 
 
 def _problem(scene) -> _Problem:
@@ -422,7 +434,18 @@ def _problem(scene) -> _Problem:
     F = external_forces(scene)
     return _Problem(len(o), o, scene.masses(), fixed, ~fixed.reshape(-1), _bind_pairs(scene),
                     F, float(np.linalg.norm(F, axis=1).sum()), ConstraintMap.of_scene(scene),
-                    volume_terms(scene), contact=material_contacts(scene))
+                    volume_terms(scene), contact=material_contacts(scene),
+                    indenter=_indenters(scene))
+
+
+def _indenters(scene):
+    """The scene's rigid spheres (``Indent`` operators) as engines/indenter.py's Indenters, or
+    None without one."""
+    from rackstress.engines.indenter import Indenters
+
+    if not any(isinstance(op, Indent) for seq in scene.operators.values() for op in seq):
+        return None
+    return Indenters(scene)
 
 
 def _spread(prob: _Problem):
@@ -450,8 +473,10 @@ def _tangent(p: np.ndarray, prob: _Problem, mu: float = REGULARIZATION, spread: 
     after μ·L stalled); returns K + R and R."""
     import scipy.sparse as sp
 
-    K = prob.cmap.reduce(stiffness(p, _pairs_at(prob, p, slack=CONTACT_SLACK), prob.m,
-                                   volume=prob.volume)).tocsr()
+    K = stiffness(p, _pairs_at(prob, p, slack=CONTACT_SLACK), prob.m, volume=prob.volume)
+    if prob.indenter is not None:             # the spheres' penalty, block diagonal
+        K = K + prob.indenter.stiffness(p)
+    K = prob.cmap.reduce(K).tocsr()
     d = K.diagonal()
     pos = d[d > 0]
     floor = 1e-3 * float(pos.mean()) if len(pos) else 1.0
@@ -867,7 +892,9 @@ def check_part(scene, progress: bool = False) -> list[dict]:
     _check_bodies(scene, prob)
     warnings, membrane = _check_particles(scene, prob)
     p = prob.o + scene.prescribed()
-    f = forces(scene, p, _pairs_at(prob, p), prob.F_ext, prob.m)
+    if prob.indenter is not None:             # the first set: the particles touched at start
+        prob.indenter.update(p)
+    f = forces(scene, p, _pairs_at(prob, p), prob.F_ext, prob.m, prob.indenter)
     b = prob.cmap.restrict(f)
     first = None
     if b.size and np.any(b != 0):
@@ -893,7 +920,7 @@ def reactions(scene, p: np.ndarray) -> np.ndarray:
     """n×3 force each support applies at ``p`` (zero on free directions): −(the bindings' force
     + the loads) on every held direction, so that with them every particle is balanced."""
     prob = _problem(scene)
-    f = forces(scene, p, _pairs_at(prob, p), prob.F_ext, prob.m)
+    f = forces(scene, p, _pairs_at(prob, p), prob.F_ext, prob.m, prob.indenter)
     return -(f - prob.cmap.unbalanced(f))
 
 
@@ -944,9 +971,15 @@ def support_reactions(scene, res: StaticResult) -> dict:
                      "particles": int(held.any(axis=1).sum()),
                      "force": rest.sum(axis=0).tolist(),
                      "moment": np.cross(p, rest).sum(axis=0).tolist()})
-    return {"reactions": rows,
-            "applied_load": {"force": F.sum(axis=0).tolist(),
-                             "moment": np.cross(p, F).sum(axis=0).tolist()}}
+    out = {"reactions": rows,
+           "applied_load": {"force": F.sum(axis=0).tolist(),
+                            "moment": np.cross(p, F).sum(axis=0).tolist()}}
+    if _indenters(scene) is not None:
+        # the rigid spheres' push (``[[indenter]]``): with the loads, what the supports balance
+        from rackstress.engines.indenter import indenter_forces
+
+        out["indenters"] = indenter_forces(scene, p)
+    return out
 
 
 def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATIONS,
@@ -996,18 +1029,23 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
     relaxed = _relaxed_sets(scene, prob, membrane) if RELAX else []
 
     def unbalanced_of(x: np.ndarray) -> np.ndarray:
-        return cmap.unbalanced(forces(scene, x, _pairs_at(prob, x), prob.F_ext, prob.m))
+        return cmap.unbalanced(forces(scene, x, _pairs_at(prob, x), prob.F_ext, prob.m, prob.indenter))
 
     sets = 0                                  # contact: active sets taken (module doc)
     if prob.contact:                          # the first set: the pairs touching at the start
         prob.active = _contact_pairs(prob, p, slack=CONTACT_SLACK)
         sets = 1
+    if prob.indenter is not None:             # the particles the spheres touch at the start
+        prob.indenter.update(p)
+        sets = 1
     try:
         while True:
-            f = forces(scene, p, _pairs_at(prob, p), prob.F_ext, prob.m)
+            f = forces(scene, p, _pairs_at(prob, p), prob.F_ext, prob.m, prob.indenter)
             unbalanced = cmap.unbalanced(f)
             if by_reactions:
                 load = float(np.linalg.norm(f - unbalanced, axis=1).sum())
+                if prob.indenter is not None:     # the spheres' push is a load too
+                    load += _indenter_load(prob, p)
             worst = float(np.linalg.norm(unbalanced, axis=1).max()) if n else 0.0
             new = worst / load if load > 0 else (0.0 if worst == 0 else float("inf"))
             rel = new
@@ -1026,6 +1064,13 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
                     say(f"static: contact set {sets}: {len(prob.active[0]) // 2:,} pairs")
                     least = None              # another problem: its residuals start anew
                     continue
+            if prob.indenter is not None and rel <= max(tolerance, CONTACT_SET_TOLERANCE) \
+                    and sets < MAX_CONTACT_SETS and prob.indenter.update(p):
+                sets += 1
+                say(f"static: indenter set {sets}: {int(prob.indenter.active.sum()):,} "
+                    "particles")
+                least = None
+                continue
             if rel <= tolerance or load == 0.0:
                 settled = True
                 break
@@ -1117,6 +1162,8 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
                 spread, mu, stalled, p = False, REGULARIZATION, 0, start.copy()
                 if prob.contact:
                     prob.active = _contact_pairs(prob, p, slack=CONTACT_SLACK)
+                if prob.indenter is not None:
+                    prob.indenter.update(p)
                 say("static: the Levenberg–Marquardt steps stalled; from the start again "
                     "with plain Newton steps")
             it += 1
@@ -1125,10 +1172,12 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
             lin.free()
         _CHECKS.pop(id(scene), None)
         prob.active = None                    # what follows sees the true one-sided contact
-    if settled and prob.contact:
+        if prob.indenter is not None:
+            prob.indenter.active = None
+    if settled and (prob.contact or prob.indenter is not None):
         # the last set is the one-sided contact's at p (it did not change), unless the sets
         # ran out: then the true contact decides
-        f = forces(scene, p, _pairs_at(prob, p), prob.F_ext, prob.m)
+        f = forces(scene, p, _pairs_at(prob, p), prob.F_ext, prob.m, prob.indenter)
         true = float(np.linalg.norm(cmap.unbalanced(f), axis=1).max()) / load if load else 0.0
         if true > tolerance:
             settled, rel = False, true
@@ -1139,12 +1188,18 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
         rel, p = least
     if not settled and prob.contact:
         _check_separation(scene, prob, p)
-    f = forces(scene, p, _pairs_at(prob, p), prob.F_ext, prob.m)
+    f = forces(scene, p, _pairs_at(prob, p), prob.F_ext, prob.m, prob.indenter)
     return StaticResult(p, settled, it, rel, load, history, time.perf_counter() - t0,
                         reactions=-(f - cmap.unbalanced(f)), solver=lin.kind if lin else "",
                         factorizations=lin.count if lin else 0, warnings=warnings,
                         contact_sets=sets, unbalanced=None if settled else unbalanced_at(
                             scene, prob, cmap.unbalanced(f), load, membrane))
+
+
+def _indenter_load(prob: _Problem, p: np.ndarray) -> float:
+    """The spheres' push at ``p``, Σ‖f_i‖: the load of a scene the indenters alone press (as
+    :func:`engine_residual` takes it)."""
+    return float(np.linalg.norm(prob.indenter.force(p), axis=1).sum())
 
 
 def _check_separation(scene, prob: _Problem, p: np.ndarray) -> None:

@@ -12,6 +12,7 @@ collide    Eqs. 10–11 (radii erratum)  c·(u−p)·min(0, 1 − R²/‖u−p�
 bind       Eqs. 12–13                  c·(u−p)·(1 − L0²/‖u−p‖²),       L0 = ‖u_o − p_o‖
 attract    Eq. 14                      c·(u−p)/‖u−p‖                  (constant magnitude c)
 integrate  Eq. 5                       v += t·a;  p += t·v            (:func:`integrate`)
+indent     (beyond the paper)          k·(R + r_p − ‖p − c‖)·(p − c)/‖p − c‖, a rigid sphere
 =========  ==========================  =====================================================
 
 A pair operator's formula is written once, as ``c·factor(d², q)·(u − p)`` with the per-pair
@@ -49,7 +50,7 @@ array([[-116.66666667,   -0.        ,   -0.        ]])
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import ClassVar, Mapping, Union
 
 import numpy as np
@@ -275,6 +276,10 @@ class Operator:
     def damping(self, holds: bool) -> float:
         """The velocity coefficient γ this operator adds (a ≈ −γ·v; only dampen has one)."""
         return 0.0
+
+    def with_dt(self, dt: float):
+        """The operator at the time step ``dt`` (one that counts its own steps: :class:`Indent`)."""
+        return self
 
     def check(self, target: str, groups: Mapping) -> None:
         """Validate against the scene's groups; raise :class:`SceneError` naming what is wrong."""
@@ -670,9 +675,100 @@ class Attract(PairOperator):
         return PairList(i, j, np.full(len(i), float(coeff.c)))
 
 
+@dataclass(frozen=True, eq=False)
+class Indent(Operator):
+    """A rigid sphere pressed on the target (``[[indenter]]``, beyond the paper): a linear
+    penalty on each particle its surface reaches,
+
+        a_p = k_p·g_p·(p − c)/‖p − c‖,   g_p = R + r_p − ‖p − c‖ > 0,
+
+    k_p the particle's stiffness per unit of its mass (``k``, one per target particle; 0: the
+    sphere does not act on it), r_p its radius (a particle of the top row sits half a spacing
+    below the part's surface), c the sphere's centre: ``centre`` + ``travel``·min(n/``steps``, 1)
+    at step n (the centre moves linearly over ``steps`` steps, then stays); ``steps`` = 0: at
+    ``centre`` + ``travel`` from the start (a static analysis). One-sided: the sphere pushes,
+    it does not pull.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> op = Indent((0.0, 0.0, 10.0), 10.0, (2.0, 2.0), travel=(0.0, 0.0, -1.0), steps=4)
+    >>> op.centre_at(2)
+    array([0. , 0. , 9.5])
+    >>> p = np.array([[0.0, 0.0, -0.25], [0.0, 5.0, -5.0]])
+    >>> Indent.accel(p, np.full(2, 0.5), np.array(op.k), op.centre_at(4), op.radius)
+    array([[ 0. ,  0. , -2.5],
+           [ 0. ,  0. ,  0. ]])
+    """
+
+    centre: tuple
+    radius: float
+    k: tuple = field(repr=False)
+    travel: tuple = (0.0, 0.0, 0.0)
+    steps: int = 0
+    when: tuple = ()
+    #: the travel's time (the scene's load ramp), whose steps ``steps`` is at the scene's dt
+    #: (:meth:`with_dt`); None: ``steps`` as given
+    ramp: float | None = None
+    #: the ramp's stairs (the scene's load ramp: its phases): ``steps`` is their steps' sum
+    stairs: int = 1
+
+    kind: ClassVar[str] = "indent"
+
+    def with_dt(self, dt: float):
+        if self.ramp is None:
+            return self
+        from dataclasses import replace
+
+        # each stair round(T/dt) steps, as model.scene.steps_for makes a phase's (the ramp,
+        # positive, checked where the scene was read)
+        return replace(self, steps=max(1, self.stairs * int(round(self.ramp / self.stairs
+                                                                   / float(dt)))))
+
+    def label(self) -> str:
+        c = ", ".join(f"{x:g}" for x in self.centre)
+        t = ", ".join(f"{x:g}" for x in self.travel)
+        return (f"indent(sphere ({c}) R {self.radius:g}, travel ({t}) over {self.steps} steps, "
+                f"{int(np.count_nonzero(self.k))} particles)" + self._when())
+
+    def check(self, target, groups) -> None:
+        super().check(target, groups)
+        where = f"operator indent on '{target}'"
+        vals = np.r_[self.centre, self.travel, self.radius]
+        if len(self.centre) != 3 or len(self.travel) != 3 or not np.all(np.isfinite(vals)):
+            raise SceneError(f"{where}: centre and travel must be three finite numbers each")
+        if not self.radius > 0:
+            raise SceneError(f"{where}: the sphere's radius must be positive, got {self.radius!r}")
+        if len(self.k) != groups[target].n or not np.all(np.asarray(self.k) >= 0):
+            raise SceneError(f"{where}: needs a stiffness >= 0 per particle of '{target}'")
+        if self.steps < 0:
+            raise SceneError(f"{where}: steps must be >= 0, got {self.steps!r}")
+
+    def centre_at(self, step: int) -> np.ndarray:
+        """The sphere's centre at step ``step`` (the fraction as the plugin's rs/indent takes it)."""
+        c, t = np.asarray(self.centre, float), np.asarray(self.travel, float)
+        s = float(step)
+        f = 1.0 if self.steps <= 0 or s >= self.steps else s / float(self.steps)
+        return c + f * t
+
+    @staticmethod
+    def accel(p, r, k, centre, radius):
+        """The acceleration of each particle p (radius r, stiffness k per unit mass) from the
+        sphere at ``centre``: zero where it does not reach (or k = 0)."""
+        d = p - np.asarray(centre, float)[None, :]
+        dist = np.sqrt(rowdot(d, d))
+        g = (radius + r) - dist
+        on = (g > 0) & (k > 0)
+        out = np.zeros_like(p)
+        out[on] = (k[on] * g[on] / dist[on])[:, None] * d[on]
+        return out
+
+
 OPERATORS = (Force, Dampen, Collide, Bind, Attract)
 PAIR_OPERATORS = (Collide, Bind, Attract)
 OPERATOR_KINDS = {cls.kind: cls for cls in OPERATORS}
+#: not an ``[[operator]]`` of a scene file: ``[[indenter]]`` makes it (scenes/physical.py)
+OPERATOR_KINDS[Indent.kind] = Indent
 
 
 def describe(op) -> str:

@@ -240,7 +240,8 @@ class Scene:
             return self
         phases = [Phase(p.name, steps_for(p.duration, dt, f"phase '{p.name}'"), p.vars,
                         p.duration) if p.duration is not None else p for p in self.phases]
-        sc = Scene(self.name, self.groups, self.operators, phases, dt, self.cycles, self.bound,
+        ops = {t: [op.with_dt(dt) for op in seq] for t, seq in self.operators.items()}
+        sc = Scene(self.name, self.groups, ops, phases, dt, self.cycles, self.bound,
                    {**self.params, "dt": dt}, self.report, self.duration, self.limit,
                    self.integrator, self.units, self.analysis)
         if self.duration is not None:

@@ -412,6 +412,87 @@ def contacts(ctx, tables, groups: dict, operators: dict, u) -> dict:
     return {name: out[name] for name in groups if name in out}
 
 
+#: ``[[indenter]]`` keys, and its ``sphere`` table's
+_INDENTER_KEYS = ("on", "sphere", "travel", "stiffness", "ramp")
+_SPHERE_KEYS = ("centre", "radius")
+#: the indenter's default stiffness factor (on E*·a per particle of the part's face):
+#: docs/calibration.md "Contact" (the Hertz bench: p0 5.6 % low at factor 1)
+INDENTER_STIFFNESS = 10.0
+
+
+def indenters(ctx, tables, groups: dict, operators: dict, u, ramp, dt: float,
+              analysis: str = "static") -> dict:
+    """``[[indenter]]``: a rigid sphere (``sphere = { centre, radius }``) pressed on a material
+    part (``on``) by moving its centre by ``travel``: at once in a static analysis (the
+    equilibrium with the sphere there), over the scene's load ramp in a dynamic one (linearly,
+    then held). Each particle the sphere's surface reaches is pushed radially out by a linear
+    penalty k·g (:class:`rackstress.model.operators.Indent`), g its overlap with the particle
+    (of radius half a spacing: the part's face is half a spacing above its top row), k =
+    ``stiffness``·E*·a·A/a² with E* = E/(1 − ν²) the part's contact modulus against a rigid
+    body (ν the lattice's 1/4 unless ``poisson = "material"``) and A/a² the particle's share of
+    a face across the travel (its cell's fractions: ½ on a symmetry plane, ¼ on an axis)."""
+    from rackstress.model.operators import Indent
+    from rackstress.model.scene import steps_for
+    from rackstress.model.volume import Volume
+    from rackstress.scenes.fields import (_array_of_tables, _check_keys, _number, _require,
+                                          _table, _vec3)
+
+    out = {name: list(seq) for name, seq in operators.items()}
+    for k, t in enumerate(_array_of_tables(ctx, tables, "indenter"), 1):
+        c = ctx.at(f"[[indenter]] #{k}")
+        _check_keys(c, t, _INDENTER_KEYS)
+        name, g = _group_of(c, t, groups)
+        if g.material is None:
+            raise c.error(f"group '{name}' has no material: the indenter's stiffness comes "
+                          "from the part's E and ν; give the part a material", "on")
+        if analysis == "dynamic" and ramp is None:
+            raise c.error("a dynamic analysis moves the indenter over the scene's load ramp: "
+                          "give 'ramp' (a time), or analysis = \"static\" for the "
+                          "equilibrium with the sphere at its travel's end", "ramp")
+        sphere = _table(c, _require(c, t, "sphere"), "sphere")
+        cs = c.at(f"[[indenter]] #{k} sphere")
+        _check_keys(cs, sphere, _SPHERE_KEYS)
+        centre = np.array(_vec3(cs, _require(cs, sphere, "centre"), "centre"))
+        radius = _number(cs, _require(cs, sphere, "radius"), "radius", positive=True)
+        travel = np.array(_vec3(c, _require(c, t, "travel"), "travel"))
+        if not np.any(travel != 0):
+            raise c.error("the sphere's centre must move (the indentation): give a nonzero "
+                          "travel, e.g. travel = [0, 0, -0.1]", "travel")
+        factor = _number(c, t.get("stiffness", INDENTER_STIFFNESS), "stiffness", positive=True)
+        a = _spacing(c, g)
+        mat = g.material.in_units(u)
+        has_volume = any(isinstance(op, Volume) for op in out.get(name, []))
+        nu = float(mat["nu"]) if has_volume else 0.25
+        e_star = float(mat["E"]) / (1.0 - nu ** 2)
+        # the particle's share of a face across the travel's main axis: its cell's fractions
+        # along the two others (model/solid.py axis_fractions), whole cells without a solid
+        solid = next((op.coeff for op in out.get(name, [])
+                      if hasattr(getattr(op, "coeff", None), "fractions")), None)
+        phi = solid.fractions(g.o) if solid is not None else np.ones((g.n, 3))
+        ax = int(np.argmax(np.abs(travel)))
+        share = np.prod(np.delete(phi, ax, axis=1), axis=1)
+        kk = factor * e_star * a * share / g.mass(u)
+        end = centre + travel
+        d = np.linalg.norm(g.o - end[None, :], axis=1)
+        if not np.any(d < radius + np.asarray(g.r, float)):
+            raise c.error(f"the sphere at its end, centre {end.tolist()} and radius {radius:g}, "
+                          f"reaches no particle of '{name}': check the centre, radius and "
+                          "travel against the part's positions and the scene's length unit",
+                          "travel")
+        if np.any(d < 0.5 * radius):
+            raise c.error(f"the sphere's centre ends inside '{name}' (its particles within "
+                          "half a radius of it): place the sphere outside the part, touching "
+                          "its face", "sphere")
+        # the centre moves over the ramp's phases (ramp_phases: RAMP_STAIRS stairs), then stays
+        steps = max(1, RAMP_STAIRS * steps_for(ramp / RAMP_STAIRS, dt, "the indenter's ramp")) \
+            if ramp is not None else 0
+        out.setdefault(name, []).append(
+            Indent(tuple(float(x) for x in centre), float(radius),
+                   tuple(float(x) for x in kk), tuple(float(x) for x in travel), steps,
+                   ramp=None if ramp is None else float(ramp), stairs=RAMP_STAIRS))
+    return {name: out[name] for name in groups if name in out}
+
+
 def ramp_of(ctx, tables):
     """The ramp time shared by the scene's loads (one ramp per scene), or None."""
     ramps = {float(t["ramp"]) for t in tables if isinstance(t, dict) and "ramp" in t

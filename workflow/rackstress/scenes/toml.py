@@ -98,7 +98,8 @@ OVERRIDABLE = ("dt", "steps", "duration", "cycles", "bound")
 STATIC_UNUSED = ("dt", "steps", "duration", "cycles")
 
 _TOP_KEYS = ("name", "dt", "cycles", "bound", "steps", "duration", "params", "group",
-             "operator", "phase", "units", "analysis", "load", "support", "budget", "contact")
+             "operator", "phase", "units", "analysis", "load", "support", "budget", "contact",
+             "indenter")
 #: ``--set`` keys of every explicit scene besides OVERRIDABLE, unless its [params] has them:
 #: ``spacing`` (every filled part's lattice spacing) and ``budget`` (the particles a part
 #: whose spacing is chosen from its walls may have)
@@ -528,7 +529,9 @@ def _build_explicit(ctx: _Ctx, data: dict, overrides: dict, user: dict) -> Scene
     region_of = lambda c, value, field, g=None: _region(c, value, field, base, g)  # noqa: E731
     select = lambda c, value, field, o, g=None: _mask(c, region_of(c, value, field, g), o, field)  # noqa: E731
     physical.supports(ctx, data.get("support", []), groups, select, region_of)
-    ramp = physical.ramp_of(ctx, data.get("load", []))
+    indenter = data.get("indenter", [])
+    ramp = physical.ramp_of(ctx, data.get("load", [])
+                            + (indenter if isinstance(indenter, list) else []))
     if ramp is not None:
         settings["ramp"] = physical.ramp_phases(ctx, data, ramp, length, dt)
     phases = _phases(ctx, data, settings, length)
@@ -538,6 +541,9 @@ def _build_explicit(ctx: _Ctx, data: dict, overrides: dict, user: dict) -> Scene
                                select, ramp)
     operators = physical.contacts(ctx, data.get("contact", []), groups, operators, unit_system)
     analysis = physical.analysis_of(ctx, data, groups, operators, ramp)
+    if "indenter" in data:
+        operators = physical.indenters(ctx, indenter, groups, operators, unit_system, ramp, dt,
+                                       analysis)
     if analysis == "static" and any(getattr(op, "mu", 0.0) > 0 for seq in operators.values()
                                     for op in seq):
         raise ctx.error("friction acts on sliding parts in time (analysis = \"dynamic\"); a "

@@ -28,6 +28,7 @@ import operator
 
 import numpy as np
 
+from rackstress.errors import SceneError
 from rackstress.lib.vec import fresh_zeros, rowdot
 from rackstress.engines.watchdog import first_nonfinite
 from rackstress.engines.lammps.deck import _global_int
@@ -1269,6 +1270,13 @@ class PyForces:
                         and rev in here):
                     self.reverse[r.site] = rev
                     self.folded[rev] = r.site   # rev is carried by r's term
+        held = [r for r in python if r.op.kind == "indent"]
+        if held:
+            raise SceneError(
+                f"scene '{self.scene.name}': the indenter on '{held[0].target}' "
+                "([[indenter]]) runs on the compiled plugin's fix rs/indent; the Python "
+                "callback does not model it: run with the plugin (the default where it builds;"
+                " not RACKSTRESS_KERNELS=numba|numpy), or --engine reference")
         self.terms = [TERMS[type(r.op)](self, r) for r in python]
         self.phase = {}
         self.active = []

@@ -90,7 +90,8 @@ import numpy as np
 
 from rackstress.model import topology
 from rackstress.errors import SceneError
-from rackstress.model.operators import (Attract, Bind, Collide, Const, Dampen, Force, Matched,
+from rackstress.model.operators import (Attract, Bind, Collide, Const, Dampen, Force, Indent,
+                                        Matched,
                                         contact_groups, phase_active, reverse_of)
 from rackstress.model.scene import Phase, Scene
 from rackstress.model.verlet import scaled_scene
@@ -548,6 +549,11 @@ class Deck:
         op, fid = r.op, f"{PLUGIN_FIX}{idx}"
         if r.plugin == "rs/dampen":
             return f"fix {fid} {r.target} rs/dampen {_f(op.extra)} contact {contact_groups(op.when)[0]}"
+        if r.plugin == "rs/indent":       # the sphere, its travel's steps, d_rskN per atom
+            name = next(n for n, _, o in _indent_props(self.scene) if o is op)
+            return (f"fix {fid} {r.target} rs/indent "
+                    + " ".join(_f(x) for x in (*op.centre, op.radius, *op.travel))
+                    + f" {int(op.steps)} stiffness d_{name}")
         if r.plugin == "rs/volume":       # the moduli per unit density (the style × its mass)
             return (f"fix {fid} {r.target} rs/volume {_f(op.solid.spacing)} "
                     + " ".join(_f(x) for x in op.c) + " btype "
@@ -1031,9 +1037,28 @@ def _realize_volume(cx: dict, target: str, k: int, op) -> Realized:
     return Realized(target, op, None, True, site=(target, k))
 
 
+def _realize_indent(cx: dict, target: str, k: int, op) -> Realized:
+    """A rigid sphere (``[[indenter]]``): the plugin's ``rs/indent``
+    (:func:`_plugin_realize`); the Python callback does not model it (it refuses the run:
+    engines/lammps/callback.py ``Forces``)."""
+    return Realized(target, op, None, True, site=(target, k))
+
+
 #: operator class → its realization on LAMMPS (adding an operator adds one entry)
 REALIZE = {Force: _realize_force, Dampen: _realize_dampen, Collide: _realize_pair,
-           Bind: _realize_pair, Attract: _realize_pair, Volume: _realize_volume}
+           Bind: _realize_pair, Attract: _realize_pair, Volume: _realize_volume,
+           Indent: _realize_indent}
+
+
+def _indent_props(scene: Scene) -> list[tuple[str, int, object]]:
+    """(per-atom property, its group's first index, the operator) of each Indent: rs/indent's
+    stiffness per unit mass, d_rsk1, d_rsk2, … in the operators' order."""
+    out = []
+    for target, seq in scene.operators.items():
+        for op in seq:
+            if isinstance(op, Indent):
+                out.append((f"rsk{len(out) + 1}", scene.offset(target), op))
+    return out
 
 
 def plugin_passive_skin(scene: Scene, passive) -> float:
@@ -1102,6 +1127,7 @@ def plugin_setup_commands(deck: Deck) -> list[str]:
     regions = " ".join(f"i_{_prop_name(n)}" for n in _region_names(deck.scene))
     if deck.volumes:              # rs/volume's cells (Deck.volume_commands)
         regions = (regions + " d2_rsphi 6").strip()
+    regions = (regions + " " + " ".join(f"d_{n}" for n, _, _ in _indent_props(deck.scene))).strip()
     L.append(f"fix {PROP_FIX} all property/atom d2_rso 3 d_rsr {regions} ghost yes".replace("  ", " "))
     return L
 
@@ -1127,6 +1153,9 @@ def plugin_property_commands(scene: Scene) -> list[str]:
     L += [f"set group all d2_rso[{k}] v_rs_o{k}" for k in (1, 2, 3)]
     L += [f"variable rs_o{k} delete" for k in (1, 2, 3)]
     L += [f"set atom {a}*{b} d_rsr {_f(v)}" for a, b, v in _id_runs(scene.radii())]
+    for name, start, op in _indent_props(scene):         # rs/indent's stiffness per atom
+        L += [f"set atom {a}*{b} d_{name} {_f(v)}"
+              for a, b, v in _id_runs(np.asarray(op.k, float), start) if v != 0]
     for name in _region_names(scene):
         for g_name, g in scene.groups.items():
             regions = (g.meta or {}).get("regions", {})
@@ -1153,6 +1182,8 @@ def _plugin_realize(scene: Scene, realized: list) -> tuple | None:
             r.plugin = "rs/dampen"
         elif isinstance(op, Collide):
             r.plugin = "rs/collide"
+        elif isinstance(op, Indent):
+            r.plugin = "rs/indent"
         elif isinstance(op, Attract):
             r.plugin = "rs/attract"
         elif isinstance(op, Volume):
