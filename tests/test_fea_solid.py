@@ -349,11 +349,11 @@ def test_points_outside_the_mesh_do_not_ask_every_element_at_once():
 
 
 def test_the_compiled_assembly_equals_its_numpy_statement():
-    """validity.tet's P2 stiffness scatter: the compiled loop (numba) and its NumPy statement
+    """lib.tet's P2 stiffness scatter: the compiled loop (numba) and its NumPy statement
     (nine bincounts, the path without numba) give the same K to round-off on a random mesh."""
     from scipy.spatial import Delaunay
 
-    from rackstress.validity import tet
+    from rackstress.lib import tet
 
     rng = np.random.default_rng(1)
     P = rng.random((400, 3))
@@ -379,7 +379,7 @@ def _rotated_block(method):
     from scipy.spatial.transform import Rotation
 
     from rackstress.model.constraints import Normals
-    from rackstress.validity.tet import Tet2
+    from rackstress.lib.tet import Tet2
 
     p, t = cell_mesh(_bar(4, 3, 3), 1.0)
     L = p.T + 0.5                                     # local: the block 0 … 4 × 0 … 3 × 0 … 3
@@ -436,7 +436,7 @@ def test_a_pinned_ring_turns_freely_and_carries_its_share_by_statics():
     rotation, shear deformation does not change it)."""
     from rackstress.model.constraints import Ring
     from rackstress.validity.solid import CellConstraints
-    from rackstress.validity.tet import Tet2
+    from rackstress.lib.tet import Tet2
 
     nx, h = 30, 3
     o = _bar(nx, h, h)

@@ -107,3 +107,57 @@ def test_a_plate_with_a_hole_reads_its_peak_by_the_notch_reading(tmp_path):
     assert 'id="notch"' in html and "notch reading" in html
     lines = "\n".join(describe(gov, info.get("singular"), err))
     assert "notch reading" in lines and f"{gov['patch_value']:.4g}" in lines
+    # read by the submodel (the test extra installs gmsh): said, with the fit's own value
+    assert gov["notch"]["by"] == "submodel" and "submodel" in lines and 'data-by="submodel"' in html
+    assert f"{gov['notch']['fit']:.4g}" in lines
+    # without gmsh (as after a plain `pip install .`), in a process of its own: the fit's
+    # reading, and why
+    import json
+    import subprocess
+    import sys
+
+    code = ("import sys, json; sys.modules['gmsh'] = None\n"
+            "from rackstress.stress.post import postprocess\n"
+            f"g = postprocess({str(d)!r}, vtk=False, dump=False)['governing']\n"
+            "print(json.dumps(g['notch']))")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr[-2000:]
+    fit = json.loads(p.stdout.strip().splitlines()[-1])
+    assert fit["by"] == "fit" and fit["value"] == pytest.approx(gov["notch"]["fit"], rel=1e-9)
+    assert "rackstress[fem]" in fit["submodel_note"]
+
+
+def _kirsch_displacement(x, y, S, E, nu, a):
+    """Kirsch's plane-strain displacement about a hole of radius ``a`` in a plate under ``S``
+    along x (Jaeger, Cook & Zimmerman, *Fundamentals of Rock Mechanics*, §8.4; κ = 3 − 4ν)."""
+    G, kap = E / (2 * (1 + nu)), 3 - 4 * nu
+    r, th = np.hypot(x, y), np.arctan2(y, x)
+    c2, s2 = np.cos(2 * th), np.sin(2 * th)
+    ur = S / (4 * G) * (r * ((kap - 1) / 2 + c2) + a ** 2 / r * (1 + (1 + kap) * c2)
+                        - a ** 4 / r ** 3 * c2)
+    ut = S / (4 * G) * ((1 - kap) * a ** 2 / r - r - a ** 4 / r ** 3) * s2
+    return ur * np.cos(th) - ut * np.sin(th), ur * np.sin(th) + ut * np.cos(th)
+
+
+def test_the_submodel_reads_kirsch_from_exact_displacements():
+    """The submodel of a hole's side (a block 20 thick with a bore of radius 2, its ball of 3
+    spacings at mid-height, inside the block), its cut displaced as "particles" on a lattice of
+    spacing 0.5 are by Kirsch's plane-strain field: plane strain is the exact 3D solution
+    there (u_z = 0 on the cut, the bore free), so it reads the edge's von Mises stress,
+    3S·√(1 − ν + ν²) (σ_θθ = 3S, σ_rr = 0, σ_zz = 3νS), within 2 % (hand calculation)."""
+    import trimesh
+
+    S, E, nu, ah, a = 10.0, 70000.0, 0.33, 2.0, 0.5
+    part = trimesh.boolean.difference(
+        [trimesh.creation.box(extents=[40, 40, 20]),
+         trimesh.creation.cylinder(radius=ah, height=30, sections=512)], engine="manifold")
+    g = np.arange(-8, 8, a) + a / 2
+    X, Y, Z = np.meshgrid(g, g, np.arange(-3, 3, a) + a / 2, indexing="ij")
+    o = np.column_stack([X.ravel(), Y.ravel(), Z.ravel()])
+    o = o[np.hypot(o[:, 0], o[:, 1]) > ah]
+    ux, uy = _kirsch_displacement(o[:, 0], o[:, 1], S, E, nu, ah)
+    u = np.column_stack([ux, uy, np.zeros(len(o))])
+    c = np.array([0.0, ah, 0.0])
+    sol = N.submodel(part.vertices, part.faces, c, o, u, a, ah, E, nu)
+    vm = float(sol.at(c[None])["von_mises"][0])
+    assert vm == pytest.approx(3 * S * math.sqrt(1 - nu + nu * nu), rel=0.02)

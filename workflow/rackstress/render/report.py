@@ -232,9 +232,11 @@ def governing_section(stress: dict, headline: bool = True) -> str:
           "(docs/stress.md).</p>")
         if gov.get("read") == "notch":
             nk = gov["notch"]
-            w(f'<p class="note" id="notch">Read on a concave curved face of radius '
-              f"{_num(nk['radius'], 3)} {_e(gov.get('length_units', ''))} by the notch reading, "
-              "a fit of the particles beneath it to a notch's field (docs/stress.md \"The "
+            from rackstress.stress.governing import notch_how
+
+            w(f'<p class="note" id="notch" data-by="{_e(nk.get("by", "fit"))}">Read on a '
+              f"concave curved face of radius {_num(nk['radius'], 3)} "
+              f"{_e(gov.get('length_units', ''))} {_e(notch_how(nk))} (docs/stress.md \"The "
               f"notch reading\"); the patch fit of the particles reads "
               f"{_num(gov['patch_value'])} {_e(gov['units'])}.</p>")
     sing = stress.get("singular")

@@ -198,7 +198,7 @@ def solve_body(p, t, E: float, nu: float, fixed, x, F, spacing: float):
     from scipy.spatial import cKDTree
 
     from rackstress.validity.solid import solve
-    from rackstress.validity.tet import Tet2
+    from rackstress.lib.tet import Tet2
 
     mesh = Tet2(np.asarray(p, float).T, np.asarray(t, np.int64).T)
     cen = mesh.p[mesh.t].mean(axis=1)

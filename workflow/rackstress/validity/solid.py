@@ -46,12 +46,15 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from rackstress.errors import RackstressError
+from rackstress.lib.tet import (FLAT_TET, SLIVER_AREA, Solution, _faces_once,  # noqa: F401
+                                _twice_areas, drop_slivers, gmsh_volume, hooke,
+                                project_strain, tet_volumes, von_mises)
 from rackstress.lib.resources import cpu_children
 from rackstress.model.singular import wall_thickness  # noqa: F401 - the part's length, one home
 
@@ -132,77 +135,6 @@ def cell_mesh(o: np.ndarray, spacing: float):
     swap = tet_volumes(p.T, t.T) < 0
     t[1, swap], t[2, swap] = t[2, swap].copy(), t[1, swap].copy()
     return p, t
-
-
-#: a triangle of area ≤ this × (the part's size)² is a sliver (:func:`drop_slivers`)
-SLIVER_AREA = 1e-9
-
-
-def _twice_areas(v: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """|(b − a) × (c − a)| of each triangle (a, b, c) of ``F``: twice its area."""
-    return np.linalg.norm(np.cross(v[F[:, 1]] - v[F[:, 0]], v[F[:, 2]] - v[F[:, 0]]), axis=1)
-
-
-def drop_slivers(vertices: np.ndarray, faces: np.ndarray, rel: float = SLIVER_AREA) -> np.ndarray:
-    """The triangles without the zero-area ones (three collinear vertices, as CSG leaves where
-    a hole meets a face), the surface kept closed and conforming: the neighbour across a
-    sliver's long edge is split at the sliver's middle vertex. gmsh cannot parametrize a patch
-    holding a sliver. The neighbour is found through a map of directed edges, and only the
-    slivers (and the triangles a split makes) are visited: linear in the triangles (a rescan
-    of every triangle for each sliver took over ten minutes on a printed finger link)."""
-    v = np.asarray(vertices, float)
-    F = np.asarray(faces, np.int64).reshape(-1, 3)
-    tiny = rel * float(np.ptp(v, axis=0).max()) ** 2
-    queue = [int(k) for k in np.flatnonzero(_twice_areas(v, F) <= tiny)][::-1]
-    if not queue:
-        return F
-    f = F.tolist()
-
-    def area2(t) -> float:
-        return float(_twice_areas(v, np.asarray([t]))[0])
-
-    owner = {}                                  # directed edge (a, b) -> its triangle
-    alive = [True] * len(f)
-    splits = 4 * len(queue) + 16        # a sliver beside a sliver splits it into slivers: bound
-
-    def register(j: int, on: bool) -> None:
-        t = f[j]
-        for r in range(3):
-            e = (t[r], t[(r + 1) % 3])
-            if on:
-                owner[e] = j
-            elif owner.get(e) == j:
-                del owner[e]
-
-    for j in range(len(f)):
-        register(j, True)
-    while queue and splits > 0:
-        k = queue.pop()
-        if not alive[k] or area2(f[k]) > tiny:
-            continue
-        tri = f[k]
-        lens = [np.linalg.norm(v[tri[(i + 1) % 3]] - v[tri[(i + 2) % 3]]) for i in range(3)]
-        i = int(np.argmax(lens))
-        m, p, q = tri[i], tri[(i + 1) % 3], tri[(i + 2) % 3]
-        j = owner.get((q, p))                   # the triangle with the edge q → p
-        if j is None or j == k or not alive[j]:
-            continue                            # no neighbour: leave it to gmsh
-        t = f[j]
-        if area2(t) <= tiny:
-            continue                            # the neighbour is a sliver too: gmsh's
-        r = next(r for r in range(3) if t[r] == q and t[(r + 1) % 3] == p)
-        d = t[(r + 2) % 3]
-        splits -= 1
-        register(j, False)
-        register(k, False)
-        alive[k] = False
-        f[j] = [q, m, d]
-        f.append([m, p, d])
-        alive.append(True)
-        register(j, True)
-        register(len(f) - 1, True)
-        queue.extend(x for x in (len(f) - 1, j) if area2(f[x]) <= tiny)
-    return np.asarray([t for t, a in zip(f, alive) if a], dtype=np.int64)
 
 
 def surface_mesh(vertices: np.ndarray, faces: np.ndarray, size: float, near=None,
@@ -329,7 +261,7 @@ TETWILD_VOLUME_TOL = 0.03
 #: load 3.5, over the 60 s target
 OWN_AIM = 0.85
 #: tetrahedra a tetrahedron of fTetWild's becomes, all bisected at their longest edge and their
-#: neighbours as conformity needs (:func:`rackstress.validity.tet.bisect`; the SO-100 base's
+#: neighbours as conformity needs (:func:`rackstress.lib.tet.bisect`; the SO-100 base's
 #: 9,298: 39,964, 4.30): where 8 times as many would exceed the budget, the second FE size
 #: bisects them instead (where all would, as many as fit: :func:`_bisect_within`), and
 #: fTetWild runs once (a coarser second run was 17–24 s of the base's 59–72 s of CPU)
@@ -397,15 +329,6 @@ def open_edges(F: np.ndarray) -> int:
     return int((n != 2).sum())
 
 
-def _faces_once(t: np.ndarray):
-    """The four faces of each tetrahedron t (M×4), face k of the 4M opposite corner k // M
-    of tetrahedron k % M, and which of them belong to that tetrahedron only (the boundary)."""
-    faces = np.concatenate([t[:, [1, 2, 3]], t[:, [0, 3, 2]], t[:, [0, 1, 3]], t[:, [0, 2, 1]]])
-    _, inv, cnt = np.unique(np.sort(faces, axis=1), axis=0, return_inverse=True,
-                            return_counts=True)
-    return faces, cnt[inv.ravel()] == 1
-
-
 def boundary_triangles(X: np.ndarray, t: np.ndarray):
     """The boundary of the tetrahedra t (M×4) of the points X (N×3): the faces that belong to
     one tetrahedron only, each turned to face away from its fourth corner (outwards).
@@ -418,13 +341,6 @@ def boundary_triangles(X: np.ndarray, t: np.ndarray):
     b[inward] = b[inward][:, [0, 2, 1]]
     used, bi = np.unique(b, return_inverse=True)
     return used, bi.reshape(-1, 3)
-
-
-def tet_volumes(X: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Signed volume of each tetrahedron t (M×4) of the points X (N×3)."""
-    P = X[t]
-    return np.einsum("ij,ij->i", np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]),
-                     P[:, 3] - P[:, 0]) / 6
 
 
 def enclosed_volume(V: np.ndarray, F: np.ndarray) -> float:
@@ -442,7 +358,7 @@ def own_tetrahedra(own) -> tuple[np.ndarray, np.ndarray, str]:
     X, t, finer = own
     how = ""
     if finer:
-        from rackstress.validity.tet import bisect, refine
+        from rackstress.lib.tet import bisect, refine
 
         n = len(t)
         if 8 * n <= FE_ELEMENTS:
@@ -465,7 +381,7 @@ def _bisect_within(X: np.ndarray, t: np.ndarray):
     stress and its governing point are there), the largest first, then the inner ones; the
     count a bisection makes (with the neighbours conformity cuts) is found by trying, at most
     four times (0.2 s each at 40,000)."""
-    from rackstress.validity.tet import bisect
+    from rackstress.lib.tet import bisect
 
     n, aim = len(t), OWN_AIM * FE_ELEMENTS
     outer = _faces_once(t)[1].reshape(4, n).any(axis=0)
@@ -582,68 +498,9 @@ FLAT = 1e-2
 
 
 def _gmsh_volume(v, f, size, near, near_size, reparametrize: bool, netgen: bool = False):
-    """gmsh's tetrahedra inside the closed triangulated surface (v, f) (:func:`surface_mesh`);
-    ``netgen``: then Netgen's optimizer on them (inside fTetWild's surface of the fixed jaw:
-    47 of 71,091 tetrahedra slivers without, whose nodal stress put the FE's governing point
-    at 2.17 MPa where the rest reads 0.12; none with, 4.7 s instead of 1.2 s; at 3.2 mm
-    0–1 of about 10,300 over five runs, fTetWild not being deterministic)."""
-    import gmsh
+    """:func:`rackstress.lib.tet.gmsh_volume` graded at :data:`GRADE`."""
+    return gmsh_volume(v, f, size, near, near_size, reparametrize, netgen, grade=GRADE)
 
-    gmsh.initialize(["-noenv"], readConfigFiles=False)
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.model.add("part")
-        s = gmsh.model.addDiscreteEntity(2)
-        gmsh.model.mesh.addNodes(2, s, np.arange(1, len(v) + 1), v.ravel())
-        gmsh.model.mesh.addElementsByType(s, 2, [], (f + 1).ravel())
-        if reparametrize:
-            gmsh.model.mesh.classifySurfaces(math.radians(40.0), True, True, math.pi)
-            gmsh.model.mesh.createGeometry()
-        else:
-            gmsh.model.mesh.createTopology()
-        loop = gmsh.model.geo.addSurfaceLoop([e[1] for e in gmsh.model.getEntities(2)])
-        gmsh.model.geo.addVolume([loop])
-        gmsh.model.geo.synchronize()
-        gmsh.option.setNumber("Mesh.MeshSizeMax", float(size))
-        gmsh.option.setNumber("Mesh.OptimizeNetgen", 1 if netgen else 0)
-        if near is not None and len(near) and near_size and near_size < size:
-            pts = [gmsh.model.geo.addPoint(*map(float, x)) for x in np.asarray(near)]
-            gmsh.model.geo.synchronize()
-            fd = gmsh.model.mesh.field.add("Distance")
-            gmsh.model.mesh.field.setNumbers(fd, "PointsList", pts)
-            ft = gmsh.model.mesh.field.add("Threshold")
-            gmsh.model.mesh.field.setNumber(ft, "InField", fd)
-            gmsh.model.mesh.field.setNumber(ft, "SizeMin", float(near_size))
-            gmsh.model.mesh.field.setNumber(ft, "SizeMax", float(size))
-            gmsh.model.mesh.field.setNumber(ft, "DistMin", float(near_size / GRADE))
-            gmsh.model.mesh.field.setNumber(ft, "DistMax", float(size / GRADE))
-            gmsh.model.mesh.field.setAsBackgroundMesh(ft)
-        gmsh.model.mesh.generate(3)
-        tags, coords, _ = gmsh.model.mesh.getNodes()
-        etypes, _, enodes = gmsh.model.mesh.getElements(3)
-    finally:
-        gmsh.finalize()
-    tet = [n for ty, n in zip(etypes, enodes) if ty == 4]
-    if not tet:
-        raise RuntimeError("gmsh made no tetrahedra")
-    index = np.zeros(int(tags.max()) + 1, dtype=np.int64)
-    index[tags.astype(np.int64)] = np.arange(len(tags))
-    t = index[np.asarray(tet[0], np.int64).reshape(-1, 4)].T
-    X = coords.reshape(-1, 3)
-    if not reparametrize:
-        # inside a file's own facets gmsh leaves flat tetrahedra, four corners on one face (the
-        # SO-100 base: 89 of 13,879 with volume < 1e-6 × edge³, 6 of them inverted): no
-        # stiffness, a singular system. They hold no volume; the rest stay conforming
-        vol = tet_volumes(X, t.T)
-        edge = np.max([np.linalg.norm(X[t[i]] - X[t[j]], axis=1)
-                       for i in range(4) for j in range(i + 1, 4)], axis=0)
-        t = t[:, np.abs(vol) > FLAT_TET * edge ** 3]
-    used, t = np.unique(t, return_inverse=True)
-    return (np.ascontiguousarray(X[used].T), np.ascontiguousarray(t.reshape(4, -1)))
-
-
-#: a tetrahedron of volume ≤ this × its longest edge³ is flat (a regular one: 0.118)
-FLAT_TET = 1e-6
 
 #: a tetrahedron is a sliver when its quality (:func:`mesh_quality`) is below this
 SLIVER_Q = 0.05
@@ -657,7 +514,7 @@ POOR_SLIVERS = 0.05
 def mesh_quality(p: np.ndarray, t: np.ndarray) -> dict:
     """Each tetrahedron's quality q = 6·√2·V / ℓ³ (ℓ the root mean square of its six edges;
     1 for a regular tetrahedron, 0 for a flat one) over the mesh (p N×3, t M×4, a
-    :class:`~rackstress.validity.tet.Tet2`'s ``p`` and ``t``): its minimum, median, the share
+    :class:`~rackstress.lib.tet.Tet2`'s ``p`` and ``t``): its minimum, median, the share
     of slivers (q < :data:`SLIVER_Q`) and whether the mesh is poor (that share above
     :data:`POOR_SLIVERS`). A regular tetrahedron:
 
@@ -804,76 +661,6 @@ def constraint_map(X: np.ndarray, fixed: np.ndarray, items: list):
 
 
 # --------------------------------------------------------------------------- solution
-@dataclass
-class Solution:
-    """A solved part: its P2 mesh (:class:`rackstress.validity.tet.Tet2`), the displacement of
-    every node (n × 3) and the strain projected onto continuous P2 (n × 6); :meth:`at`
-    evaluates."""
-
-    mesh: object
-    u: np.ndarray
-    eps: np.ndarray
-    E: float
-    nu: float
-    info: dict = field(default_factory=dict)
-
-    def at(self, points) -> dict:
-        """``displacement`` (n×3), ``stress`` (n×6: xx yy zz xy xz yz) and ``von_mises`` (n) at
-        ``points`` (n×3); a point on or just outside the faceted surface is taken at the
-        nearest point of the mesh (:meth:`~rackstress.validity.tet.Tet2.locate`)."""
-        x = np.asarray(points, float).reshape(-1, 3)
-        u = np.empty((len(x), 3))
-        e = np.empty((len(x), 6))
-        for s in range(0, len(x), 65536):
-            sl = slice(s, s + 65536)
-            el, lam = self.mesh.locate(x[sl])
-            u[sl] = self.mesh.interpolate(self.u, el, lam)
-            e[sl] = self.mesh.interpolate(self.eps, el, lam)
-        s = hooke(e, self.E, self.nu)
-        return {"displacement": u, "stress": s, "von_mises": von_mises(s)}
-
-    def nodal(self) -> dict:
-        """The same fields at every P2 node of the mesh (``mesh.X``)."""
-        s = hooke(self.eps, self.E, self.nu)
-        return {"displacement": self.u, "stress": s, "von_mises": von_mises(s)}
-
-
-def hooke(e: np.ndarray, E: float, nu: float) -> np.ndarray:
-    """σ = λ tr ε I + 2μ ε of strains (n × 6, tensor shears) → stresses (n × 6)."""
-    lam = E * nu / ((1 + nu) * (1 - 2 * nu))
-    mu = E / (2 * (1 + nu))
-    s = 2 * mu * e
-    s[:, :3] += lam * e[:, :3].sum(axis=1)[:, None]
-    return s
-
-
-def project_strain(mesh, u: np.ndarray, M=None) -> np.ndarray:
-    """The L² projection of ε(u) onto continuous P2 (n × 6): one mass matrix, conjugate
-    gradients with its diagonal (a P2 mass matrix is well conditioned)."""
-    import scipy.sparse.linalg as spla
-
-    M = mesh.mass() if M is None else M
-    b = mesh.strain_load(u)
-    D = spla.LinearOperator(M.shape, matvec=lambda x, d=1.0 / M.diagonal(): d * x)
-    out = np.zeros_like(b)
-    for c in range(6):
-        scale = float(np.abs(b[:, c]).max())
-        if scale == 0.0:
-            continue
-        x, info = spla.cg(M, b[:, c] / scale, rtol=1e-12, atol=0.0, maxiter=2000, M=D)
-        if info != 0:
-            raise RuntimeError(f"the stress projection did not converge ({info})")
-        out[:, c] = x * scale
-    return out
-
-
-def von_mises(s: np.ndarray) -> np.ndarray:
-    """σ_vm = √(½[(σxx−σyy)² + (σyy−σzz)² + (σzz−σxx)²] + 3(σxy² + σxz² + σyz²))."""
-    xx, yy, zz, xy, xz, yz = s.T
-    return np.sqrt(0.5 * ((xx - yy) ** 2 + (yy - zz) ** 2 + (zz - xx) ** 2)
-                   + 3 * (xy ** 2 + xz ** 2 + yz ** 2))
-
-
 def _on_nodes(mesh, a: np.ndarray | None, n_vertices: int, kind: str) -> np.ndarray:
     """``a`` given per vertex (N rows) or per P2 node: per P2 node. A midpoint is fixed in a
     direction when both its edge's vertices are; forces given per vertex stay there."""
@@ -897,7 +684,7 @@ def _on_nodes(mesh, a: np.ndarray | None, n_vertices: int, kind: str) -> np.ndar
 def solve(p, t, E: float, nu: float, fixed, forces, echo=None,
           constraints: CellConstraints | None = None, method: str = "auto") -> Solution:
     """Linear elasticity on the tetrahedra (p 3×N, t 4×M) with P2 elements
-    (:mod:`rackstress.validity.tet`).
+    (:mod:`rackstress.lib.tet`).
 
     ``fixed``: bool over the vertices (N×3: a direction fixed; N: all three) or over the P2
     nodes (``Tet2.X``); ``forces``: nodal forces (N×3 at the vertices, or per P2 node; None:
@@ -917,7 +704,7 @@ def solve(p, t, E: float, nu: float, fixed, forces, echo=None,
 
     from threadpoolctl import threadpool_limits
 
-    from rackstress.validity.tet import Tet2, eliminate, solve_cg
+    from rackstress.lib.tet import Tet2, eliminate, solve_cg
 
     c0 = time.process_time()
     P = np.asarray(p, float)
@@ -1014,7 +801,7 @@ def _solve_constrained(mesh, P, E, nu, fx, f, items, method, c0) -> Solution:
     from threadpoolctl import threadpool_limits
 
     from rackstress.model.constraints import Ring
-    from rackstress.validity.tet import eliminate, p_multigrid
+    from rackstress.lib.tet import eliminate, p_multigrid
 
     stages = {}
     n = mesh.n_nodes
@@ -1034,7 +821,7 @@ def _solve_constrained(mesh, P, E, nu, fx, f, items, method, c0) -> Solution:
             del K
             q, its = _solve_direct(plan, A, b), 0
         else:
-            from rackstress.validity.tet import CG_RTOL
+            from rackstress.lib.tet import CG_RTOL
 
             K = eliminate(K, fx)
             mesh.release()
@@ -1121,7 +908,7 @@ def nodal_forces(p: np.ndarray, t: np.ndarray, x: np.ndarray, F: np.ndarray,
                     w = None                      # nodes nearly on one plane: see the constant
         if w is None:                                  # the tetrahedron holding it
             if mesh is None:
-                from rackstress.validity.tet import Tet2
+                from rackstress.lib.tet import Tet2
 
                 mesh = Tet2(P, np.asarray(t).T)
             e, lam = mesh.locate(xk[None])
@@ -1497,7 +1284,7 @@ def solve_part(o, spacing, shape, held_x, held_mask, load_x, load_F, E, nu, size
         how = "the union of the particles' cells (6 tetrahedra a cube)"
         h = spacing
         if refined:                               # the cells' second mesh: each cut in 8
-            from rackstress.validity.tet import refine
+            from rackstress.lib.tet import refine
 
             check_memory(8 * t.shape[1], h / 2, what)
             q, u = refine(p.T, t.T)

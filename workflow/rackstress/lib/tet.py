@@ -38,6 +38,9 @@ Example
 """
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass, field
+
 import numpy as np
 
 #: local edges of a tetrahedron, in the order of its nodes 4 … 9
@@ -416,3 +419,231 @@ def solve_cg(mesh, K, f: np.ndarray, fixed: np.ndarray, rtol: float = CG_RTOL):
     if info != 0:
         raise RuntimeError(f"the FE solve did not converge (conjugate gradients, {info} steps)")
     return u, it[0]
+
+
+# --------------------------------------------------------------------------- a solid's mesh and solution
+# (the FE check, rackstress.validity.solid, and the notch reading's submodel,
+# rackstress.stress.notch)
+def _faces_once(t: np.ndarray):
+    """The four faces of each tetrahedron t (M×4), face k of the 4M opposite corner k // M
+    of tetrahedron k % M, and which of them belong to that tetrahedron only (the boundary)."""
+    faces = np.concatenate([t[:, [1, 2, 3]], t[:, [0, 3, 2]], t[:, [0, 1, 3]], t[:, [0, 2, 1]]])
+    _, inv, cnt = np.unique(np.sort(faces, axis=1), axis=0, return_inverse=True,
+                            return_counts=True)
+    return faces, cnt[inv.ravel()] == 1
+
+
+def tet_volumes(X: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Signed volume of each tetrahedron t (M×4) of the points X (N×3)."""
+    P = X[t]
+    return np.einsum("ij,ij->i", np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]),
+                     P[:, 3] - P[:, 0]) / 6
+
+
+def gmsh_volume(v, f, size, near, near_size, reparametrize: bool, netgen: bool = False,
+                grade: float = 0.25):
+    """gmsh's tetrahedra inside the closed triangulated surface (v, f) (the FE check's
+    :func:`rackstress.validity.solid.surface_mesh`, the notch reading's submodel), largest edge
+    ``size``, graded toward the points ``near`` (``grade`` × the distance, from ``near_size``);
+    ``netgen``: then Netgen's optimizer on them (inside fTetWild's surface of the fixed jaw:
+    47 of 71,091 tetrahedra slivers without, whose nodal stress put the FE's governing point
+    at 2.17 MPa where the rest reads 0.12; none with, 4.7 s instead of 1.2 s; at 3.2 mm
+    0–1 of about 10,300 over five runs, fTetWild not being deterministic)."""
+    import gmsh
+
+    gmsh.initialize(["-noenv"], readConfigFiles=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.model.add("part")
+        s = gmsh.model.addDiscreteEntity(2)
+        gmsh.model.mesh.addNodes(2, s, np.arange(1, len(v) + 1), v.ravel())
+        gmsh.model.mesh.addElementsByType(s, 2, [], (f + 1).ravel())
+        if reparametrize:
+            gmsh.model.mesh.classifySurfaces(math.radians(40.0), True, True, math.pi)
+            gmsh.model.mesh.createGeometry()
+        else:
+            gmsh.model.mesh.createTopology()
+        loop = gmsh.model.geo.addSurfaceLoop([e[1] for e in gmsh.model.getEntities(2)])
+        gmsh.model.geo.addVolume([loop])
+        gmsh.model.geo.synchronize()
+        gmsh.option.setNumber("Mesh.MeshSizeMax", float(size))
+        gmsh.option.setNumber("Mesh.OptimizeNetgen", 1 if netgen else 0)
+        if near is not None and len(near) and near_size and near_size < size:
+            pts = [gmsh.model.geo.addPoint(*map(float, x)) for x in np.asarray(near)]
+            gmsh.model.geo.synchronize()
+            fd = gmsh.model.mesh.field.add("Distance")
+            gmsh.model.mesh.field.setNumbers(fd, "PointsList", pts)
+            ft = gmsh.model.mesh.field.add("Threshold")
+            gmsh.model.mesh.field.setNumber(ft, "InField", fd)
+            gmsh.model.mesh.field.setNumber(ft, "SizeMin", float(near_size))
+            gmsh.model.mesh.field.setNumber(ft, "SizeMax", float(size))
+            gmsh.model.mesh.field.setNumber(ft, "DistMin", float(near_size / grade))
+            gmsh.model.mesh.field.setNumber(ft, "DistMax", float(size / grade))
+            gmsh.model.mesh.field.setAsBackgroundMesh(ft)
+        gmsh.model.mesh.generate(3)
+        tags, coords, _ = gmsh.model.mesh.getNodes()
+        etypes, _, enodes = gmsh.model.mesh.getElements(3)
+    finally:
+        gmsh.finalize()
+    tet = [n for ty, n in zip(etypes, enodes) if ty == 4]
+    if not tet:
+        raise RuntimeError("gmsh made no tetrahedra")
+    index = np.zeros(int(tags.max()) + 1, dtype=np.int64)
+    index[tags.astype(np.int64)] = np.arange(len(tags))
+    t = index[np.asarray(tet[0], np.int64).reshape(-1, 4)].T
+    X = coords.reshape(-1, 3)
+    if not reparametrize:
+        # inside a file's own facets gmsh leaves flat tetrahedra, four corners on one face (the
+        # SO-100 base: 89 of 13,879 with volume < 1e-6 × edge³, 6 of them inverted): no
+        # stiffness, a singular system. They hold no volume; the rest stay conforming
+        vol = tet_volumes(X, t.T)
+        edge = np.max([np.linalg.norm(X[t[i]] - X[t[j]], axis=1)
+                       for i in range(4) for j in range(i + 1, 4)], axis=0)
+        t = t[:, np.abs(vol) > FLAT_TET * edge ** 3]
+    used, t = np.unique(t, return_inverse=True)
+    return (np.ascontiguousarray(X[used].T), np.ascontiguousarray(t.reshape(4, -1)))
+
+
+#: a tetrahedron of volume ≤ this × its longest edge³ is flat (a regular one: 0.118)
+FLAT_TET = 1e-6
+
+
+@dataclass
+class Solution:
+    """A solved part: its P2 mesh (:class:`Tet2`), the displacement of
+    every node (n × 3) and the strain projected onto continuous P2 (n × 6); :meth:`at`
+    evaluates."""
+
+    mesh: object
+    u: np.ndarray
+    eps: np.ndarray
+    E: float
+    nu: float
+    info: dict = field(default_factory=dict)
+
+    def at(self, points) -> dict:
+        """``displacement`` (n×3), ``stress`` (n×6: xx yy zz xy xz yz) and ``von_mises`` (n) at
+        ``points`` (n×3); a point on or just outside the faceted surface is taken at the
+        nearest point of the mesh (:meth:`Tet2.locate`)."""
+        x = np.asarray(points, float).reshape(-1, 3)
+        u = np.empty((len(x), 3))
+        e = np.empty((len(x), 6))
+        for s in range(0, len(x), 65536):
+            sl = slice(s, s + 65536)
+            el, lam = self.mesh.locate(x[sl])
+            u[sl] = self.mesh.interpolate(self.u, el, lam)
+            e[sl] = self.mesh.interpolate(self.eps, el, lam)
+        s = hooke(e, self.E, self.nu)
+        return {"displacement": u, "stress": s, "von_mises": von_mises(s)}
+
+    def nodal(self) -> dict:
+        """The same fields at every P2 node of the mesh (``mesh.X``)."""
+        s = hooke(self.eps, self.E, self.nu)
+        return {"displacement": self.u, "stress": s, "von_mises": von_mises(s)}
+
+
+def hooke(e: np.ndarray, E: float, nu: float) -> np.ndarray:
+    """σ = λ tr ε I + 2μ ε of strains (n × 6, tensor shears) → stresses (n × 6)."""
+    lam = E * nu / ((1 + nu) * (1 - 2 * nu))
+    mu = E / (2 * (1 + nu))
+    s = 2 * mu * e
+    s[:, :3] += lam * e[:, :3].sum(axis=1)[:, None]
+    return s
+
+
+def project_strain(mesh, u: np.ndarray, M=None) -> np.ndarray:
+    """The L² projection of ε(u) onto continuous P2 (n × 6): one mass matrix, conjugate
+    gradients with its diagonal (a P2 mass matrix is well conditioned)."""
+    import scipy.sparse.linalg as spla
+
+    M = mesh.mass() if M is None else M
+    b = mesh.strain_load(u)
+    D = spla.LinearOperator(M.shape, matvec=lambda x, d=1.0 / M.diagonal(): d * x)
+    out = np.zeros_like(b)
+    for c in range(6):
+        scale = float(np.abs(b[:, c]).max())
+        if scale == 0.0:
+            continue
+        x, info = spla.cg(M, b[:, c] / scale, rtol=1e-12, atol=0.0, maxiter=2000, M=D)
+        if info != 0:
+            raise RuntimeError(f"the stress projection did not converge ({info})")
+        out[:, c] = x * scale
+    return out
+
+
+def von_mises(s: np.ndarray) -> np.ndarray:
+    """σ_vm = √(½[(σxx−σyy)² + (σyy−σzz)² + (σzz−σxx)²] + 3(σxy² + σxz² + σyz²))."""
+    xx, yy, zz, xy, xz, yz = s.T
+    return np.sqrt(0.5 * ((xx - yy) ** 2 + (yy - zz) ** 2 + (zz - xx) ** 2)
+                   + 3 * (xy ** 2 + xz ** 2 + yz ** 2))
+
+
+#: a triangle of area ≤ this × (the part's size)² is a sliver (:func:`drop_slivers`)
+SLIVER_AREA = 1e-9
+
+
+def _twice_areas(v: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """|(b − a) × (c − a)| of each triangle (a, b, c) of ``F``: twice its area."""
+    return np.linalg.norm(np.cross(v[F[:, 1]] - v[F[:, 0]], v[F[:, 2]] - v[F[:, 0]]), axis=1)
+
+
+def drop_slivers(vertices: np.ndarray, faces: np.ndarray, rel: float = SLIVER_AREA) -> np.ndarray:
+    """The triangles without the zero-area ones (three collinear vertices, as CSG leaves where
+    a hole meets a face), the surface kept closed and conforming: the neighbour across a
+    sliver's long edge is split at the sliver's middle vertex. gmsh cannot parametrize a patch
+    holding a sliver. The neighbour is found through a map of directed edges, and only the
+    slivers (and the triangles a split makes) are visited: linear in the triangles (a rescan
+    of every triangle for each sliver took over ten minutes on a printed finger link)."""
+    v = np.asarray(vertices, float)
+    F = np.asarray(faces, np.int64).reshape(-1, 3)
+    tiny = rel * float(np.ptp(v, axis=0).max()) ** 2
+    queue = [int(k) for k in np.flatnonzero(_twice_areas(v, F) <= tiny)][::-1]
+    if not queue:
+        return F
+    f = F.tolist()
+
+    def area2(t) -> float:
+        return float(_twice_areas(v, np.asarray([t]))[0])
+
+    owner = {}                                  # directed edge (a, b) -> its triangle
+    alive = [True] * len(f)
+    splits = 4 * len(queue) + 16        # a sliver beside a sliver splits it into slivers: bound
+
+    def register(j: int, on: bool) -> None:
+        t = f[j]
+        for r in range(3):
+            e = (t[r], t[(r + 1) % 3])
+            if on:
+                owner[e] = j
+            elif owner.get(e) == j:
+                del owner[e]
+
+    for j in range(len(f)):
+        register(j, True)
+    while queue and splits > 0:
+        k = queue.pop()
+        if not alive[k] or area2(f[k]) > tiny:
+            continue
+        tri = f[k]
+        lens = [np.linalg.norm(v[tri[(i + 1) % 3]] - v[tri[(i + 2) % 3]]) for i in range(3)]
+        i = int(np.argmax(lens))
+        m, p, q = tri[i], tri[(i + 1) % 3], tri[(i + 2) % 3]
+        j = owner.get((q, p))                   # the triangle with the edge q → p
+        if j is None or j == k or not alive[j]:
+            continue                            # no neighbour: leave it to gmsh
+        t = f[j]
+        if area2(t) <= tiny:
+            continue                            # the neighbour is a sliver too: gmsh's
+        r = next(r for r in range(3) if t[r] == q and t[(r + 1) % 3] == p)
+        d = t[(r + 2) % 3]
+        splits -= 1
+        register(j, False)
+        register(k, False)
+        alive[k] = False
+        f[j] = [q, m, d]
+        f.append([m, p, d])
+        alive.append(True)
+        register(j, True)
+        register(len(f) - 1, True)
+        queue.extend(x for x in (len(f) - 1, j) if area2(f[x]) <= tiny)
+    return np.asarray([t for t, a in zip(f, alive) if a], dtype=np.int64)
