@@ -735,13 +735,14 @@ def _notch_submodel(run, part, o, surf, pts, rho, k: int, a: float, frame: int,
     if not mat.get("E"):
         return k, None, "the part has no Young's modulus in scene.json"
     u = positions(run.trajectory[frame])[part.index] - o
+    nu = _lattice_nu(run, part, mat)
     R = notch.SUBMODEL_RADIUS * a
     seen, at, value = [], k, None
     for _ in range(NOTCH_BALLS):
         seen.append(k)
         try:
             sol = notch.submodel(surf[0], surf[1], pts[k], o, u, a, float(rho[k]),
-                                 float(mat["E"]), float(mat.get("nu", 0.3)))
+                                 float(mat["E"]), nu)
         except ImportError as exc:
             return k, None, (f"{exc.name or exc} is not installed: the notch submodel needs "
                              "the fem extra (pip install 'rackstress[fem]')")
@@ -757,6 +758,24 @@ def _notch_submodel(run, part, o, surf, pts, rho, k: int, a: float, frame: int,
             break
         k = best
     return at, value, None
+
+
+#: The Poisson's ratio of the elastic lattice without the volumetric term (docs/calibration.md:
+#: central bindings on the cubic lattice, whatever the material)
+LATTICE_NU = 0.25
+
+
+def _lattice_nu(run, part, mat: dict) -> float:
+    """The Poisson's ratio the part's particles were solved with, which the submodel takes so
+    that the displacements on its cut are its own material's: the material's where the run
+    has the volumetric term on the part (``poisson = "material"``), else the bindings'
+    :data:`LATTICE_NU`."""
+    from rackstress.stress.measures import read_volume_terms
+
+    t = read_volume_terms(run)
+    if t is not None and np.isin(t.owner, part.index).any():
+        return float(mat.get("nu", LATTICE_NU))
+    return LATTICE_NU
 
 
 #: the most submodel balls :func:`_notch_submodel` moves through
