@@ -440,6 +440,19 @@ def tet_volumes(X: np.ndarray, t: np.ndarray) -> np.ndarray:
                      P[:, 3] - P[:, 0]) / 6
 
 
+def read_tetrahedra(gmsh):
+    """The linear tetrahedra gmsh's current model holds: (points N×3, t 4×M numbering them);
+    RuntimeError where it made none."""
+    tags, coords, _ = gmsh.model.mesh.getNodes()
+    etypes, _, enodes = gmsh.model.mesh.getElements(3)
+    tet = [n for ty, n in zip(etypes, enodes) if ty == 4]
+    if not tet:
+        raise RuntimeError("gmsh made no tetrahedra")
+    index = np.zeros(int(tags.max()) + 1, dtype=np.int64)
+    index[tags.astype(np.int64)] = np.arange(len(tags))
+    return coords.reshape(-1, 3), index[np.asarray(tet[0], np.int64).reshape(-1, 4)].T
+
+
 def gmsh_volume(v, f, size, near, near_size, reparametrize: bool, netgen: bool = False,
                 grade: float = 0.25):
     """gmsh's tetrahedra inside the closed triangulated surface (v, f) (the FE check's
@@ -481,17 +494,9 @@ def gmsh_volume(v, f, size, near, near_size, reparametrize: bool, netgen: bool =
             gmsh.model.mesh.field.setNumber(ft, "DistMax", float(size / grade))
             gmsh.model.mesh.field.setAsBackgroundMesh(ft)
         gmsh.model.mesh.generate(3)
-        tags, coords, _ = gmsh.model.mesh.getNodes()
-        etypes, _, enodes = gmsh.model.mesh.getElements(3)
+        X, t = read_tetrahedra(gmsh)
     finally:
         gmsh.finalize()
-    tet = [n for ty, n in zip(etypes, enodes) if ty == 4]
-    if not tet:
-        raise RuntimeError("gmsh made no tetrahedra")
-    index = np.zeros(int(tags.max()) + 1, dtype=np.int64)
-    index[tags.astype(np.int64)] = np.arange(len(tags))
-    t = index[np.asarray(tet[0], np.int64).reshape(-1, 4)].T
-    X = coords.reshape(-1, 3)
     if not reparametrize:
         # inside a file's own facets gmsh leaves flat tetrahedra, four corners on one face (the
         # SO-100 base: 89 of 13,879 with volume < 1e-6 × edge³, 6 of them inverted): no

@@ -47,6 +47,8 @@ def graded_mesh(vertices, faces, points, h_far: float, h_near: float, grow: floa
 
 def _graded_mesh(vertices, faces, points, h_far, h_near, grow, algorithm):
     import gmsh
+
+    from rackstress.lib.tet import read_tetrahedra
     from rackstress.validity.solid import drop_slivers
 
     F = drop_slivers(vertices, faces)
@@ -87,19 +89,11 @@ def _graded_mesh(vertices, faces, points, h_far, h_near, grow, algorithm):
         if algorithm is not None:
             gmsh.option.setNumber("Mesh.Algorithm", algorithm)
         gmsh.model.mesh.generate(3)
-        tags, coords, _ = gmsh.model.mesh.getNodes()
-        etypes, _, enodes = gmsh.model.mesh.getElements(3)
+        X, t = read_tetrahedra(gmsh)
     finally:
         gmsh.finalize()
-    tet = [n for ty, n in zip(etypes, enodes) if ty == 4]
-    if not tet:
-        raise RuntimeError("gmsh made no tetrahedra")
-    index = np.zeros(int(tags.max()) + 1, dtype=np.int64)
-    index[tags.astype(np.int64)] = np.arange(len(tags))
-    t = index[np.asarray(tet[0], np.int64).reshape(-1, 4)].T
     used, t = np.unique(t, return_inverse=True)
-    return (np.ascontiguousarray(coords.reshape(-1, 3)[used].T),
-            np.ascontiguousarray(t.reshape(4, -1)))
+    return (np.ascontiguousarray(X[used].T), np.ascontiguousarray(t.reshape(4, -1)))
 
 
 def reference(rundir, h_far: float, h_near: float, grow: float = 0.5, group: str | None = None,
