@@ -250,7 +250,9 @@ def refined(out: Path, scene: Path, fea: float, echo=print) -> dict:
     fine = json.loads((out / "refine" / "summary.json").read_text())
     r.update(ratio=err["value"] / fea, extrapolated_ratio=err["extrapolated"] / fea,
              covers=bool(err["low"] <= fea <= err["high"]),
-             read=((fine.get("stress") or {}).get("governing") or {}).get("read"))
+             read=((fine.get("stress") or {}).get("governing") or {}).get("read"),
+             by=((((fine.get("stress") or {}).get("governing") or {}).get("notch") or {})
+                 .get("by")))
     echo(f"    --refine: {err['value']:.2f} MPa at {err['spacings'][-1]:.3g} mm "
          f"({r['ratio']:.3f} of FEA), extrapolated {err['extrapolated']:.2f} "
          f"({r['extrapolated_ratio']:.3f}), band {err['low']:.2f} … {err['high']:.2f}")
@@ -374,18 +376,21 @@ def notch_summary(data: dict) -> str:
     submodel) and :data:`~rackstress.stress.governing.NOTCH_ERROR` (its fit) take."""
     out = []
     for by, name in (("submodel", "NOTCH_SUBMODEL_ERROR"), ("fit", "NOTCH_ERROR")):
-        rows = [r for r in data["rows"] if r.get("headline_read") == "notch"
-                and r.get("headline_ratio") and (r.get("notch_by") or "fit") == by]
-        if not rows:
+        got = [(r["case"], r["spacing"], r["headline_ratio"]) for r in data["rows"]
+               if r.get("headline_read") == "notch" and r.get("headline_ratio")
+               and (r.get("notch_by") or "fit") == by]
+        refined = [(r["case"], r["refined"]["spacings"][-1], r["refined"]["ratio"])
+                   for r in data["rows"] if (r.get("refined") or {}).get("read") == "notch"
+                   and (r["refined"].get("by") or "fit") == by]
+        if not got and not refined:
             continue
-        worst = max(rows, key=lambda r: abs(r["headline_ratio"] - 1))
-        lo = min(r["headline_ratio"] for r in rows)
-        hi = max(r["headline_ratio"] for r in rows)
-        out.append(f"The notch reading by its {by} is the headline of {len(rows)} of "
-                   f"{len(data['rows'])} rows, {lo:.3f} … {hi:.3f} of FEA's governing stress; "
-                   f"its largest error {abs(worst['headline_ratio'] - 1):.3f} "
-                   f"({worst['case']} at {worst['spacing']:g} mm), what "
-                   f"`stress.governing.{name}` takes.")
+        worst = max(got + refined, key=lambda g: abs(g[2] - 1))
+        out.append(f"The notch reading by its {by} is the headline of {len(got)} of "
+                   f"{len(data['rows'])} rows and of {len(refined)} refined runs, "
+                   f"{min(g[2] for g in got + refined):.3f} … "
+                   f"{max(g[2] for g in got + refined):.3f} of FEA's governing stress; its "
+                   f"largest error {abs(worst[2] - 1):.3f} ({worst[0]} at {worst[1]:.3g} mm), "
+                   f"what `stress.governing.{name}` takes.")
     fits = [r for r in data["rows"] if r.get("notch_fit_ratio")]
     if fits and any(r.get("notch_by") == "submodel" for r in fits):
         out.append("The fit of the particles beneath the same faces (what reads them where "

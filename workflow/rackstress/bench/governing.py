@@ -171,6 +171,7 @@ def case(name: str, scene: Path, spacing: float, h_far: float, h_near: float, wo
                      "governing": at["governing"]["value"],
                      "governing_at": at["governing"]["position"],
                      "read": at["governing"].get("read", "patch"),
+                     "notch_by": (at["governing"].get("notch") or {}).get("by"),
                      # the particles' patch fit's own governing stress (the notch reading may
                      # be the headline instead: stress.governing.notch_peak)
                      "patch_governing": at["governing"].get("patch_value",
@@ -295,7 +296,10 @@ def table_rows(data) -> list:
     for c in data["cases"]:
         for r in c["rows"]:
             out.append([c["name"], fmt(r["spacing"], 4), f"{r['particles']:,}", fmt(c["zone"]),
-                        fmt(r["governing"], 4), r.get("read", "patch"),
+                        fmt(r["governing"], 4),
+                        r.get("read", "patch") + (f" ({r['notch_by']})"
+                                                  if r.get("read") == "notch"
+                                                  and r.get("notch_by") else ""),
                         fmt(r["singular_peak"], 4),
                         fmt(c["fea_governing"], 4), fmt(r["governing_over_fea"]),
                         fmt(r["s_over_t"]), "yes" if r["at_curved_face"] else "no",

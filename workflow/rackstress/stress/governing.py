@@ -591,8 +591,9 @@ CURVED_SPACINGS = 2.0
 #: filleted C frame of ``rackstress bench governing`` checks it.
 NOTCH_ERROR = 0.18
 #: ... and where the notch reading is its submodel's (:func:`notch_peak`, ``by`` "submodel"):
-#: the largest |reading / converged FEA − 1| of the same bench's rows read by the submodel
-NOTCH_SUBMODEL_ERROR = 0.18
+#: the largest |reading / converged FEA − 1| of the same bench's runs read by the submodel,
+#: its refined runs included (0.082: the plate with a hole refined to 0.42 mm), rounded up
+NOTCH_SUBMODEL_ERROR = 0.09
 
 
 def curved_near(rundir, name: str, points, spacing: float) -> np.ndarray:
