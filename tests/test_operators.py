@@ -293,15 +293,16 @@ def test_operator_order_within_a_group_does_not_change_the_sum():
 # ----------------------------------------------------------------------------- one home each
 def test_every_operator_has_a_kernel_a_realization_and_a_callback_term():
     """Adding an operator is one class plus one entry per engine registry: none is missing —
-    the paper's five and the material's volumetric term (model/volume.py registers its kind)."""
+    the paper's five, the material's volumetric term (model/volume.py registers its kind) and
+    the rigid indenter (``[[indenter]]``)."""
     from rackstress.engines.lammps.callback import TERMS
     from rackstress.engines.lammps.deck import REALIZE
     from rackstress.engines.reference import KERNELS
-    from rackstress.model.operators import OPERATOR_KINDS, OPERATORS
+    from rackstress.model.operators import OPERATOR_KINDS, OPERATORS, Indent
     from rackstress.model.volume import Volume
 
     kinds = set(OPERATOR_KINDS.values())
-    assert kinds == set(OPERATORS) | {Volume}
+    assert kinds == set(OPERATORS) | {Volume, Indent}
     for registry in (KERNELS, REALIZE, TERMS):
         assert set(registry) == kinds
 

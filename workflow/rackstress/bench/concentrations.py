@@ -391,7 +391,8 @@ def notch_summary(data: dict) -> str:
                    f"{max(g[2] for g in got + refined):.3f} of FEA's governing stress; its "
                    f"largest error {abs(worst[2] - 1):.3f} ({worst[0]} at {worst[1]:.3g} mm), "
                    f"what `stress.governing.{name}` takes.")
-    fits = [r for r in data["rows"] if r.get("notch_fit_ratio")]
+    fits = [r for r in data["rows"] if r.get("notch_fit_ratio")
+            and r.get("headline_read") == "notch"]
     if fits and any(r.get("notch_by") == "submodel" for r in fits):
         out.append("The fit of the particles beneath the same faces (what reads them where "
                    "gmsh is not installed) reads "

@@ -28,7 +28,6 @@ import operator
 
 import numpy as np
 
-from rackstress.errors import SceneError
 from rackstress.lib.vec import fresh_zeros, rowdot
 from rackstress.engines.watchdog import first_nonfinite
 from rackstress.engines.lammps.deck import _global_int
@@ -36,7 +35,7 @@ from rackstress.model import kernels
 from rackstress.model.kernels import choice as kernel_choice
 from rackstress.model.kernels import compiled as compiled_kernels
 from rackstress.model.kernels import warm as warm_kernels
-from rackstress.model.operators import (Attract, Bind, Collide, Const, Dampen, Force,
+from rackstress.model.operators import (Attract, Bind, Collide, Const, Dampen, Force, Indent,
                                         contact_candidates, contact_groups, phase_active,
                                         reverse_of)
 from rackstress.model.volume import Volume
@@ -1201,9 +1200,29 @@ class Fused:
                 F.nfirst, natF, natg3, nnat, fr.span)
 
 
+class IndentTerm(Term):
+    """A rigid sphere's push on the target's owned particles (``[[indenter]]``,
+    :meth:`Indent.accel`), the sphere's centre that of LAMMPS' step (``Indent.centre_at``,
+    as the plugin's rs/indent and the reference engine take it)."""
+
+    def __init__(self, forces, r):
+        super().__init__(forces, r)
+        self.k = np.asarray(r.op.k, float)
+        self.radius = forces.scene.radii()[self.sl]
+
+    def add(self, fr, acc):
+        if not self.forces.holds(fr, self):
+            return
+        sel = fr.owned(self.sl)
+        j = fr.tag[sel] - 1 - self.sl.start             # the rows' places in the group
+        a = Indent.accel(fr.x[sel], self.radius[j], self.k[j],
+                         self.op.centre_at(fr.step), self.op.radius)
+        acc[fr.compact(sel)] += a
+
+
 #: The term realizing each operator class in the callback.
 TERMS = {Force: ForceTerm, Dampen: DampenTerm, Collide: CollideTerm, Bind: BindTerm,
-         Attract: AttractTerm, Volume: VolumeTerm}
+         Attract: AttractTerm, Volume: VolumeTerm, Indent: IndentTerm}
 
 
 class PyForces:
@@ -1270,13 +1289,6 @@ class PyForces:
                         and rev in here):
                     self.reverse[r.site] = rev
                     self.folded[rev] = r.site   # rev is carried by r's term
-        held = [r for r in python if r.op.kind == "indent"]
-        if held:
-            raise SceneError(
-                f"scene '{self.scene.name}': the indenter on '{held[0].target}' "
-                "([[indenter]]) runs on the compiled plugin's fix rs/indent; the Python "
-                "callback does not model it: run with the plugin (the default where it builds;"
-                " not RACKSTRESS_KERNELS=numba|numpy), or --engine reference")
         self.terms = [TERMS[type(r.op)](self, r) for r in python]
         self.phase = {}
         self.active = []
@@ -1498,6 +1510,7 @@ class PyForces:
         self._fail_here, self._agreed, fr = None, None, None
         try:
             fr = self._frame(nlocal)
+            fr.step = int(step)          # LAMMPS' step: an indenter's centre moves with it
             self._fresh = False
         except Exception as exc:  # noqa: BLE001 - agreed on below
             self._fail_here = exc
