@@ -81,6 +81,26 @@ def dump_text(path) -> str:
     return path.read_text()
 
 
+def lammps_finals(scene, monkeypatch):
+    """Run ``scene`` on LAMMPS with the compiled plugin, then with the Python callback's numba
+    and NumPy kernels: yields (plugin, kernels, the deck's input text, final positions)."""
+    from rackstress.engines.driver import drive
+    from rackstress.engines.lammps.deck import compile_deck
+    from rackstress.engines.lammps.runner import LammpsRun
+
+    for plugin, kernels in ((True, None), (False, "numba"), (False, "numpy")):
+        if kernels:
+            monkeypatch.setenv("RACKSTRESS_KERNELS", kernels)
+        deck = compile_deck(scene, "exact", plugin=plugin)
+        run = LammpsRun(deck, None)
+        try:
+            drive(run)
+            p = run.gather_positions()
+        finally:
+            run.close()
+        yield plugin, kernels, deck.input_text(), p
+
+
 def reference_final(scene) -> np.ndarray:
     """Final positions of ``scene`` on the reference engine (read-only, cached by fingerprint)."""
     from rackstress.engines.driver import drive

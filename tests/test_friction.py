@@ -122,27 +122,15 @@ def test_friction_runs_alike_on_every_engine(tmp_path, monkeypatch):
     compiled plugin and the callback (numba and NumPy kernels) reach the reference engine's
     positions to round-off (measured 5e-15 to 1.2e-14 mm), and friction moves them by
     micrometres (not a trivial check)."""
-    from conftest import reference_final
-
-    from rackstress.engines.driver import drive
-    from rackstress.engines.lammps.deck import compile_deck
-    from rackstress.engines.lammps.runner import LammpsRun
+    from conftest import lammps_finals, reference_final
 
     sc = slide_scene(tmp_path, **FREE)
     ref = reference_final(sc)
     none = reference_final(slide_scene(tmp_path, **dict(FREE, mu=None), name="none.toml"))
     assert np.abs(ref - none).max() > 1e-3
-    for plugin, kernels in ((True, None), (False, "numba"), (False, "numpy")):
-        if kernels:
-            monkeypatch.setenv("RACKSTRESS_KERNELS", kernels)
-        deck = compile_deck(sc, "exact", plugin=plugin)
-        text = deck.input_text()
+    for plugin, kernels, text, p in lammps_finals(sc, monkeypatch):
         assert "comm_modify vel yes" in text and "pair_style lepton" not in text
         assert ("friction 0.4" in text) == plugin
-        run = LammpsRun(deck, None)
-        drive(run)
-        p = run.gather_positions()
-        run.close()
         assert np.abs(p - ref).max() < 1e-12, (plugin, kernels)
 
 

@@ -159,24 +159,13 @@ def test_indenter_runs_alike_on_the_reference_engine_and_the_plugin(tmp_path, mo
     """The centre lowered over the ramp and held, 220 steps: the plugin's fix rs/indent and the
     Python callback (numba and NumPy kernels) reach the reference engine's positions to
     round-off (measured 8e-15 mm), the sphere moving the top by tens of micrometres."""
-    from conftest import reference_final
-
-    from rackstress.engines.driver import drive
-    from rackstress.engines.lammps.deck import compile_deck
-    from rackstress.engines.lammps.runner import LammpsRun
+    from conftest import lammps_finals, reference_final
 
     sc = dynamic_scene(tmp_path)
     ref = reference_final(sc)
     assert np.abs(ref - sc.original_positions()).max() > 0.01
-    for plugin, kernels in ((True, None), (False, "numba"), (False, "numpy")):
-        if kernels:
-            monkeypatch.setenv("RACKSTRESS_KERNELS", kernels)
-        deck = compile_deck(sc, "exact", plugin=plugin)
-        assert (" rs/indent " in deck.input_text()) == plugin
-        run = LammpsRun(deck, None)
-        drive(run)
-        p = run.gather_positions()
-        run.close()
+    for plugin, kernels, text, p in lammps_finals(sc, monkeypatch):
+        assert (" rs/indent " in text) == plugin
         assert np.abs(p - ref).max() < 1e-12, (plugin, kernels)
 
 

@@ -20,24 +20,28 @@ import numpy as np
 from rackstress.model.operators import Indent
 
 
+def indents(scene):
+    """(target, its slice, the ``Indent`` operator) of every ``[[indenter]]`` of ``scene``."""
+    for target, seq in scene.operators.items():
+        for op in seq:
+            if isinstance(op, Indent):
+                yield target, scene.slice(target), op
+
+
 class Indenters:
     """Every ``Indent`` operator of a scene at its full travel, as global per-particle rows."""
 
     def __init__(self, scene):
         idx, k, c, R, r = [], [], [], [], []
         m, radii = scene.masses(), scene.radii()
-        for target, seq in scene.operators.items():
-            sl = scene.slice(target)
-            for op in seq:
-                if not isinstance(op, Indent):
-                    continue
-                kk = np.asarray(op.k, float)
-                sel = np.flatnonzero(kk > 0)
-                idx.append(sel + sl.start)
-                k.append(kk[sel] * m[sel + sl.start])
-                c.append(np.repeat(op.centre_at(op.steps)[None, :], len(sel), axis=0))
-                R.append(np.full(len(sel), float(op.radius)))
-                r.append(radii[sel + sl.start])
+        for _, sl, op in indents(scene):
+            kk = np.asarray(op.k, float)
+            sel = np.flatnonzero(kk > 0)
+            idx.append(sel + sl.start)
+            k.append(kk[sel] * m[sel + sl.start])
+            c.append(np.repeat(op.centre_at(op.steps)[None, :], len(sel), axis=0))
+            R.append(np.full(len(sel), float(op.radius)))
+            r.append(radii[sel + sl.start])
         cat = (lambda x, shape: np.concatenate(x) if x else np.zeros(shape))
         self.idx = cat(idx, 0).astype(np.int64)
         self.k, self.centre = cat(k, 0), cat(c, (0, 3))
@@ -108,16 +112,12 @@ def indenter_forces(scene, p: np.ndarray) -> list[dict]:
     the particles it pushes and its centre."""
     out = []
     m, radii = scene.masses(), scene.radii()
-    for target, seq in scene.operators.items():
-        sl = scene.slice(target)
-        for op in seq:
-            if not isinstance(op, Indent):
-                continue
-            c = op.centre_at(op.steps)
-            a = Indent.accel(p[sl], radii[sl], np.asarray(op.k, float), c, op.radius)
-            f = m[sl, None] * a
-            out.append({"group": target, "centre": c.tolist(), "radius": float(op.radius),
-                        "force": f.sum(axis=0).tolist(),
-                        "moment": np.cross(p[sl], f).sum(axis=0).tolist(),
-                        "particles": int(np.count_nonzero(np.any(a != 0, axis=1)))})
+    for target, sl, op in indents(scene):
+        c = op.centre_at(op.steps)
+        a = Indent.accel(p[sl], radii[sl], np.asarray(op.k, float), c, op.radius)
+        f = m[sl, None] * a
+        out.append({"group": target, "centre": c.tolist(), "radius": float(op.radius),
+                    "force": f.sum(axis=0).tolist(),
+                    "moment": np.cross(p[sl], f).sum(axis=0).tolist(),
+                    "particles": int(np.count_nonzero(np.any(a != 0, axis=1)))})
     return out
