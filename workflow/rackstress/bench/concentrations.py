@@ -206,12 +206,12 @@ def run_case(case: str, a: float, work: Path, echo=print, refine: bool = False) 
     from rackstress.stress.post import postprocess
 
     head = postprocess(out, vtk=False, dump=False)["governing"]
+    nk = head.get("notch") or {}
     row.update(headline_MPa=head["value"], headline_read=head.get("read"),
                headline_ratio=head["value"] / gov["value"] if gov["value"] else None,
-               notch_radius=(head.get("notch") or {}).get("radius"),
-               notch_by=(head.get("notch") or {}).get("by"),
-               notch_fit_ratio=((head.get("notch") or {}).get("fit") or 0) / gov["value"]
-               if gov["value"] and (head.get("notch") or {}).get("fit") else None)
+               notch_radius=nk.get("radius"), notch_by=nk.get("by"),
+               notch_fit_ratio=nk["fit"] / gov["value"]
+               if gov["value"] and nk.get("fit") else None)
     # every route of the measure on the same run: its governing stress over FEA's (the
     # patch route at the recovery points; the others at the particle centres)
     from rackstress.stress.measures import ParticleStress
@@ -289,6 +289,7 @@ def run_bench(out: Path | None = None, cases=None, spacings=None, echo=print) ->
 
 def markdown(data: dict) -> str:
     from rackstress.bench import fmt, md_table
+    from rackstress.stress.governing import read_label
 
     rows = []
     for r in data["rows"]:
@@ -301,7 +302,8 @@ def markdown(data: dict) -> str:
                      fmt((b.get("2-5") or {}).get("peak_ratio")),
                      fmt((b.get(">5") or {}).get("peak_ratio"))]
                     + [fmt((r.get("routes") or {}).get(k), 3) for k in ROUTES]
-                    + [fmt(r.get("headline_MPa"), 4), _read(r),
+                    + [fmt(r.get("headline_MPa"), 4),
+                       read_label(r.get("headline_read"), r.get("notch_by")),
                        fmt(r.get("headline_ratio"), 3),
                        fmt(r["notch_radius"] / r["spacing"], 2)
                        if r.get("notch_radius") else "—"])
@@ -331,14 +333,6 @@ def markdown(data: dict) -> str:
             + f"\nMachine: {m.get('cores')} cores, load average "
             f"{' / '.join(f'{x:.1f}' for x in (m.get('load_avg_at_start') or ()))} at the "
             f"start of the last command; {data['wall_s']:.0f} s wall.\n")
-
-
-def _read(r: dict) -> str:
-    """How a row's headline was read: the patch fit, or the notch reading by its submodel or
-    its fit."""
-    if r.get("headline_read") != "notch":
-        return r.get("headline_read") or "—"
-    return f"notch ({r['notch_by']})" if r.get("notch_by") else "notch"
 
 
 def refined_table(data: dict) -> str:

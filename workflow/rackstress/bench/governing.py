@@ -292,14 +292,14 @@ def notch_errors(cases: list) -> float | None:
 
 
 def table_rows(data) -> list:
+    from rackstress.stress.governing import read_label
+
     out = []
     for c in data["cases"]:
         for r in c["rows"]:
             out.append([c["name"], fmt(r["spacing"], 4), f"{r['particles']:,}", fmt(c["zone"]),
                         fmt(r["governing"], 4),
-                        r.get("read", "patch") + (f" ({r['notch_by']})"
-                                                  if r.get("read") == "notch"
-                                                  and r.get("notch_by") else ""),
+                        read_label(r.get("read", "patch"), r.get("notch_by")),
                         fmt(r["singular_peak"], 4),
                         fmt(c["fea_governing"], 4), fmt(r["governing_over_fea"]),
                         fmt(r["s_over_t"]), "yes" if r["at_curved_face"] else "no",

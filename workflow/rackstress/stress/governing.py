@@ -703,7 +703,7 @@ def notch_peak(run, name: str, spacing: float, singular: Singular, zone_: float,
     if inner.any():
         start = int(np.flatnonzero(inner)[int(np.argmax(smooth[inner]))])
         sk, value, why = _notch_submodel(run, part, o, surf, pts, rho, start, a, int(frame),
-                                         inner)
+                                         inner, st.volume)
         k = k if value is None else sk
     else:
         value, why = None, (f"every point of the face lies within {notch.SUBMODEL_CLEAR:g} "
@@ -719,16 +719,17 @@ def notch_peak(run, name: str, spacing: float, singular: Singular, zone_: float,
 
 
 def _notch_submodel(run, part, o, surf, pts, rho, k: int, a: float, frame: int,
-                    allowed: np.ndarray):
+                    allowed: np.ndarray, volume):
     """The face's peak about face point ``k`` by the submodel (:func:`rackstress.stress.notch.
     submodel`: the part's true shape in a ball about the face point, its cut displaced as the
     particles are), read at the ball's centre, the farthest from its cut (where the
     interpolated boundary's error has decayed most): the ball moves to the face point of the
     largest von Mises within a third of its radius until that is its centre (at most
     :data:`NOTCH_BALLS` balls), among the ``allowed`` face points (those clear of the part's
-    sharp outer edges, :func:`rackstress.stress.notch.clear_of_edges`). Returns (face point, value, None), or (k, None, why) where no
-    submodel can be made: gmsh or manifold3d not installed (the ``fem`` extra), or their own
-    error."""
+    sharp outer edges, :func:`rackstress.stress.notch.clear_of_edges`), with the run's
+    volumetric terms ``volume`` (or None). Returns (face point, value, None), or (k, None,
+    why) where no submodel can be made: gmsh or manifold3d not installed (the ``fem`` extra),
+    or their own error."""
     from rackstress.stress import notch
     from rackstress.stress.measures import material_parts, positions
 
@@ -736,7 +737,7 @@ def _notch_submodel(run, part, o, surf, pts, rho, k: int, a: float, frame: int,
     if not mat.get("E"):
         return k, None, "the part has no Young's modulus in scene.json"
     u = positions(run.trajectory[frame])[part.index] - o
-    nu = _lattice_nu(run, part, mat)
+    nu = _lattice_nu(volume, part, mat)
     R = notch.SUBMODEL_RADIUS * a
     seen, at, value = [], k, None
     for _ in range(NOTCH_BALLS):
@@ -766,21 +767,30 @@ def _notch_submodel(run, part, o, surf, pts, rho, k: int, a: float, frame: int,
 LATTICE_NU = 0.25
 
 
-def _lattice_nu(run, part, mat: dict) -> float:
+def _lattice_nu(volume, part, mat: dict) -> float:
     """The Poisson's ratio the part's particles were solved with, which the submodel takes so
-    that the displacements on its cut are its own material's: the material's where the run
-    has the volumetric term on the part (``poisson = "material"``), else the bindings'
-    :data:`LATTICE_NU`."""
-    from rackstress.stress.measures import read_volume_terms
-
-    t = read_volume_terms(run)
-    if t is not None and np.isin(t.owner, part.index).any():
+    that the displacements on its cut are its own material's: the material's where the run's
+    volumetric terms ``volume`` (``measures.read_volume_terms``, or None) act on the part
+    (``poisson = "material"``), else the bindings' :data:`LATTICE_NU`."""
+    if volume is not None and np.isin(volume.owner, part.index).any():
         return float(mat.get("nu", LATTICE_NU))
     return LATTICE_NU
 
 
 #: the most submodel balls :func:`_notch_submodel` moves through
 NOTCH_BALLS = 4
+
+
+def read_label(read: str | None, by: str | None = None) -> str:
+    """How a governing stress was read, in a table's words: ``patch``, or ``notch`` with how
+    the notch reading read it (``notch (submodel)``).
+
+    >>> read_label("notch", "submodel"), read_label("patch", "fit"), read_label(None)
+    ('notch (submodel)', 'patch', '—')
+    """
+    if read != "notch":
+        return read or "—"
+    return f"notch ({by})" if by else "notch"
 
 
 def notch_how(nk: dict) -> str:
