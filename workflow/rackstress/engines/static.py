@@ -441,11 +441,9 @@ def _problem(scene) -> _Problem:
 def _indenters(scene):
     """The scene's rigid spheres (``Indent`` operators) as engines/indenter.py's Indenters, or
     None without one."""
-    from rackstress.engines.indenter import Indenters
+    from rackstress.engines.indenter import Indenters, indents
 
-    if not any(isinstance(op, Indent) for seq in scene.operators.values() for op in seq):
-        return None
-    return Indenters(scene)
+    return Indenters(scene) if next(indents(scene), None) is not None else None
 
 
 def _spread(prob: _Problem):
@@ -974,11 +972,12 @@ def support_reactions(scene, res: StaticResult) -> dict:
     out = {"reactions": rows,
            "applied_load": {"force": F.sum(axis=0).tolist(),
                             "moment": np.cross(p, F).sum(axis=0).tolist()}}
-    if _indenters(scene) is not None:
-        # the rigid spheres' push (``[[indenter]]``): with the loads, what the supports balance
-        from rackstress.engines.indenter import indenter_forces
+    # the rigid spheres' push (``[[indenter]]``): with the loads, what the supports balance
+    from rackstress.engines.indenter import indenter_forces
 
-        out["indenters"] = indenter_forces(scene, p)
+    pushed = indenter_forces(scene, p)
+    if pushed:
+        out["indenters"] = pushed
     return out
 
 
@@ -1029,7 +1028,8 @@ def solve(scene, tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATI
     relaxed = _relaxed_sets(scene, prob, membrane) if RELAX else []
 
     def unbalanced_of(x: np.ndarray) -> np.ndarray:
-        return cmap.unbalanced(forces(scene, x, _pairs_at(prob, x), prob.F_ext, prob.m, prob.indenter))
+        return cmap.unbalanced(forces(scene, x, _pairs_at(prob, x), prob.F_ext, prob.m,
+                                      prob.indenter))
 
     sets = 0                                  # contact: active sets taken (module doc)
     if prob.contact:                          # the first set: the pairs touching at the start
