@@ -203,7 +203,8 @@ def _volume_blocks(op, group, offset: int, p: np.ndarray):
 
     H = Volume.hessian(p, op.terms(group)).tocoo()
     n = group.n
-    r, c = H.row // 3, H.col // 3
+    # 64-bit: SciPy's int32 rows would overflow r·n above 46,341 particles in the group
+    r, c = H.row.astype(np.int64) // 3, H.col.astype(np.int64) // 3
     off = r != c
     B = np.zeros((0, 3, 3))
     if off.any():
