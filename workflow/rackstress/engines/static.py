@@ -305,9 +305,24 @@ def volume_stiffness(vol, p: np.ndarray, m: np.ndarray):
     return (sp.diags(np.repeat(m, 3)) @ Volume.hessian(p, vol)).tocsr()
 
 
-def stiffness(p: np.ndarray, pairs, m: np.ndarray, volume=None):
+def summed(*mats):
+    """The sum of sparse matrices (CSR) as one set of triplets: SciPy's ``+`` drops the
+    entries that sum to zero, and a binding along an axis has zero cross terms at rest, so a
+    first tangent summed so lacked entries the later ones have and the factorization's
+    analysis was redone (~5 s at 93,236 particles) instead of refactorizing on it."""
+    import scipy.sparse as sp
+
+    cs = [m.tocoo() for m in mats]
+    return sp.csr_matrix((np.concatenate([c.data for c in cs]),
+                          (np.concatenate([c.row for c in cs]),
+                           np.concatenate([c.col for c in cs]))), shape=mats[0].shape)
+
+
+def stiffness(p: np.ndarray, pairs, m: np.ndarray, volume=None, pattern=None):
     """K = −∂(m·a)/∂p of the bindings (3n×3n, CSR): Eq. 12 linearized (Bind.jacobian), and of
-    the volumetric term ``volume`` (:func:`volume_stiffness`) when there is one."""
+    the volumetric term ``volume`` (:func:`volume_stiffness`) when there is one; ``pattern``
+    (:meth:`rackstress.model.volume.Volume.pattern`) its entries held as explicit zeros where
+    this state's are zero, so that every state's K has the same pattern."""
     import scipy.sparse as sp
 
     I, J, C, Q = pairs
@@ -329,7 +344,12 @@ def stiffness(p: np.ndarray, pairs, m: np.ndarray, volume=None):
     cols = np.concatenate([cols_d.ravel(), cols_ij.ravel()])
     vals = np.concatenate([D.ravel(), -B.ravel()])
     K = sp.csr_matrix((vals, (rows, cols)), shape=(3 * n, 3 * n))
-    return K if volume is None else (K + volume_stiffness(volume, p, m)).tocsr()
+    if volume is None:
+        return K
+    mats = [K, volume_stiffness(volume, p, m)]
+    if pattern is not None:
+        mats.append(sp.coo_matrix((np.zeros(len(pattern[0])), pattern), shape=K.shape))
+    return summed(*mats)
 
 
 def rigid_modes(p: np.ndarray, free) -> np.ndarray:
@@ -424,6 +444,8 @@ class _Problem:
     active: tuple | None = None
     #: the indenters (``[[indenter]]``: engines/indenter.py), None without one
     indenter: object = None
+    #: the volumetric term's tangent entries at any state (Volume.pattern), on first use
+    volume_pattern: tuple | None = None
 
 
 def _problem(scene) -> _Problem:
@@ -471,9 +493,12 @@ def _tangent(p: np.ndarray, prob: _Problem, mu: float = REGULARIZATION, spread: 
     after μ·L stalled); returns K + R and R."""
     import scipy.sparse as sp
 
-    K = stiffness(p, _pairs_at(prob, p, slack=CONTACT_SLACK), prob.m, volume=prob.volume)
+    if prob.volume is not None and prob.volume_pattern is None:
+        prob.volume_pattern = Volume.pattern(prob.volume)
+    K = stiffness(p, _pairs_at(prob, p, slack=CONTACT_SLACK), prob.m, volume=prob.volume,
+                  pattern=prob.volume_pattern)
     if prob.indenter is not None:             # the spheres' penalty, block diagonal
-        K = K + prob.indenter.stiffness(p)
+        K = summed(K, prob.indenter.stiffness(p))
     K = prob.cmap.reduce(K).tocsr()
     d = K.diagonal()
     pos = d[d > 0]
@@ -484,10 +509,7 @@ def _tangent(p: np.ndarray, prob: _Problem, mu: float = REGULARIZATION, spread: 
     # and a binding along an axis has zero cross terms at rest, so the first tangent's pattern
     # lacked entries the later ones have: the factorization's analysis was redone (~5 s at
     # 93,236 particles) instead of refactorizing on it
-    Kc, Rc = K.tocoo(), R.tocoo()
-    S = sp.csr_matrix((np.r_[Kc.data, Rc.data], (np.r_[Kc.row, Rc.row], np.r_[Kc.col, Rc.col])),
-                      shape=K.shape)
-    return S, R
+    return summed(K, R), R
 
 
 def _relaxed_sets(scene, prob: _Problem, membrane: np.ndarray) -> list:
