@@ -326,9 +326,16 @@ def kirsch(nu: float, a: float, tmp: Path) -> dict:
     k = np.flatnonzero(side)[np.argmin(o[side, 1])]          # the hole's side, on y > 0
     kt = float(S[k, 0, 0]) / 10e6
     ext = extrapolated(o, S[:, 0, 0], [0.0, 0.05, z], [0, 1.0, 0], a) / 10e6
+    # the run's own headline (summary's governing stress, von Mises: uniaxial at the hole's
+    # side, so |σ_θθ| there), as a user reads it
+    from rackstress.stress.post import postprocess
+
+    head = postprocess(tmp / f"kirsch-{nu:g}-{a:g}", vtk=False, dump=False)["governing"]
     return {"nu": nu, "spacing": a, "particles": sc.n_particles, "settled": settled,
             "at": o[k].tolist(), "Kt": kt, "ratio": kt / KIRSCH_KT, "Kt_extrapolated": ext,
-            "extrapolated_ratio": ext / KIRSCH_KT}
+            "extrapolated_ratio": ext / KIRSCH_KT, "Kt_headline": head["value"] / 10e6,
+            "headline_ratio": head["value"] / 10e6 / KIRSCH_KT,
+            "headline_at": head["read_at"], "headline_read": head.get("read")}
 
 
 BLOCK = """
@@ -487,12 +494,21 @@ def report(d: dict) -> str:
               f"{'—' if oe is None else f'{oe:.2f}'} (extrapolated).", ""]
     L += [f"## Kirsch: a hole's K_t (target {KIRSCH_KT:.3f}, Peterson chart 4.1, d/W = 0.2)",
           ""]
+    L += ["K_t = σ/10 MPa three ways: the run's own headline (`summary.json`'s governing "
+          "stress, the von Mises stress of the patch route at the face, where it is largest; "
+          "uniaxial at the hole's side, so |σ_θθ| there) — the number a user reads; σ_xx at "
+          "the lattice particle on the y axis nearest the hole (a full spacing in: the "
+          "particle on the hole's edge is not in the part); and that field extrapolated to "
+          "the edge.", ""]
     rows = [[f"{r['nu']:g}", f"{r['spacing']:g}", f"{r['particles']:,}",
+             f"{r['Kt_headline']:.3f}", f"{(r['headline_ratio'] - 1) * 100:+.1f} %",
+             "(" + ", ".join(f"{x:.4g}" for x in r["headline_at"]) + ")",
              "(" + ", ".join(f"{x:.4g}" for x in r["at"]) + ")", f"{r['Kt']:.3f}",
              f"{(r['ratio'] - 1) * 100:+.1f} %", f"{r['Kt_extrapolated']:.3f}",
              f"{(r['extrapolated_ratio'] - 1) * 100:+.1f} %"] for r in d["Kirsch"]]
-    L += [md_table(["ν", "spacing [m]", "particles", "particle at the hole's side [m]", "K_t",
-                    "error", "K_t extrapolated", "error"], rows), ""]
+    L += [md_table(["ν", "spacing [m]", "particles", "K_t, the headline", "error",
+                    "read at [m]", "particle on the y axis [m]", "K_t there", "error",
+                    "K_t extrapolated", "error"], rows), ""]
     L += ["## A laterally constrained block: σ/ε against E(1 − ν)/((1 + ν)(1 − 2ν))", ""]
     rows = [[f"{r['nu']:g}", f"{r['spacing']:g}", f"{r['particles']:,}",
              f"{r['stiffness_MPa']:.0f}", f"{r['constrained_modulus_MPa']:.0f}",
