@@ -1191,7 +1191,10 @@ def inspect_cmd(file, scale, budget, as_json, all_faces, png, bodies):
               "the static FE solution (refused otherwise: a moving state is not one).")
 @click.option("--no-converge", is_flag=True, help="Solve at one FE size only (default: also "
               "at a coarser one, to say how much the FE's own governing stress moves).")
-def fea(rundir, E, nu, size, group, measure, allow_unsettled, allow_dynamic, no_converge):
+@click.option("--no-local", is_flag=True, help="Do not refine the FE's governing stress "
+              "locally (default, on a mesh part: a submodel about it graded fine, docs/fea.md).")
+def fea(rundir, E, nu, size, group, measure, allow_unsettled, allow_dynamic, no_converge,
+        no_local):
     """Check a run's part against linear-elastic FEA of the same part (the 'fem' extra).
 
     Writes fea.json, fea.npz, vtk/fea.vtp, vtk/fea_mesh.vtu, figures/fea.png and the report's
@@ -1220,7 +1223,8 @@ def fea(rundir, E, nu, size, group, measure, allow_unsettled, allow_dynamic, no_
     try:
         data = solid.check_run(rundir, E=E, nu=nu, size=size, group=group, measure=measure,
                                echo=click.echo, allow_unsettled=allow_unsettled,
-                               allow_dynamic=allow_dynamic, converge=not no_converge)
+                               allow_dynamic=allow_dynamic, converge=not no_converge,
+                               local=not no_local)
     except (ValueError, RackstressError) as exc:
         _fail(RackstressError(f"rackstress fea {rundir}: {exc}"), getattr(exc, "exit_code", 2))
     except MemoryError:
@@ -1249,6 +1253,15 @@ def fea(rundir, E, nu, size, group, measure, allow_unsettled, allow_dynamic, no_
                    f"{[round(x, 2) for x in gv['position']]} (zone {data['zone']['length']:.3g} from "
                    f"{data['zone'].get('source', 'the FE surface')})"
                    + moved)
+        lc = gv.get("local")
+        if lc:
+            click.echo(f"fea: refined locally (a ball of {lc['radius']:.3g} about it, graded to "
+                       f"{lc['fine']:.3g}): {lc['value']:.4g} {unit} at "
+                       f"{[round(x, 2) for x in lc['position']]}; it moved "
+                       f"{100 * lc['moved']:.1f} % from twice that mesh size"
+                       + (f"; {lc['note']}" if lc.get("note") else ""))
+        elif gv.get("local_note"):
+            click.echo(f"fea: {gv['local_note']}")
         if gv.get("ratio") is not None:
             click.echo(f"fea: the particles there: {gv['particle_value']:.4g} {unit} (particle "
                        f"{gv['particle']}, ratio {gv['ratio']:.3f}); their own governing "

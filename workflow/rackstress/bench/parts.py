@@ -129,6 +129,9 @@ def case(name: str, work: Path, fea: bool = True, sets: dict | None = None, echo
                        fea_note=fj.get("note"), fea_tetrahedra=fj["fe"].get("tetrahedra"),
                        fea_governing_ratio=gov.get("ratio"), fea_moved=gov.get("moved"),
                        fea_governing_mpa=gov.get("value"),
+                       fea_local_mpa=(gov.get("local") or {}).get("value"),
+                       fea_local_moved=(gov.get("local") or {}).get("moved"),
+                       fea_local_note=gov.get("local_note"),
                        fea_budget=fj.get("fe_budget"), fea_quality=fj.get("fe_quality"),
                        fea_ftetwild_edge=fj["fe"].get("ftetwild_edge"),
                        fea_ftetwild_envelope=fj["fe"].get("ftetwild_envelope"))
@@ -275,7 +278,15 @@ def markdown(data) -> str:
                           f"reading) over the FE's: "
                           f"{fmt(r['peak_mpa'] / r['fea_governing_mpa'])}"
                           if r.get("fea_governing_mpa") and r.get("peak_mpa") is not None
-                          and r.get("peak_kind") == "governing" else ""))
+                          and r.get("peak_kind") == "governing" else "")
+                       + (f"; refined locally (`rackstress fea`'s submodel about its governing "
+                          f"point) {fmt(r['fea_local_mpa'])} MPa, moved "
+                          f"{100 * r['fea_local_moved']:.1f} % from twice its mesh size; the "
+                          f"run's governing stress over it: "
+                          f"{fmt(r['peak_mpa'] / r['fea_local_mpa'])}"
+                          if r.get("fea_local_mpa") and r.get("peak_mpa") is not None
+                          and r.get("peak_kind") == "governing" else "")
+                       + (f"; {r['fea_local_note']}" if r.get("fea_local_note") else ""))
         out.append("")
     notes = [r for r in data["rows"] if r.get("reason") or r.get("fea_error")]
     if notes:

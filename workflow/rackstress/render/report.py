@@ -184,8 +184,16 @@ def fea_section(fea: dict) -> str:
                  f"{_num(gv['ratio'])}); their own governing stress "
                  f"{_num(gv.get('particles_governing'))} {_e(unit)} (ratio "
                  f"{_num(gv.get('particles_governing_ratio'))}).")
+        lc = gv.get("local")
+        local = ("" if not lc else
+                 f" Refined locally (a ball of {_num(lc['radius'])} about it, graded to "
+                 f"{_num(lc['fine'])}): {_num(lc['value'])} {unit} at "
+                 f"{[round(x, 2) for x in lc['position']]}; it moved "
+                 f"{100 * lc['moved']:.1f} % from twice that mesh size"
+                 + (f"; {lc['note']}." if lc.get("note") else "."))
         out.append(f"<p>FE's governing stress: {_num(gv['value'])} {_e(unit)} at "
-                   f"{_e([round(x, 2) for x in gv['position']])}{_e(moved)}.{_e(there)}</p>")
+                   f"{_e([round(x, 2) for x in gv['position']])}{_e(moved)}.{_e(local)}"
+                   f"{_e(there)}</p>")
     if fea.get("bands"):
         out.append('<table id="fea-bands"><thead><tr><th>spacings from a singular point</th>'
                    "<th>particles</th><th>Spearman ρ</th><th>peak ratio</th>"

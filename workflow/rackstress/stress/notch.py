@@ -246,13 +246,16 @@ def _ball_mesh(vertices, faces_, centre, R: float, fine: float):
 
 
 def submodel(vertices, faces_, centre, o, u, spacing: float, rho: float, E: float,
-             nu: float, radius: float | None = None):
+             nu: float, radius: float | None = None, displace=None, fine: float | None = None):
     """The classical global–local submodel of the face about ``centre`` (a face point): the
     part's true shape within a ball of ``radius`` (:data:`SUBMODEL_RADIUS` spacings) about it
     (:func:`ball_piece`), P2 tetrahedra by gmsh graded toward the face point, its cut (the
     ball's sphere) displaced as the particles are (:func:`boundary_displacement` of their
     displacements ``u`` at ``o``), the part's own surface inside the ball free, solved with
-    the material's E and ν. Returns the :class:`rackstress.lib.tet.Solution`
+    the material's E and ν. ``displace`` (points k×3 → displacements k×3) instead of ``o``
+    and ``u``: the cut displaced by another model's field (the FE check's own local
+    refinement, validity.solid.local_peak); ``fine`` the mesh size at the face point instead
+    of :data:`SUBMODEL_FINE` × min(spacing, ρ). Returns the :class:`rackstress.lib.tet.Solution`
     (``.at(points)`` evaluates its stress). Raises where gmsh cannot mesh the piece (its own
     words) or is not installed (ImportError: the ``fem`` extra)."""
     from rackstress.engines.linear import factorize
@@ -260,7 +263,7 @@ def submodel(vertices, faces_, centre, o, u, spacing: float, rho: float, E: floa
 
     a = float(spacing)
     centre = np.asarray(centre, float)
-    fine = SUBMODEL_FINE * min(a, float(rho))
+    fine = float(fine) if fine else SUBMODEL_FINE * min(a, float(rho))
     errors = []
     for R in float(radius or SUBMODEL_RADIUS * a) * np.asarray(RADII):
         try:
@@ -284,7 +287,8 @@ def submodel(vertices, faces_, centre, o, u, spacing: float, rho: float, E: floa
     cut = on_bnd & (np.linalg.norm(X - centre, axis=1) >= (1 - 5e-3) * R)
     cut[nv:] = cut[mesh.edges[:, 0]] & cut[mesh.edges[:, 1]]
     U = np.zeros((len(X), 3))
-    U[cut] = boundary_displacement(np.asarray(o, float), np.asarray(u, float), X[cut], a)
+    U[cut] = (displace(X[cut]) if displace is not None else
+              boundary_displacement(np.asarray(o, float), np.asarray(u, float), X[cut], a))
     K = mesh.stiffness(E, nu).tocsr()
     fx = np.repeat(cut, 3)
     Uv = U.ravel()

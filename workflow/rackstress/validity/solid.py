@@ -1111,6 +1111,140 @@ def governing(fe_x: np.ndarray, fe_vm: np.ndarray, singular: Singular) -> dict:
     return {"value": float(fe_vm[k]), "position": fe_x[k].tolist()}
 
 
+#: The FE check's local refinement at its governing point (the classical global–local
+#: submodel, the same as the particles' notch reading: stress/notch.py ``submodel``): the
+#: part's true shape in a ball of this many of the FE's element sizes there, its cut
+#: displaced by the FE's own (P2) displacement field, graded to :data:`LOCAL_FINE` of the
+#: ball's radius at its centre. The FE check's global mesh is graded at edges and curved
+#: faces only to a budget (a corpus part's 6.25 mm fillet met 2 mm edges of fTetWild's
+#: surface, its governing stress still rising 8 % between FE sizes); the ball's is not.
+LOCAL_ELEMENTS = 3.0
+#: ... its mesh size at the centre, × the ball's radius: the reading at the first, and at the
+#: second how far it moved (the local peak's own convergence)
+LOCAL_FINE = (1 / 12, 1 / 24)
+#: ... the most balls it moves through, each to the largest stress within a third of its
+#: radius, until that is its centre
+LOCAL_BALLS = 3
+#: ... the ball's radius × these in turn where gmsh cannot mesh it (each also × 1, 1.1, 0.9:
+#: notch.RADII)
+LOCAL_RADII = (1.0, 1.3, 1.6)
+#: ... a local reading that moved more than this between its two meshes beside facets that
+#: turn inward by at least :data:`LOCAL_KINK_DEG` is said not to converge, and why
+#: (:func:`facet_kink`)
+LOCAL_MOVED = 0.03
+LOCAL_KINK_DEG = 5.0
+
+
+def element_size_at(mesh, x) -> float:
+    """The mean edge length of the tetrahedra (``mesh.p``, ``mesh.t``) at the vertex nearest
+    the point ``x``."""
+    P, T = np.asarray(mesh.p, float), np.asarray(mesh.t)
+    k = int(np.argmin(np.linalg.norm(P - np.asarray(x, float), axis=1)))
+    t = T[(T == k).any(axis=1)]
+    if not len(t):
+        return float(np.ptp(P, axis=0).max())
+    e = [np.linalg.norm(P[t[:, a]] - P[t[:, b]], axis=1) for a in range(4) for b in range(a)]
+    return float(np.mean(e))
+
+
+def _local_reading(sub, centre, R: float, singular: Singular):
+    """The submodel's largest nodal von Mises stress on the part's own surface (not its cut)
+    within a third of ``R`` of ``centre`` and the zone away from every singular point:
+    (value, position), or (None, None)."""
+    from rackstress.lib.tet import _faces_once
+
+    X = sub.mesh.X
+    faces4, once = _faces_once(sub.mesh.t)
+    bnd = np.zeros(len(X), bool)
+    bnd[np.unique(faces4[once])] = True
+    nv = len(sub.mesh.p)
+    bnd[nv:] = bnd[sub.mesh.edges[:, 0]] & bnd[sub.mesh.edges[:, 1]]
+    r = np.linalg.norm(X - centre, axis=1)
+    sel = bnd & (r <= R / 3) & (singular.distance(X) >= singular.zone)
+    if not sel.any():
+        return None, None
+    vm = sub.nodal()["von_mises"]
+    k = np.flatnonzero(sel)[int(np.argmax(vm[sel]))]
+    return float(vm[k]), X[k]
+
+
+def local_peak(vertices, faces, sol, centre, singular: Singular, E: float, nu: float,
+               echo=None) -> dict:
+    """The FE's governing stress refined locally (:data:`LOCAL_ELEMENTS`): the classical
+    submodel about the FE's governing point ``centre``, its cut displaced by the FE solution
+    ``sol``, read on the part's surface (:func:`_local_reading`), moved to the largest within
+    a third of the ball's radius (at most :data:`LOCAL_BALLS` balls), then solved again twice
+    as fine there (:data:`LOCAL_FINE`): how far it moved.
+
+    Returns ``value``, ``position``, ``radius`` of the ball, ``fine`` (the finer mesh size),
+    ``coarser_value`` and ``moved``. Raises ImportError without gmsh or manifold3d (the
+    ``fem`` extra), RuntimeError where gmsh cannot mesh the ball."""
+    from rackstress.stress.notch import submodel
+
+    c = np.asarray(centre, float)
+    R = LOCAL_ELEMENTS * element_size_at(sol.mesh, c)
+
+    def displace(X):
+        return sol.at(X)["displacement"]
+
+    def solved(at, fine):
+        errors = []
+        for k in LOCAL_RADII:      # the ball's sphere can cut the facets into overlapping ones
+            try:
+                return submodel(vertices, faces, at, None, None, R, R, E, nu, radius=k * R,
+                                displace=displace, fine=fine * R)
+            except ImportError:
+                raise
+            except RuntimeError as exc:
+                errors.append(str(exc))
+        raise RuntimeError("; ".join(dict.fromkeys(errors)))
+
+    seen = []
+    for _ in range(LOCAL_BALLS):
+        sub = solved(c, LOCAL_FINE[0])
+        value, at = _local_reading(sub, c, R, singular)
+        if value is None:
+            raise RuntimeError("no point of the ball's surface lies clear of the singular "
+                               "points")
+        seen.append(c)
+        if np.linalg.norm(at - c) <= R / 6 or any(np.linalg.norm(at - q) <= R / 6
+                                                  for q in seen):
+            break
+        c = at
+    if echo:
+        echo(f"fea: refining locally at {[round(x, 3) for x in c]} (a ball of {R:.3g}) …")
+    fine_value, fine_at = _local_reading(solved(c, LOCAL_FINE[1]), c, R, singular)
+    if fine_value is None:
+        fine_value, fine_at = value, at
+    moved = abs(fine_value - value) / fine_value if fine_value else None
+    kink = facet_kink(vertices, faces, fine_at, R / 3)
+    note = None
+    if kink >= LOCAL_KINK_DEG and moved is not None and moved > LOCAL_MOVED:
+        note = (f"not converged: the file's facets turn inward by up to {kink:.0f}° there, and "
+                "a faceted fillet's FE stress rises with every refinement (each facet edge a "
+                "shallow re-entrant corner); the smooth fillet is not in the file: an STL "
+                "exported with finer facets reads it")
+    return {"value": fine_value, "position": np.asarray(fine_at).tolist(), "radius": R,
+            "fine": LOCAL_FINE[1] * R, "coarser_value": value, "moved": moved,
+            "facet_kink_deg": kink, "note": note}
+
+
+def facet_kink(vertices, faces, x, radius: float) -> float:
+    """The largest angle (degrees) by which two of the surface's facets turn inward at an
+    edge within ``radius`` of ``x`` (0: none). A faceted fillet is a chain of such shallow
+    re-entrant edges, each a mild singularity of the FE's stress: its value there rises with
+    every refinement (a corpus part's 6.25 mm fillet, facets meeting at 15–18°: +7 % each
+    time the local mesh was halved, measured while building this), so a converged reading
+    needs the smooth surface, which an STL does not hold."""
+    import trimesh
+
+    m = trimesh.Trimesh(np.asarray(vertices, float), np.asarray(faces), process=True)
+    mid = m.vertices[m.face_adjacency_edges].mean(axis=1)
+    near = (np.linalg.norm(mid - np.asarray(x, float), axis=1) <= radius) \
+        & ~m.face_adjacency_convex
+    return float(np.degrees(m.face_adjacency_angles[near]).max()) if near.any() else 0.0
+
+
 def agreement(values: np.ndarray, fea_vm: np.ndarray, points: np.ndarray, zone: float,
               singular: np.ndarray, to_stress: float | None = None) -> dict:
     """ρ, top-5 % overlap (:func:`rackstress.validity.compare.agreement`) and the peak ratio
@@ -1451,13 +1585,14 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
               size: float | None = None, group: str | None = None,
               measure: str | None = None, echo=print, keep: bool = False,
               allow_unsettled: bool = False, allow_dynamic: bool = False,
-              converge: bool = True) -> dict:
+              converge: bool = True, local: bool = True) -> dict:
     """Solve a run's part by FEA and compare it with the particle measure (module docstring).
 
     Refuses a static run that did not settle and a dynamic run (:func:`compared_state`)
     unless allowed, and an FE model that would not fit in memory (:class:`FEAMemoryError`).
     With ``converge`` the part is solved at two FE sizes (× :data:`COARSER`), and the change
-    of the FE's governing stress between them is reported. Writes ``fea.json`` (the
+    of the FE's governing stress between them is reported; with ``local`` (a mesh part) it is
+    refined locally too (:func:`local_peak`: ``governing`` → ``local``). Writes ``fea.json`` (the
     agreement overall and by distance band, the governing point, how the FEA was set up),
     ``fea.npz`` (``fea_von_mises``, ``fea_displacement`` per particle of the part, the
     particle measure), ``vtk/fea.vtp`` (the part's particles with both fields as point
@@ -1612,6 +1747,16 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
         gov["coarser"] = {"size": sols[0].info["size"], "value": fe_gov[0]["value"],
                           "position": fe_gov[0]["position"]}
         gov["moved"] = abs(gov["value"] - fe_gov[0]["value"]) / gov["value"]
+    if local and gov["value"] and isinstance(shape, Surface):
+        pd = shape.polydata
+        try:
+            gov["local"] = local_peak(np.asarray(pd.points), np.asarray(pd.regular_faces), sol,
+                                      gov["position"], singular, E_, nu_, echo=echo)
+        except ImportError as exc:
+            gov["local_note"] = (f"{exc.name or exc} is not installed: the local refinement "
+                                 "needs the fem extra")
+        except RuntimeError as exc:             # gmsh's own words
+            gov["local_note"] = f"no local refinement: {exc}"
     if sv is not None and gov["value"]:
         k = int(np.argmin(np.linalg.norm(points - np.asarray(gov["position"]), axis=1)))
         away = dist >= singular.zone
