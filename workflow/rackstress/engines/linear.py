@@ -139,6 +139,12 @@ class Pardiso:
         self.flops = float(ip[18]) * 1e6
         return self
 
+    def preconditioner(self) -> "Pardiso":
+        """Solves without iterative refinement (each step of it one more solve and product
+        with A): an approximate inverse for conjugate gradients, which refine anyway."""
+        self.ps.iparm[7] = 0
+        return self
+
     def factor(self) -> "Pardiso":
         self._call(22)
         self.factored = True

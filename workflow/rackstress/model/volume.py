@@ -417,25 +417,6 @@ class Volume(Operator):
         return (H + geo).tocsr()
 
     @staticmethod
-    def pattern(t: VolumeTerms) -> tuple[np.ndarray, np.ndarray]:
-        """The (row, column) entries :meth:`hessian`'s Gᵀ·diag(κ)·G can hold at any state:
-        every axis of every particle a term reads, against every other. At rest a pair along
-        an axis has zero cross components, which SciPy's products drop: the static solver
-        adds these as explicit zeros, so its first tangent's pattern holds every later one's
-        and the factorization's analysis is done once (engines/static.py, ``stiffness``)."""
-        import scipy.sparse as sp
-
-        P, k3 = len(t.i), np.arange(3)
-        C = t.C.tocsr(copy=True)
-        C.data = np.ones_like(C.data)
-        J = sp.csr_matrix((np.ones(6 * P), (np.repeat(np.arange(P), 6),
-                           np.concatenate([3 * t.j[:, None] + k3, 3 * t.i[:, None] + k3],
-                                          axis=1).ravel())), shape=(P, 3 * t.n))
-        G = (C @ J).tocsr()
-        H = (G.T @ G).tocoo()               # positive sums: nothing cancels, nothing dropped
-        return H.row, H.col
-
-    @staticmethod
     def virial(p, t: VolumeTerms, m: np.ndarray) -> np.ndarray:
         """W_i = m_i·Σ_j s_ij·d_ij ⊗ d_ij/‖d_ij‖ over i's own pairs (n, 6, internal Voigt order
         xx yy zz yz xz xy): the virial of i's own terms (their forces' Σ r ⊗ f; ``m`` the
