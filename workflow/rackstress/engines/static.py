@@ -86,7 +86,8 @@ class StaticResult:
     #: n×3 force each support applies at ``p`` (zero on free directions); their sum balances
     #: the applied load (Σ reactions = −Σ loads, and so do their moments)
     reactions: np.ndarray | None = None
-    #: the linear solver of the last step ("pardiso", "superlu", "amg-cg")
+    #: the linear solver of the last step ("pardiso", "superlu", "amg-cg"; "-pcg" after a direct one:
+    #: the bindings' tangent factorized, conjugate gradients on the whole: a volumetric term's)
     solver: str = ""
     #: tangents factorized (or AMG hierarchies built): Newton steps minus reused factors
     factorizations: int = 0
@@ -723,7 +724,7 @@ class _Linear:
         else:
             self.solver = linear.AMG(P, rigid_modes(p, prob.cmap))
             self.direct = False
-        self.kind = self.solver.kind + ("-pcg" if self.split else "")
+        self.kind = self.solver.kind + ("-pcg" if self.split and self.direct else "")
         self.setup_s = time.process_time() - t0
         self._converged = True
         #: factorizations (AMG hierarchies) made for this solve so far
