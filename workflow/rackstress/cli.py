@@ -1255,10 +1255,11 @@ def fea(rundir, E, nu, size, group, measure, allow_unsettled, allow_dynamic, no_
                    + moved)
         lc = gv.get("local")
         if lc:
-            click.echo(f"fea: refined locally (a ball of {lc['radius']:.3g} about it, graded to "
-                       f"{lc['fine']:.3g}): {lc['value']:.4g} {unit} at "
-                       f"{[round(x, 2) for x in lc['position']]}; it moved "
-                       f"{100 * lc['moved']:.1f} % from twice that mesh size"
+            click.echo(f"fea: refined locally (a ball of {lc['radius']:.3g} about it"
+                       + (f", graded to {lc['fine']:.3g}" if lc.get("fine") else "") + "): "
+                       f"{lc['value']:.4g} {unit} at {[round(x, 2) for x in lc['position']]}"
+                       + (f"; it moved {100 * lc['moved']:.1f} % from twice that mesh size"
+                          if lc.get("moved") is not None else "")
                        + (f"; {lc['note']}" if lc.get("note") else ""))
         elif gv.get("local_note"):
             click.echo(f"fea: {gv['local_note']}")

@@ -280,9 +280,10 @@ def markdown(data) -> str:
                           if r.get("fea_governing_mpa") and r.get("peak_mpa") is not None
                           and r.get("peak_kind") == "governing" else "")
                        + (f"; refined locally (`rackstress fea`'s submodel about its governing "
-                          f"point) {fmt(r['fea_local_mpa'])} MPa, moved "
-                          f"{100 * r['fea_local_moved']:.1f} % from twice its mesh size; the "
-                          f"run's governing stress over it: "
+                          f"point) {fmt(r['fea_local_mpa'])} MPa"
+                          + (f", moved {100 * r['fea_local_moved']:.1f} % from twice its mesh "
+                             "size" if r.get("fea_local_moved") is not None else "")
+                          + "; the run's governing stress over it: "
                           f"{fmt(r['peak_mpa'] / r['fea_local_mpa'])}"
                           if r.get("fea_local_mpa") and r.get("peak_mpa") is not None
                           and r.get("peak_kind") == "governing" else "")

@@ -186,10 +186,11 @@ def fea_section(fea: dict) -> str:
                  f"{_num(gv.get('particles_governing_ratio'))}).")
         lc = gv.get("local")
         local = ("" if not lc else
-                 f" Refined locally (a ball of {_num(lc['radius'])} about it, graded to "
-                 f"{_num(lc['fine'])}): {_num(lc['value'])} {unit} at "
-                 f"{[round(x, 2) for x in lc['position']]}; it moved "
-                 f"{100 * lc['moved']:.1f} % from twice that mesh size"
+                 f" Refined locally (a ball of {_num(lc['radius'])} about it"
+                 + (f", graded to {_num(lc['fine'])}" if lc.get("fine") else "") + "): "
+                 f"{_num(lc['value'])} {unit} at {[round(x, 2) for x in lc['position']]}"
+                 + (f"; it moved {100 * lc['moved']:.1f} % from twice that mesh size"
+                    if lc.get("moved") is not None else "")
                  + (f"; {lc['note']}." if lc.get("note") else "."))
         out.append(f"<p>FE's governing stress: {_num(gv['value'])} {_e(unit)} at "
                    f"{_e([round(x, 2) for x in gv['position']])}{_e(moved)}.{_e(local)}"

@@ -1201,7 +1201,7 @@ def local_peak(vertices, faces, sol, centre, singular: Singular, E: float, nu: f
 
     seen = []
     for _ in range(LOCAL_BALLS):
-        sub = solved(c, LOCAL_FINE[0])
+        sub = coarse = solved(c, LOCAL_FINE[0])
         value, at = _local_reading(sub, c, R, singular)
         if value is None:
             raise RuntimeError("no point of the ball's surface lies clear of the singular "
@@ -1212,8 +1212,17 @@ def local_peak(vertices, faces, sol, centre, singular: Singular, E: float, nu: f
             break
         c = at
     if echo:
-        echo(f"fea: refining locally at {[round(x, 3) for x in c]} (a ball of {R:.3g}) …")
-    fine_value, fine_at = _local_reading(solved(c, LOCAL_FINE[1]), c, R, singular)
+        echo(f"fea: refining locally at {[round(float(x), 3) for x in c]} (a ball of {R:.3g}) …")
+    fine = solved(c, LOCAL_FINE[1])
+    if len(fine.mesh.X) == len(coarse.mesh.X):
+        # gmsh could not remesh the piece (its facets), filled it inside them, ungraded: the
+        # same mesh twice says nothing of convergence
+        return {"value": value, "position": np.asarray(at).tolist(), "radius": R,
+                "fine": None, "coarser_value": None, "moved": None,
+                "facet_kink_deg": facet_kink(vertices, faces, at, R / 3),
+                "note": "not refined: gmsh could not remesh the ball's piece of the file's "
+                        "surface and filled it inside its own facets, ungraded"}
+    fine_value, fine_at = _local_reading(fine, c, R, singular)
     if fine_value is None:
         fine_value, fine_at = value, at
     moved = abs(fine_value - value) / fine_value if fine_value else None
