@@ -24,7 +24,7 @@ DOCTESTED = ["rackstress.scenes.builtins", "rackstress.scenes", "rackstress.mode
              "rackstress.model.particles", "rackstress.model.regions", "rackstress.model.verlet",
              "rackstress.lib.rigid", "rackstress.runs.fingerprint", "rackstress.runs.rundir",
              "rackstress.engines.lammps.runner", "rackstress.stress.legs",
-             "rackstress.stress.notch", "rackstress.stress.governing"]
+             "rackstress.stress.notch", "rackstress.stress.governing", "rackstress.lib.forked"]
 
 
 @pytest.mark.parametrize("module", DOCTESTED)

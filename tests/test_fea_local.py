@@ -59,3 +59,24 @@ def test_the_facets_of_a_hole_turn_inward_by_360_over_their_number(sections):
     on_hole = [L / 2, R_HOLE * np.cos(np.pi / sections), T / 2]     # mid-facet, on y > 0
     assert solid.facet_kink(v, f, on_hole, 1.5) == pytest.approx(360 / sections, abs=1e-3)
     assert solid.facet_kink(v, f, [5.0, 0.0, T], 1.0) == 0.0            # the flat top face
+
+
+def test_a_refinement_that_does_not_end_is_stopped_and_said(tmp_path):
+    """gmsh's surface classification does not end on some pieces of a file's facets and
+    cannot be interrupted in its process: the refinement runs in a child process, and one
+    given too little time is stopped, with a RuntimeError saying so (the FE check then
+    reports it as ``local_note``), and no child is left running."""
+    import multiprocessing
+
+    v, f = _plate(64)
+    p, t = solid.surface_mesh(v, f, 4.0, None, None)
+    P = p.T
+    fixed = np.zeros((len(P), 3), bool)
+    fixed[P[:, 0] < 1e-6] = True
+    forces = np.zeros((len(P), 3))
+    forces[P[:, 0] > L - 1e-6, 0] = 1.0
+    sol = solid.solve(p, t, E, NU, fixed, forces)
+    sing = solid.Singular(points=P[fixed[:, 0]], zone=6.0, rule="", spacing=1.0)
+    with pytest.raises(RuntimeError, match="had not meshed the ball after"):
+        solid.local_peak(v, f, sol, [L / 2, R_HOLE, T / 2], sing, E, NU, timeout=0.01)
+    assert not multiprocessing.active_children()

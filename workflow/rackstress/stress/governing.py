@@ -721,8 +721,33 @@ def notch_peak(run, name: str, spacing: float, singular: Singular, zone_: float,
     return out
 
 
+#: the most seconds the notch submodel's balls may take (:func:`_notch_submodel`): gmsh's
+#: classification of a piece's surface does not end on some, and cannot be interrupted in
+#: its process (rackstress.lib.forked)
+NOTCH_SUBMODEL_TIMEOUT_S = 120.0
+
+
 def _notch_submodel(run, part, o, surf, pts, rho, k: int, a: float, frame: int,
                     allowed: np.ndarray, volume, reach=None):
+    """:func:`_notch_submodel_here` in a forked child process, stopped after
+    :data:`NOTCH_SUBMODEL_TIMEOUT_S` (the fit's reading then stands, and the note says why)."""
+    from rackstress.lib import forked
+
+    try:
+        return forked.call(lambda: _notch_submodel_here(run, part, o, surf, pts, rho, k, a,
+                                                        frame, allowed, volume, reach),
+                           NOTCH_SUBMODEL_TIMEOUT_S)
+    except forked.Timeout:
+        return k, None, (f"gmsh had not meshed the submodel's ball after "
+                         f"{NOTCH_SUBMODEL_TIMEOUT_S:.0f} s (its surface classification does "
+                         "not end on some pieces of a file's facets)")
+    except ImportError as exc:
+        return k, None, (f"{exc.name or exc} is not installed: the notch submodel needs "
+                         "the fem extra (pip install 'rackstress[fem]')")
+
+
+def _notch_submodel_here(run, part, o, surf, pts, rho, k: int, a: float, frame: int,
+                         allowed: np.ndarray, volume, reach=None):
     """The face's peak about face point ``k`` by the submodel (:func:`rackstress.stress.notch.
     submodel`: the part's true shape in a ball about the face point, its cut displaced as the
     particles are), read at the ball's centre, the farthest from its cut (where the

@@ -1168,8 +1168,31 @@ def _local_reading(sub, centre, R: float, singular: Singular):
     return float(vm[k]), X[k]
 
 
+#: ... the most seconds the local refinement may take: gmsh's classification of a piece's
+#: surface does not end on some (an SO-100 upper arm's ball: 7 minutes, killed), and it
+#: cannot be interrupted in the process, so the refinement runs in a child process
+LOCAL_TIMEOUT_S = 120.0
+
+
 def local_peak(vertices, faces, sol, centre, singular: Singular, E: float, nu: float,
-               echo=None) -> dict:
+               echo=None, timeout: float = LOCAL_TIMEOUT_S) -> dict:
+    """:func:`_local_peak` in a forked child process (:func:`rackstress.lib.forked.call`),
+    stopped after ``timeout`` seconds (RuntimeError saying so)."""
+    from rackstress.lib import forked
+
+    if echo:
+        echo(f"fea: refining locally at {[round(float(x), 3) for x in centre]} …")
+    try:
+        return forked.call(lambda: _local_peak(vertices, faces, sol, centre, singular, E, nu),
+                           timeout)
+    except forked.Timeout:
+        raise RuntimeError(f"gmsh had not meshed the ball after {timeout:.0f} s (its surface "
+                           "classification does not end on some pieces of a file's facets): "
+                           "not refined") from None
+
+
+def _local_peak(vertices, faces, sol, centre, singular: Singular, E: float, nu: float,
+                echo=None) -> dict:
     """The FE's governing stress refined locally (:data:`LOCAL_ELEMENTS`): the classical
     submodel about the FE's governing point ``centre``, its cut displaced by the FE solution
     ``sol``, read on the part's surface (:func:`_local_reading`), moved to the largest within
