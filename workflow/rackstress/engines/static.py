@@ -697,7 +697,8 @@ class _Linear:
     spacings apart, which doubled the thickness of the factorization's separators (the
     125 × 10 × 10 mm bar at 0.5 mm: 3.1× the CPU and 2.6× the memory of the bindings alone,
     ``rackstress bench lattice``); the bindings' tangent is the former lattice's, as stiff in
-    shear and within a factor 1/(1 − 2ν) in bulk, so few iterations are needed."""
+    shear and differing in the volume by the ratio of the two bulk moduli, so few iterations
+    are needed (about ten a Newton step at ν = 0.33)."""
 
     #: False: AMG-CG whatever the size (``rackstress bench static`` compares the two)
     direct_allowed = True
