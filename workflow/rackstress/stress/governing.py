@@ -724,7 +724,7 @@ def notch_peak(run, name: str, spacing: float, singular: Singular, zone_: float,
 #: the most seconds the notch submodel's balls may take (:func:`_notch_submodel`): gmsh's
 #: classification of a piece's surface does not end on some, and cannot be interrupted in
 #: its process (rackstress.lib.forked)
-NOTCH_SUBMODEL_TIMEOUT_S = 120.0
+NOTCH_SUBMODEL_TIMEOUT_S = 60.0
 
 
 def _notch_submodel(run, part, o, surf, pts, rho, k: int, a: float, frame: int,
