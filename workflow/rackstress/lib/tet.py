@@ -453,6 +453,25 @@ def read_tetrahedra(gmsh):
     return coords.reshape(-1, 3), index[np.asarray(tet[0], np.int64).reshape(-1, 4)].T
 
 
+def size_field(gmsh, points, size_min: float, size_max: float, dist_min: float,
+               dist_max: float) -> None:
+    """gmsh's background mesh size: its own Distance to ``points`` (added to the geometry,
+    not meshed) and a Threshold from ``size_min`` within ``dist_min`` of them to
+    ``size_max`` beyond ``dist_max``, linear between (a Python callback per size query took
+    minutes)."""
+    tags = [gmsh.model.geo.addPoint(*map(float, x)) for x in np.asarray(points)]
+    gmsh.model.geo.synchronize()
+    fd = gmsh.model.mesh.field.add("Distance")
+    gmsh.model.mesh.field.setNumbers(fd, "PointsList", tags)
+    ft = gmsh.model.mesh.field.add("Threshold")
+    gmsh.model.mesh.field.setNumber(ft, "InField", fd)
+    gmsh.model.mesh.field.setNumber(ft, "SizeMin", float(size_min))
+    gmsh.model.mesh.field.setNumber(ft, "SizeMax", float(size_max))
+    gmsh.model.mesh.field.setNumber(ft, "DistMin", float(dist_min))
+    gmsh.model.mesh.field.setNumber(ft, "DistMax", float(dist_max))
+    gmsh.model.mesh.field.setAsBackgroundMesh(ft)
+
+
 def gmsh_volume(v, f, size, near, near_size, reparametrize: bool, netgen: bool = False,
                 grade: float = 0.25):
     """gmsh's tetrahedra inside the closed triangulated surface (v, f) (the FE check's
@@ -482,17 +501,7 @@ def gmsh_volume(v, f, size, near, near_size, reparametrize: bool, netgen: bool =
         gmsh.option.setNumber("Mesh.MeshSizeMax", float(size))
         gmsh.option.setNumber("Mesh.OptimizeNetgen", 1 if netgen else 0)
         if near is not None and len(near) and near_size and near_size < size:
-            pts = [gmsh.model.geo.addPoint(*map(float, x)) for x in np.asarray(near)]
-            gmsh.model.geo.synchronize()
-            fd = gmsh.model.mesh.field.add("Distance")
-            gmsh.model.mesh.field.setNumbers(fd, "PointsList", pts)
-            ft = gmsh.model.mesh.field.add("Threshold")
-            gmsh.model.mesh.field.setNumber(ft, "InField", fd)
-            gmsh.model.mesh.field.setNumber(ft, "SizeMin", float(near_size))
-            gmsh.model.mesh.field.setNumber(ft, "SizeMax", float(size))
-            gmsh.model.mesh.field.setNumber(ft, "DistMin", float(near_size / grade))
-            gmsh.model.mesh.field.setNumber(ft, "DistMax", float(size / grade))
-            gmsh.model.mesh.field.setAsBackgroundMesh(ft)
+            size_field(gmsh, near, near_size, size, near_size / grade, size / grade)
         gmsh.model.mesh.generate(3)
         X, t = read_tetrahedra(gmsh)
     finally:

@@ -741,9 +741,6 @@ def _notch_submodel(run, part, o, surf, pts, rho, k: int, a: float, frame: int,
         return k, None, (f"gmsh had not meshed the submodel's ball after "
                          f"{NOTCH_SUBMODEL_TIMEOUT_S:.0f} s (its surface classification does "
                          "not end on some pieces of a file's facets)")
-    except ImportError as exc:
-        return k, None, (f"{exc.name or exc} is not installed: the notch submodel needs "
-                         "the fem extra (pip install 'rackstress[fem]')")
 
 
 def _notch_submodel_here(run, part, o, surf, pts, rho, k: int, a: float, frame: int,

@@ -48,12 +48,11 @@ def graded_mesh(vertices, faces, points, h_far: float, h_near: float, grow: floa
 def _graded_mesh(vertices, faces, points, h_far, h_near, grow, algorithm):
     import gmsh
 
-    from rackstress.lib.tet import read_tetrahedra
+    from rackstress.lib.tet import read_tetrahedra, size_field
     from rackstress.validity.solid import drop_slivers
 
     F = drop_slivers(vertices, faces)
     pts = np.asarray(points, float).reshape(-1, 3)
-    tree = True if len(pts) else None
     gmsh.initialize(["-noenv"], readConfigFiles=False)
     try:
         gmsh.option.setNumber("General.Terminal", 0)
@@ -66,22 +65,11 @@ def _graded_mesh(vertices, faces, points, h_far, h_near, grow, algorithm):
         gmsh.model.mesh.createGeometry()
         loop = gmsh.model.geo.addSurfaceLoop([e[1] for e in gmsh.model.getEntities(2)])
         gmsh.model.geo.addVolume([loop])
-        # the size field: gmsh's own Distance (to points of the geometry, not meshed) and a
-        # linear Threshold h_near + grow·d, capped at h_far (a Python callback per size query
-        # took minutes)
-        tags = [gmsh.model.geo.addPoint(*map(float, q)) for q in pts] if tree is not None else []
-        gmsh.model.geo.synchronize()
-        if tags:
-            dist = gmsh.model.mesh.field.add("Distance")
-            gmsh.model.mesh.field.setNumbers(dist, "PointsList", tags)
-            thr = gmsh.model.mesh.field.add("Threshold")
-            gmsh.model.mesh.field.setNumber(thr, "InField", dist)
-            gmsh.model.mesh.field.setNumber(thr, "SizeMin", float(h_near))
-            gmsh.model.mesh.field.setNumber(thr, "SizeMax", float(h_far))
-            gmsh.model.mesh.field.setNumber(thr, "DistMin", 0.0)
-            gmsh.model.mesh.field.setNumber(thr, "DistMax", float((h_far - h_near) / grow))
-            gmsh.model.mesh.field.setAsBackgroundMesh(thr)
+        # the size field: h_near + grow·d, capped at h_far
+        if len(pts):
+            size_field(gmsh, pts, h_near, h_far, 0.0, (h_far - h_near) / grow)
         else:
+            gmsh.model.geo.synchronize()
             gmsh.option.setNumber("Mesh.MeshSizeMax", float(h_far))
         for opt in ("Mesh.MeshSizeExtendFromBoundary", "Mesh.MeshSizeFromPoints",
                     "Mesh.MeshSizeFromCurvature"):

@@ -1193,8 +1193,8 @@ def local_peak(vertices, faces, sol, centre, singular: Singular, E: float, nu: f
                            "not refined") from None
 
 
-def _local_peak(vertices, faces, sol, centre, singular: Singular, E: float, nu: float,
-                echo=None) -> dict:
+def _local_peak(vertices, faces, sol, centre, singular: Singular, E: float,
+                nu: float) -> dict:
     """The FE's governing stress refined locally (:data:`LOCAL_ELEMENTS`): the classical
     submodel about the FE's governing point ``centre``, its cut displaced by the FE solution
     ``sol``, read on the part's surface (:func:`_local_reading`), moved to the largest within
@@ -1236,8 +1236,6 @@ def _local_peak(vertices, faces, sol, centre, singular: Singular, E: float, nu: 
                                                   for q in seen):
             break
         c = at
-    if echo:
-        echo(f"fea: refining locally at {[round(float(x), 3) for x in c]} (a ball of {R:.3g}) …")
     fine = solved(c, LOCAL_FINE[1])
     if len(fine.mesh.X) == len(coarse.mesh.X):
         # gmsh could not remesh the piece (its facets), filled it inside them, ungraded: the
