@@ -70,10 +70,10 @@ def _accelerations(deck, p):
 
 @pytest.mark.parametrize("how", ["plugin", "numba", "numpy", "static"])
 def test_one_evaluation_on_a_distorted_part(how, tmp_path, monkeypatch):
-    """The forces of one step on a randomly distorted holed plate: the plugin's rs/volume,
-    the callback's kernels and the static solver's forces with the loads (÷ m) equal the
-    reference engine's to round-off (1e-12 of the largest), on every free particle — one
-    scene, every engine."""
+    """The forces of one step on a randomly distorted holed plate: the plugin's rs/volume
+    (carrying the part's bindings too), the callback's kernels and the static solver's
+    forces with the loads (÷ m) equal the reference engine's to round-off (1e-12 of the
+    largest), on every free particle — one scene, every engine."""
     _, sc = _scene(tmp_path)
     rng = np.random.default_rng(7)
     p = sc.original_positions() + 0.01 * rng.standard_normal((sc.n_particles, 3))
@@ -91,6 +91,10 @@ def test_one_evaluation_on_a_distorted_part(how, tmp_path, monkeypatch):
         want = {"plugin": ["rs/bind", "rs/volume"], "numba": ["python", "python"],
                 "numpy": ["python", "python"]}[how]
         assert [r.how for r in deck.realized if r.target == "plate"][:2] == want
+        if how == "plugin":     # the part's bindings carried by rs/volume, no rs/bind left
+            fixes = [ln for ln in deck.input_text().splitlines() if ln.startswith("fix ")]
+            assert not [ln for ln in fixes if " rs/bind " in ln]
+            assert [ln for ln in fixes if " rs/volume " in ln and " bind " in ln]
         got = _accelerations(deck, p)
     free = ~sc.fixed()
     assert np.abs(np.where(free, got - a_ref, 0.0)).max() <= 1e-12 * np.abs(a_ref).max()

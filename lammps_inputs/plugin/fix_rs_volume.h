@@ -30,13 +30,16 @@ class FixRSVolume : public Fix {
 
  private:
   double a, c[3], cmu;
-  std::vector<int> btypes;
+  std::vector<int> btypes, bindtypes;
+  std::vector<double> bindc;
   bool built;
-  // this rank's owned atoms of the group (atom-id order), their pairs (rows i, j, rest length
-  // L, CSR over the atoms) and their terms (CSR of (pair, coefficient), κ per term): rebuilt
-  // whenever LAMMPS reneighbours (the rows change; the terms do not)
-  std::vector<int> rows, pi, pj, tptr, tpair;
-  std::vector<double> pL, tval, tkappa, e, pull, fv;
+  int nread;    // the pairs [0, nread) feed a strain, the rest are only bound
+  // this rank's owned atoms of the group (atom-id order, `rows`), their strains z (D_0..2,
+  // and G_0, G_1 on a face particle; mptr) and quadratic forms A (dense, aptr), and the pairs
+  // (rows i, j, rest length L, L², the c this fix binds them with or 0) with the strains each
+  // feeds (CSR qptr, qslot, qw): rebuilt whenever LAMMPS reneighbours
+  std::vector<int> rows, pi, pj, mptr, aptr, qptr, qslot;
+  std::vector<double> pL, pQ, pc, qw, amat, dist, dvec, z, y, fv;
   void collect();
 };
 

@@ -165,6 +165,10 @@ class Realized:
     plugin: str | None = None  # the compiled style carrying it (``rs/collide``, ...; plugin.py)
     #: rs/bind: the bond types of its pairs, each with its c (None: the operator's own c)
     btypes: list = field(default_factory=list)
+    #: rs/volume: the bond types it also binds (Eq. 12), each with its c: its part's bind's
+    #: pairs, whose rs/bind is then ``fused`` into it and writes no fix of its own
+    bind: list = field(default_factory=list)
+    fused: bool = False
 
     @property
     def how(self) -> str:
@@ -298,7 +302,8 @@ class Deck:
         # composition, as comments a reader can hold against the paper
         L.append("# operators (paper order) and their realization:")
         for r in self.realized:
-            L.append(f"#   {r.target} <- {r.op.label()}: {r.how}")
+            L.append(f"#   {r.target} <- {r.op.label()}: {r.how}"
+                     + (" (its pairs in the part's rs/volume)" if r.fused else ""))
         forces, gamma = self.static_natives()
         if self.callback_natives:
             L.append(f"# the constant forces and damping of the moving particles are added by the "
@@ -313,7 +318,7 @@ class Deck:
             if any(gamma.values()):
                 L.append(self._damp_command(gamma))
         L += [line for idx, r in enumerate(self.realized) if r.plugin and not r.op.when
-              for line in self.plugin_command(idx, r, {}).split("\n")]
+              for line in self.plugin_command(idx, r, {}).split("\n") if line]
         held_cmds, nve_group = support_commands(sc)   # supports and v0 (scene-level)
         L += held_cmds
         # a scene with supports has no passive group (passive_groups), so the two never meet
@@ -557,8 +562,12 @@ class Deck:
         if r.plugin == "rs/volume":       # the moduli per unit density (the style × its mass)
             return (f"fix {fid} {r.target} rs/volume {_f(op.solid.spacing)} "
                     + " ".join(_f(x) for x in op.c) + " btype "
-                    + " ".join(str(bt) for bt, _ in r.btypes))
+                    + " ".join(str(bt) for bt, _ in r.btypes)
+                    + ("" if not r.bind else " bind " + " ".join(f"{bt} {_f(cv)}"
+                                                                for bt, cv in r.bind)))
         c = _f(op.coeff.c)
+        if r.plugin == "rs/bind" and r.fused:
+            return ""
         if r.plugin == "rs/bind":          # one fix per bond type: rs_pN, rs_pN_2, …
             return "\n".join(
                 f"fix {fid}{'' if k == 0 else f'_{k + 1}'} {r.target} rs/bind {op.source} "
@@ -1193,7 +1202,13 @@ def _plugin_realize(scene: Scene, realized: list) -> tuple | None:
             if op.when or not carrier:
                 return None, (f"{r.target} <- {op.label()}: the volumetric term needs its "
                               "part's unconditional bind as rs/bind bonds")
-            r.plugin, r.btypes = "rs/volume", carrier[0].btypes
+            r.plugin, r.btypes = "rs/volume", list(carrier[0].btypes)
+            if not carrier[0].op.when:
+                # its part's bindings in the same pass (docs/plugin.md "rs/volume"): the bonds
+                # stay the bind's, rs/volume binds them, no rs/bind fix is written
+                c = float(carrier[0].op.coeff.c)
+                r.bind = [(bt, c if cv is None else cv) for bt, cv in carrier[0].btypes]
+                carrier[0].fused = True
         elif isinstance(op, Bind) and type(op.coeff) is Const:
             r.plugin = "rs/rack"
         elif isinstance(op, Bind):
