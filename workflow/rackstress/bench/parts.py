@@ -131,7 +131,9 @@ def case(name: str, work: Path, fea: bool = True, sets: dict | None = None, echo
                        fea_governing_mpa=gov.get("value"),
                        fea_local_mpa=(gov.get("local") or {}).get("value"),
                        fea_local_moved=(gov.get("local") or {}).get("moved"),
-                       fea_local_note=gov.get("local_note"),
+                       # why it did not refine, or its own note (facets kept it from converging)
+                       fea_local_note=(gov.get("local_note")
+                                       or (gov.get("local") or {}).get("note")),
                        fea_budget=fj.get("fe_budget"), fea_quality=fj.get("fe_quality"),
                        fea_ftetwild_edge=fj["fe"].get("ftetwild_edge"),
                        fea_ftetwild_envelope=fj["fe"].get("ftetwild_envelope"))
