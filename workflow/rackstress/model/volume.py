@@ -431,6 +431,21 @@ class Volume(Operator):
         return out
 
 
+def centroid_owners(t: VolumeTerms) -> np.ndarray:
+    """Which particles (n, bool) carry their face's overhang at its centroid: a face particle's
+    six terms Q·Dc − C_b·D (module doc), the only terms that read a pair off the lattice's
+    axes (its diagonals inward), so the owners of a term reading a pair longer than the
+    owner's nearest. Their forces already hold the cell's own moment, which the stress
+    measure's continuum route restores for the bindings alone (docs/stress.md)."""
+    near = np.full(t.n, np.inf)
+    np.minimum.at(near, t.i, t.L)
+    off_axis = t.L > (1.0 + 0.5 * (np.sqrt(2.0) - 1.0)) * near[t.i]
+    C = t.C.tocoo()
+    out = np.zeros(t.n, dtype=bool)
+    out[t.owner[C.row[off_axis[C.col]]]] = True
+    return out
+
+
 def loaded_overhang(op: "Volume", group, loaded: np.ndarray, axis: int, pressure: float,
                     nu: float) -> np.ndarray:
     """The forces (n, 3, the scene's force unit) a ``pressure`` on the ``loaded`` particles'

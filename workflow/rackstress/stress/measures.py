@@ -819,6 +819,13 @@ class ParticleStress(_RunAnalysis):
             self._W2S = None
             if self.method in ("continuum", "patch"):
                 self._wm = T.surface_moment(run.o, b[0], b[1], b[3], n)
+                if self.volume is not None:
+                    # where the volumetric term holds a face's overhang at its centroid,
+                    # the cell's own moment is in its forces: not restored a second time
+                    # (docs/stress.md "The continuum route with the material's ν")
+                    from rackstress.model.volume import centroid_owners
+
+                    self._wm = np.where(centroid_owners(self.volume)[b[0]], 0.0, self._wm)
         self._held_faces = None
         if self.method in ("continuum", "patch"):
             a2 = np.full(n, np.inf)
