@@ -389,8 +389,11 @@ ANCHOR = 1e-14
 GROWTH = 4.0
 #: within this many times the tolerance of settling, a step reuses the last tangent (a chord
 #: step: the tangent moves with the displacement, and what is left to move is that small; a
-#: third tangent of the 125 mm bar with the volumetric term at 0.5 mm cost 3.8 s of its 25,
-#: and took it from 1.05e-6 of the load to 2.6e-8). Not with contact or an indenter, whose
+#: third tangent of the 125 mm bar with the volumetric term at 0.5 mm cost 3.8 s of its 25
+#: of CPU, where the chord step takes it from 1.07e-6 of the load to 3.8e-8 in 1.0 s; at
+#: 10 × instead, the corpus' fixed jaw, shoulder bracket and wrist housing took one or two
+#: steps fewer and as long or longer, 3.51 / 2.82 / 1.88 s against 3.41 / 1.89 / 1.63 s,
+#: by hand). Not with contact or an indenter, whose
 #: tangent changes with their sets; a chord step that does not lower the unbalanced force is
 #: solved again on a new tangent, as any step
 CHORD_BELOW = 100.0

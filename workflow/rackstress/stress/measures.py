@@ -822,7 +822,7 @@ class ParticleStress(_RunAnalysis):
                 if self.volume is not None:
                     # where the volumetric term holds a face's overhang at its centroid,
                     # the cell's own moment is in its forces: not restored a second time
-                    # (docs/stress.md "The continuum route with the material's ν")
+                    # (docs/stress.md "The cells' own moment", with the material's ν)
                     from rackstress.model.volume import centroid_owners
 
                     self._wm = np.where(centroid_owners(self.volume)[b[0]], 0.0, self._wm)
