@@ -1255,12 +1255,9 @@ def fea(rundir, E, nu, size, group, measure, allow_unsettled, allow_dynamic, no_
                    + moved)
         lc = gv.get("local")
         if lc:
-            click.echo(f"fea: refined locally (a ball of {lc['radius']:.3g} about it"
-                       + (f", graded to {lc['fine']:.3g}" if lc.get("fine") else "") + "): "
-                       f"{lc['value']:.4g} {unit} at {[round(x, 2) for x in lc['position']]}"
-                       + (f"; it moved {100 * lc['moved']:.1f} % from twice that mesh size"
-                          if lc.get("moved") is not None else "")
-                       + (f"; {lc['note']}" if lc.get("note") else ""))
+            from rackstress.render.report import local_refinement
+
+            click.echo("fea: " + local_refinement(lc, unit, length_digits=3))
         elif gv.get("local_note"):
             click.echo(f"fea: {gv['local_note']}")
         if gv.get("ratio") is not None:

@@ -73,6 +73,17 @@ def _num(v, digits: int = 4) -> str:
     return str(v)
 
 
+def local_refinement(lc: dict, unit: str, length_digits: int = 4) -> str:
+    """The FE check's local refinement (``fea.json`` → ``governing.local``) in one sentence,
+    without its final stop: what ``rackstress fea`` prints and the report shows."""
+    return (f"refined locally (a ball of {_num(lc['radius'], length_digits)} about it"
+            + (f", graded to {_num(lc['fine'], length_digits)}" if lc.get("fine") else "")
+            + f"): {_num(lc['value'])} {unit} at {[round(x, 2) for x in lc['position']]}"
+            + (f"; it moved {100 * lc['moved']:.1f} % from twice that mesh size"
+               if lc.get("moved") is not None else "")
+            + (f"; {lc['note']}" if lc.get("note") else ""))
+
+
 def _load(path: Path) -> dict:
     try:
         return json.loads(path.read_text())
@@ -185,13 +196,7 @@ def fea_section(fea: dict) -> str:
                  f"{_num(gv.get('particles_governing'))} {_e(unit)} (ratio "
                  f"{_num(gv.get('particles_governing_ratio'))}).")
         lc = gv.get("local")
-        local = ("" if not lc else
-                 f" Refined locally (a ball of {_num(lc['radius'])} about it"
-                 + (f", graded to {_num(lc['fine'])}" if lc.get("fine") else "") + "): "
-                 f"{_num(lc['value'])} {unit} at {[round(x, 2) for x in lc['position']]}"
-                 + (f"; it moved {100 * lc['moved']:.1f} % from twice that mesh size"
-                    if lc.get("moved") is not None else "")
-                 + (f"; {lc['note']}." if lc.get("note") else "."))
+        local = "" if not lc else " R" + local_refinement(lc, unit)[1:] + "."
         out.append(f"<p>FE's governing stress: {_num(gv['value'])} {_e(unit)} at "
                    f"{_e([round(x, 2) for x in gv['position']])}{_e(moved)}.{_e(local)}"
                    f"{_e(there)}</p>")
