@@ -136,7 +136,7 @@ void FixRSBind::post_force(int /*vflag*/)
     const double *a = x + 3 * i1, *b = x + 3 * i2;
     const double dx = b[0] - a[0], dy = b[1] - a[1], dz = b[2] - a[2];
     const double d2 = dx * dx + dy * dy + dz * dz;
-    const double s = c * (1.0 - Q[k] / d2);
+    const double s = RackStress::eq12(c, Q[k], d2);
     const double ax = s * dx, ay = s * dy, az = s * dz;
     if (!(std::isfinite(ax) && std::isfinite(ay) && std::isfinite(az))) {
       // a pair that coincides (d = 0): neither end gains it (rs_common.h, nonfinite)

@@ -289,7 +289,7 @@ void FixRSRack::partial(double *sum)
         d[e] = p[e] - X[3 * k + e];
         d2 += d[e] * d[e];
       }
-      double s = c * (1.0 - Q[r * n + k] / d2);
+      double s = RackStress::eq12(c, Q[r * n + k], d2);
       for (int e = 0; e < 3; e++) sum[3 * k + e] += s * d[e];
     }
   }
@@ -335,7 +335,7 @@ void FixRSRack::post_force(int /*vflag*/)
           d[e] = X[3 * k + e] - x[i][e];
           d2 += d[e] * d[e];
         }
-        double s = c * (1.0 - Q[r * n + k] / d2);
+        double s = RackStress::eq12(c, Q[r * n + k], d2);
         for (int e = 0; e < 3; e++) a[e] += s * d[e];
       }
       if (!RackStress::finite3(a)) {    // coincides with a rack particle: rs_common.h

@@ -450,7 +450,8 @@ void FixRSVolume::post_force(int /*vflag*/)
     const int i = PI[p], j = PJ[p];
     const double d0 = DD[3 * p], d1 = DD[3 * p + 1], d2 = DD[3 * p + 2];
     const double g = s / R[p];
-    const double gb = C[p] == 0.0 ? 0.0 : C[p] * (1.0 - Q[p] / (d0 * d0 + d1 * d1 + d2 * d2));
+    const double gb =
+        C[p] == 0.0 ? 0.0 : RackStress::eq12(C[p], Q[p], d0 * d0 + d1 * d1 + d2 * d2);
     add(i, j, g + gb, g, d0, d1, d2);
   }
   // the pairs it only binds (Eq. 12, fix rs/bind's arithmetic)
@@ -458,7 +459,7 @@ void FixRSVolume::post_force(int /*vflag*/)
     const int i = PI[p], j = PJ[p];
     const double *xi = x + 3 * i, *xj = x + 3 * j;
     const double d0 = xj[0] - xi[0], d1 = xj[1] - xi[1], d2 = xj[2] - xi[2];
-    add(i, j, C[p] * (1.0 - Q[p] / (d0 * d0 + d1 * d1 + d2 * d2)), 0.0, d0, d1, d2);
+    add(i, j, RackStress::eq12(C[p], Q[p], d0 * d0 + d1 * d1 + d2 * d2), 0.0, d0, d1, d2);
   }
   // the partners' shares this rank computed as ghosts go to their owners
   if (comm->nprocs > 1) comm->reverse_comm(this);

@@ -55,6 +55,14 @@ namespace RackStress {
      names it (exit 3, 'diverged', as the Python callback and the reference engine do); in a
      plain `lmp` run the style stops LAMMPS there with that message (error->one ends every
      rank). */
+  /* Eq. 12's pull per unit length of d: c·(1 − L0²/‖d‖²) — the acceleration on p from u is
+     this times d = u − p. Every style that binds (rs/bind, rs/rack, rs/volume's bind) says it
+     here once. */
+  inline double eq12(double c, double L0sq, double d2)
+  {
+    return c * (1.0 - L0sq / d2);
+  }
+
   inline bool finite3(const double *a)
   {
     return std::isfinite(a[0]) && std::isfinite(a[1]) && std::isfinite(a[2]);
