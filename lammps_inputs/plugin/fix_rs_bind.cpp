@@ -121,12 +121,8 @@ void FixRSBind::post_force(int /*vflag*/)
   // LAMMPS' x and f are contiguous (3 doubles per row): read them without the row pointers
   const double *__restrict x = atom->x[0];
   double *__restrict f = atom->f[0];
-  const double *mass = atom->mass;
-  const double *rmass = atom->rmass;
-  const int *type = atom->type;
   // unit masses (the paper's, and every generated deck's): f = a, the same bits as 1·a
-  bool unit = !rmass;
-  for (int t = 1; unit && t <= atom->ntypes; t++) unit = mass[t] == 1.0;
+  const bool unit = RackStress::unit_masses(atom);
   const int n = (int) p1.size();
   const int *__restrict P1 = p1.data(), *__restrict P2 = p2.data();
   const int *__restrict E = ends.data();
@@ -147,13 +143,13 @@ void FixRSBind::post_force(int /*vflag*/)
       continue;
     }
     if (E[k] & 1) {
-      const double m = unit ? 1.0 : rmass ? rmass[i1] : mass[type[i1]];
+      const double m = unit ? 1.0 : RackStress::mass(atom, i1);
       f[3 * i1] += m * ax;
       f[3 * i1 + 1] += m * ay;
       f[3 * i1 + 2] += m * az;
     }
     if (E[k] & 2) {
-      const double m = unit ? 1.0 : rmass ? rmass[i2] : mass[type[i2]];
+      const double m = unit ? 1.0 : RackStress::mass(atom, i2);
       f[3 * i2] -= m * ax;
       f[3 * i2 + 1] -= m * ay;
       f[3 * i2 + 2] -= m * az;

@@ -416,11 +416,8 @@ void FixRSVolume::post_force(int /*vflag*/)
   std::fill(fv.begin() + 3 * (size_t) nlocal, fv.end(), 0.0);
   double *__restrict F = fv.data();
   double *__restrict f = atom->f[0];
-  const double *mass = atom->mass, *rmass = atom->rmass;
-  const int *type = atom->type;
   // unit masses (every generated deck's): f = a, the same bits as 1·a
-  bool unit = !rmass;
-  for (int t = 1; unit && t <= atom->ntypes; t++) unit = mass[t] == 1.0;
+  const bool unit = RackStress::unit_masses(atom);
   const double *__restrict C = pc.data(), *__restrict Q = pQ.data();
   auto add = [&](int i, int j, double gi, double g, double d0, double d1, double d2) {
     const double a0 = gi * d0, a1 = gi * d1, a2 = gi * d2;
@@ -429,12 +426,12 @@ void FixRSVolume::post_force(int /*vflag*/)
       RackStress::nonfinite(lmp, "rs/volume", std::min(atom->tag[i], atom->tag[j]));
       return;
     }
-    const double mi = unit ? 1.0 : rmass ? rmass[i] : mass[type[i]];
+    const double mi = unit ? 1.0 : RackStress::mass(atom, i);
     f[3 * i] += mi * a0;
     f[3 * i + 1] += mi * a1;
     f[3 * i + 2] += mi * a2;
     if (j < nlocal) {
-      const double mj = unit ? 1.0 : rmass ? rmass[j] : mass[type[j]];
+      const double mj = unit ? 1.0 : RackStress::mass(atom, j);
       f[3 * j] -= mj * a0;
       f[3 * j + 1] -= mj * a1;
       f[3 * j + 2] -= mj * a2;

@@ -48,6 +48,15 @@ namespace RackStress {
     return atom->rmass ? atom->rmass[i] : atom->mass[atom->type[i]];
   }
 
+  //! every atom's mass is 1 (per type, as every generated deck's): f = a, the same bits as 1·a
+  inline bool unit_masses(Atom *atom)
+  {
+    if (atom->rmass) return false;
+    for (int t = 1; t <= atom->ntypes; t++)
+      if (atom->mass[t] != 1.0) return false;
+    return true;
+  }
+
   /* A term that is not finite — Eq. 12's direction is 0/0 where a bound or attracted pair
      coincides (d = 0), or a force overflowed — is never added: LAMMPS' positions stay finite, and
      the step it arises in is the first bad one. In a run rackstress drives (rackstress_watch
