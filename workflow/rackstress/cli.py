@@ -1562,7 +1562,7 @@ def bench_lattice(out, quick):
 def bench_nafems(out, quick):
     """NAFEMS LE1 (elliptic membrane) and LE10 (thick plate under pressure), a hole's K_t
     (Kirsch) and a laterally constrained block at ν = 0.3 and 0.45, three spacings each
-    (docs/benchmarks/nafems.md)."""
+    (LE10 with the lattice a mesh part gets by default: four; docs/benchmarks/nafems.md)."""
     from rackstress.bench import nafems
 
     data = nafems.run_bench(out, quick=quick, echo=click.echo)

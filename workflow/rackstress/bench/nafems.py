@@ -10,7 +10,9 @@ Targets: NAFEMS, *The Standard NAFEMS Benchmarks*, TNSB Rev. 3 (1990), problems 
   (x/3.25)² + (y/2.75)² = 1 (metres), 0.1 m thick, E = 210 GPa, ν = 0.3, plane stress; 10 MPa
   of outward normal pressure on the outer edge; u_y = 0 on y = 0, u_x = 0 on x = 0 (symmetry
   planes as rollers). σ_yy at D = (2, 0): **92.7 MPa**.
-* **LE10, thick plate under pressure** — the same two ellipses, 0.6 m thick (z from 0 to 0.6),
+* **LE10, thick plate under pressure** (with the lattice a mesh part gets by default,
+  ``LE10_filled``, at four spacings, and with particles on the faces) — the same two
+  ellipses, 0.6 m thick (z from 0 to 0.6),
   1 MPa of pressure on the upper face; u_y = 0 on y = 0, u_x = 0 on x = 0, u_x = u_y = 0 on
   the outer curved face, u_z = 0 along that face's mid-plane line (z = 0.3). σ_yy at
   D = (2, 0, 0.6): **−5.38 MPa**.
@@ -240,18 +242,26 @@ def _with_forces(sc, name: str, F: np.ndarray):
     return dataclasses.replace(sc, operators={**sc.operators, name: ops})
 
 
-def le10(a: float, tmp: Path) -> dict:
+def le10(a: float, tmp: Path, filled: bool = False) -> dict:
     """LE10 at spacing ``a``, which divides 0.3 m and 2 m: the lattice's layers on the upper
-    and lower faces (z = 0 … 0.6), one on the mid-plane, a particle at D."""
+    and lower faces (z = 0 … 0.6), one on the mid-plane, a particle at D. ``filled``: the
+    lattice a mesh part gets by default instead — its cells tiling the quarter (0.6/a layers
+    of cells, an odd number, so one on the mid-plane; 2/a whole cells to D's x), the rows next
+    to the symmetry planes held across them, the particle whose recovery point is D (half a
+    spacing from it along each axis) read there."""
     from rackstress.scenes.toml import load_toml
 
-    layers = int(round(0.6 / a)) + 1
-    stl = ring_stl(tmp / "le10.stl", 0.0, 0.6)
-    f = tmp / f"le10-{a:g}.toml"
-    f.write_text(SCENE.format(name="le10", stl=stl.name, a=a, oz=0.0, nu=0.3, h=a / 2)
-                 + f"""[[load]]
+    tag = "le10f" if filled else "le10"
+    layers = int(round(0.6 / a)) + (0 if filled else 1)
+    stl = ring_stl(tmp / f"{tag}.stl", 0.0, 0.6)
+    f = tmp / f"{tag}-{a:g}.toml"
+    text = SCENE.format(name=tag, stl=stl.name, a=a, oz=a / 2 if filled else 0.0, nu=0.3,
+                        h=a if filled else a / 2)
+    if filled:
+        text = text.replace("origin = [0, 0, ", f"origin = [{a / 2}, {a / 2}, ")
+    f.write_text(text + f"""[[load]]
 on = "p"
-where = {{ box = {{ min = [-1, -1, {0.6 - a / 2}], max = [4, 4, 1] }} }}
+where = {{ box = {{ min = [-1, -1, {0.6 - (a if filled else a / 2)}], max = [4, 4, 1] }} }}
 pressure = 1e6
 normal = [0, 0, 1]
 """)
@@ -266,9 +276,10 @@ normal = [0, 0, 1]
     g.fixed[mid, 2] = True
     g.held = np.ascontiguousarray(g.fixed.all(axis=1))
     g.v0 = np.zeros_like(o)
-    S, settled = _run_and_measure(sc, tmp, f"le10-{a:g}")
-    k = int(np.argmin(np.linalg.norm(o - [2.0, 0.0, 0.6], axis=1)))
-    ext = extrapolated(o, S[:, 1, 1], [2.0, 0.0, 0.6], [1.0, 0, 0], a) / 1e6
+    S, settled = _run_and_measure(sc, tmp, f"{tag}-{a:g}")
+    c = [2.0 + a / 2, a / 2, 0.6 - a / 2] if filled else [2.0, 0.0, 0.6]
+    k = int(np.argmin(np.linalg.norm(o - c, axis=1)))
+    ext = extrapolated(o, S[:, 1, 1], [2.0] + c[1:], [1.0, 0, 0], a) / 1e6
     return {"spacing": a, "layers": layers, "particles": sc.n_particles, "settled": settled,
             "at": o[k].tolist(), "sigma_yy_MPa": float(S[k, 1, 1]) / 1e6,
             "ratio": float(S[k, 1, 1]) / 1e6 / LE10_TARGET, "extrapolated_MPa": ext,
@@ -403,6 +414,22 @@ def order(spacings, errors) -> float | None:
     return float(np.log(e[-2] / e[-1]) / np.log(spacings[-2] / spacings[-1]))
 
 
+def band(spacings, values) -> dict | None:
+    """The error bar ``rackstress run --refine`` would give the reading from its last three
+    spacings, without the target (:func:`rackstress.stress.governing.error_bar`: Richardson's
+    extrapolation at the order those three give, Roache's grid convergence index about the
+    finest value), as {"order", "order_from", "extrapolated", "low", "high"}; None with fewer
+    than three spacings."""
+    from rackstress.stress.governing import error_bar
+
+    if len(values) < 3:
+        return None
+    e = error_bar(values[-3:], spacings[-3:])
+    return {"order": e["order"], "order_from": e["order_from"],
+            "extrapolated": e["extrapolated"], "low": e["value"] - e["estimate"],
+            "high": e["value"] + e["estimate"]}
+
+
 def run_bench(out: Path | None = None, quick: bool = False, echo=print) -> dict:
     import tempfile
 
@@ -410,7 +437,7 @@ def run_bench(out: Path | None = None, quick: bool = False, echo=print) -> dict:
 
     out = out_dir(out)
     sp = {"le1": (0.05, 0.025, 0.0125), "le1_filled": (0.05, 0.025, 0.0125),
-          "le10": (0.1, 0.05, 1 / 30),
+          "le10": (0.1, 0.05, 1 / 30), "le10_filled": (0.2 / 3, 0.04, 0.2 / 7, 0.2 / 9),
           "kirsch": (0.01, 0.005, 0.0025), "block": (4.0, 2.0, 1.0)}
     if quick:
         sp = {k: v[:2] for k, v in sp.items()}
@@ -422,6 +449,7 @@ def run_bench(out: Path | None = None, quick: bool = False, echo=print) -> dict:
         for name, fn, args in (("LE1", le1, [()]),
                                ("LE1_filled", functools.partial(le1, filled=True), [()]),
                                ("LE10", le10, [()]),
+                               ("LE10_filled", functools.partial(le10, filled=True), [()]),
                                ("Kirsch", kirsch, [(0.3,), (0.45,)]),
                                ("block", block, [(0.3,), (0.45,)])):
             rows = []
@@ -437,12 +465,14 @@ def run_bench(out: Path | None = None, quick: bool = False, echo=print) -> dict:
                          + ", ".join(f"{k} {v:.4g}" for k, v in r.items()
                                      if isinstance(v, float) and k not in ("spacing",)))
             data[name] = rows
-    for name in ("LE1", "LE1_filled", "LE10"):
+    for name in ("LE1", "LE1_filled", "LE10", "LE10_filled"):
         rows = data[name]
         for tag, key in (("", "ratio"), ("_extrapolated", "extrapolated_ratio")):
             data[f"{name}_order{tag}"] = order([r["spacing"] for r in rows],
                                                [r[key] - 1 for r in rows])
             data[f"{name}_within{tag}"] = bool(abs(rows[-1][key] - 1) <= TARGET)
+        data[f"{name}_band"] = band([r["spacing"] for r in rows],
+                                    [r["sigma_yy_MPa"] for r in rows])
     (out / "nafems.json").write_text(json.dumps(data, indent=1))
     (out / "nafems.md").write_text(report(json.loads(json.dumps(data))))   # as the JSON reads
     return data
@@ -463,11 +493,12 @@ def report(d: dict) -> str:
               "spacing\" and the order below are theirs); the third, finest spacing comes from "
               "the full command.", ""]
     for name, target in (("LE1", LE1_TARGET), ("LE1_filled", LE1_TARGET),
-                         ("LE10", LE10_TARGET)):
+                         ("LE10_filled", LE10_TARGET), ("LE10", LE10_TARGET)):
         if name not in d:
             continue
-        title = "LE1, the lattice a mesh part gets by default" if name == "LE1_filled" \
-            else name
+        title = {"LE1_filled": "LE1, the lattice a mesh part gets by default",
+                 "LE10_filled": "LE10, the lattice a mesh part gets by default",
+                 "LE10": "LE10, particles on the faces"}.get(name, name)
         L += [f"## {title}: σ_yy at D, target {target} MPa (NAFEMS TNSB Rev. 3, 1990)", ""]
         if name == "LE1_filled":
             L += ["The same membrane with its cells tiling the quarter (the default fill: "
@@ -476,6 +507,20 @@ def report(d: dict) -> str:
                   "stress counts on the cells' faces, docs/stress.md); the particle nearest D "
                   "sits half a spacing from it along x and y and is read at its centre (a "
                   "membrane's patch spans one layer: its own value).", ""]
+        if name == "LE10_filled":
+            L += ["The thick plate with its cells tiling the quarter (the default fill: "
+                  "0.6/a layers of cells, an odd number so that one lies on the mid-plane "
+                  "the outer face is held along), the rows next to both symmetry planes held "
+                  "across them; the particle nearest D is half a spacing from it along each "
+                  "axis, on the pressed face, the hole's face and the symmetry plane, and is "
+                  "read at its recovery point, D itself. The value extrapolated is the "
+                  "field's on the particles' row next to the symmetry plane, half a spacing "
+                  "below the face.", ""]
+        if name == "LE10":
+            L += ["The lattice through D itself: its layers on the upper and lower faces "
+                  "(half cells there), a particle on each symmetry plane. Its reading moves "
+                  "with where the layers fall on the held outer face's staircase; the "
+                  "default fill above is the one a user's mesh part gets.", ""]
         rows = [[f"{r['spacing']:g}", r["layers"], f"{r['particles']:,}",
                  "(" + ", ".join(f"{x:.4g}" for x in r["at"]) + ")",
                  f"{r['sigma_yy_MPa']:.2f}", f"{(r['ratio'] - 1) * 100:+.1f} %",
@@ -492,6 +537,15 @@ def report(d: dict) -> str:
               f"order of convergence from the last two spacings: "
               f"{'—' if o is None else f'{o:.2f}'} (particle), "
               f"{'—' if oe is None else f'{oe:.2f}'} (extrapolated).", ""]
+        b = d.get(f"{name}_band")
+        if b:
+            lo, hi = sorted((b["low"], b["high"]))
+            L += [f"The error bar `rackstress run --refine` gives from the last three "
+                  f"readings, without the target (Richardson at order {b['order']:.2f}, "
+                  f"{b['order_from']}; Roache's grid convergence index about the finest): "
+                  f"{lo:.2f} … {hi:.2f} MPa, extrapolated {b['extrapolated']:.2f} MPa; it "
+                  f"{'covers' if lo <= target <= hi else '**does not cover**'} the target.",
+                  ""]
     L += [f"## Kirsch: a hole's K_t (target {KIRSCH_KT:.3f}, Peterson chart 4.1, d/W = 0.2)",
           ""]
     L += ["K_t = σ/10 MPa three ways: the run's own headline (`summary.json`'s governing "

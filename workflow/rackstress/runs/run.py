@@ -346,9 +346,11 @@ def sizing_lines(scene: Scene) -> tuple[list, list]:
 
 
 def write_boundary(scene: Scene, out) -> None:
-    """``boundary.npz`` (CONTRACT.md): the supports (held atom ids and their fixed directions)
-    and the loads (atom ids and the external force on each at full load, gravity included,
-    in the scene's force unit)."""
+    """``boundary.npz`` (docs/scenes.md): the supports (held atom ids and their fixed
+    directions), the loads (atom ids and the external force on each at full load, gravity
+    included, in the scene's force unit) and the normal stress a pressure puts on each pressed
+    face of a part with the material's ν (``face_ids``, ``face_stress`` k×3 along x, y, z, in
+    the scene's stress unit, at full load)."""
     from rackstress.engines.static import external_forces
     from rackstress.errors import storage_error
 
@@ -356,6 +358,12 @@ def write_boundary(scene: Scene, out) -> None:
     held = np.flatnonzero(fixed.any(axis=1))
     F = external_forces(scene)
     loaded = np.flatnonzero(np.any(F != 0.0, axis=1))
+    face = np.zeros((scene.n_particles, 3))
+    for name, g in scene.groups.items():
+        if "face_stress" in g.meta:
+            off = scene.offset(name)
+            face[off:off + g.n] = g.meta["face_stress"]
+    pressed = np.flatnonzero(np.any(face != 0.0, axis=1))
     path = Path(out) / "boundary.npz"
     tmp = Path(out) / ".boundary.tmp.npz"
     try:
@@ -365,7 +373,8 @@ def write_boundary(scene: Scene, out) -> None:
         np.savez(tmp, held_ids=(held + 1).astype(np.int64), held_mask=fixed[held],
                  load_ids=(loaded + 1).astype(np.int64), load_force=F[loaded].astype(np.float64),
                  units=np.str_(scene.units.name),
-                 constrained_ids=(constrained + 1).astype(np.int64))
+                 constrained_ids=(constrained + 1).astype(np.int64),
+                 face_ids=(pressed + 1).astype(np.int64), face_stress=face[pressed])
         tmp.replace(path)
     except OSError as exc:
         raise storage_error(exc, "write", path) from None

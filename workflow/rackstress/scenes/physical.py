@@ -599,6 +599,10 @@ def loads(ctx, tables, groups: dict, operators: dict, u, select, ramp) -> dict:
             if extra is not None:       # the pressed cells' overhang (model/volume.py)
                 for vec, sel in extra:
                     out.setdefault(name, []).extend(_forces(vec / m, sel, ramp))
+                # the normal stress on each pressed face (boundary.npz → face_stress: the
+                # stress measure counts the face's push and the overhang's prestress)
+                fs = g.meta.setdefault("face_stress", np.zeros((g.n, 3)))
+                fs[where, int(np.argmax(np.abs(n)))] -= pr
         else:       # displacement
             uvec = np.asarray(_vec3(c, t["displacement"], "displacement"))
             if ramp is not None:

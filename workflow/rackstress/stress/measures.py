@@ -61,7 +61,7 @@ from scipy.spatial import cKDTree
 from rackstress.stress import tensor as T
 from rackstress.stress.dump import DumpColumnsError, StressInputError
 from rackstress.stress.fit import FITS
-from rackstress.stress.rundata import boundary_rows
+from rackstress.stress.rundata import boundary_rows, face_stress
 
 #: Cutoff of the strain neighbourhood in units of the part's typical (median nearest) spacing.
 CUTOFF_FACTOR = 1.5
@@ -831,6 +831,10 @@ class ParticleStress(_RunAnalysis):
             a2 = np.full(n, np.inf)
             np.minimum.at(a2, b[0], b[3])            # each particle's nearest binding
             self._held_faces = self._support_faces(run, b, mine, a2)
+        self._pressed = None
+        if self.method in ("continuum", "patch") and self.volume is not None \
+                and (run.scene or {}).get("analysis") == "static":
+            self._pressed = self._pressed_faces(run, mine)
         self._patch = None
         if self.method == "patch":
             labels = np.full(n, -1, np.int64)
@@ -878,6 +882,53 @@ class ParticleStress(_RunAnalysis):
         return rows, held[rows], off[rows], loads[rows], sel, T.incidence(at[b[0][sel]],
                                                                            len(rows))
 
+    def _pressed_faces(self, run, mine) -> np.ndarray | None:
+        """The stress a pressure puts on the cells it presses that their bindings and terms do
+        not carry (n, 6), or None (docs/stress.md "A pressed face"). The bindings reach
+        inward only, so a pressed layer's virial carries σ_nn over the inner part of its cell;
+        the overhang beyond the particle, (φ − ½)·a thick, carries σ_nn = −p as well and, held
+        in its plane by the layer, the prestress λ/(λ + 2μ)·σ_nn = ν/(1 − ν)·σ_nn along each
+        axis the layer has a neighbour on, whose push the forces already apply
+        (model.volume.loaded_overhang). Each is added over the cell's share (φ − ½)/φ, but
+        not across a face a support holds: the support's force there, the push included, is
+        counted on that face already (:meth:`_support_virial`)."""
+        fs = face_stress(run)
+        if fs is None:
+            return None
+        phi = read_fractions(run)
+        held, _ = boundary_rows(run)
+        out = np.zeros((run.n_atoms, 6))
+        for part in mine:
+            idx = np.asarray(part.index)
+            if not np.any(fs[idx]):
+                continue
+            rec = self._mat[part.name]
+            nu = float(rec["material"]["nu"])
+            o = np.asarray(run.o[idx], float)
+            a = float(rec["spacing"])
+            tree = cKDTree(o)
+            side = np.zeros((len(o), 3, 2), bool)          # a neighbour at ∓a, ±a per axis
+            for q in range(3):
+                e = np.eye(3)[q] * a
+                for h, sgn in enumerate((-1.0, 1.0)):
+                    side[:, q, h] = np.isfinite(tree.query(o + sgn * e,
+                                                           distance_upper_bound=0.25 * a)[0])
+            one = side.sum(axis=2) == 1
+            # a face a support holds across carries its share already: the support's force,
+            # the push included, on that face (_support_virial)
+            has = side.any(axis=2) & ~(one & held[idx])
+            f = np.ones((len(o), 3)) if phi is None else np.nan_to_num(phi[idx], nan=1.0)
+            M = np.zeros((len(o), 3, 3))
+            for k in range(3):
+                sn = np.where(one[:, k] & ~held[idx, k], fs[idx, k], 0.0) \
+                    * np.clip(f[:, k] - 0.5, 0.0, 1.0) / np.maximum(f[:, k], 1e-12)
+                M[:, k, k] += sn
+                for q in range(3):
+                    if q != k:
+                        M[:, q, q] += nu / (1.0 - nu) * sn * has[:, q]
+            out[idx] = np.stack([M[:, r, c] for r, c in T.VOIGT], axis=1)
+        return out
+
     def _support_virial(self, p, d, d2) -> np.ndarray:
         """W of the supports' forces on the faces they hold (n, 6): Σ_k x_k ⊗ R_k symmetrized,
         R = −(the bindings', the volumetric term's and the load's force) in the held
@@ -918,6 +969,8 @@ class ParticleStress(_RunAnalysis):
         if self._held_faces is not None:  # a support's force on the face it holds
             with np.errstate(divide="ignore", invalid="ignore"):   # V = 0 off the mask
                 s = s + self._support_virial(p, d, d2) / self._V[:, None]
+        if self._pressed is not None and self._ts.frame > 0:   # (frame 0: not yet loaded)
+            s = s + self._pressed
         if self._wm is not None:
             s = T.moment_corrected(s, b[0], b[1], self._wm, self._gather)
         if self._patch is not None:

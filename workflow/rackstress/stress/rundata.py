@@ -257,6 +257,24 @@ def _parts(scene: dict, data: DataFile, rundir: Path) -> dict:
     return parts
 
 
+def face_stress(run) -> np.ndarray | None:
+    """The normal stress a pressure puts on each pressed face (n×3 along x, y, z, id order, the
+    scene's stress unit, at full load; ``boundary.npz`` → ``face_ids``, ``face_stress``), or
+    None where the run pressed none (or was written before the record)."""
+    path = Path(run.rundir) / "boundary.npz"
+    if not path.is_file():
+        return None
+    with np.load(path) as z:
+        if "face_ids" not in z.files or not len(z["face_ids"]):
+            return None
+        row = {int(i): k for k, i in enumerate(run.data.ids)}
+        out = np.zeros((run.n_atoms, 3))
+        for i, f in zip(z["face_ids"], z["face_stress"]):
+            if int(i) in row:
+                out[row[int(i)]] = f
+    return out
+
+
 def boundary_rows(run) -> tuple[np.ndarray, np.ndarray]:
     """The run's ``boundary.npz`` per particle (id order): the directions each is held in
     (n×3 booleans) and the load on it (n×3); all False and zero without the file."""
