@@ -509,18 +509,20 @@ def report(d: dict) -> str:
                   "membrane's patch spans one layer: its own value).", ""]
         if name == "LE10_filled":
             L += ["The thick plate with its cells tiling the quarter (the default fill: "
-                  "0.6/a layers of cells, an odd number so that one lies on the mid-plane "
-                  "the outer face is held along), the rows next to both symmetry planes held "
+                  "0.6/a layers of cells, an odd number, so that one lies on the mid-plane, "
+                  "where the outer face is held along z), the rows next to both symmetry "
+                  "planes held "
                   "across them; the particle nearest D is half a spacing from it along each "
                   "axis, on the pressed face, the hole's face and the symmetry plane, and is "
-                  "read at its recovery point, D itself. The value extrapolated is the "
-                  "field's on the particles' row next to the symmetry plane, half a spacing "
-                  "below the face.", ""]
+                  "read at its recovery point, D itself. The column \"extrapolated\" is the "
+                  "field extrapolated along x to the hole on the particles' row next to the "
+                  "symmetry plane, half a spacing below the face: beside D, not at it.", ""]
         if name == "LE10":
             L += ["The lattice through D itself: its layers on the upper and lower faces "
-                  "(half cells there), a particle on each symmetry plane. Its reading moves "
-                  "with where the layers fall on the held outer face's staircase; the "
-                  "default fill above is the one a user's mesh part gets.", ""]
+                  "(half cells there), a particle on each symmetry plane, D a particle. Its "
+                  "reading does not move steadily with the spacing (the table), and why was "
+                  "not found; the default fill above is the lattice a user's mesh part gets.",
+                  ""]
         rows = [[f"{r['spacing']:g}", r["layers"], f"{r['particles']:,}",
                  "(" + ", ".join(f"{x:.4g}" for x in r["at"]) + ")",
                  f"{r['sigma_yy_MPa']:.2f}", f"{(r['ratio'] - 1) * 100:+.1f} %",
@@ -534,7 +536,7 @@ def report(d: dict) -> str:
               f"{'within' if d[f'{name}_within'] else '**not within**'} {TARGET * 100:.0f} % "
               f"of the target; extrapolated to D: "
               f"{'within' if d[f'{name}_within_extrapolated'] else '**not within**'}. Observed "
-              f"order of convergence from the last two spacings: "
+              f"order of convergence from the last two errors against the target: "
               f"{'—' if o is None else f'{o:.2f}'} (particle), "
               f"{'—' if oe is None else f'{oe:.2f}'} (extrapolated).", ""]
         b = d.get(f"{name}_band")
