@@ -904,21 +904,13 @@ class ParticleStress(_RunAnalysis):
                 continue
             rec = self._mat[part.name]
             nu = float(rec["material"]["nu"])
-            o = np.asarray(run.o[idx], float)
-            a = float(rec["spacing"])
-            tree = cKDTree(o)
-            side = np.zeros((len(o), 3, 2), bool)          # a neighbour at ∓a, ±a per axis
-            for q in range(3):
-                e = np.eye(3)[q] * a
-                for h, sgn in enumerate((-1.0, 1.0)):
-                    side[:, q, h] = np.isfinite(tree.query(o + sgn * e,
-                                                           distance_upper_bound=0.25 * a)[0])
+            side = T.lattice_sides(run.o[idx], float(rec["spacing"]))
             one = side.sum(axis=2) == 1
             # a face a support holds across carries its share already: the support's force,
             # the push included, on that face (_support_virial)
             has = side.any(axis=2) & ~(one & held[idx])
-            f = np.ones((len(o), 3)) if phi is None else np.nan_to_num(phi[idx], nan=1.0)
-            M = np.zeros((len(o), 3, 3))
+            f = np.ones((len(idx), 3)) if phi is None else np.nan_to_num(phi[idx], nan=1.0)
+            M = np.zeros((len(idx), 3, 3))
             for k in range(3):
                 sn = np.where(one[:, k] & ~held[idx, k], fs[idx, k], 0.0) \
                     * np.clip(f[:, k] - 0.5, 0.0, 1.0) / np.maximum(f[:, k], 1e-12)

@@ -270,23 +270,29 @@ def to_output(s: np.ndarray) -> np.ndarray:
 PATCH_RADIUS = 2.5
 
 
-def free_faces(o: np.ndarray, spacing: float) -> np.ndarray:
-    """Each particle's free faces on its cubic lattice (n, 3): per axis −1 or +1 where the
-    lattice neighbour on that side is missing (the cell reaches the surface there), 0 where
-    both are particles (or both missing: a wall one particle thick)."""
+def lattice_sides(o: np.ndarray, spacing: float) -> np.ndarray:
+    """Which lattice neighbours each particle has on its cubic lattice (n, 3, 2): per axis,
+    the particle at −a and at +a."""
     a = float(spacing)
     o = np.asarray(o, float)
     g = np.rint((o - o.min(axis=0)) / a).astype(np.int64) + 1
     occ = np.zeros(tuple(g.max(axis=0) + 2), dtype=bool)
     occ[g[:, 0], g[:, 1], g[:, 2]] = True
-    out = np.zeros((len(o), 3))
+    out = np.zeros((len(o), 3, 2), dtype=bool)
     for ax in range(3):
-        e = np.zeros(3, dtype=np.int64)
-        e[ax] = 1
-        up, dn = g + e, g - e
-        out[:, ax] = (~occ[up[:, 0], up[:, 1], up[:, 2]]).astype(float) \
-            - (~occ[dn[:, 0], dn[:, 1], dn[:, 2]]).astype(float)
+        for h, step in enumerate((-1, 1)):
+            n = g.copy()
+            n[:, ax] += step
+            out[:, ax, h] = occ[n[:, 0], n[:, 1], n[:, 2]]
     return out
+
+
+def free_faces(o: np.ndarray, spacing: float) -> np.ndarray:
+    """Each particle's free faces on its cubic lattice (n, 3): per axis −1 or +1 where the
+    lattice neighbour on that side is missing (the cell reaches the surface there), 0 where
+    both are particles (or both missing: a wall one particle thick)."""
+    side = lattice_sides(o, spacing)
+    return (~side[:, :, 1]).astype(float) - (~side[:, :, 0]).astype(float)
 
 
 def recovery_points(o: np.ndarray, spacing: float, faces: np.ndarray | None = None,
