@@ -161,3 +161,44 @@ def test_the_submodel_reads_kirsch_from_exact_displacements():
     sol = N.submodel(part.vertices, part.faces, c, o, u, a, ah, E, nu)
     vm = float(sol.at(c[None])["von_mises"][0])
     assert vm == pytest.approx(3 * S * math.sqrt(1 - nu + nu * nu), rel=0.02)
+
+
+def test_the_submodel_is_refused_where_its_reading_depends_on_its_cut():
+    """The submodel's own check (notch.cut_check): the hole's side of the Kirsch block above
+    read with balls of 3 and 2.25 (its check). With the "particles" displaced by Kirsch's field
+    everywhere both read the edge's 3S·√(1 − ν + ν²) within 2 % and agree. With the particles
+    beyond 2.6 of the face point displaced by that field plus a shear of 5e-4 — what no
+    notch's field does: a cut through features the lattice does not carry — the ball of 3
+    reads more than 15 % off it while the check's ball, whose cut lies inside 2.6, still reads
+    it within 2 %: the two disagree and the reading is refused (hand calculation)."""
+    import trimesh
+
+    S, E, nu, ah, a = 10.0, 70000.0, 0.33, 2.0, 0.5
+    part = trimesh.boolean.difference(
+        [trimesh.creation.box(extents=[40, 40, 20]),
+         trimesh.creation.cylinder(radius=ah, height=30, sections=512)], engine="manifold")
+    g = np.arange(-8, 8, a) + a / 2
+    X, Y, Z = np.meshgrid(g, g, np.arange(-4, 4, a) + a / 2, indexing="ij")
+    o = np.column_stack([X.ravel(), Y.ravel(), Z.ravel()])
+    o = o[np.hypot(o[:, 0], o[:, 1]) > ah]
+    ux, uy = _kirsch_displacement(o[:, 0], o[:, 1], S, E, nu, ah)
+    u = np.column_stack([ux, uy, np.zeros(len(o))])
+    c = np.array([0.0, ah, 0.0])
+    edge = 3 * S * math.sqrt(1 - nu + nu * nu)
+    R = N.submodel_radius(a, ah)
+    assert R == 3.0
+    first = float(N.submodel(part.vertices, part.faces, c, o, u, a, ah, E, nu,
+                             radius=R).at(c[None])["von_mises"][0])
+    other, R2, agree = N.cut_check(part.vertices, part.faces, c, o, u, a, ah, E, nu, R, first)
+    assert R2 == pytest.approx(2.25)
+    assert first == pytest.approx(edge, rel=0.02) and other == pytest.approx(edge, rel=0.02)
+    assert agree
+    far = np.linalg.norm(o - c, axis=1) > 2.6
+    bad = u.copy()
+    bad[far, 0] += 5e-4 * o[far, 2]
+    first = float(N.submodel(part.vertices, part.faces, c, o, bad, a, ah, E, nu,
+                             radius=R).at(c[None])["von_mises"][0])
+    other, R2, agree = N.cut_check(part.vertices, part.faces, c, o, bad, a, ah, E, nu, R, first)
+    assert abs(first / edge - 1) > 0.15
+    assert other == pytest.approx(edge, rel=0.02)
+    assert not agree

@@ -753,10 +753,11 @@ def _notch_submodel_here(run, part, o, surf, pts, rho, k: int, a: float, frame: 
     :data:`NOTCH_BALLS` balls), among the ``allowed`` face points (those clear of the part's
     sharp outer edges, :func:`rackstress.stress.notch.clear_of_edges`), with the run's
     volumetric terms ``volume`` (or None); ``reach`` the face points' distances to the nearest
-    particle something bears on (:func:`rackstress.stress.notch.submodel_radius`). Returns
+    particle something bears on (:func:`rackstress.stress.notch.submodel_radius`); the last
+    ball's reading checked by a smaller ball (:func:`rackstress.stress.notch.cut_check`). Returns
     (face point, value, None), or (k, None,
-    why) where no submodel can be made: gmsh or manifold3d not installed (the ``fem`` extra),
-    or their own error."""
+    why) where no submodel can be made (gmsh or manifold3d not installed: the ``fem`` extra;
+    their own error) or its two balls disagree."""
     from rackstress.stress import notch
     from rackstress.stress.measures import material_parts, positions
 
@@ -782,11 +783,22 @@ def _notch_submodel_here(run, part, o, surf, pts, rho, k: int, a: float, frame: 
             break             # the last ball's reading stands
         near = np.flatnonzero((np.linalg.norm(pts - pts[k], axis=1) <= R / 3) & allowed)
         vm = sol.at(pts[near])["von_mises"]
-        value, at = float(sol.at(pts[k][None])["von_mises"][0]), k
+        value, at, R_at = float(sol.at(pts[k][None])["von_mises"][0]), k, R
         best = int(near[int(np.argmax(vm))])
         if best in seen:
             break
         k = best
+    # the classical submodel's own check: its reading may not depend on where its cut lies
+    try:
+        other, R2, agree = notch.cut_check(surf[0], surf[1], pts[at], o, u, a, float(rho[at]),
+                                           float(mat["E"]), nu, R_at, value)
+    except Exception as exc:  # noqa: BLE001 - gmsh's own words: the reading stands, unchecked
+        return at, value, f"its check ball could not be made ({exc}): unchecked"
+    if not agree:
+        return at, None, (f"its reading depends on where its cut lies ({value:.4g} with a ball "
+                          f"of {R_at:.3g}, {other:.4g} with one of {R2:.3g}: more than "
+                          f"{notch.CHECK_AGREE * 100:.0f} % apart), so the cut's displacement "
+                          "does not carry the notch's field there")
     return at, value, None
 
 
