@@ -139,28 +139,39 @@ def _kirsch_displacement(x, y, S, E, nu, a):
     return ur * np.cos(th) - ut * np.sin(th), ur * np.sin(th) + ut * np.cos(th)
 
 
+#: Kirsch's block: S along x, E, ν, the bore's radius, the "particles"' spacing
+KS, KE, KNU, KAH, KA = 10.0, 70000.0, 0.33, 2.0, 0.5
+
+
+def _kirsch_block(depth: float):
+    """A block 40 × 40 × 20 with a bore of radius 2 along z, "particles" on a lattice of
+    spacing 0.5 within 8 of the axis and ``depth`` of mid-height, displaced by Kirsch's
+    plane-strain field: (part, o, u, the face point at the hole's side, the edge's von Mises
+    stress 3S·√(1 − ν + ν²) — σ_θθ = 3S, σ_rr = 0, σ_zz = 3νS, by hand)."""
+    import trimesh
+
+    part = trimesh.boolean.difference(
+        [trimesh.creation.box(extents=[40, 40, 20]),
+         trimesh.creation.cylinder(radius=KAH, height=30, sections=512)], engine="manifold")
+    g = np.arange(-8, 8, KA) + KA / 2
+    X, Y, Z = np.meshgrid(g, g, np.arange(-depth, depth, KA) + KA / 2, indexing="ij")
+    o = np.column_stack([X.ravel(), Y.ravel(), Z.ravel()])
+    o = o[np.hypot(o[:, 0], o[:, 1]) > KAH]
+    ux, uy = _kirsch_displacement(o[:, 0], o[:, 1], KS, KE, KNU, KAH)
+    u = np.column_stack([ux, uy, np.zeros(len(o))])
+    return part, o, u, np.array([0.0, KAH, 0.0]), 3 * KS * math.sqrt(1 - KNU + KNU * KNU)
+
+
 def test_the_submodel_reads_kirsch_from_exact_displacements():
     """The submodel of a hole's side (a block 20 thick with a bore of radius 2, its ball of 3
     spacings at mid-height, inside the block), its cut displaced as "particles" on a lattice of
     spacing 0.5 are by Kirsch's plane-strain field: plane strain is the exact 3D solution
     there (u_z = 0 on the cut, the bore free), so it reads the edge's von Mises stress,
     3S·√(1 − ν + ν²) (σ_θθ = 3S, σ_rr = 0, σ_zz = 3νS), within 2 % (hand calculation)."""
-    import trimesh
-
-    S, E, nu, ah, a = 10.0, 70000.0, 0.33, 2.0, 0.5
-    part = trimesh.boolean.difference(
-        [trimesh.creation.box(extents=[40, 40, 20]),
-         trimesh.creation.cylinder(radius=ah, height=30, sections=512)], engine="manifold")
-    g = np.arange(-8, 8, a) + a / 2
-    X, Y, Z = np.meshgrid(g, g, np.arange(-3, 3, a) + a / 2, indexing="ij")
-    o = np.column_stack([X.ravel(), Y.ravel(), Z.ravel()])
-    o = o[np.hypot(o[:, 0], o[:, 1]) > ah]
-    ux, uy = _kirsch_displacement(o[:, 0], o[:, 1], S, E, nu, ah)
-    u = np.column_stack([ux, uy, np.zeros(len(o))])
-    c = np.array([0.0, ah, 0.0])
-    sol = N.submodel(part.vertices, part.faces, c, o, u, a, ah, E, nu)
+    part, o, u, c, edge = _kirsch_block(3.0)
+    sol = N.submodel(part.vertices, part.faces, c, o, u, KA, KAH, KE, KNU)
     vm = float(sol.at(c[None])["von_mises"][0])
-    assert vm == pytest.approx(3 * S * math.sqrt(1 - nu + nu * nu), rel=0.02)
+    assert vm == pytest.approx(edge, rel=0.02)
 
 
 def test_the_submodel_is_refused_where_its_reading_depends_on_its_cut():
@@ -171,20 +182,8 @@ def test_the_submodel_is_refused_where_its_reading_depends_on_its_cut():
     notch's field does: a cut through features the lattice does not carry — the ball of 3
     reads more than 15 % off it while the check's ball, whose cut lies inside 2.6, still reads
     it within 2 %: the two disagree and the reading is refused (hand calculation)."""
-    import trimesh
-
-    S, E, nu, ah, a = 10.0, 70000.0, 0.33, 2.0, 0.5
-    part = trimesh.boolean.difference(
-        [trimesh.creation.box(extents=[40, 40, 20]),
-         trimesh.creation.cylinder(radius=ah, height=30, sections=512)], engine="manifold")
-    g = np.arange(-8, 8, a) + a / 2
-    X, Y, Z = np.meshgrid(g, g, np.arange(-4, 4, a) + a / 2, indexing="ij")
-    o = np.column_stack([X.ravel(), Y.ravel(), Z.ravel()])
-    o = o[np.hypot(o[:, 0], o[:, 1]) > ah]
-    ux, uy = _kirsch_displacement(o[:, 0], o[:, 1], S, E, nu, ah)
-    u = np.column_stack([ux, uy, np.zeros(len(o))])
-    c = np.array([0.0, ah, 0.0])
-    edge = 3 * S * math.sqrt(1 - nu + nu * nu)
+    part, o, u, c, edge = _kirsch_block(4.0)
+    a, ah, E, nu = KA, KAH, KE, KNU
     R = N.submodel_radius(a, ah)
     assert R == 3.0
     first = float(N.submodel(part.vertices, part.faces, c, o, u, a, ah, E, nu,
