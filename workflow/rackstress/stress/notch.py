@@ -329,7 +329,7 @@ def submodel(vertices, faces_, centre, o, u, spacing: float, rho: float, E: floa
 #: radius, at least :data:`CHECK_SPACINGS` spacings; it stands where the two agree within
 #: :data:`CHECK_AGREE` of the larger — beyond the submodel's measured error (0.06,
 #: governing.NOTCH_SUBMODEL_ERROR) and a 3-spacing ball's scatter (0.94–1.08 of converged FEA,
-#: :data:`SUBMODEL_RADIUS`). On the corpus' finger link refined to 2.26 mm a ball of 26 mm read
+#: :data:`SUBMODEL_RADIUS`). On the corpus' finger link refined to 2.26 mm a ball of 24 mm read
 #: 2.59 MPa at a face where the FE check has 0.72 and a ball of 9 mm 0.77: the large ball's
 #: cut crosses the part's other features; driven by the FE check's own displacements it read
 #: 1.6–3.9 as its radius moved from 13 to 26 mm, the 9 mm one 0.76 (measured while building
