@@ -57,13 +57,6 @@ namespace RackStress {
     return true;
   }
 
-  /* A term that is not finite — Eq. 12's direction is 0/0 where a bound or attracted pair
-     coincides (d = 0), or a force overflowed — is never added: LAMMPS' positions stay finite, and
-     the step it arises in is the first bad one. In a run rackstress drives (rackstress_watch
-     below), the first such (step, atom id) is kept for the runner's next watchdog check, which
-     names it (exit 3, 'diverged', as the Python callback and the reference engine do); in a
-     plain `lmp` run the style stops LAMMPS there with that message (error->one ends every
-     rank). */
   /* Eq. 12's pull per unit length of d: c·(1 − L0²/‖d‖²) — the acceleration on p from u is
      this times d = u − p. Every style that binds (rs/bind, rs/rack, rs/volume's bind) says it
      here once. */
@@ -72,6 +65,13 @@ namespace RackStress {
     return c * (1.0 - L0sq / d2);
   }
 
+  /* A term that is not finite — Eq. 12's direction is 0/0 where a bound or attracted pair
+     coincides (d = 0), or a force overflowed — is never added: LAMMPS' positions stay finite, and
+     the step it arises in is the first bad one. In a run rackstress drives (rackstress_watch
+     below), the first such (step, atom id) is kept for the runner's next watchdog check, which
+     names it (exit 3, 'diverged', as the Python callback and the reference engine do); in a
+     plain `lmp` run the style stops LAMMPS there with that message (error->one ends every
+     rank). */
   inline bool finite3(const double *a)
   {
     return std::isfinite(a[0]) && std::isfinite(a[1]) && std::isfinite(a[2]);

@@ -826,15 +826,15 @@ class ParticleStress(_RunAnalysis):
                     from rackstress.model.volume import centroid_owners
 
                     self._wm = np.where(centroid_owners(self.volume)[b[0]], 0.0, self._wm)
-        self._held_faces = None
+        self._held_faces = self._pressed = None
         if self.method in ("continuum", "patch"):
             a2 = np.full(n, np.inf)
             np.minimum.at(a2, b[0], b[3])            # each particle's nearest binding
-            self._held_faces = self._support_faces(run, b, mine, a2)
-        self._pressed = None
-        if self.method in ("continuum", "patch") and self.volume is not None \
-                and (run.scene or {}).get("analysis") == "static":
-            self._pressed = self._pressed_faces(run, mine)
+            phi = read_fractions(run)                # both read the cells' extents and
+            held, loads = boundary_rows(run)         # the supports, once
+            self._held_faces = self._support_faces(run, b, mine, a2, phi, held.copy(), loads)
+            if self.volume is not None and (run.scene or {}).get("analysis") == "static":
+                self._pressed = self._pressed_faces(run, mine, phi, held)
         self._patch = None
         if self.method == "patch":
             labels = np.full(n, -1, np.int64)
@@ -846,7 +846,7 @@ class ParticleStress(_RunAnalysis):
             a = float(np.sqrt(np.median(a2[np.isfinite(a2)])))
             self._patch = T.patch_matrix(run.o, a, points, labels)
 
-    def _support_faces(self, run, b, mine, a2):
+    def _support_faces(self, run, b, mine, a2, phi, held, loads):
         """The particles a support holds across a face of their cell (a roller, a symmetry
         plane, a clamp: a held direction along which the lattice neighbour is missing), or
         None: (rows, held n×3 mask, offset n×3 to the face, load n×3, the bindings acting on
@@ -856,11 +856,10 @@ class ParticleStress(_RunAnalysis):
         particle (φ its cell's extent along the axis, ``read_fractions``): a particle on the
         plane itself has half a cell, its stress whole already, and gets nothing. Static runs
         (``phi`` written) only: a dynamic run's loads at a frame are not in its files. ``a2``:
-        each particle's nearest binding's squared length (its part's spacing)."""
-        phi = read_fractions(run)
+        each particle's nearest binding's squared length (its part's spacing); ``phi``,
+        ``held``, ``loads``: the run's ``read_fractions`` and ``boundary_rows``."""
         if b is None or not len(b[0]) or phi is None:
             return None
-        held, loads = boundary_rows(run)
         held &= self._mask[:, None]
         if not held.any():
             return None
@@ -882,7 +881,7 @@ class ParticleStress(_RunAnalysis):
         return rows, held[rows], off[rows], loads[rows], sel, T.incidence(at[b[0][sel]],
                                                                            len(rows))
 
-    def _pressed_faces(self, run, mine) -> np.ndarray | None:
+    def _pressed_faces(self, run, mine, phi, held) -> np.ndarray | None:
         """The stress a pressure puts on the cells it presses that their bindings and terms do
         not carry (n, 6), or None (docs/stress.md "A pressed face"). The bindings reach
         inward only, so a pressed layer's virial carries σ_nn over the inner part of its cell;
@@ -891,12 +890,11 @@ class ParticleStress(_RunAnalysis):
         axis the layer has a neighbour on, whose push the forces already apply
         (model.volume.loaded_overhang). Each is added over the cell's share (φ − ½)/φ, but
         not across a face a support holds: the support's force there, the push included, is
-        counted on that face already (:meth:`_support_virial`)."""
+        counted on that face already (:meth:`_support_virial`). ``phi``, ``held``: the run's
+        ``read_fractions`` and ``boundary_rows``."""
         fs = face_stress(run)
         if fs is None:
             return None
-        phi = read_fractions(run)
-        held, _ = boundary_rows(run)
         out = np.zeros((run.n_atoms, 6))
         for part in mine:
             idx = np.asarray(part.index)

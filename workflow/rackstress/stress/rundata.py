@@ -257,6 +257,16 @@ def _parts(scene: dict, data: DataFile, rundir: Path) -> dict:
     return parts
 
 
+def _by_row(run, ids, values, out: np.ndarray) -> np.ndarray:
+    """``values`` (one per atom id of ``ids``) into ``out``'s rows in the run's id order; ids
+    the run does not hold are skipped."""
+    row = {int(i): k for k, i in enumerate(run.data.ids)}
+    for i, v in zip(ids, values):
+        if int(i) in row:
+            out[row[int(i)]] = v
+    return out
+
+
 def face_stress(run) -> np.ndarray | None:
     """The normal stress a pressure puts on each pressed face (n×3 along x, y, z, id order, the
     scene's stress unit, at full load; ``boundary.npz`` → ``face_ids``, ``face_stress``), or
@@ -267,12 +277,7 @@ def face_stress(run) -> np.ndarray | None:
     with np.load(path) as z:
         if "face_ids" not in z.files or not len(z["face_ids"]):
             return None
-        row = {int(i): k for k, i in enumerate(run.data.ids)}
-        out = np.zeros((run.n_atoms, 3))
-        for i, f in zip(z["face_ids"], z["face_stress"]):
-            if int(i) in row:
-                out[row[int(i)]] = f
-    return out
+        return _by_row(run, z["face_ids"], z["face_stress"], np.zeros((run.n_atoms, 3)))
 
 
 def boundary_rows(run) -> tuple[np.ndarray, np.ndarray]:
@@ -282,12 +287,7 @@ def boundary_rows(run) -> tuple[np.ndarray, np.ndarray]:
     held, loads = np.zeros((n, 3), bool), np.zeros((n, 3))
     path = Path(run.rundir) / "boundary.npz"
     if path.is_file():
-        row = {int(i): k for k, i in enumerate(run.data.ids)}
         with np.load(path) as z:
-            for i, m in zip(z["held_ids"], z["held_mask"]):
-                if int(i) in row:
-                    held[row[int(i)]] = m
-            for i, f in zip(z["load_ids"], z["load_force"]):
-                if int(i) in row:
-                    loads[row[int(i)]] = f
+            _by_row(run, z["held_ids"], z["held_mask"], held)
+            _by_row(run, z["load_ids"], z["load_force"], loads)
     return held, loads
