@@ -839,12 +839,20 @@ class ParticleStress(_RunAnalysis):
         if self.method == "patch":
             labels = np.full(n, -1, np.int64)
             points = np.asarray(run.o, float).copy()
+            # the fits sample the regular cells, and the supported ones (their support's
+            # force in their stress): docs/stress.md "Patch recovery"
+            data = held.any(axis=1).copy()
             for k, part in enumerate(mine):
-                labels[part.index] = k
-                points[part.index] = T.part_recovery_points(run.o[part.index])
+                idx = np.asarray(part.index)
+                labels[idx] = k
+                points[idx] = T.part_recovery_points(run.o[idx])
+                ap = a2[idx][np.isfinite(a2[idx])]
+                if len(ap):
+                    data[idx] |= T.regular_cells(run.o[idx], float(np.sqrt(np.median(ap))),
+                                                 None if phi is None else phi[idx])
             self.points = points
             a = float(np.sqrt(np.median(a2[np.isfinite(a2)])))
-            self._patch = T.patch_matrix(run.o, a, points, labels)
+            self._patch = T.patch_matrix(run.o, a, points, labels, data=data)
 
     def _support_faces(self, run, b, mine, a2, phi, held, loads):
         """The particles a support holds across a face of their cell (a roller, a symmetry
