@@ -1,6 +1,7 @@
-"""``rackstress bench parts`` at its smallest: one real part that settles and one the mesh
-check refuses (the SO-ARM base's four bodies without ``bodies = "united"``), both rows of the
-table (nothing is left out), written as JSON and Markdown."""
+"""``rackstress bench parts`` at its smallest: one real part that settles (with ``--refine``)
+and one the mesh check refuses (the SO-ARM base's four bodies without ``bodies = "united"``),
+both rows of the table (nothing is left out), written as JSON and Markdown; the refined
+section's ratios and cover by hand."""
 from __future__ import annotations
 
 import json
@@ -21,13 +22,20 @@ def test_bench_parts_rows_for_settled_and_refused(tmp_path):
     text = scene.read_text()
     assert 'bodies = "united"\n' in text
     scene.write_text(text.replace('bodies = "united"\n', ""))       # the file as it comes
-    data = parts.run_bench(tmp_path / "out", fea=False, echo=lambda *a: None, corpus=corpus)
+    data = parts.run_bench(tmp_path / "out", fea=False, echo=lambda *a: None, corpus=corpus,
+                           refine=True)
     rows = {r["part"]: r for r in data["rows"]}
     assert set(rows) == {"finger-edu-lower-link", "so100-base"}
     ok = rows["finger-edu-lower-link"]
     assert ok["settled"] and ok["status"] == "settled" and ok["residual"] <= 1e-6
     assert ok["spacing_how"] in ("walls", "budget") and ok["particles"] > 500
     assert ok["peak_mpa"] > 0 and ok["iterations"] >= 1
+    # --refine: the part again at spacing/√2, more than twice the particles, its bar about
+    # the refined value, the coarse one among the bar's values
+    assert ok["refined_spacing"] == pytest.approx(ok["spacing"] / 2 ** 0.5, rel=1e-6)
+    assert ok["refined_particles"] > 2 * ok["particles"]
+    assert ok["bar_low"] <= ok["refined_mpa"] <= ok["bar_high"]
+    assert ok["refined_read"] in ("patch", "notch")
     # the multi-body base: refused by the mesh check, a row with its reason
     bad = rows["so100-base"]
     assert bad["status"] == "refused (exit 2)" and "Base.stl" in bad["reason"]
@@ -55,3 +63,30 @@ def test_parts_page_says_ftetwilds_edge_not_a_grading():
            "graded" in base and "graded to" not in base
     hip = next(x for x in md.splitlines() if x.startswith("* **solo12-hip**"))
     assert "graded to 2.29 mm, not 1.12" in hip
+
+
+def test_parts_page_gives_the_refined_stress_against_the_fe_check():
+    """The ``--refine`` section: governing 2.0 and refined 2.2 MPa against the FE's local
+    2.1 MPa read 0.9524 and 1.048 (by hand), a bar 1.9 … 2.6 covers 2.1 and one of 2.15 …
+    2.6 does not; a part without a refined value has no row there, and its reason is given."""
+    data = {"machine": {"cores": 2, "cpu": "x", "load_avg_at_start": [0.1]}, "fea": True,
+            "refine": True, "settled": 2, "parts": 3, "wall_s": 1.0, "timeout_s": 900.0,
+            "rows": [
+                {"part": "a", "spacing": 2.0, "spacing_how": "walls", "peak_mpa": 2.0, "peak_kind": "governing",
+                 "refined_mpa": 2.2, "refined_spacing": 1.41, "refined_read": "notch",
+                 "bar_low": 1.9, "bar_high": 2.6, "fea_governing_mpa": 2.3,
+                 "fea_local_mpa": 2.1},
+                {"part": "b", "spacing": 1.0, "spacing_how": "walls", "peak_mpa": 2.0, "peak_kind": "governing",
+                 "refined_mpa": 2.2, "refined_spacing": 0.707, "refined_read": "patch",
+                 "bar_low": 2.15, "bar_high": 2.6, "fea_governing_mpa": 2.1},
+                {"part": "c", "spacing": 1.0, "spacing_how": "given", "refine_error": "the refined run did not "
+                 "settle"}]}
+    md = parts.markdown(data)
+    assert "`rackstress bench parts --refine`" in md
+    rows = [x for x in md.split("## After `--refine`")[1].splitlines() if x.startswith("| ")]
+    a = next(x for x in rows if x.startswith("| a |"))
+    b = next(x for x in rows if x.startswith("| b |"))
+    assert "| 2.1 (local) | 0.9524 | 1.048 | yes |" in a
+    assert "| 2.1 | 0.9524 | 1.048 | **no** |" in b
+    assert not any(x.startswith("| c |") for x in rows)
+    assert "* **c**: --refine: the refined run did not settle" in md

@@ -1501,15 +1501,20 @@ def bench_validity(out, quick, planar, concentrations, cases, spacings):
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE",
               help="Override every part's scene, e.g. --set budget=5000 (repeatable).")
 @click.option("--timeout", type=click.FloatRange(min=1), default=900.0, show_default=True,
-              help="Seconds a part's run (and its FE check) may take before it is stopped.")
-def bench_parts(out, fea, only, sets, timeout):
+              help="Seconds a part's run (and its FE check) may take before it is stopped "
+                   "(with --refine the run may take three times as long).")
+@click.option("--refine", is_flag=True,
+              help="Run each part with --refine (again at spacing/sqrt(2)) and give the refined "
+                   "governing stress and its error bar against the FE check.")
+def bench_parts(out, fea, only, sets, timeout, refine):
     """Every real part of examples/parts/ through the static path: particles, spacing, Newton
     steps, residual, solve time, peak and the FE agreement (docs/benchmarks/parts.md)."""
     from rackstress import scenes
     from rackstress.bench import parts as mod
 
     data = mod.run_bench(out, fea=fea, only=only or None,
-                         sets=scenes.parse_overrides(sets), echo=click.echo, timeout=timeout)
+                         sets=scenes.parse_overrides(sets), echo=click.echo, timeout=timeout,
+                         refine=refine)
     _bench_report(data, mod)
 
 
@@ -1723,7 +1728,7 @@ TEACH = {
     "bench parts": ("Every real part of examples/parts/ through the static path.", [
         "rackstress bench parts --no-fea --out /tmp/bench",
         "rackstress bench parts --only so100 --set budget=5000 --out /tmp/bench",
-        "rackstress bench parts --out docs/benchmarks",
+        "rackstress bench parts --refine --out docs/benchmarks",
     ]),
     "bench lattice": ("E, ν, bulk and shear moduli with the volumetric term.", [
         "rackstress bench lattice --quick --out /tmp/bench",

@@ -8,7 +8,10 @@ One row a part: particles, spacing and how it was chosen, Newton steps, residual
 (the solver's wall time, and the CPU time of the whole run), the peak von Mises stress (the
 governing stress where the run has one), settled or not, the FE agreement. A part the
 static path refuses (exit 2: a mesh it cannot fill) or that does not settle (exit 6) is a row
-too, with its reason: nothing is left out.
+too, with its reason: nothing is left out. With ``--refine`` each run is ``rackstress run
+SCENE --refine`` (the part again at spacing/√2, its governing stress's error bar), and the page
+gives the refined governing stress and its bar beside the FE check's (docs/stress.md "The
+error bar").
 
 Writes ``docs/benchmarks/parts.json`` and ``parts.md``.
 """
@@ -61,9 +64,10 @@ def _error_of(stderr: str) -> str:
 
 
 def case(name: str, work: Path, fea: bool = True, sets: dict | None = None, echo=print,
-         timeout: float = TIMEOUT_S, corpus: Path | None = None) -> dict:
+         timeout: float = TIMEOUT_S, corpus: Path | None = None, refine: bool = False) -> dict:
     """One part as a user runs it, each command a process of its own: ``rackstress run SCENE
-    --no-render`` (LAMMPS; the stress measured), then ``rackstress fea``; its row."""
+    --no-render`` (LAMMPS; the stress measured; ``refine``: with ``--refine``, the run's
+    timeout three times ``timeout`` for the finer run), then ``rackstress fea``; its row."""
     import json
     import subprocess
 
@@ -75,17 +79,18 @@ def case(name: str, work: Path, fea: bool = True, sets: dict | None = None, echo
     # paths in the repository, and the run by its part's name, not this machine's temporary
     short = lambda text: str(text).replace(str(out), name).replace(root, "")  # noqa: E731
     args = [*_rackstress(), "run", str(scene), "--no-render", "--no-progress", "--out",
-            str(out), "--overwrite"]
+            str(out), "--overwrite"] + (["--refine"] if refine else [])
     for k, v in (sets or {}).items():
         args += ["--set", f"{k}={v}"]
     cpu0, t0 = cpu_children(), time.perf_counter()
+    limit = timeout * (3 if refine else 1)
     try:
-        r = subprocess.run(args, capture_output=True, text=True, timeout=timeout)
+        r = subprocess.run(args, capture_output=True, text=True, timeout=limit)
     except subprocess.TimeoutExpired:
-        row.update(status=f"stopped after {timeout:.0f} s", run_wall_s=timeout,
-                   reason=f"the run had not ended after {timeout:.0f} s (--timeout): today's "
+        row.update(status=f"stopped after {limit:.0f} s", run_wall_s=limit,
+                   reason=f"the run had not ended after {limit:.0f} s (--timeout): today's "
                           "solver had not settled it")
-        echo(f"{name}: stopped after {timeout:.0f} s")
+        echo(f"{name}: stopped after {limit:.0f} s")
         return row
     row["run_wall_s"] = time.perf_counter() - t0
     row["run_cpu_s"] = cpu_children() - cpu0
@@ -113,6 +118,8 @@ def case(name: str, work: Path, fea: bool = True, sets: dict | None = None, echo
         r.returncode, f"failed (exit {r.returncode})")
     if r.returncode not in (0, 6):
         row["reason"] = short(_error_of(r.stderr))
+    if refine:
+        row.update(_refined(out, stress, r, short))
     if fea and row["settled"]:
         t0 = time.perf_counter()
         code, err, usage = _timed([*_rackstress(), "fea", str(out)], timeout)
@@ -147,6 +154,26 @@ def case(name: str, work: Path, fea: bool = True, sets: dict | None = None, echo
     return row
 
 
+def _refined(out: Path, stress: dict, r, short) -> dict:
+    """``--refine``'s part of a row: the refined run's governing stress, how it was read, its
+    spacing and particles, and the error bar (``summary.json["stress"]["error"]``), or why
+    there is none."""
+    import json
+
+    err = stress.get("error")
+    if not err:
+        why = _error_of(r.stderr) if r.returncode else "no error bar in summary.json"
+        return {"refine_error": short(why) or "no error bar in summary.json"}
+    fine = out / err.get("refine_dir", "refine") / "summary.json"
+    fg = {}
+    if fine.is_file():
+        fg = (json.loads(fine.read_text()).get("stress") or {}).get("governing") or {}
+    return {"refined_mpa": err["values"][-1], "refined_spacing": err["spacings"][-1],
+            "refined_particles": (err.get("particles") or [None, None])[-1],
+            "refined_read": fg.get("read"), "bar_low": err["low"], "bar_high": err["high"],
+            "bar_extrapolated": err.get("extrapolated"), "bar_order": err.get("order")}
+
+
 def _timed(args: list, timeout: float):
     """Run ``args``; (exit status or None if stopped after ``timeout`` s, its stderr, its
     resource usage — CPU time and peak resident memory of that process alone, os.wait4)."""
@@ -171,9 +198,10 @@ def _timed(args: list, timeout: float):
 
 
 def run_bench(out=None, fea: bool = True, only=None, sets: dict | None = None,
-              echo=print, timeout: float = TIMEOUT_S, corpus: Path | None = None) -> dict:
-    """Every part (module doc) of ``corpus`` (default: ``examples/parts/``); returns the data
-    written to ``parts.json``."""
+              echo=print, timeout: float = TIMEOUT_S, corpus: Path | None = None,
+              refine: bool = False) -> dict:
+    """Every part (module doc) of ``corpus`` (default: ``examples/parts/``), each with
+    ``--refine`` where ``refine``; returns the data written to ``parts.json``."""
     t0 = time.perf_counter()
     start = machine()
     out = out_dir(out)
@@ -181,12 +209,13 @@ def run_bench(out=None, fea: bool = True, only=None, sets: dict | None = None,
     with tempfile.TemporaryDirectory(prefix="rs-parts-") as tmp:
         for name in part_names(only, corpus):
             rows.append(case(name, Path(tmp), fea=fea, sets=sets, echo=echo, timeout=timeout,
-                             corpus=corpus))
+                             corpus=corpus, refine=refine))
     try:
         load_end = os.getloadavg()
     except OSError:  # pragma: no cover
         load_end = None
     data = {"machine": {**start, "load_avg_at_end": load_end}, "fea": bool(fea),
+            "refine": bool(refine),
             "sets": dict(sets or {}), "only": list(only or []), "timeout_s": timeout, "rows": rows,
             "settled": sum(1 for r in rows if r.get("settled")), "parts": len(rows)}
     data["files"] = [str(out / "parts.json"), str(out / "parts.md")]
@@ -229,7 +258,8 @@ def markdown(data) -> str:
         "# Real parts: the static path on parts nobody here drew",
         "",
         "Generated by `rackstress bench parts"
-        + ("" if data.get("fea") else " --no-fea") + (f" {sets}" if sets else "")
+        + ("" if data.get("fea") else " --no-fea") + (" --refine" if data.get("refine") else "")
+        + (f" {sets}" if sets else "")
         + (f" --timeout {data['timeout_s']:g}" if data.get("timeout_s") != TIMEOUT_S else "")
         + "` (workflow/rackstress/bench/parts.py); do not edit by hand. Each part of "
         "`examples/parts/` (its `SOURCE.md` says where it comes from and under which licence) "
@@ -291,11 +321,51 @@ def markdown(data) -> str:
                           and r.get("peak_kind") == "governing" else "")
                        + (f"; {r['fea_local_note']}" if r.get("fea_local_note") else ""))
         out.append("")
-    notes = [r for r in data["rows"] if r.get("reason") or r.get("fea_error")]
+    if data.get("refine"):
+        out += _refine_section(data)
+    notes = [r for r in data["rows"] if r.get("reason") or r.get("fea_error")
+             or r.get("refine_error")]
     if notes:
         out.append("Why:")
         out.append("")
         for r in notes:
-            out.append(f"* **{r['part']}**: {r.get('reason') or r.get('fea_error')}")
+            out.append(f"* **{r['part']}**: "
+                       + "; ".join(x for x in (r.get("reason"), r.get("fea_error"),
+                                               r.get("refine_error") and "--refine: "
+                                               + r["refine_error"]) if x))
         out.append("")
     return "\n".join(out)
+
+
+REFINE_HEADER = ["part", "spacing [mm]", "governing [MPa]", "refined [MPa]", "read by",
+                 "error bar [MPa]", "FE [MPa]", "governing / FE", "refined / FE",
+                 "bar covers FE"]
+
+
+def _refine_section(data) -> list:
+    """The refined governing stress and its error bar against the FE check's governing stress
+    (its local refinement's where it has one), a row per part with both."""
+    rows = []
+    for r in data["rows"]:
+        if r.get("refined_mpa") is None:
+            continue
+        fe = r.get("fea_local_mpa") or r.get("fea_governing_mpa")
+        ratio = (lambda v: fmt(v / fe, 4) if fe and v is not None else "—")  # noqa: E731
+        rows.append([
+            r["part"], f"{fmt(r.get('spacing'))} → {fmt(r['refined_spacing'])}",
+            fmt(r.get("peak_mpa")), fmt(r["refined_mpa"]), r.get("refined_read") or "—",
+            f"{fmt(r['bar_low'])} … {fmt(r['bar_high'])}",
+            (fmt(fe) + (" (local)" if r.get("fea_local_mpa") else "")) if fe else "—",
+            ratio(r.get("peak_mpa")), ratio(r["refined_mpa"]),
+            ("yes" if r["bar_low"] <= fe <= r["bar_high"] else "**no**") if fe else "—"])
+    if not rows:
+        return []
+    return ["## After `--refine`", "",
+            "Each part solved again at spacing/√2 (`rackstress run SCENE --refine`): its "
+            "governing stress at both spacings, how the refined one was read (the patch fit or "
+            "the notch reading), and the error bar `summary.json` gives "
+            "(`[\"stress\"][\"error\"]`: Richardson from the two values, never narrower than "
+            "the refined run's own band; docs/stress.md \"The error bar\"), against the FE "
+            "check's governing stress (refined locally where `rackstress fea` could: "
+            "*local*). The target: the refined governing stress within 5 % of "
+            "converged FEA.", "", md_table(REFINE_HEADER, rows), ""]
