@@ -379,22 +379,6 @@ def interior(faces: np.ndarray) -> np.ndarray:
     return ~np.any(faces != 0, axis=1)
 
 
-def surface_recover(o: np.ndarray, s: np.ndarray, spacing: float, points: np.ndarray,
-                    inner: np.ndarray, mask: np.ndarray | None = None,
-                    radius: float = PATCH_RADIUS) -> np.ndarray:
-    """The ``patch`` route: a linear fit of the *interior* particles' stresses (``inner``)
-    within ``radius`` spacings, evaluated at each particle's recovery point; where the interior
-    particles of a patch do not span three dimensions (a wall under about four particles
-    thick) the fit takes every particle's stress (the ``continuum`` values) instead."""
-    mask = np.ones(len(o), bool) if mask is None else np.asarray(mask, bool)
-    rec, ok = patch_recover(o, np.where(inner[:, None], s, np.nan), spacing, points,
-                            mask=mask, radius=radius, return_ok=True)
-    if (~ok & mask).any():
-        rec2 = patch_recover(o, s, spacing, points, mask=mask, radius=radius)
-        rec[~ok] = rec2[~ok]
-    return rec
-
-
 #: a surface cell is the lattice's own box (:func:`regular_cells`) where its extent across
 #: each free face is within this many spacings of a whole cell's
 REGULAR_EXTENT = 0.15
