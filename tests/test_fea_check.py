@@ -84,9 +84,10 @@ def test_patch_recovery_fits_its_data_and_falls_back_where_they_are_flat():
 
 def test_regular_cells_are_the_lattice_boxes():
     """A 4 × 4 × 4 block's cells are all regular (faces at half a spacing: φ = 1); a face
-    cell that overhangs by 0.7 spacing (φ = 1.2) is not, nor an edge cell that the face
-    crosses a third of a spacing short (φ = 0.8 across one of its faces); φ inside the part
-    is not read; without φ (a dynamic run) all are regular."""
+    cell that overhangs by 0.7 spacing (φ = 1.2) is not, nor an edge cell whose face falls
+    short by 0.2 spacing across one of its two free faces (φ = 0.8: a step's corner); a face
+    cell whose one face falls short (φ = 0.6: a flat face at another offset) is; φ inside
+    the part is not read; without φ (a dynamic run) all are regular."""
     o = _block(4, 4, 4)
     phi = np.ones((64, 3))
     assert T.regular_cells(o, 1.0, phi).all()
@@ -97,8 +98,10 @@ def test_regular_cells_are_the_lattice_boxes():
     phi[edge, 1] = 0.8
     phi[edge, 2] = 0.5                       # not a free axis of that edge cell: not read
     phi[inner] = 1.3
+    flat = int(np.flatnonzero((o[:, 0] == 1) & (o[:, 1] == 1) & (o[:, 2] == 3))[0])
+    phi[flat, 2] = 0.6
     got = T.regular_cells(o, 1.0, phi)
-    assert not got[face] and not got[edge] and got[inner]
+    assert not got[face] and not got[edge] and got[inner] and got[flat]
     assert got.sum() == 62
     assert T.regular_cells(o, 1.0).all()
 

@@ -386,15 +386,16 @@ REGULAR_EXTENT = 0.15
 
 def regular_cells(o: np.ndarray, spacing: float, phi: np.ndarray | None = None) -> np.ndarray:
     """Which particles' stresses sample the field where they sit (n bool): inside the part
-    (no free face), or on its surface with the lattice's own cell — across each free face
-    an extent ``phi`` (n × 3, spacings: ``bindings.npz``'s) within :data:`REGULAR_EXTENT` of
-    a whole cell's, the face half a spacing beyond the particle. The faces, edges and
-    corners of a box whose size the spacing divides are regular; the steps of a staircased
-    curved face, and a face the lattice meets at another offset, are not: their cells reach
-    past the particle by more, or less, than the bindings' reach, and their stresses read
-    off the field (on a round rod in tension up to +15 %, at LE10's hole 0.4 – 0.9 of FEA:
-    docs/stress.md "Patch recovery"). Off one cubic lattice (hcp packing), or without
-    ``phi`` (a dynamic run), every particle counts as regular.
+    (no free face); on its surface where the cell ends within the bindings' reach — across
+    each free face an extent ``phi`` (n × 3, spacings: ``bindings.npz``'s) within
+    :data:`REGULAR_EXTENT` of a whole cell's (the face half a spacing beyond the particle:
+    the faces, edges and corners of a box the spacing divides), or, on a flat face (one free
+    face), anything short of that (a face the lattice meets at another offset). Not the steps
+    of a staircased curved face: a cell that overhangs its particle by more than the
+    bindings reach, or a step's corner that a slanted face cuts, reads its stress off the
+    field (a round rod in tension up to +15 %, LE10's hole face 0.4 – 0.9 of FEA: docs/stress.md
+    "Patch recovery"). Off one cubic lattice (hcp packing), or without ``phi`` (a dynamic
+    run), every particle counts as regular.
 
     >>> g = np.array([[x, y, z] for x in range(3) for y in range(3) for z in range(3)], float)
     >>> phi = np.ones((27, 3)); phi[26, 0] = 1.4            # the corner cell overhangs in x
@@ -411,7 +412,9 @@ def regular_cells(o: np.ndarray, spacing: float, phi: np.ndarray | None = None) 
         return ok
     free = free_faces(o, a) != 0
     f = np.nan_to_num(np.asarray(phi, float), nan=1.0)
-    return np.all(~free | (np.abs(f - 1.0) < REGULAR_EXTENT), axis=1)
+    whole = np.all(~free | (np.abs(f - 1.0) < REGULAR_EXTENT), axis=1)
+    short = (free.sum(axis=1) == 1) & np.all(~free | (f < 1.0 + REGULAR_EXTENT), axis=1)
+    return whole | short
 
 
 def patch_matrix(o: np.ndarray, spacing: float, points: np.ndarray, labels=None,
