@@ -81,6 +81,13 @@ def test_parts_page_gives_the_refined_stress_against_the_fe_check():
                  "bar_low": 2.15, "bar_high": 2.6, "fea_governing_mpa": 2.1},
                 {"part": "c", "spacing": 1.0, "spacing_how": "given", "refine_error": "the refined run did not "
                  "settle"}]}
+    for r in data["rows"]:
+        r.update(parts.refine_comparison(r))
+    a = data["rows"][0]
+    assert a["fe_reference_mpa"] == 2.1 and a["fe_reference_local"]
+    assert a["governing_over_fe"] == pytest.approx(2.0 / 2.1)
+    assert a["refined_over_fe"] == pytest.approx(2.2 / 2.1) and a["bar_covers_fe"]
+    assert not data["rows"][1]["bar_covers_fe"] and "refined_over_fe" not in data["rows"][2]
     md = parts.markdown(data)
     assert "`rackstress bench parts --refine`" in md
     rows = [x for x in md.split("## After `--refine`")[1].splitlines() if x.startswith("| ")]

@@ -147,6 +147,8 @@ def case(name: str, work: Path, fea: bool = True, sets: dict | None = None, echo
         else:
             row["fea_error"] = short(_error_of(err))
         row["fea_s"] = time.perf_counter() - t0
+    if refine:
+        row.update(refine_comparison(row))
     echo(f"{name}: {row['particles']:,} particles at {fmt(row['spacing'])} "
          f"({row['spacing_how']}), {row['status']} in {row['iterations']} steps, residual "
          f"{fmt(row['residual'])}, solve {fmt(row['solve_s'])} s, peak {fmt(peak)} MPa"
@@ -172,6 +174,20 @@ def _refined(out: Path, stress: dict, r, short) -> dict:
             "refined_particles": (err.get("particles") or [None, None])[-1],
             "refined_read": fg.get("read"), "bar_low": err["low"], "bar_high": err["high"],
             "bar_extrapolated": err.get("extrapolated"), "bar_order": err.get("order")}
+
+
+def refine_comparison(row: dict) -> dict:
+    """The FE check's governing stress a row's ``--refine`` values are compared with (its local
+    refinement's where it has one), the governing and refined values over it and whether the
+    error bar covers it; empty where the row has no refined value or no FE value."""
+    fe = row.get("fea_local_mpa") or row.get("fea_governing_mpa")
+    if row.get("refined_mpa") is None or not fe:
+        return {}
+    gov = row.get("peak_mpa") if row.get("peak_kind") == "governing" else None
+    return {"fe_reference_mpa": fe, "fe_reference_local": bool(row.get("fea_local_mpa")),
+            "governing_over_fe": None if gov is None else gov / fe,
+            "refined_over_fe": row["refined_mpa"] / fe,
+            "bar_covers_fe": bool(row["bar_low"] <= fe <= row["bar_high"])}
 
 
 def _timed(args: list, timeout: float):
@@ -344,20 +360,18 @@ REFINE_HEADER = ["part", "spacing [mm]", "governing [MPa]", "refined [MPa]", "re
 
 def _refine_section(data) -> list:
     """The refined governing stress and its error bar against the FE check's governing stress
-    (its local refinement's where it has one), a row per part with both."""
+    (:func:`refine_comparison`), a row per part with both."""
     rows = []
     for r in data["rows"]:
-        if r.get("refined_mpa") is None:
+        if r.get("refined_over_fe") is None:
             continue
-        fe = r.get("fea_local_mpa") or r.get("fea_governing_mpa")
-        ratio = (lambda v: fmt(v / fe, 4) if fe and v is not None else "—")  # noqa: E731
         rows.append([
             r["part"], f"{fmt(r.get('spacing'))} → {fmt(r['refined_spacing'])}",
             fmt(r.get("peak_mpa")), fmt(r["refined_mpa"]), r.get("refined_read") or "—",
             f"{fmt(r['bar_low'])} … {fmt(r['bar_high'])}",
-            (fmt(fe) + (" (local)" if r.get("fea_local_mpa") else "")) if fe else "—",
-            ratio(r.get("peak_mpa")), ratio(r["refined_mpa"]),
-            ("yes" if r["bar_low"] <= fe <= r["bar_high"] else "**no**") if fe else "—"])
+            fmt(r["fe_reference_mpa"]) + (" (local)" if r["fe_reference_local"] else ""),
+            fmt(r.get("governing_over_fe"), 4), fmt(r["refined_over_fe"], 4),
+            "yes" if r["bar_covers_fe"] else "**no**"])
     if not rows:
         return []
     return ["## After `--refine`", "",
