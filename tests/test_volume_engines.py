@@ -153,3 +153,48 @@ def test_standalone_deck_in_plain_lmp(tmp_path):
     shutil.copytree(tmp_path / "deck1", tmp_path / "deck2")
     _same_to_dump_precision(_lmp(tmp_path / "deck1", 1), ref)
     _same_to_dump_precision(_lmp(tmp_path / "deck2", 2), ref)
+
+
+#: a free 4 × 4 × 4 mm aluminium block of the material's ν, every cell whole (the spacing
+#: divides it) and none held, thrown at 100 mm/s
+FREE_BLOCK = """
+name = "thrown"
+units = "mm-N-s"
+analysis = "dynamic"
+dt = 1e-7
+steps = 50
+
+[[group]]
+name = "b"
+fill = { box = { min = [0, 0, 0], max = [4, 4, 4] } }
+spacing = 1
+material = { E = 70e9, nu = 0.3, density = 2700 }
+poisson = "material"
+velocity = [100.0, 0.0, 0.0]
+"""
+
+
+@pytest.mark.parametrize("engine", ["lammps", "reference"])
+def test_a_free_block_whose_cells_are_all_whole_runs(engine, tmp_path):
+    """Nothing for ``volume.atoms`` to list (no boundary cell that is not whole, no support):
+    the plugin's deck sets every cell whole and reads no atomfile (LAMMPS refuses a set of
+    none: the run stopped at step 0, "Atomfile variable rs_phi could not read values"). The
+    block, at rest length and unloaded, translates: every particle moves by v·t = 100 mm/s ×
+    50 × 1e-7 s = 5e-4 mm along x (hand calculation), on LAMMPS as on the reference engine."""
+    from test_faults import QUIET, rs
+
+    (tmp_path / "b.toml").write_text(FREE_BLOCK)
+    out = tmp_path / engine
+    r = rs("run", tmp_path / "b.toml", "--engine", engine, "--out", out, *QUIET)
+    assert r.returncode == 0, r.stderr
+    if engine == "lammps":
+        assert " rs/volume " in (out / "in.lammps").read_text()
+        assert "atomfile" not in (out / "in.lammps").read_text()
+        assert not (out / "volume.atoms").exists()
+    frames = _frames(trajectory(out))
+    (_, i0, p0), (step, i1, p1) = frames[0], frames[-1]
+    assert step == 50 and len(i0) == 64
+    d = p1[np.argsort(i1)] - p0[np.argsort(i0)]
+    # to the dump's precision (%.10g of coordinates below 4 mm: 1e-9 mm each)
+    assert d[:, 0] == pytest.approx(np.full(64, 5e-4), abs=2e-9)
+    assert np.abs(d[:, 1:]).max() <= 2e-9

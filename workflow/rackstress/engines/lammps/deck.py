@@ -338,15 +338,10 @@ class Deck:
         """The realized volumetric terms of a plugin deck (``rs/volume``)."""
         return [r for r in self.realized if r.plugin == "rs/volume"]
 
-    def volume_atoms_text(self) -> str | None:
-        """``volume.atoms``: for ``rs/volume``, each boundary or held particle's cell extents φ
-        (in spacings, along x, y, z; docs/calibration.md "Walls of any thickness") and the
-        directions a support holds it in (0 or 1), six sets of LAMMPS' atomfile variable
-        (``ID value``) after a set of ones naming them; every other particle has a whole cell
-        (φ = 1) and is free. None when
-        the deck has no such term."""
-        if not self.volumes:
-            return None
+    def _volume_cells(self) -> tuple:
+        """(atom ids, columns φx φy φz held_x held_y held_z) of the volumetric terms' boundary
+        and held particles (:meth:`volume_atoms_text`); none where every cell is whole and
+        free (a part the spacing divides, unsupported)."""
         ids, cols = [], []
         for r in self.volumes:
             g, solid = self.scene.groups[r.target], r.op.solid
@@ -356,8 +351,20 @@ class Deck:
             k = np.flatnonzero(np.any(phi != 1.0, axis=1) | held.any(axis=1))
             ids.append(k + self.scene.offset(r.target) + 1)
             cols.append(np.column_stack([phi[k], held[k].astype(float)]))
-        ids = np.concatenate(ids)
-        cols = np.concatenate(cols)
+        return np.concatenate(ids), np.concatenate(cols)
+
+    def volume_atoms_text(self) -> str | None:
+        """``volume.atoms``: for ``rs/volume``, each boundary or held particle's cell extents φ
+        (in spacings, along x, y, z; docs/calibration.md "Walls of any thickness") and the
+        directions a support holds it in (0 or 1), six sets of LAMMPS' atomfile variable
+        (``ID value``) after a set of ones naming them; every other particle has a whole cell
+        (φ = 1) and is free. None when the deck has no such term, or no such particle (LAMMPS
+        refuses an atomfile set of none: "could not read values")."""
+        if not self.volumes:
+            return None
+        ids, cols = self._volume_cells()
+        if not len(ids):
+            return None
         out = ["# rackstress: for fix rs/volume, a set of 1 (which particles follow), then each "
                "boundary or held particle's cell extents (x, y, z) and held directions (x, y, z)"]
         cols = np.column_stack([np.ones(len(ids)), cols])
@@ -370,12 +377,14 @@ class Deck:
         """After read_data: every particle of a volumetric term's part gets a whole cell
         (φ = 1) and no held direction, the boundary and held ones theirs from
         ``volume.atoms`` beside the data file (:meth:`volume_atoms_text`, an atomfile
-        variable: one set per column)."""
+        variable: one set per column), where there are any."""
         if not self.volumes:
             return []
         path = volume_file or str(Path(data_file).with_name(VOLUME_ATOMS))
         L = [f"set group {r.target} d2_rsphi[{k}] {1.0 if k <= 3 else 0.0}"
              for r in self.volumes for k in range(1, 7)]
+        if not len(self._volume_cells()[0]):
+            return L
         L += [f"variable rs_phi atomfile {path}", "group rs_vphi variable rs_phi"]
         for k in range(1, 7):
             L += ["next rs_phi", f"set group rs_vphi d2_rsphi[{k}] v_rs_phi"]
