@@ -5,7 +5,9 @@ For the C frame, its filleted twin and the bracket at spacings h and h/√2 (the
 at h/2 too): the particles' ``continuum`` stresses (the bindings' virial per cell with the
 free faces' moment restored) recovered by a least-squares polynomial over a patch of
 particles (:func:`rackstress.stress.tensor.patch_recover`) — linear or quadratic, over 1.5 to
-3 spacings, of every particle or of the interior ones only — and read at the cell's surface
+3 spacings, of every particle, of the interior ones only, or (the last, the default route's)
+of the regular cells and the supported ones (:func:`rackstress.stress.tensor.regular_cells`)
+— and read at the cell's surface
 point (:func:`rackstress.stress.tensor.recovery_points`, the default route's) or at the
 nearest point of the part's true surface (``singular.npz``'s); the governing stress of each
 (the bench's zone and singular points) over FEA's (P2, graded, the finest run's supports and
@@ -27,10 +29,12 @@ from pathlib import Path
 
 import numpy as np
 
-#: (degree, radius in spacings, interior particles only)
+#: (degree, radius in spacings, which particles: every one (False), the interior ones only
+#: (True) or the regular cells and the supported ones ("regular": the default route's))
 CANDIDATES = [(1, 2.5, False), (1, 1.5, False), (1, 2.0, False), (1, 3.0, False),
               (1, 1.5, True), (1, 2.0, True), (1, 2.5, True),
-              (2, 2.0, False), (2, 2.5, False), (2, 3.0, False), (2, 2.5, True), (2, 3.0, True)]
+              (2, 2.0, False), (2, 2.5, False), (2, 3.0, False), (2, 2.5, True), (2, 3.0, True),
+              (1, 2.5, "regular")]
 PARTS = {"cframe": (1.0, 1 / math.sqrt(2)), "cframe-filleted": (1.0, 1 / math.sqrt(2), 0.5),
          "bracket": (1.0, 1 / math.sqrt(2))}
 
@@ -41,10 +45,11 @@ def _vm(s):
                    + 3 * (xy ** 2 + yz ** 2 + xz ** 2))
 
 
-def _recover(T, o, s, h, pts, inner, deg, R, only_inner):
-    if not only_inner:
+def _recover(T, o, s, h, pts, samples, deg, R, which):
+    if which is False:
         return T.patch_recover(o, s, h, pts, degree=deg, radius=R)
-    rec, ok = T.patch_recover(o, np.where(inner[:, None], s, np.nan), h, pts, degree=deg,
+    use = samples[which]
+    rec, ok = T.patch_recover(o, np.where(use[:, None], s, np.nan), h, pts, degree=deg,
                               radius=R, return_ok=True)
     if (~ok).any():
         rec[~ok] = T.patch_recover(o, s, h, pts, degree=deg, radius=R)[~ok]
@@ -58,8 +63,8 @@ def part(name, scene, spacing, h_far, h_near, scales, work: Path) -> dict:
     from rackstress.lib.runfiles import SINGULAR
     from rackstress.stress import tensor as T
     from rackstress.stress.governing import read_singular, zone
-    from rackstress.stress.measures import ParticleStress
-    from rackstress.stress.rundata import load_run
+    from rackstress.stress.measures import ParticleStress, read_fractions
+    from rackstress.stress.rundata import boundary_rows, load_run
     from rackstress.validity.graded import governing_fe, reference
 
     runs = [_level(scene, spacing, f, work / f"{name}-{k}") for k, f in enumerate(scales)]
@@ -84,7 +89,10 @@ def part(name, scene, spacing, h_far, h_near, scales, work: Path) -> dict:
                                  process=False)
         s = ParticleStress(rd, method="continuum").run().results.stress[-1][idx]
         faces = T.free_faces(o, h)
-        inner = T.interior(faces)
+        phi = read_fractions(rd)
+        samples = {True: T.interior(faces),
+                   "regular": T.regular_cells(o, h, None if phi is None else phi[idx])
+                   | boundary_rows(rd)[0][idx].any(axis=1)}
         cell = T.recovery_points(o, h, faces)
         surf = cell.copy()
         onb = np.any(faces != 0, axis=1)
@@ -94,7 +102,7 @@ def part(name, scene, spacing, h_far, h_near, scales, work: Path) -> dict:
             d, _ = sing.distance(pts)
             away = d >= z
             for deg, R, only_inner in CANDIDATES:
-                v = _vm(_recover(T, o, s, h, pts, inner, deg, R, only_inner))
+                v = _vm(_recover(T, o, s, h, pts, samples, deg, R, only_inner))
                 j = int(np.flatnonzero(away)[np.argmax(v[away])])
                 fe_j = float(sol.at(pts[j:j + 1])["von_mises"][0])
                 row["candidates"].append({
