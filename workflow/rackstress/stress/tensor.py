@@ -405,10 +405,7 @@ def regular_cells(o: np.ndarray, spacing: float, phi: np.ndarray | None = None) 
     o = np.asarray(o, float)
     n, a = len(o), float(spacing)
     ok = np.ones(n, bool)
-    if n < 2 or phi is None:
-        return ok
-    lo = o.min(axis=0)
-    if np.abs(np.rint((o - lo) / a) * a + lo - o).max() > 1e-6 * a:
+    if n < 2 or phi is None or not on_cubic_lattice(o, a):
         return ok
     free = free_faces(o, a) != 0
     f = np.nan_to_num(np.asarray(phi, float), nan=1.0)
@@ -482,8 +479,13 @@ def part_recovery_points(o: np.ndarray, spacing: float | None = None) -> np.ndar
         from scipy.spatial import cKDTree
 
         spacing = float(np.median(cKDTree(o).query(o, k=2)[0][:, 1]))
-    lo = o.min(axis=0)
-    g = np.rint((o - lo) / spacing)
-    if np.abs(g * spacing + lo - o).max() > 1e-6 * spacing:
+    if not on_cubic_lattice(o, spacing):
         return o.copy()
     return recovery_points(o, spacing)
+
+
+def on_cubic_lattice(o: np.ndarray, spacing: float) -> bool:
+    """Whether the particles ``o`` sit on one cubic lattice of ``spacing`` (to 1e-6 of it),
+    as a part's fill puts them; not an hcp packing."""
+    lo = o.min(axis=0)
+    return bool(np.abs(np.rint((o - lo) / spacing) * spacing + lo - o).max() <= 1e-6 * spacing)
