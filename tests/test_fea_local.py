@@ -80,3 +80,44 @@ def test_a_refinement_that_does_not_end_is_stopped_and_said(tmp_path):
     with pytest.raises(RuntimeError, match="had not meshed the ball after"):
         solid.local_peak(v, f, sol, [L / 2, R_HOLE, T / 2], sing, E, NU, timeout=0.01)
     assert not multiprocessing.active_children()
+
+
+def _uniform_tension_bar(size: float):
+    """A 20 × 12 × 12 mm bar (its corner at the origin) meshed by the FE check at ``size``, and
+    the exact uniform tension field S along x on it: u = S/E (x, −ν y, −ν z)."""
+    from rackstress.lib.tet import Solution, Tet2, project_strain
+
+    box = trimesh.creation.box([20.0, 12.0, 12.0])
+    box.apply_translation([10.0, 6.0, 6.0])
+    p, t = solid.surface_mesh(np.asarray(box.vertices), np.asarray(box.faces), size, None, None)
+    mesh = Tet2(p.T, t.T)
+
+    def field(X):
+        X = np.asarray(X, float)
+        return S / E * np.stack([X[:, 0], -NU * X[:, 1], -NU * X[:, 2]], axis=1)
+
+    U = field(mesh.X)
+    return box, Solution(mesh, U, project_strain(mesh, U), E, NU), field
+
+
+def test_a_support_inside_the_refined_ball_stays_a_support():
+    """The local refinement's ball about a point 1 mm from the bar's supported end x = 0
+    (a roller there; the bar pulled at S along x) reaches that end face. The face is held,
+    not free: where the held particles' cells (spacing 1 mm, the first layer at x = ½) cover
+    the ball's nodes, they are displaced by the global field, as its cut is, and the exact
+    uniform field (which P2 elements hold exactly) reads S. Taken as free surface, as before,
+    the face carries no σ_xx, the stress beside it falls, and the ball walks away from the
+    support (its two meshes then read 16 % apart, measured while building this)."""
+    box, sol, field = _uniform_tension_bar(1.5)
+    v, f = np.asarray(box.vertices), np.asarray(box.faces)
+    sing = solid.Singular(points=np.array([[20.0, 6.0, 6.0]]), zone=2.0, rule="",
+                          spacing=1.0)
+    g = np.arange(0.5, 12.0, 1.0)
+    held = np.array([[0.5, y, z] for y in g for z in g])
+    centre = [1.0, 0.0, 6.0]                     # on the side face y = 0
+    lp = solid.local_peak(v, f, sol, centre, sing, E, NU, bears=(held, 1.0))
+    assert lp["radius"] > 1.5                    # the ball reaches the end face
+    assert lp["value"] == pytest.approx(S, rel=1e-6)
+    assert lp["coarser_value"] == pytest.approx(S, rel=1e-6)
+    free = solid.local_peak(v, f, sol, centre, sing, E, NU)
+    assert abs(free["coarser_value"] / S - 1) > 0.05

@@ -106,3 +106,29 @@ def touching_pairs(a: np.ndarray, b: np.ndarray, ra: np.ndarray, rb: np.ndarray,
     R2 = (ra[i] + rb[j]) ** 2
     keep = d * d <= R2 * (1.0 + slack) ** 2
     return i[keep], j[keep], R2[keep]
+
+
+def in_cells(p: np.ndarray, x: np.ndarray, spacing: float, slack: float = 1e-6) -> tuple:
+    """The pairs of a point of ``p`` and a particle of ``x`` whose closed cell (the cube of side
+    ``spacing`` about it, × (1 + ``slack``)) holds it: (i into ``p``, j into ``x``). Which
+    nodes of a finite-element mesh a held or loaded particle's cell covers (the FE check's
+    supports, a submodel's engaged surface).
+
+    >>> in_cells(np.array([[0.4, 0, 0], [0.6, 0, 0], [2.0, 0, 0]]),
+    ...          np.array([[0.0, 0, 0], [1.0, 0, 0]]), 1.0)
+    (array([0, 1]), array([0, 1]))
+    """
+    p, x = np.asarray(p, dtype=np.float64), np.asarray(x, dtype=np.float64)
+    if not len(p) or not len(x) or not spacing > 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    h = 0.5 * float(spacing) * (1.0 + slack)
+    found_i, found_j = [], []
+    for i, j in _candidates(p, x, 2.0 * h, half=False):
+        inside = np.all(np.abs(p[i] - x[j]) <= h, axis=1)
+        found_i.append(i[inside])
+        found_j.append(j[inside])
+    if not found_i:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    i, j = np.concatenate(found_i).astype(np.int64), np.concatenate(found_j).astype(np.int64)
+    order = np.lexsort((j, i))
+    return i[order], j[order]

@@ -688,6 +688,9 @@ def notch_peak(run, name: str, spacing: float, singular: Singular, zone_: float,
     if "contact_pressure" in st.results:
         engaged |= np.nan_to_num(np.asarray(st.results.contact_pressure[0])) > 0.0
     engaged = engaged[part.index]
+    # ... and a submodel's ball holds, as its cut, every particle something bears on: a roller
+    # or a symmetry plane too (its face is no free surface either)
+    bears = o[engaged | held.any(axis=1)[part.index]]
     reach = np.full(len(pts), np.inf)
     if engaged.any():
         d, _ = cKDTree(o[engaged]).query(pts)
@@ -706,7 +709,7 @@ def notch_peak(run, name: str, spacing: float, singular: Singular, zone_: float,
     if inner.any():
         start = int(np.flatnonzero(inner)[int(np.argmax(smooth[inner]))])
         sk, value, why = _notch_submodel(run, part, o, surf, pts, rho, start, a, int(frame),
-                                         inner, st.volume, reach)
+                                         inner, st.volume, reach, bears)
         k = k if value is None else sk
     else:
         value, why = None, (f"every point of the face lies within {notch.SUBMODEL_CLEAR:g} "
@@ -728,14 +731,15 @@ NOTCH_SUBMODEL_TIMEOUT_S = 60.0
 
 
 def _notch_submodel(run, part, o, surf, pts, rho, k: int, a: float, frame: int,
-                    allowed: np.ndarray, volume, reach=None):
+                    allowed: np.ndarray, volume, reach=None, bears=None):
     """:func:`_notch_submodel_here` in a forked child process, stopped after
     :data:`NOTCH_SUBMODEL_TIMEOUT_S` (the fit's reading then stands, and the note says why)."""
     from rackstress.lib import forked
 
     try:
         return forked.call(lambda: _notch_submodel_here(run, part, o, surf, pts, rho, k, a,
-                                                        frame, allowed, volume, reach),
+                                                        frame, allowed, volume, reach,
+                                                        bears),
                            NOTCH_SUBMODEL_TIMEOUT_S)
     except forked.Timeout:
         return k, None, (f"gmsh had not meshed the submodel's ball after "
@@ -744,7 +748,7 @@ def _notch_submodel(run, part, o, surf, pts, rho, k: int, a: float, frame: int,
 
 
 def _notch_submodel_here(run, part, o, surf, pts, rho, k: int, a: float, frame: int,
-                         allowed: np.ndarray, volume, reach=None):
+                         allowed: np.ndarray, volume, reach=None, bears=None):
     """The face's peak about face point ``k`` by the submodel (:func:`rackstress.stress.notch.
     submodel`: the part's true shape in a ball about the face point, its cut displaced as the
     particles are), read at the ball's centre, the farthest from its cut (where the
@@ -753,7 +757,8 @@ def _notch_submodel_here(run, part, o, surf, pts, rho, k: int, a: float, frame: 
     :data:`NOTCH_BALLS` balls), among the ``allowed`` face points (those clear of the part's
     sharp outer edges, :func:`rackstress.stress.notch.clear_of_edges`), with the run's
     volumetric terms ``volume`` (or None); ``reach`` the face points' distances to the nearest
-    particle something bears on (:func:`rackstress.stress.notch.submodel_radius`); the last
+    particle something bears on (:func:`rackstress.stress.notch.submodel_radius`), ``bears``
+    those particles' positions (held by the submodel where its ball reaches them); the last
     ball's reading checked by a smaller ball (:func:`rackstress.stress.notch.cut_check`). Returns
     (face point, value, None), or (k, None,
     why) where no submodel can be made (gmsh or manifold3d not installed: the ``fem`` extra;
@@ -767,13 +772,14 @@ def _notch_submodel_here(run, part, o, surf, pts, rho, k: int, a: float, frame: 
     u = positions(run.trajectory[frame])[part.index] - o
     nu = _lattice_nu(volume, part, mat)
     reach = np.full(len(pts), np.inf) if reach is None else np.asarray(reach, float)
+    held = None if bears is None else (np.asarray(bears, float), a)
     seen, at, value = [], k, None
     for _ in range(NOTCH_BALLS):
         seen.append(k)
         R = notch.submodel_radius(a, float(rho[k]), float(reach[k]))
         try:
             sol = notch.submodel(surf[0], surf[1], pts[k], o, u, a, float(rho[k]),
-                                 float(mat["E"]), nu, radius=R)
+                                 float(mat["E"]), nu, radius=R, bears=held)
         except ImportError as exc:
             return k, None, (f"{exc.name or exc} is not installed: the notch submodel needs "
                              "the fem extra (pip install 'rackstress[fem]')")
@@ -791,7 +797,7 @@ def _notch_submodel_here(run, part, o, surf, pts, rho, k: int, a: float, frame: 
     # the classical submodel's own check: its reading may not depend on where its cut lies
     try:
         other, R2, agree = notch.cut_check(surf[0], surf[1], pts[at], o, u, a, float(rho[at]),
-                                           float(mat["E"]), nu, R_at, value)
+                                           float(mat["E"]), nu, R_at, value, bears=held)
     except Exception as exc:  # noqa: BLE001 - gmsh's own words: the reading stands, unchecked
         return at, value, f"its check ball could not be made ({exc}): unchecked"
     if not agree:

@@ -919,18 +919,12 @@ def nodal_forces(p: np.ndarray, t: np.ndarray, x: np.ndarray, F: np.ndarray,
 
 def fixed_nodes(p: np.ndarray, x: np.ndarray, mask: np.ndarray, spacing: float) -> np.ndarray:
     """N×3 bool: a vertex inside the closed cell of a held particle gets its fixed directions."""
-    from scipy.spatial import cKDTree
+    from rackstress.lib.cells import in_cells
 
     P = p.T
     out = np.zeros((len(P), 3), dtype=bool)
-    if not len(x):
-        return out
-    h = 0.5 * spacing * (1 + 1e-6)
-    tree = cKDTree(np.asarray(x, float))
-    for k, cand in enumerate(tree.query_ball_point(P, h * math.sqrt(3))):
-        for c in cand:
-            if np.all(np.abs(P[k] - x[c]) <= h):
-                out[k] |= mask[c]
+    i, j = in_cells(P, x, spacing)
+    np.logical_or.at(out, i, np.asarray(mask, bool)[j])
     return out
 
 
@@ -1177,7 +1171,7 @@ LOCAL_TIMEOUT_S = 20.0
 
 
 def local_peak(vertices, faces, sol, centre, singular: Singular, E: float, nu: float,
-               echo=None, timeout: float = LOCAL_TIMEOUT_S) -> dict:
+               echo=None, timeout: float = LOCAL_TIMEOUT_S, bears=None) -> dict:
     """:func:`_local_peak` in a forked child process (:func:`rackstress.lib.forked.call`),
     stopped after ``timeout`` seconds (RuntimeError saying so)."""
     from rackstress.lib import forked
@@ -1185,8 +1179,8 @@ def local_peak(vertices, faces, sol, centre, singular: Singular, E: float, nu: f
     if echo:
         echo(f"fea: refining locally at {[round(float(x), 3) for x in centre]} …")
     try:
-        return forked.call(lambda: _local_peak(vertices, faces, sol, centre, singular, E, nu),
-                           timeout)
+        return forked.call(lambda: _local_peak(vertices, faces, sol, centre, singular, E, nu,
+                                               bears), timeout)
     except forked.Timeout:
         raise RuntimeError(f"gmsh had not meshed the ball after {timeout:.0f} s (its surface "
                            "classification does not end on some pieces of a file's facets): "
@@ -1194,12 +1188,14 @@ def local_peak(vertices, faces, sol, centre, singular: Singular, E: float, nu: f
 
 
 def _local_peak(vertices, faces, sol, centre, singular: Singular, E: float,
-                nu: float) -> dict:
+                nu: float, bears=None) -> dict:
     """The FE's governing stress refined locally (:data:`LOCAL_ELEMENTS`): the classical
     submodel about the FE's governing point ``centre``, its cut displaced by the FE solution
     ``sol``, read on the part's surface (:func:`_local_reading`), moved to the largest within
     a third of the ball's radius (at most :data:`LOCAL_BALLS` balls), then solved again twice
-    as fine there (:data:`LOCAL_FINE`): how far it moved.
+    as fine there (:data:`LOCAL_FINE`): how far it moved. ``bears`` = (x k×3, spacing): the
+    particles held or loaded; the ball's nodes in their cells are displaced by ``sol`` as
+    its cut is (a support's face inside the ball is not free surface).
 
     Returns ``value``, ``position``, ``radius`` of the ball, ``fine`` (the finer mesh size),
     ``coarser_value`` and ``moved``. Raises ImportError without gmsh or manifold3d (the
@@ -1217,7 +1213,7 @@ def _local_peak(vertices, faces, sol, centre, singular: Singular, E: float,
         for k in LOCAL_RADII:      # the ball's sphere can cut the facets into overlapping ones
             try:
                 return submodel(vertices, faces, at, None, None, R, R, E, nu, radius=k * R,
-                                displace=displace, fine=fine * R)
+                                displace=displace, fine=fine * R, bears=bears)
             except ImportError:
                 raise
             except RuntimeError as exc:
@@ -1783,7 +1779,8 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
         pd = shape.polydata
         try:
             gov["local"] = local_peak(np.asarray(pd.points), np.asarray(pd.regular_faces), sol,
-                                      gov["position"], singular, E_, nu_, echo=echo)
+                                      gov["position"], singular, E_, nu_, echo=echo,
+                                      bears=(np.concatenate([held_x, load_x]), spacing))
         except ImportError as exc:
             gov["local_note"] = (f"{exc.name or exc} is not installed: the local refinement "
                                  "needs the fem extra")
