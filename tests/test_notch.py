@@ -242,3 +242,24 @@ def test_the_cuts_displacement_holds_a_linear_field_on_the_lattices_face():
     x = np.array([[1.0, 0.0, 6.0], [6.0, 0.0, 6.0], [5.5, 0.0, 3.25], [0.0, 0.0, 0.0]])
     got = N.boundary_displacement(o, o @ A.T, x, 1.0)
     assert np.abs(got - x @ A.T).max() < 1e-12 * np.abs(x @ A.T).max()
+
+
+@pytest.mark.parametrize("radius", [3.2, 4.0])
+def test_a_ball_across_a_thin_wall_keeps_the_walls_edges(radius):
+    """A 6 mm bar of particles in uniform tension S; the submodel's ball about a point of its
+    side, radius 3.2 or 4 mm, would meet its faces 3 mm away at 20° or 41° (acos(3/R)), where
+    gmsh makes the sphere and the face one patch and rounds their edge off. A radius whose
+    sphere meets them at SEAM_DEG or more is taken, and the exact field reads S at the
+    centre, by hand (the rounded piece read 9.56 and 10.41)."""
+    import trimesh
+
+    E, nu, S, a = 70000.0, 0.3, 10.0, 1.0
+    box = trimesh.creation.box([20.0, 6.0, 6.0])
+    box.apply_translation([10.0, 3.0, 3.0])
+    g = np.arange(0.5, 20.0, a)
+    o = np.array([[x, y, z] for x in g for y in g[:6] for z in g[:6]])
+    u = S / E * o * np.array([1.0, -nu, -nu])
+    centre = np.array([10.0, 0.0, 3.0])
+    sol = N.submodel(box.vertices, box.faces, centre, o, u, a, 10.0, E, nu, radius=radius)
+    assert sol.info["seam_deg"] >= N.SEAM_DEG
+    assert float(sol.at(centre[None])["von_mises"][0]) == pytest.approx(S, rel=1e-6)
