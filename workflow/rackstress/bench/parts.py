@@ -162,6 +162,8 @@ def _refined(out: Path, stress: dict, r, short) -> dict:
     there is none."""
     import json
 
+    from rackstress.stress.governing import read_label
+
     err = stress.get("error")
     if not err:
         why = _error_of(r.stderr) if r.returncode else "no error bar in summary.json"
@@ -172,7 +174,8 @@ def _refined(out: Path, stress: dict, r, short) -> dict:
         fg = (json.loads(fine.read_text()).get("stress") or {}).get("governing") or {}
     return {"refined_mpa": err["values"][-1], "refined_spacing": err["spacings"][-1],
             "refined_particles": (err.get("particles") or [None, None])[-1],
-            "refined_read": fg.get("read"), "bar_low": err["low"], "bar_high": err["high"],
+            "refined_read": read_label(fg.get("read"), (fg.get("notch") or {}).get("by"))
+            if fg.get("read") else None, "bar_low": err["low"], "bar_high": err["high"],
             "bar_extrapolated": err.get("extrapolated"), "bar_order": err.get("order")}
 
 
