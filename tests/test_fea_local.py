@@ -104,7 +104,8 @@ def test_a_support_inside_the_refined_ball_stays_a_support():
     """The local refinement's ball about a point 1 mm from the bar's supported end x = 0
     (a roller there; the bar pulled at S along x) reaches that end face. The face is held,
     not free: where the held particles' cells (spacing 1 mm, the first layer at x = ½) cover
-    the ball's nodes, they are displaced by the global field, as its cut is, and the exact
+    the ball's nodes, they are displaced along x (the roller's direction) by the global
+    field, as its cut is, and the exact
     uniform field (which P2 elements hold exactly) reads S. Taken as free surface, as before,
     the face carries no σ_xx, the stress beside it falls, and the ball walks away from the
     support (its two meshes then read 16 % apart, measured while building this)."""
@@ -115,7 +116,8 @@ def test_a_support_inside_the_refined_ball_stays_a_support():
     g = np.arange(0.5, 12.0, 1.0)
     held = np.array([[0.5, y, z] for y in g for z in g])
     centre = [1.0, 0.0, 6.0]                     # on the side face y = 0
-    lp = solid.local_peak(v, f, sol, centre, sing, E, NU, bears=(held, 1.0))
+    roller = np.tile([True, False, False], (len(held), 1))       # held along x only
+    lp = solid.local_peak(v, f, sol, centre, sing, E, NU, bears=(held, roller, 1.0))
     assert lp["radius"] > 1.5                    # the ball reaches the end face
     assert lp["value"] == pytest.approx(S, rel=1e-6)
     assert lp["coarser_value"] == pytest.approx(S, rel=1e-6)

@@ -688,9 +688,14 @@ def notch_peak(run, name: str, spacing: float, singular: Singular, zone_: float,
     if "contact_pressure" in st.results:
         engaged |= np.nan_to_num(np.asarray(st.results.contact_pressure[0])) > 0.0
     engaged = engaged[part.index]
-    # ... and a submodel's ball holds, as its cut, every particle something bears on: a roller
-    # or a symmetry plane too (its face is no free surface either)
-    bears = o[engaged | held.any(axis=1)[part.index]]
+    # ... and a submodel's ball holds, as its cut, every particle something bears on, in the
+    # directions it is held: a roller or a symmetry plane too (its face is no free surface
+    # either); not a direction held on every particle of the part (a membrane kept in its
+    # plane: a constraint of the model, not a face's support)
+    hp = held[part.index] & ~held[part.index].all(axis=0)
+    ways = hp | engaged[:, None]
+    on = ways.any(axis=1)
+    bears = (o[on], ways[on])
     reach = np.full(len(pts), np.inf)
     if engaged.any():
         d, _ = cKDTree(o[engaged]).query(pts)
@@ -758,7 +763,8 @@ def _notch_submodel_here(run, part, o, surf, pts, rho, k: int, a: float, frame: 
     sharp outer edges, :func:`rackstress.stress.notch.clear_of_edges`), with the run's
     volumetric terms ``volume`` (or None); ``reach`` the face points' distances to the nearest
     particle something bears on (:func:`rackstress.stress.notch.submodel_radius`), ``bears``
-    those particles' positions (held by the submodel where its ball reaches them); the last
+    (positions, directions) the particles held, loaded or pressed (held by the submodel in
+    those directions where its ball reaches them); the last
     ball's reading checked by a smaller ball (:func:`rackstress.stress.notch.cut_check`). Returns
     (face point, value, None), or (k, None,
     why) where no submodel can be made (gmsh or manifold3d not installed: the ``fem`` extra;
@@ -772,7 +778,7 @@ def _notch_submodel_here(run, part, o, surf, pts, rho, k: int, a: float, frame: 
     u = positions(run.trajectory[frame])[part.index] - o
     nu = _lattice_nu(volume, part, mat)
     reach = np.full(len(pts), np.inf) if reach is None else np.asarray(reach, float)
-    held = None if bears is None else (np.asarray(bears, float), a)
+    held = None if bears is None else (np.asarray(bears[0], float), bears[1], a)
     seen, at, value = [], k, None
     for _ in range(NOTCH_BALLS):
         seen.append(k)

@@ -344,9 +344,10 @@ def submodel(vertices, faces_, centre, o, u, spacing: float, rho: float, E: floa
     (:func:`ball_piece`), P2 tetrahedra by gmsh graded toward the face point, its cut (the
     ball's sphere) displaced as the particles are (:func:`boundary_displacement` of their
     displacements ``u`` at ``o``), the part's own surface inside the ball free — except
-    where something bears on it: ``bears`` = (x k×3, side), the particles a support holds, a
-    load pulls or a contact presses, and their cells' side; the nodes inside those cells are
-    displaced as the cut is (every boundary of the global–local submodel that is not free
+    where something bears on it: ``bears`` = (x k×3, directions k×3 bool, side), the
+    particles a support holds (in the directions it holds), a load pulls or a contact presses
+    (all three), and their cells' side; the nodes inside those cells are displaced in those
+    directions as the cut is (every boundary of the global–local submodel that is not free
     surface; before, a clamped hole's face inside the ball was free, and the FE check's local
     reading of the SO-101 mounting plate beside its screw hole fell from 0.70 to 0.44 MPa,
     where with it held it reads 0.72) — solved with
@@ -397,15 +398,19 @@ def submodel(vertices, faces_, centre, o, u, spacing: float, rho: float, E: floa
     on_bnd[np.unique(faces4[once])] = True
     cut = on_bnd & (np.linalg.norm(X - centre, axis=1) >= (1 - 5e-3) * R)
     cut[nv:] = cut[mesh.edges[:, 0]] & cut[mesh.edges[:, 1]]
+    fixed = np.repeat(cut[:, None], 3, axis=1)
     if bears is not None and len(bears[0]):
         from rackstress.lib.cells import in_cells
 
-        cut[in_cells(X, bears[0], bears[1])[0]] = True
+        i, j = in_cells(X, bears[0], bears[2])
+        np.logical_or.at(fixed, i, np.asarray(bears[1], bool)[j])
+    given = fixed.any(axis=1)
     U = np.zeros((len(X), 3))
-    U[cut] = (displace(X[cut]) if displace is not None else
-              boundary_displacement(np.asarray(o, float), np.asarray(u, float), X[cut], a))
+    U[given] = (displace(X[given]) if displace is not None else
+                boundary_displacement(np.asarray(o, float), np.asarray(u, float), X[given], a))
+    U[~fixed] = 0.0
     K = mesh.stiffness(E, nu).tocsr()
-    fx = np.repeat(cut, 3)
+    fx = fixed.ravel()
     Uv = U.ravel()
     fac = factorize(K[~fx][:, ~fx].tocsr())
     try:

@@ -1193,9 +1193,10 @@ def _local_peak(vertices, faces, sol, centre, singular: Singular, E: float,
     submodel about the FE's governing point ``centre``, its cut displaced by the FE solution
     ``sol``, read on the part's surface (:func:`_local_reading`), moved to the largest within
     a third of the ball's radius (at most :data:`LOCAL_BALLS` balls), then solved again twice
-    as fine there (:data:`LOCAL_FINE`): how far it moved. ``bears`` = (x k×3, spacing): the
-    particles held or loaded; the ball's nodes in their cells are displaced by ``sol`` as
-    its cut is (a support's face inside the ball is not free surface).
+    as fine there (:data:`LOCAL_FINE`): how far it moved. ``bears`` = (x k×3, directions
+    k×3, spacing): the particles held (in the directions held) or loaded (all three); the
+    ball's nodes in their cells are displaced by ``sol`` in those directions, as its cut is
+    (a support's face inside the ball is not free surface).
 
     Returns ``value``, ``position``, ``radius`` of the ball, ``fine`` (the finer mesh size),
     ``coarser_value`` and ``moved``. Raises ImportError without gmsh or manifold3d (the
@@ -1780,7 +1781,9 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
         try:
             gov["local"] = local_peak(np.asarray(pd.points), np.asarray(pd.regular_faces), sol,
                                       gov["position"], singular, E_, nu_, echo=echo,
-                                      bears=(np.concatenate([held_x, load_x]), spacing))
+                                      bears=(np.concatenate([held_x, load_x]), np.concatenate(
+                                          [np.asarray(bnd["held_mask"], bool)[hin],
+                                           np.ones((len(load_x), 3), bool)]), spacing))
         except ImportError as exc:
             gov["local_note"] = (f"{exc.name or exc} is not installed: the local refinement "
                                  "needs the fem extra")
