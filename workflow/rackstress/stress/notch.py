@@ -363,7 +363,17 @@ def submodel(vertices, faces_, centre, o, u, spacing: float, rho: float, E: floa
     a = float(spacing)
     centre = np.asarray(centre, float)
     fine = float(fine) if fine else SUBMODEL_FINE * min(a, float(rho))
-    errors, balls = [], []
+    errors, glancing, got = [], [], None
+
+    def meshed(R, piece):
+        try:
+            return _ball_mesh(vertices, faces_, centre, R, fine, piece)
+        except ImportError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - gmsh's own words, said if every ball fails
+            errors.append(str(exc))
+            return None
+
     for R in float(radius or submodel_radius(a, rho)) * np.asarray(RADII):
         try:
             piece = ball_piece(vertices, faces_, centre, R)
@@ -372,22 +382,22 @@ def submodel(vertices, faces_, centre, o, u, spacing: float, rho: float, E: floa
         except Exception as exc:  # noqa: BLE001 - manifold3d's own words, said if all fail
             errors.append(str(exc))
             continue
-        balls.append((R, piece, seam_angle(vertices, faces_, piece, centre, R)))
-        if balls[-1][2] >= SEAM_DEG:
+        seam = seam_angle(vertices, faces_, piece, centre, R)
+        if seam < SEAM_DEG:
+            glancing.append((seam, R, piece))
+            continue
+        got = meshed(R, piece)
+        if got is not None:
             break
-    # the first ball whose sphere meets the part steeply enough, then the steepest
-    balls.sort(key=lambda b: (b[2] < SEAM_DEG, -b[2] if b[2] < SEAM_DEG else 0.0))
-    for R, piece, seam in balls:
-        try:
-            p, t = _ball_mesh(vertices, faces_, centre, R, fine, piece)
-            break
-        except ImportError:
-            raise
-        except Exception as exc:  # noqa: BLE001 - gmsh's own words, said if every ball fails
-            errors.append(str(exc))
-    else:
+    else:       # no ball meets the part steeply and meshes: the steepest that meshes
+        for seam, R, piece in sorted(glancing, key=lambda b: -b[0]):
+            got = meshed(R, piece)
+            if got is not None:
+                break
+    if got is None:
         raise RuntimeError(f"gmsh could not mesh the ball at {len(RADII)} radii: "
                            + "; ".join(dict.fromkeys(errors)))
+    p, t = got
     mesh = tet.Tet2(p.T, t.T)
     X = mesh.X
     # the cut: the boundary's nodes on the ball's (faceted) sphere, and the midpoints between
