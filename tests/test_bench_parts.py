@@ -68,17 +68,20 @@ def test_parts_page_says_ftetwilds_edge_not_a_grading():
 def test_parts_page_gives_the_refined_stress_against_the_fe_check():
     """The ``--refine`` section: governing 2.0 and refined 2.2 MPa against the FE's local
     2.1 MPa read 0.9524 and 1.048 (by hand), a bar 1.9 … 2.6 covers 2.1 and one of 2.15 …
-    2.6 does not; a part without a refined value has no row there, and its reason is given."""
+    2.6 does not (its local reading, not refined at a second mesh, is not the reference: the
+    global FE's 2.1 is); a part without a refined value has no row there, and its reason is
+    given."""
     data = {"machine": {"cores": 2, "cpu": "x", "load_avg_at_start": [0.1]}, "fea": True,
             "refine": True, "settled": 2, "parts": 3, "wall_s": 1.0, "timeout_s": 900.0,
             "rows": [
                 {"part": "a", "spacing": 2.0, "spacing_how": "walls", "peak_mpa": 2.0, "peak_kind": "governing",
                  "refined_mpa": 2.2, "refined_spacing": 1.41, "refined_read": "notch",
                  "bar_low": 1.9, "bar_high": 2.6, "fea_governing_mpa": 2.3,
-                 "fea_local_mpa": 2.1},
+                 "fea_local_mpa": 2.1, "fea_local_moved": 0.01},
                 {"part": "b", "spacing": 1.0, "spacing_how": "walls", "peak_mpa": 2.0, "peak_kind": "governing",
                  "refined_mpa": 2.2, "refined_spacing": 0.707, "refined_read": "patch",
-                 "bar_low": 2.15, "bar_high": 2.6, "fea_governing_mpa": 2.1},
+                 "bar_low": 2.15, "bar_high": 2.6, "fea_governing_mpa": 2.1,
+                 "fea_local_mpa": 3.0, "fea_local_moved": None},
                 {"part": "c", "spacing": 1.0, "spacing_how": "given", "refine_error": "the refined run did not "
                  "settle"}]}
     for r in data["rows"]:
