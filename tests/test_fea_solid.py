@@ -667,3 +667,27 @@ def test_zero_area_triangles_side_by_side_are_meshed_by_ftetwild():
                          timeout=HANG_S)
     assert out.returncode == 0, out.stderr
     assert "refused: 2 zero-area triangle(s) side by side remain" in out.stdout
+
+
+def test_a_remeshing_gmsh_does_not_end_gives_way_to_ftetwilds_surface(monkeypatch):
+    """gmsh's remeshing of a part's surface runs in a child process with a time limit (on the
+    concentrations bench's round shoulder it had not ended after 10 minutes): past it, the
+    child is stopped, the surface is fTetWild's and ``info`` says why. Here the limit is made
+    too short for a 40 × 20 × 2 mm box to be remeshed; its tetrahedra still hold its volume,
+    1,600 mm³ (by hand), to fTetWild's envelope (1 %)."""
+    import multiprocessing
+
+    import trimesh
+
+    import rackstress.validity.solid as solid_module
+    from rackstress.validity.solid import surface_mesh
+
+    box = trimesh.creation.box([40.0, 20.0, 2.0])
+    monkeypatch.setattr(solid_module, "GMSH_TIMEOUT_S", 1e-3)
+    solid_module._CLEAN.clear()
+    info = {}
+    p, t = surface_mesh(np.asarray(box.vertices), np.asarray(box.faces), 1.0, info=info)
+    assert "gmsh had not remeshed it after" in info["surface"]
+    assert "fTetWild" in info["surface"]
+    assert _tet_volume(p, t) == pytest.approx(1600.0, rel=1e-2)
+    assert not multiprocessing.active_children()

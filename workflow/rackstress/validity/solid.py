@@ -191,10 +191,15 @@ def surface_mesh(vertices: np.ndarray, faces: np.ndarray, size: float, near=None
     elif not reparametrize:
         why = "it could not at the other FE size"
     elif not left.any():   # gmsh's classification did not end in 10 minutes on a tiny pair
+        from rackstress.lib import forked
+
         try:
-            out = _gmsh_volume(v, f, size, near, near_size, reparametrize=True)
+            out = forked.call(lambda: _gmsh_volume(v, f, size, near, near_size,
+                                                   reparametrize=True), GMSH_TIMEOUT_S)
             info["surface"] = "remeshed by gmsh"
             return out
+        except forked.Timeout:
+            why = f"gmsh had not remeshed it after {GMSH_TIMEOUT_S:.0f} s"
         except Exception as exc:  # noqa: BLE001 - gmsh's own error: its words, below
             why = str(exc)
     else:
@@ -243,6 +248,12 @@ def surface_mesh(vertices: np.ndarray, faces: np.ndarray, size: float, near=None
     return _gmsh_volume(v, f, size, None, None, reparametrize=False)
 
 
+#: seconds gmsh may take to remesh a part's surface and fill it (in a child process,
+#: rackstress.lib.forked) before the FE check takes fTetWild's surface instead: on the
+#: concentrations bench's round shoulder (a torus of 256 × 64 facets as its fillet) gmsh's
+#: volume meshing at FE size 1.6 mm had not ended after 10 minutes (measured while building
+#: this); a corpus part's takes 1–5 s
+GMSH_TIMEOUT_S = 60.0
 #: tetrahedra gmsh fills inside fTetWild's surface, per triangle of it (the fixed jaw: 74,000
 #: in 28,152 triangles cut from 7,038, 2.6; 15,300 in the 7,038: 2.2): the surface's edge is
 #: raised until the finer mesh fits :data:`FE_ELEMENTS` (the SO-100 base's at 3.5 mm made
