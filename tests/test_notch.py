@@ -204,6 +204,24 @@ def test_the_submodel_is_refused_where_its_reading_depends_on_its_cut():
     assert not agree
 
 
+BAR_E, BAR_NU, BAR_S, BAR_A = 70000.0, 0.3, 10.0, 1.0
+
+
+def _bar_in_tension(side: float):
+    """A 20 mm bar of square section ``side`` (its corner at the origin) as a surface (v, f)
+    and its particles at spacing 1 with the exact uniform tension field S along x:
+    u = S/E (x, −ν y, −ν z)."""
+    import trimesh
+
+    box = trimesh.creation.box([20.0, side, side])
+    box.apply_translation([10.0, side / 2, side / 2])
+    g = np.arange(0.5 * BAR_A, 20.0, BAR_A)
+    k = int(round(side / BAR_A))
+    o = np.array([[x, y, z] for x in g for y in g[:k] for z in g[:k]])
+    u = BAR_S / BAR_E * o * np.array([1.0, -BAR_NU, -BAR_NU])
+    return np.asarray(box.vertices), np.asarray(box.faces), o, u
+
+
 def test_the_submodels_ball_holds_the_particles_something_bears_on():
     """A 20 × 12 × 12 bar of particles (spacing 1) in uniform tension S along x, its end x = 0
     on a roller: the submodel's ball about a point 1 mm from that end reaches the end face.
@@ -212,25 +230,18 @@ def test_the_submodels_ball_holds_the_particles_something_bears_on():
     and the exact field (linear: the particles' fit and P2 hold it) reads S at the ball's
     centre, by hand. Taken as free surface, as before, the face carries no σ_xx and the
     centre, 1 mm from it, reads over 5 % off S."""
-    import trimesh
-
-    E, nu, S, a = 70000.0, 0.3, 10.0, 1.0
-    box = trimesh.creation.box([20.0, 12.0, 12.0])
-    box.apply_translation([10.0, 6.0, 6.0])
-    g = np.arange(0.5, 20.0, a)
-    o = np.array([[x, y, z] for x in g for y in g[:12] for z in g[:12]])
-    u = S / E * o * np.array([1.0, -nu, -nu])
-    held = o[o[:, 0] < a]
+    v, f, o, u = _bar_in_tension(12.0)
+    held = o[o[:, 0] < BAR_A]
     centre = np.array([1.0, 0.0, 6.0])
-    v, f = np.asarray(box.vertices), np.asarray(box.faces)
 
     def reading(bears):
-        sol = N.submodel(v, f, centre, o, u, a, 10.0, E, nu, radius=4.0, bears=bears)
+        sol = N.submodel(v, f, centre, o, u, BAR_A, 10.0, BAR_E, BAR_NU, radius=4.0,
+                         bears=bears)
         return float(sol.at(centre[None])["von_mises"][0])
 
     roller = np.tile([True, False, False], (len(held), 1))       # held along x only
-    assert reading((held, roller, a)) == pytest.approx(S, rel=1e-6)
-    assert abs(reading(None) / S - 1) > 0.05
+    assert reading((held, roller, BAR_A)) == pytest.approx(BAR_S, rel=1e-6)
+    assert abs(reading(None) / BAR_S - 1) > 0.05
 
 
 def test_the_cuts_displacement_holds_a_linear_field_on_the_lattices_face():
@@ -254,18 +265,11 @@ def test_a_ball_across_a_thin_wall_keeps_the_walls_edges(radius):
     gmsh makes the sphere and the face one patch and rounds their edge off. A radius whose
     sphere meets them at SEAM_DEG or more is taken, and the exact field reads S at the
     centre, by hand (the rounded piece read 9.56 and 10.41)."""
-    import trimesh
-
-    E, nu, S, a = 70000.0, 0.3, 10.0, 1.0
-    box = trimesh.creation.box([20.0, 6.0, 6.0])
-    box.apply_translation([10.0, 3.0, 3.0])
-    g = np.arange(0.5, 20.0, a)
-    o = np.array([[x, y, z] for x in g for y in g[:6] for z in g[:6]])
-    u = S / E * o * np.array([1.0, -nu, -nu])
+    v, f, o, u = _bar_in_tension(6.0)
     centre = np.array([10.0, 0.0, 3.0])
-    sol = N.submodel(box.vertices, box.faces, centre, o, u, a, 10.0, E, nu, radius=radius)
+    sol = N.submodel(v, f, centre, o, u, BAR_A, 10.0, BAR_E, BAR_NU, radius=radius)
     assert sol.info["seam_deg"] >= N.SEAM_DEG
-    assert float(sol.at(centre[None])["von_mises"][0]) == pytest.approx(S, rel=1e-6)
+    assert float(sol.at(centre[None])["von_mises"][0]) == pytest.approx(BAR_S, rel=1e-6)
 
 
 def test_a_ball_gmsh_cannot_mesh_gives_way_to_the_next_radius():
