@@ -691,3 +691,27 @@ def test_a_remeshing_gmsh_does_not_end_gives_way_to_ftetwilds_surface(monkeypatc
     assert "fTetWild" in info["surface"]
     assert _tet_volume(p, t) == pytest.approx(1600.0, rel=1e-2)
     assert not multiprocessing.active_children()
+
+
+def test_ftetwilds_mesh_of_a_file_is_kept_and_taken_again(tmp_path, monkeypatch):
+    """fTetWild is not deterministic (the same file and settings give another mesh), so its
+    mesh is kept in the cache (``$XDG_CACHE_HOME/rackstress/ftetwild``) and the same
+    triangles and settings take it again: the same tetrahedra, to the bit. A kept file that
+    cannot be read (cut short) is made again, not trusted."""
+    import trimesh
+
+    import rackstress.validity.solid as solid_module
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    box = trimesh.creation.box([40.0, 20.0, 2.0])
+    v, f = np.asarray(box.vertices), np.asarray(box.faces)
+    X1, t1 = solid_module._tetwild(v, f, 2.0, 0.4)
+    kept = list((tmp_path / "rackstress" / "ftetwild").glob("*.npz"))
+    assert len(kept) == 1
+    X2, t2 = solid_module._tetwild(v, f, 2.0, 0.4)
+    assert np.array_equal(X1, X2) and np.array_equal(t1, t2)
+    kept[0].write_bytes(kept[0].read_bytes()[:100])
+    X3, t3 = solid_module._tetwild(v, f, 2.0, 0.4)
+    assert _tet_volume(X3.T, t3.T) == pytest.approx(1600.0, rel=2e-2)
+    with np.load(kept[0]) as d:                       # made again and kept whole
+        assert np.array_equal(d["X"], X3)
