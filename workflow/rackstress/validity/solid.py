@@ -309,7 +309,7 @@ def _tetwild(v: np.ndarray, f: np.ndarray, edge: float, envelope: float):
 
     fTetWild is not deterministic (six runs on the SO-100 fixed jaw's file, the same
     settings, one thread: six meshes of 12,619–13,047 tetrahedra, also on one CPU with address
-    randomisation off; wildmeshing/fTetWild issue 72), so the FE check of the same part would
+    randomisation off: a known trait of fTetWild itself), so the FE check of the same part would
     differ from run to run by its mesh alone (its local reading by up to 16 %). Its mesh is
     kept (:func:`tetwild_cache`, by the triangles, the settings and pytetwild's version) and
     taken again: checking a part again gives the same FE. A file there that cannot be read is
