@@ -75,7 +75,24 @@ def _num(v, digits: int = 4) -> str:
 
 def local_refinement(lc: dict, unit: str, length_digits: int = 4) -> str:
     """The FE check's local refinement (``fea.json`` → ``governing.local``) in one sentence,
-    without its final stop: what ``rackstress fea`` prints and the report shows."""
+    without its final stop: what ``rackstress fea`` prints and the report shows. A ball gmsh
+    could only fill inside the file's own facets, ungraded (no second mesh: ``moved`` None),
+    is said to be no refinement, its value given as what it is, not as the FE's answer (the
+    round shoulder's read 58 MPa where the FE's governing stress is 11.3).
+
+    >>> local_refinement({"radius": 2.0, "fine": 0.2, "value": 5.0, "position": [0, 0, 1],
+    ...                   "moved": 0.01, "note": None}, "MPa")
+    'refined locally (a ball of 2 about it, graded to 0.2): 5 MPa at [0, 0, 1]; it moved 1.0 % from twice that mesh size'
+    >>> local_refinement({"radius": 2.0, "fine": None, "value": 58.0, "position": [0, 0, 1],
+    ...                   "moved": None, "note": "not refined: gmsh could not remesh"}, "MPa")
+    'not refined locally: gmsh could not remesh (the ball of 2, filled ungraded, read 58 MPa at [0, 0, 1]: no reference)'
+    """
+    if lc.get("fine") is None and lc.get("moved") is None:
+        why = str(lc.get("note") or "the ball could not be remeshed")
+        why = why[len("not refined: "):] if why.startswith("not refined: ") else why
+        return (f"not refined locally: {why} (the ball of {_num(lc['radius'], length_digits)}, "
+                f"filled ungraded, read {_num(lc['value'])} {unit} at "
+                f"{[round(x, 2) for x in lc['position']]}: no reference)")
     return (f"refined locally (a ball of {_num(lc['radius'], length_digits)} about it"
             + (f", graded to {_num(lc['fine'], length_digits)}" if lc.get("fine") else "")
             + f"): {_num(lc['value'])} {unit} at {[round(x, 2) for x in lc['position']]}"
@@ -196,7 +213,8 @@ def fea_section(fea: dict) -> str:
                  f"{_num(gv.get('particles_governing'))} {_e(unit)} (ratio "
                  f"{_num(gv.get('particles_governing_ratio'))}).")
         lc = gv.get("local")
-        local = "" if not lc else " R" + local_refinement(lc, unit)[1:] + "."
+        said = local_refinement(lc, unit) if lc else ""
+        local = "" if not lc else " " + said[:1].upper() + said[1:] + "."
         out.append(f"<p>FE's governing stress: {_num(gv['value'])} {_e(unit)} at "
                    f"{_e([round(x, 2) for x in gv['position']])}{_e(moved)}.{_e(local)}"
                    f"{_e(there)}</p>")
