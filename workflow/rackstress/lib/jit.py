@@ -11,12 +11,18 @@ import os
 from pathlib import Path
 
 
+def cache_root() -> Path:
+    """rackstress' own cache: ``$XDG_CACHE_HOME/rackstress``, else ``~/.cache/rackstress``
+    (compiled kernels here, fTetWild's meshes: ``validity.solid.tetwild_cache``)."""
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "rackstress"
+
+
 def cache_dir() -> Path:
     """Where compiled kernels are kept (``NUMBA_CACHE_DIR`` if set)."""
     if os.environ.get("NUMBA_CACHE_DIR"):
         return Path(os.environ["NUMBA_CACHE_DIR"])
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "rackstress" / "numba"
+    return cache_root() / "numba"
 
 
 def numba_or_none():

@@ -295,10 +295,9 @@ _CLEAN: dict = {}
 def tetwild_cache() -> Path:
     """Where fTetWild's meshes are kept (:func:`_tetwild`): ``$XDG_CACHE_HOME/rackstress/
     ftetwild``, else ``~/.cache/rackstress/ftetwild``."""
-    import os
+    from rackstress.lib.jit import cache_root
 
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "rackstress" / "ftetwild"
+    return cache_root() / "ftetwild"
 
 
 def _tetwild(v: np.ndarray, f: np.ndarray, edge: float, envelope: float):
@@ -1725,6 +1724,7 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
                          "load that reaches it by contact from another group is not modelled "
                          "by the FEA")
     held_x, load_x = g.o[hk[hin]], g.o[lk[lin]]
+    held_mask = np.asarray(bnd["held_mask"], bool)[hin]
     h = float(size) if size else SIZE_SPACINGS * spacing
     near_size = NEAR_SPACINGS * spacing * (h / (SIZE_SPACINGS * spacing))
     curved = np.zeros((0, 3))
@@ -1736,7 +1736,7 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
         concave = concave_edges(*cell_mesh(g.o, spacing))
     # a support fixed in every direction has an edge where the stress is unbounded; a roller
     # or a symmetry plane (some directions free) is a smooth boundary, not singular
-    full = np.asarray(bnd["held_mask"], bool)[hin].all(axis=1)
+    full = held_mask.all(axis=1)
     held_sel = np.zeros(g.n, bool)
     held_sel[hk[hin][full]] = True
     load_sel = np.zeros(g.n, bool)
@@ -1767,7 +1767,7 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
              f"({k + 1} of {len(sizes)}) …")
         try:
             sol, how_k, note_k, forces_k, fixed_k = solve_part(
-                g.o, spacing, shape, held_x, np.asarray(bnd["held_mask"], bool)[hin], load_x,
+                g.o, spacing, shape, held_x, held_mask, load_x,
                 np.asarray(bnd["load_force"], float)[lin], E_, nu_, hs,
                 near, near_size * hs / h, what=f"FE size {hs:.3g}", constraints=constraints,
                 reparametrize=reparam, method=method)
@@ -1802,7 +1802,7 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
                 echo(f"fea: {name}: solving again with each tetrahedron cut into 8 …")
                 try:
                     sols.append(solve_part(
-                        g.o, spacing, shape, held_x, np.asarray(bnd["held_mask"], bool)[hin],
+                        g.o, spacing, shape, held_x, held_mask,
                         load_x, np.asarray(bnd["load_force"], float)[lin], E_, nu_,
                         what="cells cut into 8", refined=True, constraints=constraints,
                         method=method)[0])
@@ -1832,9 +1832,9 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
         try:
             gov["local"] = local_peak(np.asarray(pd.points), np.asarray(pd.regular_faces), sol,
                                       gov["position"], singular, E_, nu_, echo=echo,
-                                      bears=(np.concatenate([held_x, load_x]), np.concatenate(
-                                          [np.asarray(bnd["held_mask"], bool)[hin],
-                                           np.ones((len(load_x), 3), bool)]), spacing))
+                                      bears=(np.concatenate([held_x, load_x]),
+                                             np.concatenate([held_mask, np.ones_like(
+                                                 load_x, dtype=bool)]), spacing))
         except ImportError as exc:
             gov["local_note"] = (f"{exc.name or exc} is not installed: the local refinement "
                                  "needs the fem extra")

@@ -206,6 +206,8 @@ class Deck:
     #: every particle in every frame of the trajectory, as a plain LAMMPS dump (``rackstress run
     #: --dump-all``), instead of the ones that moved (:meth:`dump_commands`)
     dump_all: bool = False
+    #: the volumetric terms' boundary and held particles, once made (:meth:`_volume_cells`)
+    _cells: tuple | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def dump_moving(self) -> bool:
@@ -341,7 +343,13 @@ class Deck:
     def _volume_cells(self) -> tuple:
         """(atom ids, columns φx φy φz held_x held_y held_z) of the volumetric terms' boundary
         and held particles (:meth:`volume_atoms_text`); none where every cell is whole and
-        free (a part the spacing divides, unsupported)."""
+        free (a part the spacing divides, unsupported). Made once a deck: the text and the
+        deck's lines both ask."""
+        if self._cells is None:
+            self._cells = self._volume_cells_made()
+        return self._cells
+
+    def _volume_cells_made(self) -> tuple:
         ids, cols = [], []
         for r in self.volumes:
             g, solid = self.scene.groups[r.target], r.op.solid
