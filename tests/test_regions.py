@@ -83,11 +83,49 @@ def test_combinations_by_inclusion_exclusion():
     assert (a | b).mask(O).sum() == 1000
     assert Union((a, b)).mask(O).sum() == 500 + 700 - 200
     assert (a & b).mask(O).sum() == 200 == Intersection((a, b)).mask(O).sum()
-    assert (a - b).mask(O).sum() == 300 == Difference((a, b)).mask(O).sum()
+    # a difference is the closed solid a − b = [0, 3] × [0, 9]²: its face x = 3 (b's) included
+    assert (a - b).mask(O).sum() == 400 == Difference((a, b)).mask(O).sum()
     # a plate with a hole: a 10×10 slab minus a cylinder of radius 1.5 through (4, 4):
     # points with (x−4)² + (y−4)² ≤ 2.25: 1 + 4 + 4 = 9 per layer
     plate = Box([0, 0, 0], [9, 9, 0]) - Cylinder([4, 4, -1], [4, 4, 1], 1.5)
     assert plate.mask(O).sum() == 100 - 9
+
+
+def test_difference_keeps_a_hole_rim_the_spacing_meets():
+    """A hole of radius 2 through (4, 4): the sites with (x−4)² + (y−4)² < 4 are taken away
+    (1 + 4 + 4 = 9 a layer, integer arithmetic), the four on its rim at (4 ± 2, 4), (4, 4 ± 2)
+    kept — the closed solid's, as a box keeps its faces; before, they were taken away and the
+    hole had a one-site notch where each axis meets it."""
+    i, j = np.meshgrid(np.arange(10), np.arange(10), indexing="ij")
+    inside = ((i - 4) ** 2 + (j - 4) ** 2 < 4).sum()
+    assert inside == 9
+    plate = Box([0, 0, 0], [9, 9, 0]) - Cylinder([4, 4, -1], [4, 4, 1], 2.0)
+    m = plate.mask(O)
+    assert m.sum() == 100 - inside
+    for x, y in ((2, 4), (6, 4), (4, 2), (4, 6)):
+        assert m[y * 10 + x], (x, y)
+    # the same by the fill's own path: the grid of the layer z = 0
+    g = plate.grid_mask([0, 0, 0], (1.0, 1.0, 1.0), (10, 10, 1))
+    assert g.tolist() == m[:100].tolist()
+
+
+def test_difference_drops_boundary_points_that_border_nothing_left():
+    """A slot through the slab: the sites on its openings in the slab's faces, and on the face
+    two touching boxes of a union share, border nothing of the difference and are taken away;
+    those on the slot's walls are kept."""
+    slab = Box([0, 0, 0], [9, 9, 2])
+    slot = Box([3, 3, 0], [5, 5, 2])                 # through z, walls at x, y = 3 and 5
+    m = (slab - slot).mask(O)
+    opening = (O[:, 0] == 4) & (O[:, 1] == 4) & (O[:, 2] <= 2)
+    assert not m[opening].any()
+    wall = (O[:, 0] == 3) & (O[:, 1] == 4) & (O[:, 2] <= 2)
+    assert m[wall].all()
+    halves = Union((Box([3, 3, 0], [4, 5, 2]), Box([4, 3, 0], [5, 5, 2])))   # share x = 4
+    assert (slab - halves).mask(O).tolist() == m.tolist()
+    # inside the slab: 10 × 10 × 3 sites, the slot's interior (x, y = 4; 3 layers) gone
+    assert m.sum() == 300 - 3
+    # a part taken away by index is taken away as named
+    assert (slab - Ids([0])).mask(O).sum() == 299
 
 
 def test_bounds_of_combinations():

@@ -19,12 +19,17 @@ region                 contains the point x when
 ``NearSurface(t, d)``  within d of the triangles t (a named hole's bore, a flat face)
 ``Union(a, b, …)``     in any of them;  ``a | b``
 ``Intersection(…)``    in all of them;  ``a & b``
-``Difference(a, b…)``  in a and in none of the others;  ``a - b``
+``Difference(a, b…)``  in a and inside none of the others (closed);  ``a - b``
 =====================  ============================================================================
 
 Boundaries are included (closed shapes) up to :data:`TOL` times the shape's size, so a lattice
 particle that lies on a face by construction (0.1 + 0.2 is not 0.3 in floating point) is
-selected the same on every machine.
+selected the same on every machine. A difference is closed too, the closure of a − b
+(constructive solid geometry's regularized difference): a point on b's boundary that borders
+what is left of a is kept (:func:`_in_closure`), so a hole whose radius the spacing divides
+keeps the particles on its rim as a box keeps those on its faces. Taking them away left a
+one-particle notch where each lattice axis meets the rim — at a plate's hole under tension,
+where the stress is largest.
 
 Id order: a group's particles are numbered from 0 in the order its positions were built — for
 lattices and filled parts x fastest, then y, then z (:mod:`rackstress.model.particles`); in a
@@ -48,6 +53,10 @@ from rackstress.errors import SceneError
 
 #: Relative tolerance of region boundaries (times the shape's size; absolute 1e-12 at least).
 TOL = 1e-9
+#: A difference keeps a point on a taken-away part's boundary when one of the six points this
+#: many times TOL × the shapes' size away along the axes is left (:func:`_in_closure`): beyond
+#: the boundaries' own tolerance even where a face's normal is diagonal (1/√3 of it).
+PROBE = 4.0
 
 
 def _as_points(o) -> np.ndarray:
@@ -82,6 +91,21 @@ class Region:
         """(lo, hi) of a box holding the region, or None when it is unbounded / index-based."""
         return None
 
+    def inner(self, o: np.ndarray) -> np.ndarray:
+        """Boolean mask of the rows of ``o`` inside the region and not on its boundary (beyond
+        its tolerance): what a difference takes away (:class:`Difference`). A shape without a
+        boundary of its own to tell (a mesh, an open set): its :meth:`mask`."""
+        return self.mask(o)
+
+    def scale(self) -> float:
+        """The size the region's boundary tolerance is relative to (TOL × it)."""
+        b = self.bounds()
+        return float(np.max(np.asarray(b[1]) - np.asarray(b[0]))) if b is not None else 1.0
+
+    #: Whether membership is a matter of position (every shape), not of index (``Ids``):
+    #: only then has the region a boundary for a difference to keep (:func:`_in_closure`).
+    geometric = True
+
     def __or__(self, other: "Region") -> "Region":
         return Union((self, other))
 
@@ -112,6 +136,12 @@ class Box(Region):
         tol = max(TOL * float(np.max(hi - lo)), 1e-12)
         return np.all((o >= lo - tol) & (o <= hi + tol), axis=1)
 
+    def inner(self, o):
+        o = _as_points(o)
+        lo, hi = np.asarray(self.lo), np.asarray(self.hi)
+        tol = max(TOL * float(np.max(hi - lo)), 1e-12)
+        return np.all((o > lo + tol) & (o < hi - tol), axis=1)
+
     def bounds(self):
         return np.asarray(self.lo), np.asarray(self.hi)
 
@@ -132,6 +162,14 @@ class Sphere(Region):
         d = _as_points(o) - np.asarray(self.centre)
         r = self.radius * (1 + TOL)
         return np.einsum("ij,ij->i", d, d) <= r * r
+
+    def inner(self, o):
+        d = _as_points(o) - np.asarray(self.centre)
+        r = self.radius * (1 - TOL)
+        return np.einsum("ij,ij->i", d, d) < r * r
+
+    def scale(self):
+        return float(self.radius)
 
     def bounds(self):
         c = np.asarray(self.centre)
@@ -168,6 +206,22 @@ class Cylinder(Region):
         return ((t >= -tol) & (t <= length + tol)
                 & (np.einsum("ij,ij->i", radial, radial) <= r * r))
 
+    def inner(self, o):
+        a, b = np.asarray(self.start), np.asarray(self.end)
+        length = float(np.linalg.norm(b - a))
+        u = (b - a) / length
+        d = _as_points(o) - a
+        t = d @ u
+        radial = d - t[:, None] * u
+        tol = TOL * max(length, self.radius)
+        r = self.radius - tol
+        return ((t > tol) & (t < length - tol)
+                & (np.einsum("ij,ij->i", radial, radial) < r * r))
+
+    def scale(self):
+        return float(max(np.linalg.norm(np.asarray(self.end) - np.asarray(self.start)),
+                         self.radius))
+
     def bounds(self):
         a, b = np.asarray(self.start), np.asarray(self.end)
         return np.minimum(a, b) - self.radius, np.maximum(a, b) + self.radius
@@ -191,6 +245,14 @@ class HalfSpace(Region):
         p = np.asarray(self.point)
         s = (_as_points(o) - p) @ np.asarray(self.normal)
         return s >= -TOL * max(1.0, float(np.abs(p).max()))
+
+    def inner(self, o):
+        p = np.asarray(self.point)
+        s = (_as_points(o) - p) @ np.asarray(self.normal)
+        return s > TOL * max(1.0, float(np.abs(p).max()))
+
+    def scale(self):
+        return max(1.0, float(np.abs(np.asarray(self.point)).max()))
 
 
 @dataclass(frozen=True, eq=False)
@@ -217,6 +279,8 @@ class Ids(Region):
             if isinstance(i, (bool, np.bool_)) or not isinstance(i, (int, np.integer)):
                 raise SceneError(f"particle index {i!r} is not an integer")
         object.__setattr__(self, "ids", tuple(int(i) for i in ids))
+
+    geometric = False
 
     def mask(self, o):
         n = len(_as_points(o))
@@ -299,6 +363,20 @@ class NearSurface(Region):
         out[near] = np.asarray(dist) <= self.distance * (1.0 + TOL)
         return out
 
+    def inner(self, o):
+        import trimesh
+
+        o = _as_points(o)
+        out = np.zeros(len(o), dtype=bool)
+        m = np.flatnonzero(self.mask(o))
+        if len(m):
+            tri = self.triangles
+            sub = trimesh.Trimesh(tri.reshape(-1, 3), np.arange(3 * len(tri)).reshape(-1, 3),
+                                  process=False)
+            _, dist, _ = trimesh.proximity.closest_point(sub, o[m])
+            out[m] = np.asarray(dist) < self.distance * (1.0 - TOL)
+        return out
+
     def bounds(self):
         pts = self.triangles.reshape(-1, 3)
         return pts.min(axis=0) - self.distance, pts.max(axis=0) + self.distance
@@ -331,6 +409,29 @@ def inside_surface(polydata, points: np.ndarray, chunk: int = 2_000_000) -> np.n
     return out
 
 
+def _in_closure(first: Region, others, pts: np.ndarray) -> np.ndarray:
+    """Which of ``pts`` — each in ``first`` and on the boundary of one of ``others``, inside
+    none — lie in the closure of ``first`` minus ``others``: one of the six points
+    :data:`PROBE` × TOL × the shapes' size away along ±x, ±y, ±z is in ``first`` and in none of
+    ``others``. A point on the rim of a hole has one (off the hole); one on a hole's opening in
+    the face of ``first``, or on the face two touching parts of a union share, has none."""
+    scale = max([first.scale()] + [p.scale() for p in others])
+    delta = PROBE * TOL * max(scale, float(np.abs(pts).max()) if len(pts) else 0.0, 1e-3)
+    keep = np.zeros(len(pts), dtype=bool)
+    for axis in range(3):
+        for sign in (-1.0, 1.0):
+            rows = np.flatnonzero(~keep)
+            if not len(rows):
+                return keep
+            q = pts[rows].copy()
+            q[:, axis] += sign * delta
+            ok = np.asarray(first.mask(q), dtype=bool)
+            for p in others:
+                ok &= ~np.asarray(p.mask(q), dtype=bool)
+            keep[rows[ok]] = True
+    return keep
+
+
 class _Combination(Region):
     kind = "combination"
 
@@ -342,6 +443,13 @@ class _Combination(Region):
             if not isinstance(p, Region):
                 raise SceneError(f"{self.kind}: {p!r} is not a region")
         self.parts = parts
+
+    @property
+    def geometric(self):
+        return all(p.geometric for p in self.parts)
+
+    def scale(self):
+        return max([p.scale() for p in self.parts if p.geometric] or [1.0])
 
     def __repr__(self):
         return f"{type(self).__name__}({', '.join(map(repr, self.parts))})"
@@ -356,6 +464,14 @@ class Union(_Combination):
         out = self.parts[0].mask(o)
         for p in self.parts[1:]:
             out = out | p.mask(o)
+        return out
+
+    def inner(self, o):
+        """Inside one of the parts (a point on the face two touching parts share is in
+        neither's inner: a difference that takes the union away probes it, :func:`_in_closure`)."""
+        out = self.parts[0].inner(o)
+        for p in self.parts[1:]:
+            out = out | p.inner(o)
         return out
 
     def grid_mask(self, origin, spacing, dims):
@@ -382,6 +498,12 @@ class Intersection(_Combination):
             out = out & p.mask(o)
         return out
 
+    def inner(self, o):
+        out = self.parts[0].inner(o)
+        for p in self.parts[1:]:
+            out = out & p.inner(o)
+        return out
+
     def grid_mask(self, origin, spacing, dims):
         out = self.parts[0].grid_mask(origin, spacing, dims)
         for p in self.parts[1:]:
@@ -397,20 +519,58 @@ class Intersection(_Combination):
 
 
 class Difference(_Combination):
-    """Points in the first part and in none of the others."""
+    """Points in the first part and in none of the others, closed: the closure of the first
+    minus the others (constructive solid geometry's regularized difference), so a point on
+    another's boundary that borders what is left is kept (:func:`_in_closure`). Parts named by
+    index (``Ids``) are taken away as they are."""
 
     kind = "difference"
 
-    def mask(self, o):
-        out = self.parts[0].mask(o)
-        for p in self.parts[1:]:
-            out = out & ~p.mask(o)
+    def _subtract(self, out: np.ndarray, hits: list, points) -> np.ndarray:
+        """``out`` (the first part's mask) less the others' (``hits``: their closed masks):
+        what lies inside one goes, what lies only on their boundaries goes unless it borders
+        what is left (``points(rows)``: the rows' positions)."""
+        first, geo = self.parts[0], [p for p in self.parts[1:] if p.geometric]
+        edge = np.zeros(len(out), dtype=bool)
+        for p, h in zip(self.parts[1:], hits):
+            h = h & out
+            if not p.geometric or not first.geometric:
+                out = out & ~h
+                continue
+            rows = np.flatnonzero(h)
+            if len(rows):
+                inside = np.asarray(p.inner(points(rows)), dtype=bool)
+                out[rows[inside]] = False
+                edge[rows[~inside]] = True
+        edge &= out
+        if edge.any():
+            rows = np.flatnonzero(edge)
+            out[rows[~_in_closure(first, geo, points(rows))]] = False
         return out
 
+    def mask(self, o):
+        o = _as_points(o)
+        out = np.asarray(self.parts[0].mask(o), dtype=bool).copy()
+        hits = [np.asarray(p.mask(o), dtype=bool) for p in self.parts[1:]]
+        return self._subtract(out, hits, lambda rows: o[rows])
+
     def grid_mask(self, origin, spacing, dims):
-        out = self.parts[0].grid_mask(origin, spacing, dims)
+        out = np.asarray(self.parts[0].grid_mask(origin, spacing, dims), dtype=bool).copy()
+        hits = [np.asarray(p.grid_mask(origin, spacing, dims), dtype=bool)
+                for p in self.parts[1:]]
+        nx, ny, _ = (int(d) for d in dims)
+
+        def points(rows):
+            ijk = np.column_stack([rows % nx, (rows // nx) % ny, rows // (nx * ny)])
+            return np.asarray(origin, float) + ijk * np.asarray(spacing, float)
+
+        return self._subtract(out, hits, points)
+
+    def inner(self, o):
+        """Inside the first part and in none of the others, their boundaries included."""
+        out = np.asarray(self.parts[0].inner(o), dtype=bool).copy()
         for p in self.parts[1:]:
-            out = out & ~p.grid_mask(origin, spacing, dims)
+            out &= ~np.asarray(p.mask(o), dtype=bool)
         return out
 
     def bounds(self):
