@@ -24,6 +24,7 @@ from pathlib import Path
 
 from rackstress.bench import fmt, machine, md_table, out_dir, repository_file, write_json
 from rackstress.lib.resources import cpu_children
+from rackstress.render.report import local_is_reference
 from rackstress.validity.solid import POOR_SLIVERS, SLIVER_Q
 
 HEADER = ["part", "particles", "spacing [mm]", "Newton steps", "residual", "solve [s]",
@@ -186,7 +187,8 @@ def refine_comparison(row: dict) -> dict:
     checks — the SO-100 upper arm's read 1.29 MPa there, the global FE 0.97), the governing
     and refined values over it and whether the error bar covers it; empty where the row has no
     refined value or no FE value."""
-    local = row.get("fea_local_mpa") if row.get("fea_local_moved") is not None else None
+    local = (row.get("fea_local_mpa")
+             if local_is_reference({"moved": row.get("fea_local_moved")}) else None)
     fe = local or row.get("fea_governing_mpa")
     if row.get("refined_mpa") is None or not fe:
         return {}
@@ -335,14 +337,18 @@ def markdown(data) -> str:
                           if r.get("fea_governing_mpa") and r.get("peak_mpa") is not None
                           and r.get("peak_kind") == "governing" else "")
                        + (f"; refined locally (`rackstress fea`'s submodel about its governing "
-                          f"point) {fmt(r['fea_local_mpa'])} MPa"
-                          + (f", moved {100 * r['fea_local_moved']:.1f} % from twice its mesh "
-                             "size" if r.get("fea_local_moved") is not None else "")
-                          + "; the run's governing stress over it: "
+                          f"point) {fmt(r['fea_local_mpa'])} MPa, moved "
+                          f"{100 * r['fea_local_moved']:.1f} % from twice its mesh size; the "
+                          f"run's governing stress over it: "
                           f"{fmt(r['peak_mpa'] / r['fea_local_mpa'])}"
                           if r.get("fea_local_mpa") and r.get("peak_mpa") is not None
-                          and r.get("peak_kind") == "governing" else "")
-                       + (f"; {r['fea_local_note']}" if r.get("fea_local_note") else ""))
+                          and r.get("peak_kind") == "governing"
+                          and local_is_reference({"moved": r.get("fea_local_moved")}) else "")
+                       + (f"; {r['fea_local_note']}" if r.get("fea_local_note") else "")
+                       + (f" (its ball read {fmt(r['fea_local_mpa'])} MPa: no reference)"
+                          if r.get("fea_local_mpa")
+                          and not local_is_reference({"moved": r.get("fea_local_moved")})
+                          else ""))
         out.append("")
     if data.get("refine"):
         out += _refine_section(data)

@@ -73,6 +73,19 @@ def _num(v, digits: int = 4) -> str:
     return str(v)
 
 
+def local_is_reference(lc: dict | None) -> bool:
+    """Whether the FE check's local refinement (``fea.json`` → ``governing.local``) is a
+    reference: solved at two mesh sizes, ``moved`` given. A ball gmsh could only fill inside
+    the file's own facets, ungraded, is not — no second mesh checks it (the SO-100 upper arm's
+    read 1.29 MPa there, its global FE 0.97). The one rule the report, ``rackstress fea`` and
+    ``bench parts`` apply.
+
+    >>> local_is_reference({"moved": 0.01}), local_is_reference({"moved": None}), local_is_reference(None)
+    (True, False, False)
+    """
+    return bool(lc) and lc.get("moved") is not None
+
+
 def local_refinement(lc: dict, unit: str, length_digits: int = 4) -> str:
     """The FE check's local refinement (``fea.json`` → ``governing.local``) in one sentence,
     without its final stop: what ``rackstress fea`` prints and the report shows. A ball gmsh
@@ -87,7 +100,7 @@ def local_refinement(lc: dict, unit: str, length_digits: int = 4) -> str:
     ...                   "moved": None, "note": "not refined: gmsh could not remesh"}, "MPa")
     'not refined locally: gmsh could not remesh (the ball of 2, filled ungraded, read 58 MPa at [0, 0, 1]: no reference)'
     """
-    if lc.get("fine") is None and lc.get("moved") is None:
+    if not local_is_reference(lc):
         why = str(lc.get("note") or "the ball could not be remeshed")
         why = why[len("not refined: "):] if why.startswith("not refined: ") else why
         return (f"not refined locally: {why} (the ball of {_num(lc['radius'], length_digits)}, "
