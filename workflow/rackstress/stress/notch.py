@@ -338,7 +338,7 @@ def _ball_mesh(vertices, faces_, centre, R: float, fine: float, piece=None):
 
 def submodel(vertices, faces_, centre, o, u, spacing: float, rho: float, E: float,
              nu: float, radius: float | None = None, displace=None, fine: float | None = None,
-             bears=None):
+             bears=None, radii=RADII):
     """The classical global–local submodel of the face about ``centre`` (a face point): the
     part's true shape within a ball of ``radius`` (:func:`submodel_radius`) about it
     (:func:`ball_piece`), P2 tetrahedra by gmsh graded toward the face point, its cut (the
@@ -354,7 +354,8 @@ def submodel(vertices, faces_, centre, o, u, spacing: float, rho: float, E: floa
     the material's E and ν. ``displace`` (points k×3 → displacements k×3) instead of ``o``
     and ``u``: the cut displaced by another model's field (the FE check's own local
     refinement, validity.solid.local_peak); ``fine`` the mesh size at the face point instead
-    of :data:`SUBMODEL_FINE` × min(spacing, ρ). Returns the :class:`rackstress.lib.tet.Solution`
+    of :data:`SUBMODEL_FINE` × min(spacing, ρ); ``radii`` the ball's radii, × ``radius``, tried
+    in turn (:data:`RADII`). Returns the :class:`rackstress.lib.tet.Solution`
     (``.at(points)`` evaluates its stress). Raises where gmsh cannot mesh the piece (its own
     words) or is not installed (ImportError: the ``fem`` extra)."""
     from rackstress.engines.linear import factorize
@@ -374,7 +375,7 @@ def submodel(vertices, faces_, centre, o, u, spacing: float, rho: float, E: floa
             errors.append(str(exc))
             return None
 
-    for R in float(radius or submodel_radius(a, rho)) * np.asarray(RADII):
+    for R in float(radius or submodel_radius(a, rho)) * np.asarray(radii):
         try:
             piece = ball_piece(vertices, faces_, centre, R)
         except ImportError:
@@ -395,7 +396,7 @@ def submodel(vertices, faces_, centre, o, u, spacing: float, rho: float, E: floa
             if got is not None:
                 break
     if got is None:
-        raise RuntimeError(f"gmsh could not mesh the ball at {len(RADII)} radii: "
+        raise RuntimeError(f"gmsh could not mesh the ball at {len(radii)} radii: "
                            + "; ".join(dict.fromkeys(errors)))
     p, t = got
     mesh = tet.Tet2(p.T, t.T)

@@ -1169,9 +1169,9 @@ LOCAL_FINE = (1 / 12, 1 / 24)
 #: ... the most balls it moves through, each to the largest stress within a third of its
 #: radius, until that is its centre
 LOCAL_BALLS = 3
-#: ... the ball's radius × these in turn where gmsh cannot mesh it (each also × 1, 1.1, 0.9:
-#: notch.RADII)
-LOCAL_RADII = (1.0, 1.3, 1.6)
+#: ... the ball's radius × these in turn where gmsh cannot mesh it: notch.RADII's, then two
+#: larger (one list: each radius tried once, at most seven balls)
+LOCAL_RADII = (1.0, 1.1, 0.9, 1.25, 0.8, 1.3, 1.6)
 #: ... a local reading that moved more than this between its two meshes beside facets that
 #: turn inward by at least :data:`LOCAL_KINK_DEG` is said not to converge, and why
 #: (:func:`facet_kink`)
@@ -1259,17 +1259,9 @@ def _local_peak(vertices, faces, sol, centre, singular: Singular, E: float,
     def displace(X):
         return sol.at(X)["displacement"]
 
-    def solved(at, fine):
-        errors = []
-        for k in LOCAL_RADII:      # the ball's sphere can cut the facets into overlapping ones
-            try:
-                return submodel(vertices, faces, at, None, None, R, R, E, nu, radius=k * R,
-                                displace=displace, fine=fine * R, bears=bears)
-            except ImportError:
-                raise
-            except RuntimeError as exc:
-                errors.append(str(exc))
-        raise RuntimeError("; ".join(dict.fromkeys(errors)))
+    def solved(at, fine):          # the ball's sphere can cut the facets into overlapping ones
+        return submodel(vertices, faces, at, None, None, R, R, E, nu, radius=R,
+                        displace=displace, fine=fine * R, bears=bears, radii=LOCAL_RADII)
 
     seen = []
     for _ in range(LOCAL_BALLS):
