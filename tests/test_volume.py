@@ -523,7 +523,7 @@ force = [0, 10, 0]
 def test_a_one_layer_plate_with_particles_on_its_edges_reads_uniform_tension(tmp_path):
     """A 10 × 10 mm plate one layer (1 mm) thick, its particles on its edges (half cells
     there), 100 N along y shared by the cells: σ_yy = 100 N / (10 × 1 mm²) = 10 MPa and
-    σ_xx = 0 at every particle (statics, by hand). The edge rows are rows of a sheet: no
+    σ_xx = 0 at every particle, σ_xy = 0 on its symmetry plane y = 0 (statics, by hand). The edge rows are rows of a sheet: no
     diagonals lie in them, and the 3D rule for a face's nearest bindings ((4φ − 1)/3) left
     them 11 % too soft — their σ_yy read 8.96 MPa (model/solid.py fraction_weights)."""
     from rackstress.runs.run import run
@@ -539,3 +539,9 @@ def test_a_one_layer_plate_with_particles_on_its_edges_reads_uniform_tension(tmp
     assert edge.sum() == 22
     assert s[:, 1] == pytest.approx(np.full(len(o), 10.0), abs=0.05)
     assert np.abs(s[:, 0]).max() < 0.05
+    # the row on the symmetry plane carries no shear (its mirror's bindings would cancel it):
+    # the corner (0, 0), on the plane and the free edge, read σ_xy 2.6 MPa; (10, 0) is held
+    # along x too (a clamp's point), its shear kept
+    plane = (o[:, 1] < 0.5) & (o[:, 0] < 9.5)
+    assert plane.sum() == 10
+    assert np.abs(s[plane, 3]).max() < 0.05
