@@ -418,3 +418,29 @@ def test_a_fillets_peak_is_named_and_bounds_the_error_bar(tmp_path):
     assert curved_bound(gov) == pytest.approx(c["value"] / (1 - CURVED_ERROR))
     assert err["high"] >= c["value"] / (1 - CURVED_ERROR) - 1e-9
     assert err["low"] <= gov["value"] <= err["high"]
+
+
+def test_refine_says_what_the_refined_run_reads_at_a_fillet_the_first_run_took_for_sharp(
+        tmp_path):
+    """The filleted C frame (fillets of radius 2 mm at x 10…12, y 10…12 and 18…20) run at
+    1.6 mm, where a fillet below 1.43 spacings (2.29 mm) is a sharp edge, and refined to
+    1.13 mm, where it is one (1.62 mm): the error bar reads both at the first run's singular
+    points, so the fillets stay out of it; the refined run on its own reads at a fillet, more
+    than 10 % higher, and --refine says so (summary.json and its lines)."""
+    import json
+    from pathlib import Path
+
+    from test_faults import QUIET, rs
+
+    d = tmp_path / "r"
+    scene = Path(__file__).resolve().parents[1] / "examples" / "cframe" / "filleted.toml"
+    out = rs("run", scene, "--set", "spacing=1.6", "--refine", "--out", d, *QUIET, timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    err = json.loads((d / "summary.json").read_text())["stress"]["error"]
+    own = err["fine_own"]
+    assert own["why"] == "singular points"
+    assert own["value"] > 1.1 * err["values"][-1]
+    x, y, _ = own["position"]
+    # within a spacing of either fillet's arc (centres (12, 12) and (12, 18), radius 2)
+    assert min(abs(math.hypot(x - 12, y - cy) - 2.0) for cy in (12, 18)) <= 1.6
+    assert "the refined run alone reads" in out.stdout

@@ -312,6 +312,12 @@ def governing_section(stress: dict, headline: bool = True) -> str:
             w(f'<p class="warning" id="not-converged">Not converged: the governing stress moved '
               f"by {_num(100 * err['change'], 2)} % between the two spacings; refine further, "
               "or check it by FE (<code>rackstress fea</code>).</p>")
+        if err.get("fine_own"):
+            from rackstress.stress.governing import fine_alone_sentence
+
+            t = fine_alone_sentence(err["fine_own"], err.get("units", gov["units"]),
+                                    gov.get("length_units", ""))
+            w(f'<p class="warning" id="fine-alone">{_e(t[0].upper() + t[1:])}.</p>')
     elif err:
         w(f'<p class="note" id="error-estimate">Error bar: ± '
           f"{_num(100 * abs(err['relative']), 2)} %, {_num(err.get('low'))} … "

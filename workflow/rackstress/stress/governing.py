@@ -960,6 +960,29 @@ def _where(rec: dict) -> str:
     return f"particle {rec['particle']} at ({pos}){near}"
 
 
+def fine_alone_sentence(own: dict, unit: str, length: str = "") -> str:
+    """What ``--refine``'s refined run reads on its own where it reads more than the error
+    bar's same-rule value (``summary.json["stress"]["error"]["fine_own"]``,
+    :func:`rackstress.stress.refine.fine_alone`), and why it differs.
+
+    >>> fine_alone_sentence({"value": 0.332, "position": [-10.3, 53.4, 11.6],
+    ...                      "near": "face F43", "zone": 5.73, "why": "singular points"}, "MPa", "mm")
+    'the refined run alone reads 0.332 MPa at (-10.3, 53.4, 11.6) near face F43: by its own singular points — at the finer spacing a concave edge there turns gently enough to be a fillet, not a sharp edge; check that place by FE (rackstress fea)'
+    >>> fine_alone_sentence({"value": 12.0, "position": [1, 2, 3], "zone": 1.4, "why": "zone"},
+    ...                     "MPa", "mm")
+    'the refined run alone reads 12 MPa at (1, 2, 3): within its own zone of 1.4 mm, nearer a singular point, where the stress grows with refinement'
+    """
+    at = ", ".join(f"{x:.4g}" for x in own["position"])
+    near = f" near {own['near']}" if own.get("near") else ""
+    head = f"the refined run alone reads {own['value']:.4g} {unit} at ({at}){near}"
+    if own.get("why") == "zone":
+        return (f"{head}: within its own zone of {own['zone']:.3g} {length}, nearer a singular "
+                "point, where the stress grows with refinement")
+    return (f"{head}: by its own singular points — at the finer spacing a concave edge there "
+            "turns gently enough to be a fillet, not a sharp edge; check that place by FE "
+            "(rackstress fea)")
+
+
 def describe(gov: dict | None, sing: dict | None, error: dict | None,
              headline: bool = True, static: bool = True) -> list:
     """Terminal lines: the governing stress as the headline (``headline`` False: left to the
@@ -995,6 +1018,9 @@ def describe(gov: dict | None, sing: dict | None, error: dict | None,
                              f"{100 * error['change']:.2g} % between the two spacings (more "
                              f"than {100 * CONVERGING:g} %); refine further, or check it by "
                              "FE (rackstress fea)")
+            if error.get("fine_own"):
+                lines.append("    " + fine_alone_sentence(error["fine_own"], u,
+                                                          gov.get("length_units", "")))
         elif error:
             lines.append(f"    may be off by about ±{100 * abs(error['relative']):.2g} % at this "
                          f"spacing (the part is {error['thickness']:.3g} "
