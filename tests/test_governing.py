@@ -56,7 +56,11 @@ def test_a_fillet_of_a_spacing_and_more_is_not_singular_a_smaller_one_is():
     assert len(S.find(np.zeros((0, 3)), 1.0, _filleted(2.0))) == 0
     assert len(S.find(np.zeros((0, 3)), 1.0, _filleted(3.0))) == 0
     small = S.find(np.zeros((0, 3)), 1.0, _filleted(0.5))
-    assert len(small) and set(small.kinds()) == {"re-entrant edge"}
+    # its facets (the CSG cylinder's 72 segments: 5° each) each turn less than 20°, the
+    # window as a whole more: a fillet this spacing does not resolve, not a sharp edge
+    assert len(small) and set(small.kinds()) == {"unresolved fillet"}
+    # the sharp L's edge turns 90° at one edge of its surface: a re-entrant edge
+    assert set(S.find(np.zeros((0, 3)), 1.0, L_SHAPE).kinds()) == {"re-entrant edge"}
     # the fillet of radius 0.5 at (2.5, 2.5): its edges lie on that arc
     r = np.hypot(small.points[:, 0] - 2.5, small.points[:, 1] - 2.5)
     np.testing.assert_allclose(r, 0.5, rtol=0.02)
@@ -444,3 +448,20 @@ def test_refine_says_what_the_refined_run_reads_at_a_fillet_the_first_run_took_f
     # within a spacing of either fillet's arc (centres (12, 12) and (12, 18), radius 2)
     assert min(abs(math.hypot(x - 12, y - cy) - 2.0) for cy in (12, 18)) <= 1.6
     assert "the refined run alone reads" in out.stdout
+
+
+def test_a_fillet_the_spacing_does_not_resolve_is_not_called_a_property_of_the_spacing():
+    """The singular peak at an unresolved fillet is bounded in the part: the run's line does
+    not call it 'not a property of the part', and its advice is to refine, not to round an
+    edge that is round; at a sharp edge it still is."""
+    from rackstress.stress.governing import ADVICE, describe
+
+    def line(kind):
+        sing = {"value": 90.0, "units": "MPa", "kind": kind, "particle": 7,
+                "position": [1.0, 2.0, 3.0], "near": None, "advice": ADVICE[kind]}
+        return describe(None, sing, None)[0]
+
+    fillet, sharp = line("unresolved fillet"), line("re-entrant edge")
+    assert "at an unresolved fillet" in fillet and "not a property of the part" not in fillet
+    assert "bounded" in fillet and "Round the edge" not in ADVICE["unresolved fillet"]
+    assert "not a property of the part" in sharp

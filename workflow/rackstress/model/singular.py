@@ -13,6 +13,11 @@ limit as the spacing shrinks:
   sharp edge turns by its full angle within any window, a fillet of radius r by only
   WINDOW·a/r, so a fillet of radius above about one spacing (1.43 a) is not singular. A part
   with no known shape falls back on the lattice itself (:func:`lattice_edges`);
+* **unresolved fillet** — a concave edge that turns that far only across several facets
+  within the window (each facet's own angle below :data:`SHARP_DEG`): a fillet of radius under
+  1.43 spacings, faceted. The lattice reads it as a sharp edge and it is left out of the
+  governing stress like one, but the part's peak there is bounded and its own: a spacing
+  below r/1.43 resolves it (it is then no singular point at all);
 * **support boundary** — where held particles meet free ones: the edge of a clamp is a
   mixed boundary (displacement given on one side, traction on the other), singular in the
   continuum; the boundary of the set of fully held particles (:func:`support_boundary`).
@@ -43,7 +48,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 #: The kinds of singular point, in the order ``Singular.kind`` indexes them.
-KINDS = ("re-entrant edge", "support boundary", "point load", "contact edge")
+KINDS = ("re-entrant edge", "support boundary", "point load", "contact edge",
+         "unresolved fillet")
 #: A concave edge is sharp when the surface turns by at least this across the window.
 SHARP_DEG = 20.0
 #: The window's width across an edge, in spacings (±WINDOW/2 about it): a fillet of radius r
@@ -395,9 +401,15 @@ def reentrant(o: np.ndarray, spacing: float, shape=None) -> Singular:
                     "re-entrant edges from the lattice")
     if surf is not None:
         V, F, how = surf
-        seg, turn = sharp_edges(V, F, spacing)
+        E, own, turning, _ = concave_turning(V, F, spacing)
+        sharp = np.degrees(turning) >= SHARP_DEG - 1e-9
+        seg, turn, own = E[sharp], np.degrees(turning[sharp]), np.degrees(own[sharp])
         pts, which = sample_segments(seg, SAMPLE * spacing)
-        return Singular(pts, np.zeros(len(pts), np.int64), turn[which], how, note, (V, F))
+        # an edge that turns sharply only with its neighbours within the window (its own
+        # facet's angle below SHARP_DEG) is a fillet of radius under 1.43 spacings, faceted:
+        # singular at this spacing, bounded in the part
+        kind = np.where(own[which] >= SHARP_DEG - 1e-9, 0, KINDS.index("unresolved fillet"))
+        return Singular(pts, kind.astype(np.int64), turn[which], how, note, (V, F))
     pts = lattice_edges(o, spacing) if len(o) else np.zeros((0, 3))
     return Singular(pts, np.zeros(len(pts), np.int64), np.full(len(pts), 90.0),
                     "the lattice's concave edges", note)

@@ -75,12 +75,31 @@ ADVICE = {
                          "(a pin in a hole, a washer's area) or read the governing stress"),
     "point load": ("a load on a few particles (a point or line load): its stress grows as the "
                    "spacing shrinks. Spread the load over the real contact area"),
+    "unresolved fillet": ("a fillet of radius under 1.43 spacings (its face turns through 20° "
+                          "or more within half a spacing), which this spacing does not "
+                          "resolve: the lattice reads it as a sharp edge and the governing "
+                          "stress leaves it out, but the part's peak there is bounded and its "
+                          "own. Refine the spacing below the radius / 1.43 (rackstress run "
+                          "--refine says what the finer run reads there), or check it by FE "
+                          "(rackstress fea)"),
     "contact edge": ("where a contact reaches the edge of a face (a pin bearing on a hole's "
                      "rim, a punch's edge): singular like a rigid support's edge, the pressure "
                      "and stress there grow as the spacing shrinks. A chamfer or radius on the "
                      "rim, or a longer bearing, spreads it in the real part; read the governing "
                      "stress beside it"),
 }
+
+
+#: What a singular peak is, by its kind: the continuum's unbounded stress, or (a fillet the
+#: spacing does not resolve) a bounded peak of the part this lattice cannot read.
+SINGULAR_NOTE = {None: "spacing-dependent: unbounded in the continuum",
+                 "unresolved fillet": ("spacing-dependent: a fillet this spacing does not "
+                                       "resolve; its peak is bounded and the part's own")}
+#: ... and said in a line (:func:`describe`, the report).
+SINGULAR_SAID = {None: "spacing-dependent, not a property of the part",
+                 "unresolved fillet": ("not resolved at this spacing: the fillet's own peak "
+                                       "is bounded and a property of the part, read only "
+                                       "finer")}
 
 
 def zone(spacing: float, wall: float | None = None) -> float:
@@ -414,6 +433,7 @@ def record(run, fields, zone_override: float | None = None, singular: dict | Non
                    "safety": (float(y) / v) if (y and v > 0) else None,
                    "zone": z, "spacing": float(spacing),
                    "contact_edges": "contact edge" in s.counts(),
+                   "unresolved_fillets": "unresolved fillet" in s.counts(),
                    "curved_face": curved,
                    "rule": RULE.format(zone=z, unit=length, n=z / spacing)}
             if (run.scene or {}).get("analysis") == "static":
@@ -428,7 +448,7 @@ def record(run, fields, zone_override: float | None = None, singular: dict | Non
                   "position": [float(x) for x in o[j]], "distance": dist,
                   "near": _near(feats, o[j]),
                   "spacing_dependent": True,
-                  "note": "spacing-dependent: unbounded in the continuum",
+                  "note": SINGULAR_NOTE.get(kind, SINGULAR_NOTE[None]),
                   "advice": ADVICE[kind]}
         parts[name] = {"governing": gov, "singular": sp, "zone": z, "spacing": float(spacing),
                        "wall": wall,
@@ -1001,9 +1021,11 @@ def describe(gov: dict | None, sing: dict | None, error: dict | None,
                          f"{gov['notch']['radius']:.3g} {gov.get('length_units', '')} "
                          f"{notch_how(gov['notch'])} (docs/stress.md); the patch fit of the "
                          f"particles reads {gov['patch_value']:.4g} {u}")
-        kinds = ("sharp re-entrant edges, support boundaries, point loads and contact edges"
-                 if gov.get("contact_edges") else
-                 "sharp re-entrant edges, support boundaries and point loads")
+        kinds = ["sharp re-entrant edges"] + (["fillets it does not resolve"]
+                                               if gov.get("unresolved_fillets") else []) \
+            + ["support boundaries", "point loads"] \
+            + (["contact edges"] if gov.get("contact_edges") else [])
+        kinds = ", ".join(kinds[:-1]) + " and " + kinds[-1]
         lines.append(f"    (the largest at least {gov['zone']:.3g} {gov.get('length_units', '')}"
                      f" from {kinds})")
         if error and error.get("extrapolated") is not None:
@@ -1028,7 +1050,9 @@ def describe(gov: dict | None, sing: dict | None, error: dict | None,
                          "rackstress bench governing)"
                          + ("; rackstress run --refine measures it" if static else ""))
     if sing:
-        lines.append(f"  singular peak {sing['value']:.4g} {sing['units']} at a "
-                     f"{sing['kind']}, {_where(sing)}: spacing-dependent, not a property of "
-                     f"the part; {sing['advice'].split(':')[0]}")
+        art = "an" if sing["kind"][0] in "aeiou" else "a"
+        lines.append(f"  singular peak {sing['value']:.4g} {sing['units']} at {art} "
+                     f"{sing['kind']}, {_where(sing)}: "
+                     f"{SINGULAR_SAID.get(sing['kind'], SINGULAR_SAID[None])}; "
+                     f"{sing['advice'].split(':')[0]}")
     return lines
