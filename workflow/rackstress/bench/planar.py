@@ -377,12 +377,18 @@ def _what_it_shows(rows: list, plates: list) -> str:
                    + " spacings per radius, the patch fit flattening the last spacing's "
                    "steep rise (docs/stress.md, \"Patch recovery\"); the particles with a full "
                    "ring of neighbours beside the hole read " + ", ".join(
-                       f"{r['staircase']['8']['mean']:.3f}" for r in holes) + " and those "
+                       _mean(r['staircase']['8']) for r in holes) + " and those "
                    "at a step's inner corner " + ", ".join(
-                       f"{r['staircase']['7']['mean']:.3f}" for r in holes)
+                       _mean(r['staircase']['7']) for r in holes)
                    + " of FEA at their centres (means).")
     out.append(" Nothing was tuned: the scenes are the built-ins' geometry in mm.")
     return "".join(out)
+
+
+def _mean(group: dict) -> str:
+    """A staircase group's mean (:func:`staircase`), or 'none' where no particle is in it (a
+    hole whose radius the spacing divides has no step's inner corner in the band)."""
+    return "none" if group.get("mean") is None else f"{group['mean']:.3f}"
 
 
 def write_section(md: Path, text: str, before: str = "## Against FEA seen through") -> None:
