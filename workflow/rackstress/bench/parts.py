@@ -180,6 +180,11 @@ def _refined(out: Path, stress: dict, r, short) -> dict:
             "bar_extrapolated": err.get("extrapolated"), "bar_order": err.get("order")}
 
 
+#: The FE check's reading is a converged reference where it moved at most this between its
+#: two meshes (its local ball's, or its global FE's where the ball was no refinement)
+FE_CONVERGED = 0.05
+
+
 def refine_comparison(row: dict) -> dict:
     """The FE check's governing stress a row's ``--refine`` values are compared with (its local
     refinement's where it has one that was refined: solved at two mesh sizes, ``moved`` given;
@@ -193,7 +198,10 @@ def refine_comparison(row: dict) -> dict:
     if row.get("refined_mpa") is None or not fe:
         return {}
     gov = row.get("peak_mpa") if row.get("peak_kind") == "governing" else None
+    moved = row.get("fea_local_moved") if local else row.get("fea_moved")
     return {"fe_reference_mpa": fe, "fe_reference_local": bool(local),
+            "fe_reference_moved": moved,
+            "fe_converged": bool(moved is not None and moved <= FE_CONVERGED),
             "governing_over_fe": None if gov is None else gov / fe,
             "refined_over_fe": row["refined_mpa"] / fe,
             "bar_covers_fe": bool(row["bar_low"] <= fe <= row["bar_high"])}
@@ -367,7 +375,7 @@ def markdown(data) -> str:
 
 
 REFINE_HEADER = ["part", "spacing [mm]", "governing [MPa]", "refined [MPa]", "read by",
-                 "error bar [MPa]", "FE [MPa]", "governing / FE", "refined / FE",
+                 "error bar [MPa]", "FE [MPa]", "FE moved", "governing / FE", "refined / FE",
                  "bar covers FE"]
 
 
@@ -383,10 +391,24 @@ def _refine_section(data) -> list:
             fmt(r.get("peak_mpa")), fmt(r["refined_mpa"]), r.get("refined_read") or "—",
             f"{fmt(r['bar_low'])} … {fmt(r['bar_high'])}",
             fmt(r["fe_reference_mpa"]) + (" (local)" if r["fe_reference_local"] else ""),
+            "—" if r.get("fe_reference_moved") is None else
+            f"{100 * r['fe_reference_moved']:.1f} %"
+            + ("" if r.get("fe_converged") else " (not converged)"),
             fmt(r.get("governing_over_fe"), 4), fmt(r["refined_over_fe"], 4),
             "yes" if r["bar_covers_fe"] else "**no**"])
     if not rows:
         return []
+    done = [r for r in data["rows"] if r.get("refined_over_fe") is not None]
+    conv = [r for r in done if r.get("fe_converged")]
+    near = lambda rs: [r for r in rs if abs(r["refined_over_fe"] - 1) <= 0.05]  # noqa: E731
+    tally = (f"The refined governing stress is within 5 % of the FE check on "
+             f"{len(near(done))} of {len(done)} parts; of the {len(conv)} whose FE reading "
+             f"converged (moved at most {100 * FE_CONVERGED:g} % between its two meshes) on "
+             f"{len(near(conv))}"
+             + (f" ({', '.join(r['part'] for r in near(conv))})" if near(conv) else "")
+             + f". The other {len(done) - len(conv)} have no converged reference here: "
+             "their FE moved more between its meshes, and fTetWild meshes a file differently "
+             "from run to run (docs/fea.md).")
     return ["## After `--refine`", "",
             "Each part solved again at spacing/√2 (`rackstress run SCENE --refine`): its "
             "governing stress at both spacings, how the refined one was read (the patch fit or "
@@ -395,4 +417,5 @@ def _refine_section(data) -> list:
             "the refined run's own band; docs/stress.md \"The error bar\"), against the FE "
             "check's governing stress (refined locally where `rackstress fea` could: "
             "*local*). The target: the refined governing stress within 5 % of "
-            "converged FEA.", "", md_table(REFINE_HEADER, rows), ""]
+            "converged FEA. *FE moved*: how far that FE reading moved between its two meshes.",
+            "", md_table(REFINE_HEADER, rows), "", tally, ""]
