@@ -193,30 +193,25 @@ class Cylinder(Region):
         object.__setattr__(self, "start", tuple(a))
         object.__setattr__(self, "end", tuple(b))
 
-    def mask(self, o):
-        a, b = np.asarray(self.start), np.asarray(self.end)
-        axis = b - a
-        length = float(np.linalg.norm(axis))
-        u = axis / length
-        d = _as_points(o) - a
-        t = d @ u
-        radial = d - t[:, None] * u
-        tol = TOL * max(length, self.radius)
-        r = self.radius + tol
-        return ((t >= -tol) & (t <= length + tol)
-                & (np.einsum("ij,ij->i", radial, radial) <= r * r))
-
-    def inner(self, o):
+    def _axial(self, o):
+        """(t along the axis, squared distance from it, length, tolerance) of the rows of o."""
         a, b = np.asarray(self.start), np.asarray(self.end)
         length = float(np.linalg.norm(b - a))
         u = (b - a) / length
         d = _as_points(o) - a
         t = d @ u
         radial = d - t[:, None] * u
-        tol = TOL * max(length, self.radius)
+        return t, np.einsum("ij,ij->i", radial, radial), length, TOL * max(length, self.radius)
+
+    def mask(self, o):
+        t, r2, length, tol = self._axial(o)
+        r = self.radius + tol
+        return (t >= -tol) & (t <= length + tol) & (r2 <= r * r)
+
+    def inner(self, o):
+        t, r2, length, tol = self._axial(o)
         r = self.radius - tol
-        return ((t > tol) & (t < length - tol)
-                & (np.einsum("ij,ij->i", radial, radial) < r * r))
+        return (t > tol) & (t < length - tol) & (r2 < r * r)
 
     def scale(self):
         return float(max(np.linalg.norm(np.asarray(self.end) - np.asarray(self.start)),
@@ -347,34 +342,31 @@ class NearSurface(Region):
         if not self.distance > 0:
             raise SceneError(f"{name}: the selection distance must be positive")
 
-    def mask(self, o):
+    def _distances(self, o):
+        """(rows of o in the triangles' box grown by the distance, their distances)."""
         import trimesh
 
         o = _as_points(o)
-        out = np.zeros(len(o), dtype=bool)
         lo, hi = self.bounds()
         near = np.flatnonzero(np.all((o >= lo) & (o <= hi), axis=1))
         if not len(near):
-            return out
+            return near, np.zeros(0)
         tri = self.triangles
         sub = trimesh.Trimesh(tri.reshape(-1, 3), np.arange(3 * len(tri)).reshape(-1, 3),
                               process=False)
         _, dist, _ = trimesh.proximity.closest_point(sub, o[near])
-        out[near] = np.asarray(dist) <= self.distance * (1.0 + TOL)
+        return near, np.asarray(dist)
+
+    def mask(self, o):
+        near, dist = self._distances(o)
+        out = np.zeros(len(_as_points(o)), dtype=bool)
+        out[near] = dist <= self.distance * (1.0 + TOL)
         return out
 
     def inner(self, o):
-        import trimesh
-
-        o = _as_points(o)
-        out = np.zeros(len(o), dtype=bool)
-        m = np.flatnonzero(self.mask(o))
-        if len(m):
-            tri = self.triangles
-            sub = trimesh.Trimesh(tri.reshape(-1, 3), np.arange(3 * len(tri)).reshape(-1, 3),
-                                  process=False)
-            _, dist, _ = trimesh.proximity.closest_point(sub, o[m])
-            out[m] = np.asarray(dist) < self.distance * (1.0 - TOL)
+        near, dist = self._distances(o)
+        out = np.zeros(len(_as_points(o)), dtype=bool)
+        out[near] = dist < self.distance * (1.0 - TOL)
         return out
 
     def bounds(self):

@@ -286,14 +286,13 @@ def governing_section(stress: dict, headline: bool = True) -> str:
               f"{_num(gov['patch_value'])} {_e(gov['units'])}.</p>")
     sing = stress.get("singular")
     if sing:
+        from rackstress.stress.governing import SINGULAR_SAID
+
+        said = SINGULAR_SAID.get(sing["kind"], SINGULAR_SAID[None])
         w(f'<p class="singular" id="singular" data-kind="{_e(sing["kind"])}">Singular peak: '
           f"<b>{_num(sing['value'])}</b> {_e(sing['units'])} at "
           f"{'an' if sing['kind'][0] in 'aeiou' else 'a'} {_e(sing['kind'])}, "
-          f"{_pos(sing)} — <b>"
-          + ("not resolved at this spacing</b>: the fillet's own peak is bounded and a "
-             "property of the part: " if sing["kind"] == "unresolved fillet" else
-             "spacing-dependent</b>, not a property of the part: ")
-          + f"{_e(sing['advice'])}.</p>")
+          f"{_pos(sing)} — <b>{_e(said[0])}</b>{_e(said[1])}: {_e(sing['advice'])}.</p>")
     err = stress.get("error")
     if err and err.get("extrapolated") is not None:
         u = _e(err.get("units", gov["units"]))

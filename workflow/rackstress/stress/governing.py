@@ -95,11 +95,11 @@ ADVICE = {
 SINGULAR_NOTE = {None: "spacing-dependent: unbounded in the continuum",
                  "unresolved fillet": ("spacing-dependent: a fillet this spacing does not "
                                        "resolve; its peak is bounded and the part's own")}
-#: ... and said in a line (:func:`describe`, the report).
-SINGULAR_SAID = {None: "spacing-dependent, not a property of the part",
-                 "unresolved fillet": ("not resolved at this spacing: the fillet's own peak "
-                                       "is bounded and a property of the part, read only "
-                                       "finer")}
+#: ... and said in a line (:func:`describe`; the report sets the first part in bold).
+SINGULAR_SAID = {None: ("spacing-dependent", ", not a property of the part"),
+                 "unresolved fillet": ("not resolved at this spacing",
+                                       ": the fillet's own peak is bounded and a property of "
+                                       "the part, read only finer")}
 
 
 def zone(spacing: float, wall: float | None = None) -> float:
@@ -1053,6 +1053,6 @@ def describe(gov: dict | None, sing: dict | None, error: dict | None,
         art = "an" if sing["kind"][0] in "aeiou" else "a"
         lines.append(f"  singular peak {sing['value']:.4g} {sing['units']} at {art} "
                      f"{sing['kind']}, {_where(sing)}: "
-                     f"{SINGULAR_SAID.get(sing['kind'], SINGULAR_SAID[None])}; "
+                     f"{''.join(SINGULAR_SAID.get(sing['kind'], SINGULAR_SAID[None]))}; "
                      f"{sing['advice'].split(':')[0]}")
     return lines
