@@ -240,19 +240,16 @@ def axis_fractions(o: np.ndarray, spacing: float, part) -> np.ndarray:
     e = a/2 or t on each side. A wall of thickness t_w filled with n layers then adds up to
     Σ φ·a = t_w whatever t_w/a is, where the lattice alone represents n·a.
     """
+    from rackstress.lib.cells import lattice_sides
+
     a = float(spacing)
     o = np.asarray(o, dtype=float)
-    g = _sites(o, a, "boundary cells")
-    dims = g.max(axis=0) + 3
-    occ = np.zeros(tuple(dims), dtype=bool)
-    occ[g[:, 0] + 1, g[:, 1] + 1, g[:, 2] + 1] = True
+    _sites(o, a, "boundary cells")              # on one cubic lattice, or a SceneError
+    sides = lattice_sides(o, a)
     ext = np.full((len(o), 3), a)
     for ax in range(3):
         for sgn in (1, -1):
-            e = np.zeros(3, dtype=np.int64)
-            e[ax] = sgn
-            nb = g + 1 + e
-            free = np.flatnonzero(~occ[nb[:, 0], nb[:, 1], nb[:, 2]])
+            free = np.flatnonzero(~sides[:, ax, (sgn + 1) // 2])
             if not len(free):
                 continue
             step = np.zeros(3)
@@ -297,7 +294,12 @@ def fraction_weights(o: np.ndarray, i: np.ndarray, j: np.ndarray, phi: np.ndarra
     d = np.rint((o[j] - o[i]) / a).astype(np.int64)
     ones = (d != 0).sum(axis=1)
     w = np.ones(len(i))
-    lone = lonely_axes(o, a) if base is not None else None
+    if base is not None:            # no neighbour on either side along an axis: a sheet
+        from rackstress.lib.cells import lattice_sides
+
+        lone = ~lattice_sides(o, a).any(axis=2)
+    else:
+        lone = None
     for ax in range(3):
         f = 0.5 * (phi[i, ax] + phi[j, ax])
         along = d[:, ax] == 0
@@ -315,23 +317,6 @@ def fraction_weights(o: np.ndarray, i: np.ndarray, j: np.ndarray, phi: np.ndarra
                 nearest = np.where(row, np.maximum(f - (1.0 - f) * 0.5 / b, 0.25 * f), nearest)
         w = np.where(along, w * np.where(ones == 1, nearest, f), w)
     return w
-
-
-def lonely_axes(o: np.ndarray, spacing: float) -> np.ndarray:
-    """(n, 3) bool: the particle has no lattice neighbour on either side along that axis (a
-    sheet one layer thick, a strut one particle wide)."""
-    a = float(spacing)
-    g = _sites(np.asarray(o, dtype=float), a, "one-layer sheets")
-    dims = g.max(axis=0) + 3
-    occ = np.zeros(tuple(dims), dtype=bool)
-    occ[g[:, 0] + 1, g[:, 1] + 1, g[:, 2] + 1] = True
-    out = np.ones((len(g), 3), dtype=bool)
-    for ax in range(3):
-        for sgn in (1, -1):
-            nb = g + 1
-            nb[:, ax] += sgn
-            out[:, ax] &= ~occ[nb[:, 0], nb[:, 1], nb[:, 2]]
-    return out
 
 
 def _kmeans_table_numpy(S1, S2, C, m: int, n: int) -> np.ndarray:

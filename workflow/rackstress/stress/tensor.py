@@ -55,6 +55,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from rackstress.lib.cells import lattice_sides
+
 #: Voigt order of the internal 6-vectors (tensor components, not engineering shears)
 VOIGT = ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))
 #: Order of the six components of the ``stress`` measure: ParaView's symmetric-tensor order
@@ -268,23 +270,6 @@ def to_output(s: np.ndarray) -> np.ndarray:
 #: 3-layer beam's +4.2 %, a 6-layer one's −10.5 %; at a hole of radius 4 spacings 2.5 reads
 #: 0.55 of FEA, 1.5 0.70 (both resolution-limited)
 PATCH_RADIUS = 2.5
-
-
-def lattice_sides(o: np.ndarray, spacing: float) -> np.ndarray:
-    """Which lattice neighbours each particle has on its cubic lattice (n, 3, 2): per axis,
-    the particle at −a and at +a."""
-    a = float(spacing)
-    o = np.asarray(o, float)
-    g = np.rint((o - o.min(axis=0)) / a).astype(np.int64) + 1
-    occ = np.zeros(tuple(g.max(axis=0) + 2), dtype=bool)
-    occ[g[:, 0], g[:, 1], g[:, 2]] = True
-    out = np.zeros((len(o), 3, 2), dtype=bool)
-    for ax in range(3):
-        for h, step in enumerate((-1, 1)):
-            n = g.copy()
-            n[:, ax] += step
-            out[:, ax, h] = occ[n[:, 0], n[:, 1], n[:, 2]]
-    return out
 
 
 def free_faces(o: np.ndarray, spacing: float) -> np.ndarray:
