@@ -833,8 +833,9 @@ class ParticleStress(_RunAnalysis):
             np.minimum.at(a2, b[0], b[3])            # each particle's nearest binding
             phi = read_fractions(run)                # both read the cells' extents and
             held, loads = boundary_rows(run)         # the supports, once
-            self._held_faces = self._support_faces(run, b, mine, a2, phi, held.copy(), loads)
-            self._mirror = self._mirror_shears(run, mine, a2, phi, held)
+            faces = self._held_free_faces(run, mine, a2, phi, held)
+            self._held_faces = self._support_faces(run, b, faces, phi, held.copy(), loads)
+            self._mirror = self._mirror_shears(faces, phi, held)
             if self.volume is not None and (run.scene or {}).get("analysis") == "static":
                 self._pressed = self._pressed_faces(run, mine, phi, held)
         self._patch = None
@@ -856,7 +857,25 @@ class ParticleStress(_RunAnalysis):
             a = float(np.sqrt(np.median(a2[np.isfinite(a2)])))
             self._patch = T.patch_matrix(run.o, a, points, labels, data=data)
 
-    def _support_faces(self, run, b, mine, a2, phi, held, loads):
+    def _held_free_faces(self, run, mine, a2, phi, held):
+        """The free faces of the cells a support holds across, or None: (n×3, per axis −1 or
+        +1 where the particle is held along it and its lattice neighbour on that side is
+        missing, 0 elsewhere; n, its part's spacing), what :meth:`_support_faces` and
+        :meth:`_mirror_shears` read. Static runs (``phi`` written) only. ``a2``: each
+        particle's nearest binding's squared length (its part's spacing)."""
+        if phi is None or not held.any():
+            return None
+        faces, spacing = np.zeros((run.n_atoms, 3)), np.full(run.n_atoms, np.nan)
+        for part in mine:
+            idx = np.asarray(part.index)
+            h = held[idx] & self._mask[idx, None]
+            if not h.any() or not np.isfinite(a2[idx]).any():
+                continue
+            spacing[idx] = float(np.sqrt(np.median(a2[idx][np.isfinite(a2[idx])])))
+            faces[idx] = np.where(h, T.free_faces(run.o[idx], spacing[idx[0]]), 0.0)
+        return (faces, spacing) if faces.any() else None
+
+    def _support_faces(self, run, b, faces, phi, held, loads):
         """The particles a support holds across a face of their cell (a roller, a symmetry
         plane, a clamp: a held direction along which the lattice neighbour is missing), or
         None: (rows, held n×3 mask, offset n×3 to the face, load n×3, the bindings acting on
@@ -865,23 +884,16 @@ class ParticleStress(_RunAnalysis):
         plane read half the stress across the plane. The face lies (φ − ½)·a beyond the
         particle (φ its cell's extent along the axis, ``read_fractions``): a particle on the
         plane itself has half a cell, its stress whole already, and gets nothing. Static runs
-        (``phi`` written) only: a dynamic run's loads at a frame are not in its files. ``a2``:
-        each particle's nearest binding's squared length (its part's spacing); ``phi``,
-        ``held``, ``loads``: the run's ``read_fractions`` and ``boundary_rows``."""
-        if b is None or not len(b[0]) or phi is None:
+        (``phi`` written) only: a dynamic run's loads at a frame are not in its files.
+        ``faces``: :meth:`_held_free_faces`; ``phi``, ``held``, ``loads``: the run's
+        ``read_fractions`` and ``boundary_rows``."""
+        if b is None or not len(b[0]) or faces is None:
             return None
         held &= self._mask[:, None]
-        if not held.any():
-            return None
-        off = np.zeros((run.n_atoms, 3))
-        for part in mine:
-            idx = np.asarray(part.index)
-            h = held[idx]
-            if not h.any() or not np.isfinite(a2[idx]).any():
-                continue
-            a = float(np.sqrt(np.median(a2[idx][np.isfinite(a2[idx])])))
-            reach = np.clip(np.nan_to_num(phi[idx], nan=1.0) - 0.5, 0.0, 1.0) * a
-            off[idx] = np.where(h, T.free_faces(run.o[idx], a), 0.0) * reach
+        side, spacing = faces
+        reach = np.clip(np.nan_to_num(phi, nan=1.0) - 0.5, 0.0, 1.0) \
+            * np.nan_to_num(spacing)[:, None]
+        off = side * reach
         rows = np.flatnonzero(np.any(off != 0.0, axis=1))
         if not len(rows):
             return None
@@ -891,7 +903,7 @@ class ParticleStress(_RunAnalysis):
         return rows, held[rows], off[rows], loads[rows], sel, T.incidence(at[b[0][sel]],
                                                                            len(rows))
 
-    def _mirror_shears(self, run, mine, a2, phi, held) -> np.ndarray | None:
+    def _mirror_shears(self, faces, phi, held) -> np.ndarray | None:
         """The shear components to read as zero (n, 6 bool), or None: σ_nt of a particle on a
         plane a support holds it across (a roller, a symmetry plane: held along n, its lattice
         neighbour across n missing, its cell ending at the particle, φ_n = ½) for each axis t
@@ -900,23 +912,15 @@ class ParticleStress(_RunAnalysis):
         the plane meets a free face the particle's bindings are one-sided and read a shear
         that grows with refinement: LE1's particle at D, on its symmetry plane and the
         membrane's inner edge, read σ_xy 20 … 23 MPa at 50 … 12.5 mm, its von Mises 8 % above
-        its σ_yy (bench nafems' scene, by hand). A clamp (held along t too) keeps its shear."""
-        if phi is None or not held.any():
+        its σ_yy (bench nafems' scene, by hand). A clamp (held along t too) keeps its shear.
+        ``faces``: :meth:`_held_free_faces`."""
+        if faces is None:
             return None
-        out = np.zeros((run.n_atoms, 6), bool)
-        col = {frozenset(ij): c for c, ij in enumerate(T.VOIGT)}
-        for part in mine:
-            idx = np.asarray(part.index)
-            h = held[idx] & self._mask[idx, None]
-            if not h.any() or not np.isfinite(a2[idx]).any():
-                continue
-            a = float(np.sqrt(np.median(a2[idx][np.isfinite(a2[idx])])))
-            on = h & (T.free_faces(run.o[idx], a) != 0) \
-                & (np.abs(np.nan_to_num(phi[idx], nan=1.0) - 0.5) < 1e-6)
-            for n_ in range(3):
-                for t in range(3):
-                    if t != n_:
-                        out[idx, col[frozenset((n_, t))]] |= on[:, n_] & ~held[idx, t]
+        on = (faces[0] != 0) & (np.abs(np.nan_to_num(phi, nan=1.0) - 0.5) < 1e-6)
+        out = np.zeros((len(on), 6), bool)
+        for c, (n_, t) in enumerate(T.VOIGT):
+            if n_ != t:
+                out[:, c] = (on[:, n_] & ~held[:, t]) | (on[:, t] & ~held[:, n_])
         return out if out.any() else None
 
     def _pressed_faces(self, run, mine, phi, held) -> np.ndarray | None:
