@@ -327,6 +327,7 @@ def markdown(data) -> str:
         out += ["FE meshes (`fea.json` → `mesh`, `note`, `fe_budget`):", ""]
         for r in meshed:
             b = r.get("fea_budget") or {}
+            ref = local_is_reference({"moved": r.get("fea_local_moved")})
             out.append(f"* **{r['part']}**: {r['fea_mesh']}, {fmt(r.get('fea_tetrahedra'), 6)} "
                        "tetrahedra"
                        + (f"; fTetWild's surface at edges of {fmt(r['fea_ftetwild_edge'])} mm "
@@ -351,12 +352,10 @@ def markdown(data) -> str:
                           f"{fmt(r['peak_mpa'] / r['fea_local_mpa'])}"
                           if r.get("fea_local_mpa") and r.get("peak_mpa") is not None
                           and r.get("peak_kind") == "governing"
-                          and local_is_reference({"moved": r.get("fea_local_moved")}) else "")
+                          and ref else "")
                        + (f"; {r['fea_local_note']}" if r.get("fea_local_note") else "")
                        + (f" (its ball read {fmt(r['fea_local_mpa'])} MPa: no reference)"
-                          if r.get("fea_local_mpa")
-                          and not local_is_reference({"moved": r.get("fea_local_moved")})
-                          else ""))
+                          if r.get("fea_local_mpa") and not ref else ""))
         out.append("")
     if data.get("refine"):
         out += _refine_section(data)

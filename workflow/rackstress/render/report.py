@@ -286,12 +286,11 @@ def governing_section(stress: dict, headline: bool = True) -> str:
               f"{_num(gov['patch_value'])} {_e(gov['units'])}.</p>")
     sing = stress.get("singular")
     if sing:
-        from rackstress.stress.governing import SINGULAR_SAID
+        from rackstress.stress.governing import SINGULAR_SAID, a_kind
 
         said = SINGULAR_SAID.get(sing["kind"], SINGULAR_SAID[None])
         w(f'<p class="singular" id="singular" data-kind="{_e(sing["kind"])}">Singular peak: '
-          f"<b>{_num(sing['value'])}</b> {_e(sing['units'])} at "
-          f"{'an' if sing['kind'][0] in 'aeiou' else 'a'} {_e(sing['kind'])}, "
+          f"<b>{_num(sing['value'])}</b> {_e(sing['units'])} at {_e(a_kind(sing['kind']))}, "
           f"{_pos(sing)} — <b>{_e(said[0])}</b>{_e(said[1])}: {_e(sing['advice'])}.</p>")
     err = stress.get("error")
     if err and err.get("extrapolated") is not None:

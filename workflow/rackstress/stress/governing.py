@@ -980,6 +980,11 @@ def _where(rec: dict) -> str:
     return f"particle {rec['particle']} at ({pos}){near}"
 
 
+def a_kind(kind: str) -> str:
+    """A singular point's kind with its article: 'a re-entrant edge', 'an unresolved fillet'."""
+    return ("an " if kind[:1] in "aeiou" else "a ") + kind
+
+
 def fine_alone_sentence(own: dict, unit: str, length: str = "") -> str:
     """What ``--refine``'s refined run reads on its own where it reads more than the error
     bar's same-rule value (``summary.json["stress"]["error"]["fine_own"]``,
@@ -1050,9 +1055,8 @@ def describe(gov: dict | None, sing: dict | None, error: dict | None,
                          "rackstress bench governing)"
                          + ("; rackstress run --refine measures it" if static else ""))
     if sing:
-        art = "an" if sing["kind"][0] in "aeiou" else "a"
-        lines.append(f"  singular peak {sing['value']:.4g} {sing['units']} at {art} "
-                     f"{sing['kind']}, {_where(sing)}: "
+        lines.append(f"  singular peak {sing['value']:.4g} {sing['units']} at "
+                     f"{a_kind(sing['kind'])}, {_where(sing)}: "
                      f"{''.join(SINGULAR_SAID.get(sing['kind'], SINGULAR_SAID[None]))}; "
                      f"{sing['advice'].split(':')[0]}")
     return lines
