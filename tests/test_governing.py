@@ -44,7 +44,7 @@ def test_the_same_L_as_a_mesh_file_gives_the_same_edge():
     b = trimesh.creation.box([2, 10, 2])
     b.apply_translation([1, 5, 1])
     m = trimesh.boolean.union([a, b], engine="manifold")
-    seg, turn = S.sharp_edges(m.vertices, m.faces, 0.5)
+    seg, turn, _ = S.sharp_edges(m.vertices, m.faces, 0.5)
     mid = seg.mean(axis=1)
     np.testing.assert_allclose(mid[:, :2], 2.0, atol=1e-9)
     assert turn == pytest.approx(np.full(len(turn), 90.0))

@@ -151,8 +151,10 @@ def sharp_edges(vertices, faces, spacing: float, sharp_deg: float = SHARP_DEG,
 
     Returns
     -------
-    (segments, turning) : ((k, 2, 3) array, (k,) array)
-        The sharp edges' end points and their windows' turning in degrees.
+    (segments, turning, own) : ((k, 2, 3) array, (k,) array, (k,) array)
+        The sharp edges' end points, their windows' turning and each edge's own angle, in
+        degrees (an own angle below ``sharp_deg``: a fillet's facet, sharp only with its
+        neighbours).
 
     Example
     -------
@@ -161,9 +163,9 @@ def sharp_edges(vertices, faces, spacing: float, sharp_deg: float = SHARP_DEG,
     >>> sharp_edges(box.vertices, box.faces, 0.5)[0].shape        # a box is convex: none
     (0, 2, 3)
     """
-    E, _, turning, _ = concave_turning(vertices, faces, spacing, sharp_deg, window)
+    E, own, turning, _ = concave_turning(vertices, faces, spacing, sharp_deg, window)
     sharp = np.degrees(turning) >= sharp_deg - 1e-9
-    return E[sharp], np.degrees(turning[sharp])
+    return E[sharp], np.degrees(turning[sharp]), np.degrees(own[sharp])
 
 
 def concave_turning(vertices, faces, spacing: float, sharp_deg: float = SHARP_DEG,
@@ -401,9 +403,7 @@ def reentrant(o: np.ndarray, spacing: float, shape=None) -> Singular:
                     "re-entrant edges from the lattice")
     if surf is not None:
         V, F, how = surf
-        E, own, turning, _ = concave_turning(V, F, spacing)
-        sharp = np.degrees(turning) >= SHARP_DEG - 1e-9
-        seg, turn, own = E[sharp], np.degrees(turning[sharp]), np.degrees(own[sharp])
+        seg, turn, own = sharp_edges(V, F, spacing)
         pts, which = sample_segments(seg, SAMPLE * spacing)
         # an edge that turns sharply only with its neighbours within the window (its own
         # facet's angle below SHARP_DEG) is a fillet of radius under 1.43 spacings, faceted:
