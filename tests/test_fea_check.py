@@ -82,6 +82,36 @@ def test_patch_recovery_fits_its_data_and_falls_back_where_they_are_flat():
     assert rec == pytest.approx(np.asarray(T.patch_matrix(o, a, pts) @ s), abs=1e-12)
 
 
+def test_a_part_one_layer_thick_is_fitted_in_its_plane():
+    """A membrane of one layer (z = 0.5 everywhere) with σ = 4 + 3x − 2y: its patches do not
+    span z, so they are fitted in the plane, and every particle reads the field at its
+    recovery point (the edges half a spacing out) — not its own value, which the edge rows
+    would read a spacing and a half off. Its wrong steps (+50 on two particles of the edge,
+    left out of ``data`` as ``regular_cells`` leaves a staircase's steps) are read from the
+    other particles. A second part, a 3D block, is fitted in 3D beside it."""
+    a = 1.0
+    sheet = np.array([[x, y, 0.5] for x in range(8) for y in range(6)], float)
+    block = _block(4, 4, 4, a) + [20.0, 0.0, 0.0]
+    o = np.vstack([sheet, block])
+    lab = np.r_[np.zeros(len(sheet), int), np.ones(len(block), int)]
+    assert T.flat_axes(o, a, lab)[:len(sheet)].tolist() == [[False, False, True]] * len(sheet)
+    assert not T.flat_axes(o, a, lab)[len(sheet):].any()
+    pts = np.vstack([T.part_recovery_points(sheet), T.part_recovery_points(block)])
+    assert pts[:len(sheet), 2] == pytest.approx(0.5)             # nothing out of the plane
+
+    def field(x):
+        return (4.0 + 3.0 * x[:, 0] - 2.0 * x[:, 1])[:, None] * np.ones((1, 6))
+
+    steps = np.zeros(len(o), bool)
+    steps[[5, 47]] = True                                        # (0, 5) and (7, 5)
+    s = field(o) + np.where(steps, 50.0, 0.0)[:, None]
+    rec = np.asarray(T.patch_matrix(o, a, pts, lab, data=~steps) @ s)
+    assert rec == pytest.approx(field(pts), abs=1e-9)
+    # the edge x = 7 (its corners aside) reads the field at x = 7.5: 1.5 above its own value
+    edge = np.flatnonzero((o[:, 0] == 7.0) & (lab == 0) & (o[:, 1] > 0) & (o[:, 1] < 5))
+    assert rec[edge, 0] - field(o)[edge, 0] == pytest.approx(1.5)
+
+
 def test_regular_cells_are_the_lattice_boxes():
     """A 4 × 4 × 4 block's cells are all regular (faces at half a spacing: φ = 1); a face
     cell that overhangs by 0.7 spacing (φ = 1.2) is not, nor an edge cell whose face falls

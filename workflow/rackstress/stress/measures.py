@@ -844,10 +844,13 @@ class ParticleStress(_RunAnalysis):
             points = np.asarray(run.o, float).copy()
             # the fits sample the regular cells, and the supported ones (their support's
             # force in their stress): docs/stress.md "Patch recovery"
-            data = held.any(axis=1).copy()
+            data = np.zeros(n, bool)
             for k, part in enumerate(mine):
                 idx = np.asarray(part.index)
                 labels[idx] = k
+                # a direction held on every particle of the part (a membrane kept in its
+                # plane) is the model's constraint, not a face's support
+                data[idx] = (held[idx] & ~held[idx].all(axis=0)).any(axis=1)
                 points[idx] = T.part_recovery_points(run.o[idx])
                 ap = a2[idx][np.isfinite(a2[idx])]
                 if len(ap):
@@ -1010,6 +1013,8 @@ class ParticleStress(_RunAnalysis):
         if self._patch is not None:
             s[~self._mask] = 0.0
             s = np.asarray(self._patch @ s)
+            if self._mirror is not None:  # nor where the fit reads it, on that plane
+                s = np.where(self._mirror, 0.0, s)
         s[~self._mask] = np.nan
         vm = T.von_mises(s)
         self.results.stress[k] = T.to_output(s)

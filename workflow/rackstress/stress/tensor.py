@@ -440,6 +440,10 @@ def _patch_weights(o, a, points, lab, i, j):
         for c in range(r, 4):
             A[:, r, c] = np.bincount(i, weights=phi[:, r] * phi[:, c], minlength=n)
             A[:, c, r] = A[:, r, c]
+    # a part one layer thick along an axis (a membrane, a plate of one layer): its fit is the
+    # plane's, (1, two in-plane terms); that axis' term is held at zero (its row and column
+    # are empty, its recovery offset is zero), not left singular
+    A[:, 1:, 1:] += np.einsum("na,ab->nab", flat_axes(o, a, lab).astype(float), np.eye(3))
     lam = np.linalg.eigvalsh(A)
     ok = (lam[:, 0] > 1e-8 * np.maximum(lam[:, -1], 1e-300)) & (lab >= 0)
     q = np.column_stack([np.ones(n), (np.asarray(points, float) - o) / a])
@@ -451,6 +455,23 @@ def _patch_weights(o, a, points, lab, i, j):
     cols = np.r_[j[use], np.flatnonzero(~ok)]
     vals = np.r_[w[use], np.ones(int((~ok).sum()))]
     return csr_matrix((vals, (rows, cols)), shape=(n, n)), ok
+
+
+def flat_axes(o: np.ndarray, spacing: float, labels) -> np.ndarray:
+    """The axes along which each particle's part (``labels``; −1: none) is one layer thick
+    (n × 3 bool): every particle of the part on one lattice plane across that axis.
+
+    >>> g = np.array([[x, y, 0.5] for x in range(3) for y in range(2)], float)
+    >>> flat_axes(g, 1.0, np.zeros(6, int))[0].tolist()
+    [False, False, True]
+    """
+    o = np.asarray(o, float)
+    lab = np.asarray(labels, np.int64)
+    out = np.zeros((len(o), 3), bool)
+    for k in np.unique(lab[lab >= 0]):
+        m = lab == k
+        out[m] = np.ptp(o[m], axis=0) < 1e-6 * float(spacing)
+    return out
 
 
 def part_recovery_points(o: np.ndarray, spacing: float | None = None) -> np.ndarray:
