@@ -37,15 +37,17 @@ def test_too_few_or_too_close_samples_give_no_reading():
 def test_a_holes_radius_and_normals_from_its_surface():
     """A 40 × 20 × 4 block with a hole of radius 4 through it (256 segments): every face point
     on the hole's bore (geometry: 4 from its axis), its radius from the surface's turning
-    within 10 % of 4, its normal pointing away from the axis (into the part); the block's
-    convex edges give none."""
+    within 10 % of 4, its normal pointing away from the axis (into the part), the facets'
+    spacing across it their chord 2·4·sin(π/256) within 10 %; the block's convex edges give
+    none."""
     import trimesh
 
     box = trimesh.creation.box([40, 20, 4])
     hole = trimesh.creation.cylinder(radius=4.0, height=10.0, sections=256)
     m = trimesh.boolean.difference([box, hole], engine="manifold")
-    pts, rho, nrm = N.faces(m.vertices, m.faces, 0.5)
+    pts, rho, nrm, chord = N.faces(m.vertices, m.faces, 0.5)
     assert len(pts) > 100
+    np.testing.assert_allclose(chord, 8.0 * np.sin(np.pi / 256), rtol=0.10)
     r = np.hypot(pts[:, 0], pts[:, 1])
     np.testing.assert_allclose(r, 4.0, rtol=1e-6)
     np.testing.assert_allclose(rho, 4.0, rtol=0.10)

@@ -690,12 +690,12 @@ def notch_peak(run, name: str, spacing: float, singular: Singular, zone_: float,
     if surf is None:
         return None
     a = float(spacing)
-    pts, rho, nrm = notch.faces(surf[0], surf[1], a)
+    pts, rho, nrm, chord = notch.faces(surf[0], surf[1], a)
     keep = (rho >= NOTCH_MIN_RADIUS * a) & (singular.distance(pts)[0] >= zone_) \
         if len(pts) else np.zeros(0, bool)
     if not keep.any():
         return None
-    pts, rho, nrm = pts[keep], rho[keep], nrm[keep]
+    pts, rho, nrm, chord = pts[keep], rho[keep], nrm[keep], chord[keep]
     part = run.parts[name]
     st = ParticleStress(run, parts=[name], method="continuum")
     st.run(frames=[int(frame)])
@@ -720,12 +720,12 @@ def notch_peak(run, name: str, spacing: float, singular: Singular, zone_: float,
     if engaged.any():
         d, _ = cKDTree(o[engaged]).query(pts)
         free = d > NOTCH_CLEAR * a
-        pts, rho, nrm, reach = pts[free], rho[free], nrm[free], d[free]
+        pts, rho, nrm, reach, chord = pts[free], rho[free], nrm[free], d[free], chord[free]
     r = notch.readings(o, vm, pts, rho, nrm, a)
     ok = np.isfinite(r)
     if not ok.any():
         return None
-    pts, rho, r, reach = pts[ok], rho[ok], r[ok], reach[ok]
+    pts, rho, r, reach, chord = pts[ok], rho[ok], r[ok], reach[ok], chord[ok]
     smooth = np.array([np.median(r[n]) for n in
                        cKDTree(pts).query_ball_point(pts, NOTCH_SMOOTH * a * (1 + 1e-9))])
     k = int(np.argmax(smooth))
@@ -734,7 +734,7 @@ def notch_peak(run, name: str, spacing: float, singular: Singular, zone_: float,
     if inner.any():
         start = int(np.flatnonzero(inner)[int(np.argmax(smooth[inner]))])
         sk, value, why = _notch_submodel(run, part, o, surf, pts, rho, start, a, int(frame),
-                                         inner, st.volume, reach, bears)
+                                         inner, st.volume, reach, bears, chord)
         k = k if value is None else sk
     else:
         value, why = None, (f"every point of the face lies within {notch.SUBMODEL_CLEAR:g} "
@@ -756,7 +756,7 @@ NOTCH_SUBMODEL_TIMEOUT_S = 60.0
 
 
 def _notch_submodel(run, part, o, surf, pts, rho, k: int, a: float, frame: int,
-                    allowed: np.ndarray, volume, reach=None, bears=None):
+                    allowed: np.ndarray, volume, reach=None, bears=None, chord=None):
     """:func:`_notch_submodel_here` in a forked child process, stopped after
     :data:`NOTCH_SUBMODEL_TIMEOUT_S` (the fit's reading then stands, and the note says why)."""
     from rackstress.lib import forked
@@ -764,7 +764,7 @@ def _notch_submodel(run, part, o, surf, pts, rho, k: int, a: float, frame: int,
     try:
         return forked.call(lambda: _notch_submodel_here(run, part, o, surf, pts, rho, k, a,
                                                         frame, allowed, volume, reach,
-                                                        bears),
+                                                        bears, chord),
                            NOTCH_SUBMODEL_TIMEOUT_S)
     except forked.Timeout:
         return k, None, (f"gmsh had not meshed the submodel's ball after "
@@ -773,7 +773,7 @@ def _notch_submodel(run, part, o, surf, pts, rho, k: int, a: float, frame: int,
 
 
 def _notch_submodel_here(run, part, o, surf, pts, rho, k: int, a: float, frame: int,
-                         allowed: np.ndarray, volume, reach=None, bears=None):
+                         allowed: np.ndarray, volume, reach=None, bears=None, chord=None):
     """The face's peak about face point ``k`` by the submodel (:func:`rackstress.stress.notch.
     submodel`: the part's true shape in a ball about the face point, its cut displaced as the
     particles are), read at the ball's centre, the farthest from its cut (where the
@@ -784,7 +784,8 @@ def _notch_submodel_here(run, part, o, surf, pts, rho, k: int, a: float, frame: 
     volumetric terms ``volume`` (or None); ``reach`` the face points' distances to the nearest
     particle something bears on (:func:`rackstress.stress.notch.submodel_radius`), ``bears``
     (positions, directions) the particles held, loaded or pressed (held by the submodel in
-    those directions where its ball reaches them); the last
+    those directions where its ball reaches them), ``chord`` the facets' spacing across the
+    face at each point (:func:`rackstress.stress.notch.submodel_fine`); the last
     ball's reading checked by a smaller ball (:func:`rackstress.stress.notch.cut_check`). Returns
     (face point, value, None), or (k, None,
     why) where no submodel can be made (gmsh or manifold3d not installed: the ``fem`` extra;
@@ -799,13 +800,15 @@ def _notch_submodel_here(run, part, o, surf, pts, rho, k: int, a: float, frame: 
     nu = _lattice_nu(volume, part, mat)
     reach = np.full(len(pts), np.inf) if reach is None else np.asarray(reach, float)
     held = None if bears is None else (np.asarray(bears[0], float), bears[1], a)
+    chord = np.zeros(len(pts)) if chord is None else np.asarray(chord, float)
     seen, at, value = [], k, None
     for _ in range(NOTCH_BALLS):
         seen.append(k)
         R = notch.submodel_radius(a, float(rho[k]), float(reach[k]))
         try:
             sol = notch.submodel(surf[0], surf[1], pts[k], o, u, a, float(rho[k]),
-                                 float(mat["E"]), nu, radius=R, bears=held)
+                                 float(mat["E"]), nu, radius=R, bears=held,
+                                 fine=notch.submodel_fine(a, rho[k], chord[k]))
         except ImportError as exc:
             return k, None, (f"{exc.name or exc} is not installed: the notch submodel needs "
                              "the fem extra (pip install 'rackstress[fem]')")
@@ -823,7 +826,8 @@ def _notch_submodel_here(run, part, o, surf, pts, rho, k: int, a: float, frame: 
     # the classical submodel's own check: its reading may not depend on where its cut lies
     try:
         other, R2, agree = notch.cut_check(surf[0], surf[1], pts[at], o, u, a, float(rho[at]),
-                                           float(mat["E"]), nu, R_at, value, bears=held)
+                                           float(mat["E"]), nu, R_at, value, bears=held,
+                                           fine=notch.submodel_fine(a, rho[at], chord[at]))
     except Exception as exc:  # noqa: BLE001 - gmsh's own words: the reading stands, unchecked
         return at, value, f"its check ball could not be made ({exc}): unchecked"
     if not agree:
