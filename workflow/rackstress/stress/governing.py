@@ -614,8 +614,10 @@ NOTCH_ERROR = 0.18
 #: the largest |reading / converged FEA − 1| of the submodel's readings measured on the
 #: plate with a hole, the notched and the filleted bars at eight spacings 0.35–0.6 mm (0.060,
 #: the plate at 0.55 mm; measured while sizing its ball, notch.SUBMODEL_RHO); the same
-#: bench's own runs, refined ones included, read within 0.037 of FEA
-NOTCH_SUBMODEL_ERROR = 0.06
+#: bench's own runs, refined ones included, read within 0.037 of FEA; ``rackstress bench
+#: governing``'s filleted C frame at 0.71 mm read 1.061 of FEA once the submodel was graded
+#: no finer than the facets (notch.submodel_fine; 1.054 before): rounded up to that
+NOTCH_SUBMODEL_ERROR = 0.065
 
 
 def curved_near(rundir, name: str, points, spacing: float) -> np.ndarray:
