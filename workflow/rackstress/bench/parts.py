@@ -399,15 +399,24 @@ def _refine_section(data) -> list:
         return []
     done = [r for r in data["rows"] if r.get("refined_over_fe") is not None]
     conv = [r for r in done if r.get("fe_converged")]
+
+    def _other(n: int) -> str:
+        return (("The other one has no converged reference here: its FE moved" if n == 1 else
+                 f"The other {n} have no converged reference here: their FE moved")
+                + " more between its meshes, and fTetWild meshes a file differently from run "
+                "to run (docs/fea.md).")
+
     near = lambda rs: [r for r in rs if abs(r["refined_over_fe"] - 1) <= 0.05]  # noqa: E731
     tally = (f"The refined governing stress is within 5 % of the FE check on "
              f"{len(near(done))} of {len(done)} parts; of the {len(conv)} whose FE reading "
              f"converged (moved at most {100 * FE_CONVERGED:g} % between its two meshes) on "
              f"{len(near(conv))}"
              + (f" ({', '.join(r['part'] for r in near(conv))})" if near(conv) else "")
-             + f". The other {len(done) - len(conv)} have no converged reference here: "
-             "their FE moved more between its meshes, and fTetWild meshes a file differently "
-             "from run to run (docs/fea.md).")
+             + ("; outside 5 %: " + ", ".join(f"{r['part']} {r['refined_over_fe']:.3g}"
+                                            for r in conv if r not in near(conv))
+                if len(near(conv)) < len(conv) else "")
+             + (". " + _other(len(done) - len(conv)) if len(done) > len(conv) else ".")
+             )
     return ["## After `--refine`", "",
             "Each part solved again at spacing/√2 (`rackstress run SCENE --refine`): its "
             "governing stress at both spacings, how the refined one was read (the patch fit or "
