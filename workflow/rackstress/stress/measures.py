@@ -731,7 +731,8 @@ class ParticleStress(_RunAnalysis):
     For the parts with a material (``scene.json``: ``material``, ``volume``) and the run's
     ``bindings.npz`` (written when the run starts): the bindings' virial per particle volume
     W_i/V_i with each free face's cell moment restored (``"continuum"``), then recovered by a
-    linear least-squares fit over each particle's patch (2.5 spacings; its regular cells',
+    linear least-squares fit over each particle's patch (2.5 spacings, in its plane for a part
+    one layer thick; its regular cells',
     :func:`rackstress.stress.tensor.regular_cells`) evaluated at its recovery point — its
     centre inside the part, the surface point of its cell on the surface
     (``method="patch"``, the default: the stress where an engineer reads it, on the face);
