@@ -85,8 +85,8 @@ def test_patch_recovery_fits_its_data_and_falls_back_where_they_are_flat():
 def test_a_part_one_layer_thick_is_fitted_in_its_plane():
     """A membrane of one layer (z = 0.5 everywhere) with σ = 4 + 3x − 2y: its patches do not
     span z, so they are fitted in the plane, and every particle reads the field at its
-    recovery point (the edges half a spacing out) — not its own value, which the edge rows
-    would read a spacing and a half off. Its wrong steps (+50 on two particles of the edge,
+    recovery point (the edges half a spacing out) — not its own value, which an edge row
+    x = 7 would read 1.5 low (3 × ½ spacing). Its wrong steps (+50 on two particles of the edge,
     left out of ``data`` as ``regular_cells`` leaves a staircase's steps) are read from the
     other particles. A second part, a 3D block, is fitted in 3D beside it."""
     a = 1.0
