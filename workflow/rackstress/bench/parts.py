@@ -401,10 +401,10 @@ def _refine_section(data) -> list:
     conv = [r for r in done if r.get("fe_converged")]
 
     def _other(n: int) -> str:
-        return (("The other one has no converged reference here: its FE moved" if n == 1 else
-                 f"The other {n} have no converged reference here: their FE moved")
-                + " more between its meshes, and fTetWild meshes a file differently from run "
-                "to run (docs/fea.md).")
+        return (("The other one has no converged reference here: its FE moved more between "
+                 "its meshes" if n == 1 else f"The other {n} have no converged reference here: "
+                 "their FE moved more between their meshes")
+                + ", and fTetWild meshes a file differently from run to run (docs/fea.md).")
 
     near = lambda rs: [r for r in rs if abs(r["refined_over_fe"] - 1) <= 0.05]  # noqa: E731
     tally = (f"The refined governing stress is within 5 % of the FE check on "
