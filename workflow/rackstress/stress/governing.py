@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from rackstress.model.singular import KINDS, Singular
-from rackstress.stress.rundata import boundary_rows
+from rackstress.stress.rundata import boundary_rows, face_supports
 
 #: The zone: particles nearer than this many spacings to a singular point are left out of the
 #: governing stress. Measured (``rackstress bench governing``, docs/stress.md): beyond two
@@ -712,10 +712,8 @@ def notch_peak(run, name: str, spacing: float, singular: Singular, zone_: float,
     engaged = engaged[part.index]
     # ... and a submodel's ball holds, as its cut, every particle something bears on, in the
     # directions it is held: a roller or a symmetry plane too (its face is no free surface
-    # either); not a direction held on every particle of the part (a membrane kept in its
-    # plane: a constraint of the model, not a face's support)
-    hp = held[part.index] & ~held[part.index].all(axis=0)
-    ways = hp | engaged[:, None]
+    # either); not a direction held on every particle of the part (face_supports)
+    ways = face_supports(held[part.index]) | engaged[:, None]
     on = ways.any(axis=1)
     bears = (o[on], ways[on])
     reach = np.full(len(pts), np.inf)

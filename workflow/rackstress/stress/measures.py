@@ -61,7 +61,7 @@ from scipy.spatial import cKDTree
 from rackstress.stress import tensor as T
 from rackstress.stress.dump import DumpColumnsError, StressInputError
 from rackstress.stress.fit import FITS
-from rackstress.stress.rundata import boundary_rows, face_stress
+from rackstress.stress.rundata import boundary_rows, face_stress, face_supports
 
 #: Cutoff of the strain neighbourhood in units of the part's typical (median nearest) spacing.
 CUTOFF_FACTOR = 1.5
@@ -843,15 +843,13 @@ class ParticleStress(_RunAnalysis):
         if self.method == "patch":
             labels = np.full(n, -1, np.int64)
             points = np.asarray(run.o, float).copy()
-            # the fits sample the regular cells, and the supported ones (their support's
-            # force in their stress): docs/stress.md "Patch recovery"
+            # the fits sample the regular cells, and the ones a support holds across a face (its
+            # force in their stress; face_supports): docs/stress.md "Patch recovery"
             data = np.zeros(n, bool)
             for k, part in enumerate(mine):
                 idx = np.asarray(part.index)
                 labels[idx] = k
-                # a direction held on every particle of the part (a membrane kept in its
-                # plane) is the model's constraint, not a face's support
-                data[idx] = (held[idx] & ~held[idx].all(axis=0)).any(axis=1)
+                data[idx] = face_supports(held[idx]).any(axis=1)
                 points[idx] = T.part_recovery_points(run.o[idx])
                 ap = a2[idx][np.isfinite(a2[idx])]
                 if len(ap):

@@ -291,3 +291,16 @@ def boundary_rows(run) -> tuple[np.ndarray, np.ndarray]:
             _by_row(run, z["held_ids"], z["held_mask"], held)
             _by_row(run, z["load_ids"], z["load_force"], loads)
     return held, loads
+
+
+def face_supports(held: np.ndarray) -> np.ndarray:
+    """The directions a support holds each particle of one part across a face (k×3 bool), from
+    its rows of :func:`boundary_rows`' ``held``: not a direction held on every particle of the
+    part — a membrane kept in its plane is a constraint of the model, not a face's support.
+
+    >>> held = np.array([[False, True, True], [False, False, True]])    # z held on both
+    >>> face_supports(held).tolist()
+    [[False, True, False], [False, False, False]]
+    """
+    held = np.asarray(held, bool)
+    return held & ~held.all(axis=0)

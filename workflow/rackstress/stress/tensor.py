@@ -420,17 +420,19 @@ def patch_matrix(o: np.ndarray, spacing: float, points: np.ndarray, labels=None,
     j = np.r_[pr[:, 1], pr[:, 0], np.arange(n)]
     keep = (lab[i] == lab[j]) & (lab[i] >= 0)
     i, j = i[keep], j[keep]
-    W, _ = _patch_weights(o, a, points, lab, i, j)
+    flat = flat_axes(o, a, lab)
+    W, _ = _patch_weights(o, a, points, lab, flat, i, j)
     if data is None or np.all(data):
         return W
     use = np.asarray(data, bool)[j]
-    Wd, fit = _patch_weights(o, a, points, lab, i[use], j[use])
+    Wd, fit = _patch_weights(o, a, points, lab, flat, i[use], j[use])
     return diags(fit.astype(float)) @ Wd + diags((~fit).astype(float)) @ W
 
 
-def _patch_weights(o, a, points, lab, i, j):
+def _patch_weights(o, a, points, lab, flat, i, j):
     """:func:`patch_matrix`'s fit over the directed pairs (i, j): (W, ok), ok where the
-    particle's pairs span three dimensions (elsewhere W_ii = 1, its own value)."""
+    particle's pairs span three dimensions, or the plane of its part where ``flat``
+    (:func:`flat_axes`) says it is one layer thick (elsewhere W_ii = 1, its own value)."""
     from scipy.sparse import csr_matrix
 
     n = len(o)
@@ -443,7 +445,7 @@ def _patch_weights(o, a, points, lab, i, j):
     # a part one layer thick along an axis (a membrane, a plate of one layer): its fit is the
     # plane's, (1, two in-plane terms); that axis' term is held at zero (its row and column
     # are empty, its recovery offset is zero), not left singular
-    A[:, 1:, 1:] += np.einsum("na,ab->nab", flat_axes(o, a, lab).astype(float), np.eye(3))
+    A[:, 1:, 1:] += np.einsum("na,ab->nab", flat.astype(float), np.eye(3))
     lam = np.linalg.eigvalsh(A)
     ok = (lam[:, 0] > 1e-8 * np.maximum(lam[:, -1], 1e-300)) & (lab >= 0)
     q = np.column_stack([np.ones(n), (np.asarray(points, float) - o) / a])
