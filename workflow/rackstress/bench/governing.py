@@ -143,7 +143,7 @@ def case(name: str, scene: Path, spacing: float, h_far: float, h_near: float, wo
     from rackstress.stress.governing import curved_near as curved_near_of, with_single_run
     from rackstress.stress.post import compute_fields
     from rackstress.stress.rundata import load_run
-    from rackstress.stress.tensor import part_recovery_points
+    from rackstress.stress.measures import recovery_points_of
     from rackstress.validity.graded import governing_fe, reference
 
     runs = []
@@ -189,10 +189,10 @@ def case(name: str, scene: Path, spacing: float, h_far: float, h_near: float, wo
                      # the particles within two spacings of a concave curved face (fillets,
                      # holes) and the zone away from the singular points
                      "_curved": curved_near_of(r["dir"], part,
-                                               part_recovery_points(rd.o[rd.parts[part].index]),
+                                               recovery_points_of(rd, rd.parts[part].index),
                                                r["spacing"]),
                      # where each value is read: its recovery point (patch recovery)
-                     "_o": part_recovery_points(rd.o[rd.parts[part].index])})
+                     "_o": recovery_points_of(rd, rd.parts[part].index)})
     g = [r["governing"] for r in rows]
     h = [r["spacing"] for r in rows]
     # the bands as --refine gives them: never narrower than the finer run's own single-run

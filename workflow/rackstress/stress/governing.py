@@ -316,14 +316,14 @@ def over_time(run, vm: np.ndarray) -> dict:
     read where the measure reads it — :func:`record`'s rule, so its largest over the frames
     is the run's governing stress. ``{part: (frames,) array}`` (NaN where no particle is
     finite); what the stress-over-time plot draws beside the plain maximum."""
-    from rackstress.stress.tensor import part_recovery_points
+    from rackstress.stress.measures import recovery_points_of
 
     out = {}
     for name, (spacing, wall, s) in singular_set(run).items():
         if name not in run.parts:
             continue
         idx = run.parts[name].index
-        d, _ = s.distance(part_recovery_points(run.o[idx]))
+        d, _ = s.distance(recovery_points_of(run, idx))
         best, _ = _largest_away(np.asarray(vm[:, idx], float), d >= zone(spacing, wall))
         out[name] = np.where(np.isfinite(best), best, np.nan)
     return out
@@ -382,8 +382,7 @@ def record(run, fields, zone_override: float | None = None, singular: dict | Non
         or ``{}`` without a ``von_mises`` measure; records as ``summary.json["stress"]`` keeps
         them (docs/output.md).
     """
-    from rackstress.stress.measures import material_parts
-    from rackstress.stress.tensor import part_recovery_points
+    from rackstress.stress.measures import material_parts, recovery_points_of
 
     vm = fields.values.get("von_mises")
     if vm is None:
@@ -407,7 +406,7 @@ def record(run, fields, zone_override: float | None = None, singular: dict | Non
         # distances from where each particle's stress is read — its recovery point (patch
         # recovery, the von_mises route: a surface particle at its cell's surface point) —
         # as the FE check measures them (validity.solid), so both apply one rule
-        read = part_recovery_points(o)          # as the measure reads it (its own spacing)
+        read = recovery_points_of(run, part.index)      # as the measure reads it
         best, sbest = _frames_governing(vm[:, part.index], read, s, z)
         curved = None
         if best is not None:                  # the concave curved faces' own peak, same frame

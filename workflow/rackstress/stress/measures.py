@@ -850,7 +850,9 @@ class ParticleStress(_RunAnalysis):
                 idx = np.asarray(part.index)
                 labels[idx] = k
                 data[idx] = face_supports(held[idx]).any(axis=1)
-                points[idx] = T.part_recovery_points(run.o[idx])
+                # read on the part's face, where its cells end (φ)
+                points[idx] = T.part_recovery_points(run.o[idx],
+                                                     phi=None if phi is None else phi[idx])
                 ap = a2[idx][np.isfinite(a2[idx])]
                 if len(ap):
                     data[idx] |= T.regular_cells(run.o[idx], float(np.sqrt(np.median(ap))),
@@ -893,8 +895,7 @@ class ParticleStress(_RunAnalysis):
             return None
         held &= self._mask[:, None]
         side, spacing = faces
-        reach = np.clip(np.nan_to_num(phi, nan=1.0) - 0.5, 0.0, 1.0) \
-            * np.nan_to_num(spacing)[:, None]
+        reach = T.cell_reach(phi) * np.nan_to_num(spacing)[:, None]
         off = side * reach
         rows = np.flatnonzero(np.any(off != 0.0, axis=1))
         if not len(rows):
@@ -1087,6 +1088,15 @@ def read_fractions(run):
     """Each particle's cell extent per axis in spacings (n, 3) from the run's ``bindings.npz``
     (``phi``, :func:`rackstress.runs.run.fractions_of`: static runs), or None."""
     return _bindings_array(run, "phi", (run.n_atoms, 3))
+
+
+def recovery_points_of(run, index) -> np.ndarray:
+    """Where the ``von_mises`` measure (patch route) reads the stress of the particles
+    ``index`` of one part: :func:`rackstress.stress.tensor.part_recovery_points` with the
+    run's cell extents (``read_fractions``), as :class:`ParticleStress` reads them."""
+    idx = np.asarray(index)
+    phi = read_fractions(run)
+    return T.part_recovery_points(run.o[idx], phi=None if phi is None else phi[idx])
 
 
 def read_volumes(run):

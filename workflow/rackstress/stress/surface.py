@@ -263,12 +263,12 @@ CARRIED = ("von_mises", "strain")
 RECOVERED = ("von_mises",)
 
 
-def recovered_points(o: np.ndarray) -> np.ndarray:
-    """Where a part's patch-recovered stress stands (:func:`rackstress.stress.tensor.
-    part_recovery_points`, as the ``von_mises`` measure computes them)."""
-    from rackstress.stress.tensor import part_recovery_points
+def recovered_points(run, index) -> np.ndarray:
+    """Where a part's patch-recovered stress stands (:func:`rackstress.stress.measures.
+    recovery_points_of`, as the ``von_mises`` measure computes them)."""
+    from rackstress.stress.measures import recovery_points_of
 
-    return part_recovery_points(o)
+    return recovery_points_of(run, index)
 
 
 def static_surfaces(run, fields, frame: int = -1, notes: list | None = None) -> list:
@@ -298,13 +298,13 @@ def static_surfaces(run, fields, frame: int = -1, notes: list | None = None) -> 
         # the displacement and the neighbourhood measures live at the particles; the patch-
         # recovered stress (the von_mises measure's default route) already at each surface
         # particle's recovery point on the face: fitted from there, it is not extrapolated
-        # a second time (tensor.part_recovery_points, the points the measure used)
+        # a second time (measures.recovery_points_of, the points the measure used)
         at_rec = [j for j, m in enumerate(names) if m in RECOVERED]
         at_o = [j for j in range(len(names)) if j not in at_rec]
         vals, flat = {}, np.concatenate(cols, axis=1)
         width = [c.shape[1] for c in cols]
         start = np.r_[0, np.cumsum(width)]
-        for sel, where in ((at_o, o), (at_rec, recovered_points(o))):
+        for sel, where in ((at_o, o), (at_rec, recovered_points(run, part.index))):
             if not sel:
                 continue
             idx = np.concatenate([np.arange(start[j], start[j + 1]) for j in sel])

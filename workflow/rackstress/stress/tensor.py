@@ -476,20 +476,48 @@ def flat_axes(o: np.ndarray, spacing: float, labels) -> np.ndarray:
     return out
 
 
-def part_recovery_points(o: np.ndarray, spacing: float | None = None) -> np.ndarray:
+def cell_reach(phi: np.ndarray) -> np.ndarray:
+    """How far each cell reaches past its particle across a free face, in spacings (n, 3):
+    φ − ½ of its extent φ along the axis (``bindings.npz``'s ``phi``; NaN: a whole cell, ½),
+    in [0, 1]. On an axis with one lattice neighbour the cell spans ½ on that side and the
+    rest, up to the part's face, on the free side (``model.solid.axis_fractions``).
+
+    >>> cell_reach(np.array([[1.0, 0.6, np.nan]])).round(2).tolist()
+    [[0.5, 0.1, 0.5]]
+    """
+    return np.clip(np.nan_to_num(np.asarray(phi, float), nan=1.0) - 0.5, 0.0, 1.0)
+
+
+def part_recovery_points(o: np.ndarray, spacing: float | None = None,
+                         phi: np.ndarray | None = None) -> np.ndarray:
     """:func:`recovery_points` of one part's particles, their spacing the median nearest-
     neighbour distance when not given; particles off one cubic lattice (hcp packing) are read
-    at their centres."""
+    at their centres. ``phi`` (n, 3: the cells' extents, a static run's ``bindings.npz``)
+    puts a surface particle's point on its cell's face, :func:`cell_reach` out along each free
+    face, where the part's face is; without it (a dynamic run) half a spacing out.
+
+    >>> g = np.array([[x, y, z] for x in range(3) for y in range(3) for z in range(3)], float)
+    >>> phi = np.ones((27, 3)); phi[26, 0] = 0.6          # the face 0.1 past the corner in x
+    >>> part_recovery_points(g, 1.0, phi)[26].round(2).tolist()
+    [2.1, 2.5, 2.5]
+    """
     o = np.asarray(o, float)
-    if len(o) < 2:
+    a = _part_spacing(o, spacing)
+    if a is None:
         return o.copy()
+    return recovery_points(o, a, reach=None if phi is None else cell_reach(phi))
+
+
+def _part_spacing(o: np.ndarray, spacing: float | None) -> float | None:
+    """The spacing of one part's cubic lattice (given, or the median nearest-neighbour
+    distance), or None: fewer than two particles, or off one cubic lattice (hcp packing)."""
+    if len(o) < 2:
+        return None
     if spacing is None:
         from scipy.spatial import cKDTree
 
         spacing = float(np.median(cKDTree(o).query(o, k=2)[0][:, 1]))
-    if not on_cubic_lattice(o, spacing):
-        return o.copy()
-    return recovery_points(o, spacing)
+    return float(spacing) if on_cubic_lattice(o, spacing) else None
 
 
 def on_cubic_lattice(o: np.ndarray, spacing: float) -> bool:

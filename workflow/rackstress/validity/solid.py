@@ -1088,12 +1088,13 @@ def run_singular(rundir, name: str, fe: Singular, loads: np.ndarray) -> Singular
                     "unbounded there", float(spacing), "singular.npz")
 
 
-def region_edges(o: np.ndarray, sel: np.ndarray, spacing: float) -> np.ndarray:
+def region_edges(o: np.ndarray, sel: np.ndarray, spacing: float,
+                 phi: np.ndarray | None = None) -> np.ndarray:
     """Points on the edges of a support or a load region on the part's surface (k×3): for each
     particle of the region (``sel``, bool over ``o``) on the surface with a nearest neighbour
     outside the region, the midpoint of their recovery points — where the region's cells
     end, on the surface: the line where a fixed or a loaded face meets a free one, singular
-    in the continuum."""
+    in the continuum. ``phi``: the cells' extents (:func:`_particle_points`)."""
     from scipy.spatial import cKDTree
 
     from rackstress.stress.tensor import part_recovery_points
@@ -1102,7 +1103,7 @@ def region_edges(o: np.ndarray, sel: np.ndarray, spacing: float) -> np.ndarray:
     if not sel.any() or sel.all():
         return np.zeros((0, 3))
     a = float(spacing)
-    pts = part_recovery_points(o, a)
+    pts = part_recovery_points(o, a, phi)
     on_surface = np.any(np.abs(pts - o) > 1e-9 * a, axis=1)
     pr = cKDTree(o).query_pairs(1.01 * a, output_type="ndarray")
     if not len(pr):
@@ -1733,8 +1734,9 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
     held_sel[hk[hin][full]] = True
     load_sel = np.zeros(g.n, bool)
     load_sel[lk[lin]] = True
-    edges = np.concatenate([region_edges(g.o, held_sel, spacing),
-                            region_edges(g.o, load_sel, spacing)])
+    phi = _run_fractions(rundir, sl, g.n)
+    edges = np.concatenate([region_edges(g.o, held_sel, spacing, phi),
+                            region_edges(g.o, load_sel, spacing, phi)])
     singular = singular_points(np.concatenate([concave, edges]), held_x[full], load_x,
                                spacing)
     singular = run_singular(rundir, name, singular, load_x)
@@ -1805,7 +1807,7 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
             break
     sol = sols[-1]
     mname, values = _particle_measure(rundir, sl, measure)
-    points = _particle_points(g.o, spacing, mname)
+    points = _particle_points(g.o, spacing, mname, phi)
     res = sol.at(points)
     G = E_ / (2 * (1 + nu_))
     to_stress = 1.0 if mname == "von_mises" else (2 * math.sqrt(3) * G if mat or E else None)
@@ -1893,14 +1895,30 @@ def _stress_unit(summary: dict, bnd: dict) -> str:
     return {"mm-N-s": "MPa", "SI": "Pa"}.get(units, "stress units")
 
 
-def _particle_points(o: np.ndarray, spacing: float, mname: str) -> np.ndarray:
+def _run_fractions(rundir: Path, sl: slice, n: int) -> np.ndarray | None:
+    """The part's cells' extents (n, 3) as the run wrote them (``bindings.npz``'s ``phi``,
+    :func:`rackstress.runs.run.fractions_of`), which put each surface particle's recovery
+    point on the part's face, or None (a dynamic run, a file written before them)."""
+    from rackstress.lib.runfiles import BINDINGS
+
+    path = Path(rundir) / BINDINGS
+    if not path.is_file():
+        return None
+    with np.load(path, allow_pickle=False) as z:
+        phi = z["phi"][sl] if "phi" in z.files else None
+    return phi.astype(float) if phi is not None and phi.shape == (n, 3) else None
+
+
+def _particle_points(o: np.ndarray, spacing: float, mname: str,
+                     phi: np.ndarray | None = None) -> np.ndarray:
     """Where each particle's measure is read: the stress's recovery point (the default
     ``patch`` route: the centre inside the part, its cell's surface point on the surface,
-    :func:`rackstress.stress.tensor.part_recovery_points`), else the particle's position."""
+    :func:`rackstress.stress.tensor.part_recovery_points` with the cells' extents ``phi``, as
+    the run's measure reads it), else the particle's position."""
     if mname == "von_mises":
         from rackstress.stress.tensor import part_recovery_points
 
-        return part_recovery_points(o, spacing)
+        return part_recovery_points(o, spacing, phi)
     return np.asarray(o, float)
 
 
