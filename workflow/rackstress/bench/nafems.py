@@ -535,8 +535,9 @@ def report(d: dict) -> str:
                   "particles half a spacing off every face and both symmetry planes), the rows "
                   "next to the planes held across them (the planes' support, whose force the "
                   "stress counts on the cells' faces, docs/stress.md); the particle nearest D "
-                  "sits half a spacing from it along x and y and is read at its centre (a "
-                  "membrane's patch spans one layer: its own value).", ""]
+                  "sits half a spacing from it along x and y, where its cell ends, and is "
+                  "read at its recovery point, D itself (the membrane is fitted in its "
+                  "plane).", ""]
         if name == "LE10_filled":
             L += ["The thick plate with its cells tiling the quarter (the default fill: "
                   "0.6/a layers of cells, an odd number, so that one lies on the mid-plane, "
