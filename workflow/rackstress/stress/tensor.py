@@ -493,14 +493,11 @@ def part_recovery_points(o: np.ndarray, spacing: float | None = None,
     """:func:`recovery_points` of one part's particles, their spacing the median nearest-
     neighbour distance when not given; particles off one cubic lattice (hcp packing) are read
     at their centres. ``phi`` (n, 3: the cells' extents, a static run's ``bindings.npz``)
-    puts a surface particle's point where its cell ends along each free face, :func:`cell_reach`
-    out, where the part's face is — but never more than half a spacing out: a cell that
-    overhangs its particle (φ > 1) reaches where no binding does, and read at its face the fit
-    extrapolates past its samples by up to a spacing (:data:`RECOVERY_REACH`). Without
-    ``phi`` (a dynamic run) half a spacing out.
+    puts a surface particle's point on its cell's face, :func:`cell_reach` out along each free
+    face, where the part's face is; without it (a dynamic run) half a spacing out.
 
     >>> g = np.array([[x, y, z] for x in range(3) for y in range(3) for z in range(3)], float)
-    >>> phi = np.ones((27, 3)); phi[26, 0] = 0.6; phi[26, 1] = 1.3   # short in x, long in y
+    >>> phi = np.ones((27, 3)); phi[26, 0] = 0.6          # the face 0.1 past the corner in x
     >>> part_recovery_points(g, 1.0, phi)[26].round(2).tolist()
     [2.1, 2.5, 2.5]
     """
@@ -508,17 +505,7 @@ def part_recovery_points(o: np.ndarray, spacing: float | None = None,
     a = _part_spacing(o, spacing)
     if a is None:
         return o.copy()
-    reach = None if phi is None else np.minimum(cell_reach(phi), RECOVERY_REACH)
-    return recovery_points(o, a, reach=reach)
-
-
-#: The farthest out a surface particle is read, in spacings (:func:`part_recovery_points`):
-#: where its cell ends, up to half a spacing. Read at the face of an overhanging cell (up to a
-#: spacing out), a bracket's 3 mm wall beside its support read 1.18 of FEA's peak at 0.7 mm
-#: (``rackstress bench validity3d``; 1.00 at half a spacing), while a bent beam whose face lies
-#: 0.7 spacings past its top layer reads 5 % low at half a spacing, +2.2 % at its face
-#: (measured while building this; docs/stress.md "Where a face cell ends").
-RECOVERY_REACH = 0.5
+    return recovery_points(o, a, reach=None if phi is None else cell_reach(phi))
 
 
 def _part_spacing(o: np.ndarray, spacing: float | None) -> float | None:
