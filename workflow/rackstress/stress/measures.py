@@ -1069,25 +1069,26 @@ class ParticleStress(_RunAnalysis):
         return out
 
 
-def _bindings_array(run, key: str, shape: tuple):
-    """The array ``key`` of the run's ``bindings.npz`` as float64 when it has ``shape``, or
-    None: a file without it (written before it was) or of another run."""
+def bindings_array(rundir, key: str, shape: tuple, rows=slice(None)):
+    """The array ``key`` of the run directory's ``bindings.npz`` (its ``rows``: one part's
+    slice) as float64 when it has ``shape``, or None: a file without it (written before it
+    was) or of another run."""
     from rackstress.lib.runfiles import BINDINGS
 
-    path = Path(run.rundir) / BINDINGS
+    path = Path(rundir) / BINDINGS
     if not path.is_file():
         return None
     with np.load(path, allow_pickle=False) as z:
         if key not in z.files:
             return None
-        x = z[key].astype(np.float64)
+        x = z[key][rows].astype(np.float64)
     return x if x.shape == shape else None
 
 
 def read_fractions(run):
     """Each particle's cell extent per axis in spacings (n, 3) from the run's ``bindings.npz``
     (``phi``, :func:`rackstress.runs.run.fractions_of`: static runs), or None."""
-    return _bindings_array(run, "phi", (run.n_atoms, 3))
+    return bindings_array(run.rundir, "phi", (run.n_atoms, 3))
 
 
 def recovery_points_of(run, index) -> np.ndarray:
@@ -1102,7 +1103,7 @@ def recovery_points_of(run, index) -> np.ndarray:
 def read_volumes(run):
     """Each particle's volume from the run's ``bindings.npz`` (``V``: the boundary cells' own
     share of the part, docs/calibration.md), or None for a file without it."""
-    return _bindings_array(run, "V", (run.n_atoms,))
+    return bindings_array(run.rundir, "V", (run.n_atoms,))
 
 
 def read_volume_terms(run):

@@ -502,22 +502,15 @@ def part_recovery_points(o: np.ndarray, spacing: float | None = None,
     [2.1, 2.5, 2.5]
     """
     o = np.asarray(o, float)
-    a = _part_spacing(o, spacing)
-    if a is None:
-        return o.copy()
-    return recovery_points(o, a, reach=None if phi is None else cell_reach(phi))
-
-
-def _part_spacing(o: np.ndarray, spacing: float | None) -> float | None:
-    """The spacing of one part's cubic lattice (given, or the median nearest-neighbour
-    distance), or None: fewer than two particles, or off one cubic lattice (hcp packing)."""
     if len(o) < 2:
-        return None
+        return o.copy()
     if spacing is None:
         from scipy.spatial import cKDTree
 
         spacing = float(np.median(cKDTree(o).query(o, k=2)[0][:, 1]))
-    return float(spacing) if on_cubic_lattice(o, spacing) else None
+    if not on_cubic_lattice(o, spacing):
+        return o.copy()
+    return recovery_points(o, spacing, reach=None if phi is None else cell_reach(phi))
 
 
 def on_cubic_lattice(o: np.ndarray, spacing: float) -> bool:

@@ -1734,7 +1734,11 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
     held_sel[hk[hin][full]] = True
     load_sel = np.zeros(g.n, bool)
     load_sel[lk[lin]] = True
-    phi = _run_fractions(rundir, sl, g.n)
+    # the part's cells' extents as the run wrote them (runs.run.fractions_of), which put each
+    # surface particle's recovery point on the part's face; None for a dynamic run
+    from rackstress.stress.measures import bindings_array
+
+    phi = bindings_array(rundir, "phi", (g.n, 3), sl)
     edges = np.concatenate([region_edges(g.o, held_sel, spacing, phi),
                             region_edges(g.o, load_sel, spacing, phi)])
     singular = singular_points(np.concatenate([concave, edges]), held_x[full], load_x,
@@ -1893,20 +1897,6 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
 def _stress_unit(summary: dict, bnd: dict) -> str:
     units = str(bnd.get("units", summary.get("units", "paper")))
     return {"mm-N-s": "MPa", "SI": "Pa"}.get(units, "stress units")
-
-
-def _run_fractions(rundir: Path, sl: slice, n: int) -> np.ndarray | None:
-    """The part's cells' extents (n, 3) as the run wrote them (``bindings.npz``'s ``phi``,
-    :func:`rackstress.runs.run.fractions_of`), which put each surface particle's recovery
-    point on the part's face, or None (a dynamic run, a file written before them)."""
-    from rackstress.lib.runfiles import BINDINGS
-
-    path = Path(rundir) / BINDINGS
-    if not path.is_file():
-        return None
-    with np.load(path, allow_pickle=False) as z:
-        phi = z["phi"][sl] if "phi" in z.files else None
-    return phi.astype(float) if phi is not None and phi.shape == (n, 3) else None
 
 
 def _particle_points(o: np.ndarray, spacing: float, mname: str,
