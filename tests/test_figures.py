@@ -74,7 +74,8 @@ GENERATED = {"accuracy.md": ("accuracy", "markdown", "accuracy.json"),
                                             "validity-concentrations.json"),
              "stress.md": ("stress", "report", "stress.json"),
              "validity.md": ("validity", "report", "validity.json"),
-             "validity3d.md": ("validity3d", "markdown", "validity3d.json")}
+             "validity3d.md": ("validity3d", "markdown", "validity3d.json"),
+             "walls.md": ("walls", "report", "walls.json")}
 
 
 #: the pages no command writes

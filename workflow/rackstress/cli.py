@@ -1444,6 +1444,18 @@ def bench_validity3d(out, quick):
     _bench_report(data, mod)
 
 
+@bench.command("walls")
+@_bench_out
+@click.option("--quick", is_flag=True, help="Two depths only.")
+def bench_walls(out, quick):
+    """A cantilever whose faces fall between the lattice's layers: tip, curvature and the
+    face stress read against beam theory -> docs/benchmarks/walls.{json,md}."""
+    from rackstress.bench import walls as mod
+
+    data = mod.run_bench(out, quick=quick, echo=click.echo)
+    _bench_report(data, mod)
+
+
 @bench.command("stress")
 @_bench_out
 @click.option("--quick", is_flag=True, help="One small bar per case (for tests).")
@@ -1715,6 +1727,10 @@ TEACH = {
     "bench validity3d": ("The bracket STL's von Mises stress [MPa] against tetrahedral FEA.", [
         "rackstress bench validity3d --quick --out /tmp/bench",
         "rackstress bench validity3d --out docs/benchmarks",
+    ]),
+    "bench walls": ("A wall between the lattice's layers in bending, against beam theory.", [
+        "rackstress bench walls --quick --out /tmp/bench",
+        "rackstress bench walls --out docs/benchmarks",
     ]),
     "bench e2e": ("README's first command end to end, cold and warm, by phase.", [
         "rackstress bench e2e --scene magpod-small --out /tmp/bench",
