@@ -176,4 +176,4 @@ def test_bench_walls_quick_reads_a_wall_of_whole_cells_like_beam_theory(tmp_path
     assert whole["tip_ratio"] == pytest.approx(1.0, abs=0.02)
     assert whole["curvature_ratio"] == pytest.approx(1.0, abs=0.02)
     assert whole["face_ratio"] == pytest.approx(1.0, abs=0.03)
-    assert "| 4.29 | 4 | 1.145 |" in (tmp_path / "walls-quick.md").read_text()
+    assert "| 4.29 | 0.3 | 4 | 1.145 |" in (tmp_path / "walls-quick.md").read_text()

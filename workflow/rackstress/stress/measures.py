@@ -846,6 +846,7 @@ class ParticleStress(_RunAnalysis):
             # the fits sample the regular cells, and the ones a support holds across a face (its
             # force in their stress; face_supports): docs/stress.md "Patch recovery"
             data = np.zeros(n, bool)
+            samples = np.asarray(run.o, float).copy()
             for k, part in enumerate(mine):
                 idx = np.asarray(part.index)
                 labels[idx] = k
@@ -855,11 +856,24 @@ class ParticleStress(_RunAnalysis):
                                                      phi=None if phi is None else phi[idx])
                 ap = a2[idx][np.isfinite(a2[idx])]
                 if len(ap):
-                    data[idx] |= T.regular_cells(run.o[idx], float(np.sqrt(np.median(ap))),
-                                                 None if phi is None else phi[idx])
+                    sp = float(np.sqrt(np.median(ap)))
+                    part_phi = None if phi is None else phi[idx]
+                    data[idx] |= T.regular_cells(run.o[idx], sp, part_phi)
+                    # each sample where its value stands; a held one at its particle (its
+                    # support's force is in it)
+                    y = T.sample_points(run.o[idx], sp, part_phi, self._lattice_nu(part))
+                    samples[idx] = np.where(held[idx].any(axis=1)[:, None], run.o[idx], y)
             self.points = points
             a = float(np.sqrt(np.median(a2[np.isfinite(a2)])))
-            self._patch = T.patch_matrix(run.o, a, points, labels, data=data)
+            self._patch = T.patch_matrix(run.o, a, points, labels, data=data,
+                                         samples=samples)
+
+    def _lattice_nu(self, part) -> float:
+        """The Poisson's ratio a part's lattice has: the material's with the volumetric term
+        (``poisson = "material"``), the bindings' own ¼ without."""
+        if self.volume is None:
+            return 0.25
+        return float(self._mat[part.name]["material"].get("nu", 0.25))
 
     def _held_free_faces(self, run, mine, a2, phi, held):
         """The free faces of the cells a support holds across, or None: (n×3, per axis −1 or

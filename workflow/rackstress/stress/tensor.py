@@ -399,12 +399,62 @@ def regular_cells(o: np.ndarray, spacing: float, phi: np.ndarray | None = None) 
     return whole | short
 
 
+#: where a surface particle's ``continuum`` stress stands, as a sample of the patch fit, along
+#: each free face beyond its cell's centroid, in spacings: on a face (one free face)
+#: SAMPLE_NU·ν/(1 − ν), on an edge (two) SAMPLE_EDGE + SAMPLE_NU·ν/(1 − ν). Fitted to a bent
+#: cantilever's own curvature (``rackstress bench walls``: 3 to 8 layers, φ 0.8 … 1.225, ν 0 …
+#: 0.45; docs/stress.md "Where a sample stands")
+SAMPLE_NU = 0.115
+SAMPLE_EDGE = -0.194
+
+
+def sample_points(o: np.ndarray, spacing: float, phi: np.ndarray | None = None,
+                  nu: float = 0.25) -> np.ndarray:
+    """Where each particle's ``continuum`` stress stands as a sample of the field (n, 3). A
+    particle inside the part: at its centre. On the surface the value is a share of a cell
+    that ends off-centre and whose free face's normal strain the particle reads one-sided,
+    so in a stress gradient across the face it reads the field at another point: along each
+    free face, the centroid of its cell's extent φ ((φ − 1)/2 spacings out on a face, half
+    that on an edge) and a shift that grows with the plane-stress ratio ν/(1 − ν) of the
+    face's normal strain to its in-plane strains (:data:`SAMPLE_NU`, :data:`SAMPLE_EDGE`).
+    A corner (three free faces), a particle off one cubic lattice or without ``phi`` (a
+    dynamic run): at its centre. Read as the fit's samples, a bent wall of 3 to 8 layers
+    reads its own curvature on its face within 3 % (1 % at ν ≤ 0.4) where its particles'
+    own positions gave −7 … +5 %.
+
+    >>> g = np.array([[x, y, z] for x in range(3) for y in range(3) for z in range(3)], float)
+    >>> phi = np.ones((27, 3)); phi[22, 0] = phi[25, 0] = 1.2   # cells overhanging in x
+    >>> y = sample_points(g, 1.0, phi, nu=0.0)
+    >>> y[22].round(3).tolist()                 # (2, 1, 1), a face: its centroid, 0.1 out
+    [2.1, 1.0, 1.0]
+    >>> y[25].round(3).tolist()                 # (2, 2, 1), an edge: −0.194 + 0.05, −0.194
+    [1.856, 1.806, 1.0]
+    >>> y[13].tolist(), y[26].tolist()          # inside; a corner
+    ([1.0, 1.0, 1.0], [2.0, 2.0, 2.0])
+    """
+    o = np.asarray(o, float)
+    a = float(spacing)
+    out = o.copy()
+    if len(o) < 2 or phi is None or not on_cubic_lattice(o, a):
+        return out
+    ff = free_faces(o, a)
+    nf = np.abs(ff).sum(axis=1)
+    f = np.nan_to_num(np.asarray(phi, float), nan=1.0)
+    tilt = SAMPLE_NU * nu / (1.0 - nu)
+    face = (f - 1.0) / 2 + tilt
+    edge = (f - 1.0) / 4 + SAMPLE_EDGE + tilt
+    off = np.where((nf == 1)[:, None], face, np.where((nf == 2)[:, None], edge, 0.0))
+    return out + ff * off * a
+
+
 def patch_matrix(o: np.ndarray, spacing: float, points: np.ndarray, labels=None,
-                 radius: float = PATCH_RADIUS, data: np.ndarray | None = None):
+                 radius: float = PATCH_RADIUS, data: np.ndarray | None = None,
+                 samples: np.ndarray | None = None):
     """The linear map s → recovered s of :func:`patch_recover` (degree 1) as a sparse n × n
     matrix W (rec = W @ s), built once from the original positions: W_ij = q_iᵀ A_i⁻¹ φ_ij
-    with φ_ij = (1, (o_j − o_i)/a), A_i = Σ_j φ_ij φ_ijᵀ and q_i = (1, (x_i − o_i)/a) at the
-    recovery point x_i. ``labels`` (n): only particles of the same label share a patch (one
+    with φ_ij = (1, (y_j − o_i)/a), A_i = Σ_j φ_ij φ_ijᵀ and q_i = (1, (x_i − o_i)/a) at the
+    recovery point x_i; y_j is where particle j's stress stands as a sample (``samples``,
+    :func:`sample_points`; its position where not given). ``labels`` (n): only particles of the same label share a patch (one
     per part; −1: not recovered, W_ii = 1). ``data`` (n bool, :func:`regular_cells`): only
     these particles' stresses enter a fit, as superconvergent patch recovery samples at its
     best points; a particle whose data do not span three dimensions is fitted from its whole
@@ -422,32 +472,44 @@ def patch_matrix(o: np.ndarray, spacing: float, points: np.ndarray, labels=None,
     i, j = i[keep], j[keep]
     flat = flat_axes(o, a, lab)
     W, _ = _patch_weights(o, a, points, lab, flat, i, j)
-    if data is None or np.all(data):
+    if (data is None or np.all(data)) and samples is None:
         return W
-    use = np.asarray(data, bool)[j]
-    Wd, fit = _patch_weights(o, a, points, lab, flat, i[use], j[use])
+    use = np.ones(len(j), bool) if data is None else np.asarray(data, bool)[j]
+    Wd, fit = _patch_weights(o, a, points, lab, flat, i[use], j[use], samples)
     return diags(fit.astype(float)) @ Wd + diags((~fit).astype(float)) @ W
 
 
-def _patch_weights(o, a, points, lab, flat, i, j):
+def _patch_weights(o, a, points, lab, flat, i, j, samples=None):
     """:func:`patch_matrix`'s fit over the directed pairs (i, j): (W, ok), ok where the
     particle's pairs span three dimensions, or the plane of its part where ``flat``
-    (:func:`flat_axes`) says it is one layer thick (elsewhere W_ii = 1, its own value)."""
+    (:func:`flat_axes`) says it is one layer thick (elsewhere W_ii = 1, its own value); j's
+    value stands at ``samples[j]`` (its position where None). Whether the pairs span is
+    judged at the particles' positions: a sample's shift (a fraction of a spacing) does not
+    make a flat patch a fit."""
     from scipy.sparse import csr_matrix
 
     n = len(o)
+
+    def moments(phi):
+        A = np.zeros((n, 4, 4))
+        for r in range(4):
+            for c in range(r, 4):
+                A[:, r, c] = np.bincount(i, weights=phi[:, r] * phi[:, c], minlength=n)
+                A[:, c, r] = A[:, r, c]
+        # a part one layer thick along an axis (a membrane, a plate of one layer): its fit is
+        # the plane's, (1, two in-plane terms); that axis' term is held at zero (its row and
+        # column are empty, its recovery offset is zero), not left singular
+        A[:, 1:, 1:] += np.einsum("na,ab->nab", flat.astype(float), np.eye(3))
+        lam = np.linalg.eigvalsh(A)
+        return A, lam[:, 0] > 1e-8 * np.maximum(lam[:, -1], 1e-300)
+
     phi = np.column_stack([np.ones(len(i)), (o[j] - o[i]) / a])
-    A = np.zeros((n, 4, 4))
-    for r in range(4):
-        for c in range(r, 4):
-            A[:, r, c] = np.bincount(i, weights=phi[:, r] * phi[:, c], minlength=n)
-            A[:, c, r] = A[:, r, c]
-    # a part one layer thick along an axis (a membrane, a plate of one layer): its fit is the
-    # plane's, (1, two in-plane terms); that axis' term is held at zero (its row and column
-    # are empty, its recovery offset is zero), not left singular
-    A[:, 1:, 1:] += np.einsum("na,ab->nab", flat.astype(float), np.eye(3))
-    lam = np.linalg.eigvalsh(A)
-    ok = (lam[:, 0] > 1e-8 * np.maximum(lam[:, -1], 1e-300)) & (lab >= 0)
+    A, ok = moments(phi)
+    if samples is not None:
+        phi = np.column_stack([np.ones(len(i)), (np.asarray(samples, float)[j] - o[i]) / a])
+        A, shifted_ok = moments(phi)
+        ok &= shifted_ok
+    ok &= lab >= 0
     q = np.column_stack([np.ones(n), (np.asarray(points, float) - o) / a])
     v = np.zeros((n, 4))
     v[ok] = np.linalg.solve(A[ok], q[ok][:, :, None])[:, :, 0]
