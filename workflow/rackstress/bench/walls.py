@@ -1,7 +1,7 @@
 """``rackstress bench walls``: a wall whose faces fall between the lattice's layers, in bending.
 
 A cantilever from an STL box, 60 mm long and 6 mm wide, spacing 1 mm (E = 70 GPa, ν = 0.3 and
-three depths at 0.1 and 0.45, ``poisson = "material"``), clamped at x < 1 and carrying F = 20 N at x > 59, as a user
+three depths at 0.1 and 0.45, ``poisson = "material"``), clamped at x < 1 and carrying F = 20 N·(t/5 mm)³ at x > 59 (the same strains at every depth), as a user
 runs it (``rackstress.runs.run``, static). Its depth t is swept so that the face lies anywhere
 from the outer layer to a spacing past it: the face cells' extent φ (``bindings.npz``) runs
 from 0.8 to 1.225 (docs/calibration.md "Walls of any thickness"). Measured against beam
@@ -30,10 +30,11 @@ import numpy as np
 
 from rackstress.bench import fmt, machine, md_table, out_dir, write_json
 
-E, B, L, F = 70000.0, 6.0, 60.0, 20.0
-#: (depth [mm] at spacing 1, ν): 3, 4, 5, 6 and 8 layers, faces from 0.3 spacings short of
-#: half a spacing past the outer layer to 0.725 past it, at ν = 0.3; three of them at 0.1, 0.45
-CASES = tuple((t, 0.3) for t in (3.0, 4.0, 4.15, 4.29, 4.45, 4.6, 4.8, 5.0, 5.29, 6.29, 8.29)) \
+E, B, L, FORCE = 70000.0, 6.0, 60.0, 20.0
+#: (depth [mm] at spacing 1, ν): 2 to 8 layers, faces from 0.3 spacings short of half a
+#: spacing past the outer layer to 0.725 past it, at ν = 0.3; three of them at 0.1, 0.45
+CASES = tuple((t, 0.3) for t in (2.05, 2.2, 2.4, 2.6, 2.8, 3.0, 4.0, 4.15, 4.29, 4.45, 4.6, 4.8,
+                                 5.0, 5.29, 6.29, 8.29)) \
     + tuple((t, nu) for nu in (0.1, 0.45) for t in (4.0, 4.29, 5.0))
 QUICK = ((4.0, 0.3), (4.29, 0.3))
 SCENE = """
@@ -52,7 +53,7 @@ where = {{ box = {{ min = [-1, -9, -9], max = [1, 9, 9] }} }}
 [[load]]
 on = "wall"
 where = {{ box = {{ min = [59, -9, -9], max = [61, 9, 9] }} }}
-force = [0, 0, -{F:g}]
+force = [0, 0, -{F:.6g}]
 """
 HEADER = ["depth [mm]", "ν", "layers", "face φ", "tip / beam", "curvature / beam",
           "face σ_xx / beam", "face / curvature", "across the width / curvature"]
@@ -72,6 +73,7 @@ def case(depth: float, nu: float, tmp: Path) -> dict:
     m = trimesh.creation.box(extents=[L, B, depth])
     m.apply_translation([L / 2, 0, depth / 2])
     m.export(d / "wall.stl")
+    F = FORCE * (depth / 5.0) ** 3
     (d / "wall.toml").write_text(SCENE.format(E_pa=E * 1e6, nu=nu, F=F))
     summary = run(load_toml(d / "wall.toml"), d / "r", progress=False)
     got = load_run(d / "r")
@@ -143,7 +145,7 @@ def report(data) -> str:
         "Written by `rackstress bench walls` (module docstring of `bench/walls.py`): a "
         f"cantilever from an STL box, {L:g} × {B:g} mm × the depth, spacing 1 mm "
         f"(E = {E / 1000:g} GPa, ν as given, `poisson = \"material\"`), clamped at one end and "
-        f"carrying {F:g} N at the other, static. *tip*: the load's mean deflection over beam "
+        f"carrying {FORCE:g} N·(t/5 mm)³ at the other, static. *tip*: the load's mean deflection over beam "
         "theory with Timoshenko's shear term; *curvature*: the lattice's own axial strain at "
         "the face (the slope across the layers of their displacements' strain at mid-span) "
         "times E over M·(t/2)/I; *face*: the default route's largest σ_xx on the top face at "

@@ -406,6 +406,9 @@ def regular_cells(o: np.ndarray, spacing: float, phi: np.ndarray | None = None) 
 #: 0.45; docs/stress.md "Where a sample stands")
 SAMPLE_NU = 0.115
 SAMPLE_EDGE = -0.194
+#: the cells' extents φ the shifts were measured over; a cell beyond them (a staircase's step,
+#: a wall's face a spacing out) is shifted as one at the nearer end
+SAMPLE_PHI = (0.8, 1.225)
 
 
 def sample_points(o: np.ndarray, spacing: float, phi: np.ndarray | None = None,
@@ -439,7 +442,7 @@ def sample_points(o: np.ndarray, spacing: float, phi: np.ndarray | None = None,
         return out
     ff = free_faces(o, a)
     nf = np.abs(ff).sum(axis=1)
-    f = np.nan_to_num(np.asarray(phi, float), nan=1.0)
+    f = np.clip(np.nan_to_num(np.asarray(phi, float), nan=1.0), *SAMPLE_PHI)
     tilt = SAMPLE_NU * nu / (1.0 - nu)
     face = (f - 1.0) / 2 + tilt
     edge = (f - 1.0) / 4 + SAMPLE_EDGE + tilt
@@ -471,7 +474,7 @@ def patch_matrix(o: np.ndarray, spacing: float, points: np.ndarray, labels=None,
     keep = (lab[i] == lab[j]) & (lab[i] >= 0)
     i, j = i[keep], j[keep]
     flat = flat_axes(o, a, lab)
-    W, _ = _patch_weights(o, a, points, lab, flat, i, j)
+    W, _ = _patch_weights(o, a, points, lab, flat, i, j, samples)
     if (data is None or np.all(data)) and samples is None:
         return W
     use = np.ones(len(j), bool) if data is None else np.asarray(data, bool)[j]
