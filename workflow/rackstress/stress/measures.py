@@ -732,8 +732,9 @@ class ParticleStress(_RunAnalysis):
     ``bindings.npz`` (written when the run starts): the bindings' virial per particle volume
     W_i/V_i with each free face's cell moment restored (``"continuum"``), then recovered by a
     linear least-squares fit over each particle's patch (2.5 spacings, in its plane for a part
-    one layer thick; its regular cells',
-    :func:`rackstress.stress.tensor.regular_cells`) evaluated at its recovery point — its
+    one layer thick; its regular cells', :func:`rackstress.stress.tensor.regular_cells`, each
+    where its value stands, :func:`rackstress.stress.tensor.sample_points`) evaluated at its
+    recovery point — its
     centre inside the part, the surface point of its cell on the surface
     (``method="patch"``, the default: the stress where an engineer reads it, on the face);
     ``"continuum"`` at the particle centres; ``"virial"``: the plain W_i/V_i, exact in every
