@@ -403,14 +403,18 @@ def test_mesh_quality_names_slivers_and_a_poor_mesh():
     assert 'id="fea-poor"' not in fea_section({"fe_quality": {"poor": False}})
 
 
-@pytest.mark.parametrize("depth, nu", [(4.0, 0.1), (4.29, 0.45), (5.0, 0.3)])
-def test_a_bent_walls_face_reads_its_own_curvature_across_its_width(depth, nu, tmp_path):
+@pytest.mark.parametrize("depth, nu, within", [(4.0, 0.1, 0.02), (4.29, 0.45, 0.02),
+                                               (5.0, 0.3, 0.02), (2.4, 0.3, 0.03)])
+def test_a_bent_walls_face_reads_its_own_curvature_across_its_width(depth, nu, within,
+                                                                   tmp_path):
     """A cantilever 4 to 5 spacings deep (face cells whole or overhanging, φ = 1 and 1.145),
     6 wide: E·κ·c from the particles' own displacements (the slope across the layers of
     their axial strain between x = 24.5 and 34.5; c = depth/2) is what its face carries at
     mid-span. Every top particle there, the edges' included, reads it within 2 % — each
     sample of the fit where its value stands (tensor.sample_points). Read at their
-    particles the samples gave 0.93 … 1.03 (ν = 0.1) and 0.97 … 1.05 (ν = 0.45) of it."""
+    particles the samples gave 0.93 … 1.03 (ν = 0.1) and 0.97 … 1.05 (ν = 0.45) of it. A
+    wall of two layers whose face cells overhang (2.4 deep, φ = 1.2: no cell a regular
+    sample, the whole patch's fit) within 3 %: 1.08 … 1.21 at the particles' centres."""
     import trimesh
 
     from rackstress.runs.run import run
@@ -436,6 +440,8 @@ def test_a_bent_walls_face_reads_its_own_curvature_across_its_width(depth, nu, t
     assert top.sum() == 6
     sx = ParticleStress(got).run().results.stress[-1][top, 0]
     own = E * kappa * depth / 2
-    assert sx / own == pytest.approx(np.ones(6), abs=0.02)
-    x_F = o[o[:, 0] > 59, 0].mean()                     # and beam theory's M·c/I, within 6 %
-    assert own == pytest.approx(F * (x_F - 29.5) * depth / 2 / (b * depth ** 3 / 12), rel=0.06)
+    assert sx / own == pytest.approx(np.ones(6), abs=within)
+    if len(zs) >= 4:              # and beam theory's M·c/I within 6 % (two layers bend 1.19×)
+        x_F = o[o[:, 0] > 59, 0].mean()
+        want = F * (x_F - 29.5) * depth / 2 / (b * depth ** 3 / 12)
+        assert own == pytest.approx(want, rel=0.06)
