@@ -734,8 +734,7 @@ class ParticleStress(_RunAnalysis):
     linear least-squares fit over each particle's patch (2.5 spacings, in its plane for a part
     one layer thick; its regular cells', :func:`rackstress.stress.tensor.regular_cells`, each
     where its value stands, :func:`rackstress.stress.tensor.sample_points`) evaluated at its
-    recovery point — its
-    centre inside the part, the surface point of its cell on the surface
+    recovery point — its centre inside the part, the surface point of its cell on the surface
     (``method="patch"``, the default: the stress where an engineer reads it, on the face);
     ``"continuum"`` at the particle centres; ``"virial"``: the plain W_i/V_i, exact in every
     section sum; ``"completed"``: surface-completed — each measured against converged FEA

@@ -402,8 +402,9 @@ def regular_cells(o: np.ndarray, spacing: float, phi: np.ndarray | None = None) 
 #: where a surface particle's ``continuum`` stress stands, as a sample of the patch fit, along
 #: each free face beyond its cell's centroid, in spacings: on a face (one free face)
 #: SAMPLE_NU·ν/(1 − ν), on an edge (two) SAMPLE_EDGE + SAMPLE_NU·ν/(1 − ν). Fitted to a bent
-#: cantilever's own curvature (``rackstress bench walls``: 3 to 8 layers, φ 0.8 … 1.225, ν 0 …
-#: 0.45; docs/stress.md "Where a sample stands")
+#: cantilever's own curvature on walls of four and five layers at ν 0 … 0.45, and measured by
+#: ``rackstress bench walls`` on two to eight (φ 0.8 … 1.225; docs/stress.md "Where a sample
+#: stands")
 SAMPLE_NU = 0.115
 SAMPLE_EDGE = -0.194
 #: the cells' extents φ the shifts were measured over; a cell beyond them (a staircase's step,
@@ -421,9 +422,9 @@ def sample_points(o: np.ndarray, spacing: float, phi: np.ndarray | None = None,
     that on an edge) and a shift that grows with the plane-stress ratio ν/(1 − ν) of the
     face's normal strain to its in-plane strains (:data:`SAMPLE_NU`, :data:`SAMPLE_EDGE`).
     A corner (three free faces), a particle off one cubic lattice or without ``phi`` (a
-    dynamic run): at its centre. Read as the fit's samples, a bent wall of 3 to 8 layers
-    reads its own curvature on its face within 3 % (1 % at ν ≤ 0.4) where its particles'
-    own positions gave −7 … +5 %.
+    dynamic run): at its centre. Read as the fit's samples, a bent wall of two to eight
+    layers reads its own curvature across its face within 2.3 % (``rackstress bench
+    walls``), where its particles' own positions gave −7 … +21 %.
 
     >>> g = np.array([[x, y, z] for x in range(3) for y in range(3) for z in range(3)], float)
     >>> phi = np.ones((27, 3)); phi[22, 0] = phi[25, 0] = 1.2   # cells overhanging in x
@@ -457,8 +458,8 @@ def patch_matrix(o: np.ndarray, spacing: float, points: np.ndarray, labels=None,
     matrix W (rec = W @ s), built once from the original positions: W_ij = q_iᵀ A_i⁻¹ φ_ij
     with φ_ij = (1, (y_j − o_i)/a), A_i = Σ_j φ_ij φ_ijᵀ and q_i = (1, (x_i − o_i)/a) at the
     recovery point x_i; y_j is where particle j's stress stands as a sample (``samples``,
-    :func:`sample_points`; its position where not given). ``labels`` (n): only particles of the same label share a patch (one
-    per part; −1: not recovered, W_ii = 1). ``data`` (n bool, :func:`regular_cells`): only
+    :func:`sample_points`; its position where not given). ``labels`` (n): only particles of
+    the same label share a patch (one per part; −1: not recovered, W_ii = 1). ``data`` (n bool, :func:`regular_cells`): only
     these particles' stresses enter a fit, as superconvergent patch recovery samples at its
     best points; a particle whose data do not span three dimensions is fitted from its whole
     patch, and one whose whole patch does not keeps its own value."""
