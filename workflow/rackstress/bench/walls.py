@@ -1,7 +1,8 @@
 """``rackstress bench walls``: a wall whose faces fall between the lattice's layers, in bending.
 
 A cantilever from an STL box, 60 mm long and 6 mm wide, spacing 1 mm (E = 70 GPa, ν = 0.3 and
-three depths at 0.1 and 0.45, ``poisson = "material"``), clamped at x < 1 and carrying F = 20 N·(t/5 mm)³ at x > 59 (the same strains at every depth), as a user
+three depths at 0.1 and 0.45, ``poisson = "material"``), clamped at x < 1 and carrying
+F = 20 N·(t/5 mm)³ at x > 59 (the same strains at every depth), as a user
 runs it (``rackstress.runs.run``, static). Its depth t is swept so that the face lies anywhere
 from the outer layer to a spacing past it: the face cells' extent φ (``bindings.npz``) runs
 from 0.8 to 1.225 (docs/calibration.md "Walls of any thickness"). Measured against beam
@@ -145,13 +146,13 @@ def report(data) -> str:
         "Written by `rackstress bench walls` (module docstring of `bench/walls.py`): a "
         f"cantilever from an STL box, {L:g} × {B:g} mm × the depth, spacing 1 mm "
         f"(E = {E / 1000:g} GPa, ν as given, `poisson = \"material\"`), clamped at one end and "
-        f"carrying {FORCE:g} N·(t/5 mm)³ at the other, static. *tip*: the load's mean deflection over beam "
-        "theory with Timoshenko's shear term; *curvature*: the lattice's own axial strain at "
+        f"carrying {FORCE:g} N·(t/5 mm)³ at the other, static. *tip*: the load's mean "
+        "deflection over beam theory with Timoshenko's shear term; *curvature*: the lattice's own axial strain at "
         "the face (the slope across the layers of their displacements' strain at mid-span) "
         "times E over M·(t/2)/I; *face*: the default route's largest σ_xx on the top face at "
         "mid-span over M·(t/2)/I, what `rackstress run` reads, and over the curvature's; "
-        "*across the width*: every top particle's there (edges included) over the curvature's. *face φ*: the top layer's cell "
-        "extent across the face (1: the face half a spacing past it).\n\n"
+        "*across the width*: every top particle's there (edges included) over the "
+        "curvature's. *face φ*: the top layer's cell extent across the face (1: the face half a spacing past it).\n\n"
         + md_table(HEADER, table_rows(data))
         + f"\nThe lattice's curvature is within {100 * dev:.1f} % of beam theory's at every "
         f"depth; the recovered face stress, edges included, within {100 * rec:.1f} % of the "

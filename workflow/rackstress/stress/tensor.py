@@ -459,10 +459,11 @@ def patch_matrix(o: np.ndarray, spacing: float, points: np.ndarray, labels=None,
     with φ_ij = (1, (y_j − o_i)/a), A_i = Σ_j φ_ij φ_ijᵀ and q_i = (1, (x_i − o_i)/a) at the
     recovery point x_i; y_j is where particle j's stress stands as a sample (``samples``,
     :func:`sample_points`; its position where not given). ``labels`` (n): only particles of
-    the same label share a patch (one per part; −1: not recovered, W_ii = 1). ``data`` (n bool, :func:`regular_cells`): only
-    these particles' stresses enter a fit, as superconvergent patch recovery samples at its
-    best points; a particle whose data do not span three dimensions is fitted from its whole
-    patch, and one whose whole patch does not keeps its own value."""
+    the same label share a patch (one per part; −1: not recovered, W_ii = 1). ``data`` (n bool,
+    :func:`regular_cells`): only these particles' stresses enter a fit, as superconvergent patch
+    recovery samples at its best points; a particle whose data do not span three dimensions is
+    fitted from its whole patch, and one whose whole patch does not keeps its own value.
+    """
     from scipy.sparse import diags
     from scipy.spatial import cKDTree
 
