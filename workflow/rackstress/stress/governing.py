@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from rackstress.model.singular import KINDS, Singular
-from rackstress.stress.rundata import boundary_rows, face_supports
+from rackstress.stress.rundata import boundary_rows, face_supports, lattice_nu
 
 #: The zone: particles nearer than this many spacings to a singular point are left out of the
 #: governing stress. Measured (``rackstress bench governing``, docs/stress.md): beyond two
@@ -796,7 +796,7 @@ def _notch_submodel_here(run, part, o, surf, pts, rho, k: int, a: float, frame: 
     if not mat.get("E"):
         return k, None, "the part has no Young's modulus in scene.json"
     u = positions(run.trajectory[frame])[part.index] - o
-    nu = _lattice_nu(volume, part, mat)
+    nu = lattice_nu(volume, part, mat)    # the cut's displacements are its own material's
     reach = np.full(len(pts), np.inf) if reach is None else np.asarray(reach, float)
     held = None if bears is None else (np.asarray(bears[0], float), bears[1], a)
     chord = np.zeros(len(pts)) if chord is None else np.asarray(chord, float)
@@ -835,21 +835,6 @@ def _notch_submodel_here(run, part, o, surf, pts, rho, k: int, a: float, frame: 
                           f"{notch.CHECK_AGREE * 100:.0f} % apart), so the cut's displacement "
                           "does not carry the notch's field there")
     return at, value, None
-
-
-#: The Poisson's ratio of the elastic lattice without the volumetric term (docs/calibration.md:
-#: central bindings on the cubic lattice, whatever the material)
-LATTICE_NU = 0.25
-
-
-def _lattice_nu(volume, part, mat: dict) -> float:
-    """The Poisson's ratio the part's particles were solved with, which the submodel takes so
-    that the displacements on its cut are its own material's: the material's where the run's
-    volumetric terms ``volume`` (``measures.read_volume_terms``, or None) act on the part
-    (``poisson = "material"``), else the bindings' :data:`LATTICE_NU`."""
-    if volume is not None and np.isin(volume.owner, part.index).any():
-        return float(mat.get("nu", LATTICE_NU))
-    return LATTICE_NU
 
 
 #: the most submodel balls :func:`_notch_submodel` moves through

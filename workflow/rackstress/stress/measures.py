@@ -61,7 +61,7 @@ from scipy.spatial import cKDTree
 from rackstress.stress import tensor as T
 from rackstress.stress.dump import DumpColumnsError, StressInputError
 from rackstress.stress.fit import FITS
-from rackstress.stress.rundata import boundary_rows, face_stress, face_supports
+from rackstress.stress.rundata import boundary_rows, face_stress, face_supports, lattice_nu
 
 #: Cutoff of the strain neighbourhood in units of the part's typical (median nearest) spacing.
 CUTOFF_FACTOR = 1.5
@@ -861,19 +861,13 @@ class ParticleStress(_RunAnalysis):
                     data[idx] |= T.regular_cells(run.o[idx], sp, part_phi)
                     # each sample where its value stands; a held one at its particle (its
                     # support's force is in it)
-                    y = T.sample_points(run.o[idx], sp, part_phi, self._lattice_nu(part))
+                    nu = lattice_nu(self.volume, part, self._mat[part.name]["material"])
+                    y = T.sample_points(run.o[idx], sp, part_phi, nu)
                     samples[idx] = np.where(held[idx].any(axis=1)[:, None], run.o[idx], y)
             self.points = points
             a = float(np.sqrt(np.median(a2[np.isfinite(a2)])))
             self._patch = T.patch_matrix(run.o, a, points, labels, data=data,
                                          samples=samples)
-
-    def _lattice_nu(self, part) -> float:
-        """The Poisson's ratio a part's lattice has: the material's with the volumetric term
-        (``poisson = "material"``), the bindings' own ¼ without."""
-        if self.volume is None:
-            return 0.25
-        return float(self._mat[part.name]["material"].get("nu", 0.25))
 
     def _held_free_faces(self, run, mine, a2, phi, held):
         """The free faces of the cells a support holds across, or None: (n×3, per axis −1 or

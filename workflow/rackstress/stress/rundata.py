@@ -304,3 +304,18 @@ def face_supports(held: np.ndarray) -> np.ndarray:
     """
     held = np.asarray(held, bool)
     return held & ~held.all(axis=0)
+
+
+#: The Poisson's ratio of the elastic lattice without the volumetric term (docs/calibration.md:
+#: central bindings on the cubic lattice, whatever the material)
+LATTICE_NU = 0.25
+
+
+def lattice_nu(volume, part, mat: dict) -> float:
+    """The Poisson's ratio a part's particles were solved with: the material's (``mat``) where
+    the run's volumetric terms ``volume`` (``measures.read_volume_terms``, or None) act on the
+    part (``poisson = "material"``), else the bindings' :data:`LATTICE_NU`. The notch
+    submodel takes it for its cut, the patch fit for where its samples stand."""
+    if volume is not None and np.isin(volume.owner, part.index).any():
+        return float(mat.get("nu", LATTICE_NU))
+    return LATTICE_NU

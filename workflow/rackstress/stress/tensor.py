@@ -477,9 +477,9 @@ def patch_matrix(o: np.ndarray, spacing: float, points: np.ndarray, labels=None,
     i, j = i[keep], j[keep]
     flat = flat_axes(o, a, lab)
     W, _ = _patch_weights(o, a, points, lab, flat, i, j, samples)
-    if (data is None or np.all(data)) and samples is None:
+    if data is None or np.all(data):
         return W
-    use = np.ones(len(j), bool) if data is None else np.asarray(data, bool)[j]
+    use = np.asarray(data, bool)[j]
     Wd, fit = _patch_weights(o, a, points, lab, flat, i[use], j[use], samples)
     return diags(fit.astype(float)) @ Wd + diags((~fit).astype(float)) @ W
 
