@@ -420,7 +420,7 @@ def test_a_bent_walls_face_reads_its_own_curvature_across_its_width(depth, nu, w
     from rackstress.runs.run import run
     from rackstress.scenes import load_toml
     from rackstress.stress import load_run
-    from rackstress.stress.measures import ParticleStress
+    from rackstress.stress.measures import ParticleStress, positions
 
     b, L, F, E = 6.0, 60.0, 20.0, 70e3
     m = trimesh.creation.box(extents=[L, b, depth])
@@ -430,8 +430,7 @@ def test_a_bent_walls_face_reads_its_own_curvature_across_its_width(depth, nu, w
     assert run(load_toml(tmp_path / "beam.toml"), tmp_path / "r", progress=False)["settled"]
     got = load_run(tmp_path / "r")
     o = got.o
-    got.universe.trajectory[-1]
-    u = got.universe.atoms.positions - o
+    u = positions(got.trajectory[-1]) - o
     zs = np.unique(o[:, 2])
     eps = [(u[(o[:, 2] == z) & np.isclose(o[:, 0], 34.5), 0].mean()
             - u[(o[:, 2] == z) & np.isclose(o[:, 0], 24.5), 0].mean()) / 10.0 for z in zs]

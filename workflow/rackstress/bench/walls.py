@@ -67,7 +67,7 @@ def case(depth: float, nu: float, tmp: Path) -> dict:
     from rackstress.runs.run import run
     from rackstress.scenes import load_toml
     from rackstress.stress import load_run
-    from rackstress.stress.measures import ParticleStress
+    from rackstress.stress.measures import ParticleStress, positions, read_fractions
 
     d = tmp / f"t{depth:g}-{nu:g}"
     d.mkdir()
@@ -79,8 +79,7 @@ def case(depth: float, nu: float, tmp: Path) -> dict:
     summary = run(load_toml(d / "wall.toml"), d / "r", progress=False)
     got = load_run(d / "r")
     o = got.o
-    got.universe.trajectory[-1]
-    u = got.universe.atoms.positions - o
+    u = positions(got.trajectory[-1]) - o             # float64, as the dump wrote them
     zs = np.unique(o[:, 2])
     zc = 0.5 * (zs[0] + zs[-1])
     I = B * depth ** 3 / 12
@@ -102,7 +101,7 @@ def case(depth: float, nu: float, tmp: Path) -> dict:
     top = (o[:, 2] == zs[-1]) & np.isclose(o[:, 0], x0)
     face = float(np.max(sx[top])) / sigma
     width = sx[top] / sigma / float(curvature)
-    phi = np.load(d / "r" / "bindings.npz")["phi"][top, 2]
+    phi = read_fractions(got)[top, 2]
     return {"depth": depth, "nu": nu, "layers": len(zs), "phi": float(np.median(phi)),
             "width_low": float(width.min()), "width_high": float(width.max()),
             "settled": bool(summary["settled"]), "particles": len(o), "tip_ratio": float(tip),
