@@ -338,6 +338,33 @@ def test_fea_of_a_settled_run_reports_bands_and_its_own_convergence(settled):
 
 
 @pytest.mark.lammps
+def test_fea_of_a_run_given_another_spacing_meshes_the_parts_own_file(tmp_path):
+    """``rackstress run PART.toml --set spacing=1.5`` and ``rackstress fea``: the FE check
+    rebuilds the scene the run solved (the spacing given on the command line with it) and
+    meshes the part's own STL. The --set spacing was not recorded: the rebuilt part differed
+    from the run's, and the FE fell back to the union of the particles' cells, a staircase
+    of the part, said only in a note."""
+    import trimesh
+
+    m = trimesh.creation.box(extents=[24.0, 6.0, 6.0])
+    m.apply_translation([12.0, 0, 0])
+    m.export(tmp_path / "beam.stl")
+    (tmp_path / "beam.toml").write_text(BEAM.format().replace("[59, -9, -9], max = [61",
+                                                              "[23, -9, -9], max = [25"))
+    out = tmp_path / "r"
+    r = rs("run", tmp_path / "beam.toml", "--set", "spacing=1.5", "--out", out, *QUIET,
+           timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert json.loads((out / "scene.json").read_text())["groups"][0]["spacing"] == 1.5
+    r = rs("fea", out, "--no-converge", timeout=300)
+    assert r.returncode == 0, r.stderr
+    data = json.loads((out / "fea.json").read_text())
+    assert data["mesh"].endswith("of beam.stl") and data["note"] is None, (data["mesh"],
+                                                                          data["note"])
+    assert data["spacing"] == 1.5
+
+
+@pytest.mark.lammps
 def test_fea_refuses_an_fe_model_that_would_not_fit(settled):
     """--size far below the spacing: the FE model's memory is estimated before meshing and
     refused with how much it needs and which --size fits (exit 2, nothing written); under

@@ -551,8 +551,11 @@ def _build_explicit(ctx: _Ctx, data: dict, overrides: dict, user: dict) -> Scene
                         "declare analysis = \"dynamic\"", "[[contact]] friction")
     physical.check_constraints(ctx, groups, analysis)
 
+    # --set spacing=… and --set budget=… are recorded with the scene's own parameters, so
+    # that `rackstress fea` and a resume rebuild the part the run solved
     params = {"file": ctx.file, "dt": dt, "cycles": settings["cycles"],
-              "bound": settings["bound"], **user}
+              "bound": settings["bound"],
+              **{k: overrides[k] for k in _SIZING if overrides.get(k) is not None}, **user}
     try:
         scene = Scene(name, groups, operators, phases, dt=dt, cycles=settings["cycles"],
                       bound=settings["bound"], params=params, units=unit_system,
