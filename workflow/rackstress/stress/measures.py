@@ -61,7 +61,8 @@ from scipy.spatial import cKDTree
 from rackstress.stress import tensor as T
 from rackstress.stress.dump import DumpColumnsError, StressInputError
 from rackstress.stress.fit import FITS
-from rackstress.stress.rundata import boundary_rows, face_stress, face_supports, lattice_nu
+from rackstress.stress.rundata import (boundary_rows, face_stress, face_supports, lattice_nu,
+                                       volumetric)
 
 #: Cutoff of the strain neighbourhood in units of the part's typical (median nearest) spacing.
 CUTOFF_FACTOR = 1.5
@@ -862,7 +863,8 @@ class ParticleStress(_RunAnalysis):
                     # each sample where its value stands; a held one at its particle (its
                     # support's force is in it)
                     nu = lattice_nu(self.volume, part, self._mat[part.name]["material"])
-                    y = T.sample_points(run.o[idx], sp, part_phi, nu)
+                    y = T.sample_points(run.o[idx], sp, part_phi, nu,
+                                        volumetric(self.volume, part))
                     samples[idx] = np.where(held[idx].any(axis=1)[:, None], run.o[idx], y)
             self.points = points
             a = float(np.sqrt(np.median(a2[np.isfinite(a2)])))

@@ -311,11 +311,17 @@ def face_supports(held: np.ndarray) -> np.ndarray:
 LATTICE_NU = 0.25
 
 
+def volumetric(volume, part) -> bool:
+    """Whether the run's volumetric terms ``volume`` (``measures.read_volume_terms``, or None)
+    act on the part (``poisson = "material"``): else it is bound by its bindings alone."""
+    return volume is not None and bool(np.isin(volume.owner, part.index).any())
+
+
 def lattice_nu(volume, part, mat: dict) -> float:
     """The Poisson's ratio a part's particles were solved with: the material's (``mat``) where
     the run's volumetric terms ``volume`` (``measures.read_volume_terms``, or None) act on the
     part (``poisson = "material"``), else the bindings' :data:`LATTICE_NU`. The notch
     submodel takes it for its cut, the patch fit for where its samples stand."""
-    if volume is not None and np.isin(volume.owner, part.index).any():
+    if volumetric(volume, part):
         return float(mat.get("nu", LATTICE_NU))
     return LATTICE_NU

@@ -407,13 +407,20 @@ def regular_cells(o: np.ndarray, spacing: float, phi: np.ndarray | None = None) 
 #: stands")
 SAMPLE_NU = 0.115
 SAMPLE_EDGE = -0.194
+#: the same for a part bound by its bindings alone (``poisson = "lattice"``, the default: ν = ¼
+#: and no volumetric term, whose face cells hold no sub-cell terms): on a face at its cell's
+#: centroid, on an edge SAMPLE_BINDINGS_EDGE along each free face. Fitted to the bent
+#: cantilevers of ``rackstress bench walls`` bound so (three to ten layers, φ 0.9 … 1.145): the
+#: middle and the edges of the top face read beam theory within 7.8 %, the edges had read up
+#: to 17.6 % high with the volumetric lattice's shifts (docs/stress.md "Where a sample stands")
+SAMPLE_BINDINGS_EDGE = 0.1
 #: the cells' extents φ the shifts were measured over; a cell beyond them (a staircase's step,
 #: a wall's face a spacing out) is shifted as one at the nearer end
 SAMPLE_PHI = (0.8, 1.225)
 
 
 def sample_points(o: np.ndarray, spacing: float, phi: np.ndarray | None = None,
-                  nu: float = 0.25) -> np.ndarray:
+                  nu: float = 0.25, volumetric: bool = True) -> np.ndarray:
     """Where each particle's ``continuum`` stress stands as a sample of the field (n, 3). A
     particle inside the part: at its centre. On the surface the value is a share of a cell
     that ends off-centre and whose free face's normal strain the particle reads one-sided,
@@ -424,7 +431,9 @@ def sample_points(o: np.ndarray, spacing: float, phi: np.ndarray | None = None,
     A corner (three free faces), a particle off one cubic lattice or without ``phi`` (a
     dynamic run): at its centre. Read as the fit's samples, a bent wall of two to eight
     layers reads its own curvature across its face within 2.3 % (``rackstress bench
-    walls``), where its particles' own positions gave −7 … +21 %.
+    walls``), where its particles' own positions gave −7 … +21 %. A part bound by its
+    bindings alone (``volumetric`` False: ``poisson = "lattice"``, ν = ¼) has its own
+    offsets: a face at its centroid, an edge :data:`SAMPLE_BINDINGS_EDGE` along each face.
 
     >>> g = np.array([[x, y, z] for x in range(3) for y in range(3) for z in range(3)], float)
     >>> phi = np.ones((27, 3)); phi[22, 0] = phi[25, 0] = 1.2   # cells overhanging in x
@@ -435,6 +444,9 @@ def sample_points(o: np.ndarray, spacing: float, phi: np.ndarray | None = None,
     [1.856, 1.806, 1.0]
     >>> y[13].tolist(), y[26].tolist()          # inside; a corner
     ([1.0, 1.0, 1.0], [2.0, 2.0, 2.0])
+    >>> b = sample_points(g, 1.0, phi, volumetric=False)   # bound by its bindings alone
+    >>> b[22].round(3).tolist(), b[25].round(3).tolist()   # the centroid; 0.05 + 0.1, 0.1
+    ([2.1, 1.0, 1.0], [2.15, 2.1, 1.0])
     """
     o = np.asarray(o, float)
     a = float(spacing)
@@ -444,9 +456,13 @@ def sample_points(o: np.ndarray, spacing: float, phi: np.ndarray | None = None,
     ff = free_faces(o, a)
     nf = np.abs(ff).sum(axis=1)
     f = np.clip(np.nan_to_num(np.asarray(phi, float), nan=1.0), *SAMPLE_PHI)
-    tilt = SAMPLE_NU * nu / (1.0 - nu)
-    face = (f - 1.0) / 2 + tilt
-    edge = (f - 1.0) / 4 + SAMPLE_EDGE + tilt
+    if volumetric:
+        tilt = SAMPLE_NU * nu / (1.0 - nu)
+        face = (f - 1.0) / 2 + tilt
+        edge = (f - 1.0) / 4 + SAMPLE_EDGE + tilt
+    else:
+        face = (f - 1.0) / 2
+        edge = (f - 1.0) / 4 + SAMPLE_BINDINGS_EDGE
     off = np.where((nf == 1)[:, None], face, np.where((nf == 2)[:, None], edge, 0.0))
     return out + ff * off * a
 
