@@ -34,8 +34,10 @@ import numpy as np
 from rackstress.bench import fmt, machine, md_table, out_dir, write_json
 
 E, B, L, FORCE = 70000.0, 6.0, 60.0, 20.0
-#: (depth [mm] at spacing 1, ν): 2 to 8 layers, faces from 0.3 spacings short of half a
-#: spacing past the outer layer to 0.725 past it, at ν = 0.3; three of them at 0.1, 0.45
+#: (depth [mm] at spacing 1, ν, poisson): 2 to 8 layers, faces from 0.3 spacings short of half
+#: a spacing past the outer layer to 0.725 past it, at ν = 0.3; three of them at 0.1, 0.45; and
+#: 2 to 10 layers bound by their bindings alone (ν = ¼), where the sample offsets of
+#: ``tensor.SAMPLE_BINDINGS_EDGE`` were fitted
 CASES = tuple((t, 0.3, "material") for t in (2.05, 2.2, 2.4, 2.6, 2.8, 3.0, 4.0, 4.15, 4.29,
                                              4.45, 4.6, 4.8, 5.0, 5.29, 6.29, 8.29)) \
     + tuple((t, nu, "material") for nu in (0.1, 0.45) for t in (4.0, 4.29, 5.0)) \
