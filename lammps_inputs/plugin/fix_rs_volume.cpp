@@ -17,7 +17,9 @@
      its neighbours s_k = n_k/2 and the overhang h_k = φ_k − s_k: the sub-cell spanned along the
      axes S gets θ_S = Σ_{k∈S} D_k and κ = c_d·Π_S s·Π_rest h (c_d = λ'_d/ρ: bulk, plane
      stress, uniaxial stress, each less the bindings' own λ = μ), d the axes of S and those
-     the particle is held along (d2_rsphi[4-6]: a support's overhang cannot contract);
+     the particle is held along (d2_rsphi[4-6]: a support's overhang cannot contract; an axis
+     along which it has no neighbour is not held: a sheet one particle thick stays in plane
+     stress);
    * on a face particle (one free face, normal l, outward σ, its in-face neighbours and the
      four diagonals inward there): the overhang's in-plane strains at its centroid, Dc_k =
      (1 + h)·D_k − h·G_k, G_k = (e_{k−σl} + e_{−k−σl})/L_diag − e_{−σl}/L, with the membrane's
@@ -218,7 +220,10 @@ void FixRSVolume::collect()
     for (int k = 0; k < 3; k++) {
       s[k] = 0.5 * count[k];
       h[k] = std::max(phi[6 * i + k] - s[k], 0.0);
-      held[k] = phi[6 * i + 3 + k] > 0.5;
+      // a support across an axis along which the particle has no neighbour at all (a sheet
+      // or a strut one particle thick held in its normal) holds no face: its overhangs stay
+      // free to contract there (rackstress.model.volume.build, the same rule)
+      held[k] = phi[6 * i + 3 + k] > 0.5 && count[k] > 0.0;
     }
     // a face particle: one axis with one neighbour, both along the other two, and the four
     // diagonals inward from the free face
