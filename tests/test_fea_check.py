@@ -216,6 +216,30 @@ force = [0, 0, -20]
 """
 
 
+def _bent_beam(tmp_path, depth: float, scene: str):
+    """The cantilever of :data:`BEAM` (60 × 6 mm × ``depth``, from an STL box) solved by the
+    scene text ``scene``: its run, settled."""
+    import trimesh
+
+    from rackstress.runs.run import run
+    from rackstress.scenes import load_toml
+    from rackstress.stress import load_run
+
+    m = trimesh.creation.box(extents=[60.0, 6.0, depth])
+    m.apply_translation([30.0, 0, 0])
+    m.export(tmp_path / "beam.stl")
+    (tmp_path / "beam.toml").write_text(scene)
+    assert run(load_toml(tmp_path / "beam.toml"), tmp_path / "r", progress=False)["settled"]
+    return load_run(tmp_path / "r")
+
+
+def _beam_theory(o: np.ndarray, x, depth: float, F: float = 20.0, b: float = 6.0):
+    """M·(h/2)/I at ``x`` of :data:`BEAM`'s cantilever: M = F·(x_F − x), x_F where the load's
+    particles are, I = b·h³/12 (by hand)."""
+    x_F = o[o[:, 0] > 59, 0].mean()
+    return F * (x_F - x) * (depth / 2) / (b * depth ** 3 / 12)
+
+
 @pytest.mark.parametrize("depth", [5.6, 5.8])
 def test_a_bent_beam_reads_its_face_stress_where_its_face_is(depth, tmp_path):
     """Beam theory, σ_xx = M·(h/2)/I with M = F·(x_F − x) and I = b·h³/12, on the top face
@@ -224,28 +248,16 @@ def test_a_bent_beam_reads_its_face_stress_where_its_face_is(depth, tmp_path):
     φ = 0.8 (0.9). The face particles are read on the face, (φ − ½) spacings out, and the
     largest reads within 3 %. Read half a spacing out, past the face, the 5.6 beam's face
     read 4.4 % high."""
-    import trimesh
-
-    from rackstress.runs.run import run
-    from rackstress.scenes import load_toml
-    from rackstress.stress import load_run
     from rackstress.stress.measures import ParticleStress
 
-    b, L, F = 6.0, 60.0, 20.0
-    m = trimesh.creation.box(extents=[L, b, depth])
-    m.apply_translation([L / 2, 0, 0])
-    m.export(tmp_path / "beam.stl")
-    (tmp_path / "beam.toml").write_text(BEAM.format())
-    assert run(load_toml(tmp_path / "beam.toml"), tmp_path / "r", progress=False)["settled"]
-    got = load_run(tmp_path / "r")
+    got = _bent_beam(tmp_path, depth, BEAM.format())
     o = got.o
     assert np.ptp(o[:, 2]) == pytest.approx(round(depth) - 1)      # the layers the fill made
-    x_F = o[o[:, 0] > 59, 0].mean()
     top = o[:, 2] == o[:, 2].max()
     sx = ParticleStress(got).run().results.stress[-1][:, 0]
     for x in (25.0, 30.0, 35.0):
         at = top & (np.abs(o[:, 0] - x) < 0.6)
-        want = F * (x_F - o[at, 0]) * (depth / 2) / (b * depth ** 3 / 12)
+        want = _beam_theory(o, o[at, 0], depth)
         assert np.max(sx[at] / want) == pytest.approx(1.0, abs=0.03)
 
 
@@ -436,28 +448,17 @@ def test_a_wall_bound_by_its_bindings_alone_reads_beam_theory_on_its_edges(depth
     ν = ¼), 6 and 8 layers deep (φ = 1.145 and 1): beam theory's M·c/I (M = F·(x_F − x), I =
     b·h³/12) on every top particle at mid-span, the edges' included, within 3 %. Read with
     the volumetric lattice's sample offsets the edges read 1.084 and 1.054 of it."""
-    import trimesh
-
-    from rackstress.runs.run import run
-    from rackstress.scenes import load_toml
-    from rackstress.stress import load_run
     from rackstress.stress.measures import ParticleStress
 
-    b, L, F = 6.0, 60.0, 20.0
-    m = trimesh.creation.box(extents=[L, b, depth])
-    m.apply_translation([L / 2, 0, 0])
-    m.export(tmp_path / "beam.stl")
-    (tmp_path / "beam.toml").write_text(BEAM.format().replace('poisson = "material"\n', ""))
-    assert "poisson" not in (tmp_path / "beam.toml").read_text()
-    assert run(load_toml(tmp_path / "beam.toml"), tmp_path / "r", progress=False)["settled"]
-    got = load_run(tmp_path / "r")
+    scene = BEAM.format().replace('poisson = "material"\n', "")
+    assert "poisson" not in scene
+    got = _bent_beam(tmp_path, depth, scene)
     o = got.o
     assert len(np.unique(o[:, 2])) == int(depth)
     top = (o[:, 2] == o[:, 2].max()) & np.isclose(o[:, 0], 29.5)
     assert top.sum() == 6
     sx = ParticleStress(got).run().results.stress[-1][top, 0]
-    x_F = o[o[:, 0] > 59, 0].mean()
-    want = F * (x_F - 29.5) * depth / 2 / (b * depth ** 3 / 12)
+    want = _beam_theory(o, 29.5, depth)
     assert sx / want == pytest.approx(np.ones(6), abs=0.03)
 
 
@@ -473,20 +474,10 @@ def test_a_bent_walls_face_reads_its_own_curvature_across_its_width(depth, nu, w
     particles the samples gave 0.93 … 1.03 (ν = 0.1) and 0.97 … 1.05 (ν = 0.45) of it. A
     wall of two layers whose face cells overhang (2.4 deep, φ = 1.2: no cell a regular
     sample, the whole patch's fit) within 3 %: 1.08 … 1.21 at the particles' centres."""
-    import trimesh
-
-    from rackstress.runs.run import run
-    from rackstress.scenes import load_toml
-    from rackstress.stress import load_run
     from rackstress.stress.measures import ParticleStress, positions
 
-    b, L, F, E = 6.0, 60.0, 20.0, 70e3
-    m = trimesh.creation.box(extents=[L, b, depth])
-    m.apply_translation([L / 2, 0, 0])
-    m.export(tmp_path / "beam.stl")
-    (tmp_path / "beam.toml").write_text(BEAM.format().replace("nu = 0.3", f"nu = {nu}"))
-    assert run(load_toml(tmp_path / "beam.toml"), tmp_path / "r", progress=False)["settled"]
-    got = load_run(tmp_path / "r")
+    E = 70e3
+    got = _bent_beam(tmp_path, depth, BEAM.format().replace("nu = 0.3", f"nu = {nu}"))
     o = got.o
     u = positions(got.trajectory[-1]) - o
     zs = np.unique(o[:, 2])
@@ -499,6 +490,4 @@ def test_a_bent_walls_face_reads_its_own_curvature_across_its_width(depth, nu, w
     own = E * kappa * depth / 2
     assert sx / own == pytest.approx(np.ones(6), abs=within)
     if len(zs) >= 4:              # and beam theory's M·c/I within 6 % (two layers bend 1.19×)
-        x_F = o[o[:, 0] > 59, 0].mean()
-        want = F * (x_F - 29.5) * depth / 2 / (b * depth ** 3 / 12)
-        assert own == pytest.approx(want, rel=0.06)
+        assert own == pytest.approx(_beam_theory(o, 29.5, depth), rel=0.06)
