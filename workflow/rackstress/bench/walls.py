@@ -6,7 +6,9 @@ part is by default, ``poisson = "lattice"`` with ν = ¼), clamped at x < 1 and 
 F = 20 N·(t/5 mm)³ at x > 59 (the same strains at every depth), as a user
 runs it (``rackstress.runs.run``, static). Its depth t is swept so that the face lies anywhere
 from the outer layer to a spacing past it: the face cells' extent φ (``bindings.npz``) runs
-from 0.8 to 1.225 (docs/calibration.md "Walls of any thickness"). Measured against beam
+from 0.8 to 1.225 (docs/calibration.md "Walls of any thickness"); and walls the lattice meets
+off-centre (:data:`OFF_CENTRE`: a block at the clamp rises above the wall, the top face's
+cells overhang up to φ = 1.345 and the bottom's fall short). Measured against beam
 theory (E·I = E·b·t³/12, Timoshenko's shear term F·L/(κ·G·A) with κ = 5/6):
 
 * **tip**: the loaded particles' mean deflection over F·L³/(3EI) + F·L/(κGA), L from the
@@ -43,6 +45,13 @@ CASES = tuple((t, 0.3, "material") for t in (2.05, 2.2, 2.4, 2.6, 2.8, 3.0, 4.0,
     + tuple((t, nu, "material") for nu in (0.1, 0.45) for t in (4.0, 4.29, 5.0)) \
     + tuple((t, 0.25, "lattice") for t in (2.05, 2.4, 2.8, 3.0, 3.2, 4.0, 4.29, 5.0, 5.29, 6.0,
                                            6.29, 8.0, 10.0))
+#: (depth, ν, poisson, lift [mm]): walls the lattice meets off-centre, as a part's walls are
+#: where the fill's lattice is centred on the whole part, not on the wall. A block at the
+#: clamp (x < 0, held) rises ``lift`` above the wall and moves the lattice up by lift/2: the
+#: top face's cells overhang (φ 1.2 … 1.345), the bottom's fall short
+OFF_CENTRE = ((3.0, 0.25, "lattice", 1.6), (4.29, 0.25, "lattice", 0.6),
+              (5.29, 0.25, "lattice", 0.6), (6.29, 0.25, "lattice", 0.6),
+              (4.29, 0.3, "material", 0.6))
 QUICK = ((4.0, 0.3, "material"), (4.29, 0.3, "material"), (4.0, 0.25, "lattice"))
 SCENE = """
 name = "wall"
@@ -62,13 +71,16 @@ on = "wall"
 where = {{ box = {{ min = [59, -9, -9], max = [61, 9, 9] }} }}
 force = [0, 0, -{F:.6g}]
 """
-HEADER = ["poisson", "depth [mm]", "ν", "layers", "face φ", "tip / beam", "curvature / beam",
+HEADER = ["poisson", "depth [mm]", "ν", "layers", "face φ", "bottom φ", "tip / beam",
+          "curvature / beam",
           "face σ_xx / beam", "face / curvature", "across the width / curvature",
           "across the width / beam"]
 
 
-def case(depth: float, nu: float, tmp: Path, poisson: str = "material") -> dict:
-    """One depth: the run and its three ratios (module docstring)."""
+def case(depth: float, nu: float, tmp: Path, poisson: str = "material",
+         lift: float = 0.0) -> dict:
+    """One depth: the run and its three ratios (module docstring); ``lift``: the clamp's block
+    rising that far above the wall (:data:`OFF_CENTRE`)."""
     import trimesh
 
     from rackstress.runs.run import run
@@ -76,10 +88,14 @@ def case(depth: float, nu: float, tmp: Path, poisson: str = "material") -> dict:
     from rackstress.stress import load_run
     from rackstress.stress.measures import ParticleStress, positions, read_fractions
 
-    d = tmp / f"t{depth:g}-{nu:g}-{poisson}"
+    d = tmp / f"t{depth:g}-{nu:g}-{poisson}-{lift:g}"
     d.mkdir()
     m = trimesh.creation.box(extents=[L, B, depth])
     m.apply_translation([L / 2, 0, depth / 2])
+    if lift:
+        k = trimesh.creation.box(extents=[0.8, B, depth + lift])
+        k.apply_translation([-0.5, 0, (depth + lift) / 2])
+        m = trimesh.util.concatenate([m, k])
     m.export(d / "wall.stl")
     F = FORCE * (depth / 5.0) ** 3
     (d / "wall.toml").write_text(SCENE.format(E_pa=E * 1e6, nu=nu, F=F, poisson=poisson))
@@ -87,7 +103,9 @@ def case(depth: float, nu: float, tmp: Path, poisson: str = "material") -> dict:
     got = load_run(d / "r")
     o = got.o
     u = positions(got.trajectory[-1]) - o             # float64, as the dump wrote them
-    zs = np.unique(o[:, 2])
+    xs = np.unique(o[:, 0])
+    xa, xb, x0 = (float(xs[np.argmin(np.abs(xs - x))]) for x in (24.5, 34.5, 29.5))
+    zs = np.unique(o[o[:, 0] == x0, 2])              # the wall's layers (not the block's)
     zc = 0.5 * (zs[0] + zs[-1])
     I = B * depth ** 3 / 12
     G = E / (2 * (1 + nu))
@@ -95,7 +113,6 @@ def case(depth: float, nu: float, tmp: Path, poisson: str = "material") -> dict:
     span = x_F - o[o[:, 0] < 1.01, 0].max()
     beam = F * span ** 3 / (3 * E * I) + F * span / (5 / 6 * G * B * depth)
     tip = -u[o[:, 0] > 59, 2].mean() / beam
-    xa, xb, x0 = 24.5, 34.5, 29.5
     eps = []
     for z in zs:
         a = (o[:, 2] == z) & np.isclose(o[:, 0], xa)
@@ -106,11 +123,12 @@ def case(depth: float, nu: float, tmp: Path, poisson: str = "material") -> dict:
     curvature = kappa * E * (depth / 2) / sigma
     sx = ParticleStress(got).run().results.stress[-1][:, 0]
     top = (o[:, 2] == zs[-1]) & np.isclose(o[:, 0], x0)
+    bottom = (o[:, 2] == zs[0]) & np.isclose(o[:, 0], x0)
     face = float(np.max(sx[top])) / sigma
     width = sx[top] / sigma / float(curvature)
-    phi = read_fractions(got)[top, 2]
-    return {"poisson": poisson, "depth": depth, "nu": nu, "layers": len(zs),
-            "phi": float(np.median(phi)),
+    phi = read_fractions(got)
+    return {"poisson": poisson, "depth": depth, "nu": nu, "layers": len(zs), "lift": lift,
+            "phi": float(np.median(phi[top, 2])), "phi_bottom": float(np.median(phi[bottom, 2])),
             "width_low": float(width.min()), "width_high": float(width.max()),
             "beam_low": float(np.min(sx[top]) / sigma), "beam_high": float(np.max(sx[top]) / sigma),
             "settled": bool(summary["settled"]), "particles": len(o), "tip_ratio": float(tip),
@@ -124,8 +142,8 @@ def run_bench(out: Path | None = None, quick: bool = False, echo=print) -> dict:
     t0 = time.time()
     rows = []
     with tempfile.TemporaryDirectory(prefix="rs-walls-") as tmp:
-        for depth, nu, poisson in QUICK if quick else CASES:
-            r = case(depth, nu, Path(tmp), poisson)
+        for depth, nu, poisson, *lift in QUICK if quick else CASES + OFF_CENTRE:
+            r = case(depth, nu, Path(tmp), poisson, *lift)
             rows.append(r)
             echo(f"{poisson}: depth {depth:g} mm, nu {nu:g}: {r['layers']} layers, face φ {r['phi']:.3f}: tip "
                  f"{r['tip_ratio']:.3f}, curvature {r['curvature_ratio']:.3f}, face "
@@ -140,7 +158,7 @@ def run_bench(out: Path | None = None, quick: bool = False, echo=print) -> dict:
 
 def table_rows(data) -> list:
     return [[r["poisson"], fmt(r["depth"]), fmt(r["nu"]), r["layers"], fmt(r["phi"], 4),
-             fmt(r["tip_ratio"], 4), fmt(r["curvature_ratio"], 4), fmt(r["face_ratio"], 4),
+             fmt(r["phi_bottom"], 4), fmt(r["tip_ratio"], 4), fmt(r["curvature_ratio"], 4), fmt(r["face_ratio"], 4),
              fmt(r["face_over_curvature"], 4),
              f"{fmt(r['width_low'], 3)} … {fmt(r['width_high'], 3)}",
              f"{fmt(r['beam_low'], 3)} … {fmt(r['beam_high'], 3)}"] for r in data["rows"]]
@@ -180,7 +198,10 @@ def report(data) -> str:
         "times E over M·(t/2)/I; *face*: the default route's largest σ_xx on the top face at "
         "mid-span over M·(t/2)/I, what `rackstress run` reads, and over the curvature's; "
         "*across the width*: every top particle's there (edges included) over the "
-        "curvature's and over M·(t/2)/I. *face φ*: the top layer's cell extent across the face (1: the face half a spacing past it).\n\n"
+        "curvature's and over M·(t/2)/I. *face φ*, *bottom φ*: the top and bottom layers' cell "
+        "extent across the face (1: the face half a spacing past it); where the two differ the "
+        "lattice meets the wall off-centre, as it meets a part's walls (a block at the clamp "
+        "rises above the wall and moves the lattice up).\n\n"
         + md_table(HEADER, table_rows(data))
         + text + "\n"
         f"Machine: {data['machine']['cores']} cores, load average "

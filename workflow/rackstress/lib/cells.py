@@ -134,18 +134,24 @@ def in_cells(p: np.ndarray, x: np.ndarray, spacing: float, slack: float = 1e-6) 
     return i[order], j[order]
 
 
-def lattice_sides(o: np.ndarray, spacing: float) -> np.ndarray:
-    """Which lattice neighbours each particle has on its cubic lattice (n, 3, 2): per axis,
-    the particle at −a and at +a."""
+def lattice_neighbours(o: np.ndarray, spacing: float) -> np.ndarray:
+    """Each particle's lattice neighbours on its cubic lattice (n, 3, 2): per axis, the index
+    of the particle at −a and at +a, −1 where there is none."""
     a = float(spacing)
     o = np.asarray(o, float)
     g = np.rint((o - o.min(axis=0)) / a).astype(np.int64) + 1
-    occ = np.zeros(tuple(g.max(axis=0) + 2), dtype=bool)
-    occ[g[:, 0], g[:, 1], g[:, 2]] = True
-    out = np.zeros((len(o), 3, 2), dtype=bool)
+    at = np.full(tuple(g.max(axis=0) + 2), -1, dtype=np.int32)
+    at[g[:, 0], g[:, 1], g[:, 2]] = np.arange(len(o))
+    out = np.full((len(o), 3, 2), -1, dtype=np.int64)
     for ax in range(3):
         for h, step in enumerate((-1, 1)):
             n = g.copy()
             n[:, ax] += step
-            out[:, ax, h] = occ[n[:, 0], n[:, 1], n[:, 2]]
+            out[:, ax, h] = at[n[:, 0], n[:, 1], n[:, 2]]
     return out
+
+
+def lattice_sides(o: np.ndarray, spacing: float) -> np.ndarray:
+    """Which lattice neighbours each particle has on its cubic lattice (n, 3, 2): per axis,
+    the particle at −a and at +a."""
+    return lattice_neighbours(o, spacing) >= 0

@@ -859,12 +859,12 @@ class ParticleStress(_RunAnalysis):
                 if len(ap):
                     sp = float(np.sqrt(np.median(ap)))
                     part_phi = None if phi is None else phi[idx]
-                    data[idx] |= T.regular_cells(run.o[idx], sp, part_phi)
+                    vol = volumetric(self.volume, part)
+                    data[idx] |= T.regular_cells(run.o[idx], sp, part_phi, vol)
                     # each sample where its value stands; a held one at its particle (its
                     # support's force is in it)
                     nu = lattice_nu(self.volume, part, self._mat[part.name]["material"])
-                    y = T.sample_points(run.o[idx], sp, part_phi, nu,
-                                        volumetric(self.volume, part))
+                    y = T.sample_points(run.o[idx], sp, part_phi, nu, vol)
                     samples[idx] = np.where(held[idx].any(axis=1)[:, None], run.o[idx], y)
             self.points = points
             a = float(np.sqrt(np.median(a2[np.isfinite(a2)])))

@@ -55,7 +55,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rackstress.lib.cells import lattice_sides
+from rackstress.lib.cells import lattice_neighbours, lattice_sides
 
 #: Voigt order of the internal 6-vectors (tensor components, not engineering shears)
 VOIGT = ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))
@@ -369,7 +369,14 @@ def interior(faces: np.ndarray) -> np.ndarray:
 REGULAR_EXTENT = 0.15
 
 
-def regular_cells(o: np.ndarray, spacing: float, phi: np.ndarray | None = None) -> np.ndarray:
+#: a flat face of a part bound by its bindings alone (:func:`regular_cells`): its cell's extent
+#: across the face differs from each in-plane neighbour's by at most this many spacings (a face
+#: within 3° of the lattice's plane)
+FLAT_FACE_STEP = 0.05
+
+
+def regular_cells(o: np.ndarray, spacing: float, phi: np.ndarray | None = None,
+                  volumetric: bool = True) -> np.ndarray:
     """Which particles' stresses sample the field where they sit (n bool): inside the part
     (no free face); on its surface where the cell ends within the bindings' reach — across
     each free face an extent ``phi`` (n × 3, spacings: ``bindings.npz``'s) within
@@ -382,21 +389,59 @@ def regular_cells(o: np.ndarray, spacing: float, phi: np.ndarray | None = None) 
     "Patch recovery"). Off one cubic lattice (hcp packing), or without ``phi`` (a dynamic
     run), every particle counts as regular.
 
+    A part bound by its bindings alone (``volumetric`` False) also samples a face cell that
+    overhangs up to a whole spacing (φ ≤ 1.5) where the face is flat: its four in-plane
+    lattice neighbours are free across the same face, with extents within
+    :data:`FLAT_FACE_STEP` of its own. Its virial over its cell's volume is the slab's mean
+    stress, which stands at the cell's centroid (:func:`sample_points`); left out, the face of
+    a wall the lattice meets off-centre was extrapolated from the layers inside, over up to
+    1.85 spacings, and read the lattice's bending curvature: +19 … 22 % of beam theory on a
+    wall of four layers with φ 1.345 on its face (``rackstress bench walls``, off-centre rows),
+    +26 % on the bracket's arm at 0.7 mm. The volumetric lattice holds such a face at its
+    centroid already and keeps the rule above (its offsets were fitted to it).
+
     >>> g = np.array([[x, y, z] for x in range(3) for y in range(3) for z in range(3)], float)
     >>> phi = np.ones((27, 3)); phi[26, 0] = 1.4            # the corner cell overhangs in x
     >>> int(regular_cells(g, 1.0, phi).sum())
     26
+    >>> w = np.array([[x, y, z] for x in range(5) for y in range(5) for z in range(3)], float)
+    >>> phi = np.ones((75, 3)); phi[w[:, 2] == 2, 2] = 1.35  # a flat top face, off-centre
+    >>> int(regular_cells(w, 1.0, phi).sum()), int(regular_cells(w, 1.0, phi, False).sum())
+    (50, 59)
     """
     o = np.asarray(o, float)
     n, a = len(o), float(spacing)
     ok = np.ones(n, bool)
     if n < 2 or phi is None or not on_cubic_lattice(o, a):
         return ok
-    free = free_faces(o, a) != 0
+    ff = free_faces(o, a)
+    free = ff != 0
     f = np.nan_to_num(np.asarray(phi, float), nan=1.0)
     whole = np.all(~free | (np.abs(f - 1.0) < REGULAR_EXTENT), axis=1)
     short = (free.sum(axis=1) == 1) & np.all(~free | (f < 1.0 + REGULAR_EXTENT), axis=1)
-    return whole | short
+    if volumetric:
+        return whole | short
+    return whole | short | _flat_faces(o, a, f, ff)
+
+
+def _flat_faces(o: np.ndarray, a: float, f: np.ndarray, ff: np.ndarray) -> np.ndarray:
+    """The face particles of :func:`regular_cells`' flat faces (n bool): one free face (``ff``,
+    :func:`free_faces`), its extent across it (``f``) at most 1.5, and four in-plane
+    neighbours free across the same face (an edge's too) with extents within
+    :data:`FLAT_FACE_STEP` of its own."""
+    free = ff != 0
+    k = np.argmax(free, axis=1)                      # the free axis of a one-face particle
+    fk = f[np.arange(len(o)), k]
+    flat = (free.sum(axis=1) == 1) & (fk <= 1.5 + 1e-9)
+    nb = lattice_neighbours(o, a)
+    for ax in range(3):
+        for side in range(2):
+            j = nb[:, ax, side]
+            jj = np.where(j >= 0, j, 0)
+            same = (j >= 0) & (ff[jj, k] == ff[np.arange(len(o)), k]) & \
+                (np.abs(f[jj, k] - fk) <= FLAT_FACE_STEP + 1e-9)
+            flat &= (k == ax) | same                 # the four in-plane neighbours
+    return flat
 
 
 #: where a surface particle's ``continuum`` stress stands, as a sample of the patch fit, along
@@ -433,7 +478,9 @@ def sample_points(o: np.ndarray, spacing: float, phi: np.ndarray | None = None,
     layers reads its own curvature across its face within 2.3 % (``rackstress bench
     walls``), where its particles' own positions gave −7 … +21 %. A part bound by its
     bindings alone (``volumetric`` False: ``poisson = "lattice"``, ν = ¼) has its own
-    offsets: a face at its centroid, an edge :data:`SAMPLE_BINDINGS_EDGE` along each face.
+    offsets: a face at its centroid, an edge :data:`SAMPLE_BINDINGS_EDGE` along each face,
+    over φ's whole range (½ … 1½: a face the lattice meets off-centre; the volumetric
+    offsets keep φ within :data:`SAMPLE_PHI`, where they were fitted).
 
     >>> g = np.array([[x, y, z] for x in range(3) for y in range(3) for z in range(3)], float)
     >>> phi = np.ones((27, 3)); phi[22, 0] = phi[25, 0] = 1.2   # cells overhanging in x
@@ -455,7 +502,9 @@ def sample_points(o: np.ndarray, spacing: float, phi: np.ndarray | None = None,
         return out
     ff = free_faces(o, a)
     nf = np.abs(ff).sum(axis=1)
-    f = np.clip(np.nan_to_num(np.asarray(phi, float), nan=1.0), *SAMPLE_PHI)
+    # the volumetric offsets were fitted within SAMPLE_PHI; a cell's centroid is its own
+    f = np.clip(np.nan_to_num(np.asarray(phi, float), nan=1.0),
+                *(SAMPLE_PHI if volumetric else (0.5, 1.5)))
     if volumetric:
         tilt = SAMPLE_NU * nu / (1.0 - nu)
         face = (f - 1.0) / 2 + tilt
