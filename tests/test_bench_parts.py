@@ -69,18 +69,21 @@ def test_parts_page_gives_the_refined_stress_against_the_fe_check():
     """The ``--refine`` section: governing 2.0 and refined 2.2 MPa against the FE's local
     2.1 MPa read 0.9524 and 1.048 (by hand), a bar 1.9 … 2.6 covers 2.1 and one of 2.15 …
     2.6 does not (its local reading, not refined at a second mesh, is not the reference: the
-    global FE's 2.1 is, which moved 8 % between its meshes: not converged); a part without a refined value has no row there, and its reason is
-    given."""
+    global FE's 2.1 is, which moved 8 % between its meshes: not converged); the first run's
+    own band 1.8 … 2.2 covers 2.1 and 2.15 … 2.3 does not, tallied over the converged one; a
+    part without a refined value has no row there, and its reason is given."""
     data = {"machine": {"cores": 2, "cpu": "x", "load_avg_at_start": [0.1]}, "fea": True,
             "refine": True, "settled": 2, "parts": 3, "wall_s": 1.0, "timeout_s": 900.0,
             "rows": [
                 {"part": "a", "spacing": 2.0, "spacing_how": "walls", "peak_mpa": 2.0, "peak_kind": "governing",
                  "refined_mpa": 2.2, "refined_spacing": 1.41, "refined_read": "notch",
                  "bar_low": 1.9, "bar_high": 2.6, "fea_governing_mpa": 2.3,
+                 "first_bar_low": 1.8, "first_bar_high": 2.2,
                  "fea_local_mpa": 2.1, "fea_local_moved": 0.01},
                 {"part": "b", "spacing": 1.0, "spacing_how": "walls", "peak_mpa": 2.0, "peak_kind": "governing",
                  "refined_mpa": 2.2, "refined_spacing": 0.707, "refined_read": "patch",
                  "bar_low": 2.15, "bar_high": 2.6, "fea_governing_mpa": 2.1, "fea_moved": 0.08,
+                 "first_bar_low": 2.15, "first_bar_high": 2.3,
                  "fea_local_mpa": 3.0, "fea_local_moved": None},
                 {"part": "c", "spacing": 1.0, "spacing_how": "given", "refine_error": "the refined run did not "
                  "settle"}]}
@@ -96,11 +99,13 @@ def test_parts_page_gives_the_refined_stress_against_the_fe_check():
     rows = [x for x in md.split("## After `--refine`")[1].splitlines() if x.startswith("| ")]
     a = next(x for x in rows if x.startswith("| a |"))
     b = next(x for x in rows if x.startswith("| b |"))
-    assert "| 2.1 (local) | 1.0 % | 0.9524 | 1.048 | yes |" in a
-    assert "| 2.1 | 8.0 % (not converged) | 0.9524 | 1.048 | **no** |" in b
+    assert "| 2 | 1.8 … 2.2 | 2.2 |" in a            # the first run's own band beside its value
+    assert "| 2.1 (local) | 1.0 % | 0.9524 | 1.048 | yes | yes |" in a
+    assert "| 2.1 | 8.0 % (not converged) | 0.9524 | 1.048 | **no** | **no** |" in b
     # the tally: both within 5 %, one (a: its local reading moved 1 %) against a converged FE
     assert a and data["rows"][0]["fe_converged"] and not data["rows"][1]["fe_converged"]
     assert ("within 5 % of the FE check on 2 of 2 parts; of the 1 whose FE reading "
             "converged (moved at most 5 % between its two meshes) on 1 (a)") in md
+    assert "The first run's own band covers the converged FE reading on 1 of 1." in md
     assert not any(x.startswith("| c |") for x in rows)
     assert "* **c**: --refine: the refined run did not settle" in md

@@ -261,6 +261,9 @@ def test_refine_killed_resumed_error_bar_covers_converged_fea(refined):
     assert killed["stress"]["error"].get("extrapolated") is None      # the default estimate
     assert not fine_done
     assert summary["stress"]["error"]["values"][0] == killed["stress"]["governing"]["value"]
+    # the first run's own band is kept beside the refined bar
+    assert summary["stress"]["error"]["first_run"]["low"] == killed["stress"]["error"]["low"]
+    assert summary["stress"]["error"]["first_run"]["high"] == killed["stress"]["error"]["high"]
     st = summary["stress"]
     gov, err = st["governing"], st["error"]
     fine = json.loads((out / "refine" / "summary.json").read_text())

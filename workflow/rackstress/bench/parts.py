@@ -177,7 +177,9 @@ def _refined(out: Path, stress: dict, r, short) -> dict:
             "refined_particles": (err.get("particles") or [None, None])[-1],
             "refined_read": read_label(fg.get("read"), (fg.get("notch") or {}).get("by"))
             if fg.get("read") else None, "bar_low": err["low"], "bar_high": err["high"],
-            "bar_extrapolated": err.get("extrapolated"), "bar_order": err.get("order")}
+            "bar_extrapolated": err.get("extrapolated"), "bar_order": err.get("order"),
+            "first_bar_low": (err.get("first_run") or {}).get("low"),
+            "first_bar_high": (err.get("first_run") or {}).get("high")}
 
 
 #: The FE check's reading is a converged reference where it moved at most this between its
@@ -204,7 +206,9 @@ def refine_comparison(row: dict) -> dict:
             "fe_converged": bool(moved is not None and moved <= FE_CONVERGED),
             "governing_over_fe": None if gov is None else gov / fe,
             "refined_over_fe": row["refined_mpa"] / fe,
-            "bar_covers_fe": bool(row["bar_low"] <= fe <= row["bar_high"])}
+            "bar_covers_fe": bool(row["bar_low"] <= fe <= row["bar_high"]),
+            "first_bar_covers_fe": None if row.get("first_bar_low") is None else
+            bool(row["first_bar_low"] <= fe <= row["first_bar_high"])}
 
 
 def _timed(args: list, timeout: float):
@@ -373,9 +377,9 @@ def markdown(data) -> str:
     return "\n".join(out)
 
 
-REFINE_HEADER = ["part", "spacing [mm]", "governing [MPa]", "refined [MPa]", "read by",
-                 "error bar [MPa]", "FE [MPa]", "FE moved", "governing / FE", "refined / FE",
-                 "bar covers FE"]
+REFINE_HEADER = ["part", "spacing [mm]", "governing [MPa]", "its band [MPa]", "refined [MPa]",
+                 "read by", "error bar [MPa]", "FE [MPa]", "FE moved", "governing / FE",
+                 "refined / FE", "band covers FE", "bar covers FE"]
 
 
 def _refine_section(data) -> list:
@@ -387,13 +391,17 @@ def _refine_section(data) -> list:
             continue
         rows.append([
             r["part"], f"{fmt(r.get('spacing'))} → {fmt(r['refined_spacing'])}",
-            fmt(r.get("peak_mpa")), fmt(r["refined_mpa"]), r.get("refined_read") or "—",
+            fmt(r.get("peak_mpa")),
+            "—" if r.get("first_bar_low") is None else
+            f"{fmt(r['first_bar_low'])} … {fmt(r['first_bar_high'])}",
+            fmt(r["refined_mpa"]), r.get("refined_read") or "—",
             f"{fmt(r['bar_low'])} … {fmt(r['bar_high'])}",
             fmt(r["fe_reference_mpa"]) + (" (local)" if r["fe_reference_local"] else ""),
             "—" if r.get("fe_reference_moved") is None else
             f"{100 * r['fe_reference_moved']:.1f} %"
             + ("" if r.get("fe_converged") else " (not converged)"),
             fmt(r.get("governing_over_fe"), 4), fmt(r["refined_over_fe"], 4),
+            {None: "—", True: "yes", False: "**no**"}[r.get("first_bar_covers_fe")],
             "yes" if r["bar_covers_fe"] else "**no**"])
     if not rows:
         return []
@@ -417,6 +425,13 @@ def _refine_section(data) -> list:
                 if len(near(conv)) < len(conv) else "")
              + (". " + _other(len(done) - len(conv)) if len(done) > len(conv) else ".")
              )
+    banded = [r for r in conv if r.get("first_bar_covers_fe") is not None]
+    if banded:
+        miss = [r for r in banded if not r["first_bar_covers_fe"]]
+        tally += (f" The first run's own band covers the converged FE reading on "
+                  f"{len(banded) - len(miss)} of {len(banded)}"
+                  + (" (not: " + ", ".join(r["part"] for r in miss) + ")" if miss else "")
+                  + ".")
     return ["## After `--refine`", "",
             "Each part solved again at spacing/√2 (`rackstress run SCENE --refine`): its "
             "governing stress at both spacings, how the refined one was read (the patch fit or "
@@ -425,5 +440,9 @@ def _refine_section(data) -> list:
             "the refined run's own band; docs/stress.md \"The error bar\"), against the FE "
             "check's governing stress (refined locally where `rackstress fea` could: "
             "*local*). The target: the refined governing stress within 5 % of "
-            "converged FEA. *FE moved*: how far that FE reading moved between its two meshes.",
+            "converged FEA. *FE moved*: how far that FE reading moved between its two meshes. "
+            "*its band*: what the first run alone said its governing stress may be off by "
+            "(`[\"stress\"][\"error\"][\"first_run\"]`: the lattice's measured convergence "
+            "at its spacing and the part's thickness there, docs/stress.md \"The error bar\"), "
+            "before `--refine`.",
             "", md_table(REFINE_HEADER, rows), "", tally, ""]

@@ -168,6 +168,12 @@ def refine(rundir, spec: str, overrides: dict | None = None, engine: str = "lamm
     if own is not None:
         err["fine_own"] = own
     summary = _finished(rundir)          # as it is now (post-processing may have added to it)
+    # the first run's own band (default_error), what it said before --refine; kept when a
+    # refinement is done again
+    first = (summary.get("stress") or {}).get("error") or {}
+    first = first.get("first_run") if "values" in first else first
+    if first:
+        err["first_run"] = {k: first.get(k) for k in ("low", "high", "relative")}
     summary.setdefault("stress", {})["error"] = err
     write_json(rundir / "summary.json", summary)
     return err
