@@ -477,12 +477,13 @@ def test_a_wall_bound_by_its_bindings_alone_reads_beam_theory_on_its_edges(depth
 
 
 def test_a_wall_the_lattice_meets_off_centre_reads_beam_theory_on_its_face(tmp_path):
-    """The cantilever bound by its bindings alone, 4.29 deep, its lattice moved up by 0.3 (a
-    block in the clamp rises 0.6 above it), as a part's fill meets its walls: four layers, the
-    top face 0.845 spacings past the top layer (φ = 1.345, by hand: 4.29 − 3·1 = 1.29 of face
-    gaps, 0.3 more on top), the bottom 0.445 (φ = 0.945). Every top particle at mid-span
-    reads beam theory's M·c/I within 5 % (I = b·h³/12). Extrapolated from the layers inside,
-    as when such a face cell was left out of the fit, they read 1.19 … 1.22 of it."""
+    """The cantilever bound by its bindings alone, 4.29 deep, a block in the clamp rising 0.6
+    above it, as a part's fill meets its walls off-centre. By hand: the fill centres its
+    lattice on the part's box, z from −2.145 to 2.745 (centre 0.3), so its sites lie at
+    −1.7, −0.7, 0.3, 1.3 inside the wall: four layers, the top face 0.845 spacings past the
+    top layer (φ = ½ + 0.845 = 1.345), the bottom 0.445 (φ = 0.945). Every top particle at
+    mid-span reads beam theory's M·c/I within 5 % (I = b·h³/12). Extrapolated from the layers
+    inside, as when such a face cell was left out of the fit, they read 1.19 … 1.22 of it."""
     from rackstress.stress.measures import ParticleStress, read_fractions
 
     scene = BEAM.format().replace('poisson = "material"\n', "")
