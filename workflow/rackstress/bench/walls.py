@@ -48,9 +48,12 @@ CASES = tuple((t, 0.3, "material") for t in (2.05, 2.2, 2.4, 2.6, 2.8, 3.0, 4.0,
 #: (depth, ν, poisson, lift [mm]): walls the lattice meets off-centre, as a part's walls are
 #: where the fill's lattice is centred on the whole part, not on the wall. A block at the
 #: clamp (x < 0, held) rises ``lift`` above the wall and moves the lattice's centre (the part's
-#: box's) up by lift/2: the top face's cells overhang (φ 1.2 … 1.345), the bottom's fall short
+#: box's) up by lift/2: the top face's cells overhang (φ 1.2 … 1.345), the bottom's fall short;
+#: or the top's fall short (4 at lift 0.4: φ 0.8 / 1.2) and both (2.4 at 0.3: φ 0.55 / 0.85,
+#: three layers in 2.4 spacings)
 OFF_CENTRE = ((3.0, 0.25, "lattice", 1.6), (4.29, 0.25, "lattice", 0.6),
               (5.29, 0.25, "lattice", 0.6), (6.29, 0.25, "lattice", 0.6),
+              (4.0, 0.25, "lattice", 0.4), (2.4, 0.25, "lattice", 0.3),
               (4.29, 0.3, "material", 0.6))
 QUICK = ((4.0, 0.3, "material"), (4.29, 0.3, "material"), (4.0, 0.25, "lattice"))
 SCENE = """
