@@ -272,11 +272,12 @@ def to_output(s: np.ndarray) -> np.ndarray:
 PATCH_RADIUS = 2.5
 
 
-def free_faces(o: np.ndarray, spacing: float) -> np.ndarray:
+def free_faces(o: np.ndarray, spacing: float, side: np.ndarray | None = None) -> np.ndarray:
     """Each particle's free faces on its cubic lattice (n, 3): per axis −1 or +1 where the
     lattice neighbour on that side is missing (the cell reaches the surface there), 0 where
-    both are particles (or both missing: a wall one particle thick)."""
-    side = lattice_sides(o, spacing)
+    both are particles (or both missing: a wall one particle thick). ``side``: the particles'
+    :func:`~rackstress.lib.cells.lattice_sides`, where the caller has them."""
+    side = lattice_sides(o, spacing) if side is None else side
     return (~side[:, :, 1]).astype(float) - (~side[:, :, 0]).astype(float)
 
 
@@ -414,32 +415,32 @@ def regular_cells(o: np.ndarray, spacing: float, phi: np.ndarray | None = None,
     ok = np.ones(n, bool)
     if n < 2 or phi is None or not on_cubic_lattice(o, a):
         return ok
-    ff = free_faces(o, a)
+    nb = lattice_neighbours(o, a)
+    ff = free_faces(o, a, nb >= 0)
     free = ff != 0
     f = np.nan_to_num(np.asarray(phi, float), nan=1.0)
     whole = np.all(~free | (np.abs(f - 1.0) < REGULAR_EXTENT), axis=1)
     short = (free.sum(axis=1) == 1) & np.all(~free | (f < 1.0 + REGULAR_EXTENT), axis=1)
     if volumetric:
         return whole | short
-    return whole | short | _flat_faces(o, a, f, ff)
+    return whole | short | _flat_faces(nb, f, ff)
 
 
-def _flat_faces(o: np.ndarray, a: float, f: np.ndarray, ff: np.ndarray) -> np.ndarray:
+def _flat_faces(nb: np.ndarray, f: np.ndarray, ff: np.ndarray) -> np.ndarray:
     """The face particles of :func:`regular_cells`' flat faces (n bool): one free face (``ff``,
     :func:`free_faces`), its extent across it (``f``) at most 1.5, and four in-plane
-    neighbours free across the same face (an edge's too) with extents within
-    :data:`FLAT_FACE_STEP` of its own."""
+    neighbours (``nb``, :func:`~rackstress.lib.cells.lattice_neighbours`) free across the
+    same face (an edge's too) with extents within :data:`FLAT_FACE_STEP` of its own."""
     free = ff != 0
+    rows = np.arange(len(ff))
     k = np.argmax(free, axis=1)                      # the free axis of a one-face particle
-    fk = f[np.arange(len(o)), k]
+    fk, sk = f[rows, k], ff[rows, k]
     flat = (free.sum(axis=1) == 1) & (fk <= 1.5 + 1e-9)
-    nb = lattice_neighbours(o, a)
     for ax in range(3):
         for side in range(2):
             j = nb[:, ax, side]
             jj = np.where(j >= 0, j, 0)
-            same = (j >= 0) & (ff[jj, k] == ff[np.arange(len(o)), k]) & \
-                (np.abs(f[jj, k] - fk) <= FLAT_FACE_STEP + 1e-9)
+            same = (j >= 0) & (ff[jj, k] == sk) & (np.abs(f[jj, k] - fk) <= FLAT_FACE_STEP + 1e-9)
             flat &= (k == ax) | same                 # the four in-plane neighbours
     return flat
 
