@@ -221,6 +221,29 @@ def test_the_bindings_factor_preconditions_the_whole_tangent(nu, tmp_path, monke
     assert np.abs(u - w).max() <= 1e-6 * np.abs(w).max()
 
 
+def test_a_split_solve_that_converges_slowly_factorizes_the_whole_tangent(tmp_path, monkeypatch):
+    """Where conjugate gradients on the bindings' factor take more than SPLIT_SWITCH steps
+    (engines/static.py, _Linear), the whole tangent is factorized from then on: the same
+    equilibrium as the whole tangent's from the start, to 1e-6 of the largest displacement,
+    and the run says so (solver "pardiso"). The test bar's split takes 7 … 30 steps a Newton
+    step (measured while building this); a switch at 2 makes it slow."""
+    from rackstress.engines import static
+
+    a = 2.0
+    text = BAR.format(a=a, nu=0.45, h=a / 2, c0=5 - a / 2 - 1e-6, c1=5 + a / 2 + 1e-6,
+                      e=30 - a / 2).replace("force = [1000, 0, 0]", "force = [300, -200, 150]")
+    sc = _scene(tmp_path, text)
+    o = sc.original_positions()
+    monkeypatch.setattr(static._Linear, "SPLIT_SWITCH", 2)
+    switched = solve(sc)
+    monkeypatch.setattr(static._Linear, "split_allowed", False)
+    whole = solve(sc)
+    assert switched.solver == whole.solver == "pardiso"
+    assert switched.settled and whole.settled
+    u, w = switched.p - o, whole.p - o
+    assert np.abs(u - w).max() <= 1e-6 * np.abs(w).max()
+    assert switched.factorizations >= 2           # the bindings' factor, then the whole
+
 @pytest.mark.parametrize("nu,why", [(-0.2, "below 0"), (0.495, "above 0.49")])
 def test_a_poissons_ratio_the_lattice_cannot_take_is_refused(nu, why, tmp_path):
     """An auxetic material (ν < 0) and a nearly incompressible one (ν > 0.49) are refused

@@ -454,6 +454,9 @@ class _Problem:
     split: object = None
     #: the direct solver refused this problem for its size (_Linear): AMG-CG from then on
     direct_refused: bool = False
+    #: the bindings' factor preconditioned the whole tangent too slowly (_Linear.SPLIT_SWITCH):
+    #: the whole tangent factorized from then on
+    split_slow: bool = False
 
 
 def _problem(scene) -> _Problem:
@@ -714,6 +717,14 @@ class _Linear:
     direct_allowed = True
     #: the most conjugate-gradient steps preconditioned by the bindings' factor
     SPLIT_ITERATIONS = 400
+    #: ... a solve that takes more than this many factorizes the whole tangent instead, for the
+    #: rest of the static solve, where the direct solver's plan for it fits. The bindings'
+    #: factor preconditions a bulk part in a few tens of steps (the test bar at ν = 0 … 0.45:
+    #: 7–30 a Newton step, measured while building this); on a part of thin walls the term's
+    #: faces are much of its stiffness, and it did not converge in 400 steps on five of six
+    #: Newton steps of the SO-100 shoulder bracket (ν = 0.36: 73 s of solve, the whole tangent
+    #: factorized 11 s, measured while building this)
+    SPLIT_SWITCH = 100
     #: False: the whole tangent factorized (the test of the split compares the two)
     split_allowed = True
 
@@ -721,7 +732,9 @@ class _Linear:
         from rackstress.engines import linear
 
         t0 = time.process_time()
-        self.K, self.split = K, prob.split is not None and self.split_allowed
+        self.prob = prob
+        self.K = K
+        self.split = prob.split is not None and self.split_allowed and not prob.split_slow
         P = prob.split() if self.split else K
         f = None
         if self.direct_allowed and not prob.direct_refused:
@@ -749,10 +762,33 @@ class _Linear:
 
             A = self.K if K is None else K
             M = spla.LinearOperator(A.shape, matvec=self.solver.solve, dtype=float)
-            x, info = spla.cg(A, b, rtol=rtol, maxiter=self.SPLIT_ITERATIONS, M=M)
+            x, info = spla.cg(A, b, rtol=rtol, maxiter=self.SPLIT_SWITCH, M=M)
+            if info != 0 and self._factor_whole(A):
+                return self.solver.solve(b)
+            if info != 0:
+                x, info = spla.cg(A, b, x0=x, rtol=rtol,
+                                  maxiter=self.SPLIT_ITERATIONS - self.SPLIT_SWITCH, M=M)
             self._converged = info == 0
             return x
         return self.solver.solve(b, rtol=rtol, K=self.K if K is None else K)
+
+    def _factor_whole(self, A) -> bool:
+        """The whole tangent ``A`` factorized in place of the split (:data:`SPLIT_SWITCH`),
+        and for the rest of this static solve; False where the direct solver's plan for it
+        does not fit (the split goes on)."""
+        from rackstress.engines import linear
+
+        t0 = time.process_time()
+        f = linear.plan_direct(A)
+        if f is None:
+            return False
+        self.solver.free()
+        self.solver, self.split, self.K = f.factor(), False, A
+        self.kind, self._converged = self.solver.kind, True
+        self.count += 1
+        self.prob.split_slow = True
+        self.setup_s += time.process_time() - t0
+        return True
 
     @property
     def converged(self) -> bool:
