@@ -297,7 +297,6 @@ def test_bands_and_the_governing_point_of_a_synthetic_set():
     assert gov["value"] == 42 and gov["position"] == [6.0, 0.0, 0.0]
 
 
-
 def test_the_fe_governing_stress_is_read_where_the_particles_are_read_too():
     """A stress rising toward a singular point, σ = 1/r (r its distance), is largest at the
     zone's edge. FE nodes 1 apart from r = 0.5 stand inside it (zone 1): their largest
@@ -309,6 +308,7 @@ def test_the_fe_governing_stress_is_read_where_the_particles_are_read_too():
     pts = np.column_stack([[1.05, 0.9], np.zeros(2), np.zeros(2)])
     gov = solid.governing(nodes, 1 / nodes[:, 0], sing, pts, 1 / pts[:, 0])
     assert gov["value"] == pytest.approx(1 / 1.05) and gov["position"] == [1.05, 0.0, 0.0]
+
 
 def test_both_panels_of_fea_png_share_one_colour_scale(tmp_path):
     """fea.png: the particles' and FEA's von Mises on one scale (the larger 99.5th

@@ -244,6 +244,7 @@ def test_a_split_solve_that_converges_slowly_factorizes_the_whole_tangent(tmp_pa
     assert np.abs(u - w).max() <= 1e-6 * np.abs(w).max()
     assert switched.factorizations >= 2           # the bindings' factor, then the whole
 
+
 @pytest.mark.parametrize("nu,why", [(-0.2, "below 0"), (0.495, "above 0.49")])
 def test_a_poissons_ratio_the_lattice_cannot_take_is_refused(nu, why, tmp_path):
     """An auxetic material (ν < 0) and a nearly incompressible one (ν > 0.49) are refused
