@@ -1157,7 +1157,7 @@ def governing(fe_x: np.ndarray, fe_vm: np.ndarray, singular: Singular,
     a coarse FE mesh stand up to an element size inside that edge, so their largest alone
     read the FE's field low where the particles read it at their own, finer points: on the
     SO-100 shoulder bracket the FE's nodes gave 0.239 MPa, its field at the run's governing
-    point (0.36 mm outside the zone) 0.300 (``rackstress fea``, measured while building this).
+    point (read 0.04 mm outside the zone) 0.300 (``rackstress fea``, measured while building this).
 
     >>> s = Singular(np.zeros((1, 3)), 1.0, "one", 1.0)
     >>> x = np.array([[0.5, 0, 0], [1.5, 0, 0], [2.5, 0, 0]])       # σ = 1/r, nodes
