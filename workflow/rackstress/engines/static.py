@@ -457,6 +457,8 @@ class _Problem:
     #: the bindings' factor preconditioned the whole tangent too slowly (_Linear.SPLIT_SWITCH):
     #: the whole tangent factorized from then on
     split_slow: bool = False
+    #: ... or the direct solver's plan for the whole did not fit: not analysed again
+    whole_refused: bool = False
 
 
 def _problem(scene) -> _Problem:
@@ -778,9 +780,13 @@ class _Linear:
         does not fit (the split goes on)."""
         from rackstress.engines import linear
 
+        if self.prob.whole_refused:
+            return False
         t0 = time.process_time()
         f = linear.plan_direct(A)
         if f is None:
+            self.prob.whole_refused = True      # each Newton step's would be refused too
+            self.setup_s += time.process_time() - t0
             return False
         self.solver.free()
         self.solver, self.split, self.K = f.factor(), False, A
