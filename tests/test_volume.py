@@ -146,6 +146,50 @@ def test_uniaxial_tension_of_a_bar_five_layers_thick(nu, tmp_path):
     assert -ezz / exx == pytest.approx(nu, abs=0.005)
 
 
+def test_set_poisson_gives_every_material_part_that_does_not_say_the_materials_ratio(tmp_path):
+    """``--set poisson=material`` (a scene's own key, as ``bench parts --set`` passes it to
+    the corpus): the five-layer bar whose table does not say contracts by the material's ν
+    = 0.33 within 0.005, as the table's own key does; without it the lattice's 1/4; a part
+    that says ``poisson = "lattice"`` keeps it; and the value is recorded with the scene's
+    parameters, so a resume or ``rackstress fea`` rebuilds the same part."""
+    a = 2.0
+    text = BAR.format(a=a, nu=0.33, h=a / 2, c0=5 - a / 2 - 1e-6, c1=5 + a / 2 + 1e-6,
+                      e=30 - a / 2).replace('poisson = "material"\n', "")
+    f = tmp_path / "bar.toml"
+    f.write_text(text)
+    sc = load_toml(f, {"poisson": "material"})
+    assert sc.params["poisson"] == "material"
+    exx, eyy, ezz = _gauge_strains(sc)
+    assert -eyy / exx == pytest.approx(0.33, abs=0.005)
+    assert -ezz / exx == pytest.approx(0.33, abs=0.005)
+    exx, eyy, _ = _gauge_strains(load_toml(f))
+    assert -eyy / exx == pytest.approx(0.25, abs=0.03)
+    own = tmp_path / "own.toml"
+    own.write_text(text.replace('[[support]]', 'poisson = "lattice"\n[[support]]', 1))
+    exx, eyy, _ = _gauge_strains(load_toml(own, {"poisson": "material"}))
+    assert -eyy / exx == pytest.approx(0.25, abs=0.03)
+
+
+@pytest.mark.parametrize("value,said", [("steel", 'must be "lattice"'),
+                                        ("material", "has no [[group]] with a material")])
+def test_a_set_poisson_that_cannot_apply_is_refused(value, said, tmp_path):
+    """``--set poisson=`` neither "lattice" nor "material", or on a scene with no material
+    part: exit 2 naming the file and ``--set poisson``, nothing written (a real process)."""
+    f = tmp_path / "odd.toml"
+    text = BLOCK.format(shape='box = { min = [0, 0, 0], max = [4, 4, 4] }', a=1.0, nu=0.3,
+                        hold=0.6).replace('poisson = "material"\n', "")
+    if value == "material":
+        text = text.replace("material = { E = 70e9, nu = 0.3, density = 2700 }\n", "")
+    f.write_text(text)
+    r = subprocess.run([sys.executable, "-m", "rackstress.cli", "run", str(f), "--engine",
+                        "reference", "--set", f"poisson={value}", "--out",
+                        str(tmp_path / "run"), "--no-render"], capture_output=True, text=True)
+    assert r.returncode == 2, r.stderr
+    assert "odd.toml" in r.stderr and "--set poisson" in r.stderr
+    assert said in r.stderr and "Traceback" not in r.stderr
+    assert not (tmp_path / "run").exists()
+
+
 SHAPES = {"holeplate": 'difference = [ { box = { min = [-4, -4, 0], max = [4, 4, 3] } }, '
                        '{ cylinder = { start = [0, 0, -1], end = [0, 0, 4], radius = 1.7 } } ]',
           "sphere": 'sphere = { centre = [0, 0, 0], radius = 3.3 }'}

@@ -104,6 +104,10 @@ _TOP_KEYS = ("name", "dt", "cycles", "bound", "steps", "duration", "params", "gr
 #: ``spacing`` (every filled part's lattice spacing) and ``budget`` (the particles a part
 #: whose spacing is chosen from its walls may have)
 _SIZING = ("spacing", "budget")
+#: ``--set`` keys of every explicit scene with material parts, unless its [params] has them:
+#: ``poisson`` ("lattice" or "material"), the Poisson's ratio of every material part whose
+#: table does not say (``rackstress bench parts --set poisson=material`` on the corpus)
+_PART_DEFAULTS = ("poisson",)
 _BUILTIN_KEYS = ("scene", "params")
 #: How a plain group's particles are made: exactly one of these (or ``rack``).
 _SOURCES = ("positions", "lattice", "mesh", "fill", "parts")
@@ -246,6 +250,9 @@ def scene_parameters(path) -> dict:
             from rackstress.scenes.features import BUDGET
 
             settings["budget"] = data.get("budget", BUDGET)
+    if any("material" in g for g in data.get("group", []) if isinstance(g, dict)) \
+            and "poisson" not in params:
+        settings["poisson"] = "lattice"       # for the parts that do not say
     if data.get("analysis") == "static":
         for k in STATIC_UNUSED:        # an equilibrium has no time step, length or cycles
             settings.pop(k, None)
@@ -355,15 +362,16 @@ def _scene_params(ctx: _Ctx, data: dict, overrides: dict) -> tuple[dict, dict]:
         if key in OVERRIDABLE:
             settings[key] = value
             continue
-        if key in _SIZING and key not in table:     # every filled part's spacing; the budget
-            settings[key] = value
+        if key in _SIZING + _PART_DEFAULTS and key not in table:
+            settings[key] = value     # every filled part's spacing; the budget; material ν
             continue
         if key not in table:
             listing = ", ".join(f"{k}={v!r}" for k, v in table.items()) or "none"
-            hint = did_you_mean(key, [*OVERRIDABLE, *_SIZING, *table])
+            hint = did_you_mean(key, [*OVERRIDABLE, *_SIZING, *_PART_DEFAULTS, *table])
             raise ctx.error(f"the scene has no parameter '{key}'"
                             f"{' (' + hint + ')' if hint else ''}; --set takes "
-                            f"{', '.join(OVERRIDABLE + _SIZING)} and the scene's [params]: "
+                            f"{', '.join(OVERRIDABLE + _SIZING + _PART_DEFAULTS)} and the "
+                            "scene's [params]: "
                             f"{listing}", "--set")
         default = table[key]
         if _is_number(default) and not _is_number(value):
@@ -524,7 +532,26 @@ def _build_explicit(ctx: _Ctx, data: dict, overrides: dict, user: dict) -> Scene
     from rackstress.scenes import physical
 
     unit_system = physical.scene_units(ctx, data)
-    groups = _groups(ctx, data["group"], base, _sizing(ctx, data, overrides))
+    poisson = overrides.get("poisson")
+    if poisson is not None:
+        # --set poisson=…: every material part whose table does not say (a part's own
+        # ``poisson`` wins, as over the default)
+        if poisson not in ("lattice", "material"):
+            raise ctx.error(f"must be \"lattice\" (the bindings' own ν = 1/4) or \"material\" "
+                            f"(the material's ν through the volumetric term, "
+                            f"docs/calibration.md), got {_describe(poisson)}", "--set poisson")
+        tables = data["group"] if isinstance(data["group"], list) else []
+        if not any(isinstance(t, dict) and "material" in t for t in tables):
+            raise ctx.error("'poisson' chooses the Poisson's ratio of a material part's "
+                            "lattice, and this scene has no [[group]] with a material",
+                            "--set poisson")
+        token = _POISSON.set(poisson)
+        try:
+            groups = _groups(ctx, data["group"], base, _sizing(ctx, data, overrides))
+        finally:
+            _POISSON.reset(token)
+    else:
+        groups = _groups(ctx, data["group"], base, _sizing(ctx, data, overrides))
     physical.check_materials(ctx, groups, unit_system)
     region_of = lambda c, value, field, g=None: _region(c, value, field, base, g)  # noqa: E731
     select = lambda c, value, field, o, g=None: _mask(c, region_of(c, value, field, g), o, field)  # noqa: E731
@@ -551,11 +578,12 @@ def _build_explicit(ctx: _Ctx, data: dict, overrides: dict, user: dict) -> Scene
                         "declare analysis = \"dynamic\"", "[[contact]] friction")
     physical.check_constraints(ctx, groups, analysis)
 
-    # --set spacing=… and --set budget=… are recorded with the scene's own parameters, so
+    # --set spacing=…, budget=… and poisson=… are recorded with the scene's own parameters, so
     # that `rackstress fea` and a resume rebuild the part the run solved
     params = {"file": ctx.file, "dt": dt, "cycles": settings["cycles"],
               "bound": settings["bound"],
-              **{k: overrides[k] for k in _SIZING if overrides.get(k) is not None}, **user}
+              **{k: overrides[k] for k in _SIZING + _PART_DEFAULTS
+                 if overrides.get(k) is not None}, **user}
     try:
         scene = Scene(name, groups, operators, phases, dt=dt, cycles=settings["cycles"],
                       bound=settings["bound"], params=params, units=unit_system,
