@@ -86,7 +86,13 @@ def test_parts_page_gives_the_refined_stress_against_the_fe_check():
                  "first_bar_low": 2.15, "first_bar_high": 2.3,
                  "fea_local_mpa": 3.0, "fea_local_moved": None},
                 {"part": "c", "spacing": 1.0, "spacing_how": "given", "refine_error": "the refined run did not "
-                 "settle"}]}
+                 "settle"},
+                {"part": "d", "spacing": 1.0, "spacing_how": "walls", "peak_mpa": 1.0, "peak_kind": "governing",
+                 "refined_mpa": 1.0, "refined_spacing": 0.707, "refined_read": "notch",
+                 "bar_low": 0.9, "bar_high": 1.2, "fea_governing_mpa": 0.9, "fea_moved": 0.01,
+                 "fea_local_mpa": 1.25, "fea_local_moved": 0.04,
+                 "fea_local_note": "not converged: the file's facets turn inward by up to 12° "
+                                   "there"}]}
     for r in data["rows"]:
         r.update(parts.refine_comparison(r))
     a = data["rows"][0]
@@ -102,10 +108,19 @@ def test_parts_page_gives_the_refined_stress_against_the_fe_check():
     assert "| 2 | 1.8 … 2.2 | 2.2 |" in a            # the first run's own band beside its value
     assert "| 2.1 (local) | 1.0 % | 0.9524 | 1.048 | yes | yes |" in a
     assert "| 2.1 | 8.0 % (not converged) | 0.9524 | 1.048 | **no** | **no** |" in b
-    # the tally: both within 5 %, one (a: its local reading moved 1 %) against a converged FE
+    # d's local reading moved 4 %, under 5 %, but the FE check itself says it does not
+    # converge there (a faceted fillet): no reference, said so in its row
+    d = next(x for x in rows if x.startswith("| d |"))
+    assert "| 1.25 (local) | 4.0 % (not converged: faceted fillet) | 0.8 | 0.8 |" in d
+    # the tally: a and b within 5 %, one (a: its local reading moved 1 %) against a converged FE
     assert a and data["rows"][0]["fe_converged"] and not data["rows"][1]["fe_converged"]
-    assert ("within 5 % of the FE check on 2 of 2 parts; of the 1 whose FE reading "
-            "converged (moved at most 5 % between its two meshes) on 1 (a)") in md
+    assert not data["rows"][3]["fe_converged"]
+    assert ("within 5 % of the FE check on 2 of 3 parts; of the 1 whose FE reading "
+            "converged (moved at most 5 % between its two meshes, and not beside a faceted "
+            "fillet the FE check says it does not converge at) on 1 (a)") in md
+    assert ("The other 2 have no converged reference here: their FE moved more between their "
+            "meshes or, on 1, the FE check says its reading rises with every mesh beside the "
+            "file's faceted fillet") in md
     assert "The first run's own band covers the converged FE reading on 1 of 1." in md
     assert not any(x.startswith("| c |") for x in rows)
     assert "* **c**: --refine: the refined run did not settle" in md
