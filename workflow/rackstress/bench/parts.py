@@ -189,6 +189,10 @@ def _refined(out: Path, stress: dict, r, short) -> dict:
 FE_CONVERGED = 0.05
 
 
+#: the target at the first (default) spacing: the governing stress within this of converged FEA
+FIRST_TARGET = 0.10
+
+
 def _fe_says_not_converged(note) -> bool:
     """Whether the FE check's own note on its local reading (``fea.json`` →
     ``governing.local.note``) says it did not converge (``validity.solid`` writes it so)."""
@@ -446,6 +450,15 @@ def _refine_section(data) -> list:
              + (". " + _other([r for r in done if r not in conv])
                 if len(done) > len(conv) else ".")
              )
+    first = [r for r in conv if r.get("governing_over_fe") is not None]
+    if first:                 # the first run's governing stress against the same references
+        ok = [r for r in first if abs(r["governing_over_fe"] - 1) <= FIRST_TARGET]
+        tally += (f" At the first spacing the governing stress is within "
+                  f"{100 * FIRST_TARGET:g} % of the same converged readings on {len(ok)} of "
+                  f"{len(first)}"
+                  + ("; outside: " + ", ".join(f"{r['part']} {r['governing_over_fe']:.3g}"
+                                               for r in first if r not in ok)
+                     if len(ok) < len(first) else "") + ".")
     banded = [r for r in conv if r.get("first_bar_covers_fe") is not None]
     if banded:
         miss = [r for r in banded if not r["first_bar_covers_fe"]]
