@@ -118,9 +118,9 @@ def test_parts_page_gives_the_refined_stress_against_the_fe_check():
     assert ("within 5 % of the FE check on 2 of 3 parts; of the 1 whose FE reading "
             "converged (moved at most 5 % between its two meshes, and not beside a faceted "
             "fillet the FE check says it does not converge at) on 1 (a)") in md
-    assert ("The other 2 have no converged reference here: their FE moved more between their "
-            "meshes or, on 1, the FE check says its reading rises with every mesh beside the "
-            "file's faceted fillet") in md
+    assert ("The other 2 have no converged reference here: on 1 the FE moved more between "
+            "its two meshes, on 1 the FE check says its reading rises with every mesh beside "
+            "the file's faceted fillet") in md
     # a's first run read 2.0 against 2.1 (0.952, within 10 %); d's FE is no reference
     assert ("At the first spacing the governing stress is within 10 % of the same converged "
             "readings on 1 of 1.") in md

@@ -431,8 +431,9 @@ def _refine_section(data) -> list:
                    "faceted fillet" if n == 1 else "the FE check says their readings rise "
                    "with every mesh beside the files' faceted fillets")
         elif faceted:
-            why += (f" or, on {faceted}, the FE check says its reading rises with every mesh "
-                    "beside the file's faceted fillet")
+            why = (f"on {n - faceted} the FE moved more between its two meshes, on {faceted} "
+                   "the FE check says its reading rises with every mesh beside the file's "
+                   "faceted fillet")
         return ((f"The other one has no converged reference here: {why}" if n == 1 else
                  f"The other {n} have no converged reference here: {why}")
                 + ", and fTetWild meshes a file differently from run to run (docs/fea.md).")
