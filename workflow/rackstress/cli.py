@@ -168,9 +168,14 @@ def main():
               help="A static part: solve it again at spacing/sqrt(2) into OUT/refine and give "
                    "the governing stress's error bar (Richardson; docs/stress.md). With "
                    "--resume OUT on a finished run: only the refinement.")
+@click.option("--refine-ratio", type=click.FloatRange(min=1.2, max=3.0), default=None,
+              help="With --refine: the spacing divided by this instead of sqrt(2); 2 halves "
+                   "it (8x the particles, not 2.8x), which reads the governing stress of "
+                   "parts with walls a few spacings thick closer to FEA (docs/stress.md "
+                   "\"The error bar\").")
 def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progress, do_render,
         restart_every=None, resume_dir=None, allow_unstable=False, integrator="euler",
-        dump_all=False, dump_text=False, refine=False):
+        dump_all=False, dump_text=False, refine=False, refine_ratio=None):
     """Run SCENE (a built-in name or a .toml file) and write a run directory.
 
     Exit status (errors.py): 0 done, 2 bad input or a run directory in use or holding another
@@ -206,7 +211,7 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
             if refine and (Path(out) / "summary.json").is_file():
                 rec = json.loads((Path(out) / "scene.json").read_text())
                 _refine(out, scene, sets, rec.get("engine", engine), rec.get("mode", mode),
-                        progress, do_render)
+                        progress, do_render, refine_ratio)
                 return
         elif scene is None:
             raise click.UsageError("Missing argument 'SCENE' (or give --resume RUNDIR).")
@@ -307,7 +312,7 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
                                       guards=not _AHEAD)
             _finish(summary, out, do_render, progress, dump_text)
         if refine and summary.get("settled") is not False:
-            _refine(out, scene, sets, engine, mode, progress, do_render)
+            _refine(out, scene, sets, engine, mode, progress, do_render, refine_ratio)
         if summary.get("settled") is False:
             from rackstress.errors import EXIT_UNSETTLED
 
@@ -329,12 +334,13 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
 
 
 def _refine(out: Path, scene, sets, engine: str, mode: str, progress: bool,
-            do_render: bool) -> None:
-    """``--refine``: the finished run in ``out`` again at spacing/√2 into ``out/refine``, its
-    error bar into ``out/summary.json`` and the report (:mod:`rackstress.stress.refine`)."""
+            do_render: bool, ratio: float | None = None) -> None:
+    """``--refine``: the finished run in ``out`` again at spacing/``ratio`` (√2 unless
+    ``--refine-ratio``) into ``out/refine``, its error bar into ``out/summary.json`` and the
+    report (:mod:`rackstress.stress.refine`)."""
     from rackstress import scenes
     from rackstress.lib.mpi import rank
-    from rackstress.stress.governing import describe
+    from rackstress.stress.governing import REFINE_RATIO, describe
     from rackstress.stress.refine import refine
 
     if rank() != 0:
@@ -350,10 +356,12 @@ def _refine(out: Path, scene, sets, engine: str, mode: str, progress: bool,
     from rackstress.runs.rundir import locked
 
     with locked(out, create=False):
-        with phase(f"refining: the scene again at spacing/sqrt(2) into {Path(out) / 'refine'}",
+        ratio = REFINE_RATIO if ratio is None else float(ratio)
+        said = "sqrt(2)" if ratio == REFINE_RATIO else f"{ratio:g}"
+        with phase(f"refining: the scene again at spacing/{said} into {Path(out) / 'refine'}",
                    progress, ticker=False):
             err = refine(out, spec, overrides, engine=engine, mode=mode, progress=progress,
-                         echo=click.echo)
+                         echo=click.echo, ratio=ratio)
         summary = json.loads((Path(out) / "summary.json").read_text())
         st = summary.get("stress") or {}
         for line in describe(st.get("governing"), None, err):
@@ -1518,7 +1526,10 @@ def bench_validity(out, quick, planar, concentrations, cases, spacings):
 @click.option("--refine", is_flag=True,
               help="Run each part with --refine (again at spacing/sqrt(2)) and give the refined "
                    "governing stress and its error bar against the FE check.")
-def bench_parts(out, fea, only, sets, timeout, refine):
+@click.option("--refine-ratio", type=click.FloatRange(min=1.2, max=3.0), default=None,
+              help="With --refine: each part's spacing divided by this (rackstress run "
+                   "--refine-ratio), not sqrt(2).")
+def bench_parts(out, fea, only, sets, timeout, refine, refine_ratio):
     """Every real part of examples/parts/ through the static path: particles, spacing, Newton
     steps, residual, solve time, peak and the FE agreement (docs/benchmarks/parts.md)."""
     from rackstress import scenes
@@ -1526,7 +1537,7 @@ def bench_parts(out, fea, only, sets, timeout, refine):
 
     data = mod.run_bench(out, fea=fea, only=only or None,
                          sets=scenes.parse_overrides(sets), echo=click.echo, timeout=timeout,
-                         refine=refine)
+                         refine=refine, refine_ratio=refine_ratio)
     _bench_report(data, mod)
 
 
@@ -1745,6 +1756,9 @@ TEACH = {
         "rackstress bench parts --no-fea --out /tmp/bench",
         "rackstress bench parts --only so100 --set budget=5000 --out /tmp/bench",
         "rackstress bench parts --refine --out docs/benchmarks",
+        "rackstress bench parts --refine --set poisson=material "
+        "--out docs/benchmarks/parts-material",
+        "rackstress bench parts --refine --refine-ratio 2 --out docs/benchmarks/parts-half",
     ]),
     "bench lattice": ("E, ν, bulk and shear moduli with the volumetric term.", [
         "rackstress bench lattice --quick --out /tmp/bench",
