@@ -345,6 +345,32 @@ def test_refine_of_a_lattice_part_keeps_the_first_run(tmp_path):
     assert summary["settled"] and summary["stress"]["governing"]["value"] > 0
 
 
+def test_refine_ratio_two_halves_the_spacing_and_extrapolates_at_that_ratio(tmp_path):
+    """``--refine --refine-ratio 2``: the bar filled at 1 mm (20 × 4 × 4 = 320 particles) is
+    refined at 0.5 mm (40 × 8 × 8 = 2,560, by hand), and the error bar's Richardson
+    extrapolation is the finer value plus its change over 2¹ − 1 (order 1), by hand from the
+    two values it gives; a ratio outside 1.2 … 3 is refused by the option (exit 2)."""
+    import json
+
+    from test_faults import QUIET, rs
+
+    scene = tmp_path / "bar.toml"
+    scene.write_text(BAR.format(source='fill = { box = { min = [0, 0, 0], max = [20, 4, 4] } }'
+                                       "\nspacing = 1.0", x=1, y=1, r=2.5))
+    p = rs("run", scene, "--refine", "--refine-ratio", "2", "--engine", "reference", "--out",
+           tmp_path / "r", *QUIET, timeout=300)
+    assert p.returncode == 0, p.stderr
+    assert "at spacing / 2 (2,560 particles)" in p.stdout
+    err = json.loads((tmp_path / "r" / "summary.json").read_text())["stress"]["error"]
+    assert err["spacings"] == [1.0, 0.5] and err["ratio"] == 2.0
+    assert err["particles"] == [320, 2560]
+    coarse, fine = err["values"]
+    assert err["extrapolated"] == pytest.approx(fine + (fine - coarse))
+    p = rs("run", scene, "--refine", "--refine-ratio", "5", "--out", tmp_path / "x", *QUIET)
+    assert p.returncode == 2 and "--refine-ratio" in p.stderr
+    assert not (tmp_path / "x").exists()
+
+
 def test_refined_run_that_does_not_settle_keeps_the_first_run(tmp_path):
     """Held on a cylinder of radius 0.7 about (1.161, 0.939): at 1 mm it holds two lines of
     particles (x = 1.5, y = 0.5 and 1.5: a clamp), at 1/√2 mm one (a hinge: a mechanism)."""

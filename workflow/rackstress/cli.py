@@ -1753,8 +1753,7 @@ TEACH = {
         "rackstress bench scaling --scene magpod --out docs/benchmarks",
     ]),
     "bench parts": ("Every real part of examples/parts/ through the static path.", [
-        "rackstress bench parts --no-fea --out /tmp/bench",
-        "rackstress bench parts --only so100 --set budget=5000 --out /tmp/bench",
+        "rackstress bench parts --only so100 --set budget=5000 --no-fea --out /tmp/bench",
         "rackstress bench parts --refine --out docs/benchmarks",
         "rackstress bench parts --refine --set poisson=material "
         "--out docs/benchmarks/parts-material",
