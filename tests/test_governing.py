@@ -349,7 +349,8 @@ def test_refine_ratio_two_halves_the_spacing_and_extrapolates_at_that_ratio(tmp_
     """``--refine --refine-ratio 2``: the bar filled at 1 mm (20 × 4 × 4 = 320 particles) is
     refined at 0.5 mm (40 × 8 × 8 = 2,560, by hand), and the error bar's Richardson
     extrapolation is the finer value plus its change over 2¹ − 1 (order 1), by hand from the
-    two values it gives; a ratio outside 1.2 … 3 is refused by the option (exit 2)."""
+    two values it gives; a ratio outside 1.2 … 3, or one without --refine, is refused (exit
+    2, nothing written)."""
     import json
 
     from test_faults import QUIET, rs
@@ -366,9 +367,10 @@ def test_refine_ratio_two_halves_the_spacing_and_extrapolates_at_that_ratio(tmp_
     assert err["particles"] == [320, 2560]
     coarse, fine = err["values"]
     assert err["extrapolated"] == pytest.approx(fine + (fine - coarse))
-    p = rs("run", scene, "--refine", "--refine-ratio", "5", "--out", tmp_path / "x", *QUIET)
-    assert p.returncode == 2 and "--refine-ratio" in p.stderr
-    assert not (tmp_path / "x").exists()
+    for args in (("--refine", "--refine-ratio", "5"), ("--refine-ratio", "2")):  # no --refine
+        p = rs("run", scene, *args, "--out", tmp_path / "x", *QUIET)
+        assert p.returncode == 2 and "--refine-ratio" in p.stderr, p.stderr
+        assert "Traceback" not in p.stderr and not (tmp_path / "x").exists()
 
 
 def test_refined_run_that_does_not_settle_keeps_the_first_run(tmp_path):

@@ -195,6 +195,9 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
 
     ctx = click.get_current_context()
     try:
+        if refine_ratio is not None and not refine:
+            raise click.UsageError("--refine-ratio sets the refinement's spacing: give it "
+                                   "with --refine")
         if resume_dir is not None:
             given = [n for n in RESUME_FIXED
                      if ctx.get_parameter_source(n) != click.core.ParameterSource.DEFAULT]
@@ -1535,6 +1538,9 @@ def bench_parts(out, fea, only, sets, timeout, refine, refine_ratio):
     from rackstress import scenes
     from rackstress.bench import parts as mod
 
+    if refine_ratio is not None and not refine:
+        raise click.UsageError("--refine-ratio sets the refinement's spacing: give it with "
+                               "--refine")
     data = mod.run_bench(out, fea=fea, only=only or None,
                          sets=scenes.parse_overrides(sets), echo=click.echo, timeout=timeout,
                          refine=refine, refine_ratio=refine_ratio)
