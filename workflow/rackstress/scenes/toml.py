@@ -540,16 +540,15 @@ def _build_explicit(ctx: _Ctx, data: dict, overrides: dict, user: dict) -> Scene
             raise ctx.error(f"must be \"lattice\" (the bindings' own ν = 1/4) or \"material\" "
                             f"(the material's ν through the volumetric term, "
                             f"docs/calibration.md), got {_describe(poisson)}", "--set poisson")
-        tables = data["group"] if isinstance(data["group"], list) else []
-        if not any(isinstance(t, dict) and "material" in t for t in tables):
-            raise ctx.error("'poisson' chooses the Poisson's ratio of a material part's "
-                            "lattice, and this scene has no [[group]] with a material",
-                            "--set poisson")
         token = _POISSON.set(poisson)
         try:
             groups = _groups(ctx, data["group"], base, _sizing(ctx, data, overrides))
         finally:
             _POISSON.reset(token)
+        if not any(getattr(g, "material", None) for g in groups.values()):
+            raise ctx.error("'poisson' chooses the Poisson's ratio of a material part's "
+                            "lattice, and this scene has no [[group]] with a material",
+                            "--set poisson")
     else:
         groups = _groups(ctx, data["group"], base, _sizing(ctx, data, overrides))
     physical.check_materials(ctx, groups, unit_system)
