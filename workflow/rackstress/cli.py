@@ -195,9 +195,7 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
 
     ctx = click.get_current_context()
     try:
-        if refine_ratio is not None and not refine:
-            raise click.UsageError("--refine-ratio sets the refinement's spacing: give it "
-                                   "with --refine")
+        _refine_ratio_needs_refine(refine, refine_ratio)
         if resume_dir is not None:
             given = [n for n in RESUME_FIXED
                      if ctx.get_parameter_source(n) != click.core.ParameterSource.DEFAULT]
@@ -334,6 +332,14 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
     finally:
         gc.enable()
         _quit_ahead()
+
+
+def _refine_ratio_needs_refine(refine: bool, ratio: float | None) -> None:
+    """``--refine-ratio`` sets the refinement's spacing: without ``--refine`` it is refused
+    (exit 2), not ignored (``run`` and ``bench parts``)."""
+    if ratio is not None and not refine:
+        raise click.UsageError("--refine-ratio sets the refinement's spacing: give it with "
+                               "--refine")
 
 
 def _refine(out: Path, scene, sets, engine: str, mode: str, progress: bool,
@@ -1538,9 +1544,7 @@ def bench_parts(out, fea, only, sets, timeout, refine, refine_ratio):
     from rackstress import scenes
     from rackstress.bench import parts as mod
 
-    if refine_ratio is not None and not refine:
-        raise click.UsageError("--refine-ratio sets the refinement's spacing: give it with "
-                               "--refine")
+    _refine_ratio_needs_refine(refine, refine_ratio)
     data = mod.run_bench(out, fea=fea, only=only or None,
                          sets=scenes.parse_overrides(sets), echo=click.echo, timeout=timeout,
                          refine=refine, refine_ratio=refine_ratio)

@@ -532,25 +532,22 @@ def _build_explicit(ctx: _Ctx, data: dict, overrides: dict, user: dict) -> Scene
     from rackstress.scenes import physical
 
     unit_system = physical.scene_units(ctx, data)
+    # --set poisson=…: every material part whose table does not say (a part's own
+    # ``poisson`` wins, as over the default)
     poisson = overrides.get("poisson")
-    if poisson is not None:
-        # --set poisson=…: every material part whose table does not say (a part's own
-        # ``poisson`` wins, as over the default)
-        if poisson not in ("lattice", "material"):
-            raise ctx.error(f"must be \"lattice\" (the bindings' own ν = 1/4) or \"material\" "
-                            f"(the material's ν through the volumetric term, "
-                            f"docs/calibration.md), got {_describe(poisson)}", "--set poisson")
-        token = _POISSON.set(poisson)
-        try:
-            groups = _groups(ctx, data["group"], base, _sizing(ctx, data, overrides))
-        finally:
-            _POISSON.reset(token)
-        if not any(getattr(g, "material", None) for g in groups.values()):
-            raise ctx.error("'poisson' chooses the Poisson's ratio of a material part's "
-                            "lattice, and this scene has no [[group]] with a material",
-                            "--set poisson")
-    else:
+    if poisson is not None and poisson not in ("lattice", "material"):
+        raise ctx.error(f"must be \"lattice\" (the bindings' own ν = 1/4) or \"material\" "
+                        f"(the material's ν through the volumetric term, "
+                        f"docs/calibration.md), got {_describe(poisson)}", "--set poisson")
+    token = None if poisson is None else _POISSON.set(poisson)
+    try:
         groups = _groups(ctx, data["group"], base, _sizing(ctx, data, overrides))
+    finally:
+        if token is not None:
+            _POISSON.reset(token)
+    if poisson is not None and not any(getattr(g, "material", None) for g in groups.values()):
+        raise ctx.error("'poisson' chooses the Poisson's ratio of a material part's lattice, "
+                        "and this scene has no [[group]] with a material", "--set poisson")
     physical.check_materials(ctx, groups, unit_system)
     region_of = lambda c, value, field, g=None: _region(c, value, field, base, g)  # noqa: E731
     select = lambda c, value, field, o, g=None: _mask(c, region_of(c, value, field, g), o, field)  # noqa: E731
