@@ -432,9 +432,9 @@ def test_bench_e2e_dump_cost_and_table():
 
 
 def test_forked_job_reports_the_childs_cpu(tmp_path):
-    """A forked child's CPU time (its own clock, which starts at zero at the fork) is what the
-    kernel charges the parent for its waited children (getrusage), within a clock tick or two,
-    and none of the parent's CPU before the fork."""
+    """A forked child's CPU time (what wait4 says the kernel charged that child: its work, its
+    writing of the result and its exit) is what getrusage counts for the parent's waited
+    children, within a clock tick or two, and none of the parent's CPU before the fork."""
     import resource
     import time
 

@@ -8,8 +8,11 @@ available, the work runs in this process at :meth:`ForkedJob.join`.
 """
 from __future__ import annotations
 
+import atexit
 import json
 import os
+import signal
+import sys
 from pathlib import Path
 
 from rackstress.errors import EXIT_STORAGE, StorageError
@@ -27,12 +30,27 @@ class ForkedError(Exception):
         self.message, self.storage, self.errno, self.exitcode = message, storage, errno, exitcode
 
 
+_LIVE: set[int] = set()            # forked children not yet reaped: killed at this one's exit
+
+
+@atexit.register
+def _kill_live() -> None:
+    for pid in list(_LIVE):
+        try:
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+        except OSError:
+            pass
+    _LIVE.clear()
+
+
 class ForkedJob:
     """``work()`` (returning something JSON can hold) in a forked child; :meth:`join` returns
     it, or raises :class:`ForkedError`. Without fork, :meth:`join` runs ``work`` here (its
-    errors as they are). After :meth:`join`, :attr:`cpu_s` is the CPU time the child took
-    (a forked child's CPU clock starts at zero; None without fork), so that a run's timings
-    say what each process cost, not only how long it was awaited.
+    errors as they are). After :meth:`join`, :attr:`cpu_s` is the CPU time the kernel charged
+    the child, from ``wait4`` (its writing of the result and its exit included; None without
+    fork), so that a run's timings say what each process cost, not only how long it was
+    awaited. A child not joined is killed when this process exits.
 
     Example
     -------
@@ -43,59 +61,72 @@ class ForkedJob:
     """
 
     def __init__(self, work, result):
-        import multiprocessing as mp
-
         self.work, self.result = work, Path(result)
-        self.proc, self.parent, self.cpu_s = None, os.getpid(), None
-        if "fork" in mp.get_all_start_methods():
+        self.pid, self.parent, self.cpu_s = None, os.getpid(), None
+        if hasattr(os, "fork") and hasattr(os, "wait4"):
             import gc
 
-            self.proc = mp.get_context("fork").Process(target=self._child, daemon=True)
             gc.freeze()                  # the objects so far: no collection walks them in the
             try:                         # child, whose pages then stay shared (copy on write)
-                self.proc.start()
+                pid = os.fork()
             finally:
-                gc.unfreeze()
+                if os.getpid() == self.parent:
+                    gc.unfreeze()
+            if pid == 0:
+                self._child()            # never returns
+            self.pid = pid
+            _LIVE.add(pid)
 
     def _child(self):
-        import gc
-
-        gc.disable()                     # a short life: no collection touches the parent's
-        in_forked_child(self.parent)     # pages; the run directory's lock stays the parent's
+        code = 1                         # anything unforeseen: the parent sees exit code 1
         try:
-            rec = {"value": self.work()}
-        except BaseException as exc:  # noqa: BLE001 - handed to the parent
-            rec = {"error": f"{type(exc).__name__}: {exc}",
-                   "storage": isinstance(exc, StorageError),
-                   "errno": getattr(exc, "errno", None)}
-        import time
+            import gc
 
-        rec["cpu_s"] = time.process_time()
-        try:
-            self.result.write_text(json.dumps(rec))
-        except OSError:      # a full disk: the parent learns it from the exit status
-            os._exit(EXIT_STORAGE)
-        os._exit(0)
+            gc.disable()                 # a short life: no collection touches the parent's
+            in_forked_child(self.parent)  # pages; the run directory's lock stays the parent's
+            try:
+                rec = {"value": self.work()}
+            except BaseException as exc:  # noqa: BLE001 - handed to the parent
+                rec = {"error": f"{type(exc).__name__}: {exc}",
+                       "storage": isinstance(exc, StorageError),
+                       "errno": getattr(exc, "errno", None)}
+            try:
+                self.result.write_text(json.dumps(rec))
+                code = 0
+            except OSError:              # a full disk: the parent learns it from the exit status
+                code = EXIT_STORAGE
+            sys.stdout.flush()
+            sys.stderr.flush()
+        finally:
+            os._exit(code)
+
+    def _reap(self, options: int = 0) -> int:
+        """Wait for the child; its exit code, and :attr:`cpu_s` from its resource usage."""
+        _, status, usage = os.wait4(self.pid, options)
+        _LIVE.discard(self.pid)
+        self.cpu_s = usage.ru_utime + usage.ru_stime
+        return os.waitstatus_to_exitcode(status)
 
     def join(self):
-        if self.proc is None:
+        if self.pid is None:
             self.result.unlink(missing_ok=True)
             return self.work()
-        self.proc.join()
+        exitcode = self._reap()
         try:
             rec = json.loads(self.result.read_text())
         except (OSError, json.JSONDecodeError):
             self.result.unlink(missing_ok=True)
-            raise ForkedError(f"ended with exit code {self.proc.exitcode}",
-                              exitcode=self.proc.exitcode) from None
+            raise ForkedError(f"ended with exit code {exitcode}", exitcode=exitcode) from None
         self.result.unlink(missing_ok=True)
-        self.cpu_s = rec.get("cpu_s")
         if "error" in rec:
             raise ForkedError(rec["error"], rec["storage"], rec["errno"])
         return rec["value"]
 
     def kill(self):
-        if self.proc is not None and self.proc.is_alive():
-            self.proc.kill()
-            self.proc.join()
+        if self.pid is not None and self.pid in _LIVE:
+            try:
+                os.kill(self.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+            self._reap()
         self.result.unlink(missing_ok=True)
