@@ -1,6 +1,7 @@
 """Linear-elastic finite-element references for the validity cases (scikit-fem, plane stress).
 
-Three planar bodies of unit thickness, quadratic triangles (P2), a direct sparse solve:
+Three planar bodies of unit thickness, quadratic triangles (P2), a direct sparse solve (MKL
+PARDISO where it is, else SuperLU: :func:`rackstress.engines.linear.factorize`):
 
 * :func:`cantilever` — a beam [x0, x0+L] × [y0, y0+h] clamped at x = x0 (both displacement
   components zero), a shear traction of total P on its free end (Euler–Bernoulli: tip deflection
@@ -37,8 +38,8 @@ import numpy as np
 
 try:
     import skfem
-    from skfem import (Basis, ElementTriP2, ElementVector, FacetBasis, LinearForm, MeshTri,
-                       asm, condense, solve)
+    from skfem import (Basis, BilinearForm, ElementTriP2, ElementVector, FacetBasis, LinearForm,
+                       MeshTri, asm, condense)
     from skfem.models.elasticity import lame_parameters, linear_elasticity
 except ImportError as exc:  # pragma: no cover - exercised only without the extra
     raise ImportError("rackstress.validity.fea needs scikit-fem: pip install 'rackstress[fem]'"
@@ -72,8 +73,13 @@ class FEAResult:
         du = self.basis.interpolate(self.u)
         g = du.grad  # g[i][j] = ∂u_i/∂x_j at quadrature points
         self._sbasis = sb
-        self._eps = (sb.project(g[0][0]), sb.project(g[1][1]),
-                     sb.project(0.5 * (g[0][1] + g[1][0])))
+        # scikit-fem's L2 projection (Basis.project: M e = ∫ g·v), its mass matrix factorized
+        # once for the three components
+        M = asm(BilinearForm(lambda u, v, w: u * v), sb)
+        rhs = np.stack([asm(LinearForm(lambda v, w: w.g * v), sb, g=x)
+                        for x in (g[0][0], g[1][1], 0.5 * (g[0][1] + g[1][0]))], axis=1)
+        eps = _solved(M, rhs)
+        self._eps = tuple(np.ascontiguousarray(eps[:, k]) for k in range(3))
 
     @property
     def n_dofs(self) -> int:
@@ -211,7 +217,6 @@ def square_lattice_stiffness(k: float) -> tuple:
 
 
 def _anisotropic(stiffness):
-    from skfem import BilinearForm
     from skfem.helpers import sym_grad
 
     C11, C12, C44 = (float(x) for x in stiffness)
@@ -248,7 +253,23 @@ def _solve(mesh, E, nu, fixed, traction, stiffness=None):
         for c in comps:
             D.append(dofs.all(f"u^{c + 1}"))
     D = np.unique(np.concatenate(D))
-    return basis, solve(*condense(K, f, D=D))
+    A, b, u, free = condense(K, f, D=D)
+    u = u.copy()
+    u[free] = _solved(A, b)
+    return basis, u
+
+
+def _solved(A, b: np.ndarray) -> np.ndarray:
+    """A x = b (``A`` symmetric; ``b`` one right-hand side or its columns) by the static
+    path's direct solver (:func:`rackstress.engines.linear.factorize`: MKL PARDISO, else
+    SuperLU), its factor freed after."""
+    from rackstress.engines.linear import factorize
+
+    f = factorize(A.tocsr())
+    try:
+        return f.solve(b) if b.ndim == 1 else f.solve_many(b)
+    finally:
+        f.free()
 
 
 def cantilever(L, h, P, x0=0.0, y0=0.0, density=8, E=E_DEFAULT, nu=NU_DEFAULT,
