@@ -434,14 +434,16 @@ def test_bench_e2e_dump_cost_and_table():
 def test_forked_job_reports_the_childs_cpu(tmp_path):
     """A forked child's CPU time (what wait4 says the kernel charged that child: its work, its
     writing of the result and its exit) is what getrusage counts for the parent's waited
-    children, within a clock tick or two, and none of the parent's CPU before the fork."""
+    children, within a clock tick or two, and none of the parent's CPU before the fork: 0.6 s
+    of it, so that the child's own 0.2 s and its exit (0.04 s measured beside a large pytest
+    worker, whose pages the child's exit unmaps) stay below 0.5, and the two together above."""
     import resource
     import time
 
     from rackstress.runs.forked import ForkedJob
 
     t = time.process_time()
-    while time.process_time() - t < 0.3:        # the parent's CPU before the fork: not counted
+    while time.process_time() - t < 0.6:        # the parent's CPU before the fork: not counted
         pass
 
     def work():
@@ -455,7 +457,7 @@ def test_forked_job_reports_the_childs_cpu(tmp_path):
     assert job.join() == 1
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     kernel = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    assert 0.2 <= job.cpu_s < 0.3
+    assert 0.2 <= job.cpu_s < 0.5
     assert abs(job.cpu_s - kernel) < 0.03
 
 
