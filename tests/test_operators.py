@@ -338,6 +338,29 @@ def test_bind_pairs_carry_each_pair_original_length():
     np.testing.assert_array_equal(pl.c, [3.0] * 6)
 
 
+def test_bind_pairs_are_built_once_per_coefficient_and_positions():
+    """Every Bind of one coefficient shares its pairs for the same original positions (a run
+    asked for them up to seven times); they cannot be changed in place; other positions, or
+    forget_pairs (a run's engine holds what it steps with), build them anew, equal to the
+    hand count: the three of test_bind_pairs_carry_each_pair_original_length."""
+    from rackstress.model.operators import Within as W
+    from rackstress.model.operators import forget_pairs
+
+    coeff = W(2.5, 3.0)
+    g = Group("g", [[0, 0, 0], [1, 0, 0], [0, 2, 0]], 0.25)
+    first = Bind("g", coeff).pairs(g, g)
+    assert Bind("g", coeff, when=(("x", 1),)).pairs(g, g) is first
+    with pytest.raises(ValueError):
+        first.c[0] = 1.0
+    moved = Group("g", [[0, 0, 0], [1, 0, 0], [0, 3, 0]], 0.25)    # 2: 3 and √10 away
+    pl = Bind("g", coeff).pairs(moved, moved)
+    assert pl is not first and list(zip(pl.i.tolist(), pl.j.tolist())) == [(0, 1), (1, 0)]
+    forget_pairs()
+    again = Bind("g", coeff).pairs(g, g)
+    assert again is not first
+    np.testing.assert_array_equal(again.q, [1, 4, 1, 5, 4, 5])
+
+
 def test_rack_forces_and_pull_selection():
     from rackstress.model.operators import norm2_below, rack_forces
 

@@ -23,6 +23,7 @@ from rackstress.lib.jsonio import write_json
 from rackstress.lib.mpi import on_root, world
 from rackstress.lib.progress import progress_bar
 from rackstress.lib.resources import require_memory
+from rackstress.model.operators import forget_pairs
 from rackstress.model.scene import PhaseEnd, Scene
 
 ENGINES = ("lammps", "reference")
@@ -631,14 +632,18 @@ def execute(scene: Scene, out: Path, engine: str, mode: str, dump_every: int, *,
     if root:
         write_boundary(scene, out)
     if scene.analysis == "static":
-        return execute_static(scene, out, engine, mode, progress=progress, comm=comm, deck=deck,
-                              extra=extra)
+        try:
+            return execute_static(scene, out, engine, mode, progress=progress, comm=comm,
+                                  deck=deck, extra=extra)
+        finally:
+            forget_pairs()               # the bindings are in the run directory now
     extra = dict(extra or {}, dump_every=dump_every)
     if records is None:
         records = [PhaseEnd(0, None, {}, 0, scene.original_positions())]
     on_phase_end = records.append if scene.report is not None else None
     t0 = time.perf_counter()
     eng = open_engine(scene, out, engine, mode, dump_every, comm, deck, append=resume is not None)
+    forget_pairs()                       # the engine holds what it steps with
     try:
         ckpt = None
         if restart_every and engine == "lammps":
