@@ -15,6 +15,12 @@
   "stops after its iterations") is the CPU time its processes used (:func:`child_cpu`), which
   another process's load does not change, or a count of the work done (steps, frames).
 
+* :func:`pytest_sessionstart`: before the workers start, two processes compile (or load) the
+  LAMMPS callback's numba kernels, one the fused step and one the rest, so that no worker and
+  no ``rackstress run`` a test starts compiles them again (a fresh clone's install compiles
+  them: 34 s in one process, and every process started before the cache is there compiled
+  all of them itself).
+
 Markers (registered in pyproject.toml): ``lammps``, ``mpi``, ``slow``; the quick tier is
 ``pytest -m 'not slow'``. README's test command runs everything on both cores (pytest-xdist).
 """
@@ -34,6 +40,26 @@ _FINAL: dict = {}
 #: the limit on any one process a test starts, and on waiting for what it writes: a hang guard
 #: (pyproject.toml's pytest timeout is the whole test's)
 HANG_S = 900
+
+
+def pytest_sessionstart(session):
+    """The callback's kernels compiled into the cache once, by two processes, before the
+    workers start (module doc); in a worker, nothing. A warm-up that fails leaves each test to
+    compile what it needs, as before."""
+    import subprocess
+
+    if hasattr(session.config, "workerinput"):
+        return
+    code = ("import sys; from rackstress.model.kernels import warm; warm(sys.argv[1]); "
+            "from rackstress.stress.kernels import warm as w; sys.argv[1] == 'rest' and w()")
+    procs = [subprocess.Popen([sys.executable, "-c", code, part], stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL) for part in ("step", "rest")]
+    for proc in procs:
+        try:
+            proc.wait(timeout=HANG_S)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
 
 
 class child_cpu:
