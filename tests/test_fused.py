@@ -520,3 +520,23 @@ def test_lists_kept_by_relative_motion_equal_fresh_searches(monkeypatch, active_
     assert 0 < n < n0
     if active_only:
         assert n0 >= 2 * 400 and n < n0 / 4
+
+
+def test_warm_halves_compile_the_kernels_between_them():
+    """``kernels.warm("step")`` and ``warm("rest")`` (the suite's two warm-up processes) load
+    disjoint halves whose union is every kernel ``warm()`` loads: each counted in a fresh
+    process by the dispatchers holding a signature. An unknown half is refused."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from rackstress.model import kernels as k; k.warm(sys.argv[1]); "
+            "print(' '.join(sorted(n for n in dir(k) if getattr(getattr(k, n), 'signatures', "
+            "None))))")
+    got = {part: set(subprocess.run([sys.executable, "-c", code, part], capture_output=True,
+                                    text=True, check=True).stdout.split())
+           for part in ("all", "step", "rest")}
+    assert {"step", "bind_block", "bed_join"} == got["step"]
+    assert not got["step"] & got["rest"] and got["step"] | got["rest"] == got["all"]
+    assert {"candidates", "collide_add", "grid_candidates", "relist"} <= got["rest"]
+    with pytest.raises(ValueError, match="unknown part 'both'"):
+        K.warm("both")
