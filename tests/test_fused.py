@@ -537,6 +537,7 @@ def test_warm_halves_compile_the_kernels_between_them():
            for part in ("all", "step", "rest")}
     assert {"step", "bind_block", "bed_join"} == got["step"]
     assert not got["step"] & got["rest"] and got["step"] | got["rest"] == got["all"]
-    assert {"candidates", "collide_add", "grid_candidates", "relist"} <= got["rest"]
+    assert {"candidates", "collide_add", "collide_friction", "grid_candidates",
+            "relist"} <= got["rest"]
     with pytest.raises(ValueError, match="unknown part 'both'"):
         K.warm("both")

@@ -104,6 +104,7 @@ def warm(part: str = "all") -> dict:
                        np.zeros(2), np.zeros(2), acc)
         k.touching(x, r, s, np.full(2, 4.0))
         k.collide(x, r, s, np.full(2, 4.0), 3.0)
+        k.collide_friction(x, np.ones((3, 3)), r, s, np.full(2, 4.0), 3.0, 0.5, 0.1)
         k.dampen(np.ones((3, 3)), r, r, 2.0, acc)
         k.candidates(x, r, s, 2.0, False, tag, 3.0)
         k.overlapping(x, r, s, np.full(2, 4.0))
