@@ -100,15 +100,15 @@ class ForkedJob:
         finally:
             os._exit(code)
 
-    def _reap(self, options: int = 0) -> int | None:
+    def _reap(self) -> int | None:
         """Wait for the child; its exit code, and :attr:`cpu_s` from its resource usage (None
         for both if something else in this process reaped it: a ``waitpid(-1)``)."""
         try:
-            _, status, usage = os.wait4(self.pid, options)
+            _, status, usage = os.wait4(self.pid, 0)
         except ChildProcessError:
-            _LIVE.discard(self.pid)
             return None
-        _LIVE.discard(self.pid)
+        finally:
+            _LIVE.discard(self.pid)
         self.cpu_s = usage.ru_utime + usage.ru_stime
         return os.waitstatus_to_exitcode(status)
 
