@@ -187,3 +187,32 @@ def test_a_solids_own_pairs_are_tested_once_per_run(tmp_path):
                        timeout=HANG_S)
     assert r.returncode == 0, r.stderr
     assert r.stderr.count("bind inside bracket") == 1, r.stderr
+
+
+def test_a_solids_remembered_answers_die_with_it():
+    """Solid remembers its inside test, its own pairs' test and its boundary fractions by
+    ``id(self)``. Two shapes, the same segments (by hand): in an L of three unit cells the
+    diagonal (0,0)–(1,1) crosses the missing corner cell, so it is outside; in the square of all
+    four it is inside. A Solid of the L asked, then collected: its entries are gone from all
+    three stores, so a Solid of the square made after it (CPython may give it the L's address)
+    reads its own shape, not the L's answer."""
+    import gc
+
+    from rackstress.model import solid as S
+
+    a = np.array([[0.0, 0, 0], [0, 0, 0]])
+    b = np.array([[0.0, 1, 0], [1, 1, 0]])
+    L = Box((-.5, -.5, -.5), (.5, 1.5, .5)) | Box((-.5, .5, -.5), (1.5, 1.5, .5))
+    square = Box((-.5, -.5, -.5), (1.5, 1.5, .5))
+    o = np.array([[0.0, 0, 0], [0, 1, 0], [1, 1, 0]])
+    first = S.Solid(1.5, 20.0, L, spacing=1.0, part=L)
+    assert first.inside(a, b).tolist() == [True, False]
+    first.inside_pairs(o, np.array([0, 0]), np.array([1, 2]))
+    first.fractions(o)
+    gone = id(first)
+    assert all(gone in store for store in (S._INSIDE, S._PAIRS, S._FRACTIONS))
+    del first
+    gc.collect()
+    assert not any(gone in store for store in (S._INSIDE, S._PAIRS, S._FRACTIONS))
+    second = S.Solid(1.5, 20.0, square, spacing=1.0, part=square)
+    assert second.inside(a, b).tolist() == [True, True]
