@@ -75,6 +75,8 @@ def _cache_of(store: dict, owner) -> dict:
         cache = store[k] = {}
         weakref.finalize(owner, store.pop, k, None)
     return cache
+
+
 #: bisection steps finding a free face's distance along an axis (precision a / 2**steps:
 #: 1e-12 spacings, so a face on the lattice's own half-cell reads ½ to a double's digits)
 FACE_STEPS = 40
