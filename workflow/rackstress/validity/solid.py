@@ -94,6 +94,15 @@ MEMORY_FLOOR = 150e6
 TETS_PER_SIZE3 = 4.8
 #: FE systems up to this many unknowns are solved directly (SuperLU), larger by AMG-CG
 DIRECT_DOFS = 20_000
+#: A mesh gmsh remeshed from the file (well-shaped) is solved by conjugate gradients first
+#: (:func:`solve_part`), whatever the direct factor's size: README's bracket at FE sizes 2.83
+#: and 2 (125,310 and 249,894 unknowns) took 3.5 and 7.2 s of CPU by conjugate gradients
+#: against 6.1 s by PARDISO (its factor within DIRECT_FLOPS: 7.6e10 flop) and 11.3 s (the
+#: analysis that refused the factor, 4.4 s, then conjugate gradients), the same governing
+#: stress to 14 digits (measured 2026-12-02). A mesh inside the file's own facets or fTetWild's
+#: is not (the SO-100 base's 82,656 unknowns: 752 steps), so there the factor's size decides
+#: (:func:`solve`'s ``method="remeshed"``).
+REMESHED_CG = True
 #: the finer FE mesh's budget of tetrahedra: the FE check's target of ≤ 60 s of one core and ≤ 2 GB for a
 #: 20,000-particle part, with both FE sizes (measured on the finger's lower link: 179,215
 #: tetrahedra took 59.5 s of CPU and 2.4 GB, 68,822 took 21.6 s; at a budget of 80,000 the
@@ -741,7 +750,8 @@ def solve(p, t, E: float, nu: float, fixed, forces, echo=None,
     none); ``constraints``: supports that hold no whole axis (:class:`CellConstraints` of
     particles, or :class:`~rackstress.model.constraints.Normals` and ``Ring`` over the P2
     nodes), imposed exactly by u = T·q (:func:`constraint_map`): Tᵀ·K·T q = Tᵀ·f.
-    ``method``: ``"auto"`` — up to :data:`DIRECT_DOFS` unknowns SuperLU, above it MKL
+    ``method``: ``"remeshed"`` — conjugate gradients above :data:`DIRECT_DOFS` unknowns, the
+    ``"auto"`` choice where they do not converge (:data:`REMESHED_CG`); ``"auto"`` — up to :data:`DIRECT_DOFS` unknowns SuperLU, above it MKL
     PARDISO where its own estimate of the factor fits :data:`DIRECT_MEMORY` and
     ``engines.linear``'s work limit (:func:`rackstress.engines.linear.plan_direct`), else
     conjugate gradients preconditioned by a two-grid cycle (P2 smoothing, AMG on P1; with
@@ -785,7 +795,14 @@ def solve(p, t, E: float, nu: float, fixed, forces, echo=None,
         if plan is not None:
             u, its = _solve_direct(plan, K, f.ravel()), 0
         else:
-            u, its = solve_cg(mesh, K, f.ravel(), fx)
+            try:
+                u, its = solve_cg(mesh, K, f.ravel(), fx)
+            except RuntimeError:
+                plan = _direct_plan(K, "auto") if method == "remeshed" else None
+                if plan is None:
+                    raise
+                solver = _solver_name(plan)
+                u, its = _solve_direct(plan, K, f.ravel()), 0
         del K
         stages["solve"] = time.process_time() - c0 - stages["assembly"]
         u = u.reshape(-1, 3)
@@ -803,6 +820,8 @@ def _direct_plan(K, method: str):
     if method == "cg":
         return None
     n = K.shape[0]
+    if method == "remeshed":
+        return "superlu" if n <= DIRECT_DOFS else None
     if n <= DIRECT_DOFS or (method == "direct" and n <= 4 * DIRECT_DOFS):
         return "superlu"
     from rackstress.engines.linear import Pardiso, backend, plan_direct
@@ -1522,6 +1541,9 @@ def solve_part(o, spacing, shape, held_x, held_mask, load_x, load_F, E, nu, size
     fixed = fixed_nodes(p, held_x, held_mask, spacing)
     forces = nodal_forces(p, t, load_x, load_F, spacing)
     try:
+        if REMESHED_CG and method == "auto" and not constraints and isinstance(shape, Surface) \
+                and how == f"gmsh tetrahedra of {Path(shape.name).name}":
+            method = "remeshed"                 # well-shaped: REMESHED_CG
         sol = solve(p, t, E, nu, fixed, forces, constraints=constraints, method=method)
     except MemoryError:
         avail, why = available_bytes()
