@@ -71,6 +71,42 @@ def test_bar_in_tension_is_F_over_A():
     assert b - a == pytest.approx(10 * 2.0 / 500.0, rel=0.01)
 
 
+@pytest.mark.parametrize("cg_converges", [True, False])
+def test_a_remeshed_part_is_solved_by_conjugate_gradients_else_directly(monkeypatch,
+                                                                       cg_converges):
+    """``method="remeshed"`` (a mesh gmsh remeshed from the file, validity.solid.REMESHED_CG):
+    above DIRECT_DOFS unknowns by conjugate gradients; where they do not converge (made to
+    raise here, as they do after their steps), by the size-based choice, a direct solve — and
+    ``method="cg"`` still raises. The bar of the test above at 30 × 6 × 6 cells (more than
+    DIRECT_DOFS unknowns), σ = 2, E = 500: its middle 10 stretch by 10·σ/E either way."""
+    import rackstress.lib.tet as tet
+    from rackstress.validity.solid import DIRECT_DOFS
+
+    o = _bar(30, 6, 6)
+    p, t = cell_mesh(o, 1.0)
+    P = p.T
+    fixed = np.zeros((len(P), 3), bool)
+    fixed[np.isclose(P[:, 0], -0.5), 0] = True
+    fixed[np.isclose(P, [-0.5, -0.5, -0.5]).all(axis=1)] = True
+    fixed[np.isclose(P, [-0.5, 5.5, -0.5]).all(axis=1), 2] = True
+    fixed[np.isclose(P, [-0.5, -0.5, 5.5]).all(axis=1), 1] = True
+    end = o[:, 0] == 29
+    F = np.zeros((end.sum(), 3))
+    F[:, 0] = 2.0                                                   # 72 on A = 36: σ = 2
+    forces = nodal_forces(p, t, o[end], F, 1.0)
+    if not cg_converges:
+        def stalls(*args, **kwargs):
+            raise RuntimeError("the FE solve did not converge (conjugate gradients, 2000 steps)")
+        monkeypatch.setattr(tet, "solve_cg", stalls)
+        with pytest.raises(RuntimeError, match="did not converge"):
+            solve(p, t, 500.0, 0.3, fixed, forces, method="cg")
+    sol = solve(p, t, 500.0, 0.3, fixed, forces, method="remeshed")
+    assert sol.info["dofs"] > DIRECT_DOFS
+    assert (sol.info["solver"] == "cg") is cg_converges
+    a, b = sol.at(np.array([[9.5, 2.5, 2.5], [19.5, 2.5, 2.5]]))["displacement"][:, 0]
+    assert b - a == pytest.approx(10 * 2.0 / 500.0, rel=0.01)
+
+
 @pytest.mark.slow
 def test_cantilever_tip_deflection_and_bending_stress():
     """A bar of 48 × 4 × 4 cells clamped over its x = −0.5 face, P = 1 down (−z) on the free
