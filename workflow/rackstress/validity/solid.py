@@ -753,12 +753,12 @@ def solve(p, t, E: float, nu: float, fixed, forces, echo=None,
     ``method``: ``"remeshed"`` — conjugate gradients above :data:`DIRECT_DOFS` unknowns, the
     ``"auto"`` choice where they do not converge (:data:`REMESHED_CG`); ``"auto"`` — up to
     :data:`DIRECT_DOFS` unknowns SuperLU, above it MKL PARDISO where its own estimate of the
-    factor fits :data:`DIRECT_MEMORY` and ``engines.linear``'s work limit (:func:`rackstress.engines.linear.plan_direct`), else
-    conjugate gradients preconditioned by a two-grid cycle (P2 smoothing, AMG on P1; with
-    constraints, the cycle of K with each constrained node's held directions stiffened by
-    its own diagonal, seen through T); ``"direct"`` or ``"cg"`` force one. A mesh inside an
-    STL's own facets is poorly shaped: the SO-100 base's 82,656 unknowns took 752
-    conjugate-gradient steps (39 s of CPU).
+    factor fits :data:`DIRECT_MEMORY` and ``engines.linear``'s work limit
+    (:func:`rackstress.engines.linear.plan_direct`), else conjugate gradients preconditioned by
+    a two-grid cycle (P2 smoothing, AMG on P1; with constraints, the cycle of K with each
+    constrained node's held directions stiffened by its own diagonal, seen through T);
+    ``"direct"`` or ``"cg"`` force one. A mesh inside an STL's own facets is poorly shaped: the
+    SO-100 base's 82,656 unknowns took 752 conjugate-gradient steps (39 s of CPU).
     """
     import time
 
