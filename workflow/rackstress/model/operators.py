@@ -539,8 +539,21 @@ class Collide(PairOperator):
         return PairOperator._radial(diff, c, R2)
 
 
-#: the last pairs of each live bind coefficient (:func:`_remembered`): id → (weak reference,
-#: key, pairs)
+def cache_of(store: dict, owner) -> dict:
+    """``owner``'s entry of ``store`` (a dict by ``id(owner)``), dropped when ``owner`` is
+    collected: a later object at the same address must not read the answers of the one before
+    (another Solid's shape with the same positions), and a dead one's arrays are not kept."""
+    import weakref
+
+    k = id(owner)
+    cache = store.get(k)
+    if cache is None:
+        cache = store[k] = {}
+        weakref.finalize(owner, store.pop, k, None)
+    return cache
+
+
+#: the last pairs of each live bind coefficient (:func:`_remembered`, :func:`cache_of`)
 _REMEMBERED: dict = {}
 
 
@@ -551,23 +564,20 @@ def _remembered(coeff, target, source, build) -> PairList:
     and whether the two are one group; its arrays read-only, so no caller changes what the
     next one gets."""
     import hashlib
-    import weakref
 
     h = hashlib.sha1(np.ascontiguousarray(target.o, dtype=float).tobytes())
     if source is not target:
         h.update(b"|" + np.ascontiguousarray(source.o, dtype=float).tobytes())
     key = (h.hexdigest(), source is target)
-    entry = _REMEMBERED.get(id(coeff))
-    if entry is not None and entry[0]() is coeff and entry[1] == key:
-        return entry[2]
-    pl = build(target, source)
-    for a in (pl.i, pl.j, pl.c, pl.q):
-        if a is not None:
-            a.setflags(write=False)
-    ident = id(coeff)
-    _REMEMBERED[ident] = (weakref.ref(coeff, lambda _, k=ident: _REMEMBERED.pop(k, None)), key,
-                          pl)
-    return pl
+    cache = cache_of(_REMEMBERED, coeff)
+    if key not in cache:
+        pl = build(target, source)
+        for a in (pl.i, pl.j, pl.c, pl.q):
+            if a is not None:
+                a.setflags(write=False)
+        cache.clear()
+        cache[key] = pl
+    return cache[key]
 
 
 def forget_pairs() -> None:

@@ -43,7 +43,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rackstress.errors import SceneError
-from rackstress.model.operators import WithinInside
+from rackstress.model.operators import WithinInside, cache_of
 
 #: E = LATTICE_E · k / a for the simple-cubic lattice with equal 1st/2nd-neighbour springs
 #: alone (no volumetric term: ν = 1/4)
@@ -54,29 +54,13 @@ LATTICE_NU = 0.25
 #: along its projection: half of it lies inside the part (the half-spacing skin), and a
 #: nearest binding carries twice a diagonal's C11 (k·n_x⁴·ℓ²: 1 against 1/2), so ½·½ = ¼
 FACE_SHARE = 0.25
-#: the last inside test of each live Solid (by id, :func:`_cache_of`): its pairs are asked for
-#: several times per run
+#: the last inside test of each live Solid (by id, ``operators.cache_of``): its pairs are
+#: asked for several times per run
 _INSIDE: dict = {}
 #: the last boundary fractions of each live Solid (by id)
 _FRACTIONS: dict = {}
 #: the lattice test's answer for a group's own pairs, per live Solid (one entry: the last pairs)
 _PAIRS: dict = {}
-
-
-def _cache_of(store: dict, owner) -> dict:
-    """``owner``'s entry of ``store`` (a dict by ``id(owner)``), dropped when ``owner`` is
-    collected: a later Solid at the same address (another shape, the same positions) must not
-    read the answers of the one before, and a dead Solid's arrays are not kept."""
-    import weakref
-
-    k = id(owner)
-    cache = store.get(k)
-    if cache is None:
-        cache = store[k] = {}
-        weakref.finalize(owner, store.pop, k, None)
-    return cache
-
-
 #: bisection steps finding a free face's distance along an axis (precision a / 2**steps:
 #: 1e-12 spacings, so a face on the lattice's own half-cell reads ½ to a double's digits)
 FACE_STEPS = 40
@@ -126,7 +110,7 @@ class Solid(WithinInside):
         import hashlib
 
         key = hashlib.sha1(a.tobytes() + b.tobytes()).hexdigest()
-        cache = _cache_of(_INSIDE, self)
+        cache = cache_of(_INSIDE, self)
         if key not in cache:
             cache.clear()
             cache[key] = super().inside(a, b)
@@ -145,7 +129,7 @@ class Solid(WithinInside):
         key = h.hexdigest()
         # remembered like inside(): the scene's memory estimate, the deck and the static solver
         # each ask for the same pairs (3 × 3.4 s at 1,000,000 particles)
-        cache = _cache_of(_PAIRS, self)
+        cache = cache_of(_PAIRS, self)
         if key not in cache:
             cache.clear()
             cache[key] = super().inside_pairs(points, i, j, name=name)
@@ -166,7 +150,7 @@ class Solid(WithinInside):
 
         o = np.ascontiguousarray(o, dtype=float)
         key = ("fractions", hashlib.sha1(o.tobytes()).hexdigest())
-        cache = _cache_of(_FRACTIONS, self)
+        cache = cache_of(_FRACTIONS, self)
         if key not in cache:
             cache.clear()
             cache[key] = axis_fractions(o, self.spacing, self.part)
