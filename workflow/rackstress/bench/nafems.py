@@ -142,14 +142,14 @@ def _run_and_measure(sc, tmp: Path, name: str, headline: bool = False):
 
     out = tmp / name
     run(sc, out, engine="reference", progress=False, dump_every=1)
-    head = None
+    head, data = None, load_run(out)
     if headline:
         from rackstress.stress.post import compute_fields, postprocess
 
-        head = postprocess(out, vtk=False, dump=False)["governing"]
-        s6 = np.asarray(compute_fields(load_run(out)).extras["stress"][-1], dtype=float)
+        head = postprocess(out, vtk=False, dump=False, run=data)["governing"]
+        s6 = np.asarray(compute_fields(data).extras["stress"][-1], dtype=float)
     else:
-        s6 = ParticleStress(load_run(out)).run().results.stress[-1]   # xx yy zz xy yz xz
+        s6 = ParticleStress(data).run().results.stress[-1]          # xx yy zz xy yz xz
     S = np.empty((len(s6), 3, 3))
     for c, (x, y) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (0, 2))):
         S[:, x, y] = S[:, y, x] = s6[:, c]
