@@ -140,3 +140,21 @@ def test_magpod_gait_breaks_just_beyond_the_predicted_limit():
     assert below["stopped"] is None
     assert abs(below["advance"] - base["advance"]) <= GAIT_TOL * base["advance"]
     assert above["stopped"] or abs(above["advance"] - base["advance"]) > GAIT_TOL * base["advance"]
+
+
+def test_the_stiffness_matrix_sums_repeated_pairs_block_by_block():
+    """K[p, p] += B and K[p, u] −= B for every listed pair (``stability.stiffness_matrix``),
+    a pair listed twice adding both blocks; a particle that is only ever a partner keeps an
+    empty row (``_top_eigen`` drops those rows). By hand, with blocks A, C on pair (0, 2)
+    twice and D on (2, 0): rows of 0 are [A + C, 0, −(A + C)], of 2 [−D, 0, D], of 1 empty."""
+    from rackstress.model.stability import stiffness_matrix
+
+    A = np.arange(9.0).reshape(3, 3)
+    C, D = np.eye(3) * 5.0, -np.ones((3, 3))
+    K = stiffness_matrix({"I": np.array([0, 0, 2]), "J": np.array([2, 2, 0]),
+                          "B": np.stack([A, C, D])}, 3)
+    want = np.zeros((9, 9))
+    want[0:3, 0:3], want[0:3, 6:9] = A + C, -(A + C)
+    want[6:9, 6:9], want[6:9, 0:3] = D, -D
+    assert K.format == "csr" and np.array_equal(K.toarray(), want)
+    assert list(np.diff(K.indptr)[3:6]) == [0, 0, 0]
