@@ -135,6 +135,13 @@ def test_plate_walls(plate_features):
     thin = w.thinner_than(1.6)
     assert thin and all(1.5 - 1e-6 <= t["thickness"] < 1.6 for t in thin)
     assert all(abs(t["position"][1] - 24) < 1.6 for t in thin)  # over and under H3
+    # a limit larger than the part (a spacing the size of the part): every thin sample is
+    # within it of every other, so one place — the thinnest sample over the whole surface
+    # (by hand: the minimum), all of it (share 1)
+    (one,) = w.thinner_than(1e3)
+    ok = np.isfinite(w.thickness)
+    assert one["thickness"] == np.nanmin(w.thickness)
+    assert one["share"] == pytest.approx(w.weight[ok].sum() / w.weight.sum())
 
 
 def test_so_arm_hole_by_independent_fit():
