@@ -248,24 +248,30 @@ def axis_fractions(o: np.ndarray, spacing: float, part) -> np.ndarray:
     _sites(o, a, "boundary cells")              # on one cubic lattice, or a SceneError
     sides = lattice_sides(o, a)
     ext = np.full((len(o), 3), a)
+    # the six directions' free sides bisected together: one inside test per step for all of
+    # them (a mesh's test builds its locator each call: 40 calls where 240 took 6× as long)
+    rows, steps, cols = [], [], []
     for ax in range(3):
         for sgn in (1, -1):
             free = np.flatnonzero(~sides[:, ax, (sgn + 1) // 2])
-            if not len(free):
-                continue
             step = np.zeros(3)
             step[ax] = sgn * a
-            lo_t, hi_t = np.zeros(len(free)), np.ones(len(free))
-            for _ in range(FACE_STEPS):        # inside at lo_t, outside at hi_t (in spacings)
-                mid = 0.5 * (lo_t + hi_t)
-                ins = np.asarray(part.mask(o[free] + mid[:, None] * step), dtype=bool)
-                lo_t = np.where(ins, mid, lo_t)
-                hi_t = np.where(ins, hi_t, mid)
-            t = 0.5 * (lo_t + hi_t)
-            # a face on the particle or on its half cell reads there exactly: the shapes'
-            # masks are closed up to regions.TOL × their size, which bisection finds too
-            t = np.where(np.abs(t - 0.5) < FACE_SNAP, 0.5, np.where(t < FACE_SNAP, 0.0, t))
-            ext[free, ax] += (t - 0.5) * a
+            rows.append(free)
+            steps.append(np.broadcast_to(step, (len(free), 3)))
+            cols.append(np.full(len(free), ax))
+    free, step, axis = np.concatenate(rows), np.concatenate(steps), np.concatenate(cols)
+    if len(free):
+        lo_t, hi_t = np.zeros(len(free)), np.ones(len(free))
+        for _ in range(FACE_STEPS):            # inside at lo_t, outside at hi_t (in spacings)
+            mid = 0.5 * (lo_t + hi_t)
+            ins = np.asarray(part.mask(o[free] + mid[:, None] * step), dtype=bool)
+            lo_t = np.where(ins, mid, lo_t)
+            hi_t = np.where(ins, hi_t, mid)
+        t = 0.5 * (lo_t + hi_t)
+        # a face on the particle or on its half cell reads there exactly: the shapes'
+        # masks are closed up to regions.TOL × their size, which bisection finds too
+        t = np.where(np.abs(t - 0.5) < FACE_SNAP, 0.5, np.where(t < FACE_SNAP, 0.0, t))
+        np.add.at(ext, (free, axis), (t - 0.5) * a)
     return ext / a
 
 
