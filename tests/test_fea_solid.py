@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from rackstress.validity.solid import (boundary_from_scene, cell_mesh, concave_edges,
-                                       fixed_nodes, nodal_forces, solve, von_mises)
+                                       fixed_nodes, next_method, nodal_forces, solve,
+                                       von_mises)
 from conftest import HANG_S
 
 
@@ -105,6 +106,10 @@ def test_a_remeshed_part_is_solved_by_conjugate_gradients_else_directly(monkeypa
     assert (sol.info["solver"] == "cg") is cg_converges
     a, b = sol.at(np.array([[9.5, 2.5, 2.5], [19.5, 2.5, 2.5]]))["displacement"][:, 0]
     assert b - a == pytest.approx(10 * 2.0 / 500.0, rel=0.01)
+    # check_run's finer mesh keeps the remeshed choice, and with it the direct fallback: its
+    # conjugate gradients were chosen, not forced by a refused factor (which forces "cg")
+    assert next_method(sol.info, "auto") == "auto"
+    assert next_method(dict(sol.info, method="auto", solver="cg"), "auto") == "cg"
 
 
 @pytest.mark.slow

@@ -811,7 +811,28 @@ def solve(p, t, E: float, nu: float, fixed, forces, echo=None,
     return Solution(mesh, u, eps, float(E), float(nu),
                     {"vertices": int(P.shape[1]), "tetrahedra": int(mesh.n_elements),
                      "nodes": int(mesh.n_nodes), "dofs": int(dofs), "cg_iterations": int(its),
-                     "solver": solver, "cpu_s": time.process_time() - c0, "stages_cpu_s": stages})
+                     "solver": solver, "method": method, "cpu_s": time.process_time() - c0,
+                     "stages_cpu_s": stages})
+
+
+def next_method(info: dict, method: str) -> str:
+    """The ``method`` of :func:`solve` for :func:`check_run`'s next, finer FE mesh, from the
+    last one's ``info``: ``"cg"`` where conjugate gradients served because the direct factor
+    was refused at this size (PARDISO's own estimate after its analysis: the hip's 206,406
+    unknowns 1.5 GB, 3.6e11 flop) — the finer mesh's is larger still, so its analysis (7 s of
+    CPU on the hip) is not made again; else ``method`` unchanged. A remeshed mesh's conjugate
+    gradients were chosen first, not forced (:data:`REMESHED_CG`): the finer mesh keeps that
+    choice and its direct fallback.
+
+    >>> next_method({"solver": "cg", "dofs": 10**6, "method": "auto"}, "auto")
+    'cg'
+    >>> next_method({"solver": "cg", "dofs": 10**6, "method": "remeshed"}, "auto")
+    'auto'
+    """
+    if (info["solver"] == "cg" and info["dofs"] > DIRECT_DOFS
+            and info.get("method") != "remeshed"):
+        return "cg"
+    return method
 
 
 def _direct_plan(K, method: str):
@@ -1825,11 +1846,7 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
             break
         how, forces, fixed = how_k, forces_k, fixed_k
         sols.append(sol)
-        if sol.info["solver"] == "cg" and sol.info["dofs"] > DIRECT_DOFS:
-            # the direct factor was refused at this size (PARDISO's own estimate after its
-            # analysis: the hip's 206,406 unknowns 1.5 GB, 3.6e11 flop); the finer mesh's
-            # is larger still, so its analysis (7 s of CPU on the hip) is not made again
-            method = "cg"
+        method = next_method(sol.info, method)
         note = note or note_k                  # the first mesh's: why gmsh took that way
         reparam = "inside its own triangles" not in how and "fTetWild" not in how
         if "inside its own triangles" in how and k == 0 and len(sizes) > 1:
