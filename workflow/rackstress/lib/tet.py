@@ -178,8 +178,10 @@ class Tet2:
             import scipy.sparse as sp
 
             n, e = self.n_nodes, self.n_elements
-            # nodes sharing an element: the pattern of Eᵀ E, E the element–node incidence
-            inc = sp.csr_matrix((np.ones(10 * e, np.int8),
+            # nodes sharing an element: the pattern of Eᵀ E, E the element–node incidence;
+            # its entries count the shared elements, so not int8: a vertex of 256 tetrahedra
+            # counted 0, which the product drops, and its blocks went to its neighbour's
+            inc = sp.csr_matrix((np.ones(10 * e, np.int32),
                                  (np.repeat(np.arange(e), 10), self.nodes.ravel())),
                                 shape=(e, n))
             pat = (inc.T.tocsr() @ inc).tocsr()
