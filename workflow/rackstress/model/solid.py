@@ -249,7 +249,7 @@ def axis_fractions(o: np.ndarray, spacing: float, part) -> np.ndarray:
     sides = lattice_sides(o, a)
     ext = np.full((len(o), 3), a)
     # the six directions' free sides bisected together: one inside test per step for all of
-    # them (a mesh's test builds its locator each call: 40 calls where 240 took 6× as long)
+    # them, 40 calls where there were 240 (a mesh's test: 2.1× faster on four real parts)
     rows, steps, cols = [], [], []
     for ax in range(3):
         for sgn in (1, -1):
