@@ -238,3 +238,19 @@ def test_step_box_with_hole(tmp_path):
     bad.write_text("ISO-10303-21;\nHEADER;\nENDSEC;\nDATA;\nENDSEC;\nEND-ISO-10303-21;\n")
     with pytest.raises(SceneError, match="empty.step"):
         read_surface(bad)
+
+
+def test_inspect_names_no_hole_it_did_not_find(tmp_path):
+    """A solid block has no hole: ``inspect`` says so and does not offer ``hole = "H1"``, which
+    the scene would refuse (a public string-light bracket printed "holes (0): hold one with
+    where = { hole = "H1" }"); a sphere has no flat face, likewise."""
+    from rackstress.scenes import inspect as insp
+
+    for name, mesh, none in (("block", trimesh.creation.box([20, 10, 5]), "holes (0): none"),
+                             ("ball", trimesh.creation.icosphere(4, 5.0), "flat faces (0): none")):
+        path = tmp_path / f"{name}.stl"
+        mesh.export(path)
+        report = insp.text(insp.inspect_part(path))
+        assert none in report, report
+        (line,) = [ln for ln in report.splitlines() if ln.startswith(none.split(":")[0])]
+        assert '"H1"' not in line and '"F1"' not in line, line

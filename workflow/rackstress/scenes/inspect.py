@@ -122,7 +122,9 @@ def text(info: dict, all_faces: bool = False) -> str:
                    "and faces (the names below are of the file as it is)")
     out.append("")
     holes = info["holes"]
-    out.append(f"holes ({len(holes)}): hold one with where = {{ hole = \"H1\" }}")
+    out.append(f"holes ({len(holes)}): hold one with where = {{ hole = \"H1\" }}" if holes
+               else "holes (0): none found; hold or load the part by its faces, or by a box, "
+                    "sphere or cylinder region")
     if holes:
         out.append(f"  {'name':5s} {'diameter':>9s} {'depth':>8s} {'':7s} {'axis':24s} "
                    f"{'centre (mid-depth)':28s} segments")
@@ -134,7 +136,9 @@ def text(info: dict, all_faces: bool = False) -> str:
     shown = faces if all_faces else faces[:FACES_SHOWN]
     more = "" if len(shown) == len(faces) else f", the {len(shown)} largest shown (--all)"
     out.append("")
-    out.append(f"flat faces ({len(faces)}{more}): load one with where = {{ face = \"F1\" }}")
+    out.append(f"flat faces ({len(faces)}{more}): load one with where = {{ face = \"F1\" }}"
+               if faces else "flat faces (0): none found; load the part by a box, sphere or "
+                             "cylinder region")
     if shown:
         out.append(f"  {'name':5s} {'area':>10s} {'normal':24s} {'centre':28s} extent")
         for x in shown:
