@@ -1526,7 +1526,7 @@ def solve_part(o, spacing, shape, held_x, held_mask, load_x, load_F, E, nu, size
     (:func:`check_memory`)."""
     from rackstress.model.regions import Surface
 
-    how, note, got = "cells", None, {}
+    how, note, got, remeshed = "cells", None, {}, False
     h = float(size) if size else SIZE_SPACINGS * spacing
     if isinstance(shape, Surface):
         try:
@@ -1543,6 +1543,8 @@ def solve_part(o, spacing, shape, held_x, held_mask, load_x, load_F, E, nu, size
             elif "fTetWild's own" in got.get("surface", ""):
                 how = f"fTetWild's tetrahedra of {Path(shape.name).name}{got['cut']}"
                 note = got["surface"]
+            else:
+                remeshed = True                 # gmsh remeshed the file: well-shaped
         except MemoryError:
             raise
         except Exception as exc:  # noqa: BLE001 - gmsh refused the surface: say so, use cells
@@ -1562,9 +1564,8 @@ def solve_part(o, spacing, shape, held_x, held_mask, load_x, load_F, E, nu, size
     fixed = fixed_nodes(p, held_x, held_mask, spacing)
     forces = nodal_forces(p, t, load_x, load_F, spacing)
     try:
-        if REMESHED_CG and method == "auto" and not constraints and isinstance(shape, Surface) \
-                and how == f"gmsh tetrahedra of {Path(shape.name).name}":
-            method = "remeshed"                 # well-shaped: REMESHED_CG
+        if REMESHED_CG and remeshed and method == "auto" and not constraints:
+            method = "remeshed"
         sol = solve(p, t, E, nu, fixed, forces, constraints=constraints, method=method)
     except MemoryError:
         avail, why = available_bytes()
