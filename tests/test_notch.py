@@ -295,3 +295,25 @@ def test_a_ball_gmsh_cannot_mesh_gives_way_to_the_next_radius():
     sol = N.submodel(v, f, centre, o, u, 2 ** -0.5, 1.8, 70000.0, 0.25, radius=R)
     assert sol.info["radius"] / R in [pytest.approx(k) for k in N.RADII]
     assert sol.info["seam_deg"] >= N.SEAM_DEG
+
+
+def test_the_submodel_is_read_at_its_surfaces_peak_within_a_third_of_its_ball():
+    """notch.surface_peak, how the notch reading and the FE check's local refinement read a
+    ball: the submodel of the Kirsch block's hole side (ball of 3) read at its surface's peak
+    within 1 (a third of the ball) of the face point. Kirsch's hoop stress on the bore is
+    largest at the side (3S, von Mises 3S·√(1 − ν + ν²)) and falls as S(1 + 2cos 2φ) at an
+    angle φ from it: the peak reads the edge within 3 %, on the bore (radius 2) within 1 of
+    the face point. With the bore within φ = 0.4 of the side left out (``keep`` false where
+    |x| < 2 sin 0.4) the peak lies beyond it, below S(1 + 2cos 0.8) = 2.39S, 0.80 of the
+    edge's, plus the mesh's 3 % (hand calculation)."""
+    part, o, u, c, edge = _kirsch_block(3.0)
+    sol = N.submodel(part.vertices, part.faces, c, o, u, KA, KAH, KE, KNU, radius=3.0)
+    value, at = N.surface_peak(sol, c, 3.0)
+    assert value == pytest.approx(edge, rel=0.03)
+    assert np.linalg.norm(at - c) <= 1.0 + 1e-9
+    assert math.hypot(at[0], at[1]) == pytest.approx(KAH, abs=0.02)
+    wide = KAH * math.sin(0.4)
+    off, where = N.surface_peak(sol, c, 3.0, keep=lambda X: np.abs(X[:, 0]) >= wide)
+    assert abs(where[0]) >= wide
+    assert off < (1 + 2 * math.cos(0.8)) / 3 * 1.03 * edge
+    assert N.surface_peak(sol, c, 3.0, keep=lambda X: np.zeros(len(X), bool)) == (None, None)

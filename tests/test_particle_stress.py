@@ -3,6 +3,7 @@ calculation and analytical fields — a pulled pair, uniform tension σ = F/A, p
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -15,6 +16,7 @@ from rackstress.model.stability import predict
 from rackstress.model.units import SYSTEMS
 from rackstress.runs.run import run
 from rackstress.stress import load_run
+from rackstress.stress import tensor as T
 from rackstress.stress.measures import ParticleStress
 from rackstress.stress.post import STRAIN_LIMIT, postprocess
 from conftest import HANG_S
@@ -355,3 +357,37 @@ def test_coinciding_bound_particles_give_no_numpy_warning():
     assert not np.isfinite(W[0]).all()
     assert W[2][0] == pytest.approx(0.5 * (1 - 1 / 4) * 4) and np.all(W[2][1:] == 0)
     assert np.all(W[1] == 0)
+
+
+def test_a_surface_particles_recovery_point_outside_a_curved_face_is_read_on_it():
+    """stress.tensor.onto_surface: a cylinder of radius 5 and height 6 along z (128 facets
+    round), particles on a lattice of spacing 1 inside it, each surface particle's recovery
+    point its free faces' reaches summed (stress.tensor.recovery_points, each reach the exact
+    distance to the surface along that axis). Where x and y are both free on the round face,
+    the sum lies outside the cylinder (geometry: (x + ex, y + ey) beyond radius 5); moved, every
+    point lies within the facets (radius ≤ 5, |z| ≤ 3), the moved ones on them (radius at
+    least the facets' inscribed 5·cos(π/128) on the round face), and those inside stay put."""
+    import trimesh
+
+    R, H, a = 5.0, 6.0, 1.0
+    cyl = trimesh.creation.cylinder(radius=R, height=H, sections=128)
+    g = np.arange(-4.5, 5.0, a)
+    o = np.array([[x, y, z] for x in g for y in g for z in (-2.5, -1.5, -0.5, 0.5, 1.5, 2.5)])
+    o = o[np.hypot(o[:, 0], o[:, 1]) < R * math.cos(math.pi / 128)]
+    faces = T.free_faces(o, a)
+    reach = np.zeros(o.shape)
+    for k in (0, 1):                                   # along x, y: to the round face
+        other = o[:, 1 - k]
+        reach[:, k] = (np.sqrt(R ** 2 - other ** 2) - np.abs(o[:, k])) / a
+    reach[:, 2] = (H / 2 - np.abs(o[:, 2])) / a
+    pts = T.recovery_points(o, a, faces, reach)
+    r = np.hypot(pts[:, 0], pts[:, 1])
+    assert (r > R + 0.1 * a).sum() >= 8               # outside the part: the flaw
+    moved = T.onto_surface(pts, (cyl.vertices, cyl.faces), o)
+    rm = np.hypot(moved[:, 0], moved[:, 1])
+    assert rm.max() <= R + 1e-6 and np.abs(moved[:, 2]).max() <= H / 2 + 1e-6
+    inscribed = R * math.cos(math.pi / 128)
+    inside = (r < inscribed - 1e-6) & (np.abs(pts[:, 2]) < H / 2 - 1e-6)
+    assert np.array_equal(moved[inside], pts[inside])
+    out = r > R + 1e-6
+    assert (rm[out] >= inscribed - 1e-6).all()

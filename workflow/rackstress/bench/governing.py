@@ -189,10 +189,10 @@ def case(name: str, scene: Path, spacing: float, h_far: float, h_near: float, wo
                      # the particles within two spacings of a concave curved face (fillets,
                      # holes) and the zone away from the singular points
                      "_curved": curved_near_of(r["dir"], part,
-                                               recovery_points_of(rd, rd.parts[part].index),
+                                               recovery_points_of(rd, rd.parts[part]),
                                                r["spacing"]),
                      # where each value is read: its recovery point (patch recovery)
-                     "_o": recovery_points_of(rd, rd.parts[part].index)})
+                     "_o": recovery_points_of(rd, rd.parts[part])})
     g = [r["governing"] for r in rows]
     h = [r["spacing"] for r in rows]
     # the bands as --refine gives them: never narrower than the finer run's own single-run

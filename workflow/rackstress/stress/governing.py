@@ -323,7 +323,7 @@ def over_time(run, vm: np.ndarray) -> dict:
         if name not in run.parts:
             continue
         idx = run.parts[name].index
-        d, _ = s.distance(recovery_points_of(run, idx))
+        d, _ = s.distance(recovery_points_of(run, run.parts[name]))
         best, _ = _largest_away(np.asarray(vm[:, idx], float), d >= zone(spacing, wall))
         out[name] = np.where(np.isfinite(best), best, np.nan)
     return out
@@ -406,7 +406,7 @@ def record(run, fields, zone_override: float | None = None, singular: dict | Non
         # distances from where each particle's stress is read — its recovery point (patch
         # recovery, the von_mises route: a surface particle at its cell's surface point) —
         # as the FE check measures them (validity.solid), so both apply one rule
-        read = recovery_points_of(run, part.index)      # as the measure reads it
+        read = recovery_points_of(run, part)      # as the measure reads it
         best, sbest = _frames_governing(vm[:, part.index], read, s, z)
         curved = None
         if best is not None:                  # the concave curved faces' own peak, same frame
@@ -659,14 +659,9 @@ NOTCH_CLEAR = 2.0
 
 def _surface(rundir, name: str):
     """The part's closed surface from ``singular.npz`` (vertices, faces), or None."""
-    from rackstress.lib.runfiles import SINGULAR
+    from rackstress.stress.measures import read_surface
 
-    try:
-        with np.load(Path(rundir) / SINGULAR, allow_pickle=False) as z:
-            k = [str(v) for v in z["parts"]].index(name)
-            return z[f"surface_{k}_vertices"], z[f"surface_{k}_faces"]
-    except (OSError, KeyError, ValueError):
-        return None
+    return read_surface(rundir, name)
 
 
 def notch_peak(run, name: str, spacing: float, singular: Singular, zone_: float,
@@ -730,17 +725,28 @@ def notch_peak(run, name: str, spacing: float, singular: Singular, zone_: float,
     k = int(np.argmax(smooth))
     fit = float(smooth[k])
     inner = notch.clear_of_edges(surf[0], surf[1], pts, a)
+    point = None
     if inner.any():
         start = int(np.flatnonzero(inner)[int(np.argmax(smooth[inner]))])
-        sk, value, why = _notch_submodel(run, part, o, surf, pts, rho, start, a, int(frame),
-                                         inner, st.volume, reach, bears, chord)
+        clear = cKDTree(o[engaged]) if engaged.any() else None
+
+        def keep(X):          # the submodel's surface read as the face points are chosen
+            ok = singular.distance(X)[0] >= zone_
+            if clear is not None:
+                ok &= clear.query(X)[0] > NOTCH_CLEAR * a
+            return ok
+
+        sk, value, why, point = _notch_submodel(run, part, o, surf, pts, rho, start, a,
+                                                int(frame), inner, st.volume, reach, bears,
+                                                chord, keep)
         k = k if value is None else sk
     else:
         value, why = None, (f"every point of the face lies within {notch.SUBMODEL_CLEAR:g} "
                             "spacings of the part's sharp outer edges")
-    j = int(np.argmin(np.einsum("ij,ij->i", o - pts[k], o - pts[k])))    # nearest particle
+    at = pts[k] if point is None else np.asarray(point, float)
+    j = int(np.argmin(np.einsum("ij,ij->i", o - at, o - at)))    # nearest particle
     out = {"value": fit if value is None else float(value),
-           "position": [float(x) for x in pts[k]], "radius": float(rho[k]), "index": j,
+           "position": [float(x) for x in at], "radius": float(rho[k]), "index": j,
            "faces_read": int(len(r)), "fit": fit,
            "by": "fit" if value is None else "submodel"}
     if why:
@@ -755,7 +761,8 @@ NOTCH_SUBMODEL_TIMEOUT_S = 60.0
 
 
 def _notch_submodel(run, part, o, surf, pts, rho, k: int, a: float, frame: int,
-                    allowed: np.ndarray, volume, reach=None, bears=None, chord=None):
+                    allowed: np.ndarray, volume, reach=None, bears=None, chord=None,
+                    keep=None):
     """:func:`_notch_submodel_here` in a forked child process, stopped after
     :data:`NOTCH_SUBMODEL_TIMEOUT_S` (the fit's reading then stands, and the note says why)."""
     from rackstress.lib import forked
@@ -763,38 +770,41 @@ def _notch_submodel(run, part, o, surf, pts, rho, k: int, a: float, frame: int,
     try:
         return forked.call(lambda: _notch_submodel_here(run, part, o, surf, pts, rho, k, a,
                                                         frame, allowed, volume, reach,
-                                                        bears, chord),
+                                                        bears, chord, keep),
                            NOTCH_SUBMODEL_TIMEOUT_S)
     except forked.Timeout:
         return k, None, (f"gmsh had not meshed the submodel's ball after "
                          f"{NOTCH_SUBMODEL_TIMEOUT_S:.0f} s (its surface classification does "
-                         "not end on some pieces of a file's facets)")
+                         "not end on some pieces of a file's facets)"), None
 
 
 def _notch_submodel_here(run, part, o, surf, pts, rho, k: int, a: float, frame: int,
-                         allowed: np.ndarray, volume, reach=None, bears=None, chord=None):
+                         allowed: np.ndarray, volume, reach=None, bears=None, chord=None,
+                         keep=None):
     """The face's peak about face point ``k`` by the submodel (:func:`rackstress.stress.notch.
     submodel`: the part's true shape in a ball about the face point, its cut displaced as the
-    particles are), read at the ball's centre, the farthest from its cut (where the
-    interpolated boundary's error has decayed most): the ball moves to the face point of the
-    largest von Mises within a third of its radius until that is its centre (at most
-    :data:`NOTCH_BALLS` balls), among the ``allowed`` face points (those clear of the part's
-    sharp outer edges, :func:`rackstress.stress.notch.clear_of_edges`), with the run's
-    volumetric terms ``volume`` (or None); ``reach`` the face points' distances to the nearest
-    particle something bears on (:func:`rackstress.stress.notch.submodel_radius`), ``bears``
-    (positions, directions) the particles held, loaded or pressed (held by the submodel in
-    those directions where its ball reaches them), ``chord`` the facets' spacing across the
-    face at each point (:func:`rackstress.stress.notch.submodel_fine`); the last
-    ball's reading checked by a smaller ball (:func:`rackstress.stress.notch.cut_check`). Returns
-    (face point, value, None), or (k, None,
-    why) where no submodel can be made (gmsh or manifold3d not installed: the ``fem`` extra;
-    their own error) or its two balls disagree."""
+    particles are): the ball moves to the face point of the largest von Mises within a third
+    of its radius until that is its centre (at most :data:`NOTCH_BALLS` balls), among the
+    ``allowed`` face points (those clear of the part's sharp outer edges,
+    :func:`rackstress.stress.notch.clear_of_edges`), and the last ball is read as the FE
+    check reads its own (:func:`rackstress.stress.notch.surface_peak`: the largest on the
+    part's surface within a third of its radius, where ``keep`` allows: the zone away from
+    the singular points, clear of what bears on the part). ``volume``: the run's volumetric
+    terms (or None); ``reach`` the face points' distances to the nearest particle something
+    bears on (:func:`rackstress.stress.notch.submodel_radius`), ``bears`` (positions,
+    directions) the particles held, loaded or pressed (held by the submodel in those
+    directions where its ball reaches them), ``chord`` the facets' spacing across the face
+    at each point (:func:`rackstress.stress.notch.submodel_fine`); the reading checked by a
+    smaller ball at the same point (:func:`rackstress.stress.notch.cut_check`). Returns (face
+    point, value, None, the point read), or (k, None, why, None) where no submodel can be
+    made (gmsh or manifold3d not installed: the ``fem`` extra; their own error) or its two
+    balls disagree."""
     from rackstress.stress import notch
     from rackstress.stress.measures import material_parts, positions
 
     mat = (material_parts(run).get(part.name) or {}).get("material") or {}
     if not mat.get("E"):
-        return k, None, "the part has no Young's modulus in scene.json"
+        return k, None, "the part has no Young's modulus in scene.json", None
     u = positions(run.trajectory[frame])[part.index] - o
     nu = lattice_nu(volume, part, mat)    # the cut's displacements are its own material's
     reach = np.full(len(pts), np.inf) if reach is None else np.asarray(reach, float)
@@ -810,31 +820,39 @@ def _notch_submodel_here(run, part, o, surf, pts, rho, k: int, a: float, frame: 
                                  fine=notch.submodel_fine(a, rho[k], chord[k]))
         except ImportError as exc:
             return k, None, (f"{exc.name or exc} is not installed: the notch submodel needs "
-                             "the fem extra (pip install 'rackstress[fem]')")
+                             "the fem extra (pip install 'rackstress[fem]')"), None
         except Exception as exc:  # noqa: BLE001 - gmsh's or manifold3d's own words, kept
             if value is None:
-                return k, None, f"no submodel at ({', '.join(f'{x:.4g}' for x in pts[k])}): {exc}"
+                return k, None, (f"no submodel at ({', '.join(f'{x:.4g}' for x in pts[k])}): "
+                                 f"{exc}"), None
             break             # the last ball's reading stands
         near = np.flatnonzero((np.linalg.norm(pts - pts[k], axis=1) <= R / 3) & allowed)
         vm = sol.at(pts[near])["von_mises"]
-        value, at, R_at = float(sol.at(pts[k][None])["von_mises"][0]), k, R
+        value, at, R_at, last = float(sol.at(pts[k][None])["von_mises"][0]), k, R, sol
         best = int(near[int(np.argmax(vm))])
         if best in seen:
             break
         k = best
+    # read on the surface about the last ball's centre, as the FE check reads its own ball
+    peak, point = notch.surface_peak(last, pts[at], R_at, keep)
+    if peak is None:                   # no surface node clear: the centre's reading stands
+        point, keep = pts[at], False
+    else:
+        value = peak
     # the classical submodel's own check: its reading may not depend on where its cut lies
     try:
         other, R2, agree = notch.cut_check(surf[0], surf[1], pts[at], o, u, a, float(rho[at]),
                                            float(mat["E"]), nu, R_at, value, bears=held,
-                                           fine=notch.submodel_fine(a, rho[at], chord[at]))
+                                           fine=notch.submodel_fine(a, rho[at], chord[at]),
+                                           keep=keep)
     except Exception as exc:  # noqa: BLE001 - gmsh's own words: the reading stands, unchecked
-        return at, value, f"its check ball could not be made ({exc}): unchecked"
+        return at, value, f"its check ball could not be made ({exc}): unchecked", point
     if not agree:
         return at, None, (f"its reading depends on where its cut lies ({value:.4g} with a ball "
                           f"of {R_at:.3g}, {other:.4g} with one of {R2:.3g}: more than "
                           f"{notch.CHECK_AGREE * 100:.0f} % apart), so the cut's displacement "
-                          "does not carry the notch's field there")
-    return at, value, None
+                          "does not carry the notch's field there"), None
+    return at, value, None, point
 
 
 #: the most submodel balls :func:`_notch_submodel` moves through

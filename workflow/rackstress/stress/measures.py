@@ -854,7 +854,9 @@ class ParticleStress(_RunAnalysis):
                 data[idx] = face_supports(held[idx]).any(axis=1)
                 # read on the part's face, where its cells end (φ)
                 points[idx] = T.part_recovery_points(run.o[idx],
-                                                     phi=None if phi is None else phi[idx])
+                                                     phi=None if phi is None else phi[idx],
+                                                     surface=read_surface(run.rundir,
+                                                                          part.name))
                 ap = a2[idx][np.isfinite(a2[idx])]
                 if len(ap):
                     sp = float(np.sqrt(np.median(ap)))
@@ -1101,13 +1103,30 @@ def read_fractions(run):
     return bindings_array(run.rundir, "phi", (run.n_atoms, 3))
 
 
-def recovery_points_of(run, index) -> np.ndarray:
-    """Where the ``von_mises`` measure (patch route) reads the stress of the particles
-    ``index`` of one part: :func:`rackstress.stress.tensor.part_recovery_points` with the
-    run's cell extents (``read_fractions``), as :class:`ParticleStress` reads them."""
-    idx = np.asarray(index)
+def read_surface(rundir, name: str):
+    """The part ``name``'s closed surface (vertices, faces) as the run kept it in
+    ``singular.npz`` (:func:`rackstress.runs.run.write_singular`), or None (no such file, a
+    part without a material or without a surface: a box, a lattice)."""
+    from rackstress.lib.runfiles import SINGULAR
+
+    try:
+        with np.load(Path(rundir) / SINGULAR, allow_pickle=False) as z:
+            k = [str(v) for v in z["parts"]].index(name)
+            return z[f"surface_{k}_vertices"], z[f"surface_{k}_faces"]
+    except (OSError, KeyError, ValueError):
+        return None
+
+
+def recovery_points_of(run, part) -> np.ndarray:
+    """Where the ``von_mises`` measure (patch route) reads the stress of the particles of
+    ``part`` (a :class:`~rackstress.stress.rundata.Part`):
+    :func:`rackstress.stress.tensor.part_recovery_points` with the run's cell extents
+    (``read_fractions``) and the part's surface (``read_surface``), as
+    :class:`ParticleStress` reads them."""
+    idx = np.asarray(part.index)
     phi = read_fractions(run)
-    return T.part_recovery_points(run.o[idx], phi=None if phi is None else phi[idx])
+    return T.part_recovery_points(run.o[idx], phi=None if phi is None else phi[idx],
+                                  surface=read_surface(run.rundir, part.name))
 
 
 def read_volumes(run):

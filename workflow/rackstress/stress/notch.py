@@ -485,6 +485,32 @@ def submodel(vertices, faces_, centre, o, u, spacing: float, rho: float, E: floa
                         info={"radius": float(R), "seam_deg": float(seam)})
 
 
+def surface_peak(sol, centre, radius: float, keep=None):
+    """The submodel's largest nodal von Mises stress on the part's own surface (not its cut)
+    within a third of ``radius`` of ``centre``, where ``keep`` (points k×3 → bool k) allows:
+    (value, position), or (None, None). The FE check's local refinement reads its ball so
+    (validity.solid), and the notch reading the same way: the face's peak near the ball's
+    centre, not only at it — on a coarsely faceted face the peak sits on a facet edge between
+    the face points (the SO-100 upper arm at 1.9 mm: 0.746 MPa at the centre, 0.894 on the
+    surface within R/3, the FE check's local reading 0.893; measured while building this)."""
+    from rackstress.lib.tet import _faces_once
+
+    X = sol.mesh.X
+    faces4, once = _faces_once(sol.mesh.t)
+    bnd = np.zeros(len(X), bool)
+    bnd[np.unique(faces4[once])] = True
+    nv = len(sol.mesh.p)
+    bnd[nv:] = bnd[sol.mesh.edges[:, 0]] & bnd[sol.mesh.edges[:, 1]]
+    sel = bnd & (np.linalg.norm(X - np.asarray(centre, float), axis=1) <= radius / 3)
+    if keep is not None and sel.any():
+        sel[sel] = np.asarray(keep(X[sel]), bool)
+    if not sel.any():
+        return None, None
+    vm = sol.nodal()["von_mises"]
+    k = np.flatnonzero(sel)[int(np.argmax(vm[sel]))]
+    return float(vm[k]), X[k]
+
+
 #: The submodel's check (:func:`cut_check`): its reading again with a ball of this × its
 #: radius, at least :data:`CHECK_SPACINGS` spacings; it stands where the two agree within
 #: :data:`CHECK_AGREE` of the larger — beyond the submodel's measured error (0.06,
@@ -500,17 +526,20 @@ CHECK_AGREE = 0.15
 
 
 def cut_check(vertices, faces_, centre, o, u, spacing: float, rho: float, E: float, nu: float,
-              radius: float, value: float, bears=None, fine: float | None = None):
+              radius: float, value: float, bears=None, fine: float | None = None, keep=False):
     """The classical submodel's own check: a reading may not depend on where its cut lies. The
     submodel (:func:`submodel`) about ``centre`` read again with a ball of :data:`CHECK_RADIUS`
     × ``radius`` (the first ball's, which read ``value``), at least :data:`CHECK_SPACINGS`
-    spacings: (its reading, its radius, whether the two agree within :data:`CHECK_AGREE` of
-    the larger); ``bears`` and ``fine`` as :func:`submodel` takes them. Raises as
-    :func:`submodel` does."""
+    spacings, as the first was read: at ``centre``, or where ``keep`` is given (None: every
+    point) by :func:`surface_peak` with it. Returns (its reading, its radius, whether the two
+    agree within :data:`CHECK_AGREE` of the larger); ``bears`` and ``fine`` as
+    :func:`submodel` takes them. Raises as :func:`submodel` does."""
     R2 = max(CHECK_SPACINGS * float(spacing), CHECK_RADIUS * float(radius))
     sol = submodel(vertices, faces_, centre, o, u, spacing, rho, E, nu, radius=R2,
                    bears=bears, fine=fine)
-    other = float(sol.at(np.asarray(centre, float)[None])["von_mises"][0])
+    other = None if keep is False else surface_peak(sol, centre, R2, keep)[0]
+    if other is None:
+        other = float(sol.at(np.asarray(centre, float)[None])["von_mises"][0])
     agree = abs(other - value) <= CHECK_AGREE * max(abs(value), abs(other))
     return other, R2, bool(agree)
 

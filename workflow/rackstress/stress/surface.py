@@ -263,12 +263,12 @@ CARRIED = ("von_mises", "strain")
 RECOVERED = ("von_mises",)
 
 
-def recovered_points(run, index) -> np.ndarray:
+def recovered_points(run, part) -> np.ndarray:
     """Where a part's patch-recovered stress stands (:func:`rackstress.stress.measures.
     recovery_points_of`, as the ``von_mises`` measure computes them)."""
     from rackstress.stress.measures import recovery_points_of
 
-    return recovery_points_of(run, index)
+    return recovery_points_of(run, part)
 
 
 def static_surfaces(run, fields, frame: int = -1, notes: list | None = None) -> list:
@@ -304,7 +304,7 @@ def static_surfaces(run, fields, frame: int = -1, notes: list | None = None) -> 
         vals, flat = {}, np.concatenate(cols, axis=1)
         width = [c.shape[1] for c in cols]
         start = np.r_[0, np.cumsum(width)]
-        for sel, where in ((at_o, o), (at_rec, recovered_points(run, part.index))):
+        for sel, where in ((at_o, o), (at_rec, recovered_points(run, part))):
             if not sel:
                 continue
             idx = np.concatenate([np.arange(start[j], start[j + 1]) for j in sel])

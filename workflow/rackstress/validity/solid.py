@@ -1257,22 +1257,11 @@ def element_size_at(mesh, x) -> float:
 def _local_reading(sub, centre, R: float, singular: Singular):
     """The submodel's largest nodal von Mises stress on the part's own surface (not its cut)
     within a third of ``R`` of ``centre`` and the zone away from every singular point:
-    (value, position), or (None, None)."""
-    from rackstress.lib.tet import _faces_once
+    (value, position), or (None, None) (:func:`rackstress.stress.notch.surface_peak`, the
+    notch reading's rule)."""
+    from rackstress.stress.notch import surface_peak
 
-    X = sub.mesh.X
-    faces4, once = _faces_once(sub.mesh.t)
-    bnd = np.zeros(len(X), bool)
-    bnd[np.unique(faces4[once])] = True
-    nv = len(sub.mesh.p)
-    bnd[nv:] = bnd[sub.mesh.edges[:, 0]] & bnd[sub.mesh.edges[:, 1]]
-    r = np.linalg.norm(X - centre, axis=1)
-    sel = bnd & (r <= R / 3) & (singular.distance(X) >= singular.zone)
-    if not sel.any():
-        return None, None
-    vm = sub.nodal()["von_mises"]
-    k = np.flatnonzero(sel)[int(np.argmax(vm[sel]))]
-    return float(vm[k]), X[k]
+    return surface_peak(sub, centre, R, lambda X: singular.distance(X) >= singular.zone)
 
 
 #: ... the most seconds the local refinement may take: gmsh's classification of a piece's
@@ -1873,7 +1862,9 @@ def check_run(rundir, E: float | None = None, nu: float | None = None,
             break
     sol = sols[-1]
     mname, values = _particle_measure(rundir, sl, measure)
-    points = _particle_points(g.o, spacing, mname, phi)
+    from rackstress.stress.measures import read_surface
+
+    points = _particle_points(g.o, spacing, mname, phi, read_surface(rundir, name))
     res = sol.at(points)
     G = E_ / (2 * (1 + nu_))
     to_stress = 1.0 if mname == "von_mises" else (2 * math.sqrt(3) * G if mat or E else None)
@@ -1964,15 +1955,15 @@ def _stress_unit(summary: dict, bnd: dict) -> str:
 
 
 def _particle_points(o: np.ndarray, spacing: float, mname: str,
-                     phi: np.ndarray | None = None) -> np.ndarray:
+                     phi: np.ndarray | None = None, surface=None) -> np.ndarray:
     """Where each particle's measure is read: the stress's recovery point (the default
     ``patch`` route: the centre inside the part, its cell's surface point on the surface,
-    :func:`rackstress.stress.tensor.part_recovery_points` with the cells' extents ``phi``, as
-    the run's measure reads it), else the particle's position."""
+    :func:`rackstress.stress.tensor.part_recovery_points` with the cells' extents ``phi`` and
+    the part's ``surface``, as the run's measure reads it), else the particle's position."""
     if mname == "von_mises":
         from rackstress.stress.tensor import part_recovery_points
 
-        return part_recovery_points(o, spacing, phi)
+        return part_recovery_points(o, spacing, phi, surface)
     return np.asarray(o, float)
 
 
