@@ -52,9 +52,9 @@ from pathlib import Path
 import numpy as np
 
 from rackstress.errors import RackstressError
-from rackstress.lib.tet import (FLAT_TET, SLIVER_AREA, Solution, _faces_once,  # noqa: F401
-                                _twice_areas, drop_slivers, gmsh_volume, hooke,
-                                project_strain, tet_volumes, von_mises)
+from rackstress.lib.tet import (FLAT_TET, POOR_SLIVERS, SLIVER_AREA, SLIVER_Q,  # noqa: F401
+                                Solution, _faces_once, _twice_areas, drop_slivers,
+                                gmsh_volume, hooke, project_strain, tet_volumes, von_mises)
 from rackstress.lib.resources import cpu_children
 from rackstress.model.singular import wall_thickness  # noqa: F401 - the part's length, one home
 
@@ -561,13 +561,6 @@ def _gmsh_volume(v, f, size, near, near_size, reparametrize: bool, netgen: bool 
     return gmsh_volume(v, f, size, near, near_size, reparametrize, netgen, grade=GRADE)
 
 
-#: a tetrahedron is a sliver when its quality (:func:`mesh_quality`) is below this
-SLIVER_Q = 0.05
-#: an FE mesh with more than this share of slivers is poor: its stress is no reference. The
-#: corpus (examples/parts, docs/benchmarks/parts.md): the meshes gmsh remeshes 0.0 %, those
-#: filled inside a file's own facets 18–61 %, among them the fixed jaw's (43 %), whose FE put
-#: 893 MPa at a sliver under a 10 N load that the particles carry at 0.57 MPa
-POOR_SLIVERS = 0.05
 
 
 def mesh_quality(p: np.ndarray, t: np.ndarray) -> dict:
@@ -583,12 +576,9 @@ def mesh_quality(p: np.ndarray, t: np.ndarray) -> dict:
     >>> round(q["min"], 12), q["sliver_share"], q["poor"]
     (1.0, 0.0, False)
     """
-    T = np.asarray(t)[:, :4]
-    X = np.asarray(p, float)[T]
-    V = np.abs(tet_volumes(np.asarray(p, float), T))
-    l2 = np.mean([((X[:, i] - X[:, j]) ** 2).sum(axis=1)
-                  for i in range(4) for j in range(i + 1, 4)], axis=0)
-    q = 6 * math.sqrt(2) * V / l2 ** 1.5
+    from rackstress.lib.tet import quality
+
+    q = quality(p, t)
     share = float(np.mean(q < SLIVER_Q))
     return {"min": float(q.min()), "median": float(np.median(q)), "sliver_share": share,
             "sliver_q": SLIVER_Q, "poor_share": POOR_SLIVERS, "poor": share > POOR_SLIVERS}
