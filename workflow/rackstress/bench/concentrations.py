@@ -51,6 +51,27 @@ CASES = tuple(SPACINGS)
 #: targets: the governing stress within 10 % of converged FEA at the default spacing (the
 #: middle one) and within 5 % after --refine (the error bar covering the converged value)
 TARGET = {"default": 0.10, "refined": 0.05}
+#: a row's FEA is a reference where its governing stress moved at most this much between the
+#: FE check's two sizes (bench parts' rule, :data:`rackstress.bench.parts.FE_CONVERGED`)
+FE_CONVERGED = 0.05
+
+
+def fea_converged(row: dict) -> bool:
+    """Whether the row's FEA governing stress converged (moved at most :data:`FE_CONVERGED`
+    between its two FE sizes; a row without the second size counts as converged)."""
+    moved = row.get("fea_moved")
+    return moved is None or moved <= FE_CONVERGED
+
+
+def _unconverged(rows) -> str:
+    """The rows left out for an FEA that did not converge, in words ("" if none)."""
+    off = [r for r in rows if not fea_converged(r)]
+    if not off:
+        return ""
+    return (" Left out, their FEA not converged (moved more than "
+            f"{100 * FE_CONVERGED:g} % between its two sizes): "
+            + ", ".join(f"{r['case']} at {r['spacing']:g} mm ({100 * r['fea_moved']:.0f} %)"
+                        for r in off) + ".")
 JSON = "validity-concentrations.json"
 ROUTES = ("patch", "continuum", "virial", "completed")
 MD = "validity-concentrations.md"
@@ -348,8 +369,9 @@ def refined_table(data: dict) -> str:
     rows = [r for r in data["rows"] if r.get("refined")]
     if not rows:
         return ""
-    ok = [r for r in rows if abs(r["refined"]["ratio"] - 1) <= TARGET["refined"]]
-    cover = [r for r in rows if r["refined"]["covers"]]
+    ref = [r for r in rows if fea_converged(r)]
+    ok = [r for r in ref if abs(r["refined"]["ratio"] - 1) <= TARGET["refined"]]
+    cover = [r for r in ref if r["refined"]["covers"]]
     return ("\n## After `--refine`\n\n`rackstress run --refine` on the default (middle) "
             "spacing's run, as a user runs it: the scene again at spacing/√2, its governing "
             "stress read at the first run's zone. What it reports is the finer run's value, "
@@ -367,7 +389,8 @@ def refined_table(data: dict) -> str:
                          f"{fmt(r['refined']['low'], 4)} … {fmt(r['refined']['high'], 4)}",
                          "yes" if r["refined"]["covers"] else "no"] for r in rows])
             + f"\nWithin {100 * TARGET['refined']:g} % of FEA after `--refine`: {len(ok)} of "
-            f"{len(rows)}; the band covers FEA's value on {len(cover)} of {len(rows)}.\n")
+            f"{len(ref)}; the band covers FEA's value on {len(cover)} of {len(ref)}."
+            + _unconverged(rows) + "\n")
 
 
 def notch_summary(data: dict) -> str:
@@ -375,30 +398,33 @@ def notch_summary(data: dict) -> str:
     by how it was read: what :data:`rackstress.stress.governing.NOTCH_SUBMODEL_ERROR` (its
     submodel) and :data:`~rackstress.stress.governing.NOTCH_ERROR` (its fit) take."""
     out = []
+    rows = [r for r in data["rows"] if fea_converged(r)]
     for by, name in (("submodel", "NOTCH_SUBMODEL_ERROR"), ("fit", "NOTCH_ERROR")):
-        got = [(r["case"], r["spacing"], r["headline_ratio"]) for r in data["rows"]
+        got = [(r["case"], r["spacing"], r["headline_ratio"]) for r in rows
                if r.get("headline_read") == "notch" and r.get("headline_ratio")
                and (r.get("notch_by") or "fit") == by]
         refined = [(r["case"], r["refined"]["spacings"][-1], r["refined"]["ratio"])
-                   for r in data["rows"] if (r.get("refined") or {}).get("read") == "notch"
+                   for r in rows if (r.get("refined") or {}).get("read") == "notch"
                    and (r["refined"].get("by") or "fit") == by]
         if not got and not refined:
             continue
         worst = max(got + refined, key=lambda g: abs(g[2] - 1))
         out.append(f"The notch reading by its {by} is the headline of {len(got)} of "
-                   f"{len(data['rows'])} rows and of {len(refined)} refined runs, "
+                   f"{len(rows)} rows and of {len(refined)} refined runs, "
                    f"{min(g[2] for g in got + refined):.3f} … "
                    f"{max(g[2] for g in got + refined):.3f} of FEA's governing stress; its "
                    f"largest error {abs(worst[2] - 1):.3f} ({worst[0]} at {worst[1]:.3g} mm), "
                    f"what `stress.governing.{name}` takes.")
-    fits = [r for r in data["rows"] if r.get("notch_fit_ratio")
+    fits = [r for r in rows if r.get("notch_fit_ratio")
             and r.get("headline_read") == "notch"]
     if fits and any(r.get("notch_by") == "submodel" for r in fits):
         out.append("The fit of the particles beneath the same faces (what reads them where "
                    "gmsh is not installed) reads "
                    f"{min(r['notch_fit_ratio'] for r in fits):.3f} … "
                    f"{max(r['notch_fit_ratio'] for r in fits):.3f} of FEA's governing stress.")
-    return " ".join(out) if out else "The notch reading is the headline of no row."
+    if not out:
+        return "The notch reading is the headline of no row." + _unconverged(data["rows"])
+    return " ".join(out) + _unconverged(data["rows"])
 
 def table_rows(data) -> list:
     return [[r["case"], r["spacing"], r["ratio"]] for r in data["rows"]]
