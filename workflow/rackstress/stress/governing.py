@@ -615,7 +615,8 @@ NOTCH_ERROR = 0.18
 #: the plate at 0.55 mm; measured while sizing its ball, notch.SUBMODEL_RHO); the same
 #: bench's own runs, refined ones included, read within 0.037 of FEA; ``rackstress bench
 #: governing``'s filleted C frame at 0.71 mm read 1.061 of FEA once the submodel was graded
-#: no finer than the facets (notch.submodel_fine; 1.054 before): rounded up to that
+#: no finer than the facets (notch.submodel_fine; 1.054 before), 1.063 read at its ball's
+#: surface peak (notch.surface_peak): rounded up to that
 NOTCH_SUBMODEL_ERROR = 0.065
 
 
