@@ -837,7 +837,7 @@ def _notch_submodel_here(run, part, o, surf, pts, rho, k: int, a: float, frame: 
     # read on the surface about the last ball's centre, as the FE check reads its own ball
     peak, point = notch.surface_peak(last, pts[at], R_at, keep)
     if peak is None:                   # no surface node clear: the centre's reading stands
-        point, keep = pts[at], False
+        point = pts[at]
     else:
         value = peak
     # the classical submodel's own check: its reading may not depend on where its cut lies
@@ -845,7 +845,7 @@ def _notch_submodel_here(run, part, o, surf, pts, rho, k: int, a: float, frame: 
         other, R2, agree = notch.cut_check(surf[0], surf[1], pts[at], o, u, a, float(rho[at]),
                                            float(mat["E"]), nu, R_at, value, bears=held,
                                            fine=notch.submodel_fine(a, rho[at], chord[at]),
-                                           keep=keep)
+                                           peak=peak is not None, keep=keep)
     except Exception as exc:  # noqa: BLE001 - gmsh's own words: the reading stands, unchecked
         return at, value, f"its check ball could not be made ({exc}): unchecked", point
     if not agree:

@@ -536,18 +536,19 @@ CHECK_AGREE = 0.15
 
 
 def cut_check(vertices, faces_, centre, o, u, spacing: float, rho: float, E: float, nu: float,
-              radius: float, value: float, bears=None, fine: float | None = None, keep=False):
+              radius: float, value: float, bears=None, fine: float | None = None,
+              peak: bool = False, keep=None):
     """The classical submodel's own check: a reading may not depend on where its cut lies. The
     submodel (:func:`submodel`) about ``centre`` read again with a ball of :data:`CHECK_RADIUS`
     × ``radius`` (the first ball's, which read ``value``), at least :data:`CHECK_SPACINGS`
-    spacings, as the first was read: at ``centre``, or where ``keep`` is given (None: every
-    point) by :func:`surface_peak` with it. Returns (its reading, its radius, whether the two
+    spacings, as the first was read: at ``centre``, or with ``peak`` by :func:`surface_peak`
+    (``keep`` as it takes it). Returns (its reading, its radius, whether the two
     agree within :data:`CHECK_AGREE` of the larger); ``bears`` and ``fine`` as
     :func:`submodel` takes them. Raises as :func:`submodel` does."""
     R2 = max(CHECK_SPACINGS * float(spacing), CHECK_RADIUS * float(radius))
     sol = submodel(vertices, faces_, centre, o, u, spacing, rho, E, nu, radius=R2,
                    bears=bears, fine=fine)
-    other = None if keep is False else surface_peak(sol, centre, R2, keep)[0]
+    other = surface_peak(sol, centre, R2, keep)[0] if peak else None
     if other is None:
         other = float(sol.at(np.asarray(centre, float)[None])["von_mises"][0])
     agree = abs(other - value) <= CHECK_AGREE * max(abs(value), abs(other))
