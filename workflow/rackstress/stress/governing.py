@@ -345,17 +345,11 @@ def part_features(rundir, name: str):
         from rackstress.scenes import features as feat
     except ImportError:
         return None
-    from rackstress.lib.runfiles import SINGULAR
+    from rackstress.stress.measures import read_surface
 
-    path = Path(rundir) / SINGULAR
     try:
-        with np.load(path, allow_pickle=False) as z:
-            k = [str(x) for x in z["parts"]].index(name)
-            key = f"surface_{k}"
-            if key + "_vertices" not in z:
-                return None
-            V, F = z[key + "_vertices"], z[key + "_faces"]
-        return feat.part_features((V, F))
+        surf = read_surface(rundir, name)
+        return None if surf is None else feat.part_features(surf)
     except Exception:  # noqa: BLE001 - a name is a help, not a result
         return None
 
@@ -629,7 +623,9 @@ def curved_near(rundir, name: str, points, spacing: float) -> np.ndarray:
     from rackstress.model.singular import concave_points
 
     x = np.asarray(points, float).reshape(-1, 3)
-    surf = _surface(rundir, name)
+    from rackstress.stress.measures import read_surface
+
+    surf = read_surface(rundir, name)
     if surf is None:
         return np.zeros(len(x), bool)
     V, F = surf
@@ -658,13 +654,6 @@ NOTCH_SMOOTH = 0.5
 NOTCH_CLEAR = 2.0
 
 
-def _surface(rundir, name: str):
-    """The part's closed surface from ``singular.npz`` (vertices, faces), or None."""
-    from rackstress.stress.measures import read_surface
-
-    return read_surface(rundir, name)
-
-
 def notch_peak(run, name: str, spacing: float, singular: Singular, zone_: float,
                frame: int) -> dict | None:
     """The largest notch reading (:mod:`rackstress.stress.notch`) of the part's concave curved
@@ -681,9 +670,9 @@ def notch_peak(run, name: str, spacing: float, singular: Singular, zone_: float,
     from scipy.spatial import cKDTree
 
     from rackstress.stress import notch
-    from rackstress.stress.measures import ParticleStress
+    from rackstress.stress.measures import ParticleStress, read_surface
 
-    surf = _surface(run.rundir, name)
+    surf = read_surface(run.rundir, name)
     if surf is None:
         return None
     a = float(spacing)

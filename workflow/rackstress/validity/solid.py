@@ -561,8 +561,6 @@ def _gmsh_volume(v, f, size, near, near_size, reparametrize: bool, netgen: bool 
     return gmsh_volume(v, f, size, near, near_size, reparametrize, netgen, grade=GRADE)
 
 
-
-
 def mesh_quality(p: np.ndarray, t: np.ndarray) -> dict:
     """Each tetrahedron's quality q = 6·√2·V / ℓ³ (ℓ the root mean square of its six edges;
     1 for a regular tetrahedron, 0 for a flat one) over the mesh (p N×3, t M×4, a
