@@ -35,6 +35,18 @@ import numpy as np
 #: 1.4 GB) took 164 CG iterations a solve, 5× the time of factorizing each Newton step's tangent
 #: (docs/benchmarks/parts-100k); the crossover was 6e10 on the solid blocks
 DIRECT_FLOPS = 3e11
+#: ... and up to which it is still taken where AMG-CG does not converge within
+#: :data:`AMG_PATIENCE` steps (the static path's :class:`rackstress.engines.static._Linear`):
+#: about 100 s at the ~20 Gflop/s PARDISO reached here. The SO-100 base at 155,392 particles
+#: (1 mm, its 2 mm walls two particles across: 465,216 unknowns) had not finished one Newton
+#: step by AMG-CG after 5 minutes; its factorization is 5.1e11 flop, 2.8 GB, 23 s, and it
+#: settled in 56 s (measured while building this)
+DIRECT_FLOPS_FALLBACK = 2e12
+#: the conjugate-gradient steps AMG-CG takes before a direct factorization that fits
+#: (:data:`DIRECT_FLOPS_FALLBACK`) replaces it: a solid part converges in tens; the SO-100
+#: base at 93,236 particles took 164 a solve, five times the time of factorizing
+#: (docs/calibration.md "Static analysis"), and at 155,392 250 steps took 100 s
+AMG_PATIENCE = 100
 #: share of the available memory a factorization may take
 DIRECT_MEMORY_SHARE = 0.5
 #: unknowns beyond which the factorization is not even analysed (its ordering alone takes
@@ -238,12 +250,12 @@ class SuperLU:
         self.lu = None
 
 
-def plan_direct(K, available: int | None = None):
+def plan_direct(K, available: int | None = None, flops: float | None = None):
     """The analysed direct factorization of ``K`` when it fits (module doc), else None: AMG-CG.
 
     The choice: at most :data:`DIRECT_MAX_DOFS` unknowns, the factor's memory (the solver's own
     estimate) at most :data:`DIRECT_MEMORY_SHARE` of the available memory, its work at most
-    :data:`DIRECT_FLOPS`."""
+    ``flops`` (:data:`DIRECT_FLOPS`; :data:`DIRECT_FLOPS_FALLBACK` where AMG-CG stalled)."""
     from rackstress.lib.resources import available_memory
 
     n = K.shape[0]
@@ -252,7 +264,7 @@ def plan_direct(K, available: int | None = None):
     have = available if available is not None else available_memory()
     if backend() == "pardiso":
         f = Pardiso(K).analyse()
-        if f.bytes <= DIRECT_MEMORY_SHARE * have and f.flops <= DIRECT_FLOPS:
+        if f.bytes <= DIRECT_MEMORY_SHARE * have and f.flops <= (flops or DIRECT_FLOPS):
             return f
         f.free()
         return None
@@ -288,10 +300,15 @@ class AMG:
         self.setup_s = time.process_time() - t0
         self.converged = True
 
-    def solve(self, b: np.ndarray, rtol: float = 1e-8, K=None) -> np.ndarray:
+    #: the most conjugate-gradient steps of a solve
+    MAXITER = 2000
+
+    def solve(self, b: np.ndarray, rtol: float = 1e-8, K=None, maxiter: int | None = None,
+              x0=None) -> np.ndarray:
         import scipy.sparse.linalg as spla
 
-        x, info = spla.cg(self.K if K is None else K, b, rtol=rtol, maxiter=2000, M=self.M)
+        x, info = spla.cg(self.K if K is None else K, b, x0=x0, rtol=rtol,
+                          maxiter=maxiter or self.MAXITER, M=self.M)
         self.converged = info == 0
         return x
 

@@ -460,6 +460,9 @@ class _Problem:
     split_slow: bool = False
     #: ... or the direct solver's plan for the whole did not fit: not analysed again
     whole_refused: bool = False
+    #: AMG-CG did not converge within linear.AMG_PATIENCE steps: the direct solver's plans are
+    #: made with linear.DIRECT_FLOPS_FALLBACK from then on (True), or that did not fit (None)
+    amg_stalled: bool | None = False
 
 
 def _problem(scene) -> _Problem:
@@ -741,7 +744,8 @@ class _Linear:
         P = prob.split() if self.split else K
         f = None
         if self.direct_allowed and not prob.direct_refused:
-            f = linear.plan_direct(P)
+            f = linear.plan_direct(P, flops=linear.DIRECT_FLOPS_FALLBACK if prob.amg_stalled
+                                   else None)
             # refused for its size: not analysed again at every Newton step of this solve
             prob.direct_refused = f is None
         if f is not None:
@@ -773,7 +777,41 @@ class _Linear:
                                   maxiter=self.SPLIT_ITERATIONS - self.SPLIT_SWITCH, M=M)
             self._converged = info == 0
             return x
-        return self.solver.solve(b, rtol=rtol, K=self.K if K is None else K)
+        from rackstress.engines import linear
+
+        A = self.K if K is None else K
+        if not (self.direct_allowed and self.prob.amg_stalled is False):
+            return self.solver.solve(b, rtol=rtol, K=A)
+        x = self.solver.solve(b, rtol=rtol, K=A, maxiter=linear.AMG_PATIENCE)
+        if self.solver.converged:
+            return x
+        if self._factor_stalled(A):
+            return self.solver.solve(b)
+        return self.solver.solve(b, rtol=rtol, K=A, x0=x)        # AMG-CG goes on
+
+    def _factor_stalled(self, A) -> bool:
+        """The whole tangent ``A`` factorized in place of AMG-CG that did not converge within
+        :data:`rackstress.engines.linear.AMG_PATIENCE` steps (a part of thin walls), for the
+        rest of this static solve, where the direct solver's plan fits within
+        :data:`rackstress.engines.linear.DIRECT_FLOPS_FALLBACK`; False where it does not
+        (AMG-CG goes on)."""
+        from rackstress.engines import linear
+
+        t0 = time.process_time()
+        self.prob.direct_refused = False
+        f = linear.plan_direct(A, flops=linear.DIRECT_FLOPS_FALLBACK)
+        self.prob.amg_stalled = True if f is not None else None
+        if f is None:
+            self.prob.direct_refused = True
+            self.setup_s += time.process_time() - t0
+            return False
+        self.solver.free()
+        self.solver, self.direct, self.split, self.K = f.factor(), True, False, A
+        self.kind, self._converged = self.solver.kind, True
+        self.count += 1
+        self.prob.split_slow = True
+        self.setup_s += time.process_time() - t0
+        return True
 
     def _factor_whole(self, A) -> bool:
         """The whole tangent ``A`` factorized in place of the split (:data:`SPLIT_SWITCH`),
