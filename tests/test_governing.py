@@ -195,6 +195,46 @@ def test_headline_stays_put_while_the_singular_peak_grows(tmp_path):
         assert dist[0] >= g["zone"] - 1e-9
 
 
+def test_a_governing_stress_at_the_zones_edge_names_the_edge_it_rises_toward(tmp_path):
+    """The step's shank bent by a force across it at its end: the moment, and the stress,
+    rise toward the sharp ring where the shank meets the head (x = 6, the square y, z ∈
+    [2, 8]), so the largest outside the 2.4 mm zone lies at the zone's edge, and the run says
+    so: the ring's point nearest it (on the ring, by geometry), its distance (at least the
+    zone, less than half a spacing beyond), how much less the particles a spacing farther out
+    read (about the 1/7.5 by which the beam's moment F·(16 − x) falls from x = 8.5 to 9.5),
+    what to do, in the terminal and in the report. Pulled along the shank (uniform tension),
+    the stress there does not rise: nothing is said."""
+    from rackstress.render.report import governing_section
+    from rackstress.runs.run import run
+    from rackstress.scenes import load_toml
+    from rackstress.stress.governing import describe
+    from rackstress.stress.post import postprocess
+
+    path = tmp_path / "bent.toml"
+    path.write_text(STEP.format(F=3600.0).replace("force = [3600.0, 0, 0]", "force = [0, 300, 0]"))
+    assert run(load_toml(path, {"spacing": 1.0}), tmp_path / "bent", engine="reference",
+               progress=False)["settled"]
+    info = postprocess(tmp_path / "bent", vtk=False)
+    g = info["governing"]
+    ze = g["zone_edge"]
+    assert ze["kind"] == "re-entrant edge"
+    x, y, z = ze["position"]
+    assert x == pytest.approx(6.0, abs=1e-6)
+    assert 2 - 1e-6 <= y <= 8 + 1e-6 and 2 - 1e-6 <= z <= 8 + 1e-6
+    assert min(abs(y - 2), abs(y - 8), abs(z - 2), abs(z - 8)) < 1e-6    # on the ring
+    dist = float(np.linalg.norm(np.array(g["read_at"]) - ze["position"]))
+    assert ze["distance"] == pytest.approx(dist)
+    assert g["zone"] - 1e-9 <= ze["distance"] <= g["zone"] + 0.5
+    assert ze["beyond"] == pytest.approx(ze["distance"] - g["zone"])
+    assert ze["fall"] >= 1 / 7.5 - 0.01
+    said = "\n".join(describe(g, info["singular"], info.get("error")))
+    assert "at the zone's edge" in said and "model the edge's real fillet" in said
+    assert 'id="zone-edge"' in governing_section(info)
+    (_, pulled), = _step_runs(tmp_path, (1.0,))
+    assert pulled["governing"]["zone_edge"] is None
+    assert 'id="zone-edge"' not in governing_section(pulled)
+
+
 # ----------------------------------------------------------------------------- --refine
 #: a dog-bone: two 6 × 10 × 10 heads joined by a 12 mm shank 6 × 6 (sharp re-entrant rings at
 #: both shoulders), one head's back face held, the far half of the other pulled by F: F/A =

@@ -284,6 +284,11 @@ def governing_section(stress: dict, headline: bool = True) -> str:
               f"{_e(gov.get('length_units', ''))} {_e(notch_how(nk))} (docs/stress.md \"The "
               f"notch reading\"); the patch fit of the particles reads "
               f"{_num(gov['patch_value'])} {_e(gov['units'])}.</p>")
+    if gov.get("zone_edge"):
+        from rackstress.stress.governing import zone_edge_sentence
+
+        t = zone_edge_sentence(gov)
+        w(f'<p class="note" id="zone-edge">{_e(t[0].upper() + t[1:])}.</p>')
     sing = stress.get("singular")
     if sing:
         from rackstress.stress.governing import SINGULAR_SAID, a_kind

@@ -432,6 +432,8 @@ def record(run, fields, zone_override: float | None = None, singular: dict | Non
             if (run.scene or {}).get("analysis") == "static":
                 _with_notch(gov, notch_peak(run, name, spacing, s, z, k), o,
                             run.data.ids[part.index], feats, y)
+            gov["zone_edge"] = zone_edge(gov["read_at"], s, z, float(spacing), feats,
+                                         read, vm[gov["frame"], part.index])
         sp = None
         if sbest is not None:
             k, j, v, kind, dist = sbest
@@ -458,6 +460,91 @@ def record(run, fields, zone_override: float | None = None, singular: dict | Non
     if top is not None:
         out["error"] = default_error(run, top)
     return out
+
+
+#: The governing stress is said to lie at the zone's edge where it is read within this many
+#: spacings beyond the zone ...
+ZONE_EDGE = 0.5
+#: ... and the particles' stress rises toward the singular point nearest it: within
+#: :data:`ZONE_EDGE_NEAR` spacings of the read point, those in the first spacing beyond the
+#: zone read more than this share of their value above those a spacing farther out (not those
+#: inside the zone: next to a sharp edge the recovered stress is not the edge's). Its
+#: value is then set by where the zone ends, not by a peak of the part. On the corpus (bench parts, the default spacing) 7 of 8
+#: parts' governing points lay within 0.15 spacings of the zone's edge; the SO-101 motor
+#: holder's, read at its fillet by the notch reading, 8.2 spacings beyond it (measured while
+#: building this).
+ZONE_EDGE_FALL = 0.05
+ZONE_EDGE_NEAR = 2.0
+#: ... and what an engineer does about the singular point it rises toward, by its kind
+ZONE_EDGE_ADVICE = {
+    "re-entrant edge": "model the edge's real fillet, or check that edge by FE (rackstress fea)",
+    "support boundary": "model the support as it bears (a pin in a hole, a washer's area)",
+    "point load": "spread the load over its real area",
+    "unresolved fillet": ("refine below the fillet's radius / 1.43 (rackstress run --refine), "
+                          "or check it by FE (rackstress fea)"),
+    "contact edge": "a chamfer or radius on the rim, or a longer bearing, spreads it",
+}
+
+
+def zone_edge(at, singular: Singular, zone_: float, spacing: float, feats=None,
+              read=None, values=None) -> dict | None:
+    """Whether the governing stress, read at ``at``, is the zone's rather than the part's: it
+    lies within :data:`ZONE_EDGE` spacings beyond the zone, and the particles' ``values``
+    (read at ``read``, k×3) within :data:`ZONE_EDGE_NEAR` spacings of ``at`` fall away from
+    the zone: 1 − the largest a spacing farther out over the largest in its first spacing
+    beyond it (``fall``), more than :data:`ZONE_EDGE_FALL`. Returns the singular point
+    nearest ``at`` (``position``, ``kind``, ``near``: the nearest named face or hole), its
+    ``distance``, how far ``beyond`` the zone it is read and the ``fall``; None otherwise (a
+    peak of the part).
+
+    >>> from rackstress.model.singular import Singular
+    >>> s = Singular(np.array([[0.0, 0.0, 0.0]]), np.array([0]), np.array([90.0]), "test")
+    >>> x = np.array([[1.5, 0, 0], [2.1, 0, 0], [3.2, 0, 0]])     # stress rising toward 0
+    >>> zone_edge([2.1, 0, 0], s, 2.0, 1.0, None, x, np.array([5.0, 10.0, 8.0]))["fall"]
+    0.2
+    >>> zone_edge([2.1, 0, 0], s, 2.0, 1.0, None, x, np.array([5.0, 10.0, 9.9]))  # flat
+    >>> zone_edge([3.0, 0, 0], s, 2.0, 1.0, None, x, np.array([5.0, 10.0, 8.0]))  # beyond
+    """
+    a = float(spacing)
+    d, k = singular.distance(np.asarray(at, float)[None])
+    d, k = float(d[0]), int(k[0])
+    if k < 0 or d - float(zone_) > ZONE_EDGE * a or read is None:
+        return None
+    read = np.asarray(read, float).reshape(-1, 3)
+    v = np.asarray(values, float)
+    near = np.linalg.norm(read - np.asarray(at, float), axis=1) <= ZONE_EDGE_NEAR * a
+    ds = singular.distance(read[near])[0]
+    z, ok = float(zone_), np.isfinite(v[near])
+    first = ok & (ds >= z) & (ds < z + a)
+    farther = ok & (ds >= z + a)
+    if not first.any() or not farther.any():
+        return None
+    top = float(v[near][first].max())
+    fall = 1.0 - float(v[near][farther].max()) / top if top > 0 else 0.0
+    if not fall > ZONE_EDGE_FALL:
+        return None
+    x = singular.points[k]
+    return {"distance": d, "beyond": d - float(zone_), "fall": round(fall, 12),
+            "position": [float(c) for c in x], "kind": KINDS[int(singular.kind[k])],
+            "near": _near(feats, x) if feats else None}
+
+
+def zone_edge_sentence(gov: dict) -> str:
+    """What :func:`zone_edge` found, in a sentence for the terminal and the report.
+
+    >>> zone_edge_sentence({"zone_edge": {"distance": 5.77, "beyond": 0.04, "kind":
+    ...     "re-entrant edge", "position": [10.0, 50.2, 9.0], "near": "face F43", "fall": 0.3},
+    ...     "zone": 5.73, "length_units": "mm"})[:72]
+    "at the zone's edge: 0.04 mm beyond it, 5.77 mm from a re-entrant edge at"
+    """
+    ze, u = gov["zone_edge"], gov.get("length_units", "")
+    pos = ", ".join(f"{x:.4g}" for x in ze["position"])
+    near = f", {ze['near']}" if ze.get("near") else ""
+    return (f"at the zone's edge: {ze['beyond']:.2g} {u} beyond it, {ze['distance']:.3g} {u} "
+            f"from {a_kind(ze['kind'])} at ({pos}){near}, toward which the stress rises (the "
+            f"particles a spacing farther out read {100 * ze['fall']:.2g} % less): this value is "
+            f"set by where the zone ends ({gov['zone']:.3g} {u}); "
+            + ZONE_EDGE_ADVICE.get(ze["kind"], "check it by FE (rackstress fea)"))
 
 
 def _with_notch(gov: dict, nk: dict | None, o: np.ndarray, ids, feats, y) -> None:
@@ -1029,6 +1116,8 @@ def describe(gov: dict | None, sing: dict | None, error: dict | None,
         kinds = ", ".join(kinds[:-1]) + " and " + kinds[-1]
         lines.append(f"    (the largest at least {gov['zone']:.3g} {gov.get('length_units', '')}"
                      f" from {kinds})")
+        if gov.get("zone_edge"):
+            lines.append("    " + zone_edge_sentence(gov))
         if error and error.get("extrapolated") is not None:
             lines.append(f"    error bar: {gov['value']:.4g} {u} at spacing "
                          f"{error['spacings'][0]:.4g}, {error['values'][-1]:.4g} at "
