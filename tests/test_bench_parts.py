@@ -36,6 +36,7 @@ def test_bench_parts_rows_for_settled_and_refused(tmp_path):
     assert ok["refined_particles"] > 2 * ok["particles"]
     assert ok["bar_low"] <= ok["refined_mpa"] <= ok["bar_high"]
     assert ok["refined_read"] in ("patch", "notch (submodel)", "notch (fit)")
+    assert ok["zone_edge"] in (True, False)       # said either way, for a governing stress
     # the multi-body base: refused by the mesh check, a row with its reason
     bad = rows["so100-base"]
     assert bad["status"] == "refused (exit 2)" and "Base.stl" in bad["reason"]
@@ -95,6 +96,8 @@ def test_parts_page_gives_the_refined_stress_against_the_fe_check():
                                    "there"}]}
     for r in data["rows"]:
         r.update(parts.refine_comparison(r))
+    data["rows"][0].update(zone_edge=True, zone_edge_kind="re-entrant edge", zone_edge_fall=0.133)
+    data["rows"][1].update(zone_edge=False)
     a = data["rows"][0]
     assert a["fe_reference_mpa"] == 2.1 and a["fe_reference_local"]
     assert a["governing_over_fe"] == pytest.approx(2.0 / 2.1)
@@ -102,6 +105,8 @@ def test_parts_page_gives_the_refined_stress_against_the_fe_check():
     assert not data["rows"][1]["bar_covers_fe"] and "refined_over_fe" not in data["rows"][2]
     md = parts.markdown(data)
     assert "`rackstress bench parts --refine`" in md
+    edge = next(x for x in md.splitlines() if x.startswith("At the zone's edge"))
+    assert edge.endswith("1 of 2 parts: a (re-entrant edge, 13 % less a spacing out).")
     rows = [x for x in md.split("## After `--refine`")[1].splitlines() if x.startswith("| ")]
     a = next(x for x in rows if x.startswith("| a |"))
     b = next(x for x in rows if x.startswith("| b |"))

@@ -119,6 +119,10 @@ def case(name: str, work: Path, fea: bool = True, sets: dict | None = None, echo
         peak = (stress.get("peak") or {}).get("value")
     row["peak_mpa"], row["peak_kind"] = peak, ("governing" if gov else "peak")
     row["peak_read"] = (gov or {}).get("read")         # patch fit or notch reading
+    ze = (gov or {}).get("zone_edge")                  # set by where the zone ends
+    row["zone_edge"] = None if gov is None else bool(ze)
+    if ze:
+        row.update(zone_edge_kind=ze["kind"], zone_edge_fall=ze["fall"])
     row["status"] = {0: "settled", 6: "not settled (exit 6)"}.get(
         r.returncode, f"failed (exit {r.returncode})")
     if r.returncode not in (0, 6):
@@ -381,6 +385,16 @@ def markdown(data) -> str:
                        + (f" (its ball read {fmt(r['fea_local_mpa'])} MPa: no reference)"
                           if r.get("fea_local_mpa") and not ref else ""))
         out.append("")
+    edge = [r for r in data["rows"] if r.get("zone_edge") is not None]
+    if edge:
+        at = [r for r in edge if r["zone_edge"]]
+        out += [f"At the zone's edge (`summary.json` → `stress.governing.zone_edge`: the "
+                "governing stress read within half a spacing beyond the zone, the particles a "
+                "spacing farther out reading more than 5 % less; docs/stress.md): "
+                f"{len(at)} of {len(edge)} parts"
+                + (": " + ", ".join(f"{r['part']} ({r['zone_edge_kind']}, "
+                                     f"{100 * r['zone_edge_fall']:.2g} % less a spacing out)"
+                                     for r in at) if at else "") + ".", ""]
     if data.get("refine"):
         out += _refine_section(data)
     notes = [r for r in data["rows"] if r.get("reason") or r.get("fea_error")
