@@ -39,8 +39,9 @@ DIRECT_FLOPS = 3e11
 #: :data:`AMG_PATIENCE` steps (the static path's :class:`rackstress.engines.static._Linear`):
 #: about 100 s at the ~20 Gflop/s PARDISO reached here. The SO-100 base at 155,392 particles
 #: (1 mm, its 2 mm walls two particles across: 465,216 unknowns) had not finished one Newton
-#: step by AMG-CG after 5 minutes; its factorization is 5.1e11 flop, 2.8 GB, 23 s, and it
-#: settled in 56 s (measured while building this)
+#: step by AMG-CG after 5 minutes; its factorization is 5.1e11 flop, 2.8 GB, 23 s: factorized
+#: from the start it settled in 56 s, after AMG-CG's 100 steps in 102 s (measured while
+#: building this)
 DIRECT_FLOPS_FALLBACK = 2e12
 #: the conjugate-gradient steps AMG-CG takes before a direct factorization that fits
 #: (:data:`DIRECT_FLOPS_FALLBACK`) replaces it: a solid part converges in tens; the SO-100

@@ -461,7 +461,8 @@ class _Problem:
     #: ... or the direct solver's plan for the whole did not fit: not analysed again
     whole_refused: bool = False
     #: AMG-CG did not converge within linear.AMG_PATIENCE steps: the direct solver's plans are
-    #: made with linear.DIRECT_FLOPS_FALLBACK from then on (True), or that did not fit (None)
+    #: made with linear.DIRECT_FLOPS_FALLBACK from then on (True), or that did not fit (None:
+    #: AMG-CG to the end)
     amg_stalled: bool | None = False
 
 
@@ -785,50 +786,32 @@ class _Linear:
         x = self.solver.solve(b, rtol=rtol, K=A, maxiter=linear.AMG_PATIENCE)
         if self.solver.converged:
             return x
-        if self._factor_stalled(A):
+        # AMG-CG stalls on a part of thin walls: the whole tangent factorized instead, for the
+        # rest of this solve, where it fits within DIRECT_FLOPS_FALLBACK
+        if self._factor_whole(A, flops=linear.DIRECT_FLOPS_FALLBACK):
+            self.prob.amg_stalled, self.prob.direct_refused = True, False
             return self.solver.solve(b)
+        self.prob.amg_stalled = None
         return self.solver.solve(b, rtol=rtol, K=A, x0=x)        # AMG-CG goes on
 
-    def _factor_stalled(self, A) -> bool:
-        """The whole tangent ``A`` factorized in place of AMG-CG that did not converge within
-        :data:`rackstress.engines.linear.AMG_PATIENCE` steps (a part of thin walls), for the
-        rest of this static solve, where the direct solver's plan fits within
-        :data:`rackstress.engines.linear.DIRECT_FLOPS_FALLBACK`; False where it does not
-        (AMG-CG goes on)."""
+    def _factor_whole(self, A, flops: float | None = None) -> bool:
+        """The whole tangent ``A`` factorized in place of the split (:data:`SPLIT_SWITCH`) or
+        of AMG-CG that did not converge within :data:`rackstress.engines.linear.AMG_PATIENCE`
+        steps (``flops``: :data:`rackstress.engines.linear.DIRECT_FLOPS_FALLBACK`), and for
+        the rest of this static solve; False where the direct solver's plan for it does not
+        fit (the split, or AMG-CG, goes on)."""
         from rackstress.engines import linear
 
-        t0 = time.process_time()
-        self.prob.direct_refused = False
-        f = linear.plan_direct(A, flops=linear.DIRECT_FLOPS_FALLBACK)
-        self.prob.amg_stalled = True if f is not None else None
-        if f is None:
-            self.prob.direct_refused = True
-            self.setup_s += time.process_time() - t0
-            return False
-        self.solver.free()
-        self.solver, self.direct, self.split, self.K = f.factor(), True, False, A
-        self.kind, self._converged = self.solver.kind, True
-        self.count += 1
-        self.prob.split_slow = True
-        self.setup_s += time.process_time() - t0
-        return True
-
-    def _factor_whole(self, A) -> bool:
-        """The whole tangent ``A`` factorized in place of the split (:data:`SPLIT_SWITCH`),
-        and for the rest of this static solve; False where the direct solver's plan for it
-        does not fit (the split goes on)."""
-        from rackstress.engines import linear
-
-        if self.prob.whole_refused:
+        if self.prob.whole_refused and flops is None:
             return False
         t0 = time.process_time()
-        f = linear.plan_direct(A)
+        f = linear.plan_direct(A, flops=flops)
         if f is None:
             self.prob.whole_refused = True      # each Newton step's would be refused too
             self.setup_s += time.process_time() - t0
             return False
         self.solver.free()
-        self.solver, self.split, self.K = f.factor(), False, A
+        self.solver, self.split, self.K, self.direct = f.factor(), False, A, True
         self.kind, self._converged = self.solver.kind, True
         self.count += 1
         self.prob.split_slow = True
