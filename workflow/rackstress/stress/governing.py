@@ -466,13 +466,11 @@ def record(run, fields, zone_override: float | None = None, singular: dict | Non
 #: spacings beyond the zone ...
 ZONE_EDGE = 0.5
 #: ... and the particles' stress rises toward the singular point nearest it: within
-#: :data:`ZONE_EDGE_NEAR` spacings of the read point, those in the first spacing beyond the
-#: zone read more than this share of their value above those a spacing farther out (not those
-#: inside the zone: next to a sharp edge the recovered stress is not the edge's). Its
-#: value is then set by where the zone ends, not by a peak of the part. On the corpus (bench parts, the default spacing) 7 of 8
-#: parts' governing points lay within 0.15 spacings of the zone's edge; the SO-101 motor
-#: holder's, read at its fillet by the notch reading, 8.2 spacings beyond it (measured while
-#: building this).
+#: :data:`ZONE_EDGE_NEAR` spacings of the read point, those a spacing farther out than the
+#: zone's first spacing read more than this share less than those in it (not those inside
+#: the zone: next to a sharp edge the recovered stress is not the edge's). Its value is then
+#: set by where the zone ends, not by a peak of the part: on 5 of the corpus' 12 parts at the
+#: default spacing (``rackstress bench parts``, docs/benchmarks/parts.md).
 ZONE_EDGE_FALL = 0.05
 ZONE_EDGE_NEAR = 2.0
 #: ... and what an engineer does about the singular point it rises toward, by its kind
