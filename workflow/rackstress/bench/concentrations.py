@@ -42,6 +42,8 @@ from pathlib import Path
 
 import numpy as np
 
+from rackstress.bench.parts import FE_CONVERGED
+
 SIGMA = 10.0                          # MPa, the plate's gross tension
 #: the three spacings of each case [mm], coarse to fine
 SPACINGS = {"plate-hole": (0.8, 0.6, 0.4), "fillet": (0.8, 0.6, 0.4),
@@ -51,14 +53,12 @@ CASES = tuple(SPACINGS)
 #: targets: the governing stress within 10 % of converged FEA at the default spacing (the
 #: middle one) and within 5 % after --refine (the error bar covering the converged value)
 TARGET = {"default": 0.10, "refined": 0.05}
-#: a row's FEA is a reference where its governing stress moved at most this much between the
-#: FE check's two sizes (bench parts' rule, :data:`rackstress.bench.parts.FE_CONVERGED`)
-FE_CONVERGED = 0.05
 
 
 def fea_converged(row: dict) -> bool:
-    """Whether the row's FEA governing stress converged (moved at most :data:`FE_CONVERGED`
-    between its two FE sizes; a row without the second size counts as converged)."""
+    """Whether the row's FEA governing stress converged (moved at most
+    :data:`rackstress.bench.parts.FE_CONVERGED` between its two FE sizes, bench parts' rule;
+    a row without the second size counts as converged)."""
     moved = row.get("fea_moved")
     return moved is None or moved <= FE_CONVERGED
 

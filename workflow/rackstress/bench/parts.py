@@ -24,8 +24,8 @@ from pathlib import Path
 
 from rackstress.bench import fmt, machine, md_table, out_dir, repository_file, write_json
 from rackstress.lib.resources import cpu_children
+from rackstress.lib.tet import POOR_SLIVERS, SLIVER_Q
 from rackstress.render.report import local_is_reference
-from rackstress.validity.solid import POOR_SLIVERS, SLIVER_Q
 
 HEADER = ["part", "particles", "spacing [mm]", "Newton steps", "residual", "solve [s]",
           "run CPU [s]", "peak [MPa]", "settled", "FE slivers", "FE ρ", "FE peak ratio",

@@ -706,10 +706,9 @@ def curved_near(rundir, name: str, points, spacing: float) -> np.ndarray:
     from scipy.spatial import cKDTree
 
     from rackstress.model.singular import concave_points
-
-    x = np.asarray(points, float).reshape(-1, 3)
     from rackstress.stress.measures import read_surface
 
+    x = np.asarray(points, float).reshape(-1, 3)
     surf = read_surface(rundir, name)
     if surf is None:
         return np.zeros(len(x), bool)
