@@ -24,7 +24,8 @@ DOCTESTED = ["rackstress.scenes.builtins", "rackstress.scenes", "rackstress.mode
              "rackstress.model.particles", "rackstress.model.regions", "rackstress.model.verlet",
              "rackstress.lib.rigid", "rackstress.runs.fingerprint", "rackstress.runs.rundir",
              "rackstress.engines.lammps.runner", "rackstress.stress.legs",
-             "rackstress.stress.notch", "rackstress.stress.governing", "rackstress.lib.forked"]
+             "rackstress.stress.notch", "rackstress.stress.governing", "rackstress.lib.forked",
+             "rackstress.stress.offsets"]
 
 
 @pytest.mark.parametrize("module", DOCTESTED)

@@ -77,7 +77,8 @@ GENERATED = {"accuracy.md": ("accuracy", "markdown", "accuracy.json"),
              "stress.md": ("stress", "report", "stress.json"),
              "validity.md": ("validity", "report", "validity.json"),
              "validity3d.md": ("validity3d", "markdown", "validity3d.json"),
-             "walls.md": ("walls", "report", "walls.json")}
+             "walls.md": ("walls", "report", "walls.json"),
+             "offsets.md": ("offsets", "markdown", "offsets.json")}
 
 
 #: the pages no command writes

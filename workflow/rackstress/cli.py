@@ -116,6 +116,11 @@ def _memory_message(err: MemoryError) -> str:
             "time, or use a machine (or a job) with more memory")
 
 
+#: The parameters a run records that are not its scene's ``--set`` values (how it was run)
+RECORDED_ONLY = ("file", "integrator", "dt", "analysis", "spacing_scale", "lattice_shift",
+                 "steps")
+
+
 #: Options of ``run`` that ``--resume`` cannot honour: the run goes on as it was started.
 RESUME_FIXED = ("engine", "mode", "steps", "dt", "sets", "dump_every", "overwrite",
                 "restart_every", "allow_unstable", "integrator", "dump_all")
@@ -173,9 +178,14 @@ def main():
                    "it (8x the particles, not 2.8x), which reads the governing stress of "
                    "parts with walls a few spacings thick closer to FEA (docs/stress.md "
                    "\"The error bar\").")
+@click.option("--offsets", "n_offsets", type=click.IntRange(min=2, max=16), default=None,
+              help="A static part: fill it again on N-1 lattices moved within a spacing into "
+                   "OUT/offsets/K and give how far the governing stress moves with where the "
+                   "lattice falls (docs/stress.md \"Lattice offsets\"). With --resume OUT on "
+                   "a finished run: only the offsets.")
 def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progress, do_render,
         restart_every=None, resume_dir=None, allow_unstable=False, integrator="euler",
-        dump_all=False, dump_text=False, refine=False, refine_ratio=None):
+        dump_all=False, dump_text=False, refine=False, refine_ratio=None, n_offsets=None):
     """Run SCENE (a built-in name or a .toml file) and write a run directory.
 
     Exit status (errors.py): 0 done, 2 bad input or a run directory in use or holding another
@@ -209,10 +219,14 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
                     f"so {opts} cannot be given with it (the checkpoint fixes them); to change "
                     "them start a new run, e.g. with --overwrite")
             out = check_out(resume_dir)
-            if refine and (Path(out) / "summary.json").is_file():
+            if (refine or n_offsets) and (Path(out) / "summary.json").is_file():
                 rec = json.loads((Path(out) / "scene.json").read_text())
-                _refine(out, scene, sets, rec.get("engine", engine), rec.get("mode", mode),
-                        progress, do_render, refine_ratio)
+                if refine:
+                    _refine(out, scene, sets, rec.get("engine", engine),
+                            rec.get("mode", mode), progress, do_render, refine_ratio)
+                if n_offsets:
+                    _offsets(out, scene, sets, rec.get("engine", engine),
+                             rec.get("mode", mode), progress, do_render, n_offsets)
                 return
         elif scene is None:
             raise click.UsageError("Missing argument 'SCENE' (or give --resume RUNDIR).")
@@ -230,15 +244,16 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
             _may_exit_now()
             return
         shown = progress and rank() == 0
-        if refine and not (scene.endswith(".toml") or Path(scene).is_file()):
-            raise RackstressError(f"scene '{scene}' is a built-in scene: --refine refines the "
-                                  "parts of a scene file (.toml) filled at a spacing")
+        for option, given in (("--refine", refine), ("--offsets", n_offsets)):
+            if given and not (scene.endswith(".toml") or Path(scene).is_file()):
+                raise RackstressError(f"scene '{scene}' is a built-in scene: {option} fills "
+                                      "the parts of a scene file (.toml) again at a spacing")
         with phase(f"building the scene {scene}", shown):
             sc = _load_scene(scene, steps, dt, sets, integrator)
-        if refine:
+        if refine or n_offsets:
             from rackstress.stress.refine import check_refinable
 
-            check_refinable(sc)
+            check_refinable(sc, "--refine" if refine else "--offsets")
         if rank() == 0:
             said, warned = run_mod.sizing_lines(sc)
             for line in said:
@@ -314,6 +329,8 @@ def run(scene, engine, mode, steps, dt, sets, out, dump_every, overwrite, progre
             _finish(summary, out, do_render, progress, dump_text)
         if refine and summary.get("settled") is not False:
             _refine(out, scene, sets, engine, mode, progress, do_render, refine_ratio)
+        if n_offsets and summary.get("settled") is not False:
+            _offsets(out, scene, sets, engine, mode, progress, do_render, n_offsets)
         if summary.get("settled") is False:
             from rackstress.errors import EXIT_UNSETTLED
 
@@ -342,26 +359,33 @@ def _refine_ratio_needs_refine(refine: bool, ratio: float | None) -> None:
                                "--refine")
 
 
+def _scene_again(out: Path, scene, sets, option: str) -> tuple:
+    """(the scene file, its ``--set`` values) a finished run in ``out`` was made from, to fill
+    it again (``--refine``, ``--offsets``): the ``--set`` given now, else those it recorded."""
+    from rackstress import scenes
+
+    rec = json.loads((Path(out) / "scene.json").read_text())
+    spec = scene or rec.get("source")
+    if not spec:
+        raise RackstressError(f"{out}: its scene file is not recorded; give it: rackstress run "
+                              f"SCENE.toml --resume {out} {option}")
+    overrides = scenes.parse_overrides(sets) if sets else {
+        k: v for k, v in (rec.get("params") or {}).items() if k not in RECORDED_ONLY}
+    return spec, overrides
+
+
 def _refine(out: Path, scene, sets, engine: str, mode: str, progress: bool,
             do_render: bool, ratio: float | None = None) -> None:
     """``--refine``: the finished run in ``out`` again at spacing/``ratio`` (√2 unless
     ``--refine-ratio``) into ``out/refine``, its error bar into ``out/summary.json`` and the
     report (:mod:`rackstress.stress.refine`)."""
-    from rackstress import scenes
     from rackstress.lib.mpi import rank
     from rackstress.stress.governing import REFINE_RATIO, describe
     from rackstress.stress.refine import refine
 
     if rank() != 0:
         return
-    rec = json.loads((Path(out) / "scene.json").read_text())
-    spec = scene or rec.get("source")
-    if not spec:
-        raise RackstressError(f"{out}: its scene file is not recorded; give it: rackstress run "
-                              f"SCENE.toml --resume {out} --refine")
-    overrides = scenes.parse_overrides(sets) if sets else {
-        k: v for k, v in (rec.get("params") or {}).items()
-        if k not in ("file", "integrator", "dt", "analysis", "spacing_scale", "steps")}
+    spec, overrides = _scene_again(out, scene, sets, "--refine")
     from rackstress.runs.rundir import locked
 
     with locked(out, create=False):
@@ -375,6 +399,28 @@ def _refine(out: Path, scene, sets, engine: str, mode: str, progress: bool,
         st = summary.get("stress") or {}
         for line in describe(st.get("governing"), None, err):
             click.echo(line)
+        if do_render:
+            _write_report(out)
+
+
+def _offsets(out: Path, scene, sets, engine: str, mode: str, progress: bool,
+             do_render: bool, n: int) -> None:
+    """``--offsets N``: the finished run in ``out`` again on N − 1 moved lattices into
+    ``out/offsets/K``, the governing stress's spread into ``out/summary.json`` and the report
+    (:mod:`rackstress.stress.offsets`)."""
+    from rackstress.lib.mpi import rank
+    from rackstress.runs.rundir import locked
+    from rackstress.stress.offsets import offsets, offsets_sentence
+
+    if rank() != 0:
+        return
+    spec, overrides = _scene_again(out, scene, sets, f"--offsets {n}")
+    with locked(out, create=False):
+        with phase(f"offsets: the scene again on {n - 1} moved lattice(s) into "
+                   f"{Path(out) / 'offsets'}", progress, ticker=False):
+            off = offsets(out, spec, n, overrides, engine=engine, mode=mode,
+                          progress=progress, echo=click.echo)
+        click.echo("  " + offsets_sentence(off))
         if do_render:
             _write_report(out)
 
@@ -1551,6 +1597,20 @@ def bench_parts(out, fea, only, sets, timeout, refine, refine_ratio):
     _bench_report(data, mod)
 
 
+@bench.command("offsets")
+@_bench_out
+@click.option("--offsets", "n", type=click.IntRange(min=2, max=16), default=6,
+              show_default=True, help="Lattices per part, the scene's own included.")
+@click.option("--only", multiple=True, help="Only parts whose name contains this (repeatable).")
+def bench_offsets(out, n, only):
+    """Every real part of examples/parts/ on N lattices moved within a spacing (rackstress run
+    --offsets), against bench parts' converged FE readings (docs/benchmarks/offsets.md)."""
+    from rackstress.bench import offsets as mod
+
+    data = mod.run_bench(out, n=n, only=only or None, echo=click.echo)
+    _bench_report(data, mod)
+
+
 @bench.command("cantilever")
 @_bench_out
 @click.option("--quick", is_flag=True, help="Spacings 2 and 1 only, no 100,000-particle run.")
@@ -1657,7 +1717,7 @@ TEACH = {
     ]),
     "run": ("Run a scene and write its run directory, peaks and pictures.", [
         "rackstress run plane-rack --out runs/plane-rack",
-        "rackstress run examples/cframe/static.toml --refine --out runs/cframe",
+        "rackstress run examples/cframe/static.toml --refine --offsets 4 --out runs/cframe",
         "mpiexec -n 2 rackstress run magpod-small --set cycles=2 --out runs/ms",
         "rackstress run --resume runs/ms",
     ]),
@@ -1748,6 +1808,10 @@ TEACH = {
     "bench validity3d": ("The bracket STL's von Mises stress [MPa] against tetrahedral FEA.", [
         "rackstress bench validity3d --quick --out /tmp/bench",
         "rackstress bench validity3d --out docs/benchmarks",
+    ]),
+    "bench offsets": ("Real parts on lattices moved within a spacing, against FE.", [
+        "rackstress bench offsets --only hip --offsets 2 --out /tmp/bench",
+        "rackstress bench offsets --out docs/benchmarks",
     ]),
     "bench walls": ("A wall between the lattice's layers in bending, against beam theory.", [
         "rackstress bench walls --quick --out /tmp/bench",

@@ -41,4 +41,4 @@ RUN_FILES = ("scene.json", "summary.json", "progress.json", "particles.data", "i
              "log.lammps", "trajectory.dump", "trajectory.dump.gz", "boundary.npz", BINDINGS,
              STABILITY, STRESS_JSON, STRESS_DUMP, CACHE, VTK_DIR, REPORT, "view3d.html",
              "figures", "restart", "fea.json", "fea.npz", "job.json", SINGULAR,
-             "refine", "volume.atoms", EQUILIBRIUM)
+             "refine", "offsets", "volume.atoms", EQUILIBRIUM)

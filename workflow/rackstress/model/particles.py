@@ -229,9 +229,13 @@ def lattice_points(lo, hi, spacing: float, packing: str = "cubic", origin=None, 
 
 
 def fill(region, spacing: float, packing: str = "cubic", origin=None, name: str = "part",
-         max_particles: int = MAX_PARTICLES) -> np.ndarray:
+         max_particles: int = MAX_PARTICLES, shift=None) -> np.ndarray:
     """Particle centres filling ``region`` (a solid region: mesh, box, sphere, … or their
     combination) on a lattice of ``spacing``, in id order (x fastest, then y, then z).
+
+    ``shift`` (three fractions of the spacing) moves the lattice from its origin — the one
+    given, or the one centred in the region's box — by ``shift`` × ``spacing``: the same part
+    filled at another lattice offset (``rackstress run --offsets``).
 
     Every centre lies inside the region (its ``mask``); a cubic fill holds about
     volume/spacing³ particles, an hcp fill √2 times that. ``name`` (the mesh file or group)
@@ -281,6 +285,10 @@ def fill(region, spacing: float, packing: str = "cubic", origin=None, name: str 
             "part may have: the spacing is too small for the part, or the mesh is in other "
             "units than intended: give a larger spacing, or scale (e.g. 0.001 for millimetres "
             "to metres)")
+    if shift is not None:
+        if origin is None:
+            origin = [float(_axis(lo[k], hi[k], s, None)[0]) for k in range(3)]
+        origin = np.asarray(origin, float) + s * np.asarray(shift, float)
     _, shape = lattice_points(lo, hi, s, packing, origin, z_slice=slice(0, 0))
     nx, ny, nz = shape
     per_slab = 2 * max(1, int(1_000_000 // max(1, nx * ny)))   # even: hcp parities line up

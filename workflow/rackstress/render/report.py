@@ -329,6 +329,22 @@ def governing_section(stress: dict, headline: bool = True) -> str:
         w(f'<p class="note" id="error-estimate">Error bar: ± '
           f"{_num(100 * abs(err['relative']), 2)} %, {_num(err.get('low'))} … "
           f"{_num(err.get('high'))} {_e(gov['units'])} ({_e(err['method'])}).</p>")
+    off = stress.get("offsets")
+    if off and off.get("values"):
+        from rackstress.stress.offsets import offsets_sentence
+
+        u = _e(off.get("units") or gov["units"])
+        w('<table id="offsets"><thead><tr><th>lattice moved by [spacings]</th><th>particles'
+          f"</th><th>governing [{u}]</th><th>run</th></tr></thead><tbody>")
+        for r in off["rows"]:
+            v = (_num(r["value"]) if r["value"] is not None else
+                 "refused by the part check" if r.get("refused") else "did not settle")
+            w("<tr>" + "".join(f"<td class=num>{c}</td>" for c in (
+                ", ".join(f"{x:.3f}" for x in r["offset"]), f"{r['particles']:,}", v))
+              + f"<td><code>{_e(r['dir'])}</code></td></tr>")
+        w("</tbody></table>")
+        t = offsets_sentence(off)
+        w(f'<p class="note" id="offsets-spread">{_e(t[0].upper() + t[1:])}.</p>')
     return "\n".join(out)
 
 

@@ -157,9 +157,11 @@ def rebuild_scene(rundir: Path, spec: str | None = None):
         # duration-given scene gets its steps from the duration, not from a recorded count;
         # "analysis" is recorded from the file's own key (static), not a --set parameter
         given = {k: v for k, v in params.items()
-                 if k not in ("file", "integrator", "dt", "analysis", "spacing_scale")
+                 if k not in ("file", "integrator", "dt", "analysis", "spacing_scale",
+                              "lattice_shift")
                  and not (k == "steps" and "duration" in params)}
-        sc = scenes.load(spec, given, spacing_scale=float(params.get("spacing_scale", 1.0)))
+        sc = scenes.load(spec, given, spacing_scale=float(params.get("spacing_scale", 1.0)),
+                         lattice_shift=params.get("lattice_shift"))
         dt = params.get("dt")
         if dt is not None and dt != sc.dt:
             sc = sc.with_dt(float(dt))

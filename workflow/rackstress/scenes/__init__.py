@@ -14,7 +14,8 @@ __all__ = ["BUILDERS", "build", "load", "load_toml", "parameters", "parse_overri
            "parse_value"]
 
 
-def load(spec: str, overrides: dict | None = None, spacing_scale: float = 1.0):
+def load(spec: str, overrides: dict | None = None, spacing_scale: float = 1.0,
+         lattice_shift=None):
     """A scene from a built-in name or a ``.toml`` file path, with ``--set`` overrides applied.
 
     Parameters
@@ -27,6 +28,9 @@ def load(spec: str, overrides: dict | None = None, spacing_scale: float = 1.0):
     spacing_scale : float
         A scene file's parts filled at their spacing times this (``rackstress run --refine``);
         built-in scenes take no other than 1.
+    lattice_shift : sequence of 3 floats, optional
+        A scene file's filled parts on a lattice moved by these fractions of their spacing
+        (``rackstress run --offsets``); built-in scenes take none.
 
     Returns
     -------
@@ -39,10 +43,12 @@ def load(spec: str, overrides: dict | None = None, spacing_scale: float = 1.0):
     """
     overrides = dict(overrides or {})
     if spec.endswith(".toml") or Path(spec).is_file():
-        return load_toml(spec, overrides, spacing_scale=spacing_scale)
-    if spacing_scale != 1.0:
+        return load_toml(spec, overrides, spacing_scale=spacing_scale,
+                         lattice_shift=lattice_shift)
+    if spacing_scale != 1.0 or lattice_shift is not None:
         from rackstress.errors import SceneError
 
-        raise SceneError(f"scene '{spec}' is a built-in scene: --refine refines the parts of a "
-                         "scene file (.toml) filled from a mesh or shape at a spacing")
+        raise SceneError(f"scene '{spec}' is a built-in scene: --refine and --offsets refill "
+                         "the parts of a scene file (.toml) filled from a mesh or shape at a "
+                         "spacing")
     return build(spec, **overrides)

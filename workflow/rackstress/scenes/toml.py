@@ -143,17 +143,34 @@ from rackstress.scenes.fields import (_Ctx, _array_of_tables, _check_keys, _desc
 _SPACING_SCALE = contextvars.ContextVar("spacing_scale", default=1.0)
 
 
+#: The fractions of its spacing by which every filled part's lattice is moved while a scene
+#: file is read (:func:`load_toml`'s ``lattice_shift``: ``rackstress run --offsets``).
+_LATTICE_SHIFT = contextvars.ContextVar("lattice_shift", default=None)
+
+
 #: The Poisson's ratio of a material part that does not say (``poisson``): :func:`load_toml`'s
 #: ``poisson`` ("lattice" unless a caller, e.g. ``rackstress bench lattice``, asks otherwise).
 _POISSON = contextvars.ContextVar("poisson", default="lattice")
 
 
 def load_toml(path, overrides: dict | None = None, spacing_scale: float = 1.0,
-              poisson: str | None = None) -> Scene:
+              poisson: str | None = None, lattice_shift=None) -> Scene:
     """The scene described by the TOML file ``path``, with ``--set`` ``overrides`` applied;
     every part filled from a mesh or shape at its ``spacing`` × ``spacing_scale``
     (``rackstress run --refine``), recorded as the parameter ``spacing_scale``; ``poisson``
-    ("lattice" or "material") for the material parts whose table does not say."""
+    ("lattice" or "material") for the material parts whose table does not say;
+    ``lattice_shift`` (three fractions of a spacing, ``rackstress run --offsets``) moves every
+    filled part's lattice by that much of its spacing, recorded as the parameter
+    ``lattice_shift``."""
+    if lattice_shift is not None:
+        shift = [float(x) for x in lattice_shift]
+        token = _LATTICE_SHIFT.set(shift)
+        try:
+            scene = load_toml(path, overrides, spacing_scale, poisson)
+        finally:
+            _LATTICE_SHIFT.reset(token)
+        scene.params["lattice_shift"] = shift
+        return scene
     if poisson is not None:
         token = _POISSON.set(poisson)
         try:
@@ -762,9 +779,13 @@ def _plain_group(c: _Ctx, t: dict, base: Path, sizing: dict | None = None) -> Gr
             names = [getattr(s, "name", None) for s in solids if isinstance(s, rg.Surface)]
             if names:
                 what += f" (mesh {', '.join(names)})"
+            own = origin
             origin = _shared_origin(t, spacing, packing, origin, sizing)
+            # --offsets: every part's lattice moved by the same fractions of its spacing (a
+            # part in contact on a shared lattice takes it as moved already)
+            shift = _LATTICE_SHIFT.get() if origin is own else None
             try:
-                filled_o = [fill(region, spacing, packing, origin, name=what)]
+                filled_o = [fill(region, spacing, packing, origin, name=what, shift=shift)]
             except SceneError as exc:
                 raise SceneError(str(exc)) from None
         o = union_positions(*filled_o, *blocks)

@@ -35,24 +35,56 @@ class RefineError(RackstressError):
     or 6 (``EXIT_UNSETTLED``) when the refined run did not settle."""
 
 
-def _finished(rundir: Path) -> dict | None:
+def finished_summary(rundir: Path) -> dict | None:
+    """A run directory's ``summary.json``, or None while it has none (or an unreadable one)."""
     try:
         return json.loads((rundir / "summary.json").read_text())
     except (OSError, ValueError):
         return None
 
 
-def check_refinable(scene) -> None:
-    """Refuse, before anything runs, a scene ``--refine`` cannot refine: a dynamic analysis
-    (its peak is a time's, and the time step changes with the spacing) or one without a part
-    with a material (no von Mises stress, no governing stress)."""
+def first_run(rundir: Path, error, doing: str, no_equilibrium: str, no_governing: str):
+    """What filling a finished run again reads against (``--refine``, ``--offsets``): its
+    summary, governing stress, singular points (its contact edges included, found from its
+    result: its measures, only for a run with parts in contact), ``spacing_scale`` and the
+    zone of the governing part. ``error`` (a :class:`RackstressError`) refuses a run that is
+    not finished, did not settle or has no governing stress, its message ending as given."""
+    from rackstress.stress.post import compute_fields
+    from rackstress.stress.rundata import load_run
+
+    summary = finished_summary(rundir)
+    if summary is None:
+        raise error(f"{rundir}: no finished run to {doing} (no summary.json)")
+    if summary.get("settled") is False or summary.get("status") in ("diverged", "not settled"):
+        raise error(f"{rundir}: the run did not settle ({summary.get('status')}): its stress "
+                    f"is not an equilibrium's, {no_equilibrium}")
+    gov = (summary.get("stress") or {}).get("governing")
+    if not gov:
+        raise error(f"{rundir}: no governing stress (a part with a material and its von Mises "
+                    f"stress) {no_governing}")
+    run = load_run(rundir)
+    sing = singular_set(run)
+    if read_contacts(run) is not None:
+        sing = with_contact_edges(run, compute_fields(run), sing)
+    scale = float(json.loads((rundir / "scene.json").read_text()).get("params", {})
+                  .get("spacing_scale", 1.0))
+    parts = (summary.get("stress") or {}).get("zone_parts") or {}
+    zone = (parts.get(gov["group"]) or {}).get("zone", gov["zone"])
+    return summary, gov, sing, scale, zone
+
+
+def check_refinable(scene, option: str = "--refine") -> None:
+    """Refuse, before anything runs, a scene ``--refine`` cannot refine (nor ``--offsets``
+    move, ``option``): a dynamic analysis (its peak is a time's, and the time step changes
+    with the spacing) or one without a part with a material (no von Mises stress, no
+    governing stress)."""
     if getattr(scene, "analysis", None) != "static":
         raise RefineError(f"scene '{scene.name}' is not a static analysis (analysis = "
-                          "\"static\"): --refine gives the error bar of a static part's "
-                          "governing stress")
+                          f"\"static\"): {option} reads a static part's governing stress "
+                          "again on another lattice")
     if not any(g.material is not None for g in scene.groups.values()):
-        raise RefineError(f"scene '{scene.name}' has no part with a material: --refine "
-                          "refines the governing von Mises stress of a material part")
+        raise RefineError(f"scene '{scene.name}' has no part with a material: {option} "
+                          "reads the governing von Mises stress of a material part")
 
 
 def fine_alone(fine_dir: Path, fg: dict, zone: float) -> dict | None:
@@ -68,7 +100,7 @@ def fine_alone(fine_dir: Path, fg: dict, zone: float) -> dict | None:
     run's ``zone``: it reads nearer the singular points) or its singular points."""
     from rackstress.stress.governing import CONVERGING
 
-    own = ((_finished(fine_dir) or {}).get("stress") or {}).get("governing")
+    own = ((finished_summary(fine_dir) or {}).get("stress") or {}).get("governing")
     if not own or own.get("group") != fg.get("group", own.get("group")):
         return None
     if not own["value"] > (1.0 + CONVERGING) * fg["value"]:
@@ -108,26 +140,10 @@ def refine(rundir, spec: str, overrides: dict | None = None, engine: str = "lamm
     from rackstress.stress.rundata import load_run
 
     rundir = Path(rundir)
-    summary = _finished(rundir)
-    if summary is None:
-        raise RefineError(f"{rundir}: no finished run to refine (no summary.json)")
-    if summary.get("settled") is False or summary.get("status") in ("diverged", "not settled"):
-        raise RefineError(f"{rundir}: the run did not settle ({summary.get('status')}): its "
-                          "stress is not an equilibrium's, so it has no error bar to refine")
-    gov = (summary.get("stress") or {}).get("governing")
-    if not gov:
-        raise RefineError(f"{rundir}: no governing stress (a part with a material and its "
-                          "von Mises stress) to refine")
-    coarse_run = load_run(rundir)
-    # the coarse run's singular points, its contact edges included (found from its result:
-    # its measures, only for a run with parts in contact)
-    sing = singular_set(coarse_run)
-    if read_contacts(coarse_run) is not None:
-        sing = with_contact_edges(coarse_run, compute_fields(coarse_run), sing)
-    scale = float(json.loads((rundir / "scene.json").read_text()).get("params", {})
-                  .get("spacing_scale", 1.0))
+    summary, gov, sing, scale, z = first_run(rundir, RefineError, "refine",
+                                             "so it has no error bar to refine", "to refine")
     fine_dir = rundir / REFINE_DIR
-    fine_summary = _finished(fine_dir)
+    fine_summary = finished_summary(fine_dir)
     sc = load(spec, overrides, spacing_scale=scale / ratio)
     done = (fine_summary is not None and fine_summary.get("settled") is not False
             and fine_summary.get("n_particles") == sc.n_particles
@@ -136,7 +152,7 @@ def refine(rundir, spec: str, overrides: dict | None = None, engine: str = "lamm
         echo(f"refine: {sc.name} at spacing / {ratio:.4g} ({sc.n_particles:,} particles) into "
              f"{fine_dir}")
         run_scene(sc, fine_dir, engine=engine, mode=mode, progress=progress, overwrite=True)
-        fine_summary = _finished(fine_dir)
+        fine_summary = finished_summary(fine_dir)
         if fine_summary.get("settled") is False:
             err = RefineError(f"{fine_dir}: the refined run did not settle (residual "
                               f"{fine_summary.get('residual'):.3g} of the load); the first "
@@ -148,8 +164,6 @@ def refine(rundir, spec: str, overrides: dict | None = None, engine: str = "lamm
         echo(f"refine: {fine_dir} holds the refined run already")
     fine_run = load_run(fine_dir)
     fields = compute_fields(fine_run)
-    parts = (summary.get("stress") or {}).get("zone_parts") or {}
-    z = (parts.get(gov["group"]) or {}).get("zone", gov["zone"])
     fine = record(fine_run, fields, zone_override=z, singular=sing)
     fg = (fine.get("parts") or {}).get(gov["group"], {}).get("governing")
     if fg is None:
@@ -167,7 +181,7 @@ def refine(rundir, spec: str, overrides: dict | None = None, engine: str = "lamm
     own = fine_alone(fine_dir, fg, z)
     if own is not None:
         err["fine_own"] = own
-    summary = _finished(rundir)          # as it is now (post-processing may have added to it)
+    summary = finished_summary(rundir)          # as it is now (post-processing may have added to it)
     # the first run's own band (default_error), what it said before --refine; kept when a
     # refinement is done again
     first = (summary.get("stress") or {}).get("error") or {}
