@@ -201,6 +201,9 @@ def test_bench_offsets_reads_a_part_against_bench_parts_fe(tmp_path):
     assert row["part"] == "solo12-hip" and row["fe_mpa"] == fe and len(row["values"]) == 2
     assert row["ratios"] == pytest.approx([v / fe for v in row["values"]], rel=1e-12)
     assert row["range_holds_fe"] is (min(row["values"]) <= fe <= max(row["values"]))
+    # on its own lattice a run reads its own governing stress: the first is the first reading
+    assert row["own"][0]["value"] == row["values"][0]
+    assert row["own_bands_hold_fe"] == sum(o["low"] <= fe <= o["high"] for o in row["own"] if o)
     within = sum(abs(v / fe - 1) < 0.1 for v in row["values"])
     assert data["readings_within"] == within and data["readings"] == 2
     md = (tmp_path / "offsets.md").read_text()

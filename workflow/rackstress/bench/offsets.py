@@ -40,6 +40,13 @@ def reference() -> dict:
     return {r["part"]: r for r in data["rows"]}
 
 
+def _summary(rundir: Path) -> dict | None:
+    try:
+        return json.loads((rundir / "summary.json").read_text())
+    except (OSError, ValueError):
+        return None
+
+
 def case(name: str, work: Path, ref: dict, n: int = N, echo=print,
          timeout: float = TIMEOUT_S) -> dict:
     """One part: ``rackstress run SCENE --offsets n`` into ``work/name``; its row."""
@@ -67,6 +74,16 @@ def case(name: str, work: Path, ref: dict, n: int = N, echo=print,
                particles=[x["particles"] for x in off["rows"]], unsettled=off["unsettled"],
                median=off["median"], low=off["low"], high=off["high"], spread=off["spread"],
                band_low=band.get("low"), band_high=band.get("high"))
+    # what a user would have read on each lattice alone: its own governing stress (its own
+    # singular points and zone) and the band its run printed
+    own = []
+    for x in off["rows"]:
+        s = _summary(out / x["dir"]) if x["settled"] and "refused" not in x else None
+        g = ((s or {}).get("stress") or {}).get("governing")
+        e = ((s or {}).get("stress") or {}).get("error") or {}
+        own.append(None if g is None else {"value": g["value"], "low": e.get("low"),
+                                           "high": e.get("high"), "read": g.get("read")})
+    row["own"] = own
     got = [v for v in values if v is not None]
     row["band_holds_all"] = bool(band.get("low") is not None
                                  and band["low"] <= min(got) and max(got) <= band["high"])
@@ -76,7 +93,10 @@ def case(name: str, work: Path, ref: dict, n: int = N, echo=print,
                    low_over_fe=off["low"] / fe, high_over_fe=off["high"] / fe,
                    range_holds_fe=bool(off["low"] <= fe <= off["high"]),
                    within=sum(abs(x - 1) < TARGET for x in ratios if x is not None),
-                   read=sum(x is not None for x in ratios))
+                   read=sum(x is not None for x in ratios),
+                   own_bands=sum(o is not None and o["low"] is not None for o in own),
+                   own_bands_hold_fe=sum(o is not None and o["low"] is not None
+                                         and o["low"] <= fe <= o["high"] for o in own))
     echo(f"bench offsets: {name}: {' '.join(fmt(v, 4) for v in got)} MPa, FE {fmt(fe, 4)} "
          f"({row['wall_s']:.0f} s)")
     return row
@@ -104,6 +124,8 @@ def run_bench(out=None, n: int = N, only=None, echo=print, timeout: float = TIME
             "readings_within": sum(r["within"] for r in conv),
             "readings": sum(r["read"] for r in conv),
             "range_holds_fe": sum(r["range_holds_fe"] for r in conv),
+            "own_bands": sum(r["own_bands"] for r in conv),
+            "own_bands_hold_fe": sum(r["own_bands_hold_fe"] for r in conv),
             "band_holds_all": sum(bool(r.get("band_holds_all")) for r in rows
                                   if r.get("status") == "ok"),
             "ok": sum(r.get("status") == "ok" for r in rows),
@@ -120,7 +142,7 @@ def run_bench(out=None, n: int = N, only=None, echo=print, timeout: float = TIME
 
 
 HEADER = ["part", "spacing [mm]", "FE [MPa]", "FE converged", "first / FE",
-          "each lattice / FE", "median / FE", "spread", "range holds FE",
+          "each lattice / FE", "median / FE", "spread", "range holds FE", "own bands hold FE",
           "first band holds all"]
 
 
@@ -129,7 +151,7 @@ def table_rows(data) -> list:
     for r in data["rows"]:
         if r.get("status") != "ok":
             rows.append([r["part"], fmt(r.get("spacing")), fmt(r.get("fe_mpa"), 4), "—",
-                         "—", r.get("status", "—"), "—", "—", "—", "—"])
+                         "—", r.get("status", "—"), "—", "—", "—", "—", "—"])
             continue
         states = r.get("states") or ["unsettled"] * len(r.get("ratios") or [])
         each = " ".join(fmt(x, 3) if x is not None else st
@@ -139,6 +161,8 @@ def table_rows(data) -> list:
                      fmt(r.get("first_over_fe"), 3), each, fmt(r.get("median_over_fe"), 3),
                      f"±{100 * r['spread']:.1f} %",
                      {True: "yes", False: "**no**"}.get(r.get("range_holds_fe"), "—"),
+                     (f"{r['own_bands_hold_fe']} of {r['own_bands']}" if "own_bands" in r
+                      else "—"),
                      "yes" if r.get("band_holds_all") else "**no**"])
     return rows
 
@@ -158,7 +182,9 @@ def markdown(data) -> str:
         "reads; *each lattice / FE*: every lattice's, the first first (*unsettled*: it did not "
         "settle; *refused*: the part check refused the moved lattice); *spread*: the largest "
         "departure from the median; *range holds FE*: the FE's value lies within the lattices' "
-        "range; *first band holds all*: the first run's own error band (`summary.json`'s "
+        "range; *own bands hold FE*: on how many lattices the band that lattice's run prints "
+        "alone (its own governing stress, singular points and zone) holds the FE's value; "
+        "*first band holds all*: the first run's own error band (`summary.json`'s "
         "`stress.error`) holds every lattice's reading.", "",
         md_table(HEADER, table_rows(data)), "",
         f"Of the {data['converged']} parts whose FE reading converged, the scene's own lattice "
@@ -166,7 +192,10 @@ def markdown(data) -> str:
         f"their lattices' readings, {data['readings_within']} of {data['readings']} are "
         f"within {100 * data['target']:.0f} %; the median of a part's lattices on "
         f"{data['median_within']}; the lattices' range holds the FE's value on "
-        f"{data['range_holds_fe']}. Where the lattice falls moves a part's governing stress by "
+        f"{data['range_holds_fe']}. Run on one lattice alone (its own singular points and "
+        f"zone), the band a run prints holds the FE's value on {data['own_bands_hold_fe']} of "
+        f"those {data['own_bands']} runs. Where the lattice falls moves a part's governing "
+        "stress by "
         f"up to ±{100 * data['largest_spread']:.1f} % (median part ±"
         f"{100 * data['median_spread']:.1f} %); the first run's own band holds every "
         f"lattice's reading on {data['band_holds_all']} of {data['ok']} parts.", "",
