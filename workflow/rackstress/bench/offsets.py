@@ -70,7 +70,7 @@ def case(name: str, work: Path, ref: dict, n: int = N, echo=print,
     values = [x["value"] for x in off["rows"]]
     row.update(status="ok", values=values, offsets=[x["offset"] for x in off["rows"]],
                states=["refused" if "refused" in x else "read" if x["value"] is not None
-                       else "unsettled" for x in off["rows"]],
+                       else "unread" if x["settled"] else "unsettled" for x in off["rows"]],
                particles=[x["particles"] for x in off["rows"]], unsettled=off["unsettled"],
                median=off["median"], low=off["low"], high=off["high"], spread=off["spread"],
                band_low=band.get("low"), band_high=band.get("high"))
@@ -180,7 +180,8 @@ def markdown(data) -> str:
         "reading of `rackstress bench parts --refine` ([parts.md](parts.md), "
         "`fe_reference_mpa`). *first / FE*: the scene's own lattice, what a default run "
         "reads; *each lattice / FE*: every lattice's, the first first (*unsettled*: it did not "
-        "settle; *refused*: the part check refused the moved lattice); *spread*: the largest "
+        "settle; *refused*: the part check refused the moved lattice; *unread*: every particle "
+        "lies within the zone); *spread*: the largest "
         "departure from the median; *range holds FE*: the FE's value lies within the lattices' "
         "range; *own bands hold FE*: on how many lattices the band that lattice's run prints "
         "alone (its own governing stress, singular points and zone) holds the FE's value; "

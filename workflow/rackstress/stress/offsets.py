@@ -139,6 +139,9 @@ def offsets(rundir, spec: str, n: int, overrides: dict | None = None, engine: st
             g = (rec.get("parts") or {}).get(gov["group"], {}).get("governing")
             if g is not None:
                 row.update(value=float(g["value"]), position=g.get("position"))
+            else:
+                row["unread"] = (f"every particle of '{gov['group']}' lies within the zone "
+                                 f"({z:.3g}) of a singular point")
         else:
             echo(f"offsets: {d} did not settle (residual {done.get('residual'):.3g} of the "
                  "load): left out of the spread")
@@ -149,7 +152,7 @@ def offsets(rundir, spec: str, n: int, overrides: dict | None = None, engine: st
            "values": read, "unsettled": sum(not r["settled"] and "refused" not in r
                                             for r in rows),
            "refused": sum("refused" in r for r in rows), **spread(read)}
-    summary = finished_summary(rundir)          # as it is now (post-processing may have added to it)
+    summary = finished_summary(rundir)    # as it is now (post-processing may have added to it)
     band = (summary.get("stress") or {}).get("error") or {}
     if band.get("low") is not None and band.get("high") is not None and read:
         # does the error band the run prints (--refine's, else the single run's) hold every

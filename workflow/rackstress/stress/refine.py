@@ -181,7 +181,7 @@ def refine(rundir, spec: str, overrides: dict | None = None, engine: str = "lamm
     own = fine_alone(fine_dir, fg, z)
     if own is not None:
         err["fine_own"] = own
-    summary = finished_summary(rundir)          # as it is now (post-processing may have added to it)
+    summary = finished_summary(rundir)    # as it is now (post-processing may have added to it)
     # the first run's own band (default_error), what it said before --refine; kept when a
     # refinement is done again
     first = (summary.get("stress") or {}).get("error") or {}
