@@ -27,6 +27,7 @@ import numpy as np
 
 from rackstress.bench import fmt, machine, md_table, out_dir, repository_file, write_json
 from rackstress.bench.parts import TIMEOUT_S, _error_of, _rackstress, _timed, part_names
+from rackstress.stress.refine import finished_summary
 
 #: lattices per part, the scene's own included
 N = 6
@@ -38,13 +39,6 @@ def reference() -> dict:
     """``{part: row}`` of ``bench parts``' last page (docs/benchmarks/parts.json)."""
     data = json.loads(repository_file("docs", "benchmarks", "parts.json").read_text())
     return {r["part"]: r for r in data["rows"]}
-
-
-def _summary(rundir: Path) -> dict | None:
-    try:
-        return json.loads((rundir / "summary.json").read_text())
-    except (OSError, ValueError):
-        return None
 
 
 def case(name: str, work: Path, ref: dict, n: int = N, echo=print,
@@ -78,7 +72,8 @@ def case(name: str, work: Path, ref: dict, n: int = N, echo=print,
     # singular points and zone) and the band its run printed
     own = []
     for x in off["rows"]:
-        s = _summary(out / x["dir"]) if x["settled"] and "refused" not in x else None
+        s = (finished_summary(out / x["dir"]) if x["settled"] and "refused" not in x
+             else None)
         g = ((s or {}).get("stress") or {}).get("governing")
         e = ((s or {}).get("stress") or {}).get("error") or {}
         own.append(None if g is None else {"value": g["value"], "low": e.get("low"),

@@ -338,7 +338,8 @@ def governing_section(stress: dict, headline: bool = True) -> str:
           f"</th><th>governing [{u}]</th><th>run</th></tr></thead><tbody>")
         for r in off["rows"]:
             v = (_num(r["value"]) if r["value"] is not None else
-                 "refused by the part check" if r.get("refused") else "did not settle")
+                 "refused by the part check" if r.get("refused") else
+                 "every particle within the zone" if r.get("unread") else "did not settle")
             w("<tr>" + "".join(f"<td class=num>{c}</td>" for c in (
                 ", ".join(f"{x:.3f}" for x in r["offset"]), f"{r['particles']:,}", v))
               + f"<td><code>{_e(r['dir'])}</code></td></tr>")
