@@ -35,7 +35,7 @@ def test_bench_parts_rows_for_settled_and_refused(tmp_path):
     assert ok["refined_spacing"] == pytest.approx(ok["spacing"] / 2 ** 0.5, rel=1e-6)
     assert ok["refined_particles"] > 2 * ok["particles"]
     assert ok["bar_low"] <= ok["refined_mpa"] <= ok["bar_high"]
-    assert ok["refined_read"] in ("patch", "notch (submodel)", "notch (fit)")
+    assert ok["refined_read"] in ("patch", "notch (submodel)", "notch (fit)", "first point")
     assert ok["zone_edge"] in (True, False)       # said either way, for a governing stress
     # the multi-body base: refused by the mesh check, a row with its reason
     bad = rows["so100-base"]

@@ -536,3 +536,48 @@ def test_a_fillet_the_spacing_does_not_resolve_is_not_called_a_property_of_the_s
     assert "at an unresolved fillet" in fillet and "not a property of the part" not in fillet
     assert "bounded" in fillet and "Round the edge" not in ADVICE["unresolved fillet"]
     assert "not a property of the part" in sharp
+
+
+def test_another_lattice_reads_the_first_runs_governing_point_by_beam_theory(tmp_path):
+    """``with_first_point`` (``--refine``, ``--offsets``): another lattice's governing stress is
+    its own rule reading, or its stress field at the first run's governing point where that is
+    the larger. The 20 × 4 × 4 mm cantilever at 1 mm (a real run), 10 N at its tip (x = 19.5):
+    at the top face mid-span (10, 4, 2) beam theory gives σ = M c / I = 10 · 9.5 · 2 / (4 · 4³
+    / 12) = 8.906 MPa (hand calculation); the field read there is within the lattice's own
+    band for a 4 mm member at 1 mm (``DEFAULT_ERROR_SLOPE`` · s / t, docs/stress.md). A rule
+    reading above it is kept as it is; none at all (every particle within the zone) gives the
+    field's reading, said as read at the first point."""
+    from test_faults import QUIET, rs
+
+    from rackstress.stress.governing import DEFAULT_ERROR_SLOPE, FIRST_POINT, with_first_point
+    from rackstress.stress.post import compute_fields
+    from rackstress.stress.rundata import load_run
+
+    scene = tmp_path / "bar.toml"
+    scene.write_text(BAR.format(source='fill = { box = { min = [0, 0, 0], max = [20, 4, 4] } }'
+                                       "\nspacing = 1.0", x=1, y=1, r=2.5))
+    p = rs("run", scene, "--engine", "reference", "--out", tmp_path / "r", *QUIET)
+    assert p.returncode == 0, p.stderr
+    run = load_run(tmp_path / "r")
+    fields = compute_fields(run)
+    first = {"group": "bar", "read_at": [10.0, 4.0, 2.0], "value": 1.0, "safety": 250.0,
+             "units": "MPa", "length_units": "mm", "zone": 2.0}
+    beam = 10.0 * 9.5 * 2.0 / (4.0 * 4.0 ** 3 / 12.0)
+    got = with_first_point(run, fields, None, first)
+    assert got["read"] == FIRST_POINT and got["rule_value"] is None
+    assert got["read_at"] == [10.0, 4.0, 2.0]
+    assert abs(got["value"] / beam - 1.0) <= DEFAULT_ERROR_SLOPE * 1.0 / 4.0
+    assert got["safety"] == pytest.approx(250.0 / got["value"])      # the yield, 250 MPa
+    # the nearest particle is named: a top-layer particle at mid-span
+    assert abs(got["position"][0] - 10.0) <= 0.5 and got["position"][1] == pytest.approx(3.5)
+    # read where it is asked: M falls linearly toward the tip, so does the reading
+    at = [with_first_point(run, fields, None, dict(first, read_at=[x, 4.0, 2.0]))["value"]
+          for x in (8.0, 12.0)]
+    assert at[0] > got["value"] > at[1]
+    assert abs((at[0] - at[1]) / (10.0 * 4.0 * 2.0 / (4.0 * 4.0 ** 3 / 12.0)) - 1.0) \
+        <= DEFAULT_ERROR_SLOPE * 1.0 / 4.0
+    low = {"value": 0.5 * beam, "frame": len(fields.steps) - 1, "group": "bar"}
+    assert with_first_point(run, fields, low, first)["value"] == got["value"]
+    assert with_first_point(run, fields, low, first)["rule_value"] == 0.5 * beam
+    high = dict(low, value=2.0 * beam)
+    assert with_first_point(run, fields, high, first) is high

@@ -270,12 +270,10 @@ def refined(out: Path, scene: Path, fea: float, echo=print) -> dict:
     err = refine(out, str(scene), echo=lambda *x: None)
     r = {k: err.get(k) for k in ("value", "extrapolated", "low", "high", "order", "spacings",
                                  "particles", "change")}
-    fine = json.loads((out / "refine" / "summary.json").read_text())
+    fg = err.get("governing_fine") or {}        # how the refined value was read
     r.update(ratio=err["value"] / fea, extrapolated_ratio=err["extrapolated"] / fea,
-             covers=bool(err["low"] <= fea <= err["high"]),
-             read=((fine.get("stress") or {}).get("governing") or {}).get("read"),
-             by=((((fine.get("stress") or {}).get("governing") or {}).get("notch") or {})
-                 .get("by")))
+             covers=bool(err["low"] <= fea <= err["high"]), read=fg.get("read"),
+             by=fg.get("notch_by"))
     echo(f"    --refine: {err['value']:.2f} MPa at {err['spacings'][-1]:.3g} mm "
          f"({r['ratio']:.3f} of FEA), extrapolated {err['extrapolated']:.2f} "
          f"({r['extrapolated_ratio']:.3f}), band {err['low']:.2f} … {err['high']:.2f}")

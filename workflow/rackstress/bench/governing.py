@@ -138,7 +138,8 @@ def case(name: str, scene: Path, spacing: float, h_far: float, h_near: float, wo
          levels=LEVELS, fe_levels: int = 2, echo=print) -> dict:
     """One part through the levels, the error bars and the FE reference (module docstring)."""
     from rackstress.model.singular import chords
-    from rackstress.stress.governing import (LATTICE_ORDER, error_bar, near_curved, record,
+    from rackstress.stress.governing import (LATTICE_ORDER, default_error, error_bar,
+                                             near_curved, record, with_first_point,
                                              read_singular, zone as zone_of)
     from rackstress.stress.governing import curved_near as curved_near_of, with_single_run
     from rackstress.stress.post import compute_fields
@@ -156,29 +157,34 @@ def case(name: str, scene: Path, spacing: float, h_far: float, h_near: float, wo
     part = next(iter(coarse))
     sp0, wall, sing = coarse[part]
     z = zone_of(sp0, wall)
-    rows = []
+    rows, first = [], None
     for r in runs:
         rd = load_run(r["dir"])
         fields = compute_fields(rd)
         rec = record(rd, fields, zone_override=z, singular=coarse)
         at = rec["parts"][part]
+        # the finer levels as --refine reads them: also at the first level's governing point
+        # (stress.governing.with_first_point)
+        gov = at["governing"] if first is None else with_first_point(rd, fields,
+                                                                     at["governing"], first)
+        first = first or gov
         own = record(rd, fields)["parts"][part]
         o_part = rd.o[rd.parts[part].index]
-        t_gov = float(chords(o_part, r["spacing"])[at["governing"]["index"]])
-        curved = near_curved(r["dir"], part, at["governing"]["position"], r["spacing"])
+        t_gov = float(chords(o_part, r["spacing"])[gov["index"]])
+        curved = near_curved(r["dir"], part, gov["position"], r["spacing"])
         rows.append({"spacing": r["spacing"], "particles": r["particles"],
                      "settled": r["settled"], "cpu_s": r["cpu_s"],
-                     "governing": at["governing"]["value"],
-                     "governing_at": at["governing"]["position"],
-                     "read": at["governing"].get("read", "patch"),
-                     "notch_by": (at["governing"].get("notch") or {}).get("by"),
+                     "governing": gov["value"],
+                     "governing_at": gov["position"],
+                     "read": gov.get("read", "patch"),
+                     "notch_by": (gov.get("notch") or {}).get("by"),
                      # the particles' patch fit's own governing stress (the notch reading may
                      # be the headline instead: stress.governing.notch_peak)
-                     "patch_governing": at["governing"].get("patch_value",
-                                                            at["governing"]["value"]),
-                     "curved_face": at["governing"].get("curved_face"),
+                     "patch_governing": gov.get("patch_value", gov["value"]),
+                     "curved_face": gov.get("curved_face"),
                      # what a single run at this spacing says it may be off by
-                     "single_run": {k: rec["error"][k] for k in
+                     "single_run": {k: (rec["error"] if gov is at["governing"]
+                                        else default_error(rd, gov))[k] for k in
                                     ("low", "high", "relative", "curved_face_bound")},
                      "governing_own_zone": own["governing"]["value"], "own_zone": own["zone"],
                      "thickness_at_governing": t_gov, "at_curved_face": curved,

@@ -177,14 +177,20 @@ def _refined(out: Path, stress: dict, r, short) -> dict:
     if not err:
         why = _error_of(r.stderr) if r.returncode else "no error bar in summary.json"
         return {"refine_error": short(why) or "no error bar in summary.json"}
+    # how the refined value was read (the error bar's own reading: the first run's rule, or
+    # the refined field at the first run's governing point); an older summary without it:
+    # the refined run's own reading
+    fg = dict(err.get("governing_fine") or {})
     fine = out / err.get("refine_dir", "refine") / "summary.json"
-    fg = {}
-    if fine.is_file():
-        fg = (json.loads(fine.read_text()).get("stress") or {}).get("governing") or {}
+    if not fg.get("read") and fine.is_file():
+        own = (json.loads(fine.read_text()).get("stress") or {}).get("governing") or {}
+        fg = {"read": own.get("read"), "notch_by": (own.get("notch") or {}).get("by")}
     return {"refined_mpa": err["values"][-1], "refined_spacing": err["spacings"][-1],
             "refined_particles": (err.get("particles") or [None, None])[-1],
-            "refined_read": read_label(fg.get("read"), (fg.get("notch") or {}).get("by"))
-            if fg.get("read") else None, "bar_low": err["low"], "bar_high": err["high"],
+            "refined_read": read_label(fg.get("read"), fg.get("notch_by"))
+            if fg.get("read") else None,
+            "refined_rule_mpa": fg.get("rule_value"),
+            "bar_low": err["low"], "bar_high": err["high"],
             "bar_extrapolated": err.get("extrapolated"), "bar_order": err.get("order"),
             "first_bar_low": (err.get("first_run") or {}).get("low"),
             "first_bar_high": (err.get("first_run") or {}).get("high")}

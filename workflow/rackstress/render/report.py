@@ -319,6 +319,11 @@ def governing_section(stress: dict, headline: bool = True) -> str:
             w(f'<p class="warning" id="not-converged">Not converged: the governing stress moved '
               f"by {_num(100 * err['change'], 2)} % between the two spacings; refine further, "
               "or check it by FE (<code>rackstress fea</code>).</p>")
+        from rackstress.stress.governing import first_point_sentence
+
+        fp = first_point_sentence(err.get("governing_fine"), err.get("units", gov["units"]))
+        if fp:
+            w(f'<p class="note" id="first-point">{_e(fp[0].upper() + fp[1:])}.</p>')
         if err.get("fine_own"):
             from rackstress.stress.governing import fine_alone_sentence
 

@@ -462,6 +462,68 @@ def record(run, fields, zone_override: float | None = None, singular: dict | Non
     return out
 
 
+#: ``read`` of another lattice's governing stress taken at the first run's governing point
+FIRST_POINT = "first point"
+
+
+def with_first_point(run, fields, g: dict | None, first: dict) -> dict | None:
+    """Another lattice's governing stress (``--refine``'s finer one, ``--offsets``' moved
+    ones) under the first run's rule — ``g``, :func:`record`'s, None where every particle lies
+    within the zone — or, where it is the larger, this lattice's stress field at the first
+    run's governing point ``first["read_at"]`` (``"read": "first point"``).
+
+    The governing stress is the largest stress in the region at least the zone from the
+    singular points; each lattice samples that region at its own points. Where the stress
+    rises toward a singular point the largest lies at the zone's edge, and a lattice whose
+    points there all fall just inside it reads the region's largest a spacing farther out:
+    the SO-100 shoulder bracket's first run read 0.325 MPa 0.04 mm beyond its 5.73 mm zone,
+    its refined run's particles there 5.4–5.5 mm from the edge, and its largest beyond the
+    zone was 0.222 (the FE check: 0.356 at that point). The first run's governing point lies
+    in the region, so this lattice's field there (:func:`rackstress.stress.surface.interpolate`,
+    the moving-least-squares fit the report's surface takes) is a reading of the same
+    quantity: 0.345 MPa there. ``g``'s own reading is kept as ``rule_value``.
+
+    Examples
+    --------
+    >>> with_first_point(None, None, {"value": 2.0}, {})["value"]     # no first point: g
+    2.0
+    """
+    from rackstress.model.singular import nearest_spacing
+    from rackstress.stress.measures import recovery_points_of
+    from rackstress.stress.surface import interpolate
+
+    at = (first or {}).get("read_at")
+    name = (first or {}).get("group")
+    if at is None or name not in getattr(run, "parts", {}):
+        return g
+    vm = fields.values.get("von_mises")
+    part = run.parts[name]
+    frame = int(g["frame"]) if g else len(vm) - 1
+    row = vm[frame, part.index]
+    read = recovery_points_of(run, part)
+    o = run.o[part.index]
+    ok = np.isfinite(row)
+    if not ok.any():
+        return g
+    p = np.asarray(at, float).reshape(1, 3)
+    v = max(float(interpolate(read[ok], row[ok], p, nearest_spacing(o))[0]), 0.0)
+    if g is not None and not v > g["value"]:
+        return g
+    j = int(np.argmin(np.einsum("ij,ij->i", read - p, read - p)))
+    out = dict(g or {"units": first.get("units"), "group": name,
+                     "length_units": first.get("length_units"), "zone": first.get("zone"),
+                     "iteration": int(fields.steps[frame]), "frame": frame})
+    y = (first.get("value") * first["safety"]) if first.get("safety") else None
+    out.update(value=v, rule_value=None if g is None else g["value"], index=j,
+               particle=int(run.data.ids[part.index[j]]), position=[float(x) for x in o[j]],
+               read_at=[float(x) for x in p[0]], near=first.get("near"), read=FIRST_POINT,
+               safety=(y / v) if (y and v > 0) else None,
+               spacing=float(nearest_spacing(o)))
+    out.pop("notch", None)
+    out.pop("patch_value", None)
+    return out
+
+
 #: The governing stress is said to lie at the zone's edge where it is read within this many
 #: spacings beyond the zone ...
 ZONE_EDGE = 0.5
@@ -1065,6 +1127,24 @@ def a_kind(kind: str) -> str:
     return ("an " if kind[:1] in "aeiou" else "a ") + kind
 
 
+def first_point_sentence(fine: dict, unit: str) -> str | None:
+    """Where ``--refine``'s refined value was read at the first run's governing point
+    (``summary.json["stress"]["error"]["governing_fine"]``, :func:`with_first_point`), what
+    it says; None where it was read by the rule alone.
+
+    >>> first_point_sentence({"read": "first point", "read_at": [10.67, 53.37, 10.89],
+    ...                       "value": 0.3445, "rule_value": 0.222}, "MPa")
+    "the refined value is the finer run's stress at the first run's governing point (10.67, 53.37, 10.89), where the stress rises toward a singular point and the finer run's own points beyond the zone read at most 0.222 MPa"
+    """
+    if not fine or fine.get("read") != FIRST_POINT:
+        return None
+    at = ", ".join(f"{x:.4g}" for x in fine["read_at"])
+    rule = ("has no points beyond the zone" if fine.get("rule_value") is None else
+            f"own points beyond the zone read at most {fine['rule_value']:.4g} {unit}")
+    return ("the refined value is the finer run's stress at the first run's governing point "
+            f"({at}), where the stress rises toward a singular point and the finer run's {rule}")
+
+
 def fine_alone_sentence(own: dict, unit: str, length: str = "") -> str:
     """What ``--refine``'s refined run reads on its own where it reads more than the error
     bar's same-rule value (``summary.json["stress"]["error"]["fine_own"]``,
@@ -1127,6 +1207,9 @@ def describe(gov: dict | None, sing: dict | None, error: dict | None,
                              f"{100 * error['change']:.2g} % between the two spacings (more "
                              f"than {100 * CONVERGING:g} %); refine further, or check it by "
                              "FE (rackstress fea)")
+            fp = first_point_sentence(error.get("governing_fine"), u)
+            if fp:
+                lines.append("    " + fp)
             if error.get("fine_own"):
                 lines.append("    " + fine_alone_sentence(error["fine_own"], u,
                                                           gov.get("length_units", "")))

@@ -9,7 +9,8 @@ scene again N − 1 times, every filled part's lattice moved by :func:`lattice_o
 fractions of its spacing (the same spacing: nothing else changes), into ``RUN/offsets/K``
 (each a run directory of its own, locked, resumable, overwritten only by this step), reads each
 governing stress **at the first run's zone and singular points** (the same quantity at every
-offset, as ``--refine`` reads its finer run), and writes into
+offset, as ``--refine`` reads its finer run: its field at the first run's governing point
+where that is the larger, :func:`rackstress.stress.governing.with_first_point`), and writes into
 ``RUN/summary.json["stress"]["offsets"]`` the readings, their median and range and the
 largest departure from the median: a measured spread of the reading at this spacing, not an
 assumed one. ``RUN`` is complete before the first offset starts; an offset that does not
@@ -28,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from rackstress.errors import RackstressError, SceneError
-from rackstress.stress.governing import record
+from rackstress.stress.governing import record, with_first_point
 from rackstress.stress.refine import finished_summary, first_run
 
 #: the offsets' run directories inside the run: ``RUN/offsets/1`` …
@@ -135,10 +136,13 @@ def offsets(rundir, spec: str, n: int, overrides: dict | None = None, engine: st
                    particles=int(done.get("n_particles", 0)))
         if row["settled"]:
             run = load_run(d)
-            rec = record(run, compute_fields(run), zone_override=z, singular=sing)
-            g = (rec.get("parts") or {}).get(gov["group"], {}).get("governing")
+            fields = compute_fields(run)
+            rec = record(run, fields, zone_override=z, singular=sing)
+            g = with_first_point(run, fields, (rec.get("parts") or {}).get(gov["group"], {})
+                                 .get("governing"), gov)
             if g is not None:
-                row.update(value=float(g["value"]), position=g.get("position"))
+                row.update(value=float(g["value"]), position=g.get("position"),
+                           read=g.get("read"))
             else:
                 row["unread"] = (f"every particle of '{gov['group']}' lies within the zone "
                                  f"({z:.3g}) of a singular point")

@@ -5,7 +5,8 @@ with every part filled at h/√2 (:data:`~rackstress.stress.governing.REFINE_RAT
 ``RUN/refine`` — a run directory of its own, locked, resumable and overwritten only by this
 step —, reads its governing stress at the first run's zone and singular points (the same
 quantity at both spacings: :func:`rackstress.stress.governing.record` with the coarse run's
-``singular`` and ``zone_override``), and writes into ``RUN/summary.json["stress"]["error"]``
+``singular`` and ``zone_override``; its field at the first run's governing point where that
+is the larger, :func:`rackstress.stress.governing.with_first_point`), and writes into ``RUN/summary.json["stress"]["error"]``
 Richardson's extrapolation and the error band (:func:`rackstress.stress.governing.error_bar`,
 the lattice's measured order). ``RUN`` is complete before the refined run starts: a refined
 run that is interrupted leaves it as it was (``--resume RUN --refine`` does the refinement
@@ -23,7 +24,8 @@ from pathlib import Path
 
 from rackstress.errors import EXIT_UNSETTLED, RackstressError
 from rackstress.stress.governing import (REFINE_RATIO, default_error, error_bar, record,
-                                         singular_set, with_contact_edges, with_single_run)
+                                         singular_set, with_contact_edges, with_first_point,
+                                         with_single_run)
 from rackstress.stress.measures import read_contacts
 
 #: the refined run's directory inside the run
@@ -165,7 +167,8 @@ def refine(rundir, spec: str, overrides: dict | None = None, engine: str = "lamm
     fine_run = load_run(fine_dir)
     fields = compute_fields(fine_run)
     fine = record(fine_run, fields, zone_override=z, singular=sing)
-    fg = (fine.get("parts") or {}).get(gov["group"], {}).get("governing")
+    fg = with_first_point(fine_run, fields,
+                          (fine.get("parts") or {}).get(gov["group"], {}).get("governing"), gov)
     if fg is None:
         raise RefineError(f"{fine_dir}: every particle of '{gov['group']}' lies within the "
                           f"zone ({z:.3g}) of a singular point")
@@ -175,7 +178,11 @@ def refine(rundir, spec: str, overrides: dict | None = None, engine: str = "lamm
     err = with_single_run(error_bar([gov["value"], fg["value"]], [h, h / ratio]),
                           default_error(fine_run, fg))
     err.update(refine_dir=REFINE_DIR, group=gov["group"], zone=z, units=gov["units"],
-               governing_fine={k: fg[k] for k in ("value", "particle", "position", "iteration")},
+               governing_fine={**{k: fg[k] for k in ("value", "particle", "position",
+                                                     "iteration")},
+                               "read": fg.get("read"), "read_at": fg.get("read_at"),
+                               "rule_value": fg.get("rule_value", fg["value"]),
+                               "notch_by": (fg.get("notch") or {}).get("by")},
                particles=[int(summary.get("n_particles", 0)),
                           int(fine_summary.get("n_particles", 0))])
     own = fine_alone(fine_dir, fg, z)
