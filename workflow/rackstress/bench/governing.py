@@ -13,7 +13,8 @@ refinement of ``--refine``):
   gripping with 10 N on its jaw face (h = 2 mm).
 
 For each: the governing stress (:mod:`rackstress.stress.governing`) at every spacing read at
-the coarsest run's zone and singular points (the same quantity at every spacing), the singular
+the coarsest run's zone and singular points (the same quantity at every spacing; the finer
+ones also at the coarsest run's governing point, as ``--refine`` reads), the singular
 peak beside it, the error bar ``--refine`` gives (h and h/√2, the lattice's order), the
 three-spacing Richardson extrapolation with its measured order, and **converged FEA**: P2
 tetrahedra graded toward the re-entrant edges and the loaded particles
@@ -383,7 +384,10 @@ def markdown(data) -> str:
              + f". Lattice: {data['lattice']}.",
              "",
              "Each part at spacings h, h/√2, h/2; every spacing's governing stress read at the "
-             "coarsest run's zone and singular points. FEA: P2 tetrahedra graded toward the "
+             "coarsest run's zone and singular points (the finer ones, as `--refine` reads "
+             "its finer run, also at the coarsest run's governing point where that reads more: "
+             "*first point*, docs/stress.md \"The first run's governing point\"). FEA: P2 "
+             "tetrahedra graded toward the "
              "re-entrant edges, the concave curved faces and the loads (validity/graded.py), "
              "the finest run's supports and loads; its "
              "governing stress is the largest nodal von Mises stress (surface included) at least "

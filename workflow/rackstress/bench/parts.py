@@ -499,8 +499,10 @@ def _refine_section(data) -> list:
            if ratio else "spacing/√2 (`rackstress run SCENE --refine`)")
     return ["## After `--refine`", "",
             f"Each part solved again at {how}: its "
-            "governing stress at both spacings, how the refined one was read (the patch fit or "
-            "the notch reading), and the error bar `summary.json` gives "
+            "governing stress at both spacings, how the refined one was read (the patch fit, "
+            "the notch reading, or its field at the first run's governing point: *first "
+            "point*, docs/stress.md \"The first run's governing point\"), and the error bar "
+            "`summary.json` gives "
             "(`[\"stress\"][\"error\"]`: Richardson from the two values, never narrower than "
             "the refined run's own band; docs/stress.md \"The error bar\"), against the FE "
             "check's governing stress (refined locally where `rackstress fea` could: "

@@ -481,7 +481,7 @@ def with_first_point(run, fields, g: dict | None, first: dict) -> dict | None:
     zone was 0.222 (the FE check: 0.356 at that point). The first run's governing point lies
     in the region, so this lattice's field there (:func:`rackstress.stress.surface.interpolate`,
     the moving-least-squares fit the report's surface takes) is a reading of the same
-    quantity: 0.345 MPa there. ``g``'s own reading is kept as ``rule_value``.
+    quantity: 0.344 MPa there. ``g``'s own reading is kept as ``rule_value``.
 
     Examples
     --------
@@ -497,6 +497,8 @@ def with_first_point(run, fields, g: dict | None, first: dict) -> dict | None:
     if at is None or name not in getattr(run, "parts", {}):
         return g
     vm = fields.values.get("von_mises")
+    if vm is None:
+        return g
     part = run.parts[name]
     frame = int(g["frame"]) if g else len(vm) - 1
     row = vm[frame, part.index]
@@ -519,8 +521,8 @@ def with_first_point(run, fields, g: dict | None, first: dict) -> dict | None:
                read_at=[float(x) for x in p[0]], near=first.get("near"), read=FIRST_POINT,
                safety=(y / v) if (y and v > 0) else None,
                spacing=float(nearest_spacing(o)))
-    out.pop("notch", None)
-    out.pop("patch_value", None)
+    for k in ("notch", "patch_value", "zone_edge"):     # the rule reading's, not this point's
+        out.pop(k, None)
     return out
 
 
@@ -1132,17 +1134,21 @@ def first_point_sentence(fine: dict, unit: str) -> str | None:
     (``summary.json["stress"]["error"]["governing_fine"]``, :func:`with_first_point`), what
     it says; None where it was read by the rule alone.
 
-    >>> first_point_sentence({"read": "first point", "read_at": [10.67, 53.37, 10.89],
-    ...                       "value": 0.3445, "rule_value": 0.222}, "MPa")
-    "the refined value is the finer run's stress at the first run's governing point (10.67, 53.37, 10.89), where the stress rises toward a singular point and the finer run's own points beyond the zone read at most 0.222 MPa"
+    >>> print(first_point_sentence({"read": "first point", "read_at": [10.67, 53.37, 10.89],
+    ...                             "value": 0.3445, "rule_value": 0.222}, "MPa"))
+    ... # doctest: +NORMALIZE_WHITESPACE
+    the refined value is the finer run's stress at the first run's governing point
+    (10.67, 53.37, 10.89), more than its own points beyond the zone read (at most 0.222 MPa;
+    docs/stress.md "The first run's governing point")
     """
     if not fine or fine.get("read") != FIRST_POINT:
         return None
     at = ", ".join(f"{x:.4g}" for x in fine["read_at"])
-    rule = ("has no points beyond the zone" if fine.get("rule_value") is None else
-            f"own points beyond the zone read at most {fine['rule_value']:.4g} {unit}")
+    rule = ("it has no points beyond the zone" if fine.get("rule_value") is None else
+            f"more than its own points beyond the zone read (at most "
+            f"{fine['rule_value']:.4g} {unit}")
     return ("the refined value is the finer run's stress at the first run's governing point "
-            f"({at}), where the stress rises toward a singular point and the finer run's {rule}")
+            f"({at}), {rule}; docs/stress.md \"The first run's governing point\")")
 
 
 def fine_alone_sentence(own: dict, unit: str, length: str = "") -> str:

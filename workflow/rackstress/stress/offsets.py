@@ -10,8 +10,8 @@ fractions of its spacing (the same spacing: nothing else changes), into ``RUN/of
 (each a run directory of its own, locked, resumable, overwritten only by this step), reads each
 governing stress **at the first run's zone and singular points** (the same quantity at every
 offset, as ``--refine`` reads its finer run: its field at the first run's governing point
-where that is the larger, :func:`rackstress.stress.governing.with_first_point`), and writes into
-``RUN/summary.json["stress"]["offsets"]`` the readings, their median and range and the
+where that is the larger, :func:`rackstress.stress.governing.with_first_point`), and writes
+into ``RUN/summary.json["stress"]["offsets"]`` the readings, their median and range and the
 largest departure from the median: a measured spread of the reading at this spacing, not an
 assumed one. ``RUN`` is complete before the first offset starts; an offset that does not
 settle, or whose moved lattice the part check refuses (a load on a wall it fills one particle
