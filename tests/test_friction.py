@@ -143,8 +143,9 @@ def test_friction_runs_alike_under_mpi(tmp_path):
 
     sc = slide_scene(tmp_path, **FREE)
     got = lammps_under_mpi(tmp_path, "from test_friction import slide_scene, FREE\n"
-                           "from pathlib import Path\nimport tempfile\n"
-                           "scenes_ = {'free': slide_scene(Path(tempfile.mkdtemp()), **FREE)}",
+                           "from pathlib import Path\nimport os\n"
+                           f"d = Path({str(tmp_path)!r}) / f'rank-{{os.getpid()}}'\n"
+                           "d.mkdir()\nscenes_ = {'free': slide_scene(d, **FREE)}",
                            plugin=True)
     p, counts = got["free"]
     assert min(counts) > 0

@@ -177,8 +177,9 @@ def test_indenter_runs_alike_under_mpi(tmp_path):
 
     sc = dynamic_scene(tmp_path)
     got = lammps_under_mpi(tmp_path, "from test_indenter import dynamic_scene\n"
-                           "from pathlib import Path\nimport tempfile\n"
-                           "scenes_ = {'dyn': dynamic_scene(Path(tempfile.mkdtemp()))}",
+                           "from pathlib import Path\nimport os\n"
+                           f"d = Path({str(tmp_path)!r}) / f'rank-{{os.getpid()}}'\n"
+                           "d.mkdir()\nscenes_ = {'dyn': dynamic_scene(d)}",
                            plugin=True)
     p, counts = got["dyn"]
     assert min(counts) > 0
