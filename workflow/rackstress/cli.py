@@ -116,11 +116,6 @@ def _memory_message(err: MemoryError) -> str:
             "time, or use a machine (or a job) with more memory")
 
 
-#: The parameters a run records that are not its scene's ``--set`` values (how it was run)
-RECORDED_ONLY = ("file", "integrator", "dt", "analysis", "spacing_scale", "lattice_shift",
-                 "steps")
-
-
 #: Options of ``run`` that ``--resume`` cannot honour: the run goes on as it was started.
 RESUME_FIXED = ("engine", "mode", "steps", "dt", "sets", "dump_every", "overwrite",
                 "restart_every", "allow_unstable", "integrator", "dump_all")
@@ -370,7 +365,7 @@ def _scene_again(out: Path, scene, sets, option: str) -> tuple:
         raise RackstressError(f"{out}: its scene file is not recorded; give it: rackstress run "
                               f"SCENE.toml --resume {out} {option}")
     overrides = scenes.parse_overrides(sets) if sets else {
-        k: v for k, v in (rec.get("params") or {}).items() if k not in RECORDED_ONLY}
+        k: v for k, v in (rec.get("params") or {}).items() if k not in scenes.RECORDED_ONLY}
     return spec, overrides
 
 

@@ -128,7 +128,7 @@ def case(name: str, work: Path, fea: bool = True, sets: dict | None = None, echo
     if r.returncode not in (0, 6):
         row["reason"] = short(_error_of(r.stderr))
     if refine:
-        row.update(_refined(out, stress, r, short))
+        row.update(_refined(stress, r, short))
     if fea and row["settled"]:
         t0 = time.perf_counter()
         code, err, usage = _timed([*_rackstress(), "fea", str(out)], timeout)
@@ -165,26 +165,19 @@ def case(name: str, work: Path, fea: bool = True, sets: dict | None = None, echo
     return row
 
 
-def _refined(out: Path, stress: dict, r, short) -> dict:
+def _refined(stress: dict, r, short) -> dict:
     """``--refine``'s part of a row: the refined run's governing stress, how it was read, its
     spacing and particles, and the error bar (``summary.json["stress"]["error"]``), or why
     there is none."""
-    import json
-
     from rackstress.stress.governing import read_label
 
     err = stress.get("error")
     if not err:
         why = _error_of(r.stderr) if r.returncode else "no error bar in summary.json"
         return {"refine_error": short(why) or "no error bar in summary.json"}
-    # how the refined value was read (the error bar's own reading: the first run's rule, or
-    # the refined field at the first run's governing point); an older summary without it:
-    # the refined run's own reading
-    fg = dict(err.get("governing_fine") or {})
-    fine = out / err.get("refine_dir", "refine") / "summary.json"
-    if not fg.get("read") and fine.is_file():
-        own = (json.loads(fine.read_text()).get("stress") or {}).get("governing") or {}
-        fg = {"read": own.get("read"), "notch_by": (own.get("notch") or {}).get("by")}
+    # how the refined value was read: the error bar's own reading (the first run's rule, or
+    # the refined field at the first run's governing point)
+    fg = err.get("governing_fine") or {}
     return {"refined_mpa": err["values"][-1], "refined_spacing": err["spacings"][-1],
             "refined_particles": (err.get("particles") or [None, None])[-1],
             "refined_read": read_label(fg.get("read"), fg.get("notch_by"))

@@ -154,12 +154,12 @@ def rebuild_scene(rundir: Path, spec: str | None = None):
         sc = scenes.build(name, **{k: v for k, v in params.items() if k in known})
     else:
         # the file's own [params] as the run had them (its --set overrides included); a
-        # duration-given scene gets its steps from the duration, not from a recorded count;
-        # "analysis" is recorded from the file's own key (static), not a --set parameter
+        # duration-given scene gets its steps from the duration, not from a recorded count
+        # (a step-given one keeps them); "analysis" is recorded from the file's own key
+        # (static), not a --set parameter
         given = {k: v for k, v in params.items()
-                 if k not in ("file", "integrator", "dt", "analysis", "spacing_scale",
-                              "lattice_shift")
-                 and not (k == "steps" and "duration" in params)}
+                 if k not in scenes.RECORDED_ONLY
+                 or (k == "steps" and "duration" not in params)}
         sc = scenes.load(spec, given, spacing_scale=float(params.get("spacing_scale", 1.0)),
                          lattice_shift=params.get("lattice_shift"))
         dt = params.get("dt")

@@ -10,8 +10,14 @@ from rackstress.scenes.builtins import (BUILDERS, build, parameters, parse_overr
                                         parse_value)
 from rackstress.scenes.toml import load_toml
 
-__all__ = ["BUILDERS", "build", "load", "load_toml", "parameters", "parse_overrides",
-           "parse_value"]
+__all__ = ["BUILDERS", "RECORDED_ONLY", "build", "load", "load_toml", "parameters",
+           "parse_overrides", "parse_value"]
+
+#: The parameters a run records in ``scene.json``'s ``params`` that are not its scene's
+#: ``--set`` values but how it was run or filled (``spacing_scale``: ``--refine``,
+#: ``lattice_shift``: ``--offsets``); a scene read again from its file leaves them out
+RECORDED_ONLY = ("file", "integrator", "dt", "analysis", "spacing_scale", "lattice_shift",
+                 "steps")
 
 
 def load(spec: str, overrides: dict | None = None, spacing_scale: float = 1.0,

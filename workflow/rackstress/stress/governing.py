@@ -508,7 +508,8 @@ def with_first_point(run, fields, g: dict | None, first: dict) -> dict | None:
     if not ok.any():
         return g
     p = np.asarray(at, float).reshape(1, 3)
-    v = max(float(interpolate(read[ok], row[ok], p, nearest_spacing(o))[0]), 0.0)
+    h = float(nearest_spacing(o))
+    v = max(float(interpolate(read[ok], row[ok], p, h)[0]), 0.0)
     if g is not None and not v > g["value"]:
         return g
     j = int(np.argmin(np.einsum("ij,ij->i", read - p, read - p)))
@@ -519,8 +520,7 @@ def with_first_point(run, fields, g: dict | None, first: dict) -> dict | None:
     out.update(value=v, rule_value=None if g is None else g["value"], index=j,
                particle=int(run.data.ids[part.index[j]]), position=[float(x) for x in o[j]],
                read_at=[float(x) for x in p[0]], near=first.get("near"), read=FIRST_POINT,
-               safety=(y / v) if (y and v > 0) else None,
-               spacing=float(nearest_spacing(o)))
+               safety=(y / v) if (y and v > 0) else None, spacing=h)
     for k in ("notch", "patch_value", "zone_edge"):     # the rule reading's, not this point's
         out.pop(k, None)
     return out

@@ -7,10 +7,10 @@ step —, reads its governing stress at the first run's zone and singular points
 quantity at both spacings: :func:`rackstress.stress.governing.record` with the coarse run's
 ``singular`` and ``zone_override``; its field at the first run's governing point where that
 is the larger, :func:`rackstress.stress.governing.with_first_point`), and writes into
-``RUN/summary.json["stress"]["error"]`` Richardson's extrapolation and the error band (:func:`rackstress.stress.governing.error_bar`,
-the lattice's measured order). ``RUN`` is complete before the refined run starts: a refined
-run that is interrupted leaves it as it was (``--resume RUN --refine`` does the refinement
-again).
+``RUN/summary.json["stress"]["error"]`` Richardson's extrapolation and the error band
+(:func:`rackstress.stress.governing.error_bar`, the lattice's measured order). ``RUN`` is
+complete before the refined run starts: a refined run that is interrupted leaves it as it was
+(``--resume RUN --refine`` does the refinement again).
 
 Example
 -------
