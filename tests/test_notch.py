@@ -102,6 +102,14 @@ def test_a_plate_with_a_hole_reads_its_peak_by_the_notch_reading(tmp_path):
     assert math.hypot(x - 20, y - 8) == pytest.approx(3.2, rel=1e-3)
     assert abs(x - 20) < 1.0
     assert err["low"] <= peterson <= err["high"]
+    # its band adds the notch reading's own error to that of the particles' field it reads,
+    # a particle's own ± slope × s/t, t the plate's 2.4 mm: four layers of 0.6 mm
+    from rackstress.stress.governing import (DEFAULT_ERROR_SLOPE, NOTCH_ERROR,
+                                             NOTCH_SUBMODEL_ERROR)
+
+    own = NOTCH_SUBMODEL_ERROR if gov["notch"]["by"] == "submodel" else NOTCH_ERROR
+    assert err["relative"] == pytest.approx(own + DEFAULT_ERROR_SLOPE * 0.6 / 2.4, rel=1e-9)
+    assert err["low"] == pytest.approx(gov["value"] / (1 + err["relative"]), rel=1e-12)
     # the report and the terminal say how it was read, and the patch fit's own value
     from rackstress.render.report import governing_section
     from rackstress.stress.governing import describe
