@@ -55,9 +55,11 @@ class ForkedJob:
     Example
     -------
     >>> import tempfile
-    >>> job = ForkedJob(lambda: {"n": 2}, Path(tempfile.mkdtemp()) / "job.json")
+    >>> tmp = tempfile.TemporaryDirectory()
+    >>> job = ForkedJob(lambda: {"n": 2}, Path(tmp.name) / "job.json")
     >>> job.join()
     {'n': 2}
+    >>> tmp.cleanup()
     """
 
     def __init__(self, work, result):

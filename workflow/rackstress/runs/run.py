@@ -887,8 +887,10 @@ def run(scene: Scene, out: Path, engine: str = "lammps", mode: str = "exact",
     >>> import tempfile
     >>> from rackstress import scenes
     >>> sc = scenes.build("plane-rack").with_steps(20)
-    >>> run(sc, tempfile.mkdtemp() + "/pr", engine="reference", progress=False)["status"]
+    >>> tmp = tempfile.TemporaryDirectory()
+    >>> run(sc, tmp.name + "/pr", engine="reference", progress=False)["status"]
     'ok'
+    >>> tmp.cleanup()
     """
     from rackstress.runs.rundir import check_out, claim, locked
 

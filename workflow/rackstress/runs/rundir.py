@@ -142,10 +142,12 @@ def locked(rundir, command: str | None = None, comm=None, create: bool = True, n
     Examples
     --------
     >>> import tempfile, pathlib
-    >>> d = pathlib.Path(tempfile.mkdtemp()) / "run"
+    >>> tmp = tempfile.TemporaryDirectory()
+    >>> d = pathlib.Path(tmp.name) / "run"
     >>> with locked(d):
     ...     (d / "scene.json").write_text("{}")
     2
+    >>> tmp.cleanup()
     """
     from rackstress.lib.mpi import on_root
 
@@ -323,13 +325,15 @@ def own(directory, names, doing: str) -> Path:
     Examples
     --------
     >>> import tempfile, pathlib
-    >>> d = pathlib.Path(tempfile.mkdtemp())
+    >>> tmp = tempfile.TemporaryDirectory()
+    >>> d = pathlib.Path(tmp.name)
     >>> (d / "stress.json").write_text("mine")
     4
     >>> own(d, ["stress.json"], "the stress files")
     Traceback (most recent call last):
     ...
     rackstress.errors.RunDirError: ...
+    >>> tmp.cleanup()
     """
     directory = Path(directory)
     try:
