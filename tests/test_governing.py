@@ -429,6 +429,13 @@ def test_refined_run_that_does_not_settle_keeps_the_first_run(tmp_path):
     summary = json.loads((tmp_path / "r" / "summary.json").read_text())
     assert summary["settled"] and summary["stress"]["governing"]["value"] > 0
     assert summary["stress"]["error"].get("extrapolated") is None
+    # bench parts' row of such a run: the refinement's own error, not a refined value (its
+    # summary's error is the first run's band alone, without the two values)
+    from rackstress.bench.parts import _error_of, _refined
+
+    row = _refined(summary["stress"], p, short=lambda x: x)
+    assert row == {"refine_error": _error_of(p.stderr)}
+    assert ("did not settle" if p.returncode == 6 else "cannot hold") in row["refine_error"]
 
 
 def test_band_inverts_the_measured_relative_error():

@@ -172,7 +172,9 @@ def _refined(stress: dict, r, short) -> dict:
     from rackstress.stress.governing import read_label
 
     err = stress.get("error")
-    if not err:
+    if not err or "values" not in err:
+        # none, or the first run's own band alone: the refinement failed or did not settle
+        # (exit 6), and the first run was kept as it was (stress.refine.refine)
         why = _error_of(r.stderr) if r.returncode else "no error bar in summary.json"
         return {"refine_error": short(why) or "no error bar in summary.json"}
     # how the refined value was read: the error bar's own reading (the first run's rule, or
